@@ -1,0 +1,215 @@
+"""ROS plumbing shared by every node of the suite.
+
+Start-up and shutdown (clean exits on SIGINT/SIGTERM, a one-line message and exit code 2 for a
+configuration error), typed parameters declared from the cores' configuration dataclasses,
+rate-limited and counted rejection of bad input, and the ``diagnostics`` publisher.
+"""
+
+from __future__ import annotations
+
+import sys
+import typing
+from collections import Counter
+from collections.abc import Callable, Mapping
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from buoy_nav.parameters import (
+    ParameterError,
+    build_config,
+    coerce_parameter,
+    config_parameters,
+    to_ros_value,
+)
+
+# Reliable with a deep queue: a recorder or a slow subscriber must not lose sensor samples.
+DATA_QOS = QoSProfile(
+    depth=1000,
+    history=HistoryPolicy.KEEP_LAST,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
+REJECTION_LOG_PERIOD_S = 5.0
+
+
+class StartupError(Exception):
+    """A node cannot start: bad parameter, missing file. The message names the culprit."""
+
+
+class SuiteNode(Node):
+    """A Node that can ask to stop (end of a simulation, end of a bag) and counts rejections."""
+
+    def __init__(self, node_name: str, **kwargs):
+        super().__init__(node_name, **kwargs)
+        self.finished = False
+        self.exit_code = 0
+        self.rejections: Counter[str] = Counter()
+
+    def finish(self, exit_code: int = 0) -> None:
+        """Leave the spin loop after the current callback."""
+        self.finished = True
+        self.exit_code = exit_code
+
+    def reject(self, input_name: str, reason: str) -> None:
+        """Count a rejected input sample and warn, rate-limited, with the running count."""
+        key = f"{input_name}: {reason}"
+        self.rejections[key] += 1
+        self.get_logger().warning(
+            f"rejected {key} (total {self.rejections[key]})",
+            throttle_duration_sec=REJECTION_LOG_PERIOD_S,
+        )
+
+    # -- parameters -------------------------------------------------------------------------
+
+    def declare_value(self, name: str, default, description: str = ""):
+        """Declare a parameter whose value is checked against the type of ``default``.
+
+        Integers are accepted where a double is expected (YAML ``100`` for ``100.0``); anything
+        else of the wrong type, or a vector of the wrong length, raises StartupError naming it.
+        """
+        descriptor = ParameterDescriptor(description=description, dynamic_typing=True)
+        value = self.declare_parameter(name, to_ros_value(default), descriptor).value
+        try:
+            return coerce_parameter(name, value, default)
+        except ParameterError as error:
+            raise StartupError(str(error)) from error
+
+    def declare_string_list(self, name: str, description: str = "") -> list[str]:
+        """Declare a string-array parameter (default empty)."""
+        descriptor = ParameterDescriptor(description=description)
+        try:
+            self.declare_parameter(name, Parameter.Type.STRING_ARRAY, descriptor)
+            value = self.get_parameter(name).value
+        except rclpy.exceptions.ParameterUninitializedException:
+            return []
+        except rclpy.exceptions.InvalidParameterTypeException as error:
+            raise StartupError(f"parameter '{name}' must be a list of strings") from error
+        return list(value)
+
+    def declare_config(
+        self,
+        config_type: type,
+        prefix: str = "",
+        renamed: Mapping[str, str] | None = None,
+        skip: tuple[str, ...] = (),
+        **fixed,
+    ):
+        """Declare one parameter per field of a configuration dataclass and build it.
+
+        The parameter of field ``f`` is ``prefix + f`` unless ``renamed`` maps it elsewhere (the
+        shared extrinsics such as ``gnss.primary_antenna``). Fields in ``skip`` keep their default;
+        ``fixed`` gives values that are not parameters.
+        """
+        values = {
+            parameter: self.declare_value(parameter, default)
+            for _, parameter, default in config_parameters(
+                config_type, prefix, renamed, set(skip) | set(fixed)
+            )
+        }
+        try:
+            return build_config(config_type, values, prefix, renamed, skip, **fixed)
+        except ParameterError as error:
+            raise StartupError(str(error)) from error
+
+
+# -- diagnostics ---------------------------------------------------------------------------------
+
+LEVELS = {"ok": DiagnosticStatus.OK, "warn": DiagnosticStatus.WARN, "error": DiagnosticStatus.ERROR}
+
+
+class DiagnosticsPublisher:
+    """Publishes the node's health on ``diagnostics`` once per period.
+
+    ``report()`` returns (level, message, values) with level one of 'ok', 'warn', 'error' and
+    values a flat mapping; the node's rejection counts are appended automatically.
+    """
+
+    def __init__(
+        self,
+        node: SuiteNode,
+        report: Callable[[], tuple[str, str, Mapping[str, typing.Any]]],
+        period_s: float = 1.0,
+    ):
+        self._node = node
+        self._report = report
+        self._publisher = node.create_publisher(DiagnosticArray, "diagnostics", 10)
+        self._timer = node.create_timer(period_s, self.publish)
+
+    def publish(self) -> None:
+        level, message, values = self._report()
+        status = DiagnosticStatus()
+        status.level = LEVELS[level]
+        status.name = f"{self._node.get_namespace().rstrip('/')}/{self._node.get_name()}"
+        status.message = message
+        status.hardware_id = self._node.get_name()
+        items = dict(values)
+        items["rejected_total"] = sum(self._node.rejections.values())
+        for key, count in sorted(self._node.rejections.items()):
+            items[f"rejected[{key}]"] = count
+        status.values = [KeyValue(key=str(k), value=_format_value(v)) for k, v in items.items()]
+        array = DiagnosticArray()
+        array.header.stamp = self._node.get_clock().now().to_msg()
+        array.status = [status]
+        self._publisher.publish(array)
+
+
+def _format_value(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+# -- running ----------------------------------------------------------------------------------
+
+
+def run_node(node_factory: Callable[[], SuiteNode], args: list[str] | None = None) -> int:
+    """Initialise rclpy, build the node, spin until SIGINT/SIGTERM or ``node.finish()``.
+
+    Returns the process exit code: 0 for a clean stop, 2 for a configuration error (reported as
+    one line on stderr, without a traceback).
+    """
+    program = sys.argv[0].rsplit("/", 1)[-1]
+    try:
+        rclpy.init(args=sys.argv if args is None else args)
+    except Exception as error:  # rclpy raises RCLError for a missing --params-file
+        print(f"{program}: cannot start: {error}", file=sys.stderr)
+        return 2
+    node = None
+    try:
+        node = node_factory()
+        while rclpy.ok() and not node.finished:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        return node.exit_code
+    except StartupError as error:
+        print(f"{program}: {error}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 0
+    except (rclpy.exceptions.ParameterException, ParameterError) as error:
+        print(f"{program}: {error}", file=sys.stderr)
+        return 2
+    except Exception:
+        # SIGTERM can invalidate the context under a running callback: that is a normal stop.
+        if not rclpy.ok():
+            return 0
+        raise
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def main_for(node_factory: Callable[[], SuiteNode]) -> Callable[[], None]:
+    """A console-script entry point that runs ``node_factory`` and exits with its code."""
+
+    def main() -> None:
+        sys.exit(run_node(node_factory))
+
+    return main

@@ -1,0 +1,1 @@
+"""Simulated buoy sensors, truth, simulation clock, bag recorder and player."""

@@ -1,0 +1,177 @@
+"""Build the contract's ROS messages from simulated samples.
+
+The live sensor nodes and the offline bag generator both build their messages here, so a bag
+recorded from the nodes and a bag generated offline hold the same messages. Only the message
+packages are imported (no rclpy): the resulting objects are published by the nodes and
+serialised by the bag writer.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import numpy as np
+from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+
+from sensor_sim.sensor_models import GnssSample
+from sensor_sim.truth import TruthState
+
+IMU_FRAME = "imu_link"
+GNSS_FRAME = "gnss_primary"
+ANEMOMETER_FRAME = "anemometer_link"
+MAP_FRAME = "map"
+BODY_FRAME = "base_link"
+
+# Heading messages carry yaw only; roll and pitch are marked as unknown with a huge variance.
+UNKNOWN_ANGLE_VARIANCE_RAD2 = 1.0e6
+
+
+def stamp_ns(start_time_ns: int, t_s: float) -> int:
+    """Sensor-time stamp (ns) of scenario time ``t_s`` (s), rounded to the nanosecond."""
+    return start_time_ns + round(t_s * 1e9)
+
+
+def _set_stamp(header, time_ns: int, frame_id: str) -> None:
+    header.stamp.sec, header.stamp.nanosec = divmod(time_ns, 1_000_000_000)
+    header.frame_id = frame_id
+
+
+def _set_vector(target, values) -> None:
+    target.x, target.y, target.z = (float(v) for v in values)
+
+
+def _set_quaternion(target, xyzw) -> None:
+    target.x, target.y, target.z, target.w = (float(v) for v in xyzw)
+
+
+def imu_messages(
+    stamps_ns: list[int],
+    gyro_rad_s: np.ndarray,
+    specific_force_mps2: np.ndarray,
+    gyro_variance_rad2_s2: float,
+    accel_variance_m2_s4: float,
+) -> Iterator[Imu]:
+    """``imu/data_raw``: body rate (rad/s) and specific force (m/s²) in imu_link; no attitude."""
+    for time_ns, gyro, force in zip(stamps_ns, gyro_rad_s, specific_force_mps2, strict=True):
+        message = Imu()
+        _set_stamp(message.header, time_ns, IMU_FRAME)
+        message.orientation_covariance[0] = -1.0
+        _set_vector(message.angular_velocity, gyro)
+        _set_vector(message.linear_acceleration, force)
+        message.angular_velocity_covariance[0::4] = gyro_variance_rad2_s2
+        message.linear_acceleration_covariance[0::4] = accel_variance_m2_s4
+        yield message
+
+
+def gnss_fix_messages(stamps_ns: list[int], sample: GnssSample) -> Iterator[NavSatFix]:
+    """``gnss/fix``: primary antenna WGS-84 position; status NO_FIX (and NaN) during outages."""
+    for i, time_ns in enumerate(stamps_ns):
+        message = NavSatFix()
+        _set_stamp(message.header, time_ns, GNSS_FRAME)
+        message.status.service = NavSatStatus.SERVICE_GPS
+        if sample.fix_valid[i]:
+            message.status.status = NavSatStatus.STATUS_GBAS_FIX
+            message.latitude = float(sample.latitude_deg[i])
+            message.longitude = float(sample.longitude_deg[i])
+            message.altitude = float(sample.altitude_m[i])
+            message.position_covariance = sample.position_covariance_enu_m2[i].ravel().astype(float)
+            message.position_covariance_type = NavSatFix.COVARIANCE_TYPE_KNOWN
+        else:
+            message.status.status = NavSatStatus.STATUS_NO_FIX
+            message.latitude = message.longitude = message.altitude = math.nan
+            message.position_covariance_type = NavSatFix.COVARIANCE_TYPE_UNKNOWN
+        yield message
+
+
+def gnss_velocity_messages(
+    stamps_ns: list[int], sample: GnssSample
+) -> Iterator[TwistWithCovarianceStamped | None]:
+    """``gnss/vel``: primary antenna ENU velocity over ground (m/s); None while there is no fix."""
+    for i, time_ns in enumerate(stamps_ns):
+        if not sample.fix_valid[i]:
+            yield None
+            continue
+        message = TwistWithCovarianceStamped()
+        _set_stamp(message.header, time_ns, GNSS_FRAME)
+        _set_vector(message.twist.twist.linear, sample.velocity_enu_mps[i])
+        covariance = np.zeros((6, 6))
+        covariance[:3, :3] = sample.velocity_covariance_enu_m2s2[i]
+        covariance[3:, 3:] = -np.eye(3)  # angular part not measured
+        message.twist.covariance = covariance.ravel()
+        yield message
+
+
+def gnss_heading_messages(stamps_ns: list[int], sample: GnssSample) -> Iterator[Imu | None]:
+    """``gnss/heading``: yaw-only quaternion of the baseline azimuth (ENU); None during outages."""
+    for i, time_ns in enumerate(stamps_ns):
+        if not sample.heading_valid[i]:
+            yield None
+            continue
+        message = Imu()
+        _set_stamp(message.header, time_ns, GNSS_FRAME)
+        half_yaw = 0.5 * float(sample.heading_yaw_rad[i])
+        _set_quaternion(message.orientation, (0.0, 0.0, math.sin(half_yaw), math.cos(half_yaw)))
+        message.orientation_covariance[0] = UNKNOWN_ANGLE_VARIANCE_RAD2
+        message.orientation_covariance[4] = UNKNOWN_ANGLE_VARIANCE_RAD2
+        message.orientation_covariance[8] = float(sample.heading_variance_rad2[i])
+        message.angular_velocity_covariance[0] = -1.0
+        message.linear_acceleration_covariance[0] = -1.0
+        yield message
+
+
+def gnss_baseline_messages(
+    stamps_ns: list[int], sample: GnssSample
+) -> Iterator[Vector3Stamped | None]:
+    """``gnss/baseline``: measured primary→secondary vector in ENU (m); None during outages."""
+    for i, time_ns in enumerate(stamps_ns):
+        if not sample.heading_valid[i]:
+            yield None
+            continue
+        message = Vector3Stamped()
+        _set_stamp(message.header, time_ns, MAP_FRAME)
+        _set_vector(message.vector, sample.baseline_enu_m[i])
+        yield message
+
+
+def anemometer_messages(
+    stamps_ns: list[int], wind_sensor_mps: np.ndarray
+) -> Iterator[Vector3Stamped]:
+    """``anemometer/wind``: air velocity relative to the sensor in anemometer axes (m/s)."""
+    for time_ns, wind in zip(stamps_ns, wind_sensor_mps, strict=True):
+        message = Vector3Stamped()
+        _set_stamp(message.header, time_ns, ANEMOMETER_FRAME)
+        _set_vector(message.vector, wind)
+        yield message
+
+
+def truth_odometry_messages(
+    stamps_ns: list[int], truth: TruthState, position_map_m: np.ndarray
+) -> Iterator[Odometry]:
+    """``truth/odometry``: true pose of base_link in map, true twist in base_link.
+
+    Twist follows the Odometry convention: linear = velocity over ground in body axes, angular =
+    body rate relative to the local-level frame (rad/s).
+    """
+    quaternions = truth.attitude.as_quat()
+    body_velocity = truth.attitude.inv().apply(truth.velocity_enu_mps)
+    for i, time_ns in enumerate(stamps_ns):
+        message = Odometry()
+        _set_stamp(message.header, time_ns, MAP_FRAME)
+        message.child_frame_id = BODY_FRAME
+        _set_vector(message.pose.pose.position, position_map_m[i])
+        _set_quaternion(message.pose.pose.orientation, quaternions[i])
+        _set_vector(message.twist.twist.linear, body_velocity[i])
+        _set_vector(message.twist.twist.angular, truth.angular_rate_body_rad_s[i])
+        yield message
+
+
+def enu_vector_messages(stamps_ns: list[int], vectors_enu: np.ndarray) -> Iterator[Vector3Stamped]:
+    """ENU vectors in frame map (``truth/wind``, ``truth/current``)."""
+    for time_ns, vector in zip(stamps_ns, vectors_enu, strict=True):
+        message = Vector3Stamped()
+        _set_stamp(message.header, time_ns, MAP_FRAME)
+        _set_vector(message.vector, vector)
+        yield message

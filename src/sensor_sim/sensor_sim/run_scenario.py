@@ -1,0 +1,234 @@
+"""``run_scenario``: run a simulated buoy live, each node its own process, optionally recording.
+
+Starts the truth, IMU, GNSS and anemometer nodes and the simulation clock (and, on request, the
+fusion and compensation nodes and the bag recorder) as separate processes that talk over DDS,
+waits until the scenario has played out, stops the long-running nodes with SIGINT and reports.
+It plays the role ``ros2 launch`` would on a full ROS install.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sensor_sim.scenario import ScenarioError, load_scenario
+
+SENSOR_NODES = ("truth_node", "imu_sim_node", "gnss_sim_node", "anemometer_sim_node")
+# Time for the last messages to travel through fusion, compensation and into the recorder.
+DRAIN_S = 2.0
+STOP_TIMEOUT_S = 20.0
+SIM_TIME = {"use_sim_time": True}
+
+
+def executable(name: str) -> str:
+    """A suite executable: on PATH, or beside this Python (a venv's bin)."""
+    found = shutil.which(name) or shutil.which(name, path=str(Path(sys.executable).parent))
+    if found is None:
+        raise FileNotFoundError(f"executable '{name}' not found on PATH or beside {sys.executable}")
+    return found
+
+
+@dataclass
+class Process:
+    name: str
+    popen: subprocess.Popen
+    log_path: Path
+    stops_by_itself: bool
+
+    def log_tail(self, lines: int = 15) -> str:
+        text = self.log_path.read_text(errors="replace").splitlines()
+        return "\n".join("    " + line for line in text[-lines:])
+
+
+@dataclass
+class Run:
+    log_dir: Path
+    processes: list[Process] = field(default_factory=list)
+
+    def start(self, name: str, args: list[str], stops_by_itself: bool) -> Process:
+        log_path = self.log_dir / f"{name}.log"
+        with open(log_path, "w") as log:
+            popen = subprocess.Popen(
+                [executable(name), *args],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+        process = Process(name, popen, log_path, stops_by_itself)
+        self.processes.append(process)
+        return process
+
+    def failed(self) -> Process | None:
+        for process in self.processes:
+            code = process.popen.poll()
+            if code not in (None, 0):
+                return process
+        return None
+
+    def interrupt(self, processes: list[Process]) -> None:
+        for process in processes:
+            if process.popen.poll() is None:
+                process.popen.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + STOP_TIMEOUT_S
+        for process in processes:
+            try:
+                process.popen.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                process.popen.kill()
+                process.popen.wait()
+
+
+def ros_arguments(arguments, values: dict[str, object]) -> list[str]:
+    """``--ros-args`` for a node: the shared parameter files, then these values, namespace."""
+    args = ["--ros-args"]
+    for params_file in arguments.params_file:
+        args += ["--params-file", params_file]
+    for key, value in values.items():
+        if isinstance(value, bool):
+            value = "true" if value else "false"
+        args += ["-p", f"{key}:={value}"]
+    if arguments.namespace:
+        args += ["-r", f"__ns:={arguments.namespace}"]
+    return args
+
+
+def scenario_values(arguments) -> dict[str, object]:
+    values = {"scenario": arguments.scenario, "scenario_overrides": json.dumps(arguments.overrides)}
+    if arguments.seed is not None:
+        values["seed"] = arguments.seed
+    return values
+
+
+def parse_arguments(argv):
+    parser = argparse.ArgumentParser(prog="run_scenario", description=__doc__.split("\n")[0])
+    parser.add_argument("scenario", help="shipped scenario name or path to a scenario YAML file")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario value (repeatable)",
+    )
+    parser.add_argument("--seed", type=int, help="random seed (default: the scenario's)")
+    parser.add_argument(
+        "--rate-factor",
+        type=float,
+        default=1.0,
+        help="simulated seconds per wall-clock second (default 1: real time)",
+    )
+    parser.add_argument(
+        "--params-file",
+        action="append",
+        default=[],
+        help="ROS parameter YAML given to every node (repeatable)",
+    )
+    parser.add_argument("--record", metavar="BAG", help="record the run into this new bag")
+    parser.add_argument("--fusion", action="store_true", help="also run fusion_node")
+    parser.add_argument(
+        "--compensation", action="store_true", help="also run compensation_node (implies --fusion)"
+    )
+    parser.add_argument("--namespace", help="put every node in this namespace, e.g. /buoy1")
+    parser.add_argument("--log-dir", default=None, help="where node logs go (default: a temp dir)")
+    return parser.parse_args(argv)
+
+
+def run(arguments) -> int:
+    scenario = load_scenario(arguments.scenario, arguments.overrides, arguments.seed)
+    if arguments.record and Path(arguments.record).exists():
+        print(f"run_scenario: {arguments.record} exists; choose a new bag path", file=sys.stderr)
+        return 2
+    if arguments.log_dir:
+        log_dir = Path(arguments.log_dir)
+        log_dir.mkdir(parents=True, exist_ok=True)
+    else:
+        log_dir = Path(tempfile.mkdtemp(prefix="run_scenario-"))
+    run = Run(log_dir)
+    clock_subscribers = len(SENSOR_NODES)
+    if arguments.record:
+        run.start("bag_recorder", [arguments.record, *ros_arguments(arguments, SIM_TIME)], False)
+        clock_subscribers += 1
+    if arguments.fusion or arguments.compensation:
+        run.start("fusion_node", ros_arguments(arguments, SIM_TIME), False)
+        clock_subscribers += 1
+    if arguments.compensation:
+        run.start("compensation_node", ros_arguments(arguments, SIM_TIME), False)
+        clock_subscribers += 1
+    wait = 1 if (arguments.record or arguments.fusion or arguments.compensation) else 0
+    for name in SENSOR_NODES:
+        run.start(
+            name,
+            ros_arguments(arguments, {**scenario_values(arguments), "wait_for_subscribers": wait}),
+            True,
+        )
+    run.start(
+        "sim_clock_node",
+        ros_arguments(
+            arguments,
+            {
+                **scenario_values(arguments),
+                "rate_factor": arguments.rate_factor,
+                "wait_for_subscribers": clock_subscribers,
+            },
+        ),
+        True,
+    )
+    print(
+        f"run_scenario: '{scenario.name}' seed {scenario.seed}, {scenario.duration_s:g} s at "
+        f"{arguments.rate_factor:g}x; node logs in {log_dir}",
+        flush=True,
+    )
+    self_stopping = [p for p in run.processes if p.stops_by_itself]
+    long_running = [p for p in run.processes if not p.stops_by_itself]
+    expected_wall_s = scenario.duration_s / arguments.rate_factor
+    deadline = time.monotonic() + expected_wall_s + 60.0
+    try:
+        while any(p.popen.poll() is None for p in self_stopping):
+            failure = run.failed()
+            if failure is not None:
+                print(
+                    f"run_scenario: {failure.name} exited with code "
+                    f"{failure.popen.returncode}:\n{failure.log_tail()}",
+                    file=sys.stderr,
+                )
+                run.interrupt(run.processes)
+                return 1
+            if time.monotonic() > deadline:
+                print("run_scenario: the simulation did not finish in time", file=sys.stderr)
+                run.interrupt(run.processes)
+                return 1
+            time.sleep(0.2)
+        time.sleep(DRAIN_S)
+    except KeyboardInterrupt:
+        print("run_scenario: interrupted, stopping the nodes", file=sys.stderr)
+        run.interrupt(run.processes)
+        return 130
+    run.interrupt(long_running)
+    failure = run.failed()
+    if failure is not None:
+        print(
+            f"run_scenario: {failure.name} exited with code {failure.popen.returncode}:\n"
+            f"{failure.log_tail()}",
+            file=sys.stderr,
+        )
+        return 1
+    if arguments.record:
+        print(f"run_scenario: recorded {arguments.record}")
+    return 0
+
+
+def main(argv=None) -> None:
+    arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
+    try:
+        sys.exit(run(arguments))
+    except (ScenarioError, FileNotFoundError) as error:
+        print(f"run_scenario: {error}", file=sys.stderr)
+        sys.exit(2)

@@ -1,0 +1,98 @@
+"""The common shape of the simulated sensor nodes.
+
+Each sensor node evaluates the scenario's truth at its own sample times. It follows the
+simulation clock on ``/clock`` (published by ``sim_clock_node``): whenever the clock moves, it
+publishes every sample whose stamp has been reached. Stamps therefore never depend on
+scheduling, and a run is fully defined by the scenario file, the overrides and the seed.
+"""
+
+from __future__ import annotations
+
+from buoy_nav.base_node import DATA_QOS, DiagnosticsPublisher, StartupError, SuiteNode, main_for
+from buoy_nav.parameters import ParameterError
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+
+from sensor_sim.scenario import ScenarioError, load_scenario
+from sensor_sim.streams import STREAMS
+from sensor_sim.truth import TruthModel
+
+CLOCK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def declare_scenario(node: SuiteNode):
+    """Declare ``scenario``, ``scenario_overrides`` and ``seed``; load the scenario."""
+    name = node.declare_value("scenario", "sea_state", "shipped scenario name or YAML path")
+    overrides = node.declare_string_list("scenario_overrides", "dotted.key=value overrides")
+    seed = node.declare_value("seed", -1, "random seed; -1 keeps the scenario's")
+    try:
+        return load_scenario(name, overrides, None if seed < 0 else seed)
+    except ScenarioError as error:
+        raise StartupError(str(error)) from error
+
+
+class SimulatedSensorNode(SuiteNode):
+    """Publishes one sensor stream, driven by the simulation clock."""
+
+    def __init__(self, kind: str):
+        self.spec = STREAMS[kind]
+        super().__init__(self.spec.node_name)
+        self.scenario = declare_scenario(self)
+        values = {
+            name: self.declare_value(name, default) for name, default in self.spec.parameters()
+        }
+        try:
+            self.stream = self.spec.build(self.scenario, TruthModel(self.scenario), values)
+        except ParameterError as error:
+            raise StartupError(str(error)) from error
+        self.wait_for_subscribers = self.declare_value(
+            "wait_for_subscribers",
+            0,
+            "publish only once every topic has this many subscribers (recording)",
+        )
+        self.publishers_by_topic = {
+            topic: self.create_publisher(_message_class(type_name), topic, DATA_QOS)
+            for topic, type_name in self.stream.topics.items()
+        }
+        self.published = 0
+        self.sim_time_s = float("nan")
+        self.create_subscription(Clock, "/clock", self.on_clock, CLOCK_QOS)
+        DiagnosticsPublisher(self, self.health)
+        self.get_logger().info(
+            f"scenario '{self.scenario.name}' seed {self.scenario.seed}: "
+            f"{', '.join(self.stream.topics)} at {self.stream.timing.rate_hz:g} Hz"
+        )
+
+    def subscribers_ready(self) -> bool:
+        return all(
+            publisher.get_subscription_count() >= self.wait_for_subscribers
+            for publisher in self.publishers_by_topic.values()
+        )
+
+    def on_clock(self, clock: Clock) -> None:
+        clock_ns = clock.clock.sec * 1_000_000_000 + clock.clock.nanosec
+        self.sim_time_s = (clock_ns - self.scenario.start_time_ns) * 1e-9
+        if self.wait_for_subscribers and not self.subscribers_ready():
+            return
+        for topic, _, message in self.stream.advance(self.sim_time_s):
+            self.publishers_by_topic[topic].publish(message)
+            self.published += 1
+        if self.stream.finished():
+            self.get_logger().info(f"end of scenario: {self.published} messages published")
+            self.finish()
+
+    def health(self):
+        level = "ok" if self.published else "warn"
+        message = "publishing" if self.published else "waiting for /clock or subscribers"
+        return level, message, {"sim_time_s": self.sim_time_s, "published": self.published}
+
+
+def _message_class(type_name: str):
+    package, _, name = type_name.split("/")
+    module = __import__(f"{package}.msg", fromlist=[name])
+    return getattr(module, name)
+
+
+def main_for_stream(kind: str):
+    """Console-script entry point of the node that publishes stream ``kind``."""
+    return main_for(lambda: SimulatedSensorNode(kind))

@@ -1,0 +1,322 @@
+"""Sensor streams: each simulated sensor as a sequence of timestamped messages.
+
+A stream samples the truth at its own sample times ``t_k = offset + k / rate`` (scenario time,
+s) and turns the samples into contract messages. A live node advances its stream as the
+simulation clock moves; the offline generator advances all streams to the end of the scenario.
+Both therefore publish the same messages with the same stamps for a scenario and a seed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+from buoy_nav.parameters import build_config, config_parameters
+
+from sensor_sim import messages
+from sensor_sim.geodesy import geodetic_to_enu_m
+from sensor_sim.scenario import Scenario
+from sensor_sim.sensor_models import (
+    AnemometerErrorConfig,
+    AnemometerSimulator,
+    GnssErrorConfig,
+    GnssSimulator,
+    ImuErrorConfig,
+    ImuSimulator,
+)
+from sensor_sim.truth import TruthModel
+
+SECONDS_PER_HOUR = 3600.0
+
+# Per-sensor keys for the seed: every sensor draws its own independent random stream.
+IMU_SEED_KEY, GNSS_SEED_KEY, ANEMOMETER_SEED_KEY = 1, 2, 3
+
+
+@dataclass(frozen=True)
+class Extrinsics:
+    """Where the sensors sit on the buoy (shared parameters of the interface contract)."""
+
+    primary_antenna_body_m: tuple[float, float, float] = (-0.75, 0.0, 1.0)
+    secondary_antenna_body_m: tuple[float, float, float] = (0.75, 0.0, 1.0)
+    anemometer_position_body_m: tuple[float, float, float] = (0.0, 0.0, 3.0)
+    anemometer_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        baseline = np.subtract(self.secondary_antenna_body_m, self.primary_antenna_body_m)
+        if np.hypot(baseline[0], baseline[1]) < 0.05:
+            raise ValueError(
+                "secondary_antenna_body_m: the antenna baseline must be at least 0.05 m long "
+                "horizontally in base_link to give a heading"
+            )
+
+
+@dataclass(frozen=True)
+class MapOrigin:
+    """Reference point of the map frame (deg, deg, m); NaN: the scenario's starting point."""
+
+    latitude_deg: float = math.nan
+    longitude_deg: float = math.nan
+    altitude_m: float = math.nan
+
+    def unset(self) -> bool:
+        return any(math.isnan(v) for v in (self.latitude_deg, self.longitude_deg, self.altitude_m))
+
+
+@dataclass(frozen=True)
+class StreamTiming:
+    """Sample rate (Hz) and time offset of the first sample (s) of one sensor."""
+
+    rate_hz: float = 10.0
+    time_offset_s: float = 0.0
+
+    def __post_init__(self):
+        if not (math.isfinite(self.rate_hz) and 0.0 < self.rate_hz <= 2000.0):
+            raise ValueError(f"rate_hz must be in (0, 2000] Hz, got {self.rate_hz}")
+        if not (
+            math.isfinite(self.time_offset_s) and 0.0 <= self.time_offset_s < 1.0 / self.rate_hz
+        ):
+            raise ValueError(f"time_offset_s must be in [0, 1/rate_hz) s, got {self.time_offset_s}")
+
+
+@dataclass
+class SensorStream:
+    """Base: sample-time bookkeeping shared by all streams."""
+
+    scenario: Scenario
+    truth: TruthModel
+    timing: StreamTiming
+    next_index: int = field(default=0, init=False)
+
+    topics: dict[str, str] = field(default_factory=dict, init=False)
+
+    def _take_times(self, until_s: float) -> np.ndarray:
+        """Scenario times (s) of the samples not yet produced with t <= until_s and <= duration."""
+        end_s = min(until_s, self.scenario.duration_s)
+        period = 1.0 / self.timing.rate_hz
+        last_index = math.floor((end_s - self.timing.time_offset_s) / period + 1e-9)
+        if last_index < self.next_index:
+            return np.empty(0)
+        indices = np.arange(self.next_index, last_index + 1)
+        self.next_index = last_index + 1
+        return self.timing.time_offset_s + indices * period
+
+    def finished(self) -> bool:
+        period = 1.0 / self.timing.rate_hz
+        return self.timing.time_offset_s + self.next_index * period > self.scenario.duration_s
+
+    def _stamps(self, times_s: np.ndarray) -> list[int]:
+        return [messages.stamp_ns(self.scenario.start_time_ns, t) for t in times_s]
+
+    def advance(self, until_s: float) -> list[tuple[str, int, object]]:
+        """Messages (topic, stamp_ns, message) of every sample due up to scenario time until_s."""
+        times = self._take_times(until_s)
+        if times.size == 0:
+            return []
+        return list(self._messages(times, self._stamps(times)))
+
+    def _messages(self, times_s, stamps_ns) -> Iterator[tuple[str, int, object]]:
+        raise NotImplementedError
+
+
+@dataclass
+class ImuStream(SensorStream):
+    errors: ImuErrorConfig = field(default_factory=ImuErrorConfig)
+
+    def __post_init__(self):
+        self.topics = {"imu/data_raw": "sensor_msgs/msg/Imu"}
+        self._simulator = ImuSimulator(self.truth, self.errors, [self.scenario.seed, IMU_SEED_KEY])
+        # Per-sample white-noise variances, advertised in the message covariances.
+        gyro_density_rad_sqrt_s = math.radians(self.errors.gyro_noise_deg_sqrt_h) / 60.0
+        accel_density_mps_sqrt_s = self.errors.accel_noise_mps_sqrt_h / 60.0
+        self._gyro_variance = gyro_density_rad_sqrt_s**2 * self.timing.rate_hz
+        self._accel_variance = accel_density_mps_sqrt_s**2 * self.timing.rate_hz
+
+    def _messages(self, times_s, stamps_ns):
+        gyro, force = self._simulator.measure(times_s)
+        for stamp, message in zip(
+            stamps_ns,
+            messages.imu_messages(
+                stamps_ns, gyro, force, self._gyro_variance, self._accel_variance
+            ),
+            strict=True,
+        ):
+            yield "imu/data_raw", stamp, message
+
+
+@dataclass
+class GnssStream(SensorStream):
+    errors: GnssErrorConfig = field(default_factory=GnssErrorConfig)
+    extrinsics: Extrinsics = field(default_factory=Extrinsics)
+
+    def __post_init__(self):
+        self.topics = {
+            "gnss/fix": "sensor_msgs/msg/NavSatFix",
+            "gnss/vel": "geometry_msgs/msg/TwistWithCovarianceStamped",
+            "gnss/heading": "sensor_msgs/msg/Imu",
+            "gnss/baseline": "geometry_msgs/msg/Vector3Stamped",
+        }
+        self._simulator = GnssSimulator(
+            self.truth,
+            self.errors,
+            np.asarray(self.extrinsics.primary_antenna_body_m),
+            np.asarray(self.extrinsics.secondary_antenna_body_m),
+            [self.scenario.seed, GNSS_SEED_KEY],
+        )
+
+    def _messages(self, times_s, stamps_ns):
+        sample = self._simulator.measure(times_s)
+        per_topic = {
+            "gnss/fix": messages.gnss_fix_messages(stamps_ns, sample),
+            "gnss/vel": messages.gnss_velocity_messages(stamps_ns, sample),
+            "gnss/heading": messages.gnss_heading_messages(stamps_ns, sample),
+            "gnss/baseline": messages.gnss_baseline_messages(stamps_ns, sample),
+        }
+        rows = zip(stamps_ns, *per_topic.values(), strict=True)
+        for stamp, *row in rows:
+            for topic, message in zip(per_topic, row, strict=True):
+                if message is not None:
+                    yield topic, stamp, message
+
+
+@dataclass
+class AnemometerStream(SensorStream):
+    errors: AnemometerErrorConfig = field(default_factory=AnemometerErrorConfig)
+    extrinsics: Extrinsics = field(default_factory=Extrinsics)
+
+    def __post_init__(self):
+        self.topics = {"anemometer/wind": "geometry_msgs/msg/Vector3Stamped"}
+        self._simulator = AnemometerSimulator(
+            self.truth,
+            self.errors,
+            np.asarray(self.extrinsics.anemometer_position_body_m),
+            np.asarray(self.extrinsics.anemometer_rpy_deg),
+            [self.scenario.seed, ANEMOMETER_SEED_KEY],
+        )
+
+    def _messages(self, times_s, stamps_ns):
+        wind = self._simulator.measure(times_s)
+        for stamp, message in zip(
+            stamps_ns, messages.anemometer_messages(stamps_ns, wind), strict=True
+        ):
+            yield "anemometer/wind", stamp, message
+
+
+@dataclass
+class TruthStream(SensorStream):
+    """The truth topics: the bag carries its own answer."""
+
+    map_origin: MapOrigin = field(default_factory=lambda: MapOrigin())
+
+    def __post_init__(self):
+        self.topics = {
+            "truth/odometry": "nav_msgs/msg/Odometry",
+            "truth/wind": "geometry_msgs/msg/Vector3Stamped",
+        }
+        if self.truth.evaluate(np.zeros(1)).current_enu_mps is not None:
+            self.topics["truth/current"] = "geometry_msgs/msg/Vector3Stamped"
+
+    def _messages(self, times_s, stamps_ns):
+        state = self.truth.evaluate(times_s)
+        position_map = self._position_in_map(state)
+        streams = [
+            ("truth/odometry", messages.truth_odometry_messages(stamps_ns, state, position_map)),
+            ("truth/wind", messages.enu_vector_messages(stamps_ns, state.wind_enu_mps)),
+        ]
+        if state.current_enu_mps is not None:
+            streams.append(
+                ("truth/current", messages.enu_vector_messages(stamps_ns, state.current_enu_mps))
+            )
+        topics = [topic for topic, _ in streams]
+        for stamp, *row in zip(stamps_ns, *(s for _, s in streams), strict=True):
+            for topic, message in zip(topics, row, strict=True):
+                yield topic, stamp, message
+
+    def _position_in_map(self, state) -> np.ndarray:
+        """base_link position in map: the scenario origin unless origin parameters say otherwise."""
+        origin = self.map_origin
+        if origin.unset():
+            return state.position_enu_m
+        return geodetic_to_enu_m(
+            state.latitude_deg,
+            state.longitude_deg,
+            state.altitude_m,
+            origin.latitude_deg,
+            origin.longitude_deg,
+            origin.altitude_m,
+        )
+
+
+def merged_messages(streams: list[SensorStream], until_s: float):
+    """All streams' messages up to until_s, in stamp order (ties: stream order, then topic)."""
+    rows = []
+    for order, stream in enumerate(streams):
+        rows.extend(
+            (stamp, order, topic, message) for topic, stamp, message in stream.advance(until_s)
+        )
+    rows.sort(key=lambda row: (row[0], row[1]))
+    return [(topic, stamp, message) for stamp, _, topic, message in rows]
+
+
+EXTRINSIC_PARAMETERS = {
+    "primary_antenna_body_m": "gnss.primary_antenna",
+    "secondary_antenna_body_m": "gnss.secondary_antenna",
+    "anemometer_position_body_m": "anemometer.position",
+    "anemometer_rpy_deg": "anemometer.rpy_deg",
+}
+
+
+@dataclass(frozen=True)
+class StreamSpec:
+    """How one sensor stream is configured: its node, default rate and parameter groups.
+
+    ``configs`` maps a stream field to (configuration type, parameter prefix, renamed fields).
+    """
+
+    node_name: str
+    stream_type: type
+    default_rate_hz: float
+    configs: dict[str, tuple[type, str, dict[str, str]]]
+
+    def parameters(self) -> list[tuple[str, object]]:
+        """(parameter name, default) of every parameter of this stream's node."""
+        names = [("rate_hz", float(self.default_rate_hz)), ("time_offset_s", 0.0)]
+        for config_type, prefix, renamed in self.configs.values():
+            names += [(p, d) for _, p, d in config_parameters(config_type, prefix, renamed)]
+        return names
+
+    def build(self, scenario: Scenario, truth: TruthModel, values: dict) -> SensorStream:
+        """The stream configured by parameter ``values`` (absent ones keep their defaults)."""
+        timing = build_config(StreamTiming, {"rate_hz": self.default_rate_hz, **values}, renamed={})
+        configs = {
+            field_name: build_config(config_type, values, prefix, renamed)
+            for field_name, (config_type, prefix, renamed) in self.configs.items()
+        }
+        return self.stream_type(scenario, truth, timing, **configs)
+
+
+STREAMS = {
+    "imu": StreamSpec("imu_sim_node", ImuStream, 100.0, {"errors": (ImuErrorConfig, "imu.", {})}),
+    "gnss": StreamSpec(
+        "gnss_sim_node",
+        GnssStream,
+        10.0,
+        {
+            "errors": (GnssErrorConfig, "gnss.", {}),
+            "extrinsics": (Extrinsics, "", EXTRINSIC_PARAMETERS),
+        },
+    ),
+    "anemometer": StreamSpec(
+        "anemometer_sim_node",
+        AnemometerStream,
+        20.0,
+        {
+            "errors": (AnemometerErrorConfig, "anemometer.", {}),
+            "extrinsics": (Extrinsics, "", EXTRINSIC_PARAMETERS),
+        },
+    ),
+    "truth": StreamSpec(
+        "truth_node", TruthStream, 50.0, {"map_origin": (MapOrigin, "origin.", {})}
+    ),
+}

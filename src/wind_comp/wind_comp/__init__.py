@@ -1,0 +1,1 @@
+"""Miller motion correction of buoy anemometer wind, wind products and reports."""

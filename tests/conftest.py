@@ -1,0 +1,104 @@
+"""Fixtures shared by the whole test tree: isolated DDS domains and node processes."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+_domain_counter = itertools.count()
+
+
+def _isolated_ros_environment() -> dict[str, str]:
+    """An environment whose DDS traffic stays on loopback, in a domain no other run uses."""
+    env = dict(os.environ)
+    # pid-derived base keeps parallel pytest runs apart; the counter keeps tests of one run apart.
+    domain = 1 + (os.getpid() * 7 + next(_domain_counter)) % 200
+    env["ROS_DOMAIN_ID"] = str(domain)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    env["AMENT_PREFIX_PATH"] = str(BIN.parent)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+class NodeProcesses:
+    """Starts suite executables as separate processes in one isolated domain; stops them all."""
+
+    def __init__(self, log_dir: Path):
+        self.env = _isolated_ros_environment()
+        self.log_dir = log_dir
+        self.processes: list[tuple[str, subprocess.Popen]] = []
+
+    def start(self, executable: str, *args: str) -> subprocess.Popen:
+        log = open(self.log_dir / f"{executable}-{len(self.processes)}.log", "w")  # noqa: SIM115
+        process = subprocess.Popen(
+            [str(BIN / executable), *args],
+            env=self.env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        self.processes.append((executable, process))
+        return process
+
+    def run(self, executable: str, *args: str, timeout_s: float = 120.0):
+        """Run an executable to completion in this domain; returns the CompletedProcess."""
+        return subprocess.run(
+            [str(BIN / executable), *args],
+            env=self.env,
+            capture_output=True,
+            text=True,
+            timeout=timeout_s,
+        )
+
+    def interrupt(self, process: subprocess.Popen, timeout_s: float = 15.0) -> int:
+        """SIGINT, as Ctrl-C would; returns the exit code."""
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+        try:
+            return process.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+            raise
+
+    def log_of(self, process: subprocess.Popen) -> str:
+        for index, (executable, candidate) in enumerate(self.processes):
+            if candidate is process:
+                return (self.log_dir / f"{executable}-{index}.log").read_text()
+        raise KeyError(process)
+
+    def stop_all(self) -> None:
+        for _, process in self.processes:
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + 15.0
+        for _, process in self.processes:
+            try:
+                process.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+@pytest.fixture
+def nodes(tmp_path):
+    """Start node executables in an isolated DDS domain; all are stopped after the test."""
+    processes = NodeProcesses(tmp_path)
+    yield processes
+    processes.stop_all()
+
+
+@pytest.fixture
+def ros_env():
+    """An isolated environment for subprocesses that talk DDS."""
+    return _isolated_ros_environment()
