@@ -102,3 +102,9 @@ def nodes(tmp_path):
 def ros_env():
     """An isolated environment for subprocesses that talk DDS."""
     return _isolated_ros_environment()
+
+
+@pytest.fixture(scope="module")
+def module_ros_env():
+    """An isolated environment shared by the tests of one module (expensive shared runs)."""
+    return _isolated_ros_environment()

@@ -7,6 +7,7 @@ rate-limited and counted rejection of bad input, and the ``diagnostics`` publish
 
 from __future__ import annotations
 
+import importlib
 import sys
 import typing
 from collections import Counter
@@ -117,6 +118,12 @@ class SuiteNode(Node):
             return build_config(config_type, values, prefix, renamed, skip, **fixed)
         except ParameterError as error:
             raise StartupError(str(error)) from error
+
+
+def message_class(msgtype: str):
+    """The rclpy message class of a type string such as 'sensor_msgs/msg/Imu'."""
+    package, kind, name = msgtype.split("/")
+    return getattr(importlib.import_module(f"{package}.{kind}"), name)
 
 
 # -- diagnostics ---------------------------------------------------------------------------------

@@ -93,12 +93,20 @@ def config_parameters(
     prefix: str = "",
     renamed: Mapping[str, str] | None = None,
     skip: Iterable[str] = (),
+    base: Any = None,
 ) -> list[tuple[str, str, Any]]:
-    """(field name, parameter name, default) for each parameter-backed field of config_type."""
+    """(field name, parameter name, default) for each parameter-backed field of config_type.
+
+    Defaults come from ``base`` (an instance of config_type) when given.
+    """
     renamed = renamed or {}
     skip = set(skip)
     return [
-        (field.name, renamed.get(field.name, prefix + field.name), field_default(field))
+        (
+            field.name,
+            renamed.get(field.name, prefix + field.name),
+            field_default(field) if base is None else getattr(base, field.name),
+        )
         for field in dataclasses.fields(config_type)
         if field.name not in skip
     ]
@@ -110,17 +118,22 @@ def build_config(
     prefix: str = "",
     renamed: Mapping[str, str] | None = None,
     skip: Iterable[str] = (),
+    base: Any = None,
     **fixed: Any,
 ):
     """Build ``config_type`` from parameter values; absent parameters keep their defaults.
+
+    The defaults are the dataclass's own, or the field values of ``base`` when given.
 
     ``fixed`` supplies fields that are not parameters (and removes them from the parameter set).
     Validation errors of the dataclass are re-raised as ParameterError naming the parameter.
     """
     values = dict(fixed)
+    if base is not None:
+        values = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)} | values
     parameter_of_field = {}
     for field_name, parameter, default in config_parameters(
-        config_type, prefix, renamed, set(skip) | set(fixed)
+        config_type, prefix, renamed, set(skip) | set(fixed), base
     ):
         parameter_of_field[field_name] = parameter
         if parameter in values_by_parameter:

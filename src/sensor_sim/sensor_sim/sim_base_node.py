@@ -8,16 +8,25 @@ scheduling, and a run is fully defined by the scenario file, the overrides and t
 
 from __future__ import annotations
 
-from buoy_nav.base_node import DATA_QOS, DiagnosticsPublisher, StartupError, SuiteNode, main_for
-from buoy_nav.parameters import ParameterError
+from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
+from buoy_nav.base_node import (
+    DATA_QOS,
+    DiagnosticsPublisher,
+    StartupError,
+    SuiteNode,
+    main_for,
+    message_class,
+)
+from buoy_nav.parameters import ParameterError
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS
 from sensor_sim.truth import TruthModel
 
 CLOCK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+ACK_TIMEOUT_S = 5.0
 
 
 def declare_scenario(node: SuiteNode):
@@ -39,7 +48,8 @@ class SimulatedSensorNode(SuiteNode):
         super().__init__(self.spec.node_name)
         self.scenario = declare_scenario(self)
         values = {
-            name: self.declare_value(name, default) for name, default in self.spec.parameters()
+            name: self.declare_value(name, default)
+            for name, default in self.spec.parameters(self.scenario)
         }
         try:
             self.stream = self.spec.build(self.scenario, TruthModel(self.scenario), values)
@@ -51,7 +61,7 @@ class SimulatedSensorNode(SuiteNode):
             "publish only once every topic has this many subscribers (recording)",
         )
         self.publishers_by_topic = {
-            topic: self.create_publisher(_message_class(type_name), topic, DATA_QOS)
+            topic: self.create_publisher(message_class(type_name), topic, DATA_QOS)
             for topic, type_name in self.stream.topics.items()
         }
         self.published = 0
@@ -78,6 +88,9 @@ class SimulatedSensorNode(SuiteNode):
             self.publishers_by_topic[topic].publish(message)
             self.published += 1
         if self.stream.finished():
+            # Reliable delivery of the last samples must complete before the process exits.
+            for publisher in self.publishers_by_topic.values():
+                publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
             self.get_logger().info(f"end of scenario: {self.published} messages published")
             self.finish()
 
@@ -85,12 +98,6 @@ class SimulatedSensorNode(SuiteNode):
         level = "ok" if self.published else "warn"
         message = "publishing" if self.published else "waiting for /clock or subscribers"
         return level, message, {"sim_time_s": self.sim_time_s, "published": self.published}
-
-
-def _message_class(type_name: str):
-    package, _, name = type_name.split("/")
-    module = __import__(f"{package}.msg", fromlist=[name])
-    return getattr(module, name)
 
 
 def main_for_stream(kind: str):

@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 import time
 
-from buoy_nav.base_node import StartupError, SuiteNode, main_for
 from rosgraph_msgs.msg import Clock
 
+from buoy_nav.base_node import StartupError, SuiteNode, main_for
 from sensor_sim.sim_base_node import CLOCK_QOS, declare_scenario
 
 END_LINGER_S = 1.0

@@ -13,7 +13,6 @@ import sys
 from buoy_nav.bag_io import BagError, BagWriter
 from buoy_nav.parameters import ParameterError, load_parameter_files
 from buoy_nav.progress import Progress
-
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS, merged_messages
 from sensor_sim.truth import TruthModel

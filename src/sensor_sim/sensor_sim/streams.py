@@ -13,8 +13,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
-from buoy_nav.parameters import build_config, config_parameters
 
+from buoy_nav.parameters import build_config, config_parameters
 from sensor_sim import messages
 from sensor_sim.geodesy import geodetic_to_enu_m
 from sensor_sim.scenario import Scenario
@@ -126,7 +126,12 @@ class ImuStream(SensorStream):
 
     def __post_init__(self):
         self.topics = {"imu/data_raw": "sensor_msgs/msg/Imu"}
-        self._simulator = ImuSimulator(self.truth, self.errors, [self.scenario.seed, IMU_SEED_KEY])
+        self._simulator = ImuSimulator(
+            self.truth,
+            self.errors,
+            [self.scenario.seed, IMU_SEED_KEY],
+            first_interval_s=1.0 / self.timing.rate_hz,
+        )
         # Per-sample white-noise variances, advertised in the message covariances.
         gyro_density_rad_sqrt_s = math.radians(self.errors.gyro_noise_deg_sqrt_h) / 60.0
         accel_density_mps_sqrt_s = self.errors.accel_noise_mps_sqrt_h / 60.0
@@ -279,18 +284,36 @@ class StreamSpec:
     default_rate_hz: float
     configs: dict[str, tuple[type, str, dict[str, str]]]
 
-    def parameters(self) -> list[tuple[str, object]]:
-        """(parameter name, default) of every parameter of this stream's node."""
+    def parameters(self, scenario: Scenario) -> list[tuple[str, object]]:
+        """(parameter name, default) of every parameter of this stream's node.
+
+        Sensor error defaults are the scenario's (``sensors.*`` in its file), so a scenario and
+        a seed define a run; parameters override them.
+        """
         names = [("rate_hz", float(self.default_rate_hz)), ("time_offset_s", 0.0)]
-        for config_type, prefix, renamed in self.configs.values():
-            names += [(p, d) for _, p, d in config_parameters(config_type, prefix, renamed)]
+        for field_name, (config_type, prefix, renamed) in self.configs.items():
+            base = self._scenario_default(scenario, field_name)
+            names += [
+                (p, d) for _, p, d in config_parameters(config_type, prefix, renamed, (), base)
+            ]
         return names
 
+    def _scenario_default(self, scenario: Scenario, field_name: str):
+        if field_name != "errors":
+            return None
+        return getattr(scenario.sensors, self.node_name.split("_")[0])
+
     def build(self, scenario: Scenario, truth: TruthModel, values: dict) -> SensorStream:
-        """The stream configured by parameter ``values`` (absent ones keep their defaults)."""
+        """The stream configured by parameter ``values`` (absent ones: the scenario's values)."""
         timing = build_config(StreamTiming, {"rate_hz": self.default_rate_hz, **values}, renamed={})
         configs = {
-            field_name: build_config(config_type, values, prefix, renamed)
+            field_name: build_config(
+                config_type,
+                values,
+                prefix,
+                renamed,
+                base=self._scenario_default(scenario, field_name),
+            )
             for field_name, (config_type, prefix, renamed) in self.configs.items()
         }
         return self.stream_type(scenario, truth, timing, **configs)

@@ -1,0 +1,515 @@
+"""Sensor error models: MEMS IMU, dual-antenna GNSS receiver, 3-D sonic anemometer.
+
+Each simulator evaluates the shared truth at its own sample times and adds its errors. Random
+errors come from a private stream np.random.default_rng([*seed, SENSOR_KEY]) (seed: the
+scenario seed, or any sequence of non-negative integers that starts with it), so a sensor's
+output depends only on the scenario, the seed and its own sample times: every node that owns a
+sensor reproduces it exactly, and no two sensors share a stream. Within a simulator, one fixed
+block of normal draws is consumed per sample, so splitting the same sample times into several
+``measure`` calls gives the same output as one call.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
+
+from sensor_sim.geodesy import (
+    earth_rate_enu_rad_s,
+    offset_geodetic,
+    transport_rate_enu_rad_s,
+    wgs84_normal_gravity_mps2,
+)
+
+if TYPE_CHECKING:
+    from sensor_sim.truth import TruthModel, TruthState
+
+__all__ = [
+    "AnemometerErrorConfig",
+    "AnemometerSimulator",
+    "GnssErrorConfig",
+    "GnssSample",
+    "GnssSimulator",
+    "ImuErrorConfig",
+    "ImuSimulator",
+    "InvalidConfigValueError",
+    "ideal_imu",
+    "wgs84_normal_gravity_mps2",
+]
+
+IMU_STREAM_KEY = 1
+GNSS_STREAM_KEY = 2
+ANEMOMETER_STREAM_KEY = 3
+
+STANDARD_GRAVITY_MPS2 = 9.80665
+_DEG = np.pi / 180.0
+_SECONDS_PER_HOUR = 3600.0
+# Keeps exp(-elapsed/tau) far from underflow inside one vectorised Gauss-Markov block.
+_MAX_DECAY_PER_BLOCK = 50.0
+
+
+class InvalidConfigValueError(ValueError):
+    """A configuration field holds a value outside its physical range."""
+
+    def __init__(self, key: str, value: object, requirement: str):
+        super().__init__(f"{key} = {value!r}: {requirement}")
+        self.key = key
+        self.value = value
+        self.requirement = requirement
+
+
+def check_field(config: object, key: str, ok: bool, requirement: str) -> None:
+    """Raise InvalidConfigValueError for config.key unless ok."""
+    if not ok:
+        raise InvalidConfigValueError(key, getattr(config, key), requirement)
+
+
+def check_non_negative(config: object, *keys: str) -> None:
+    """Each named field of config must be >= 0."""
+    for key in keys:
+        check_field(config, key, getattr(config, key) >= 0.0, "must be >= 0")
+
+
+def check_positive(config: object, *keys: str) -> None:
+    """Each named field of config must be > 0."""
+    for key in keys:
+        check_field(config, key, getattr(config, key) > 0.0, "must be > 0")
+
+
+@dataclass(frozen=True)
+class ImuErrorConfig:
+    """MEMS IMU error budget, in the units data sheets use (1-sigma per axis).
+
+    Noise densities are angle/velocity random walks; turn-on biases and scale-factor errors are
+    drawn once when the simulator starts; bias instabilities are the stationary standard
+    deviations of first-order Gauss-Markov processes with the given correlation times.
+    """
+
+    gyro_noise_deg_sqrt_h: float = 0.2
+    gyro_turn_on_bias_deg_s: float = 0.02
+    gyro_bias_instability_deg_h: float = 5.0
+    gyro_bias_correlation_time_s: float = 300.0
+    accel_noise_mps_sqrt_h: float = 0.05
+    accel_turn_on_bias_mg: float = 5.0
+    accel_bias_instability_mg: float = 0.1
+    accel_bias_correlation_time_s: float = 600.0
+    scale_factor_error_percent: float = 0.1
+
+    def __post_init__(self) -> None:
+        check_non_negative(
+            self,
+            "gyro_noise_deg_sqrt_h",
+            "gyro_turn_on_bias_deg_s",
+            "gyro_bias_instability_deg_h",
+            "accel_noise_mps_sqrt_h",
+            "accel_turn_on_bias_mg",
+            "accel_bias_instability_mg",
+            "scale_factor_error_percent",
+        )
+        check_positive(self, "gyro_bias_correlation_time_s", "accel_bias_correlation_time_s")
+
+    @property
+    def gyro_noise_density_rad_s_sqrt_hz(self) -> float:
+        """Gyro white-noise density, rad/s/sqrt(Hz) (= rad/sqrt(s))."""
+        return self.gyro_noise_deg_sqrt_h * _DEG / np.sqrt(_SECONDS_PER_HOUR)
+
+    @property
+    def accel_noise_density_mps2_sqrt_hz(self) -> float:
+        """Accelerometer white-noise density, m/s²/sqrt(Hz) (= m/s/sqrt(s))."""
+        return self.accel_noise_mps_sqrt_h / np.sqrt(_SECONDS_PER_HOUR)
+
+    @property
+    def gyro_bias_instability_rad_s(self) -> float:
+        """Stationary sigma of the gyro Gauss-Markov bias, rad/s."""
+        return self.gyro_bias_instability_deg_h * _DEG / _SECONDS_PER_HOUR
+
+    @property
+    def accel_bias_instability_mps2(self) -> float:
+        """Stationary sigma of the accelerometer Gauss-Markov bias, m/s²."""
+        return self.accel_bias_instability_mg * 1e-3 * STANDARD_GRAVITY_MPS2
+
+
+@dataclass(frozen=True)
+class GnssErrorConfig:
+    """Dual-antenna GNSS (moving-baseline RTK) errors, 1-sigma per ENU axis, white.
+
+    Outages are [start, end) intervals in scenario time (s). A receiver without a fix has no
+    heading either, so heading is also invalid during fix outages.
+    """
+
+    position_noise_horizontal_m: float = 0.02
+    position_noise_vertical_m: float = 0.04
+    velocity_noise_horizontal_mps: float = 0.02
+    velocity_noise_vertical_mps: float = 0.04
+    baseline_noise_horizontal_m: float = 0.003
+    baseline_noise_vertical_m: float = 0.006
+    fix_outages_s: tuple[tuple[float, float], ...] = ()
+    heading_outages_s: tuple[tuple[float, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        check_non_negative(
+            self,
+            "position_noise_horizontal_m",
+            "position_noise_vertical_m",
+            "velocity_noise_horizontal_mps",
+            "velocity_noise_vertical_mps",
+            "baseline_noise_horizontal_m",
+            "baseline_noise_vertical_m",
+        )
+        for key in ("fix_outages_s", "heading_outages_s"):
+            for start, end in getattr(self, key):
+                if not start < end:
+                    raise InvalidConfigValueError(
+                        key, getattr(self, key), f"interval [{start}, {end}) must have start < end"
+                    )
+
+
+@dataclass(frozen=True)
+class AnemometerErrorConfig:
+    """Sonic anemometer white noise, m/s, 1-sigma per axis."""
+
+    noise_mps: float = 0.02
+
+    def __post_init__(self) -> None:
+        check_non_negative(self, "noise_mps")
+
+
+def ideal_imu(state: TruthState) -> tuple[np.ndarray, np.ndarray]:
+    """Error-free gyro (rad/s) and specific force (m/s²), body axes, from a truth state.
+
+    gyro = omega_nb^b + R_nb^T (omega_ie^n + omega_en^n);
+    f^b = R_nb^T (a^n + (2 omega_ie^n + omega_en^n) x v^n - g^n), g^n = (0, 0, -gamma(lat, h)).
+    """
+    latitude = np.deg2rad(state.latitude_deg)
+    earth_rate = earth_rate_enu_rad_s(latitude)
+    transport_rate = transport_rate_enu_rad_s(latitude, state.altitude_m, state.velocity_enu_mps)
+    gyro = state.angular_rate_body_rad_s + state.attitude.inv().apply(earth_rate + transport_rate)
+    gravity = np.zeros_like(state.velocity_enu_mps)
+    gravity[:, 2] = -wgs84_normal_gravity_mps2(latitude, state.altitude_m)
+    coriolis = np.cross(2.0 * earth_rate + transport_rate, state.velocity_enu_mps)
+    specific_force = state.attitude.inv().apply(state.acceleration_enu_mps2 + coriolis - gravity)
+    return gyro, specific_force
+
+
+def sensor_rng(seed: int | Sequence[int], stream_key: int) -> np.random.Generator:
+    """The private random stream of one sensor: default_rng([*seed, stream_key])."""
+    entropy = [int(value) for value in np.atleast_1d(np.asarray(seed, dtype=object))]
+    if any(value < 0 for value in entropy):
+        raise ValueError(f"seed {seed!r}: must be non-negative integers")
+    return np.random.default_rng([*entropy, stream_key])
+
+
+def _sample_times(t_s: ArrayLike) -> np.ndarray:
+    t = np.atleast_1d(np.asarray(t_s, dtype=float)).ravel()
+    if not np.all(np.isfinite(t)):
+        raise ValueError("sample times must be finite")
+    return t
+
+
+def _in_intervals(t: np.ndarray, intervals: tuple[tuple[float, float], ...]) -> np.ndarray:
+    inside = np.zeros(t.shape, dtype=bool)
+    for start, end in intervals:
+        inside |= (t >= start) & (t < end)
+    return inside
+
+
+def _gauss_markov_sequence(
+    initial: np.ndarray, decay: np.ndarray, drive: np.ndarray, elapsed_over_tau: np.ndarray
+) -> np.ndarray:
+    """Solve b_k = decay_k b_(k-1) + drive_k for k = 0..N-1, vectorised in blocks.
+
+    initial: (3,) state before the first sample; decay: (N,) = exp(-dt_k/tau);
+    drive: (N,3); elapsed_over_tau: (N,) dt_k/tau, used to size the blocks.
+    """
+    result = np.empty_like(drive)
+    state = initial
+    start = 0
+    n = decay.size
+    while start < n:
+        budget = np.cumsum(elapsed_over_tau[start:])
+        stop = start + max(1, int(np.searchsorted(budget, _MAX_DECAY_PER_BLOCK, side="right")))
+        stop = min(stop, n)
+        if stop - start == 1:
+            # A lone step may decay past underflow; propagate it directly.
+            state = decay[start] * state + drive[start]
+            result[start] = state
+            start = stop
+            continue
+        cumulative = np.exp(-budget[: stop - start])[:, None]
+        block = cumulative * (state + np.cumsum(drive[start:stop] / cumulative, axis=0))
+        result[start:stop] = block
+        state = block[-1]
+        start = stop
+    return result
+
+
+class ImuSimulator:
+    """Strapdown IMU at the base_link origin (imu_link = base_link) with MEMS errors.
+
+    measured = (1 + scale_error) * ideal + turn_on_bias + gauss_markov_bias + white_noise,
+    per axis. White noise on a sample has sigma = density / sqrt(dt), dt being the spacing to
+    the previous sample (first_interval_s for the very first one). The Gauss-Markov biases are
+    propagated with the exact discretisation
+    b_k = e^(-dt/tau) b_(k-1) + sigma sqrt(1 - e^(-2 dt/tau)) w_k.
+    """
+
+    def __init__(
+        self,
+        truth: TruthModel,
+        config: ImuErrorConfig,
+        seed: int | Sequence[int],
+        first_interval_s: float = 0.01,
+    ):
+        """truth: shared truth model; config: error budget; seed: scenario seed;
+        first_interval_s: spacing (s) assumed before the first sample for its noise level."""
+        if not first_interval_s > 0.0:
+            raise ValueError(f"first_interval_s = {first_interval_s!r}: must be > 0")
+        self.truth = truth
+        self.config = config
+        self._rng = sensor_rng(seed, IMU_STREAM_KEY)
+        draws = self._rng.standard_normal((6, 3))
+        self.gyro_turn_on_bias_rad_s = draws[0] * config.gyro_turn_on_bias_deg_s * _DEG
+        self.accel_turn_on_bias_mps2 = (
+            draws[1] * config.accel_turn_on_bias_mg * 1e-3 * STANDARD_GRAVITY_MPS2
+        )
+        self.gyro_scale_factor_error = draws[2] * config.scale_factor_error_percent / 100.0
+        self.accel_scale_factor_error = draws[3] * config.scale_factor_error_percent / 100.0
+        self._gyro_markov_rad_s = draws[4] * config.gyro_bias_instability_rad_s
+        self._accel_markov_mps2 = draws[5] * config.accel_bias_instability_mps2
+        self._first_interval_s = float(first_interval_s)
+        self._last_t_s: float | None = None
+
+    def ideal(self, t_s: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Error-free (gyro rad/s (N,3), specific force m/s² (N,3)) in body axes."""
+        return ideal_imu(self.truth.evaluate(_sample_times(t_s)))
+
+    def measure(self, t_s: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Measured (gyro rad/s (N,3), specific force m/s² (N,3)); times must keep increasing."""
+        t = _sample_times(t_s)
+        if t.size == 0:
+            return np.empty((0, 3)), np.empty((0, 3))
+        previous = self._last_t_s if self._last_t_s is not None else t[0] - self._first_interval_s
+        intervals = np.diff(t, prepend=previous)
+        if np.any(intervals <= 0.0):
+            raise ValueError("IMU sample times must be strictly increasing across calls")
+        gyro_ideal, force_ideal = self.ideal(t)
+        normals = self._rng.standard_normal((t.size, 4, 3))
+        config = self.config
+
+        gyro_markov = self._markov(
+            self._gyro_markov_rad_s,
+            intervals / config.gyro_bias_correlation_time_s,
+            config.gyro_bias_instability_rad_s,
+            normals[:, 2],
+        )
+        accel_markov = self._markov(
+            self._accel_markov_mps2,
+            intervals / config.accel_bias_correlation_time_s,
+            config.accel_bias_instability_mps2,
+            normals[:, 3],
+        )
+        self._gyro_markov_rad_s = gyro_markov[-1]
+        self._accel_markov_mps2 = accel_markov[-1]
+        self._last_t_s = float(t[-1])
+
+        root_interval = np.sqrt(intervals)[:, None]
+        gyro = (
+            (1.0 + self.gyro_scale_factor_error) * gyro_ideal
+            + self.gyro_turn_on_bias_rad_s
+            + gyro_markov
+            + normals[:, 0] * config.gyro_noise_density_rad_s_sqrt_hz / root_interval
+        )
+        specific_force = (
+            (1.0 + self.accel_scale_factor_error) * force_ideal
+            + self.accel_turn_on_bias_mps2
+            + accel_markov
+            + normals[:, 1] * config.accel_noise_density_mps2_sqrt_hz / root_interval
+        )
+        return gyro, specific_force
+
+    @staticmethod
+    def _markov(
+        state: np.ndarray, elapsed_over_tau: np.ndarray, sigma: float, normals: np.ndarray
+    ) -> np.ndarray:
+        decay = np.exp(-elapsed_over_tau)
+        drive = normals * (sigma * np.sqrt(-np.expm1(-2.0 * elapsed_over_tau)))[:, None]
+        return _gauss_markov_sequence(state, decay, drive, elapsed_over_tau)
+
+
+@dataclass(frozen=True)
+class GnssSample:
+    """Dual-antenna GNSS output over N samples (fields NaN where the matching flag is False).
+
+    latitude_deg, longitude_deg, altitude_m: (N,) primary antenna, WGS-84, ellipsoidal height.
+    position_covariance_enu_m2: (N,3,3). velocity_enu_mps: (N,3) primary antenna over ground.
+    velocity_covariance_enu_m2s2: (N,3,3). baseline_enu_m: (N,3) primary -> secondary, measured.
+    heading_yaw_rad: (N,) ENU azimuth atan2(bN, bE) of the measured baseline's horizontal part.
+    heading_variance_rad2: (N,) sigma_h² / (horizontal baseline length)².
+    """
+
+    t_s: np.ndarray
+    latitude_deg: np.ndarray
+    longitude_deg: np.ndarray
+    altitude_m: np.ndarray
+    position_covariance_enu_m2: np.ndarray
+    velocity_enu_mps: np.ndarray
+    velocity_covariance_enu_m2s2: np.ndarray
+    baseline_enu_m: np.ndarray
+    heading_yaw_rad: np.ndarray
+    heading_variance_rad2: np.ndarray
+    fix_valid: np.ndarray
+    heading_valid: np.ndarray
+
+
+class GnssSimulator:
+    """Dual-antenna receiver: primary antenna position and velocity, baseline and heading."""
+
+    def __init__(
+        self,
+        truth: TruthModel,
+        config: GnssErrorConfig,
+        primary_antenna_body_m: ArrayLike,
+        secondary_antenna_body_m: ArrayLike,
+        seed: int | Sequence[int],
+    ):
+        """Antenna phase centres are in base_link (FLU), metres; seed is the scenario seed."""
+        self.truth = truth
+        self.config = config
+        self.primary_antenna_body_m = _body_vector(primary_antenna_body_m, "primary_antenna")
+        self.secondary_antenna_body_m = _body_vector(secondary_antenna_body_m, "secondary_antenna")
+        baseline = self.secondary_antenna_body_m - self.primary_antenna_body_m
+        if not np.linalg.norm(baseline) > 0.0:
+            raise ValueError("primary and secondary antennas must not coincide")
+        self._rng = sensor_rng(seed, GNSS_STREAM_KEY)
+
+    def measure(self, t_s: ArrayLike) -> GnssSample:
+        """Measurements at times t_s (s), one block of 9 normal draws per sample."""
+        t = _sample_times(t_s)
+        state = self.truth.evaluate(t)
+        normals = self._rng.standard_normal((t.size, 3, 3))
+        config = self.config
+        attitude = state.attitude
+        lever_enu = attitude.apply(self.primary_antenna_body_m)
+
+        position_sigma = np.array(
+            [
+                config.position_noise_horizontal_m,
+                config.position_noise_horizontal_m,
+                config.position_noise_vertical_m,
+            ]
+        )
+        velocity_sigma = np.array(
+            [
+                config.velocity_noise_horizontal_mps,
+                config.velocity_noise_horizontal_mps,
+                config.velocity_noise_vertical_mps,
+            ]
+        )
+        baseline_sigma = np.array(
+            [
+                config.baseline_noise_horizontal_m,
+                config.baseline_noise_horizontal_m,
+                config.baseline_noise_vertical_m,
+            ]
+        )
+        latitude, longitude, altitude = offset_geodetic(
+            np.deg2rad(state.latitude_deg),
+            np.deg2rad(state.longitude_deg),
+            state.altitude_m,
+            lever_enu + normals[:, 0] * position_sigma,
+        )
+        lever_velocity_body = np.cross(state.angular_rate_body_rad_s, self.primary_antenna_body_m)
+        velocity = (
+            state.velocity_enu_mps
+            + attitude.apply(lever_velocity_body)
+            + normals[:, 1] * velocity_sigma
+        )
+        baseline = (
+            attitude.apply(self.secondary_antenna_body_m - self.primary_antenna_body_m)
+            + normals[:, 2] * baseline_sigma
+        )
+        heading = np.arctan2(baseline[:, 1], baseline[:, 0])
+        horizontal_length_sq = baseline[:, 0] ** 2 + baseline[:, 1] ** 2
+        heading_variance = config.baseline_noise_horizontal_m**2 / horizontal_length_sq
+
+        fix_valid = ~_in_intervals(t, config.fix_outages_s)
+        heading_valid = fix_valid & ~_in_intervals(t, config.heading_outages_s)
+        no_fix = ~fix_valid
+        no_heading = ~heading_valid
+        latitude_deg = np.where(no_fix, np.nan, np.rad2deg(latitude))
+        longitude_deg = np.where(no_fix, np.nan, np.rad2deg(longitude))
+        altitude = np.where(no_fix, np.nan, altitude)
+        velocity[no_fix] = np.nan
+        baseline[no_heading] = np.nan
+        heading = np.where(no_heading, np.nan, heading)
+        heading_variance = np.where(no_heading, np.nan, heading_variance)
+        return GnssSample(
+            t_s=t,
+            latitude_deg=latitude_deg,
+            longitude_deg=longitude_deg,
+            altitude_m=altitude,
+            position_covariance_enu_m2=np.broadcast_to(
+                np.diag(position_sigma**2), (t.size, 3, 3)
+            ).copy(),
+            velocity_enu_mps=velocity,
+            velocity_covariance_enu_m2s2=np.broadcast_to(
+                np.diag(velocity_sigma**2), (t.size, 3, 3)
+            ).copy(),
+            baseline_enu_m=baseline,
+            heading_yaw_rad=heading,
+            heading_variance_rad2=heading_variance,
+            fix_valid=fix_valid,
+            heading_valid=heading_valid,
+        )
+
+
+class AnemometerSimulator:
+    """3-D sonic anemometer on a lever arm, mounted with a fixed rotation, white noise.
+
+    measured = R_bw^T R_nb^T (wind - v_b - R_nb (omega_nb^b x B)) + noise, in anemometer axes,
+    with R_bw = Rz(yaw) Ry(pitch) Rx(roll) of mounting_rpy_deg (anemometer axes -> body) and B
+    the anemometer position in base_link.
+    """
+
+    def __init__(
+        self,
+        truth: TruthModel,
+        config: AnemometerErrorConfig,
+        position_body_m: ArrayLike,
+        mounting_rpy_deg: ArrayLike,
+        seed: int | Sequence[int],
+    ):
+        """position_body_m: measurement centre in base_link (FLU), m; mounting_rpy_deg: roll,
+        pitch, yaw of anemometer_link relative to base_link, degrees; seed: scenario seed."""
+        self.truth = truth
+        self.config = config
+        self.position_body_m = _body_vector(position_body_m, "anemometer position")
+        roll, pitch, yaw = _body_vector(mounting_rpy_deg, "anemometer mounting rpy")
+        self.mounting = Rotation.from_euler("ZYX", [yaw, pitch, roll], degrees=True)
+        self._rng = sensor_rng(seed, ANEMOMETER_STREAM_KEY)
+
+    def ideal(self, t_s: ArrayLike) -> np.ndarray:
+        """Error-free air velocity relative to the sensor (N,3), anemometer axes, m/s."""
+        state = self.truth.evaluate(_sample_times(t_s))
+        lever_velocity_body = np.cross(state.angular_rate_body_rad_s, self.position_body_m)
+        relative_air_enu = (
+            state.wind_enu_mps - state.velocity_enu_mps - state.attitude.apply(lever_velocity_body)
+        )
+        return self.mounting.inv().apply(state.attitude.inv().apply(relative_air_enu))
+
+    def measure(self, t_s: ArrayLike) -> np.ndarray:
+        """Measured air velocity relative to the sensor (N,3), anemometer axes, m/s."""
+        ideal = self.ideal(t_s)
+        return ideal + self._rng.standard_normal(ideal.shape) * self.config.noise_mps
+
+
+def _body_vector(value: ArrayLike, what: str) -> np.ndarray:
+    vector = np.asarray(value, dtype=float)
+    if vector.shape != (3,) or not np.all(np.isfinite(vector)):
+        raise ValueError(f"{what} must be three finite numbers, got {value!r}")
+    return vector

@@ -1,0 +1,292 @@
+"""Time alignment of navigation samples to wind sample stamps.
+
+A wind sample is corrected with the navigation state interpolated at its own stamp: attitude
+by spherical linear interpolation between the two bracketing navigation samples, angular rate
+and velocity linearly. Nothing is extrapolated: a stamp that is not bracketed, or whose
+bracketing samples are too far apart, is reported invalid with a reason.
+"""
+
+from enum import IntEnum
+from typing import NamedTuple
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+class NavTrackError(ValueError):
+    """A navigation track was constructed or queried with malformed arguments."""
+
+
+class InterpolationStatus(IntEnum):
+    """Outcome of interpolating the navigation track at one stamp."""
+
+    OK = 0
+    """Bracketed by two samples at most ``max_gap_s`` apart, or exactly on a sample."""
+    BEFORE_START = 1
+    """Earlier than the first sample the track ever received; can never be bracketed."""
+    AFTER_END = 2
+    """No sample at or after the stamp yet (also for an empty track); a later sample may
+    still bracket it."""
+    GAP = 3
+    """The bracketing samples are more than ``max_gap_s`` apart."""
+    EVICTED = 4
+    """The bracketing samples were discarded from the bounded history."""
+    INVALID_STAMP = 5
+    """The query stamp is not finite."""
+
+
+class InterpolatedNav(NamedTuple):
+    """Navigation state at N query stamps.
+
+    Invalid entries hold the identity attitude and NaN rate and velocity.
+    """
+
+    valid: np.ndarray
+    """(N,) bool."""
+    status: np.ndarray
+    """(N,) int8 codes of :class:`InterpolationStatus`."""
+    attitude_nb: Rotation
+    """N body→ENU rotations."""
+    angular_rate_body_rad_s: np.ndarray
+    """(N, 3) body rate, body axes, rad/s."""
+    velocity_enu_mps: np.ndarray
+    """(N, 3) ENU velocity of the body origin, m/s."""
+
+
+_INITIAL_CAPACITY = 256
+
+
+class NavTrack:
+    """Bounded, time-ordered history of navigation samples with vectorised interpolation.
+
+    Samples are appended in strictly increasing stamp order; a sample whose stamp is not later
+    than the newest accepted one is rejected and counted, as is a sample with a non-finite
+    value or a zero quaternion. The history keeps every sample needed to answer queries at or
+    after ``newest_stamp - history_s``; older samples are discarded.
+    """
+
+    def __init__(self, max_gap_s: float = 0.1, history_s: float = np.inf):
+        """Args:
+        max_gap_s: largest spacing of two bracketing samples that still allows
+            interpolation, s.
+        history_s: how far back from the newest sample queries must stay answerable, s
+            (``inf`` keeps everything, as offline processing does).
+        """
+        if not (np.isfinite(max_gap_s) and max_gap_s > 0):
+            raise NavTrackError(f"max_gap_s must be a positive number of seconds, got {max_gap_s}")
+        if not history_s > 0:
+            raise NavTrackError(f"history_s must be positive (s), got {history_s}")
+        self.max_gap_s = float(max_gap_s)
+        self.history_s = float(history_s)
+        self._stamps_s = np.empty(_INITIAL_CAPACITY)
+        self._quats_xyzw = np.empty((_INITIAL_CAPACITY, 4))
+        self._rates_body_rad_s = np.empty((_INITIAL_CAPACITY, 3))
+        self._velocities_enu_mps = np.empty((_INITIAL_CAPACITY, 3))
+        self._start = 0
+        self._end = 0
+        self._first_stamp_s = np.nan
+        self.n_accepted = 0
+        self.n_rejected_out_of_order = 0
+        self.n_rejected_invalid = 0
+
+    @classmethod
+    def from_arrays(
+        cls,
+        t_s,
+        quat_xyzw,
+        angular_rate_body_rad_s,
+        velocity_enu_mps,
+        max_gap_s: float = 0.1,
+    ) -> "NavTrack":
+        """Build an unbounded track from whole arrays, applying the same acceptance rules as
+        appending the samples one by one in array order.
+
+        Args:
+            t_s: (N,) stamps, s. quat_xyzw: (N, 4) body→ENU attitude.
+            angular_rate_body_rad_s: (N, 3). velocity_enu_mps: (N, 3).
+        """
+        stamps, quats, rates, velocities = _validated_arrays(
+            t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps
+        )
+        track = cls(max_gap_s=max_gap_s)
+        well_formed = _well_formed(stamps, quats, rates, velocities)
+        candidate_stamps = np.where(well_formed, stamps, -np.inf)
+        latest_before = np.concatenate(([-np.inf], np.maximum.accumulate(candidate_stamps)[:-1]))
+        accepted = well_formed & (stamps > latest_before)
+        n_accepted = int(np.count_nonzero(accepted))
+        track._reserve(n_accepted)
+        track._stamps_s[:n_accepted] = stamps[accepted]
+        track._quats_xyzw[:n_accepted] = _normalised(quats[accepted])
+        track._rates_body_rad_s[:n_accepted] = rates[accepted]
+        track._velocities_enu_mps[:n_accepted] = velocities[accepted]
+        track._end = n_accepted
+        if n_accepted:
+            track._first_stamp_s = float(stamps[accepted][0])
+        track.n_accepted = n_accepted
+        track.n_rejected_invalid = int(np.count_nonzero(~well_formed))
+        track.n_rejected_out_of_order = int(np.count_nonzero(well_formed & ~accepted))
+        return track
+
+    def __len__(self) -> int:
+        return self._end - self._start
+
+    @property
+    def newest_stamp_s(self) -> float:
+        """Stamp of the newest sample, s (NaN when empty)."""
+        return float(self._stamps_s[self._end - 1]) if len(self) else np.nan
+
+    @property
+    def oldest_stamp_s(self) -> float:
+        """Stamp of the oldest retained sample, s (NaN when empty)."""
+        return float(self._stamps_s[self._start]) if len(self) else np.nan
+
+    def append(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> bool:
+        """Add one sample; return False (and count it) when it is rejected.
+
+        Args:
+            t_s: stamp, s. quat_xyzw: (4,) body→ENU attitude, any non-zero norm.
+            angular_rate_body_rad_s: (3,) body axes. velocity_enu_mps: (3,) ENU.
+        """
+        stamps, quats, rates, velocities = _validated_arrays(
+            [t_s], [quat_xyzw], [angular_rate_body_rad_s], [velocity_enu_mps]
+        )
+        if not _well_formed(stamps, quats, rates, velocities)[0]:
+            self.n_rejected_invalid += 1
+            return False
+        stamp = stamps[0]
+        if len(self) and not stamp > self.newest_stamp_s:
+            self.n_rejected_out_of_order += 1
+            return False
+        self._reserve(1)
+        self._stamps_s[self._end] = stamp
+        self._quats_xyzw[self._end] = _normalised(quats)[0]
+        self._rates_body_rad_s[self._end] = rates[0]
+        self._velocities_enu_mps[self._end] = velocities[0]
+        self._end += 1
+        if np.isnan(self._first_stamp_s):
+            self._first_stamp_s = float(stamp)
+        self.n_accepted += 1
+        self._discard_before(stamp - self.history_s)
+        return True
+
+    def interpolate(self, t_query_s) -> InterpolatedNav:
+        """Navigation state at the (N,) query stamps, s; see :class:`InterpolationStatus`.
+
+        A query exactly on a sample stamp returns that sample. Otherwise the bracketing pair is
+        the last sample before and the first sample after the query; attitude is slerped along
+        the shortest arc between them, rate and velocity are linear in time.
+        """
+        queries = np.asarray(t_query_s, dtype=float)
+        if queries.ndim != 1:
+            raise NavTrackError(f"t_query_s must have shape (N,), got {queries.shape}")
+        n_queries = queries.shape[0]
+        stamps = self._stamps_s[self._start : self._end]
+        n_samples = stamps.shape[0]
+
+        status = np.full(n_queries, InterpolationStatus.OK, dtype=np.int8)
+        lower = np.searchsorted(stamps, queries, side="right") - 1
+        finite = np.isfinite(queries)
+        lower_c = np.clip(lower, 0, max(n_samples - 1, 0))
+        exact = finite & (lower >= 0) & (n_samples > 0)
+        if n_samples:
+            exact &= stamps[lower_c] == queries
+        upper = np.where(exact, lower, lower + 1)
+        upper_c = np.clip(upper, 0, max(n_samples - 1, 0))
+
+        before_track = finite & (lower < 0) & (n_samples > 0)
+        never_received = queries < self._first_stamp_s
+        status[before_track & never_received] = InterpolationStatus.BEFORE_START
+        status[before_track & ~never_received] = InterpolationStatus.EVICTED
+        status[finite & ~before_track & (upper >= n_samples)] = InterpolationStatus.AFTER_END
+        bracketed = finite & (lower >= 0) & (upper < n_samples)
+        if n_samples:
+            spacing = stamps[upper_c] - stamps[lower_c]
+            status[bracketed & (spacing > self.max_gap_s)] = InterpolationStatus.GAP
+        status[~finite] = InterpolationStatus.INVALID_STAMP
+        valid = status == InterpolationStatus.OK
+
+        rates = np.full((n_queries, 3), np.nan)
+        velocities = np.full((n_queries, 3), np.nan)
+        quats = np.tile([0.0, 0.0, 0.0, 1.0], (n_queries, 1))
+        if np.any(valid):
+            lo = lower_c[valid] + self._start
+            hi = upper_c[valid] + self._start
+            span = self._stamps_s[hi] - self._stamps_s[lo]
+            fraction = np.divide(
+                queries[valid] - self._stamps_s[lo],
+                span,
+                out=np.zeros_like(span),
+                where=span > 0,
+            )[:, None]
+            rates[valid] = self._rates_body_rad_s[lo] + fraction * (
+                self._rates_body_rad_s[hi] - self._rates_body_rad_s[lo]
+            )
+            velocities[valid] = self._velocities_enu_mps[lo] + fraction * (
+                self._velocities_enu_mps[hi] - self._velocities_enu_mps[lo]
+            )
+            start = Rotation.from_quat(self._quats_xyzw[lo])
+            step = start.inv() * Rotation.from_quat(self._quats_xyzw[hi])
+            quats[valid] = (start * Rotation.from_rotvec(fraction * step.as_rotvec())).as_quat()
+        return InterpolatedNav(valid, status, Rotation.from_quat(quats), rates, velocities)
+
+    def _discard_before(self, horizon_s: float) -> None:
+        """Drop samples not needed to answer queries at or after ``horizon_s``: keep the last
+        sample at or before the horizon and everything after it."""
+        stamps = self._stamps_s[self._start : self._end]
+        keep_from = int(np.searchsorted(stamps, horizon_s, side="right")) - 1
+        if keep_from > 0:
+            self._start += keep_from
+
+    def _reserve(self, n_more: int) -> None:
+        """Make room for ``n_more`` samples after the newest one."""
+        capacity = self._stamps_s.shape[0]
+        if self._end + n_more <= capacity:
+            return
+        n_kept = len(self)
+        new_capacity = max(capacity, _INITIAL_CAPACITY)
+        while n_kept + n_more > new_capacity // 2:
+            new_capacity *= 2
+        for name in ("_stamps_s", "_quats_xyzw", "_rates_body_rad_s", "_velocities_enu_mps"):
+            old = getattr(self, name)
+            new = np.empty((new_capacity, *old.shape[1:]))
+            new[:n_kept] = old[self._start : self._end]
+            setattr(self, name, new)
+        self._start = 0
+        self._end = n_kept
+
+
+def _validated_arrays(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps):
+    """Convert to float arrays of matching length N, raising on wrong shapes."""
+    stamps = np.asarray(t_s, dtype=float)
+    quats = np.asarray(quat_xyzw, dtype=float)
+    rates = np.asarray(angular_rate_body_rad_s, dtype=float)
+    velocities = np.asarray(velocity_enu_mps, dtype=float)
+    if stamps.ndim != 1:
+        raise NavTrackError(f"navigation stamps must have shape (N,), got {stamps.shape}")
+    n_samples = stamps.shape[0]
+    for name, array, width in (
+        ("quat_xyzw", quats, 4),
+        ("angular_rate_body_rad_s", rates, 3),
+        ("velocity_enu_mps", velocities, 3),
+    ):
+        if array.shape != (n_samples, width):
+            raise NavTrackError(
+                f"{name} must have shape ({n_samples}, {width}) to match the stamps, "
+                f"got {array.shape}"
+            )
+    return stamps, quats, rates, velocities
+
+
+def _well_formed(stamps, quats, rates, velocities) -> np.ndarray:
+    """(N,) True where every value is finite and the quaternion is not zero."""
+    finite = (
+        np.isfinite(stamps)
+        & np.all(np.isfinite(quats), axis=1)
+        & np.all(np.isfinite(rates), axis=1)
+        & np.all(np.isfinite(velocities), axis=1)
+    )
+    return finite & (np.linalg.norm(np.where(finite[:, None], quats, 0.0), axis=1) > 1e-9)
+
+
+def _normalised(quats: np.ndarray) -> np.ndarray:
+    return quats / np.linalg.norm(quats, axis=1, keepdims=True)

@@ -1,0 +1,223 @@
+"""Wind compensator: streaming equals batch, one output per input, decisions from stamps only."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from wind_comp.compensator import (
+    CompensatorConfig,
+    CompensatorInputError,
+    ConfigError,
+    WindCompensator,
+    WindStatus,
+    correct_batch,
+)
+
+LEVER_ARM_M = (0.3, -0.1, 3.2)
+MOUNTING_RPY_DEG = (2.0, -1.5, 90.0)
+RATE_BODY_RAD_S = np.array([0.3, -0.2, 0.15])
+ATTITUDE_0 = Rotation.from_euler("ZYX", [40.0, 3.0, -6.0], degrees=True)
+TRUE_WIND_ENU = np.array([6.0, -3.0, 0.4])
+
+
+def config(**overrides) -> CompensatorConfig:
+    return CompensatorConfig(
+        anemometer_position_body_m=LEVER_ARM_M, anemometer_rpy_deg=MOUNTING_RPY_DEG, **overrides
+    )
+
+
+def nav_truth(t_s):
+    """Constant body rate, linearly changing velocity: interpolation of these is exact."""
+    attitude = ATTITUDE_0 * Rotation.from_rotvec(np.outer(t_s, RATE_BODY_RAD_S))
+    rates = np.tile(RATE_BODY_RAD_S, (len(t_s), 1))
+    velocities = np.array([0.5, 1.0, 0.0]) + np.outer(t_s, [0.2, -0.1, 0.05])
+    return attitude, rates, velocities
+
+
+def anemometer_readings(t_s):
+    """First-principles reading of the steady true wind from the moving sensor."""
+    attitude, rates, velocities = nav_truth(t_s)
+    sensor_velocity = velocities + attitude.apply(np.cross(rates, LEVER_ARM_M))
+    mounting = Rotation.from_euler("ZYX", MOUNTING_RPY_DEG[::-1], degrees=True)
+    return mounting.inv().apply(attitude.inv().apply(TRUE_WIND_ENU - sensor_velocity))
+
+
+def scenario():
+    """Navigation at 100 Hz with a gap, wind at 10 Hz starting before and ending after it,
+    with malformed wind samples and stamps."""
+    nav_t = np.arange(0.5, 12.0, 0.01)
+    nav_t = nav_t[(nav_t < 5.0) | (nav_t > 5.3)]
+    attitude, rates, velocities = nav_truth(nav_t)
+    wind_t = np.arange(0.0, 12.5, 0.1) + 0.004
+    wind = anemometer_readings(wind_t)
+    wind[20] = np.nan
+    wind[30] = [150.0, 0.0, 0.0]
+    wind_t[40] = wind_t[39]  # duplicate stamp
+    wind_t[80] = wind_t[70]  # backwards stamp
+    return nav_t, attitude.as_quat(), rates, velocities, wind_t, wind
+
+
+def stream(nav_t, quats, rates, velocities, wind_t, wind, nav_latency_s, cfg=None):
+    """Feed the samples in arrival order, navigation arriving ``nav_latency_s`` after its stamp
+    and wind in array order, collecting the output after every message."""
+    compensator = WindCompensator(cfg or config())
+    wind_arrival = np.maximum.accumulate(wind_t)  # a bad stamp arrives in its array place
+    arrivals = [(t + nav_latency_s, 0, i) for i, t in enumerate(nav_t)]
+    arrivals += [(t, 1, i) for i, t in enumerate(wind_arrival)]
+    arrivals.sort()
+    outputs = []
+    for _, kind, i in arrivals:
+        if kind == 0:
+            compensator.add_nav(nav_t[i], quats[i], rates[i], velocities[i])
+        else:
+            compensator.add_wind(wind_t[i], wind[i])
+        outputs += compensator.ready()
+    outputs += compensator.flush()
+    return outputs, compensator
+
+
+def test_streaming_equals_batch_whatever_the_arrival_order():
+    data = scenario()
+    batch = correct_batch(config(), *data)
+    for nav_latency_s in (-0.5, 0.0, 0.037, 0.5):
+        outputs, compensator = stream(*data, nav_latency_s=nav_latency_s)
+        np.testing.assert_array_equal([o.t_s for o in outputs], batch.t_s)
+        np.testing.assert_array_equal([o.status for o in outputs], batch.status)
+        for name in (
+            "true_wind_enu_mps",
+            "tilt_term_enu_mps",
+            "rotation_term_enu_mps",
+            "translation_term_enu_mps",
+        ):
+            streamed = np.array([getattr(o, name) for o in outputs])
+            np.testing.assert_array_equal(streamed, getattr(batch, name))
+        assert compensator.counts == batch.counts()
+        assert compensator.n_pending == 0
+
+
+def test_every_sample_gets_one_output_with_its_stamp_and_reason():
+    nav_t, quats, rates, velocities, wind_t, wind = scenario()
+    batch = correct_batch(config(), nav_t, quats, rates, velocities, wind_t, wind)
+    assert len(batch) == len(wind_t)
+    status = batch.status
+    assert status[20] == WindStatus.INVALID_WIND
+    assert status[30] == WindStatus.WIND_SPEED_OUT_OF_RANGE
+    assert status[40] == WindStatus.INVALID_STAMP
+    assert status[80] == WindStatus.INVALID_STAMP
+    before_nav = wind_t < nav_t[0]
+    after_nav = wind_t > nav_t[-1]
+    in_gap = (wind_t > 5.0) & (wind_t < 5.3)
+    assert (status[before_nav] == WindStatus.NO_NAVIGATION).all()
+    assert (status[after_nav] == WindStatus.NO_NAVIGATION).all()
+    assert (status[in_gap] == WindStatus.NAV_GAP).all()
+    assert np.isnan(batch.true_wind_enu_mps[~batch.valid]).all()
+    counts = batch.counts()
+    assert counts[WindStatus.INVALID_STAMP] == 2
+    assert sum(counts.values()) == len(wind_t)
+    # Everything else is bracketed by exact navigation and recovers the true wind.
+    expected_valid = ~(before_nav | after_nav | in_gap)
+    expected_valid[[20, 30, 40, 80]] = False
+    np.testing.assert_array_equal(batch.valid, expected_valid)
+    recovered = batch.true_wind_enu_mps[batch.valid]
+    np.testing.assert_allclose(recovered - TRUE_WIND_ENU, 0.0, atol=1e-9)
+
+
+def test_sample_waits_until_navigation_brackets_it():
+    compensator = WindCompensator(config())
+    attitude, rates, velocities = nav_truth(np.array([0.0, 0.05, 0.1]))
+    quats = attitude.as_quat()
+    compensator.add_nav(0.0, quats[0], rates[0], velocities[0])
+    compensator.add_wind(0.07, anemometer_readings(np.array([0.07]))[0])
+    assert compensator.ready() == []
+    compensator.add_nav(0.05, quats[1], rates[1], velocities[1])
+    assert compensator.ready() == []
+    compensator.add_nav(0.1, quats[2], rates[2], velocities[2])
+    (result,) = compensator.ready()
+    assert result.valid and result.t_s == 0.07
+    np.testing.assert_allclose(result.true_wind_enu_mps, TRUE_WIND_ENU, atol=1e-9)
+
+
+def test_expire_gives_up_only_on_old_samples_and_flush_on_the_rest():
+    compensator = WindCompensator(config())
+    for t in (1.0, 1.1, 1.2):
+        compensator.add_wind(t, [1.0, 0.0, 0.0])
+    expired = compensator.expire(before_t_s=1.15)
+    assert [(o.t_s, o.status) for o in expired] == [
+        (1.0, WindStatus.NAVIGATION_TIMEOUT),
+        (1.1, WindStatus.NAVIGATION_TIMEOUT),
+    ]
+    assert compensator.n_pending == 1
+    (last,) = compensator.flush()
+    assert (last.t_s, last.status) == (1.2, WindStatus.NO_NAVIGATION)
+    assert compensator.counts[WindStatus.NAVIGATION_TIMEOUT] == 2
+
+
+def test_outputs_keep_input_order_behind_a_pending_sample():
+    compensator = WindCompensator(config())
+    compensator.add_nav(0.0, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
+    compensator.add_wind(0.05, [1.0, 0.0, 0.0])  # waits for navigation
+    compensator.add_wind(0.04, [1.0, 0.0, 0.0])  # rejected at once, but returned second
+    assert compensator.ready() == []
+    compensator.add_nav(0.1, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
+    outputs = compensator.ready()
+    assert [(o.t_s, o.status) for o in outputs] == [
+        (0.05, WindStatus.VALID),
+        (0.04, WindStatus.INVALID_STAMP),
+    ]
+
+
+def test_wind_lagging_beyond_the_navigation_history_is_reported():
+    compensator = WindCompensator(config(nav_history_s=1.0))
+    for t in np.arange(0.0, 5.0, 0.01):
+        compensator.add_nav(t, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
+    compensator.add_wind(2.0, [1.0, 0.0, 0.0])
+    compensator.add_wind(4.5, [1.0, 0.0, 0.0])
+    outputs = compensator.ready()
+    assert [o.status for o in outputs] == [WindStatus.NAV_HISTORY_EXCEEDED, WindStatus.VALID]
+
+
+def test_wrong_wind_shape_raises():
+    with pytest.raises(CompensatorInputError, match="wind_sensor_mps"):
+        WindCompensator(config()).add_wind(0.0, [1.0, 2.0])
+
+
+@pytest.mark.parametrize(
+    ("overrides", "field"),
+    [
+        ({"max_nav_gap_s": -0.1}, "max_nav_gap_s"),
+        ({"max_wind_speed_mps": np.nan}, "max_wind_speed_mps"),
+        ({"anemometer_position_body_m": (0.0, 3.0)}, "anemometer_position_body_m"),
+        ({"anemometer_rpy_deg": (0.0, np.inf, 0.0)}, "anemometer_rpy_deg"),
+        ({"anemometer_rpy_deg": "abc"}, "anemometer_rpy_deg"),
+        ({"nav_history_s": 0.05}, "nav_history_s"),
+        ({"product_windows_s": (60.0, -1.0)}, "product_windows_s"),
+        ({"gust_window_s": 90.0}, "gust_window_s"),
+        ({"gust_window_s": True}, "gust_window_s"),
+    ],
+)
+def test_config_errors_name_the_field(overrides, field):
+    values = {
+        "anemometer_position_body_m": LEVER_ARM_M,
+        "anemometer_rpy_deg": MOUNTING_RPY_DEG,
+    } | overrides
+    with pytest.raises(ConfigError, match=field):
+        CompensatorConfig(**values)
+
+
+def test_config_from_mapping():
+    cfg = CompensatorConfig.from_mapping(
+        {"anemometer_position_body_m": [0, 0, 3], "anemometer_rpy_deg": [0, 0, 0]}
+    )
+    assert cfg.anemometer_position_body_m == (0.0, 0.0, 3.0)
+    assert cfg.product_windows_s == (60.0, 600.0)
+    with pytest.raises(ConfigError, match=r"wind\.yaml.*max_gap_s"):
+        CompensatorConfig.from_mapping(
+            {
+                "anemometer_position_body_m": [0, 0, 3],
+                "anemometer_rpy_deg": [0, 0, 0],
+                "max_gap_s": 0.2,
+            },
+            source="wind.yaml",
+        )
+    with pytest.raises(ConfigError, match="anemometer_rpy_deg"):
+        CompensatorConfig.from_mapping({"anemometer_position_body_m": [0, 0, 3]})

@@ -1,0 +1,162 @@
+"""Navigation interpolation against analytic trajectories, gaps and the bounded history."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from wind_comp.nav_interpolation import InterpolationStatus, NavTrack, NavTrackError
+
+RATE_BODY_RAD_S = np.array([0.4, -0.25, 0.6])
+ATTITUDE_0 = Rotation.from_euler("ZYX", [30.0, 5.0, -8.0], degrees=True)
+
+
+def constant_rate_attitude(t_s):
+    """R(t) = R0·exp([ω×]t): rotation at a constant body rate."""
+    return ATTITUDE_0 * Rotation.from_rotvec(np.outer(t_s, RATE_BODY_RAD_S))
+
+
+def linear_velocity(t_s):
+    return np.array([1.0, -2.0, 0.5]) + np.outer(t_s, [0.3, 0.1, -0.2])
+
+
+def linear_rate(t_s):
+    return RATE_BODY_RAD_S + np.outer(t_s, [0.01, 0.02, -0.03])
+
+
+def analytic_track(stamps_s, max_gap_s=0.1, history_s=np.inf) -> NavTrack:
+    track = NavTrack(max_gap_s=max_gap_s, history_s=history_s)
+    quats = constant_rate_attitude(stamps_s).as_quat()
+    for t, quat, rate, velocity in zip(
+        stamps_s, quats, linear_rate(stamps_s), linear_velocity(stamps_s), strict=True
+    ):
+        assert track.append(t, quat, rate, velocity)
+    return track
+
+
+def test_constant_rate_rotation_and_linear_signals_are_interpolated_exactly():
+    stamps = np.arange(0.0, 2.0, 0.05)
+    track = analytic_track(stamps)
+    rng = np.random.default_rng(21)
+    queries = np.sort(np.concatenate((stamps[:-1] + 0.025, rng.uniform(0.0, stamps[-1], 200))))
+    nav = track.interpolate(queries)
+    assert nav.valid.all()
+    assert (nav.status == InterpolationStatus.OK).all()
+    angle_error = (nav.attitude_nb.inv() * constant_rate_attitude(queries)).magnitude()
+    assert angle_error.max() < 1e-12
+    np.testing.assert_allclose(nav.velocity_enu_mps, linear_velocity(queries), atol=1e-13)
+    np.testing.assert_allclose(nav.angular_rate_body_rad_s, linear_rate(queries), atol=1e-13)
+
+
+def test_query_on_a_sample_returns_that_sample_even_beside_a_gap():
+    stamps = np.array([0.0, 0.05, 0.1, 0.5])
+    track = analytic_track(stamps)
+    nav = track.interpolate(stamps)
+    assert nav.valid.all()
+    np.testing.assert_allclose(nav.velocity_enu_mps, linear_velocity(stamps), atol=0)
+    assert (nav.attitude_nb.inv() * constant_rate_attitude(stamps)).magnitude().max() < 1e-15
+
+
+def test_gap_before_start_and_after_end_are_never_extrapolated():
+    track = analytic_track(np.array([1.0, 1.05, 1.1, 1.3, 1.35]))
+    queries = np.array([0.9, 1.02, 1.2, 1.32, 1.4, np.nan])
+    nav = track.interpolate(queries)
+    expected = [
+        InterpolationStatus.BEFORE_START,
+        InterpolationStatus.OK,
+        InterpolationStatus.GAP,
+        InterpolationStatus.OK,
+        InterpolationStatus.AFTER_END,
+        InterpolationStatus.INVALID_STAMP,
+    ]
+    np.testing.assert_array_equal(nav.status, expected)
+    np.testing.assert_array_equal(nav.valid, [False, True, False, True, False, False])
+    assert np.isnan(nav.velocity_enu_mps[~nav.valid]).all()
+    assert np.isnan(nav.angular_rate_body_rad_s[~nav.valid]).all()
+
+
+def test_gap_limit_is_inclusive():
+    track = NavTrack(max_gap_s=0.25)
+    for t in (0.0, 0.25, 0.75):
+        track.append(t, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
+    nav = track.interpolate([0.1, 0.5])
+    np.testing.assert_array_equal(nav.status, [InterpolationStatus.OK, InterpolationStatus.GAP])
+
+
+def test_empty_track_waits_for_samples():
+    nav = NavTrack().interpolate([0.0, 5.0])
+    np.testing.assert_array_equal(nav.status, [InterpolationStatus.AFTER_END] * 2)
+    assert len(NavTrack().interpolate([]).valid) == 0
+
+
+def test_slerp_takes_the_short_arc_whatever_the_quaternion_sign():
+    stamps = np.arange(0.0, 1.0, 0.05)
+    quats = constant_rate_attitude(stamps).as_quat()
+    flipped = quats * np.where(np.arange(len(stamps)) % 2 == 0, 1.0, -1.0)[:, None]
+    rates, velocities = linear_rate(stamps), linear_velocity(stamps)
+    plain = NavTrack.from_arrays(stamps, quats, rates, velocities)
+    signed = NavTrack.from_arrays(stamps, flipped, rates, velocities)
+    queries = stamps[:-1] + 0.02
+    plain_attitude = plain.interpolate(queries).attitude_nb
+    difference = plain_attitude.inv() * signed.interpolate(queries).attitude_nb
+    assert difference.magnitude().max() < 1e-12
+
+
+def test_rejected_samples_are_counted_and_do_not_enter_the_track():
+    track = NavTrack()
+    good = ([0, 0, 0, 1], np.zeros(3), np.zeros(3))
+    assert track.append(1.0, *good)
+    assert not track.append(1.0, *good)  # duplicate stamp
+    assert not track.append(0.5, *good)  # backwards
+    assert not track.append(1.1, [0, 0, 0, 0], np.zeros(3), np.zeros(3))
+    assert not track.append(1.2, [0, 0, 0, 1], [np.nan, 0, 0], np.zeros(3))
+    assert not track.append(np.inf, *good)
+    assert track.append(1.05, *good)
+    assert (track.n_accepted, track.n_rejected_out_of_order, track.n_rejected_invalid) == (2, 2, 3)
+    assert len(track) == 2
+
+
+def test_from_arrays_matches_appending_one_by_one():
+    rng = np.random.default_rng(22)
+    stamps = np.cumsum(rng.uniform(0.005, 0.04, 400))
+    stamps[[50, 51, 200]] = stamps[[49, 30, 150]]  # duplicate and backwards stamps
+    quats = rng.normal(size=(400, 4))
+    quats[77] = 0.0
+    rates = rng.normal(size=(400, 3))
+    rates[90, 1] = np.nan
+    velocities = rng.normal(size=(400, 3))
+    batch = NavTrack.from_arrays(stamps, quats, rates, velocities)
+    streamed = NavTrack()
+    for row in zip(stamps, quats, rates, velocities, strict=True):
+        streamed.append(*row)
+    assert (batch.n_accepted, batch.n_rejected_out_of_order, batch.n_rejected_invalid) == (
+        streamed.n_accepted,
+        streamed.n_rejected_out_of_order,
+        streamed.n_rejected_invalid,
+    )
+    queries = np.sort(rng.uniform(stamps[0] - 0.5, stamps.max() + 0.5, 1000))
+    a, b = batch.interpolate(queries), streamed.interpolate(queries)
+    np.testing.assert_array_equal(a.status, b.status)
+    np.testing.assert_array_equal(a.attitude_nb.as_quat(), b.attitude_nb.as_quat())
+    np.testing.assert_array_equal(a.velocity_enu_mps, b.velocity_enu_mps)
+    np.testing.assert_array_equal(a.angular_rate_body_rad_s, b.angular_rate_body_rad_s)
+
+
+def test_history_is_bounded_and_old_stamps_are_reported_evicted():
+    stamps = np.arange(0.0, 60.0, 0.01)
+    track = analytic_track(stamps, history_s=1.0)
+    assert len(track) <= 102
+    assert track.oldest_stamp_s <= track.newest_stamp_s - 1.0
+    nav = track.interpolate([-1.0, 30.0, track.newest_stamp_s - 1.0 + 1e-3])
+    np.testing.assert_array_equal(
+        nav.status,
+        [InterpolationStatus.BEFORE_START, InterpolationStatus.EVICTED, InterpolationStatus.OK],
+    )
+
+
+def test_malformed_arguments_raise():
+    with pytest.raises(NavTrackError, match="max_gap_s"):
+        NavTrack(max_gap_s=0.0)
+    with pytest.raises(NavTrackError, match="quat_xyzw"):
+        NavTrack().append(0.0, [0, 0, 1], np.zeros(3), np.zeros(3))
+    with pytest.raises(NavTrackError, match="t_query_s"):
+        NavTrack().interpolate(np.zeros((2, 2)))

@@ -1,0 +1,62 @@
+"""Re-record the committed bags in bags/ from the live simulation nodes (`make bags`).
+
+Each bag is one `run_scenario ... --record` run: every sensor node, the truth node, the clock
+and the recorder as separate processes over DDS. bags/README.md lists the same commands.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+RATE_FACTOR = "4"
+
+# name -> run_scenario arguments (scenario first)
+BAGS = {
+    "static": ["static", "--set", "duration_s=120", "--seed", "1"],
+    "tilt_table": ["tilt_table", "--seed", "2"],
+    "wind_tunnel_10": [
+        "wind_tunnel",
+        "--set",
+        "duration_s=120",
+        "--set",
+        "wind.speed_mps=10",
+        "--seed",
+        "3",
+    ],
+    "vertical_wind_5": ["vertical_wind", "--set", "duration_s=120", "--seed", "4"],
+    "sea_state": ["sea_state", "--set", "duration_s=180", "--seed", "5"],
+    "open_ocean": ["open_ocean", "--set", "duration_s=180", "--seed", "6"],
+}
+
+
+def main() -> None:
+    selected = sys.argv[1:] or list(BAGS)
+    unknown = [name for name in selected if name not in BAGS]
+    if unknown:
+        sys.exit(f"record_bags: unknown bag(s) {unknown}; known: {list(BAGS)}")
+    bags = REPO / "bags"
+    for name in selected:
+        target = bags / name
+        if target.exists():
+            shutil.rmtree(target)
+        command = [
+            str(BIN / "run_scenario"),
+            *BAGS[name],
+            "--params-file",
+            str(REPO / "src/buoy_nav/config/buoy.yaml"),
+            "--rate-factor",
+            RATE_FACTOR,
+            "--record",
+            str(target),
+        ]
+        print("+", " ".join(command[1:]).replace(str(REPO) + "/", ""), flush=True)
+        subprocess.run(command, check=True)
+
+
+if __name__ == "__main__":
+    main()
