@@ -1,0 +1,327 @@
+"""compensation_node: Miller motion correction of every anemometer sample, live.
+
+    compensation_node [--ros-args --params-file buoy.yaml --params-file compensation.yaml ...]
+
+Subscribes (reliable, deep queue):
+
+- ``anemometer/wind`` (geometry_msgs/Vector3Stamped, frame ``anemometer_link``)
+- ``nav/odometry`` (nav_msgs/Odometry): attitude, bias-corrected body rate ω_ib, body velocity
+- ``nav/fix`` (sensor_msgs/NavSatFix): its latitude removes the Earth's rotation from the body
+  rate (ω_nb = ω_ib − R_nb^T·ω_ie). Until the first fix the rate is used as received: at a 3 m
+  lever arm that is an error below 3e-4 m/s of wind. The latest valid latitude is kept while
+  the fix is lost.
+
+Publishes:
+
+- ``wind/true`` (geometry_msgs/Vector3Stamped, frame ``map``): the corrected ENU wind, m/s,
+  exactly one message per ``anemometer/wind`` message, with the same header stamp, in arrival
+  order. A sample that cannot be corrected (malformed, out of range, no navigation around its
+  stamp) is published with NaN components, never dropped.
+- ``wind/mean_1min``, ``wind/mean_10min`` (geometry_msgs/Vector3Stamped, frame ``map``): vector
+  mean of the ENU wind over each window, stamped with the window end.
+- ``wind/stats_1min``, ``wind/stats_10min`` (std_msgs/Float64MultiArray): statistics of the same
+  windows; ``layout.dim[i].label`` names ``data[i]``, in the order of
+  :data:`wind_comp.nav_messages.STATS_FIELDS` (scalar_mean_speed_mps, vector_mean_speed_mps,
+  vector_mean_direction_deg (meteorological, FROM), gust_mps, std_u_mps, std_v_mps, std_w_mps,
+  n_valid, n_invalid, window_start_s, window_end_s, first_sample_s, last_sample_s).
+  Windows come from ``compensation.product_windows_s`` (60 and 600 s by default; a window of
+  other length W is named ``W s``, e.g. ``wind/mean_30s``). A window is published when the
+  first sample of the next one is corrected, and the partial windows at shutdown.
+- ``diagnostics``: samples in and out, valid and invalid by reason, navigation samples seen,
+  input rates, processing latency, rejected messages by reason.
+
+Parameters: ``anemometer.position`` (double[3], m, default [0, 0, 3]) and
+``anemometer.rpy_deg`` (double[3], deg, default [0, 0, 0]) of the shared buoy file; every
+other :class:`wind_comp.compensator.CompensatorConfig` field as ``compensation.<field>``; and
+``compensation.nav_timeout_s`` (s, default 1.0), the latency budget: a wind sample still without
+navigation on both sides once the newest anemometer stamp is this much later, and that has also
+waited this long in wall-clock time, is published invalid (navigation timeout) instead of
+waiting longer. The wall-clock condition keeps a backlog of queued messages (both topics are
+taken alternately, so wind stamps can run ahead of navigation stamps) or a fast replay from
+timing out samples whose navigation is only queued, not missing.
+
+Malformed messages (non-finite values, zero quaternion, wrong frame, stamps not increasing) are
+counted and warned about (rate-limited). A rejected anemometer message still yields its NaN
+``wind/true``. On SIGINT or SIGTERM the samples still waiting for navigation are published
+(invalid) before the node exits with code 0.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import signal
+import time
+
+import rclpy
+import rclpy.signals
+from geometry_msgs.msg import Vector3Stamped
+from nav_msgs.msg import Odometry
+from rclpy.duration import Duration
+from sensor_msgs.msg import NavSatFix
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from buoy_nav.base_node import DATA_QOS, DiagnosticsPublisher, StartupError, SuiteNode, main_for
+from wind_comp.compensator import CompensatorConfig, CorrectedWind, WindCompensator, WindStatus
+from wind_comp.nav_messages import (
+    REASON_STAMP_NOT_INCREASING,
+    MalformedMessageError,
+    StampOrder,
+    anemometer_sample,
+    fix_latitude_deg,
+    odometry_sample,
+    product_messages,
+    remove_earth_rate,
+    true_wind_message,
+    window_label,
+)
+from wind_comp.products import WindAverager, WindProduct
+
+NODE_NAME = "compensation_node"
+WIND_TOPIC = "anemometer/wind"
+ODOMETRY_TOPIC = "nav/odometry"
+FIX_TOPIC = "nav/fix"
+TRUE_WIND_TOPIC = "wind/true"
+
+DEFAULT_ANEMOMETER_POSITION_M = (0.0, 0.0, 3.0)
+DEFAULT_ANEMOMETER_RPY_DEG = (0.0, 0.0, 0.0)
+DEFAULT_NAV_TIMEOUT_S = 1.0
+DIAGNOSTICS_PERIOD_S = 1.0
+# Bound on the wait, at shutdown, for subscribers to acknowledge the flushed samples.
+FLUSH_ACK_TIMEOUT_S = 2.0
+
+
+class PendingStamp:
+    """Header stamp and wall arrival time of an anemometer sample awaiting its output."""
+
+    __slots__ = ("arrival_s", "nanosec", "sec", "t_s")
+
+    def __init__(self, sec: int, nanosec: int, t_s: float, arrival_s: float):
+        self.sec = sec
+        self.nanosec = nanosec
+        self.t_s = t_s
+        self.arrival_s = arrival_s
+
+
+class CompensationNode(SuiteNode):
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        self.config = self._declare_compensator_config()
+        self.nav_timeout_s = self.declare_value(
+            "compensation.nav_timeout_s",
+            DEFAULT_NAV_TIMEOUT_S,
+            "s: wind samples this much older than the newest anemometer stamp, waiting this long "
+            "in wall time and still without navigation around them are published invalid",
+        )
+        if not (math.isfinite(self.nav_timeout_s) and self.nav_timeout_s > 0):
+            raise StartupError(
+                f"parameter 'compensation.nav_timeout_s' must be positive, got {self.nav_timeout_s}"
+            )
+
+        self.compensator = WindCompensator(self.config)
+        self.averagers = [
+            WindAverager(window_s, self.config.gust_window_s)
+            for window_s in self.config.product_windows_s
+        ]
+        self.latitude_deg = math.nan
+        self._wind_order = StampOrder()
+        self._nav_order = StampOrder()
+        self._pending: collections.deque[PendingStamp] = collections.deque()
+        self._counters = collections.Counter()
+        self._counters_at_last_report = collections.Counter()
+        self._last_report_s = time.monotonic()
+        self._latencies_s: list[float] = []
+
+        self._true_wind_publisher = self.create_publisher(Vector3Stamped, TRUE_WIND_TOPIC, DATA_QOS)
+        self._product_publishers = {
+            averager.window_s: (
+                self.create_publisher(
+                    Vector3Stamped, f"wind/mean_{window_label(averager.window_s)}", DATA_QOS
+                ),
+                self.create_publisher(
+                    Float64MultiArray, f"wind/stats_{window_label(averager.window_s)}", DATA_QOS
+                ),
+            )
+            for averager in self.averagers
+        }
+        self.create_subscription(Vector3Stamped, WIND_TOPIC, self.on_wind, DATA_QOS)
+        self.create_subscription(Odometry, ODOMETRY_TOPIC, self.on_odometry, DATA_QOS)
+        self.create_subscription(NavSatFix, FIX_TOPIC, self.on_fix, DATA_QOS)
+        self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
+        self._stop_on_signals()
+        self.get_logger().info(
+            f"correcting {WIND_TOPIC} with {ODOMETRY_TOPIC}: anemometer at "
+            f"{list(self.config.anemometer_position_body_m)} m, rpy "
+            f"{list(self.config.anemometer_rpy_deg)} deg; products over "
+            f"{list(self.config.product_windows_s)} s"
+        )
+
+    def _declare_compensator_config(self) -> CompensatorConfig:
+        position = self.declare_value(
+            "anemometer.position",
+            DEFAULT_ANEMOMETER_POSITION_M,
+            "anemometer measurement centre in base_link, m (Miller's lever arm B)",
+        )
+        rpy = self.declare_value(
+            "anemometer.rpy_deg",
+            DEFAULT_ANEMOMETER_RPY_DEG,
+            "roll, pitch, yaw of anemometer_link relative to base_link, deg",
+        )
+        for name, values in (("anemometer.position", position), ("anemometer.rpy_deg", rpy)):
+            if not all(math.isfinite(value) for value in values):
+                raise StartupError(f"parameter '{name}' must be finite, got {list(values)}")
+        return self.declare_config(
+            CompensatorConfig,
+            prefix="compensation.",
+            anemometer_position_body_m=position,
+            anemometer_rpy_deg=rpy,
+        )
+
+    def _stop_on_signals(self) -> None:
+        """Take SIGINT and SIGTERM from rclpy: leave the spin loop with the context still valid,
+        so that :meth:`destroy_node` can still publish the pending samples."""
+        rclpy.signals.uninstall_signal_handlers()
+        for signal_number in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signal_number, lambda *_: self.finish(0))
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    def on_wind(self, message: Vector3Stamped) -> None:
+        self._counters["wind_in"] += 1
+        sample = anemometer_sample(message)
+        stamp_increases = self._wind_order.advance(sample.t_s)
+        if sample.rejection is not None:
+            self.reject(WIND_TOPIC, sample.rejection)
+        elif not stamp_increases:
+            self.reject(WIND_TOPIC, REASON_STAMP_NOT_INCREASING)
+        stamp = message.header.stamp
+        self._pending.append(PendingStamp(stamp.sec, stamp.nanosec, sample.t_s, time.monotonic()))
+        self.compensator.add_wind(sample.t_s, sample.wind_sensor_mps)
+        self.publish_results(self.compensator.expire(self._timeout_horizon_s()))
+
+    def _timeout_horizon_s(self) -> float:
+        """Stamp (s) before which samples still without navigation are given up: older than
+        the newest anemometer stamp by ``nav_timeout_s`` and waiting that long in wall time."""
+        waited_enough_before_s = time.monotonic() - self.nav_timeout_s
+        horizon_s = -math.inf
+        for pending in self._pending:
+            if pending.arrival_s > waited_enough_before_s:
+                break
+            horizon_s = max(horizon_s, math.nextafter(pending.t_s, math.inf))
+        return min(horizon_s, self._wind_order.latest_s - self.nav_timeout_s)
+
+    def on_odometry(self, message: Odometry) -> None:
+        self._counters["nav_in"] += 1
+        try:
+            sample = odometry_sample(message)
+        except MalformedMessageError as error:
+            self.reject(ODOMETRY_TOPIC, error.reason)
+            return
+        if not self._nav_order.advance(sample.t_s):
+            self.reject(ODOMETRY_TOPIC, REASON_STAMP_NOT_INCREASING)
+            return
+        rate = remove_earth_rate(
+            sample.angular_rate_body_rad_s, sample.quat_xyzw, self.latitude_deg
+        )
+        if self.compensator.add_nav(sample.t_s, sample.quat_xyzw, rate, sample.velocity_enu_mps):
+            self._counters["nav_accepted"] += 1
+        self.publish_results(self.compensator.ready())
+
+    def on_fix(self, message: NavSatFix) -> None:
+        self._counters["fix_in"] += 1
+        try:
+            latitude = fix_latitude_deg(message)
+        except MalformedMessageError as error:
+            self.reject(FIX_TOPIC, error.reason)
+            return
+        if latitude is not None:
+            self.latitude_deg = latitude
+
+    # -- outputs ----------------------------------------------------------------------------
+
+    def publish_results(self, results: list[CorrectedWind]) -> None:
+        """Publish decided samples in order, each with the stamp of its anemometer message."""
+        now_s = time.monotonic()
+        for result in results:
+            pending = self._pending.popleft()
+            self._true_wind_publisher.publish(
+                true_wind_message(
+                    Vector3Stamped, pending.sec, pending.nanosec, result.true_wind_enu_mps
+                )
+            )
+            self._counters["wind_out"] += 1
+            self._latencies_s.append(now_s - pending.arrival_s)
+            for averager in self.averagers:
+                self.publish_products(averager.add(result.t_s, result.true_wind_enu_mps))
+
+    def publish_products(self, products: list[WindProduct]) -> None:
+        for product in products:
+            mean_publisher, stats_publisher = self._product_publishers[product.window_s]
+            mean, stats = product_messages(
+                Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
+            )
+            mean_publisher.publish(mean)
+            stats_publisher.publish(stats)
+
+    def flush(self) -> None:
+        """End of input: publish every pending sample and the partial product windows."""
+        self.publish_results(self.compensator.flush())
+        for averager in self.averagers:
+            self.publish_products(averager.flush())
+        publishers = [self._true_wind_publisher]
+        for pair in self._product_publishers.values():
+            publishers.extend(pair)
+        deadline_s = time.monotonic() + FLUSH_ACK_TIMEOUT_S
+        for publisher in publishers:
+            remaining_s = max(0.0, deadline_s - time.monotonic())
+            publisher.wait_for_all_acked(Duration(seconds=remaining_s))
+
+    def destroy_node(self) -> None:
+        if self.context.ok():
+            try:
+                self.flush()
+            except Exception as error:  # a failing flush must not hide the node's exit
+                self.get_logger().error(f"could not publish the pending samples: {error}")
+        super().destroy_node()
+
+    # -- diagnostics ------------------------------------------------------------------------
+
+    def report(self):
+        now_s = time.monotonic()
+        period_s = max(now_s - self._last_report_s, 1e-9)
+        new = self._counters - self._counters_at_last_report
+        self._counters_at_last_report = collections.Counter(self._counters)
+        self._last_report_s = now_s
+        latencies, self._latencies_s = self._latencies_s, []
+        counts = self.compensator.counts
+        n_invalid = sum(n for status, n in counts.items() if status != WindStatus.VALID)
+        values = {
+            "wind_samples_in": self._counters["wind_in"],
+            "wind_samples_out": self._counters["wind_out"],
+            "wind_samples_pending": self.compensator.n_pending,
+            "valid": counts[WindStatus.VALID],
+            "invalid": n_invalid,
+        }
+        for status in WindStatus:
+            if status != WindStatus.VALID:
+                values[f"invalid[{status.reason}]"] = counts[status]
+        values.update(
+            {
+                "nav_samples_in": self._counters["nav_in"],
+                "nav_samples_accepted": self._counters["nav_accepted"],
+                "fix_messages_in": self._counters["fix_in"],
+                "latitude_deg": self.latitude_deg,
+                "wind_rate_hz": new["wind_in"] / period_s,
+                "nav_rate_hz": new["nav_in"] / period_s,
+                "latency_mean_s": sum(latencies) / len(latencies) if latencies else math.nan,
+                "latency_max_s": max(latencies) if latencies else math.nan,
+            }
+        )
+        if new["wind_in"] == 0:
+            return "warn", f"no {WIND_TOPIC} samples", values
+        if new["nav_in"] == 0:
+            return "warn", f"no {ODOMETRY_TOPIC} samples: wind cannot be corrected", values
+        return "ok", f"{counts[WindStatus.VALID]} valid, {n_invalid} invalid wind samples", values
+
+
+main = main_for(CompensationNode)

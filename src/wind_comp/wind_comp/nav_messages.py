@@ -1,0 +1,340 @@
+"""Contract messages of the wind compensation as arrays, and arrays as contract messages.
+
+The live ``compensation_node`` and offline bag processing both convert through this module, so
+a message is accepted, rejected or transformed identically in both. Messages are read by
+attribute access only: rclpy message objects and rosbags' decoded objects both work. Messages
+are built from default-constructible message classes (the ROS Python message classes, which
+:class:`buoy_nav.bag_io.BagWriter` also serialises).
+
+Inputs (interface contract):
+
+- ``anemometer/wind`` (geometry_msgs/Vector3Stamped, frame ``anemometer_link``): air velocity
+  relative to the sensor in anemometer axes, m/s.
+- ``nav/odometry`` (nav_msgs/Odometry, frame ``map``, child ``base_link``):
+  ``pose.pose.orientation`` = body→ENU attitude R_nb, ``twist.twist.angular`` = bias-corrected
+  body rate ω_ib (body axes, rad/s), ``twist.twist.linear`` = velocity of the body origin in body
+  axes (m/s), so the ENU velocity is R_nb · linear.
+- ``nav/fix`` (sensor_msgs/NavSatFix): WGS-84 latitude of the body origin, used to remove the
+  Earth's rotation from the body rate (:func:`remove_earth_rate`).
+
+Outputs:
+
+- ``wind/true`` (geometry_msgs/Vector3Stamped, frame ``map``): corrected ENU wind, m/s, with the
+  anemometer sample's own header stamp; NaN components when the sample could not be corrected.
+- ``wind/mean_<window>`` (geometry_msgs/Vector3Stamped, frame ``map``): vector mean of the ENU
+  wind over one averaging window, stamped with the window end.
+- ``wind/stats_<window>`` (std_msgs/Float64MultiArray): the statistics of the same window,
+  ``data[i]`` named by ``layout.dim[i].label`` (one dimension of size 1 per field), in the order
+  of :data:`STATS_FIELDS`.
+
+Windows are named by :func:`window_label`: ``1min`` for 60 s, ``10min`` for 600 s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import NamedTuple
+
+import numpy as np
+
+from wind_comp.products import WindProduct
+
+ANEMOMETER_FRAME = "anemometer_link"
+MAP_FRAME = "map"
+BODY_FRAME = "base_link"
+
+EARTH_RATE_RAD_S = 7.292115e-5
+"""Earth's rotation rate relative to inertial space (WGS-84), rad/s."""
+
+NANOSECONDS_PER_SECOND = 1_000_000_000
+
+# Quaternions shorter than this cannot be normalised into an attitude.
+_MIN_QUATERNION_NORM = 1e-9
+
+REASON_NON_FINITE = "non-finite value"
+REASON_ZERO_QUATERNION = "zero quaternion"
+REASON_WRONG_FRAME = "wrong frame"
+REASON_STAMP_NOT_INCREASING = "stamp not increasing"
+REASON_LATITUDE_OUT_OF_RANGE = "latitude out of range"
+
+STATS_FIELDS = (
+    "scalar_mean_speed_mps",
+    "vector_mean_speed_mps",
+    "vector_mean_direction_deg",
+    "gust_mps",
+    "std_u_mps",
+    "std_v_mps",
+    "std_w_mps",
+    "n_valid",
+    "n_invalid",
+    "window_start_s",
+    "window_end_s",
+    "first_sample_s",
+    "last_sample_s",
+)
+"""Layout of ``wind/stats_<window>``: speeds m/s (horizontal), direction meteorological deg
+(blowing FROM, clockwise from true North), standard deviations of the ENU components m/s,
+sample counts, window bounds and first/last sample stamps in s since the epoch (a window closed
+at shutdown may end before ``window_end_s``). Conventions: :mod:`wind_comp.products`."""
+
+
+class MalformedMessageError(ValueError):
+    """A message is malformed. ``reason`` is a short label for counting; the text details it."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+class WindSample(NamedTuple):
+    """One anemometer sample as the compensator takes it."""
+
+    t_s: float
+    """Header stamp, s since the epoch."""
+    wind_sensor_mps: np.ndarray
+    """(3,) air velocity in anemometer axes, m/s; NaN when the message was rejected."""
+    rejection: str | None
+    """Reason the message was rejected (its output is then invalid), None when accepted."""
+
+
+class NavSample(NamedTuple):
+    """One navigation sample as the compensator takes it."""
+
+    t_s: float
+    """Header stamp, s since the epoch."""
+    quat_xyzw: np.ndarray
+    """(4,) body→ENU attitude as received (not normalised)."""
+    angular_rate_body_rad_s: np.ndarray
+    """(3,) body rate as received (ω_ib, body axes), rad/s."""
+    velocity_enu_mps: np.ndarray
+    """(3,) ENU velocity of the body origin, m/s."""
+
+
+class NavArrays(NamedTuple):
+    """Navigation samples of a recording, in message order; (M,), (M, 4), (M, 3), (M, 3)."""
+
+    t_s: np.ndarray
+    quat_xyzw: np.ndarray
+    angular_rate_body_rad_s: np.ndarray
+    velocity_enu_mps: np.ndarray
+
+
+def stamp_s(stamp) -> float:
+    """A ``builtin_interfaces/Time`` as float seconds since the epoch."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_from_seconds(t_s: float) -> tuple[int, int]:
+    """(sec, nanosec) of a time in float seconds, rounded to the nanosecond."""
+    return divmod(round(t_s * NANOSECONDS_PER_SECOND), NANOSECONDS_PER_SECOND)
+
+
+class StampOrder:
+    """Tracks that the stamps of one topic strictly increase."""
+
+    def __init__(self):
+        self.latest_s = -math.inf
+
+    def advance(self, t_s: float) -> bool:
+        """True and remember ``t_s`` (s) when it is later than every earlier accepted stamp."""
+        if not t_s > self.latest_s:
+            return False
+        self.latest_s = t_s
+        return True
+
+
+def _vector(message_vector) -> np.ndarray:
+    return np.array([message_vector.x, message_vector.y, message_vector.z], dtype=float)
+
+
+def anemometer_sample(message) -> WindSample:
+    """``anemometer/wind`` as a :class:`WindSample`.
+
+    A message in another frame than ``anemometer_link`` or with a non-finite component is
+    rejected: its wind becomes NaN so that the compensator still returns one (invalid) output
+    for it, in order. Stamp order is checked by the compensator itself.
+    """
+    t_s = stamp_s(message.header.stamp)
+    wind = _vector(message.vector)
+    rejection = None
+    if message.header.frame_id != ANEMOMETER_FRAME:
+        rejection = REASON_WRONG_FRAME
+    elif not np.all(np.isfinite(wind)):
+        rejection = REASON_NON_FINITE
+    if rejection is not None:
+        wind = np.full(3, np.nan)
+    return WindSample(t_s, wind, rejection)
+
+
+def body_to_enu(quat_xyzw, vectors_body) -> np.ndarray:
+    """Rotate body-frame vectors into ENU with body→ENU quaternions (normalised here).
+
+    Args:
+        quat_xyzw: (N, 4) or (4,) attitude R_nb, scipy order.
+        vectors_body: (N, 3) or (3,) vectors in body axes (any unit, kept).
+
+    Elementwise numpy only, so one sample and a batch give bit-identical results.
+    """
+    quats = np.asarray(quat_xyzw, dtype=float)
+    vectors = np.asarray(vectors_body, dtype=float)
+    quats = quats / np.linalg.norm(quats, axis=-1, keepdims=True)
+    axis = quats[..., :3]
+    scalar = quats[..., 3:]
+    twice_cross = 2.0 * np.cross(axis, vectors)
+    return vectors + scalar * twice_cross + np.cross(axis, twice_cross)
+
+
+def enu_to_body(quat_xyzw, vectors_enu) -> np.ndarray:
+    """Rotate ENU vectors into body axes (R_nb^T), quaternions as in :func:`body_to_enu`."""
+    conjugate = np.asarray(quat_xyzw, dtype=float) * np.array([-1.0, -1.0, -1.0, 1.0])
+    return body_to_enu(conjugate, vectors_enu)
+
+
+def _odometry_fields(message) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """Stamp and raw vectors of an Odometry, after the frame, finiteness and quaternion checks."""
+    if message.header.frame_id != MAP_FRAME or message.child_frame_id != BODY_FRAME:
+        raise MalformedMessageError(
+            REASON_WRONG_FRAME,
+            f"odometry must be of {BODY_FRAME} in {MAP_FRAME}, got "
+            f"'{message.child_frame_id}' in '{message.header.frame_id}'",
+        )
+    orientation = message.pose.pose.orientation
+    quat = np.array([orientation.x, orientation.y, orientation.z, orientation.w], dtype=float)
+    rate = _vector(message.twist.twist.angular)
+    velocity_body = _vector(message.twist.twist.linear)
+    if not all(np.all(np.isfinite(vector)) for vector in (quat, rate, velocity_body)):
+        raise MalformedMessageError(REASON_NON_FINITE, "odometry orientation, rate or velocity")
+    if np.linalg.norm(quat) < _MIN_QUATERNION_NORM:
+        raise MalformedMessageError(REASON_ZERO_QUATERNION, "odometry orientation has zero length")
+    return stamp_s(message.header.stamp), quat, rate, velocity_body
+
+
+def odometry_sample(message) -> NavSample:
+    """``nav/odometry`` as a :class:`NavSample`; raises :class:`MalformedMessageError`.
+
+    The body-frame linear velocity of the Odometry twist is rotated into ENU with the message's
+    own attitude.
+    """
+    t_s, quat, rate, velocity_body = _odometry_fields(message)
+    velocity_enu = body_to_enu(quat[None, :], velocity_body[None, :])[0]
+    return NavSample(t_s, quat, rate, velocity_enu)
+
+
+def odometry_arrays(messages: Iterable) -> tuple[NavArrays, dict[str, int]]:
+    """Whole-recording :func:`odometry_sample`: arrays of the accepted messages, in order, and
+    the number of rejected messages per reason. Stamp order is left to the navigation track,
+    which rejects non-increasing stamps exactly as it does live."""
+    stamps, quats, rates, velocities_body = [], [], [], []
+    rejected: dict[str, int] = {}
+    for message in messages:
+        try:
+            t_s, quat, rate, velocity_body = _odometry_fields(message)
+        except MalformedMessageError as error:
+            rejected[error.reason] = rejected.get(error.reason, 0) + 1
+            continue
+        stamps.append(t_s)
+        quats.append(quat)
+        rates.append(rate)
+        velocities_body.append(velocity_body)
+    quats_array = np.array(quats, dtype=float).reshape(-1, 4)
+    velocities = body_to_enu(quats_array, np.array(velocities_body, dtype=float).reshape(-1, 3))
+    arrays = NavArrays(
+        np.array(stamps, dtype=float),
+        quats_array,
+        np.array(rates, dtype=float).reshape(-1, 3),
+        velocities,
+    )
+    return arrays, rejected
+
+
+def fix_latitude_deg(message) -> float | None:
+    """Latitude (deg) of a ``nav/fix`` NavSatFix; None when it reports no fix (status < 0).
+
+    Raises :class:`MalformedMessageError` for a fix whose latitude is not finite or beyond ±90°.
+    """
+    if message.status.status < 0:
+        return None
+    latitude = float(message.latitude)
+    if not math.isfinite(latitude):
+        raise MalformedMessageError(REASON_NON_FINITE, f"fix latitude {latitude}")
+    if abs(latitude) > 90.0:
+        raise MalformedMessageError(REASON_LATITUDE_OUT_OF_RANGE, f"fix latitude {latitude} deg")
+    return latitude
+
+
+def remove_earth_rate(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> np.ndarray:
+    """Body rate relative to the local-level frame from the rate relative to inertial space.
+
+    ω_nb = ω_ib − R_nb^T · ω_ie^n with ω_ie^n = Ω (0, cos φ, sin φ) in ENU (Ω: Earth rate). The
+    transport rate of a buoy (< 1e-7 rad/s) is neglected.
+
+    Args:
+        angular_rate_body_rad_s: (N, 3) or (3,) ω_ib, body axes, rad/s.
+        quat_xyzw: (N, 4) or (4,) body→ENU attitude.
+        latitude_deg: (N,) or scalar geodetic latitude φ, deg; NaN where unknown, which leaves
+            the rate unchanged (an error of at most Ω·|B|, < 3e-4 m/s of wind at 3 m).
+
+    Returns ω_nb, body axes, rad/s, shaped like ``angular_rate_body_rad_s``.
+    """
+    rates = np.asarray(angular_rate_body_rad_s, dtype=float)
+    latitude_rad = np.radians(np.asarray(latitude_deg, dtype=float))
+    earth_rate_enu = EARTH_RATE_RAD_S * np.stack(
+        [np.zeros_like(latitude_rad), np.cos(latitude_rad), np.sin(latitude_rad)], axis=-1
+    )
+    earth_rate_body = enu_to_body(quat_xyzw, earth_rate_enu)
+    known = np.isfinite(latitude_rad)[..., None]
+    return np.where(known, rates - np.where(known, earth_rate_body, 0.0), rates)
+
+
+def window_label(window_s: float) -> str:
+    """Topic suffix of an averaging window: ``1min`` for 60 s, ``10min`` for 600 s, ``30s``."""
+    if window_s % 60.0 == 0.0:
+        return f"{int(window_s // 60)}min"
+    return f"{window_s:g}s".replace(".", "p")
+
+
+def _set_header(header, sec: int, nanosec: int, frame_id: str) -> None:
+    header.stamp.sec = int(sec)
+    header.stamp.nanosec = int(nanosec)
+    header.frame_id = frame_id
+
+
+def _set_vector(target, values) -> None:
+    target.x, target.y, target.z = (float(value) for value in values)
+
+
+def true_wind_message(vector_stamped_class, sec: int, nanosec: int, wind_enu_mps):
+    """``wind/true``: ENU wind (m/s, NaN when invalid) in frame ``map``, stamped (sec, nanosec)
+    with the anemometer sample's own stamp."""
+    message = vector_stamped_class()
+    _set_header(message.header, sec, nanosec, MAP_FRAME)
+    _set_vector(message.vector, wind_enu_mps)
+    return message
+
+
+def product_messages(
+    vector_stamped_class, multi_array_class, dimension_class, product: WindProduct
+) -> tuple[object, object]:
+    """(``wind/mean_<window>``, ``wind/stats_<window>``) messages of one averaging window.
+
+    The mean is the ENU vector mean (m/s, frame ``map``), stamped with the window end; the
+    statistics follow :data:`STATS_FIELDS`.
+    """
+    sec, nanosec = stamp_from_seconds(product.window_end_s)
+    mean = vector_stamped_class()
+    _set_header(mean.header, sec, nanosec, MAP_FRAME)
+    _set_vector(
+        mean.vector, (product.mean_u_enu_mps, product.mean_v_enu_mps, product.mean_w_enu_mps)
+    )
+    stats = multi_array_class()
+    stats.layout.dim = [dimension_class(label=name, size=1, stride=1) for name in STATS_FIELDS]
+    stats.layout.data_offset = 0
+    stats.data = [float(getattr(product, name)) for name in STATS_FIELDS]
+    return mean, stats
+
+
+def stats_values(stats_message) -> dict[str, float]:
+    """A ``wind/stats_<window>`` message as {field label: value}."""
+    labels = [dimension.label for dimension in stats_message.layout.dim]
+    return dict(zip(labels, (float(value) for value in stats_message.data), strict=True))

@@ -1,0 +1,236 @@
+"""Conversions between contract messages and the compensator's arrays (no DDS)."""
+
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import Vector3Stamped
+from nav_msgs.msg import Odometry
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import NavSatFix, NavSatStatus
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from wind_comp.nav_messages import (
+    EARTH_RATE_RAD_S,
+    STATS_FIELDS,
+    MalformedMessageError,
+    StampOrder,
+    anemometer_sample,
+    body_to_enu,
+    fix_latitude_deg,
+    odometry_arrays,
+    odometry_sample,
+    product_messages,
+    remove_earth_rate,
+    stamp_from_seconds,
+    stamp_s,
+    stats_values,
+    true_wind_message,
+    window_label,
+)
+from wind_comp.products import WindAverager
+from wind_comp.wind_echo_node import utc_text, wind_line
+
+RNG = np.random.default_rng(11)
+
+
+def odometry(quat_xyzw, rate_body, velocity_body, sec=100, nanosec=0):
+    message = Odometry()
+    message.header.stamp.sec, message.header.stamp.nanosec = sec, nanosec
+    message.header.frame_id = "map"
+    message.child_frame_id = "base_link"
+    o = message.pose.pose.orientation
+    o.x, o.y, o.z, o.w = (float(v) for v in quat_xyzw)
+    t = message.twist.twist
+    t.angular.x, t.angular.y, t.angular.z = (float(v) for v in rate_body)
+    t.linear.x, t.linear.y, t.linear.z = (float(v) for v in velocity_body)
+    return message
+
+
+def wind(vector, frame="anemometer_link", sec=100, nanosec=0):
+    message = Vector3Stamped()
+    message.header.stamp.sec, message.header.stamp.nanosec = sec, nanosec
+    message.header.frame_id = frame
+    message.vector.x, message.vector.y, message.vector.z = (float(v) for v in vector)
+    return message
+
+
+def test_stamps_round_trip_within_float_resolution():
+    # Float seconds near 2026 resolve 2.4e-7 s: outputs therefore copy the input stamps.
+    for sec, nanosec in [(1_767_225_600, 50_000_000), (0, 1), (1_767_225_600, 999_999_999)]:
+        message = wind([1, 2, 3], sec=sec, nanosec=nanosec)
+        back_sec, back_nanosec = stamp_from_seconds(stamp_s(message.header.stamp))
+        assert abs((back_sec - sec) * 1_000_000_000 + back_nanosec - nanosec) <= 250
+    assert stamp_from_seconds(1_767_225_660.0) == (1_767_225_660, 0)
+
+
+def test_odometry_velocity_is_rotated_into_enu_like_scipy():
+    attitude = Rotation.from_euler("ZYX", [0.7, -0.2, 0.3])
+    velocity_body = np.array([1.5, -0.4, 0.2])
+    scale = 3.0  # unnormalised quaternions are normalised, not used as given
+    sample = odometry_sample(
+        odometry(scale * attitude.as_quat(), [0.01, 0.02, 0.03], velocity_body, 5, 250_000_000)
+    )
+    assert sample.t_s == 5.25
+    np.testing.assert_allclose(sample.velocity_enu_mps, attitude.apply(velocity_body), atol=1e-14)
+    np.testing.assert_array_equal(sample.angular_rate_body_rad_s, [0.01, 0.02, 0.03])
+
+
+def test_batch_conversion_equals_single_messages_bitwise():
+    quats = Rotation.random(20, random_state=3).as_quat()
+    messages = [
+        odometry(q, RNG.normal(0, 0.1, 3), RNG.normal(0, 2, 3), nanosec=i)
+        for i, q in enumerate(quats)
+    ]
+    arrays, rejected = odometry_arrays(messages)
+    assert rejected == {}
+    singles = [odometry_sample(m) for m in messages]
+    np.testing.assert_array_equal(arrays.velocity_enu_mps, [s.velocity_enu_mps for s in singles])
+    np.testing.assert_array_equal(arrays.quat_xyzw, [s.quat_xyzw for s in singles])
+    np.testing.assert_array_equal(arrays.t_s, [s.t_s for s in singles])
+
+
+@pytest.mark.parametrize(
+    ("change", "reason"),
+    [
+        (lambda m: setattr(m.pose.pose.orientation, "w", math.nan), "non-finite value"),
+        (lambda m: setattr(m.twist.twist.angular, "y", math.inf), "non-finite value"),
+        (lambda m: setattr(m.twist.twist.linear, "x", math.nan), "non-finite value"),
+        (
+            lambda m: setattr(m.pose.pose, "orientation", type(m.pose.pose.orientation)(w=0.0)),
+            "zero quaternion",
+        ),
+        (lambda m: setattr(m.header, "frame_id", "odom"), "wrong frame"),
+        (lambda m: setattr(m, "child_frame_id", "imu_link"), "wrong frame"),
+    ],
+)
+def test_malformed_odometry_is_rejected_with_its_reason(change, reason):
+    message = odometry([0, 0, 0, 1], [0, 0, 0], [0, 0, 0])
+    change(message)
+    with pytest.raises(MalformedMessageError) as raised:
+        odometry_sample(message)
+    assert raised.value.reason == reason
+    good = odometry([0, 0, 0, 1], [0, 0, 0], [1, 0, 0])
+    arrays, rejected = odometry_arrays([good, message, good])
+    assert rejected == {reason: 1}
+    assert arrays.t_s.shape == (2,)
+
+
+def test_anemometer_sample_round_trip_and_rejections():
+    sample = anemometer_sample(wind([3.0, -4.0, 0.5], sec=7, nanosec=500_000_000))
+    assert sample.rejection is None
+    assert sample.t_s == 7.5
+    np.testing.assert_array_equal(sample.wind_sensor_mps, [3.0, -4.0, 0.5])
+    for message, reason in [
+        (wind([math.nan, 1.0, 0.0]), "non-finite value"),
+        (wind([1.0, math.inf, 0.0]), "non-finite value"),
+        (wind([1.0, 1.0, 0.0], frame="imu_link"), "wrong frame"),
+    ]:
+        rejected = anemometer_sample(message)
+        assert rejected.rejection == reason
+        assert rejected.t_s == 100.0  # the stamp survives: the output keeps its place
+        assert np.all(np.isnan(rejected.wind_sensor_mps))
+
+
+def test_stamp_order_accepts_only_increasing_stamps():
+    order = StampOrder()
+    assert [order.advance(t) for t in (1.0, 2.0, 2.0, 1.5, 3.0, math.nan)] == [
+        True,
+        True,
+        False,
+        False,
+        True,
+        False,
+    ]
+
+
+def test_fix_latitude_and_its_rejections():
+    fix = NavSatFix()
+    fix.status.status = NavSatStatus.STATUS_FIX
+    fix.latitude = -33.5
+    assert fix_latitude_deg(fix) == -33.5
+    fix.status.status = NavSatStatus.STATUS_NO_FIX
+    fix.latitude = math.nan
+    assert fix_latitude_deg(fix) is None
+    fix.status.status = NavSatStatus.STATUS_FIX
+    with pytest.raises(MalformedMessageError, match="non-finite"):
+        fix_latitude_deg(fix)
+    fix.latitude = 91.0
+    with pytest.raises(MalformedMessageError, match="latitude out of range"):
+        fix_latitude_deg(fix)
+
+
+def test_earth_rate_removal_inverts_what_a_gyro_senses():
+    attitudes = Rotation.random(50, random_state=5)
+    latitudes_deg = RNG.uniform(-89, 89, 50)
+    rates_nb = RNG.normal(0, 0.2, (50, 3))
+    phi = np.radians(latitudes_deg)
+    earth_enu = EARTH_RATE_RAD_S * np.column_stack([np.zeros(50), np.cos(phi), np.sin(phi)])
+    sensed = rates_nb + attitudes.inv().apply(earth_enu)
+    recovered = remove_earth_rate(sensed, attitudes.as_quat(), latitudes_deg)
+    np.testing.assert_allclose(recovered, rates_nb, atol=1e-15)
+    # The Earth's rate has the same length in any attitude.
+    np.testing.assert_allclose(
+        np.linalg.norm(sensed - recovered, axis=1), EARTH_RATE_RAD_S, rtol=1e-12
+    )
+
+
+def test_earth_rate_is_kept_without_a_latitude():
+    rates = RNG.normal(0, 0.1, (4, 3))
+    quats = Rotation.random(4, random_state=1).as_quat()
+    np.testing.assert_array_equal(remove_earth_rate(rates, quats, math.nan), rates)
+    single = remove_earth_rate(rates[0], quats[0], 0.0)
+    # At the equator the Earth's rate is horizontal, pointing North.
+    np.testing.assert_allclose(
+        Rotation.from_quat(quats[0]).apply(rates[0] - single), [0, EARTH_RATE_RAD_S, 0], atol=1e-15
+    )
+
+
+def test_body_to_enu_keeps_length_and_matches_scipy():
+    attitudes = Rotation.random(30, random_state=9)
+    vectors = RNG.normal(0, 5, (30, 3))
+    rotated = body_to_enu(attitudes.as_quat(), vectors)
+    np.testing.assert_allclose(rotated, attitudes.apply(vectors), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(rotated, axis=1), np.linalg.norm(vectors, axis=1))
+
+
+def test_true_wind_message_keeps_stamp_and_is_in_map():
+    message = true_wind_message(Vector3Stamped, 1_767_225_600, 50_000_000, [1.0, np.nan, 2.0])
+    assert (message.header.stamp.sec, message.header.stamp.nanosec) == (1_767_225_600, 50_000_000)
+    assert message.header.frame_id == "map"
+    assert message.vector.x == 1.0 and math.isnan(message.vector.y)
+
+
+def test_product_messages_carry_the_window_statistics():
+    averager = WindAverager(60.0, 3.0)
+    stamps = 1_767_225_600.0 + np.arange(0.0, 61.0, 0.5)
+    winds = np.column_stack(
+        [np.full(stamps.shape, 4.0), RNG.normal(0, 1, stamps.shape), np.zeros(stamps.shape)]
+    )
+    winds[3] = np.nan
+    (product,) = averager.add_batch(stamps, winds)
+    mean, stats = product_messages(Vector3Stamped, Float64MultiArray, MultiArrayDimension, product)
+    assert stamp_from_seconds(product.window_end_s) == (
+        mean.header.stamp.sec,
+        mean.header.stamp.nanosec,
+    )
+    assert mean.header.frame_id == "map"
+    np.testing.assert_allclose(
+        [mean.vector.x, mean.vector.y, mean.vector.z],
+        np.nanmean(winds[stamps < product.window_end_s], axis=0),
+    )
+    values = stats_values(stats)
+    assert tuple(values) == STATS_FIELDS
+    assert values["n_invalid"] == 1 and values["n_valid"] == 119
+    assert values["vector_mean_direction_deg"] == pytest.approx(product.vector_mean_direction_deg)
+
+
+def test_window_labels():
+    assert [window_label(w) for w in (60.0, 600.0, 30.0, 2.5)] == ["1min", "10min", "30s", "2p5s"]
+
+
+def test_echo_lines():
+    assert utc_text(1_767_225_600.05) == "2026-01-01T00:00:00.050Z"
+    line = wind_line(0.0, 1.0, 0.0, 0.0)  # blowing toward East: from the West
+    assert "speed   1.00 m/s" in line and "from 270.0 deg" in line
+    assert wind_line(0.0, math.nan, 0.0, 0.0).endswith("invalid")
