@@ -1,0 +1,327 @@
+"""Initial alignment at sea: levelling from specific force, heading from the antenna baseline.
+
+A buoy is never still, so the levelling window is made insensitive to its rotation: every
+specific-force increment is turned into the body frame at the start of the window with the
+gyro-integrated relative rotation ``R_b0b`` before it is averaged (in that frame, inertially
+fixed for the few seconds of the window, gravity keeps its direction however the buoy rolls).
+The mean is then turned into the body frame at the alignment instant, where roll and pitch follow
+from ``f^b ≈ R_nb^T (0, 0, g)`` (paper 000 eq. 2-3 written for forward-left-up axes)::
+
+    roll = atan2(f_y, f_z),   pitch = atan2(−f_x, √(f_y² + f_z²)).
+
+What is left is the mean wave acceleration over the window (and the accelerometer bias), which
+tilts the estimate by ``a/g``. Its 1-σ is sized from the variance of the horizontal specific force
+in the window (the window mean of an oscillation is bounded by a fraction of its amplitude, so
+the full standard deviation is a conservative bound), plus the accelerometer bias over g and the
+gyro-bias rotation over half the window.
+
+The heading is solved exactly for the levelled attitude and any antenna geometry (paper 000
+eq. 4 generalised): with ``R_nb = Rz(ψ) R_L``, ``R_L = Ry(pitch) Rx(roll)``, the baseline azimuth
+is ``ψ + atan2(w_y, w_x)`` where ``w = R_L (l_s − l_p)``, so ``ψ = ψ_measured − atan2(w_y, w_x)``.
+The attitude covariance carries the correlation this creates between yaw and tilt errors.
+
+Position and velocity come from the latest fix and GNSS velocity, with the lever arm removed.
+"""
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from buoy_nav import earth
+from buoy_nav.config import FusionConfig
+from buoy_nav.error_state_filter import (
+    ACCEL_BIAS,
+    ATTITUDE,
+    GYRO_BIAS,
+    POSITION,
+    STATE_DIM,
+    VELOCITY,
+    ImuErrorModel,
+    NavState,
+)
+from buoy_nav.measurements.heading import horizontal_fraction
+from buoy_nav.rotations import (
+    IDENTITY_QUATERNION,
+    euler_from_rotation_matrix,
+    normalize_quaternion,
+    quaternion_from_rotation_matrix,
+    quaternion_from_rotation_vector,
+    quaternion_multiply,
+    rotation_matrix_from_euler,
+    rotation_matrix_from_quaternion,
+    wrap_angle,
+)
+
+# The baseline's horizontal projection must keep this fraction of its length for its azimuth to
+# carry heading (at 0.2 the yaw noise is 5× the tilt-free value).
+MIN_HORIZONTAL_BASELINE_FRACTION = 0.2
+# Floor of the tilt 1-σ (rad): the levelling is never trusted beyond 0.05°.
+_TILT_SIGMA_FLOOR_RAD = math.radians(0.05)
+# Velocity 1-σ (m/s) assumed when no GNSS velocity is available at alignment.
+_UNKNOWN_VELOCITY_SIGMA_MPS = 5.0
+
+
+class AlignmentState(enum.Enum):
+    """Progress of the alignment."""
+
+    WAITING_FOR_IMU = "waiting_for_imu"
+    LEVELLING = "levelling"
+    WAITING_FOR_GNSS = "waiting_for_gnss"
+    ALIGNED = "aligned"
+
+
+@dataclass(frozen=True)
+class AlignmentResult:
+    """Initial state and covariance of the filter.
+
+    t_s: alignment instant (s). state: nominal state there. covariance: 15×15 initial P.
+    roll_rad, pitch_rad, yaw_rad: the aligned Euler angles. tilt_sigma_rad: 1-σ of roll/pitch.
+    """
+
+    t_s: float
+    state: NavState
+    covariance: np.ndarray
+    roll_rad: float
+    pitch_rad: float
+    yaw_rad: float
+    tilt_sigma_rad: float
+
+
+@dataclass(frozen=True)
+class _Fix:
+    t_s: float
+    latitude_rad: float
+    longitude_rad: float
+    altitude_m: float
+    covariance_enu_m2: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Velocity:
+    t_s: float
+    velocity_enu_mps: np.ndarray
+    covariance_m2s2: np.ndarray
+
+
+class InMotionAligner:
+    """Collects IMU motion and GNSS measurements until an alignment can be made."""
+
+    def __init__(self, config: FusionConfig, imu_model: ImuErrorModel):
+        self._config = config
+        self._imu = imu_model
+        self._primary = np.array(config.primary_antenna_body_m)
+        self._baseline = np.array(config.baseline_body_m)
+        self._fix: _Fix | None = None
+        self._velocity: _Velocity | None = None
+        self.restart()
+
+    def restart(self):
+        """Forget the levelling window (after an IMU gap); GNSS measurements are kept."""
+        self._relative: tuple[float, float, float, float] = IDENTITY_QUATERNION
+        self._duration_s = 0.0
+        self._force_sum = np.zeros(3)
+        self._force_sq_sum = np.zeros(3)
+        self._has_imu = False
+
+    @property
+    def state(self) -> AlignmentState:
+        """Current progress (never ALIGNED: the aligner hands over at alignment)."""
+        if not self._has_imu:
+            return AlignmentState.WAITING_FOR_IMU
+        if self._duration_s < self._config.alignment_window_s:
+            return AlignmentState.LEVELLING
+        return AlignmentState.WAITING_FOR_GNSS
+
+    def add_motion(self, dt_s: float, gyro_start, gyro_end, force_start, force_end):
+        """One IMU step of ``dt_s`` between raw samples (body rad/s and m/s²)."""
+        if self._duration_s >= 2.0 * self._config.alignment_window_s:
+            # A long wait for GNSS lets gyro bias accumulate in R_b0b: start a fresh window.
+            self.restart()
+        self._has_imu = True
+        half_dt = 0.5 * dt_s
+        dtheta = (np.asarray(gyro_start) + np.asarray(gyro_end)) * half_dt
+        dvel = (np.asarray(force_start) + np.asarray(force_end)) * half_dt
+        dvel = dvel + 0.5 * np.cross(dtheta, dvel)
+        rotated = rotation_matrix_from_quaternion(self._relative) @ dvel
+        self._force_sum += rotated
+        self._force_sq_sum += rotated * rotated / dt_s
+        self._duration_s += dt_s
+        self._relative = normalize_quaternion(
+            quaternion_multiply(self._relative, quaternion_from_rotation_vector(*dtheta))
+        )
+
+    def add_fix(self, t_s, latitude_rad, longitude_rad, altitude_m, covariance_enu_m2):
+        """Remember the latest primary-antenna fix (rad, rad, m; ENU covariance m²)."""
+        self._fix = _Fix(
+            t_s, latitude_rad, longitude_rad, altitude_m, np.array(covariance_enu_m2, dtype=float)
+        )
+
+    def add_velocity(self, t_s, velocity_enu_mps, covariance_m2s2):
+        """Remember the latest primary-antenna velocity (ENU m/s, covariance m²/s²)."""
+        self._velocity = _Velocity(
+            t_s, np.array(velocity_enu_mps, dtype=float), np.array(covariance_m2s2, dtype=float)
+        )
+
+    def _level_and_head(self, mean_force, yaw_rad: float) -> np.ndarray | None:
+        """R_nb from the mean specific force (body) and a baseline azimuth; None if too steep."""
+        roll = math.atan2(mean_force[1], mean_force[2])
+        pitch = math.atan2(-mean_force[0], math.hypot(mean_force[1], mean_force[2]))
+        levelled = rotation_matrix_from_euler(roll, pitch, 0.0)
+        if horizontal_fraction(levelled, self._baseline) < MIN_HORIZONTAL_BASELINE_FRACTION:
+            return None
+        levelled_baseline = levelled @ self._baseline
+        yaw = wrap_angle(yaw_rad - math.atan2(levelled_baseline[1], levelled_baseline[0]))
+        return rotation_matrix_from_euler(roll, pitch, yaw)
+
+    def add_heading(
+        self, t_s: float, yaw_rad: float, variance_rad2: float, gyro_rad_s
+    ) -> AlignmentResult | None:
+        """Try to complete the alignment at a heading measurement's stamp.
+
+        The IMU motion must already be integrated up to ``t_s``; ``gyro_rad_s`` is the raw gyro
+        rate there (body, rad/s), used to remove the lever-arm velocity. Returns None while the
+        window is short, no recent fix exists, or the baseline is too steep.
+        """
+        config = self._config
+        if self.state is not AlignmentState.WAITING_FOR_GNSS:
+            return None
+        fix = self._fix
+        if fix is None or t_s - fix.t_s > config.alignment_max_fix_age_s:
+            return None
+
+        duration = self._duration_s
+        mean_start_frame = self._force_sum / duration
+        relative = rotation_matrix_from_quaternion(self._relative)
+        mean_force = relative.T @ mean_start_frame
+        earth_rate = earth.earth_rate_enu_rad_s(fix.latitude_rad)
+        rotation = self._level_and_head(mean_force, yaw_rad)
+        if rotation is None:
+            return None
+        # The window's frame is inertial, so gravity turned with the Earth during it: the mean
+        # lags the end-of-window direction by ω_ie × T/2. Correct with the first solution.
+        mean_force = mean_force + np.cross(rotation.T @ earth_rate, mean_force) * (0.5 * duration)
+        rotation = self._level_and_head(mean_force, yaw_rad)
+        if rotation is None:
+            return None
+        roll, pitch, yaw = euler_from_rotation_matrix(rotation)
+
+        gravity = earth.normal_gravity_mps2(fix.latitude_rad, fix.altitude_m)
+        variance = np.maximum(self._force_sq_sum / duration - mean_start_frame**2, 0.0)
+        motion_tilt_variance = (
+            0.5 * (variance[0] + variance[1]) / gravity**2
+            + self._imu.initial_gyro_bias_variance_rad2_s2 * (0.5 * duration) ** 2
+            + _TILT_SIGMA_FLOOR_RAD**2
+        )
+        accel_bias_variance = self._imu.initial_accel_bias_variance_m2_s4
+        tilt_variance = motion_tilt_variance + accel_bias_variance / gravity**2
+        covariance = np.zeros((STATE_DIM, STATE_DIM))
+        attitude_bias_covariance = _attitude_and_accel_bias_covariance(
+            rotation,
+            rotation @ self._baseline,
+            motion_tilt_variance,
+            max(variance_rad2, 0.0),
+            accel_bias_variance,
+            gravity,
+        )
+        for row, rows in enumerate((ATTITUDE, ACCEL_BIAS)):
+            for column, columns in enumerate((ATTITUDE, ACCEL_BIAS)):
+                covariance[rows, columns] = attitude_bias_covariance[
+                    3 * row : 3 * row + 3, 3 * column : 3 * column + 3
+                ]
+
+        # Position and velocity: the antenna measurements moved back along the lever arm. They
+        # may be up to alignment_max_fix_age_s old; the motion since then widens the variances
+        # (acceleration variance from the window for velocity, speed for position).
+        lever_enu = rotation @ self._primary
+        acceleration_variance = float(np.sum(variance))
+        latitude, longitude, altitude = earth.geodetic_offset(
+            fix.latitude_rad, fix.longitude_rad, fix.altitude_m, -lever_enu
+        )
+        velocity = np.zeros(3)
+        velocity_variance = np.full(3, _UNKNOWN_VELOCITY_SIGMA_MPS**2)
+        rate = np.asarray(gyro_rad_s, dtype=float)
+        measured = self._velocity
+        if measured is not None and t_s - measured.t_s <= config.alignment_max_fix_age_s:
+            frame_rate = earth.navigation_frame_rate_enu_rad_s(
+                latitude, altitude, measured.velocity_enu_mps
+            )
+            velocity = (
+                measured.velocity_enu_mps
+                - rotation @ np.cross(rate, self._primary)
+                + np.cross(frame_rate, lever_enu)
+            )
+            velocity_variance = (
+                np.diag(measured.covariance_m2s2)
+                + acceleration_variance * (t_s - measured.t_s) ** 2
+            )
+        speed_sq = float(velocity @ velocity + np.sum(velocity_variance))
+        position_variance = np.diag(fix.covariance_enu_m2) + speed_sq * (t_s - fix.t_s) ** 2
+        lever_sq = float(self._primary @ self._primary)
+        position_variance = position_variance + tilt_variance * lever_sq
+        velocity_variance = velocity_variance + tilt_variance * float(rate @ rate) * lever_sq
+        covariance[VELOCITY, VELOCITY] = np.diag(
+            np.maximum(velocity_variance, config.gnss_velocity_variance_floor_m2s2)
+        )
+        covariance[POSITION, POSITION] = np.diag(
+            np.maximum(position_variance, config.gnss_position_variance_floor_m2)
+        )
+        covariance[GYRO_BIAS, GYRO_BIAS] = np.eye(3) * self._imu.initial_gyro_bias_variance_rad2_s2
+        state = NavState(
+            attitude_xyzw=quaternion_from_rotation_matrix(rotation),
+            velocity_enu_mps=velocity,
+            latitude_rad=latitude,
+            longitude_rad=longitude,
+            altitude_m=altitude,
+            gyro_bias_rad_s=np.zeros(3),
+            accel_bias_mps2=np.zeros(3),
+        )
+        return AlignmentResult(
+            t_s=t_s,
+            state=state,
+            covariance=covariance,
+            roll_rad=roll,
+            pitch_rad=pitch,
+            yaw_rad=yaw,
+            tilt_sigma_rad=math.sqrt(tilt_variance),
+        )
+
+
+def _attitude_and_accel_bias_covariance(
+    rotation_nb,
+    baseline_enu,
+    motion_tilt_variance: float,
+    heading_variance: float,
+    accel_bias_variance: float,
+    gravity: float,
+) -> np.ndarray:
+    """Joint 6×6 covariance of (φ, δb_a) right after the alignment.
+
+    The levelling mistakes the horizontal accelerometer bias for tilt: the averaged specific
+    force R_nb^T g_up + b gives φ × g_up = (R_nb b)_horizontal, i.e.
+    ``φ_E = −(R_nb b)_N / g`` and ``φ_N = (R_nb b)_E / g``, fully correlated with the bias state
+    (this is what keeps the filter consistent while the bias stays unobservable, e.g. on a still
+    buoy); the wave motion adds an independent tilt error of variance ``motion_tilt_variance``.
+    The yaw solved from one heading satisfies H φ = −e (e: heading noise, H = (h_E, h_N, 1) the
+    heading Jacobian), so ``φ_U = −e − h_E φ_E − h_N φ_N``.
+    """
+    b_east, b_north, b_up = baseline_enu
+    horizontal_sq = b_east * b_east + b_north * b_north
+    h_east = -b_east * b_up / horizontal_sq
+    h_north = -b_north * b_up / horizontal_sq
+    rotation = np.asarray(rotation_nb, dtype=float)
+    # Independent sources z = (bias (3), motion tilt E, N (2), heading noise (1)).
+    tilt_from_sources = np.zeros((2, 6))
+    tilt_from_sources[0, 0:3] = -rotation[1] / gravity
+    tilt_from_sources[1, 0:3] = rotation[0] / gravity
+    tilt_from_sources[:, 3:5] = np.eye(2)
+    mapping = np.zeros((6, 6))
+    mapping[0:2] = tilt_from_sources
+    mapping[2] = -h_east * tilt_from_sources[0] - h_north * tilt_from_sources[1]
+    mapping[2, 5] = -1.0
+    mapping[3:6, 0:3] = np.eye(3)
+    source_variances = np.array(
+        (accel_bias_variance,) * 3 + (motion_tilt_variance,) * 2 + (heading_variance,)
+    )
+    return (mapping * source_variances) @ mapping.T

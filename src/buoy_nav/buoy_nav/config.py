@@ -1,0 +1,230 @@
+"""Typed configuration of the fusion engine.
+
+:class:`FusionConfig` is a frozen dataclass of simple field types (float, int, bool, str, tuple of
+floats) with unit-suffixed names, so that a ROS node can declare one parameter per field. The IMU
+error fields carry the same names and meanings as the simulator's IMU error configuration, so the
+filter can be tuned to a sensor by copying its data sheet (or the simulator's settings) verbatim.
+"""
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+NAN = float("nan")
+
+# A baseline shorter than this cannot give a heading worth fusing (the noise of a few mm of
+# carrier-phase baseline then exceeds a degree).
+MIN_BASELINE_LENGTH_M = 0.1
+
+
+class ConfigError(ValueError):
+    """A configuration value is missing, of the wrong type or out of range (names the field)."""
+
+
+@dataclass(frozen=True)
+class FusionConfig:
+    """Configuration of :class:`buoy_nav.engine.FusionEngine` (defaults in brackets).
+
+    Antennas and map origin
+      primary_antenna_body_m: primary antenna phase centre in ``base_link`` (m) [(−0.75, 0, 1)].
+      secondary_antenna_body_m: secondary antenna phase centre in ``base_link`` (m) [(0.75, 0, 1)].
+      origin_latitude_deg, origin_longitude_deg, origin_altitude_m: origin of the ``map`` ENU
+        frame (deg, deg, m ellipsoidal); all NaN = the ``base_link`` position at alignment [NaN].
+
+    IMU error model (same names as the simulator's IMU error configuration)
+      gyro_noise_deg_sqrt_h: gyro angle random walk (°/√h) [0.2].
+      gyro_turn_on_bias_deg_s: 1-σ gyro bias at switch-on, per axis (°/s) [0.02].
+      gyro_bias_instability_deg_h: 1-σ of the first-order Gauss-Markov gyro bias drift (°/h) [5].
+      gyro_bias_correlation_time_s: its correlation time (s) [300].
+      accel_noise_mps_sqrt_h: accelerometer velocity random walk (m/s/√h) [0.05].
+      accel_turn_on_bias_mg: 1-σ accelerometer bias at switch-on, per axis (mg) [5].
+      accel_bias_instability_mg: 1-σ of the Gauss-Markov accelerometer bias drift (mg) [0.1].
+      accel_bias_correlation_time_s: its correlation time (s) [600].
+      scale_factor_error_percent: 1-σ scale-factor error of gyros and accelerometers (%) [0.1];
+        not estimated, accounted for as extra process noise proportional to the motion.
+
+    Alignment
+      alignment_window_s: length of the levelling window of specific force (s) [10].
+      alignment_max_fix_age_s: oldest GNSS fix/velocity (relative to the heading that completes
+        the alignment) used to initialise position and velocity (s) [1].
+
+    Measurements
+      gate_probability: probability of the chi-square innovation gate [0.9999].
+      gate_reset_count: consecutive gate rejections of one kind after which the filter resets the
+        corresponding states to that measurement (attitude yaw, velocity or position) [50].
+      gnss_position_variance_floor_m2: smallest position variance used per ENU axis (m²) [1e-4].
+      gnss_velocity_variance_floor_m2s2: smallest velocity variance per ENU axis (m²/s²) [1e-4].
+      gnss_heading_variance_floor_rad2: smallest dual-antenna heading variance (rad²) [1e-6].
+      coasting_timeout_s: a measurement kind not accepted for this long is reported as coasting
+        (s) [1].
+
+    Timing and input validation
+      max_measurement_delay_s: how long measurements may arrive after the IMU sample of the same
+        stamp; processing lags the newest IMU stamp by this much (s) [0.3].
+      covariance_propagation_interval_s: longest span of IMU samples over which the covariance is
+        propagated in one step (s) [0.1].
+      max_imu_gap_s: an IMU gap longer than this restarts the alignment (s) [0.5].
+      max_angular_rate_rad_s: IMU samples with a larger rate magnitude are rejected (rad/s) [35].
+      max_specific_force_mps2: IMU samples with a larger specific force are rejected (m/s²) [160].
+
+    Output
+      output_rate_hz: rate of navigation solutions; 0 = one per IMU sample (Hz) [0].
+      record_innovations: keep every innovation in ``FusionEngine.innovation_log`` [False].
+    """
+
+    primary_antenna_body_m: tuple[float, float, float] = (-0.75, 0.0, 1.0)
+    secondary_antenna_body_m: tuple[float, float, float] = (0.75, 0.0, 1.0)
+    origin_latitude_deg: float = NAN
+    origin_longitude_deg: float = NAN
+    origin_altitude_m: float = NAN
+
+    gyro_noise_deg_sqrt_h: float = 0.2
+    gyro_turn_on_bias_deg_s: float = 0.02
+    gyro_bias_instability_deg_h: float = 5.0
+    gyro_bias_correlation_time_s: float = 300.0
+    accel_noise_mps_sqrt_h: float = 0.05
+    accel_turn_on_bias_mg: float = 5.0
+    accel_bias_instability_mg: float = 0.1
+    accel_bias_correlation_time_s: float = 600.0
+    scale_factor_error_percent: float = 0.1
+
+    alignment_window_s: float = 10.0
+    alignment_max_fix_age_s: float = 1.0
+
+    gate_probability: float = 0.9999
+    gate_reset_count: int = 50
+    gnss_position_variance_floor_m2: float = 1e-4
+    gnss_velocity_variance_floor_m2s2: float = 1e-4
+    gnss_heading_variance_floor_rad2: float = 1e-6
+    coasting_timeout_s: float = 1.0
+
+    max_measurement_delay_s: float = 0.3
+    covariance_propagation_interval_s: float = 0.1
+    max_imu_gap_s: float = 0.5
+    max_angular_rate_rad_s: float = 35.0
+    max_specific_force_mps2: float = 160.0
+
+    output_rate_hz: float = 0.0
+    record_innovations: bool = False
+
+    def __post_init__(self):
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            object.__setattr__(self, field.name, _coerce(field.name, field.type, value))
+        self._validate()
+
+    @classmethod
+    def from_mapping(cls, values: Mapping) -> "FusionConfig":
+        """Build from a mapping of field name → value; unknown names raise :class:`ConfigError`."""
+        if not isinstance(values, Mapping):
+            raise ConfigError(f"configuration must be a mapping, got {type(values).__name__}")
+        known = {field.name for field in dataclasses.fields(cls)}
+        unknown = sorted(str(key) for key in values if key not in known)
+        if unknown:
+            raise ConfigError(f"unknown configuration field(s): {', '.join(unknown)}")
+        return cls(**dict(values))
+
+    def _validate(self):
+        for name in ("primary_antenna_body_m", "secondary_antenna_body_m"):
+            if not all(math.isfinite(c) for c in getattr(self, name)):
+                raise ConfigError(f"{name} must hold three finite numbers (m)")
+        if math.hypot(*self.baseline_body_m) < MIN_BASELINE_LENGTH_M:
+            raise ConfigError(
+                "secondary_antenna_body_m must be at least "
+                f"{MIN_BASELINE_LENGTH_M} m from primary_antenna_body_m"
+            )
+        origin = (self.origin_latitude_deg, self.origin_longitude_deg, self.origin_altitude_m)
+        if any(math.isnan(c) for c in origin):
+            if not all(math.isnan(c) for c in origin):
+                raise ConfigError(
+                    "origin_latitude_deg, origin_longitude_deg and origin_altitude_m must be "
+                    "all set or all NaN"
+                )
+        else:
+            _require(abs(self.origin_latitude_deg) < 90.0, "origin_latitude_deg", "in (−90, 90)")
+            _require(
+                abs(self.origin_longitude_deg) <= 180.0, "origin_longitude_deg", "in [−180, 180]"
+            )
+            _require(abs(self.origin_altitude_m) < 1e5, "origin_altitude_m", "within ±100 km")
+        for name in (
+            "gyro_noise_deg_sqrt_h",
+            "gyro_turn_on_bias_deg_s",
+            "gyro_bias_instability_deg_h",
+            "accel_noise_mps_sqrt_h",
+            "accel_turn_on_bias_mg",
+            "accel_bias_instability_mg",
+            "scale_factor_error_percent",
+            "output_rate_hz",
+            "max_measurement_delay_s",
+        ):
+            _require(getattr(self, name) >= 0.0, name, "finite and ≥ 0")
+        for name in (
+            "gyro_bias_correlation_time_s",
+            "accel_bias_correlation_time_s",
+            "alignment_window_s",
+            "alignment_max_fix_age_s",
+            "gnss_position_variance_floor_m2",
+            "gnss_velocity_variance_floor_m2s2",
+            "gnss_heading_variance_floor_rad2",
+            "coasting_timeout_s",
+            "covariance_propagation_interval_s",
+            "max_imu_gap_s",
+            "max_angular_rate_rad_s",
+            "max_specific_force_mps2",
+        ):
+            _require(getattr(self, name) > 0.0, name, "finite and > 0")
+        _require(0.0 < self.gate_probability < 1.0, "gate_probability", "in (0, 1)")
+        _require(self.gate_reset_count >= 1, "gate_reset_count", "≥ 1")
+        _require(self.scale_factor_error_percent < 100.0, "scale_factor_error_percent", "< 100")
+
+    @property
+    def baseline_body_m(self) -> tuple[float, float, float]:
+        """Primary → secondary antenna vector in ``base_link`` (m)."""
+        secondary, primary = self.secondary_antenna_body_m, self.primary_antenna_body_m
+        return tuple(s - p for s, p in zip(secondary, primary, strict=True))
+
+    @property
+    def has_origin(self) -> bool:
+        """True when the ``map`` origin is configured (not taken from the first fix)."""
+        return not math.isnan(self.origin_latitude_deg)
+
+
+def _require(condition: bool, name: str, expectation: str):
+    if not condition:
+        raise ConfigError(f"{name} must be {expectation}")
+
+
+def _coerce(name: str, annotation, value):
+    """Convert ``value`` to the field's declared type or raise :class:`ConfigError` naming it."""
+    if annotation is bool or annotation == "bool":
+        if isinstance(value, bool):
+            return value
+        raise ConfigError(f"{name} must be a boolean, got {value!r}")
+    if annotation is int or annotation == "int":
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not math.isfinite(value)
+            or value != int(value)
+        ):
+            raise ConfigError(f"{name} must be an integer, got {value!r}")
+        return int(value)
+    if annotation is float or annotation == "float":
+        return _to_float(name, value)
+    # tuple[float, float, float]
+    if isinstance(value, str) or not hasattr(value, "__len__") or len(value) != 3:
+        raise ConfigError(f"{name} must be a sequence of three numbers, got {value!r}")
+    return tuple(_to_float(name, c) for c in value)
+
+
+def _to_float(name: str, value) -> float:
+    if isinstance(value, bool):
+        raise ConfigError(f"{name} must be a number, got {value!r}")
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be a number, got {value!r}") from None
+    if math.isinf(number):
+        raise ConfigError(f"{name} must be finite, got {value!r}")
+    return number

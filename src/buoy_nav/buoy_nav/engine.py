@@ -1,0 +1,894 @@
+"""Fusion engine: the one entry point of the navigation core for live nodes and offline tools.
+
+The engine buffers IMU samples and GNSS measurements and processes them strictly in stamp order,
+``max_measurement_delay_s`` behind the newest IMU stamp, so measurements that arrive out of order
+within that delay give exactly the result of in-order arrival. A measurement whose stamp falls
+between two IMU samples is applied at its own stamp: the state is integrated to it with IMU
+samples interpolated on the parabola through the last three samples (the curve the strapdown
+integrator integrates, so splitting a step costs no accuracy), updated, and integrated on to the
+next sample. Measurements sharing a stamp are gated one by one and the accepted ones applied in
+one stacked update (their order: fix, velocity, heading).
+
+Before alignment the IMU samples and GNSS measurements feed :class:`InMotionAligner`; once
+aligned, the strapdown integrator carries the nominal state and the error-state filter corrects
+it after every accepted measurement. The covariance is propagated in batches of at most
+``covariance_propagation_interval_s`` and always up to a measurement stamp before an update (the
+batching is exact to first order, see :mod:`buoy_nav.error_state_filter`); the covariances in a
+:class:`NavSolution` are therefore at most that interval old.
+
+Invalid input (non-finite values, absurd magnitudes, non-positive variances, IMU stamps not
+increasing, duplicated measurement stamps, measurements older than what was already processed)
+is rejected and counted by kind and reason; it never reaches the state.
+"""
+
+import heapq
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from buoy_nav import earth
+from buoy_nav.alignment import (
+    MIN_HORIZONTAL_BASELINE_FRACTION,
+    AlignmentResult,
+    AlignmentState,
+    InMotionAligner,
+)
+from buoy_nav.config import FusionConfig
+from buoy_nav.error_state_filter import (
+    ATTITUDE,
+    POSITION,
+    VELOCITY,
+    ErrorStateFilter,
+    ImuErrorModel,
+    NavState,
+    discrete_error_model,
+    inject_error_state,
+)
+from buoy_nav.measurements.gnss_position import position_model
+from buoy_nav.measurements.gnss_velocity import (
+    predicted_antenna_velocity_enu_mps,
+    velocity_model,
+)
+from buoy_nav.measurements.heading import heading_model, horizontal_fraction
+from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
+from buoy_nav.rotations import (
+    euler_from_rotation_matrix,
+    quaternion_from_rotation_matrix,
+    rotation_matrix_from_euler,
+    rotation_matrix_from_quaternion,
+    wrap_angle,
+)
+
+IMU = "imu"
+GNSS_FIX = "gnss_fix"
+GNSS_VELOCITY = "gnss_velocity"
+GNSS_HEADING = "gnss_heading"
+MEASUREMENT_KINDS = (GNSS_FIX, GNSS_VELOCITY, GNSS_HEADING)
+# Order of measurements that share a stamp.
+_KIND_ORDER = {GNSS_FIX: 0, GNSS_VELOCITY: 1, GNSS_HEADING: 2}
+
+# Rejection reasons.
+NON_FINITE = "non_finite"
+OUT_OF_RANGE = "out_of_range"
+NON_POSITIVE_VARIANCE = "non_positive_variance"
+STAMP_NOT_INCREASING = "stamp_not_increasing"
+DUPLICATE_STAMP = "duplicate_stamp"
+TOO_LATE = "too_late"
+GATE = "gate"
+GEOMETRY = "geometry"
+SINGULAR = "singular_innovation_covariance"
+BEYOND_IMU_DATA = "beyond_imu_data"
+MALFORMED = "malformed"
+
+# Plausibility limits of GNSS input beyond which a value is a malformed message, not a
+# measurement: ellipsoidal altitude (m) and speed over ground (m/s) of a buoy.
+_MAX_ABS_ALTITUDE_M = 1.0e4
+_MAX_SPEED_MPS = 100.0
+
+
+@dataclass(frozen=True, slots=True)
+class NavSolution:
+    """Navigation solution at one IMU sample (all arrays float64).
+
+    t_s: stamp (s). attitude_xyzw: quaternion of R_nb (body FLU → ENU).
+    angular_rate_body_rad_s: bias-corrected gyro rate ω_ib (body).
+    angular_rate_nb_body_rad_s: ω_nb, rate relative to ENU (Earth and transport rate removed).
+    specific_force_body_mps2: bias-corrected specific force (body).
+    velocity_enu_mps: velocity over ground of the ``base_link`` origin (ENU).
+    latitude_deg, longitude_deg, altitude_m: WGS-84 position of the ``base_link`` origin.
+    position_map_m: the same position in the ``map`` ENU frame (m).
+    attitude_covariance_rad2: covariance of the attitude error φ (ENU, 3×3, rad²), where
+      R_true = Exp([φ×]) R_estimated.
+    velocity_covariance_m2s2, position_covariance_m2: ENU 3×3 covariances.
+    gyro_bias_rad_s, accel_bias_mps2: bias estimates (body).
+    The covariance and bias arrays are read-only: consecutive solutions share them until the
+    filter changes them.
+    aligned: the filter is aligned (always True in emitted solutions).
+    coasting_fix, coasting_velocity, coasting_heading: no measurement of that kind was accepted
+      for longer than ``coasting_timeout_s``.
+    """
+
+    t_s: float
+    attitude_xyzw: np.ndarray
+    angular_rate_body_rad_s: np.ndarray
+    angular_rate_nb_body_rad_s: np.ndarray
+    specific_force_body_mps2: np.ndarray
+    velocity_enu_mps: np.ndarray
+    latitude_deg: float
+    longitude_deg: float
+    altitude_m: float
+    position_map_m: np.ndarray
+    attitude_covariance_rad2: np.ndarray
+    velocity_covariance_m2s2: np.ndarray
+    position_covariance_m2: np.ndarray
+    gyro_bias_rad_s: np.ndarray
+    accel_bias_mps2: np.ndarray
+    aligned: bool
+    coasting_fix: bool
+    coasting_velocity: bool
+    coasting_heading: bool
+
+    @property
+    def euler_rad(self) -> tuple[float, float, float]:
+        """(roll, pitch, yaw) in rad of R_nb = Rz(yaw) Ry(pitch) Rx(roll)."""
+        return euler_from_rotation_matrix(rotation_matrix_from_quaternion(self.attitude_xyzw))
+
+
+@dataclass(frozen=True)
+class InnovationRecord:
+    """One gated measurement (kept when ``record_innovations`` is on).
+
+    t_s: stamp. kind: measurement kind. innovation: measured − predicted.
+    innovation_covariance: S = H P H^T + R. nis: ν^T S^{-1} ν. accepted: passed the gate.
+    """
+
+    t_s: float
+    kind: str
+    innovation: np.ndarray
+    innovation_covariance: np.ndarray
+    nis: float
+    accepted: bool
+
+
+@dataclass
+class MeasurementCounters:
+    """Counters of one input kind.
+
+    accepted: samples used (IMU) or filter updates applied (GNSS).
+    used_for_alignment: GNSS measurements consumed by the alignment.
+    rejected: rejections by reason. resets: state resets after ``gate_reset_count``
+    consecutive gate rejections. nis_sum, nis_count: over accepted updates (mean_nis).
+    """
+
+    accepted: int = 0
+    used_for_alignment: int = 0
+    rejected: dict[str, int] = field(default_factory=dict)
+    resets: int = 0
+    nis_sum: float = 0.0
+    nis_count: int = 0
+
+    @property
+    def mean_nis(self) -> float:
+        """Running mean of the NIS of accepted updates (NaN before the first)."""
+        return self.nis_sum / self.nis_count if self.nis_count else math.nan
+
+    def reject(self, reason: str):
+        self.rejected[reason] = self.rejected.get(reason, 0) + 1
+
+
+@dataclass(frozen=True)
+class EngineHealth:
+    """Snapshot of the engine's health.
+
+    alignment_state: progress of the alignment. aligned: the filter runs.
+    coasting_fix, coasting_velocity, coasting_heading: see :class:`NavSolution`.
+    counters: per kind (``imu``, ``gnss_fix``, ``gnss_velocity``, ``gnss_heading``).
+    covariance_repairs: times P had to be made positive definite again.
+    imu_gaps: IMU gaps longer than ``max_imu_gap_s``. alignments: completed alignments.
+    time_s: stamp up to which data was processed (NaN before any).
+    alignment: the last alignment result (None before the first).
+    """
+
+    alignment_state: AlignmentState
+    aligned: bool
+    coasting_fix: bool
+    coasting_velocity: bool
+    coasting_heading: bool
+    counters: dict[str, MeasurementCounters]
+    covariance_repairs: int
+    imu_gaps: int
+    alignments: int
+    time_s: float
+    alignment: AlignmentResult | None
+
+
+@dataclass(frozen=True)
+class _Fix:
+    latitude_rad: float
+    longitude_rad: float
+    altitude_m: float
+    covariance_enu_m2: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Velocity:
+    velocity_enu_mps: np.ndarray
+    covariance_m2s2: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Heading:
+    yaw_rad: float
+    variance_rad2: float
+
+
+class FusionEngine:
+    """Dual-antenna GNSS / strapdown INS fusion (see the module docstring)."""
+
+    def __init__(self, config: FusionConfig):
+        self.config = config
+        self._imu_model = ImuErrorModel.from_config(config)
+        self._primary = np.array(config.primary_antenna_body_m)
+        self._baseline = np.array(config.baseline_body_m)
+        self._aligner = InMotionAligner(config, self._imu_model)
+        self._integrator: StrapdownIntegrator | None = None
+        self._filter: ErrorStateFilter | None = None
+        self._alignment: AlignmentResult | None = None
+        self._alignments = 0
+        self._imu_gaps = 0
+        self._map_plane = (
+            earth.LocalTangentPlane(
+                math.radians(config.origin_latitude_deg),
+                math.radians(config.origin_longitude_deg),
+                config.origin_altitude_m,
+            )
+            if config.has_origin
+            else None
+        )
+
+        self._imu_buffer: deque = deque()
+        self._measurements: list = []
+        self._sequence = 0
+        self._buffered_stamps: dict[str, set] = {kind: set() for kind in MEASUREMENT_KINDS}
+        self._latest_imu_stamp = -math.inf
+        # State of the processing: time and (raw) IMU sample the state refers to.
+        self._time = -math.inf
+        self._gyro: tuple[float, float, float] | None = None
+        self._force: tuple[float, float, float] | None = None
+        # The IMU sample before the current one (same run), for interpolation at stamps.
+        self._older_imu = None
+        self._last_processed_imu_stamp = -math.inf
+
+        self._counters = {kind: MeasurementCounters() for kind in (IMU, *MEASUREMENT_KINDS)}
+        self._last_accepted = {kind: -math.inf for kind in MEASUREMENT_KINDS}
+        self._consecutive_rejections = dict.fromkeys(MEASUREMENT_KINDS, 0)
+        self.innovation_log: list[InnovationRecord] | None = (
+            [] if config.record_innovations else None
+        )
+
+        self._output_period = 1.0 / config.output_rate_hz if config.output_rate_hz > 0 else 0.0
+        self._next_output_time = -math.inf
+        self._covariance_blocks = None
+        self._bias_arrays = None
+
+    # ------------------------------------------------------------------ input
+    def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[NavSolution]:
+        """Add an IMU sample (stamp s; ω_ib body rad/s; specific force body m/s²).
+
+        Returns the solutions of the samples that became processable (stamp ≤ newest IMU stamp
+        − ``max_measurement_delay_s``).
+        """
+        counters = self._counters[IMU]
+        try:
+            t = float(t_s)
+            gx, gy, gz = _float_triple(gyro_rad_s)
+            fx, fy, fz = _float_triple(specific_force_mps2)
+        except (TypeError, ValueError):
+            counters.reject(MALFORMED)
+            return []
+        if not (math.isfinite(t) and math.isfinite(gx + gy + gz) and math.isfinite(fx + fy + fz)):
+            counters.reject(NON_FINITE)
+            return []
+        config = self.config
+        if (
+            gx * gx + gy * gy + gz * gz > config.max_angular_rate_rad_s**2
+            or fx * fx + fy * fy + fz * fz > config.max_specific_force_mps2**2
+        ):
+            counters.reject(OUT_OF_RANGE)
+            return []
+        if t <= self._latest_imu_stamp:
+            duplicate = t == self._latest_imu_stamp
+            counters.reject(DUPLICATE_STAMP if duplicate else STAMP_NOT_INCREASING)
+            return []
+        counters.accepted += 1
+        self._latest_imu_stamp = t
+        self._imu_buffer.append((t, (gx, gy, gz), (fx, fy, fz)))
+        return self._process(t - config.max_measurement_delay_s)
+
+    def add_gnss_fix(
+        self,
+        t_s: float,
+        latitude_deg: float,
+        longitude_deg: float,
+        altitude_m: float,
+        position_covariance_enu_m2,
+    ) -> None:
+        """Add a primary-antenna fix (WGS-84 deg, deg, ellipsoidal m; ENU covariance 3×3 m²)."""
+        values, reason = _floats(t_s, latitude_deg, longitude_deg, altitude_m)
+        covariance, covariance_reason = _matrix3(position_covariance_enu_m2)
+        reason = reason or covariance_reason
+        if reason is None and (
+            abs(values[1]) > 90.0 or abs(values[2]) > 360.0 or abs(values[3]) > _MAX_ABS_ALTITUDE_M
+        ):
+            reason = OUT_OF_RANGE
+        if reason is None and np.any(np.diag(covariance) <= 0.0):
+            reason = NON_POSITIVE_VARIANCE
+        if reason is None:
+            t, latitude, longitude, altitude = values
+            payload = _Fix(math.radians(latitude), math.radians(longitude), altitude, covariance)
+            self._enqueue(GNSS_FIX, t, payload)
+        else:
+            self._counters[GNSS_FIX].reject(reason)
+
+    def add_gnss_velocity(self, t_s: float, velocity_enu_mps, covariance_m2s2) -> None:
+        """Add the primary antenna's velocity over ground (ENU m/s; covariance 3×3 m²/s²)."""
+        stamp, reason = _floats(t_s)
+        velocity, velocity_reason = _vector3(velocity_enu_mps)
+        covariance, covariance_reason = _matrix3(covariance_m2s2)
+        reason = reason or velocity_reason or covariance_reason
+        if reason is None and float(velocity @ velocity) > _MAX_SPEED_MPS**2:
+            reason = OUT_OF_RANGE
+        if reason is None and np.any(np.diag(covariance) <= 0.0):
+            reason = NON_POSITIVE_VARIANCE
+        if reason is None:
+            self._enqueue(GNSS_VELOCITY, stamp[0], _Velocity(velocity, covariance))
+        else:
+            self._counters[GNSS_VELOCITY].reject(reason)
+
+    def add_gnss_heading(self, t_s: float, yaw_rad: float, variance_rad2: float) -> None:
+        """Add a dual-antenna heading: baseline azimuth (rad, ENU, 0 = East, CCW), variance rad²."""
+        values, reason = _floats(t_s, yaw_rad, variance_rad2)
+        if reason is None and values[2] <= 0.0:
+            reason = NON_POSITIVE_VARIANCE
+        if reason is None:
+            t, yaw, variance = values
+            self._enqueue(GNSS_HEADING, t, _Heading(wrap_angle(yaw), variance))
+        else:
+            self._counters[GNSS_HEADING].reject(reason)
+
+    def flush(self) -> list[NavSolution]:
+        """End of data: process every buffered IMU sample and every applicable measurement.
+
+        Measurements stamped after the last IMU sample cannot be reached and are rejected.
+        """
+        solutions = self._process(math.inf)
+        while self._measurements:
+            _, _, _, kind, _ = heapq.heappop(self._measurements)
+            self._counters[kind].reject(BEYOND_IMU_DATA)
+        for stamps in self._buffered_stamps.values():
+            stamps.clear()
+        return solutions
+
+    # ------------------------------------------------------------------ status
+    @property
+    def aligned(self) -> bool:
+        """True once the filter runs (after alignment)."""
+        return self._filter is not None
+
+    def health(self) -> EngineHealth:
+        """Counters, alignment and coasting state (a snapshot)."""
+        coasting = self._coasting_flags(self._time)
+        return EngineHealth(
+            alignment_state=AlignmentState.ALIGNED if self.aligned else self._aligner.state,
+            aligned=self.aligned,
+            coasting_fix=coasting[0],
+            coasting_velocity=coasting[1],
+            coasting_heading=coasting[2],
+            counters={
+                kind: MeasurementCounters(
+                    c.accepted,
+                    c.used_for_alignment,
+                    dict(c.rejected),
+                    c.resets,
+                    c.nis_sum,
+                    c.nis_count,
+                )
+                for kind, c in self._counters.items()
+            },
+            covariance_repairs=self._filter.covariance_repairs if self._filter else 0,
+            imu_gaps=self._imu_gaps,
+            alignments=self._alignments,
+            time_s=self._time if math.isfinite(self._time) else math.nan,
+            alignment=self._alignment,
+        )
+
+    @property
+    def covariance(self) -> np.ndarray | None:
+        """Current 15×15 error-state covariance (a copy), None before alignment."""
+        return None if self._filter is None else self._filter.covariance.copy()
+
+    @property
+    def nav_state(self) -> NavState | None:
+        """Current nominal state, None before alignment."""
+        return None if self._integrator is None else _nav_state(self._integrator)
+
+    @property
+    def map_plane(self) -> earth.LocalTangentPlane | None:
+        """The ``map`` frame (None until its origin is known)."""
+        return self._map_plane
+
+    # ------------------------------------------------------------------ processing
+    def _enqueue(self, kind: str, t: float, payload):
+        counters = self._counters[kind]
+        if t <= self._last_processed_imu_stamp:
+            counters.reject(TOO_LATE)
+            return
+        stamps = self._buffered_stamps[kind]
+        if t in stamps:
+            counters.reject(DUPLICATE_STAMP)
+            return
+        stamps.add(t)
+        self._sequence += 1
+        heapq.heappush(self._measurements, (t, _KIND_ORDER[kind], self._sequence, kind, payload))
+
+    def _process(self, horizon: float) -> list[NavSolution]:
+        solutions: list[NavSolution] = []
+        buffer = self._imu_buffer
+        measurements = self._measurements
+        while buffer and buffer[0][0] <= horizon:
+            t, gyro, force = buffer.popleft()
+            if self._gyro is None or t - self._time > self.config.max_imu_gap_s:
+                if self._gyro is not None:
+                    self._restart_alignment()
+                # Measurements up to the first sample of a run can only feed the alignment.
+                while measurements and measurements[0][0] <= t:
+                    self._handle_measurements(self._pop_same_stamp(), gyro)
+                self._time, self._gyro, self._force = t, gyro, force
+                self._older_imu = None
+                self._last_processed_imu_stamp = t
+                continue
+            t0, gyro0, force0 = self._time, self._gyro, self._force
+            older = self._older_imu
+            t_older, gyro_older, force_older = older if older else (None, None, None)
+            span = t - t0
+            while measurements and measurements[0][0] <= t:
+                group = self._pop_same_stamp()
+                stamp = group[0][0]
+                gyro_m = interpolate_sample(stamp, t0, gyro0, t, gyro, t_older, gyro_older)
+                force_m = interpolate_sample(stamp, t0, force0, t, force, t_older, force_older)
+                self._advance(stamp, gyro_m, force_m)
+                self._handle_measurements(group, gyro_m)
+            self._advance(t, gyro, force)
+            self._older_imu = (t0, gyro0, force0)
+            self._last_processed_imu_stamp = t
+            if self._filter is not None and self._output_due(t, span):
+                solutions.append(self._solution())
+        return solutions
+
+    def _pop_same_stamp(self) -> list:
+        """Pop the earliest measurement and all others of the same stamp (in kind order)."""
+        measurements = self._measurements
+        group = [heapq.heappop(measurements)]
+        while measurements and measurements[0][0] == group[0][0]:
+            group.append(heapq.heappop(measurements))
+        return group
+
+    def _output_due(self, t: float, span: float) -> bool:
+        """Decimation to ``output_rate_hz`` on a grid anchored at the first output."""
+        period = self._output_period
+        if period == 0.0:
+            return True
+        # Half an IMU step of tolerance absorbs stamp jitter and float rounding of the grid.
+        if t + 0.5 * span < self._next_output_time:
+            return False
+        following = self._next_output_time + period
+        self._next_output_time = following if following > t else t + period
+        return True
+
+    def _advance(self, t: float, gyro, force):
+        """Integrate from the current state time to ``t`` (raw samples at both ends)."""
+        dt = t - self._time
+        if dt > 0.0:
+            integrator = self._integrator
+            if integrator is None:
+                self._aligner.add_motion(dt, self._gyro, gyro, self._force, force)
+            else:
+                integrator.step(dt, self._gyro, gyro, self._force, force)
+                interval = self.config.covariance_propagation_interval_s
+                if integrator.accumulated_duration_s >= interval:
+                    self._propagate_covariance()
+        self._time, self._gyro, self._force = t, gyro, force
+
+    def _propagate_covariance(self):
+        integrator = self._integrator
+        if integrator.accumulated_duration_s <= 0.0:
+            return
+        sums = integrator.take_propagation_sums()
+        transition, noise = discrete_error_model(
+            sums,
+            integrator.latitude_rad,
+            integrator.altitude_m,
+            integrator.velocity_enu_mps,
+            self._imu_model,
+        )
+        self._filter.propagate(transition, noise)
+        self._covariance_blocks = None
+
+    def _restart_alignment(self):
+        self._imu_gaps += 1
+        self._integrator = None
+        self._filter = None
+        self._aligner.restart()
+        self._covariance_blocks = None
+        self._bias_arrays = None
+
+    def _handle_measurements(self, group: list, gyro):
+        """Apply the measurements of one stamp (raw gyro rate ``gyro`` at that stamp).
+
+        Each measurement is gated on its own against the predicted covariance; the accepted
+        ones are applied together in one stacked update, which equals applying them one after
+        the other (their noises are independent) at a third of the cost.
+        """
+        t = group[0][0]
+        for entry in group:
+            self._buffered_stamps[entry[3]].discard(t)
+        if self._filter is None:
+            # Kind order puts the heading, which may complete the alignment, last.
+            for _, _, _, kind, payload in group:
+                self._align_with(kind, t, payload, gyro)
+            return
+        self._propagate_covariance()
+        state = _nav_state(self._integrator)
+        rotation = state.rotation_nb
+        accepted = []
+        persistent_rejections = []
+        for _, _, _, kind, payload in group:
+            model = self._measurement_model(kind, payload, state, rotation, gyro)
+            counters = self._counters[kind]
+            if model is None:
+                counters.reject(GEOMETRY)
+                continue
+            gate = self._filter.gate(model.innovation, model.jacobian, model.covariance)
+            if self.innovation_log is not None:
+                self.innovation_log.append(
+                    InnovationRecord(
+                        t,
+                        kind,
+                        model.innovation,
+                        gate.innovation_covariance,
+                        gate.nis,
+                        gate.accepted,
+                    )
+                )
+            if gate.accepted:
+                counters.accepted += 1
+                counters.nis_sum += gate.nis
+                counters.nis_count += 1
+                self._last_accepted[kind] = t
+                self._consecutive_rejections[kind] = 0
+                accepted.append(model)
+                continue
+            counters.reject(GATE if math.isfinite(gate.nis) else SINGULAR)
+            self._consecutive_rejections[kind] += 1
+            if self._consecutive_rejections[kind] >= self.config.gate_reset_count:
+                persistent_rejections.append((kind, payload, model))
+        if accepted:
+            correction = self._filter.update(
+                np.concatenate([m.innovation for m in accepted]),
+                np.vstack([m.jacobian for m in accepted]),
+                _block_diagonal([m.covariance for m in accepted]),
+            )
+            self._inject(state, correction)
+        for kind, payload, model in persistent_rejections:
+            self._reset_to_measurement(kind, t, payload, gyro, model)
+
+    def _measurement_model(self, kind, payload, state: NavState, rotation, gyro):
+        """Linearised model of one measurement; None when the heading geometry is unusable."""
+        config = self.config
+        if kind == GNSS_FIX:
+            return position_model(
+                payload.latitude_rad,
+                payload.longitude_rad,
+                payload.altitude_m,
+                payload.covariance_enu_m2,
+                state.latitude_rad,
+                state.longitude_rad,
+                state.altitude_m,
+                rotation,
+                self._primary,
+                config.gnss_position_variance_floor_m2,
+            )
+        if kind == GNSS_VELOCITY:
+            return velocity_model(
+                payload.velocity_enu_mps,
+                payload.covariance_m2s2,
+                state.velocity_enu_mps,
+                rotation,
+                gyro,
+                state.gyro_bias_rad_s,
+                self._integrator.nav_frame_rate_enu_rad_s,
+                self._primary,
+                config.gnss_velocity_variance_floor_m2s2,
+            )
+        if horizontal_fraction(rotation, self._baseline) < MIN_HORIZONTAL_BASELINE_FRACTION:
+            return None
+        return heading_model(
+            payload.yaw_rad,
+            payload.variance_rad2,
+            rotation,
+            self._baseline,
+            config.gnss_heading_variance_floor_rad2,
+        )
+
+    def _inject(self, state: NavState, correction):
+        new_state = inject_error_state(state, correction)
+        _set_nav_state(self._integrator, new_state)
+        self._filter.reset_after_injection(correction)
+        self._covariance_blocks = None
+        self._bias_arrays = None
+
+    def _reset_to_measurement(self, kind, t, payload, gyro, model):
+        """Re-initialise the states a persistently rejected measurement kind observes."""
+        state = _nav_state(self._integrator)
+        counters = self._counters[kind]
+        counters.resets += 1
+        self._consecutive_rejections[kind] = 0
+        self._last_accepted[kind] = t
+        rotation = state.rotation_nb
+        if kind == GNSS_HEADING:
+            roll, pitch, _ = euler_from_rotation_matrix(rotation)
+            levelled = rotation_matrix_from_euler(roll, pitch, 0.0) @ self._baseline
+            yaw = payload.yaw_rad - math.atan2(levelled[1], levelled[0])
+            new_rotation = rotation_matrix_from_euler(roll, pitch, yaw)
+            new_state = NavState(
+                quaternion_from_rotation_matrix(new_rotation),
+                state.velocity_enu_mps,
+                state.latitude_rad,
+                state.longitude_rad,
+                state.altitude_m,
+                state.gyro_bias_rad_s,
+                state.accel_bias_mps2,
+            )
+            self._filter.reset_states([2], [float(model.covariance[0, 0])])
+        elif kind == GNSS_VELOCITY:
+            velocity = payload.velocity_enu_mps - (
+                predicted_antenna_velocity_enu_mps(
+                    np.zeros(3),
+                    rotation,
+                    np.asarray(gyro) - state.gyro_bias_rad_s,
+                    self._integrator.nav_frame_rate_enu_rad_s,
+                    self._primary,
+                )
+            )
+            new_state = NavState(
+                state.attitude_xyzw,
+                velocity,
+                state.latitude_rad,
+                state.longitude_rad,
+                state.altitude_m,
+                state.gyro_bias_rad_s,
+                state.accel_bias_mps2,
+            )
+            self._filter.reset_states(range(3, 6), np.diag(model.covariance))
+        else:
+            latitude, longitude, altitude = earth.geodetic_offset(
+                payload.latitude_rad,
+                payload.longitude_rad,
+                payload.altitude_m,
+                -(rotation @ self._primary),
+            )
+            new_state = NavState(
+                state.attitude_xyzw,
+                state.velocity_enu_mps,
+                latitude,
+                longitude,
+                altitude,
+                state.gyro_bias_rad_s,
+                state.accel_bias_mps2,
+            )
+            self._filter.reset_states(range(6, 9), np.diag(model.covariance))
+        _set_nav_state(self._integrator, new_state)
+        self._filter.ensure_positive_definite()
+        self._covariance_blocks = None
+
+    def _align_with(self, kind: str, t: float, payload, gyro):
+        counters = self._counters[kind]
+        counters.used_for_alignment += 1
+        aligner = self._aligner
+        if kind == GNSS_FIX:
+            aligner.add_fix(
+                t,
+                payload.latitude_rad,
+                payload.longitude_rad,
+                payload.altitude_m,
+                payload.covariance_enu_m2,
+            )
+            return
+        if kind == GNSS_VELOCITY:
+            aligner.add_velocity(t, payload.velocity_enu_mps, payload.covariance_m2s2)
+            return
+        variance = max(payload.variance_rad2, self.config.gnss_heading_variance_floor_rad2)
+        result = aligner.add_heading(t, payload.yaw_rad, variance, gyro)
+        if result is None:
+            return
+        state = result.state
+        self._integrator = StrapdownIntegrator(
+            state.attitude_xyzw,
+            state.velocity_enu_mps,
+            state.latitude_rad,
+            state.longitude_rad,
+            state.altitude_m,
+            state.gyro_bias_rad_s,
+            state.accel_bias_mps2,
+        )
+        self._filter = ErrorStateFilter(result.covariance, self.config.gate_probability)
+        self._alignment = result
+        self._alignments += 1
+        for measurement_kind in MEASUREMENT_KINDS:
+            self._last_accepted[measurement_kind] = t
+            self._consecutive_rejections[measurement_kind] = 0
+        if self._map_plane is None:
+            self._map_plane = earth.LocalTangentPlane(
+                state.latitude_rad, state.longitude_rad, state.altitude_m
+            )
+        self._next_output_time = -math.inf
+        self._covariance_blocks = None
+        self._bias_arrays = None
+
+    # ------------------------------------------------------------------ output
+    def _coasting_flags(self, t: float) -> tuple[bool, bool, bool]:
+        timeout = self.config.coasting_timeout_s
+        last = self._last_accepted
+        return (
+            t - last[GNSS_FIX] > timeout,
+            t - last[GNSS_VELOCITY] > timeout,
+            t - last[GNSS_HEADING] > timeout,
+        )
+
+    def _solution(self) -> NavSolution:
+        integrator = self._integrator
+        if self._covariance_blocks is None:
+            covariance = self._filter.covariance
+            # Shared by the solutions until P changes again, hence read-only.
+            self._covariance_blocks = tuple(
+                _read_only(covariance[block, block].copy())
+                for block in (ATTITUDE, VELOCITY, POSITION)
+            )
+        if self._bias_arrays is None:
+            self._bias_arrays = (
+                _read_only(np.array(integrator.gyro_bias_rad_s)),
+                _read_only(np.array(integrator.accel_bias_mps2)),
+            )
+        bgx, bgy, bgz = integrator.gyro_bias_rad_s
+        bax, bay, baz = integrator.accel_bias_mps2
+        gx, gy, gz = self._gyro
+        fx, fy, fz = self._force
+        wx, wy, wz = gx - bgx, gy - bgy, gz - bgz
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = integrator.rotation_elements
+        ie, in_, iu = integrator.nav_frame_rate_enu_rad_s
+        latitude = integrator.latitude_rad
+        longitude = integrator.longitude_rad
+        altitude = integrator.altitude_m
+        t = self._time
+        coasting = self._coasting_flags(t)
+        attitude_cov, velocity_cov, position_cov = self._covariance_blocks
+        gyro_bias, accel_bias = self._bias_arrays
+        return NavSolution(
+            t_s=t,
+            attitude_xyzw=np.array(integrator.attitude_xyzw),
+            angular_rate_body_rad_s=np.array((wx, wy, wz)),
+            angular_rate_nb_body_rad_s=np.array(
+                (
+                    wx - (r00 * ie + r10 * in_ + r20 * iu),
+                    wy - (r01 * ie + r11 * in_ + r21 * iu),
+                    wz - (r02 * ie + r12 * in_ + r22 * iu),
+                )
+            ),
+            specific_force_body_mps2=np.array((fx - bax, fy - bay, fz - baz)),
+            velocity_enu_mps=np.array(integrator.velocity_enu_mps),
+            latitude_deg=math.degrees(latitude),
+            longitude_deg=math.degrees(longitude),
+            altitude_m=altitude,
+            position_map_m=np.array(
+                self._map_plane.enu_from_geodetic_scalar(latitude, longitude, altitude)
+            ),
+            attitude_covariance_rad2=attitude_cov,
+            velocity_covariance_m2s2=velocity_cov,
+            position_covariance_m2=position_cov,
+            gyro_bias_rad_s=gyro_bias,
+            accel_bias_mps2=accel_bias,
+            aligned=True,
+            coasting_fix=coasting[0],
+            coasting_velocity=coasting[1],
+            coasting_heading=coasting[2],
+        )
+
+
+def _nav_state(integrator: StrapdownIntegrator) -> NavState:
+    return NavState(
+        attitude_xyzw=integrator.attitude_xyzw,
+        velocity_enu_mps=np.array(integrator.velocity_enu_mps),
+        latitude_rad=integrator.latitude_rad,
+        longitude_rad=integrator.longitude_rad,
+        altitude_m=integrator.altitude_m,
+        gyro_bias_rad_s=np.array(integrator.gyro_bias_rad_s),
+        accel_bias_mps2=np.array(integrator.accel_bias_mps2),
+    )
+
+
+def _set_nav_state(integrator: StrapdownIntegrator, state: NavState):
+    integrator.set_state(
+        state.attitude_xyzw,
+        state.velocity_enu_mps,
+        state.latitude_rad,
+        state.longitude_rad,
+        state.altitude_m,
+        state.gyro_bias_rad_s,
+        state.accel_bias_mps2,
+    )
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
+def _block_diagonal(blocks) -> np.ndarray:
+    size = sum(block.shape[0] for block in blocks)
+    matrix = np.zeros((size, size))
+    offset = 0
+    for block in blocks:
+        n = block.shape[0]
+        matrix[offset : offset + n, offset : offset + n] = block
+        offset += n
+    return matrix
+
+
+def _float_triple(values) -> tuple[float, float, float]:
+    """Three floats from a 3-element array or sequence (ValueError/TypeError otherwise)."""
+    if isinstance(values, np.ndarray) and values.dtype == np.float64:
+        x, y, z = values.tolist()
+        return x, y, z
+    x, y, z = values
+    return float(x), float(y), float(z)
+
+
+def _floats(*values) -> tuple[tuple[float, ...] | None, str | None]:
+    """Scalar inputs as floats, or (None, reason) when one is malformed or not finite."""
+    try:
+        numbers = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        return None, MALFORMED
+    if not all(math.isfinite(n) for n in numbers):
+        return None, NON_FINITE
+    return numbers, None
+
+
+def _vector3(values) -> tuple[np.ndarray | None, str | None]:
+    """A 3-vector input as a float array, or (None, reason)."""
+    try:
+        vector = np.array(values, dtype=float)
+    except (TypeError, ValueError):
+        return None, MALFORMED
+    if vector.shape != (3,):
+        return None, MALFORMED
+    if not np.all(np.isfinite(vector)):
+        return None, NON_FINITE
+    return vector, None
+
+
+def _matrix3(values) -> tuple[np.ndarray | None, str | None]:
+    """A 3×3 (or row-major 9-element) covariance input as a float array, or (None, reason)."""
+    try:
+        matrix = np.array(values, dtype=float)
+    except (TypeError, ValueError):
+        return None, MALFORMED
+    if matrix.shape == (9,):
+        matrix = matrix.reshape(3, 3)
+    if matrix.shape != (3, 3):
+        return None, MALFORMED
+    if not np.all(np.isfinite(matrix)):
+        return None, NON_FINITE
+    return matrix, None

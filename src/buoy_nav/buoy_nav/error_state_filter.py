@@ -1,0 +1,381 @@
+"""15-state error-state Kalman filter (closed loop) of the strapdown navigation.
+
+Error state (all column indices below):
+
+====  =========  ===========================================================
+0:3   φ          attitude error, ENU (rad)
+3:6   δv         velocity error, ENU (m/s)
+6:9   δp         position error, ENU metres of the local tangent plane at the
+                 nominal position (better conditioned than δL, δλ, δh)
+9:12  δb_g       gyro bias error, body (rad/s)
+12:15 δb_a       accelerometer bias error, body (m/s²)
+====  =========  ===========================================================
+
+**Error-injection convention** (the single definition, :func:`inject_error_state`): the true
+state is the nominal state with the error applied as
+
+* ``R_nb,true = Exp([φ×]) · R_nb``  (φ is a rotation of the ENU frame),
+* ``v_true = v + δv``,
+* ``position_true = position moved by δp`` (ENU metres: Δlat = δp_N / (R_M + h),
+  Δlon = δp_E / ((R_N + h) cos lat), Δh = δp_U),
+* ``b_true = b + δb`` for both biases (the bias-corrected rate is ``ω = ω_raw − b``).
+
+The closed-loop correction applies the estimated error with the same function and resets it to
+zero; the measurement Jacobians are derived, and tested, under the same convention.
+
+Continuous error model (paper 001 eq. 1-5, rewritten for this convention and for δp in metres;
+ω_in = ω_ie + ω_en, f^n = R_nb f the specific force in ENU)::
+
+    φ̇  = −ω_in × φ − ∂ω_en/∂v · δv − R_nb δb_g − R_nb n_g
+    δv̇ = −f^n × φ − (2ω_ie + ω_en) × δv + (2g/R) δp_U e_U − R_nb δb_a − R_nb n_a
+    δṗ = δv
+    δḃ = w_b                            (random walk of density 2σ²/τ, both biases)
+
+The sensor bias is a constant switch-on part plus a first-order Gauss-Markov drift (σ, τ). A
+Gauss-Markov *error* state would decay towards its stationary σ (0.1 mg, 5 °/h) within τ and so
+forget the switch-on bias, which is far larger and does not decay; on a still buoy, where the
+horizontal accelerometer bias is unobservable, that made the filter overconfident. The bias
+error is therefore a random walk driven by the Gauss-Markov process's own noise density 2σ²/τ:
+the same short-term growth, no decay, and a long-term growth that only errs on the safe side.
+
+The terms dropped are the Earth-rate and Coriolis changes with position and velocity error
+(∂ω_ie/∂p δp, δω × v), all below 1e-9 rad/s or 1e-7 m/s² for a buoy's metre-level errors and
+sub-m/s speeds.
+
+Discretisation over a propagation interval T that may span several IMU steps: the
+time-varying coupling blocks are replaced by their exact integrals over the interval taken from
+the mechanization (``∫R_nb dt`` and ``∫f^n dt``, see :class:`PropagationSums`), which is exact to
+first order in T whatever the motion during the interval; ``Φ = I + A + A²/2`` with ``A`` the
+integrated ``F·T``. The neglected third-order terms chain three blocks (e.g. gyro bias →
+attitude → velocity → position, ``b_g f T³/6`` ≈ 1e-6 m per 0.02 °/s over T = 0.1 s), far below
+the process noise of the same interval.
+
+Discrete process noise: white-noise densities integrated over T, ``Q_d = Q_c T`` for attitude
+and velocity (the cross terms ``F Q_c T²/2``, e.g. gyro noise into velocity, are below 1 % of
+the retained terms for T ≤ 0.1 s), and ``2σ²T/τ`` for the bias random walks. Gyro and
+accelerometer white noise are isotropic, so their ENU covariance does not depend on the
+attitude. The scale-factor error (not estimated) adds, per body axis, a white noise of density
+``(s·ω)² τ_s`` on the gyro and ``(s·a)² τ_s`` on the accelerometer, where ``a`` is the specific
+force beyond gravity and ``τ_s`` (:data:`SCALE_FACTOR_CORRELATION_TIME_S`) is the time over which
+that error is treated as coherent before the aiding measurements correct it; the gravity part
+of the accelerometer scale-factor error is constant and is added to the initial
+accelerometer-bias variance instead.
+"""
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.linalg import lapack
+from scipy.stats import chi2
+
+from buoy_nav import earth
+from buoy_nav.config import FusionConfig
+from buoy_nav.rotations import (
+    normalize_quaternion,
+    quaternion_from_rotation_vector,
+    quaternion_multiply,
+    rotation_matrix_from_quaternion,
+)
+
+STATE_DIM = 15
+ATTITUDE = slice(0, 3)
+VELOCITY = slice(3, 6)
+POSITION = slice(6, 9)
+GYRO_BIAS = slice(9, 12)
+ACCEL_BIAS = slice(12, 15)
+
+STANDARD_GRAVITY_MPS2 = 9.80665
+DEG = math.pi / 180.0
+# Time (s) over which the unestimated scale-factor error is treated as coherent: a few times the
+# 0.1 s between aiding measurements, about the time constant with which the heading and
+# velocity measurements pull the attitude back.
+SCALE_FACTOR_CORRELATION_TIME_S = 3.0
+# Smallest eigenvalue kept when a covariance has to be repaired, relative to the largest one.
+_EIGENVALUE_FLOOR_RELATIVE = 1e-15
+_IDENTITY = np.eye(STATE_DIM)
+_EYE3 = np.eye(3)
+
+
+def _skew_array(vector: np.ndarray) -> np.ndarray:
+    x, y, z = vector
+    return np.array(((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0)))
+
+
+@dataclass(frozen=True)
+class NavState:
+    """Nominal navigation state (the filter's linearisation point).
+
+    attitude_xyzw: quaternion of R_nb (body FLU → ENU).
+    velocity_enu_mps: ENU velocity of the ``base_link`` origin (m/s).
+    latitude_rad, longitude_rad, altitude_m: WGS-84 position of the ``base_link`` origin.
+    gyro_bias_rad_s, accel_bias_mps2: IMU bias estimates (body, rad/s and m/s²).
+    """
+
+    attitude_xyzw: tuple[float, float, float, float]
+    velocity_enu_mps: np.ndarray
+    latitude_rad: float
+    longitude_rad: float
+    altitude_m: float
+    gyro_bias_rad_s: np.ndarray
+    accel_bias_mps2: np.ndarray
+
+    @property
+    def rotation_nb(self) -> np.ndarray:
+        """R_nb (3×3)."""
+        return rotation_matrix_from_quaternion(self.attitude_xyzw)
+
+
+def inject_error_state(state: NavState, error) -> NavState:
+    """Apply a 15-element error state to a nominal state (THE error-injection convention)."""
+    dx = np.asarray(error, dtype=float)
+    phi = dx[ATTITUDE]
+    attitude = normalize_quaternion(
+        quaternion_multiply(
+            quaternion_from_rotation_vector(float(phi[0]), float(phi[1]), float(phi[2])),
+            state.attitude_xyzw,
+        )
+    )
+    meridian, prime_vertical = earth.radii_of_curvature_m(state.latitude_rad)
+    return replace(
+        state,
+        attitude_xyzw=attitude,
+        velocity_enu_mps=state.velocity_enu_mps + dx[VELOCITY],
+        latitude_rad=state.latitude_rad + float(dx[7]) / (meridian + state.altitude_m),
+        longitude_rad=state.longitude_rad
+        + float(dx[6]) / ((prime_vertical + state.altitude_m) * math.cos(state.latitude_rad)),
+        altitude_m=state.altitude_m + float(dx[8]),
+        gyro_bias_rad_s=state.gyro_bias_rad_s + dx[GYRO_BIAS],
+        accel_bias_mps2=state.accel_bias_mps2 + dx[ACCEL_BIAS],
+    )
+
+
+@dataclass(frozen=True)
+class ImuErrorModel:
+    """IMU error parameters in SI units.
+
+    gyro_noise_psd_rad2_s: angle-random-walk density (rad²/s).
+    accel_noise_psd_m2_s3: velocity-random-walk density (m²/s³).
+    gyro_turn_on_sigma_rad_s, accel_turn_on_sigma_mps2: 1-σ switch-on biases.
+    gyro_markov_sigma_rad_s, accel_markov_sigma_mps2: 1-σ Gauss-Markov bias drifts.
+    gyro_correlation_time_s, accel_correlation_time_s: their correlation times.
+    scale_factor: 1-σ scale-factor error (dimensionless).
+    """
+
+    gyro_noise_psd_rad2_s: float
+    accel_noise_psd_m2_s3: float
+    gyro_turn_on_sigma_rad_s: float
+    accel_turn_on_sigma_mps2: float
+    gyro_markov_sigma_rad_s: float
+    accel_markov_sigma_mps2: float
+    gyro_correlation_time_s: float
+    accel_correlation_time_s: float
+    scale_factor: float
+
+    @classmethod
+    def from_config(cls, config: FusionConfig) -> "ImuErrorModel":
+        """Convert the data-sheet units of :class:`FusionConfig` to SI."""
+        milli_g = 1e-3 * STANDARD_GRAVITY_MPS2
+        return cls(
+            gyro_noise_psd_rad2_s=(config.gyro_noise_deg_sqrt_h * DEG / 60.0) ** 2,
+            accel_noise_psd_m2_s3=(config.accel_noise_mps_sqrt_h / 60.0) ** 2,
+            gyro_turn_on_sigma_rad_s=config.gyro_turn_on_bias_deg_s * DEG,
+            accel_turn_on_sigma_mps2=config.accel_turn_on_bias_mg * milli_g,
+            gyro_markov_sigma_rad_s=config.gyro_bias_instability_deg_h * DEG / 3600.0,
+            accel_markov_sigma_mps2=config.accel_bias_instability_mg * milli_g,
+            gyro_correlation_time_s=config.gyro_bias_correlation_time_s,
+            accel_correlation_time_s=config.accel_bias_correlation_time_s,
+            scale_factor=config.scale_factor_error_percent / 100.0,
+        )
+
+    @property
+    def initial_gyro_bias_variance_rad2_s2(self) -> float:
+        """Prior variance of each gyro bias at switch-on (turn-on plus drift)."""
+        return self.gyro_turn_on_sigma_rad_s**2 + self.gyro_markov_sigma_rad_s**2
+
+    @property
+    def initial_accel_bias_variance_m2_s4(self) -> float:
+        """Prior variance of each accelerometer bias: turn-on, drift and scale factor × g."""
+        return (
+            self.accel_turn_on_sigma_mps2**2
+            + self.accel_markov_sigma_mps2**2
+            + (self.scale_factor * STANDARD_GRAVITY_MPS2) ** 2
+        )
+
+
+def discrete_error_model(
+    sums, latitude_rad: float, altitude_m: float, velocity_enu_mps, imu: ImuErrorModel
+) -> tuple[np.ndarray, np.ndarray]:
+    """Transition matrix Φ and process noise Q_d (15×15) over one propagation interval.
+
+    sums: :class:`buoy_nav.mechanization.PropagationSums` of the interval.
+    latitude_rad, altitude_m, velocity_enu_mps: nominal state at the end of the interval (the
+    rates evaluated from them change by far less than 1e-9 rad/s within an interval).
+    """
+    duration = sums.duration_s
+    meridian, prime_vertical = earth.radii_of_curvature_m(latitude_rad)
+    north_radius = meridian + altitude_m
+    east_radius = prime_vertical + altitude_m
+    earth_rate = earth.earth_rate_enu_rad_s(latitude_rad)
+    transport_rate = earth.transport_rate_enu_rad_s(latitude_rad, altitude_m, velocity_enu_mps)
+    gravity = earth.normal_gravity_mps2(latitude_rad, altitude_m)
+    rotation_integral = sums.rotation_integral_s
+
+    rate = earth_rate + transport_rate
+    coriolis = 2.0 * earth_rate + transport_rate
+    force = sums.specific_force_increment_enu_mps
+
+    a = np.zeros((STATE_DIM, STATE_DIM))
+    a[ATTITUDE, ATTITUDE] = _skew_array(-duration * rate)
+    # ∂ω_en/∂v: ω_en = (−v_N/(R_M+h), v_E/(R_N+h), v_E tan L/(R_N+h)).
+    a[0, 4] = duration / north_radius
+    a[1, 3] = -duration / east_radius
+    a[2, 3] = -duration * math.tan(latitude_rad) / east_radius
+    a[ATTITUDE, GYRO_BIAS] = -rotation_integral
+    a[VELOCITY, ATTITUDE] = _skew_array(-force)
+    a[VELOCITY, VELOCITY] = _skew_array(-duration * coriolis)
+    a[5, 8] = 2.0 * gravity / math.sqrt(north_radius * east_radius) * duration
+    a[VELOCITY, ACCEL_BIAS] = -rotation_integral
+    a[6, 3] = a[7, 4] = a[8, 5] = duration
+
+    transition = a @ a
+    transition *= 0.5
+    transition += a
+    transition += _IDENTITY
+
+    mean_rotation = rotation_integral / duration
+    scale_sq_time = imu.scale_factor**2 * SCALE_FACTOR_CORRELATION_TIME_S
+    noise = np.zeros((STATE_DIM, STATE_DIM))
+    noise[ATTITUDE, ATTITUDE] = (
+        mean_rotation * (scale_sq_time * sums.gyro_rate_sq_integral_rad2_s)
+    ) @ mean_rotation.T
+    noise[VELOCITY, VELOCITY] = (
+        mean_rotation * (scale_sq_time * sums.force_deviation_sq_integral_m2_s3)
+    ) @ mean_rotation.T
+    gyro_noise = imu.gyro_noise_psd_rad2_s * duration
+    accel_noise = imu.accel_noise_psd_m2_s3 * duration
+    gyro_drift = 2.0 * imu.gyro_markov_sigma_rad_s**2 * duration / imu.gyro_correlation_time_s
+    accel_drift = 2.0 * imu.accel_markov_sigma_mps2**2 * duration / imu.accel_correlation_time_s
+    for axis in range(3):
+        noise[axis, axis] += gyro_noise
+        noise[3 + axis, 3 + axis] += accel_noise
+        noise[9 + axis, 9 + axis] = gyro_drift
+        noise[12 + axis, 12 + axis] = accel_drift
+    return transition, noise
+
+
+@dataclass(frozen=True)
+class GateResult:
+    """Chi-square test of one measurement against the predicted covariance.
+
+    accepted: nis ≤ threshold. nis: ν^T S^{-1} ν (NaN when S is not positive definite).
+    threshold: chi-square quantile it was compared with. innovation_covariance: S = H P H^T + R.
+    """
+
+    accepted: bool
+    nis: float
+    threshold: float
+    innovation_covariance: np.ndarray
+
+
+class ErrorStateFilter:
+    """Covariance bookkeeping of the 15-state error-state filter.
+
+    The error-state mean is zero between updates (closed loop): :meth:`update` returns the
+    correction, the caller injects it with :func:`inject_error_state`, and
+    :meth:`reset_after_injection` accounts for the reset in the covariance.
+    """
+
+    def __init__(self, initial_covariance, gate_probability: float):
+        covariance = np.array(initial_covariance, dtype=float)
+        if covariance.shape != (STATE_DIM, STATE_DIM):
+            raise ValueError(f"initial covariance must be {STATE_DIM}×{STATE_DIM}")
+        self.covariance = 0.5 * (covariance + covariance.T)
+        self.gate_probability = gate_probability
+        self._thresholds: dict[int, float] = {}
+        self.covariance_repairs = 0
+
+    def gate_threshold(self, dimension: int) -> float:
+        """Chi-square quantile of :attr:`gate_probability` with ``dimension`` degrees of freedom."""
+        if dimension not in self._thresholds:
+            self._thresholds[dimension] = float(chi2.ppf(self.gate_probability, dimension))
+        return self._thresholds[dimension]
+
+    def propagate(self, transition: np.ndarray, process_noise: np.ndarray):
+        """P ← Φ P Φ^T + Q_d."""
+        covariance = transition @ self.covariance @ transition.T + process_noise
+        self.covariance = 0.5 * (covariance + covariance.T)
+
+    def gate(self, innovation, jacobian, measurement_covariance) -> GateResult:
+        """Normalised innovation squared of one measurement and its chi-square test.
+
+        innovation ν (m,), jacobian H (m×15), measurement covariance R (m×m).
+        """
+        nu = np.atleast_1d(np.asarray(innovation, dtype=float))
+        h = np.atleast_2d(np.asarray(jacobian, dtype=float))
+        s = h @ self.covariance @ h.T + np.atleast_2d(measurement_covariance)
+        s = 0.5 * (s + s.T)
+        threshold = self.gate_threshold(nu.shape[0])
+        # LAPACK directly: numpy.linalg costs ten times more in call overhead at this size.
+        factor, info = lapack.dpotrf(s)
+        if info != 0:
+            return GateResult(False, math.nan, threshold, s)
+        solved, _ = lapack.dpotrs(factor, nu)
+        nis = float(nu @ solved)
+        return GateResult(nis <= threshold, nis, threshold, s)
+
+    def update(self, innovation, jacobian, measurement_covariance) -> np.ndarray:
+        """Apply a (possibly stacked) measurement in Joseph form; return the error estimate.
+
+        innovation ν (m,), jacobian H (m×15), measurement covariance R (m×m). No gating here:
+        gate each measurement with :meth:`gate` first. Raises ``numpy.linalg.LinAlgError`` if
+        the innovation covariance is not positive definite (the gate rejects those first).
+        """
+        nu = np.atleast_1d(np.asarray(innovation, dtype=float))
+        h = np.atleast_2d(np.asarray(jacobian, dtype=float))
+        r = np.atleast_2d(np.asarray(measurement_covariance, dtype=float))
+        hp = h @ self.covariance
+        s = hp @ h.T + r
+        factor, info = lapack.dpotrf(0.5 * (s + s.T))
+        if info != 0:
+            raise np.linalg.LinAlgError("innovation covariance is not positive definite")
+        gain_t, _ = lapack.dpotrs(factor, hp)
+        gain = gain_t.T
+        i_kh = _IDENTITY - gain @ h
+        covariance = i_kh @ self.covariance @ i_kh.T + gain @ r @ gain_t
+        self.covariance = 0.5 * (covariance + covariance.T)
+        return gain @ nu
+
+    def reset_after_injection(self, correction):
+        """Covariance of the error after the correction was injected and the mean reset.
+
+        With ``R_true = Exp(φ) R`` the new attitude error is φ' ≈ φ − δφ̂ + ½ δφ̂ × φ, so the
+        attitude rows and columns are transformed by G = I + ½[δφ̂×]; the other states are
+        additive and unchanged.
+        """
+        g = _skew_array(0.5 * np.asarray(correction)[ATTITUDE])
+        g += _EYE3
+        covariance = self.covariance
+        covariance[ATTITUDE, :] = g @ covariance[ATTITUDE, :]
+        covariance[:, ATTITUDE] = covariance[:, ATTITUDE] @ g.T
+        self.covariance = 0.5 * (covariance + covariance.T)
+        self.ensure_positive_definite()
+
+    def ensure_positive_definite(self) -> bool:
+        """Repair P if it lost positive definiteness; returns True when a repair was needed."""
+        if lapack.dpotrf(self.covariance)[1] == 0:
+            return False
+        eigenvalues, eigenvectors = np.linalg.eigh(self.covariance)
+        floor = max(float(np.max(np.abs(eigenvalues))), 1e-30) * _EIGENVALUE_FLOOR_RELATIVE
+        eigenvalues = np.maximum(eigenvalues, floor)
+        covariance = (eigenvectors * eigenvalues) @ eigenvectors.T
+        self.covariance = 0.5 * (covariance + covariance.T)
+        self.covariance_repairs += 1
+        return True
+
+    def reset_states(self, indices, variances):
+        """Decorrelate the given states and set their variances (after an external reset)."""
+        index = np.asarray(indices)
+        self.covariance[index, :] = 0.0
+        self.covariance[:, index] = 0.0
+        self.covariance[index, index] = np.asarray(variances, dtype=float)

@@ -1,0 +1,335 @@
+"""Strapdown mechanization in the local-level East-North-Up frame.
+
+The integrator carries the nominal navigation state (attitude ``R_nb``, ENU velocity of the
+``base_link`` origin, geodetic position, IMU bias estimates) from one IMU sample to the next.
+
+Inputs are instantaneous samples (gyro rate ω_ib in rad/s and specific force in m/s², body
+frame), not increments. Each step forms the angle and velocity increments of the interval by
+integrating the parabola through the last three samples (the trapezoid rule plus a curvature
+term; for equal steps the Adams-Moulton weights (−1, 8, 5)/12), then corrects them for coning
+and sculling with the two-sample previous-increment algorithms. The plain trapezoid would
+overstate an oscillating rate by (ΩT)²/12, and for coning motion that alone drifts as much as
+the uncorrected coning term, which would leave the coning correction only half effective.
+The coning and sculling corrections are exact when the rate and specific force vary linearly
+across the two intervals. For intervals of unequal length (a step split at a measurement stamp)
+both the curvature term and the corrections use the factor ``k = T² / (6 T_prev (T_prev + T))``,
+which is 1/12 for equal lengths. The first step after (re)initialisation uses the trapezoid
+without corrections.
+
+Attitude update: ``R_nb(k) = Exp(−ω_in T) · R_nb(k−1) · Exp(φ_k)`` with φ_k the coning-corrected
+rotation vector of the body and ω_in = ω_ie + ω_en the rotation of ENU with respect to inertial
+space. Velocity update: the specific-force increment, rotation-compensated to third order and
+sculling-corrected, turned into ENU with the start attitude (plus half the navigation-frame
+rotation), then gravity and Coriolis. Position update: trapezoid on velocity, converted to
+latitude/longitude with the WGS-84 radii of curvature.
+
+For the error-state filter the integrator also accumulates, over the steps since the last
+covariance propagation, the integrals the discrete error model needs (see
+:class:`PropagationSums`). The per-step path uses plain floats because at 100 Hz and more the
+call overhead of small numpy arrays would dominate.
+"""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from buoy_nav import earth
+from buoy_nav.rotations import (
+    Quaternion,
+    normalize_quaternion,
+    quaternion_from_rotation_vector,
+    quaternion_multiply,
+    rotation_matrix_from_quaternion,
+)
+
+_OMEGA = earth.EARTH_RATE_RAD_S
+
+
+@dataclass(frozen=True)
+class PropagationSums:
+    """Integrals over the IMU steps since the last covariance propagation.
+
+    duration_s: total time T (s).
+    rotation_integral_s: ∫ R_nb dt (3×3, s); maps body-frame sensor errors into ENU.
+    specific_force_increment_enu_mps: ∫ f^n dt (ENU, m/s); couples attitude error into velocity.
+    gyro_rate_sq_integral_rad2_s: ∫ ω_ib² dt per body axis (rad²/s), for the scale-factor noise.
+    force_deviation_sq_integral_m2_s3: ∫ (f − (0, 0, g))² dt per body axis (m²/s³): the specific
+      force a floating, upright ``base_link`` sees beyond gravity, for the scale-factor noise
+      (the gravity part of a scale-factor error is constant and taken up by the bias state).
+    """
+
+    duration_s: float
+    rotation_integral_s: np.ndarray
+    specific_force_increment_enu_mps: np.ndarray
+    gyro_rate_sq_integral_rad2_s: np.ndarray
+    force_deviation_sq_integral_m2_s3: np.ndarray
+
+
+class StrapdownIntegrator:
+    """Nominal navigation state integrated from consecutive IMU samples.
+
+    Attributes (plain floats; read them, and change them only through :meth:`set_state`):
+      attitude_xyzw: quaternion of R_nb (body FLU → ENU).
+      rotation_elements: R_nb as a row-major 9-tuple.
+      nav_frame_rate_enu_rad_s: ω_in = ω_ie + ω_en used by the last step (ENU, rad/s).
+      accumulated_duration_s: time integrated since the last :meth:`take_propagation_sums`.
+      velocity_enu_mps: velocity of the ``base_link`` origin over ground, ENU.
+      latitude_rad, longitude_rad, altitude_m: WGS-84 position of the ``base_link`` origin.
+      gyro_bias_rad_s, accel_bias_mps2: bias estimates subtracted from the raw samples (body).
+    """
+
+    def __init__(
+        self,
+        attitude_xyzw,
+        velocity_enu_mps,
+        latitude_rad: float,
+        longitude_rad: float,
+        altitude_m: float,
+        gyro_bias_rad_s=(0.0, 0.0, 0.0),
+        accel_bias_mps2=(0.0, 0.0, 0.0),
+        coning_correction: bool = True,
+        sculling_correction: bool = True,
+    ):
+        self.coning_correction = coning_correction
+        self.sculling_correction = sculling_correction
+        self.set_state(
+            attitude_xyzw,
+            velocity_enu_mps,
+            latitude_rad,
+            longitude_rad,
+            altitude_m,
+            gyro_bias_rad_s,
+            accel_bias_mps2,
+        )
+        # The previous step (length, body-frame increments, raw samples at its start), for the
+        # curvature, coning and sculling terms; no previous step yet.
+        self._previous_dt = 0.0
+        self._previous_dtheta = (0.0, 0.0, 0.0)
+        self._previous_dvel = (0.0, 0.0, 0.0)
+        self._older_samples = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+        self._reset_sums()
+
+    def set_state(
+        self,
+        attitude_xyzw,
+        velocity_enu_mps,
+        latitude_rad: float,
+        longitude_rad: float,
+        altitude_m: float,
+        gyro_bias_rad_s,
+        accel_bias_mps2,
+    ):
+        """Replace the nominal state (after a filter correction); increments history is kept."""
+        self.attitude_xyzw: Quaternion = normalize_quaternion(
+            tuple(float(c) for c in attitude_xyzw)
+        )
+        self.velocity_enu_mps = tuple(float(c) for c in velocity_enu_mps)
+        self.latitude_rad = float(latitude_rad)
+        self.longitude_rad = float(longitude_rad)
+        self.altitude_m = float(altitude_m)
+        self.gyro_bias_rad_s = tuple(float(c) for c in gyro_bias_rad_s)
+        self.accel_bias_mps2 = tuple(float(c) for c in accel_bias_mps2)
+        self.rotation_elements = _matrix_tuple(self.attitude_xyzw)
+        self.nav_frame_rate_enu_rad_s = tuple(
+            float(c)
+            for c in earth.navigation_frame_rate_enu_rad_s(
+                self.latitude_rad, self.altitude_m, self.velocity_enu_mps
+            )
+        )
+
+    @property
+    def rotation_nb(self) -> np.ndarray:
+        """R_nb as a 3×3 array."""
+        return rotation_matrix_from_quaternion(self.attitude_xyzw)
+
+    def step(self, dt_s: float, gyro_start, gyro_end, force_start, force_end):
+        """Advance the state by ``dt_s`` (s) between two raw IMU samples.
+
+        gyro_start, gyro_end: raw angular rate ω_ib at the start and end of the step (body, rad/s).
+        force_start, force_end: raw specific force at the start and end (body, m/s²).
+        The bias estimates are removed here.
+        """
+        bgx, bgy, bgz = self.gyro_bias_rad_s
+        bax, bay, baz = self.accel_bias_mps2
+        half_dt = 0.5 * dt_s
+        g0x, g0y, g0z = gyro_start
+        g1x, g1y, g1z = gyro_end
+        f0x, f0y, f0z = force_start
+        f1x, f1y, f1z = force_end
+        dthx = (g0x + g1x - 2.0 * bgx) * half_dt
+        dthy = (g0y + g1y - 2.0 * bgy) * half_dt
+        dthz = (g0z + g1z - 2.0 * bgz) * half_dt
+        dvx = (f0x + f1x - 2.0 * bax) * half_dt
+        dvy = (f0y + f1y - 2.0 * bay) * half_dt
+        dvz = (f0z + f1z - 2.0 * baz) * half_dt
+        previous_dt = self._previous_dt
+        if previous_dt > 0.0:
+            k = dt_s * dt_s / (6.0 * previous_dt * (previous_dt + dt_s))
+            # Curvature of the parabola through the older, start and end samples.
+            (ogx, ogy, ogz), (ofx, ofy, ofz) = self._older_samples
+            dthx -= k * ((g1x - g0x) * previous_dt + (ogx - g0x) * dt_s)
+            dthy -= k * ((g1y - g0y) * previous_dt + (ogy - g0y) * dt_s)
+            dthz -= k * ((g1z - g0z) * previous_dt + (ogz - g0z) * dt_s)
+            dvx -= k * ((f1x - f0x) * previous_dt + (ofx - f0x) * dt_s)
+            dvy -= k * ((f1y - f0y) * previous_dt + (ofy - f0y) * dt_s)
+            dvz -= k * ((f1z - f0z) * previous_dt + (ofz - f0z) * dt_s)
+
+        # Body rotation vector and velocity increment in the start-of-step body frame.
+        rvx, rvy, rvz = dthx, dthy, dthz
+        # Rotation of the body during the step: ½ Δθ × Δv + ⅙ Δθ × (Δθ × Δv), the series of
+        # ∫ Exp([ωt×]) f dt to third order (the third term matters for fast rolls).
+        cx = dthy * dvz - dthz * dvy
+        cy = dthz * dvx - dthx * dvz
+        cz = dthx * dvy - dthy * dvx
+        bvx = dvx + 0.5 * cx + (dthy * cz - dthz * cy) / 6.0
+        bvy = dvy + 0.5 * cy + (dthz * cx - dthx * cz) / 6.0
+        bvz = dvz + 0.5 * cz + (dthx * cy - dthy * cx) / 6.0
+        if previous_dt > 0.0:
+            px, py, pz = self._previous_dtheta
+            if self.coning_correction:
+                rvx += k * (py * dthz - pz * dthy)
+                rvy += k * (pz * dthx - px * dthz)
+                rvz += k * (px * dthy - py * dthx)
+            if self.sculling_correction:
+                ux, uy, uz = self._previous_dvel
+                bvx += k * (py * dvz - pz * dvy + uy * dthz - uz * dthy)
+                bvy += k * (pz * dvx - px * dvz + uz * dthx - ux * dthz)
+                bvz += k * (px * dvy - py * dvx + ux * dthy - uy * dthx)
+        self._previous_dt = dt_s
+        self._previous_dtheta = (dthx, dthy, dthz)
+        self._previous_dvel = (dvx, dvy, dvz)
+        self._older_samples = (gyro_start, force_start)
+
+        # Earth model at the start-of-step position.
+        lat = self.latitude_rad
+        alt = self.altitude_m
+        ve, vn, vu = self.velocity_enu_mps
+        sin_lat = math.sin(lat)
+        cos_lat = math.cos(lat)
+        w_sq = 1.0 - earth.ECCENTRICITY_SQ * sin_lat * sin_lat
+        prime_vertical = earth.SEMI_MAJOR_AXIS_M / math.sqrt(w_sq)
+        north_radius = prime_vertical * (1.0 - earth.ECCENTRICITY_SQ) / w_sq + alt
+        east_radius = prime_vertical + alt
+        gravity = earth.normal_gravity_mps2(lat, alt)
+        wie_n = _OMEGA * cos_lat
+        wie_u = _OMEGA * sin_lat
+        wen_e = -vn / north_radius
+        wen_n = ve / east_radius
+        wen_u = wen_n * sin_lat / cos_lat
+        win_e = wen_e
+        win_n = wie_n + wen_n
+        win_u = wie_u + wen_u
+        self.nav_frame_rate_enu_rad_s = (win_e, win_n, win_u)
+
+        # Specific-force velocity increment in ENU (start attitude, half the frame rotation).
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self.rotation_elements
+        fne = r00 * bvx + r01 * bvy + r02 * bvz
+        fnn = r10 * bvx + r11 * bvy + r12 * bvz
+        fnu = r20 * bvx + r21 * bvy + r22 * bvz
+        fne, fnn, fnu = (
+            fne - half_dt * (win_n * fnu - win_u * fnn),
+            fnn - half_dt * (win_u * fne - win_e * fnu),
+            fnu - half_dt * (win_e * fnn - win_n * fne),
+        )
+        # Coriolis (2ω_ie + ω_en) × v and gravity (0, 0, −g).
+        ce = win_e
+        cn = wie_n + win_n
+        cu = wie_u + win_u
+        new_ve = ve + fne - (cn * vu - cu * vn) * dt_s
+        new_vn = vn + fnn - (cu * ve - ce * vu) * dt_s
+        new_vu = vu + fnu - (ce * vn - cn * ve + gravity) * dt_s
+
+        self.latitude_rad = lat + (vn + new_vn) * half_dt / north_radius
+        self.longitude_rad += (ve + new_ve) * half_dt / (east_radius * cos_lat)
+        self.altitude_m = alt + (vu + new_vu) * half_dt
+        self.velocity_enu_mps = (new_ve, new_vn, new_vu)
+
+        body_rotation = quaternion_from_rotation_vector(rvx, rvy, rvz)
+        frame_rotation = quaternion_from_rotation_vector(
+            -win_e * dt_s, -win_n * dt_s, -win_u * dt_s
+        )
+        attitude = quaternion_multiply(
+            frame_rotation, quaternion_multiply(self.attitude_xyzw, body_rotation)
+        )
+        self.attitude_xyzw = normalize_quaternion(attitude)
+        new_rotation = _matrix_tuple(self.attitude_xyzw)
+
+        # Integrals for the covariance propagation (trapezoid in the attitude).
+        sums = self._rotation_sum
+        for index in range(9):
+            sums[index] += (self.rotation_elements[index] + new_rotation[index]) * half_dt
+        self.rotation_elements = new_rotation
+        self.accumulated_duration_s += dt_s
+        force_sum = self._force_sum
+        force_sum[0] += fne
+        force_sum[1] += fnn
+        force_sum[2] += fnu
+        inverse_dt = 1.0 / dt_s
+        rate_sum = self._rate_sq_sum
+        rate_sum[0] += dthx * dthx * inverse_dt
+        rate_sum[1] += dthy * dthy * inverse_dt
+        rate_sum[2] += dthz * dthz * inverse_dt
+        deviation_sum = self._force_deviation_sq_sum
+        dvz_kinematic = dvz - gravity * dt_s
+        deviation_sum[0] += dvx * dvx * inverse_dt
+        deviation_sum[1] += dvy * dvy * inverse_dt
+        deviation_sum[2] += dvz_kinematic * dvz_kinematic * inverse_dt
+
+    def take_propagation_sums(self) -> PropagationSums:
+        """Return the integrals accumulated since the last call and restart them."""
+        sums = PropagationSums(
+            duration_s=self.accumulated_duration_s,
+            rotation_integral_s=np.array(self._rotation_sum).reshape(3, 3),
+            specific_force_increment_enu_mps=np.array(self._force_sum),
+            gyro_rate_sq_integral_rad2_s=np.array(self._rate_sq_sum),
+            force_deviation_sq_integral_m2_s3=np.array(self._force_deviation_sq_sum),
+        )
+        self._reset_sums()
+        return sums
+
+    def _reset_sums(self):
+        self.accumulated_duration_s = 0.0
+        self._rotation_sum = [0.0] * 9
+        self._force_sum = [0.0, 0.0, 0.0]
+        self._rate_sq_sum = [0.0, 0.0, 0.0]
+        self._force_deviation_sq_sum = [0.0, 0.0, 0.0]
+
+
+def interpolate_sample(
+    t_s: float, t_start: float, start, t_end: float, end, t_older=None, older=None
+):
+    """IMU sample (3 floats) at ``t_s`` within [t_start, t_end], for splitting a step there.
+
+    With the sample before ``start`` (``t_older``, ``older``) it is read off the parabola through
+    the three samples, the same parabola the integrator integrates over the step, so the two
+    sub-steps add up to the unsplit step; without it, linear interpolation.
+    """
+    if older is None:
+        fraction = (t_s - t_start) / (t_end - t_start)
+        return tuple(a + (b - a) * fraction for a, b in zip(start, end, strict=True))
+    w_older = (t_s - t_start) * (t_s - t_end) / ((t_older - t_start) * (t_older - t_end))
+    w_start = (t_s - t_older) * (t_s - t_end) / ((t_start - t_older) * (t_start - t_end))
+    w_end = (t_s - t_older) * (t_s - t_start) / ((t_end - t_older) * (t_end - t_start))
+    return tuple(
+        w_older * a + w_start * b + w_end * c for a, b, c in zip(older, start, end, strict=True)
+    )
+
+
+def _matrix_tuple(q: Quaternion) -> tuple[float, ...]:
+    """Row-major 9-tuple of the rotation matrix of a unit (x, y, z, w) quaternion."""
+    x, y, z, w = q
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    return (
+        1.0 - 2.0 * (yy + zz),
+        2.0 * (xy - wz),
+        2.0 * (xz + wy),
+        2.0 * (xy + wz),
+        1.0 - 2.0 * (xx + zz),
+        2.0 * (yz - wx),
+        2.0 * (xz - wy),
+        2.0 * (yz + wx),
+        1.0 - 2.0 * (xx + yy),
+    )

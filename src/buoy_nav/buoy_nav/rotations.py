@@ -1,0 +1,160 @@
+"""Rotation conventions and functions of the navigation core.
+
+Conventions (fixed for the whole project):
+
+* ``R_nb`` rotates body (``base_link``, forward-left-up) vectors into ENU (``map``).
+* Euler angles: ``R_nb = Rz(yaw) · Ry(pitch) · Rx(roll)``; yaw 0 points East and grows
+  counter-clockwise (the same as scipy ``Rotation.from_euler("ZYX", [yaw, pitch, roll])``).
+* Quaternions are Hamilton quaternions stored in scipy order ``(x, y, z, w)``; the quaternion
+  ``q`` of ``R_nb`` rotates a body vector ``v`` into ``q ⊗ v ⊗ q*``, and the product
+  ``a ⊗ b`` has the matrix ``R(a) · R(b)``.
+
+The scalar quaternion functions take and return plain tuples of floats because the strapdown
+integrator calls them at the IMU rate, where a numpy call costs more than the arithmetic.
+"""
+
+import math
+
+import numpy as np
+
+Quaternion = tuple[float, float, float, float]
+
+IDENTITY_QUATERNION: Quaternion = (0.0, 0.0, 0.0, 1.0)
+
+# Below this rotation angle (rad) sin(θ/2)/θ and cos(θ/2) use their Taylor series, which are
+# exact to double precision there and avoid dividing by a vanishing angle.
+_SMALL_ANGLE_RAD = 1e-4
+
+
+def skew(vector) -> np.ndarray:
+    """Cross-product matrix ``[v×]`` (3×3) such that ``skew(a) @ b == cross(a, b)``."""
+    x, y, z = float(vector[0]), float(vector[1]), float(vector[2])
+    return np.array(((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0)))
+
+
+def cross(a, b) -> np.ndarray:
+    """Cross product of two 3-vectors (faster than numpy.cross for single vectors)."""
+    ax, ay, az = float(a[0]), float(a[1]), float(a[2])
+    bx, by, bz = float(b[0]), float(b[1]), float(b[2])
+    return np.array((ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx))
+
+
+def quaternion_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
+    """Hamilton product ``a ⊗ b`` of two (x, y, z, w) quaternions; ``R(a ⊗ b) = R(a) R(b)``."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
+
+
+def quaternion_from_rotation_vector(x: float, y: float, z: float) -> Quaternion:
+    """Unit (x, y, z, w) quaternion of the rotation vector (x, y, z) (axis × angle, rad)."""
+    angle_sq = x * x + y * y + z * z
+    if angle_sq < _SMALL_ANGLE_RAD * _SMALL_ANGLE_RAD:
+        # sin(θ/2)/θ = 1/2 − θ²/48 + …, cos(θ/2) = 1 − θ²/8 + θ⁴/384 − …
+        half_sinc = 0.5 - angle_sq / 48.0
+        w = 1.0 - angle_sq / 8.0 + angle_sq * angle_sq / 384.0
+    else:
+        angle = math.sqrt(angle_sq)
+        half_sinc = math.sin(0.5 * angle) / angle
+        w = math.cos(0.5 * angle)
+    return (x * half_sinc, y * half_sinc, z * half_sinc, w)
+
+
+def normalize_quaternion(q: Quaternion) -> Quaternion:
+    """Scale an (x, y, z, w) quaternion to unit norm, with a non-negative scalar part."""
+    x, y, z, w = q
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if w < 0.0:
+        norm = -norm
+    return (x / norm, y / norm, z / norm, w / norm)
+
+
+def rotation_matrix_from_quaternion(q) -> np.ndarray:
+    """3×3 rotation matrix of a unit (x, y, z, w) quaternion."""
+    x, y, z, w = (float(c) for c in q)
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    return np.array(
+        (
+            (1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)),
+            (2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)),
+            (2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)),
+        )
+    )
+
+
+def quaternion_from_rotation_matrix(rotation) -> Quaternion:
+    """Unit (x, y, z, w) quaternion (w ≥ 0) of a 3×3 rotation matrix (Shepperd's method)."""
+    m = np.asarray(rotation, dtype=float)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    candidates = (trace, m[0, 0], m[1, 1], m[2, 2])
+    largest = max(range(4), key=candidates.__getitem__)
+    if largest == 0:
+        s = 2.0 * math.sqrt(1.0 + trace)
+        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4)
+    elif largest == 1:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = (s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
+    elif largest == 2:
+        s = 2.0 * math.sqrt(1.0 - m[0, 0] + m[1, 1] - m[2, 2])
+        q = ((m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
+    else:
+        s = 2.0 * math.sqrt(1.0 - m[0, 0] - m[1, 1] + m[2, 2])
+        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4, (m[1, 0] - m[0, 1]) / s)
+    return normalize_quaternion(tuple(float(c) for c in q))
+
+
+def rotation_matrix_from_rotation_vector(rotation_vector) -> np.ndarray:
+    """Matrix exponential ``Exp([θ×])`` of a rotation vector θ (rad), 3×3."""
+    x, y, z = (float(c) for c in rotation_vector)
+    return rotation_matrix_from_quaternion(quaternion_from_rotation_vector(x, y, z))
+
+
+def rotation_vector_from_rotation_matrix(rotation) -> np.ndarray:
+    """Matrix logarithm of a rotation matrix as a rotation vector (rad), angle in [0, π]."""
+    x, y, z, w = quaternion_from_rotation_matrix(rotation)
+    sin_half = math.sqrt(x * x + y * y + z * z)
+    if sin_half < 1e-12:
+        return 2.0 * np.array((x, y, z))
+    angle = 2.0 * math.atan2(sin_half, w)
+    return np.array((x, y, z)) * (angle / sin_half)
+
+
+def rotation_matrix_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:
+    """``R_nb = Rz(yaw) · Ry(pitch) · Rx(roll)`` (body FLU → ENU) from angles in rad."""
+    sr, cr = math.sin(roll_rad), math.cos(roll_rad)
+    sp, cp = math.sin(pitch_rad), math.cos(pitch_rad)
+    sy, cy = math.sin(yaw_rad), math.cos(yaw_rad)
+    return np.array(
+        (
+            (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr),
+            (sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr),
+            (-sp, cp * sr, cp * cr),
+        )
+    )
+
+
+def euler_from_rotation_matrix(rotation) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) in rad of ``R_nb = Rz(yaw) · Ry(pitch) · Rx(roll)``.
+
+    Roll and yaw are in (−π, π], pitch in [−π/2, π/2].
+    """
+    m = np.asarray(rotation, dtype=float)
+    roll = math.atan2(m[2, 1], m[2, 2])
+    pitch = math.asin(max(-1.0, min(1.0, -m[2, 0])))
+    yaw = math.atan2(m[1, 0], m[0, 0])
+    return roll, pitch, yaw
+
+
+def wrap_angle(angle_rad: float) -> float:
+    """Wrap an angle (rad) into (−π, π]."""
+    wrapped = math.fmod(angle_rad + math.pi, 2.0 * math.pi)
+    if wrapped <= 0.0:
+        wrapped += 2.0 * math.pi
+    return wrapped - math.pi
