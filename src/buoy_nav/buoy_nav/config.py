@@ -18,6 +18,22 @@ NAN = float("nan")
 MIN_BASELINE_LENGTH_M = 0.1
 
 
+FUSION_NODE_NAME = "fusion_node"
+"""Node name whose parameter-file sections configure the fusion (live and offline)."""
+FUSION_PARAMETER_PREFIX = "fusion."
+"""ROS parameter of a :class:`FusionConfig` field ``f``: ``fusion.f``, except the shared ones."""
+FUSION_SHARED_PARAMETERS = {
+    "primary_antenna_body_m": "gnss.primary_antenna",
+    "secondary_antenna_body_m": "gnss.secondary_antenna",
+    "origin_latitude_deg": "origin.latitude_deg",
+    "origin_longitude_deg": "origin.longitude_deg",
+    "origin_altitude_m": "origin.altitude_m",
+}
+"""Fields set by the parameters every node shares (interface contract)."""
+FUSION_FIELDS_NOT_PARAMETERS = ("record_innovations",)
+"""Fields for analysis tools only, not ROS parameters."""
+
+
 class ConfigError(ValueError):
     """A configuration value is missing, of the wrong type or out of range (names the field)."""
 
@@ -69,6 +85,10 @@ class FusionConfig:
       max_specific_force_mps2: IMU samples with a larger specific force are rejected (m/s²) [160].
 
     Output
+      realtime_output: emit each solution as soon as its IMU sample arrives, predicted by
+        strapdown integration from the filter state ``max_measurement_delay_s`` behind; False:
+        emit solutions ``max_measurement_delay_s`` late, with every measurement up to their
+        stamp applied [True].
       output_rate_hz: rate of navigation solutions; 0 = one per IMU sample (Hz) [0].
       record_innovations: keep every innovation in ``FusionEngine.innovation_log`` [False].
     """
@@ -105,6 +125,7 @@ class FusionConfig:
     max_angular_rate_rad_s: float = 35.0
     max_specific_force_mps2: float = 160.0
 
+    realtime_output: bool = True
     output_rate_hz: float = 0.0
     record_innovations: bool = False
 

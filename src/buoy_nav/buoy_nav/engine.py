@@ -9,6 +9,14 @@ integrator integrates, so splitting a step costs no accuracy), updated, and inte
 next sample. Measurements sharing a stamp are gated one by one and the accepted ones applied in
 one stacked update (their order: fix, velocity, heading).
 
+With ``realtime_output`` (the default) a solution leaves with its IMU sample, not
+``max_measurement_delay_s`` later: a copy of the filter's nominal state is integrated ahead
+through the buffered IMU samples to the newest one and integrated on with each new sample; it is
+forked again whenever a measurement corrects the filter. The prediction depends only on stamps
+(which measurements lie behind the processing horizon), so a live node and an offline run of the
+same data give the same solutions. Its covariances are the filter's, from up to
+``max_measurement_delay_s`` earlier.
+
 Before alignment the IMU samples and GNSS measurements feed :class:`InMotionAligner`; once
 aligned, the strapdown integrator carries the nominal state and the error-state filter corrects
 it after every accepted measurement. The covariance is propagated in batches of at most
@@ -272,6 +280,12 @@ class FusionEngine:
         self._next_output_time = -math.inf
         self._covariance_blocks = None
         self._bias_arrays = None
+        # Real-time prediction: (integrator ahead of the filter, its time, raw gyro and force at
+        # that time); None when it must be forked again from the filter state.
+        self._ahead: tuple[StrapdownIntegrator, float, tuple, tuple] | None = None
+        self._last_predicted_stamp = -math.inf
+        # Why the latest add_* call rejected its input (None: accepted).
+        self.last_input_rejection: str | None = None
 
     # ------------------------------------------------------------------ input
     def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[NavSolution]:
@@ -280,32 +294,37 @@ class FusionEngine:
         Returns the solutions of the samples that became processable (stamp ≤ newest IMU stamp
         − ``max_measurement_delay_s``).
         """
+        self.last_input_rejection = None
         counters = self._counters[IMU]
         try:
             t = float(t_s)
             gx, gy, gz = _float_triple(gyro_rad_s)
             fx, fy, fz = _float_triple(specific_force_mps2)
         except (TypeError, ValueError):
-            counters.reject(MALFORMED)
+            self._reject_input(IMU, MALFORMED)
             return []
         if not (math.isfinite(t) and math.isfinite(gx + gy + gz) and math.isfinite(fx + fy + fz)):
-            counters.reject(NON_FINITE)
+            self._reject_input(IMU, NON_FINITE)
             return []
         config = self.config
         if (
             gx * gx + gy * gy + gz * gz > config.max_angular_rate_rad_s**2
             or fx * fx + fy * fy + fz * fz > config.max_specific_force_mps2**2
         ):
-            counters.reject(OUT_OF_RANGE)
+            self._reject_input(IMU, OUT_OF_RANGE)
             return []
         if t <= self._latest_imu_stamp:
             duplicate = t == self._latest_imu_stamp
-            counters.reject(DUPLICATE_STAMP if duplicate else STAMP_NOT_INCREASING)
+            self._reject_input(IMU, DUPLICATE_STAMP if duplicate else STAMP_NOT_INCREASING)
             return []
         counters.accepted += 1
         self._latest_imu_stamp = t
-        self._imu_buffer.append((t, (gx, gy, gz), (fx, fy, fz)))
-        return self._process(t - config.max_measurement_delay_s)
+        sample = (t, (gx, gy, gz), (fx, fy, fz))
+        self._imu_buffer.append(sample)
+        solutions = self._process(t - config.max_measurement_delay_s)
+        if not config.realtime_output:
+            return solutions
+        return self._predict_ahead(sample)
 
     def add_gnss_fix(
         self,
@@ -316,6 +335,7 @@ class FusionEngine:
         position_covariance_enu_m2,
     ) -> None:
         """Add a primary-antenna fix (WGS-84 deg, deg, ellipsoidal m; ENU covariance 3×3 m²)."""
+        self.last_input_rejection = None
         values, reason = _floats(t_s, latitude_deg, longitude_deg, altitude_m)
         covariance, covariance_reason = _matrix3(position_covariance_enu_m2)
         reason = reason or covariance_reason
@@ -330,10 +350,11 @@ class FusionEngine:
             payload = _Fix(math.radians(latitude), math.radians(longitude), altitude, covariance)
             self._enqueue(GNSS_FIX, t, payload)
         else:
-            self._counters[GNSS_FIX].reject(reason)
+            self._reject_input(GNSS_FIX, reason)
 
     def add_gnss_velocity(self, t_s: float, velocity_enu_mps, covariance_m2s2) -> None:
         """Add the primary antenna's velocity over ground (ENU m/s; covariance 3×3 m²/s²)."""
+        self.last_input_rejection = None
         stamp, reason = _floats(t_s)
         velocity, velocity_reason = _vector3(velocity_enu_mps)
         covariance, covariance_reason = _matrix3(covariance_m2s2)
@@ -345,10 +366,11 @@ class FusionEngine:
         if reason is None:
             self._enqueue(GNSS_VELOCITY, stamp[0], _Velocity(velocity, covariance))
         else:
-            self._counters[GNSS_VELOCITY].reject(reason)
+            self._reject_input(GNSS_VELOCITY, reason)
 
     def add_gnss_heading(self, t_s: float, yaw_rad: float, variance_rad2: float) -> None:
         """Add a dual-antenna heading: baseline azimuth (rad, ENU, 0 = East, CCW), variance rad²."""
+        self.last_input_rejection = None
         values, reason = _floats(t_s, yaw_rad, variance_rad2)
         if reason is None and values[2] <= 0.0:
             reason = NON_POSITIVE_VARIANCE
@@ -356,12 +378,13 @@ class FusionEngine:
             t, yaw, variance = values
             self._enqueue(GNSS_HEADING, t, _Heading(wrap_angle(yaw), variance))
         else:
-            self._counters[GNSS_HEADING].reject(reason)
+            self._reject_input(GNSS_HEADING, reason)
 
     def flush(self) -> list[NavSolution]:
         """End of data: process every buffered IMU sample and every applicable measurement.
 
-        Measurements stamped after the last IMU sample cannot be reached and are rejected.
+        Measurements stamped after the last IMU sample cannot be reached and are rejected. With
+        ``realtime_output`` every sample already had its solution, so none is returned.
         """
         solutions = self._process(math.inf)
         while self._measurements:
@@ -421,19 +444,25 @@ class FusionEngine:
 
     # ------------------------------------------------------------------ processing
     def _enqueue(self, kind: str, t: float, payload):
-        counters = self._counters[kind]
         if t <= self._last_processed_imu_stamp:
-            counters.reject(TOO_LATE)
+            self._reject_input(kind, TOO_LATE)
             return
         stamps = self._buffered_stamps[kind]
         if t in stamps:
-            counters.reject(DUPLICATE_STAMP)
+            self._reject_input(kind, DUPLICATE_STAMP)
             return
         stamps.add(t)
         self._sequence += 1
         heapq.heappush(self._measurements, (t, _KIND_ORDER[kind], self._sequence, kind, payload))
 
+    def _reject_input(self, kind: str, reason: str):
+        self._counters[kind].reject(reason)
+        self.last_input_rejection = reason
+
     def _process(self, horizon: float) -> list[NavSolution]:
+        """Filter the buffered data up to ``horizon``: the solutions of the processed IMU
+        samples, unless ``realtime_output`` predicts them ahead instead."""
+        emit_solutions = not self.config.realtime_output
         solutions: list[NavSolution] = []
         buffer = self._imu_buffer
         measurements = self._measurements
@@ -463,8 +492,41 @@ class FusionEngine:
             self._advance(t, gyro, force)
             self._older_imu = (t0, gyro0, force0)
             self._last_processed_imu_stamp = t
-            if self._filter is not None and self._output_due(t, span):
-                solutions.append(self._solution())
+            if emit_solutions and self._filter is not None and self._output_due(t, span):
+                solutions.append(
+                    self._solution(self._integrator, self._time, self._gyro, self._force)
+                )
+        return solutions
+
+    def _predict_ahead(self, sample) -> list[NavSolution]:
+        """Real-time solutions up to the newest IMU ``sample`` (see the module docstring): its
+        own, and after an alignment those of the buffered samples since."""
+        if self._filter is None:
+            return []
+        max_gap = self.config.max_imu_gap_s
+        solutions = []
+        if self._ahead is None:
+            integrator = self._integrator.fork()
+            t, gyro, force = self._time, self._gyro, self._force
+            samples = self._imu_buffer
+            if t > self._last_predicted_stamp and self._output_due(t, 0.0):
+                # The filter's own sample: the first one after an alignment.
+                solutions.append(self._solution(integrator, t, gyro, force))
+        else:
+            integrator, t, gyro, force = self._ahead
+            samples = (sample,)
+        for t_next, gyro_next, force_next in samples:
+            span = t_next - t
+            if span > max_gap:
+                # The filter restarts its alignment at this gap: nothing to predict from.
+                self._ahead = None
+                return solutions
+            integrator.step(span, gyro, gyro_next, force, force_next)
+            t, gyro, force = t_next, gyro_next, force_next
+            if t > self._last_predicted_stamp and self._output_due(t, span):
+                solutions.append(self._solution(integrator, t, gyro, force))
+        self._last_predicted_stamp = t
+        self._ahead = (integrator, t, gyro, force)
         return solutions
 
     def _pop_same_stamp(self) -> list:
@@ -522,6 +584,7 @@ class FusionEngine:
         self._filter = None
         self._aligner.restart()
         self._covariance_blocks = None
+        self._ahead = None
         self._bias_arrays = None
 
     def _handle_measurements(self, group: list, gyro):
@@ -627,6 +690,7 @@ class FusionEngine:
         _set_nav_state(self._integrator, new_state)
         self._filter.reset_after_injection(correction)
         self._covariance_blocks = None
+        self._ahead = None
         self._bias_arrays = None
 
     def _reset_to_measurement(self, kind, t, payload, gyro, model):
@@ -692,6 +756,7 @@ class FusionEngine:
         _set_nav_state(self._integrator, new_state)
         self._filter.ensure_positive_definite()
         self._covariance_blocks = None
+        self._ahead = None
 
     def _align_with(self, kind: str, t: float, payload, gyro):
         counters = self._counters[kind]
@@ -736,6 +801,7 @@ class FusionEngine:
         self._next_output_time = -math.inf
         self._covariance_blocks = None
         self._bias_arrays = None
+        self._ahead = None
 
     # ------------------------------------------------------------------ output
     def _coasting_flags(self, t: float) -> tuple[bool, bool, bool]:
@@ -747,8 +813,8 @@ class FusionEngine:
             t - last[GNSS_HEADING] > timeout,
         )
 
-    def _solution(self) -> NavSolution:
-        integrator = self._integrator
+    def _solution(self, integrator: StrapdownIntegrator, t: float, gyro, force) -> NavSolution:
+        """The solution of ``integrator``'s state at stamp ``t`` (raw gyro and force there)."""
         if self._covariance_blocks is None:
             covariance = self._filter.covariance
             # Shared by the solutions until P changes again, hence read-only.
@@ -763,16 +829,16 @@ class FusionEngine:
             )
         bgx, bgy, bgz = integrator.gyro_bias_rad_s
         bax, bay, baz = integrator.accel_bias_mps2
-        gx, gy, gz = self._gyro
-        fx, fy, fz = self._force
+        gx, gy, gz = gyro
+        fx, fy, fz = force
         wx, wy, wz = gx - bgx, gy - bgy, gz - bgz
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = integrator.rotation_elements
         ie, in_, iu = integrator.nav_frame_rate_enu_rad_s
         latitude = integrator.latitude_rad
         longitude = integrator.longitude_rad
         altitude = integrator.altitude_m
-        t = self._time
-        coasting = self._coasting_flags(t)
+        # Coasting is judged where the filter is: measurements ahead of it are not yet used.
+        coasting = self._coasting_flags(self._time)
         attitude_cov, velocity_cov, position_cov = self._covariance_blocks
         gyro_bias, accel_bias = self._bias_arrays
         return NavSolution(

@@ -29,6 +29,7 @@ covariance propagation, the integrals the discrete error model needs (see
 call overhead of small numpy arrays would dominate.
 """
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -137,6 +138,13 @@ class StrapdownIntegrator:
                 self.latitude_rad, self.altitude_m, self.velocity_enu_mps
             )
         )
+
+    def fork(self) -> "StrapdownIntegrator":
+        """An independent copy that integrates ahead without touching this one's propagation
+        sums (its own sums start empty)."""
+        twin = copy.copy(self)
+        twin._reset_sums()
+        return twin
 
     @property
     def rotation_nb(self) -> np.ndarray:
