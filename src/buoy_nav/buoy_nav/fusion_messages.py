@@ -1,0 +1,445 @@
+"""Contract messages of the fusion: sensor messages into the engine, solutions into ``nav/*``.
+
+The live ``fusion_node`` and the offline tools (``fuse_bag``, ``process_bag``) convert through
+this module, so a message is accepted, rejected or produced identically in both. Messages are
+read by attribute access only: rclpy message objects and rosbags' decoded objects both work.
+Output messages are built from the message classes handed in (the ROS Python message classes,
+which :class:`buoy_nav.bag_io.BagWriter` also serialises).
+
+Inputs (interface contract); frame ids are not checked, so drivers that name their frames
+differently still work:
+
+- ``imu/data_raw`` (sensor_msgs/Imu): raw body rate ω_ib (rad/s) and specific force (m/s²).
+- ``gnss/fix`` (sensor_msgs/NavSatFix): primary antenna WGS-84 position, ENU
+  ``position_covariance`` (m²). ``status.status < 0`` (no fix) is skipped and counted.
+- ``gnss/vel`` (geometry_msgs/TwistWithCovarianceStamped): primary antenna ENU velocity over
+  ground, covariance (m²/s²) from the linear 3×3 block of the 6×6 twist covariance.
+- ``gnss/heading`` (sensor_msgs/Imu): yaw of the orientation quaternion = azimuth of the
+  primary→secondary baseline (ENU, rad); ``orientation_covariance[8]`` = yaw variance (rad²).
+
+Outputs (one set per navigation solution, all with the solution's stamp):
+
+- ``nav/odometry`` (nav_msgs/Odometry, ``map`` → ``base_link``): position in ``map`` (m),
+  attitude body→ENU, 6×6 pose covariance (position, then attitude as rotation-vector error in
+  ENU, rad²); twist in ``base_link``: linear = R_nbᵀ·v_ENU with covariance R_nbᵀ·P_v·R_nb,
+  angular = bias-corrected body rate ω_ib.
+- ``nav/imu`` (sensor_msgs/Imu, ``base_link``): attitude with its covariance, bias-corrected
+  ω_ib and specific force.
+- ``nav/velocity`` (geometry_msgs/TwistWithCovarianceStamped, ``map``): ENU velocity of the
+  ``base_link`` origin with covariance.
+
+Covariances not estimated (the rates, the specific force, the angular part of the twists) are
+all zeros, the ROS convention for "unknown".
+- ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``): WGS-84 position of the ``base_link``
+  origin, ENU covariance (known), status FIX, service GPS.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from typing import NamedTuple
+
+import numpy as np
+
+from buoy_nav.engine import FusionEngine, NavSolution
+
+IMU_TOPIC = "imu/data_raw"
+FIX_TOPIC = "gnss/fix"
+VELOCITY_TOPIC = "gnss/vel"
+HEADING_TOPIC = "gnss/heading"
+SENSOR_MSGTYPES = {
+    IMU_TOPIC: "sensor_msgs/msg/Imu",
+    FIX_TOPIC: "sensor_msgs/msg/NavSatFix",
+    VELOCITY_TOPIC: "geometry_msgs/msg/TwistWithCovarianceStamped",
+    HEADING_TOPIC: "sensor_msgs/msg/Imu",
+}
+"""The fusion's input topics (relative names) and their message types."""
+
+ODOMETRY_TOPIC = "nav/odometry"
+NAV_IMU_TOPIC = "nav/imu"
+NAV_VELOCITY_TOPIC = "nav/velocity"
+NAV_FIX_TOPIC = "nav/fix"
+NAV_MSGTYPES = {
+    ODOMETRY_TOPIC: "nav_msgs/msg/Odometry",
+    NAV_IMU_TOPIC: "sensor_msgs/msg/Imu",
+    NAV_VELOCITY_TOPIC: "geometry_msgs/msg/TwistWithCovarianceStamped",
+    NAV_FIX_TOPIC: "sensor_msgs/msg/NavSatFix",
+}
+"""The fusion's output topics and their message types."""
+
+MAP_FRAME = "map"
+BODY_FRAME = "base_link"
+
+REASON_NO_FIX = "no_fix"
+REASON_ZERO_QUATERNION = "zero_quaternion"
+REASON_MALFORMED = "malformed"
+
+NANOSECONDS_PER_SECOND = 1_000_000_000
+# Quaternions shorter than this carry no heading.
+_MIN_QUATERNION_NORM = 1e-9
+# sensor_msgs/NavSatStatus and NavSatFix constants.
+STATUS_FIX = 0
+SERVICE_GPS = 1
+COVARIANCE_TYPE_KNOWN = 3
+
+
+def stamp_seconds(header) -> float:
+    """Header stamp in seconds since the epoch (float)."""
+    stamp = header.stamp
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_parts(t_s: float) -> tuple[int, int]:
+    """(sec, nanosec) of a stamp in seconds, rounded to the nanosecond."""
+    total_ns = round(t_s * NANOSECONDS_PER_SECOND)
+    return total_ns // NANOSECONDS_PER_SECOND, total_ns % NANOSECONDS_PER_SECOND
+
+
+def _triple(vector) -> tuple[float, float, float]:
+    return float(vector.x), float(vector.y), float(vector.z)
+
+
+def yaw_from_quaternion_rad(x: float, y: float, z: float, w: float) -> float:
+    """Yaw (rad, about ENU up, 0 = East, counter-clockwise) of the rotation of a quaternion
+    (any norm): the azimuth of the rotated body x axis projected on the horizontal."""
+    return math.atan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
+
+
+def feed_message(engine: FusionEngine, topic: str, message) -> tuple[list[NavSolution], str | None]:
+    """Give one sensor message of ``topic`` to ``engine``.
+
+    Returns the navigation solutions that became available (IMU messages only) and the reason
+    the message was rejected, None when it was accepted. Rejected input never reaches the
+    state; the engine counts its own rejections (see :meth:`FusionEngine.health`).
+    """
+    try:
+        t_s = stamp_seconds(message.header)
+        if topic == IMU_TOPIC:
+            solutions = engine.add_imu(
+                t_s, _triple(message.angular_velocity), _triple(message.linear_acceleration)
+            )
+            return solutions, engine.last_input_rejection
+        if topic == FIX_TOPIC:
+            if message.status.status < STATUS_FIX:
+                return [], REASON_NO_FIX
+            engine.add_gnss_fix(
+                t_s,
+                message.latitude,
+                message.longitude,
+                message.altitude,
+                np.asarray(message.position_covariance, dtype=float),
+            )
+        elif topic == VELOCITY_TOPIC:
+            twist = message.twist
+            covariance = np.asarray(twist.covariance, dtype=float)
+            if covariance.shape != (36,):
+                return [], REASON_MALFORMED
+            engine.add_gnss_velocity(
+                t_s, _triple(twist.twist.linear), covariance.reshape(6, 6)[:3, :3]
+            )
+        elif topic == HEADING_TOPIC:
+            q = message.orientation
+            x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+            norm = math.sqrt(x * x + y * y + z * z + w * w)
+            if math.isfinite(norm) and norm < _MIN_QUATERNION_NORM:
+                return [], REASON_ZERO_QUATERNION
+            covariance = message.orientation_covariance
+            if len(covariance) != 9:
+                return [], REASON_MALFORMED
+            engine.add_gnss_heading(t_s, yaw_from_quaternion_rad(x, y, z, w), covariance[8])
+        else:
+            raise ValueError(f"'{topic}' is not an input topic of the fusion")
+    except (AttributeError, TypeError, ValueError) as error:
+        if isinstance(error, ValueError) and "input topic" in str(error):
+            raise
+        return [], REASON_MALFORMED
+    return [], engine.last_input_rejection
+
+
+class NavValues(NamedTuple):
+    """The numbers of the four ``nav/*`` messages of one solution (flat, row-major)."""
+
+    t_s: float
+    sec: int
+    nanosec: int
+    position_map_m: tuple
+    attitude_xyzw: tuple
+    pose_covariance: tuple
+    velocity_body_mps: tuple
+    angular_rate_body_rad_s: tuple
+    body_twist_covariance: tuple
+    attitude_covariance_rad2: tuple
+    specific_force_body_mps2: tuple
+    velocity_enu_mps: tuple
+    enu_twist_covariance: tuple
+    latitude_deg: float
+    longitude_deg: float
+    altitude_m: float
+    position_covariance_m2: tuple
+
+
+_ZEROS3 = [0.0, 0.0, 0.0]
+
+
+def _block_diagonal_6x6(upper, lower) -> tuple:
+    """Row-major 6×6 with 3×3 blocks ``upper`` (top left) and ``lower`` (bottom right)."""
+    rows = []
+    for row in upper:
+        rows += row
+        rows += _ZEROS3
+    for row in lower:
+        rows += _ZEROS3
+        rows += row
+    return tuple(rows)
+
+
+def nav_values(solution: NavSolution) -> NavValues:
+    """What the ``nav/*`` messages of ``solution`` carry (see the module docstring)."""
+    sec, nanosec = stamp_parts(solution.t_s)
+    x, y, z, w = solution.attitude_xyzw.tolist()
+    rotation_nb = _rotation_matrix(x, y, z, w)
+    attitude_covariance = solution.attitude_covariance_rad2
+    velocity_covariance = solution.velocity_covariance_m2s2
+    position_covariance = solution.position_covariance_m2
+    velocity_enu = solution.velocity_enu_mps
+    zeros = [_ZEROS3] * 3
+    return NavValues(
+        t_s=solution.t_s,
+        sec=sec,
+        nanosec=nanosec,
+        position_map_m=tuple(solution.position_map_m.tolist()),
+        attitude_xyzw=(x, y, z, w),
+        pose_covariance=_block_diagonal_6x6(
+            position_covariance.tolist(), attitude_covariance.tolist()
+        ),
+        velocity_body_mps=tuple((rotation_nb.T @ velocity_enu).tolist()),
+        angular_rate_body_rad_s=tuple(solution.angular_rate_body_rad_s.tolist()),
+        body_twist_covariance=_block_diagonal_6x6(
+            (rotation_nb.T @ velocity_covariance @ rotation_nb).tolist(), zeros
+        ),
+        attitude_covariance_rad2=tuple(attitude_covariance.ravel().tolist()),
+        specific_force_body_mps2=tuple(solution.specific_force_body_mps2.tolist()),
+        velocity_enu_mps=tuple(velocity_enu.tolist()),
+        enu_twist_covariance=_block_diagonal_6x6(velocity_covariance.tolist(), zeros),
+        latitude_deg=float(solution.latitude_deg),
+        longitude_deg=float(solution.longitude_deg),
+        altitude_m=float(solution.altitude_m),
+        position_covariance_m2=tuple(position_covariance.ravel().tolist()),
+    )
+
+
+class NavMessageClasses(NamedTuple):
+    """The message classes :func:`solution_messages` builds (the ROS Python classes)."""
+
+    odometry: type
+    imu: type
+    twist_with_covariance_stamped: type
+    nav_sat_fix: type
+
+
+def _set_header(message, sec: int, nanosec: int, frame_id: str) -> None:
+    message.header.stamp.sec = sec
+    message.header.stamp.nanosec = nanosec
+    message.header.frame_id = frame_id
+
+
+def _set_vector(target, values) -> None:
+    target.x, target.y, target.z = values
+
+
+def _set_quaternion(target, values) -> None:
+    target.x, target.y, target.z, target.w = values
+
+
+def _rotation_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def solution_messages(solution: NavSolution, classes: NavMessageClasses) -> dict[str, object]:
+    """The four ``nav/*`` messages of one solution, by topic (see the module docstring)."""
+    values = nav_values(solution)
+    sec, nanosec = values.sec, values.nanosec
+
+    odometry = classes.odometry()
+    _set_header(odometry, sec, nanosec, MAP_FRAME)
+    odometry.child_frame_id = BODY_FRAME
+    _set_vector(odometry.pose.pose.position, values.position_map_m)
+    _set_quaternion(odometry.pose.pose.orientation, values.attitude_xyzw)
+    odometry.pose.covariance = values.pose_covariance
+    _set_vector(odometry.twist.twist.linear, values.velocity_body_mps)
+    _set_vector(odometry.twist.twist.angular, values.angular_rate_body_rad_s)
+    odometry.twist.covariance = values.body_twist_covariance
+
+    imu = classes.imu()
+    _set_header(imu, sec, nanosec, BODY_FRAME)
+    _set_quaternion(imu.orientation, values.attitude_xyzw)
+    imu.orientation_covariance = values.attitude_covariance_rad2
+    _set_vector(imu.angular_velocity, values.angular_rate_body_rad_s)
+    _set_vector(imu.linear_acceleration, values.specific_force_body_mps2)
+
+    velocity = classes.twist_with_covariance_stamped()
+    _set_header(velocity, sec, nanosec, MAP_FRAME)
+    _set_vector(velocity.twist.twist.linear, values.velocity_enu_mps)
+    velocity.twist.covariance = values.enu_twist_covariance
+
+    fix = classes.nav_sat_fix()
+    _set_header(fix, sec, nanosec, BODY_FRAME)
+    fix.status.status = STATUS_FIX
+    fix.status.service = SERVICE_GPS
+    fix.latitude = values.latitude_deg
+    fix.longitude = values.longitude_deg
+    fix.altitude = values.altitude_m
+    fix.position_covariance = values.position_covariance_m2
+    fix.position_covariance_type = COVARIANCE_TYPE_KNOWN
+
+    return {
+        ODOMETRY_TOPIC: odometry,
+        NAV_IMU_TOPIC: imu,
+        NAV_VELOCITY_TOPIC: velocity,
+        NAV_FIX_TOPIC: fix,
+    }
+
+
+# -- CDR ------------------------------------------------------------------------------------------
+# Offline tools write the nav messages straight from the values: packing four fixed layouts is
+# several times faster than building and serialising message objects. The layouts are those of
+# ROS 2 (XCDR1, little endian: each primitive aligned to its size from the start of the data).
+
+
+class _CdrLayout:
+    """Accumulates a struct format for a fixed CDR layout, inserting the alignment padding."""
+
+    def __init__(self):
+        self.format = ["<"]
+        self.offset = 0
+
+    def add(self, code: str, size: int, count: int = 1) -> None:
+        padding = -self.offset % size
+        if padding:
+            self.format.append(f"{padding}x")
+        self.format.append(f"{count}{code}")
+        self.offset += padding + size * count
+
+    def string(self, text: str) -> bytes:
+        encoded = text.encode() + b"\0"
+        self.add("I", 4)
+        self.format.append(f"{len(encoded)}s")
+        self.offset += len(encoded)
+        return encoded
+
+    def header(self, frame_id: str) -> bytes:
+        self.add("i", 4)
+        self.add("I", 4)
+        return self.string(frame_id)
+
+    def struct(self) -> struct.Struct:
+        return struct.Struct("".join(self.format))
+
+
+_CDR_ENCAPSULATION = b"\x00\x01\x00\x00"
+
+
+def _odometry_layout():
+    layout = _CdrLayout()
+    frame = layout.header(MAP_FRAME)
+    child = layout.string(BODY_FRAME)
+    layout.add("d", 8, 7 + 36 + 6 + 36)
+    return layout.struct(), frame, child
+
+
+def _imu_layout():
+    layout = _CdrLayout()
+    frame = layout.header(BODY_FRAME)
+    layout.add("d", 8, 4 + 9 + 3 + 9 + 3 + 9)
+    return layout.struct(), frame
+
+
+def _twist_layout():
+    layout = _CdrLayout()
+    frame = layout.header(MAP_FRAME)
+    layout.add("d", 8, 6 + 36)
+    return layout.struct(), frame
+
+
+def _fix_layout():
+    layout = _CdrLayout()
+    frame = layout.header(BODY_FRAME)
+    layout.add("b", 1)
+    layout.add("H", 2)
+    layout.add("d", 8, 3 + 9)
+    layout.add("B", 1)
+    return layout.struct(), frame
+
+
+_ODOMETRY_CDR, _MAP_STRING, _BODY_STRING = _odometry_layout()
+_IMU_CDR, _ = _imu_layout()
+_TWIST_CDR, _ = _twist_layout()
+_FIX_CDR, _ = _fix_layout()
+_ZEROS9 = (0.0,) * 9
+
+
+def solution_cdr(v: NavValues) -> dict[str, bytes]:
+    """The four ``nav/*`` messages of one solution's :func:`nav_values` as CDR bytes, by topic:
+    what ROS serialises for :func:`solution_messages` (with zeroed padding)."""
+    sec, nanosec = v.sec, v.nanosec
+    return {
+        ODOMETRY_TOPIC: _CDR_ENCAPSULATION
+        + _ODOMETRY_CDR.pack(
+            sec,
+            nanosec,
+            len(_MAP_STRING),
+            _MAP_STRING,
+            len(_BODY_STRING),
+            _BODY_STRING,
+            *v.position_map_m,
+            *v.attitude_xyzw,
+            *v.pose_covariance,
+            *v.velocity_body_mps,
+            *v.angular_rate_body_rad_s,
+            *v.body_twist_covariance,
+        ),
+        NAV_IMU_TOPIC: _CDR_ENCAPSULATION
+        + _IMU_CDR.pack(
+            sec,
+            nanosec,
+            len(_BODY_STRING),
+            _BODY_STRING,
+            *v.attitude_xyzw,
+            *v.attitude_covariance_rad2,
+            *v.angular_rate_body_rad_s,
+            *_ZEROS9,
+            *v.specific_force_body_mps2,
+            *_ZEROS9,
+        ),
+        NAV_VELOCITY_TOPIC: _CDR_ENCAPSULATION
+        + _TWIST_CDR.pack(
+            sec,
+            nanosec,
+            len(_MAP_STRING),
+            _MAP_STRING,
+            *v.velocity_enu_mps,
+            *_ZEROS3,
+            *v.enu_twist_covariance,
+        ),
+        NAV_FIX_TOPIC: _CDR_ENCAPSULATION
+        + _FIX_CDR.pack(
+            sec,
+            nanosec,
+            len(_BODY_STRING),
+            _BODY_STRING,
+            STATUS_FIX,
+            SERVICE_GPS,
+            v.latitude_deg,
+            v.longitude_deg,
+            v.altitude_m,
+            *v.position_covariance_m2,
+            COVARIANCE_TYPE_KNOWN,
+        ),
+    }

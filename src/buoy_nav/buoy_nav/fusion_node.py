@@ -1,0 +1,278 @@
+"""fusion_node: dual-antenna GNSS / strapdown INS fusion, live.
+
+    fusion_node [--ros-args --params-file buoy.yaml --params-file fusion.yaml ...]
+
+Subscribes (reliable, deep queue):
+
+- ``imu/data_raw`` (sensor_msgs/Imu): raw body rate (rad/s) and specific force (m/s²)
+- ``gnss/fix`` (sensor_msgs/NavSatFix): primary antenna WGS-84 position, ENU covariance (m²)
+- ``gnss/vel`` (geometry_msgs/TwistWithCovarianceStamped): primary antenna ENU velocity (m/s)
+- ``gnss/heading`` (sensor_msgs/Imu): azimuth of the primary→secondary baseline (yaw, rad)
+
+Publishes, once aligned, one set per navigation solution, all with the solution's stamp:
+
+- ``nav/odometry`` (nav_msgs/Odometry, ``map`` → ``base_link``)
+- ``nav/imu`` (sensor_msgs/Imu, ``base_link``)
+- ``nav/velocity`` (geometry_msgs/TwistWithCovarianceStamped, ``map``)
+- ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``)
+- ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
+  rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps, input rates
+  per topic, solutions published and the wall-clock processing time of the IMU callback (from
+  its start to the end of its publishing), mean and max over the period. Level warn while not
+  aligned, while a GNSS kind is coasting or when no IMU sample came in the period.
+
+Messages are converted and fed to :class:`buoy_nav.engine.FusionEngine` by
+:mod:`buoy_nav.fusion_messages`, the code the offline ``fuse_bag`` uses, so a bag replayed to
+this node gives the solutions ``fuse_bag`` writes. Only header stamps drive the fusion; the wall
+clock serves the diagnostics alone. With ``fusion.realtime_output`` (default) each IMU sample's
+solution is published by the callback that receives it; otherwise solutions leave
+``fusion.max_measurement_delay_s`` of stamps late.
+
+Parameters: ``gnss.primary_antenna``, ``gnss.secondary_antenna`` (double[3], m, in
+``base_link``) and ``origin.latitude_deg``, ``origin.longitude_deg``, ``origin.altitude_m``
+(deg, deg, m; NaN or absent = the position at alignment) of the shared buoy file; every other
+:class:`buoy_nav.config.FusionConfig` field as ``fusion.<field>`` (see ``config/fusion.yaml``).
+A bad value stops the node at start-up with exit code 2 and a message naming the parameter.
+
+Rejected input (malformed, non-finite, out of range, stamps not increasing, no fix, ...) is
+counted by topic and reason and warned about (rate-limited); it never reaches the state. On
+SIGINT or SIGTERM the engine is flushed, its last solutions published, and the node exits 0.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import re
+import signal
+import time
+
+import rclpy
+import rclpy.signals
+from geometry_msgs.msg import TwistWithCovarianceStamped
+from nav_msgs.msg import Odometry
+from rclpy.duration import Duration
+from sensor_msgs.msg import Imu, NavSatFix
+
+from buoy_nav.base_node import DATA_QOS, DiagnosticsPublisher, StartupError, SuiteNode, main_for
+from buoy_nav.config import FusionConfig
+from buoy_nav.engine import IMU, FusionEngine, NavSolution
+from buoy_nav.fusion_messages import (
+    FIX_TOPIC,
+    HEADING_TOPIC,
+    IMU_TOPIC,
+    NAV_FIX_TOPIC,
+    NAV_IMU_TOPIC,
+    NAV_VELOCITY_TOPIC,
+    ODOMETRY_TOPIC,
+    SENSOR_MSGTYPES,
+    VELOCITY_TOPIC,
+    NavMessageClasses,
+    feed_message,
+    solution_messages,
+)
+from buoy_nav.parameters import config_parameters
+
+NODE_NAME = "fusion_node"
+PARAMETER_PREFIX = "fusion."
+SHARED_PARAMETERS = {
+    "primary_antenna_body_m": "gnss.primary_antenna",
+    "secondary_antenna_body_m": "gnss.secondary_antenna",
+    "origin_latitude_deg": "origin.latitude_deg",
+    "origin_longitude_deg": "origin.longitude_deg",
+    "origin_altitude_m": "origin.altitude_m",
+}
+NOT_PARAMETERS = ("record_innovations",)
+NAV_CLASSES = NavMessageClasses(Odometry, Imu, TwistWithCovarianceStamped, NavSatFix)
+OUTPUT_CLASSES = {
+    ODOMETRY_TOPIC: Odometry,
+    NAV_IMU_TOPIC: Imu,
+    NAV_VELOCITY_TOPIC: TwistWithCovarianceStamped,
+    NAV_FIX_TOPIC: NavSatFix,
+}
+INPUT_CLASSES = {
+    IMU_TOPIC: Imu,
+    FIX_TOPIC: NavSatFix,
+    VELOCITY_TOPIC: TwistWithCovarianceStamped,
+    HEADING_TOPIC: Imu,
+}
+DIAGNOSTICS_PERIOD_S = 1.0
+# Bound on the wait, at shutdown, for subscribers to acknowledge the last solutions.
+FLUSH_ACK_TIMEOUT_S = 2.0
+
+
+class FusionNode(SuiteNode):
+    def __init__(self):
+        super().__init__(NODE_NAME)
+        self.config = self._declare_fusion_config()
+        self.engine = FusionEngine(self.config)
+        self._messages_in = collections.Counter()
+        self._messages_in_at_last_report = collections.Counter()
+        self._last_report_s = time.monotonic()
+        self._imu_callback_durations_s: list[float] = []
+        self.solutions_published = 0
+
+        self._nav_publishers = {
+            topic: self.create_publisher(message_class, topic, DATA_QOS)
+            for topic, message_class in OUTPUT_CLASSES.items()
+        }
+        self.create_subscription(Imu, IMU_TOPIC, self.on_imu, DATA_QOS)
+        for topic in (FIX_TOPIC, VELOCITY_TOPIC, HEADING_TOPIC):
+            self.create_subscription(
+                INPUT_CLASSES[topic],
+                topic,
+                lambda message, topic=topic: self.feed(topic, message),
+                DATA_QOS,
+            )
+        self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
+        self._stop_on_signals()
+        config = self.config
+        origin = (
+            f"({config.origin_latitude_deg} deg, {config.origin_longitude_deg} deg, "
+            f"{config.origin_altitude_m} m)"
+            if config.has_origin
+            else "the position at alignment"
+        )
+        rate = f"{config.output_rate_hz} Hz" if config.output_rate_hz > 0 else "every IMU sample"
+        self.get_logger().info(
+            f"fusing {', '.join(SENSOR_MSGTYPES)}: antennas "
+            f"{list(config.primary_antenna_body_m)} m (primary) and "
+            f"{list(config.secondary_antenna_body_m)} m (secondary) in base_link; map origin "
+            f"{origin}; output {rate}, "
+            f"{'real time' if config.realtime_output else 'delayed'}"
+        )
+
+    def _declare_fusion_config(self) -> FusionConfig:
+        try:
+            return self.declare_config(
+                FusionConfig,
+                prefix=PARAMETER_PREFIX,
+                renamed=SHARED_PARAMETERS,
+                skip=NOT_PARAMETERS,
+            )
+        except StartupError as error:
+            raise StartupError(with_parameter_names(str(error))) from error
+
+    def _stop_on_signals(self) -> None:
+        """Take SIGINT and SIGTERM from rclpy: leave the spin loop with the context still valid,
+        so that :meth:`destroy_node` can still publish the last solutions."""
+        rclpy.signals.uninstall_signal_handlers()
+        for signal_number in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signal_number, lambda *_: self.finish(0))
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    def on_imu(self, message: Imu) -> None:
+        started_s = time.perf_counter()
+        self.feed(IMU_TOPIC, message)
+        self._imu_callback_durations_s.append(time.perf_counter() - started_s)
+
+    def feed(self, topic: str, message) -> None:
+        """Give a sensor message to the engine; publish the solutions it yields."""
+        self._messages_in[topic] += 1
+        solutions, rejection = feed_message(self.engine, topic, message)
+        if rejection is not None:
+            self.reject(topic, rejection)
+            return
+        self.publish_solutions(solutions)
+
+    # -- outputs ----------------------------------------------------------------------------
+
+    def publish_solutions(self, solutions: list[NavSolution]) -> None:
+        for solution in solutions:
+            for topic, message in solution_messages(solution, NAV_CLASSES).items():
+                self._nav_publishers[topic].publish(message)
+            self.solutions_published += 1
+
+    def flush(self) -> None:
+        """End of input: publish the solutions the engine still holds, wait for them to arrive."""
+        self.publish_solutions(self.engine.flush())
+        deadline_s = time.monotonic() + FLUSH_ACK_TIMEOUT_S
+        for publisher in self._nav_publishers.values():
+            remaining_s = max(0.0, deadline_s - time.monotonic())
+            publisher.wait_for_all_acked(Duration(seconds=remaining_s))
+
+    def destroy_node(self) -> None:
+        if self.context.ok():
+            try:
+                self.flush()
+            except Exception as error:  # a failing flush must not hide the node's exit
+                self.get_logger().error(f"could not publish the last solutions: {error}")
+        super().destroy_node()
+
+    # -- diagnostics ------------------------------------------------------------------------
+
+    def report(self):
+        now_s = time.monotonic()
+        period_s = max(now_s - self._last_report_s, 1e-9)
+        new = self._messages_in - self._messages_in_at_last_report
+        self._messages_in_at_last_report = collections.Counter(self._messages_in)
+        self._last_report_s = now_s
+        durations, self._imu_callback_durations_s = self._imu_callback_durations_s, []
+
+        health = self.engine.health()
+        values = {
+            "alignment_state": health.alignment_state.value,
+            "aligned": health.aligned,
+            "coasting_fix": health.coasting_fix,
+            "coasting_velocity": health.coasting_velocity,
+            "coasting_heading": health.coasting_heading,
+        }
+        for kind, counters in health.counters.items():
+            values[f"{kind}.accepted"] = counters.accepted
+            for reason, count in sorted(counters.rejected.items()):
+                values[f"{kind}.rejected[{reason}]"] = count
+            if kind != IMU:  # alignment use, resets and NIS are of measurements only
+                values[f"{kind}.used_for_alignment"] = counters.used_for_alignment
+                values[f"{kind}.resets"] = counters.resets
+                values[f"{kind}.mean_nis"] = counters.mean_nis
+        values.update(
+            {
+                "covariance_repairs": health.covariance_repairs,
+                "imu_gaps": health.imu_gaps,
+                "alignments": health.alignments,
+                # Full precision: a stamp in seconds since the epoch.
+                "processed_up_to_s": f"{health.time_s:.6f}",
+            }
+        )
+        for topic in SENSOR_MSGTYPES:
+            values[f"messages_in[{topic}]"] = self._messages_in[topic]
+            values[f"rate_hz[{topic}]"] = new[topic] / period_s
+        values.update(
+            {
+                "solutions_published": self.solutions_published,
+                "latency_mean_s": sum(durations) / len(durations) if durations else math.nan,
+                "latency_max_s": max(durations) if durations else math.nan,
+            }
+        )
+
+        if new[IMU_TOPIC] == 0:
+            return "warn", f"no {IMU_TOPIC} samples", values
+        if not health.aligned:
+            return "warn", f"aligning ({health.alignment_state.value})", values
+        coasting = [
+            kind
+            for kind, flag in (
+                ("fix", health.coasting_fix),
+                ("velocity", health.coasting_velocity),
+                ("heading", health.coasting_heading),
+            )
+            if flag
+        ]
+        if coasting:
+            return "warn", f"aligned, coasting without GNSS {', '.join(coasting)}", values
+        return "ok", f"aligned, {self.solutions_published} solutions published", values
+
+
+def with_parameter_names(message: str) -> str:
+    """``message`` with every FusionConfig field name replaced by its parameter name, so that
+    a check relating two fields (the antennas, the origin) names both parameters."""
+    for field_name, parameter, _ in config_parameters(
+        FusionConfig, PARAMETER_PREFIX, SHARED_PARAMETERS, NOT_PARAMETERS
+    ):
+        # A field name already inside a parameter name ('fusion.gate_probability') stays.
+        message = re.sub(rf"(?<![\w.]){field_name}(?!\w)", parameter, message)
+    return message
+
+
+main = main_for(FusionNode)

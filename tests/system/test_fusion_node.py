@@ -1,0 +1,487 @@
+"""fusion_node as a real process over DDS, fed the sensor messages of the committed sea_state bag.
+
+The test process publishes ``imu/data_raw``, ``gnss/fix``, ``gnss/vel`` and ``gnss/heading`` in
+bag order, paced at a multiple of real time, and listens to the four ``nav/*`` topics and
+``diagnostics``. The reference is a FusionEngine fed the same messages offline through the same
+conversion (:func:`buoy_nav.fusion_messages.feed_message`): the engine's results depend on header
+stamps only, so the live node must publish exactly the offline solutions.
+"""
+
+from __future__ import annotations
+
+import array
+import copy
+import math
+import os
+import threading
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import TwistWithCovarianceStamped
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import Imu, NavSatFix
+
+from buoy_nav import engine as fusion_engine
+from buoy_nav.bag_io import BagReader
+from buoy_nav.base_node import DATA_QOS
+from buoy_nav.config import FusionConfig
+from buoy_nav.engine import FusionEngine
+from buoy_nav.fusion_messages import (
+    FIX_TOPIC,
+    HEADING_TOPIC,
+    IMU_TOPIC,
+    NAV_MSGTYPES,
+    ODOMETRY_TOPIC,
+    REASON_NO_FIX,
+    REASON_ZERO_QUATERNION,
+    SENSOR_MSGTYPES,
+    VELOCITY_TOPIC,
+    feed_message,
+    solution_messages,
+)
+from buoy_nav.fusion_node import (
+    INPUT_CLASSES,
+    NAV_CLASSES,
+    NOT_PARAMETERS,
+    OUTPUT_CLASSES,
+    SHARED_PARAMETERS,
+)
+from buoy_nav.parameters import build_config, load_parameter_files
+
+pytestmark = pytest.mark.ros
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+BAG = os.path.join(REPO, "bags", "sea_state")
+BUOY_PARAMETERS = os.path.join(REPO, "src", "buoy_nav", "config", "buoy.yaml")
+NODE = "fusion_node"
+LIVE_EQUALS_OFFLINE_S = 40.0  # the alignment takes the first 10 s
+MALFORMED_RUN_S = 16.0
+MALFORMED_AFTER_S = 12.0  # aligned by then
+FLUSH_RUN_S = 12.0
+PLAY_RATE = 4.0
+# Equality of live and offline values: relative, and absolute for values near zero.
+RELATIVE_TOLERANCE = 1e-9
+ABSOLUTE_TOLERANCE = 1e-12
+
+
+def to_rclpy(source, target):
+    """Copy the fields of a rosbags message into an rclpy message of the same type."""
+    for name in target.get_fields_and_field_types():
+        value = getattr(source, name)
+        if hasattr(value, "__dataclass_fields__"):
+            to_rclpy(value, getattr(target, name))
+        elif isinstance(value, np.ndarray):
+            setattr(target, name, value.tolist())
+        else:
+            setattr(target, name, value)
+    return target
+
+
+def stamp_ns(message) -> int:
+    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
+
+
+def set_stamp_ns(message, time_ns: int) -> None:
+    message.header.stamp.sec, message.header.stamp.nanosec = divmod(time_ns, 1_000_000_000)
+
+
+@pytest.fixture(scope="module")
+def sensor_stream():
+    """(topic, rclpy message) of the bag's first LIVE_EQUALS_OFFLINE_S of sensor data, bag order."""
+    stream = []
+    with BagReader(BAG) as reader:
+        first_ns = None
+        for record in reader.messages(list(SENSOR_MSGTYPES)):
+            first_ns = record.log_time_ns if first_ns is None else first_ns
+            if record.log_time_ns - first_ns > LIVE_EQUALS_OFFLINE_S * 1e9:
+                break
+            topic = record.topic.lstrip("/")
+            stream.append((topic, to_rclpy(reader.decode(record), INPUT_CLASSES[topic]())))
+    return stream
+
+
+def node_config(**overrides) -> FusionConfig:
+    """The configuration the node builds from the shared buoy file and ``overrides``
+    (parameter name → value, as ``-p`` gives them)."""
+    parameters = load_parameter_files([BUOY_PARAMETERS], NODE) | overrides
+    return build_config(FusionConfig, parameters, "fusion.", SHARED_PARAMETERS, NOT_PARAMETERS)
+
+
+def nav_messages(solutions, outputs: dict[str, list]) -> None:
+    for solution in solutions:
+        for nav_topic, nav_message in solution_messages(solution, NAV_CLASSES).items():
+            outputs[nav_topic].append(nav_message)
+
+
+def offline_run(stream, **overrides) -> tuple[dict[str, list], FusionEngine]:
+    """The nav messages of a fresh engine fed ``stream`` in order, by topic, and the engine."""
+    engine = FusionEngine(node_config(**overrides))
+    outputs = {topic: [] for topic in NAV_MSGTYPES}
+    for topic, message in stream:
+        nav_messages(feed_message(engine, topic, message)[0], outputs)
+    return outputs, engine
+
+
+class Listener:
+    """An in-process DDS participant in the test's isolated domain: publishes the sensor topics,
+    records the nav topics and the diagnostics."""
+
+    def __init__(self, env: dict[str, str]):
+        for name in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE"):
+            os.environ[name] = env[name]
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node("fusion_test", context=self.context)
+        self.received = {topic: [] for topic in NAV_MSGTYPES}
+        for topic, message_class in OUTPUT_CLASSES.items():
+            self.node.create_subscription(
+                message_class, topic, self.received[topic].append, DATA_QOS
+            )
+        self.diagnostics: list[DiagnosticStatus] = []
+        self.node.create_subscription(
+            DiagnosticArray,
+            "diagnostics",
+            lambda array: self.diagnostics.extend(s for s in array.status if s.hardware_id == NODE),
+            10,
+        )
+        self.publishers = {
+            topic: self.node.create_publisher(message_class, topic, DATA_QOS)
+            for topic, message_class in INPUT_CLASSES.items()
+        }
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def wait_for(self, condition, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while not condition():
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.02)
+        return True
+
+    def wait_for_node(self, timeout_s: float = 20.0) -> bool:
+        """Until the node's subscriptions and publishers are matched with ours."""
+        return self.wait_for(
+            lambda: (
+                all(p.get_subscription_count() > 0 for p in self.publishers.values())
+                and all(self.node.count_publishers(topic) > 0 for topic in NAV_MSGTYPES)
+            ),
+            timeout_s,
+        )
+
+    def play(self, paced_stream) -> None:
+        """Publish (pace stamp ns, topic, message) rows at PLAY_RATE times real time."""
+        start_wall_s, first_ns = time.monotonic(), paced_stream[0][0]
+        for pace_ns, topic, message in paced_stream:
+            delay_s = (pace_ns - first_ns) * 1e-9 / PLAY_RATE - (time.monotonic() - start_wall_s)
+            if delay_s > 0:
+                time.sleep(delay_s)
+            self.publishers[topic].publish(message)
+
+    def latest_diagnostics_where(self, condition, timeout_s: float) -> dict[str, str] | None:
+        """Values of the first diagnostics status, from now on, satisfying ``condition``."""
+        start = len(self.diagnostics)
+        found = []
+
+        def arrived() -> bool:
+            for status in self.diagnostics[start:]:
+                values = {kv.key: kv.value for kv in status.values}
+                if condition(values):
+                    found.append(values)
+                    return True
+            return False
+
+        self.wait_for(arrived, timeout_s)
+        return found[0] if found else None
+
+    def close(self):
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=5.0)
+
+
+def flatten(message, strings: list[str], numbers: list[float]) -> None:
+    """Every string and every number of ``message``, depth first, in field order."""
+    for name in message.get_fields_and_field_types():
+        value = getattr(message, name)
+        if hasattr(value, "get_fields_and_field_types"):
+            flatten(value, strings, numbers)
+        elif isinstance(value, str):
+            strings.append(value)
+        elif isinstance(value, (np.ndarray, array.array, list, tuple)):
+            numbers.extend(float(x) for x in value)
+        else:
+            numbers.append(float(value))
+
+
+def assert_same_messages(live: dict[str, list], offline: dict[str, list]) -> float:
+    """Same count, stamps, strings and (to RELATIVE_TOLERANCE) numbers on every nav topic;
+    returns the largest relative difference seen."""
+    largest = 0.0
+    for topic in NAV_MSGTYPES:
+        assert len(live[topic]) == len(offline[topic]), topic
+        assert [stamp_ns(m) for m in live[topic]] == [stamp_ns(m) for m in offline[topic]], topic
+        live_strings, live_numbers, offline_strings, offline_numbers = [], [], [], []
+        for message in live[topic]:
+            flatten(message, live_strings, live_numbers)
+        for message in offline[topic]:
+            flatten(message, offline_strings, offline_numbers)
+        assert live_strings == offline_strings, topic
+        live_values, offline_values = np.array(live_numbers), np.array(offline_numbers)
+        np.testing.assert_allclose(
+            live_values,
+            offline_values,
+            rtol=RELATIVE_TOLERANCE,
+            atol=ABSOLUTE_TOLERANCE,
+            equal_nan=True,
+            err_msg=topic,
+        )
+        finite = np.isfinite(offline_values)
+        difference = np.abs(live_values[finite] - offline_values[finite])
+        scale = np.maximum(np.abs(offline_values[finite]), ABSOLUTE_TOLERANCE)
+        largest = max(largest, float(np.max(difference / scale, initial=0.0)))
+    return largest
+
+
+def received_count(listener: Listener) -> int:
+    return min(len(messages) for messages in listener.received.values())
+
+
+def test_live_solutions_equal_offline_fusion(nodes, sensor_stream):
+    offline, engine = offline_run(sensor_stream)
+    n_solutions = len(offline[ODOMETRY_TOPIC])
+    assert n_solutions > 0.6 * sum(topic == IMU_TOPIC for topic, _ in sensor_stream)
+
+    listener = Listener(nodes.env)
+    try:
+        process = nodes.start(NODE, "--ros-args", "--params-file", BUOY_PARAMETERS)
+        assert listener.wait_for_node(), nodes.log_of(process)
+        listener.play([(stamp_ns(m), topic, m) for topic, m in sensor_stream])
+        listener.wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
+        n_imu = sum(topic == IMU_TOPIC for topic, _ in sensor_stream)
+        final = listener.latest_diagnostics_where(
+            lambda values: values.get(f"messages_in[{IMU_TOPIC}]") == str(n_imu), 5.0
+        )
+        live = {topic: list(messages) for topic, messages in listener.received.items()}
+        statuses = list(listener.diagnostics)
+        assert nodes.interrupt(process) == 0, nodes.log_of(process)
+    finally:
+        listener.close()
+
+    largest_relative_difference = assert_same_messages(live, offline)
+    print(f"{n_solutions} solutions, largest relative difference {largest_relative_difference:g}")
+
+    assert final is not None, nodes.log_of(process)
+    health = engine.health()
+    assert final["aligned"] == "True"
+    assert final["solutions_published"] == str(n_solutions)
+    for kind, counters in health.counters.items():
+        assert final[f"{kind}.accepted"] == str(counters.accepted), kind
+        if kind != fusion_engine.IMU:
+            assert final[f"{kind}.used_for_alignment"] == str(counters.used_for_alignment), kind
+    assert final["rejected_total"] == "0"
+    latency_mean_s, latency_max_s = float(final["latency_mean_s"]), float(final["latency_max_s"])
+    assert 0.0 < latency_mean_s <= latency_max_s
+    maxima = []
+    for status in statuses:
+        values = {kv.key: kv.value for kv in status.values}
+        if values["aligned"] != "True":
+            assert status.level == DiagnosticStatus.WARN
+        maxima.append(float(values["latency_max_s"]))
+    print(
+        f"IMU callback latency: last period mean {latency_mean_s} s, "
+        f"largest of the run {np.nanmax(maxima)} s"
+    )
+    assert any(status.level == DiagnosticStatus.OK for status in statuses)
+
+
+def malformed_messages(
+    imu: Imu, fix: NavSatFix, velocity: TwistWithCovarianceStamped, heading: Imu
+) -> list[tuple]:
+    """(topic, message, expected engine kind, expected reason) of bad messages derived from good
+    ones: the IMU ones follow ``imu`` on its topic (so that its stamp is the newest), the others
+    carry stamps between the good measurements'."""
+    bad = []
+
+    def variant(message, topic, kind, reason, time_ns=None):
+        copied = copy.deepcopy(message)
+        if time_ns is not None:
+            set_stamp_ns(copied, time_ns)
+        bad.append((topic, copied, kind, reason))
+        return copied
+
+    imu_ns, step_ns = stamp_ns(imu), 1_000_000
+    variant(
+        imu, IMU_TOPIC, fusion_engine.IMU, fusion_engine.NON_FINITE, imu_ns + step_ns
+    ).angular_velocity.y = math.nan
+    variant(
+        imu, IMU_TOPIC, fusion_engine.IMU, fusion_engine.NON_FINITE, imu_ns + 2 * step_ns
+    ).linear_acceleration.z = math.inf
+    variant(
+        imu, IMU_TOPIC, fusion_engine.IMU, fusion_engine.OUT_OF_RANGE, imu_ns + 3 * step_ns
+    ).linear_acceleration.x = 1.0e4
+    # Plausible values, so that they would visibly change the state were they used.
+    backwards = variant(
+        imu,
+        IMU_TOPIC,
+        fusion_engine.IMU,
+        fusion_engine.STAMP_NOT_INCREASING,
+        imu_ns - 500 * step_ns,
+    )
+    backwards.angular_velocity.z += 0.5
+    duplicate = variant(imu, IMU_TOPIC, fusion_engine.IMU, fusion_engine.DUPLICATE_STAMP)
+    duplicate.angular_velocity.z += 0.5
+    duplicate.linear_acceleration.x += 2.0
+
+    between_ns = stamp_ns(heading) + 50 * step_ns
+    zero = variant(heading, HEADING_TOPIC, None, REASON_ZERO_QUATERNION, between_ns)
+    zero.orientation.x = zero.orientation.y = zero.orientation.z = zero.orientation.w = 0.0
+    negative = variant(
+        heading,
+        HEADING_TOPIC,
+        fusion_engine.GNSS_HEADING,
+        fusion_engine.NON_POSITIVE_VARIANCE,
+        between_ns,
+    )
+    negative.orientation.z, negative.orientation.w = math.sin(0.5), math.cos(0.5)
+    negative.orientation_covariance[8] = -1.0e-4
+    variant(
+        fix, FIX_TOPIC, fusion_engine.GNSS_FIX, fusion_engine.NON_FINITE, between_ns
+    ).latitude = math.nan
+    variant(
+        velocity, VELOCITY_TOPIC, fusion_engine.GNSS_VELOCITY, fusion_engine.NON_FINITE, between_ns
+    ).twist.twist.linear.x = math.inf
+    no_fix = variant(fix, FIX_TOPIC, None, REASON_NO_FIX, between_ns)
+    no_fix.status.status = -1
+    no_fix.latitude += 1.0e-3
+    return bad
+
+
+def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_stream):
+    first_ns = stamp_ns(sensor_stream[0][1])
+    good = [
+        (topic, m) for topic, m in sensor_stream if stamp_ns(m) - first_ns <= MALFORMED_RUN_S * 1e9
+    ]
+    after_ns = first_ns + round(MALFORMED_AFTER_S * 1e9)
+    imu_index = next(
+        i for i, (topic, m) in enumerate(good) if topic == IMU_TOPIC and stamp_ns(m) >= after_ns
+    )
+    imu_ns = stamp_ns(good[imu_index][1])
+    latest = {}
+    for topic, m in good:
+        if topic != IMU_TOPIC and stamp_ns(m) > imu_ns and topic not in latest:
+            latest[topic] = m
+    bad = malformed_messages(
+        good[imu_index][1], latest[FIX_TOPIC], latest[VELOCITY_TOPIC], latest[HEADING_TOPIC]
+    )
+    # Each bad message goes out right after the good IMU sample, at its pace.
+    paced = []
+    for index, (topic, m) in enumerate(good):
+        paced.append((stamp_ns(m), topic, m))
+        if index == imu_index:
+            paced.extend((stamp_ns(m), bad_topic, message) for bad_topic, message, _, _ in bad)
+    reference, engine = offline_run(good)
+    n_solutions = len(reference[ODOMETRY_TOPIC])
+    last_bad_ns = max(stamp_ns(message) for _, message, _, _ in bad)
+    assert sum(stamp_ns(m) > last_bad_ns for m in reference[ODOMETRY_TOPIC]) > 100
+
+    listener = Listener(nodes.env)
+    try:
+        process = nodes.start(NODE, "--ros-args", "--params-file", BUOY_PARAMETERS)
+        assert listener.wait_for_node(), nodes.log_of(process)
+        listener.play(paced)
+        listener.wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
+        n_imu = sum(topic == IMU_TOPIC for _, topic, _ in paced)
+        final = listener.latest_diagnostics_where(
+            lambda values: values.get(f"messages_in[{IMU_TOPIC}]") == str(n_imu), 5.0
+        )
+        live = {topic: list(messages) for topic, messages in listener.received.items()}
+        still_running = process.poll() is None
+        assert nodes.interrupt(process) == 0, nodes.log_of(process)
+    finally:
+        listener.close()
+
+    assert still_running
+    assert_same_messages(live, reference)
+
+    assert final is not None, nodes.log_of(process)
+    expected_node = {}
+    expected_engine = {}
+    for topic, _, kind, reason in bad:
+        key = f"rejected[{topic}: {reason}]"
+        expected_node[key] = expected_node.get(key, 0) + 1
+        if kind is not None:
+            key = f"{kind}.rejected[{reason}]"
+            expected_engine[key] = expected_engine.get(key, 0) + 1
+    node_rejections = {k: int(v) for k, v in final.items() if k.startswith("rejected[")}
+    assert node_rejections == expected_node
+    assert final["rejected_total"] == str(len(bad))
+    engine_rejections = {k: int(v) for k, v in final.items() if ".rejected[" in k}
+    assert engine_rejections == expected_engine
+    for kind, counters in engine.health().counters.items():
+        assert final[f"{kind}.accepted"] == str(counters.accepted), kind
+    assert final["solutions_published"] == str(n_solutions)
+
+
+def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
+    first_ns = stamp_ns(sensor_stream[0][1])
+    stream = [
+        (topic, m) for topic, m in sensor_stream if stamp_ns(m) - first_ns <= FLUSH_RUN_S * 1e9
+    ]
+    reference, engine = offline_run(stream, **{"fusion.realtime_output": False})
+    n_before_end = len(reference[ODOMETRY_TOPIC])
+    nav_messages(engine.flush(), reference)
+    n_solutions = len(reference[ODOMETRY_TOPIC])
+    # The last max_measurement_delay_s of IMU samples wait for measurements until the end.
+    assert n_solutions - n_before_end > 10
+
+    listener = Listener(nodes.env)
+    try:
+        process = nodes.start(
+            NODE,
+            "--ros-args",
+            "--params-file",
+            BUOY_PARAMETERS,
+            "-p",
+            "fusion.realtime_output:=false",
+        )
+        assert listener.wait_for_node(), nodes.log_of(process)
+        listener.play([(stamp_ns(m), topic, m) for topic, m in stream])
+        n_imu = sum(topic == IMU_TOPIC for topic, _ in stream)
+        assert listener.latest_diagnostics_where(
+            lambda values: values.get(f"messages_in[{IMU_TOPIC}]") == str(n_imu), 5.0
+        ), nodes.log_of(process)
+        listener.wait_for(lambda: received_count(listener) >= n_before_end, 10.0)
+        n_before_interrupt = received_count(listener)
+        assert nodes.interrupt(process) == 0, nodes.log_of(process)
+        listener.wait_for(lambda: received_count(listener) >= n_solutions, 10.0)
+        live = {topic: list(messages) for topic, messages in listener.received.items()}
+    finally:
+        listener.close()
+
+    assert n_before_interrupt == n_before_end
+    assert_same_messages(live, reference)
+
+
+@pytest.mark.parametrize(
+    ("override", "parameter"),
+    [
+        ("gnss.secondary_antenna:=[-0.75,0.0,1.0]", "gnss.secondary_antenna"),
+        ("fusion.gate_probability:=2.0", "fusion.gate_probability"),
+        ("fusion.accel_noise_mps_sqrt_h:=-0.05", "fusion.accel_noise_mps_sqrt_h"),
+    ],
+)
+def test_bad_parameter_stops_the_node_naming_it(nodes, override, parameter):
+    result = nodes.run(
+        NODE, "--ros-args", "--params-file", BUOY_PARAMETERS, "-p", override, timeout_s=30.0
+    )
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert parameter in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
