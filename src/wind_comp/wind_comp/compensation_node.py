@@ -62,7 +62,14 @@ from sensor_msgs.msg import NavSatFix
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from buoy_nav.base_node import DATA_QOS, DiagnosticsPublisher, StartupError, SuiteNode, main_for
-from wind_comp.compensator import CompensatorConfig, CorrectedWind, WindCompensator, WindStatus
+from wind_comp.compensator import (
+    DEFAULT_ANEMOMETER_POSITION_M,
+    DEFAULT_ANEMOMETER_RPY_DEG,
+    CompensatorConfig,
+    CorrectedWind,
+    WindCompensator,
+    WindStatus,
+)
 from wind_comp.nav_messages import (
     REASON_STAMP_NOT_INCREASING,
     MalformedMessageError,
@@ -83,8 +90,6 @@ ODOMETRY_TOPIC = "nav/odometry"
 FIX_TOPIC = "nav/fix"
 TRUE_WIND_TOPIC = "wind/true"
 
-DEFAULT_ANEMOMETER_POSITION_M = (0.0, 0.0, 3.0)
-DEFAULT_ANEMOMETER_RPY_DEG = (0.0, 0.0, 0.0)
 DEFAULT_NAV_TIMEOUT_S = 1.0
 DIAGNOSTICS_PERIOD_S = 1.0
 # Bound on the wait, at shutdown, for subscribers to acknowledge the flushed samples.

@@ -22,6 +22,11 @@ import numpy as np
 from wind_comp.miller import miller_correction, mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import InterpolationStatus, NavTrack
 
+DEFAULT_ANEMOMETER_POSITION_M = (0.0, 0.0, 3.0)
+"""Anemometer position when parameter ``anemometer.position`` is not given, m (body)."""
+DEFAULT_ANEMOMETER_RPY_DEG = (0.0, 0.0, 0.0)
+"""Anemometer mounting when parameter ``anemometer.rpy_deg`` is not given, deg."""
+
 
 class ConfigError(ValueError):
     """A compensator setting is missing or malformed; the message names the field."""

@@ -9,22 +9,43 @@
 - ``wind_products.md``: the averaged wind products and, with truth, the error statistics.
 
 Angles are degrees in every figure and table. Figures are drawn with the Agg canvas directly
-(no pyplot), so no display and no global backend state are involved. The ``wind_report``
-command draws the report of a run saved with :func:`save_report_data`.
+(no pyplot), so no display and no global backend state are involved.
+
+:func:`report_data_from_bag` gathers the arrays from a bag that holds ``anemometer/wind`` and
+``wind/true`` (written by ``process_bag`` or recorded from the running nodes), with the truth
+and navigation topics when present. The ``wind_report`` command draws the report of such a bag,
+or of a run saved with :func:`save_report_data`.
 """
 
 import argparse
+import datetime
 import math
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from scipy.signal import welch
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
-from wind_comp.products import WindProduct, meteorological_direction_deg
+from buoy_nav.bag_io import BagError, BagReader
+from wind_comp.compensator import CompensatorConfig
+from wind_comp.nav_messages import stats_values, window_label
+from wind_comp.products import WindAverager, WindProduct, meteorological_direction_deg
+
+ANEMOMETER_TOPIC = "anemometer/wind"
+CORRECTED_WIND_TOPIC = "wind/true"
+TRUE_WIND_TOPIC = "truth/wind"
+NAV_ODOMETRY_TOPIC = "nav/odometry"
+TRUE_ODOMETRY_TOPIC = "truth/odometry"
+STATS_TOPIC_PREFIX = "wind/stats_"
+MEAN_TOPIC_PREFIX = "wind/mean_"
+NANOSECONDS_PER_SECOND = 1_000_000_000
+# Plots count time from the start of the minute of the first sample, so simulated runs (which
+# start on a whole minute) show scenario time and the 1-minute windows start on round numbers.
+_TIME_ORIGIN_STEP_S = 60
 
 _MIN_SPECTRUM_SAMPLES = 32
 _MAX_SPECTRUM_SEGMENT = 1024
@@ -48,6 +69,8 @@ class ReportData:
         truth_rpy_rad: (M, 3) true roll, pitch, yaw at ``attitude_t_s``, rad, or None.
         products: averaged wind products.
         title: figure title prefix, e.g. the scenario name.
+        time_origin_s: stamp (s) that the time axes of the figures count from.
+        products_source: where the products come from, stated under their table.
     """
 
     t_s: np.ndarray
@@ -59,6 +82,8 @@ class ReportData:
     truth_rpy_rad: np.ndarray | None = None
     products: list[WindProduct] = field(default_factory=list)
     title: str = ""
+    time_origin_s: float = 0.0
+    products_source: str = ""
 
     def __post_init__(self):
         self.t_s = _array("t_s", self.t_s, (None,))
@@ -124,23 +149,24 @@ def _wind_series(data: ReportData) -> list[tuple[str, np.ndarray, str]]:
 def _plot_wind_time_series(data: ReportData, path: Path) -> Path:
     figure = Figure(figsize=(10, 8))
     speed_axis, direction_axis, vertical_axis = figure.subplots(3, 1, sharex=True)
+    t_s = data.t_s - data.time_origin_s
     for label, wind, color in _wind_series(data):
-        speed_axis.plot(data.t_s, np.hypot(wind[:, 0], wind[:, 1]), color=color, label=label)
+        speed_axis.plot(t_s, np.hypot(wind[:, 0], wind[:, 1]), color=color, label=label)
         direction_axis.plot(
-            data.t_s,
+            t_s,
             meteorological_direction_deg(wind[:, 0], wind[:, 1]),
             ".",
             markersize=2,
             color=color,
             label=label,
         )
-        vertical_axis.plot(data.t_s, wind[:, 2], color=color, label=label)
+        vertical_axis.plot(t_s, wind[:, 2], color=color, label=label)
     speed_axis.set_ylabel("horizontal speed (m/s)")
     direction_axis.set_ylabel("direction from (deg)")
     direction_axis.set_ylim(0, 360)
     direction_axis.set_yticks(range(0, 361, 90))
     vertical_axis.set_ylabel("vertical wind w (m/s)")
-    vertical_axis.set_xlabel("time (s)")
+    vertical_axis.set_xlabel(_time_label(data))
     speed_axis.legend(loc="upper right")
     speed_axis.set_title(_title(data, "wind before and after motion correction"))
     for axis in (speed_axis, direction_axis, vertical_axis):
@@ -153,10 +179,10 @@ def _plot_attitude_error(data: ReportData, path: Path) -> Path:
     figure = Figure(figsize=(10, 7))
     axes = figure.subplots(3, 1, sharex=True)
     for axis, label, error in zip(axes, ("roll", "pitch", "heading"), errors_deg.T, strict=True):
-        axis.plot(data.attitude_t_s, error, color="tab:red")
+        axis.plot(data.attitude_t_s - data.time_origin_s, error, color="tab:red")
         axis.set_ylabel(f"{label} error (deg)")
         axis.grid(alpha=0.3)
-    axes[-1].set_xlabel("time (s)")
+    axes[-1].set_xlabel(_time_label(data))
     axes[0].set_title(_title(data, "attitude error (estimate − truth)"))
     return _save(figure, path)
 
@@ -203,6 +229,18 @@ def _longest_true_run(mask: np.ndarray) -> slice:
     return slice(int(starts[longest]), int(stops[longest]))
 
 
+def _time_label(data: ReportData) -> str:
+    if data.time_origin_s == 0.0:
+        return "time (s)"
+    return f"time (s) since {utc_text(data.time_origin_s)}"
+
+
+def utc_text(t_s: float) -> str:
+    """ISO 8601 UTC time of ``t_s`` (s since the epoch), whole seconds."""
+    moment = datetime.datetime.fromtimestamp(t_s, tz=datetime.UTC)
+    return moment.strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
 def _title(data: ReportData, what: str) -> str:
     return f"{data.title}: {what}" if data.title else what
 
@@ -218,12 +256,17 @@ def _markdown_summary(data: ReportData) -> str:
     lines = [f"# {_title(data, 'wind products')}", ""]
     if data.true_wind_enu_mps is not None:
         lines += [*_accuracy_table(data), ""]
-    lines += _products_table(data.products)
+    lines += _products_table(data.products, data.products_source)
     return "\n".join(lines) + "\n"
 
 
 def _accuracy_table(data: ReportData) -> list[str]:
-    """Bias and RMS of the measured and corrected wind against the truth (valid samples)."""
+    """Bias and RMS of the measured and corrected wind against the truth.
+
+    Each row counts the samples where both the series and the truth are finite. The measured
+    wind is in sensor axes, so only its horizontal speed and w are compared; the corrected wind
+    is ENU like the truth and is also compared per component and in direction.
+    """
     true_wind = data.true_wind_enu_mps
     true_speed = np.hypot(true_wind[:, 0], true_wind[:, 1])
     true_direction = meteorological_direction_deg(true_wind[:, 0], true_wind[:, 1])
@@ -240,36 +283,43 @@ def _accuracy_table(data: ReportData) -> list[str]:
         if label == "corrected":
             direction = meteorological_direction_deg(wind[:, 0], wind[:, 1])
             direction_error = (direction - true_direction + 180.0) % 360.0 - 180.0
-            quantities.append(("direction (deg)", direction_error))
+            quantities += [
+                ("u (m/s)", wind[:, 0] - true_wind[:, 0]),
+                ("v (m/s)", wind[:, 1] - true_wind[:, 1]),
+                ("direction (deg)", direction_error),
+            ]
         for quantity, error in quantities:
             error = error[np.isfinite(error)]
             if error.size:
                 bias, rms = float(error.mean()), float(np.sqrt(np.mean(error**2)))
             else:
                 bias = rms = math.nan
-            lines.append(f"| {label} | {quantity} | {bias:.3f} | {rms:.3f} | {error.size} |")
+            lines.append(f"| {label} | {quantity} | {bias:.4f} | {rms:.4f} | {error.size} |")
     return lines
 
 
-def _products_table(products: list[WindProduct]) -> list[str]:
+def _products_table(products: list[WindProduct], source: str) -> list[str]:
     lines = [
         "## Averaged wind",
         "",
         "Direction: degrees clockwise from true North, where the wind blows from. "
-        "Vectors ENU. Gust: maximum running mean of horizontal speed.",
+        "Vectors ENU. Gust: maximum running mean of horizontal speed. The last window of each "
+        "length may be partial: it was closed at the end of the data.",
         "",
     ]
+    if source:
+        lines += [f"Source: {source}.", ""]
     if not products:
         return [*lines, "No averaging window completed."]
     lines += [
-        "| window start (s) | length (s) | valid | invalid | vector mean speed (m/s) "
+        "| window start (UTC) | length (s) | valid | invalid | vector mean speed (m/s) "
         "| direction (deg) | scalar mean speed (m/s) | gust (m/s) | mean w (m/s) "
         "| std u (m/s) | std v (m/s) | std w (m/s) |",
         "|" + "---|" * 12,
     ]
     for product in products:
         lines.append(
-            f"| {product.window_start_s:.1f} | {product.window_s:.0f} | {product.n_valid} "
+            f"| {utc_text(product.window_start_s)} | {product.window_s:.0f} | {product.n_valid} "
             f"| {product.n_invalid} | {product.vector_mean_speed_mps:.2f} "
             f"| {product.vector_mean_direction_deg:.1f} | {product.scalar_mean_speed_mps:.2f} "
             f"| {product.gust_mps:.2f} | {product.mean_w_enu_mps:.3f} "
@@ -300,7 +350,13 @@ def save_report_data(data: ReportData, path) -> Path:
             [getattr(product, product_field.name) for product in data.products], dtype=float
         )
     path = Path(path)
-    np.savez(path, title=np.array(data.title), **arrays)
+    np.savez(
+        path,
+        title=np.array(data.title),
+        time_origin_s=np.array(data.time_origin_s),
+        products_source=np.array(data.products_source),
+        **arrays,
+    )
     return path
 
 
@@ -321,6 +377,8 @@ def load_report_data(path) -> ReportData:
             if _PRODUCT_PREFIX + product_field.name in stored
         }
         title = str(stored["title"]) if "title" in stored else ""
+        time_origin_s = float(stored["time_origin_s"]) if "time_origin_s" in stored else 0.0
+        source = str(stored["products_source"]) if "products_source" in stored else ""
     n_products = min((len(column) for column in columns.values()), default=0)
     products = [
         WindProduct(
@@ -333,7 +391,13 @@ def load_report_data(path) -> ReportData:
         )
         for i in range(n_products)
     ]
-    return ReportData(**arrays, products=products, title=title)
+    return ReportData(
+        **arrays,
+        products=products,
+        title=title,
+        time_origin_s=time_origin_s,
+        products_source=source,
+    )
 
 
 def rpy_rad_from_quaternions(quat_xyzw) -> np.ndarray:
@@ -342,22 +406,282 @@ def rpy_rad_from_quaternions(quat_xyzw) -> np.ndarray:
     return yaw_pitch_roll[..., ::-1]
 
 
+class StampedVectors(NamedTuple):
+    """The ``Vector3Stamped`` messages of one topic, in bag order."""
+
+    stamps_ns: np.ndarray
+    """(N,) int64 header stamps, ns since the epoch."""
+    vectors: np.ndarray
+    """(N, 3) vector components, in the topic's unit and frame."""
+
+
+def stored_topic(reader: BagReader, topic: str) -> str | None:
+    """The name under which ``reader`` stores relative ``topic`` (with or without "/"), or None."""
+    for candidate in (topic, "/" + topic.lstrip("/")):
+        if candidate in reader.topics:
+            return candidate
+    return None
+
+
+def _stamp_ns(header) -> int:
+    return int(header.stamp.sec) * NANOSECONDS_PER_SECOND + int(header.stamp.nanosec)
+
+
+def stamped_vectors(reader: BagReader, topic: str) -> StampedVectors:
+    """Header stamps and vectors of every ``Vector3Stamped`` message of ``topic``."""
+    stamps, vectors = [], []
+    for message in reader.messages([topic]):
+        decoded = reader.decode(message)
+        stamps.append(_stamp_ns(decoded.header))
+        vectors.append((decoded.vector.x, decoded.vector.y, decoded.vector.z))
+    return StampedVectors(
+        np.array(stamps, dtype=np.int64), np.array(vectors, dtype=float).reshape(-1, 3)
+    )
+
+
+def stamped_orientations(reader: BagReader, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    """(M,) int64 header stamps (ns) and (M, 4) body→ENU quaternions (x, y, z, w) of an
+    ``Odometry`` topic."""
+    stamps, quats = [], []
+    for message in reader.messages([topic]):
+        decoded = reader.decode(message)
+        orientation = decoded.pose.pose.orientation
+        stamps.append(_stamp_ns(decoded.header))
+        quats.append((orientation.x, orientation.y, orientation.z, orientation.w))
+    return np.array(stamps, dtype=np.int64), np.array(quats, dtype=float).reshape(-1, 4)
+
+
+def vectors_at_stamps(stamps_ns: np.ndarray, source: StampedVectors) -> np.ndarray:
+    """(N, 3): for each stamp (ns), the vector of the ``source`` message carrying exactly that
+    header stamp; NaN where no message does."""
+    order = np.argsort(source.stamps_ns, kind="stable")
+    sorted_stamps = source.stamps_ns[order]
+    matched = np.full((len(stamps_ns), 3), np.nan)
+    if sorted_stamps.size == 0:
+        return matched
+    index = np.minimum(np.searchsorted(sorted_stamps, stamps_ns), sorted_stamps.size - 1)
+    found = sorted_stamps[index] == stamps_ns
+    matched[found] = source.vectors[order[index[found]]]
+    return matched
+
+
+def interpolate_vectors(stamps_ns: np.ndarray, source: StampedVectors) -> np.ndarray:
+    """(N, 3) ``source`` vectors linearly interpolated at ``stamps_ns`` (ns); NaN outside the
+    span of the source stamps."""
+    interpolated = np.full((len(stamps_ns), 3), np.nan)
+    if source.stamps_ns.size == 0:
+        return interpolated
+    order = np.argsort(source.stamps_ns, kind="stable")
+    # Relative seconds keep nanosecond resolution that epoch seconds in float64 would lose.
+    origin_ns = source.stamps_ns[order[0]]
+    source_t_s = (source.stamps_ns[order] - origin_ns) * 1e-9
+    t_s = (np.asarray(stamps_ns, dtype=np.int64) - origin_ns) * 1e-9
+    for axis in range(3):
+        interpolated[:, axis] = np.interp(
+            t_s, source_t_s, source.vectors[order, axis], left=np.nan, right=np.nan
+        )
+    return interpolated
+
+
+def interpolate_rpy_rad(stamps_ns: np.ndarray, source_stamps_ns, source_quat_xyzw) -> np.ndarray:
+    """(N, 3) roll, pitch, yaw (rad) of the source attitudes slerped to ``stamps_ns`` (ns);
+    NaN outside the span of the source stamps or when fewer than two source samples exist."""
+    rpy = np.full((len(stamps_ns), 3), np.nan)
+    unique_stamps, first = np.unique(
+        np.asarray(source_stamps_ns, dtype=np.int64), return_index=True
+    )
+    if unique_stamps.size < 2:
+        return rpy
+    origin_ns = unique_stamps[0]
+    slerp = Slerp((unique_stamps - origin_ns) * 1e-9, Rotation.from_quat(source_quat_xyzw[first]))
+    t_s = (np.asarray(stamps_ns, dtype=np.int64) - origin_ns) * 1e-9
+    inside = (t_s >= 0.0) & (t_s <= (unique_stamps[-1] - origin_ns) * 1e-9)
+    if np.any(inside):
+        rpy[inside] = rpy_rad_from_quaternions(slerp(t_s[inside]).as_quat())
+    return rpy
+
+
+def report_data_from_bag(bag, title: str | None = None) -> ReportData:
+    """The :class:`ReportData` of a bag holding ``anemometer/wind`` and ``wind/true``.
+
+    - ``t_s`` and the measured wind: every ``anemometer/wind`` message (header stamps).
+    - corrected wind: the ``wind/true`` message with the same header stamp, NaN when none.
+    - true wind (with ``truth/wind``): interpolated linearly to the anemometer stamps.
+    - attitude (with ``nav/odometry``): at the navigation stamps, with ``truth/odometry``
+      slerped to them.
+    - products: the ``wind/stats_<window>`` messages (mean vectors from ``wind/mean_<window>``)
+      when the bag has them, otherwise recomputed from the corrected wind with the default
+      windows of the compensation.
+
+    Raises :class:`ReportDataError` (one line) for a missing or unreadable bag or one without
+    the two wind topics.
+    """
+    try:
+        with BagReader(bag) as reader:
+            return _report_data(reader, Path(bag).name if title is None else title)
+    except BagError as error:
+        raise ReportDataError(str(error)) from error
+
+
+def _report_data(reader: BagReader, title: str) -> ReportData:
+    required = (ANEMOMETER_TOPIC, CORRECTED_WIND_TOPIC)
+    stored = {topic: stored_topic(reader, topic) for topic in required}
+    missing = [
+        topic for topic, name in stored.items() if name is None or not reader.topics[name].count
+    ]
+    if missing:
+        raise ReportDataError(
+            f"bag {reader.path} has no {' and no '.join(missing)} messages; a wind report needs "
+            f"{' and '.join(required)} (a bag written by process_bag, or recorded with "
+            "compensation_node running)"
+        )
+    measured = stamped_vectors(reader, ANEMOMETER_TOPIC)
+    corrected = vectors_at_stamps(measured.stamps_ns, stamped_vectors(reader, CORRECTED_WIND_TOPIC))
+    t_s = measured.stamps_ns / NANOSECONDS_PER_SECOND
+    true_wind = None
+    if stored_topic(reader, TRUE_WIND_TOPIC) is not None:
+        true_wind = interpolate_vectors(
+            measured.stamps_ns, stamped_vectors(reader, TRUE_WIND_TOPIC)
+        )
+    attitude_t_s = nav_rpy = truth_rpy = None
+    if stored_topic(reader, NAV_ODOMETRY_TOPIC) is not None:
+        nav_stamps_ns, nav_quats = stamped_orientations(reader, NAV_ODOMETRY_TOPIC)
+        attitude_t_s = nav_stamps_ns / NANOSECONDS_PER_SECOND
+        nav_rpy = rpy_rad_from_quaternions(nav_quats)
+        if stored_topic(reader, TRUE_ODOMETRY_TOPIC) is not None:
+            truth_rpy = interpolate_rpy_rad(
+                nav_stamps_ns, *stamped_orientations(reader, TRUE_ODOMETRY_TOPIC)
+            )
+    products, products_source = _products(reader, t_s, corrected)
+    minute_ns = _TIME_ORIGIN_STEP_S * NANOSECONDS_PER_SECOND
+    return ReportData(
+        t_s=t_s,
+        measured_wind_sensor_mps=measured.vectors,
+        corrected_wind_enu_mps=corrected,
+        true_wind_enu_mps=true_wind,
+        attitude_t_s=attitude_t_s,
+        nav_rpy_rad=nav_rpy,
+        truth_rpy_rad=truth_rpy,
+        products=products,
+        title=title,
+        time_origin_s=float(measured.stamps_ns[0] // minute_ns * _TIME_ORIGIN_STEP_S),
+        products_source=products_source,
+    )
+
+
+def _products(
+    reader: BagReader, t_s: np.ndarray, corrected_wind_enu_mps: np.ndarray
+) -> tuple[list[WindProduct], str]:
+    """The bag's published wind products, or products recomputed from the corrected wind; and a
+    sentence saying which."""
+    stats_topics = sorted(
+        name for name in reader.topics if name.lstrip("/").startswith(STATS_TOPIC_PREFIX)
+    )
+    if stats_topics:
+        per_topic = {topic: _published_products(reader, topic) for topic in stats_topics}
+        products = sorted(
+            (product for topic_products in per_topic.values() for product in topic_products),
+            key=lambda product: (product.window_s, product.window_start_s),
+        )
+        by_window = sorted(
+            per_topic, key=lambda topic: min((p.window_s for p in per_topic[topic]), default=0.0)
+        )
+        return products, "published on " + ", ".join(name.lstrip("/") for name in by_window)
+    defaults = {field.name: field.default for field in fields(CompensatorConfig)}
+    windows_s = defaults["product_windows_s"]
+    gust_window_s = defaults["gust_window_s"]
+    products = []
+    for window_s in windows_s:
+        averager = WindAverager(window_s, gust_window_s)
+        products += averager.add_batch(t_s, corrected_wind_enu_mps) + averager.flush()
+    labels = " and ".join(window_label(window_s) for window_s in windows_s)
+    return products, (
+        f"recomputed from {CORRECTED_WIND_TOPIC}, {labels} windows, {gust_window_s:g} s gust "
+        f"(the bag has no {STATS_TOPIC_PREFIX}* topic)"
+    )
+
+
+def _published_products(reader: BagReader, stats_topic: str) -> list[WindProduct]:
+    """Products from the ``wind/stats_<window>`` messages of ``stats_topic``, each with the mean
+    vector of the ``wind/mean_<window>`` message stamped at the window end (when recorded; else
+    u and v from speed and direction, and w NaN). The gust window is not published: NaN."""
+    mean_topic = stored_topic(
+        reader, MEAN_TOPIC_PREFIX + stats_topic.lstrip("/").removeprefix(STATS_TOPIC_PREFIX)
+    )
+    means = (
+        stamped_vectors(reader, mean_topic)
+        if mean_topic
+        else StampedVectors(np.empty(0, dtype=np.int64), np.empty((0, 3)))
+    )
+    products = []
+    for message in reader.messages([stats_topic]):
+        try:
+            values = stats_values(reader.decode(message))
+            product = _product_from_stats(values, means)
+        except (KeyError, ValueError) as error:
+            raise ReportDataError(
+                f"bag {reader.path}: {stats_topic} message at log time {message.log_time_ns} ns "
+                f"is not a wind statistics layout ({error})"
+            ) from error
+        products.append(product)
+    return products
+
+
+def _product_from_stats(values: dict[str, float], means: StampedVectors) -> WindProduct:
+    end_ns = round(values["window_end_s"] * NANOSECONDS_PER_SECOND)
+    mean = vectors_at_stamps(np.array([end_ns], dtype=np.int64), means)[0]
+    if np.isnan(mean[0]):
+        speed = values["vector_mean_speed_mps"]
+        from_rad = math.radians(values["vector_mean_direction_deg"])
+        mean = np.array([-speed * math.sin(from_rad), -speed * math.cos(from_rad), math.nan])
+    return WindProduct(
+        window_s=values["window_end_s"] - values["window_start_s"],
+        window_start_s=values["window_start_s"],
+        window_end_s=values["window_end_s"],
+        first_sample_s=values["first_sample_s"],
+        last_sample_s=values["last_sample_s"],
+        n_valid=int(values["n_valid"]),
+        n_invalid=int(values["n_invalid"]),
+        mean_u_enu_mps=float(mean[0]),
+        mean_v_enu_mps=float(mean[1]),
+        mean_w_enu_mps=float(mean[2]),
+        vector_mean_speed_mps=values["vector_mean_speed_mps"],
+        vector_mean_direction_deg=values["vector_mean_direction_deg"],
+        scalar_mean_speed_mps=values["scalar_mean_speed_mps"],
+        gust_mps=values["gust_mps"],
+        gust_window_s=math.nan,
+        std_u_mps=values["std_u_mps"],
+        std_v_mps=values["std_v_mps"],
+        std_w_mps=values["std_w_mps"],
+    )
+
+
 def main(argv=None) -> int:
-    """Command line: draw the report of a run saved with :func:`save_report_data`."""
+    """Command line: draw the report of a bag, or of a run saved with :func:`save_report_data`."""
     parser = argparse.ArgumentParser(
         prog="wind_report", description="Draw wind-correction figures and tables."
     )
-    parser.add_argument("data", type=Path, help="report data file (.npz)")
     parser.add_argument(
-        "--out", type=Path, default=None, help="output folder (default: <data>_report)"
+        "source",
+        type=Path,
+        help="bag directory holding anemometer/wind and wind/true (written by process_bag or "
+        "recorded from the nodes), or a report data file (.npz)",
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: <source>_report)"
     )
     arguments = parser.parse_args(argv)
-    out_dir = arguments.out or arguments.data.with_name(arguments.data.stem + "_report")
+    source = arguments.source
     try:
-        data = load_report_data(arguments.data)
+        if source.is_file():
+            data = load_report_data(source)
+            default_out = source.with_name(source.stem + "_report")
+        else:
+            data = report_data_from_bag(source)
+            default_out = source.with_name(source.name + "_report")
     except ReportDataError as error:
         parser.exit(2, f"wind_report: {error}\n")
-    for path in write_report(data, out_dir):
+    for path in write_report(data, arguments.out or default_out):
         print(path)
     return 0
 

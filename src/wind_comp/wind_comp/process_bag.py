@@ -1,0 +1,337 @@
+"""``process_bag``: fusion and wind correction over a recorded bag, the offline twin of the nodes.
+
+    process_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file compensation.yaml]
+                [--overwrite]
+
+Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
+by ``compensation_node``: the navigation solutions pass through the numbers the ``nav/*``
+messages carry, each gets the latitude of the solution before it (as the node gets it from
+``nav/fix``), and every ``anemometer/wind`` sample yields exactly one ``wind/true`` (NaN when it
+cannot be corrected). The new bag holds ``nav/*``, ``wind/true``, the wind products
+(``wind/mean_<window>``, ``wind/stats_<window>``), the measured ``anemometer/wind`` and any
+truth topics; every output message carries the log time of the input message after which it
+was produced. The wind products are also written to ``<OUT_BAG>_wind_products.csv``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+import time
+from collections import Counter, deque
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+from geometry_msgs.msg import Vector3Stamped
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from buoy_nav.bag_io import BagError, BagReader, BagWriter
+from buoy_nav.config import FusionConfig
+from buoy_nav.fuse_bag import (
+    OfflineFusion,
+    bag_topic,
+    copy_or_decode,
+    fusion_config_from_files,
+    relative_topic,
+    sensor_topics_of,
+    truth_topics_of,
+)
+from buoy_nav.fusion_messages import NavValues
+from buoy_nav.parameters import ParameterError, build_config, coerce_parameter, load_parameter_files
+from buoy_nav.progress import Progress
+from wind_comp.compensator import (
+    DEFAULT_ANEMOMETER_POSITION_M,
+    DEFAULT_ANEMOMETER_RPY_DEG,
+    CompensatorConfig,
+    CorrectedWind,
+    WindCompensator,
+    WindStatus,
+)
+from wind_comp.nav_messages import (
+    REASON_STAMP_NOT_INCREASING,
+    StampOrder,
+    anemometer_sample,
+    body_to_enu,
+    product_messages,
+    remove_earth_rate,
+    stamp_from_seconds,
+    true_wind_message,
+    window_label,
+)
+from wind_comp.products import WindAverager, WindProduct
+
+COMPENSATION_NODE_NAME = "compensation_node"
+WIND_TOPIC = "anemometer/wind"
+TRUE_WIND_TOPIC = "wind/true"
+VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
+FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+PRODUCTS_CSV_SUFFIX = "_wind_products.csv"
+PROGRESS_EVERY_MESSAGES = 2000
+
+
+def compensator_config_from_files(paths) -> CompensatorConfig:
+    """The :class:`CompensatorConfig` ``compensation_node`` would build from these files."""
+    values = load_parameter_files(paths, COMPENSATION_NODE_NAME)
+    position = coerce_parameter(
+        "anemometer.position",
+        values.get("anemometer.position", DEFAULT_ANEMOMETER_POSITION_M),
+        DEFAULT_ANEMOMETER_POSITION_M,
+    )
+    rpy = coerce_parameter(
+        "anemometer.rpy_deg",
+        values.get("anemometer.rpy_deg", DEFAULT_ANEMOMETER_RPY_DEG),
+        DEFAULT_ANEMOMETER_RPY_DEG,
+    )
+    return build_config(
+        CompensatorConfig,
+        values,
+        prefix="compensation.",
+        anemometer_position_body_m=position,
+        anemometer_rpy_deg=rpy,
+    )
+
+
+def products_csv_path(out_bag) -> Path:
+    """Where the wind products of ``out_bag`` go: beside it, ``<name>_wind_products.csv``."""
+    out_bag = Path(out_bag)
+    return out_bag.with_name(out_bag.name + PRODUCTS_CSV_SUFFIX)
+
+
+@dataclass
+class ProcessSummary:
+    """What a run did: counts of outputs and rejections, products, timing."""
+
+    wind_status_counts: dict[WindStatus, int] = field(default_factory=dict)
+    rejected_wind_messages: Counter = field(default_factory=Counter)
+    products: list[WindProduct] = field(default_factory=list)
+    topic_counts: dict[str, int] = field(default_factory=dict)
+    fusion_lines: list[str] = field(default_factory=list)
+    duration_s: float = 0.0
+    wall_s: float = 0.0
+    csv_path: Path | None = None
+
+
+class OfflineCompensation:
+    """The compensation node's processing fed from navigation solutions, writing to a bag.
+
+    Navigation and wind samples are buffered and handed to the compensator in chunks of a
+    quarter of ``nav_history_s`` of wind: the compensator's decisions depend on stamps only, so
+    chunking changes nothing but the speed (vectorised conversion, fewer interpolations).
+    """
+
+    def __init__(self, config: CompensatorConfig, writer: BagWriter):
+        self.compensator = WindCompensator(config)
+        self.averagers = [
+            WindAverager(window_s, config.gust_window_s) for window_s in config.product_windows_s
+        ]
+        self.writer = writer
+        self.products: list[WindProduct] = []
+        self.rejected: Counter[str] = Counter()
+        self._chunk_s = config.nav_history_s / 4.0
+        self._wind_order = StampOrder()
+        self._pending_stamps: deque[tuple[int, int]] = deque()
+        self._nav_chunk: list[NavValues] = []
+        self._wind_chunk: list[tuple[float, np.ndarray]] = []
+        self._latitude_deg = math.nan
+
+    def add_navigation(self, values: list[NavValues]) -> None:
+        """The ``nav/*`` values of new navigation solutions, in order."""
+        self._nav_chunk.extend(values)
+
+    def add_wind(self, message, log_time_ns: int) -> None:
+        """One decoded ``anemometer/wind`` message."""
+        sample = anemometer_sample(message)
+        if sample.rejection is not None:
+            self.rejected[sample.rejection] += 1
+        elif not self._wind_order.advance(sample.t_s):
+            self.rejected[REASON_STAMP_NOT_INCREASING] += 1
+        stamp = message.header.stamp
+        self._pending_stamps.append((stamp.sec, stamp.nanosec))
+        self._wind_chunk.append((sample.t_s, sample.wind_sensor_mps))
+        if sample.t_s - self._wind_chunk[0][0] >= self._chunk_s:
+            self._process_chunk(log_time_ns)
+
+    def finish(self, log_time_ns: int) -> None:
+        """End of data: every pending sample decided and written, partial windows closed."""
+        self._process_chunk(log_time_ns)
+        self._write_results(self.compensator.flush(), log_time_ns)
+        for averager in self.averagers:
+            self._write_products(averager.flush(), log_time_ns)
+
+    def _process_chunk(self, log_time_ns: int) -> None:
+        self._feed_navigation()
+        winds, self._wind_chunk = self._wind_chunk, []
+        for t_s, wind in winds:
+            self.compensator.add_wind(t_s, wind)
+        self._write_results(self.compensator.ready(), log_time_ns)
+
+    def _feed_navigation(self) -> None:
+        """Convert the buffered solutions as the node converts ``nav/odometry`` + ``nav/fix``."""
+        values, self._nav_chunk = self._nav_chunk, []
+        if not values:
+            return
+        quats = np.array([v.attitude_xyzw for v in values])
+        rates = np.array([v.angular_rate_body_rad_s for v in values])
+        velocities_enu = body_to_enu(quats, np.array([v.velocity_body_mps for v in values]))
+        latitudes = np.array([self._latitude_deg, *(v.latitude_deg for v in values[:-1])])
+        self._latitude_deg = values[-1].latitude_deg
+        rates_nb = remove_earth_rate(rates, quats, latitudes)
+        for v, quat, rate, velocity in zip(values, quats, rates_nb, velocities_enu, strict=True):
+            self.compensator.add_nav(v.t_s, quat, rate, velocity)
+
+    def _write_results(self, results: list[CorrectedWind], log_time_ns: int) -> None:
+        for result in results:
+            sec, nanosec = self._pending_stamps.popleft()
+            message = true_wind_message(Vector3Stamped, sec, nanosec, result.true_wind_enu_mps)
+            self.writer.write(bag_topic(TRUE_WIND_TOPIC), VECTOR3_STAMPED, log_time_ns, message)
+            for averager in self.averagers:
+                self._write_products(
+                    averager.add(result.t_s, result.true_wind_enu_mps), log_time_ns
+                )
+
+    def _write_products(self, products: list[WindProduct], log_time_ns: int) -> None:
+        for product in products:
+            self.products.append(product)
+            mean, stats = product_messages(
+                Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
+            )
+            label = window_label(product.window_s)
+            self.writer.write(bag_topic(f"wind/mean_{label}"), VECTOR3_STAMPED, log_time_ns, mean)
+            self.writer.write(
+                bag_topic(f"wind/stats_{label}"), FLOAT64_MULTI_ARRAY, log_time_ns, stats
+            )
+
+
+def write_products_csv(products: list[WindProduct], path: Path) -> None:
+    """One row per closed averaging window; columns named with their units."""
+    names = [f.name for f in fields(WindProduct)]
+    with open(path, "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(names)
+        for product in products:
+            writer.writerow([_csv_value(getattr(product, name)) for name in names])
+
+
+def _csv_value(value) -> str:
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else f"{value:.6f}"
+    return str(value)
+
+
+def process_bag(
+    in_bag,
+    out_bag,
+    fusion_config: FusionConfig,
+    compensator_config: CompensatorConfig,
+    overwrite: bool = False,
+) -> ProcessSummary:
+    """Fuse and correct ``in_bag`` into ``out_bag`` and the products CSV beside it."""
+    started = time.monotonic()
+    csv_path = products_csv_path(out_bag)
+    with BagReader(in_bag) as reader:
+        sensors = sensor_topics_of(reader, extra_required=(WIND_TOPIC,))
+        stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_TOPIC)
+        truth = truth_topics_of(reader)
+        relative_of = {stored: relative for relative, stored in sensors.items()}
+        decoded_topics = {*relative_of, stored_wind}
+        progress = Progress(reader.duration_s, f"process_bag {in_bag}", unit="bag s")
+        with BagWriter(out_bag, overwrite=overwrite) as writer:
+            fusion = OfflineFusion(fusion_config, writer)
+            compensation = OfflineCompensation(compensator_config, writer)
+            topics = [*sensors.values(), stored_wind, *truth]
+            log_time_ns = reader.start_ns
+            for index, message in enumerate(reader.messages(topics)):
+                log_time_ns = message.log_time_ns
+                decoded = copy_or_decode(reader, writer, message, decoded_topics)
+                if message.topic == stored_wind:
+                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                    compensation.add_wind(decoded, log_time_ns)
+                elif decoded is not None:
+                    compensation.add_navigation(
+                        fusion.add(relative_of[message.topic], decoded, log_time_ns)
+                    )
+                if index % PROGRESS_EVERY_MESSAGES == 0:
+                    progress.update((log_time_ns - reader.start_ns) * 1e-9)
+            compensation.add_navigation(fusion.finish())
+            compensation.finish(log_time_ns)
+            progress.close()
+            topic_counts = writer.counts
+        duration_s = reader.duration_s
+    write_products_csv(compensation.products, csv_path)
+    return ProcessSummary(
+        wind_status_counts=compensation.compensator.counts,
+        rejected_wind_messages=compensation.rejected,
+        products=compensation.products,
+        topic_counts=topic_counts,
+        fusion_lines=fusion.summary(),
+        duration_s=duration_s,
+        wall_s=time.monotonic() - started,
+        csv_path=csv_path,
+    )
+
+
+def parse_arguments(argv):
+    parser = argparse.ArgumentParser(prog="process_bag", description=__doc__.split("\n")[0])
+    parser.add_argument(
+        "in_bag", help="bag with imu/data_raw, gnss/fix, gnss/heading, anemometer/wind[, gnss/vel]"
+    )
+    parser.add_argument("out_bag", help="bag directory to create")
+    parser.add_argument(
+        "--params-file",
+        action="append",
+        default=[],
+        help="ROS parameter YAML as given to the nodes (repeatable; later files win)",
+    )
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing OUT_BAG")
+    return parser.parse_args(argv)
+
+
+def _print_summary(summary: ProcessSummary, out_bag: str) -> None:
+    for line in summary.fusion_lines:
+        print(line)
+    counts = summary.wind_status_counts
+    invalid = ", ".join(
+        f"{status.reason} {n}" for status, n in counts.items() if status != WindStatus.VALID and n
+    )
+    print(
+        f"wind samples: {sum(counts.values())} in, {counts.get(WindStatus.VALID, 0)} corrected, "
+        f"invalid: {invalid or 'none'}"
+    )
+    for reason, n in sorted(summary.rejected_wind_messages.items()):
+        print(f"rejected message {WIND_TOPIC}: {reason}: {n}")
+    for product in summary.products:
+        if product.window_end_s - product.window_start_s < product.window_s:
+            continue
+        start_sec, _ = stamp_from_seconds(product.window_start_s)
+        print(
+            f"{window_label(product.window_s):>6s} window from {start_sec}: "
+            f"{product.vector_mean_speed_mps:6.2f} m/s from "
+            f"{product.vector_mean_direction_deg:6.1f} deg, gust {product.gust_mps:6.2f} m/s, "
+            f"{product.n_valid} valid / {product.n_invalid} invalid"
+        )
+    for topic, count in sorted(summary.topic_counts.items()):
+        print(f"{topic:22s} {count:8d}")
+    print(f"wrote {out_bag} and {summary.csv_path}")
+    print(
+        f"{summary.duration_s:.1f} s of data in {summary.wall_s:.1f} s "
+        f"({summary.duration_s / max(summary.wall_s, 1e-9):.0f}x real time)"
+    )
+
+
+def main(argv=None) -> None:
+    arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
+    try:
+        summary = process_bag(
+            arguments.in_bag,
+            arguments.out_bag,
+            fusion_config_from_files(arguments.params_file),
+            compensator_config_from_files(arguments.params_file),
+            arguments.overwrite,
+        )
+    except (ParameterError, BagError, OSError) as error:
+        print(f"process_bag: {error}", file=sys.stderr)
+        sys.exit(2)
+    _print_summary(summary, arguments.out_bag)
