@@ -35,6 +35,7 @@ from buoy_nav.fusion_messages import (
     SENSOR_MSGTYPES,
     VELOCITY_TOPIC,
     NavValues,
+    feed_imu_cdr,
     feed_message,
     nav_values,
     solution_cdr,
@@ -109,7 +110,17 @@ class OfflineFusion:
     def add(self, topic: str, message, log_time_ns: int) -> list[NavValues]:
         """One decoded sensor message of relative ``topic``; returns the values of the new
         solutions' ``nav/*`` messages, which are written with log time ``log_time_ns``."""
-        solutions, rejection = feed_message(self.engine, topic, message)
+        return self._take(topic, feed_message(self.engine, topic, message), log_time_ns)
+
+    def add_message(self, reader: BagReader, topic: str, message: BagMessage) -> list[NavValues]:
+        """:meth:`add` of a bag message of relative ``topic``, IMU samples read from CDR."""
+        fed = feed_imu_cdr(self.engine, message.raw) if topic == IMU_TOPIC else None
+        if fed is None:
+            return self.add(topic, reader.decode(message), message.log_time_ns)
+        return self._take(topic, fed, message.log_time_ns)
+
+    def _take(self, topic: str, fed, log_time_ns: int) -> list[NavValues]:
+        solutions, rejection = fed
         if rejection is not None:
             self.rejections[f"{topic}: {rejection}"] += 1
         self.last_log_time_ns = log_time_ns
@@ -150,16 +161,6 @@ class OfflineFusion:
         return lines
 
 
-def copy_or_decode(
-    reader: BagReader, writer: BagWriter, message: BagMessage, inputs: set[str]
-) -> object | None:
-    """The decoded message when its topic is one of ``inputs``; otherwise copied verbatim."""
-    if message.topic in inputs:
-        return reader.decode(message)
-    writer.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
-    return None
-
-
 def fuse_bag(in_bag: str, out_bag: str, config: FusionConfig, overwrite: bool = False):
     """Run the fusion over ``in_bag`` into ``out_bag``; returns (OfflineFusion, counts, wall s)."""
     started = time.monotonic()
@@ -171,9 +172,13 @@ def fuse_bag(in_bag: str, out_bag: str, config: FusionConfig, overwrite: bool = 
         with BagWriter(out_bag, overwrite=overwrite) as writer:
             fusion = OfflineFusion(config, writer)
             for index, message in enumerate(reader.messages([*sensors.values(), *truth])):
-                decoded = copy_or_decode(reader, writer, message, set(relative_of))
-                if decoded is not None:
-                    fusion.add(relative_of[message.topic], decoded, message.log_time_ns)
+                topic = relative_of.get(message.topic)
+                if topic is None:
+                    writer.write_raw(
+                        message.topic, message.msgtype, message.log_time_ns, message.raw
+                    )
+                else:
+                    fusion.add_message(reader, topic, message)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
                     progress.update((message.log_time_ns - reader.start_ns) * 1e-9)
             fusion.finish()

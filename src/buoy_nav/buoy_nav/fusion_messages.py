@@ -157,6 +157,30 @@ def feed_message(engine: FusionEngine, topic: str, message) -> tuple[list[NavSol
     return [], engine.last_input_rejection
 
 
+_CDR_LITTLE_ENDIAN = (0, 1)
+_STAMP = struct.Struct("<iII")
+_IMU_VECTORS = struct.Struct("<4d9d3d9d3d")
+
+
+def feed_imu_cdr(engine: FusionEngine, raw: bytes) -> tuple[list[NavSolution], str | None] | None:
+    """:func:`feed_message` of an ``imu/data_raw`` message straight from its CDR bytes.
+
+    Offline tools read IMU samples this way, several times faster than decoding a message
+    object; the engine receives the same numbers. Returns None for bytes this reader does not
+    handle (big-endian or short data): decode the message and use :func:`feed_message`.
+    """
+    if tuple(raw[:2]) != _CDR_LITTLE_ENDIAN or len(raw) < 16:
+        return None
+    sec, nanosec, frame_length = _STAMP.unpack_from(raw, 4)
+    vectors_at = 4 + 12 + frame_length
+    vectors_at += -(vectors_at - 4) % 8
+    if len(raw) < vectors_at + _IMU_VECTORS.size:
+        return None
+    values = _IMU_VECTORS.unpack_from(raw, vectors_at)
+    solutions = engine.add_imu(sec + nanosec * 1e-9, values[13:16], values[25:28])
+    return solutions, engine.last_input_rejection
+
+
 class NavValues(NamedTuple):
     """The numbers of the four ``nav/*`` messages of one solution (flat, row-major)."""
 

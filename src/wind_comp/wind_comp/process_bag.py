@@ -33,7 +33,6 @@ from buoy_nav.config import FusionConfig
 from buoy_nav.fuse_bag import (
     OfflineFusion,
     bag_topic,
-    copy_or_decode,
     fusion_config_from_files,
     relative_topic,
     sensor_topics_of,
@@ -236,7 +235,6 @@ def process_bag(
         stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_TOPIC)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
-        decoded_topics = {*relative_of, stored_wind}
         progress = Progress(reader.duration_s, f"process_bag {in_bag}", unit="bag s")
         with BagWriter(out_bag, overwrite=overwrite) as writer:
             fusion = OfflineFusion(fusion_config, writer)
@@ -245,14 +243,13 @@ def process_bag(
             log_time_ns = reader.start_ns
             for index, message in enumerate(reader.messages(topics)):
                 log_time_ns = message.log_time_ns
-                decoded = copy_or_decode(reader, writer, message, decoded_topics)
+                topic = relative_of.get(message.topic)
+                if topic is not None:
+                    compensation.add_navigation(fusion.add_message(reader, topic, message))
+                    continue
+                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
                 if message.topic == stored_wind:
-                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                    compensation.add_wind(decoded, log_time_ns)
-                elif decoded is not None:
-                    compensation.add_navigation(
-                        fusion.add(relative_of[message.topic], decoded, log_time_ns)
-                    )
+                    compensation.add_wind(reader.decode(message), log_time_ns)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
                     progress.update((log_time_ns - reader.start_ns) * 1e-9)
             compensation.add_navigation(fusion.finish())
