@@ -40,6 +40,7 @@ from buoy_nav.fusion_messages import (
     REASON_ZERO_QUATERNION,
     SENSOR_MSGTYPES,
     VELOCITY_TOPIC,
+    StampBook,
     feed_message,
     solution_messages,
 )
@@ -111,19 +112,21 @@ def node_config(**overrides) -> FusionConfig:
     return build_config(FusionConfig, parameters, "fusion.", SHARED_PARAMETERS, NOT_PARAMETERS)
 
 
-def nav_messages(solutions, outputs: dict[str, list]) -> None:
+def nav_messages(solutions, outputs: dict[str, list], stamps: StampBook) -> None:
     for solution in solutions:
-        for nav_topic, nav_message in solution_messages(solution, NAV_CLASSES).items():
+        for nav_topic, nav_message in solution_messages(solution, NAV_CLASSES, stamps).items():
             outputs[nav_topic].append(nav_message)
 
 
-def offline_run(stream, **overrides) -> tuple[dict[str, list], FusionEngine]:
-    """The nav messages of a fresh engine fed ``stream`` in order, by topic, and the engine."""
+def offline_run(stream, **overrides) -> tuple[dict[str, list], FusionEngine, StampBook]:
+    """The nav messages of a fresh engine fed ``stream`` in order, by topic, the engine and the
+    book of IMU stamps its solutions are stamped from."""
     engine = FusionEngine(node_config(**overrides))
     outputs = {topic: [] for topic in NAV_MSGTYPES}
+    stamps = StampBook()
     for topic, message in stream:
-        nav_messages(feed_message(engine, topic, message)[0], outputs)
-    return outputs, engine
+        nav_messages(feed_message(engine, topic, message, stamps)[0], outputs, stamps)
+    return outputs, engine, stamps
 
 
 class Listener:
@@ -255,7 +258,7 @@ def received_count(listener: Listener) -> int:
 
 
 def test_live_solutions_equal_offline_fusion(nodes, sensor_stream):
-    offline, engine = offline_run(sensor_stream)
+    offline, engine, _ = offline_run(sensor_stream)
     n_solutions = len(offline[ODOMETRY_TOPIC])
     assert n_solutions > 0.6 * sum(topic == IMU_TOPIC for topic, _ in sensor_stream)
 
@@ -387,7 +390,7 @@ def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_st
         paced.append((stamp_ns(m), topic, m))
         if index == imu_index:
             paced.extend((stamp_ns(m), bad_topic, message) for bad_topic, message, _, _ in bad)
-    reference, engine = offline_run(good)
+    reference, engine, _ = offline_run(good)
     n_solutions = len(reference[ODOMETRY_TOPIC])
     last_bad_ns = max(stamp_ns(message) for _, message, _, _ in bad)
     assert sum(stamp_ns(m) > last_bad_ns for m in reference[ODOMETRY_TOPIC]) > 100
@@ -435,9 +438,9 @@ def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
     stream = [
         (topic, m) for topic, m in sensor_stream if stamp_ns(m) - first_ns <= FLUSH_RUN_S * 1e9
     ]
-    reference, engine = offline_run(stream, **{"fusion.realtime_output": False})
+    reference, engine, stamps = offline_run(stream, **{"fusion.realtime_output": False})
     n_before_end = len(reference[ODOMETRY_TOPIC])
-    nav_messages(engine.flush(), reference)
+    nav_messages(engine.flush(), reference, stamps)
     n_solutions = len(reference[ODOMETRY_TOPIC])
     # The last max_measurement_delay_s of IMU samples wait for measurements until the end.
     assert n_solutions - n_before_end > 10

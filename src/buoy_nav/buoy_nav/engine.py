@@ -11,11 +11,15 @@ one stacked update (their order: fix, velocity, heading).
 
 With ``realtime_output`` (the default) a solution leaves with its IMU sample, not
 ``max_measurement_delay_s`` later: a copy of the filter's nominal state is integrated ahead
-through the buffered IMU samples to the newest one and integrated on with each new sample; it is
-forked again whenever a measurement corrects the filter. The prediction depends only on stamps
-(which measurements lie behind the processing horizon), so a live node and an offline run of the
-same data give the same solutions. Its covariances are the filter's, from up to
-``max_measurement_delay_s`` earlier.
+through the buffered IMU samples to the newest one and integrated on with each new sample. Each
+correction of the filter is carried over to the copy through the error dynamics over the span
+between them (attitude error plus gyro-bias drift, velocity error plus the attitude error acting
+on the specific-force increment and the accelerometer-bias change, position error plus velocity
+error times the span), exact to first order; once per ``PREDICTION_RESYNC_INTERVAL_S`` of stamps
+the copy is instead forked afresh from the filter, so second-order residues cannot accumulate.
+The prediction depends only on stamps (which measurements lie behind the processing horizon), so
+a live node and an offline run of the same data give the same solutions. Its covariances are the
+filter's, from up to ``max_measurement_delay_s`` earlier.
 
 Before alignment the IMU samples and GNSS measurements feed :class:`InMotionAligner`; once
 aligned, the strapdown integrator carries the nominal state and the error-state filter corrects
@@ -45,7 +49,9 @@ from buoy_nav.alignment import (
 )
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import (
+    ACCEL_BIAS,
     ATTITUDE,
+    GYRO_BIAS,
     POSITION,
     VELOCITY,
     ErrorStateFilter,
@@ -89,6 +95,10 @@ GEOMETRY = "geometry"
 SINGULAR = "singular_innovation_covariance"
 BEYOND_IMU_DATA = "beyond_imu_data"
 MALFORMED = "malformed"
+
+# Longest run of carried-over corrections before the real-time prediction is forked afresh from
+# the filter (s of stamps): bounds the second-order residue of the carry-over (≪ 1e-6 rad).
+PREDICTION_RESYNC_INTERVAL_S = 1.0
 
 # Plausibility limits of GNSS input beyond which a value is a malformed message, not a
 # measurement: ellipsoidal altitude (m) and speed over ground (m/s) of a buoy.
@@ -283,6 +293,7 @@ class FusionEngine:
         # Real-time prediction: (integrator ahead of the filter, its time, raw gyro and force at
         # that time); None when it must be forked again from the filter state.
         self._ahead: tuple[StrapdownIntegrator, float, tuple, tuple] | None = None
+        self._ahead_forked_at = -math.inf
         self._last_predicted_stamp = -math.inf
         # Why the latest add_* call rejected its input (None: accepted).
         self.last_input_rejection: str | None = None
@@ -508,6 +519,7 @@ class FusionEngine:
         if self._ahead is None:
             integrator = self._integrator.fork()
             t, gyro, force = self._time, self._gyro, self._force
+            self._ahead_forked_at = t
             samples = self._imu_buffer
             if t > self._last_predicted_stamp and self._output_due(t, 0.0):
                 # The filter's own sample: the first one after an alignment.
@@ -690,8 +702,29 @@ class FusionEngine:
         _set_nav_state(self._integrator, new_state)
         self._filter.reset_after_injection(correction)
         self._covariance_blocks = None
-        self._ahead = None
         self._bias_arrays = None
+        if self._ahead is not None:
+            if self._time >= self._ahead_forked_at + PREDICTION_RESYNC_INTERVAL_S:
+                self._ahead = None
+            else:
+                self._carry_over(state, correction)
+
+    def _carry_over(self, state: NavState, correction):
+        """Apply a correction of the filter state ``state`` to the prediction ahead of it."""
+        integrator, t_ahead, _, _ = self._ahead
+        span = t_ahead - self._time
+        dx = np.array(correction, dtype=float)
+        if span > 0.0:
+            rotation_integral = integrator.rotation_nb * span
+            velocity_ahead = np.array(integrator.velocity_enu_mps)
+            gravity = earth.normal_gravity_mps2(state.latitude_rad, state.altitude_m)
+            force_increment = velocity_ahead - state.velocity_enu_mps
+            force_increment[2] += gravity * span
+            phi, dv = dx[ATTITUDE], dx[VELOCITY].copy()
+            dx[POSITION] += dv * span
+            dx[VELOCITY] += np.cross(phi, force_increment) - rotation_integral @ dx[ACCEL_BIAS]
+            dx[ATTITUDE] -= rotation_integral @ dx[GYRO_BIAS]
+        _set_nav_state(integrator, inject_error_state(_nav_state(integrator), dx))
 
     def _reset_to_measurement(self, kind, t, payload, gyro, model):
         """Re-initialise the states a persistently rejected measurement kind observes."""

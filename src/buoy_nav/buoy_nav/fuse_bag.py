@@ -35,6 +35,7 @@ from buoy_nav.fusion_messages import (
     SENSOR_MSGTYPES,
     VELOCITY_TOPIC,
     NavValues,
+    StampBook,
     feed_imu_cdr,
     feed_message,
     nav_values,
@@ -102,6 +103,7 @@ class OfflineFusion:
 
     def __init__(self, config: FusionConfig, writer: BagWriter):
         self.engine = FusionEngine(config)
+        self.stamps = StampBook()
         self.writer = writer
         self.rejections: Counter[str] = Counter()
         self.first_solution_s: float | None = None
@@ -110,11 +112,13 @@ class OfflineFusion:
     def add(self, topic: str, message, log_time_ns: int) -> list[NavValues]:
         """One decoded sensor message of relative ``topic``; returns the values of the new
         solutions' ``nav/*`` messages, which are written with log time ``log_time_ns``."""
-        return self._take(topic, feed_message(self.engine, topic, message), log_time_ns)
+        return self._take(
+            topic, feed_message(self.engine, topic, message, self.stamps), log_time_ns
+        )
 
     def add_message(self, reader: BagReader, topic: str, message: BagMessage) -> list[NavValues]:
         """:meth:`add` of a bag message of relative ``topic``, IMU samples read from CDR."""
-        fed = feed_imu_cdr(self.engine, message.raw) if topic == IMU_TOPIC else None
+        fed = feed_imu_cdr(self.engine, message.raw, self.stamps) if topic == IMU_TOPIC else None
         if fed is None:
             return self.add(topic, reader.decode(message), message.log_time_ns)
         return self._take(topic, fed, message.log_time_ns)
@@ -135,7 +139,7 @@ class OfflineFusion:
         for solution in solutions:
             if self.first_solution_s is None:
                 self.first_solution_s = solution.t_s
-            values = nav_values(solution)
+            values = nav_values(solution, self.stamps)
             for topic, raw in solution_cdr(values).items():
                 self.writer.write_raw(bag_topic(topic), NAV_MSGTYPES[topic], log_time_ns, raw)
             written.append(values)
@@ -209,7 +213,8 @@ def main(argv=None) -> None:
             arguments.in_bag, arguments.out_bag, config, arguments.overwrite
         )
     except (ParameterError, BagError) as error:
-        print(f"fuse_bag: {error}", file=sys.stderr)
+        # one line: YAML parser messages span several
+        print(f"fuse_bag: {' '.join(str(error).split())}", file=sys.stderr)
         sys.exit(2)
     for line in fusion.summary():
         print(line)

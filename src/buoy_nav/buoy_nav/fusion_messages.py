@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections import deque
 from typing import NamedTuple
 
 import numpy as np
@@ -96,6 +97,32 @@ def stamp_parts(t_s: float) -> tuple[int, int]:
     return total_ns // NANOSECONDS_PER_SECOND, total_ns % NANOSECONDS_PER_SECOND
 
 
+class StampBook:
+    """The exact header stamps of recent IMU samples, to stamp their solutions with.
+
+    The engine works in float seconds, which resolve about 0.24 µs at present-day epoch times;
+    a solution's stamp is looked up here by its float stamp so that ``nav/*`` carry the IMU
+    message's own (sec, nanosec). Solutions come out in stamp order, so the book is a queue;
+    it keeps the newest ``capacity`` samples (delayed output needs
+    ``max_measurement_delay_s`` × IMU rate of them).
+    """
+
+    def __init__(self, capacity: int = 8192):
+        self._stamps: deque[tuple[float, int, int]] = deque(maxlen=capacity)
+
+    def remember(self, t_s: float, sec: int, nanosec: int) -> None:
+        self._stamps.append((t_s, sec, nanosec))
+
+    def exact(self, t_s: float) -> tuple[int, int]:
+        """(sec, nanosec) of the sample stamped ``t_s`` (s); rounded from ``t_s`` if unknown."""
+        stamps = self._stamps
+        while stamps and stamps[0][0] < t_s:
+            stamps.popleft()
+        if stamps and stamps[0][0] == t_s:
+            return stamps[0][1], stamps[0][2]
+        return stamp_parts(t_s)
+
+
 def _triple(vector) -> tuple[float, float, float]:
     return float(vector.x), float(vector.y), float(vector.z)
 
@@ -106,16 +133,21 @@ def yaw_from_quaternion_rad(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
 
 
-def feed_message(engine: FusionEngine, topic: str, message) -> tuple[list[NavSolution], str | None]:
+def feed_message(
+    engine: FusionEngine, topic: str, message, stamps: StampBook | None = None
+) -> tuple[list[NavSolution], str | None]:
     """Give one sensor message of ``topic`` to ``engine``.
 
     Returns the navigation solutions that became available (IMU messages only) and the reason
     the message was rejected, None when it was accepted. Rejected input never reaches the
-    state; the engine counts its own rejections (see :meth:`FusionEngine.health`).
+    state; the engine counts its own rejections (see :meth:`FusionEngine.health`). IMU stamps
+    go into ``stamps`` when given.
     """
     try:
         t_s = stamp_seconds(message.header)
         if topic == IMU_TOPIC:
+            if stamps is not None:
+                stamps.remember(t_s, message.header.stamp.sec, message.header.stamp.nanosec)
             solutions = engine.add_imu(
                 t_s, _triple(message.angular_velocity), _triple(message.linear_acceleration)
             )
@@ -162,7 +194,9 @@ _STAMP = struct.Struct("<iII")
 _IMU_VECTORS = struct.Struct("<4d9d3d9d3d")
 
 
-def feed_imu_cdr(engine: FusionEngine, raw: bytes) -> tuple[list[NavSolution], str | None] | None:
+def feed_imu_cdr(
+    engine: FusionEngine, raw: bytes, stamps: StampBook | None = None
+) -> tuple[list[NavSolution], str | None] | None:
     """:func:`feed_message` of an ``imu/data_raw`` message straight from its CDR bytes.
 
     Offline tools read IMU samples this way, several times faster than decoding a message
@@ -177,7 +211,10 @@ def feed_imu_cdr(engine: FusionEngine, raw: bytes) -> tuple[list[NavSolution], s
     if len(raw) < vectors_at + _IMU_VECTORS.size:
         return None
     values = _IMU_VECTORS.unpack_from(raw, vectors_at)
-    solutions = engine.add_imu(sec + nanosec * 1e-9, values[13:16], values[25:28])
+    t_s = sec + nanosec * 1e-9
+    if stamps is not None:
+        stamps.remember(t_s, sec, nanosec)
+    solutions = engine.add_imu(t_s, values[13:16], values[25:28])
     return solutions, engine.last_input_rejection
 
 
@@ -218,9 +255,11 @@ def _block_diagonal_6x6(upper, lower) -> tuple:
     return tuple(rows)
 
 
-def nav_values(solution: NavSolution) -> NavValues:
-    """What the ``nav/*`` messages of ``solution`` carry (see the module docstring)."""
-    sec, nanosec = stamp_parts(solution.t_s)
+def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavValues:
+    """What the ``nav/*`` messages of ``solution`` carry (see the module docstring), stamped
+    with the exact IMU stamp from ``stamps`` when given."""
+    t_s = solution.t_s
+    sec, nanosec = stamp_parts(t_s) if stamps is None else stamps.exact(t_s)
     x, y, z, w = solution.attitude_xyzw.tolist()
     rotation_nb = _rotation_matrix(x, y, z, w)
     attitude_covariance = solution.attitude_covariance_rad2
@@ -286,9 +325,11 @@ def _rotation_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
     )
 
 
-def solution_messages(solution: NavSolution, classes: NavMessageClasses) -> dict[str, object]:
+def solution_messages(
+    solution: NavSolution, classes: NavMessageClasses, stamps: StampBook | None = None
+) -> dict[str, object]:
     """The four ``nav/*`` messages of one solution, by topic (see the module docstring)."""
-    values = nav_values(solution)
+    values = nav_values(solution, stamps)
     sec, nanosec = values.sec, values.nanosec
 
     odometry = classes.odometry()

@@ -68,6 +68,7 @@ from buoy_nav.fusion_messages import (
     SENSOR_MSGTYPES,
     VELOCITY_TOPIC,
     NavMessageClasses,
+    StampBook,
     feed_message,
     solution_messages,
 )
@@ -106,6 +107,7 @@ class FusionNode(SuiteNode):
         super().__init__(NODE_NAME)
         self.config = self._declare_fusion_config()
         self.engine = FusionEngine(self.config)
+        self.stamps = StampBook()
         self._messages_in = collections.Counter()
         self._messages_in_at_last_report = collections.Counter()
         self._last_report_s = time.monotonic()
@@ -170,7 +172,7 @@ class FusionNode(SuiteNode):
     def feed(self, topic: str, message) -> None:
         """Give a sensor message to the engine; publish the solutions it yields."""
         self._messages_in[topic] += 1
-        solutions, rejection = feed_message(self.engine, topic, message)
+        solutions, rejection = feed_message(self.engine, topic, message, self.stamps)
         if rejection is not None:
             self.reject(topic, rejection)
             return
@@ -180,7 +182,7 @@ class FusionNode(SuiteNode):
 
     def publish_solutions(self, solutions: list[NavSolution]) -> None:
         for solution in solutions:
-            for topic, message in solution_messages(solution, NAV_CLASSES).items():
+            for topic, message in solution_messages(solution, NAV_CLASSES, self.stamps).items():
                 self._nav_publishers[topic].publish(message)
             self.solutions_published += 1
 
