@@ -1,21 +1,33 @@
-"""Report figures, tables and the saved report data."""
+"""Report figures, tables and the saved report data; the report of a processed bag."""
+
+import dataclasses
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.image import imread
 from scipy.spatial.transform import Rotation
 
+from buoy_nav.bag_io import BagReader, BagWriter
+from buoy_nav.fuse_bag import fusion_config_from_files
+from sensor_sim.simulate_bag import parse_arguments, simulate
+from wind_comp.process_bag import compensator_config_from_files, process_bag
 from wind_comp.products import WindAverager
 from wind_comp.report import (
     ReportData,
     ReportDataError,
     load_report_data,
     main,
+    report_data_from_bag,
     rpy_rad_from_quaternions,
     save_report_data,
     write_report,
 )
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+BUOY_PARAMS = str(Path(__file__).resolve().parents[2] / "src/buoy_nav/config/buoy.yaml")
+FIGURES = ("wind_time_series.png", "attitude_error.png", "vertical_wind_spectrum.png")
 
 
 def sample_data(with_truth: bool) -> ReportData:
@@ -119,3 +131,136 @@ def test_unreadable_data_file_is_reported(tmp_path):
     with pytest.raises(SystemExit) as exit_info:
         main([str(bad)])
     assert exit_info.value.code == 2
+
+
+@pytest.fixture(scope="module")
+def sea_state_bags(tmp_path_factory):
+    """(sensor bag, processed bag, process summary) of 40 s of the sea_state scenario."""
+    folder = tmp_path_factory.mktemp("sea_state")
+    sensors, processed = folder / "sensors", folder / "processed"
+    simulate(
+        parse_arguments(
+            ["sea_state", str(sensors), "--set", "duration_s=40", "--params-file", BUOY_PARAMS]
+        )
+    )
+    summary = process_bag(
+        sensors,
+        processed,
+        fusion_config_from_files([BUOY_PARAMS]),
+        compensator_config_from_files([BUOY_PARAMS]),
+    )
+    return sensors, processed, summary
+
+
+def independent_errors(bag) -> tuple[np.ndarray, np.ndarray]:
+    """Corrected wind matched to each anemometer stamp and its error against the truth
+    interpolated there, straight from the bag's messages; (N, 3) each, NaN where unknown."""
+    with BagReader(bag) as reader:
+
+        def stamped(topic):
+            for message in reader.messages([topic]):
+                decoded = reader.decode(message)
+                stamp = decoded.header.stamp
+                yield (
+                    (stamp.sec, stamp.nanosec),
+                    (
+                        decoded.vector.x,
+                        decoded.vector.y,
+                        decoded.vector.z,
+                    ),
+                )
+
+        measured_stamps = [stamp for stamp, _ in stamped("anemometer/wind")]
+        corrected_by_stamp = dict(stamped("wind/true"))
+        truth = list(stamped("truth/wind"))
+    # The contract: one wind/true per anemometer sample, with its stamp.
+    assert len(corrected_by_stamp) == len(measured_stamps)
+    corrected = np.array([corrected_by_stamp[stamp] for stamp in measured_stamps])
+    truth_sec0 = truth[0][0][0]
+    truth_t_s = np.array([(sec - truth_sec0) + nanosec * 1e-9 for (sec, nanosec), _ in truth])
+    truth_wind = np.array([vector for _, vector in truth])
+    t_s = np.array([(sec - truth_sec0) + nanosec * 1e-9 for sec, nanosec in measured_stamps])
+    true_at_samples = np.column_stack(
+        [
+            np.interp(t_s, truth_t_s, truth_wind[:, axis], left=np.nan, right=np.nan)
+            for axis in range(3)
+        ]
+    )
+    return corrected, corrected - true_at_samples
+
+
+def table_row(markdown: str, series: str, quantity: str) -> tuple[float, float, int]:
+    """(bias, RMS, samples) of one row of the error table."""
+    match = re.search(
+        rf"^\| {re.escape(series)} \| {re.escape(quantity)} \| (\S+) \| (\S+) \| (\d+) \|$",
+        markdown,
+        flags=re.MULTILINE,
+    )
+    assert match, f"no row {series} / {quantity}"
+    return float(match[1]), float(match[2]), int(match[3])
+
+
+def test_report_of_a_processed_bag(sea_state_bags, tmp_path, capsys):
+    _, processed, summary = sea_state_bags
+    assert main([str(processed), "--out", str(tmp_path)]) == 0
+    assert "wind_products.md" in capsys.readouterr().out
+    for name in FIGURES:
+        path = tmp_path / name
+        assert path.read_bytes()[:8] == PNG_SIGNATURE
+        image = imread(path)
+        assert image.shape[0] > 400 and image.shape[1] > 600
+        colours = np.unique(image.reshape(-1, image.shape[2]), axis=0)
+        assert len(colours) > 50, f"{name} looks blank"
+
+    corrected, errors = independent_errors(processed)
+    data = report_data_from_bag(processed)
+    np.testing.assert_array_equal(data.corrected_wind_enu_mps, corrected)
+    np.testing.assert_allclose(
+        data.corrected_wind_enu_mps - data.true_wind_enu_mps, errors, rtol=0, atol=1e-9
+    )
+
+    markdown = (tmp_path / "wind_products.md").read_text()
+    usable = np.all(np.isfinite(errors), axis=1)
+    rms = np.sqrt(np.mean(errors[usable] ** 2, axis=0))
+    for axis, quantity in enumerate(("u (m/s)", "v (m/s)", "w (m/s)")):
+        _, table_rms, samples = table_row(markdown, "corrected", quantity)
+        assert samples == np.count_nonzero(usable)
+        # The table prints 4 decimals: it must be the recomputed value rounded.
+        assert abs(table_rms - rms[axis]) <= 0.5e-4 + 1e-9
+    # The motion correction removes most of the buoy's motion from w.
+    _, measured_w_rms, _ = table_row(markdown, "measured (sensor axes)", "w (m/s)")
+    assert rms[2] < 0.2 * measured_w_rms
+
+    # The published products are read back as process_bag computed them (the gust window is
+    # not published).
+    published = [dataclasses.replace(p, gust_window_s=3.0) for p in data.products]
+    assert published == sorted(summary.products, key=lambda p: (p.window_s, p.window_start_s))
+    assert "published on wind/stats_1min, wind/stats_10min" in markdown
+
+
+def test_products_are_recomputed_when_the_bag_has_none(sea_state_bags, tmp_path):
+    _, processed, _ = sea_state_bags
+    without_products = tmp_path / "without_products"
+    with BagReader(processed) as reader, BagWriter(without_products) as writer:
+        kept = [name for name in reader.topics if not name.startswith("/wind/stats_")]
+        for message in reader.messages(kept):
+            writer.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
+    data = report_data_from_bag(without_products)
+    expected = []
+    for window_s in (60.0, 600.0):
+        averager = WindAverager(window_s, 3.0)
+        expected += averager.add_batch(data.t_s, data.corrected_wind_enu_mps) + averager.flush()
+    assert data.products == expected
+    assert data.products_source.startswith("recomputed from wind/true")
+
+
+def test_missing_bag_or_wind_topics_exit_with_one_line(sea_state_bags, tmp_path, capsys):
+    sensors, _, _ = sea_state_bags
+    for source, expected in ((tmp_path / "no_such_bag", "does not exist"), (sensors, "wind/true")):
+        with pytest.raises(SystemExit) as exit_info:
+            main([str(source), "--out", str(tmp_path / "report")])
+        assert exit_info.value.code == 2
+        error = capsys.readouterr().err
+        assert error.startswith("wind_report: ") and expected in error
+        assert error.count("\n") == 1
+    assert not (tmp_path / "report").exists()

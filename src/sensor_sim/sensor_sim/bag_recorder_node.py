@@ -53,6 +53,8 @@ DEFAULT_TOPICS = (
     "wind/true",
     "wind/mean_1min",
     "wind/mean_10min",
+    "wind/stats_1min",
+    "wind/stats_10min",
 )
 # ROS infrastructure that --all leaves out; /clock is recorded only when listed in --topics.
 EXCLUDED_FROM_ALL = frozenset({"/rosout", "/parameter_events", "/clock"})

@@ -423,6 +423,11 @@ def stored_topic(reader: BagReader, topic: str) -> str | None:
     return None
 
 
+def _has_messages(reader: BagReader, topic: str) -> bool:
+    name = stored_topic(reader, topic)
+    return name is not None and reader.topics[name].count > 0
+
+
 def _stamp_ns(header) -> int:
     return int(header.stamp.sec) * NANOSECONDS_PER_SECOND + int(header.stamp.nanosec)
 
@@ -525,10 +530,7 @@ def report_data_from_bag(bag, title: str | None = None) -> ReportData:
 
 def _report_data(reader: BagReader, title: str) -> ReportData:
     required = (ANEMOMETER_TOPIC, CORRECTED_WIND_TOPIC)
-    stored = {topic: stored_topic(reader, topic) for topic in required}
-    missing = [
-        topic for topic, name in stored.items() if name is None or not reader.topics[name].count
-    ]
+    missing = [topic for topic in required if not _has_messages(reader, topic)]
     if missing:
         raise ReportDataError(
             f"bag {reader.path} has no {' and no '.join(missing)} messages; a wind report needs "
@@ -539,16 +541,16 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
     corrected = vectors_at_stamps(measured.stamps_ns, stamped_vectors(reader, CORRECTED_WIND_TOPIC))
     t_s = measured.stamps_ns / NANOSECONDS_PER_SECOND
     true_wind = None
-    if stored_topic(reader, TRUE_WIND_TOPIC) is not None:
+    if _has_messages(reader, TRUE_WIND_TOPIC):
         true_wind = interpolate_vectors(
             measured.stamps_ns, stamped_vectors(reader, TRUE_WIND_TOPIC)
         )
     attitude_t_s = nav_rpy = truth_rpy = None
-    if stored_topic(reader, NAV_ODOMETRY_TOPIC) is not None:
+    if _has_messages(reader, NAV_ODOMETRY_TOPIC):
         nav_stamps_ns, nav_quats = stamped_orientations(reader, NAV_ODOMETRY_TOPIC)
         attitude_t_s = nav_stamps_ns / NANOSECONDS_PER_SECOND
         nav_rpy = rpy_rad_from_quaternions(nav_quats)
-        if stored_topic(reader, TRUE_ODOMETRY_TOPIC) is not None:
+        if _has_messages(reader, TRUE_ODOMETRY_TOPIC):
             truth_rpy = interpolate_rpy_rad(
                 nav_stamps_ns, *stamped_orientations(reader, TRUE_ODOMETRY_TOPIC)
             )
