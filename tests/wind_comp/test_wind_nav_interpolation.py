@@ -141,6 +141,37 @@ def test_from_arrays_matches_appending_one_by_one():
     np.testing.assert_array_equal(a.angular_rate_body_rad_s, b.angular_rate_body_rad_s)
 
 
+def test_extending_in_chunks_matches_appending_one_by_one_with_bounded_history():
+    rng = np.random.default_rng(23)
+    stamps = np.cumsum(rng.uniform(0.005, 0.04, 600))
+    stamps[[120, 121, 300]] = stamps[[119, 100, 250]]  # duplicate and backwards stamps
+    quats = rng.normal(size=(600, 4))
+    quats[333] = 0.0
+    rates = rng.normal(size=(600, 3))
+    rates[90, 1] = np.inf
+    velocities = rng.normal(size=(600, 3))
+    chunked, streamed = NavTrack(history_s=2.0), NavTrack(history_s=2.0)
+    boundaries = np.sort(rng.choice(np.arange(1, 600), 40, replace=False))
+    queries_per_chunk = []
+    for chunk in np.split(np.arange(600), boundaries):
+        chunked.extend(stamps[chunk], quats[chunk], rates[chunk], velocities[chunk])
+        for i in chunk:
+            streamed.append(stamps[i], quats[i], rates[i], velocities[i])
+        queries = rng.uniform(stamps[chunk[0]] - 3.0, stamps[chunk[-1]] + 0.1, 50)
+        queries_per_chunk.append((chunked.interpolate(queries), streamed.interpolate(queries)))
+        assert len(chunked) == len(streamed)
+    assert (chunked.n_accepted, chunked.n_rejected_out_of_order, chunked.n_rejected_invalid) == (
+        streamed.n_accepted,
+        streamed.n_rejected_out_of_order,
+        streamed.n_rejected_invalid,
+    )
+    assert chunked.n_rejected_invalid == 2 and chunked.n_rejected_out_of_order == 3
+    for a, b in queries_per_chunk:
+        np.testing.assert_array_equal(a.status, b.status)
+        np.testing.assert_array_equal(a.attitude_nb.as_quat(), b.attitude_nb.as_quat())
+        np.testing.assert_array_equal(a.velocity_enu_mps, b.velocity_enu_mps)
+
+
 def test_history_is_bounded_and_old_stamps_are_reported_evicted():
     stamps = np.arange(0.0, 60.0, 0.01)
     track = analytic_track(stamps, history_s=1.0)

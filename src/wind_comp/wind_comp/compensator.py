@@ -321,6 +321,11 @@ class WindCompensator:
         ENU velocity m/s). Returns False when the track rejects it (counted there)."""
         return self.nav_track.append(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
 
+    def add_nav_batch(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> int:
+        """:meth:`add_nav` of (N,) stamps and (N, 4), (N, 3), (N, 3) arrays, in order; returns
+        the number accepted."""
+        return self.nav_track.extend(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
+
     def add_wind(self, t_s, wind_sensor_mps) -> None:
         """Add one anemometer sample: stamp s, air velocity in anemometer axes m/s, (3,)."""
         wind = np.asarray(wind_sensor_mps, dtype=float)

@@ -105,26 +105,8 @@ class NavTrack:
             t_s: (N,) stamps, s. quat_xyzw: (N, 4) body→ENU attitude.
             angular_rate_body_rad_s: (N, 3). velocity_enu_mps: (N, 3).
         """
-        stamps, quats, rates, velocities = _validated_arrays(
-            t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps
-        )
         track = cls(max_gap_s=max_gap_s)
-        well_formed = _well_formed(stamps, quats, rates, velocities)
-        candidate_stamps = np.where(well_formed, stamps, -np.inf)
-        latest_before = np.concatenate(([-np.inf], np.maximum.accumulate(candidate_stamps)[:-1]))
-        accepted = well_formed & (stamps > latest_before)
-        n_accepted = int(np.count_nonzero(accepted))
-        track._reserve(n_accepted)
-        track._stamps_s[:n_accepted] = stamps[accepted]
-        track._quats_xyzw[:n_accepted] = _normalised(quats[accepted])
-        track._rates_body_rad_s[:n_accepted] = rates[accepted]
-        track._velocities_enu_mps[:n_accepted] = velocities[accepted]
-        track._end = n_accepted
-        if n_accepted:
-            track._first_stamp_s = float(stamps[accepted][0])
-        track.n_accepted = n_accepted
-        track.n_rejected_invalid = int(np.count_nonzero(~well_formed))
-        track.n_rejected_out_of_order = int(np.count_nonzero(well_formed & ~accepted))
+        track.extend(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
         return track
 
     def __len__(self) -> int:
@@ -147,27 +129,42 @@ class NavTrack:
             t_s: stamp, s. quat_xyzw: (4,) body→ENU attitude, any non-zero norm.
             angular_rate_body_rad_s: (3,) body axes. velocity_enu_mps: (3,) ENU.
         """
+        return self.extend([t_s], [quat_xyzw], [angular_rate_body_rad_s], [velocity_enu_mps]) == 1
+
+    def extend(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> int:
+        """Add samples in array order, exactly as appending them one by one would (a sample is
+        rejected and counted when malformed or not later than the newest accepted one); returns
+        how many were accepted.
+
+        Args:
+            t_s: (N,) stamps, s. quat_xyzw: (N, 4) body→ENU attitude.
+            angular_rate_body_rad_s: (N, 3). velocity_enu_mps: (N, 3).
+        """
         stamps, quats, rates, velocities = _validated_arrays(
-            [t_s], [quat_xyzw], [angular_rate_body_rad_s], [velocity_enu_mps]
+            t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps
         )
-        if not _well_formed(stamps, quats, rates, velocities)[0]:
-            self.n_rejected_invalid += 1
-            return False
-        stamp = stamps[0]
-        if len(self) and not stamp > self.newest_stamp_s:
-            self.n_rejected_out_of_order += 1
-            return False
-        self._reserve(1)
-        self._stamps_s[self._end] = stamp
-        self._quats_xyzw[self._end] = _normalised(quats)[0]
-        self._rates_body_rad_s[self._end] = rates[0]
-        self._velocities_enu_mps[self._end] = velocities[0]
-        self._end += 1
+        well_formed = _well_formed(stamps, quats, rates, velocities)
+        newest = self.newest_stamp_s if len(self) else -np.inf
+        candidate_stamps = np.where(well_formed, stamps, -np.inf)
+        latest_before = np.maximum.accumulate(np.concatenate(([newest], candidate_stamps)))[:-1]
+        accepted = well_formed & (stamps > latest_before)
+        n_accepted = int(np.count_nonzero(accepted))
+        self.n_rejected_invalid += int(np.count_nonzero(~well_formed))
+        self.n_rejected_out_of_order += int(np.count_nonzero(well_formed & ~accepted))
+        if n_accepted == 0:
+            return 0
+        self._reserve(n_accepted)
+        end = self._end + n_accepted
+        self._stamps_s[self._end : end] = stamps[accepted]
+        self._quats_xyzw[self._end : end] = _normalised(quats[accepted])
+        self._rates_body_rad_s[self._end : end] = rates[accepted]
+        self._velocities_enu_mps[self._end : end] = velocities[accepted]
+        self._end = end
         if np.isnan(self._first_stamp_s):
-            self._first_stamp_s = float(stamp)
-        self.n_accepted += 1
-        self._discard_before(stamp - self.history_s)
-        return True
+            self._first_stamp_s = float(stamps[accepted][0])
+        self.n_accepted += n_accepted
+        self._discard_before(self._stamps_s[end - 1] - self.history_s)
+        return n_accepted
 
     def interpolate(self, t_query_s) -> InterpolatedNav:
         """Navigation state at the (N,) query stamps, s; see :class:`InterpolationStatus`.

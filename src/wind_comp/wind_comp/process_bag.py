@@ -178,8 +178,8 @@ class OfflineCompensation:
         latitudes = np.array([self._latitude_deg, *(v.latitude_deg for v in values[:-1])])
         self._latitude_deg = values[-1].latitude_deg
         rates_nb = remove_earth_rate(rates, quats, latitudes)
-        for v, quat, rate, velocity in zip(values, quats, rates_nb, velocities_enu, strict=True):
-            self.compensator.add_nav(v.t_s, quat, rate, velocity)
+        stamps = np.array([v.t_s for v in values])
+        self.compensator.add_nav_batch(stamps, quats, rates_nb, velocities_enu)
 
     def _write_results(self, results: list[CorrectedWind], log_time_ns: int) -> None:
         for result in results:
@@ -329,6 +329,7 @@ def main(argv=None) -> None:
             arguments.overwrite,
         )
     except (ParameterError, BagError, OSError) as error:
-        print(f"process_bag: {error}", file=sys.stderr)
+        # one line: YAML parser messages span several
+        print(f"process_bag: {' '.join(str(error).split())}", file=sys.stderr)
         sys.exit(2)
     _print_summary(summary, arguments.out_bag)
