@@ -1,0 +1,414 @@
+"""``fuse_bag`` on the committed bags: the command line, its errors, and the accuracy of the
+fusion against the truth each bag carries.
+
+Accuracy is judged on ``process_bag``'s output, whose ``nav/*`` are ``fuse_bag``'s (same core;
+``test_process_bag`` holds them byte-equal), so every bag is fused once per session. The filter
+must be consistent (its errors the size its covariance claims) and never worse than what the
+simulated sensors allow (bounds from the simulator's error budget, which recorded the bags).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import subprocess
+import sys
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from buoy_nav.bag_io import BagReader, BagWriter
+from buoy_nav.fuse_bag import fusion_config_from_files
+from sensor_sim.sensor_models import GnssErrorConfig, ImuErrorConfig
+from wind_comp.process_bag import compensator_config_from_files, process_bag
+
+REPO = Path(__file__).resolve().parents[2]
+BAGS_DIR = REPO / "bags"
+BAGS = ("static", "tilt_table", "wind_tunnel_10", "vertical_wind_5", "sea_state", "open_ocean")
+BUOY_PARAMETERS = REPO / "src" / "buoy_nav" / "config" / "buoy.yaml"
+FUSE_BAG = Path(sys.executable).parent / "fuse_bag"
+CLI_BAG = "sea_state"
+NAV_TOPICS = ("/nav/odometry", "/nav/imu", "/nav/velocity", "/nav/fix")
+SENSOR_TOPICS = ("/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gnss/heading")
+NANOSECONDS_PER_SECOND = 1_000_000_000
+
+SETTLING_S = 60.0  # accuracy is judged from the first solution + this
+# Statistics at the GNSS rate: consecutive 100 Hz errors add no independent information.
+EVALUATION_PERIOD_MS = 100
+ATTITUDE_VARIANCE_INDICES = (21, 28, 35)  # E, N, U rotation-vector error in the pose covariance
+VELOCITY_VARIANCE_INDICES = (0, 7, 14)  # E, N, U in the ENU twist covariance
+AXES = ("E", "N", "U")
+# Per bag and axis the error may be one slowly varying draw over the whole window (bias driven),
+# so its mean NEES is bounded only by the chi-square quantile of ONE degree of freedom; pooled
+# over all bags and axes (independent seeds), the mean has at least that many degrees.
+CONFIDENCE = 0.999
+MAX_SIGMAS = 4.0
+MIN_FRACTION_WITHIN = 0.999
+
+IMU_ERRORS = ImuErrorConfig()
+GNSS_ERRORS = GnssErrorConfig()
+STANDARD_GRAVITY_MPS2 = 9.80665
+# Still, the filter cannot tell a tilt from a horizontal accelerometer bias: the tilt error is
+# bias/g, 3 sigma of the turn-on bias at most.
+MAX_TILT_ERROR_DEG = math.degrees(math.atan(3 * IMU_ERRORS.accel_turn_on_bias_mg * 1e-3))
+# The fused heading is never worse than 2 sigma of ONE dual-antenna heading (10 Hz of them and
+# a gyro keep it far better).
+BASELINE_LENGTH_M = 1.5
+MAX_HEADING_ERROR_DEG = math.degrees(
+    2 * GNSS_ERRORS.baseline_noise_horizontal_m / BASELINE_LENGTH_M
+)
+# Nor is the fused velocity worse than 3 sigma of one GNSS velocity, per ENU axis.
+MAX_VELOCITY_ERROR_MPS = 3 * np.array(
+    [
+        GNSS_ERRORS.velocity_noise_horizontal_mps,
+        GNSS_ERRORS.velocity_noise_horizontal_mps,
+        GNSS_ERRORS.velocity_noise_vertical_mps,
+    ]
+)
+
+
+# -- shared processing ---------------------------------------------------------------------
+
+
+def processed_bag(tmp_path_factory, name: str) -> Path:
+    """``process_bag``'s output of committed bag ``name``, made once per test session."""
+    out = tmp_path_factory.getbasetemp() / "processed_bags" / name
+    if not (out / "metadata.yaml").is_file():
+        out.parent.mkdir(exist_ok=True)
+        process_bag(
+            BAGS_DIR / name,
+            out,
+            fusion_config_from_files([BUOY_PARAMETERS]),
+            compensator_config_from_files([BUOY_PARAMETERS]),
+            overwrite=True,
+        )
+    return out
+
+
+def raw_stamp_ns(raw: bytes) -> int:
+    """Header stamp of a CDR message that starts with a std_msgs/Header (little endian)."""
+    assert raw[:2] == b"\x00\x01", "little-endian CDR"
+    sec, nanosec = struct.unpack_from("<iI", raw, 4)
+    return sec * NANOSECONDS_PER_SECOND + nanosec
+
+
+def evaluation_samples(reader: BagReader, topic: str, from_ns: int) -> dict[int, object]:
+    """Decoded messages of ``topic`` stamped on the evaluation grid from ``from_ns``, by grid
+    time (ms); stamps are matched to the nearest millisecond."""
+    samples = {}
+    for record in reader.messages([topic]):
+        stamp = raw_stamp_ns(record.raw)
+        grid_ms = round(stamp / 1e6)
+        if stamp >= from_ns and grid_ms % EVALUATION_PERIOD_MS == 0:
+            samples[grid_ms] = reader.decode(record)
+    return samples
+
+
+def quaternion(message) -> list[float]:
+    q = message.pose.pose.orientation
+    return [q.x, q.y, q.z, q.w]
+
+
+def vector(v) -> list[float]:
+    return [v.x, v.y, v.z]
+
+
+class Accuracy(NamedTuple):
+    """Errors estimate − truth at the evaluation samples and the filter's variances."""
+
+    attitude_error_rad: np.ndarray  # (N, 3) rotation vector φ, R_true = Exp(φ)·R_est, ENU
+    attitude_variance_rad2: np.ndarray  # (N, 3) E, N, U
+    euler_error_deg: np.ndarray  # (N, 3) yaw, pitch, roll, wrapped
+    velocity_error_mps: np.ndarray  # (N, 3) ENU
+    velocity_variance_m2s2: np.ndarray  # (N, 3)
+
+
+def accuracy_of(bag: Path) -> Accuracy:
+    with BagReader(bag) as reader:
+        first_ns = raw_stamp_ns(next(iter(reader.messages(["nav/odometry"]))).raw)
+        from_ns = first_ns + int(SETTLING_S * NANOSECONDS_PER_SECOND)
+        odometry = evaluation_samples(reader, "nav/odometry", from_ns)
+        velocity = evaluation_samples(reader, "nav/velocity", from_ns)
+        truth = evaluation_samples(reader, "truth/odometry", from_ns)
+    grid = sorted(set(odometry) & set(truth))
+    assert len(grid) >= 0.95 * len(truth) > 100, "navigation at every truth sample"
+    estimated = Rotation.from_quat([quaternion(odometry[t]) for t in grid])
+    true = Rotation.from_quat([quaternion(truth[t]) for t in grid])
+    euler_error = np.degrees(estimated.as_euler("ZYX") - true.as_euler("ZYX"))
+    true_velocity_enu = true.apply([vector(truth[t].twist.twist.linear) for t in grid])
+    return Accuracy(
+        attitude_error_rad=(true * estimated.inv()).as_rotvec(),
+        attitude_variance_rad2=np.array(
+            [[odometry[t].pose.covariance[i] for i in ATTITUDE_VARIANCE_INDICES] for t in grid]
+        ),
+        euler_error_deg=(euler_error + 180.0) % 360.0 - 180.0,
+        velocity_error_mps=np.array([vector(velocity[t].twist.twist.linear) for t in grid])
+        - true_velocity_enu,
+        velocity_variance_m2s2=np.array(
+            [[velocity[t].twist.covariance[i] for i in VELOCITY_VARIANCE_INDICES] for t in grid]
+        ),
+    )
+
+
+@pytest.fixture(scope="module")
+def accuracy(tmp_path_factory) -> dict[str, Accuracy]:
+    return {name: accuracy_of(processed_bag(tmp_path_factory, name)) for name in BAGS}
+
+
+def consistency_figures(error: np.ndarray, variance: np.ndarray) -> str:
+    nees = np.mean(error**2 / variance, axis=0)
+    rms = np.sqrt(np.mean(error**2, axis=0))
+    sigma = np.sqrt(np.mean(variance, axis=0))
+    return ", ".join(
+        f"{axis}: mean NEES {n:.2f}, RMS error {r:.3g}, mean sigma {s:.3g}"
+        for axis, n, r, s in zip(AXES, nees, rms, sigma, strict=True)
+    )
+
+
+def assert_consistent(error: np.ndarray, variance: np.ndarray, what: str) -> None:
+    figures = consistency_figures(error, variance)
+    assert np.all(variance > 0), what
+    nees = np.mean(error**2 / variance, axis=0)
+    bound = chi2.ppf(CONFIDENCE, 1)
+    assert np.all(nees < bound), f"{what}: mean NEES above {bound:.1f}: {figures}"
+    within = np.mean(np.abs(error) < MAX_SIGMAS * np.sqrt(variance), axis=0)
+    assert np.all(within >= MIN_FRACTION_WITHIN), (
+        f"{what}: fraction within {MAX_SIGMAS:g} sigma {within}: {figures}"
+    )
+
+
+# -- accuracy ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", BAGS)
+def test_attitude_error_is_what_the_covariance_says(accuracy, name):
+    result = accuracy[name]
+    assert_consistent(
+        result.attitude_error_rad, result.attitude_variance_rad2, f"{name} attitude (rad)"
+    )
+
+
+@pytest.mark.parametrize("name", BAGS)
+def test_velocity_error_is_what_the_covariance_says(accuracy, name):
+    result = accuracy[name]
+    assert_consistent(
+        result.velocity_error_mps, result.velocity_variance_m2s2, f"{name} velocity (m/s)"
+    )
+
+
+@pytest.mark.parametrize(
+    "field, variance_field",
+    [
+        ("attitude_error_rad", "attitude_variance_rad2"),
+        ("velocity_error_mps", "velocity_variance_m2s2"),
+    ],
+)
+def test_pooled_nees_is_within_chi_square_bounds(accuracy, field, variance_field):
+    per_bag_axis = np.concatenate(
+        [
+            np.mean(getattr(r, field) ** 2 / getattr(r, variance_field), axis=0)
+            for r in accuracy.values()
+        ]
+    )
+    degrees = per_bag_axis.size
+    low = chi2.ppf(1 - CONFIDENCE, degrees) / degrees
+    high = chi2.ppf(CONFIDENCE, degrees) / degrees
+    figures = {
+        name: np.round(np.mean(getattr(r, field) ** 2 / getattr(r, variance_field), axis=0), 2)
+        for name, r in accuracy.items()
+    }
+    assert low < per_bag_axis.mean() < high, (
+        f"{field}: mean NEES {per_bag_axis.mean():.2f} outside [{low:.2f}, {high:.2f}]; "
+        f"per bag (E, N, U): {figures}"
+    )
+
+
+@pytest.mark.parametrize("name", BAGS)
+def test_attitude_error_stays_within_what_the_sensors_allow(accuracy, name):
+    error = np.abs(accuracy[name].euler_error_deg)
+    yaw, pitch, roll = error.max(axis=0)
+    figures = (
+        f"{name}: max |error| roll {roll:.3f} deg, pitch {pitch:.3f} deg, yaw {yaw:.3f} deg "
+        f"(limits: tilt {MAX_TILT_ERROR_DEG:.3f} deg, heading {MAX_HEADING_ERROR_DEG:.3f} deg)"
+    )
+    assert max(roll, pitch) <= MAX_TILT_ERROR_DEG, figures
+    assert yaw <= MAX_HEADING_ERROR_DEG, figures
+
+
+@pytest.mark.parametrize("name", BAGS)
+def test_velocity_error_stays_within_what_the_sensors_allow(accuracy, name):
+    worst = np.abs(accuracy[name].velocity_error_mps).max(axis=0)
+    assert np.all(worst <= MAX_VELOCITY_ERROR_MPS), (
+        f"{name}: max |velocity error| E, N, U {np.round(worst, 4)} m/s, "
+        f"limits {MAX_VELOCITY_ERROR_MPS} m/s"
+    )
+
+
+# -- the command line --------------------------------------------------------------------------
+
+
+def run_fuse_bag(*arguments, timeout_s: float = 120.0) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [str(FUSE_BAG), *map(str, arguments)],
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+    )
+
+
+@pytest.fixture(scope="module")
+def cli_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fuse_bag") / CLI_BAG
+    completed = run_fuse_bag(BAGS_DIR / CLI_BAG, out, "--params-file", BUOY_PARAMETERS)
+    return completed, out
+
+
+def stamps_of(reader: BagReader, topic: str) -> list[int]:
+    return [raw_stamp_ns(record.raw) for record in reader.messages([topic])]
+
+
+def test_cli_writes_one_nav_set_per_imu_sample_after_alignment(cli_run):
+    completed, out = cli_run
+    assert completed.returncode == 0, completed.stderr
+    assert "Traceback" not in completed.stderr
+    with BagReader(BAGS_DIR / CLI_BAG) as source:
+        imu_stamps = stamps_of(source, "imu/data_raw")
+        truth_topics = {n: i for n, i in source.topics.items() if n.startswith("/truth/")}
+        truth_raw = {n: [r.raw for r in source.messages([n])] for n in truth_topics}
+    with BagReader(out) as fused:
+        assert set(fused.topics) == set(NAV_TOPICS) | set(truth_topics)
+        assert fused.topics["/nav/odometry"].msgtype == "nav_msgs/msg/Odometry"
+        nav_stamps = {topic: stamps_of(fused, topic) for topic in NAV_TOPICS}
+        for topic, info in truth_topics.items():
+            assert fused.topics[topic] == info
+            assert [r.raw for r in fused.messages([topic])] == truth_raw[topic], topic
+    first = nav_stamps["/nav/odometry"][0]
+    after_alignment = [t for t in imu_stamps if t >= first]
+    assert len(after_alignment) > 0.9 * len(imu_stamps)
+    for topic, stamps in nav_stamps.items():
+        assert stamps == after_alignment, topic
+    assert f"wrote {out}" in completed.stdout
+
+
+def test_cli_output_is_read_by_the_independent_mcap_readers(cli_run):
+    completed, out = cli_run
+    assert completed.returncode == 0, completed.stderr
+    (mcap_file,) = out.glob("*.mcap")
+    counts: dict[str, int] = {}
+    first = {}
+    with open(mcap_file, "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == "ros2"
+        for schema, channel, _, decoded in reader.iter_decoded_messages():
+            assert schema.encoding == "ros2msg"
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            first.setdefault(channel.topic, decoded)
+    with BagReader(out) as ours:
+        assert counts == {topic: info.count for topic, info in ours.topics.items()}
+    odometry = first["/nav/odometry"]
+    assert (odometry.header.frame_id, odometry.child_frame_id) == ("map", "base_link")
+    q = odometry.pose.pose.orientation
+    assert math.isclose(math.hypot(q.x, q.y, q.z, q.w), 1.0, abs_tol=1e-9)
+    assert first["/nav/velocity"].header.frame_id == "map"
+    fix = first["/nav/fix"]
+    # sea_state starts at 35 N 120 E and drifts a few metres
+    assert math.isclose(fix.latitude, 35.0, abs_tol=1e-3)
+    assert math.isclose(fix.longitude, 120.0, abs_tol=1e-3)
+
+
+@pytest.fixture(scope="module")
+def short_bags(tmp_path_factory):
+    """The first 12 s of the static bag (alignment takes 10 s), with and without gnss/heading."""
+    directory = tmp_path_factory.mktemp("short_bags")
+    bags = {"complete": directory / "complete", "no_heading": directory / "no_heading"}
+    with BagReader(BAGS_DIR / "static") as reader:
+        end_ns = reader.start_ns + 12 * NANOSECONDS_PER_SECOND
+        records = [r for r in reader.messages(SENSOR_TOPICS) if r.log_time_ns <= end_ns]
+    for name, path in bags.items():
+        with BagWriter(path) as writer:
+            for record in records:
+                if name == "no_heading" and record.topic == "/gnss/heading":
+                    continue
+                writer.write_raw(record.topic, record.msgtype, record.log_time_ns, record.raw)
+    return bags
+
+
+def assert_one_line_error(completed: subprocess.CompletedProcess, *expected: str) -> None:
+    message = completed.stderr.strip()
+    assert completed.returncode == 2, (completed.returncode, completed.stderr)
+    assert "Traceback" not in completed.stderr, completed.stderr
+    assert "\n" not in message, f"not one line: {message!r}"
+    assert message.startswith("fuse_bag: "), message
+    for text in expected:
+        assert text in message, message
+
+
+def write_parameters(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def test_missing_input_bag(tmp_path):
+    missing = tmp_path / "no_such_bag"
+    completed = run_fuse_bag(missing, tmp_path / "out")
+    assert_one_line_error(completed, str(missing), "does not exist")
+    assert not (tmp_path / "out").exists()
+
+
+def test_bag_without_heading_names_the_missing_topic(short_bags, tmp_path):
+    completed = run_fuse_bag(short_bags["no_heading"], tmp_path / "out")
+    assert_one_line_error(completed, "gnss/heading")
+    assert not (tmp_path / "out").exists()
+
+
+def test_existing_output_is_kept_unless_overwrite_is_given(short_bags, tmp_path):
+    out = tmp_path / "out"
+    first = run_fuse_bag(short_bags["complete"], out)
+    assert first.returncode == 0, first.stderr
+    written = (out / "metadata.yaml").read_text()
+
+    refused = run_fuse_bag(short_bags["complete"], out)
+    assert_one_line_error(refused, str(out), "already exists")
+    assert (out / "metadata.yaml").read_text() == written
+
+    replaced = run_fuse_bag(short_bags["complete"], out, "--overwrite")
+    assert replaced.returncode == 0, replaced.stderr
+    with BagReader(out) as reader:
+        assert reader.topics["/nav/odometry"].count > 100  # 2 s after alignment at 100 Hz
+
+
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        (
+            "/**/fusion_node:\n  ros__parameters:\n    fusion: [gate_probability: 2.0\n",
+            ("not valid YAML",),
+        ),
+        (
+            "/**/fusion_node:\n  ros__parameters:\n    fusion:\n      gate_probability: 2.0\n",
+            ("fusion.gate_probability", "(0, 1)"),
+        ),
+        (
+            "/**:\n  ros__parameters:\n    gnss:\n      primary_antenna: [0.0, 1.0]\n",
+            ("gnss.primary_antenna", "3"),
+        ),
+        (
+            "/**/fusion_node:\n  ros__parameters:\n    fusion:\n      realtime_output: 1\n",
+            ("fusion.realtime_output", "true or false"),
+        ),
+    ],
+    ids=["malformed_yaml", "gate_probability_2", "antenna_of_two", "bool_as_number"],
+)
+def test_bad_parameters_stop_with_a_message_naming_them(short_bags, tmp_path, text, expected):
+    parameters = write_parameters(tmp_path / "parameters.yaml", text)
+    completed = run_fuse_bag(short_bags["complete"], tmp_path / "out", "--params-file", parameters)
+    assert_one_line_error(completed, *expected)
+    if "YAML" in expected[0]:
+        assert str(parameters) in completed.stderr
+    assert not (tmp_path / "out").exists()
