@@ -1,0 +1,331 @@
+"""Live latency and CPU of the nodes: the last part of `make bench`, also runnable alone.
+
+Runs ``run_scenario sea_state --fusion --compensation`` in a ROS domain of its own and, in this
+process, an rclpy node listening to ``imu/data_raw``, ``nav/imu``, ``anemometer/wind`` and
+``wind/true``. Latency of a stage is the receive time of its output minus the receive time of
+the input with the same header stamp (receive times from the middleware's reception stamp when
+it gives one), over all pairs and "in service" (without the first second of output, when a
+just-aligned filter releases its held-back solutions at once); the same difference of the
+publishers' source stamps is given beside it. The CPU share of ``fusion_node`` comes from
+/proc/<pid>/stat (utime + stime) while the IMU stream flows.
+
+    python tools/bench_live.py [--duration-s 40]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+PARAMS_FILE = REPO / "src/buoy_nav/config/buoy.yaml"
+LATENCY_TARGET_P99_MS = 5.0
+CPU_SAMPLE_PERIOD_S = 0.25
+FIND_PID_TIMEOUT_S = 30.0
+RUN_MARGIN_S = 90.0
+IN_SERVICE_AFTER_S = 1.0
+
+
+def isolate_ros_domain() -> int:
+    """A random domain in 100-200, discovery on loopback only; set for this process and its
+    children (rclpy reads the environment at init)."""
+    domain = random.randint(100, 200)
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    os.environ.setdefault("AMENT_PREFIX_PATH", str(BIN.parent))
+    os.environ["PYTHONUNBUFFERED"] = "1"
+    return domain
+
+
+class Listener:
+    """Receive times (ns) per topic and header stamp, in an rclpy context of its own."""
+
+    def __init__(self):
+        import rclpy
+        from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
+        from nav_msgs.msg import Odometry
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from sensor_msgs.msg import Imu, NavSatFix
+
+        from buoy_nav.base_node import DATA_QOS
+
+        self._rclpy = rclpy
+        self.context = Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node("bench_latency", context=self.context)
+        # topic → header stamp (sec, nanosec) → (receive time, source time), ns
+        self.received: dict[str, dict[tuple[int, int], tuple[int, int]]] = {}
+        self.first_callback_ns: dict[str, int] = {}
+        self.last_callback_ns: dict[str, int] = {}
+        self.valid_true_wind: set[tuple[int, int]] = set()
+        self.middleware_stamps = 0
+        self.callback_stamps = 0
+        types = {
+            "imu/data_raw": Imu,
+            "nav/imu": Imu,
+            "anemometer/wind": Vector3Stamped,
+            "wind/true": Vector3Stamped,
+        }
+        for topic, message_type in types.items():
+            self.received[topic] = {}
+            self.node.create_subscription(message_type, topic, self._callback_for(topic), DATA_QOS)
+        # The simulated sensors of run_scenario publish only once every one of their topics
+        # has a subscriber (so that a recorder misses nothing); without a recorder, nobody
+        # else listens to these. Raw subscriptions: no deserialisation load in this process.
+        for topic, message_type in {
+            "gnss/fix": NavSatFix,
+            "gnss/vel": TwistWithCovarianceStamped,
+            "gnss/heading": Imu,
+            "gnss/baseline": Vector3Stamped,
+            "truth/odometry": Odometry,
+            "truth/wind": Vector3Stamped,
+            "truth/current": Vector3Stamped,
+        }.items():
+            self.node.create_subscription(message_type, topic, lambda _: None, DATA_QOS, raw=True)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+
+    def _callback_for(self, topic: str):
+        table = self.received[topic]
+
+        def on_message(message, info) -> None:
+            now_ns = time.time_ns()
+            # The middleware's reception stamp (system clock) excludes the time the sample
+            # waited in this process's executor; the callback time is the fallback. The source
+            # stamp is when the publishing process wrote the sample.
+            received_ns = info.get("received_timestamp", 0)
+            if received_ns > 0:
+                self.middleware_stamps += 1
+            else:
+                received_ns = now_ns
+                self.callback_stamps += 1
+            stamp = message.header.stamp
+            key = (stamp.sec, stamp.nanosec)
+            table.setdefault(key, (received_ns, info.get("source_timestamp", 0)))
+            if topic == "wind/true" and math.isfinite(message.vector.x):
+                self.valid_true_wind.add(key)
+            self.first_callback_ns.setdefault(topic, time.monotonic_ns())
+            self.last_callback_ns[topic] = time.monotonic_ns()
+
+        return on_message
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self._rclpy.try_shutdown(context=self.context)
+        self.thread.join(timeout=5.0)
+
+
+class CpuSampler:
+    """utime + stime of a process (clock ticks), sampled with monotonic times in a thread."""
+
+    def __init__(self, pid: int):
+        self.pid = pid
+        self.samples: list[tuple[int, int]] = []
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _ticks(self) -> int | None:
+        try:
+            text = Path(f"/proc/{self.pid}/stat").read_text()
+        except OSError:
+            return None
+        # Fields after the command name (which may contain spaces) start at field 3 (state);
+        # utime and stime are fields 14 and 15.
+        fields = text[text.rindex(")") + 2 :].split()
+        return int(fields[11]) + int(fields[12])
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            ticks = self._ticks()
+            if ticks is None:
+                return
+            self.samples.append((time.monotonic_ns(), ticks))
+            self._stop.wait(CPU_SAMPLE_PERIOD_S)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.thread.join(timeout=2.0)
+
+    def share_between(self, start_ns: int, end_ns: int) -> tuple[float, float] | None:
+        """(CPU share of one core, window s) between the samples inside [start, end]."""
+        inside = [s for s in self.samples if start_ns <= s[0] <= end_ns]
+        if len(inside) < 2:
+            return None
+        (t0, c0), (t1, c1) = inside[0], inside[-1]
+        window_s = (t1 - t0) * 1e-9
+        return (c1 - c0) / os.sysconf("SC_CLK_TCK") / window_s, window_s
+
+
+def child_pid(parent_pid: int, pattern: str, timeout_s: float) -> int | None:
+    """The pid of ``parent_pid``'s child whose command line matches ``pattern`` (pgrep -f)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        found = subprocess.run(
+            ["pgrep", "-f", "-P", str(parent_pid), pattern], capture_output=True, text=True
+        ).stdout.split()
+        if found:
+            return int(found[0])
+        time.sleep(0.1)
+    return None
+
+
+def latency_stats(inputs: dict, outputs: dict) -> dict:
+    """Output minus input time of the samples with the same header stamp, ms: by receive
+    times in this process and, for comparison, by the publishers' source stamps."""
+    matched = [stamp for stamp in outputs if stamp in inputs]
+    if not matched:
+        return {"pairs": 0, "unmatched": len(outputs)}
+    received_ms = np.array([outputs[s][0] - inputs[s][0] for s in matched]) * 1e-6
+    source_ms = np.array([outputs[s][1] - inputs[s][1] for s in matched]) * 1e-6
+    p99 = float(np.percentile(received_ms, 99))
+    return {
+        "pairs": len(matched),
+        "unmatched": len(outputs) - len(matched),
+        "median_ms": float(np.median(received_ms)),
+        "p99_ms": p99,
+        "max_ms": float(received_ms.max()),
+        "min_ms": float(received_ms.min()),
+        "p99_pass": bool(p99 <= LATENCY_TARGET_P99_MS),
+        "source_stamp_median_ms": float(np.median(source_ms)),
+        "source_stamp_p99_ms": float(np.percentile(source_ms, 99)),
+        "source_stamp_max_ms": float(source_ms.max()),
+    }
+
+
+def in_service(outputs: dict) -> dict:
+    """The outputs received from IN_SERVICE_AFTER_S after the first one on: without the burst
+    of solutions a filter releases at once when it has just aligned."""
+    if not outputs:
+        return outputs
+    start_ns = min(received for received, _ in outputs.values()) + IN_SERVICE_AFTER_S * 1e9
+    return {stamp: times for stamp, times in outputs.items() if times[0] >= start_ns}
+
+
+def run_live(duration_s: float, log_dir: Path) -> dict:
+    """Run the live scenario and measure; returns figures (or ``error`` with what failed)."""
+    domain = isolate_ros_domain()
+    # Latency is only as good as the machine is idle: other work on it shows up here.
+    load_before = os.getloadavg()[0]
+    log_dir.mkdir(parents=True, exist_ok=True)
+    command = [
+        str(BIN / "run_scenario"),
+        "sea_state",
+        "--set",
+        f"duration_s={duration_s:g}",
+        "--fusion",
+        "--compensation",
+        "--params-file",
+        str(PARAMS_FILE),
+        "--log-dir",
+        str(log_dir),
+    ]
+    result = {
+        "duration_s": duration_s,
+        "ros_domain_id": domain,
+        "command": command[1:],
+        "load_average_1min_before": load_before,
+        "cpus": os.cpu_count(),
+    }
+    print(f"bench: live: {' '.join(command[1:])} (domain {domain})", file=sys.stderr, flush=True)
+    listener = Listener()
+    sampler = None
+    try:
+        scenario = subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
+        pid = child_pid(scenario.pid, "fusion_node", FIND_PID_TIMEOUT_S)
+        if pid is not None:
+            sampler = CpuSampler(pid)
+        try:
+            output, _ = scenario.communicate(timeout=duration_s + RUN_MARGIN_S)
+        except subprocess.TimeoutExpired:
+            scenario.terminate()
+            output, _ = scenario.communicate(timeout=30)
+        result["run_scenario_exit_code"] = scenario.returncode
+        result["run_scenario_output"] = output.strip().splitlines()[-20:]
+        time.sleep(0.5)
+    finally:
+        if sampler is not None:
+            sampler.stop()
+        listener.close()
+    if scenario.returncode != 0:
+        result["error"] = f"run_scenario exited with {scenario.returncode}: " + " | ".join(
+            result["run_scenario_output"][-5:]
+        )
+    received = listener.received
+    result["received"] = {topic: len(stamps) for topic, stamps in received.items()}
+    result["receive_time_source"] = (
+        "middleware reception stamps"
+        if listener.callback_stamps == 0
+        else f"callback times for {listener.callback_stamps} messages, "
+        f"middleware stamps for {listener.middleware_stamps}"
+    )
+    nav = received["nav/imu"]
+    # Before the first navigation solution the wind samples can only be given up as NaN after
+    # the node's navigation timeout; the corrected ones show the latency in service.
+    corrected = {s: t for s, t in received["wind/true"].items() if s in listener.valid_true_wind}
+    result["in_service_after_s"] = IN_SERVICE_AFTER_S
+    result["latency"] = {
+        "imu/data_raw → nav/imu, all": latency_stats(received["imu/data_raw"], nav),
+        "imu/data_raw → nav/imu, in service": latency_stats(
+            received["imu/data_raw"], in_service(nav)
+        ),
+        "anemometer/wind → wind/true, all": latency_stats(
+            received["anemometer/wind"], received["wind/true"]
+        ),
+        "anemometer/wind → wind/true, corrected in service": latency_stats(
+            received["anemometer/wind"], in_service(corrected)
+        ),
+    }
+    result["fusion_cpu"] = fusion_cpu(listener, sampler, received)
+    return result
+
+
+def fusion_cpu(listener: Listener, sampler: CpuSampler | None, received: dict) -> dict:
+    """CPU share while IMU samples flow and the filter runs (first nav/imu to last IMU)."""
+    if sampler is None:
+        return {"share_of_one_core": None, "note": "fusion_node pid not found"}
+    start_ns = listener.first_callback_ns.get("nav/imu")
+    end_ns = listener.last_callback_ns.get("imu/data_raw")
+    if start_ns is None or end_ns is None:
+        return {"share_of_one_core": None, "note": "no nav/imu or imu/data_raw received"}
+    share = sampler.share_between(start_ns, end_ns)
+    if share is None:
+        return {"share_of_one_core": None, "note": "too few CPU samples in the window"}
+    stamps = sorted(received["imu/data_raw"])
+    span_s = (stamps[-1][0] - stamps[0][0]) + (stamps[-1][1] - stamps[0][1]) * 1e-9
+    return {
+        "pid": sampler.pid,
+        "share_of_one_core": share[0],
+        "window_s": share[1],
+        "imu_rate_hz": (len(stamps) - 1) / span_s if span_s > 0 else float("nan"),
+    }
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(prog="bench_live", description=__doc__.split("\n")[0])
+    parser.add_argument("--duration-s", type=float, default=40.0, help="scenario length, s")
+    arguments = parser.parse_args(argv)
+    result = run_live(arguments.duration_s, REPO / "out" / "bench" / "live_logs")
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()
