@@ -162,7 +162,10 @@ def run(arguments) -> int:
     if arguments.compensation:
         run.start("compensation_node", ros_arguments(arguments, SIM_TIME), False)
         clock_subscribers += 1
-    wait = 1 if (arguments.record or arguments.fusion or arguments.compensation) else 0
+    # A recording must start with the first sample of every topic; without a recorder some
+    # topics (truth, baseline) may have no subscriber at all, and the clock's own wait for the
+    # fusion and compensation nodes is what keeps them from missing the start.
+    wait = 1 if arguments.record else 0
     for name in SENSOR_NODES:
         run.start(
             name,
