@@ -8,14 +8,18 @@ rate-limited and counted rejection of bad input, and the ``diagnostics`` publish
 from __future__ import annotations
 
 import importlib
+import signal
 import sys
+import time
 import typing
 from collections import Counter
 from collections.abc import Callable, Mapping
 
 import rclpy
+import rclpy.signals
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -38,6 +42,8 @@ DATA_QOS = QoSProfile(
 )
 
 REJECTION_LOG_PERIOD_S = 5.0
+# Bound on the wait, at shutdown, for subscribers to acknowledge the last published messages.
+FLUSH_ACK_TIMEOUT_S = 2.0
 
 
 class StartupError(Exception):
@@ -118,6 +124,37 @@ class SuiteNode(Node):
             return build_config(config_type, values, prefix, renamed, skip, **fixed)
         except ParameterError as error:
             raise StartupError(str(error)) from error
+
+
+class FlushingNode(SuiteNode):
+    """A node that holds output back (waiting for later input) and publishes it when it stops.
+
+    SIGINT and SIGTERM are taken from rclpy so that they only end the spin loop: the context
+    stays valid, :meth:`flush_held_back` can still publish, and the node waits (at most
+    ``FLUSH_ACK_TIMEOUT_S``) for the subscribers to acknowledge what it published.
+    """
+
+    def __init__(self, node_name: str, **kwargs):
+        super().__init__(node_name, **kwargs)
+        rclpy.signals.uninstall_signal_handlers()
+        for signal_number in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signal_number, lambda *_: self.finish(0))
+
+    def flush_held_back(self) -> list:
+        """Publish what is held back; return the publishers to wait for."""
+        raise NotImplementedError
+
+    def destroy_node(self) -> None:
+        if self.context.ok():
+            try:
+                publishers = self.flush_held_back()
+                deadline_s = time.monotonic() + FLUSH_ACK_TIMEOUT_S
+                for publisher in publishers:
+                    remaining_s = max(0.0, deadline_s - time.monotonic())
+                    publisher.wait_for_all_acked(Duration(seconds=remaining_s))
+            except Exception as error:  # a failing flush must not hide the node's exit
+                self.get_logger().error(f"could not publish the held-back output: {error}")
+        super().destroy_node()
 
 
 def message_class(msgtype: str):

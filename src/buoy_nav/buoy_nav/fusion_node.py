@@ -44,17 +44,19 @@ from __future__ import annotations
 import collections
 import math
 import re
-import signal
 import time
 
-import rclpy
-import rclpy.signals
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from nav_msgs.msg import Odometry
-from rclpy.duration import Duration
 from sensor_msgs.msg import Imu, NavSatFix
 
-from buoy_nav.base_node import DATA_QOS, DiagnosticsPublisher, StartupError, SuiteNode, main_for
+from buoy_nav.base_node import (
+    DATA_QOS,
+    DiagnosticsPublisher,
+    FlushingNode,
+    StartupError,
+    main_for,
+)
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
 from buoy_nav.fusion_messages import (
@@ -99,10 +101,9 @@ INPUT_CLASSES = {
 }
 DIAGNOSTICS_PERIOD_S = 1.0
 # Bound on the wait, at shutdown, for subscribers to acknowledge the last solutions.
-FLUSH_ACK_TIMEOUT_S = 2.0
 
 
-class FusionNode(SuiteNode):
+class FusionNode(FlushingNode):
     def __init__(self):
         super().__init__(NODE_NAME)
         self.config = self._declare_fusion_config()
@@ -127,7 +128,6 @@ class FusionNode(SuiteNode):
                 DATA_QOS,
             )
         self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
-        self._stop_on_signals()
         config = self.config
         origin = (
             f"({config.origin_latitude_deg} deg, {config.origin_longitude_deg} deg, "
@@ -155,13 +155,6 @@ class FusionNode(SuiteNode):
         except StartupError as error:
             raise StartupError(with_parameter_names(str(error))) from error
 
-    def _stop_on_signals(self) -> None:
-        """Take SIGINT and SIGTERM from rclpy: leave the spin loop with the context still valid,
-        so that :meth:`destroy_node` can still publish the last solutions."""
-        rclpy.signals.uninstall_signal_handlers()
-        for signal_number in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signal_number, lambda *_: self.finish(0))
-
     # -- inputs -----------------------------------------------------------------------------
 
     def on_imu(self, message: Imu) -> None:
@@ -186,21 +179,10 @@ class FusionNode(SuiteNode):
                 self._nav_publishers[topic].publish(message)
             self.solutions_published += 1
 
-    def flush(self) -> None:
-        """End of input: publish the solutions the engine still holds, wait for them to arrive."""
+    def flush_held_back(self) -> list:
+        """End of input: publish the solutions the engine still holds."""
         self.publish_solutions(self.engine.flush())
-        deadline_s = time.monotonic() + FLUSH_ACK_TIMEOUT_S
-        for publisher in self._nav_publishers.values():
-            remaining_s = max(0.0, deadline_s - time.monotonic())
-            publisher.wait_for_all_acked(Duration(seconds=remaining_s))
-
-    def destroy_node(self) -> None:
-        if self.context.ok():
-            try:
-                self.flush()
-            except Exception as error:  # a failing flush must not hide the node's exit
-                self.get_logger().error(f"could not publish the last solutions: {error}")
-        super().destroy_node()
+        return list(self._nav_publishers.values())
 
     # -- diagnostics ------------------------------------------------------------------------
 

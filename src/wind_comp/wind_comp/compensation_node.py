@@ -50,18 +50,20 @@ from __future__ import annotations
 
 import collections
 import math
-import signal
 import time
 
-import rclpy
-import rclpy.signals
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
-from rclpy.duration import Duration
 from sensor_msgs.msg import NavSatFix
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from buoy_nav.base_node import DATA_QOS, DiagnosticsPublisher, StartupError, SuiteNode, main_for
+from buoy_nav.base_node import (
+    DATA_QOS,
+    DiagnosticsPublisher,
+    FlushingNode,
+    StartupError,
+    main_for,
+)
 from wind_comp.compensator import (
     DEFAULT_ANEMOMETER_POSITION_M,
     DEFAULT_ANEMOMETER_RPY_DEG,
@@ -92,8 +94,6 @@ TRUE_WIND_TOPIC = "wind/true"
 
 DEFAULT_NAV_TIMEOUT_S = 1.0
 DIAGNOSTICS_PERIOD_S = 1.0
-# Bound on the wait, at shutdown, for subscribers to acknowledge the flushed samples.
-FLUSH_ACK_TIMEOUT_S = 2.0
 
 
 class PendingStamp:
@@ -108,7 +108,7 @@ class PendingStamp:
         self.arrival_s = arrival_s
 
 
-class CompensationNode(SuiteNode):
+class CompensationNode(FlushingNode):
     def __init__(self):
         super().__init__(NODE_NAME)
         self.config = self._declare_compensator_config()
@@ -153,7 +153,6 @@ class CompensationNode(SuiteNode):
         self.create_subscription(Odometry, ODOMETRY_TOPIC, self.on_odometry, DATA_QOS)
         self.create_subscription(NavSatFix, FIX_TOPIC, self.on_fix, DATA_QOS)
         self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
-        self._stop_on_signals()
         self.get_logger().info(
             f"correcting {WIND_TOPIC} with {ODOMETRY_TOPIC}: anemometer at "
             f"{list(self.config.anemometer_position_body_m)} m, rpy "
@@ -181,13 +180,6 @@ class CompensationNode(SuiteNode):
             anemometer_position_body_m=position,
             anemometer_rpy_deg=rpy,
         )
-
-    def _stop_on_signals(self) -> None:
-        """Take SIGINT and SIGTERM from rclpy: leave the spin loop with the context still valid,
-        so that :meth:`destroy_node` can still publish the pending samples."""
-        rclpy.signals.uninstall_signal_handlers()
-        for signal_number in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signal_number, lambda *_: self.finish(0))
 
     # -- inputs -----------------------------------------------------------------------------
 
@@ -268,7 +260,7 @@ class CompensationNode(SuiteNode):
             mean_publisher.publish(mean)
             stats_publisher.publish(stats)
 
-    def flush(self) -> None:
+    def flush_held_back(self) -> list:
         """End of input: publish every pending sample and the partial product windows."""
         self.publish_results(self.compensator.flush())
         for averager in self.averagers:
@@ -276,18 +268,7 @@ class CompensationNode(SuiteNode):
         publishers = [self._true_wind_publisher]
         for pair in self._product_publishers.values():
             publishers.extend(pair)
-        deadline_s = time.monotonic() + FLUSH_ACK_TIMEOUT_S
-        for publisher in publishers:
-            remaining_s = max(0.0, deadline_s - time.monotonic())
-            publisher.wait_for_all_acked(Duration(seconds=remaining_s))
-
-    def destroy_node(self) -> None:
-        if self.context.ok():
-            try:
-                self.flush()
-            except Exception as error:  # a failing flush must not hide the node's exit
-                self.get_logger().error(f"could not publish the pending samples: {error}")
-        super().destroy_node()
+        return publishers
 
     # -- diagnostics ------------------------------------------------------------------------
 
