@@ -31,6 +31,7 @@ from std_msgs.msg import Float64MultiArray
 
 from buoy_nav.bag_io import BagReader
 from buoy_nav.base_node import DATA_QOS
+from ros_messages import stamp_ns, to_rclpy
 from wind_comp.compensator import CompensatorConfig, WindStatus, correct_batch
 from wind_comp.nav_messages import (
     anemometer_sample,
@@ -52,23 +53,6 @@ WRONG_FRAME_INDEX = 41
 ZERO_QUATERNION_AFTER_INDEX = 100
 ANEMOMETER_NOISE_MPS = 0.02
 ECHO_EVERY = 10
-
-
-def to_rclpy(source, target):
-    """Copy the fields of a rosbags message into an rclpy message of the same type."""
-    for name in target.get_fields_and_field_types():
-        value = getattr(source, name)
-        if hasattr(value, "__dataclass_fields__"):
-            to_rclpy(value, getattr(target, name))
-        elif isinstance(value, np.ndarray):
-            setattr(target, name, value.tolist())
-        else:
-            setattr(target, name, value)
-    return target
-
-
-def stamp_ns(message) -> int:
-    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
 
 
 @pytest.fixture(scope="module")

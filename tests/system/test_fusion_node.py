@@ -52,6 +52,7 @@ from buoy_nav.fusion_node import (
     SHARED_PARAMETERS,
 )
 from buoy_nav.parameters import build_config, load_parameter_files
+from ros_messages import stamp_ns, to_rclpy
 
 pytestmark = pytest.mark.ros
 
@@ -67,23 +68,6 @@ PLAY_RATE = 4.0
 # Equality of live and offline values: relative, and absolute for values near zero.
 RELATIVE_TOLERANCE = 1e-9
 ABSOLUTE_TOLERANCE = 1e-12
-
-
-def to_rclpy(source, target):
-    """Copy the fields of a rosbags message into an rclpy message of the same type."""
-    for name in target.get_fields_and_field_types():
-        value = getattr(source, name)
-        if hasattr(value, "__dataclass_fields__"):
-            to_rclpy(value, getattr(target, name))
-        elif isinstance(value, np.ndarray):
-            setattr(target, name, value.tolist())
-        else:
-            setattr(target, name, value)
-    return target
-
-
-def stamp_ns(message) -> int:
-    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
 
 
 def set_stamp_ns(message, time_ns: int) -> None:

@@ -26,6 +26,7 @@ from rclpy.executors import SingleThreadedExecutor
 
 from buoy_nav.bag_io import BagReader, BagWriter
 from buoy_nav.fuse_bag import fusion_config_from_files
+from ros_messages import stamp_ns
 from wind_comp.process_bag import compensator_config_from_files, process_bag
 
 pytestmark = pytest.mark.ros
@@ -55,10 +56,6 @@ STARTUP_TIMEOUT_S = 30.0
 # After the player has finished: the nodes' queues drain in well under this.
 DRAIN_TIMEOUT_S = 30.0
 FLUSH_TIMEOUT_S = 10.0
-
-
-def stamp_ns(message) -> int:
-    return message.header.stamp.sec * NANOSECONDS_PER_SECOND + message.header.stamp.nanosec
 
 
 class DiagnosticsWatcher:

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from buoy_nav.bag_io import BagReader
+from ros_messages import stamp_ns
 
 SCENARIO_S = 12.0
 RATES_HZ = {
@@ -46,10 +47,6 @@ FRAMES = {
     "truth/odometry": "map",
     "truth/wind": "map",
 }
-
-
-def stamp_ns(message) -> int:
-    return message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
 
 
 def messages_by_topic(bag_path):
