@@ -348,7 +348,7 @@ class FusionEngine:
         """Add a primary-antenna fix (WGS-84 deg, deg, ellipsoidal m; ENU covariance 3×3 m²)."""
         self.last_input_rejection = None
         values, reason = _floats(t_s, latitude_deg, longitude_deg, altitude_m)
-        covariance, covariance_reason = _matrix3(position_covariance_enu_m2)
+        covariance, covariance_reason = _float_array(position_covariance_enu_m2, (3, 3))
         reason = reason or covariance_reason
         if reason is None and (
             abs(values[1]) > 90.0 or abs(values[2]) > 360.0 or abs(values[3]) > _MAX_ABS_ALTITUDE_M
@@ -367,8 +367,8 @@ class FusionEngine:
         """Add the primary antenna's velocity over ground (ENU m/s; covariance 3×3 m²/s²)."""
         self.last_input_rejection = None
         stamp, reason = _floats(t_s)
-        velocity, velocity_reason = _vector3(velocity_enu_mps)
-        covariance, covariance_reason = _matrix3(covariance_m2s2)
+        velocity, velocity_reason = _float_array(velocity_enu_mps, (3,))
+        covariance, covariance_reason = _float_array(covariance_m2s2, (3, 3))
         reason = reason or velocity_reason or covariance_reason
         if reason is None and float(velocity @ velocity) > _MAX_SPEED_MPS**2:
             reason = OUT_OF_RANGE
@@ -965,29 +965,16 @@ def _floats(*values) -> tuple[tuple[float, ...] | None, str | None]:
     return numbers, None
 
 
-def _vector3(values) -> tuple[np.ndarray | None, str | None]:
-    """A 3-vector input as a float array, or (None, reason)."""
+def _float_array(values, shape: tuple[int, ...]) -> tuple[np.ndarray | None, str | None]:
+    """An input as a float array of ``shape`` (a 3×3 may come row-major flat), or (None, reason)."""
     try:
-        vector = np.array(values, dtype=float)
+        array = np.array(values, dtype=float)
     except (TypeError, ValueError):
         return None, MALFORMED
-    if vector.shape != (3,):
+    if array.size == math.prod(shape) and array.ndim == 1:
+        array = array.reshape(shape)
+    if array.shape != shape:
         return None, MALFORMED
-    if not np.all(np.isfinite(vector)):
+    if not np.all(np.isfinite(array)):
         return None, NON_FINITE
-    return vector, None
-
-
-def _matrix3(values) -> tuple[np.ndarray | None, str | None]:
-    """A 3×3 (or row-major 9-element) covariance input as a float array, or (None, reason)."""
-    try:
-        matrix = np.array(values, dtype=float)
-    except (TypeError, ValueError):
-        return None, MALFORMED
-    if matrix.shape == (9,):
-        matrix = matrix.reshape(3, 3)
-    if matrix.shape != (3, 3):
-        return None, MALFORMED
-    if not np.all(np.isfinite(matrix)):
-        return None, NON_FINITE
-    return matrix, None
+    return array, None

@@ -213,8 +213,7 @@ def main(argv=None) -> None:
             arguments.in_bag, arguments.out_bag, config, arguments.overwrite
         )
     except (ParameterError, BagError) as error:
-        # one line: YAML parser messages span several
-        print(f"fuse_bag: {' '.join(str(error).split())}", file=sys.stderr)
+        print(f"fuse_bag: {error}", file=sys.stderr)
         sys.exit(2)
     for line in fusion.summary():
         print(line)

@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import collections
 import math
-import re
 import time
 
 from geometry_msgs.msg import TwistWithCovarianceStamped
@@ -54,7 +53,6 @@ from buoy_nav.base_node import (
     DATA_QOS,
     DiagnosticsPublisher,
     FlushingNode,
-    StartupError,
     main_for,
 )
 from buoy_nav.config import FusionConfig
@@ -74,7 +72,6 @@ from buoy_nav.fusion_messages import (
     feed_message,
     solution_messages,
 )
-from buoy_nav.parameters import config_parameters
 
 NODE_NAME = "fusion_node"
 PARAMETER_PREFIX = "fusion."
@@ -145,15 +142,12 @@ class FusionNode(FlushingNode):
         )
 
     def _declare_fusion_config(self) -> FusionConfig:
-        try:
-            return self.declare_config(
-                FusionConfig,
-                prefix=PARAMETER_PREFIX,
-                renamed=SHARED_PARAMETERS,
-                skip=NOT_PARAMETERS,
-            )
-        except StartupError as error:
-            raise StartupError(with_parameter_names(str(error))) from error
+        return self.declare_config(
+            FusionConfig,
+            prefix=PARAMETER_PREFIX,
+            renamed=SHARED_PARAMETERS,
+            skip=NOT_PARAMETERS,
+        )
 
     # -- inputs -----------------------------------------------------------------------------
 
@@ -246,17 +240,6 @@ class FusionNode(FlushingNode):
         if coasting:
             return "warn", f"aligned, coasting without GNSS {', '.join(coasting)}", values
         return "ok", f"aligned, {self.solutions_published} solutions published", values
-
-
-def with_parameter_names(message: str) -> str:
-    """``message`` with every FusionConfig field name replaced by its parameter name, so that
-    a check relating two fields (the antennas, the origin) names both parameters."""
-    for field_name, parameter, _ in config_parameters(
-        FusionConfig, PARAMETER_PREFIX, SHARED_PARAMETERS, NOT_PARAMETERS
-    ):
-        # A field name already inside a parameter name ('fusion.gate_probability') stays.
-        message = re.sub(rf"(?<![\w.]){field_name}(?!\w)", parameter, message)
-    return message
 
 
 main = main_for(FusionNode)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -143,10 +144,16 @@ def build_config(
     try:
         return config_type(**values)
     except (ValueError, TypeError) as error:
+        # Speak of parameters, not fields, everywhere in the message: a check relating two
+        # fields (the antennas, the origin) then names both parameters.
         message = str(error)
+        named = []
         for field_name, parameter in parameter_of_field.items():
-            if field_name in message:
-                raise ParameterError(f"parameter '{parameter}': {message}") from error
+            message, count = re.subn(rf"(?<![\w.]){field_name}(?!\w)", parameter, message)
+            if count:
+                named.append((message.index(parameter), parameter))
+        if named:
+            raise ParameterError(f"parameter '{min(named)[1]}': {message}") from error
         raise ParameterError(message) from error
 
 
@@ -176,7 +183,9 @@ def load_parameter_files(paths: Iterable[str | Path], node_name: str) -> dict[st
         except OSError as error:
             raise ParameterError(f"cannot read parameter file {path}: {error.strerror}") from error
         except yaml.YAMLError as error:
-            raise ParameterError(f"parameter file {path} is not valid YAML: {error}") from error
+            # One line: the parser's message spans several.
+            detail = " ".join(str(error).split())
+            raise ParameterError(f"parameter file {path} is not valid YAML: {detail}") from error
         if document is None:
             continue
         if not isinstance(document, Mapping):

@@ -329,7 +329,6 @@ def main(argv=None) -> None:
             arguments.overwrite,
         )
     except (ParameterError, BagError, OSError) as error:
-        # one line: YAML parser messages span several
-        print(f"process_bag: {' '.join(str(error).split())}", file=sys.stderr)
+        print(f"process_bag: {error}", file=sys.stderr)
         sys.exit(2)
     _print_summary(summary, arguments.out_bag)
