@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import TwistWithCovarianceStamped
+from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 from scipy.spatial.transform import Rotation
@@ -26,6 +26,7 @@ from buoy_nav.bag_io import BagReader, BagWriter, jazzy_typestore
 from buoy_nav.engine import FusionEngine, NavSolution
 from buoy_nav.fuse_bag import fusion_config_from_files
 from buoy_nav.fusion_messages import (
+    BASELINE_TOPIC,
     FIX_TOPIC,
     HEADING_TOPIC,
     IMU_TOPIC,
@@ -59,6 +60,7 @@ RCLPY_CLASSES = {
     "sensor_msgs/msg/NavSatFix": NavSatFix,
     "geometry_msgs/msg/TwistWithCovarianceStamped": TwistWithCovarianceStamped,
     "nav_msgs/msg/Odometry": Odometry,
+    "geometry_msgs/msg/Vector3Stamped": Vector3Stamped,
 }
 NANOSECONDS_PER_SECOND = 1_000_000_000
 # Indices of the attitude variances (E, N, U rotation-vector error) in the 6×6 pose covariance.
@@ -278,6 +280,16 @@ def _nan_heading(message):
     message.orientation.z = math.nan
 
 
+def _nan_baseline(message):
+    message.vector.z = math.nan
+
+
+def _tenfold_baseline(message):
+    message.vector.x *= 10.0
+    message.vector.y *= 10.0
+    message.vector.z *= 10.0
+
+
 # (topic, how to spoil a copy of a valid message of the topic, expected reason, the engine's
 # input kind that counts the rejection: None when the message never reaches the engine)
 SPOILED = [
@@ -289,6 +301,8 @@ SPOILED = [
     (IMU_TOPIC, _nan_rate, "non_finite", "imu"),
     (VELOCITY_TOPIC, _infinite_velocity, "non_finite", "gnss_velocity"),
     (HEADING_TOPIC, _nan_heading, "non_finite", "gnss_heading"),
+    (BASELINE_TOPIC, _nan_baseline, "non_finite", "gnss_baseline"),
+    (BASELINE_TOPIC, _tenfold_baseline, "out_of_range", "gnss_baseline"),
 ]
 INSERTED_AT_FRACTIONS = (0.3, 0.85)  # of each topic's messages: before and after alignment
 
@@ -372,7 +386,8 @@ def test_spoiled_messages_are_rejected_with_their_reason_and_leave_no_trace(
     engine_rejections = {}
     for _, _, reason, kind in SPOILED:
         if kind is not None:
-            engine_rejections.setdefault(kind, {reason: 0})[reason] += len(INSERTED_AT_FRACTIONS)
+            rejections = engine_rejections.setdefault(kind, {})
+            rejections[reason] = rejections.get(reason, 0) + len(INSERTED_AT_FRACTIONS)
     for kind, counters in health.counters.items():
         clean_counters = clean_health.counters[kind]
         assert counters.accepted == clean_counters.accepted, kind
@@ -382,6 +397,7 @@ def test_spoiled_messages_are_rejected_with_their_reason_and_leave_no_trace(
             clean_counters.nis_count,
         ), kind
         assert counters.resets == clean_counters.resets, kind
+        assert counters.superseded == clean_counters.superseded, kind
         assert counters.rejected == engine_rejections.get(kind, {}), kind
     assert health.time_s == clean_health.time_s
 
@@ -389,4 +405,4 @@ def test_spoiled_messages_are_rejected_with_their_reason_and_leave_no_trace(
 def test_an_unknown_topic_is_a_programming_error(sensor_inputs):
     engine = FusionEngine(fusion_config_from_files([BUOY_PARAMETERS]))
     with pytest.raises(ValueError, match="input topic"):
-        feed_message(engine, "gnss/baseline", sensor_inputs[0][1])
+        feed_message(engine, "imu/mag", sensor_inputs[0][1])

@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 from buoy_nav import earth
 from buoy_nav.error_state_filter import STATE_DIM, NavState, inject_error_state
 from buoy_nav.measurements import floored_covariance
+from buoy_nav.measurements.baseline import baseline_azimuth_rad, baseline_vector_model
 from buoy_nav.measurements.gnss_position import position_model
 from buoy_nav.measurements.gnss_velocity import (
     predicted_antenna_velocity_enu_mps,
@@ -73,6 +74,37 @@ def test_heading_jacobian_matches_finite_differences(attitude_deg):
     numeric = finite_difference_jacobian(predict, state, STEPS)
     np.testing.assert_allclose(model.jacobian, numeric, atol=1e-7)
     assert np.all(model.jacobian[0, 3:] == 0.0)
+
+
+@pytest.mark.parametrize("attitude_deg", ATTITUDES_DEG)
+def test_baseline_vector_jacobian_matches_finite_differences(attitude_deg):
+    state = random_state(*attitude_deg)
+    baseline = SECONDARY - PRIMARY
+    model = baseline_vector_model(np.zeros(3), 0.003, 0.006, state.rotation_nb, baseline)
+
+    def predict(s):
+        return s.rotation_nb @ baseline
+
+    numeric = finite_difference_jacobian(predict, state, STEPS)
+    np.testing.assert_allclose(model.jacobian, numeric, atol=1e-7)
+    assert np.all(model.jacobian[:, 3:] == 0.0)
+    # A rotation about the baseline itself leaves it unchanged: not observed.
+    along_baseline = model.predicted / np.linalg.norm(model.predicted)
+    np.testing.assert_allclose(model.jacobian[:, :3] @ along_baseline, 0.0, atol=1e-15)
+    np.testing.assert_array_equal(model.covariance, np.diag((0.003**2, 0.003**2, 0.006**2)))
+
+
+def test_baseline_vector_innovation_and_azimuth_under_tilt():
+    """Predicted = R_nb·(l_s − l_p) for any tilt; its azimuth is the dual-antenna heading."""
+    baseline = SECONDARY - PRIMARY
+    for roll, pitch, yaw in ATTITUDES_DEG:
+        rotation = Rotation.from_euler("ZYX", np.radians([yaw, pitch, roll]))
+        measured = rotation.apply(baseline) + np.array((0.001, -0.002, 0.003))
+        model = baseline_vector_model(measured, 0.003, 0.006, rotation.as_matrix(), baseline)
+        np.testing.assert_allclose(model.innovation, (0.001, -0.002, 0.003), atol=1e-12)
+        azimuth, horizontal_length = baseline_azimuth_rad(model.predicted)
+        assert azimuth == pytest.approx(predicted_heading_rad(rotation.as_matrix(), baseline))
+        assert horizontal_length == pytest.approx(np.hypot(*model.predicted[:2]))
 
 
 def test_heading_is_the_azimuth_of_the_projected_baseline_under_tilt():

@@ -28,7 +28,13 @@ from sensor_msgs.msg import Imu, NavSatFix
 from buoy_nav import engine as fusion_engine
 from buoy_nav.bag_io import BagReader
 from buoy_nav.base_node import DATA_QOS
-from buoy_nav.config import FusionConfig
+from buoy_nav.config import (
+    FUSION_FIELDS_NOT_PARAMETERS,
+    FUSION_NODE_NAME,
+    FUSION_PARAMETER_PREFIX,
+    FUSION_SHARED_PARAMETERS,
+    FusionConfig,
+)
 from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import (
     FIX_TOPIC,
@@ -44,13 +50,7 @@ from buoy_nav.fusion_messages import (
     feed_message,
     solution_messages,
 )
-from buoy_nav.fusion_node import (
-    INPUT_CLASSES,
-    NAV_CLASSES,
-    NOT_PARAMETERS,
-    OUTPUT_CLASSES,
-    SHARED_PARAMETERS,
-)
+from buoy_nav.fusion_node import INPUT_CLASSES, NAV_CLASSES, OUTPUT_CLASSES
 from buoy_nav.parameters import build_config, load_parameter_files
 from ros_messages import stamp_ns, to_rclpy
 
@@ -59,7 +59,7 @@ pytestmark = pytest.mark.ros
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BAG = os.path.join(REPO, "bags", "sea_state")
 BUOY_PARAMETERS = os.path.join(REPO, "src", "buoy_nav", "config", "buoy.yaml")
-NODE = "fusion_node"
+NODE = FUSION_NODE_NAME
 LIVE_EQUALS_OFFLINE_S = 40.0  # the alignment takes the first 10 s
 MALFORMED_RUN_S = 16.0
 MALFORMED_AFTER_S = 12.0  # aligned by then
@@ -93,7 +93,13 @@ def node_config(**overrides) -> FusionConfig:
     """The configuration the node builds from the shared buoy file and ``overrides``
     (parameter name → value, as ``-p`` gives them)."""
     parameters = load_parameter_files([BUOY_PARAMETERS], NODE) | overrides
-    return build_config(FusionConfig, parameters, "fusion.", SHARED_PARAMETERS, NOT_PARAMETERS)
+    return build_config(
+        FusionConfig,
+        parameters,
+        FUSION_PARAMETER_PREFIX,
+        FUSION_SHARED_PARAMETERS,
+        FUSION_FIELDS_NOT_PARAMETERS,
+    )
 
 
 def nav_messages(solutions, outputs: dict[str, list], stamps: StampBook) -> None:

@@ -39,6 +39,7 @@ PLAYED_TOPICS = (
     "/gnss/fix",
     "/gnss/vel",
     "/gnss/heading",
+    "/gnss/baseline",
     "/anemometer/wind",
 )
 PLAYED_S = 60.0

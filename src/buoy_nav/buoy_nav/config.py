@@ -72,6 +72,12 @@ class FusionConfig:
       gnss_position_variance_floor_m2: smallest position variance used per ENU axis (m²) [1e-4].
       gnss_velocity_variance_floor_m2s2: smallest velocity variance per ENU axis (m²/s²) [1e-4].
       gnss_heading_variance_floor_rad2: smallest dual-antenna heading variance (rad²) [1e-6].
+      use_gnss_baseline: fuse the receiver's baseline vector (``gnss/baseline``), which observes
+        the baseline's tilt as well as its azimuth; a heading with the stamp of a baseline,
+        derived from the same vector, is then not fused [True].
+      gnss_baseline_sigma_horizontal_m, gnss_baseline_sigma_vertical_m: 1-σ error of the
+        baseline vector per horizontal ENU axis and vertically, from the receiver's data sheet
+        (m) [0.003, 0.006].
       coasting_timeout_s: a measurement kind not accepted for this long is reported as coasting
         (s) [1].
 
@@ -117,6 +123,9 @@ class FusionConfig:
     gnss_position_variance_floor_m2: float = 1e-4
     gnss_velocity_variance_floor_m2s2: float = 1e-4
     gnss_heading_variance_floor_rad2: float = 1e-6
+    use_gnss_baseline: bool = True
+    gnss_baseline_sigma_horizontal_m: float = 0.003
+    gnss_baseline_sigma_vertical_m: float = 0.006
     coasting_timeout_s: float = 1.0
 
     max_measurement_delay_s: float = 0.3
@@ -188,6 +197,8 @@ class FusionConfig:
             "gnss_position_variance_floor_m2",
             "gnss_velocity_variance_floor_m2s2",
             "gnss_heading_variance_floor_rad2",
+            "gnss_baseline_sigma_horizontal_m",
+            "gnss_baseline_sigma_vertical_m",
             "coasting_timeout_s",
             "covariance_propagation_interval_s",
             "max_imu_gap_s",

@@ -7,7 +7,13 @@ between two IMU samples is applied at its own stamp: the state is integrated to 
 samples interpolated on the parabola through the last three samples (the curve the strapdown
 integrator integrates, so splitting a step costs no accuracy), updated, and integrated on to the
 next sample. Measurements sharing a stamp are gated one by one and the accepted ones applied in
-one stacked update (their order: fix, velocity, heading).
+one stacked update (their order: fix, velocity, baseline, heading).
+
+The dual antennas give either the full baseline vector (``add_gnss_baseline``, which observes the
+baseline's azimuth and tilt) or only its azimuth (``add_gnss_heading``). Both come from the same
+carrier-phase solution, so fusing both of one epoch would count it twice: a heading with the
+stamp of a baseline is set aside and counted as superseded; headings of epochs
+without a baseline (a receiver that sends none, or sends them at a lower rate) are fused.
 
 With ``realtime_output`` (the default) a solution leaves with its IMU sample, not
 ``max_measurement_delay_s`` later: a copy of the filter's nominal state is integrated ahead
@@ -60,6 +66,7 @@ from buoy_nav.error_state_filter import (
     discrete_error_model,
     inject_error_state,
 )
+from buoy_nav.measurements.baseline import baseline_azimuth_rad, baseline_vector_model
 from buoy_nav.measurements.gnss_position import position_model
 from buoy_nav.measurements.gnss_velocity import (
     predicted_antenna_velocity_enu_mps,
@@ -79,9 +86,11 @@ IMU = "imu"
 GNSS_FIX = "gnss_fix"
 GNSS_VELOCITY = "gnss_velocity"
 GNSS_HEADING = "gnss_heading"
-MEASUREMENT_KINDS = (GNSS_FIX, GNSS_VELOCITY, GNSS_HEADING)
-# Order of measurements that share a stamp.
-_KIND_ORDER = {GNSS_FIX: 0, GNSS_VELOCITY: 1, GNSS_HEADING: 2}
+GNSS_BASELINE = "gnss_baseline"
+MEASUREMENT_KINDS = (GNSS_FIX, GNSS_VELOCITY, GNSS_BASELINE, GNSS_HEADING)
+# Order of measurements that share a stamp: the antenna attitude, which may complete the
+# alignment, comes last.
+_KIND_ORDER = {GNSS_FIX: 0, GNSS_VELOCITY: 1, GNSS_BASELINE: 2, GNSS_HEADING: 3}
 
 # Rejection reasons.
 NON_FINITE = "non_finite"
@@ -95,6 +104,11 @@ GEOMETRY = "geometry"
 SINGULAR = "singular_innovation_covariance"
 BEYOND_IMU_DATA = "beyond_imu_data"
 MALFORMED = "malformed"
+DISABLED = "disabled"
+
+# A measured baseline whose length differs from the configured antenna separation by more than
+# this fraction is a wrong configuration or a wrong fix, not a measurement.
+_MAX_BASELINE_LENGTH_ERROR_FRACTION = 0.5
 
 # Longest run of carried-over corrections before the real-time prediction is forked afresh from
 # the filter (s of stamps): bounds the second-order residue of the carry-over (≪ 1e-6 rad).
@@ -125,7 +139,7 @@ class NavSolution:
     filter changes them.
     aligned: the filter is aligned (always True in emitted solutions).
     coasting_fix, coasting_velocity, coasting_heading: no measurement of that kind was accepted
-      for longer than ``coasting_timeout_s``.
+      for longer than ``coasting_timeout_s`` (for the heading: neither a heading nor a baseline).
     """
 
     t_s: float
@@ -176,12 +190,15 @@ class MeasurementCounters:
 
     accepted: samples used (IMU) or filter updates applied (GNSS).
     used_for_alignment: GNSS measurements consumed by the alignment.
+    superseded: headings not fused because a baseline of the same stamp carries their
+    information and more.
     rejected: rejections by reason. resets: state resets after ``gate_reset_count``
     consecutive gate rejections. nis_sum, nis_count: over accepted updates (mean_nis).
     """
 
     accepted: int = 0
     used_for_alignment: int = 0
+    superseded: int = 0
     rejected: dict[str, int] = field(default_factory=dict)
     resets: int = 0
     nis_sum: float = 0.0
@@ -202,7 +219,8 @@ class EngineHealth:
 
     alignment_state: progress of the alignment. aligned: the filter runs.
     coasting_fix, coasting_velocity, coasting_heading: see :class:`NavSolution`.
-    counters: per kind (``imu``, ``gnss_fix``, ``gnss_velocity``, ``gnss_heading``).
+    counters: per kind (``imu``, ``gnss_fix``, ``gnss_velocity``, ``gnss_baseline``,
+      ``gnss_heading``).
     covariance_repairs: times P had to be made positive definite again.
     imu_gaps: IMU gaps longer than ``max_imu_gap_s``. alignments: completed alignments.
     time_s: stamp up to which data was processed (NaN before any).
@@ -242,6 +260,11 @@ class _Heading:
     variance_rad2: float
 
 
+@dataclass(frozen=True)
+class _Baseline:
+    baseline_enu_m: np.ndarray
+
+
 class FusionEngine:
     """Dual-antenna GNSS / strapdown INS fusion (see the module docstring)."""
 
@@ -250,6 +273,7 @@ class FusionEngine:
         self._imu_model = ImuErrorModel.from_config(config)
         self._primary = np.array(config.primary_antenna_body_m)
         self._baseline = np.array(config.baseline_body_m)
+        self._baseline_length_m = float(np.linalg.norm(self._baseline))
         self._aligner = InMotionAligner(config, self._imu_model)
         self._integrator: StrapdownIntegrator | None = None
         self._filter: ErrorStateFilter | None = None
@@ -391,6 +415,23 @@ class FusionEngine:
         else:
             self._reject_input(GNSS_HEADING, reason)
 
+    def add_gnss_baseline(self, t_s: float, baseline_enu_m) -> None:
+        """Add a primary → secondary antenna vector (ENU, m) from moving-baseline RTK."""
+        self.last_input_rejection = None
+        stamp, reason = _floats(t_s)
+        baseline, baseline_reason = _float_array(baseline_enu_m, (3,))
+        reason = reason or baseline_reason
+        if reason is None and not self.config.use_gnss_baseline:
+            reason = DISABLED
+        if reason is None:
+            length_error = float(np.linalg.norm(baseline)) - self._baseline_length_m
+            if abs(length_error) > _MAX_BASELINE_LENGTH_ERROR_FRACTION * self._baseline_length_m:
+                reason = OUT_OF_RANGE
+        if reason is None:
+            self._enqueue(GNSS_BASELINE, stamp[0], _Baseline(baseline))
+        else:
+            self._reject_input(GNSS_BASELINE, reason)
+
     def flush(self) -> list[NavSolution]:
         """End of data: process every buffered IMU sample and every applicable measurement.
 
@@ -424,6 +465,7 @@ class FusionEngine:
                 kind: MeasurementCounters(
                     c.accepted,
                     c.used_for_alignment,
+                    c.superseded,
                     dict(c.rejected),
                     c.resets,
                     c.nis_sum,
@@ -607,10 +649,13 @@ class FusionEngine:
         the other (their noises are independent) at a third of the cost.
         """
         t = group[0][0]
+        group = self._without_superseded_headings(group)
+        if not group:
+            return
         for entry in group:
             self._buffered_stamps[entry[3]].discard(t)
         if self._filter is None:
-            # Kind order puts the heading, which may complete the alignment, last.
+            # Kind order puts the antenna attitude, which may complete the alignment, last.
             for _, _, _, kind, payload in group:
                 self._align_with(kind, t, payload, gyro)
             return
@@ -659,6 +704,21 @@ class FusionEngine:
         for kind, payload, model in persistent_rejections:
             self._reset_to_measurement(kind, t, payload, gyro, model)
 
+    def _without_superseded_headings(self, group: list) -> list:
+        """The measurements of one stamp less the heading if a baseline has that stamp too
+        (counted)."""
+        t = group[0][0]
+        if t not in self._buffered_stamps[GNSS_BASELINE]:
+            return group
+        kept = []
+        for entry in group:
+            if entry[3] == GNSS_HEADING:
+                self._buffered_stamps[GNSS_HEADING].discard(t)
+                self._counters[GNSS_HEADING].superseded += 1
+            else:
+                kept.append(entry)
+        return kept
+
     def _measurement_model(self, kind, payload, state: NavState, rotation, gyro):
         """Linearised model of one measurement; None when the heading geometry is unusable."""
         config = self.config
@@ -686,6 +746,14 @@ class FusionEngine:
                 self._integrator.nav_frame_rate_enu_rad_s,
                 self._primary,
                 config.gnss_velocity_variance_floor_m2s2,
+            )
+        if kind == GNSS_BASELINE:
+            return baseline_vector_model(
+                payload.baseline_enu_m,
+                config.gnss_baseline_sigma_horizontal_m,
+                config.gnss_baseline_sigma_vertical_m,
+                rotation,
+                self._baseline,
             )
         if horizontal_fraction(rotation, self._baseline) < MIN_HORIZONTAL_BASELINE_FRACTION:
             return None
@@ -728,16 +796,21 @@ class FusionEngine:
 
     def _reset_to_measurement(self, kind, t, payload, gyro, model):
         """Re-initialise the states a persistently rejected measurement kind observes."""
+        attitude_kind = kind in (GNSS_HEADING, GNSS_BASELINE)
+        measured = self._antenna_heading(kind, payload) if attitude_kind else None
+        if attitude_kind and measured is None:
+            return
         state = _nav_state(self._integrator)
         counters = self._counters[kind]
         counters.resets += 1
         self._consecutive_rejections[kind] = 0
         self._last_accepted[kind] = t
         rotation = state.rotation_nb
-        if kind == GNSS_HEADING:
+        if attitude_kind:
+            azimuth, variance = measured
             roll, pitch, _ = euler_from_rotation_matrix(rotation)
             levelled = rotation_matrix_from_euler(roll, pitch, 0.0) @ self._baseline
-            yaw = payload.yaw_rad - math.atan2(levelled[1], levelled[0])
+            yaw = azimuth - math.atan2(levelled[1], levelled[0])
             new_rotation = rotation_matrix_from_euler(roll, pitch, yaw)
             new_state = NavState(
                 quaternion_from_rotation_matrix(new_rotation),
@@ -748,7 +821,7 @@ class FusionEngine:
                 state.gyro_bias_rad_s,
                 state.accel_bias_mps2,
             )
-            self._filter.reset_states([2], [float(model.covariance[0, 0])])
+            self._filter.reset_states([2], [variance])
         elif kind == GNSS_VELOCITY:
             velocity = payload.velocity_enu_mps - (
                 predicted_antenna_velocity_enu_mps(
@@ -807,8 +880,10 @@ class FusionEngine:
         if kind == GNSS_VELOCITY:
             aligner.add_velocity(t, payload.velocity_enu_mps, payload.covariance_m2s2)
             return
-        variance = max(payload.variance_rad2, self.config.gnss_heading_variance_floor_rad2)
-        result = aligner.add_heading(t, payload.yaw_rad, variance, gyro)
+        measured = self._antenna_heading(kind, payload)
+        if measured is None:
+            return
+        result = aligner.add_heading(t, *measured, gyro)
         if result is None:
             return
         state = result.state
@@ -836,6 +911,19 @@ class FusionEngine:
         self._bias_arrays = None
         self._ahead = None
 
+    def _antenna_heading(self, kind: str, payload) -> tuple[float, float] | None:
+        """Baseline azimuth (rad, ENU) and its variance (rad², floored) of a heading or a
+        baseline measurement; None for a baseline too steep to give one."""
+        config = self.config
+        if kind == GNSS_HEADING:
+            yaw, variance = payload.yaw_rad, payload.variance_rad2
+        else:
+            yaw, horizontal_length = baseline_azimuth_rad(payload.baseline_enu_m)
+            if horizontal_length < MIN_HORIZONTAL_BASELINE_FRACTION * self._baseline_length_m:
+                return None
+            variance = (config.gnss_baseline_sigma_horizontal_m / horizontal_length) ** 2
+        return yaw, max(variance, config.gnss_heading_variance_floor_rad2)
+
     # ------------------------------------------------------------------ output
     def _coasting_flags(self, t: float) -> tuple[bool, bool, bool]:
         timeout = self.config.coasting_timeout_s
@@ -843,7 +931,7 @@ class FusionEngine:
         return (
             t - last[GNSS_FIX] > timeout,
             t - last[GNSS_VELOCITY] > timeout,
-            t - last[GNSS_HEADING] > timeout,
+            t - max(last[GNSS_HEADING], last[GNSS_BASELINE]) > timeout,
         )
 
     def _solution(self, integrator: StrapdownIntegrator, t: float, gyro, force) -> NavSolution:

@@ -2,12 +2,13 @@
 
     fuse_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file fusion.yaml] [--overwrite]
 
-Reads the sensor topics ``imu/data_raw``, ``gnss/fix``, ``gnss/heading`` (required) and
-``gnss/vel`` (used when present) in log-time order, feeds them through the same conversion and
-engine as the live node, and writes ``nav/odometry``, ``nav/imu``, ``nav/velocity`` and
-``nav/fix`` to a new bag, each with the log time of the IMU message that produced it. Truth
-topics (``truth/*``) are copied unchanged, so the output carries its own answer. Parameters come
-from the same YAML files the node takes (sections ``/**`` and ``fusion_node``).
+Reads the sensor topics ``imu/data_raw``, ``gnss/fix``, ``gnss/heading`` (required),
+``gnss/vel`` and ``gnss/baseline`` (used when present) in log-time order, feeds them through the
+same conversion and engine as the live node, and writes ``nav/odometry``, ``nav/imu``,
+``nav/velocity`` and ``nav/fix`` to a new bag, each with the log time of the IMU message that
+produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries its own
+answer. Parameters come from the same YAML files the node takes (sections ``/**`` and
+``fusion_node``).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from buoy_nav.config import (
 )
 from buoy_nav.engine import FusionEngine, NavSolution
 from buoy_nav.fusion_messages import (
+    BASELINE_TOPIC,
     FIX_TOPIC,
     HEADING_TOPIC,
     IMU_TOPIC,
@@ -45,7 +47,7 @@ from buoy_nav.parameters import ParameterError, build_config, load_parameter_fil
 from buoy_nav.progress import Progress
 
 REQUIRED_TOPICS = (IMU_TOPIC, FIX_TOPIC, HEADING_TOPIC)
-OPTIONAL_TOPICS = (VELOCITY_TOPIC,)
+OPTIONAL_TOPICS = (VELOCITY_TOPIC, BASELINE_TOPIC)
 TRUTH_PREFIX = "truth/"
 PROGRESS_EVERY_MESSAGES = 2000
 
@@ -72,8 +74,11 @@ def bag_topic(relative: str) -> str:
     return "/" + relative
 
 
-def sensor_topics_of(reader: BagReader, extra_required: Iterable[str] = ()) -> dict[str, str]:
-    """Relative → stored name of the fusion's input topics in ``reader``'s bag.
+def sensor_topics_of(
+    reader: BagReader, config: FusionConfig, extra_required: Iterable[str] = ()
+) -> dict[str, str]:
+    """Relative → stored name of the fusion's input topics in ``reader``'s bag (``gnss/baseline``
+    only when ``config`` fuses it).
 
     Raises BagError naming what is missing or of the wrong type.
     """
@@ -81,7 +86,7 @@ def sensor_topics_of(reader: BagReader, extra_required: Iterable[str] = ()) -> d
     stored = {relative_topic(name): name for name in reader.topics}
     found = {}
     for topic in (*REQUIRED_TOPICS, *OPTIONAL_TOPICS):
-        if topic not in stored:
+        if topic not in stored or (topic == BASELINE_TOPIC and not config.use_gnss_baseline):
             continue
         msgtype = reader.topics[stored[topic]].msgtype
         if msgtype != SENSOR_MSGTYPES[topic]:
@@ -157,7 +162,8 @@ class OfflineFusion:
             rejected = ", ".join(f"{r} {n}" for r, n in sorted(counters.rejected.items()))
             lines.append(
                 f"{kind:14s} accepted {counters.accepted:7d}  "
-                f"alignment {counters.used_for_alignment:4d}  resets {counters.resets:3d}  "
+                f"alignment {counters.used_for_alignment:4d}  "
+                f"superseded {counters.superseded:6d}  resets {counters.resets:3d}  "
                 f"mean NIS {counters.mean_nis:6.2f}  rejected: {rejected or 'none'}"
             )
         for key, count in sorted(self.rejections.items()):
@@ -169,7 +175,7 @@ def fuse_bag(in_bag: str, out_bag: str, config: FusionConfig, overwrite: bool = 
     """Run the fusion over ``in_bag`` into ``out_bag``; returns (OfflineFusion, counts, wall s)."""
     started = time.monotonic()
     with BagReader(in_bag) as reader:
-        sensors = sensor_topics_of(reader)
+        sensors = sensor_topics_of(reader, config)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
         progress = Progress(reader.duration_s, f"fuse_bag {in_bag}", unit="bag s")
@@ -193,7 +199,9 @@ def fuse_bag(in_bag: str, out_bag: str, config: FusionConfig, overwrite: bool = 
 
 def parse_arguments(argv):
     parser = argparse.ArgumentParser(prog="fuse_bag", description=__doc__.split("\n")[0])
-    parser.add_argument("in_bag", help="bag with imu/data_raw, gnss/fix, gnss/heading[, gnss/vel]")
+    parser.add_argument(
+        "in_bag", help="bag with imu/data_raw, gnss/fix, gnss/heading[, gnss/vel, gnss/baseline]"
+    )
     parser.add_argument("out_bag", help="bag directory to create with the nav/* topics")
     parser.add_argument(
         "--params-file",

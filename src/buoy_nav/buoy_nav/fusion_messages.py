@@ -16,6 +16,8 @@ differently still work:
   ground, covariance (m²/s²) from the linear 3×3 block of the 6×6 twist covariance.
 - ``gnss/heading`` (sensor_msgs/Imu): yaw of the orientation quaternion = azimuth of the
   primary→secondary baseline (ENU, rad); ``orientation_covariance[8]`` = yaw variance (rad²).
+- ``gnss/baseline`` (geometry_msgs/Vector3Stamped): primary→secondary antenna vector (ENU, m);
+  its error is a parameter (the message has no covariance).
 
 Outputs (one set per navigation solution, all with the solution's stamp):
 
@@ -49,11 +51,13 @@ IMU_TOPIC = "imu/data_raw"
 FIX_TOPIC = "gnss/fix"
 VELOCITY_TOPIC = "gnss/vel"
 HEADING_TOPIC = "gnss/heading"
+BASELINE_TOPIC = "gnss/baseline"
 SENSOR_MSGTYPES = {
     IMU_TOPIC: "sensor_msgs/msg/Imu",
     FIX_TOPIC: "sensor_msgs/msg/NavSatFix",
     VELOCITY_TOPIC: "geometry_msgs/msg/TwistWithCovarianceStamped",
     HEADING_TOPIC: "sensor_msgs/msg/Imu",
+    BASELINE_TOPIC: "geometry_msgs/msg/Vector3Stamped",
 }
 """The fusion's input topics (relative names) and their message types."""
 
@@ -180,6 +184,8 @@ def feed_message(
             if len(covariance) != 9:
                 return [], REASON_MALFORMED
             engine.add_gnss_heading(t_s, yaw_from_quaternion_rad(x, y, z, w), covariance[8])
+        elif topic == BASELINE_TOPIC:
+            engine.add_gnss_baseline(t_s, _triple(message.vector))
         else:
             raise ValueError(f"'{topic}' is not an input topic of the fusion")
     except (AttributeError, TypeError, ValueError) as error:

@@ -8,6 +8,8 @@ Subscribes (reliable, deep queue):
 - ``gnss/fix`` (sensor_msgs/NavSatFix): primary antenna WGS-84 position, ENU covariance (m²)
 - ``gnss/vel`` (geometry_msgs/TwistWithCovarianceStamped): primary antenna ENU velocity (m/s)
 - ``gnss/heading`` (sensor_msgs/Imu): azimuth of the primary→secondary baseline (yaw, rad)
+- ``gnss/baseline`` (geometry_msgs/Vector3Stamped): the primary→secondary antenna vector (ENU,
+  m), unless ``fusion.use_gnss_baseline`` is false; it replaces the heading of the same stamp
 
 Publishes, once aligned, one set per navigation solution, all with the solution's stamp:
 
@@ -16,9 +18,9 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``nav/velocity`` (geometry_msgs/TwistWithCovarianceStamped, ``map``)
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``)
 - ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
-  rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps, input rates
-  per topic, solutions published and the wall-clock processing time of the IMU callback (from
-  its start to the end of its publishing), mean and max over the period. Level warn while not
+  superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps,
+  input rates per topic, solutions published and the wall-clock processing time of the IMU
+  callback (from its start to the end of its publishing), mean and max over the period. Level warn while not
   aligned, while a GNSS kind is coasting or when no IMU sample came in the period.
 
 Messages are converted and fed to :class:`buoy_nav.engine.FusionEngine` by
@@ -45,7 +47,7 @@ import collections
 import math
 import time
 
-from geometry_msgs.msg import TwistWithCovarianceStamped
+from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, NavSatFix
 
@@ -55,9 +57,16 @@ from buoy_nav.base_node import (
     FlushingNode,
     main_for,
 )
-from buoy_nav.config import FusionConfig
+from buoy_nav.config import (
+    FUSION_FIELDS_NOT_PARAMETERS,
+    FUSION_NODE_NAME,
+    FUSION_PARAMETER_PREFIX,
+    FUSION_SHARED_PARAMETERS,
+    FusionConfig,
+)
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
 from buoy_nav.fusion_messages import (
+    BASELINE_TOPIC,
     FIX_TOPIC,
     HEADING_TOPIC,
     IMU_TOPIC,
@@ -65,7 +74,6 @@ from buoy_nav.fusion_messages import (
     NAV_IMU_TOPIC,
     NAV_VELOCITY_TOPIC,
     ODOMETRY_TOPIC,
-    SENSOR_MSGTYPES,
     VELOCITY_TOPIC,
     NavMessageClasses,
     StampBook,
@@ -73,16 +81,6 @@ from buoy_nav.fusion_messages import (
     solution_messages,
 )
 
-NODE_NAME = "fusion_node"
-PARAMETER_PREFIX = "fusion."
-SHARED_PARAMETERS = {
-    "primary_antenna_body_m": "gnss.primary_antenna",
-    "secondary_antenna_body_m": "gnss.secondary_antenna",
-    "origin_latitude_deg": "origin.latitude_deg",
-    "origin_longitude_deg": "origin.longitude_deg",
-    "origin_altitude_m": "origin.altitude_m",
-}
-NOT_PARAMETERS = ("record_innovations",)
 NAV_CLASSES = NavMessageClasses(Odometry, Imu, TwistWithCovarianceStamped, NavSatFix)
 OUTPUT_CLASSES = {
     ODOMETRY_TOPIC: Odometry,
@@ -95,6 +93,7 @@ INPUT_CLASSES = {
     FIX_TOPIC: NavSatFix,
     VELOCITY_TOPIC: TwistWithCovarianceStamped,
     HEADING_TOPIC: Imu,
+    BASELINE_TOPIC: Vector3Stamped,
 }
 DIAGNOSTICS_PERIOD_S = 1.0
 # Bound on the wait, at shutdown, for subscribers to acknowledge the last solutions.
@@ -102,7 +101,7 @@ DIAGNOSTICS_PERIOD_S = 1.0
 
 class FusionNode(FlushingNode):
     def __init__(self):
-        super().__init__(NODE_NAME)
+        super().__init__(FUSION_NODE_NAME)
         self.config = self._declare_fusion_config()
         self.engine = FusionEngine(self.config)
         self.stamps = StampBook()
@@ -111,13 +110,18 @@ class FusionNode(FlushingNode):
         self._last_report_s = time.monotonic()
         self._imu_callback_durations_s: list[float] = []
         self.solutions_published = 0
+        self.input_topics = [
+            topic
+            for topic in INPUT_CLASSES
+            if topic != BASELINE_TOPIC or self.config.use_gnss_baseline
+        ]
 
         self._nav_publishers = {
             topic: self.create_publisher(message_class, topic, DATA_QOS)
             for topic, message_class in OUTPUT_CLASSES.items()
         }
         self.create_subscription(Imu, IMU_TOPIC, self.on_imu, DATA_QOS)
-        for topic in (FIX_TOPIC, VELOCITY_TOPIC, HEADING_TOPIC):
+        for topic in self.input_topics[1:]:
             self.create_subscription(
                 INPUT_CLASSES[topic],
                 topic,
@@ -134,7 +138,7 @@ class FusionNode(FlushingNode):
         )
         rate = f"{config.output_rate_hz} Hz" if config.output_rate_hz > 0 else "every IMU sample"
         self.get_logger().info(
-            f"fusing {', '.join(SENSOR_MSGTYPES)}: antennas "
+            f"fusing {', '.join(self.input_topics)}: antennas "
             f"{list(config.primary_antenna_body_m)} m (primary) and "
             f"{list(config.secondary_antenna_body_m)} m (secondary) in base_link; map origin "
             f"{origin}; output {rate}, "
@@ -144,9 +148,9 @@ class FusionNode(FlushingNode):
     def _declare_fusion_config(self) -> FusionConfig:
         return self.declare_config(
             FusionConfig,
-            prefix=PARAMETER_PREFIX,
-            renamed=SHARED_PARAMETERS,
-            skip=NOT_PARAMETERS,
+            prefix=FUSION_PARAMETER_PREFIX,
+            renamed=FUSION_SHARED_PARAMETERS,
+            skip=FUSION_FIELDS_NOT_PARAMETERS,
         )
 
     # -- inputs -----------------------------------------------------------------------------
@@ -202,6 +206,7 @@ class FusionNode(FlushingNode):
                 values[f"{kind}.rejected[{reason}]"] = count
             if kind != IMU:  # alignment use, resets and NIS are of measurements only
                 values[f"{kind}.used_for_alignment"] = counters.used_for_alignment
+                values[f"{kind}.superseded"] = counters.superseded
                 values[f"{kind}.resets"] = counters.resets
                 values[f"{kind}.mean_nis"] = counters.mean_nis
         values.update(
@@ -213,7 +218,7 @@ class FusionNode(FlushingNode):
                 "processed_up_to_s": f"{health.time_s:.6f}",
             }
         )
-        for topic in SENSOR_MSGTYPES:
+        for topic in self.input_topics:
             values[f"messages_in[{topic}]"] = self._messages_in[topic]
             values[f"rate_hz[{topic}]"] = new[topic] / period_s
         values.update(

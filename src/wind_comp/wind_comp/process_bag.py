@@ -231,7 +231,7 @@ def process_bag(
     started = time.monotonic()
     csv_path = products_csv_path(out_bag)
     with BagReader(in_bag) as reader:
-        sensors = sensor_topics_of(reader, extra_required=(WIND_TOPIC,))
+        sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_TOPIC,))
         stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_TOPIC)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
@@ -273,7 +273,9 @@ def process_bag(
 def parse_arguments(argv):
     parser = argparse.ArgumentParser(prog="process_bag", description=__doc__.split("\n")[0])
     parser.add_argument(
-        "in_bag", help="bag with imu/data_raw, gnss/fix, gnss/heading, anemometer/wind[, gnss/vel]"
+        "in_bag",
+        help="bag with imu/data_raw, gnss/fix, gnss/heading, anemometer/wind"
+        "[, gnss/vel, gnss/baseline]",
     )
     parser.add_argument("out_bag", help="bag directory to create")
     parser.add_argument(
