@@ -6,8 +6,9 @@ process, an rclpy node listening to ``imu/data_raw``, ``nav/imu``, ``anemometer/
 the input with the same header stamp (receive times from the middleware's reception stamp when
 it gives one), over all pairs and "in service" (without the first second of output, when a
 just-aligned filter releases its held-back solutions at once); the same difference of the
-publishers' source stamps is given beside it. The CPU share of ``fusion_node`` comes from
-/proc/<pid>/stat (utime + stime) while the IMU stream flows.
+publishers' source stamps is given beside it. The simulated sensors and clock run at niceness
+``SIMULATOR_NICENESS``, the nodes under test at the default. The CPU share of ``fusion_node``
+comes from /proc/<pid>/stat (utime + stime) while the IMU stream flows.
 
     python tools/bench_live.py [--duration-s 40]
 """
@@ -33,6 +34,17 @@ PARAMS_FILE = REPO / "src/buoy_nav/config/buoy.yaml"
 LATENCY_TARGET_P99_MS = 5.0
 CPU_SAMPLE_PERIOD_S = 0.25
 FIND_PID_TIMEOUT_S = 30.0
+# The simulated sensors and clock stand in for hardware and its drivers; on this machine they are
+# five Python processes sharing two cores with the nodes under test, so they run at a lower
+# priority, as a buoy computer would run its processing nodes above housekeeping.
+SIMULATOR_PROCESSES = (
+    "truth_node",
+    "imu_sim_node",
+    "gnss_sim_node",
+    "anemometer_sim_node",
+    "sim_clock_node",
+)
+SIMULATOR_NICENESS = 10
 RUN_MARGIN_S = 90.0
 IN_SERVICE_AFTER_S = 1.0
 
@@ -186,6 +198,18 @@ def child_pid(parent_pid: int, pattern: str, timeout_s: float) -> int | None:
     return None
 
 
+def lower_priority(parent_pid: int, names) -> dict[str, int | None]:
+    """Set the niceness of ``parent_pid``'s children of these names to SIMULATOR_NICENESS;
+    returns the niceness each got (None: not found)."""
+    niceness = {}
+    for name in names:
+        pid = child_pid(parent_pid, name, FIND_PID_TIMEOUT_S)
+        if pid is not None:
+            os.setpriority(os.PRIO_PROCESS, pid, SIMULATOR_NICENESS)
+        niceness[name] = None if pid is None else os.getpriority(os.PRIO_PROCESS, pid)
+    return niceness
+
+
 def latency_stats(inputs: dict, outputs: dict) -> dict:
     """Output minus input time of the samples with the same header stamp, ms: by receive
     times in this process and, for comparison, by the publishers' source stamps."""
@@ -253,6 +277,7 @@ def run_live(duration_s: float, log_dir: Path) -> dict:
         pid = child_pid(scenario.pid, "fusion_node", FIND_PID_TIMEOUT_S)
         if pid is not None:
             sampler = CpuSampler(pid)
+        result["simulator_niceness"] = lower_priority(scenario.pid, SIMULATOR_PROCESSES)
         try:
             output, _ = scenario.communicate(timeout=duration_s + RUN_MARGIN_S)
         except subprocess.TimeoutExpired:

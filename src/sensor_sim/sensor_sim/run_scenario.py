@@ -26,6 +26,7 @@ SENSOR_NODES = ("truth_node", "imu_sim_node", "gnss_sim_node", "anemometer_sim_n
 DRAIN_S = 2.0
 STOP_TIMEOUT_S = 20.0
 SIM_TIME = {"use_sim_time": True}
+STOP_ORDER = ("fusion_node", "compensation_node", "bag_recorder")
 
 
 def executable(name: str) -> str:
@@ -156,34 +157,31 @@ def run(arguments) -> int:
     if arguments.record:
         run.start("bag_recorder", [arguments.record, *ros_arguments(arguments, SIM_TIME)], False)
         clock_subscribers += 1
+    # The processing nodes run on header stamps and the wall clock, as on a buoy: on simulated
+    # time each would also take every /clock message, a callback per 5 ms for nothing.
+    processing_nodes = []
     if arguments.fusion or arguments.compensation:
-        run.start("fusion_node", ros_arguments(arguments, SIM_TIME), False)
-        clock_subscribers += 1
+        processing_nodes.append("fusion_node")
     if arguments.compensation:
-        run.start("compensation_node", ros_arguments(arguments, SIM_TIME), False)
-        clock_subscribers += 1
+        processing_nodes.append("compensation_node")
+    for name in processing_nodes:
+        run.start(name, ros_arguments(arguments, {}), False)
     # A recording must start with the first sample of every topic; without a recorder some
     # topics (truth, baseline) may have no subscriber at all, and the clock's own wait for the
     # fusion and compensation nodes is what keeps them from missing the start.
-    wait = 1 if arguments.record else 0
+    sensor_values = scenario_values(arguments)
+    if arguments.record:
+        sensor_values["wait_for_subscriber_node"] = "bag_recorder"
     for name in SENSOR_NODES:
-        run.start(
-            name,
-            ros_arguments(arguments, {**scenario_values(arguments), "wait_for_subscribers": wait}),
-            True,
-        )
-    run.start(
-        "sim_clock_node",
-        ros_arguments(
-            arguments,
-            {
-                **scenario_values(arguments),
-                "rate_factor": arguments.rate_factor,
-                "wait_for_subscribers": clock_subscribers,
-            },
-        ),
-        True,
-    )
+        run.start(name, ros_arguments(arguments, sensor_values), True)
+    clock_values = {
+        **scenario_values(arguments),
+        "rate_factor": arguments.rate_factor,
+        "wait_for_subscribers": clock_subscribers,
+    }
+    if processing_nodes:
+        clock_values["wait_for_nodes"] = f"[{','.join(processing_nodes)}]"
+    run.start("sim_clock_node", ros_arguments(arguments, clock_values), True)
     print(
         f"run_scenario: '{scenario.name}' seed {scenario.seed}, {scenario.duration_s:g} s at "
         f"{arguments.rate_factor:g}x; node logs in {log_dir}",
@@ -214,7 +212,10 @@ def run(arguments) -> int:
         print("run_scenario: interrupted, stopping the nodes", file=sys.stderr)
         run.interrupt(run.processes)
         return 130
-    run.interrupt(long_running)
+    # Upstream first: each node publishes what it holds back when it stops, and the recorder,
+    # stopped last, records that too.
+    for process in sorted(long_running, key=lambda p: STOP_ORDER.index(p.name)):
+        run.interrupt([process])
     failure = run.failed()
     if failure is not None:
         print(

@@ -55,10 +55,10 @@ class SimulatedSensorNode(SuiteNode):
             self.stream = self.spec.build(self.scenario, TruthModel(self.scenario), values)
         except ParameterError as error:
             raise StartupError(str(error)) from error
-        self.wait_for_subscribers = self.declare_value(
-            "wait_for_subscribers",
-            0,
-            "publish only once every topic has this many subscribers (recording)",
+        self.wait_for_subscriber_node = self.declare_value(
+            "wait_for_subscriber_node",
+            "",
+            "publish only once every topic has a subscription of this node (a recorder)",
         )
         self.publishers_by_topic = {
             topic: self.create_publisher(message_class(type_name), topic, DATA_QOS)
@@ -74,15 +74,20 @@ class SimulatedSensorNode(SuiteNode):
         )
 
     def subscribers_ready(self) -> bool:
+        """Every topic has a subscription of ``wait_for_subscriber_node``: a count would also be
+        met by another node's subscription, while the recorder's is still on its way."""
         return all(
-            publisher.get_subscription_count() >= self.wait_for_subscribers
-            for publisher in self.publishers_by_topic.values()
+            any(
+                endpoint.node_name == self.wait_for_subscriber_node
+                for endpoint in self.get_subscriptions_info_by_topic(topic)
+            )
+            for topic in self.publishers_by_topic
         )
 
     def on_clock(self, clock: Clock) -> None:
         clock_ns = clock.clock.sec * 1_000_000_000 + clock.clock.nanosec
         self.sim_time_s = (clock_ns - self.scenario.start_time_ns) * 1e-9
-        if self.wait_for_subscribers and not self.subscribers_ready():
+        if self.wait_for_subscriber_node and not self.subscribers_ready():
             return
         for topic, _, message in self.stream.advance(self.sim_time_s):
             self.publishers_by_topic[topic].publish(message)

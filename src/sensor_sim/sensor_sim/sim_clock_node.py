@@ -29,6 +29,11 @@ class SimClockNode(SuiteNode):
         self.wait_for_subscribers = self.declare_value(
             "wait_for_subscribers", 0, "hold time at 0 until /clock has this many subscribers"
         )
+        self.wait_for_nodes = set(
+            self.declare_string_list(
+                "wait_for_nodes", "names of nodes not on simulated time to hold time at 0 for"
+            )
+        )
         self.start_delay_s = self.declare_value(
             "start_delay_s", 0.5, "wall-clock pause after the subscribers are there"
         )
@@ -57,6 +62,8 @@ class SimClockNode(SuiteNode):
         if self.wall_start_s is None:
             self.publish_time(0.0)
             if self.publisher.get_subscription_count() < self.wait_for_subscribers:
+                return
+            if not self.wait_for_nodes <= set(self.get_node_names()):
                 return
             self.ready_since_s = self.ready_since_s or now_s
             if now_s - self.ready_since_s < self.start_delay_s:
