@@ -21,6 +21,7 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import TwistWithCovarianceStamped
+from nav_msgs.msg import Odometry
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import Imu, NavSatFix
@@ -46,11 +47,12 @@ from buoy_nav.fusion_messages import (
     REASON_ZERO_QUATERNION,
     SENSOR_MSGTYPES,
     VELOCITY_TOPIC,
+    NavMessageClasses,
     StampBook,
     feed_message,
     solution_messages,
 )
-from buoy_nav.fusion_node import INPUT_CLASSES, NAV_CLASSES, OUTPUT_CLASSES
+from buoy_nav.fusion_node import INPUT_CLASSES, OUTPUT_CLASSES
 from buoy_nav.parameters import build_config, load_parameter_files
 from ros_messages import stamp_ns, to_rclpy
 
@@ -60,6 +62,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 BAG = os.path.join(REPO, "bags", "sea_state")
 BUOY_PARAMETERS = os.path.join(REPO, "src", "buoy_nav", "config", "buoy.yaml")
 NODE = FUSION_NODE_NAME
+# The message-object form of the solutions: an independent path to the CDR the node publishes.
+NAV_CLASSES = NavMessageClasses(Odometry, Imu, TwistWithCovarianceStamped, NavSatFix)
 LIVE_EQUALS_OFFLINE_S = 40.0  # the alignment takes the first 10 s
 MALFORMED_RUN_S = 16.0
 MALFORMED_AFTER_S = 12.0  # aligned by then

@@ -20,8 +20,8 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
   superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps,
   input rates per topic, solutions published and the wall-clock processing time of the IMU
-  callback (from its start to the end of its publishing), mean and max over the period. Level warn while not
-  aligned, while a GNSS kind is coasting or when no IMU sample came in the period.
+  callback (from its start to the end of its publishing), mean and max over the period. Level
+  warn while not aligned, while a GNSS kind is coasting or when no IMU sample came in the period.
 
 Messages are converted and fed to :class:`buoy_nav.engine.FusionEngine` by
 :mod:`buoy_nav.fusion_messages`, the code the offline ``fuse_bag`` uses, so a bag replayed to
@@ -49,6 +49,7 @@ import time
 
 from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu, NavSatFix
 
 from buoy_nav.base_node import (
@@ -75,13 +76,13 @@ from buoy_nav.fusion_messages import (
     NAV_VELOCITY_TOPIC,
     ODOMETRY_TOPIC,
     VELOCITY_TOPIC,
-    NavMessageClasses,
     StampBook,
+    feed_imu_cdr,
     feed_message,
-    solution_messages,
+    nav_values,
+    solution_cdr,
 )
 
-NAV_CLASSES = NavMessageClasses(Odometry, Imu, TwistWithCovarianceStamped, NavSatFix)
 OUTPUT_CLASSES = {
     ODOMETRY_TOPIC: Odometry,
     NAV_IMU_TOPIC: Imu,
@@ -120,7 +121,9 @@ class FusionNode(FlushingNode):
             topic: self.create_publisher(message_class, topic, DATA_QOS)
             for topic, message_class in OUTPUT_CLASSES.items()
         }
-        self.create_subscription(Imu, IMU_TOPIC, self.on_imu, DATA_QOS)
+        # Raw: the IMU sample is read straight from its CDR bytes, as offline, and saves the
+        # building of a message object at 100 Hz.
+        self.create_subscription(Imu, IMU_TOPIC, self.on_imu, DATA_QOS, raw=True)
         for topic in self.input_topics[1:]:
             self.create_subscription(
                 INPUT_CLASSES[topic],
@@ -155,15 +158,22 @@ class FusionNode(FlushingNode):
 
     # -- inputs -----------------------------------------------------------------------------
 
-    def on_imu(self, message: Imu) -> None:
+    def on_imu(self, raw: bytes) -> None:
         started_s = time.perf_counter()
-        self.feed(IMU_TOPIC, message)
+        self._messages_in[IMU_TOPIC] += 1
+        fed = feed_imu_cdr(self.engine, raw, self.stamps)
+        if fed is None:
+            fed = feed_message(self.engine, IMU_TOPIC, deserialize_message(raw, Imu), self.stamps)
+        self._take(IMU_TOPIC, fed)
         self._imu_callback_durations_s.append(time.perf_counter() - started_s)
 
     def feed(self, topic: str, message) -> None:
         """Give a sensor message to the engine; publish the solutions it yields."""
         self._messages_in[topic] += 1
-        solutions, rejection = feed_message(self.engine, topic, message, self.stamps)
+        self._take(topic, feed_message(self.engine, topic, message, self.stamps))
+
+    def _take(self, topic: str, fed) -> None:
+        solutions, rejection = fed
         if rejection is not None:
             self.reject(topic, rejection)
             return
@@ -172,9 +182,10 @@ class FusionNode(FlushingNode):
     # -- outputs ----------------------------------------------------------------------------
 
     def publish_solutions(self, solutions: list[NavSolution]) -> None:
+        """Publish as CDR bytes: the bytes ``fuse_bag`` writes, without building messages."""
         for solution in solutions:
-            for topic, message in solution_messages(solution, NAV_CLASSES, self.stamps).items():
-                self._nav_publishers[topic].publish(message)
+            for topic, raw in solution_cdr(nav_values(solution, self.stamps)).items():
+                self._nav_publishers[topic].publish(raw)
             self.solutions_published += 1
 
     def flush_held_back(self) -> list:
