@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import shutil
 from pathlib import Path
 
@@ -13,6 +14,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
+from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Image, Imu, NavSatFix
 from std_msgs.msg import Byte, ByteMultiArray, Char
 
@@ -206,6 +208,39 @@ def test_metadata_is_rosbag2_version_9_with_one_mcap_file(written_bag):
     )
     # Compression lives inside the MCAP chunks, so rosbag2 must not decompress the file itself.
     assert metadata["compression_mode"] == ""
+
+
+def test_chunks_overlapping_in_time_are_read_in_the_order_rosbags_reads(tmp_path):
+    """Log times that go back and repeat across chunks: messages come merged in log-time
+    order, equal log times in rosbags' order, and checksums hold for the mcap reader."""
+    path = tmp_path / "overlapping"
+    payload = bytes(range(256)) * 400  # ten of these fill a chunk
+    with BagWriter(path) as writer:
+        for index in range(60):
+            image = Image(height=1, width=len(payload), encoding="mono8", step=len(payload))
+            image.data = payload
+            image.header.frame_id = str(index)
+            topic = "/camera_a" if index % 3 else "/camera_b"
+            time_ns = T0_NS + (index * 7919 % 50) * 1000
+            writer.write(topic, "sensor_msgs/msg/Image", time_ns, image)
+    (mcap_file,) = path.glob("*.mcap")
+    with mcap_file.open("rb") as stream:
+        reader = make_reader(stream, validate_crcs=True)
+        chunks = sorted(reader.get_summary().chunk_indexes, key=lambda c: c.message_start_time)
+        assert sum(1 for _ in reader.iter_messages()) == 60
+    assert any(
+        later.message_start_time <= earlier.message_end_time
+        for earlier, later in itertools.pairwise(chunks)
+    )
+    with Reader(path) as reference:
+        expected = [
+            (connection.topic, time_ns, bytes(raw))
+            for connection, time_ns, raw in reference.messages()
+        ]
+    for topics in (None, ["/camera_a"]):
+        with BagReader(path) as reader:
+            read = [(m.topic, m.log_time_ns, m.raw) for m in reader.messages(topics)]
+        assert read == [entry for entry in expected if topics is None or entry[0] in topics]
 
 
 def test_chunk_compression_makes_the_bag_smaller(tmp_path):

@@ -95,6 +95,25 @@ def test_streaming_equals_batch_whatever_the_arrival_order():
         assert compensator.n_pending == 0
 
 
+def test_wind_added_in_batches_equals_wind_added_one_by_one():
+    nav_t, quats, rates, velocities, wind_t, wind = scenario()
+    one_by_one = WindCompensator(config())
+    in_batches = WindCompensator(config())
+    for compensator in (one_by_one, in_batches):
+        compensator.add_nav_batch(nav_t, quats, rates, velocities)
+    for i in range(len(wind_t)):
+        one_by_one.add_wind(wind_t[i], wind[i])
+    for part in np.array_split(np.arange(len(wind_t)), 7):
+        in_batches.add_wind_batch(wind_t[part], wind[part])
+    expected, got = one_by_one.flush(), in_batches.flush()
+    assert [(o.t_s, o.status) for o in got] == [(o.t_s, o.status) for o in expected]
+    np.testing.assert_array_equal(
+        [o.true_wind_enu_mps for o in got], [o.true_wind_enu_mps for o in expected]
+    )
+    with pytest.raises(CompensatorInputError):
+        in_batches.add_wind_batch(wind_t[:3], wind[:2])
+
+
 def test_every_sample_gets_one_output_with_its_stamp_and_reason():
     nav_t, quats, rates, velocities, wind_t, wind = scenario()
     batch = correct_batch(config(), nav_t, quats, rates, velocities, wind_t, wind)

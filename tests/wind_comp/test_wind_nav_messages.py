@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
+from rclpy.serialization import serialize_message
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
@@ -16,6 +17,7 @@ from wind_comp.nav_messages import (
     MalformedMessageError,
     StampOrder,
     anemometer_sample,
+    anemometer_sample_cdr,
     body_to_enu,
     fix_latitude_deg,
     odometry_arrays,
@@ -25,6 +27,7 @@ from wind_comp.nav_messages import (
     stamp_from_seconds,
     stamp_s,
     stats_values,
+    true_wind_cdr,
     true_wind_message,
     window_label,
 )
@@ -132,6 +135,32 @@ def test_anemometer_sample_round_trip_and_rejections():
         assert np.all(np.isnan(rejected.wind_sensor_mps))
 
 
+@pytest.mark.parametrize(
+    ("vector", "frame"),
+    [
+        ([3.0, -4.0, 0.5], "anemometer_link"),
+        ([math.nan, 1.0, 0.0], "anemometer_link"),
+        ([1.0, 1.0, 0.0], "imu_link"),
+        ([1.0, 1.0, 0.0], ""),
+        ([1.0, 1.0, 0.0], "anemometer_link_with_a_longer_name"),
+    ],
+)
+def test_anemometer_sample_from_cdr_equals_the_decoded_message(vector, frame):
+    message = wind(vector, frame=frame, sec=1_767_225_600, nanosec=123_456_789)
+    expected = anemometer_sample(message)
+    sample, sec, nanosec = anemometer_sample_cdr(serialize_message(message))
+    assert (sec, nanosec) == (1_767_225_600, 123_456_789)
+    assert sample.t_s == expected.t_s
+    assert sample.rejection == expected.rejection
+    np.testing.assert_array_equal(sample.wind_sensor_mps, expected.wind_sensor_mps)
+
+
+def test_anemometer_cdr_reader_declines_what_it_does_not_handle():
+    raw = serialize_message(wind([1.0, 2.0, 3.0]))
+    assert anemometer_sample_cdr(b"\x01\x00" + raw[2:]) is None  # big-endian
+    assert anemometer_sample_cdr(raw[:20]) is None
+
+
 def test_stamp_order_accepts_only_increasing_stamps():
     order = StampOrder()
     assert [order.advance(t) for t in (1.0, 2.0, 2.0, 1.5, 3.0, math.nan)] == [
@@ -199,6 +228,12 @@ def test_true_wind_message_keeps_stamp_and_is_in_map():
     assert (message.header.stamp.sec, message.header.stamp.nanosec) == (1_767_225_600, 50_000_000)
     assert message.header.frame_id == "map"
     assert message.vector.x == 1.0 and math.isnan(message.vector.y)
+
+
+def test_true_wind_cdr_is_what_ros_serialises_for_the_message():
+    for vector in ([1.0, -2.5, 0.25], [math.nan, math.nan, math.nan]):
+        message = true_wind_message(Vector3Stamped, 1_767_225_600, 50_000_000, vector)
+        assert true_wind_cdr(1_767_225_600, 50_000_000, vector) == serialize_message(message)
 
 
 def test_product_messages_carry_the_window_statistics():

@@ -1,13 +1,20 @@
-"""Reading and writing rosbag2 bags (metadata.yaml version 9, one MCAP file) with rosbags.
+"""Reading and writing rosbag2 bags (metadata.yaml version 9, one MCAP file).
 
 A bag is a directory holding ``metadata.yaml`` and one ``.mcap`` file with the ``ros2`` profile
 and ``ros2msg`` schemas, as ``ros2 bag record`` writes and ``ros2 bag play`` reads. Messages are
-kept as CDR bytes; log times are integer nanoseconds.
+kept as CDR bytes; log times are integer nanoseconds. rosbags opens bags (metadata.yaml, topics,
+message types), decodes messages and supplies the message definitions and type hashes. The MCAP
+file is written here, and the messages of a bag with one indexed MCAP file are read here by its
+chunk index (other bags through rosbags, in the same order): the offline tools pass millions of
+messages, and general-purpose readers and writers spend several times longer per message than
+packing or unpacking a record of an open chunk.
 
-Chunks of the MCAP file are zstd-compressed (rosbags' storage-level compression, the same layout
+Chunks of the MCAP file are zstd-compressed (storage-level compression, the same layout
 ``ros2 bag record --storage-preset-profile zstd_fast`` produces): metadata.yaml then declares no
 compression, and both the rosbag2 MCAP plugin and the ``mcap`` readers decompress chunks
-transparently. Sensor bags shrink several-fold.
+transparently. Sensor bags shrink several-fold. The file carries the records rosbag2's own MCAP
+storage writes: schemas and channels, chunks with their message indexes, the ``rosbag2``
+metadata record, and a summary (schemas, channels, chunk indexes, statistics, offsets).
 
 This module never imports rclpy: it is used offline as well as by the recorder and player nodes.
 """
@@ -15,21 +22,27 @@ This module never imports rclpy: it is used offline as well as by the recorder a
 from __future__ import annotations
 
 import functools
+import heapq
 import re
 import shutil
+import struct
+import zlib
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import NamedTuple
+from typing import BinaryIO, NamedTuple
 
 import numpy as np
+import yaml
+import zstandard
 from rosbags.interfaces import MessageDefinitionFormat, Nodetype
-from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
+from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.base import normalize_fieldname
 
 BAG_VERSION = 9
 METADATA_FILE = "metadata.yaml"
+ROS_DISTRO = "jazzy"
 
 # numpy dtypes rosbags uses for arrays of each primitive type.
 _ARRAY_DTYPES = {
@@ -49,6 +62,36 @@ _ARRAY_DTYPES = {
 }
 _STRING_TYPES = {"string", "wstring"}
 _RCLPY_MESSAGE_MODULE = re.compile(r"^(?P<package>\w+)\.msg\._\w+$")
+
+# MCAP records (https://mcap.dev/spec): opcode, content length (u64), content; little endian.
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
+_OP_HEADER = 0x01
+_OP_FOOTER = 0x02
+_OP_SCHEMA = 0x03
+_OP_CHANNEL = 0x04
+_OP_MESSAGE = 0x05
+_OP_CHUNK = 0x06
+_OP_MESSAGE_INDEX = 0x07
+_OP_CHUNK_INDEX = 0x08
+_OP_STATISTICS = 0x0B
+_OP_METADATA = 0x0C
+_OP_METADATA_INDEX = 0x0D
+_OP_SUMMARY_OFFSET = 0x0E
+_OP_DATA_END = 0x0F
+_RECORD_HEADER = struct.Struct("<BQ")
+# Opcode, length, channel id, sequence, log time, publish time: what precedes a message's data.
+_MESSAGE_HEADER = struct.Struct("<BQHIQQ")
+_MESSAGE_HEADER_CONTENT = _MESSAGE_HEADER.size - _RECORD_HEADER.size
+_MESSAGE_CHANNEL_AND_LOG_TIME = struct.Struct("<HIQ")
+_FOOTER_WITH_MAGIC = struct.Struct("<BQQQI8s")
+_CHUNK_INDEX_TIMES_AND_OFFSET = struct.Struct("<QQQQ")
+_CHUNK_FIXED_FIELDS = struct.Struct("<QQQI")
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+# rosbag2 closes a chunk once it holds about this many uncompressed bytes.
+_CHUNK_TARGET_BYTES = 1 << 20
+_ROSBAG2_METADATA_NAME = "rosbag2"
 
 
 class BagError(Exception):
@@ -91,6 +134,172 @@ def _find_topic(available: Iterable[str], name: str) -> str | None:
     return None
 
 
+class _ChunkIndex(NamedTuple):
+    """Where one chunk of an MCAP file lies and the log times (ns) of its first and last message."""
+
+    start_ns: int
+    end_ns: int
+    offset: int
+    length: int
+
+
+def _string_at(buffer: bytes, position: int) -> tuple[str, int]:
+    """An MCAP string starting at ``position``, and the position after it."""
+    (length,) = _U32.unpack_from(buffer, position)
+    end = position + _U32.size + length
+    return buffer[position + _U32.size : end].decode(), end
+
+
+def _read_mcap_summary(stream: BinaryIO) -> tuple[dict[int, str], list[_ChunkIndex]] | None:
+    """Topics by channel id and the chunk indexes of an MCAP file, from its summary.
+
+    None when the messages cannot be read by chunk index here (no summary, no chunk index, a
+    chunk compression other than zstd); they are then read through rosbags.
+    """
+    size = stream.seek(0, 2)
+    if size < len(_MCAP_MAGIC) + _FOOTER_WITH_MAGIC.size:
+        return None
+    stream.seek(size - _FOOTER_WITH_MAGIC.size)
+    opcode, _, summary_start, _, _, magic = _FOOTER_WITH_MAGIC.unpack(
+        stream.read(_FOOTER_WITH_MAGIC.size)
+    )
+    if opcode != _OP_FOOTER or magic != _MCAP_MAGIC or summary_start == 0:
+        return None
+    stream.seek(summary_start)
+    summary = stream.read(size - _FOOTER_WITH_MAGIC.size - summary_start)
+    topics: dict[int, str] = {}
+    chunks: list[_ChunkIndex] = []
+    position = 0
+    while position < len(summary):
+        opcode, length = _RECORD_HEADER.unpack_from(summary, position)
+        content = position + _RECORD_HEADER.size
+        position = content + length
+        if opcode == _OP_CHANNEL:
+            (channel_id,) = _U16.unpack_from(summary, content)
+            topics[channel_id], _ = _string_at(summary, content + 2 * _U16.size)
+        elif opcode == _OP_CHUNK_INDEX:
+            start_ns, end_ns, offset, length = _CHUNK_INDEX_TIMES_AND_OFFSET.unpack_from(
+                summary, content
+            )
+            offsets_at = content + _CHUNK_INDEX_TIMES_AND_OFFSET.size
+            (offsets_length,) = _U32.unpack_from(summary, offsets_at)
+            # After the message index offsets: their total length (u64), then the compression.
+            compression_at = offsets_at + _U32.size + offsets_length + _U64.size
+            compression, _ = _string_at(summary, compression_at)
+            if compression not in ("", "zstd"):
+                return None
+            chunks.append(_ChunkIndex(start_ns, end_ns, offset, length))
+    return (topics, chunks) if chunks else None
+
+
+def _chunk_records(stream: BinaryIO, chunk: _ChunkIndex, decompressor) -> bytes:
+    """The uncompressed records of one chunk, checked against its size and checksum."""
+    stream.seek(chunk.offset)
+    record = stream.read(chunk.length)
+    if len(record) != chunk.length or record[0] != _OP_CHUNK:
+        raise BagError(f"no chunk at offset {chunk.offset}")
+    _, _, uncompressed_size, checksum = _CHUNK_FIXED_FIELDS.unpack_from(record, _RECORD_HEADER.size)
+    compression, position = _string_at(record, _RECORD_HEADER.size + _CHUNK_FIXED_FIELDS.size)
+    (stored_size,) = _U64.unpack_from(record, position)
+    stored = record[position + _U64.size : position + _U64.size + stored_size]
+    if compression == "zstd":
+        records = decompressor.decompress(stored, max_output_size=uncompressed_size)
+    else:
+        records = stored
+    if len(records) != uncompressed_size:
+        raise BagError(
+            f"chunk at offset {chunk.offset} holds {len(records)} bytes, not {uncompressed_size}"
+        )
+    if checksum and zlib.crc32(records) != checksum:
+        raise BagError(f"chunk at offset {chunk.offset} fails its checksum")
+    return records
+
+
+def _log_time_ns(message: BagMessage) -> int:
+    return message.log_time_ns
+
+
+def _chunk_messages(records: bytes, channels: dict[int, tuple[str, str]]) -> list[BagMessage]:
+    """The messages of ``channels`` (id → topic, type) in a chunk's records, in log-time order
+    (stable: equal log times keep their order in the chunk)."""
+    messages = []
+    append = messages.append
+    unpack_record = _RECORD_HEADER.unpack_from
+    unpack_message = _MESSAGE_CHANNEL_AND_LOG_TIME.unpack_from
+    data_offset = _RECORD_HEADER.size + _MESSAGE_HEADER_CONTENT
+    position, end = 0, len(records)
+    while position < end:
+        opcode, length = unpack_record(records, position)
+        record_end = position + _RECORD_HEADER.size + length
+        if opcode == _OP_MESSAGE:
+            channel_id, _, log_time_ns = unpack_message(records, position + _RECORD_HEADER.size)
+            channel = channels.get(channel_id)
+            if channel is not None:
+                append(
+                    BagMessage(
+                        channel[0],
+                        channel[1],
+                        log_time_ns,
+                        records[position + data_offset : record_end],
+                    )
+                )
+        position = record_end
+    if position != end:
+        raise BagError("a record of a chunk runs past its end")
+    messages.sort(key=_log_time_ns)
+    return messages
+
+
+def _merged_chunk_entries(stream, chunk: _ChunkIndex, channels, decompressor):
+    """(log time, chunk offset, index, message) of a chunk's messages, after a placeholder at
+    the chunk's start time so that :func:`heapq.merge` reads the chunk only when due."""
+    yield chunk.start_ns, chunk.offset, -1, None
+    messages = _chunk_messages(_chunk_records(stream, chunk, decompressor), channels)
+    for index, message in enumerate(messages):
+        yield message.log_time_ns, chunk.offset, index, message
+
+
+def _mcap_messages(
+    path: Path, chunks: list[_ChunkIndex], channels: dict[int, tuple[str, str]]
+) -> Iterator[BagMessage]:
+    """Messages of ``channels`` in log-time order, equal log times in the order rosbags reads
+    them: by the chunk's place in the file, then by the place in the chunk.
+
+    Chunks are taken in order of their first log time. A chunk that starts after the ones
+    before it end (or at their last log time, and later in the file) follows them whole; only
+    chunks whose time ranges overlap are merged message by message.
+    """
+    chunks = sorted(chunks, key=lambda chunk: (chunk.start_ns, chunk.offset))
+    decompressor = zstandard.ZstdDecompressor()
+    with path.open("rb") as stream:
+        index = 0
+        while index < len(chunks):
+            group = [chunks[index]]
+            group_end_ns = chunks[index].end_ns
+            group_last_offset = chunks[index].offset
+            index += 1
+            while index < len(chunks) and (
+                chunks[index].start_ns < group_end_ns
+                or (
+                    chunks[index].start_ns == group_end_ns
+                    and chunks[index].offset < group_last_offset
+                )
+            ):
+                group.append(chunks[index])
+                group_end_ns = max(group_end_ns, chunks[index].end_ns)
+                group_last_offset = max(group_last_offset, chunks[index].offset)
+                index += 1
+            if len(group) == 1:
+                yield from _chunk_messages(_chunk_records(stream, group[0], decompressor), channels)
+                continue
+            entries = [
+                _merged_chunk_entries(stream, chunk, channels, decompressor) for chunk in group
+            ]
+            for *_, message in heapq.merge(*entries):
+                if message is not None:
+                    yield message
+
+
 class BagReader:
     """Read a rosbag2 bag directory; a context manager.
 
@@ -119,12 +328,28 @@ class BagReader:
             else:
                 self.start_ns = self.end_ns = 0
             self._typestore = self._typestore_for_bag()
+            self._indexed_mcap = self._find_indexed_mcap()
         except BagError:
             self.close()
             raise
         except Exception as error:
             self.close()
             raise BagError(f"bag {self.path}: corrupt: {_one_line(error)}") from error
+
+    def _find_indexed_mcap(self) -> tuple[Path, dict[int, str], list[_ChunkIndex]] | None:
+        """The bag's single MCAP file with its channel topics and chunk indexes, when messages
+        can be read from it by chunk index here; None leaves reading to rosbags."""
+        if self._reader.compression_mode:
+            return None
+        information = yaml.safe_load((self.path / METADATA_FILE).read_text())
+        information = information["rosbag2_bagfile_information"]
+        files = information["relative_file_paths"]
+        if information["storage_identifier"] != "mcap" or len(files) != 1:
+            return None
+        path = self.path / Path(files[0]).name
+        with path.open("rb") as stream:
+            summary = _read_mcap_summary(stream)
+        return None if summary is None else (path, *summary)
 
     def _check_layout(self) -> None:
         if not self.path.exists():
@@ -206,9 +431,9 @@ class BagReader:
             return
         seen: Counter[str] = Counter()
         try:
-            for connection, log_time_ns, raw in self._reader.messages(connections=connections):
-                seen[connection.topic] += 1
-                yield BagMessage(connection.topic, connection.msgtype, log_time_ns, bytes(raw))
+            for message in self._read(connections, wanted):
+                seen[message.topic] += 1
+                yield message
         except Exception as error:
             raise BagError(f"bag {self.path}: corrupt message data: {_one_line(error)}") from error
         short = {
@@ -222,6 +447,19 @@ class BagReader:
                 f"bag {self.path}: corrupt data: message counts differ from "
                 f"{METADATA_FILE} ({detail})"
             )
+
+    def _read(self, connections: list, wanted: set[str]) -> Iterator[BagMessage]:
+        if self._indexed_mcap is None:
+            for connection, log_time_ns, raw in self._reader.messages(connections=connections):
+                yield BagMessage(connection.topic, connection.msgtype, log_time_ns, bytes(raw))
+            return
+        path, topics, chunks = self._indexed_mcap
+        channels = {
+            channel_id: (topic, self.topics[topic].msgtype)
+            for channel_id, topic in topics.items()
+            if topic in wanted
+        }
+        yield from _mcap_messages(path, chunks, channels)
 
     def decode(self, message: BagMessage):
         """The rosbags message object of ``message`` (fields named as in ROS, arrays as numpy)."""
@@ -245,6 +483,257 @@ class BagReader:
         self.close()
 
 
+@functools.cache
+def _message_definition(msgtype: str) -> tuple[str, str]:
+    """(ros2msg definition text, RIHS01 type hash) of a Jazzy message type, as rosbag2 stores."""
+    typestore = jazzy_typestore()
+    definition, _ = typestore.generate_msgdef(msgtype, ros_version=2)
+    return definition, typestore.hash_rihs01(msgtype)
+
+
+def _record(opcode: int, content: bytes) -> bytes:
+    return struct.pack("<BQ", opcode, len(content)) + content
+
+
+def _string(text: str) -> bytes:
+    encoded = text.encode()
+    return struct.pack("<I", len(encoded)) + encoded
+
+
+def _string_map(entries: dict[str, str]) -> bytes:
+    content = b"".join(_string(key) + _string(value) for key, value in entries.items())
+    return struct.pack("<I", len(content)) + content
+
+
+def _time_span(start_ns: int, end_ns: int) -> dict:
+    """metadata.yaml's start and duration of messages logged from ``start_ns`` to ``end_ns``
+    (fresh dicts each time: shared ones would be dumped as YAML aliases)."""
+    return {
+        "starting_time": {"nanoseconds_since_epoch": start_ns},
+        "duration": {"nanoseconds": max(0, end_ns - start_ns)},
+    }
+
+
+class _Channel:
+    """A topic of the bag being written: MCAP channel id, type and messages written so far."""
+
+    __slots__ = ("count", "id", "msgtype", "topic")
+
+    def __init__(self, channel_id: int, topic: str, msgtype: str):
+        self.id = channel_id
+        self.topic = topic
+        self.msgtype = msgtype
+        self.count = 0
+
+
+class _McapFile:
+    """An MCAP file of the ``ros2`` profile being written, one chunk open at a time.
+
+    Schema and channel records go into the chunk open when they are added (and into the
+    summary); messages are appended to the chunk as packed records and indexed per channel by
+    (log time, offset in the chunk).
+    """
+
+    def __init__(self, path: Path, compress: bool):
+        self._stream: BinaryIO = path.open("xb")
+        self._compressor = zstandard.ZstdCompressor() if compress else None
+        self._compression = "zstd" if compress else ""
+        self._schema_records: list[bytes] = []
+        self._schema_ids: dict[str, int] = {}
+        self._channel_records: list[bytes] = []
+        self._chunk_index_records: list[bytes] = []
+        # Per channel id (index 0 unused): flat (log time, offset) pairs of the open chunk.
+        self._chunk_message_offsets: list[list[int]] = [[]]
+        self.message_start_ns = 2**63 - 1
+        self.message_end_ns = 0
+        self._new_chunk()
+        self._stream.write(_MCAP_MAGIC)
+        self._stream.write(
+            _record(_OP_HEADER, _string("ros2") + _string(f"buoy_nav.bag_io ({ROS_DISTRO})"))
+        )
+
+    def _new_chunk(self) -> None:
+        self._chunk = bytearray()
+        self._chunk_start_ns = 2**63 - 1
+        self._chunk_end_ns = 0
+
+    def add_schema(self, msgtype: str, definition: str) -> int:
+        schema_id = self._schema_ids.get(msgtype)
+        if schema_id is None:
+            schema_id = self._schema_ids[msgtype] = len(self._schema_ids) + 1
+            content = struct.pack("<H", schema_id) + _string(msgtype) + _string("ros2msg")
+            record = _record(_OP_SCHEMA, content + _string(definition))
+            self._schema_records.append(record)
+            self._chunk += record
+        return schema_id
+
+    def add_channel(self, schema_id: int, topic: str) -> int:
+        channel_id = len(self._channel_records) + 1
+        content = struct.pack("<HH", channel_id, schema_id) + _string(topic) + _string("cdr")
+        record = _record(_OP_CHANNEL, content + _string_map({"offered_qos_profiles": "[]"}))
+        self._channel_records.append(record)
+        self._chunk_message_offsets.append([])
+        self._chunk += record
+        return channel_id
+
+    def write(self, channel_id: int, log_time_ns: int, data: bytes) -> None:
+        chunk = self._chunk
+        offsets = self._chunk_message_offsets[channel_id]
+        offsets.append(log_time_ns)
+        offsets.append(len(chunk))
+        chunk += _MESSAGE_HEADER.pack(
+            _OP_MESSAGE,
+            _MESSAGE_HEADER_CONTENT + len(data),
+            channel_id,
+            0,
+            log_time_ns,
+            log_time_ns,
+        )
+        chunk += data
+        if log_time_ns < self._chunk_start_ns:
+            self._chunk_start_ns = log_time_ns
+        if log_time_ns > self._chunk_end_ns:
+            self._chunk_end_ns = log_time_ns
+        if len(chunk) > _CHUNK_TARGET_BYTES:
+            self._close_chunk()
+
+    def _close_chunk(self) -> None:
+        if not self._chunk:
+            return
+        start_ns, end_ns = self._chunk_start_ns, self._chunk_end_ns
+        if start_ns > end_ns:  # schemas and channels only: no message time range
+            start_ns = end_ns = 0
+        else:
+            self.message_start_ns = min(self.message_start_ns, start_ns)
+            self.message_end_ns = max(self.message_end_ns, end_ns)
+        message_offsets = [
+            (channel_id, offsets)
+            for channel_id, offsets in enumerate(self._chunk_message_offsets)
+            if offsets
+        ]
+        self._chunk_message_offsets = [[] for _ in self._chunk_message_offsets]
+        records = self._chunk
+        self._new_chunk()
+        self._write_chunk(records, start_ns, end_ns, message_offsets)
+
+    def _write_chunk(
+        self,
+        records: bytearray,
+        start_ns: int,
+        end_ns: int,
+        message_offsets: list[tuple[int, list[int]]],
+    ) -> None:
+        """The chunk record, its message indexes and (kept for the summary) its chunk index."""
+        stored = records if self._compressor is None else self._compressor.compress(records)
+        stream = self._stream
+        chunk_at = stream.tell()
+        fields = (
+            _CHUNK_FIXED_FIELDS.pack(start_ns, end_ns, len(records), zlib.crc32(records))
+            + _string(self._compression)
+            + _U64.pack(len(stored))
+        )
+        stream.write(_RECORD_HEADER.pack(_OP_CHUNK, len(fields) + len(stored)))
+        stream.write(fields)
+        stream.write(stored)
+        indexes_at = stream.tell()
+        index_offsets = []
+        for channel_id, offsets in message_offsets:
+            index_offsets.append(struct.pack("<HQ", channel_id, stream.tell()))
+            pairs = struct.pack(f"<{len(offsets)}Q", *offsets)
+            stream.write(
+                _record(_OP_MESSAGE_INDEX, struct.pack("<HI", channel_id, len(pairs)) + pairs)
+            )
+        offset_map = b"".join(index_offsets)
+        self._chunk_index_records.append(
+            _record(
+                _OP_CHUNK_INDEX,
+                struct.pack(
+                    "<QQQQI", start_ns, end_ns, chunk_at, indexes_at - chunk_at, len(offset_map)
+                )
+                + offset_map
+                + _U64.pack(stream.tell() - indexes_at)
+                + _string(self._compression)
+                + struct.pack("<QQ", len(stored), len(records)),
+            )
+        )
+
+    def end_data(self) -> tuple[int, int]:
+        """Write the open chunk; returns the log times (ns) of the first and last message
+        written, both 0 without messages."""
+        self._close_chunk()
+        if self.message_start_ns > self.message_end_ns:
+            self.message_start_ns = self.message_end_ns = 0
+        return self.message_start_ns, self.message_end_ns
+
+    def close(self, channel_counts: list[int], serialized_metadata: str) -> None:
+        """After :meth:`end_data`: the rosbag2 metadata record, the summary and the footer."""
+        stream = self._stream
+        metadata_at = stream.tell()
+        stream.write(
+            _record(
+                _OP_METADATA,
+                _string(_ROSBAG2_METADATA_NAME)
+                + _string_map({"serialized_metadata": serialized_metadata}),
+            )
+        )
+        metadata_end = stream.tell()
+        stream.write(_record(_OP_DATA_END, struct.pack("<I", 0)))
+        sections = []
+        for opcode, records in (
+            (_OP_SCHEMA, self._schema_records),
+            (_OP_CHANNEL, self._channel_records),
+            (_OP_CHUNK_INDEX, self._chunk_index_records),
+            (
+                _OP_METADATA_INDEX,
+                [
+                    _record(
+                        _OP_METADATA_INDEX,
+                        struct.pack("<QQ", metadata_at, metadata_end - metadata_at)
+                        + _string(_ROSBAG2_METADATA_NAME),
+                    )
+                ],
+            ),
+            (_OP_STATISTICS, [self._statistics_record(channel_counts)]),
+        ):
+            if records:
+                at = stream.tell()
+                stream.write(b"".join(records))
+                sections.append((opcode, at, stream.tell() - at))
+        summary_at = sections[0][1]
+        summary_offsets_at = stream.tell()
+        for opcode, at, length in sections:
+            stream.write(_record(_OP_SUMMARY_OFFSET, struct.pack("<BQQ", opcode, at, length)))
+        stream.write(_record(_OP_FOOTER, struct.pack("<QQI", summary_at, summary_offsets_at, 0)))
+        stream.write(_MCAP_MAGIC)
+        stream.close()
+
+    def _statistics_record(self, channel_counts: list[int]) -> bytes:
+        counts = b"".join(
+            struct.pack("<HQ", channel_id, count)
+            for channel_id, count in enumerate(channel_counts, start=1)
+        )
+        return _record(
+            _OP_STATISTICS,
+            struct.pack(
+                "<QHIIIIQQI",
+                sum(channel_counts),
+                len(self._schema_records),
+                len(self._channel_records),
+                0,  # attachments
+                1,  # metadata records
+                len(self._chunk_index_records),
+                self.message_start_ns,
+                self.message_end_ns,
+                len(counts),
+            )
+            + counts,
+        )
+
+    def abort(self) -> None:
+        """Close the file as it is, without the summary: readers refuse it."""
+        self._stream.close()
+
+
 class BagWriter:
     """Write a rosbag2 bag (version 9, MCAP, zstd chunks); a context manager.
 
@@ -261,16 +750,13 @@ class BagWriter:
                 raise BagError(f"bag {self.path} already exists; refusing to overwrite it")
             self._remove_existing_bag()
         self._typestore = jazzy_typestore()
-        self._connections: dict[str, object] = {}
-        self._counts: Counter[str] = Counter()
-        writer = Writer(self.path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP)
-        if compress:
-            writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        self._channels: dict[str, _Channel] = {}
+        self._mcap_name = f"{self.path.name}.mcap"
         try:
-            writer.open()
-        except Exception as error:
+            self.path.mkdir(mode=0o755, parents=True)
+            self._file: _McapFile | None = _McapFile(self.path / self._mcap_name, compress)
+        except OSError as error:
             raise BagError(f"bag {self.path}: cannot create: {_one_line(error)}") from error
-        self._writer: Writer | None = writer
 
     def _remove_existing_bag(self) -> None:
         """Delete what is at ``path`` only if it is a bag: never an arbitrary directory."""
@@ -289,42 +775,46 @@ class BagWriter:
     @property
     def counts(self) -> dict[str, int]:
         """Messages written so far, per topic."""
-        return dict(self._counts)
+        return {topic: channel.count for topic, channel in self._channels.items() if channel.count}
 
     @property
     def closed(self) -> bool:
-        return self._writer is None
+        return self._file is None
 
-    def _connection(self, topic: str, msgtype: str):
-        connection = self._connections.get(topic)
-        if connection is not None:
-            if connection.msgtype != msgtype:
+    def _open_file(self) -> _McapFile:
+        if self._file is None:
+            raise BagError(f"bag {self.path} is closed")
+        return self._file
+
+    def _channel(self, topic: str, msgtype: str) -> _Channel:
+        channel = self._channels.get(topic)
+        if channel is not None:
+            if channel.msgtype != msgtype:
                 raise BagError(
-                    f"bag {self.path}: topic {topic} holds {connection.msgtype}, "
+                    f"bag {self.path}: topic {topic} holds {channel.msgtype}, "
                     f"cannot also write {msgtype}"
                 )
-            return connection
+            return channel
         if msgtype not in self._typestore.fielddefs:
             raise BagError(
                 f"bag {self.path}: topic {topic}: unknown message type {msgtype!r} "
                 "(not a ROS 2 Jazzy type; expected 'package/msg/Type')"
             )
-        connection = self._open_writer().add_connection(topic, msgtype, typestore=self._typestore)
-        self._connections[topic] = connection
-        return connection
-
-    def _open_writer(self) -> Writer:
-        if self._writer is None:
-            raise BagError(f"bag {self.path} is closed")
-        return self._writer
+        file = self._open_file()
+        definition, _ = _message_definition(msgtype)
+        channel_id = file.add_channel(file.add_schema(msgtype, definition), topic)
+        channel = self._channels[topic] = _Channel(channel_id, topic, msgtype)
+        return channel
 
     def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
         """Append one CDR-serialised message with log time ``log_time_ns`` (ns since the epoch)."""
+        channel = self._channels.get(topic)
+        if channel is None or channel.msgtype != msgtype:
+            channel = self._channel(topic, msgtype)
         if log_time_ns < 0:
             raise BagError(f"bag {self.path}: topic {topic}: negative log time {log_time_ns} ns")
-        connection = self._connection(topic, msgtype)
-        self._open_writer().write(connection, int(log_time_ns), raw)
-        self._counts[topic] += 1
+        self._open_file().write(channel.id, int(log_time_ns), raw)
+        channel.count += 1
 
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
         """Serialise ``message`` (a rosbags or an rclpy message of ``msgtype``) and append it.
@@ -333,7 +823,7 @@ class BagWriter:
         what rclpy holds differently: ``byte`` as ``bytes``, ``char`` as ``str``, sequences as
         ``array.array`` or lists.
         """
-        self._connection(topic, msgtype)
+        self._channel(topic, msgtype)
         try:
             typed = _as_typestore_message(self._typestore, msgtype, message)
             raw = self._typestore.serialize_cdr(typed, msgtype)
@@ -346,24 +836,68 @@ class BagWriter:
             ) from error
         self.write_raw(topic, msgtype, log_time_ns, bytes(raw))
 
+    def _metadata(self, start_ns: int, end_ns: int) -> dict:
+        """The ``rosbag2_bagfile_information`` of the bag as written so far."""
+        channels = list(self._channels.values())
+        count = sum(channel.count for channel in channels)
+        return {
+            "version": BAG_VERSION,
+            "storage_identifier": "mcap",
+            "relative_file_paths": [self._mcap_name],
+            **_time_span(start_ns, end_ns),
+            "message_count": count,
+            "topics_with_message_count": [
+                {
+                    "topic_metadata": {
+                        "name": channel.topic,
+                        "type": channel.msgtype,
+                        "serialization_format": "cdr",
+                        "offered_qos_profiles": [],
+                        "type_description_hash": _message_definition(channel.msgtype)[1],
+                    },
+                    "message_count": channel.count,
+                }
+                for channel in channels
+            ],
+            "compression_format": "",
+            "compression_mode": "",
+            "files": [
+                {"path": self._mcap_name, **_time_span(start_ns, end_ns), "message_count": count}
+            ],
+            "custom_data": None,
+            "ros_distro": ROS_DISTRO,
+        }
+
     def close(self) -> None:
         """Finish the bag: write the MCAP index and metadata.yaml. Idempotent."""
-        writer, self._writer = self._writer, None
-        if writer is None:
+        file, self._file = self._file, None
+        if file is None:
             return
         try:
-            writer.close()
+            information = self._metadata(*file.end_data())
+            file.close(
+                [channel.count for channel in self._channels.values()],
+                yaml.safe_dump(information, default_flow_style=False).strip(),
+            )
+            staged = self.path / f"{METADATA_FILE}.tmp"
+            staged.write_text(
+                yaml.safe_dump(
+                    {"rosbag2_bagfile_information": information}, default_flow_style=False
+                ),
+                "utf8",
+            )
+            staged.replace(self.path / METADATA_FILE)
         except Exception as error:
-            writer.abort()
+            file.abort()
             raise BagError(
                 f"bag {self.path}: failed to finish, bag is incomplete: {_one_line(error)}"
             ) from error
 
     def abort(self) -> None:
         """Stop writing without finishing: the bag stays incomplete (no metadata.yaml)."""
-        writer, self._writer = self._writer, None
-        if writer is not None:
-            writer.abort()
+        file, self._file = self._file, None
+        if file is not None:
+            file.abort()
 
     def __enter__(self) -> BagWriter:
         return self
@@ -376,7 +910,7 @@ class BagWriter:
             self.abort()
             exc.add_note(
                 f"bag {self.path} was aborted and is incomplete "
-                f"(no {METADATA_FILE}; {sum(self._counts.values())} messages written)"
+                f"(no {METADATA_FILE}; {sum(self.counts.values())} messages written)"
             )
 
 

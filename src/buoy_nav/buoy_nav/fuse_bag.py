@@ -74,6 +74,10 @@ def bag_topic(relative: str) -> str:
     return "/" + relative
 
 
+# Relative nav topic → (name stored in the bag, message type).
+NAV_BAG_TOPICS = {topic: (bag_topic(topic), msgtype) for topic, msgtype in NAV_MSGTYPES.items()}
+
+
 def sensor_topics_of(
     reader: BagReader, config: FusionConfig, extra_required: Iterable[str] = ()
 ) -> dict[str, str]:
@@ -146,7 +150,8 @@ class OfflineFusion:
                 self.first_solution_s = solution.t_s
             values = nav_values(solution, self.stamps)
             for topic, raw in solution_cdr(values).items():
-                self.writer.write_raw(bag_topic(topic), NAV_MSGTYPES[topic], log_time_ns, raw)
+                stored_topic, msgtype = NAV_BAG_TOPICS[topic]
+                self.writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
             written.append(values)
         return written
 

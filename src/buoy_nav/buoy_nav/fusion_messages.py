@@ -246,19 +246,85 @@ class NavValues(NamedTuple):
     position_covariance_m2: tuple
 
 
-_ZEROS3 = [0.0, 0.0, 0.0]
+_ZEROS3 = (0.0, 0.0, 0.0)
+_ZEROS18 = (0.0,) * 18
 
 
 def _block_diagonal_6x6(upper, lower) -> tuple:
-    """Row-major 6×6 with 3×3 blocks ``upper`` (top left) and ``lower`` (bottom right)."""
-    rows = []
-    for row in upper:
-        rows += row
-        rows += _ZEROS3
-    for row in lower:
-        rows += _ZEROS3
-        rows += row
-    return tuple(rows)
+    """Row-major 6×6 with 3×3 blocks ``upper`` (top left) and ``lower`` (bottom right), each
+    given as a row-major 9-sequence."""
+    return (
+        *upper[0:3],
+        *_ZEROS3,
+        *upper[3:6],
+        *_ZEROS3,
+        *upper[6:9],
+        *_ZEROS3,
+        *_ZEROS3,
+        *lower[0:3],
+        *_ZEROS3,
+        *lower[3:6],
+        *_ZEROS3,
+        *lower[6:9],
+    )
+
+
+def _upper_block_6x6(upper) -> tuple:
+    """Row-major 6×6 with the 3×3 block ``upper`` (row-major 9-sequence) top left, else 0."""
+    return (
+        *upper[0:3],
+        *_ZEROS3,
+        *upper[3:6],
+        *_ZEROS3,
+        *upper[6:9],
+        *_ZEROS3,
+        *_ZEROS18,
+    )
+
+
+class _CovarianceFields(NamedTuple):
+    """The ``nav/*`` fields that depend on a solution's covariance blocks alone."""
+
+    pose_covariance: tuple
+    attitude_covariance_rad2: tuple
+    enu_twist_covariance: tuple
+    position_covariance_m2: tuple
+
+
+class _CovarianceFieldCache:
+    """:class:`_CovarianceFields` of the latest covariance blocks seen.
+
+    The engine hands consecutive solutions the same read-only covariance arrays until the
+    filter changes them, so at the IMU rate almost every solution reuses the fields of the one
+    before. Writable arrays could change in place and are never taken from the cache.
+    """
+
+    def __init__(self):
+        self._latest: tuple | None = None
+
+    def fields(self, attitude, velocity, position) -> _CovarianceFields:
+        latest = self._latest  # one read: the blocks and their fields stay a consistent pair
+        if (
+            latest is not None
+            and latest[0] is attitude
+            and latest[1] is velocity
+            and latest[2] is position
+        ):
+            return latest[3]
+        attitude_flat = attitude.ravel().tolist()
+        position_flat = position.ravel().tolist()
+        fields = _CovarianceFields(
+            pose_covariance=_block_diagonal_6x6(position_flat, attitude_flat),
+            attitude_covariance_rad2=tuple(attitude_flat),
+            enu_twist_covariance=_upper_block_6x6(velocity.ravel().tolist()),
+            position_covariance_m2=tuple(position_flat),
+        )
+        if not (attitude.flags.writeable or velocity.flags.writeable or position.flags.writeable):
+            self._latest = (attitude, velocity, position, fields)
+        return fields
+
+
+_COVARIANCE_FIELDS = _CovarianceFieldCache()
 
 
 def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavValues:
@@ -267,34 +333,39 @@ def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavVal
     t_s = solution.t_s
     sec, nanosec = stamp_parts(t_s) if stamps is None else stamps.exact(t_s)
     x, y, z, w = solution.attitude_xyzw.tolist()
-    rotation_nb = _rotation_matrix(x, y, z, w)
-    attitude_covariance = solution.attitude_covariance_rad2
+    rotation_elements = _rotation_elements(x, y, z, w)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_elements
+    rotation_nb = np.array(rotation_elements).reshape(3, 3)
     velocity_covariance = solution.velocity_covariance_m2s2
-    position_covariance = solution.position_covariance_m2
-    velocity_enu = solution.velocity_enu_mps
-    zeros = [_ZEROS3] * 3
+    covariances = _COVARIANCE_FIELDS.fields(
+        solution.attitude_covariance_rad2, velocity_covariance, solution.position_covariance_m2
+    )
+    ve, vn, vu = velocity_enu = solution.velocity_enu_mps.tolist()
     return NavValues(
-        t_s=solution.t_s,
+        t_s=t_s,
         sec=sec,
         nanosec=nanosec,
         position_map_m=tuple(solution.position_map_m.tolist()),
         attitude_xyzw=(x, y, z, w),
-        pose_covariance=_block_diagonal_6x6(
-            position_covariance.tolist(), attitude_covariance.tolist()
+        pose_covariance=covariances.pose_covariance,
+        # R_nb^T v, summed in the order numpy's product sums.
+        velocity_body_mps=(
+            r00 * ve + r10 * vn + r20 * vu,
+            r01 * ve + r11 * vn + r21 * vu,
+            r02 * ve + r12 * vn + r22 * vu,
         ),
-        velocity_body_mps=tuple((rotation_nb.T @ velocity_enu).tolist()),
         angular_rate_body_rad_s=tuple(solution.angular_rate_body_rad_s.tolist()),
-        body_twist_covariance=_block_diagonal_6x6(
-            (rotation_nb.T @ velocity_covariance @ rotation_nb).tolist(), zeros
+        body_twist_covariance=_upper_block_6x6(
+            (rotation_nb.T @ velocity_covariance @ rotation_nb).ravel().tolist()
         ),
-        attitude_covariance_rad2=tuple(attitude_covariance.ravel().tolist()),
+        attitude_covariance_rad2=covariances.attitude_covariance_rad2,
         specific_force_body_mps2=tuple(solution.specific_force_body_mps2.tolist()),
-        velocity_enu_mps=tuple(velocity_enu.tolist()),
-        enu_twist_covariance=_block_diagonal_6x6(velocity_covariance.tolist(), zeros),
+        velocity_enu_mps=tuple(velocity_enu),
+        enu_twist_covariance=covariances.enu_twist_covariance,
         latitude_deg=float(solution.latitude_deg),
         longitude_deg=float(solution.longitude_deg),
         altitude_m=float(solution.altitude_m),
-        position_covariance_m2=tuple(position_covariance.ravel().tolist()),
+        position_covariance_m2=covariances.position_covariance_m2,
     )
 
 
@@ -321,13 +392,18 @@ def _set_quaternion(target, values) -> None:
     target.x, target.y, target.z, target.w = values
 
 
-def _rotation_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
+def _rotation_elements(x: float, y: float, z: float, w: float) -> tuple[float, ...]:
+    """Row-major 9-tuple of the rotation matrix of a unit (x, y, z, w) quaternion."""
+    return (
+        1 - 2 * (y * y + z * z),
+        2 * (x * y - w * z),
+        2 * (x * z + w * y),
+        2 * (x * y + w * z),
+        1 - 2 * (x * x + z * z),
+        2 * (y * z - w * x),
+        2 * (x * z - w * y),
+        2 * (y * z + w * x),
+        1 - 2 * (x * x + y * y),
     )
 
 

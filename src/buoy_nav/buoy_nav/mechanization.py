@@ -40,7 +40,6 @@ from buoy_nav.rotations import (
     Quaternion,
     normalize_quaternion,
     quaternion_from_rotation_vector,
-    quaternion_multiply,
     rotation_matrix_from_quaternion,
 )
 
@@ -122,21 +121,21 @@ class StrapdownIntegrator:
         accel_bias_mps2,
     ):
         """Replace the nominal state (after a filter correction); increments history is kept."""
-        self.attitude_xyzw: Quaternion = normalize_quaternion(
-            tuple(float(c) for c in attitude_xyzw)
-        )
-        self.velocity_enu_mps = tuple(float(c) for c in velocity_enu_mps)
-        self.latitude_rad = float(latitude_rad)
+        self.attitude_xyzw: Quaternion = normalize_quaternion(_floats(attitude_xyzw))
+        self.velocity_enu_mps = ve, vn, _ = _floats(velocity_enu_mps)
+        self.latitude_rad = lat = float(latitude_rad)
         self.longitude_rad = float(longitude_rad)
-        self.altitude_m = float(altitude_m)
-        self.gyro_bias_rad_s = tuple(float(c) for c in gyro_bias_rad_s)
-        self.accel_bias_mps2 = tuple(float(c) for c in accel_bias_mps2)
+        self.altitude_m = alt = float(altitude_m)
+        self.gyro_bias_rad_s = _floats(gyro_bias_rad_s)
+        self.accel_bias_mps2 = _floats(accel_bias_mps2)
         self.rotation_elements = _matrix_tuple(self.attitude_xyzw)
-        self.nav_frame_rate_enu_rad_s = tuple(
-            float(c)
-            for c in earth.navigation_frame_rate_enu_rad_s(
-                self.latitude_rad, self.altitude_m, self.velocity_enu_mps
-            )
+        # earth.navigation_frame_rate_enu_rad_s (ω_ie + ω_en) in floats, the same arithmetic.
+        meridian, prime_vertical = earth.radii_of_curvature_m(lat)
+        east_radius = prime_vertical + alt
+        self.nav_frame_rate_enu_rad_s = (
+            0.0 + -vn / (meridian + alt),
+            _OMEGA * math.cos(lat) + ve / east_radius,
+            _OMEGA * math.sin(lat) + ve * math.tan(lat) / east_radius,
         )
 
     def fork(self) -> "StrapdownIntegrator":
@@ -253,21 +252,56 @@ class StrapdownIntegrator:
         self.altitude_m = alt + (vu + new_vu) * half_dt
         self.velocity_enu_mps = (new_ve, new_vn, new_vu)
 
-        body_rotation = quaternion_from_rotation_vector(rvx, rvy, rvz)
-        frame_rotation = quaternion_from_rotation_vector(
+        # R_nb(k) = Exp(−ω_in T) · R_nb(k−1) · Exp(φ_k), in quaternions. The arithmetic is
+        # that of rotations.quaternion_multiply / normalize_quaternion and _matrix_tuple written
+        # out, because at twice the IMU rate the calls cost as much as the arithmetic.
+        bx, by, bz, bw = quaternion_from_rotation_vector(rvx, rvy, rvz)
+        nx, ny, nz, nw = quaternion_from_rotation_vector(
             -win_e * dt_s, -win_n * dt_s, -win_u * dt_s
         )
-        attitude = quaternion_multiply(
-            frame_rotation, quaternion_multiply(self.attitude_xyzw, body_rotation)
+        ax, ay, az, aw = self.attitude_xyzw
+        ax, ay, az, aw = (
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
         )
-        self.attitude_xyzw = normalize_quaternion(attitude)
-        new_rotation = _matrix_tuple(self.attitude_xyzw)
+        ax, ay, az, aw = (
+            nw * ax + nx * aw + ny * az - nz * ay,
+            nw * ay - nx * az + ny * aw + nz * ax,
+            nw * az + nx * ay - ny * ax + nz * aw,
+            nw * aw - nx * ax - ny * ay - nz * az,
+        )
+        norm = math.sqrt(ax * ax + ay * ay + az * az + aw * aw)
+        if aw < 0.0:
+            norm = -norm
+        x, y, z, w = ax / norm, ay / norm, az / norm, aw / norm
+        self.attitude_xyzw = (x, y, z, w)
+        xx, yy, zz = x * x, y * y, z * z
+        xy, xz, yz = x * y, x * z, y * z
+        wx, wy, wz = w * x, w * y, w * z
+        n00 = 1.0 - 2.0 * (yy + zz)
+        n01 = 2.0 * (xy - wz)
+        n02 = 2.0 * (xz + wy)
+        n10 = 2.0 * (xy + wz)
+        n11 = 1.0 - 2.0 * (xx + zz)
+        n12 = 2.0 * (yz - wx)
+        n20 = 2.0 * (xz - wy)
+        n21 = 2.0 * (yz + wx)
+        n22 = 1.0 - 2.0 * (xx + yy)
+        self.rotation_elements = (n00, n01, n02, n10, n11, n12, n20, n21, n22)
 
         # Integrals for the covariance propagation (trapezoid in the attitude).
         sums = self._rotation_sum
-        for index in range(9):
-            sums[index] += (self.rotation_elements[index] + new_rotation[index]) * half_dt
-        self.rotation_elements = new_rotation
+        sums[0] += (r00 + n00) * half_dt
+        sums[1] += (r01 + n01) * half_dt
+        sums[2] += (r02 + n02) * half_dt
+        sums[3] += (r10 + n10) * half_dt
+        sums[4] += (r11 + n11) * half_dt
+        sums[5] += (r12 + n12) * half_dt
+        sums[6] += (r20 + n20) * half_dt
+        sums[7] += (r21 + n21) * half_dt
+        sums[8] += (r22 + n22) * half_dt
         self.accumulated_duration_s += dt_s
         force_sum = self._force_sum
         force_sum[0] += fne
@@ -322,6 +356,11 @@ def interpolate_sample(
     return tuple(
         w_older * a + w_start * b + w_end * c for a, b, c in zip(older, start, end, strict=True)
     )
+
+
+def _floats(values) -> tuple[float, ...]:
+    """A sequence or array of numbers as a tuple of Python floats."""
+    return tuple(map(float, values))
 
 
 def _matrix_tuple(q: Quaternion) -> tuple[float, ...]:

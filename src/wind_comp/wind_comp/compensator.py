@@ -331,16 +331,25 @@ class WindCompensator:
         wind = np.asarray(wind_sensor_mps, dtype=float)
         if wind.shape != (3,):
             raise CompensatorInputError(f"wind_sensor_mps must have shape (3,), got {wind.shape}")
-        entry = _Entry(float(t_s), wind.copy())
+        self.add_wind_batch(np.array([float(t_s)]), wind[None, :])
+
+    def add_wind_batch(self, t_s, wind_sensor_mps) -> None:
+        """:meth:`add_wind` of (N,) stamps and (N, 3) winds, in order (screened together)."""
+        stamps = np.asarray(t_s, dtype=float)
+        winds = np.asarray(wind_sensor_mps, dtype=float)
+        if stamps.ndim != 1 or winds.shape != (stamps.shape[0], 3):
+            raise CompensatorInputError(
+                f"stamps and winds must have shapes (N,) and (N, 3), got {stamps.shape} and "
+                f"{winds.shape}"
+            )
         status, self._latest_wind_stamp_s = _screen_wind(
-            np.array([entry.t_s]),
-            wind[None, :],
-            self._latest_wind_stamp_s,
-            self.config.max_wind_speed_mps,
+            stamps, winds, self._latest_wind_stamp_s, self.config.max_wind_speed_mps
         )
-        if status[0] != _PENDING:
-            entry.result = _invalid(entry, WindStatus(int(status[0])))
-        self._queue.append(entry)
+        for stamp, wind, code in zip(stamps.tolist(), winds, status.tolist(), strict=True):
+            entry = _Entry(stamp, wind.copy())
+            if code != _PENDING:
+                entry.result = _invalid(entry, WindStatus(code))
+            self._queue.append(entry)
 
     def ready(self) -> list[CorrectedWind]:
         """Every sample that can now be decided, in input order."""

@@ -33,6 +33,7 @@ Windows are named by :func:`window_label`: ``1min`` for 60 s, ``10min`` for 600 
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Iterable
 from typing import NamedTuple
 
@@ -155,16 +156,55 @@ def anemometer_sample(message) -> WindSample:
     rejected: its wind becomes NaN so that the compensator still returns one (invalid) output
     for it, in order. Stamp order is checked by the compensator itself.
     """
-    t_s = stamp_s(message.header.stamp)
-    wind = _vector(message.vector)
+    vector = message.vector
+    return _wind_sample(
+        stamp_s(message.header.stamp), message.header.frame_id, vector.x, vector.y, vector.z
+    )
+
+
+def _wind_sample(t_s: float, frame_id: str, x: float, y: float, z: float) -> WindSample:
+    wind = np.array([x, y, z], dtype=float)
     rejection = None
-    if message.header.frame_id != ANEMOMETER_FRAME:
+    if frame_id != ANEMOMETER_FRAME:
         rejection = REASON_WRONG_FRAME
     elif not np.all(np.isfinite(wind)):
         rejection = REASON_NON_FINITE
     if rejection is not None:
         wind = np.full(3, np.nan)
     return WindSample(t_s, wind, rejection)
+
+
+# Offline tools read and write Vector3Stamped as CDR bytes (ROS 2 XCDR1, little endian: each
+# primitive aligned to its size from the start of the data, which follows a 4-byte
+# encapsulation header), several times faster than through message objects.
+_CDR_LITTLE_ENDIAN = b"\x00\x01"
+_CDR_ENCAPSULATION = b"\x00\x01\x00\x00"
+_CDR_STAMP_AND_FRAME_LENGTH = struct.Struct("<iII")
+_CDR_VECTOR = struct.Struct("<3d")
+_MAP_FRAME_CDR = MAP_FRAME.encode() + b"\0"
+_CDR_VECTOR3_STAMPED_IN_MAP = struct.Struct(
+    f"<4siII{len(_MAP_FRAME_CDR)}s{-(12 + len(_MAP_FRAME_CDR)) % 8}x3d"
+)
+
+
+def anemometer_sample_cdr(raw: bytes) -> tuple[WindSample, int, int] | None:
+    """:func:`anemometer_sample` of an ``anemometer/wind`` message straight from its CDR bytes,
+    with the header stamp (sec, nanosec). None for bytes this reader does not handle
+    (big-endian, short or not UTF-8): decode the message and use :func:`anemometer_sample`."""
+    if raw[:2] != _CDR_LITTLE_ENDIAN or len(raw) < 4 + _CDR_STAMP_AND_FRAME_LENGTH.size:
+        return None
+    sec, nanosec, frame_length = _CDR_STAMP_AND_FRAME_LENGTH.unpack_from(raw, 4)
+    frame_at = 4 + _CDR_STAMP_AND_FRAME_LENGTH.size
+    vector_at = frame_at + frame_length
+    vector_at += -(vector_at - 4) % 8
+    if frame_length == 0 or len(raw) < vector_at + _CDR_VECTOR.size:
+        return None
+    try:
+        frame_id = raw[frame_at : frame_at + frame_length - 1].decode()
+    except UnicodeDecodeError:
+        return None
+    x, y, z = _CDR_VECTOR.unpack_from(raw, vector_at)
+    return _wind_sample(sec + nanosec * 1e-9, frame_id, x, y, z), sec, nanosec
 
 
 def body_to_enu(quat_xyzw, vectors_body) -> np.ndarray:
@@ -311,6 +351,21 @@ def true_wind_message(vector_stamped_class, sec: int, nanosec: int, wind_enu_mps
     _set_header(message.header, sec, nanosec, MAP_FRAME)
     _set_vector(message.vector, wind_enu_mps)
     return message
+
+
+def true_wind_cdr(sec: int, nanosec: int, wind_enu_mps) -> bytes:
+    """:func:`true_wind_message` as CDR bytes: what ROS serialises for it."""
+    x, y, z = wind_enu_mps
+    return _CDR_VECTOR3_STAMPED_IN_MAP.pack(
+        _CDR_ENCAPSULATION,
+        int(sec),
+        int(nanosec),
+        len(_MAP_FRAME_CDR),
+        _MAP_FRAME_CDR,
+        float(x),
+        float(y),
+        float(z),
+    )
 
 
 def product_messages(

@@ -28,7 +28,7 @@ import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from buoy_nav.bag_io import BagError, BagReader, BagWriter
+from buoy_nav.bag_io import BagError, BagMessage, BagReader, BagWriter
 from buoy_nav.config import FusionConfig
 from buoy_nav.fuse_bag import (
     OfflineFusion,
@@ -52,12 +52,14 @@ from wind_comp.compensator import (
 from wind_comp.nav_messages import (
     REASON_STAMP_NOT_INCREASING,
     StampOrder,
+    WindSample,
     anemometer_sample,
+    anemometer_sample_cdr,
     body_to_enu,
     product_messages,
     remove_earth_rate,
     stamp_from_seconds,
-    true_wind_message,
+    true_wind_cdr,
     window_label,
 )
 from wind_comp.products import WindAverager, WindProduct
@@ -65,6 +67,7 @@ from wind_comp.products import WindAverager, WindProduct
 COMPENSATION_NODE_NAME = "compensation_node"
 WIND_TOPIC = "anemometer/wind"
 TRUE_WIND_TOPIC = "wind/true"
+TRUE_WIND_BAG_TOPIC = bag_topic(TRUE_WIND_TOPIC)
 VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
 PRODUCTS_CSV_SUFFIX = "_wind_products.csv"
@@ -133,7 +136,8 @@ class OfflineCompensation:
         self._wind_order = StampOrder()
         self._pending_stamps: deque[tuple[int, int]] = deque()
         self._nav_chunk: list[NavValues] = []
-        self._wind_chunk: list[tuple[float, np.ndarray]] = []
+        self._wind_stamps_s: list[float] = []
+        self._winds_sensor_mps: list[np.ndarray] = []
         self._latitude_deg = math.nan
 
     def add_navigation(self, values: list[NavValues]) -> None:
@@ -142,15 +146,26 @@ class OfflineCompensation:
 
     def add_wind(self, message, log_time_ns: int) -> None:
         """One decoded ``anemometer/wind`` message."""
-        sample = anemometer_sample(message)
+        stamp = message.header.stamp
+        self._add_sample(anemometer_sample(message), stamp.sec, stamp.nanosec, log_time_ns)
+
+    def add_wind_message(self, reader: BagReader, message: BagMessage) -> None:
+        """:meth:`add_wind` of an ``anemometer/wind`` bag message, read from CDR."""
+        parsed = anemometer_sample_cdr(message.raw)
+        if parsed is None:
+            self.add_wind(reader.decode(message), message.log_time_ns)
+        else:
+            self._add_sample(*parsed, message.log_time_ns)
+
+    def _add_sample(self, sample: WindSample, sec: int, nanosec: int, log_time_ns: int) -> None:
         if sample.rejection is not None:
             self.rejected[sample.rejection] += 1
         elif not self._wind_order.advance(sample.t_s):
             self.rejected[REASON_STAMP_NOT_INCREASING] += 1
-        stamp = message.header.stamp
-        self._pending_stamps.append((stamp.sec, stamp.nanosec))
-        self._wind_chunk.append((sample.t_s, sample.wind_sensor_mps))
-        if sample.t_s - self._wind_chunk[0][0] >= self._chunk_s:
+        self._pending_stamps.append((sec, nanosec))
+        self._wind_stamps_s.append(sample.t_s)
+        self._winds_sensor_mps.append(sample.wind_sensor_mps)
+        if sample.t_s - self._wind_stamps_s[0] >= self._chunk_s:
             self._process_chunk(log_time_ns)
 
     def finish(self, log_time_ns: int) -> None:
@@ -162,9 +177,11 @@ class OfflineCompensation:
 
     def _process_chunk(self, log_time_ns: int) -> None:
         self._feed_navigation()
-        winds, self._wind_chunk = self._wind_chunk, []
-        for t_s, wind in winds:
-            self.compensator.add_wind(t_s, wind)
+        if self._wind_stamps_s:
+            self.compensator.add_wind_batch(
+                np.array(self._wind_stamps_s), np.array(self._winds_sensor_mps)
+            )
+            self._wind_stamps_s, self._winds_sensor_mps = [], []
         self._write_results(self.compensator.ready(), log_time_ns)
 
     def _feed_navigation(self) -> None:
@@ -184,8 +201,12 @@ class OfflineCompensation:
     def _write_results(self, results: list[CorrectedWind], log_time_ns: int) -> None:
         for result in results:
             sec, nanosec = self._pending_stamps.popleft()
-            message = true_wind_message(Vector3Stamped, sec, nanosec, result.true_wind_enu_mps)
-            self.writer.write(bag_topic(TRUE_WIND_TOPIC), VECTOR3_STAMPED, log_time_ns, message)
+            self.writer.write_raw(
+                TRUE_WIND_BAG_TOPIC,
+                VECTOR3_STAMPED,
+                log_time_ns,
+                true_wind_cdr(sec, nanosec, result.true_wind_enu_mps.tolist()),
+            )
             for averager in self.averagers:
                 self._write_products(
                     averager.add(result.t_s, result.true_wind_enu_mps), log_time_ns
@@ -249,7 +270,7 @@ def process_bag(
                     continue
                 writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
                 if message.topic == stored_wind:
-                    compensation.add_wind(reader.decode(message), log_time_ns)
+                    compensation.add_wind_message(reader, message)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
                     progress.update((log_time_ns - reader.start_ns) * 1e-9)
             compensation.add_navigation(fusion.finish())
