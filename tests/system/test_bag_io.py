@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from bag_taps import EchoTap
 from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -18,7 +19,7 @@ from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Image, Imu, NavSatFix
 from std_msgs.msg import Byte, ByteMultiArray, Char
 
-from buoy_nav.bag_io import BagError, BagReader, BagWriter
+from buoy_nav.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter
 
 T0_NS = 1_700_000_000_000_000_000
 IMU_PERIOD_NS = 10_000_000  # 100 Hz
@@ -413,3 +414,46 @@ def test_empty_bag_is_valid(tmp_path):
         assert reader.topics == {}
         assert list(reader.messages()) == []
         assert reader.duration_s == 0.0
+
+
+# -- the writer in a process of its own --------------------------------------------------------
+
+
+def test_background_writer_writes_the_same_bag_and_runs_its_tap(written_bag, tmp_path):
+    path, messages, counts = written_bag
+    copy = tmp_path / "copy"
+    tap = (EchoTap, ("/imu/data_raw", "/echo"))
+    with BagReader(path) as reader, BackgroundBagWriter(copy, tap=tap) as writer:
+        for message in reader.messages():
+            writer.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
+        writer.end_of_input(messages[-1][1] + 7)
+    n_imu = counts["/imu/data_raw"]
+    assert writer.tap_result == (n_imu, messages[-1][1] + 7)
+    assert writer.counts == {**counts, "/echo": n_imu}
+    with BagReader(path) as original, BagReader(copy) as copied:
+        assert list(original.messages()) == [m for m in copied.messages() if m.topic != "/echo"]
+        imu_times = [m.log_time_ns for m in original.messages(["/imu/data_raw"])]
+        echoed = [copied.decode(m).data[0] for m in copied.messages(["/echo"])]
+    assert echoed == imu_times
+
+
+def test_background_writer_reports_errors_of_the_writing_process(tmp_path):
+    with (
+        pytest.raises(BagError, match="holds sensor_msgs/msg/Imu"),
+        BackgroundBagWriter(tmp_path / "types") as writer,
+    ):
+        writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS, Imu())
+        writer.write_raw("/imu/data_raw", "sensor_msgs/msg/NavSatFix", T0_NS, b"\x00\x01")
+    assert not (tmp_path / "types" / "metadata.yaml").exists()
+    with pytest.raises(BagError, match="already exists"):
+        BackgroundBagWriter(tmp_path / "types")
+
+
+def test_background_writer_aborts_when_the_tool_fails(tmp_path):
+    path = tmp_path / "aborted"
+    with pytest.raises(RuntimeError) as raised, BackgroundBagWriter(path) as writer:
+        writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS, Imu())
+        raise RuntimeError("fusion failed")
+    assert any(str(path) in note and "aborted" in note for note in raised.value.__notes__)
+    with pytest.raises(BagError, match="incomplete"):
+        BagReader(path)

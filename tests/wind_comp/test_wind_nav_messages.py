@@ -19,8 +19,12 @@ from wind_comp.nav_messages import (
     anemometer_sample,
     anemometer_sample_cdr,
     body_to_enu,
+    checked_fix_latitude_deg,
+    fix_fields_cdr,
     fix_latitude_deg,
     odometry_arrays,
+    odometry_fields,
+    odometry_fields_cdr,
     odometry_sample,
     product_messages,
     remove_earth_rate,
@@ -269,3 +273,50 @@ def test_echo_lines():
     line = wind_line(0.0, 1.0, 0.0, 0.0)  # blowing toward East: from the West
     assert "speed   1.00 m/s" in line and "from 270.0 deg" in line
     assert wind_line(0.0, math.nan, 0.0, 0.0).endswith("invalid")
+
+
+@pytest.mark.parametrize(
+    ("frame", "child", "quat", "rate"),
+    [
+        ("map", "base_link", [0.1, -0.2, 0.3, 0.9], [0.01, -0.02, 0.03]),
+        ("odom", "base_link", [0.1, -0.2, 0.3, 0.9], [0.01, -0.02, 0.03]),
+        ("map", "base_link_long_name", [0.1, -0.2, 0.3, 0.9], [0.01, -0.02, 0.03]),
+        ("map", "base_link", [0.0, 0.0, 0.0, 0.0], [0.01, -0.02, 0.03]),
+        ("map", "base_link", [0.1, -0.2, 0.3, 0.9], [math.inf, -0.02, 0.03]),
+    ],
+)
+def test_odometry_fields_from_cdr_equal_the_decoded_message(frame, child, quat, rate):
+    message = odometry(quat, rate, [1.5, -0.4, 0.2], sec=1_767_225_600, nanosec=987_654_321)
+    message.header.frame_id, message.child_frame_id = frame, child
+    message.pose.covariance = RNG.normal(size=36).tolist()
+    raw = serialize_message(message)
+    try:
+        expected = odometry_fields(message)
+    except MalformedMessageError as error:
+        with pytest.raises(MalformedMessageError) as raised:
+            odometry_fields_cdr(raw)
+        assert raised.value.reason == error.reason
+        return
+    fields = odometry_fields_cdr(raw)
+    assert fields[0] == expected[0]
+    for got, want in zip(fields[1:], expected[1:], strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize(("status", "latitude"), [(0, 35.25), (-1, 35.25), (2, -89.5)])
+def test_fix_fields_from_cdr_equal_the_decoded_message(status, latitude):
+    message = NavSatFix()
+    message.header.frame_id = "base_link"
+    message.status.status, message.status.service = status, NavSatStatus.SERVICE_GPS
+    message.latitude, message.longitude, message.altitude = latitude, 120.5, 3.25
+    raw = serialize_message(message)
+    assert fix_fields_cdr(raw) == (status, latitude)
+    assert checked_fix_latitude_deg(*fix_fields_cdr(raw)) == fix_latitude_deg(message)
+
+
+def test_nav_cdr_readers_decline_what_they_do_not_handle():
+    odometry_raw = serialize_message(odometry([0, 0, 0, 1], [0, 0, 0], [0, 0, 0]))
+    fix_raw = serialize_message(NavSatFix())
+    for reader, raw in ((odometry_fields_cdr, odometry_raw), (fix_fields_cdr, fix_raw)):
+        assert reader(b"\x01\x00" + raw[2:]) is None  # big-endian
+        assert reader(raw[:14]) is None

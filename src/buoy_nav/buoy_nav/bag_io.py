@@ -21,8 +21,10 @@ This module never imports rclpy: it is used offline as well as by the recorder a
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import heapq
+import multiprocessing
 import re
 import shutil
 import struct
@@ -795,11 +797,7 @@ class BagWriter:
                     f"cannot also write {msgtype}"
                 )
             return channel
-        if msgtype not in self._typestore.fielddefs:
-            raise BagError(
-                f"bag {self.path}: topic {topic}: unknown message type {msgtype!r} "
-                "(not a ROS 2 Jazzy type; expected 'package/msg/Type')"
-            )
+        _require_known_type(self._typestore, self.path, topic, msgtype)
         file = self._open_file()
         definition, _ = _message_definition(msgtype)
         channel_id = file.add_channel(file.add_schema(msgtype, definition), topic)
@@ -824,17 +822,8 @@ class BagWriter:
         ``array.array`` or lists.
         """
         self._channel(topic, msgtype)
-        try:
-            typed = _as_typestore_message(self._typestore, msgtype, message)
-            raw = self._typestore.serialize_cdr(typed, msgtype)
-        except BagError:
-            raise
-        except Exception as error:
-            raise BagError(
-                f"bag {self.path}: topic {topic}: cannot serialise "
-                f"{type(message).__name__} as {msgtype}: {_one_line(error)}"
-            ) from error
-        self.write_raw(topic, msgtype, log_time_ns, bytes(raw))
+        raw = _serialize(self._typestore, self.path, topic, msgtype, message)
+        self.write_raw(topic, msgtype, log_time_ns, raw)
 
     def _metadata(self, start_ns: int, end_ns: int) -> dict:
         """The ``rosbag2_bagfile_information`` of the bag as written so far."""
@@ -912,6 +901,223 @@ class BagWriter:
                 f"bag {self.path} was aborted and is incomplete "
                 f"(no {METADATA_FILE}; {sum(self.counts.values())} messages written)"
             )
+
+
+def _require_known_type(typestore, path: Path, topic: str, msgtype: str) -> None:
+    if msgtype not in typestore.fielddefs:
+        raise BagError(
+            f"bag {path}: topic {topic}: unknown message type {msgtype!r} "
+            "(not a ROS 2 Jazzy type; expected 'package/msg/Type')"
+        )
+
+
+def _serialize(typestore, path: Path, topic: str, msgtype: str, message) -> bytes:
+    """CDR bytes of a rosbags or rclpy ``message`` of ``msgtype``; BagError naming the bag and
+    topic when it does not fit the type."""
+    _require_known_type(typestore, path, topic, msgtype)
+    try:
+        typed = _as_typestore_message(typestore, msgtype, message)
+        return bytes(typestore.serialize_cdr(typed, msgtype))
+    except BagError:
+        raise
+    except Exception as error:
+        raise BagError(
+            f"bag {path}: topic {topic}: cannot serialise "
+            f"{type(message).__name__} as {msgtype}: {_one_line(error)}"
+        ) from error
+
+
+# Messages handed to the writing process at a time: large enough that sending costs a fraction
+# of a microsecond per message, small enough to keep both processes busy.
+_BATCH_MESSAGES = 2048
+
+
+class BackgroundBagWriter:
+    """A :class:`BagWriter` in a process of its own, for the offline tools: packing records,
+    compressing and writing the file then take the second core instead of the tool's.
+
+    Same interface and bag as :class:`BagWriter`. Messages are handed over in batches through a
+    pipe; an error of the writing process (a full disk, a type conflict) is raised as BagError
+    at the next hand-over or at :meth:`close`. Leaving the ``with`` block by an exception aborts
+    the bag, as :class:`BagWriter` does.
+
+    ``tap`` = (factory, arguments) puts more of the work in the writing process: it builds
+    ``factory(bag_writer, *arguments)`` there, an object with a set ``topics``,
+    ``take(topic, log_time_ns, raw)`` for each record of those topics as it is written (it may
+    write records of its own) and ``finish(log_time_ns)`` at the end of the input (the log
+    time given to :meth:`end_of_input`, else the latest written), whose result becomes
+    :attr:`tap_result` once the bag is closed.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        overwrite: bool = False,
+        compress: bool = True,
+        tap: tuple | None = None,
+    ):
+        self.path = Path(path)
+        self.tap_result = None
+        self._typestore = jazzy_typestore()
+        self._counts: Counter[str] = Counter()
+        self._batch: list[tuple[str, str, int, bytes]] = []
+        # Spawned, not forked: the tools may run inside processes with middleware threads.
+        context = multiprocessing.get_context("spawn")
+        self._connection, child_end = context.Pipe()
+        self._process = context.Process(
+            target=_write_bag_from_pipe,
+            args=(child_end, str(self.path), overwrite, compress, tap),
+            name=f"bag writer {self.path.name}",
+            daemon=True,
+        )
+        self._process.start()
+        child_end.close()
+        self._open = True
+        self._raise_if_failed(self._receive())
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Messages handed over so far, per topic; once closed, all the bag holds (with what
+        the tap wrote)."""
+        return dict(self._counts)
+
+    @property
+    def closed(self) -> bool:
+        return not self._open
+
+    def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
+        """Append one CDR-serialised message with log time ``log_time_ns`` (ns since the epoch)."""
+        if not self._open:
+            raise BagError(f"bag {self.path} is closed")
+        self._batch.append((topic, msgtype, log_time_ns, raw))
+        self._counts[topic] += 1
+        if len(self._batch) >= _BATCH_MESSAGES:
+            self._send_batch()
+
+    def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
+        """Serialise ``message`` (a rosbags or an rclpy message of ``msgtype``) and append it."""
+        raw = _serialize(self._typestore, self.path, topic, msgtype, message)
+        self.write_raw(topic, msgtype, log_time_ns, raw)
+
+    def end_of_input(self, log_time_ns: int) -> None:
+        """The log time (ns) of the last input message, at which the tap finishes."""
+        self._batch.append(("", "", log_time_ns, b""))
+
+    def close(self) -> None:
+        """Finish the bag (index and metadata.yaml) and wait for the writing process."""
+        if not self._open:
+            return
+        self._send_batch()
+        self.tap_result, counts = self._finish("close")
+        self._counts = Counter(counts)
+
+    def abort(self) -> None:
+        """Stop writing without finishing: the bag stays incomplete (no metadata.yaml). Never
+        raises: it runs while an error is already on its way."""
+        if self._open:
+            self._batch.clear()
+            with contextlib.suppress(BagError):
+                self._finish("abort")
+
+    def _send_batch(self) -> None:
+        if not self._batch:
+            return
+        batch, self._batch = self._batch, []
+        try:
+            self._connection.send(batch)
+        except (BrokenPipeError, ConnectionResetError, EOFError):
+            self._open = False
+            self._raise_if_failed(self._receive())
+            raise BagError(f"bag {self.path}: the writing process stopped") from None
+
+    def _finish(self, command: str):
+        """Send ``command``; the result the writing process reports."""
+        self._open = False
+        try:
+            self._connection.send(command)
+            reply = self._receive()
+        except (BrokenPipeError, ConnectionResetError):
+            reply = self._receive()
+        finally:
+            self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
+            if self._process.is_alive():
+                self._process.kill()
+            self._connection.close()
+        self._raise_if_failed(reply)
+        return reply[1:]
+
+    def _receive(self):
+        try:
+            return self._connection.recv()
+        except (EOFError, ConnectionResetError):
+            return ("error", f"bag {self.path}: the writing process ended unexpectedly")
+
+    @staticmethod
+    def _raise_if_failed(reply) -> None:
+        if reply[0] == "error":
+            raise BagError(reply[1])
+
+    def __enter__(self) -> BackgroundBagWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, traceback) -> None:
+        if exc is None:
+            self.close()
+            return
+        if not self.closed:
+            self.abort()
+            exc.add_note(
+                f"bag {self.path} was aborted and is incomplete "
+                f"(no {METADATA_FILE}; {sum(self._counts.values())} messages handed over)"
+            )
+
+
+# Longest wait for the writing process to exit once the bag is finished (s).
+_WRITER_EXIT_TIMEOUT_S = 60.0
+
+
+def _write_bag_from_pipe(connection, path: str, overwrite: bool, compress: bool, tap) -> None:
+    """The writing process: a BagWriter fed batches of records until "close" or "abort"; an
+    empty topic marks the end of the input (see :meth:`BackgroundBagWriter.end_of_input`)."""
+    try:
+        writer = BagWriter(path, overwrite=overwrite, compress=compress)
+    except BagError as error:
+        connection.send(("error", str(error)))
+        return
+    connection.send(("ok",))
+    result = None
+    try:
+        taker = None if tap is None else tap[0](writer, *tap[1])
+        tapped = set() if taker is None else taker.topics
+        end_ns = latest_ns = 0
+        while True:
+            batch = connection.recv()
+            if batch == "abort":
+                writer.abort()
+                connection.send(("aborted",))
+                return
+            if batch == "close":
+                break
+            for topic, msgtype, log_time_ns, raw in batch:
+                if not topic:
+                    end_ns = log_time_ns
+                    continue
+                writer.write_raw(topic, msgtype, log_time_ns, raw)
+                latest_ns = log_time_ns
+                if topic in tapped:
+                    taker.take(topic, log_time_ns, raw)
+        if taker is not None:
+            result = taker.finish(end_ns or latest_ns)
+        counts = writer.counts
+        writer.close()
+    except EOFError:
+        writer.abort()
+        return
+    except Exception as error:  # reported to the tool, which raises it as a BagError
+        writer.abort()
+        connection.send(("error", f"bag {path}: {type(error).__name__}: {_one_line(error)}"))
+        return
+    connection.send(("ok", result, counts))
 
 
 def _as_typestore_message(typestore, msgtype: str, source):

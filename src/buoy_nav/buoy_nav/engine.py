@@ -75,6 +75,7 @@ from buoy_nav.measurements.gnss_velocity import (
 from buoy_nav.measurements.heading import heading_model, horizontal_fraction
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
 from buoy_nav.rotations import (
+    cross,
     euler_from_rotation_matrix,
     quaternion_from_rotation_matrix,
     rotation_matrix_from_euler,
@@ -790,7 +791,7 @@ class FusionEngine:
             force_increment[2] += gravity * span
             phi, dv = dx[ATTITUDE], dx[VELOCITY].copy()
             dx[POSITION] += dv * span
-            dx[VELOCITY] += np.cross(phi, force_increment) - rotation_integral @ dx[ACCEL_BIAS]
+            dx[VELOCITY] += cross(phi, force_increment) - rotation_integral @ dx[ACCEL_BIAS]
             dx[ATTITUDE] -= rotation_integral @ dx[GYRO_BIAS]
         _set_nav_state(integrator, inject_error_state(_nav_state(integrator), dx))
 

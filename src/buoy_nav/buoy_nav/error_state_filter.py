@@ -63,7 +63,7 @@ accelerometer-bias variance instead.
 """
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import lapack
@@ -137,8 +137,7 @@ def inject_error_state(state: NavState, error) -> NavState:
         )
     )
     meridian, prime_vertical = earth.radii_of_curvature_m(state.latitude_rad)
-    return replace(
-        state,
+    return NavState(
         attitude_xyzw=attitude,
         velocity_enu_mps=state.velocity_enu_mps + dx[VELOCITY],
         latitude_rad=state.latitude_rad + float(dx[7]) / (meridian + state.altitude_m),

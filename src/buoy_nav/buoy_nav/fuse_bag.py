@@ -19,7 +19,7 @@ import time
 from collections import Counter
 from collections.abc import Iterable
 
-from buoy_nav.bag_io import BagError, BagMessage, BagReader, BagWriter
+from buoy_nav.bag_io import BackgroundBagWriter, BagError, BagMessage, BagReader, BagWriter
 from buoy_nav.config import (
     FUSION_FIELDS_NOT_PARAMETERS,
     FUSION_NODE_NAME,
@@ -110,7 +110,7 @@ def truth_topics_of(reader: BagReader) -> list[str]:
 class OfflineFusion:
     """Feeds sensor messages to a :class:`FusionEngine` and writes its ``nav/*`` to a bag."""
 
-    def __init__(self, config: FusionConfig, writer: BagWriter):
+    def __init__(self, config: FusionConfig, writer: BagWriter | BackgroundBagWriter):
         self.engine = FusionEngine(config)
         self.stamps = StampBook()
         self.writer = writer
@@ -184,7 +184,7 @@ def fuse_bag(in_bag: str, out_bag: str, config: FusionConfig, overwrite: bool = 
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
         progress = Progress(reader.duration_s, f"fuse_bag {in_bag}", unit="bag s")
-        with BagWriter(out_bag, overwrite=overwrite) as writer:
+        with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
             fusion = OfflineFusion(config, writer)
             for index, message in enumerate(reader.messages([*sensors.values(), *truth])):
                 topic = relative_of.get(message.topic)

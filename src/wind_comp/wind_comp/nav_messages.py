@@ -181,6 +181,16 @@ _CDR_LITTLE_ENDIAN = b"\x00\x01"
 _CDR_ENCAPSULATION = b"\x00\x01\x00\x00"
 _CDR_STAMP_AND_FRAME_LENGTH = struct.Struct("<iII")
 _CDR_VECTOR = struct.Struct("<3d")
+_CDR_STAMP = struct.Struct("<iI")
+_CDR_U32 = struct.Struct("<I")
+_CDR_U16 = struct.Struct("<H")
+_CDR_I8 = struct.Struct("<b")
+_CDR_F64 = struct.Struct("<d")
+# geometry_msgs/Pose (position, orientation) and Twist (linear, angular); each *WithCovariance
+# follows its 8-byte-aligned fields with a 6×6 float64 covariance.
+_CDR_POSE = struct.Struct("<7d")
+_CDR_TWIST = struct.Struct("<6d")
+_CDR_POSE_WITH_COVARIANCE_SIZE = _CDR_POSE.size + 36 * 8
 _MAP_FRAME_CDR = MAP_FRAME.encode() + b"\0"
 _CDR_VECTOR3_STAMPED_IN_MAP = struct.Struct(
     f"<4siII{len(_MAP_FRAME_CDR)}s{-(12 + len(_MAP_FRAME_CDR)) % 8}x3d"
@@ -231,23 +241,85 @@ def enu_to_body(quat_xyzw, vectors_enu) -> np.ndarray:
     return body_to_enu(conjugate, vectors_enu)
 
 
-def _odometry_fields(message) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+def odometry_fields(message) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """Stamp and raw vectors of an Odometry, after the frame, finiteness and quaternion checks."""
-    if message.header.frame_id != MAP_FRAME or message.child_frame_id != BODY_FRAME:
+    orientation = message.pose.pose.orientation
+    return _checked_odometry(
+        stamp_s(message.header.stamp),
+        message.header.frame_id,
+        message.child_frame_id,
+        np.array([orientation.x, orientation.y, orientation.z, orientation.w], dtype=float),
+        _vector(message.twist.twist.angular),
+        _vector(message.twist.twist.linear),
+    )
+
+
+def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body):
+    if frame_id != MAP_FRAME or child_frame_id != BODY_FRAME:
         raise MalformedMessageError(
             REASON_WRONG_FRAME,
             f"odometry must be of {BODY_FRAME} in {MAP_FRAME}, got "
-            f"'{message.child_frame_id}' in '{message.header.frame_id}'",
+            f"'{child_frame_id}' in '{frame_id}'",
         )
-    orientation = message.pose.pose.orientation
-    quat = np.array([orientation.x, orientation.y, orientation.z, orientation.w], dtype=float)
-    rate = _vector(message.twist.twist.angular)
-    velocity_body = _vector(message.twist.twist.linear)
     if not all(np.all(np.isfinite(vector)) for vector in (quat, rate, velocity_body)):
         raise MalformedMessageError(REASON_NON_FINITE, "odometry orientation, rate or velocity")
     if np.linalg.norm(quat) < _MIN_QUATERNION_NORM:
         raise MalformedMessageError(REASON_ZERO_QUATERNION, "odometry orientation has zero length")
-    return stamp_s(message.header.stamp), quat, rate, velocity_body
+    return t_s, quat, rate, velocity_body
+
+
+def _cdr_string(raw: bytes, position: int) -> tuple[str, int]:
+    """A CDR string (length with its NUL, 4-byte aligned) at ``position``, and the position
+    after it; ValueError for bytes that do not hold one."""
+    position += -(position - 4) % 4
+    (length,) = _CDR_U32.unpack_from(raw, position)
+    start = position + _CDR_U32.size
+    if length == 0 or start + length > len(raw):
+        raise ValueError("string runs past the message")
+    return raw[start : start + length - 1].decode(), start + length
+
+
+def odometry_fields_cdr(raw: bytes) -> tuple[float, np.ndarray, np.ndarray, np.ndarray] | None:
+    """Stamp (s), attitude quaternion, body rate ω_ib and body velocity of a ``nav/odometry``
+    message straight from its CDR bytes, checked as :func:`odometry_sample` checks them (raises
+    :class:`MalformedMessageError`). None for bytes this reader does not handle (big-endian,
+    short): decode the message instead."""
+    if raw[:2] != _CDR_LITTLE_ENDIAN:
+        return None
+    try:
+        sec, nanosec = _CDR_STAMP.unpack_from(raw, 4)
+        frame_id, position = _cdr_string(raw, 12)
+        child_frame_id, position = _cdr_string(raw, position)
+        position += -(position - 4) % 8
+        pose = _CDR_POSE.unpack_from(raw, position)
+        twist = _CDR_TWIST.unpack_from(raw, position + _CDR_POSE_WITH_COVARIANCE_SIZE)
+    except (struct.error, ValueError, UnicodeDecodeError):
+        return None
+    return _checked_odometry(
+        sec + nanosec * 1e-9,
+        frame_id,
+        child_frame_id,
+        np.array(pose[3:7]),
+        np.array(twist[3:6]),
+        np.array(twist[0:3]),
+    )
+
+
+def fix_fields_cdr(raw: bytes) -> tuple[int, float] | None:
+    """Status and latitude (deg) of a ``nav/fix`` message straight from its CDR bytes, for
+    :func:`checked_fix_latitude_deg`; None for bytes this reader does not handle."""
+    if raw[:2] != _CDR_LITTLE_ENDIAN:
+        return None
+    try:
+        _, position = _cdr_string(raw, 12)
+        (status,) = _CDR_I8.unpack_from(raw, position)
+        position += 1
+        position += -(position - 4) % 2 + _CDR_U16.size
+        position += -(position - 4) % 8
+        (latitude,) = _CDR_F64.unpack_from(raw, position)
+    except (struct.error, ValueError, UnicodeDecodeError):
+        return None
+    return status, latitude
 
 
 def odometry_sample(message) -> NavSample:
@@ -256,7 +328,7 @@ def odometry_sample(message) -> NavSample:
     The body-frame linear velocity of the Odometry twist is rotated into ENU with the message's
     own attitude.
     """
-    t_s, quat, rate, velocity_body = _odometry_fields(message)
+    t_s, quat, rate, velocity_body = odometry_fields(message)
     velocity_enu = body_to_enu(quat[None, :], velocity_body[None, :])[0]
     return NavSample(t_s, quat, rate, velocity_enu)
 
@@ -269,7 +341,7 @@ def odometry_arrays(messages: Iterable) -> tuple[NavArrays, dict[str, int]]:
     rejected: dict[str, int] = {}
     for message in messages:
         try:
-            t_s, quat, rate, velocity_body = _odometry_fields(message)
+            t_s, quat, rate, velocity_body = odometry_fields(message)
         except MalformedMessageError as error:
             rejected[error.reason] = rejected.get(error.reason, 0) + 1
             continue
@@ -293,14 +365,20 @@ def fix_latitude_deg(message) -> float | None:
 
     Raises :class:`MalformedMessageError` for a fix whose latitude is not finite or beyond ±90°.
     """
-    if message.status.status < 0:
+    return checked_fix_latitude_deg(message.status.status, float(message.latitude))
+
+
+def checked_fix_latitude_deg(status: int, latitude_deg: float) -> float | None:
+    """:func:`fix_latitude_deg` of a fix's status and latitude (deg)."""
+    if status < 0:
         return None
-    latitude = float(message.latitude)
-    if not math.isfinite(latitude):
-        raise MalformedMessageError(REASON_NON_FINITE, f"fix latitude {latitude}")
-    if abs(latitude) > 90.0:
-        raise MalformedMessageError(REASON_LATITUDE_OUT_OF_RANGE, f"fix latitude {latitude} deg")
-    return latitude
+    if not math.isfinite(latitude_deg):
+        raise MalformedMessageError(REASON_NON_FINITE, f"fix latitude {latitude_deg}")
+    if abs(latitude_deg) > 90.0:
+        raise MalformedMessageError(
+            REASON_LATITUDE_OUT_OF_RANGE, f"fix latitude {latitude_deg} deg"
+        )
+    return latitude_deg
 
 
 def remove_earth_rate(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> np.ndarray:

@@ -23,12 +23,13 @@ import time
 from collections import Counter, deque
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from buoy_nav.bag_io import BagError, BagMessage, BagReader, BagWriter
+from buoy_nav.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter, jazzy_typestore
 from buoy_nav.config import FusionConfig
 from buoy_nav.fuse_bag import (
     OfflineFusion,
@@ -38,7 +39,7 @@ from buoy_nav.fuse_bag import (
     sensor_topics_of,
     truth_topics_of,
 )
-from buoy_nav.fusion_messages import NavValues
+from buoy_nav.fusion_messages import NAV_FIX_TOPIC, NAV_MSGTYPES, ODOMETRY_TOPIC
 from buoy_nav.parameters import ParameterError, build_config, coerce_parameter, load_parameter_files
 from buoy_nav.progress import Progress
 from wind_comp.compensator import (
@@ -56,6 +57,10 @@ from wind_comp.nav_messages import (
     anemometer_sample,
     anemometer_sample_cdr,
     body_to_enu,
+    checked_fix_latitude_deg,
+    fix_fields_cdr,
+    odometry_fields,
+    odometry_fields_cdr,
     product_messages,
     remove_earth_rate,
     stamp_from_seconds,
@@ -68,6 +73,10 @@ COMPENSATION_NODE_NAME = "compensation_node"
 WIND_TOPIC = "anemometer/wind"
 TRUE_WIND_TOPIC = "wind/true"
 TRUE_WIND_BAG_TOPIC = bag_topic(TRUE_WIND_TOPIC)
+ODOMETRY_BAG_TOPIC = bag_topic(ODOMETRY_TOPIC)
+NAV_FIX_BAG_TOPIC = bag_topic(NAV_FIX_TOPIC)
+ODOMETRY_MSGTYPE = NAV_MSGTYPES[ODOMETRY_TOPIC]
+NAV_FIX_MSGTYPE = NAV_MSGTYPES[NAV_FIX_TOPIC]
 VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
 PRODUCTS_CSV_SUFFIX = "_wind_products.csv"
@@ -116,46 +125,70 @@ class ProcessSummary:
     csv_path: Path | None = None
 
 
-class OfflineCompensation:
-    """The compensation node's processing fed from navigation solutions, writing to a bag.
+class CompensationResult(NamedTuple):
+    """What :class:`OfflineCompensation` reports at the end of the data."""
 
-    Navigation and wind samples are buffered and handed to the compensator in chunks of a
-    quarter of ``nav_history_s`` of wind: the compensator's decisions depend on stamps only, so
-    chunking changes nothing but the speed (vectorised conversion, fewer interpolations).
+    wind_status_counts: dict[WindStatus, int]
+    rejected_wind_messages: Counter
+    products: list[WindProduct]
+
+
+class OfflineCompensation:
+    """The compensation node's processing fed from the bag records being written.
+
+    It takes what ``compensation_node`` subscribes to, as CDR bytes: ``nav/odometry`` and
+    ``nav/fix`` as written by the fusion and the copied ``anemometer/wind``, so a solution gets
+    the latitude of the ``nav/fix`` before it, as the node does. It runs in the process that
+    writes the bag (see :class:`buoy_nav.bag_io.BackgroundBagWriter`) and writes ``wind/true``
+    and the products to the same bag. Navigation and wind samples are handed to the compensator
+    in chunks of a quarter of ``nav_history_s`` of wind: its decisions depend on stamps only, so
+    chunking changes nothing but the speed.
     """
 
-    def __init__(self, config: CompensatorConfig, writer: BagWriter):
+    def __init__(self, writer: BagWriter, config: CompensatorConfig, stored_wind_topic: str):
         self.compensator = WindCompensator(config)
         self.averagers = [
             WindAverager(window_s, config.gust_window_s) for window_s in config.product_windows_s
         ]
         self.writer = writer
+        self.topics = {stored_wind_topic, ODOMETRY_BAG_TOPIC, NAV_FIX_BAG_TOPIC}
+        self._wind_topic = stored_wind_topic
+        self._typestore = jazzy_typestore()
         self.products: list[WindProduct] = []
         self.rejected: Counter[str] = Counter()
         self._chunk_s = config.nav_history_s / 4.0
         self._wind_order = StampOrder()
         self._pending_stamps: deque[tuple[int, int]] = deque()
-        self._nav_chunk: list[NavValues] = []
+        self._nav_chunk: list[tuple] = []
         self._wind_stamps_s: list[float] = []
         self._winds_sensor_mps: list[np.ndarray] = []
         self._latitude_deg = math.nan
 
-    def add_navigation(self, values: list[NavValues]) -> None:
-        """The ``nav/*`` values of new navigation solutions, in order."""
-        self._nav_chunk.extend(values)
-
-    def add_wind(self, message, log_time_ns: int) -> None:
-        """One decoded ``anemometer/wind`` message."""
-        stamp = message.header.stamp
-        self._add_sample(anemometer_sample(message), stamp.sec, stamp.nanosec, log_time_ns)
-
-    def add_wind_message(self, reader: BagReader, message: BagMessage) -> None:
-        """:meth:`add_wind` of an ``anemometer/wind`` bag message, read from CDR."""
-        parsed = anemometer_sample_cdr(message.raw)
-        if parsed is None:
-            self.add_wind(reader.decode(message), message.log_time_ns)
+    def take(self, topic: str, log_time_ns: int, raw: bytes) -> None:
+        """One record of a topic in :attr:`topics`, as written to the bag."""
+        if topic == ODOMETRY_BAG_TOPIC:
+            fields = odometry_fields_cdr(raw)
+            if fields is None:
+                fields = odometry_fields(self._decode(raw, ODOMETRY_MSGTYPE))
+            self._nav_chunk.append((*fields, self._latitude_deg))
+        elif topic == NAV_FIX_BAG_TOPIC:
+            fields = fix_fields_cdr(raw)
+            if fields is None:
+                message = self._decode(raw, NAV_FIX_MSGTYPE)
+                fields = (message.status.status, message.latitude)
+            latitude = checked_fix_latitude_deg(*fields)
+            if latitude is not None:
+                self._latitude_deg = latitude
         else:
-            self._add_sample(*parsed, message.log_time_ns)
+            parsed = anemometer_sample_cdr(raw)
+            if parsed is None:
+                message = self._decode(raw, VECTOR3_STAMPED)
+                stamp = message.header.stamp
+                parsed = (anemometer_sample(message), stamp.sec, stamp.nanosec)
+            self._add_sample(*parsed, log_time_ns)
+
+    def _decode(self, raw: bytes, msgtype: str):
+        return self._typestore.deserialize_cdr(raw, msgtype)
 
     def _add_sample(self, sample: WindSample, sec: int, nanosec: int, log_time_ns: int) -> None:
         if sample.rejection is not None:
@@ -168,12 +201,13 @@ class OfflineCompensation:
         if sample.t_s - self._wind_stamps_s[0] >= self._chunk_s:
             self._process_chunk(log_time_ns)
 
-    def finish(self, log_time_ns: int) -> None:
+    def finish(self, log_time_ns: int) -> CompensationResult:
         """End of data: every pending sample decided and written, partial windows closed."""
         self._process_chunk(log_time_ns)
         self._write_results(self.compensator.flush(), log_time_ns)
         for averager in self.averagers:
             self._write_products(averager.flush(), log_time_ns)
+        return CompensationResult(dict(self.compensator.counts), self.rejected, self.products)
 
     def _process_chunk(self, log_time_ns: int) -> None:
         self._feed_navigation()
@@ -185,17 +219,15 @@ class OfflineCompensation:
         self._write_results(self.compensator.ready(), log_time_ns)
 
     def _feed_navigation(self) -> None:
-        """Convert the buffered solutions as the node converts ``nav/odometry`` + ``nav/fix``."""
-        values, self._nav_chunk = self._nav_chunk, []
-        if not values:
+        """Convert the buffered solutions as the node converts ``nav/odometry``."""
+        samples, self._nav_chunk = self._nav_chunk, []
+        if not samples:
             return
-        quats = np.array([v.attitude_xyzw for v in values])
-        rates = np.array([v.angular_rate_body_rad_s for v in values])
-        velocities_enu = body_to_enu(quats, np.array([v.velocity_body_mps for v in values]))
-        latitudes = np.array([self._latitude_deg, *(v.latitude_deg for v in values[:-1])])
-        self._latitude_deg = values[-1].latitude_deg
+        stamps, quats, rates, velocities_body, latitudes = (
+            np.array(column) for column in zip(*samples, strict=True)
+        )
         rates_nb = remove_earth_rate(rates, quats, latitudes)
-        stamps = np.array([v.t_s for v in values])
+        velocities_enu = body_to_enu(quats, velocities_body)
         self.compensator.add_nav_batch(stamps, quats, rates_nb, velocities_enu)
 
     def _write_results(self, results: list[CorrectedWind], log_time_ns: int) -> None:
@@ -248,7 +280,11 @@ def process_bag(
     compensator_config: CompensatorConfig,
     overwrite: bool = False,
 ) -> ProcessSummary:
-    """Fuse and correct ``in_bag`` into ``out_bag`` and the products CSV beside it."""
+    """Fuse and correct ``in_bag`` into ``out_bag`` and the products CSV beside it.
+
+    The fusion runs here; the compensation runs in the process that writes the bag, on the
+    records it writes, so the two share the machine's cores.
+    """
     started = time.monotonic()
     csv_path = products_csv_path(out_bag)
     with BagReader(in_bag) as reader:
@@ -257,33 +293,31 @@ def process_bag(
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
         progress = Progress(reader.duration_s, f"process_bag {in_bag}", unit="bag s")
-        with BagWriter(out_bag, overwrite=overwrite) as writer:
+        tap = (OfflineCompensation, (compensator_config, stored_wind))
+        with BackgroundBagWriter(out_bag, overwrite=overwrite, tap=tap) as writer:
             fusion = OfflineFusion(fusion_config, writer)
-            compensation = OfflineCompensation(compensator_config, writer)
             topics = [*sensors.values(), stored_wind, *truth]
             log_time_ns = reader.start_ns
             for index, message in enumerate(reader.messages(topics)):
                 log_time_ns = message.log_time_ns
                 topic = relative_of.get(message.topic)
                 if topic is not None:
-                    compensation.add_navigation(fusion.add_message(reader, topic, message))
+                    fusion.add_message(reader, topic, message)
                     continue
                 writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                if message.topic == stored_wind:
-                    compensation.add_wind_message(reader, message)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
                     progress.update((log_time_ns - reader.start_ns) * 1e-9)
-            compensation.add_navigation(fusion.finish())
-            compensation.finish(log_time_ns)
-            progress.close()
-            topic_counts = writer.counts
+            fusion.finish()
+            writer.end_of_input(log_time_ns)
+        progress.close()
         duration_s = reader.duration_s
+    compensation: CompensationResult = writer.tap_result
     write_products_csv(compensation.products, csv_path)
     return ProcessSummary(
-        wind_status_counts=compensation.compensator.counts,
-        rejected_wind_messages=compensation.rejected,
+        wind_status_counts=compensation.wind_status_counts,
+        rejected_wind_messages=compensation.rejected_wind_messages,
         products=compensation.products,
-        topic_counts=topic_counts,
+        topic_counts=writer.counts,
         fusion_lines=fusion.summary(),
         duration_s=duration_s,
         wall_s=time.monotonic() - started,
