@@ -54,6 +54,7 @@ import time
 
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -77,8 +78,11 @@ from wind_comp.nav_messages import (
     MalformedMessageError,
     StampOrder,
     anemometer_sample,
-    fix_latitude_deg,
-    odometry_sample,
+    checked_fix_latitude_deg,
+    fix_fields_cdr,
+    nav_sample,
+    odometry_fields,
+    odometry_fields_cdr,
     product_messages,
     remove_earth_rate,
     true_wind_message,
@@ -150,8 +154,9 @@ class CompensationNode(FlushingNode):
             for averager in self.averagers
         }
         self.create_subscription(Vector3Stamped, WIND_TOPIC, self.on_wind, DATA_QOS)
-        self.create_subscription(Odometry, ODOMETRY_TOPIC, self.on_odometry, DATA_QOS)
-        self.create_subscription(NavSatFix, FIX_TOPIC, self.on_fix, DATA_QOS)
+        # Raw: 100 Hz each, read straight from CDR as process_bag reads them.
+        self.create_subscription(Odometry, ODOMETRY_TOPIC, self.on_odometry, DATA_QOS, raw=True)
+        self.create_subscription(NavSatFix, FIX_TOPIC, self.on_fix, DATA_QOS, raw=True)
         self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
         self.get_logger().info(
             f"correcting {WIND_TOPIC} with {ODOMETRY_TOPIC}: anemometer at "
@@ -207,10 +212,13 @@ class CompensationNode(FlushingNode):
             horizon_s = max(horizon_s, math.nextafter(pending.t_s, math.inf))
         return min(horizon_s, self._wind_order.latest_s - self.nav_timeout_s)
 
-    def on_odometry(self, message: Odometry) -> None:
+    def on_odometry(self, raw: bytes) -> None:
         self._counters["nav_in"] += 1
         try:
-            sample = odometry_sample(message)
+            fields = odometry_fields_cdr(raw)
+            if fields is None:
+                fields = odometry_fields(deserialize_message(raw, Odometry))
+            sample = nav_sample(*fields)
         except MalformedMessageError as error:
             self.reject(ODOMETRY_TOPIC, error.reason)
             return
@@ -224,10 +232,14 @@ class CompensationNode(FlushingNode):
             self._counters["nav_accepted"] += 1
         self.publish_results(self.compensator.ready())
 
-    def on_fix(self, message: NavSatFix) -> None:
+    def on_fix(self, raw: bytes) -> None:
         self._counters["fix_in"] += 1
+        fields = fix_fields_cdr(raw)
+        if fields is None:
+            message = deserialize_message(raw, NavSatFix)
+            fields = (message.status.status, message.latitude)
         try:
-            latitude = fix_latitude_deg(message)
+            latitude = checked_fix_latitude_deg(*fields)
         except MalformedMessageError as error:
             self.reject(FIX_TOPIC, error.reason)
             return

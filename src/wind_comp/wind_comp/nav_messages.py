@@ -328,9 +328,14 @@ def odometry_sample(message) -> NavSample:
     The body-frame linear velocity of the Odometry twist is rotated into ENU with the message's
     own attitude.
     """
-    t_s, quat, rate, velocity_body = odometry_fields(message)
-    velocity_enu = body_to_enu(quat[None, :], velocity_body[None, :])[0]
-    return NavSample(t_s, quat, rate, velocity_enu)
+    return nav_sample(*odometry_fields(message))
+
+
+def nav_sample(t_s: float, quat_xyzw, angular_rate_body_rad_s, velocity_body_mps) -> NavSample:
+    """A :class:`NavSample` of checked odometry fields (stamp s, attitude, body rate ω_ib,
+    body-frame velocity m/s), the velocity rotated into ENU with the attitude."""
+    velocity_enu = body_to_enu(quat_xyzw[None, :], velocity_body_mps[None, :])[0]
+    return NavSample(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu)
 
 
 def odometry_arrays(messages: Iterable) -> tuple[NavArrays, dict[str, int]]:
