@@ -736,7 +736,26 @@ class _McapFile:
         self._stream.close()
 
 
-class BagWriter:
+class _BagOutput:
+    """A bag being written, as a context manager: leaving the block normally finishes the bag
+    (``close``); leaving it by an exception aborts it and notes so on the exception."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, traceback) -> None:
+        if exc is None:
+            self.close()
+            return
+        if not self.closed:
+            self.abort()
+            exc.add_note(
+                f"bag {self.path} was aborted and is incomplete "
+                f"(no {METADATA_FILE}; {sum(self.counts.values())} messages written)"
+            )
+
+
+class BagWriter(_BagOutput):
     """Write a rosbag2 bag (version 9, MCAP, zstd chunks); a context manager.
 
     The bag directory is created at construction. ``close()`` (or leaving the ``with`` block
@@ -888,20 +907,6 @@ class BagWriter:
         if file is not None:
             file.abort()
 
-    def __enter__(self) -> BagWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, traceback) -> None:
-        if exc is None:
-            self.close()
-            return
-        if not self.closed:
-            self.abort()
-            exc.add_note(
-                f"bag {self.path} was aborted and is incomplete "
-                f"(no {METADATA_FILE}; {sum(self.counts.values())} messages written)"
-            )
-
 
 def _require_known_type(typestore, path: Path, topic: str, msgtype: str) -> None:
     if msgtype not in typestore.fielddefs:
@@ -932,7 +937,7 @@ def _serialize(typestore, path: Path, topic: str, msgtype: str, message) -> byte
 _BATCH_MESSAGES = 2048
 
 
-class BackgroundBagWriter:
+class BackgroundBagWriter(_BagOutput):
     """A :class:`BagWriter` in a process of its own, for the offline tools: packing records,
     compressing and writing the file then take the second core instead of the tool's.
 
@@ -1056,20 +1061,6 @@ class BackgroundBagWriter:
     def _raise_if_failed(reply) -> None:
         if reply[0] == "error":
             raise BagError(reply[1])
-
-    def __enter__(self) -> BackgroundBagWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, traceback) -> None:
-        if exc is None:
-            self.close()
-            return
-        if not self.closed:
-            self.abort()
-            exc.add_note(
-                f"bag {self.path} was aborted and is incomplete "
-                f"(no {METADATA_FILE}; {sum(self._counts.values())} messages handed over)"
-            )
 
 
 # Longest wait for the writing process to exit once the bag is finished (s).

@@ -335,13 +335,7 @@ class WindCompensator:
 
     def add_wind_batch(self, t_s, wind_sensor_mps) -> None:
         """:meth:`add_wind` of (N,) stamps and (N, 3) winds, in order (screened together)."""
-        stamps = np.asarray(t_s, dtype=float)
-        winds = np.asarray(wind_sensor_mps, dtype=float)
-        if stamps.ndim != 1 or winds.shape != (stamps.shape[0], 3):
-            raise CompensatorInputError(
-                f"stamps and winds must have shapes (N,) and (N, 3), got {stamps.shape} and "
-                f"{winds.shape}"
-            )
+        stamps, winds = _wind_arrays(t_s, wind_sensor_mps)
         status, self._latest_wind_stamp_s = _screen_wind(
             stamps, winds, self._latest_wind_stamp_s, self.config.max_wind_speed_mps
         )
@@ -437,13 +431,7 @@ def correct_batch(
         nav_velocity_enu_mps,
         max_gap_s=config.max_nav_gap_s,
     )
-    stamps = np.asarray(wind_t_s, dtype=float)
-    winds = np.asarray(wind_sensor_mps, dtype=float)
-    if stamps.ndim != 1 or winds.shape != (stamps.shape[0], 3):
-        raise CompensatorInputError(
-            f"wind_t_s must be (N,) and wind_sensor_mps (N, 3), got {stamps.shape} and "
-            f"{winds.shape}"
-        )
+    stamps, winds = _wind_arrays(wind_t_s, wind_sensor_mps)
     status, _ = _screen_wind(stamps, winds, -np.inf, config.max_wind_speed_mps)
     outputs = [np.full((stamps.shape[0], 3), np.nan) for _ in range(4)]
     screened = status == _PENDING
@@ -456,3 +444,16 @@ def correct_batch(
     return CorrectedWindBatch(
         stamps.copy(), status, true_wind, tilt, rotation, translation, winds.copy()
     )
+
+
+def _wind_arrays(t_s, wind_sensor_mps) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) stamps (s) and (N, 3) winds (m/s) as float arrays; CompensatorInputError if their
+    shapes do not match."""
+    stamps = np.asarray(t_s, dtype=float)
+    winds = np.asarray(wind_sensor_mps, dtype=float)
+    if stamps.ndim != 1 or winds.shape != (stamps.shape[0], 3):
+        raise CompensatorInputError(
+            f"stamps and winds must have shapes (N,) and (N, 3), got {stamps.shape} and "
+            f"{winds.shape}"
+        )
+    return stamps, winds
