@@ -20,6 +20,7 @@ import json
 import math
 import os
 import random
+import struct
 import subprocess
 import sys
 import threading
@@ -47,6 +48,10 @@ SIMULATOR_PROCESSES = (
 SIMULATOR_NICENESS = 10
 RUN_MARGIN_S = 90.0
 IN_SERVICE_AFTER_S = 1.0
+# CDR of a message that starts with a std_msgs/Header, after the 4-byte encapsulation header.
+HEADER_STAMP = struct.Struct("<iI")
+FRAME_LENGTH = struct.Struct("<I")
+FLOAT64 = struct.Struct("<d")
 
 
 def isolate_ros_domain() -> int:
@@ -66,11 +71,10 @@ class Listener:
 
     def __init__(self):
         import rclpy
-        from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
-        from nav_msgs.msg import Odometry
+        from geometry_msgs.msg import Vector3Stamped
         from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
-        from sensor_msgs.msg import Imu, NavSatFix
+        from sensor_msgs.msg import Imu
 
         from buoy_nav.base_node import DATA_QOS
 
@@ -91,22 +95,13 @@ class Listener:
             "anemometer/wind": Vector3Stamped,
             "wind/true": Vector3Stamped,
         }
+        # Raw: the stamps are read from the CDR bytes, so this process's own load (which
+        # delays nothing it measures, but competes for the cores) stays small.
         for topic, message_type in types.items():
             self.received[topic] = {}
-            self.node.create_subscription(message_type, topic, self._callback_for(topic), DATA_QOS)
-        # The simulated sensors of run_scenario publish only once every one of their topics
-        # has a subscriber (so that a recorder misses nothing); without a recorder, nobody
-        # else listens to these. Raw subscriptions: no deserialisation load in this process.
-        for topic, message_type in {
-            "gnss/fix": NavSatFix,
-            "gnss/vel": TwistWithCovarianceStamped,
-            "gnss/heading": Imu,
-            "gnss/baseline": Vector3Stamped,
-            "truth/odometry": Odometry,
-            "truth/wind": Vector3Stamped,
-            "truth/current": Vector3Stamped,
-        }.items():
-            self.node.create_subscription(message_type, topic, lambda _: None, DATA_QOS, raw=True)
+            self.node.create_subscription(
+                message_type, topic, self._callback_for(topic), DATA_QOS, raw=True
+            )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
@@ -126,10 +121,9 @@ class Listener:
             else:
                 received_ns = now_ns
                 self.callback_stamps += 1
-            stamp = message.header.stamp
-            key = (stamp.sec, stamp.nanosec)
+            key = HEADER_STAMP.unpack_from(message, 4)
             table.setdefault(key, (received_ns, info.get("source_timestamp", 0)))
-            if topic == "wind/true" and math.isfinite(message.vector.x):
+            if topic == "wind/true" and math.isfinite(vector_x_of_cdr(message)):
                 self.valid_true_wind.add(key)
             self.first_callback_ns.setdefault(topic, time.monotonic_ns())
             self.last_callback_ns[topic] = time.monotonic_ns()
@@ -208,6 +202,14 @@ def lower_priority(parent_pid: int, names) -> dict[str, int | None]:
             os.setpriority(os.PRIO_PROCESS, pid, SIMULATOR_NICENESS)
         niceness[name] = None if pid is None else os.getpriority(os.PRIO_PROCESS, pid)
     return niceness
+
+
+def vector_x_of_cdr(raw: bytes) -> float:
+    """x of a geometry_msgs/Vector3Stamped from its CDR bytes (little endian)."""
+    (frame_length,) = FRAME_LENGTH.unpack_from(raw, 12)
+    vector_at = 16 + frame_length
+    vector_at += -(vector_at - 4) % 8
+    return FLOAT64.unpack_from(raw, vector_at)[0]
 
 
 def latency_stats(inputs: dict, outputs: dict) -> dict:
