@@ -27,6 +27,8 @@ from sensor_sim.truth import TruthModel
 
 CLOCK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 ACK_TIMEOUT_S = 5.0
+# How often a sensor waiting for the recorder looks at its topics' subscriptions, s.
+READINESS_POLL_PERIOD_S = 0.05
 
 
 def declare_scenario(node: SuiteNode):
@@ -58,7 +60,7 @@ class SimulatedSensorNode(SuiteNode):
         self.wait_for_subscriber_node = self.declare_value(
             "wait_for_subscriber_node",
             "",
-            "publish only once every topic has a subscription of this node (a recorder)",
+            "follow /clock only once every topic has a subscription of this node (a recorder)",
         )
         self.publishers_by_topic = {
             topic: self.create_publisher(message_class(type_name), topic, DATA_QOS)
@@ -66,7 +68,15 @@ class SimulatedSensorNode(SuiteNode):
         }
         self.published = 0
         self.sim_time_s = float("nan")
-        self.create_subscription(Clock, "/clock", self.on_clock, CLOCK_QOS)
+        if self.wait_for_subscriber_node:
+            # The clock holds time at the start until every sensor subscribes to it, so a
+            # sensor that subscribes only once the recorder takes each of its topics holds the
+            # whole simulation for the recorder: nothing is held back and sent in a burst later.
+            self._readiness_timer = self.create_timer(
+                READINESS_POLL_PERIOD_S, self._subscribe_to_clock_when_ready
+            )
+        else:
+            self._subscribe_to_clock()
         DiagnosticsPublisher(self, self.health)
         self.get_logger().info(
             f"scenario '{self.scenario.name}' seed {self.scenario.seed}: "
@@ -84,11 +94,17 @@ class SimulatedSensorNode(SuiteNode):
             for topic in self.publishers_by_topic
         )
 
+    def _subscribe_to_clock_when_ready(self) -> None:
+        if self.subscribers_ready():
+            self._readiness_timer.cancel()
+            self._subscribe_to_clock()
+
+    def _subscribe_to_clock(self) -> None:
+        self.create_subscription(Clock, "/clock", self.on_clock, CLOCK_QOS)
+
     def on_clock(self, clock: Clock) -> None:
         clock_ns = clock.clock.sec * 1_000_000_000 + clock.clock.nanosec
         self.sim_time_s = (clock_ns - self.scenario.start_time_ns) * 1e-9
-        if self.wait_for_subscriber_node and not self.subscribers_ready():
-            return
         for topic, _, message in self.stream.advance(self.sim_time_s):
             self.publishers_by_topic[topic].publish(message)
             self.published += 1
