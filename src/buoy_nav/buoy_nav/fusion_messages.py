@@ -410,7 +410,10 @@ def _rotation_elements(x: float, y: float, z: float, w: float) -> tuple[float, .
 def solution_messages(
     solution: NavSolution, classes: NavMessageClasses, stamps: StampBook | None = None
 ) -> dict[str, object]:
-    """The four ``nav/*`` messages of one solution, by topic (see the module docstring)."""
+    """The four ``nav/*`` messages of one solution, by topic (see the module docstring), built
+    from the message classes handed in: for code that embeds the engine in a node of its own.
+    The suite's node and tools publish :func:`solution_cdr` instead, which the tests hold
+    byte-identical to these messages serialised."""
     values = nav_values(solution, stamps)
     sec, nanosec = values.sec, values.nanosec
 
