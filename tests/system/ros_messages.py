@@ -1,6 +1,9 @@
-"""Message helpers shared by the tests that talk to nodes over DDS."""
+"""Message and waiting helpers shared by the tests that talk to nodes over DDS or read bags."""
 
 from __future__ import annotations
+
+import struct
+import time
 
 import numpy as np
 
@@ -23,3 +26,20 @@ def to_rclpy(source, target):
 def stamp_ns(message) -> int:
     """Header stamp of a message, integer nanoseconds since the epoch."""
     return message.header.stamp.sec * NANOSECONDS_PER_SECOND + message.header.stamp.nanosec
+
+
+def raw_stamp_ns(raw: bytes) -> int:
+    """Header stamp of a CDR message that starts with a std_msgs/Header (little endian)."""
+    assert raw[:2] == b"\x00\x01", "little-endian CDR"
+    sec, nanosec = struct.unpack_from("<iI", raw, 4)
+    return sec * NANOSECONDS_PER_SECOND + nanosec
+
+
+def wait_for(condition, timeout_s: float) -> bool:
+    """Poll ``condition()`` until it holds (True) or ``timeout_s`` passes (False)."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True

@@ -31,7 +31,7 @@ from std_msgs.msg import Float64MultiArray
 
 from buoy_nav.bag_io import BagReader
 from buoy_nav.base_node import DATA_QOS
-from ros_messages import stamp_ns, to_rclpy
+from ros_messages import stamp_ns, to_rclpy, wait_for
 from wind_comp.compensator import CompensatorConfig, WindStatus, correct_batch
 from wind_comp.nav_messages import (
     anemometer_sample,
@@ -150,14 +150,6 @@ class Listener:
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
 
-    def wait_for(self, condition, timeout_s: float) -> bool:
-        deadline = time.monotonic() + timeout_s
-        while not condition():
-            if time.monotonic() > deadline:
-                return False
-            time.sleep(0.02)
-        return True
-
     def close(self):
         self.executor.shutdown()
         self.node.destroy_node()
@@ -189,7 +181,7 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
             start_new_session=True,
         )
     try:
-        assert listener.wait_for(
+        assert wait_for(
             lambda: (
                 min(
                     listener.wind.get_subscription_count(),
@@ -220,22 +212,22 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
         n_held = sum(
             stamp_ns(w) > stamp_ns(odometries[-1]) for w in winds
         )  # no navigation after them
-        listener.wait_for(lambda: len(listener.received["wind/true"]) >= len(winds) - n_held, 10.0)
+        wait_for(lambda: len(listener.received["wind/true"]) >= len(winds) - n_held, 10.0)
         n_before_interrupt = len(listener.received["wind/true"])
         n_diagnostics = len(listener.diagnostics)
-        listener.wait_for(lambda: len(listener.diagnostics) > n_diagnostics, 5.0)
+        wait_for(lambda: len(listener.diagnostics) > n_diagnostics, 5.0)
         diagnostics_before_interrupt = list(listener.diagnostics)
 
         process.send_signal(signal.SIGINT)
         exit_code = process.wait(timeout=15.0)
-        listener.wait_for(
+        wait_for(
             lambda: (
                 len(listener.received["wind/true"]) >= len(winds)
                 and listener.received["wind/stats_1min"]
             ),
             5.0,
         )
-        listener.wait_for(lambda: "1-min stats" in echo_log_path.read_text(), 5.0)
+        wait_for(lambda: "1-min stats" in echo_log_path.read_text(), 5.0)
         echo_exit_code = process_exit_code(echo)
         return {
             "echo_exit_code": echo_exit_code,

@@ -10,7 +10,6 @@ simulated sensors allow (bounds from the simulator's error budget, which recorde
 from __future__ import annotations
 
 import math
-import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -25,6 +24,7 @@ from scipy.stats import chi2
 
 from buoy_nav.bag_io import BagReader, BagWriter
 from buoy_nav.fuse_bag import fusion_config_from_files
+from ros_messages import raw_stamp_ns
 from sensor_sim.sensor_models import GnssErrorConfig, ImuErrorConfig
 from wind_comp.process_bag import compensator_config_from_files, process_bag
 
@@ -89,13 +89,6 @@ def processed_bag(tmp_path_factory, name: str) -> Path:
             overwrite=True,
         )
     return out
-
-
-def raw_stamp_ns(raw: bytes) -> int:
-    """Header stamp of a CDR message that starts with a std_msgs/Header (little endian)."""
-    assert raw[:2] == b"\x00\x01", "little-endian CDR"
-    sec, nanosec = struct.unpack_from("<iI", raw, 4)
-    return sec * NANOSECONDS_PER_SECOND + nanosec
 
 
 def evaluation_samples(reader: BagReader, topic: str, from_ns: int) -> dict[int, object]:

@@ -54,7 +54,7 @@ from buoy_nav.fusion_messages import (
 )
 from buoy_nav.fusion_node import INPUT_CLASSES, OUTPUT_CLASSES
 from buoy_nav.parameters import build_config, load_parameter_files
-from ros_messages import stamp_ns, to_rclpy
+from ros_messages import stamp_ns, to_rclpy, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -154,17 +154,9 @@ class Listener:
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
 
-    def wait_for(self, condition, timeout_s: float) -> bool:
-        deadline = time.monotonic() + timeout_s
-        while not condition():
-            if time.monotonic() > deadline:
-                return False
-            time.sleep(0.02)
-        return True
-
     def wait_for_node(self, timeout_s: float = 20.0) -> bool:
         """Until the node's subscriptions and publishers are matched with ours."""
-        return self.wait_for(
+        return wait_for(
             lambda: (
                 all(p.get_subscription_count() > 0 for p in self.publishers.values())
                 and all(self.node.count_publishers(topic) > 0 for topic in NAV_MSGTYPES)
@@ -194,7 +186,7 @@ class Listener:
                     return True
             return False
 
-        self.wait_for(arrived, timeout_s)
+        wait_for(arrived, timeout_s)
         return found[0] if found else None
 
     def close(self):
@@ -261,7 +253,7 @@ def test_live_solutions_equal_offline_fusion(nodes, sensor_stream):
         process = nodes.start(NODE, "--ros-args", "--params-file", BUOY_PARAMETERS)
         assert listener.wait_for_node(), nodes.log_of(process)
         listener.play([(stamp_ns(m), topic, m) for topic, m in sensor_stream])
-        listener.wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
+        wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
         n_imu = sum(topic == IMU_TOPIC for topic, _ in sensor_stream)
         final = listener.latest_diagnostics_where(
             lambda values: values.get(f"messages_in[{IMU_TOPIC}]") == str(n_imu), 5.0
@@ -397,7 +389,7 @@ def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_st
         process = nodes.start(NODE, "--ros-args", "--params-file", BUOY_PARAMETERS)
         assert listener.wait_for_node(), nodes.log_of(process)
         listener.play(paced)
-        listener.wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
+        wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
         n_imu = sum(topic == IMU_TOPIC for _, topic, _ in paced)
         final = listener.latest_diagnostics_where(
             lambda values: values.get(f"messages_in[{IMU_TOPIC}]") == str(n_imu), 5.0
@@ -458,10 +450,10 @@ def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
         assert listener.latest_diagnostics_where(
             lambda values: values.get(f"messages_in[{IMU_TOPIC}]") == str(n_imu), 5.0
         ), nodes.log_of(process)
-        listener.wait_for(lambda: received_count(listener) >= n_before_end, 10.0)
+        wait_for(lambda: received_count(listener) >= n_before_end, 10.0)
         n_before_interrupt = received_count(listener)
         assert nodes.interrupt(process) == 0, nodes.log_of(process)
-        listener.wait_for(lambda: received_count(listener) >= n_solutions, 10.0)
+        wait_for(lambda: received_count(listener) >= n_solutions, 10.0)
         live = {topic: list(messages) for topic, messages in listener.received.items()}
     finally:
         listener.close()

@@ -26,7 +26,7 @@ from rclpy.executors import SingleThreadedExecutor
 
 from buoy_nav.bag_io import BagReader, BagWriter
 from buoy_nav.fuse_bag import fusion_config_from_files
-from ros_messages import stamp_ns
+from ros_messages import stamp_ns, wait_for
 from wind_comp.process_bag import compensator_config_from_files, process_bag
 
 pytestmark = pytest.mark.ros
@@ -97,15 +97,6 @@ class DiagnosticsWatcher:
                 os.environ.pop(name, None)
             else:
                 os.environ[name] = value
-
-
-def wait_for(condition, timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.05)
-    return True
 
 
 def cut_bag(source: Path, out: Path, seconds: float) -> None:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import csv
 import math
-import struct
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from buoy_nav.bag_io import BagReader
 from buoy_nav.fuse_bag import fuse_bag, fusion_config_from_files
+from ros_messages import raw_stamp_ns
 from sensor_sim.sensor_models import AnemometerErrorConfig
 from wind_comp.nav_messages import STATS_FIELDS, stats_values, window_label
 from wind_comp.process_bag import compensator_config_from_files, process_bag, products_csv_path
@@ -50,13 +50,6 @@ def processed_bag(tmp_path_factory, name: str) -> Path:
             overwrite=True,
         )
     return out
-
-
-def raw_stamp_ns(raw: bytes) -> int:
-    """Header stamp of a CDR message that starts with a std_msgs/Header (little endian)."""
-    assert raw[:2] == b"\x00\x01", "little-endian CDR"
-    sec, nanosec = struct.unpack_from("<iI", raw, 4)
-    return sec * NANOSECONDS_PER_SECOND + nanosec
 
 
 def vector(v) -> list[float]:
