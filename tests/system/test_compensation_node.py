@@ -32,6 +32,7 @@ from std_msgs.msg import Float64MultiArray
 from buoy_nav.bag_io import BagReader
 from buoy_nav.base_node import DATA_QOS
 from ros_messages import stamp_ns, to_rclpy, wait_for
+from wind_comp.compensation_node import NODE_NAME
 from wind_comp.compensator import CompensatorConfig, WindStatus, correct_batch
 from wind_comp.nav_messages import (
     anemometer_sample,
@@ -150,6 +151,18 @@ class Listener:
         self.thread = threading.Thread(target=self.executor.spin, daemon=True)
         self.thread.start()
 
+    def node_sees_publishers(self) -> bool:
+        """The node's latest diagnostics report a matched publisher on every input: a sample
+        sent before its reader knows our writer would arrive later, in a burst of its topic."""
+        statuses = [s for a in self.diagnostics for s in a.status if s.hardware_id == NODE_NAME]
+        if not statuses:
+            return False
+        values = {kv.key: kv.value for kv in statuses[-1].values}
+        return all(
+            int(values.get(f"publishers[/{topic}]", 0)) > 0
+            for topic in ("anemometer/wind", "nav/odometry", "nav/fix")
+        )
+
     def close(self):
         self.executor.shutdown()
         self.node.destroy_node()
@@ -191,6 +204,7 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
                     listener.node.count_subscribers("wind/stats_1min") - 1,
                 )
                 > 0
+                and listener.node_sees_publishers()
             ),
             timeout_s=20.0,
         ), log_path.read_text()

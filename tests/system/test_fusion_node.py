@@ -155,14 +155,24 @@ class Listener:
         self.thread.start()
 
     def wait_for_node(self, timeout_s: float = 20.0) -> bool:
-        """Until the node's subscriptions and publishers are matched with ours."""
+        """Until the node's subscriptions and publishers are matched with ours, on both sides:
+        a sample sent before the node's reader knows our writer arrives later in a burst of its
+        topic alone, out of stamp order with the other topics."""
         return wait_for(
             lambda: (
                 all(p.get_subscription_count() > 0 for p in self.publishers.values())
                 and all(self.node.count_publishers(topic) > 0 for topic in NAV_MSGTYPES)
+                and self.node_sees_publishers()
             ),
             timeout_s,
         )
+
+    def node_sees_publishers(self) -> bool:
+        """The node's latest diagnostics report a matched publisher on every input."""
+        if not self.diagnostics:
+            return False
+        values = {kv.key: kv.value for kv in self.diagnostics[-1].values}
+        return all(int(values.get(f"publishers[/{topic}]", 0)) > 0 for topic in INPUT_CLASSES)
 
     def play(self, paced_stream) -> None:
         """Publish (pace stamp ns, topic, message) rows at PLAY_RATE times real time."""
