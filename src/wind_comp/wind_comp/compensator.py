@@ -369,7 +369,11 @@ class WindCompensator:
         return self._pop_decided()
 
     def _decide(self) -> None:
-        undecided = [entry for entry in self._queue if entry.result is None]
+        # A stamp after the newest navigation sample can only wait: no need to look it up.
+        newest_nav_s = self.nav_track.newest_stamp_s
+        undecided = [
+            entry for entry in self._queue if entry.result is None and entry.t_s <= newest_nav_s
+        ]
         if not undecided:
             return
         stamps = np.array([entry.t_s for entry in undecided])

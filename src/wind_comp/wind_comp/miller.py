@@ -104,6 +104,17 @@ def _rotate(matrices: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     )
 
 
+def cross_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a × b of (..., 3) arrays, broadcast.
+
+    Explicit products and differences: elementwise like ``np.cross`` (so one sample and a batch
+    agree bit for bit) at a fraction of its cost on a single vector, the live case.
+    """
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
+
+
 def miller_correction(
     wind_sensor_mps,
     attitude_nb: Rotation,
@@ -161,7 +172,7 @@ def miller_correction(
 
     wind_body = _rotate(np.broadcast_to(mounting, (n_samples, 3, 3)), wind)
     tilt_term = _rotate(attitude, wind_body)
-    lever_arm_velocity_body = np.cross(rate, np.broadcast_to(lever_arm, (n_samples, 3)))
+    lever_arm_velocity_body = cross_product(rate, lever_arm)
     rotation_term = _rotate(attitude, lever_arm_velocity_body)
     translation_term = np.array(velocity, dtype=float)
     true_wind = tilt_term + rotation_term + translation_term

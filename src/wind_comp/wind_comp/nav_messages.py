@@ -39,6 +39,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from wind_comp.miller import cross_product
 from wind_comp.products import WindProduct
 
 ANEMOMETER_FRAME = "anemometer_link"
@@ -231,8 +232,8 @@ def body_to_enu(quat_xyzw, vectors_body) -> np.ndarray:
     quats = quats / np.linalg.norm(quats, axis=-1, keepdims=True)
     axis = quats[..., :3]
     scalar = quats[..., 3:]
-    twice_cross = 2.0 * np.cross(axis, vectors)
-    return vectors + scalar * twice_cross + np.cross(axis, twice_cross)
+    twice_cross = 2.0 * cross_product(axis, vectors)
+    return vectors + scalar * twice_cross + cross_product(axis, twice_cross)
 
 
 def enu_to_body(quat_xyzw, vectors_enu) -> np.ndarray:
