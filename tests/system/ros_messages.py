@@ -43,3 +43,11 @@ def wait_for(condition, timeout_s: float) -> bool:
             return False
         time.sleep(0.02)
     return True
+
+
+def reports_publishers_on(status, topics) -> bool:
+    """A node's diagnostics ``status`` reports a matched publisher on each of ``topics``
+    (relative names). Until then, a sample sent to the node arrives later, in a burst of its
+    topic alone, out of stamp order with the other topics."""
+    values = {item.key: item.value for item in status.values}
+    return all(int(values.get(f"publishers[/{topic}]", 0)) > 0 for topic in topics)

@@ -31,7 +31,7 @@ from std_msgs.msg import Float64MultiArray
 
 from buoy_nav.bag_io import BagReader
 from buoy_nav.base_node import DATA_QOS
-from ros_messages import stamp_ns, to_rclpy, wait_for
+from ros_messages import reports_publishers_on, stamp_ns, to_rclpy, wait_for
 from wind_comp.compensation_node import NODE_NAME
 from wind_comp.compensator import CompensatorConfig, WindStatus, correct_batch
 from wind_comp.nav_messages import (
@@ -152,15 +152,10 @@ class Listener:
         self.thread.start()
 
     def node_sees_publishers(self) -> bool:
-        """The node's latest diagnostics report a matched publisher on every input: a sample
-        sent before its reader knows our writer would arrive later, in a burst of its topic."""
+        """The node's latest diagnostics report a matched publisher on every input."""
         statuses = [s for a in self.diagnostics for s in a.status if s.hardware_id == NODE_NAME]
-        if not statuses:
-            return False
-        values = {kv.key: kv.value for kv in statuses[-1].values}
-        return all(
-            int(values.get(f"publishers[/{topic}]", 0)) > 0
-            for topic in ("anemometer/wind", "nav/odometry", "nav/fix")
+        return bool(statuses) and reports_publishers_on(
+            statuses[-1], ("anemometer/wind", "nav/odometry", "nav/fix")
         )
 
     def close(self):

@@ -54,7 +54,7 @@ from buoy_nav.fusion_messages import (
 )
 from buoy_nav.fusion_node import INPUT_CLASSES, OUTPUT_CLASSES
 from buoy_nav.parameters import build_config, load_parameter_files
-from ros_messages import stamp_ns, to_rclpy, wait_for
+from ros_messages import reports_publishers_on, stamp_ns, to_rclpy, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -155,9 +155,7 @@ class Listener:
         self.thread.start()
 
     def wait_for_node(self, timeout_s: float = 20.0) -> bool:
-        """Until the node's subscriptions and publishers are matched with ours, on both sides:
-        a sample sent before the node's reader knows our writer arrives later in a burst of its
-        topic alone, out of stamp order with the other topics."""
+        """Until the node's subscriptions and publishers are matched with ours, on both sides."""
         return wait_for(
             lambda: (
                 all(p.get_subscription_count() > 0 for p in self.publishers.values())
@@ -169,10 +167,7 @@ class Listener:
 
     def node_sees_publishers(self) -> bool:
         """The node's latest diagnostics report a matched publisher on every input."""
-        if not self.diagnostics:
-            return False
-        values = {kv.key: kv.value for kv in self.diagnostics[-1].values}
-        return all(int(values.get(f"publishers[/{topic}]", 0)) > 0 for topic in INPUT_CLASSES)
+        return bool(self.diagnostics) and reports_publishers_on(self.diagnostics[-1], INPUT_CLASSES)
 
     def play(self, paced_stream) -> None:
         """Publish (pace stamp ns, topic, message) rows at PLAY_RATE times real time."""
