@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from wind_comp.nav_interpolation import InterpolationStatus, NavTrack, NavTrackError
+from wind_comp.nav_interpolation import (
+    InterpolationStatus,
+    NavTrack,
+    NavTrackError,
+    quaternion_product,
+    rotation_matrices_from_quaternions,
+    slerp,
+)
 
 RATE_BODY_RAD_S = np.array([0.4, -0.25, 0.6])
 ATTITUDE_0 = Rotation.from_euler("ZYX", [30.0, 5.0, -8.0], degrees=True)
@@ -191,3 +198,39 @@ def test_malformed_arguments_raise():
         NavTrack().append(0.0, [0, 0, 1], np.zeros(3), np.zeros(3))
     with pytest.raises(NavTrackError, match="t_query_s"):
         NavTrack().interpolate(np.zeros((2, 2)))
+
+
+def test_quaternion_arithmetic_agrees_with_scipy_and_is_the_same_alone_or_in_a_batch():
+    rng = np.random.default_rng(5)
+    start = Rotation.random(200, random_state=rng)
+    # Steps from 1e-9 rad (a 100 Hz track at rest) to nearly half a turn.
+    angles = np.geomspace(1e-9, 3.0, 200)
+    axes = rng.normal(size=(200, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    end = start * Rotation.from_rotvec(axes * angles[:, None])
+    fraction = rng.uniform(0.0, 1.0, 200)
+    # The sign of a quaternion must not matter: flip half of the ends.
+    end_xyzw = end.as_quat() * np.where(rng.uniform(size=200) < 0.5, -1.0, 1.0)[:, None]
+
+    blended = slerp(start.as_quat(), end_xyzw, fraction)
+    expected = start * Rotation.from_rotvec(axes * (angles * fraction)[:, None])
+    assert (Rotation.from_quat(blended).inv() * expected).magnitude().max() < 1e-14
+    np.testing.assert_allclose(np.linalg.norm(blended, axis=1), 1.0, atol=1e-15)
+
+    one_by_one = np.array(
+        [
+            slerp(start.as_quat()[k : k + 1], end_xyzw[k : k + 1], fraction[k : k + 1])[0]
+            for k in range(200)
+        ]
+    )
+    np.testing.assert_array_equal(one_by_one, blended)
+
+    np.testing.assert_allclose(
+        rotation_matrices_from_quaternions(blended),
+        Rotation.from_quat(blended).as_matrix(),
+        atol=1e-15,
+    )
+    product = quaternion_product(start.as_quat(), end.as_quat())
+    np.testing.assert_allclose(
+        Rotation.from_quat(product).as_matrix(), (start * end).as_matrix(), atol=1e-15
+    )

@@ -19,8 +19,12 @@ from enum import IntEnum
 
 import numpy as np
 
-from wind_comp.miller import miller_correction, mounting_rotation_from_rpy_deg
-from wind_comp.nav_interpolation import InterpolationStatus, NavTrack
+from wind_comp.miller import miller_terms, mounting_rotation_from_rpy_deg
+from wind_comp.nav_interpolation import (
+    InterpolationStatus,
+    NavTrack,
+    rotation_matrices_from_quaternions,
+)
 
 DEFAULT_ANEMOMETER_POSITION_M = (0.0, 0.0, 3.0)
 """Anemometer position when parameter ``anemometer.position`` is not given, m (body)."""
@@ -251,7 +255,9 @@ class _Corrector:
     """Navigation lookup plus Miller correction for samples that passed screening."""
 
     def __init__(self, config: CompensatorConfig):
-        self._mounting_bw = mounting_rotation_from_rpy_deg(config.anemometer_rpy_deg)
+        self._mounting_matrix_bw = mounting_rotation_from_rpy_deg(
+            config.anemometer_rpy_deg
+        ).as_matrix()
         self._lever_arm_body_m = np.array(config.anemometer_position_body_m)
 
     def correct(self, track: NavTrack, stamps_s: np.ndarray, winds_mps: np.ndarray):
@@ -262,24 +268,15 @@ class _Corrector:
         outputs = [np.full((stamps_s.shape[0], 3), np.nan) for _ in range(4)]
         valid = nav.valid
         if np.any(valid):
-            terms = miller_correction(
+            terms = miller_terms(
                 winds_mps[valid],
-                nav.attitude_nb[np.flatnonzero(valid)],
+                rotation_matrices_from_quaternions(nav.attitude_xyzw[valid]),
                 nav.angular_rate_body_rad_s[valid],
                 nav.velocity_enu_mps[valid],
-                self._mounting_bw,
+                self._mounting_matrix_bw,
                 self._lever_arm_body_m,
             )
-            for output, term in zip(
-                outputs,
-                (
-                    terms.true_wind_enu_mps,
-                    terms.tilt_term_enu_mps,
-                    terms.rotation_term_enu_mps,
-                    terms.translation_term_enu_mps,
-                ),
-                strict=True,
-            ):
+            for output, term in zip(outputs, terms.arrays(), strict=True):
                 output[valid] = term
         return status, outputs
 

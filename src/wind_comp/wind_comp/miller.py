@@ -40,6 +40,15 @@ class MillerTerms:
     rotation_term_enu_mps: np.ndarray
     translation_term_enu_mps: np.ndarray
 
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(true wind, tilt term, rotation term, translation term)."""
+        return (
+            self.true_wind_enu_mps,
+            self.tilt_term_enu_mps,
+            self.rotation_term_enu_mps,
+            self.translation_term_enu_mps,
+        )
+
 
 def mounting_rotation_from_rpy_deg(rpy_deg) -> Rotation:
     """Anemometer→body rotation R_bw from roll, pitch, yaw in degrees.
@@ -165,18 +174,38 @@ def miller_correction(
     single_sample = not batch_lengths
     n_samples = distinct_lengths.pop() if distinct_lengths else 1
 
-    wind = np.broadcast_to(wind.reshape(-1, 3), (n_samples, 3))
-    rate = np.broadcast_to(rate.reshape(-1, 3), (n_samples, 3))
-    velocity = np.broadcast_to(velocity.reshape(-1, 3), (n_samples, 3))
-    attitude = np.broadcast_to(attitude.reshape(-1, 3, 3), (n_samples, 3, 3))
-
-    wind_body = _rotate(np.broadcast_to(mounting, (n_samples, 3, 3)), wind)
-    tilt_term = _rotate(attitude, wind_body)
-    lever_arm_velocity_body = cross_product(rate, lever_arm)
-    rotation_term = _rotate(attitude, lever_arm_velocity_body)
-    translation_term = np.array(velocity, dtype=float)
-    true_wind = tilt_term + rotation_term + translation_term
-
+    terms = miller_terms(
+        np.broadcast_to(wind.reshape(-1, 3), (n_samples, 3)),
+        np.broadcast_to(attitude.reshape(-1, 3, 3), (n_samples, 3, 3)),
+        np.broadcast_to(rate.reshape(-1, 3), (n_samples, 3)),
+        np.broadcast_to(velocity.reshape(-1, 3), (n_samples, 3)),
+        mounting,
+        lever_arm,
+    )
     if single_sample:
-        return MillerTerms(true_wind[0], tilt_term[0], rotation_term[0], translation_term[0])
+        return MillerTerms(*(term[0] for term in terms.arrays()))
+    return terms
+
+
+def miller_terms(
+    wind_sensor_mps: np.ndarray,
+    attitude_matrix_nb: np.ndarray,
+    angular_rate_body_rad_s: np.ndarray,
+    velocity_enu_mps: np.ndarray,
+    mounting_matrix_bw: np.ndarray,
+    anemometer_position_body_m: np.ndarray,
+) -> MillerTerms:
+    """The arithmetic of :func:`miller_correction` on checked (N, ...) float arrays: wind
+    (N, 3) anemometer axes m/s, body→ENU matrices (N, 3, 3), body rate (N, 3) rad/s, ENU
+    velocity (N, 3) m/s, anemometer→body matrix (3, 3), anemometer position (3,) body m.
+
+    The one routine every path runs, live sample by sample and offline over a recording.
+    """
+    n_samples = wind_sensor_mps.shape[0]
+    wind_body = _rotate(np.broadcast_to(mounting_matrix_bw, (n_samples, 3, 3)), wind_sensor_mps)
+    tilt_term = _rotate(attitude_matrix_nb, wind_body)
+    lever_arm_velocity_body = cross_product(angular_rate_body_rad_s, anemometer_position_body_m)
+    rotation_term = _rotate(attitude_matrix_nb, lever_arm_velocity_body)
+    translation_term = np.array(velocity_enu_mps, dtype=float)
+    true_wind = tilt_term + rotation_term + translation_term
     return MillerTerms(true_wind, tilt_term, rotation_term, translation_term)
