@@ -78,6 +78,7 @@ from wind_comp.nav_messages import (
     MalformedMessageError,
     StampOrder,
     anemometer_sample,
+    anemometer_sample_cdr,
     checked_fix_latitude_deg,
     fix_fields_cdr,
     nav_sample,
@@ -85,7 +86,7 @@ from wind_comp.nav_messages import (
     odometry_fields_cdr,
     product_messages,
     remove_earth_rate,
-    true_wind_message,
+    true_wind_cdr,
     window_label,
 )
 from wind_comp.products import WindAverager, WindProduct
@@ -153,7 +154,9 @@ class CompensationNode(FlushingNode):
             )
             for averager in self.averagers
         }
-        self.create_subscription(Vector3Stamped, WIND_TOPIC, self.on_wind, DATA_QOS)
+        # Raw: wind samples are read from their CDR bytes and wind/true written as CDR bytes,
+        # the arithmetic process_bag runs, without building message objects on the way.
+        self.create_subscription(Vector3Stamped, WIND_TOPIC, self.on_wind, DATA_QOS, raw=True)
         # Raw: 100 Hz each, read straight from CDR as process_bag reads them.
         self.create_subscription(Odometry, ODOMETRY_TOPIC, self.on_odometry, DATA_QOS, raw=True)
         self.create_subscription(NavSatFix, FIX_TOPIC, self.on_fix, DATA_QOS, raw=True)
@@ -188,16 +191,23 @@ class CompensationNode(FlushingNode):
 
     # -- inputs -----------------------------------------------------------------------------
 
-    def on_wind(self, message: Vector3Stamped) -> None:
+    def on_wind(self, raw: bytes) -> None:
         self._counters["wind_in"] += 1
-        sample = anemometer_sample(message)
+        parsed = anemometer_sample_cdr(raw)
+        if parsed is None:
+            message = deserialize_message(raw, Vector3Stamped)
+            parsed = (
+                anemometer_sample(message),
+                message.header.stamp.sec,
+                message.header.stamp.nanosec,
+            )
+        sample, sec, nanosec = parsed
         stamp_increases = self._wind_order.advance(sample.t_s)
         if sample.rejection is not None:
             self.reject(WIND_TOPIC, sample.rejection)
         elif not stamp_increases:
             self.reject(WIND_TOPIC, REASON_STAMP_NOT_INCREASING)
-        stamp = message.header.stamp
-        self._pending.append(PendingStamp(stamp.sec, stamp.nanosec, sample.t_s, time.monotonic()))
+        self._pending.append(PendingStamp(sec, nanosec, sample.t_s, time.monotonic()))
         self.compensator.add_wind(sample.t_s, sample.wind_sensor_mps)
         self.publish_results(self.compensator.expire(self._timeout_horizon_s()))
 
@@ -254,9 +264,7 @@ class CompensationNode(FlushingNode):
         for result in results:
             pending = self._pending.popleft()
             self._true_wind_publisher.publish(
-                true_wind_message(
-                    Vector3Stamped, pending.sec, pending.nanosec, result.true_wind_enu_mps
-                )
+                true_wind_cdr(pending.sec, pending.nanosec, result.true_wind_enu_mps.tolist())
             )
             self._counters["wind_out"] += 1
             self._latencies_s.append(now_s - pending.arrival_s)

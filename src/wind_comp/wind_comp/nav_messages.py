@@ -428,17 +428,9 @@ def _set_vector(target, values) -> None:
     target.x, target.y, target.z = (float(value) for value in values)
 
 
-def true_wind_message(vector_stamped_class, sec: int, nanosec: int, wind_enu_mps):
-    """``wind/true``: ENU wind (m/s, NaN when invalid) in frame ``map``, stamped (sec, nanosec)
-    with the anemometer sample's own stamp."""
-    message = vector_stamped_class()
-    _set_header(message.header, sec, nanosec, MAP_FRAME)
-    _set_vector(message.vector, wind_enu_mps)
-    return message
-
-
 def true_wind_cdr(sec: int, nanosec: int, wind_enu_mps) -> bytes:
-    """:func:`true_wind_message` as CDR bytes: what ROS serialises for it."""
+    """``wind/true`` as CDR bytes: the ENU wind (m/s, NaN when invalid) in frame ``map``,
+    stamped (sec, nanosec) with the anemometer sample's own stamp."""
     x, y, z = wind_enu_mps
     return _CDR_VECTOR3_STAMPED_IN_MAP.pack(
         _CDR_ENCAPSULATION,
