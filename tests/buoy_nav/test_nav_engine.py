@@ -201,6 +201,20 @@ def test_out_of_order_arrival_within_the_delay_gives_the_in_order_result(rocking
     np.testing.assert_array_equal(solution_matrix(shuffled), solution_matrix(solutions))
 
 
+def test_solutions_do_not_depend_on_when_the_filter_catches_up(rocking_run):
+    """A node publishes each solution, then calls catch_up; an offline run never calls it; a
+    caller may read the state, which catches up too. All get the same solutions."""
+    _, events, _, solutions = rocking_run
+    for catch_up in (FusionEngine.catch_up, lambda engine: engine.nav_state):
+        engine = FusionEngine(engine_config())
+        caught_up = []
+        for event in events:
+            caught_up += deliver(engine, event)
+            catch_up(engine)
+        caught_up += engine.flush()
+        np.testing.assert_array_equal(solution_matrix(caught_up), solution_matrix(solutions))
+
+
 def test_measurements_later_than_the_delay_are_rejected_as_too_late(rocking_run):
     _, events, _, _ = rocking_run
     late = [e for e in events if e[2] != "heading"]

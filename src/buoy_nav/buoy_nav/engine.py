@@ -23,9 +23,12 @@ between them (attitude error plus gyro-bias drift, velocity error plus the attit
 on the specific-force increment and the accelerometer-bias change, position error plus velocity
 error times the span), exact to first order; once per ``PREDICTION_RESYNC_INTERVAL_S`` of stamps
 the copy is instead forked afresh from the filter, so second-order residues cannot accumulate.
-The prediction depends only on stamps (which measurements lie behind the processing horizon), so
-a live node and an offline run of the same data give the same solutions. Its covariances are the
-filter's, from up to ``max_measurement_delay_s`` earlier.
+The solution of a sample is predicted before the filter catches up with that sample's horizon
+(:meth:`FusionEngine.catch_up`), so a node publishes it before the updates and covariance
+propagation it triggers, and corrections reach the prediction one IMU sample later. The
+prediction depends only on stamps (which measurements lie behind the previous sample's
+processing horizon), so a live node and an offline run of the same data give the same solutions.
+Its covariances are the filter's, from up to ``max_measurement_delay_s`` earlier.
 
 Before alignment the IMU samples and GNSS measurements feed :class:`InMotionAligner`; once
 aligned, the strapdown integrator carries the nominal state and the error-state filter corrects
@@ -303,6 +306,8 @@ class FusionEngine:
         # The IMU sample before the current one (same run), for interpolation at stamps.
         self._older_imu = None
         self._last_processed_imu_stamp = -math.inf
+        # Processing horizon that add_imu left for catch_up (None: nothing deferred).
+        self._deferred_horizon: float | None = None
 
         self._counters = {kind: MeasurementCounters() for kind in (IMU, *MEASUREMENT_KINDS)}
         self._last_accepted = {kind: -math.inf for kind in MEASUREMENT_KINDS}
@@ -330,6 +335,7 @@ class FusionEngine:
         Returns the solutions of the samples that became processable (stamp ≤ newest IMU stamp
         − ``max_measurement_delay_s``).
         """
+        self.catch_up()
         self.last_input_rejection = None
         counters = self._counters[IMU]
         try:
@@ -357,10 +363,23 @@ class FusionEngine:
         self._latest_imu_stamp = t
         sample = (t, (gx, gy, gz), (fx, fy, fz))
         self._imu_buffer.append(sample)
-        solutions = self._process(t - config.max_measurement_delay_s)
+        horizon = t - config.max_measurement_delay_s
         if not config.realtime_output:
-            return solutions
-        return self._predict_ahead(sample)
+            return self._process(horizon)
+        solutions = self._predict_ahead(sample)
+        self._deferred_horizon = horizon
+        return solutions
+
+    def catch_up(self) -> None:
+        """Do the filtering that :meth:`add_imu` left for later: with ``realtime_output`` it
+        returns the new sample's predicted solution first and defers the processing of the
+        buffer up to the new horizon (updates, covariance propagation) to this call, so a node
+        can publish before the heavy work. Every other public method catches up first, so the
+        results do not depend on whether, or when, it is called."""
+        horizon = self._deferred_horizon
+        if horizon is not None:
+            self._deferred_horizon = None
+            self._process(horizon)
 
     def add_gnss_fix(
         self,
@@ -371,6 +390,7 @@ class FusionEngine:
         position_covariance_enu_m2,
     ) -> None:
         """Add a primary-antenna fix (WGS-84 deg, deg, ellipsoidal m; ENU covariance 3×3 m²)."""
+        self.catch_up()
         self.last_input_rejection = None
         values, reason = _floats(t_s, latitude_deg, longitude_deg, altitude_m)
         covariance, covariance_reason = _float_array(position_covariance_enu_m2, (3, 3))
@@ -390,6 +410,7 @@ class FusionEngine:
 
     def add_gnss_velocity(self, t_s: float, velocity_enu_mps, covariance_m2s2) -> None:
         """Add the primary antenna's velocity over ground (ENU m/s; covariance 3×3 m²/s²)."""
+        self.catch_up()
         self.last_input_rejection = None
         stamp, reason = _floats(t_s)
         velocity, velocity_reason = _float_array(velocity_enu_mps, (3,))
@@ -406,6 +427,7 @@ class FusionEngine:
 
     def add_gnss_heading(self, t_s: float, yaw_rad: float, variance_rad2: float) -> None:
         """Add a dual-antenna heading: baseline azimuth (rad, ENU, 0 = East, CCW), variance rad²."""
+        self.catch_up()
         self.last_input_rejection = None
         values, reason = _floats(t_s, yaw_rad, variance_rad2)
         if reason is None and values[2] <= 0.0:
@@ -418,6 +440,7 @@ class FusionEngine:
 
     def add_gnss_baseline(self, t_s: float, baseline_enu_m) -> None:
         """Add a primary → secondary antenna vector (ENU, m) from moving-baseline RTK."""
+        self.catch_up()
         self.last_input_rejection = None
         stamp, reason = _floats(t_s)
         baseline, baseline_reason = _float_array(baseline_enu_m, (3,))
@@ -439,6 +462,7 @@ class FusionEngine:
         Measurements stamped after the last IMU sample cannot be reached and are rejected. With
         ``realtime_output`` every sample already had its solution, so none is returned.
         """
+        self.catch_up()
         solutions = self._process(math.inf)
         while self._measurements:
             _, _, _, kind, _ = heapq.heappop(self._measurements)
@@ -451,10 +475,12 @@ class FusionEngine:
     @property
     def aligned(self) -> bool:
         """True once the filter runs (after alignment)."""
+        self.catch_up()
         return self._filter is not None
 
     def health(self) -> EngineHealth:
         """Counters, alignment and coasting state (a snapshot)."""
+        self.catch_up()
         coasting = self._coasting_flags(self._time)
         return EngineHealth(
             alignment_state=AlignmentState.ALIGNED if self.aligned else self._aligner.state,
@@ -484,16 +510,19 @@ class FusionEngine:
     @property
     def covariance(self) -> np.ndarray | None:
         """Current 15×15 error-state covariance (a copy), None before alignment."""
+        self.catch_up()
         return None if self._filter is None else self._filter.covariance.copy()
 
     @property
     def nav_state(self) -> NavState | None:
         """Current nominal state, None before alignment."""
+        self.catch_up()
         return None if self._integrator is None else _nav_state(self._integrator)
 
     @property
     def map_plane(self) -> earth.LocalTangentPlane | None:
         """The ``map`` frame (None until its origin is known)."""
+        self.catch_up()
         return self._map_plane
 
     # ------------------------------------------------------------------ processing

@@ -20,14 +20,16 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
   superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps,
   input rates per topic, solutions published and the wall-clock processing time of the IMU
-  callback (from its start to the end of its publishing), mean and max over the period. Level
+  callback (from its start to the end of the filtering after its publishing), mean and max over
+  the period. Level
   warn while not aligned, while a GNSS kind is coasting or when no IMU sample came in the period.
 
 Messages are converted and fed to :class:`buoy_nav.engine.FusionEngine` by
 :mod:`buoy_nav.fusion_messages`, the code the offline ``fuse_bag`` uses, so a bag replayed to
 this node gives the solutions ``fuse_bag`` writes. Only header stamps drive the fusion; the wall
 clock serves the diagnostics alone. With ``fusion.realtime_output`` (default) each IMU sample's
-solution is published by the callback that receives it; otherwise solutions leave
+solution is published by the callback that receives it, before the filter updates and covariance
+propagation that sample makes due; otherwise solutions leave
 ``fusion.max_measurement_delay_s`` of stamps late.
 
 Parameters: ``gnss.primary_antenna``, ``gnss.secondary_antenna`` (double[3], m, in
@@ -165,6 +167,8 @@ class FusionNode(FlushingNode):
         if fed is None:
             fed = feed_message(self.engine, IMU_TOPIC, deserialize_message(raw, Imu), self.stamps)
         self._take(IMU_TOPIC, fed)
+        # The solution is out: now the filtering this sample made due.
+        self.engine.catch_up()
         self._imu_callback_durations_s.append(time.perf_counter() - started_s)
 
     def feed(self, topic: str, message) -> None:
