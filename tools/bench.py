@@ -11,13 +11,15 @@ as constants and printed beside our figures:
 3. vertical wind (paper Table 3): process_bag on vertical_wind at 5 and 15 m/s;
 4. sea: process_bag on sea_state and open_ocean, with the share of each Miller term;
 5. speed: fuse_bag and process_bag on one hour of open_ocean;
-6. live latency and CPU of fusion_node (tools/bench_live.py).
+6. live latency and CPU of fusion_node (tools/bench_live.py);
+7. consistency: Monte-Carlo normalised errors of the accelerometer bias over many seeds
+   (tools/bias_consistency.py).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only attitude|wind|speed|live ...]
+    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency ...]
 """
 
 from __future__ import annotations
@@ -65,7 +67,7 @@ SIMULATION_PARAMS = [str(BUOY_PARAMS)]
 SIMULATOR_PACKAGE = REPO / "src/sensor_sim/sensor_sim"
 # Modules outside sensor_sim whose code decides what simulate_bag writes.
 SIMULATION_SHARED_MODULES = ("buoy_nav.parameters", "buoy_nav.bag_io")
-SECTIONS = ("attitude", "wind", "speed", "live")
+SECTIONS = ("attitude", "wind", "speed", "live", "consistency")
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 
 # ---------------------------------------------------------------------------------------------
@@ -170,6 +172,9 @@ QUICK_DURATION_S = {
 }
 SPEED_DURATION_S = {"full": 3600.0, "quick": 600.0}
 LIVE_DURATION_S = {"full": 40.0, "quick": 20.0}
+CONSISTENCY_SEEDS = {"full": range(2, 52), "quick": range(2, 12)}
+CONSISTENCY_DURATION_S = 75.0
+CONSISTENCY_CHECKPOINTS_S = (30.0, 50.0, 70.0)
 
 
 @dataclass(frozen=True)
@@ -1298,6 +1303,15 @@ def main(argv=None) -> None:
             LIVE_DURATION_S["quick" if quick else "full"], OUT_DIR / "live_logs"
         )
         print_live(results["live"])
+    if "consistency" in sections:
+        import bias_consistency
+
+        results["consistency"] = bias_consistency.run_consistency(
+            CONSISTENCY_SEEDS["quick" if quick else "full"],
+            CONSISTENCY_DURATION_S,
+            CONSISTENCY_CHECKPOINTS_S,
+        )
+        bias_consistency.print_table(results["consistency"]["table"])
 
     results["meta"]["wall_s"] = time.monotonic() - started
     with open(OUT_DIR / "results.json", "w") as stream:
