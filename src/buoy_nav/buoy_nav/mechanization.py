@@ -40,6 +40,7 @@ from buoy_nav.rotations import (
     Quaternion,
     normalize_quaternion,
     quaternion_from_rotation_vector,
+    rotation_matrix_elements,
     rotation_matrix_from_quaternion,
 )
 
@@ -128,7 +129,7 @@ class StrapdownIntegrator:
         self.altitude_m = alt = float(altitude_m)
         self.gyro_bias_rad_s = _floats(gyro_bias_rad_s)
         self.accel_bias_mps2 = _floats(accel_bias_mps2)
-        self.rotation_elements = _matrix_tuple(self.attitude_xyzw)
+        self.rotation_elements = rotation_matrix_elements(*self.attitude_xyzw)
         # earth.navigation_frame_rate_enu_rad_s (ω_ie + ω_en) in floats, the same arithmetic.
         meridian, prime_vertical = earth.radii_of_curvature_m(lat)
         east_radius = prime_vertical + alt
@@ -252,9 +253,9 @@ class StrapdownIntegrator:
         self.altitude_m = alt + (vu + new_vu) * half_dt
         self.velocity_enu_mps = (new_ve, new_vn, new_vu)
 
-        # R_nb(k) = Exp(−ω_in T) · R_nb(k−1) · Exp(φ_k), in quaternions. The arithmetic is
-        # that of rotations.quaternion_multiply / normalize_quaternion and _matrix_tuple written
-        # out, because at twice the IMU rate the calls cost as much as the arithmetic.
+        # R_nb(k) = Exp(−ω_in T) · R_nb(k−1) · Exp(φ_k), in quaternions. The arithmetic is that
+        # of rotations.quaternion_multiply / normalize_quaternion / rotation_matrix_elements
+        # written out, because at twice the IMU rate the calls cost as much as the arithmetic.
         bx, by, bz, bw = quaternion_from_rotation_vector(rvx, rvy, rvz)
         nx, ny, nz, nw = quaternion_from_rotation_vector(
             -win_e * dt_s, -win_n * dt_s, -win_u * dt_s
@@ -361,22 +362,3 @@ def interpolate_sample(
 def _floats(values) -> tuple[float, ...]:
     """A sequence or array of numbers as a tuple of Python floats."""
     return tuple(map(float, values))
-
-
-def _matrix_tuple(q: Quaternion) -> tuple[float, ...]:
-    """Row-major 9-tuple of the rotation matrix of a unit (x, y, z, w) quaternion."""
-    x, y, z, w = q
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    return (
-        1.0 - 2.0 * (yy + zz),
-        2.0 * (xy - wz),
-        2.0 * (xz + wy),
-        2.0 * (xy + wz),
-        1.0 - 2.0 * (xx + zz),
-        2.0 * (yz - wx),
-        2.0 * (xz - wy),
-        2.0 * (yz + wx),
-        1.0 - 2.0 * (xx + yy),
-    )

@@ -74,19 +74,30 @@ def normalize_quaternion(q: Quaternion) -> Quaternion:
     return (x / norm, y / norm, z / norm, w / norm)
 
 
-def rotation_matrix_from_quaternion(q) -> np.ndarray:
-    """3×3 rotation matrix of a unit (x, y, z, w) quaternion."""
-    x, y, z, w = (float(c) for c in q)
+def rotation_matrix_elements(x, y, z, w) -> tuple:
+    """Row-major elements (r00, r01, r02, r10, ..., r22) of the rotation matrix of the unit
+    quaternion (x, y, z, w). The components may be floats or equally shaped arrays: the
+    arithmetic is elementwise, so a quaternion gives bit-identical elements alone or in a batch.
+    """
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    return np.array(
-        (
-            (1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)),
-            (2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)),
-            (2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)),
-        )
+    return (
+        1.0 - 2.0 * (yy + zz),
+        2.0 * (xy - wz),
+        2.0 * (xz + wy),
+        2.0 * (xy + wz),
+        1.0 - 2.0 * (xx + zz),
+        2.0 * (yz - wx),
+        2.0 * (xz - wy),
+        2.0 * (yz + wx),
+        1.0 - 2.0 * (xx + yy),
     )
+
+
+def rotation_matrix_from_quaternion(q) -> np.ndarray:
+    """3×3 rotation matrix of a unit (x, y, z, w) quaternion."""
+    return np.array(rotation_matrix_elements(*(float(c) for c in q))).reshape(3, 3)
 
 
 def quaternion_from_rotation_matrix(rotation) -> Quaternion:

@@ -12,6 +12,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from buoy_nav.rotations import rotation_matrix_elements
+
 
 class NavTrackError(ValueError):
     """A navigation track was constructed or queried with malformed arguments."""
@@ -306,24 +308,7 @@ def slerp(start_xyzw: np.ndarray, end_xyzw: np.ndarray, fraction: np.ndarray) ->
 
 def rotation_matrices_from_quaternions(quat_xyzw: np.ndarray) -> np.ndarray:
     """(N, 3, 3) rotation matrices of (N, 4) unit xyzw quaternions."""
-    x, y, z, w = quat_xyzw[:, 0], quat_xyzw[:, 1], quat_xyzw[:, 2], quat_xyzw[:, 3]
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    return np.stack(
-        (
-            1.0 - 2.0 * (yy + zz),
-            2.0 * (xy - wz),
-            2.0 * (xz + wy),
-            2.0 * (xy + wz),
-            1.0 - 2.0 * (xx + zz),
-            2.0 * (yz - wx),
-            2.0 * (xz - wy),
-            2.0 * (yz + wx),
-            1.0 - 2.0 * (xx + yy),
-        ),
-        axis=1,
-    ).reshape(-1, 3, 3)
+    return np.stack(rotation_matrix_elements(*quat_xyzw.T), axis=1).reshape(-1, 3, 3)
 
 
 def _validated_arrays(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps):
