@@ -177,9 +177,22 @@ def run_consistency(seeds, duration_s: float, checkpoints_s: tuple[float, ...]) 
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seeds", type=seed_range, default=seed_range("2-51"), help="A-B")
-    parser.add_argument("--duration-s", type=float, default=75.0)
-    parser.add_argument("--checkpoints", type=float, nargs="+", default=[30.0, 50.0, 70.0])
+    parser.add_argument(
+        "--seeds",
+        type=seed_range,
+        default=seed_range("2-51"),
+        help="seeds to run, A-B or A (default 2-51)",
+    )
+    parser.add_argument(
+        "--duration-s", type=float, default=75.0, help="length of each run, s (default 75)"
+    )
+    parser.add_argument(
+        "--checkpoints",
+        type=float,
+        nargs="+",
+        default=[30.0, 50.0, 70.0],
+        help="times after the first IMU sample, s (default 30 50 70)",
+    )
     parser.add_argument("--json", type=Path, help="also write the runs and the table here")
     arguments = parser.parse_args(sys.argv[1:] if argv is None else argv)
     result = run_consistency(arguments.seeds, arguments.duration_s, tuple(arguments.checkpoints))
