@@ -332,8 +332,10 @@ class FusionEngine:
     def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[NavSolution]:
         """Add an IMU sample (stamp s; ω_ib body rad/s; specific force body m/s²).
 
-        Returns the solutions of the samples that became processable (stamp ≤ newest IMU stamp
-        − ``max_measurement_delay_s``).
+        Returns the new solutions: with ``realtime_output`` the new sample's prediction (after an
+        alignment also those of the samples buffered since), the filtering it makes due left to
+        :meth:`catch_up`; otherwise those of the samples that became processable (stamp ≤ newest
+        IMU stamp − ``max_measurement_delay_s``).
         """
         self.catch_up()
         self.last_input_rejection = None
