@@ -59,11 +59,6 @@ class InterpolatedNav(NamedTuple):
         """The N body→ENU attitudes as scipy rotations."""
         return Rotation.from_quat(self.attitude_xyzw)
 
-    @property
-    def attitude_matrix_nb(self) -> np.ndarray:
-        """(N, 3, 3) body→ENU rotation matrices."""
-        return rotation_matrices_from_quaternions(self.attitude_xyzw)
-
 
 _INITIAL_CAPACITY = 256
 
