@@ -1160,15 +1160,15 @@ def print_live(result: dict) -> None:
         "'src p99' uses the publishers' source stamps instead"
     )
     print(
-        f"  {'pair':50s} {'pairs':>6s} {'median ms':>10s} {'p99 ms':>8s} {'max ms':>8s} "
+        f"  {'pair':66s} {'pairs':>6s} {'median ms':>10s} {'p99 ms':>8s} {'max ms':>8s} "
         f"{'p99≤5':>5s} {'src p99':>8s}"
     )
     for name, stats in result["latency"].items():
         if not stats["pairs"]:
-            print(f"  {name:50s} {0:6d}  no pairs")
+            print(f"  {name:66s} {0:6d}  no pairs")
             continue
         print(
-            f"  {name:50s} {stats['pairs']:6d} {stats['median_ms']:10.2f} "
+            f"  {name:66s} {stats['pairs']:6d} {stats['median_ms']:10.2f} "
             f"{stats['p99_ms']:8.2f} {stats['max_ms']:8.2f} {mark(stats['p99_pass'])} "
             f"{stats['source_stamp_p99_ms']:8.2f}"
         )

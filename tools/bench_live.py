@@ -325,10 +325,12 @@ def run_live(duration_s: float, log_dir: Path) -> dict:
     # instant (which the simulated sensors publish independently) and the pipeline after it.
     corrected_in_service = in_service(corrected)
     imu = received["imu/data_raw"]
-    result["latency"]["  of which anemometer/wind → imu/data_raw, same stamp"] = latency_stats(
-        received["anemometer/wind"], {s: imu[s] for s in corrected_in_service if s in imu}
+    result["latency"]["corrected wind, part 1: anemometer/wind → imu/data_raw, same stamp"] = (
+        latency_stats(
+            received["anemometer/wind"], {s: imu[s] for s in corrected_in_service if s in imu}
+        )
     )
-    result["latency"]["  of which imu/data_raw → wind/true"] = latency_stats(
+    result["latency"]["corrected wind, part 2: imu/data_raw → wind/true"] = latency_stats(
         imu, corrected_in_service
     )
     result["fusion_cpu"] = fusion_cpu(listener, sampler, received)
