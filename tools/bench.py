@@ -11,7 +11,9 @@ as constants and printed beside our figures:
 3. vertical wind (paper Table 3): process_bag on vertical_wind at 5 and 15 m/s;
 4. sea: process_bag on sea_state and open_ocean, with the share of each Miller term;
 5. speed: fuse_bag and process_bag on one hour of open_ocean;
-6. live latency and CPU of fusion_node (tools/bench_live.py);
+6. live latency and CPU of fusion_node (tools/bench_live.py), and (6b) the same run with
+   pass-through stand-ins for both nodes (tools/passthrough_node.py): the floor it is read
+   against;
 7. consistency: Monte-Carlo normalised errors of the accelerometer bias over many seeds
    (tools/bias_consistency.py).
 
@@ -1145,8 +1147,8 @@ def print_speed(result: dict, quick: bool) -> None:
         )
 
 
-def print_live(result: dict) -> None:
-    print("\nTable 6 — live: run_scenario sea_state with fusion_node and compensation_node")
+def print_live(result: dict, title: str) -> None:
+    print(f"\n{title}")
     if result.get("error"):
         print(f"  FAILED: {result['error']}")
     print(
@@ -1173,11 +1175,12 @@ def print_live(result: dict) -> None:
             f"{stats['source_stamp_p99_ms']:8.2f}"
         )
     cpu = result["fusion_cpu"]
+    fusion = "pass-through fusion_node" if result["passthrough"] else "fusion_node"
     if cpu.get("share_of_one_core") is None:
-        print(f"  fusion_node CPU: not measured ({cpu.get('note', '')})")
+        print(f"  {fusion} CPU: not measured ({cpu.get('note', '')})")
     else:
         print(
-            f"  fusion_node CPU: {100 * cpu['share_of_one_core']:.1f} % of one core over "
+            f"  {fusion} CPU: {100 * cpu['share_of_one_core']:.1f} % of one core over "
             f"{cpu['window_s']:.1f} s with imu/data_raw at {cpu['imu_rate_hz']:.1f} Hz"
         )
     print(f"  messages received: {result['received']}")
@@ -1299,10 +1302,22 @@ def main(argv=None) -> None:
     if "live" in sections:
         import bench_live
 
-        results["live"] = bench_live.run_live(
-            LIVE_DURATION_S["quick" if quick else "full"], OUT_DIR / "live_logs"
+        live_duration_s = LIVE_DURATION_S["quick" if quick else "full"]
+        results["live"] = bench_live.run_live(live_duration_s, OUT_DIR / "live_logs")
+        print_live(
+            results["live"],
+            "Table 6 — live: run_scenario sea_state with fusion_node and compensation_node",
         )
-        print_live(results["live"])
+        # The same run with stand-ins that compute nothing: what the middleware, the executor
+        # and this machine cost on the same path, to read Table 6 against.
+        results["live_passthrough"] = bench_live.run_live(
+            live_duration_s, OUT_DIR / "live_logs_passthrough", passthrough=True
+        )
+        print_live(
+            results["live_passthrough"],
+            "Table 6b — the floor: the same run with pass-through stand-ins for both nodes "
+            "(tools/passthrough_node.py)",
+        )
     if "consistency" in sections:
         import bias_consistency
 

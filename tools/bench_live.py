@@ -10,7 +10,11 @@ publishers' source stamps is given beside it. The simulated sensors and clock ru
 ``SIMULATOR_NICENESS``, the nodes under test at the default. The CPU share of ``fusion_node``
 comes from /proc/<pid>/stat (utime + stime) while the IMU stream flows.
 
-    python tools/bench_live.py [--duration-s 40]
+With ``--passthrough`` the two nodes are replaced by ``tools/passthrough_node.py``, stand-ins
+that compute nothing: the same run then measures the floor that the middleware, the Python
+executor and this machine set on the same path.
+
+    python tools/bench_live.py [--duration-s 40] [--passthrough]
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import random
 import struct
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -32,6 +37,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 PARAMS_FILE = REPO / "src/buoy_nav/config/buoy.yaml"
+PASSTHROUGH_SCRIPT = REPO / "tools" / "passthrough_node.py"
+NODES_UNDER_TEST = ("fusion_node", "compensation_node")
 LATENCY_TARGET_P99_MS = 5.0
 CPU_SAMPLE_PERIOD_S = 0.25
 FIND_PID_TIMEOUT_S = 30.0
@@ -244,9 +251,30 @@ def in_service(outputs: dict) -> dict:
     return {stamp: times for stamp, times in outputs.items() if times[0] >= start_ns}
 
 
-def run_live(duration_s: float, log_dir: Path) -> dict:
-    """Run the live scenario and measure; returns figures (or ``error`` with what failed)."""
+def passthrough_path(shim_dir: Path) -> str:
+    """A PATH on which ``fusion_node`` and ``compensation_node`` are the pass-through stand-ins
+    (run_scenario takes the suite's executables from PATH first)."""
+    for name in NODES_UNDER_TEST:
+        shim = shim_dir / name
+        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" "{PASSTHROUGH_SCRIPT}" {name} "$@"\n')
+        shim.chmod(0o755)
+    return f"{shim_dir}{os.pathsep}{os.environ.get('PATH', '')}"
+
+
+def run_live(duration_s: float, log_dir: Path, passthrough: bool = False) -> dict:
+    """Run the live scenario and measure; returns figures (or ``error`` with what failed).
+    ``passthrough``: with the stand-ins of tools/passthrough_node.py in place of the nodes."""
     domain = isolate_ros_domain()
+    with tempfile.TemporaryDirectory(prefix="bench_live_") as shim_dir:
+        environment = dict(os.environ)
+        if passthrough:
+            environment["PATH"] = passthrough_path(Path(shim_dir))
+        return _run_live(duration_s, log_dir, environment, domain, passthrough)
+
+
+def _run_live(
+    duration_s: float, log_dir: Path, environment: dict, domain: int, passthrough: bool
+) -> dict:
     # Latency is only as good as the machine is idle: other work on it shows up here.
     load_before = os.getloadavg()[0]
     log_dir.mkdir(parents=True, exist_ok=True)
@@ -263,6 +291,7 @@ def run_live(duration_s: float, log_dir: Path) -> dict:
         str(log_dir),
     ]
     result = {
+        "passthrough": passthrough,
         "duration_s": duration_s,
         "ros_domain_id": domain,
         "command": command[1:],
@@ -274,7 +303,7 @@ def run_live(duration_s: float, log_dir: Path) -> dict:
     sampler = None
     try:
         scenario = subprocess.Popen(
-            command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+            command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=environment
         )
         pid = child_pid(scenario.pid, "fusion_node", FIND_PID_TIMEOUT_S)
         if pid is not None:
@@ -361,8 +390,15 @@ def fusion_cpu(listener: Listener, sampler: CpuSampler | None, received: dict) -
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(prog="bench_live", description=__doc__.split("\n")[0])
     parser.add_argument("--duration-s", type=float, default=40.0, help="scenario length, s")
+    parser.add_argument(
+        "--passthrough",
+        action="store_true",
+        help="replace both nodes by the stand-ins of tools/passthrough_node.py (the floor)",
+    )
     arguments = parser.parse_args(argv)
-    result = run_live(arguments.duration_s, REPO / "out" / "bench" / "live_logs")
+    result = run_live(
+        arguments.duration_s, REPO / "out" / "bench" / "live_logs", arguments.passthrough
+    )
     print(json.dumps(result, indent=2))
 
 

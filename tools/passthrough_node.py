@@ -1,0 +1,92 @@
+"""Pass-through stand-ins for fusion_node and compensation_node: the live benchmark's floor.
+
+    python tools/passthrough_node.py fusion_node|compensation_node [--ros-args ...]
+
+They keep the suite's node names, processes, topics, QoS and executor, and compute nothing:
+
+- ``fusion_node`` republishes every ``imu/data_raw`` message, unchanged, on ``nav/imu``;
+- ``compensation_node`` republishes every ``anemometer/wind`` message, unchanged, on
+  ``wind/true`` as soon as ``nav/imu`` of the same header stamp has arrived (at once if it
+  already has), as the real node waits for the navigation at its sample's stamp.
+
+Run in place of the real nodes (``tools/bench_live.py --passthrough``), the latency they show
+is what the middleware, the Python executor and the machine's scheduling cost on the same
+path, so the real nodes' figures can be read against it.
+"""
+
+from __future__ import annotations
+
+import struct
+import sys
+
+import rclpy
+from geometry_msgs.msg import Vector3Stamped
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
+from sensor_msgs.msg import Imu
+
+from buoy_nav.base_node import DATA_QOS
+
+# Header stamp (sec, nanosec) of a message's CDR bytes, after the 4-byte encapsulation header.
+HEADER_STAMP = struct.Struct("<iI")
+# Stamps of navigation seen, kept for matching wind samples that arrive after them.
+NAV_STAMPS_KEPT = 1000
+
+
+def passthrough_fusion(node) -> None:
+    publisher = node.create_publisher(Imu, "nav/imu", DATA_QOS)
+    node.create_subscription(Imu, "imu/data_raw", publisher.publish, DATA_QOS, raw=True)
+
+
+def passthrough_compensation(node) -> None:
+    publisher = node.create_publisher(Vector3Stamped, "wind/true", DATA_QOS)
+    waiting_wind: dict[tuple[int, int], bytes] = {}
+    nav_stamps: dict[tuple[int, int], None] = {}
+
+    def on_wind(raw: bytes) -> None:
+        stamp = HEADER_STAMP.unpack_from(raw, 4)
+        if stamp in nav_stamps:
+            publisher.publish(raw)
+        else:
+            waiting_wind[stamp] = raw
+
+    def on_nav(raw: bytes) -> None:
+        stamp = HEADER_STAMP.unpack_from(raw, 4)
+        nav_stamps[stamp] = None
+        if len(nav_stamps) > NAV_STAMPS_KEPT:
+            del nav_stamps[next(iter(nav_stamps))]
+        wind = waiting_wind.pop(stamp, None)
+        if wind is not None:
+            publisher.publish(wind)
+
+    node.create_subscription(Vector3Stamped, "anemometer/wind", on_wind, DATA_QOS, raw=True)
+    node.create_subscription(Imu, "nav/imu", on_nav, DATA_QOS, raw=True)
+
+
+ROLES = {"fusion_node": passthrough_fusion, "compensation_node": passthrough_compensation}
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) < 2 or argv[1] not in ROLES:
+        print(f"usage: passthrough_node.py {'|'.join(ROLES)} [--ros-args ...]", file=sys.stderr)
+        return 2
+    role = argv[1]
+    rclpy.init(args=argv)
+    # Built before the node, as run_node does: the executor installs the signal handling.
+    executor = EventsExecutor()
+    node = rclpy.create_node(role)
+    ROLES[role](node)
+    executor.add_node(node)
+    try:
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
