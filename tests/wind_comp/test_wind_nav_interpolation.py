@@ -11,6 +11,7 @@ from wind_comp.nav_interpolation import (
     quaternion_product,
     rotation_matrices_from_quaternions,
     slerp,
+    slerp_components,
 )
 
 RATE_BODY_RAD_S = np.array([0.4, -0.25, 0.6])
@@ -179,6 +180,33 @@ def test_extending_in_chunks_matches_appending_one_by_one_with_bounded_history()
         np.testing.assert_array_equal(a.velocity_enu_mps, b.velocity_enu_mps)
 
 
+def test_one_stamp_in_floats_is_interpolated_exactly_as_in_a_batch_for_every_outcome():
+    rng = np.random.default_rng(24)
+    stamps = np.cumsum(rng.uniform(0.005, 0.04, 300))
+    stamps[270:] += 0.5  # a gap longer than max_gap_s, inside the kept history
+    quats = rng.normal(size=(300, 4))
+    rates = rng.normal(size=(300, 3))
+    velocities = rng.normal(size=(300, 3))
+    track = NavTrack(history_s=3.0)
+    track.extend(stamps, quats, rates, velocities)
+    queries = np.concatenate(
+        (
+            rng.uniform(stamps[0] - 1.0, stamps[-1] + 1.0, 2000),
+            stamps[-50:],  # exactly on samples
+            [stamps[0] - 0.1, track.oldest_stamp_s - 0.1, stamps[-1] + 0.1, np.nan, np.inf],
+        )
+    )
+    batch = track.interpolate(queries)
+    assert set(batch.status.tolist()) == set(InterpolationStatus)
+    for k, query in enumerate(queries.tolist()):
+        status, attitude, rate, velocity = track.interpolate_one(query)
+        assert status == batch.status[k]
+        np.testing.assert_array_equal(attitude, batch.attitude_xyzw[k])
+        np.testing.assert_array_equal(rate, batch.angular_rate_body_rad_s[k])
+        np.testing.assert_array_equal(velocity, batch.velocity_enu_mps[k])
+    assert NavTrack().interpolate_one(1.0)[0] == InterpolationStatus.AFTER_END
+
+
 def test_history_is_bounded_and_old_stamps_are_reported_evicted():
     stamps = np.arange(0.0, 60.0, 0.01)
     track = analytic_track(stamps, history_s=1.0)
@@ -217,11 +245,17 @@ def test_quaternion_arithmetic_agrees_with_scipy_and_is_the_same_alone_or_in_a_b
     assert (Rotation.from_quat(blended).inv() * expected).magnitude().max() < 1e-14
     np.testing.assert_allclose(np.linalg.norm(blended, axis=1), 1.0, atol=1e-15)
 
+    # One quaternion in plain floats (the live path) gives the batch's bits.
     one_by_one = np.array(
         [
-            slerp(start.as_quat()[k : k + 1], end_xyzw[k : k + 1], fraction[k : k + 1])[0]
+            slerp_components(
+                tuple(start.as_quat()[k].tolist()),
+                tuple(end_xyzw[k].tolist()),
+                float(fraction[k]),
+            )
             for k in range(200)
-        ]
+        ],
+        dtype=float,
     )
     np.testing.assert_array_equal(one_by_one, blended)
 

@@ -19,6 +19,7 @@ from wind_comp.nav_messages import (
     anemometer_sample,
     anemometer_sample_cdr,
     body_to_enu,
+    body_to_enu_components,
     checked_fix_latitude_deg,
     fix_fields_cdr,
     fix_latitude_deg,
@@ -27,6 +28,7 @@ from wind_comp.nav_messages import (
     odometry_fields_cdr,
     odometry_sample,
     product_messages,
+    rate_relative_to_level_components,
     remove_earth_rate,
     stamp_from_seconds,
     stamp_s,
@@ -224,6 +226,24 @@ def test_body_to_enu_keeps_length_and_matches_scipy():
     rotated = body_to_enu(attitudes.as_quat(), vectors)
     np.testing.assert_allclose(rotated, attitudes.apply(vectors), atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(rotated, axis=1), np.linalg.norm(vectors, axis=1))
+
+
+def test_one_message_in_floats_converts_exactly_as_a_batch_of_messages():
+    # The node converts each nav/odometry in plain floats, process_bag whole columns.
+    attitudes = Rotation.random(40, random_state=13).as_quat() * RNG.uniform(0.5, 2.0, (40, 1))
+    rates = RNG.normal(0, 0.3, (40, 3))
+    velocities_body = RNG.normal(0, 2.0, (40, 3))
+    latitudes_deg = RNG.uniform(-89, 89, 40)
+    latitudes_deg[[3, 17]] = math.nan
+    batch_rates = remove_earth_rate(rates, attitudes, latitudes_deg)
+    batch_velocities = body_to_enu(attitudes, velocities_body)
+    for k in range(40):
+        quat, rate = tuple(attitudes[k].tolist()), tuple(rates[k].tolist())
+        one_rate = rate_relative_to_level_components(rate, quat, float(latitudes_deg[k]))
+        one_velocity = body_to_enu_components(quat, tuple(velocities_body[k].tolist()))
+        np.testing.assert_array_equal(np.array(one_rate, dtype=float), batch_rates[k])
+        np.testing.assert_array_equal(np.array(one_velocity, dtype=float), batch_velocities[k])
+    np.testing.assert_array_equal(batch_rates[[3, 17]], rates[[3, 17]])
 
 
 def test_true_wind_cdr_is_the_stamped_map_vector_ros_serialises():

@@ -79,13 +79,13 @@ from wind_comp.nav_messages import (
     StampOrder,
     anemometer_sample,
     anemometer_sample_cdr,
+    body_to_enu_components,
     checked_fix_latitude_deg,
     fix_fields_cdr,
-    nav_sample,
     odometry_fields,
     odometry_fields_cdr,
     product_messages,
-    remove_earth_rate,
+    rate_relative_to_level_components,
     true_wind_cdr,
     window_label,
 )
@@ -228,17 +228,17 @@ class CompensationNode(FlushingNode):
             fields = odometry_fields_cdr(raw)
             if fields is None:
                 fields = odometry_fields(deserialize_message(raw, Odometry))
-            sample = nav_sample(*fields)
         except MalformedMessageError as error:
             self.reject(ODOMETRY_TOPIC, error.reason)
             return
-        if not self._nav_order.advance(sample.t_s):
+        t_s, quat_xyzw, rate_body_rad_s, velocity_body_mps = fields
+        if not self._nav_order.advance(t_s):
             self.reject(ODOMETRY_TOPIC, REASON_STAMP_NOT_INCREASING)
             return
-        rate = remove_earth_rate(
-            sample.angular_rate_body_rad_s, sample.quat_xyzw, self.latitude_deg
-        )
-        if self.compensator.add_nav(sample.t_s, sample.quat_xyzw, rate, sample.velocity_enu_mps):
+        # In floats, one message at a time: the arithmetic process_bag runs on whole columns.
+        rate_nb = rate_relative_to_level_components(rate_body_rad_s, quat_xyzw, self.latitude_deg)
+        velocity_enu = body_to_enu_components(quat_xyzw, velocity_body_mps)
+        if self.compensator.add_nav(t_s, quat_xyzw, rate_nb, velocity_enu):
             self._counters["nav_accepted"] += 1
         self.publish_results(self.compensator.ready())
 

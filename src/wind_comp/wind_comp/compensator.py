@@ -19,7 +19,8 @@ from enum import IntEnum
 
 import numpy as np
 
-from wind_comp.miller import miller_terms, mounting_rotation_from_rpy_deg
+from buoy_nav.rotations import rotation_matrix_elements
+from wind_comp.miller import miller_components, miller_terms, mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import (
     InterpolationStatus,
     NavTrack,
@@ -259,6 +260,25 @@ class _Corrector:
             config.anemometer_rpy_deg
         ).as_matrix()
         self._lever_arm_body_m = np.array(config.anemometer_position_body_m)
+        self._mounting_elements_bw = tuple(self._mounting_matrix_bw.ravel().tolist())
+        self._lever_arm_elements_body_m = tuple(config.anemometer_position_body_m)
+
+    def correct_one(self, track: NavTrack, t_s: float, wind_mps: np.ndarray):
+        """:meth:`correct` of one sample in plain floats (bit-identical): its status and its
+        true wind and three Miller terms as (3,) arrays, NaN unless valid."""
+        code, attitude, rate, velocity = track.interpolate_one(t_s)
+        status = _NAV_OUTCOME[code]
+        if status != WindStatus.VALID:
+            return status, tuple(np.full(3, np.nan) for _ in range(4))
+        terms = miller_components(
+            tuple(wind_mps.tolist()),
+            rotation_matrix_elements(*attitude),
+            rate,
+            velocity,
+            self._mounting_elements_bw,
+            self._lever_arm_elements_body_m,
+        )
+        return status, tuple(np.array(term, dtype=float) for term in terms)
 
     def correct(self, track: NavTrack, stamps_s: np.ndarray, winds_mps: np.ndarray):
         """Return (N,) statuses (``_PENDING`` while navigation may still bracket a stamp) and
@@ -372,6 +392,13 @@ class WindCompensator:
             entry for entry in self._queue if entry.result is None and entry.t_s <= newest_nav_s
         ]
         if not undecided:
+            return
+        if len(undecided) == 1:
+            # The live case: one sample, in floats, as bit-identical as the batch below.
+            (entry,) = undecided
+            status, terms = self._corrector.correct_one(self.nav_track, entry.t_s, entry.wind_mps)
+            if status != _PENDING:
+                entry.result = CorrectedWind(entry.t_s, WindStatus(status), *terms, entry.wind_mps)
             return
         stamps = np.array([entry.t_s for entry in undecided])
         winds = np.array([entry.wind_mps for entry in undecided])

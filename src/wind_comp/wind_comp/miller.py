@@ -100,28 +100,27 @@ def _mounting_matrix(mounting_rotation_bw) -> np.ndarray:
     return matrix
 
 
-def _rotate(matrices: np.ndarray, vectors: np.ndarray) -> np.ndarray:
-    """Apply (N, 3, 3) matrices to (N, 3) vectors.
+def rotate_components(matrix_elements, vector) -> tuple:
+    """Matrix × vector written out: ``matrix_elements`` are the nine row-major elements,
+    ``vector`` the three components; each a float or an array, all of one shape (or floats).
 
-    Written as explicit products and sums so that a sample gives bit-identical results
-    whether it is corrected alone or inside a batch (streaming and offline must agree).
+    Elementwise, so a sample gives bit-identical results alone (floats, the live case) or inside
+    a batch (arrays, offline): streaming and offline must agree.
     """
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = matrix_elements
+    x, y, z = vector
     return (
-        matrices[:, :, 0] * vectors[:, 0, None]
-        + matrices[:, :, 1] * vectors[:, 1, None]
-        + matrices[:, :, 2] * vectors[:, 2, None]
+        m00 * x + m01 * y + m02 * z,
+        m10 * x + m11 * y + m12 * z,
+        m20 * x + m21 * y + m22 * z,
     )
 
 
-def cross_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b of (..., 3) arrays, broadcast.
-
-    Explicit products and differences: elementwise like ``np.cross`` (so one sample and a batch
-    agree bit for bit) at a fraction of its cost on a single vector, the live case.
-    """
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
+def cross_components(a, b) -> tuple:
+    """a × b of two 3-vectors given by components (floats or equally shaped arrays)."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
 
 
 def miller_correction(
@@ -199,13 +198,50 @@ def miller_terms(
     (N, 3) anemometer axes m/s, body→ENU matrices (N, 3, 3), body rate (N, 3) rad/s, ENU
     velocity (N, 3) m/s, anemometer→body matrix (3, 3), anemometer position (3,) body m.
 
-    The one routine every path runs, live sample by sample and offline over a recording.
+    Runs :func:`miller_components` on the columns.
     """
-    n_samples = wind_sensor_mps.shape[0]
-    wind_body = _rotate(np.broadcast_to(mounting_matrix_bw, (n_samples, 3, 3)), wind_sensor_mps)
-    tilt_term = _rotate(attitude_matrix_nb, wind_body)
-    lever_arm_velocity_body = cross_product(angular_rate_body_rad_s, anemometer_position_body_m)
-    rotation_term = _rotate(attitude_matrix_nb, lever_arm_velocity_body)
-    translation_term = np.array(velocity_enu_mps, dtype=float)
-    true_wind = tilt_term + rotation_term + translation_term
-    return MillerTerms(true_wind, tilt_term, rotation_term, translation_term)
+    terms = miller_components(
+        tuple(wind_sensor_mps.T),
+        tuple(attitude_matrix_nb.reshape(-1, 9).T),
+        tuple(angular_rate_body_rad_s.T),
+        tuple(velocity_enu_mps.T),
+        tuple(np.asarray(mounting_matrix_bw, dtype=float).ravel().tolist()),
+        tuple(np.asarray(anemometer_position_body_m, dtype=float).tolist()),
+    )
+    return MillerTerms(*(np.stack(term, axis=-1) for term in terms))
+
+
+def miller_components(
+    wind_sensor_mps,
+    attitude_elements_nb,
+    angular_rate_body_rad_s,
+    velocity_enu_mps,
+    mounting_elements_bw,
+    anemometer_position_body_m,
+) -> tuple[tuple, tuple, tuple, tuple]:
+    """The Miller correction written out by components: the one routine every path runs, live
+    on one sample's floats, offline on a recording's columns.
+
+    Args:
+        wind_sensor_mps: (u, v, w) in anemometer axes, m/s.
+        attitude_elements_nb: the nine row-major elements of the body→ENU matrix R_nb.
+        angular_rate_body_rad_s: body rate relative to the local-level frame, body axes, rad/s.
+        velocity_enu_mps: ENU velocity of the body origin, m/s.
+        mounting_elements_bw: the nine row-major elements of R_bw (floats).
+        anemometer_position_body_m: the lever arm B, body axes, m (floats).
+
+    Each per-sample component is a float or an array, all of one shape. Returns the true wind
+    and the tilt, rotation and translation terms, ENU m/s, as component triples.
+    """
+    wind_body = rotate_components(mounting_elements_bw, wind_sensor_mps)
+    tilt_term = rotate_components(attitude_elements_nb, wind_body)
+    lever_arm_velocity_body = cross_components(angular_rate_body_rad_s, anemometer_position_body_m)
+    rotation_term = rotate_components(attitude_elements_nb, lever_arm_velocity_body)
+    translation_term = tuple(velocity_enu_mps)
+    true_wind = tuple(
+        tilt + rotation + translation
+        for tilt, rotation, translation in zip(
+            tilt_term, rotation_term, translation_term, strict=True
+        )
+    )
+    return true_wind, tilt_term, rotation_term, translation_term

@@ -6,13 +6,14 @@ and velocity linearly. Nothing is extrapolated: a stamp that is not bracketed, o
 bracketing samples are too far apart, is reported invalid with a reason.
 """
 
+import math
 from enum import IntEnum
 from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from buoy_nav.rotations import rotation_matrix_elements
+from buoy_nav.rotations import quaternion_multiply, rotation_matrix_elements
 
 
 class NavTrackError(ValueError):
@@ -61,6 +62,8 @@ class InterpolatedNav(NamedTuple):
 
 
 _INITIAL_CAPACITY = 256
+# Quaternions shorter than this cannot be normalised into an attitude.
+_MIN_QUATERNION_NORM = 1e-9
 
 
 class NavTrack:
@@ -130,13 +133,40 @@ class NavTrack:
         return float(self._stamps_s[self._start]) if len(self) else np.nan
 
     def append(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> bool:
-        """Add one sample; return False (and count it) when it is rejected.
+        """Add one sample; return False (and count it) when it is rejected. Exactly
+        :meth:`extend` of one sample, in plain floats: the live path, one sample at a time.
 
         Args:
-            t_s: stamp, s. quat_xyzw: (4,) body→ENU attitude, any non-zero norm.
-            angular_rate_body_rad_s: (3,) body axes. velocity_enu_mps: (3,) ENU.
+            t_s: stamp, s. quat_xyzw: 4 values, body→ENU attitude, any non-zero norm.
+            angular_rate_body_rad_s: 3 values, body axes. velocity_enu_mps: 3 values, ENU.
         """
-        return self.extend([t_s], [quat_xyzw], [angular_rate_body_rad_s], [velocity_enu_mps]) == 1
+        stamp = float(t_s)
+        quat = _floats("quat_xyzw", quat_xyzw, 4)
+        rate = _floats("angular_rate_body_rad_s", angular_rate_body_rad_s, 3)
+        velocity = _floats("velocity_enu_mps", velocity_enu_mps, 3)
+        norm = quaternion_norm(*quat)
+        if not (
+            math.isfinite(stamp)
+            and all(math.isfinite(value) for value in (*quat, *rate, *velocity))
+            and norm > _MIN_QUATERNION_NORM
+        ):
+            self.n_rejected_invalid += 1
+            return False
+        if len(self) and not stamp > self._stamps_s[self._end - 1]:
+            self.n_rejected_out_of_order += 1
+            return False
+        self._reserve(1)
+        end = self._end
+        self._stamps_s[end] = stamp
+        self._quats_xyzw[end] = [component / norm for component in quat]
+        self._rates_body_rad_s[end] = rate
+        self._velocities_enu_mps[end] = velocity
+        self._end = end + 1
+        if math.isnan(self._first_stamp_s):
+            self._first_stamp_s = stamp
+        self.n_accepted += 1
+        self._discard_before(stamp - self.history_s)
+        return True
 
     def extend(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> int:
         """Add samples in array order, exactly as appending them one by one would (a sample is
@@ -231,6 +261,37 @@ class NavTrack:
             quats[valid] = slerp(self._quats_xyzw[lo], self._quats_xyzw[hi], fraction[:, 0])
         return InterpolatedNav(valid, status, quats, rates, velocities)
 
+    def interpolate_one(self, t_query_s: float) -> tuple[int, tuple, tuple, tuple]:
+        """:meth:`interpolate` at one stamp (s), in plain floats: (status code, attitude
+        (x, y, z, w), body rate (3,) rad/s, ENU velocity (3,) m/s), bit-identical to the
+        batch; the live path, where numpy's per-call cost would dominate."""
+        t_s = float(t_query_s)
+        if not math.isfinite(t_s):
+            return InterpolationStatus.INVALID_STAMP, *_INVALID_NAV
+        start, end = self._start, self._end
+        if start == end:
+            return InterpolationStatus.AFTER_END, *_INVALID_NAV
+        stamps = self._stamps_s
+        lower = int(np.searchsorted(stamps[start:end], t_s, side="right")) - 1 + start
+        if lower < start:
+            if t_s < self._first_stamp_s:
+                return InterpolationStatus.BEFORE_START, *_INVALID_NAV
+            return InterpolationStatus.EVICTED, *_INVALID_NAV
+        upper = lower if stamps[lower] == t_s else lower + 1
+        if upper >= end:
+            return InterpolationStatus.AFTER_END, *_INVALID_NAV
+        lower_stamp_s, upper_stamp_s = float(stamps[lower]), float(stamps[upper])
+        span_s = upper_stamp_s - lower_stamp_s
+        if span_s > self.max_gap_s:
+            return InterpolationStatus.GAP, *_INVALID_NAV
+        fraction = (t_s - lower_stamp_s) / span_s if span_s > 0 else 0.0
+        rates, velocities = self._rates_body_rad_s, self._velocities_enu_mps
+        rate = _lerp(rates[lower].tolist(), rates[upper].tolist(), fraction)
+        velocity = _lerp(velocities[lower].tolist(), velocities[upper].tolist(), fraction)
+        quats = self._quats_xyzw
+        attitude = slerp_components(quats[lower].tolist(), quats[upper].tolist(), fraction)
+        return InterpolationStatus.OK, tuple(map(float, attitude)), rate, velocity
+
     def _discard_before(self, horizon_s: float) -> None:
         """Drop samples not needed to answer queries at or after ``horizon_s``: keep the last
         sample at or before the horizon and everything after it."""
@@ -257,53 +318,68 @@ class NavTrack:
         self._end = n_kept
 
 
-# The quaternion arithmetic below is written elementwise, component by component: a sample then
-# gives bit-identical results whether it is interpolated alone (live) or in a batch (offline),
-# and a single sample costs a few microseconds instead of scipy's per-call overhead.
+# The quaternion arithmetic below is written elementwise, component by component, on floats or
+# equally shaped arrays: a sample then gives bit-identical results whether it is interpolated
+# alone (floats, live) or in a batch (arrays, offline), and a single sample costs microseconds.
 
 
 def quaternion_product(a_xyzw: np.ndarray, b_xyzw: np.ndarray) -> np.ndarray:
     """Hamilton products a ⊗ b of (N, 4) xyzw quaternions (rotation b, then a)."""
-    ax, ay, az, aw = a_xyzw[:, 0], a_xyzw[:, 1], a_xyzw[:, 2], a_xyzw[:, 3]
-    bx, by, bz, bw = b_xyzw[:, 0], b_xyzw[:, 1], b_xyzw[:, 2], b_xyzw[:, 3]
-    return np.stack(
-        (
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ),
-        axis=1,
-    )
+    return np.stack(quaternion_multiply(tuple(a_xyzw.T), tuple(b_xyzw.T)), axis=1)
 
 
 def slerp(start_xyzw: np.ndarray, end_xyzw: np.ndarray, fraction: np.ndarray) -> np.ndarray:
-    """Spherical interpolation along the shortest arc between (N, 4) unit xyzw quaternions, at
-    (N,) fractions of the way (0: start, 1: end): start ⊗ exp(fraction · log(start* ⊗ end))."""
-    conjugate_start = start_xyzw * np.array([-1.0, -1.0, -1.0, 1.0])
-    step = quaternion_product(conjugate_start, end_xyzw)
+    """:func:`slerp_components` of (N, 4) unit xyzw quaternions at (N,) fractions."""
+    return np.stack(slerp_components(tuple(start_xyzw.T), tuple(end_xyzw.T), fraction), axis=1)
+
+
+def slerp_components(start_xyzw, end_xyzw, fraction) -> tuple:
+    """Spherical interpolation along the shortest arc between unit quaternions given as
+    (x, y, z, w) components, at ``fraction`` of the way (0: start, 1: end):
+    start ⊗ exp(fraction · log(start* ⊗ end)). Components and fraction are floats or arrays
+    of one shape."""
+    x, y, z, w = start_xyzw
+    step_x, step_y, step_z, step_w = quaternion_multiply((-x, -y, -z, w), end_xyzw)
     # q and −q are the same rotation; the one with w ≥ 0 is the short way round.
-    step = np.where(step[:, 3:4] < 0.0, -step, step)
-    sx, sy, sz, sw = step[:, 0], step[:, 1], step[:, 2], step[:, 3]
-    sin_half_angle = np.sqrt(sx * sx + sy * sy + sz * sz)
-    partial_half_angle = fraction * np.arctan2(sin_half_angle, sw)
+    sign = np.where(step_w < 0.0, -1.0, 1.0)
+    step_x, step_y, step_z, step_w = step_x * sign, step_y * sign, step_z * sign, step_w * sign
+    sin_half_angle = np.sqrt(step_x * step_x + step_y * step_y + step_z * step_z)
+    partial_half_angle = fraction * np.arctan2(sin_half_angle, step_w)
     # sin(f·θ/2) / sin(θ/2) → f as θ → 0; the vector part is zero there anyway.
-    vector_scale = np.divide(
-        np.sin(partial_half_angle),
-        sin_half_angle,
-        out=np.array(fraction, dtype=float),
-        where=sin_half_angle > 0.0,
+    turning = sin_half_angle > 0.0
+    vector_scale = np.where(
+        turning, np.sin(partial_half_angle) / np.where(turning, sin_half_angle, 1.0), fraction
     )
-    partial = np.stack(
-        (sx * vector_scale, sy * vector_scale, sz * vector_scale, np.cos(partial_half_angle)),
-        axis=1,
+    partial = (
+        step_x * vector_scale,
+        step_y * vector_scale,
+        step_z * vector_scale,
+        np.cos(partial_half_angle),
     )
-    return quaternion_product(start_xyzw, partial)
+    return quaternion_multiply(start_xyzw, partial)
 
 
 def rotation_matrices_from_quaternions(quat_xyzw: np.ndarray) -> np.ndarray:
     """(N, 3, 3) rotation matrices of (N, 4) unit xyzw quaternions."""
     return np.stack(rotation_matrix_elements(*quat_xyzw.T), axis=1).reshape(-1, 3, 3)
+
+
+_INVALID_NAV = ((0.0, 0.0, 0.0, 1.0), (math.nan,) * 3, (math.nan,) * 3)
+
+
+def _lerp(start: list[float], end: list[float], fraction: float) -> tuple[float, ...]:
+    return tuple(a + fraction * (b - a) for a, b in zip(start, end, strict=True))
+
+
+def _floats(name: str, values, length: int) -> tuple[float, ...]:
+    """``values`` as a tuple of ``length`` floats; NavTrackError naming ``name`` otherwise."""
+    try:
+        numbers = tuple(map(float, values))
+    except (TypeError, ValueError) as error:
+        raise NavTrackError(f"{name} must be {length} numbers, got {values!r}") from error
+    if len(numbers) != length:
+        raise NavTrackError(f"{name} must be {length} numbers, got {len(numbers)}")
+    return numbers
 
 
 def _validated_arrays(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps):
@@ -336,8 +412,16 @@ def _well_formed(stamps, quats, rates, velocities) -> np.ndarray:
         & np.all(np.isfinite(rates), axis=1)
         & np.all(np.isfinite(velocities), axis=1)
     )
-    return finite & (np.linalg.norm(np.where(finite[:, None], quats, 0.0), axis=1) > 1e-9)
+    return finite & (
+        quaternion_norm(*np.where(finite[:, None], quats, 0.0).T) > _MIN_QUATERNION_NORM
+    )
+
+
+def quaternion_norm(x, y, z, w):
+    """|q| of components (floats or arrays), written out so that one sample and a batch agree
+    bit for bit."""
+    return np.sqrt(x * x + y * y + z * z + w * w)
 
 
 def _normalised(quats: np.ndarray) -> np.ndarray:
-    return quats / np.linalg.norm(quats, axis=1, keepdims=True)
+    return quats / quaternion_norm(*quats.T)[:, None]

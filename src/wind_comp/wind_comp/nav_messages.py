@@ -39,7 +39,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from wind_comp.miller import cross_product
+from wind_comp.miller import cross_components
+from wind_comp.nav_interpolation import quaternion_norm
 from wind_comp.products import WindProduct
 
 ANEMOMETER_FRAME = "anemometer_link"
@@ -146,8 +147,8 @@ class StampOrder:
         return True
 
 
-def _vector(message_vector) -> np.ndarray:
-    return np.array([message_vector.x, message_vector.y, message_vector.z], dtype=float)
+def _vector(message_vector) -> tuple[float, float, float]:
+    return float(message_vector.x), float(message_vector.y), float(message_vector.z)
 
 
 def anemometer_sample(message) -> WindSample:
@@ -225,31 +226,47 @@ def body_to_enu(quat_xyzw, vectors_body) -> np.ndarray:
         quat_xyzw: (N, 4) or (4,) attitude R_nb, scipy order.
         vectors_body: (N, 3) or (3,) vectors in body axes (any unit, kept).
 
-    Elementwise numpy only, so one sample and a batch give bit-identical results.
+    :func:`body_to_enu_components` on the columns.
     """
     quats = np.asarray(quat_xyzw, dtype=float)
     vectors = np.asarray(vectors_body, dtype=float)
-    quats = quats / np.linalg.norm(quats, axis=-1, keepdims=True)
-    axis = quats[..., :3]
-    scalar = quats[..., 3:]
-    twice_cross = 2.0 * cross_product(axis, vectors)
-    return vectors + scalar * twice_cross + cross_product(axis, twice_cross)
+    rotated = body_to_enu_components(
+        tuple(np.moveaxis(quats, -1, 0)), tuple(np.moveaxis(vectors, -1, 0))
+    )
+    return np.stack(np.broadcast_arrays(*rotated), axis=-1)
 
 
-def enu_to_body(quat_xyzw, vectors_enu) -> np.ndarray:
-    """Rotate ENU vectors into body axes (R_nb^T), quaternions as in :func:`body_to_enu`."""
-    conjugate = np.asarray(quat_xyzw, dtype=float) * np.array([-1.0, -1.0, -1.0, 1.0])
-    return body_to_enu(conjugate, vectors_enu)
+def body_to_enu_components(quat_xyzw, vector_body) -> tuple:
+    """R(q)·v of a body→ENU quaternion (x, y, z, w), normalised here, and a body vector
+    (x, y, z), by components: floats or equally shaped arrays, so that one sample (live) and a
+    batch (offline) give bit-identical results."""
+    x, y, z, w = quat_xyzw
+    norm = quaternion_norm(x, y, z, w)
+    axis = (x / norm, y / norm, z / norm)
+    scalar = w / norm
+    twice_cross = tuple(2.0 * component for component in cross_components(axis, vector_body))
+    return tuple(
+        vector + scalar * first + second
+        for vector, first, second in zip(
+            vector_body, twice_cross, cross_components(axis, twice_cross), strict=True
+        )
+    )
 
 
-def odometry_fields(message) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
-    """Stamp and raw vectors of an Odometry, after the frame, finiteness and quaternion checks."""
+def odometry_fields(message) -> tuple[float, tuple, tuple, tuple]:
+    """Stamp (s), attitude quaternion (x, y, z, w), body rate ω_ib and body velocity (tuples of
+    floats) of an Odometry, after the frame, finiteness and quaternion checks."""
     orientation = message.pose.pose.orientation
     return _checked_odometry(
         stamp_s(message.header.stamp),
         message.header.frame_id,
         message.child_frame_id,
-        np.array([orientation.x, orientation.y, orientation.z, orientation.w], dtype=float),
+        (
+            float(orientation.x),
+            float(orientation.y),
+            float(orientation.z),
+            float(orientation.w),
+        ),
         _vector(message.twist.twist.angular),
         _vector(message.twist.twist.linear),
     )
@@ -262,9 +279,9 @@ def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body):
             f"odometry must be of {BODY_FRAME} in {MAP_FRAME}, got "
             f"'{child_frame_id}' in '{frame_id}'",
         )
-    if not all(np.all(np.isfinite(vector)) for vector in (quat, rate, velocity_body)):
+    if not all(math.isfinite(value) for value in (*quat, *rate, *velocity_body)):
         raise MalformedMessageError(REASON_NON_FINITE, "odometry orientation, rate or velocity")
-    if np.linalg.norm(quat) < _MIN_QUATERNION_NORM:
+    if quaternion_norm(*quat) < _MIN_QUATERNION_NORM:
         raise MalformedMessageError(REASON_ZERO_QUATERNION, "odometry orientation has zero length")
     return t_s, quat, rate, velocity_body
 
@@ -280,9 +297,9 @@ def _cdr_string(raw: bytes, position: int) -> tuple[str, int]:
     return raw[start : start + length - 1].decode(), start + length
 
 
-def odometry_fields_cdr(raw: bytes) -> tuple[float, np.ndarray, np.ndarray, np.ndarray] | None:
-    """Stamp (s), attitude quaternion, body rate ω_ib and body velocity of a ``nav/odometry``
-    message straight from its CDR bytes, checked as :func:`odometry_sample` checks them (raises
+def odometry_fields_cdr(raw: bytes) -> tuple[float, tuple, tuple, tuple] | None:
+    """:func:`odometry_fields` of a ``nav/odometry`` message straight from its CDR bytes,
+    checked as :func:`odometry_fields` checks them (raises
     :class:`MalformedMessageError`). None for bytes this reader does not handle (big-endian,
     short): decode the message instead."""
     if raw[:2] != _CDR_LITTLE_ENDIAN:
@@ -300,9 +317,9 @@ def odometry_fields_cdr(raw: bytes) -> tuple[float, np.ndarray, np.ndarray, np.n
         sec + nanosec * 1e-9,
         frame_id,
         child_frame_id,
-        np.array(pose[3:7]),
-        np.array(twist[3:6]),
-        np.array(twist[0:3]),
+        pose[3:7],
+        twist[3:6],
+        twist[0:3],
     )
 
 
@@ -335,8 +352,10 @@ def odometry_sample(message) -> NavSample:
 def nav_sample(t_s: float, quat_xyzw, angular_rate_body_rad_s, velocity_body_mps) -> NavSample:
     """A :class:`NavSample` of checked odometry fields (stamp s, attitude, body rate ω_ib,
     body-frame velocity m/s), the velocity rotated into ENU with the attitude."""
-    velocity_enu = body_to_enu(quat_xyzw[None, :], velocity_body_mps[None, :])[0]
-    return NavSample(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu)
+    velocity_enu = body_to_enu_components(quat_xyzw, velocity_body_mps)
+    return NavSample(
+        t_s, np.array(quat_xyzw), np.array(angular_rate_body_rad_s), np.array(velocity_enu)
+    )
 
 
 def odometry_arrays(messages: Iterable) -> tuple[NavArrays, dict[str, int]]:
@@ -402,13 +421,32 @@ def remove_earth_rate(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> np.nd
     Returns ω_nb, body axes, rad/s, shaped like ``angular_rate_body_rad_s``.
     """
     rates = np.asarray(angular_rate_body_rad_s, dtype=float)
-    latitude_rad = np.radians(np.asarray(latitude_deg, dtype=float))
-    earth_rate_enu = EARTH_RATE_RAD_S * np.stack(
-        [np.zeros_like(latitude_rad), np.cos(latitude_rad), np.sin(latitude_rad)], axis=-1
+    quats = np.asarray(quat_xyzw, dtype=float)
+    level_rates = rate_relative_to_level_components(
+        tuple(np.moveaxis(rates, -1, 0)),
+        tuple(np.moveaxis(quats, -1, 0)),
+        np.asarray(latitude_deg, dtype=float),
     )
-    earth_rate_body = enu_to_body(quat_xyzw, earth_rate_enu)
-    known = np.isfinite(latitude_rad)[..., None]
-    return np.where(known, rates - np.where(known, earth_rate_body, 0.0), rates)
+    return np.stack(np.broadcast_arrays(*level_rates), axis=-1)
+
+
+def rate_relative_to_level_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> tuple:
+    """:func:`remove_earth_rate` by components: rate (x, y, z) rad/s, quaternion (x, y, z, w),
+    latitude deg; floats or equally shaped arrays, so that one sample (live) and a batch
+    (offline) give bit-identical results."""
+    latitude_rad = np.radians(latitude_deg)
+    earth_rate_enu = (
+        0.0,
+        EARTH_RATE_RAD_S * np.cos(latitude_rad),
+        EARTH_RATE_RAD_S * np.sin(latitude_rad),
+    )
+    x, y, z, w = quat_xyzw
+    earth_rate_body = body_to_enu_components((-x, -y, -z, w), earth_rate_enu)
+    known = np.isfinite(latitude_rad)
+    return tuple(
+        np.where(known, rate - np.where(known, earth, 0.0), rate)
+        for rate, earth in zip(angular_rate_body_rad_s, earth_rate_body, strict=True)
+    )
 
 
 def window_label(window_s: float) -> str:
