@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from buoy_nav.rotations import quaternion_multiply
 from wind_comp.nav_interpolation import (
     InterpolationStatus,
     NavTrack,
     NavTrackError,
-    quaternion_product,
     rotation_matrices_from_quaternions,
     slerp,
     slerp_components,
@@ -264,7 +264,9 @@ def test_quaternion_arithmetic_agrees_with_scipy_and_is_the_same_alone_or_in_a_b
         Rotation.from_quat(blended).as_matrix(),
         atol=1e-15,
     )
-    product = quaternion_product(start.as_quat(), end.as_quat())
+    product = np.stack(
+        quaternion_multiply(tuple(start.as_quat().T), tuple(end.as_quat().T)), axis=1
+    )
     np.testing.assert_allclose(
         Rotation.from_quat(product).as_matrix(), (start * end).as_matrix(), atol=1e-15
     )

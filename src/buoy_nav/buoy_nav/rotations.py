@@ -40,7 +40,9 @@ def cross(a, b) -> np.ndarray:
 
 
 def quaternion_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
-    """Hamilton product ``a ⊗ b`` of two (x, y, z, w) quaternions; ``R(a ⊗ b) = R(a) R(b)``."""
+    """Hamilton product ``a ⊗ b`` of two (x, y, z, w) quaternions; ``R(a ⊗ b) = R(a) R(b)``.
+
+    The components may also be equally shaped arrays (a batch, elementwise)."""
     ax, ay, az, aw = a
     bx, by, bz, bw = b
     return (

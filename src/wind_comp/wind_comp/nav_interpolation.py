@@ -62,8 +62,8 @@ class InterpolatedNav(NamedTuple):
 
 
 _INITIAL_CAPACITY = 256
-# Quaternions shorter than this cannot be normalised into an attitude.
-_MIN_QUATERNION_NORM = 1e-9
+MIN_QUATERNION_NORM = 1e-9
+"""Quaternions shorter than this cannot be normalised into an attitude."""
 
 
 class NavTrack:
@@ -148,7 +148,7 @@ class NavTrack:
         if not (
             math.isfinite(stamp)
             and all(math.isfinite(value) for value in (*quat, *rate, *velocity))
-            and norm > _MIN_QUATERNION_NORM
+            and norm > MIN_QUATERNION_NORM
         ):
             self.n_rejected_invalid += 1
             return False
@@ -323,11 +323,6 @@ class NavTrack:
 # alone (floats, live) or in a batch (arrays, offline), and a single sample costs microseconds.
 
 
-def quaternion_product(a_xyzw: np.ndarray, b_xyzw: np.ndarray) -> np.ndarray:
-    """Hamilton products a ⊗ b of (N, 4) xyzw quaternions (rotation b, then a)."""
-    return np.stack(quaternion_multiply(tuple(a_xyzw.T), tuple(b_xyzw.T)), axis=1)
-
-
 def slerp(start_xyzw: np.ndarray, end_xyzw: np.ndarray, fraction: np.ndarray) -> np.ndarray:
     """:func:`slerp_components` of (N, 4) unit xyzw quaternions at (N,) fractions."""
     return np.stack(slerp_components(tuple(start_xyzw.T), tuple(end_xyzw.T), fraction), axis=1)
@@ -413,7 +408,7 @@ def _well_formed(stamps, quats, rates, velocities) -> np.ndarray:
         & np.all(np.isfinite(velocities), axis=1)
     )
     return finite & (
-        quaternion_norm(*np.where(finite[:, None], quats, 0.0).T) > _MIN_QUATERNION_NORM
+        quaternion_norm(*np.where(finite[:, None], quats, 0.0).T) > MIN_QUATERNION_NORM
     )
 
 

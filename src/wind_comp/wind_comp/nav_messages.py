@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 from wind_comp.miller import cross_components
-from wind_comp.nav_interpolation import quaternion_norm
+from wind_comp.nav_interpolation import MIN_QUATERNION_NORM, quaternion_norm
 from wind_comp.products import WindProduct
 
 ANEMOMETER_FRAME = "anemometer_link"
@@ -52,8 +52,6 @@ EARTH_RATE_RAD_S = 7.292115e-5
 
 NANOSECONDS_PER_SECOND = 1_000_000_000
 
-# Quaternions shorter than this cannot be normalised into an attitude.
-_MIN_QUATERNION_NORM = 1e-9
 
 REASON_NON_FINITE = "non-finite value"
 REASON_ZERO_QUATERNION = "zero quaternion"
@@ -281,7 +279,7 @@ def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body):
         )
     if not all(math.isfinite(value) for value in (*quat, *rate, *velocity_body)):
         raise MalformedMessageError(REASON_NON_FINITE, "odometry orientation, rate or velocity")
-    if quaternion_norm(*quat) < _MIN_QUATERNION_NORM:
+    if quaternion_norm(*quat) < MIN_QUATERNION_NORM:
         raise MalformedMessageError(REASON_ZERO_QUATERNION, "odometry orientation has zero length")
     return t_s, quat, rate, velocity_body
 
