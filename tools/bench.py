@@ -174,7 +174,7 @@ QUICK_DURATION_S = {
 }
 SPEED_DURATION_S = {"full": 3600.0, "quick": 600.0}
 LIVE_DURATION_S = {"full": 40.0, "quick": 20.0}
-CONSISTENCY_SEEDS = {"full": range(2, 52), "quick": range(2, 12)}
+CONSISTENCY_SEEDS = {"full": range(2, 202), "quick": range(2, 12)}
 CONSISTENCY_DURATION_S = 75.0
 CONSISTENCY_CHECKPOINTS_S = (30.0, 50.0, 70.0)
 

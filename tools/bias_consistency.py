@@ -10,7 +10,7 @@ For a consistent filter the mean of z² is 1 and the mean NEES 3; the filter sti
 default IMU noise, which this IMU does not have, so somewhat less is expected. The table gives
 the two-sided 95 % chi-square bounds of the means over the seeds.
 
-    python tools/bias_consistency.py [--seeds 2-51] [--duration-s 75] [--checkpoints 30 50 70]
+    python tools/bias_consistency.py [--seeds 2-201] [--duration-s 75] [--checkpoints 30 50 70]
 """
 
 from __future__ import annotations
@@ -180,8 +180,8 @@ def main(argv=None) -> None:
     parser.add_argument(
         "--seeds",
         type=seed_range,
-        default=seed_range("2-51"),
-        help="seeds to run, A-B or A (default 2-51)",
+        default=seed_range("2-201"),
+        help="seeds to run, A-B or A (default 2-201)",
     )
     parser.add_argument(
         "--duration-s", type=float, default=75.0, help="length of each run, s (default 75)"
