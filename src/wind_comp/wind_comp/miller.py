@@ -14,7 +14,8 @@ true wind in the world frame:
 - B: anemometer measurement centre in the body frame, m.
 - V_b: ENU velocity of the body origin, m/s.
 
-The same vectorised code corrects one sample or a whole recording.
+One component-wise routine, :func:`miller_components`, corrects one sample (floats, live) or a
+whole recording (arrays, offline), with bit-identical results.
 """
 
 from dataclasses import dataclass
