@@ -46,6 +46,7 @@ from typing import NamedTuple
 import numpy as np
 
 from buoy_nav.engine import FusionEngine, NavSolution
+from buoy_nav.rotations import rotation_matrix_elements
 
 IMU_TOPIC = "imu/data_raw"
 FIX_TOPIC = "gnss/fix"
@@ -333,7 +334,7 @@ def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavVal
     t_s = solution.t_s
     sec, nanosec = stamp_parts(t_s) if stamps is None else stamps.exact(t_s)
     x, y, z, w = solution.attitude_xyzw.tolist()
-    rotation_elements = _rotation_elements(x, y, z, w)
+    rotation_elements = rotation_matrix_elements(x, y, z, w)
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_elements
     rotation_nb = np.array(rotation_elements).reshape(3, 3)
     velocity_covariance = solution.velocity_covariance_m2s2
@@ -390,21 +391,6 @@ def _set_vector(target, values) -> None:
 
 def _set_quaternion(target, values) -> None:
     target.x, target.y, target.z, target.w = values
-
-
-def _rotation_elements(x: float, y: float, z: float, w: float) -> tuple[float, ...]:
-    """Row-major 9-tuple of the rotation matrix of a unit (x, y, z, w) quaternion."""
-    return (
-        1 - 2 * (y * y + z * z),
-        2 * (x * y - w * z),
-        2 * (x * z + w * y),
-        2 * (x * y + w * z),
-        1 - 2 * (x * x + z * z),
-        2 * (y * z - w * x),
-        2 * (x * z - w * y),
-        2 * (y * z + w * x),
-        1 - 2 * (x * x + y * y),
-    )
 
 
 def solution_messages(
