@@ -197,6 +197,15 @@ def test_stacked_update_equals_sequential_updates():
     np.testing.assert_allclose(stacked.covariance, sequential.covariance, rtol=1e-8, atol=1e-10)
 
 
+@pytest.mark.parametrize("probability", [0.95, 0.99, 0.9999])
+def test_gate_threshold_is_the_chi_square_quantile_for_each_dimension(probability):
+    kalman = ErrorStateFilter(np.eye(STATE_DIM), probability)
+    for dimension in range(1, 7):
+        assert kalman.gate_threshold(dimension) == pytest.approx(
+            chi2.ppf(probability, dimension), rel=1e-12
+        )
+
+
 def test_gate_uses_the_chi_square_quantile_and_rejects_an_outlier():
     prior = np.eye(STATE_DIM) * 1e-2
     h = np.zeros((3, STATE_DIM))

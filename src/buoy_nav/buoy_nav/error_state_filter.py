@@ -67,7 +67,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import lapack
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from buoy_nav import earth
 from buoy_nav.config import FusionConfig
@@ -297,7 +297,10 @@ class ErrorStateFilter:
     def gate_threshold(self, dimension: int) -> float:
         """Chi-square quantile of :attr:`gate_probability` with ``dimension`` degrees of freedom."""
         if dimension not in self._thresholds:
-            self._thresholds[dimension] = float(chi2.ppf(self.gate_probability, dimension))
+            # The chi-square quantile as scipy.stats.chi2.ppf computes it, without the half
+            # second that importing scipy.stats adds to the start of every node and tool.
+            quantile = 2.0 * gammaincinv(0.5 * dimension, self.gate_probability)
+            self._thresholds[dimension] = float(quantile)
         return self._thresholds[dimension]
 
     def propagate(self, transition: np.ndarray, process_noise: np.ndarray):
