@@ -448,3 +448,26 @@ def test_background_writer_reports_errors_of_the_writing_process(tmp_path):
     assert not (tmp_path / "types" / "metadata.yaml").exists()
     with pytest.raises(BagError, match="already exists"):
         BackgroundBagWriter(tmp_path / "types")
+
+
+def test_background_writer_that_cannot_create_its_bag_says_so(tmp_path):
+    # The writing process creates the bag while the tool goes on: its failure surfaces at the
+    # next hand-over or, as here, when the bag is closed; no message is taken for written.
+    (tmp_path / "a_file").write_text("not a directory")
+    path = tmp_path / "a_file" / "bag"
+    with (
+        pytest.raises(BagError, match=f"bag {path}: cannot create"),
+        BackgroundBagWriter(path) as writer,
+    ):
+        writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS, Imu())
+    assert writer.closed
+
+
+@pytest.mark.parametrize("messages", [0, 3, 5000])
+def test_background_writer_keeps_what_it_is_given_while_its_process_starts(tmp_path, messages):
+    path = tmp_path / "kept"
+    with BackgroundBagWriter(path) as writer:
+        for k in range(messages):
+            writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS + k, Imu())
+    with BagReader(path) as reader:
+        assert [m.log_time_ns for m in reader.messages()] == [T0_NS + k for k in range(messages)]

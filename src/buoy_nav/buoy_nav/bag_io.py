@@ -755,6 +755,24 @@ class _BagOutput:
             )
 
 
+def _make_room_for_bag(path: Path, overwrite: bool) -> None:
+    """Make sure nothing is at ``path`` for a new bag: refuse if something is there, unless
+    ``overwrite``, and even then delete it only if it is a bag, never an arbitrary directory."""
+    if not (path.exists() or path.is_symlink()):
+        return
+    if not overwrite:
+        raise BagError(f"bag {path} already exists; refusing to overwrite it")
+    if not path.is_dir() or path.is_symlink():
+        raise BagError(f"bag {path} exists and is not a bag directory; not removing it")
+    unexpected = [p.name for p in path.iterdir() if p.name != METADATA_FILE and p.suffix != ".mcap"]
+    if unexpected:
+        raise BagError(
+            f"bag {path} exists and holds more than a bag ({', '.join(unexpected)}); "
+            "not removing it"
+        )
+    shutil.rmtree(path)
+
+
 class BagWriter(_BagOutput):
     """Write a rosbag2 bag (version 9, MCAP, zstd chunks); a context manager.
 
@@ -766,10 +784,7 @@ class BagWriter(_BagOutput):
 
     def __init__(self, path: str | Path, overwrite: bool = False, compress: bool = True):
         self.path = Path(path)
-        if self.path.exists() or self.path.is_symlink():
-            if not overwrite:
-                raise BagError(f"bag {self.path} already exists; refusing to overwrite it")
-            self._remove_existing_bag()
+        _make_room_for_bag(self.path, overwrite)
         self._typestore = jazzy_typestore()
         self._channels: dict[str, _Channel] = {}
         self._mcap_name = f"{self.path.name}.mcap"
@@ -778,20 +793,6 @@ class BagWriter(_BagOutput):
             self._file: _McapFile | None = _McapFile(self.path / self._mcap_name, compress)
         except OSError as error:
             raise BagError(f"bag {self.path}: cannot create: {_one_line(error)}") from error
-
-    def _remove_existing_bag(self) -> None:
-        """Delete what is at ``path`` only if it is a bag: never an arbitrary directory."""
-        if not self.path.is_dir() or self.path.is_symlink():
-            raise BagError(f"bag {self.path} exists and is not a bag directory; not removing it")
-        unexpected = [
-            p.name for p in self.path.iterdir() if p.name != METADATA_FILE and p.suffix != ".mcap"
-        ]
-        if unexpected:
-            raise BagError(
-                f"bag {self.path} exists and holds more than a bag ({', '.join(unexpected)}); "
-                "not removing it"
-            )
-        shutil.rmtree(self.path)
 
     @property
     def counts(self) -> dict[str, int]:
@@ -944,7 +945,9 @@ class BackgroundBagWriter(_BagOutput):
     Same interface and bag as :class:`BagWriter`. Messages are handed over in batches through a
     pipe; an error of the writing process (a full disk, a type conflict) is raised as BagError
     at the next hand-over or at :meth:`close`. Leaving the ``with`` block by an exception aborts
-    the bag, as :class:`BagWriter` does.
+    the bag, as :class:`BagWriter` does. What is at ``path`` is checked (and with ``overwrite``
+    removed) at construction; the tool does not wait for the writing process to start (about a
+    second of imports) but keeps the first batches until it is ready.
 
     ``tap`` = (factory, arguments) puts more of the work in the writing process: it builds
     ``factory(bag_writer, *arguments)`` there, an object with a set ``topics``,
@@ -963,22 +966,24 @@ class BackgroundBagWriter(_BagOutput):
     ):
         self.path = Path(path)
         self.tap_result = None
+        _make_room_for_bag(self.path, overwrite)
         self._typestore = jazzy_typestore()
         self._counts: Counter[str] = Counter()
         self._batch: list[tuple[str, str, int, bytes]] = []
+        self._waiting_batches: list[list[tuple[str, str, int, bytes]]] = []
+        self._writer_ready = False
         # Spawned, not forked: the tools may run inside processes with middleware threads.
         context = multiprocessing.get_context("spawn")
         self._connection, child_end = context.Pipe()
         self._process = context.Process(
             target=_write_bag_from_pipe,
-            args=(child_end, str(self.path), overwrite, compress, tap),
+            args=(child_end, str(self.path), compress, tap),
             name=f"bag writer {self.path.name}",
             daemon=True,
         )
         self._process.start()
         child_end.close()
         self._open = True
-        self._raise_if_failed(self._receive())
 
     @property
     def counts(self) -> dict[str, int]:
@@ -1012,7 +1017,7 @@ class BackgroundBagWriter(_BagOutput):
         """Finish the bag (index and metadata.yaml) and wait for the writing process."""
         if not self._open:
             return
-        self._send_batch()
+        self._send_batch(wait_for_writer=True)
         self.tap_result, counts = self._finish("close")
         self._counts = Counter(counts)
 
@@ -1021,23 +1026,34 @@ class BackgroundBagWriter(_BagOutput):
         raises: it runs while an error is already on its way."""
         if self._open:
             self._batch.clear()
+            self._waiting_batches.clear()
             with contextlib.suppress(BagError):
                 self._finish("abort")
 
-    def _send_batch(self) -> None:
-        if not self._batch:
-            return
-        batch, self._batch = self._batch, []
+    def _send_batch(self, wait_for_writer: bool = False) -> None:
+        """Hand the batch over, or keep it while the writing process is still starting (unless
+        ``wait_for_writer``)."""
+        if self._batch:
+            self._waiting_batches.append(self._batch)
+            self._batch = []
+        if not self._writer_ready:
+            if not (wait_for_writer or self._connection.poll()):
+                return
+            self._await_writer()
         try:
-            self._connection.send(batch)
+            for batch in self._waiting_batches:
+                self._connection.send(batch)
         except (BrokenPipeError, ConnectionResetError, EOFError):
             self._open = False
             self._raise_if_failed(self._receive())
             raise BagError(f"bag {self.path}: the writing process stopped") from None
+        self._waiting_batches.clear()
 
     def _finish(self, command: str):
         """Send ``command``; the result the writing process reports."""
         self._open = False
+        if not self._writer_ready:
+            self._await_writer()
         try:
             self._connection.send(command)
             reply = self._receive()
@@ -1050,6 +1066,17 @@ class BackgroundBagWriter(_BagOutput):
             self._connection.close()
         self._raise_if_failed(reply)
         return reply[1:]
+
+    def _await_writer(self) -> None:
+        """Wait for the writing process to report that it has created the bag; raise its
+        error if it could not."""
+        reply = self._receive()
+        if reply[0] == "error":
+            self._open = False
+            self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
+            self._connection.close()
+            raise BagError(reply[1])
+        self._writer_ready = True
 
     def _receive(self):
         try:
@@ -1067,11 +1094,11 @@ class BackgroundBagWriter(_BagOutput):
 _WRITER_EXIT_TIMEOUT_S = 60.0
 
 
-def _write_bag_from_pipe(connection, path: str, overwrite: bool, compress: bool, tap) -> None:
+def _write_bag_from_pipe(connection, path: str, compress: bool, tap) -> None:
     """The writing process: a BagWriter fed batches of records until "close" or "abort"; an
     empty topic marks the end of the input (see :meth:`BackgroundBagWriter.end_of_input`)."""
     try:
-        writer = BagWriter(path, overwrite=overwrite, compress=compress)
+        writer = BagWriter(path, compress=compress)
     except BagError as error:
         connection.send(("error", str(error)))
         return
