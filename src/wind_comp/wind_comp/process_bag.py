@@ -301,10 +301,10 @@ def process_bag(
             for index, message in enumerate(reader.messages(topics)):
                 log_time_ns = message.log_time_ns
                 topic = relative_of.get(message.topic)
-                if topic is not None:
+                if topic is None:
+                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                else:
                     fusion.add_message(reader, topic, message)
-                    continue
-                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
                     progress.update((log_time_ns - reader.start_ns) * 1e-9)
             fusion.finish()
