@@ -149,6 +149,8 @@ SEA_MEAN_WINDOW_S = 600.0
 # not reported as a mean.
 MIN_MEAN_WINDOW_COVERAGE_S = 60.0
 SPEED_TARGET_REAL_TIME = 100.0
+# Runs of each tool in the speed table.
+SPEED_RUNS = 2
 STAMP_MATCH_NS = 1000
 
 # ---------------------------------------------------------------------------------------------
@@ -841,32 +843,41 @@ def run_cases(cases: list[Case], bag_of: dict[str, Path]) -> dict[str, dict]:
 
 
 def run_speed(in_bag: Path) -> dict:
-    """fuse_bag and process_bag on the long bag, one after the other, nothing else running."""
+    """fuse_bag and process_bag on the long bag, SPEED_RUNS times each, alternating, nothing else
+    running in the bench. The figure of a tool is its fastest run: on a shared machine the
+    other runs measure the neighbours as much as the code (all runs are kept in the results)."""
     out = RUNS_DIR / "speed"
     out.mkdir(parents=True, exist_ok=True)
     # Other work on the machine slows this down; the load average says how much there was.
     load_before = os.getloadavg()[0]
-    log("bench: speed: fuse_bag on the long bag")
-    _, _, fuse_wall_s, duration_s = fuse_bag(
-        str(in_bag), str(out / "fused"), fusion_config_from_files(PROCESSING_PARAMS), True
-    )
-    log("bench: speed: process_bag on the long bag")
-    summary = process_bag(
-        str(in_bag),
-        str(out / "processed"),
-        fusion_config_from_files(PROCESSING_PARAMS),
-        compensator_config_from_files(PROCESSING_PARAMS),
-        overwrite=True,
-    )
+    walls: dict[str, list[float]] = {"fuse_bag": [], "process_bag": []}
+    duration_s = math.nan
+    for run in range(1, SPEED_RUNS + 1):
+        # The bags the bench just wrote would otherwise be flushed to disk during the timing.
+        os.sync()
+        log(f"bench: speed: fuse_bag on the long bag, run {run} of {SPEED_RUNS}")
+        _, _, fuse_wall_s, duration_s = fuse_bag(
+            str(in_bag), str(out / "fused"), fusion_config_from_files(PROCESSING_PARAMS), True
+        )
+        walls["fuse_bag"].append(fuse_wall_s)
+        os.sync()
+        log(f"bench: speed: process_bag on the long bag, run {run} of {SPEED_RUNS}")
+        summary = process_bag(
+            str(in_bag),
+            str(out / "processed"),
+            fusion_config_from_files(PROCESSING_PARAMS),
+            compensator_config_from_files(PROCESSING_PARAMS),
+            overwrite=True,
+        )
+        walls["process_bag"].append(summary.wall_s)
     steps = {}
-    for name, wall_s, data_s in (
-        ("fuse_bag", fuse_wall_s, duration_s),
-        ("process_bag", summary.wall_s, summary.duration_s),
-    ):
-        multiple = data_s / wall_s
+    for name, runs_wall_s in walls.items():
+        multiple = duration_s / min(runs_wall_s)
         steps[name] = {
-            "data_s": data_s,
-            "wall_s": wall_s,
+            "data_s": duration_s,
+            "wall_s": min(runs_wall_s),
+            "runs_wall_s": runs_wall_s,
+            "runs_real_time_multiple": [duration_s / wall for wall in runs_wall_s],
             "real_time_multiple": multiple,
             "pass": bool(multiple >= SPEED_TARGET_REAL_TIME),
         }
@@ -1138,12 +1149,16 @@ def print_speed(result: dict, quick: bool) -> None:
     )
     if quick:
         print(f"  (--quick: {SPEED_DURATION_S['quick']:g} s of data instead of one hour)")
-    print(f"  {'step':12s} {'data s':>8s} {'wall s':>8s} {'× real time':>12s}  target ≥ 100×")
+    print(
+        f"  {'step':12s} {'data s':>8s} {'wall s':>8s} {'× real time':>12s}  target ≥ 100×   "
+        "× real time of each run (the best counts)"
+    )
     for name in ("fuse_bag", "process_bag"):
         s = result[name]
+        runs = " / ".join(f"{multiple:.1f}" for multiple in s["runs_real_time_multiple"])
         print(
             f"  {name:12s} {s['data_s']:8.0f} {s['wall_s']:8.1f} "
-            f"{s['real_time_multiple']:12.1f}  {mark(s['pass'])}"
+            f"{s['real_time_multiple']:12.1f}  {mark(s['pass']):14s} {runs}"
         )
 
 
