@@ -26,7 +26,6 @@ from wind_comp.nav_messages import (
     odometry_arrays,
     odometry_fields,
     odometry_fields_cdr,
-    odometry_sample,
     product_messages,
     rate_relative_to_level_components,
     remove_earth_rate,
@@ -76,12 +75,14 @@ def test_odometry_velocity_is_rotated_into_enu_like_scipy():
     attitude = Rotation.from_euler("ZYX", [0.7, -0.2, 0.3])
     velocity_body = np.array([1.5, -0.4, 0.2])
     scale = 3.0  # unnormalised quaternions are normalised, not used as given
-    sample = odometry_sample(
+    t_s, quat, rate, velocity = odometry_fields(
         odometry(scale * attitude.as_quat(), [0.01, 0.02, 0.03], velocity_body, 5, 250_000_000)
     )
-    assert sample.t_s == 5.25
-    np.testing.assert_allclose(sample.velocity_enu_mps, attitude.apply(velocity_body), atol=1e-14)
-    np.testing.assert_array_equal(sample.angular_rate_body_rad_s, [0.01, 0.02, 0.03])
+    assert t_s == 5.25
+    np.testing.assert_allclose(
+        body_to_enu_components(quat, velocity), attitude.apply(velocity_body), atol=1e-14
+    )
+    np.testing.assert_array_equal(rate, [0.01, 0.02, 0.03])
 
 
 def test_batch_conversion_equals_single_messages_bitwise():
@@ -92,10 +93,14 @@ def test_batch_conversion_equals_single_messages_bitwise():
     ]
     arrays, rejected = odometry_arrays(messages)
     assert rejected == {}
-    singles = [odometry_sample(m) for m in messages]
-    np.testing.assert_array_equal(arrays.velocity_enu_mps, [s.velocity_enu_mps for s in singles])
-    np.testing.assert_array_equal(arrays.quat_xyzw, [s.quat_xyzw for s in singles])
-    np.testing.assert_array_equal(arrays.t_s, [s.t_s for s in singles])
+    # One message at a time as compensation_node takes them, from message objects and from CDR.
+    singles = [odometry_fields(m) for m in messages]
+    assert [odometry_fields_cdr(serialize_message(m)) for m in messages] == singles
+    np.testing.assert_array_equal(
+        arrays.velocity_enu_mps, [body_to_enu_components(q, v) for _, q, _, v in singles]
+    )
+    np.testing.assert_array_equal(arrays.quat_xyzw, [q for _, q, _, _ in singles])
+    np.testing.assert_array_equal(arrays.t_s, [t for t, _, _, _ in singles])
 
 
 @pytest.mark.parametrize(
@@ -116,7 +121,7 @@ def test_malformed_odometry_is_rejected_with_its_reason(change, reason):
     message = odometry([0, 0, 0, 1], [0, 0, 0], [0, 0, 0])
     change(message)
     with pytest.raises(MalformedMessageError) as raised:
-        odometry_sample(message)
+        odometry_fields(message)
     assert raised.value.reason == reason
     good = odometry([0, 0, 0, 1], [0, 0, 0], [1, 0, 0])
     arrays, rejected = odometry_arrays([good, message, good])

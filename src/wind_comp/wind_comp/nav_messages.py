@@ -99,19 +99,6 @@ class WindSample(NamedTuple):
     """Reason the message was rejected (its output is then invalid), None when accepted."""
 
 
-class NavSample(NamedTuple):
-    """One navigation sample as the compensator takes it."""
-
-    t_s: float
-    """Header stamp, s since the epoch."""
-    quat_xyzw: np.ndarray
-    """(4,) body→ENU attitude as received (not normalised)."""
-    angular_rate_body_rad_s: np.ndarray
-    """(3,) body rate as received (ω_ib, body axes), rad/s."""
-    velocity_enu_mps: np.ndarray
-    """(3,) ENU velocity of the body origin, m/s."""
-
-
 class NavArrays(NamedTuple):
     """Navigation samples of a recording, in message order; (M,), (M, 4), (M, 3), (M, 3)."""
 
@@ -338,28 +325,10 @@ def fix_fields_cdr(raw: bytes) -> tuple[int, float] | None:
     return status, latitude
 
 
-def odometry_sample(message) -> NavSample:
-    """``nav/odometry`` as a :class:`NavSample`; raises :class:`MalformedMessageError`.
-
-    The body-frame linear velocity of the Odometry twist is rotated into ENU with the message's
-    own attitude.
-    """
-    return nav_sample(*odometry_fields(message))
-
-
-def nav_sample(t_s: float, quat_xyzw, angular_rate_body_rad_s, velocity_body_mps) -> NavSample:
-    """A :class:`NavSample` of checked odometry fields (stamp s, attitude, body rate ω_ib,
-    body-frame velocity m/s), the velocity rotated into ENU with the attitude."""
-    velocity_enu = body_to_enu_components(quat_xyzw, velocity_body_mps)
-    return NavSample(
-        t_s, np.array(quat_xyzw), np.array(angular_rate_body_rad_s), np.array(velocity_enu)
-    )
-
-
 def odometry_arrays(messages: Iterable) -> tuple[NavArrays, dict[str, int]]:
-    """Whole-recording :func:`odometry_sample`: arrays of the accepted messages, in order, and
-    the number of rejected messages per reason. Stamp order is left to the navigation track,
-    which rejects non-increasing stamps exactly as it does live."""
+    """Whole-recording :func:`odometry_fields` with the velocity rotated into ENU: arrays of the
+    accepted messages, in order, and the number of rejected messages per reason. Stamp order is
+    left to the navigation track, which rejects non-increasing stamps exactly as it does live."""
     stamps, quats, rates, velocities_body = [], [], [], []
     rejected: dict[str, int] = {}
     for message in messages:
