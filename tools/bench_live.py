@@ -275,7 +275,9 @@ def run_live(duration_s: float, log_dir: Path, passthrough: bool = False) -> dic
 def _run_live(
     duration_s: float, log_dir: Path, environment: dict, domain: int, passthrough: bool
 ) -> dict:
-    # Latency is only as good as the machine is idle: other work on it shows up here.
+    # Latency is only as good as the machine is idle: other work on it shows up here, the
+    # flushing of bags written just before too.
+    os.sync()
     load_before = os.getloadavg()[0]
     log_dir.mkdir(parents=True, exist_ok=True)
     command = [
