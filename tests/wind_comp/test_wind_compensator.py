@@ -223,20 +223,7 @@ def test_config_errors_name_the_field(overrides, field):
         CompensatorConfig(**values)
 
 
-def test_config_from_mapping():
-    cfg = CompensatorConfig.from_mapping(
-        {"anemometer_position_body_m": [0, 0, 3], "anemometer_rpy_deg": [0, 0, 0]}
-    )
+def test_config_takes_lists_and_keeps_the_wmo_windows_by_default():
+    cfg = CompensatorConfig(anemometer_position_body_m=[0, 0, 3], anemometer_rpy_deg=[0, 0, 0])
     assert cfg.anemometer_position_body_m == (0.0, 0.0, 3.0)
     assert cfg.product_windows_s == (60.0, 600.0)
-    with pytest.raises(ConfigError, match=r"wind\.yaml.*max_gap_s"):
-        CompensatorConfig.from_mapping(
-            {
-                "anemometer_position_body_m": [0, 0, 3],
-                "anemometer_rpy_deg": [0, 0, 0],
-                "max_gap_s": 0.2,
-            },
-            source="wind.yaml",
-        )
-    with pytest.raises(ConfigError, match="anemometer_rpy_deg"):
-        CompensatorConfig.from_mapping({"anemometer_position_body_m": [0, 0, 3]})

@@ -8,7 +8,6 @@ filter can be tuned to a sensor by copying its data sheet (or the simulator's se
 
 import dataclasses
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 NAN = float("nan")
@@ -143,17 +142,6 @@ class FusionConfig:
             value = getattr(self, field.name)
             object.__setattr__(self, field.name, _coerce(field.name, field.type, value))
         self._validate()
-
-    @classmethod
-    def from_mapping(cls, values: Mapping) -> "FusionConfig":
-        """Build from a mapping of field name → value; unknown names raise :class:`ConfigError`."""
-        if not isinstance(values, Mapping):
-            raise ConfigError(f"configuration must be a mapping, got {type(values).__name__}")
-        known = {field.name for field in dataclasses.fields(cls)}
-        unknown = sorted(str(key) for key in values if key not in known)
-        if unknown:
-            raise ConfigError(f"unknown configuration field(s): {', '.join(unknown)}")
-        return cls(**dict(values))
 
     def _validate(self):
         for name in ("primary_antenna_body_m", "secondary_antenna_body_m"):

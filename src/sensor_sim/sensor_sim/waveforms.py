@@ -88,13 +88,6 @@ class RampProfile:
         starts = start_s + np.concatenate([[0.0], np.cumsum(durations)[:-1]])
         return cls(starts, values[:-1], travels, corners, plateaus, float(rate))
 
-    @property
-    def end_time_s(self) -> float:
-        """Time (s) at which the last ramp has arrived (holds after it not included)."""
-        if self.travels.size == 0:
-            return float("-inf")
-        return float(self.start_times_s[-1] + self.corners_s[-1] * 2 + self.plateaus_s[-1])
-
     def evaluate(self, t_s: ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Value, first and second time derivative at times t_s (s); each shaped like t_s."""
         t = np.asarray(t_s, dtype=float)

@@ -13,8 +13,7 @@ sample lagging the navigation by more than ``nav_history_s``.
 
 import math
 from collections import deque
-from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
@@ -87,23 +86,6 @@ class CompensatorConfig:
                 f"gust_window_s ({self.gust_window_s}) must be shorter than every product window "
                 f"{windows}"
             )
-
-    @classmethod
-    def from_mapping(cls, values: Mapping[str, object], source: str = "configuration"):
-        """Build from a mapping of field names to values (e.g. a YAML section).
-
-        Unknown or missing keys raise :class:`ConfigError` naming the key and ``source``.
-        """
-        known = {field.name for field in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ConfigError(f"{source}: unknown key(s) {unknown}; known keys are {sorted(known)}")
-        try:
-            return cls(**values)
-        except TypeError as error:
-            raise ConfigError(f"{source}: {error}") from error
-        except ConfigError as error:
-            raise ConfigError(f"{source}: {error}") from error
 
 
 def _finite_tuple(name: str, value, length: int | None) -> tuple[float, ...]:
@@ -215,20 +197,6 @@ class CorrectedWindBatch:
     def counts(self) -> dict[WindStatus, int]:
         """Number of samples per status."""
         return {status: int(np.count_nonzero(self.status == status)) for status in WindStatus}
-
-    def to_list(self) -> list[CorrectedWind]:
-        return [
-            CorrectedWind(
-                float(self.t_s[i]),
-                WindStatus(int(self.status[i])),
-                self.true_wind_enu_mps[i],
-                self.tilt_term_enu_mps[i],
-                self.rotation_term_enu_mps[i],
-                self.translation_term_enu_mps[i],
-                self.wind_sensor_mps[i],
-            )
-            for i in range(len(self))
-        ]
 
 
 def _screen_wind(
