@@ -43,6 +43,8 @@ DATA_QOS = QoSProfile(
 )
 
 REJECTION_LOG_PERIOD_S = 5.0
+# Longest wait of the spin loop for an event before it checks whether to stop (s).
+SPIN_TIMEOUT_S = 0.1
 # Bound on the wait, at shutdown, for subscribers to acknowledge the last published messages.
 FLUSH_ACK_TIMEOUT_S = 2.0
 
@@ -59,6 +61,12 @@ class SuiteNode(Node):
         self.finished = False
         self.exit_code = 0
         self.rejections: Counter[str] = Counter()
+        # Monotonic time (s) at which the spin loop calls run_deferred_work; None: nothing due.
+        self.deferred_work_due_s: float | None = None
+
+    def run_deferred_work(self) -> None:
+        """Work a callback put off (see :func:`run_node`); clears ``deferred_work_due_s``."""
+        self.deferred_work_due_s = None
 
     def finish(self, exit_code: int = 0) -> None:
         """Leave the spin loop after the current callback."""
@@ -241,7 +249,16 @@ def run_node(node_factory: Callable[[], SuiteNode], args: list[str] | None = Non
         node = node_factory()
         executor.add_node(node)
         while rclpy.ok() and not node.finished:
-            executor.spin_once(timeout_sec=0.1)
+            due_s = node.deferred_work_due_s
+            if due_s is None:
+                executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+                continue
+            wait_s = due_s - time.monotonic()
+            if wait_s > 0.0:
+                executor.spin_once(timeout_sec=min(wait_s, SPIN_TIMEOUT_S))
+            due_s = node.deferred_work_due_s  # a callback may have run it meanwhile
+            if due_s is not None and time.monotonic() >= due_s:
+                node.run_deferred_work()
         return node.exit_code
     except StartupError as error:
         print(f"{program}: {error}", file=sys.stderr)

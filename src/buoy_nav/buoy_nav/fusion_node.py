@@ -19,10 +19,11 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``)
 - ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
   superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps,
-  input rates per topic, solutions published and the wall-clock processing time of the IMU
-  callback (from its start to the end of the filtering after its publishing), mean and max over
-  the period. Level
-  warn while not aligned, while a GNSS kind is coasting or when no IMU sample came in the period.
+  input rates per topic, solutions published, and in wall-clock time the IMU callback up to its
+  solution's publishing (``latency_*``) and the filtering after it (``filtering_*``), mean and
+  max over the period, and how often that filtering was still undone when the next IMU sample
+  came (``filtering_overdue``, a sign of an overloaded machine). Level warn while not aligned,
+  while a GNSS kind is coasting or when no IMU sample came in the period.
 
 Messages are converted and fed to :class:`buoy_nav.engine.FusionEngine` by
 :mod:`buoy_nav.fusion_messages`, the code the offline ``fuse_bag`` uses, so a bag replayed to
@@ -30,7 +31,13 @@ this node gives the solutions ``fuse_bag`` writes. Only header stamps drive the 
 clock serves the diagnostics alone. With ``fusion.realtime_output`` (default) each IMU sample's
 solution is published by the callback that receives it, before the filter updates and covariance
 propagation that sample makes due; otherwise solutions leave
-``fusion.max_measurement_delay_s`` of stamps late.
+``fusion.max_measurement_delay_s`` of stamps late. That filtering, and the feeding of the GNSS
+messages received meanwhile, runs ``FILTERING_DELAY_S`` (at most half an IMU interval) after
+the publishing, so that the nodes taking the solution (``compensation_node`` above all, whose
+wind samples share the GNSS epochs) get the cores first; a GNSS message is converted only then
+(or at the next diagnostics report when no IMU sample comes), since the engine needs it only
+``max_measurement_delay_s`` later. The solutions do not depend on this timing: they depend on
+the stamps alone.
 
 Parameters: ``gnss.primary_antenna``, ``gnss.secondary_antenna`` (double[3], m, in
 ``base_link``) and ``origin.latitude_deg``, ``origin.longitude_deg``, ``origin.altitude_m``
@@ -77,6 +84,7 @@ from buoy_nav.fusion_messages import (
     NAV_IMU_TOPIC,
     NAV_VELOCITY_TOPIC,
     ODOMETRY_TOPIC,
+    REASON_MALFORMED,
     VELOCITY_TOPIC,
     StampBook,
     feed_imu_cdr,
@@ -99,6 +107,11 @@ INPUT_CLASSES = {
     BASELINE_TOPIC: Vector3Stamped,
 }
 DIAGNOSTICS_PERIOD_S = 1.0
+# How long after publishing a solution the node feeds the GNSS messages and lets the filter
+# catch up (s): long enough for the nodes and recorders that take the solution to run first;
+# at most half the interval between IMU samples, so that it is done before the next one, whose
+# prediction needs it.
+FILTERING_DELAY_S = 0.003
 # Bound on the wait, at shutdown, for subscribers to acknowledge the last solutions.
 
 
@@ -112,6 +125,10 @@ class FusionNode(FlushingNode):
         self._messages_in_at_last_report = collections.Counter()
         self._last_report_s = time.monotonic()
         self._imu_callback_durations_s: list[float] = []
+        self._filtering_durations_s: list[float] = []
+        self._previous_imu_callback_s = -math.inf
+        self.filtering_overdue = 0
+        self._gnss_waiting: list[tuple[str, bytes]] = []
         self.solutions_published = 0
         self.input_topics = [
             topic
@@ -124,14 +141,16 @@ class FusionNode(FlushingNode):
             for topic, message_class in OUTPUT_CLASSES.items()
         }
         # Raw: the IMU sample is read straight from its CDR bytes, as offline, and saves the
-        # building of a message object at 100 Hz.
+        # building of a message object at 100 Hz; GNSS messages are decoded when their turn
+        # comes (see the module docstring).
         self.create_subscription(Imu, IMU_TOPIC, self.on_imu, DATA_QOS, raw=True)
         for topic in self.input_topics[1:]:
             self.create_subscription(
                 INPUT_CLASSES[topic],
                 topic,
-                lambda message, topic=topic: self.feed(topic, message),
+                lambda raw, topic=topic: self._gnss_waiting.append((topic, raw)),
                 DATA_QOS,
+                raw=True,
             )
         self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
         config = self.config
@@ -162,14 +181,44 @@ class FusionNode(FlushingNode):
 
     def on_imu(self, raw: bytes) -> None:
         started_s = time.perf_counter()
+        now_s = time.monotonic()
+        interval_s, self._previous_imu_callback_s = now_s - self._previous_imu_callback_s, now_s
         self._messages_in[IMU_TOPIC] += 1
         fed = feed_imu_cdr(self.engine, raw, self.stamps)
         if fed is None:
-            fed = feed_message(self.engine, IMU_TOPIC, deserialize_message(raw, Imu), self.stamps)
+            message = _decoded(raw, Imu)
+            if message is None:
+                self.reject(IMU_TOPIC, REASON_MALFORMED)
+                return
+            fed = feed_message(self.engine, IMU_TOPIC, message, self.stamps)
         self._take(IMU_TOPIC, fed)
-        # The solution is out: now the filtering this sample made due.
-        self.engine.catch_up()
+        # The solution is out. The GNSS messages that came in and the filtering this sample made
+        # due wait a little, so that the nodes that take this solution run first.
+        if self.deferred_work_due_s is None:
+            self.deferred_work_due_s = now_s + min(FILTERING_DELAY_S, 0.5 * interval_s)
+        else:
+            # The previous sample's filtering did not get its turn before this sample came.
+            self.filtering_overdue += 1
+            self.run_deferred_work()
         self._imu_callback_durations_s.append(time.perf_counter() - started_s)
+
+    def run_deferred_work(self) -> None:
+        started_s = time.perf_counter()
+        super().run_deferred_work()
+        self.feed_waiting_gnss()
+        self.engine.catch_up()
+        self._filtering_durations_s.append(time.perf_counter() - started_s)
+
+    def feed_waiting_gnss(self) -> None:
+        """Give the GNSS messages received since the last IMU sample to the engine."""
+        waiting, self._gnss_waiting = self._gnss_waiting, []
+        for topic, raw in waiting:
+            message = _decoded(raw, INPUT_CLASSES[topic])
+            if message is None:
+                self._messages_in[topic] += 1
+                self.reject(topic, REASON_MALFORMED)
+                continue
+            self.feed(topic, message)
 
     def feed(self, topic: str, message) -> None:
         """Give a sensor message to the engine; publish the solutions it yields."""
@@ -194,18 +243,21 @@ class FusionNode(FlushingNode):
 
     def flush_held_back(self) -> list:
         """End of input: publish the solutions the engine still holds."""
+        self.feed_waiting_gnss()
         self.publish_solutions(self.engine.flush())
         return list(self._nav_publishers.values())
 
     # -- diagnostics ------------------------------------------------------------------------
 
     def report(self):
+        self.feed_waiting_gnss()
         now_s = time.monotonic()
         period_s = max(now_s - self._last_report_s, 1e-9)
         new = self._messages_in - self._messages_in_at_last_report
         self._messages_in_at_last_report = collections.Counter(self._messages_in)
         self._last_report_s = now_s
         durations, self._imu_callback_durations_s = self._imu_callback_durations_s, []
+        filtering, self._filtering_durations_s = self._filtering_durations_s, []
 
         health = self.engine.health()
         values = {
@@ -241,6 +293,9 @@ class FusionNode(FlushingNode):
                 "solutions_published": self.solutions_published,
                 "latency_mean_s": sum(durations) / len(durations) if durations else math.nan,
                 "latency_max_s": max(durations) if durations else math.nan,
+                "filtering_mean_s": sum(filtering) / len(filtering) if filtering else math.nan,
+                "filtering_max_s": max(filtering) if filtering else math.nan,
+                "filtering_overdue": self.filtering_overdue,
             }
         )
 
@@ -260,6 +315,14 @@ class FusionNode(FlushingNode):
         if coasting:
             return "warn", f"aligned, coasting without GNSS {', '.join(coasting)}", values
         return "ok", f"aligned, {self.solutions_published} solutions published", values
+
+
+def _decoded(raw: bytes, message_class):
+    """The message of CDR bytes ``raw``, None when they are not one."""
+    try:
+        return deserialize_message(raw, message_class)
+    except RuntimeError:  # rclpy's RMWError: the bytes are not a message of this type
+        return None
 
 
 main = main_for(FusionNode)
