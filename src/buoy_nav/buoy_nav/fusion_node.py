@@ -112,7 +112,6 @@ DIAGNOSTICS_PERIOD_S = 1.0
 # at most half the interval between IMU samples, so that it is done before the next one, whose
 # prediction needs it.
 FILTERING_DELAY_S = 0.003
-# Bound on the wait, at shutdown, for subscribers to acknowledge the last solutions.
 
 
 class FusionNode(FlushingNode):
