@@ -281,6 +281,23 @@ def test_live_solutions_equal_offline_fusion(nodes, sensor_stream):
         if kind != fusion_engine.IMU:
             assert final[f"{kind}.used_for_alignment"] == str(counters.used_for_alignment), kind
     assert final["rejected_total"] == "0"
+    # The filter's uncertainty and bias estimates, in the documented units, are those of the
+    # offline engine fed the same messages.
+    covariance, state = engine.covariance, engine.nav_state
+    for k, axis in enumerate(("east", "north", "up")):
+        assert float(final[f"attitude_sigma_deg[{axis}]"]) == pytest.approx(
+            math.degrees(math.sqrt(covariance[k, k])), rel=1e-5
+        )
+        assert float(final[f"velocity_sigma_mps[{axis}]"]) == pytest.approx(
+            math.sqrt(covariance[3 + k, 3 + k]), rel=1e-5
+        )
+    for k, axis in enumerate("xyz"):
+        assert float(final[f"gyro_bias_deg_s[{axis}]"]) == pytest.approx(
+            math.degrees(state.gyro_bias_rad_s[k]), rel=1e-5
+        )
+        assert float(final[f"accel_bias_mg[{axis}]"]) == pytest.approx(
+            state.accel_bias_mps2[k] / 9.80665e-3, rel=1e-5
+        )
     # Wall-clock times per diagnostics period: the IMU callback up to its publishing
     # ("latency") and the filtering after it.
     maxima = {"latency": [], "filtering": []}

@@ -18,12 +18,15 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``nav/velocity`` (geometry_msgs/TwistWithCovarianceStamped, ``map``)
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``)
 - ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
-  superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps,
-  input rates per topic, solutions published, and in wall-clock time the IMU callback up to its
-  solution's publishing (``latency_*``) and the filtering after it (``filtering_*``), mean and
-  max over the period, and how often that filtering was still undone when the next IMU sample
-  came (``filtering_overdue``, a sign of an overloaded machine). Level warn while not aligned,
-  while a GNSS kind is coasting or when no IMU sample came in the period.
+  superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps;
+  once aligned the filter's 1σ of attitude (``attitude_sigma_deg[east|north|up]``) and velocity
+  (``velocity_sigma_mps[...]``) and its bias estimates (``gyro_bias_deg_s[x|y|z]``,
+  ``accel_bias_mg[x|y|z]``); input rates per topic, solutions published, and in wall-clock time
+  the IMU callback up to its solution's publishing (``latency_*``) and the filtering after it
+  (``filtering_*``), mean and max over the period, and how often that filtering was still undone
+  when the next IMU sample came (``filtering_overdue``, a sign of an overloaded machine). Level
+  warn while not aligned, while a GNSS kind is coasting or when no IMU sample came in the
+  period.
 
 Messages are converted and fed to :class:`buoy_nav.engine.FusionEngine` by
 :mod:`buoy_nav.fusion_messages`, the code the offline ``fuse_bag`` uses, so a bag replayed to
@@ -75,6 +78,7 @@ from buoy_nav.config import (
     FusionConfig,
 )
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
+from buoy_nav.error_state_filter import STANDARD_GRAVITY_MPS2
 from buoy_nav.fusion_messages import (
     BASELINE_TOPIC,
     FIX_TOPIC,
@@ -284,6 +288,7 @@ class FusionNode(FlushingNode):
                 "processed_up_to_s": f"{health.time_s:.6f}",
             }
         )
+        values.update(self._filter_estimates())
         for topic in self.input_topics:
             values[f"messages_in[{topic}]"] = self._messages_in[topic]
             values[f"rate_hz[{topic}]"] = new[topic] / period_s
@@ -314,6 +319,25 @@ class FusionNode(FlushingNode):
         if coasting:
             return "warn", f"aligned, coasting without GNSS {', '.join(coasting)}", values
         return "ok", f"aligned, {self.solutions_published} solutions published", values
+
+    def _filter_estimates(self) -> dict[str, float]:
+        """The filter's 1σ of attitude (ENU error angles, deg) and velocity (ENU, m/s) and its
+        IMU bias estimates (body; gyro deg/s, accelerometer mg, the units of the parameters):
+        whether the attitude is good enough yet, and whether the sensor is sane."""
+        covariance, state = self.engine.covariance, self.engine.nav_state
+        if covariance is None or state is None:
+            return {}
+        variances = covariance.diagonal()
+        estimates = {}
+        for k, axis in enumerate(("east", "north", "up")):
+            estimates[f"attitude_sigma_deg[{axis}]"] = math.degrees(math.sqrt(variances[k]))
+            estimates[f"velocity_sigma_mps[{axis}]"] = math.sqrt(variances[3 + k])
+        for k, axis in enumerate("xyz"):
+            estimates[f"gyro_bias_deg_s[{axis}]"] = math.degrees(state.gyro_bias_rad_s[k])
+            estimates[f"accel_bias_mg[{axis}]"] = (
+                1e3 * float(state.accel_bias_mps2[k]) / STANDARD_GRAVITY_MPS2
+            )
+        return estimates
 
 
 def _decoded(raw: bytes, message_class):
