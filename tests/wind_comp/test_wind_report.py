@@ -17,10 +17,12 @@ from wind_comp.products import WindAverager
 from wind_comp.report import (
     ReportData,
     ReportDataError,
+    attitude_errors_deg,
     load_report_data,
     main,
     report_data_from_bag,
     rpy_rad_from_quaternions,
+    rpy_sigma_rad,
     save_report_data,
     write_report,
 )
@@ -53,6 +55,7 @@ def sample_data(with_truth: bool) -> ReportData:
         attitude_t_s=t_s,
         nav_rpy_rad=nav_rpy,
         truth_rpy_rad=truth_rpy if with_truth else None,
+        nav_rpy_sigma_rad=np.full_like(nav_rpy, np.radians(0.2)),
         products=products,
         title="test run",
     )
@@ -94,6 +97,7 @@ def test_report_data_round_trip_and_command_line(tmp_path, capsys):
     loaded = load_report_data(saved)
     np.testing.assert_array_equal(loaded.corrected_wind_enu_mps, data.corrected_wind_enu_mps)
     np.testing.assert_array_equal(loaded.truth_rpy_rad, data.truth_rpy_rad)
+    np.testing.assert_array_equal(loaded.nav_rpy_sigma_rad, data.nav_rpy_sigma_rad)
     assert loaded.products == data.products
     assert loaded.title == "test run"
     assert main([str(saved), "--out", str(tmp_path / "out")]) == 0
@@ -102,11 +106,9 @@ def test_report_data_round_trip_and_command_line(tmp_path, capsys):
 
 
 def test_heading_error_is_wrapped_and_clockwise():
-    from wind_comp.report import _attitude_errors_deg
-
     truth = np.radians([[0.0, 0.0, 179.0], [0.0, 0.0, 10.0]])
     estimate = np.radians([[1.0, -2.0, -179.0], [0.0, 0.0, 12.0]])
-    errors = _attitude_errors_deg(estimate, truth)
+    errors = attitude_errors_deg(estimate, truth)
     # Yaw grows counter-clockwise, heading clockwise: +2° of yaw is -2° of heading.
     np.testing.assert_allclose(errors, [[1.0, -2.0, -2.0], [0.0, 0.0, -2.0]], atol=1e-12)
 
@@ -115,6 +117,41 @@ def test_euler_angles_from_quaternions_follow_the_zyx_convention():
     roll, pitch, yaw = 0.1, -0.2, 2.5
     quat = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat()
     np.testing.assert_allclose(rpy_rad_from_quaternions([quat]), [[roll, pitch, yaw]])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_euler_sigma_follows_the_euler_change_of_a_small_enu_rotation(seed):
+    # A rotation error along ENU axis k alone (covariance e_k e_kᵀ) moves the Euler angles by
+    # column k of their Jacobian: its 1σ must be that column's magnitude, found here by turning
+    # the attitude by a small angle about that axis.
+    rng = np.random.default_rng(seed)
+    attitude = Rotation.from_euler("ZYX", rng.uniform([-np.pi, -1.2, -np.pi], [np.pi, 1.2, np.pi]))
+    rpy = rpy_rad_from_quaternions([attitude.as_quat()])
+    step_rad = 1e-7
+    for k in range(3):
+        turned = Rotation.from_rotvec(step_rad * np.eye(3)[k]) * attitude
+        change = rpy_rad_from_quaternions([turned.as_quat()]) - rpy
+        change = (change + np.pi) % (2 * np.pi) - np.pi
+        covariance = np.outer(np.eye(3)[k], np.eye(3)[k])[None]
+        np.testing.assert_allclose(
+            rpy_sigma_rad(rpy, covariance), np.abs(change) / step_rad, rtol=1e-5, atol=1e-6
+        )
+
+
+def test_euler_sigma_of_a_full_covariance_matches_sampled_errors():
+    rng = np.random.default_rng(7)
+    attitude = Rotation.from_euler("ZYX", [2.0, 0.4, -0.3])
+    rpy = rpy_rad_from_quaternions([attitude.as_quat()])
+    factor = rng.normal(scale=1e-3, size=(3, 3))
+    covariance = factor @ factor.T
+    samples = rng.multivariate_normal(np.zeros(3), covariance, size=20_000)
+    turned = Rotation.from_rotvec(samples) * attitude
+    errors = rpy_rad_from_quaternions(turned.as_quat()) - rpy
+    errors = (errors + np.pi) % (2 * np.pi) - np.pi
+    # 20 000 samples estimate a standard deviation to about 0.5 % (1σ).
+    np.testing.assert_allclose(
+        rpy_sigma_rad(rpy, covariance[None])[0], errors.std(axis=0), rtol=0.03
+    )
 
 
 def test_inconsistent_report_data_raises():
@@ -230,6 +267,14 @@ def test_report_of_a_processed_bag(sea_state_bags, tmp_path, capsys):
     # The motion correction removes most of the buoy's motion from w.
     _, measured_w_rms, _ = table_row(markdown, "measured (sensor axes)", "w (m/s)")
     assert rms[2] < 0.2 * measured_w_rms
+
+    # The attitude errors stay inside the filter's own ±3σ but for rare moments once the
+    # filter has converged (a consistent filter: ~0.3 % outside for Gaussian errors).
+    errors_deg = np.abs(attitude_errors_deg(data.nav_rpy_rad, data.truth_rpy_rad))
+    bound_deg = 3.0 * np.degrees(data.nav_rpy_sigma_rad)
+    settled = data.attitude_t_s >= data.attitude_t_s[0] + 20.0
+    outside = np.mean(errors_deg[settled] > bound_deg[settled], axis=0)
+    assert np.all(outside < 0.05), f"share outside ±3σ (roll, pitch, heading): {outside}"
 
     # The published products are read back as process_bag computed them (the gust window is
     # not published).

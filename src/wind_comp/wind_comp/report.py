@@ -3,7 +3,8 @@
 :func:`write_report` draws, from plain arrays:
 - ``wind_time_series.png``: horizontal speed, direction and vertical wind over time, measured
   (sensor axes, uncorrected), corrected and true (when known);
-- ``attitude_error.png`` (only with truth): roll, pitch and heading error of the navigation;
+- ``attitude_error.png`` (only with truth): roll, pitch and heading error of the navigation,
+  within the filter's own ±3σ when the navigation carries its covariance;
 - ``vertical_wind_spectrum.png``: Welch power spectra of the vertical wind before and after
   correction (and of the truth);
 - ``wind_products.md``: the averaged wind products and, with truth, the error statistics.
@@ -67,6 +68,8 @@ class ReportData:
         attitude_t_s: (M,) stamps of the attitude series, s, or None.
         nav_rpy_rad: (M, 3) estimated roll, pitch, yaw (R = Rz(yaw)·Ry(pitch)·Rx(roll)), rad.
         truth_rpy_rad: (M, 3) true roll, pitch, yaw at ``attitude_t_s``, rad, or None.
+        nav_rpy_sigma_rad: (M, 3) the filter's 1σ of the estimated roll, pitch and yaw, rad, or
+            None (see :func:`rpy_sigma_rad`).
         products: averaged wind products.
         title: figure title prefix, e.g. the scenario name.
         time_origin_s: stamp (s) that the time axes of the figures count from.
@@ -80,6 +83,7 @@ class ReportData:
     attitude_t_s: np.ndarray | None = None
     nav_rpy_rad: np.ndarray | None = None
     truth_rpy_rad: np.ndarray | None = None
+    nav_rpy_sigma_rad: np.ndarray | None = None
     products: list[WindProduct] = field(default_factory=list)
     title: str = ""
     time_origin_s: float = 0.0
@@ -96,12 +100,13 @@ class ReportData:
             )
         if (self.nav_rpy_rad is None) != (self.attitude_t_s is None):
             raise ReportDataError("attitude_t_s and nav_rpy_rad must be given together")
-        if self.truth_rpy_rad is not None and self.nav_rpy_rad is None:
-            raise ReportDataError("truth_rpy_rad needs attitude_t_s and nav_rpy_rad")
+        for name in ("truth_rpy_rad", "nav_rpy_sigma_rad"):
+            if getattr(self, name) is not None and self.nav_rpy_rad is None:
+                raise ReportDataError(f"{name} needs attitude_t_s and nav_rpy_rad")
         if self.attitude_t_s is not None:
             self.attitude_t_s = _array("attitude_t_s", self.attitude_t_s, (None,))
             n_attitudes = self.attitude_t_s.shape[0]
-            for name in ("nav_rpy_rad", "truth_rpy_rad"):
+            for name in ("nav_rpy_rad", "truth_rpy_rad", "nav_rpy_sigma_rad"):
                 if getattr(self, name) is not None:
                     setattr(self, name, _array(name, getattr(self, name), (n_attitudes, 3)))
 
@@ -175,19 +180,32 @@ def _plot_wind_time_series(data: ReportData, path: Path) -> Path:
 
 
 def _plot_attitude_error(data: ReportData, path: Path) -> Path:
-    errors_deg = _attitude_errors_deg(data.nav_rpy_rad, data.truth_rpy_rad)
+    errors_deg = attitude_errors_deg(data.nav_rpy_rad, data.truth_rpy_rad)
+    t_s = data.attitude_t_s - data.time_origin_s
     figure = Figure(figsize=(10, 7))
     axes = figure.subplots(3, 1, sharex=True)
-    for axis, label, error in zip(axes, ("roll", "pitch", "heading"), errors_deg.T, strict=True):
-        axis.plot(data.attitude_t_s - data.time_origin_s, error, color="tab:red")
+    for k, (axis, label) in enumerate(zip(axes, ("roll", "pitch", "heading"), strict=True)):
+        if data.nav_rpy_sigma_rad is not None:
+            # A consistent filter keeps its error inside this band but for rare moments.
+            bound_deg = 3.0 * np.degrees(data.nav_rpy_sigma_rad[:, k])
+            axis.fill_between(
+                t_s, -bound_deg, bound_deg, color="0.85", linewidth=0, label="filter ±3σ"
+            )
+        axis.plot(t_s, errors_deg[:, k], color="tab:red", label="estimate − truth")
+        if data.nav_rpy_sigma_rad is not None:
+            # Scaled to the error: the band of the first seconds after alignment is far wider.
+            largest_deg = np.nanmax(np.abs(errors_deg[:, k]), initial=0.0)
+            axis.set_ylim(-1.2 * largest_deg - 1e-3, 1.2 * largest_deg + 1e-3)
         axis.set_ylabel(f"{label} error (deg)")
         axis.grid(alpha=0.3)
+    if data.nav_rpy_sigma_rad is not None:
+        axes[0].legend(loc="upper right")
     axes[-1].set_xlabel(_time_label(data))
     axes[0].set_title(_title(data, "attitude error (estimate − truth)"))
     return _save(figure, path)
 
 
-def _attitude_errors_deg(nav_rpy_rad: np.ndarray, truth_rpy_rad: np.ndarray) -> np.ndarray:
+def attitude_errors_deg(nav_rpy_rad: np.ndarray, truth_rpy_rad: np.ndarray) -> np.ndarray:
     """(M, 3) roll, pitch and heading errors, deg, wrapped to [-180, 180).
 
     Heading is measured clockwise from North, so its error is the negated yaw error.
@@ -336,6 +354,7 @@ _ARRAY_FIELDS = (
     "attitude_t_s",
     "nav_rpy_rad",
     "truth_rpy_rad",
+    "nav_rpy_sigma_rad",
 )
 _PRODUCT_PREFIX = "product_"
 
@@ -444,16 +463,48 @@ def stamped_vectors(reader: BagReader, topic: str) -> StampedVectors:
     )
 
 
-def stamped_orientations(reader: BagReader, topic: str) -> tuple[np.ndarray, np.ndarray]:
-    """(M,) int64 header stamps (ns) and (M, 4) body→ENU quaternions (x, y, z, w) of an
-    ``Odometry`` topic."""
-    stamps, quats = [], []
+def stamped_orientations(
+    reader: BagReader, topic: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M,) int64 header stamps (ns), (M, 4) body→ENU quaternions (x, y, z, w) and (M, 3, 3)
+    attitude covariances (the pose covariance's rotation block: the ENU rotation-vector error,
+    rad²) of an ``Odometry`` topic."""
+    stamps, quats, covariances = [], [], []
     for message in reader.messages([topic]):
         decoded = reader.decode(message)
         orientation = decoded.pose.pose.orientation
         stamps.append(_stamp_ns(decoded.header))
         quats.append((orientation.x, orientation.y, orientation.z, orientation.w))
-    return np.array(stamps, dtype=np.int64), np.array(quats, dtype=float).reshape(-1, 4)
+        covariances.append(np.reshape(decoded.pose.covariance, (6, 6))[3:, 3:])
+    return (
+        np.array(stamps, dtype=np.int64),
+        np.array(quats, dtype=float).reshape(-1, 4),
+        np.array(covariances, dtype=float).reshape(-1, 3, 3),
+    )
+
+
+def rpy_sigma_rad(rpy_rad, attitude_covariance_enu_rad2) -> np.ndarray:
+    """(M, 3) 1σ (rad) of roll, pitch and yaw (R = Rz(yaw)·Ry(pitch)·Rx(roll)) at attitudes
+    ``rpy_rad`` (M, 3) whose error is the ENU rotation vector φ (R_true = Exp(φ)·R) with
+    covariance ``attitude_covariance_enu_rad2`` (M, 3, 3).
+
+    To first order the Euler errors are J·φ with J the inverse of the map from Euler increments
+    to the rotation they make in ENU, [Rz·Ry·x̂ | Rz·ŷ | ẑ]; their covariance is J·P·Jᵀ.
+    """
+    _, pitch, yaw = np.moveaxis(np.asarray(rpy_rad, dtype=float), -1, 0)
+    cos_yaw, sin_yaw, cos_pitch = np.cos(yaw), np.sin(yaw), np.cos(pitch)
+    zeros, ones = np.zeros_like(yaw), np.ones_like(yaw)
+    jacobian = np.stack(
+        [
+            np.stack([cos_yaw / cos_pitch, sin_yaw / cos_pitch, zeros], axis=-1),
+            np.stack([-sin_yaw, cos_yaw, zeros], axis=-1),
+            np.stack([cos_yaw * np.tan(pitch), sin_yaw * np.tan(pitch), ones], axis=-1),
+        ],
+        axis=-2,
+    )
+    covariance = jacobian @ np.asarray(attitude_covariance_enu_rad2, dtype=float)
+    variances = np.einsum("...ij,...ij->...i", covariance, jacobian)
+    return np.sqrt(np.maximum(variances, 0.0))
 
 
 def vectors_at_stamps(stamps_ns: np.ndarray, source: StampedVectors) -> np.ndarray:
@@ -545,15 +596,15 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
         true_wind = interpolate_vectors(
             measured.stamps_ns, stamped_vectors(reader, TRUE_WIND_TOPIC)
         )
-    attitude_t_s = nav_rpy = truth_rpy = None
+    attitude_t_s = nav_rpy = truth_rpy = nav_rpy_sigma = None
     if _has_messages(reader, NAV_ODOMETRY_TOPIC):
-        nav_stamps_ns, nav_quats = stamped_orientations(reader, NAV_ODOMETRY_TOPIC)
+        nav_stamps_ns, nav_quats, nav_covariances = stamped_orientations(reader, NAV_ODOMETRY_TOPIC)
         attitude_t_s = nav_stamps_ns / NANOSECONDS_PER_SECOND
         nav_rpy = rpy_rad_from_quaternions(nav_quats)
+        nav_rpy_sigma = rpy_sigma_rad(nav_rpy, nav_covariances)
         if _has_messages(reader, TRUE_ODOMETRY_TOPIC):
-            truth_rpy = interpolate_rpy_rad(
-                nav_stamps_ns, *stamped_orientations(reader, TRUE_ODOMETRY_TOPIC)
-            )
+            truth_stamps_ns, truth_quats, _ = stamped_orientations(reader, TRUE_ODOMETRY_TOPIC)
+            truth_rpy = interpolate_rpy_rad(nav_stamps_ns, truth_stamps_ns, truth_quats)
     products, products_source = _products(reader, t_s, corrected)
     minute_ns = _TIME_ORIGIN_STEP_S * NANOSECONDS_PER_SECOND
     return ReportData(
@@ -564,6 +615,7 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
         attitude_t_s=attitude_t_s,
         nav_rpy_rad=nav_rpy,
         truth_rpy_rad=truth_rpy,
+        nav_rpy_sigma_rad=nav_rpy_sigma,
         products=products,
         title=title,
         time_origin_s=float(measured.stamps_ns[0] // minute_ns * _TIME_ORIGIN_STEP_S),
