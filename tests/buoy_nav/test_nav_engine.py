@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 from buoy_nav import earth
 from buoy_nav.alignment import AlignmentState
 from buoy_nav.config import ConfigError, FusionConfig
-from buoy_nav.engine import FusionEngine
+from buoy_nav.engine import MAX_MEASUREMENT_LEAD_S, FusionEngine
 
 LATITUDE_DEG, LONGITUDE_DEG, ALTITUDE_M = 38.9, 117.7, 0.0
 LATITUDE = math.radians(LATITUDE_DEG)
@@ -347,6 +347,24 @@ def test_imu_gap_restarts_the_alignment():
     assert health.alignments == 2
     stamps = np.array([s.t_s for s in solutions])
     assert not np.any((stamps > 20.0) & (stamps < 30.9))  # re-levelling after the gap
+    assert attitude_errors_rad(buoy, solutions).max() < math.radians(0.02)
+
+
+def test_an_imu_outage_keeps_only_the_last_seconds_of_measurements_and_realigns():
+    buoy = RockingBuoy()
+    events = [e for e in make_events(buoy, 90.0) if not (e[2] == "imu" and 20.0 < e[0] < 70.0)]
+    engine, solutions = run(events)
+    health = engine.health()
+    assert health.imu_gaps == 1 and health.alignments == 2
+    # Of the 10 Hz measurements stamped during the 50 s outage, those more than
+    # MAX_MEASUREMENT_LEAD_S older than the newest were given up; the rest fed the realignment.
+    outage_epochs = 499  # 20.1 s to 69.9 s
+    lead_epochs = round(MAX_MEASUREMENT_LEAD_S * 10)
+    for kind in ("gnss_fix", "gnss_velocity", "gnss_heading"):
+        given_up = health.counters[kind].rejected.get("beyond_imu_data", 0)
+        assert outage_epochs - lead_epochs - 1 <= given_up <= outage_epochs - lead_epochs + 1
+    stamps = np.array([s.t_s for s in solutions])
+    assert stamps.max() > 85.0
     assert attitude_errors_rad(buoy, solutions).max() < math.radians(0.02)
 
 

@@ -39,7 +39,9 @@ batching is exact to first order, see :mod:`buoy_nav.error_state_filter`); the c
 
 Invalid input (non-finite values, absurd magnitudes, non-positive variances, IMU stamps not
 increasing, duplicated measurement stamps, measurements older than what was already processed)
-is rejected and counted by kind and reason; it never reaches the state.
+is rejected and counted by kind and reason; it never reaches the state. Measurements more than
+``MAX_MEASUREMENT_LEAD_S`` ahead of the newest IMU sample (an IMU outage) are given up as
+``beyond_imu_data``, oldest first, so an outage cannot fill the memory.
 """
 
 import heapq
@@ -113,6 +115,12 @@ DISABLED = "disabled"
 # A measured baseline whose length differs from the configured antenna separation by more than
 # this fraction is a wrong configuration or a wrong fix, not a measurement.
 _MAX_BASELINE_LENGTH_ERROR_FRACTION = 0.5
+
+# How far measurements may run ahead of the newest IMU sample (s of stamps). More can only be an
+# IMU outage (or GNSS before the IMU starts): the filter could use them only for the alignment
+# that follows, which needs the last seconds alone, and keeping them all would let an outage
+# fill the memory and, when the IMU returns, stall the node on the backlog.
+MAX_MEASUREMENT_LEAD_S = 10.0
 
 # Longest run of carried-over corrections before the real-time prediction is forked afresh from
 # the filter (s of stamps): bounds the second-order residue of the carry-over (≪ 1e-6 rad).
@@ -539,6 +547,23 @@ class FusionEngine:
         stamps.add(t)
         self._sequence += 1
         heapq.heappush(self._measurements, (t, _KIND_ORDER[kind], self._sequence, kind, payload))
+        if t - self._latest_imu_stamp > MAX_MEASUREMENT_LEAD_S:
+            self._give_up_measurements_before(t - MAX_MEASUREMENT_LEAD_S)
+
+    def _give_up_measurements_before(self, t: float):
+        """Reject the buffered measurements ahead of the IMU data and stamped before ``t``;
+        those the IMU data already covers stay for the filter."""
+        latest_imu = self._latest_imu_stamp
+        kept = []
+        for entry in self._measurements:
+            stamp, _, _, kind, _ = entry
+            if latest_imu < stamp < t:
+                self._buffered_stamps[kind].discard(stamp)
+                self._counters[kind].reject(BEYOND_IMU_DATA)
+            else:
+                kept.append(entry)
+        heapq.heapify(kept)
+        self._measurements[:] = kept
 
     def _reject_input(self, kind: str, reason: str):
         self._counters[kind].reject(reason)
