@@ -19,12 +19,8 @@ from enum import IntEnum
 import numpy as np
 
 from buoy_nav.rotations import rotation_matrix_elements
-from wind_comp.miller import miller_components, miller_terms, mounting_rotation_from_rpy_deg
-from wind_comp.nav_interpolation import (
-    InterpolationStatus,
-    NavTrack,
-    rotation_matrices_from_quaternions,
-)
+from wind_comp.miller import miller_components, mounting_rotation_from_rpy_deg
+from wind_comp.nav_interpolation import InterpolationStatus, NavTrack
 
 DEFAULT_ANEMOMETER_POSITION_M = (0.0, 0.0, 3.0)
 """Anemometer position when parameter ``anemometer.position`` is not given, m (body)."""
@@ -224,11 +220,8 @@ class _Corrector:
     """Navigation lookup plus Miller correction for samples that passed screening."""
 
     def __init__(self, config: CompensatorConfig):
-        self._mounting_matrix_bw = mounting_rotation_from_rpy_deg(
-            config.anemometer_rpy_deg
-        ).as_matrix()
-        self._lever_arm_body_m = np.array(config.anemometer_position_body_m)
-        self._mounting_elements_bw = tuple(self._mounting_matrix_bw.ravel().tolist())
+        mounting_matrix_bw = mounting_rotation_from_rpy_deg(config.anemometer_rpy_deg).as_matrix()
+        self._mounting_elements_bw = tuple(mounting_matrix_bw.ravel().tolist())
         self._lever_arm_elements_body_m = tuple(config.anemometer_position_body_m)
 
     def correct_one(self, track: NavTrack, t_s: float, wind_mps: np.ndarray):
@@ -256,16 +249,17 @@ class _Corrector:
         outputs = [np.full((stamps_s.shape[0], 3), np.nan) for _ in range(4)]
         valid = nav.valid
         if np.any(valid):
-            terms = miller_terms(
-                winds_mps[valid],
-                rotation_matrices_from_quaternions(nav.attitude_xyzw[valid]),
-                nav.angular_rate_body_rad_s[valid],
-                nav.velocity_enu_mps[valid],
-                self._mounting_matrix_bw,
-                self._lever_arm_body_m,
+            # The arithmetic of correct_one, on the columns of the valid samples.
+            terms = miller_components(
+                tuple(winds_mps[valid].T),
+                rotation_matrix_elements(*nav.attitude_xyzw[valid].T),
+                tuple(nav.angular_rate_body_rad_s[valid].T),
+                tuple(nav.velocity_enu_mps[valid].T),
+                self._mounting_elements_bw,
+                self._lever_arm_elements_body_m,
             )
-            for output, term in zip(outputs, terms.arrays(), strict=True):
-                output[valid] = term
+            for output, term in zip(outputs, terms, strict=True):
+                output[valid] = np.stack(term, axis=-1)
         return status, outputs
 
 

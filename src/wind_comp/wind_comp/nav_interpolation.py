@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from buoy_nav.rotations import quaternion_multiply, rotation_matrix_elements
+from buoy_nav.rotations import quaternion_multiply
 
 
 class NavTrackError(ValueError):
@@ -352,11 +352,6 @@ def slerp_components(start_xyzw, end_xyzw, fraction) -> tuple:
         np.cos(partial_half_angle),
     )
     return quaternion_multiply(start_xyzw, partial)
-
-
-def rotation_matrices_from_quaternions(quat_xyzw: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) rotation matrices of (N, 4) unit xyzw quaternions."""
-    return np.stack(rotation_matrix_elements(*quat_xyzw.T), axis=1).reshape(-1, 3, 3)
 
 
 _INVALID_NAV = ((0.0, 0.0, 0.0, 1.0), (math.nan,) * 3, (math.nan,) * 3)
