@@ -19,13 +19,10 @@ from __future__ import annotations
 import struct
 import sys
 
-import rclpy
 from geometry_msgs.msg import Vector3Stamped
-from rclpy.executors import ExternalShutdownException
-from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import Imu
 
-from buoy_nav.base_node import DATA_QOS
+from buoy_nav.base_node import DATA_QOS, SuiteNode, run_node
 
 # Header stamp (sec, nanosec) of a message's CDR bytes, after the 4-byte encapsulation header.
 HEADER_STAMP = struct.Struct("<iI")
@@ -71,21 +68,14 @@ def main(argv: list[str]) -> int:
         print(f"usage: passthrough_node.py {'|'.join(ROLES)} [--ros-args ...]", file=sys.stderr)
         return 2
     role = argv[1]
-    rclpy.init(args=argv)
-    # Built before the node, as run_node does: the executor installs the signal handling.
-    executor = EventsExecutor()
-    node = rclpy.create_node(role)
-    ROLES[role](node)
-    executor.add_node(node)
-    try:
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+
+    def stand_in() -> SuiteNode:
+        node = SuiteNode(role)
+        ROLES[role](node)
+        return node
+
+    # The real nodes' start-up, executor and spin loop.
+    return run_node(stand_in, argv)
 
 
 if __name__ == "__main__":
