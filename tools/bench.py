@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from buoy_nav.bag_io import BagReader
+from buoy_common.bag_io import BagReader
 from buoy_nav.fuse_bag import fuse_bag, fusion_config_from_files
 from sensor_sim.scenario import load_scenario
 from sensor_sim.simulate_bag import simulate
@@ -58,7 +58,7 @@ REPO = Path(__file__).resolve().parents[1]
 OUT_DIR = REPO / "out" / "bench"
 CACHE_DIR = OUT_DIR / "cache"
 RUNS_DIR = OUT_DIR / "runs"
-BUOY_PARAMS = REPO / "src/buoy_nav/config/buoy.yaml"
+BUOY_PARAMS = REPO / "src/buoy_common/config/buoy.yaml"
 # The shipped defaults, given explicitly so that the bench runs what a user of the files runs.
 PROCESSING_PARAMS = [
     str(BUOY_PARAMS),
@@ -68,7 +68,7 @@ PROCESSING_PARAMS = [
 SIMULATION_PARAMS = [str(BUOY_PARAMS)]
 SIMULATOR_PACKAGE = REPO / "src/sensor_sim/sensor_sim"
 # Modules outside sensor_sim whose code decides what simulate_bag writes.
-SIMULATION_SHARED_MODULES = ("buoy_nav.parameters", "buoy_nav.bag_io")
+SIMULATION_SHARED_MODULES = ("buoy_common.parameters", "buoy_common.bag_io")
 SECTIONS = ("attitude", "wind", "speed", "live", "consistency")
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 

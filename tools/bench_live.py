@@ -36,7 +36,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
-PARAMS_FILE = REPO / "src/buoy_nav/config/buoy.yaml"
+PARAMS_FILE = REPO / "src/buoy_common/config/buoy.yaml"
 PASSTHROUGH_SCRIPT = REPO / "tools" / "passthrough_node.py"
 NODES_UNDER_TEST = ("fusion_node", "compensation_node")
 LATENCY_TARGET_P99_MS = 5.0
@@ -83,7 +83,7 @@ class Listener:
         from rclpy.executors import SingleThreadedExecutor
         from sensor_msgs.msg import Imu
 
-        from buoy_nav.base_node import DATA_QOS
+        from buoy_common.base_node import DATA_QOS
 
         self._rclpy = rclpy
         self.context = Context()

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from buoy_nav.bag_io import BagReader, BagWriter
+from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.error_state_filter import ACCEL_BIAS
 from buoy_nav.fuse_bag import (
     OfflineFusion,
@@ -35,12 +35,13 @@ from buoy_nav.fuse_bag import (
     relative_topic,
     sensor_topics_of,
 )
-from sensor_sim.sensor_models import ImuErrorConfig, ImuSimulator
+from sensor_sim.sensor_errors import ImuErrorConfig
+from sensor_sim.sensor_models import ImuSimulator
 from sensor_sim.simulate_bag import simulate
 from sensor_sim.streams import IMU_SEED_KEY
 
 REPO = Path(__file__).resolve().parents[1]
-BUOY_PARAMS = str(REPO / "src/buoy_nav/config/buoy.yaml")
+BUOY_PARAMS = str(REPO / "src/buoy_common/config/buoy.yaml")
 SIMULATION_PARAMS = [BUOY_PARAMS]
 FUSION_PARAMS = [BUOY_PARAMS, str(REPO / "src/buoy_nav/config/fusion.yaml")]
 SCENARIO = "sea_state"

@@ -22,15 +22,17 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from buoy_nav.bag_io import BagReader
+from buoy_common.bag_io import BagReader
+from buoy_common.contract import (
+    NANOSECONDS_PER_SECOND,
+    NAV_ODOMETRY_TOPIC,
+    WIND_RAW_TOPIC,
+    WIND_TRUE_TOPIC,
+)
 from wind_comp.miller import mounting_rotation_from_rpy_deg
 from wind_comp.process_bag import compensator_config_from_files
 from wind_comp.products import WindAverager, meteorological_direction_deg
 from wind_comp.report import (
-    ANEMOMETER_TOPIC,
-    CORRECTED_WIND_TOPIC,
-    NANOSECONDS_PER_SECOND,
-    NAV_ODOMETRY_TOPIC,
     ReportData,
     ReportDataError,
     report_data_from_bag,
@@ -40,7 +42,7 @@ from wind_comp.report import (
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
-PARAMS_FILE = REPO / "src/buoy_nav/config/buoy.yaml"
+PARAMS_FILE = REPO / "src/buoy_common/config/buoy.yaml"
 SCENARIO = "sea_state"
 # 70 s: the first 1-minute window (corrected from the filter's alignment at about 10 s on) closes
 # with the first sample after 60 s, with a margin.
@@ -115,8 +117,8 @@ def print_one_output_per_sample(reader: BagReader, data: ReportData, aligned_s: 
     The recorder picks topics up as they appear, so the two topics may start being recorded at
     different moments; the check covers the stamps both were recorded over.
     """
-    measured = stamped_vectors(reader, ANEMOMETER_TOPIC).stamps_ns
-    corrected = np.sort(stamped_vectors(reader, CORRECTED_WIND_TOPIC).stamps_ns)
+    measured = stamped_vectors(reader, WIND_RAW_TOPIC).stamps_ns
+    corrected = np.sort(stamped_vectors(reader, WIND_TRUE_TOPIC).stamps_ns)
     start, end = max(measured[0], corrected[0]), min(measured[-1], corrected[-1])
     measured_in_span = measured[(measured >= start) & (measured <= end)]
     corrected_in_span = corrected[(corrected >= start) & (corrected <= end)]
@@ -128,24 +130,24 @@ def print_one_output_per_sample(reader: BagReader, data: ReportData, aligned_s: 
     )
     start_s, end_s = (stamp / NANOSECONDS_PER_SECOND - data.time_origin_s for stamp in (start, end))
     print(
-        f"\n{ANEMOMETER_TOPIC} -> {CORRECTED_WIND_TOPIC}, matched by header stamp over "
+        f"\n{WIND_RAW_TOPIC} -> {WIND_TRUE_TOPIC}, matched by header stamp over "
         f"{start_s:.2f}-{end_s:.2f} s (recorded on both):"
     )
     print(
-        f"  {len(measured_in_span)} samples, {len(corrected_in_span)} {CORRECTED_WIND_TOPIC}, "
+        f"  {len(measured_in_span)} samples, {len(corrected_in_span)} {WIND_TRUE_TOPIC}, "
         f"exactly one per sample: {'yes' if exactly_one else 'NO'}"
     )
     outside = len(corrected) - len(corrected_in_span), len(measured) - len(measured_in_span)
     if any(outside):
         print(
-            f"  recorded outside that span: {outside[0]} {CORRECTED_WIND_TOPIC}, "
-            f"{outside[1]} {ANEMOMETER_TOPIC} (the recorder subscribed one topic later)"
+            f"  recorded outside that span: {outside[0]} {WIND_TRUE_TOPIC}, "
+            f"{outside[1]} {WIND_RAW_TOPIC} (the recorder subscribed one topic later)"
         )
     invalid = ~np.all(np.isfinite(data.corrected_wind_enu_mps), axis=1)
     before_alignment = data.t_s < aligned_s
     invalid_after = np.count_nonzero(invalid & ~before_alignment)
     print(
-        f"  NaN {CORRECTED_WIND_TOPIC}: {np.count_nonzero(invalid & before_alignment)} before the "
+        f"  NaN {WIND_TRUE_TOPIC}: {np.count_nonzero(invalid & before_alignment)} before the "
         f"filter aligned at {aligned_s - data.time_origin_s:.2f} s, {invalid_after} after"
     )
     if invalid_after:
@@ -273,7 +275,7 @@ def analyse(bag: Path) -> int:
     print_comparison(data, aligned_s)
     print_last_minute(data)
     print(
-        f"\nwatch {CORRECTED_WIND_TOPIC} live (two terminals, in {REPO}):\n"
+        f"\nwatch {WIND_TRUE_TOPIC} live (two terminals, in {REPO}):\n"
         f"  .venv/bin/run_scenario {SCENARIO} --params-file {shown(PARAMS_FILE)} --compensation\n"
         "  .venv/bin/wind_echo --every 20"
     )

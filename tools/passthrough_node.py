@@ -22,7 +22,7 @@ import sys
 from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import Imu
 
-from buoy_nav.base_node import DATA_QOS, SuiteNode, run_node
+from buoy_common.base_node import DATA_QOS, SuiteNode, run_node
 
 # Header stamp (sec, nanosec) of a message's CDR bytes, after the 4-byte encapsulation header.
 HEADER_STAMP = struct.Struct("<iI")

@@ -48,7 +48,7 @@ def main() -> None:
             str(BIN / "run_scenario"),
             *BAGS[name],
             "--params-file",
-            str(REPO / "src/buoy_nav/config/buoy.yaml"),
+            str(REPO / "src/buoy_common/config/buoy.yaml"),
             "--rate-factor",
             RATE_FACTOR,
             "--record",

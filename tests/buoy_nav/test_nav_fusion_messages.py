@@ -22,24 +22,24 @@ from rclpy.serialization import deserialize_message, serialize_message
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu, NavSatFix
 
-from buoy_nav.bag_io import BagReader, BagWriter, jazzy_typestore
-from buoy_nav.engine import FusionEngine, NavSolution
-from buoy_nav.fuse_bag import fusion_config_from_files
-from buoy_nav.fusion_messages import (
-    BASELINE_TOPIC,
-    FIX_TOPIC,
-    HEADING_TOPIC,
-    IMU_TOPIC,
+from buoy_common.bag_io import BagReader, BagWriter, jazzy_typestore
+from buoy_common.contract import (
+    GNSS_BASELINE_TOPIC,
+    GNSS_FIX_TOPIC,
+    GNSS_HEADING_TOPIC,
+    GNSS_VELOCITY_TOPIC,
+    IMU_RAW_TOPIC,
     NAV_FIX_TOPIC,
     NAV_IMU_TOPIC,
     NAV_MSGTYPES,
+    NAV_ODOMETRY_TOPIC,
     NAV_VELOCITY_TOPIC,
-    ODOMETRY_TOPIC,
-    REASON_MALFORMED,
-    REASON_NO_FIX,
-    REASON_ZERO_QUATERNION,
-    SENSOR_MSGTYPES,
-    VELOCITY_TOPIC,
+    Reason,
+)
+from buoy_nav.engine import FusionEngine, NavSolution
+from buoy_nav.fuse_bag import fusion_config_from_files
+from buoy_nav.fusion_messages import (
+    FUSION_INPUT_MSGTYPES,
     NavMessageClasses,
     NavValues,
     StampBook,
@@ -52,7 +52,7 @@ from buoy_nav.fusion_messages import (
 
 REPO = Path(__file__).resolve().parents[2]
 SEA_STATE_BAG = REPO / "bags" / "sea_state"
-BUOY_PARAMETERS = REPO / "src" / "buoy_nav" / "config" / "buoy.yaml"
+BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
 SECONDS_OF_BAG = 15.0
 NAV_CLASSES = NavMessageClasses(Odometry, Imu, TwistWithCovarianceStamped, NavSatFix)
 RCLPY_CLASSES = {
@@ -87,7 +87,7 @@ def run_engine(inputs, imu_from_cdr: bool = False):
     stamps = StampBook()
     produced, reasons = [], []
     for topic, message, raw in inputs:
-        if imu_from_cdr and topic == IMU_TOPIC:
+        if imu_from_cdr and topic == IMU_RAW_TOPIC:
             new, reason = feed_imu_cdr(engine, raw, stamps)
         else:
             new, reason = feed_message(engine, topic, message, stamps)
@@ -106,7 +106,7 @@ def sensor_inputs():
     inputs = []
     with BagReader(SEA_STATE_BAG) as reader:
         end_ns = reader.start_ns + int(SECONDS_OF_BAG * NANOSECONDS_PER_SECOND)
-        for record in reader.messages(list(SENSOR_MSGTYPES)):
+        for record in reader.messages(list(FUSION_INPUT_MSGTYPES)):
             if record.log_time_ns > end_ns:
                 break
             message = deserialize_message(record.raw, RCLPY_CLASSES[record.msgtype])
@@ -159,8 +159,8 @@ def test_cdr_is_byte_for_byte_what_rosbags_writes_for_the_messages(produced, tmp
 
 
 def test_nav_stamps_are_the_imu_stamps_to_the_nanosecond(sensor_inputs, produced):
-    imu_stamps = [stamp_ns(m) for topic, m, _ in sensor_inputs if topic == IMU_TOPIC]
-    published = [stamp_ns(p.messages[ODOMETRY_TOPIC]) for p in produced]
+    imu_stamps = [stamp_ns(m) for topic, m, _ in sensor_inputs if topic == IMU_RAW_TOPIC]
+    published = [stamp_ns(p.messages[NAV_ODOMETRY_TOPIC]) for p in produced]
     # one solution per IMU sample from alignment on, each with its sample's own stamp
     assert published == imu_stamps[-len(published) :]
     for solution, values, messages in produced:
@@ -186,7 +186,7 @@ def test_imu_samples_from_cdr_bytes_give_the_same_solutions(sensor_inputs, produ
 
 def test_frames_and_conventions_of_the_four_messages(produced):
     for solution, _, messages in produced[:: max(1, len(produced) // 100)]:
-        odometry = messages[ODOMETRY_TOPIC]
+        odometry = messages[NAV_ODOMETRY_TOPIC]
         imu = messages[NAV_IMU_TOPIC]
         velocity = messages[NAV_VELOCITY_TOPIC]
         fix = messages[NAV_FIX_TOPIC]
@@ -293,16 +293,16 @@ def _tenfold_baseline(message):
 # (topic, how to spoil a copy of a valid message of the topic, expected reason, the engine's
 # input kind that counts the rejection: None when the message never reaches the engine)
 SPOILED = [
-    (HEADING_TOPIC, _zero_quaternion, REASON_ZERO_QUATERNION, None),
-    (FIX_TOPIC, _no_fix, REASON_NO_FIX, None),
-    (VELOCITY_TOPIC, "twist.covariance:35", REASON_MALFORMED, None),
-    (HEADING_TOPIC, "orientation_covariance:8", REASON_MALFORMED, None),
-    (FIX_TOPIC, _nan_latitude, "non_finite", "gnss_fix"),
-    (IMU_TOPIC, _nan_rate, "non_finite", "imu"),
-    (VELOCITY_TOPIC, _infinite_velocity, "non_finite", "gnss_velocity"),
-    (HEADING_TOPIC, _nan_heading, "non_finite", "gnss_heading"),
-    (BASELINE_TOPIC, _nan_baseline, "non_finite", "gnss_baseline"),
-    (BASELINE_TOPIC, _tenfold_baseline, "out_of_range", "gnss_baseline"),
+    (GNSS_HEADING_TOPIC, _zero_quaternion, Reason.ZERO_QUATERNION, None),
+    (GNSS_FIX_TOPIC, _no_fix, Reason.NO_FIX, None),
+    (GNSS_VELOCITY_TOPIC, "twist.covariance:35", Reason.MALFORMED, None),
+    (GNSS_HEADING_TOPIC, "orientation_covariance:8", Reason.MALFORMED, None),
+    (GNSS_FIX_TOPIC, _nan_latitude, "non_finite", "gnss_fix"),
+    (IMU_RAW_TOPIC, _nan_rate, "non_finite", "imu"),
+    (GNSS_VELOCITY_TOPIC, _infinite_velocity, "non_finite", "gnss_velocity"),
+    (GNSS_HEADING_TOPIC, _nan_heading, "non_finite", "gnss_heading"),
+    (GNSS_BASELINE_TOPIC, _nan_baseline, "non_finite", "gnss_baseline"),
+    (GNSS_BASELINE_TOPIC, _tenfold_baseline, "out_of_range", "gnss_baseline"),
 ]
 INSERTED_AT_FRACTIONS = (0.3, 0.85)  # of each topic's messages: before and after alignment
 
@@ -343,7 +343,8 @@ def with_spoiled_messages(inputs):
     rejected as a duplicate.
     """
     positions = {
-        topic: [i for i, (t, _, _) in enumerate(inputs) if t == topic] for topic in SENSOR_MSGTYPES
+        topic: [i for i, (t, _, _) in enumerate(inputs) if t == topic]
+        for topic in FUSION_INPUT_MSGTYPES
     }
     insertions = {}
     for case, (topic, spoil, reason, _) in enumerate(SPOILED):

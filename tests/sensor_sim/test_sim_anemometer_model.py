@@ -7,7 +7,8 @@ import pytest
 from scipy.stats import chi2
 
 from sensor_sim.scenario import load_scenario
-from sensor_sim.sensor_models import AnemometerErrorConfig, AnemometerSimulator
+from sensor_sim.sensor_errors import AnemometerErrorConfig
+from sensor_sim.sensor_models import AnemometerSimulator
 from sensor_sim.truth import TruthModel
 
 NOISE_FREE = AnemometerErrorConfig(noise_mps=0.0)

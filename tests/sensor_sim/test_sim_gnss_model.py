@@ -8,7 +8,8 @@ from scipy.stats import chi2
 
 from sensor_sim.geodesy import geodetic_to_enu_m
 from sensor_sim.scenario import load_scenario
-from sensor_sim.sensor_models import GnssErrorConfig, GnssSimulator
+from sensor_sim.sensor_errors import GnssErrorConfig
+from sensor_sim.sensor_models import GnssSimulator
 from sensor_sim.truth import TruthModel
 
 PRIMARY = np.array([0.3, -0.9, 1.2])

@@ -8,7 +8,8 @@ from scipy.stats import chi2
 
 from sensor_sim.geodesy import wgs84_normal_gravity_mps2
 from sensor_sim.scenario import load_scenario
-from sensor_sim.sensor_models import ImuErrorConfig, ImuSimulator
+from sensor_sim.sensor_errors import ImuErrorConfig
+from sensor_sim.sensor_models import ImuSimulator
 from sensor_sim.truth import TruthModel
 
 EARTH_RATE = 7.292115e-5

@@ -1,4 +1,4 @@
-"""A tap for :class:`buoy_nav.bag_io.BackgroundBagWriter` in tests: importable by name in the
+"""A tap for :class:`buoy_common.bag_io.BackgroundBagWriter` in tests: importable by name in the
 writing process, which unpickles it there."""
 
 from std_msgs.msg import Float64MultiArray

@@ -19,7 +19,7 @@ from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Image, Imu, NavSatFix
 from std_msgs.msg import Byte, ByteMultiArray, Char
 
-from buoy_nav.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter
+from buoy_common.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter
 
 T0_NS = 1_700_000_000_000_000_000
 IMU_PERIOD_NS = 10_000_000  # 100 Hz

@@ -10,7 +10,7 @@ from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, NavSatFix
 
-from buoy_nav.bag_io import BagReader, BagWriter
+from buoy_common.bag_io import BagReader, BagWriter
 
 pytestmark = pytest.mark.ros
 

@@ -10,7 +10,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
-PACKAGES = ("sensor_sim", "buoy_nav", "wind_comp")
+PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp")
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def test_colcon_installs_packages_with_ament_index_and_config(install_base):
             install_base / package / "share/ament_index/resource_index/packages" / package
         ).exists()
         assert (install_base / package / "share" / package / "package.xml").exists()
-    assert (install_base / "buoy_nav/share/buoy_nav/config/buoy.yaml").exists()
+    assert (install_base / "buoy_common/share/buoy_common/config/buoy.yaml").exists()
     assert (install_base / "sensor_sim/share/sensor_sim/config/sim.yaml").exists()
 
 

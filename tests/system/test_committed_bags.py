@@ -10,7 +10,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from buoy_nav.bag_io import BagReader
+from buoy_common.bag_io import BagReader
 
 BAGS = sorted(p for p in (Path(__file__).resolve().parents[2] / "bags").iterdir() if p.is_dir())
 SENSOR_RATES_HZ = {

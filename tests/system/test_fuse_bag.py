@@ -22,16 +22,16 @@ from mcap_ros2.decoder import DecoderFactory
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from buoy_nav.bag_io import BagReader, BagWriter
+from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.fuse_bag import fusion_config_from_files
 from ros_messages import raw_stamp_ns
-from sensor_sim.sensor_models import GnssErrorConfig, ImuErrorConfig
+from sensor_sim.sensor_errors import GnssErrorConfig, ImuErrorConfig
 from wind_comp.process_bag import compensator_config_from_files, process_bag
 
 REPO = Path(__file__).resolve().parents[2]
 BAGS_DIR = REPO / "bags"
 BAGS = ("static", "tilt_table", "wind_tunnel_10", "vertical_wind_5", "sea_state", "open_ocean")
-BUOY_PARAMETERS = REPO / "src" / "buoy_nav" / "config" / "buoy.yaml"
+BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
 FUSE_BAG = Path(sys.executable).parent / "fuse_bag"
 CLI_BAG = "sea_state"
 NAV_TOPICS = ("/nav/odometry", "/nav/imu", "/nav/velocity", "/nav/fix")

@@ -26,41 +26,41 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import Imu, NavSatFix
 
+from buoy_common.bag_io import BagReader
+from buoy_common.base_node import DATA_QOS
+from buoy_common.contract import (
+    GNSS_FIX_TOPIC,
+    GNSS_HEADING_TOPIC,
+    GNSS_VELOCITY_TOPIC,
+    IMU_RAW_TOPIC,
+    NAV_MSGTYPES,
+    NAV_ODOMETRY_TOPIC,
+    Reason,
+)
+from buoy_common.parameters import build_config, load_parameter_files
 from buoy_nav import engine as fusion_engine
-from buoy_nav.bag_io import BagReader
-from buoy_nav.base_node import DATA_QOS
 from buoy_nav.config import (
     FUSION_FIELDS_NOT_PARAMETERS,
     FUSION_NODE_NAME,
     FUSION_PARAMETER_PREFIX,
-    FUSION_SHARED_PARAMETERS,
     FusionConfig,
 )
 from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import (
-    FIX_TOPIC,
-    HEADING_TOPIC,
-    IMU_TOPIC,
-    NAV_MSGTYPES,
-    ODOMETRY_TOPIC,
-    REASON_NO_FIX,
-    REASON_ZERO_QUATERNION,
-    SENSOR_MSGTYPES,
-    VELOCITY_TOPIC,
+    FUSION_INPUT_MSGTYPES,
     NavMessageClasses,
     StampBook,
     feed_message,
     solution_messages,
 )
 from buoy_nav.fusion_node import INPUT_CLASSES, OUTPUT_CLASSES
-from buoy_nav.parameters import build_config, load_parameter_files
 from ros_messages import reports_publishers_on, stamp_ns, to_rclpy, wait_for
 
 pytestmark = pytest.mark.ros
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 BAG = os.path.join(REPO, "bags", "sea_state")
-BUOY_PARAMETERS = os.path.join(REPO, "src", "buoy_nav", "config", "buoy.yaml")
+BUOY_PARAMETERS = os.path.join(REPO, "src", "buoy_common", "config", "buoy.yaml")
 NODE = FUSION_NODE_NAME
 # The message-object form of the solutions: an independent path to the CDR the node publishes.
 NAV_CLASSES = NavMessageClasses(Odometry, Imu, TwistWithCovarianceStamped, NavSatFix)
@@ -84,7 +84,7 @@ def sensor_stream():
     stream = []
     with BagReader(BAG) as reader:
         first_ns = None
-        for record in reader.messages(list(SENSOR_MSGTYPES)):
+        for record in reader.messages(list(FUSION_INPUT_MSGTYPES)):
             first_ns = record.log_time_ns if first_ns is None else first_ns
             if record.log_time_ns - first_ns > LIVE_EQUALS_OFFLINE_S * 1e9:
                 break
@@ -101,8 +101,7 @@ def node_config(**overrides) -> FusionConfig:
         FusionConfig,
         parameters,
         FUSION_PARAMETER_PREFIX,
-        FUSION_SHARED_PARAMETERS,
-        FUSION_FIELDS_NOT_PARAMETERS,
+        skip=FUSION_FIELDS_NOT_PARAMETERS,
     )
 
 
@@ -250,8 +249,8 @@ def received_count(listener: Listener) -> int:
 
 def test_live_solutions_equal_offline_fusion(nodes, sensor_stream):
     offline, engine, _ = offline_run(sensor_stream)
-    n_solutions = len(offline[ODOMETRY_TOPIC])
-    assert n_solutions > 0.6 * sum(topic == IMU_TOPIC for topic, _ in sensor_stream)
+    n_solutions = len(offline[NAV_ODOMETRY_TOPIC])
+    assert n_solutions > 0.6 * sum(topic == IMU_RAW_TOPIC for topic, _ in sensor_stream)
 
     listener = Listener(nodes.env)
     try:
@@ -259,9 +258,9 @@ def test_live_solutions_equal_offline_fusion(nodes, sensor_stream):
         assert listener.wait_for_node(), nodes.log_of(process)
         listener.play([(stamp_ns(m), topic, m) for topic, m in sensor_stream])
         wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
-        n_imu = sum(topic == IMU_TOPIC for topic, _ in sensor_stream)
+        n_imu = sum(topic == IMU_RAW_TOPIC for topic, _ in sensor_stream)
         final = listener.latest_diagnostics_where(
-            lambda values: values.get(f"messages_in[{IMU_TOPIC}]") == str(n_imu), 5.0
+            lambda values: values.get(f"messages_in[{IMU_RAW_TOPIC}]") == str(n_imu), 5.0
         )
         live = {topic: list(messages) for topic, messages in listener.received.items()}
         statuses = list(listener.diagnostics)
@@ -341,33 +340,33 @@ def malformed_messages(
 
     imu_ns, step_ns = stamp_ns(imu), 1_000_000
     variant(
-        imu, IMU_TOPIC, fusion_engine.IMU, fusion_engine.NON_FINITE, imu_ns + step_ns
+        imu, IMU_RAW_TOPIC, fusion_engine.IMU, fusion_engine.NON_FINITE, imu_ns + step_ns
     ).angular_velocity.y = math.nan
     variant(
-        imu, IMU_TOPIC, fusion_engine.IMU, fusion_engine.NON_FINITE, imu_ns + 2 * step_ns
+        imu, IMU_RAW_TOPIC, fusion_engine.IMU, fusion_engine.NON_FINITE, imu_ns + 2 * step_ns
     ).linear_acceleration.z = math.inf
     variant(
-        imu, IMU_TOPIC, fusion_engine.IMU, fusion_engine.OUT_OF_RANGE, imu_ns + 3 * step_ns
+        imu, IMU_RAW_TOPIC, fusion_engine.IMU, fusion_engine.OUT_OF_RANGE, imu_ns + 3 * step_ns
     ).linear_acceleration.x = 1.0e4
     # Plausible values, so that they would visibly change the state were they used.
     backwards = variant(
         imu,
-        IMU_TOPIC,
+        IMU_RAW_TOPIC,
         fusion_engine.IMU,
         fusion_engine.STAMP_NOT_INCREASING,
         imu_ns - 500 * step_ns,
     )
     backwards.angular_velocity.z += 0.5
-    duplicate = variant(imu, IMU_TOPIC, fusion_engine.IMU, fusion_engine.DUPLICATE_STAMP)
+    duplicate = variant(imu, IMU_RAW_TOPIC, fusion_engine.IMU, fusion_engine.DUPLICATE_STAMP)
     duplicate.angular_velocity.z += 0.5
     duplicate.linear_acceleration.x += 2.0
 
     between_ns = stamp_ns(heading) + 50 * step_ns
-    zero = variant(heading, HEADING_TOPIC, None, REASON_ZERO_QUATERNION, between_ns)
+    zero = variant(heading, GNSS_HEADING_TOPIC, None, Reason.ZERO_QUATERNION, between_ns)
     zero.orientation.x = zero.orientation.y = zero.orientation.z = zero.orientation.w = 0.0
     negative = variant(
         heading,
-        HEADING_TOPIC,
+        GNSS_HEADING_TOPIC,
         fusion_engine.GNSS_HEADING,
         fusion_engine.NON_POSITIVE_VARIANCE,
         between_ns,
@@ -375,12 +374,16 @@ def malformed_messages(
     negative.orientation.z, negative.orientation.w = math.sin(0.5), math.cos(0.5)
     negative.orientation_covariance[8] = -1.0e-4
     variant(
-        fix, FIX_TOPIC, fusion_engine.GNSS_FIX, fusion_engine.NON_FINITE, between_ns
+        fix, GNSS_FIX_TOPIC, fusion_engine.GNSS_FIX, fusion_engine.NON_FINITE, between_ns
     ).latitude = math.nan
     variant(
-        velocity, VELOCITY_TOPIC, fusion_engine.GNSS_VELOCITY, fusion_engine.NON_FINITE, between_ns
+        velocity,
+        GNSS_VELOCITY_TOPIC,
+        fusion_engine.GNSS_VELOCITY,
+        fusion_engine.NON_FINITE,
+        between_ns,
     ).twist.twist.linear.x = math.inf
-    no_fix = variant(fix, FIX_TOPIC, None, REASON_NO_FIX, between_ns)
+    no_fix = variant(fix, GNSS_FIX_TOPIC, None, Reason.NO_FIX, between_ns)
     no_fix.status.status = -1
     no_fix.latitude += 1.0e-3
     return bad
@@ -393,15 +396,18 @@ def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_st
     ]
     after_ns = first_ns + round(MALFORMED_AFTER_S * 1e9)
     imu_index = next(
-        i for i, (topic, m) in enumerate(good) if topic == IMU_TOPIC and stamp_ns(m) >= after_ns
+        i for i, (topic, m) in enumerate(good) if topic == IMU_RAW_TOPIC and stamp_ns(m) >= after_ns
     )
     imu_ns = stamp_ns(good[imu_index][1])
     latest = {}
     for topic, m in good:
-        if topic != IMU_TOPIC and stamp_ns(m) > imu_ns and topic not in latest:
+        if topic != IMU_RAW_TOPIC and stamp_ns(m) > imu_ns and topic not in latest:
             latest[topic] = m
     bad = malformed_messages(
-        good[imu_index][1], latest[FIX_TOPIC], latest[VELOCITY_TOPIC], latest[HEADING_TOPIC]
+        good[imu_index][1],
+        latest[GNSS_FIX_TOPIC],
+        latest[GNSS_VELOCITY_TOPIC],
+        latest[GNSS_HEADING_TOPIC],
     )
     # Each bad message goes out right after the good IMU sample, at its pace.
     paced = []
@@ -410,9 +416,9 @@ def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_st
         if index == imu_index:
             paced.extend((stamp_ns(m), bad_topic, message) for bad_topic, message, _, _ in bad)
     reference, engine, _ = offline_run(good)
-    n_solutions = len(reference[ODOMETRY_TOPIC])
+    n_solutions = len(reference[NAV_ODOMETRY_TOPIC])
     last_bad_ns = max(stamp_ns(message) for _, message, _, _ in bad)
-    assert sum(stamp_ns(m) > last_bad_ns for m in reference[ODOMETRY_TOPIC]) > 100
+    assert sum(stamp_ns(m) > last_bad_ns for m in reference[NAV_ODOMETRY_TOPIC]) > 100
 
     listener = Listener(nodes.env)
     try:
@@ -420,9 +426,9 @@ def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_st
         assert listener.wait_for_node(), nodes.log_of(process)
         listener.play(paced)
         wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
-        n_imu = sum(topic == IMU_TOPIC for _, topic, _ in paced)
+        n_imu = sum(topic == IMU_RAW_TOPIC for _, topic, _ in paced)
         final = listener.latest_diagnostics_where(
-            lambda values: values.get(f"messages_in[{IMU_TOPIC}]") == str(n_imu), 5.0
+            lambda values: values.get(f"messages_in[{IMU_RAW_TOPIC}]") == str(n_imu), 5.0
         )
         live = {topic: list(messages) for topic, messages in listener.received.items()}
         still_running = process.poll() is None
@@ -458,9 +464,9 @@ def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
         (topic, m) for topic, m in sensor_stream if stamp_ns(m) - first_ns <= FLUSH_RUN_S * 1e9
     ]
     reference, engine, stamps = offline_run(stream, **{"fusion.realtime_output": False})
-    n_before_end = len(reference[ODOMETRY_TOPIC])
+    n_before_end = len(reference[NAV_ODOMETRY_TOPIC])
     nav_messages(engine.flush(), reference, stamps)
-    n_solutions = len(reference[ODOMETRY_TOPIC])
+    n_solutions = len(reference[NAV_ODOMETRY_TOPIC])
     # The last max_measurement_delay_s of IMU samples wait for measurements until the end.
     assert n_solutions - n_before_end > 10
 
@@ -476,9 +482,9 @@ def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
         )
         assert listener.wait_for_node(), nodes.log_of(process)
         listener.play([(stamp_ns(m), topic, m) for topic, m in stream])
-        n_imu = sum(topic == IMU_TOPIC for topic, _ in stream)
+        n_imu = sum(topic == IMU_RAW_TOPIC for topic, _ in stream)
         assert listener.latest_diagnostics_where(
-            lambda values: values.get(f"messages_in[{IMU_TOPIC}]") == str(n_imu), 5.0
+            lambda values: values.get(f"messages_in[{IMU_RAW_TOPIC}]") == str(n_imu), 5.0
         ), nodes.log_of(process)
         wait_for(lambda: received_count(listener) >= n_before_end, 10.0)
         n_before_interrupt = received_count(listener)

@@ -24,7 +24,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 
-from buoy_nav.bag_io import BagReader, BagWriter
+from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.fuse_bag import fusion_config_from_files
 from ros_messages import stamp_ns, wait_for
 from wind_comp.process_bag import compensator_config_from_files, process_bag
@@ -33,7 +33,7 @@ pytestmark = pytest.mark.ros
 
 REPO = Path(__file__).resolve().parents[2]
 SOURCE_BAG = REPO / "bags" / "sea_state"
-BUOY_PARAMETERS = REPO / "src" / "buoy_nav" / "config" / "buoy.yaml"
+BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
 PLAYED_TOPICS = (
     "/imu/data_raw",
     "/gnss/fix",

@@ -12,17 +12,23 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from buoy_nav.bag_io import BagReader
+from buoy_common.bag_io import BagReader
+from buoy_common.contract import (
+    window_label,
+)
 from buoy_nav.fuse_bag import fuse_bag, fusion_config_from_files
 from ros_messages import raw_stamp_ns
-from sensor_sim.sensor_models import AnemometerErrorConfig
-from wind_comp.nav_messages import STATS_FIELDS, stats_values, window_label
+from sensor_sim.sensor_errors import AnemometerErrorConfig
+from wind_comp.nav_messages import (
+    STATS_FIELDS,
+    stats_values,
+)
 from wind_comp.process_bag import compensator_config_from_files, process_bag, products_csv_path
 
 REPO = Path(__file__).resolve().parents[2]
 BAGS_DIR = REPO / "bags"
 BAGS = ("static", "tilt_table", "wind_tunnel_10", "vertical_wind_5", "sea_state", "open_ocean")
-BUOY_PARAMETERS = REPO / "src" / "buoy_nav" / "config" / "buoy.yaml"
+BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
 COMPENSATOR = compensator_config_from_files([BUOY_PARAMETERS])
 NAV_TOPICS = ("/nav/odometry", "/nav/imu", "/nav/velocity", "/nav/fix")
 NANOSECONDS_PER_SECOND = 1_000_000_000

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from buoy_nav.bag_io import BagReader
+from buoy_common.bag_io import BagReader
 from ros_messages import stamp_ns
 
 SCENARIO_S = 12.0

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from buoy_nav.bag_io import BagReader
+from buoy_common.bag_io import BagReader
 from buoy_nav.fuse_bag import fusion_config_from_files
 from wind_comp.process_bag import compensator_config_from_files, process_bag
 

@@ -11,6 +11,11 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import NavSatFix, NavSatStatus
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from buoy_common.contract import (
+    seconds_to_stamp,
+    stamp_to_seconds,
+    window_label,
+)
 from wind_comp.nav_messages import (
     EARTH_RATE_RAD_S,
     STATS_FIELDS,
@@ -29,11 +34,8 @@ from wind_comp.nav_messages import (
     product_messages,
     rate_relative_to_level_components,
     remove_earth_rate,
-    stamp_from_seconds,
-    stamp_s,
     stats_values,
     true_wind_cdr,
-    window_label,
 )
 from wind_comp.products import WindAverager
 from wind_comp.wind_echo_node import utc_text, wind_line
@@ -66,9 +68,9 @@ def test_stamps_round_trip_within_float_resolution():
     # Float seconds near 2026 resolve 2.4e-7 s: outputs therefore copy the input stamps.
     for sec, nanosec in [(1_767_225_600, 50_000_000), (0, 1), (1_767_225_600, 999_999_999)]:
         message = wind([1, 2, 3], sec=sec, nanosec=nanosec)
-        back_sec, back_nanosec = stamp_from_seconds(stamp_s(message.header.stamp))
+        back_sec, back_nanosec = seconds_to_stamp(stamp_to_seconds(message.header.stamp))
         assert abs((back_sec - sec) * 1_000_000_000 + back_nanosec - nanosec) <= 250
-    assert stamp_from_seconds(1_767_225_660.0) == (1_767_225_660, 0)
+    assert seconds_to_stamp(1_767_225_660.0) == (1_767_225_660, 0)
 
 
 def test_odometry_velocity_is_rotated_into_enu_like_scipy():
@@ -106,15 +108,15 @@ def test_batch_conversion_equals_single_messages_bitwise():
 @pytest.mark.parametrize(
     ("change", "reason"),
     [
-        (lambda m: setattr(m.pose.pose.orientation, "w", math.nan), "non-finite value"),
-        (lambda m: setattr(m.twist.twist.angular, "y", math.inf), "non-finite value"),
-        (lambda m: setattr(m.twist.twist.linear, "x", math.nan), "non-finite value"),
+        (lambda m: setattr(m.pose.pose.orientation, "w", math.nan), "non_finite"),
+        (lambda m: setattr(m.twist.twist.angular, "y", math.inf), "non_finite"),
+        (lambda m: setattr(m.twist.twist.linear, "x", math.nan), "non_finite"),
         (
             lambda m: setattr(m.pose.pose, "orientation", type(m.pose.pose.orientation)(w=0.0)),
-            "zero quaternion",
+            "zero_quaternion",
         ),
-        (lambda m: setattr(m.header, "frame_id", "odom"), "wrong frame"),
-        (lambda m: setattr(m, "child_frame_id", "imu_link"), "wrong frame"),
+        (lambda m: setattr(m.header, "frame_id", "odom"), "wrong_frame"),
+        (lambda m: setattr(m, "child_frame_id", "imu_link"), "wrong_frame"),
     ],
 )
 def test_malformed_odometry_is_rejected_with_its_reason(change, reason):
@@ -135,9 +137,9 @@ def test_anemometer_sample_round_trip_and_rejections():
     assert sample.t_s == 7.5
     np.testing.assert_array_equal(sample.wind_sensor_mps, [3.0, -4.0, 0.5])
     for message, reason in [
-        (wind([math.nan, 1.0, 0.0]), "non-finite value"),
-        (wind([1.0, math.inf, 0.0]), "non-finite value"),
-        (wind([1.0, 1.0, 0.0], frame="imu_link"), "wrong frame"),
+        (wind([math.nan, 1.0, 0.0]), "non_finite"),
+        (wind([1.0, math.inf, 0.0]), "non_finite"),
+        (wind([1.0, 1.0, 0.0], frame="imu_link"), "wrong_frame"),
     ]:
         rejected = anemometer_sample(message)
         assert rejected.rejection == reason
@@ -192,10 +194,10 @@ def test_fix_latitude_and_its_rejections():
     fix.latitude = math.nan
     assert fix_latitude_deg(fix) is None
     fix.status.status = NavSatStatus.STATUS_FIX
-    with pytest.raises(MalformedMessageError, match="non-finite"):
+    with pytest.raises(MalformedMessageError, match="non_finite"):
         fix_latitude_deg(fix)
     fix.latitude = 91.0
-    with pytest.raises(MalformedMessageError, match="latitude out of range"):
+    with pytest.raises(MalformedMessageError, match="latitude_out_of_range"):
         fix_latitude_deg(fix)
 
 
@@ -275,7 +277,7 @@ def test_product_messages_carry_the_window_statistics():
     winds[3] = np.nan
     (product,) = averager.add_batch(stamps, winds)
     mean, stats = product_messages(Vector3Stamped, Float64MultiArray, MultiArrayDimension, product)
-    assert stamp_from_seconds(product.window_end_s) == (
+    assert seconds_to_stamp(product.window_end_s) == (
         mean.header.stamp.sec,
         mean.header.stamp.nanosec,
     )

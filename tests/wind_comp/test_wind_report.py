@@ -9,7 +9,7 @@ import pytest
 from matplotlib.image import imread
 from scipy.spatial.transform import Rotation
 
-from buoy_nav.bag_io import BagReader, BagWriter
+from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.fuse_bag import fusion_config_from_files
 from sensor_sim.simulate_bag import parse_arguments, simulate
 from wind_comp.process_bag import compensator_config_from_files, process_bag
@@ -28,7 +28,7 @@ from wind_comp.report import (
 )
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-BUOY_PARAMS = str(Path(__file__).resolve().parents[2] / "src/buoy_nav/config/buoy.yaml")
+BUOY_PARAMS = str(Path(__file__).resolve().parents[2] / "src/buoy_common/config/buoy.yaml")
 FIGURES = ("wind_time_series.png", "attitude_error.png", "vertical_wind_spectrum.png")
 
 

@@ -10,25 +10,13 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-NAN = float("nan")
-
-# A baseline shorter than this cannot give a heading worth fusing (the noise of a few mm of
-# carrier-phase baseline then exceeds a degree).
-MIN_BASELINE_LENGTH_M = 0.1
-
+from buoy_common.extrinsics import check_shared_fields, shared_field
 
 FUSION_NODE_NAME = "fusion_node"
 """Node name whose parameter-file sections configure the fusion (live and offline)."""
 FUSION_PARAMETER_PREFIX = "fusion."
-"""ROS parameter of a :class:`FusionConfig` field ``f``: ``fusion.f``, except the shared ones."""
-FUSION_SHARED_PARAMETERS = {
-    "primary_antenna_body_m": "gnss.primary_antenna",
-    "secondary_antenna_body_m": "gnss.secondary_antenna",
-    "origin_latitude_deg": "origin.latitude_deg",
-    "origin_longitude_deg": "origin.longitude_deg",
-    "origin_altitude_m": "origin.altitude_m",
-}
-"""Fields set by the parameters every node shares (interface contract)."""
+"""ROS parameter of a :class:`FusionConfig` field ``f``: ``fusion.f``, except the shared ones
+(interface contract), which are declared with their own names."""
 FUSION_FIELDS_NOT_PARAMETERS = ("record_innovations",)
 """Fields for analysis tools only, not ROS parameters."""
 
@@ -98,11 +86,11 @@ class FusionConfig:
       record_innovations: keep every innovation in ``FusionEngine.innovation_log`` [False].
     """
 
-    primary_antenna_body_m: tuple[float, float, float] = (-0.75, 0.0, 1.0)
-    secondary_antenna_body_m: tuple[float, float, float] = (0.75, 0.0, 1.0)
-    origin_latitude_deg: float = NAN
-    origin_longitude_deg: float = NAN
-    origin_altitude_m: float = NAN
+    primary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.primary_antenna")
+    secondary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.secondary_antenna")
+    origin_latitude_deg: float = shared_field("origin.latitude_deg")
+    origin_longitude_deg: float = shared_field("origin.longitude_deg")
+    origin_altitude_m: float = shared_field("origin.altitude_m")
 
     gyro_noise_deg_sqrt_h: float = 0.2
     gyro_turn_on_bias_deg_s: float = 0.02
@@ -144,27 +132,10 @@ class FusionConfig:
         self._validate()
 
     def _validate(self):
-        for name in ("primary_antenna_body_m", "secondary_antenna_body_m"):
-            if not all(math.isfinite(c) for c in getattr(self, name)):
-                raise ConfigError(f"{name} must hold three finite numbers (m)")
-        if math.hypot(*self.baseline_body_m) < MIN_BASELINE_LENGTH_M:
-            raise ConfigError(
-                "secondary_antenna_body_m must be at least "
-                f"{MIN_BASELINE_LENGTH_M} m from primary_antenna_body_m"
-            )
-        origin = (self.origin_latitude_deg, self.origin_longitude_deg, self.origin_altitude_m)
-        if any(math.isnan(c) for c in origin):
-            if not all(math.isnan(c) for c in origin):
-                raise ConfigError(
-                    "origin_latitude_deg, origin_longitude_deg and origin_altitude_m must be "
-                    "all set or all NaN"
-                )
-        else:
-            _require(abs(self.origin_latitude_deg) < 90.0, "origin_latitude_deg", "in (−90, 90)")
-            _require(
-                abs(self.origin_longitude_deg) <= 180.0, "origin_longitude_deg", "in [−180, 180]"
-            )
-            _require(abs(self.origin_altitude_m) < 1e5, "origin_altitude_m", "within ±100 km")
+        try:
+            check_shared_fields(self)
+        except ValueError as error:
+            raise ConfigError(str(error)) from None
         for name in (
             "gyro_noise_deg_sqrt_h",
             "gyro_turn_on_bias_deg_s",

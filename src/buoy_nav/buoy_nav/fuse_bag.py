@@ -19,23 +19,28 @@ import time
 from collections import Counter
 from collections.abc import Iterable
 
-from buoy_nav.bag_io import BackgroundBagWriter, BagError, BagMessage, BagReader, BagWriter
+from buoy_common.bag_io import BackgroundBagWriter, BagError, BagMessage, BagReader, BagWriter
+from buoy_common.contract import (
+    GNSS_BASELINE_TOPIC,
+    GNSS_FIX_TOPIC,
+    GNSS_HEADING_TOPIC,
+    GNSS_VELOCITY_TOPIC,
+    IMU_RAW_TOPIC,
+    NAV_MSGTYPES,
+    TRUTH_PREFIX,
+    bag_topic,
+)
+from buoy_common.parameters import ParameterError, build_config, load_parameter_files
+from buoy_common.progress import Progress
 from buoy_nav.config import (
     FUSION_FIELDS_NOT_PARAMETERS,
     FUSION_NODE_NAME,
     FUSION_PARAMETER_PREFIX,
-    FUSION_SHARED_PARAMETERS,
     FusionConfig,
 )
 from buoy_nav.engine import FusionEngine, NavSolution
 from buoy_nav.fusion_messages import (
-    BASELINE_TOPIC,
-    FIX_TOPIC,
-    HEADING_TOPIC,
-    IMU_TOPIC,
-    NAV_MSGTYPES,
-    SENSOR_MSGTYPES,
-    VELOCITY_TOPIC,
+    FUSION_INPUT_MSGTYPES,
     NavValues,
     StampBook,
     feed_imu_cdr,
@@ -43,12 +48,9 @@ from buoy_nav.fusion_messages import (
     nav_values,
     solution_cdr,
 )
-from buoy_nav.parameters import ParameterError, build_config, load_parameter_files
-from buoy_nav.progress import Progress
 
-REQUIRED_TOPICS = (IMU_TOPIC, FIX_TOPIC, HEADING_TOPIC)
-OPTIONAL_TOPICS = (VELOCITY_TOPIC, BASELINE_TOPIC)
-TRUTH_PREFIX = "truth/"
+REQUIRED_TOPICS = (IMU_RAW_TOPIC, GNSS_FIX_TOPIC, GNSS_HEADING_TOPIC)
+OPTIONAL_TOPICS = (GNSS_VELOCITY_TOPIC, GNSS_BASELINE_TOPIC)
 PROGRESS_EVERY_MESSAGES = 2000
 
 
@@ -59,19 +61,13 @@ def fusion_config_from_files(paths: Iterable[str]) -> FusionConfig:
         FusionConfig,
         values,
         FUSION_PARAMETER_PREFIX,
-        FUSION_SHARED_PARAMETERS,
-        FUSION_FIELDS_NOT_PARAMETERS,
+        skip=FUSION_FIELDS_NOT_PARAMETERS,
     )
 
 
 def relative_topic(name: str) -> str:
     """A bag topic name without its leading slash (topic names of the contract are relative)."""
     return name.lstrip("/")
-
-
-def bag_topic(relative: str) -> str:
-    """The absolute name under which ``ros2 bag record`` stores a relative topic."""
-    return "/" + relative
 
 
 # Relative nav topic → (name stored in the bag, message type).
@@ -90,13 +86,13 @@ def sensor_topics_of(
     stored = {relative_topic(name): name for name in reader.topics}
     found = {}
     for topic in (*REQUIRED_TOPICS, *OPTIONAL_TOPICS):
-        if topic not in stored or (topic == BASELINE_TOPIC and not config.use_gnss_baseline):
+        if topic not in stored or (topic == GNSS_BASELINE_TOPIC and not config.use_gnss_baseline):
             continue
         msgtype = reader.topics[stored[topic]].msgtype
-        if msgtype != SENSOR_MSGTYPES[topic]:
+        if msgtype != FUSION_INPUT_MSGTYPES[topic]:
             raise BagError(
                 f"bag {reader.path}: topic {stored[topic]} holds {msgtype}, "
-                f"expected {SENSOR_MSGTYPES[topic]}"
+                f"expected {FUSION_INPUT_MSGTYPES[topic]}"
             )
         found[topic] = stored[topic]
     return found
@@ -127,7 +123,9 @@ class OfflineFusion:
 
     def add_message(self, reader: BagReader, topic: str, message: BagMessage) -> list[NavValues]:
         """:meth:`add` of a bag message of relative ``topic``, IMU samples read from CDR."""
-        fed = feed_imu_cdr(self.engine, message.raw, self.stamps) if topic == IMU_TOPIC else None
+        fed = (
+            feed_imu_cdr(self.engine, message.raw, self.stamps) if topic == IMU_RAW_TOPIC else None
+        )
         if fed is None:
             return self.add(topic, reader.decode(message), message.log_time_ns)
         return self._take(topic, fed, message.log_time_ns)

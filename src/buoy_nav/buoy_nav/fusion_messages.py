@@ -4,7 +4,7 @@ The live ``fusion_node`` and the offline tools (``fuse_bag``, ``process_bag``) c
 this module, so a message is accepted, rejected or produced identically in both. Messages are
 read by attribute access only: rclpy message objects and rosbags' decoded objects both work.
 Output messages are built from the message classes handed in (the ROS Python message classes,
-which :class:`buoy_nav.bag_io.BagWriter` also serialises).
+which :class:`buoy_common.bag_io.BagWriter` also serialises).
 
 Inputs (interface contract); frame ids are not checked, so drivers that name their frames
 differently still work:
@@ -45,61 +45,44 @@ from typing import NamedTuple
 
 import numpy as np
 
+from buoy_common.contract import (
+    BODY_FRAME,
+    GNSS_BASELINE_TOPIC,
+    GNSS_FIX_TOPIC,
+    GNSS_HEADING_TOPIC,
+    GNSS_VELOCITY_TOPIC,
+    IMU_RAW_TOPIC,
+    MAP_FRAME,
+    NAV_FIX_TOPIC,
+    NAV_IMU_TOPIC,
+    NAV_ODOMETRY_TOPIC,
+    NAV_VELOCITY_TOPIC,
+    SENSOR_MSGTYPES,
+    Reason,
+    header_seconds,
+    seconds_to_stamp,
+)
 from buoy_nav.engine import FusionEngine, NavSolution
 from buoy_nav.rotations import rotation_matrix_elements
 
-IMU_TOPIC = "imu/data_raw"
-FIX_TOPIC = "gnss/fix"
-VELOCITY_TOPIC = "gnss/vel"
-HEADING_TOPIC = "gnss/heading"
-BASELINE_TOPIC = "gnss/baseline"
-SENSOR_MSGTYPES = {
-    IMU_TOPIC: "sensor_msgs/msg/Imu",
-    FIX_TOPIC: "sensor_msgs/msg/NavSatFix",
-    VELOCITY_TOPIC: "geometry_msgs/msg/TwistWithCovarianceStamped",
-    HEADING_TOPIC: "sensor_msgs/msg/Imu",
-    BASELINE_TOPIC: "geometry_msgs/msg/Vector3Stamped",
+FUSION_INPUT_MSGTYPES = {
+    topic: SENSOR_MSGTYPES[topic]
+    for topic in (
+        IMU_RAW_TOPIC,
+        GNSS_FIX_TOPIC,
+        GNSS_VELOCITY_TOPIC,
+        GNSS_HEADING_TOPIC,
+        GNSS_BASELINE_TOPIC,
+    )
 }
 """The fusion's input topics (relative names) and their message types."""
 
-ODOMETRY_TOPIC = "nav/odometry"
-NAV_IMU_TOPIC = "nav/imu"
-NAV_VELOCITY_TOPIC = "nav/velocity"
-NAV_FIX_TOPIC = "nav/fix"
-NAV_MSGTYPES = {
-    ODOMETRY_TOPIC: "nav_msgs/msg/Odometry",
-    NAV_IMU_TOPIC: "sensor_msgs/msg/Imu",
-    NAV_VELOCITY_TOPIC: "geometry_msgs/msg/TwistWithCovarianceStamped",
-    NAV_FIX_TOPIC: "sensor_msgs/msg/NavSatFix",
-}
-"""The fusion's output topics and their message types."""
-
-MAP_FRAME = "map"
-BODY_FRAME = "base_link"
-
-REASON_NO_FIX = "no_fix"
-REASON_ZERO_QUATERNION = "zero_quaternion"
-REASON_MALFORMED = "malformed"
-
-NANOSECONDS_PER_SECOND = 1_000_000_000
 # Quaternions shorter than this carry no heading.
 _MIN_QUATERNION_NORM = 1e-9
 # sensor_msgs/NavSatStatus and NavSatFix constants.
 STATUS_FIX = 0
 SERVICE_GPS = 1
 COVARIANCE_TYPE_KNOWN = 3
-
-
-def stamp_seconds(header) -> float:
-    """Header stamp in seconds since the epoch (float)."""
-    stamp = header.stamp
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def stamp_parts(t_s: float) -> tuple[int, int]:
-    """(sec, nanosec) of a stamp in seconds, rounded to the nanosecond."""
-    total_ns = round(t_s * NANOSECONDS_PER_SECOND)
-    return total_ns // NANOSECONDS_PER_SECOND, total_ns % NANOSECONDS_PER_SECOND
 
 
 class StampBook:
@@ -125,7 +108,7 @@ class StampBook:
             stamps.popleft()
         if stamps and stamps[0][0] == t_s:
             return stamps[0][1], stamps[0][2]
-        return stamp_parts(t_s)
+        return seconds_to_stamp(t_s)
 
 
 def _triple(vector) -> tuple[float, float, float]:
@@ -149,17 +132,17 @@ def feed_message(
     go into ``stamps`` when given.
     """
     try:
-        t_s = stamp_seconds(message.header)
-        if topic == IMU_TOPIC:
+        t_s = header_seconds(message.header)
+        if topic == IMU_RAW_TOPIC:
             if stamps is not None:
                 stamps.remember(t_s, message.header.stamp.sec, message.header.stamp.nanosec)
             solutions = engine.add_imu(
                 t_s, _triple(message.angular_velocity), _triple(message.linear_acceleration)
             )
             return solutions, engine.last_input_rejection
-        if topic == FIX_TOPIC:
+        if topic == GNSS_FIX_TOPIC:
             if message.status.status < STATUS_FIX:
-                return [], REASON_NO_FIX
+                return [], Reason.NO_FIX
             engine.add_gnss_fix(
                 t_s,
                 message.latitude,
@@ -167,32 +150,32 @@ def feed_message(
                 message.altitude,
                 np.asarray(message.position_covariance, dtype=float),
             )
-        elif topic == VELOCITY_TOPIC:
+        elif topic == GNSS_VELOCITY_TOPIC:
             twist = message.twist
             covariance = np.asarray(twist.covariance, dtype=float)
             if covariance.shape != (36,):
-                return [], REASON_MALFORMED
+                return [], Reason.MALFORMED
             engine.add_gnss_velocity(
                 t_s, _triple(twist.twist.linear), covariance.reshape(6, 6)[:3, :3]
             )
-        elif topic == HEADING_TOPIC:
+        elif topic == GNSS_HEADING_TOPIC:
             q = message.orientation
             x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
             norm = math.sqrt(x * x + y * y + z * z + w * w)
             if math.isfinite(norm) and norm < _MIN_QUATERNION_NORM:
-                return [], REASON_ZERO_QUATERNION
+                return [], Reason.ZERO_QUATERNION
             covariance = message.orientation_covariance
             if len(covariance) != 9:
-                return [], REASON_MALFORMED
+                return [], Reason.MALFORMED
             engine.add_gnss_heading(t_s, yaw_from_quaternion_rad(x, y, z, w), covariance[8])
-        elif topic == BASELINE_TOPIC:
+        elif topic == GNSS_BASELINE_TOPIC:
             engine.add_gnss_baseline(t_s, _triple(message.vector))
         else:
             raise ValueError(f"'{topic}' is not an input topic of the fusion")
     except (AttributeError, TypeError, ValueError) as error:
         if isinstance(error, ValueError) and "input topic" in str(error):
             raise
-        return [], REASON_MALFORMED
+        return [], Reason.MALFORMED
     return [], engine.last_input_rejection
 
 
@@ -332,7 +315,7 @@ def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavVal
     """What the ``nav/*`` messages of ``solution`` carry (see the module docstring), stamped
     with the exact IMU stamp from ``stamps`` when given."""
     t_s = solution.t_s
-    sec, nanosec = stamp_parts(t_s) if stamps is None else stamps.exact(t_s)
+    sec, nanosec = seconds_to_stamp(t_s) if stamps is None else stamps.exact(t_s)
     x, y, z, w = solution.attitude_xyzw.tolist()
     rotation_elements = rotation_matrix_elements(x, y, z, w)
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_elements
@@ -436,7 +419,7 @@ def solution_messages(
     fix.position_covariance_type = COVARIANCE_TYPE_KNOWN
 
     return {
-        ODOMETRY_TOPIC: odometry,
+        NAV_ODOMETRY_TOPIC: odometry,
         NAV_IMU_TOPIC: imu,
         NAV_VELOCITY_TOPIC: velocity,
         NAV_FIX_TOPIC: fix,
@@ -526,7 +509,7 @@ def solution_cdr(v: NavValues) -> dict[str, bytes]:
     what ROS serialises for :func:`solution_messages` (with zeroed padding)."""
     sec, nanosec = v.sec, v.nanosec
     return {
-        ODOMETRY_TOPIC: _CDR_ENCAPSULATION
+        NAV_ODOMETRY_TOPIC: _CDR_ENCAPSULATION
         + _ODOMETRY_CDR.pack(
             sec,
             nanosec,

@@ -64,32 +64,33 @@ from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu, NavSatFix
 
-from buoy_nav.base_node import (
+from buoy_common.base_node import (
     DATA_QOS,
     DiagnosticsPublisher,
     FlushingNode,
     main_for,
 )
+from buoy_common.contract import (
+    GNSS_BASELINE_TOPIC,
+    GNSS_FIX_TOPIC,
+    GNSS_HEADING_TOPIC,
+    GNSS_VELOCITY_TOPIC,
+    IMU_RAW_TOPIC,
+    NAV_FIX_TOPIC,
+    NAV_IMU_TOPIC,
+    NAV_ODOMETRY_TOPIC,
+    NAV_VELOCITY_TOPIC,
+    Reason,
+)
 from buoy_nav.config import (
     FUSION_FIELDS_NOT_PARAMETERS,
     FUSION_NODE_NAME,
     FUSION_PARAMETER_PREFIX,
-    FUSION_SHARED_PARAMETERS,
     FusionConfig,
 )
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
 from buoy_nav.error_state_filter import STANDARD_GRAVITY_MPS2
 from buoy_nav.fusion_messages import (
-    BASELINE_TOPIC,
-    FIX_TOPIC,
-    HEADING_TOPIC,
-    IMU_TOPIC,
-    NAV_FIX_TOPIC,
-    NAV_IMU_TOPIC,
-    NAV_VELOCITY_TOPIC,
-    ODOMETRY_TOPIC,
-    REASON_MALFORMED,
-    VELOCITY_TOPIC,
     StampBook,
     feed_imu_cdr,
     feed_message,
@@ -98,17 +99,17 @@ from buoy_nav.fusion_messages import (
 )
 
 OUTPUT_CLASSES = {
-    ODOMETRY_TOPIC: Odometry,
+    NAV_ODOMETRY_TOPIC: Odometry,
     NAV_IMU_TOPIC: Imu,
     NAV_VELOCITY_TOPIC: TwistWithCovarianceStamped,
     NAV_FIX_TOPIC: NavSatFix,
 }
 INPUT_CLASSES = {
-    IMU_TOPIC: Imu,
-    FIX_TOPIC: NavSatFix,
-    VELOCITY_TOPIC: TwistWithCovarianceStamped,
-    HEADING_TOPIC: Imu,
-    BASELINE_TOPIC: Vector3Stamped,
+    IMU_RAW_TOPIC: Imu,
+    GNSS_FIX_TOPIC: NavSatFix,
+    GNSS_VELOCITY_TOPIC: TwistWithCovarianceStamped,
+    GNSS_HEADING_TOPIC: Imu,
+    GNSS_BASELINE_TOPIC: Vector3Stamped,
 }
 DIAGNOSTICS_PERIOD_S = 1.0
 # How long after publishing a solution the node feeds the GNSS messages and lets the filter
@@ -136,7 +137,7 @@ class FusionNode(FlushingNode):
         self.input_topics = [
             topic
             for topic in INPUT_CLASSES
-            if topic != BASELINE_TOPIC or self.config.use_gnss_baseline
+            if topic != GNSS_BASELINE_TOPIC or self.config.use_gnss_baseline
         ]
 
         self._nav_publishers = {
@@ -146,7 +147,7 @@ class FusionNode(FlushingNode):
         # Raw: the IMU sample is read straight from its CDR bytes, as offline, and saves the
         # building of a message object at 100 Hz; GNSS messages are decoded when their turn
         # comes (see the module docstring).
-        self.create_subscription(Imu, IMU_TOPIC, self.on_imu, DATA_QOS, raw=True)
+        self.create_subscription(Imu, IMU_RAW_TOPIC, self.on_imu, DATA_QOS, raw=True)
         for topic in self.input_topics[1:]:
             self.create_subscription(
                 INPUT_CLASSES[topic],
@@ -176,7 +177,6 @@ class FusionNode(FlushingNode):
         return self.declare_config(
             FusionConfig,
             prefix=FUSION_PARAMETER_PREFIX,
-            renamed=FUSION_SHARED_PARAMETERS,
             skip=FUSION_FIELDS_NOT_PARAMETERS,
         )
 
@@ -186,15 +186,15 @@ class FusionNode(FlushingNode):
         started_s = time.perf_counter()
         now_s = time.monotonic()
         interval_s, self._previous_imu_callback_s = now_s - self._previous_imu_callback_s, now_s
-        self._messages_in[IMU_TOPIC] += 1
+        self._messages_in[IMU_RAW_TOPIC] += 1
         fed = feed_imu_cdr(self.engine, raw, self.stamps)
         if fed is None:
             message = _decoded(raw, Imu)
             if message is None:
-                self.reject(IMU_TOPIC, REASON_MALFORMED)
+                self.reject(IMU_RAW_TOPIC, Reason.MALFORMED)
                 return
-            fed = feed_message(self.engine, IMU_TOPIC, message, self.stamps)
-        self._take(IMU_TOPIC, fed)
+            fed = feed_message(self.engine, IMU_RAW_TOPIC, message, self.stamps)
+        self._take(IMU_RAW_TOPIC, fed)
         # The solution is out. The GNSS messages that came in and the filtering this sample made
         # due wait a little, so that the nodes that take this solution run first.
         if self.deferred_work_due_s is None:
@@ -219,7 +219,7 @@ class FusionNode(FlushingNode):
             message = _decoded(raw, INPUT_CLASSES[topic])
             if message is None:
                 self._messages_in[topic] += 1
-                self.reject(topic, REASON_MALFORMED)
+                self.reject(topic, Reason.MALFORMED)
                 continue
             self.feed(topic, message)
 
@@ -303,8 +303,8 @@ class FusionNode(FlushingNode):
             }
         )
 
-        if new[IMU_TOPIC] == 0:
-            return "warn", f"no {IMU_TOPIC} samples", values
+        if new[IMU_RAW_TOPIC] == 0:
+            return "warn", f"no {IMU_RAW_TOPIC} samples", values
         if not health.aligned:
             return "warn", f"aligning ({health.alignment_state.value})", values
         coasting = [

@@ -33,8 +33,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from buoy_nav.bag_io import BagError, BagReader
-from buoy_nav.base_node import DATA_QOS, StartupError, SuiteNode, message_class
+from buoy_common.bag_io import BagError, BagReader
+from buoy_common.base_node import DATA_QOS, StartupError, SuiteNode, message_class
 from sensor_sim.bag_recorder_node import split_ros_arguments
 
 PROGRAM = "bag_player"

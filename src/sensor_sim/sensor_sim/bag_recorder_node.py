@@ -23,8 +23,8 @@ from collections import Counter
 from rclpy.clock import Clock, ClockType
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from buoy_nav.bag_io import BagError, BagWriter, jazzy_typestore
-from buoy_nav.base_node import (
+from buoy_common.bag_io import BagError, BagWriter, jazzy_typestore
+from buoy_common.base_node import (
     DATA_QOS,
     DiagnosticsPublisher,
     StartupError,

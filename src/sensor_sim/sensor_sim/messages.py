@@ -16,14 +16,15 @@ from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 
+from buoy_common.contract import (
+    ANEMOMETER_FRAME,
+    BODY_FRAME,
+    GNSS_PRIMARY_FRAME,
+    IMU_FRAME,
+    MAP_FRAME,
+)
 from sensor_sim.sensor_models import GnssSample
 from sensor_sim.truth import TruthState
-
-IMU_FRAME = "imu_link"
-GNSS_FRAME = "gnss_primary"
-ANEMOMETER_FRAME = "anemometer_link"
-MAP_FRAME = "map"
-BODY_FRAME = "base_link"
 
 # Heading messages carry yaw only; roll and pitch are marked as unknown with a huge variance.
 UNKNOWN_ANGLE_VARIANCE_RAD2 = 1.0e6
@@ -70,7 +71,7 @@ def gnss_fix_messages(stamps_ns: list[int], sample: GnssSample) -> Iterator[NavS
     """``gnss/fix``: primary antenna WGS-84 position; status NO_FIX (and NaN) during outages."""
     for i, time_ns in enumerate(stamps_ns):
         message = NavSatFix()
-        _set_stamp(message.header, time_ns, GNSS_FRAME)
+        _set_stamp(message.header, time_ns, GNSS_PRIMARY_FRAME)
         message.status.service = NavSatStatus.SERVICE_GPS
         if sample.fix_valid[i]:
             message.status.status = NavSatStatus.STATUS_GBAS_FIX
@@ -95,7 +96,7 @@ def gnss_velocity_messages(
             yield None
             continue
         message = TwistWithCovarianceStamped()
-        _set_stamp(message.header, time_ns, GNSS_FRAME)
+        _set_stamp(message.header, time_ns, GNSS_PRIMARY_FRAME)
         _set_vector(message.twist.twist.linear, sample.velocity_enu_mps[i])
         covariance = np.zeros((6, 6))
         covariance[:3, :3] = sample.velocity_covariance_enu_m2s2[i]
@@ -111,7 +112,7 @@ def gnss_heading_messages(stamps_ns: list[int], sample: GnssSample) -> Iterator[
             yield None
             continue
         message = Imu()
-        _set_stamp(message.header, time_ns, GNSS_FRAME)
+        _set_stamp(message.header, time_ns, GNSS_PRIMARY_FRAME)
         half_yaw = 0.5 * float(sample.heading_yaw_rad[i])
         _set_quaternion(message.orientation, (0.0, 0.0, math.sin(half_yaw), math.cos(half_yaw)))
         message.orientation_covariance[0] = UNKNOWN_ANGLE_VARIANCE_RAD2

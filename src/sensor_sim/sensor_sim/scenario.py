@@ -30,7 +30,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
-from sensor_sim.sensor_models import (
+from sensor_sim.sensor_errors import (
     AnemometerErrorConfig,
     GnssErrorConfig,
     ImuErrorConfig,

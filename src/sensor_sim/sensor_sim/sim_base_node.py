@@ -12,7 +12,7 @@ from rclpy.duration import Duration
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from buoy_nav.base_node import (
+from buoy_common.base_node import (
     DATA_QOS,
     DiagnosticsPublisher,
     StartupError,
@@ -20,7 +20,7 @@ from buoy_nav.base_node import (
     main_for,
     message_class,
 )
-from buoy_nav.parameters import ParameterError
+from buoy_common.parameters import ParameterError
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS
 from sensor_sim.truth import TruthModel

@@ -12,7 +12,7 @@ import time
 
 from rosgraph_msgs.msg import Clock
 
-from buoy_nav.base_node import StartupError, SuiteNode, main_for
+from buoy_common.base_node import StartupError, SuiteNode, main_for
 from sensor_sim.sim_base_node import CLOCK_QOS, declare_scenario
 
 END_LINGER_S = 1.0

@@ -10,9 +10,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from buoy_nav.bag_io import BagError, BagWriter
-from buoy_nav.parameters import ParameterError, load_parameter_files
-from buoy_nav.progress import Progress
+from buoy_common.bag_io import BagError, BagWriter
+from buoy_common.parameters import ParameterError, load_parameter_files
+from buoy_common.progress import Progress
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS, merged_messages
 from sensor_sim.truth import TruthModel

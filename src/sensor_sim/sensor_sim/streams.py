@@ -14,18 +14,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from buoy_nav.parameters import build_config, config_parameters
+from buoy_common.extrinsics import check_shared_fields, shared_field
+from buoy_common.parameters import build_config, config_parameters
 from sensor_sim import messages
 from sensor_sim.geodesy import geodetic_to_enu_m
 from sensor_sim.scenario import Scenario
-from sensor_sim.sensor_models import (
-    AnemometerErrorConfig,
-    AnemometerSimulator,
-    GnssErrorConfig,
-    GnssSimulator,
-    ImuErrorConfig,
-    ImuSimulator,
-)
+from sensor_sim.sensor_errors import AnemometerErrorConfig, GnssErrorConfig, ImuErrorConfig
+from sensor_sim.sensor_models import AnemometerSimulator, GnssSimulator, ImuSimulator
 from sensor_sim.truth import TruthModel
 
 SECONDS_PER_HOUR = 3600.0
@@ -38,27 +33,25 @@ IMU_SEED_KEY, GNSS_SEED_KEY, ANEMOMETER_SEED_KEY = 1, 2, 3
 class Extrinsics:
     """Where the sensors sit on the buoy (shared parameters of the interface contract)."""
 
-    primary_antenna_body_m: tuple[float, float, float] = (-0.75, 0.0, 1.0)
-    secondary_antenna_body_m: tuple[float, float, float] = (0.75, 0.0, 1.0)
-    anemometer_position_body_m: tuple[float, float, float] = (0.0, 0.0, 3.0)
-    anemometer_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    primary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.primary_antenna")
+    secondary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.secondary_antenna")
+    anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
+    anemometer_rpy_deg: tuple[float, float, float] = shared_field("anemometer.rpy_deg")
 
     def __post_init__(self):
-        baseline = np.subtract(self.secondary_antenna_body_m, self.primary_antenna_body_m)
-        if np.hypot(baseline[0], baseline[1]) < 0.05:
-            raise ValueError(
-                "secondary_antenna_body_m: the antenna baseline must be at least 0.05 m long "
-                "horizontally in base_link to give a heading"
-            )
+        check_shared_fields(self)
 
 
 @dataclass(frozen=True)
 class MapOrigin:
     """Reference point of the map frame (deg, deg, m); NaN: the scenario's starting point."""
 
-    latitude_deg: float = math.nan
-    longitude_deg: float = math.nan
-    altitude_m: float = math.nan
+    latitude_deg: float = shared_field("origin.latitude_deg")
+    longitude_deg: float = shared_field("origin.longitude_deg")
+    altitude_m: float = shared_field("origin.altitude_m")
+
+    def __post_init__(self):
+        check_shared_fields(self)
 
     def unset(self) -> bool:
         return any(math.isnan(v) for v in (self.latitude_deg, self.longitude_deg, self.altitude_m))
@@ -264,14 +257,6 @@ def merged_messages(streams: list[SensorStream], until_s: float):
     return [(topic, stamp, message) for stamp, _, topic, message in rows]
 
 
-EXTRINSIC_PARAMETERS = {
-    "primary_antenna_body_m": "gnss.primary_antenna",
-    "secondary_antenna_body_m": "gnss.secondary_antenna",
-    "anemometer_position_body_m": "anemometer.position",
-    "anemometer_rpy_deg": "anemometer.rpy_deg",
-}
-
-
 @dataclass(frozen=True)
 class StreamSpec:
     """How one sensor stream is configured: its node, default rate and parameter groups.
@@ -327,7 +312,7 @@ STREAMS = {
         10.0,
         {
             "errors": (GnssErrorConfig, "gnss.", {}),
-            "extrinsics": (Extrinsics, "", EXTRINSIC_PARAMETERS),
+            "extrinsics": (Extrinsics, "", {}),
         },
     ),
     "anemometer": StreamSpec(
@@ -336,10 +321,8 @@ STREAMS = {
         20.0,
         {
             "errors": (AnemometerErrorConfig, "anemometer.", {}),
-            "extrinsics": (Extrinsics, "", EXTRINSIC_PARAMETERS),
+            "extrinsics": (Extrinsics, "", {}),
         },
     ),
-    "truth": StreamSpec(
-        "truth_node", TruthStream, 50.0, {"map_origin": (MapOrigin, "origin.", {})}
-    ),
+    "truth": StreamSpec("truth_node", TruthStream, 50.0, {"map_origin": (MapOrigin, "", {})}),
 }

@@ -58,23 +58,28 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from buoy_nav.base_node import (
+from buoy_common.base_node import (
     DATA_QOS,
     DiagnosticsPublisher,
     FlushingNode,
     StartupError,
     main_for,
 )
+from buoy_common.contract import (
+    NAV_FIX_TOPIC,
+    NAV_ODOMETRY_TOPIC,
+    WIND_RAW_TOPIC,
+    WIND_TRUE_TOPIC,
+    Reason,
+    window_label,
+)
 from wind_comp.compensator import (
-    DEFAULT_ANEMOMETER_POSITION_M,
-    DEFAULT_ANEMOMETER_RPY_DEG,
     CompensatorConfig,
     CorrectedWind,
     WindCompensator,
     WindStatus,
 )
 from wind_comp.nav_messages import (
-    REASON_STAMP_NOT_INCREASING,
     MalformedMessageError,
     StampOrder,
     anemometer_sample,
@@ -87,15 +92,10 @@ from wind_comp.nav_messages import (
     product_messages,
     rate_relative_to_level_components,
     true_wind_cdr,
-    window_label,
 )
 from wind_comp.products import WindAverager, WindProduct
 
 NODE_NAME = "compensation_node"
-WIND_TOPIC = "anemometer/wind"
-ODOMETRY_TOPIC = "nav/odometry"
-FIX_TOPIC = "nav/fix"
-TRUE_WIND_TOPIC = "wind/true"
 
 DEFAULT_NAV_TIMEOUT_S = 1.0
 DIAGNOSTICS_PERIOD_S = 1.0
@@ -142,7 +142,7 @@ class CompensationNode(FlushingNode):
         self._last_report_s = time.monotonic()
         self._latencies_s: list[float] = []
 
-        self._true_wind_publisher = self.create_publisher(Vector3Stamped, TRUE_WIND_TOPIC, DATA_QOS)
+        self._true_wind_publisher = self.create_publisher(Vector3Stamped, WIND_TRUE_TOPIC, DATA_QOS)
         self._product_publishers = {
             averager.window_s: (
                 self.create_publisher(
@@ -156,38 +156,20 @@ class CompensationNode(FlushingNode):
         }
         # Raw: wind samples are read from their CDR bytes and wind/true written as CDR bytes,
         # the arithmetic process_bag runs, without building message objects on the way.
-        self.create_subscription(Vector3Stamped, WIND_TOPIC, self.on_wind, DATA_QOS, raw=True)
+        self.create_subscription(Vector3Stamped, WIND_RAW_TOPIC, self.on_wind, DATA_QOS, raw=True)
         # Raw: 100 Hz each, read straight from CDR as process_bag reads them.
-        self.create_subscription(Odometry, ODOMETRY_TOPIC, self.on_odometry, DATA_QOS, raw=True)
-        self.create_subscription(NavSatFix, FIX_TOPIC, self.on_fix, DATA_QOS, raw=True)
+        self.create_subscription(Odometry, NAV_ODOMETRY_TOPIC, self.on_odometry, DATA_QOS, raw=True)
+        self.create_subscription(NavSatFix, NAV_FIX_TOPIC, self.on_fix, DATA_QOS, raw=True)
         self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
         self.get_logger().info(
-            f"correcting {WIND_TOPIC} with {ODOMETRY_TOPIC}: anemometer at "
+            f"correcting {WIND_RAW_TOPIC} with {NAV_ODOMETRY_TOPIC}: anemometer at "
             f"{list(self.config.anemometer_position_body_m)} m, rpy "
             f"{list(self.config.anemometer_rpy_deg)} deg; products over "
             f"{list(self.config.product_windows_s)} s"
         )
 
     def _declare_compensator_config(self) -> CompensatorConfig:
-        position = self.declare_value(
-            "anemometer.position",
-            DEFAULT_ANEMOMETER_POSITION_M,
-            "anemometer measurement centre in base_link, m (Miller's lever arm B)",
-        )
-        rpy = self.declare_value(
-            "anemometer.rpy_deg",
-            DEFAULT_ANEMOMETER_RPY_DEG,
-            "roll, pitch, yaw of anemometer_link relative to base_link, deg",
-        )
-        for name, values in (("anemometer.position", position), ("anemometer.rpy_deg", rpy)):
-            if not all(math.isfinite(value) for value in values):
-                raise StartupError(f"parameter '{name}' must be finite, got {list(values)}")
-        return self.declare_config(
-            CompensatorConfig,
-            prefix="compensation.",
-            anemometer_position_body_m=position,
-            anemometer_rpy_deg=rpy,
-        )
+        return self.declare_config(CompensatorConfig, prefix="compensation.")
 
     # -- inputs -----------------------------------------------------------------------------
 
@@ -204,9 +186,9 @@ class CompensationNode(FlushingNode):
         sample, sec, nanosec = parsed
         stamp_increases = self._wind_order.advance(sample.t_s)
         if sample.rejection is not None:
-            self.reject(WIND_TOPIC, sample.rejection)
+            self.reject(WIND_RAW_TOPIC, sample.rejection)
         elif not stamp_increases:
-            self.reject(WIND_TOPIC, REASON_STAMP_NOT_INCREASING)
+            self.reject(WIND_RAW_TOPIC, Reason.STAMP_NOT_INCREASING)
         self._pending.append(PendingStamp(sec, nanosec, sample.t_s, time.monotonic()))
         self.compensator.add_wind(sample.t_s, sample.wind_sensor_mps)
         self.publish_results(self.compensator.expire(self._timeout_horizon_s()))
@@ -229,11 +211,11 @@ class CompensationNode(FlushingNode):
             if fields is None:
                 fields = odometry_fields(deserialize_message(raw, Odometry))
         except MalformedMessageError as error:
-            self.reject(ODOMETRY_TOPIC, error.reason)
+            self.reject(NAV_ODOMETRY_TOPIC, error.reason)
             return
         t_s, quat_xyzw, rate_body_rad_s, velocity_body_mps = fields
         if not self._nav_order.advance(t_s):
-            self.reject(ODOMETRY_TOPIC, REASON_STAMP_NOT_INCREASING)
+            self.reject(NAV_ODOMETRY_TOPIC, Reason.STAMP_NOT_INCREASING)
             return
         # In floats, one message at a time: the arithmetic process_bag runs on whole columns.
         rate_nb = rate_relative_to_level_components(rate_body_rad_s, quat_xyzw, self.latitude_deg)
@@ -251,7 +233,7 @@ class CompensationNode(FlushingNode):
         try:
             latitude = checked_fix_latitude_deg(*fields)
         except MalformedMessageError as error:
-            self.reject(FIX_TOPIC, error.reason)
+            self.reject(NAV_FIX_TOPIC, error.reason)
             return
         if latitude is not None:
             self.latitude_deg = latitude
@@ -324,9 +306,9 @@ class CompensationNode(FlushingNode):
             }
         )
         if new["wind_in"] == 0:
-            return "warn", f"no {WIND_TOPIC} samples", values
+            return "warn", f"no {WIND_RAW_TOPIC} samples", values
         if new["nav_in"] == 0:
-            return "warn", f"no {ODOMETRY_TOPIC} samples: wind cannot be corrected", values
+            return "warn", f"no {NAV_ODOMETRY_TOPIC} samples: wind cannot be corrected", values
         return "ok", f"{counts[WindStatus.VALID]} valid, {n_invalid} invalid wind samples", values
 
 

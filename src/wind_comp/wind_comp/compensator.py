@@ -18,14 +18,11 @@ from enum import IntEnum
 
 import numpy as np
 
+from buoy_common.contract import Reason
+from buoy_common.extrinsics import check_shared_fields, shared_field
 from buoy_nav.rotations import rotation_matrix_elements
 from wind_comp.miller import miller_components, mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import InterpolationStatus, NavTrack
-
-DEFAULT_ANEMOMETER_POSITION_M = (0.0, 0.0, 3.0)
-"""Anemometer position when parameter ``anemometer.position`` is not given, m (body)."""
-DEFAULT_ANEMOMETER_RPY_DEG = (0.0, 0.0, 0.0)
-"""Anemometer mounting when parameter ``anemometer.rpy_deg`` is not given, deg."""
 
 
 class ConfigError(ValueError):
@@ -55,8 +52,8 @@ class CompensatorConfig:
         gust_window_s: length of the running mean whose maximum is the gust, s (WMO: 3 s).
     """
 
-    anemometer_position_body_m: tuple[float, float, float]
-    anemometer_rpy_deg: tuple[float, float, float]
+    anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
+    anemometer_rpy_deg: tuple[float, float, float] = shared_field("anemometer.rpy_deg")
     max_nav_gap_s: float = 0.1
     max_wind_speed_mps: float = 100.0
     nav_history_s: float = 10.0
@@ -66,6 +63,10 @@ class CompensatorConfig:
     def __post_init__(self):
         for name in ("anemometer_position_body_m", "anemometer_rpy_deg"):
             object.__setattr__(self, name, _finite_tuple(name, getattr(self, name), length=3))
+        try:
+            check_shared_fields(self)
+        except ValueError as error:
+            raise ConfigError(str(error)) from None
         for name in ("max_nav_gap_s", "max_wind_speed_mps", "nav_history_s", "gust_window_s"):
             object.__setattr__(self, name, _positive_float(name, getattr(self, name)))
         windows = _finite_tuple("product_windows_s", self.product_windows_s, length=None)
@@ -128,9 +129,9 @@ class WindStatus(IntEnum):
     """The stamp is not finite, or not later than the previous wind stamp."""
 
     @property
-    def reason(self) -> str:
-        """Human-readable reason, for logs and diagnostics."""
-        return self.name.lower().replace("_", " ")
+    def reason(self) -> Reason:
+        """Why the sample is invalid, in the contract's words (not defined for VALID)."""
+        return Reason[self.name]
 
 
 _PENDING = -1

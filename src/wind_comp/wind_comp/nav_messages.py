@@ -4,7 +4,7 @@ The live ``compensation_node`` and offline bag processing both convert through t
 a message is accepted, rejected or transformed identically in both. Messages are read by
 attribute access only: rclpy message objects and rosbags' decoded objects both work. Messages
 are built from default-constructible message classes (the ROS Python message classes, which
-:class:`buoy_nav.bag_io.BagWriter` also serialises).
+:class:`buoy_common.bag_io.BagWriter` also serialises).
 
 Inputs (interface contract):
 
@@ -39,25 +39,21 @@ from typing import NamedTuple
 
 import numpy as np
 
+from buoy_common.contract import (
+    ANEMOMETER_FRAME,
+    BODY_FRAME,
+    MAP_FRAME,
+    Reason,
+    seconds_to_stamp,
+    stamp_to_seconds,
+)
 from wind_comp.miller import cross_components
 from wind_comp.nav_interpolation import MIN_QUATERNION_NORM, quaternion_norm
 from wind_comp.products import WindProduct
 
-ANEMOMETER_FRAME = "anemometer_link"
-MAP_FRAME = "map"
-BODY_FRAME = "base_link"
-
 EARTH_RATE_RAD_S = 7.292115e-5
 """Earth's rotation rate relative to inertial space (WGS-84), rad/s."""
 
-NANOSECONDS_PER_SECOND = 1_000_000_000
-
-
-REASON_NON_FINITE = "non-finite value"
-REASON_ZERO_QUATERNION = "zero quaternion"
-REASON_WRONG_FRAME = "wrong frame"
-REASON_STAMP_NOT_INCREASING = "stamp not increasing"
-REASON_LATITUDE_OUT_OF_RANGE = "latitude out of range"
 
 STATS_FIELDS = (
     "scalar_mean_speed_mps",
@@ -108,16 +104,6 @@ class NavArrays(NamedTuple):
     velocity_enu_mps: np.ndarray
 
 
-def stamp_s(stamp) -> float:
-    """A ``builtin_interfaces/Time`` as float seconds since the epoch."""
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
-def stamp_from_seconds(t_s: float) -> tuple[int, int]:
-    """(sec, nanosec) of a time in float seconds, rounded to the nanosecond."""
-    return divmod(round(t_s * NANOSECONDS_PER_SECOND), NANOSECONDS_PER_SECOND)
-
-
 class StampOrder:
     """Tracks that the stamps of one topic strictly increase."""
 
@@ -145,7 +131,11 @@ def anemometer_sample(message) -> WindSample:
     """
     vector = message.vector
     return _wind_sample(
-        stamp_s(message.header.stamp), message.header.frame_id, vector.x, vector.y, vector.z
+        stamp_to_seconds(message.header.stamp),
+        message.header.frame_id,
+        vector.x,
+        vector.y,
+        vector.z,
     )
 
 
@@ -153,9 +143,9 @@ def _wind_sample(t_s: float, frame_id: str, x: float, y: float, z: float) -> Win
     wind = np.array([x, y, z], dtype=float)
     rejection = None
     if frame_id != ANEMOMETER_FRAME:
-        rejection = REASON_WRONG_FRAME
+        rejection = Reason.WRONG_FRAME
     elif not np.all(np.isfinite(wind)):
-        rejection = REASON_NON_FINITE
+        rejection = Reason.NON_FINITE
     if rejection is not None:
         wind = np.full(3, np.nan)
     return WindSample(t_s, wind, rejection)
@@ -243,7 +233,7 @@ def odometry_fields(message) -> tuple[float, tuple, tuple, tuple]:
     floats) of an Odometry, after the frame, finiteness and quaternion checks."""
     orientation = message.pose.pose.orientation
     return _checked_odometry(
-        stamp_s(message.header.stamp),
+        stamp_to_seconds(message.header.stamp),
         message.header.frame_id,
         message.child_frame_id,
         (
@@ -260,14 +250,14 @@ def odometry_fields(message) -> tuple[float, tuple, tuple, tuple]:
 def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body):
     if frame_id != MAP_FRAME or child_frame_id != BODY_FRAME:
         raise MalformedMessageError(
-            REASON_WRONG_FRAME,
+            Reason.WRONG_FRAME,
             f"odometry must be of {BODY_FRAME} in {MAP_FRAME}, got "
             f"'{child_frame_id}' in '{frame_id}'",
         )
     if not all(math.isfinite(value) for value in (*quat, *rate, *velocity_body)):
-        raise MalformedMessageError(REASON_NON_FINITE, "odometry orientation, rate or velocity")
+        raise MalformedMessageError(Reason.NON_FINITE, "odometry orientation, rate or velocity")
     if quaternion_norm(*quat) < MIN_QUATERNION_NORM:
-        raise MalformedMessageError(REASON_ZERO_QUATERNION, "odometry orientation has zero length")
+        raise MalformedMessageError(Reason.ZERO_QUATERNION, "odometry orientation has zero length")
     return t_s, quat, rate, velocity_body
 
 
@@ -365,10 +355,10 @@ def checked_fix_latitude_deg(status: int, latitude_deg: float) -> float | None:
     if status < 0:
         return None
     if not math.isfinite(latitude_deg):
-        raise MalformedMessageError(REASON_NON_FINITE, f"fix latitude {latitude_deg}")
+        raise MalformedMessageError(Reason.NON_FINITE, f"fix latitude {latitude_deg}")
     if abs(latitude_deg) > 90.0:
         raise MalformedMessageError(
-            REASON_LATITUDE_OUT_OF_RANGE, f"fix latitude {latitude_deg} deg"
+            Reason.LATITUDE_OUT_OF_RANGE, f"fix latitude {latitude_deg} deg"
         )
     return latitude_deg
 
@@ -416,13 +406,6 @@ def rate_relative_to_level_components(angular_rate_body_rad_s, quat_xyzw, latitu
     )
 
 
-def window_label(window_s: float) -> str:
-    """Topic suffix of an averaging window: ``1min`` for 60 s, ``10min`` for 600 s, ``30s``."""
-    if window_s % 60.0 == 0.0:
-        return f"{int(window_s // 60)}min"
-    return f"{window_s:g}s".replace(".", "p")
-
-
 def _set_header(header, sec: int, nanosec: int, frame_id: str) -> None:
     header.stamp.sec = int(sec)
     header.stamp.nanosec = int(nanosec)
@@ -457,7 +440,7 @@ def product_messages(
     The mean is the ENU vector mean (m/s, frame ``map``), stamped with the window end; the
     statistics follow :data:`STATS_FIELDS`.
     """
-    sec, nanosec = stamp_from_seconds(product.window_end_s)
+    sec, nanosec = seconds_to_stamp(product.window_end_s)
     mean = vector_stamped_class()
     _set_header(mean.header, sec, nanosec, MAP_FRAME)
     _set_vector(

@@ -29,29 +29,39 @@ import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from buoy_nav.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter, jazzy_typestore
+from buoy_common.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter, jazzy_typestore
+from buoy_common.contract import (
+    NAV_FIX_TOPIC,
+    NAV_MSGTYPES,
+    NAV_ODOMETRY_TOPIC,
+    WIND_RAW_TOPIC,
+    WIND_TRUE_TOPIC,
+    Reason,
+    bag_topic,
+    seconds_to_stamp,
+    window_label,
+)
+from buoy_common.parameters import (
+    ParameterError,
+    build_config,
+    load_parameter_files,
+)
+from buoy_common.progress import Progress
 from buoy_nav.config import FusionConfig
 from buoy_nav.fuse_bag import (
     OfflineFusion,
-    bag_topic,
     fusion_config_from_files,
     relative_topic,
     sensor_topics_of,
     truth_topics_of,
 )
-from buoy_nav.fusion_messages import NAV_FIX_TOPIC, NAV_MSGTYPES, ODOMETRY_TOPIC
-from buoy_nav.parameters import ParameterError, build_config, coerce_parameter, load_parameter_files
-from buoy_nav.progress import Progress
 from wind_comp.compensator import (
-    DEFAULT_ANEMOMETER_POSITION_M,
-    DEFAULT_ANEMOMETER_RPY_DEG,
     CompensatorConfig,
     CorrectedWind,
     WindCompensator,
     WindStatus,
 )
 from wind_comp.nav_messages import (
-    REASON_STAMP_NOT_INCREASING,
     StampOrder,
     WindSample,
     anemometer_sample,
@@ -63,19 +73,15 @@ from wind_comp.nav_messages import (
     odometry_fields_cdr,
     product_messages,
     remove_earth_rate,
-    stamp_from_seconds,
     true_wind_cdr,
-    window_label,
 )
 from wind_comp.products import WindAverager, WindProduct
 
 COMPENSATION_NODE_NAME = "compensation_node"
-WIND_TOPIC = "anemometer/wind"
-TRUE_WIND_TOPIC = "wind/true"
-TRUE_WIND_BAG_TOPIC = bag_topic(TRUE_WIND_TOPIC)
-ODOMETRY_BAG_TOPIC = bag_topic(ODOMETRY_TOPIC)
+TRUE_WIND_BAG_TOPIC = bag_topic(WIND_TRUE_TOPIC)
+ODOMETRY_BAG_TOPIC = bag_topic(NAV_ODOMETRY_TOPIC)
 NAV_FIX_BAG_TOPIC = bag_topic(NAV_FIX_TOPIC)
-ODOMETRY_MSGTYPE = NAV_MSGTYPES[ODOMETRY_TOPIC]
+ODOMETRY_MSGTYPE = NAV_MSGTYPES[NAV_ODOMETRY_TOPIC]
 NAV_FIX_MSGTYPE = NAV_MSGTYPES[NAV_FIX_TOPIC]
 VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
@@ -86,23 +92,7 @@ PROGRESS_EVERY_MESSAGES = 2000
 def compensator_config_from_files(paths) -> CompensatorConfig:
     """The :class:`CompensatorConfig` ``compensation_node`` would build from these files."""
     values = load_parameter_files(paths, COMPENSATION_NODE_NAME)
-    position = coerce_parameter(
-        "anemometer.position",
-        values.get("anemometer.position", DEFAULT_ANEMOMETER_POSITION_M),
-        DEFAULT_ANEMOMETER_POSITION_M,
-    )
-    rpy = coerce_parameter(
-        "anemometer.rpy_deg",
-        values.get("anemometer.rpy_deg", DEFAULT_ANEMOMETER_RPY_DEG),
-        DEFAULT_ANEMOMETER_RPY_DEG,
-    )
-    return build_config(
-        CompensatorConfig,
-        values,
-        prefix="compensation.",
-        anemometer_position_body_m=position,
-        anemometer_rpy_deg=rpy,
-    )
+    return build_config(CompensatorConfig, values, prefix="compensation.")
 
 
 def products_csv_path(out_bag) -> Path:
@@ -139,7 +129,7 @@ class OfflineCompensation:
     It takes what ``compensation_node`` subscribes to, as CDR bytes: ``nav/odometry`` and
     ``nav/fix`` as written by the fusion and the copied ``anemometer/wind``, so a solution gets
     the latitude of the ``nav/fix`` before it, as the node does. It runs in the process that
-    writes the bag (see :class:`buoy_nav.bag_io.BackgroundBagWriter`) and writes ``wind/true``
+    writes the bag (see :class:`buoy_common.bag_io.BackgroundBagWriter`) and writes ``wind/true``
     and the products to the same bag. Navigation and wind samples are handed to the compensator
     in chunks of a quarter of ``nav_history_s`` of wind: its decisions depend on stamps only, so
     chunking changes nothing but the speed.
@@ -194,7 +184,7 @@ class OfflineCompensation:
         if sample.rejection is not None:
             self.rejected[sample.rejection] += 1
         elif not self._wind_order.advance(sample.t_s):
-            self.rejected[REASON_STAMP_NOT_INCREASING] += 1
+            self.rejected[Reason.STAMP_NOT_INCREASING] += 1
         self._pending_stamps.append((sec, nanosec))
         self._wind_stamps_s.append(sample.t_s)
         self._winds_sensor_mps.append(sample.wind_sensor_mps)
@@ -288,8 +278,8 @@ def process_bag(
     started = time.monotonic()
     csv_path = products_csv_path(out_bag)
     with BagReader(in_bag) as reader:
-        sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_TOPIC,))
-        stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_TOPIC)
+        sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_RAW_TOPIC,))
+        stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
         progress = Progress(reader.duration_s, f"process_bag {in_bag}", unit="bag s")
@@ -355,11 +345,11 @@ def _print_summary(summary: ProcessSummary, out_bag: str) -> None:
         f"invalid: {invalid or 'none'}"
     )
     for reason, n in sorted(summary.rejected_wind_messages.items()):
-        print(f"rejected message {WIND_TOPIC}: {reason}: {n}")
+        print(f"rejected message {WIND_RAW_TOPIC}: {reason}: {n}")
     for product in summary.products:
         if product.window_end_s - product.window_start_s < product.window_s:
             continue
-        start_sec, _ = stamp_from_seconds(product.window_start_s)
+        start_sec, _ = seconds_to_stamp(product.window_start_s)
         print(
             f"{window_label(product.window_s):>6s} window from {start_sec}: "
             f"{product.vector_mean_speed_mps:6.2f} m/s from "

@@ -31,19 +31,24 @@ from matplotlib.figure import Figure
 from scipy.signal import welch
 from scipy.spatial.transform import Rotation, Slerp
 
-from buoy_nav.bag_io import BagError, BagReader
+from buoy_common.bag_io import BagError, BagReader
+from buoy_common.contract import (
+    NANOSECONDS_PER_SECOND,
+    NAV_ODOMETRY_TOPIC,
+    TRUTH_ODOMETRY_TOPIC,
+    TRUTH_WIND_TOPIC,
+    WIND_MEAN_PREFIX,
+    WIND_RAW_TOPIC,
+    WIND_STATS_PREFIX,
+    WIND_TRUE_TOPIC,
+    window_label,
+)
 from wind_comp.compensator import CompensatorConfig
-from wind_comp.nav_messages import stats_values, window_label
+from wind_comp.nav_messages import (
+    stats_values,
+)
 from wind_comp.products import WindAverager, WindProduct, meteorological_direction_deg
 
-ANEMOMETER_TOPIC = "anemometer/wind"
-CORRECTED_WIND_TOPIC = "wind/true"
-TRUE_WIND_TOPIC = "truth/wind"
-NAV_ODOMETRY_TOPIC = "nav/odometry"
-TRUE_ODOMETRY_TOPIC = "truth/odometry"
-STATS_TOPIC_PREFIX = "wind/stats_"
-MEAN_TOPIC_PREFIX = "wind/mean_"
-NANOSECONDS_PER_SECOND = 1_000_000_000
 # Plots count time from the start of the minute of the first sample, so simulated runs (which
 # start on a whole minute) show scenario time and the 1-minute windows start on round numbers.
 _TIME_ORIGIN_STEP_S = 60
@@ -580,7 +585,7 @@ def report_data_from_bag(bag, title: str | None = None) -> ReportData:
 
 
 def _report_data(reader: BagReader, title: str) -> ReportData:
-    required = (ANEMOMETER_TOPIC, CORRECTED_WIND_TOPIC)
+    required = (WIND_RAW_TOPIC, WIND_TRUE_TOPIC)
     missing = [topic for topic in required if not _has_messages(reader, topic)]
     if missing:
         raise ReportDataError(
@@ -588,13 +593,13 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
             f"{' and '.join(required)} (a bag written by process_bag, or recorded with "
             "compensation_node running)"
         )
-    measured = stamped_vectors(reader, ANEMOMETER_TOPIC)
-    corrected = vectors_at_stamps(measured.stamps_ns, stamped_vectors(reader, CORRECTED_WIND_TOPIC))
+    measured = stamped_vectors(reader, WIND_RAW_TOPIC)
+    corrected = vectors_at_stamps(measured.stamps_ns, stamped_vectors(reader, WIND_TRUE_TOPIC))
     t_s = measured.stamps_ns / NANOSECONDS_PER_SECOND
     true_wind = None
-    if _has_messages(reader, TRUE_WIND_TOPIC):
+    if _has_messages(reader, TRUTH_WIND_TOPIC):
         true_wind = interpolate_vectors(
-            measured.stamps_ns, stamped_vectors(reader, TRUE_WIND_TOPIC)
+            measured.stamps_ns, stamped_vectors(reader, TRUTH_WIND_TOPIC)
         )
     attitude_t_s = nav_rpy = truth_rpy = nav_rpy_sigma = None
     if _has_messages(reader, NAV_ODOMETRY_TOPIC):
@@ -602,8 +607,8 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
         attitude_t_s = nav_stamps_ns / NANOSECONDS_PER_SECOND
         nav_rpy = rpy_rad_from_quaternions(nav_quats)
         nav_rpy_sigma = rpy_sigma_rad(nav_rpy, nav_covariances)
-        if _has_messages(reader, TRUE_ODOMETRY_TOPIC):
-            truth_stamps_ns, truth_quats, _ = stamped_orientations(reader, TRUE_ODOMETRY_TOPIC)
+        if _has_messages(reader, TRUTH_ODOMETRY_TOPIC):
+            truth_stamps_ns, truth_quats, _ = stamped_orientations(reader, TRUTH_ODOMETRY_TOPIC)
             truth_rpy = interpolate_rpy_rad(nav_stamps_ns, truth_stamps_ns, truth_quats)
     products, products_source = _products(reader, t_s, corrected)
     minute_ns = _TIME_ORIGIN_STEP_S * NANOSECONDS_PER_SECOND
@@ -629,7 +634,7 @@ def _products(
     """The bag's published wind products, or products recomputed from the corrected wind; and a
     sentence saying which."""
     stats_topics = sorted(
-        name for name in reader.topics if name.lstrip("/").startswith(STATS_TOPIC_PREFIX)
+        name for name in reader.topics if name.lstrip("/").startswith(WIND_STATS_PREFIX)
     )
     if stats_topics:
         per_topic = {topic: _published_products(reader, topic) for topic in stats_topics}
@@ -650,8 +655,8 @@ def _products(
         products += averager.add_batch(t_s, corrected_wind_enu_mps) + averager.flush()
     labels = " and ".join(window_label(window_s) for window_s in windows_s)
     return products, (
-        f"recomputed from {CORRECTED_WIND_TOPIC}, {labels} windows, {gust_window_s:g} s gust "
-        f"(the bag has no {STATS_TOPIC_PREFIX}* topic)"
+        f"recomputed from {WIND_TRUE_TOPIC}, {labels} windows, {gust_window_s:g} s gust "
+        f"(the bag has no {WIND_STATS_PREFIX}* topic)"
     )
 
 
@@ -660,7 +665,7 @@ def _published_products(reader: BagReader, stats_topic: str) -> list[WindProduct
     vector of the ``wind/mean_<window>`` message stamped at the window end (when recorded; else
     u and v from speed and direction, and w NaN). The gust window is not published: NaN."""
     mean_topic = stored_topic(
-        reader, MEAN_TOPIC_PREFIX + stats_topic.lstrip("/").removeprefix(STATS_TOPIC_PREFIX)
+        reader, WIND_MEAN_PREFIX + stats_topic.lstrip("/").removeprefix(WIND_STATS_PREFIX)
     )
     means = (
         stamped_vectors(reader, mean_topic)

@@ -24,8 +24,13 @@ from geometry_msgs.msg import Vector3Stamped
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64MultiArray
 
-from buoy_nav.base_node import DATA_QOS, SuiteNode, run_node
-from wind_comp.nav_messages import stamp_s, stats_values
+from buoy_common.base_node import DATA_QOS, SuiteNode, run_node
+from buoy_common.contract import (
+    stamp_to_seconds,
+)
+from wind_comp.nav_messages import (
+    stats_values,
+)
 from wind_comp.products import meteorological_direction_deg
 
 PROGRAM = "wind_echo"
@@ -77,11 +82,14 @@ class WindEcho(SuiteNode):
         if (self.n_received - 1) % self.every:
             return
         vector = message.vector
-        print(wind_line(stamp_s(message.header.stamp), vector.x, vector.y, vector.z), flush=True)
+        print(
+            wind_line(stamp_to_seconds(message.header.stamp), vector.x, vector.y, vector.z),
+            flush=True,
+        )
 
     def on_mean(self, message: Vector3Stamped) -> None:
         vector = message.vector
-        line = wind_line(stamp_s(message.header.stamp), vector.x, vector.y, vector.z)
+        line = wind_line(stamp_to_seconds(message.header.stamp), vector.x, vector.y, vector.z)
         print(line.replace("  ", "  1-min mean: ", 1), flush=True)
 
     def on_stats(self, message: Float64MultiArray) -> None:

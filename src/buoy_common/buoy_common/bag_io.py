@@ -551,7 +551,7 @@ class _McapFile:
         self._new_chunk()
         self._stream.write(_MCAP_MAGIC)
         self._stream.write(
-            _record(_OP_HEADER, _string("ros2") + _string(f"buoy_nav.bag_io ({ROS_DISTRO})"))
+            _record(_OP_HEADER, _string("ros2") + _string(f"buoy_common.bag_io ({ROS_DISTRO})"))
         )
 
     def _new_chunk(self) -> None:

@@ -26,7 +26,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from buoy_nav.parameters import (
+from buoy_common.parameters import (
     ParameterError,
     build_config,
     coerce_parameter,

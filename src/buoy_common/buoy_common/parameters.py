@@ -17,6 +17,8 @@ from typing import Any
 
 import yaml
 
+from buoy_common.extrinsics import field_parameter
+
 
 class ParameterError(ValueError):
     """A parameter value or parameter file is unusable; the message names it."""
@@ -98,6 +100,8 @@ def config_parameters(
 ) -> list[tuple[str, str, Any]]:
     """(field name, parameter name, default) for each parameter-backed field of config_type.
 
+    A field's parameter is, in this order: its name in ``renamed``, the shared parameter it is
+    declared with (:func:`buoy_common.extrinsics.shared_field`), or ``prefix`` + its name.
     Defaults come from ``base`` (an instance of config_type) when given.
     """
     renamed = renamed or {}
@@ -105,7 +109,7 @@ def config_parameters(
     return [
         (
             field.name,
-            renamed.get(field.name, prefix + field.name),
+            renamed.get(field.name) or field_parameter(field) or prefix + field.name,
             field_default(field) if base is None else getattr(base, field.name),
         )
         for field in dataclasses.fields(config_type)

@@ -1,0 +1,171 @@
+"""The parameters every node shares (interface contract): where the sensors sit and the map origin.
+
+Each shared parameter is declared once here, with its default and one validity rule. The
+configuration dataclasses of the simulator, the filter and the compensation take their fields
+from here with :func:`shared_field` and call :func:`check_shared_fields` after their own
+coercion, so a value that one node accepts every node accepts, and the error names the parameter.
+
+Rules that relate two parameters (the antenna separation, the origin given all or not at all)
+are part of the rule of the second one and apply when a configuration holds both.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+MIN_ANTENNA_SEPARATION_M = 0.1
+"""Closest two GNSS antennas may be: a few mm of carrier-phase baseline noise on a shorter
+baseline is more than a degree of attitude."""
+MAX_LEVER_ARM_M = 100.0
+"""Farthest a sensor may sit from ``base_link``: anything larger is a unit or sign mistake."""
+
+PARAMETER_METADATA_KEY = "parameter"
+
+
+@dataclass(frozen=True)
+class SharedParameter:
+    """One shared parameter: its ROS name, default, meaning and validity rule.
+
+    ``check(value)`` returns None for a valid value, or the expectation it misses ("three
+    finite numbers within 100 m").
+    """
+
+    name: str
+    default: Any
+    meaning: str
+    check: Callable[[Any], str | None]
+
+
+def _position_in_body(value) -> str | None:
+    if len(value) != 3 or not all(math.isfinite(c) for c in value):
+        return "three finite numbers (m)"
+    if math.hypot(*value) > MAX_LEVER_ARM_M:
+        return f"within {MAX_LEVER_ARM_M:g} m of base_link"
+    return None
+
+
+def _mounting_angles(value) -> str | None:
+    if len(value) != 3 or not all(math.isfinite(c) for c in value):
+        return "three finite numbers (deg)"
+    roll, pitch, yaw = value
+    if abs(roll) > 180.0 or abs(pitch) > 90.0 or abs(yaw) > 180.0:
+        return "roll and yaw within ±180°, pitch within ±90°"
+    return None
+
+
+def _latitude(value) -> str | None:
+    return None if math.isnan(value) or abs(value) < 90.0 else "in (−90, 90) or NaN"
+
+
+def _longitude(value) -> str | None:
+    return None if math.isnan(value) or abs(value) <= 180.0 else "in [−180, 180] or NaN"
+
+
+def _altitude(value) -> str | None:
+    return None if math.isnan(value) or abs(value) < 1.0e5 else "within ±100 km or NaN"
+
+
+_NAN = math.nan
+
+SHARED_PARAMETERS: dict[str, SharedParameter] = {
+    parameter.name: parameter
+    for parameter in (
+        SharedParameter(
+            "gnss.primary_antenna",
+            (-0.75, 0.0, 1.0),
+            "primary antenna phase centre in base_link, m",
+            _position_in_body,
+        ),
+        SharedParameter(
+            "gnss.secondary_antenna",
+            (0.75, 0.0, 1.0),
+            "secondary antenna phase centre in base_link, m",
+            _position_in_body,
+        ),
+        SharedParameter(
+            "anemometer.position",
+            (0.0, 0.0, 3.0),
+            "anemometer measurement centre in base_link, m (Miller's lever arm B)",
+            _position_in_body,
+        ),
+        SharedParameter(
+            "anemometer.rpy_deg",
+            (0.0, 0.0, 0.0),
+            "roll, pitch, yaw of anemometer_link in base_link, deg, R = Rz(yaw)·Ry(pitch)·Rx(roll)",
+            _mounting_angles,
+        ),
+        SharedParameter(
+            "origin.latitude_deg",
+            _NAN,
+            "latitude of the map origin, deg; NaN: first fix",
+            _latitude,
+        ),
+        SharedParameter(
+            "origin.longitude_deg",
+            _NAN,
+            "longitude of the map origin, deg; NaN: first fix",
+            _longitude,
+        ),
+        SharedParameter(
+            "origin.altitude_m",
+            _NAN,
+            "ellipsoidal altitude of the map origin, m; NaN: first fix",
+            _altitude,
+        ),
+    )
+}
+"""Every shared parameter, by ROS name."""
+
+ORIGIN_PARAMETERS = ("origin.latitude_deg", "origin.longitude_deg", "origin.altitude_m")
+
+
+def shared_field(parameter: str) -> Any:
+    """A dataclass field backed by the shared ``parameter``, with its default."""
+    default = SHARED_PARAMETERS[parameter].default
+    return dataclasses.field(default=default, metadata={PARAMETER_METADATA_KEY: parameter})
+
+
+def field_parameter(field: dataclasses.Field) -> str | None:
+    """The shared parameter behind a configuration field, None for a field of its own."""
+    return field.metadata.get(PARAMETER_METADATA_KEY)
+
+
+def check_shared_fields(config) -> None:
+    """Apply the rule of every shared parameter a configuration holds; ValueError naming the
+    first parameter whose value breaks its rule."""
+    values = {
+        parameter: getattr(config, field.name)
+        for field in dataclasses.fields(config)
+        if (parameter := field_parameter(field)) is not None
+    }
+    for parameter, value in values.items():
+        expectation = SHARED_PARAMETERS[parameter].check(value)
+        if expectation is not None:
+            raise ValueError(f"parameter '{parameter}' must be {expectation}, got {value!r}")
+    _check_antenna_separation(values)
+    _check_origin_complete(values)
+
+
+def _check_antenna_separation(values: dict[str, Any]) -> None:
+    if "gnss.primary_antenna" not in values or "gnss.secondary_antenna" not in values:
+        return
+    separation = math.dist(values["gnss.primary_antenna"], values["gnss.secondary_antenna"])
+    if separation < MIN_ANTENNA_SEPARATION_M:
+        raise ValueError(
+            f"parameter 'gnss.secondary_antenna' must be at least {MIN_ANTENNA_SEPARATION_M} m "
+            f"from 'gnss.primary_antenna', got {separation:.3f} m"
+        )
+
+
+def _check_origin_complete(values: dict[str, Any]) -> None:
+    given = [name for name in ORIGIN_PARAMETERS if name in values]
+    unset = [name for name in given if math.isnan(values[name])]
+    if unset and len(unset) != len(given):
+        raise ValueError(
+            f"parameter '{unset[0]}': origin.latitude_deg, origin.longitude_deg and "
+            "origin.altitude_m must be all set or all NaN"
+        )

@@ -1,0 +1,37 @@
+from pathlib import Path
+
+from setuptools import find_packages, setup
+
+PACKAGE = "buoy_common"
+HERE = Path(__file__).parent
+
+
+def config_files():
+    return [str(p.relative_to(HERE)) for p in sorted((HERE / "config").rglob("*.yaml"))]
+
+
+def config_data_files():
+    """Install config/ (and its sub-folders) under share/<package>/config."""
+    grouped = {}
+    for relative in config_files():
+        folder = str(Path("share", PACKAGE, Path(relative).parent))
+        grouped.setdefault(folder, []).append(relative)
+    return sorted(grouped.items())
+
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+        *config_data_files(),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="Buoy wind maintainers",
+    maintainer_email="maintainers@buoy-wind.invalid",
+    description="Shared infrastructure of the buoy wind suite: contract, nodes, parameters, bags.",
+    license="Apache-2.0",
+)
