@@ -43,7 +43,7 @@ format: venv
 	$(BIN)/ruff check --fix .
 
 test: venv lint
-	$(BIN)/python -m pytest tests
+	$(BIN)/python -m pytest
 
 demo: venv
 	$(BIN)/python tools/demo.py

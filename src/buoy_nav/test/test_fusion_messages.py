@@ -50,7 +50,7 @@ from buoy_nav.fusion_messages import (
     solution_messages,
 )
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 SEA_STATE_BAG = REPO / "bags" / "sea_state"
 BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
 SECONDS_OF_BAG = 15.0

@@ -13,8 +13,6 @@ import pytest
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-pytest.importorskip("sensor_sim.scenario")
-
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
 from sensor_sim.scenario import load_scenario

@@ -1,0 +1,97 @@
+"""The structure the design rests on, checked on the source tree.
+
+The simulator is the independent witness of the estimator, so it never imports it; rclpy lives
+in node modules only, so every algorithm runs offline unchanged; every package declares the
+packages it imports; and a shared parameter is refused or accepted alike everywhere.
+"""
+
+import ast
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from buoy_nav.config import ConfigError, FusionConfig
+from sensor_sim.streams import Extrinsics
+
+REPO = Path(__file__).resolve().parents[2]
+PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp")
+STANDARD_LIBRARY = set(sys.stdlib_module_names)
+# Python distributions named differently from their package.xml keys.
+ROSDEP_KEYS = {
+    "numpy": "python3-numpy",
+    "scipy": "python3-scipy",
+    "yaml": "python3-yaml",
+    "rosbags": "python3-rosbags",
+    "zstandard": "python3-zstandard",
+    "matplotlib": "python3-matplotlib",
+    "mcap": "python3-mcap",
+    "mcap_ros2": "python3-mcap-ros2-support",
+    "tqdm": "python3-tqdm",
+}
+
+
+def _modules(package: str):
+    return sorted((REPO / "src" / package / package).rglob("*.py"))
+
+
+def _imported_top_levels(path: Path) -> set[str]:
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names |= {alias.name.split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module.split(".")[0])
+    return names
+
+
+def test_the_simulator_never_imports_the_estimator_or_the_wind_core():
+    offenders = {
+        str(path.relative_to(REPO)): sorted(_imported_top_levels(path) & {"buoy_nav", "wind_comp"})
+        for path in _modules("sensor_sim")
+    }
+    assert {k: v for k, v in offenders.items() if v} == {}
+
+
+def test_rclpy_is_imported_by_node_modules_only():
+    offenders = [
+        str(path.relative_to(REPO))
+        for package in PACKAGES
+        for path in _modules(package)
+        if "rclpy" in _imported_top_levels(path) and not path.name.endswith("_node.py")
+    ]
+    assert offenders == []
+
+
+def test_buoy_common_depends_on_no_other_package_of_the_suite():
+    offenders = {
+        str(path.relative_to(REPO)): sorted(_imported_top_levels(path) & set(PACKAGES[1:]))
+        for path in _modules("buoy_common")
+    }
+    assert {k: v for k, v in offenders.items() if v} == {}
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_package_xml_declares_what_the_package_imports(package):
+    manifest = ET.parse(REPO / "src" / package / "package.xml").getroot()
+    declared = {element.text for element in manifest if element.tag.endswith("depend")}
+    imported = set().union(*(_imported_top_levels(path) for path in _modules(package)))
+    missing = []
+    for name in sorted(imported - STANDARD_LIBRARY - {package}):
+        key = ROSDEP_KEYS.get(name, name)
+        if key not in declared:
+            missing.append(f"{name} ({key})")
+    assert missing == []
+
+
+def test_the_simulator_and_the_filter_share_one_antenna_rule():
+    # A 0.07 m baseline once ran in the simulator and stopped the fusion node at start-up.
+    close = {"primary_antenna_body_m": (0.0, 0.0, 1.0), "secondary_antenna_body_m": (0.07, 0, 1)}
+    with pytest.raises(ValueError, match=r"gnss\.secondary_antenna"):
+        Extrinsics(**close)
+    with pytest.raises(ConfigError, match=r"gnss\.secondary_antenna"):
+        FusionConfig(**close)
+    vertical = {"primary_antenna_body_m": (0.0, 0.0, 1.0), "secondary_antenna_body_m": (0, 0, 1.5)}
+    Extrinsics(**vertical)
+    FusionConfig(**vertical)
