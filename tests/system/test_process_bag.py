@@ -13,9 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
-from buoy_common.contract import (
-    window_label,
-)
+from buoy_common.contract import window_label
 from buoy_nav.fuse_bag import fuse_bag, fusion_config_from_files
 from ros_messages import raw_stamp_ns
 from sensor_sim.sensor_errors import AnemometerErrorConfig

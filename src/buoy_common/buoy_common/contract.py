@@ -104,6 +104,10 @@ ANEMOMETER_FRAME = "anemometer_link"
 DVL_FRAME = "dvl_link"
 
 
+DEFAULT_PRODUCT_WINDOWS_S = (60.0, 600.0)
+"""Averaging windows of the wind products unless configured otherwise, s (WMO practice)."""
+
+
 def window_label(window_s: float) -> str:
     """Name of an averaging window in topic names: ``1min`` for 60 s, ``10min`` for 600 s,
     ``30s`` for 30 s, ``2p5s`` for 2.5 s."""

@@ -32,29 +32,26 @@ from buoy_common.base_node import (
     message_class,
     run_node,
 )
+from buoy_common.contract import (
+    CURRENT_TOPIC,
+    DEFAULT_PRODUCT_WINDOWS_S,
+    NAV_MSGTYPES,
+    SENSOR_MSGTYPES,
+    TRUTH_MSGTYPES,
+    WIND_TRUE_TOPIC,
+    wind_mean_topic,
+    wind_stats_topic,
+)
 
 # The contract's sensor, truth, navigation and wind topics; relative, so a namespace applies.
 DEFAULT_TOPICS = (
-    "imu/data_raw",
-    "imu/mag",
-    "gnss/fix",
-    "gnss/vel",
-    "gnss/heading",
-    "gnss/baseline",
-    "anemometer/wind",
-    "dvl/velocity",
-    "truth/odometry",
-    "truth/wind",
-    "truth/current",
-    "nav/odometry",
-    "nav/imu",
-    "nav/velocity",
-    "nav/fix",
-    "wind/true",
-    "wind/mean_1min",
-    "wind/mean_10min",
-    "wind/stats_1min",
-    "wind/stats_10min",
+    *SENSOR_MSGTYPES,
+    *TRUTH_MSGTYPES,
+    *NAV_MSGTYPES,
+    WIND_TRUE_TOPIC,
+    *(wind_mean_topic(window_s) for window_s in DEFAULT_PRODUCT_WINDOWS_S),
+    *(wind_stats_topic(window_s) for window_s in DEFAULT_PRODUCT_WINDOWS_S),
+    CURRENT_TOPIC,
 )
 # ROS infrastructure that --all leaves out; /clock is recorded only when listed in --topics.
 EXCLUDED_FROM_ALL = frozenset({"/rosout", "/parameter_events", "/clock"})

@@ -14,6 +14,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from buoy_common.contract import (
+    GNSS_BASELINE_TOPIC,
+    GNSS_FIX_TOPIC,
+    GNSS_HEADING_TOPIC,
+    GNSS_VELOCITY_TOPIC,
+    IMU_RAW_TOPIC,
+    SENSOR_MSGTYPES,
+    TRUTH_CURRENT_TOPIC,
+    TRUTH_MSGTYPES,
+    TRUTH_ODOMETRY_TOPIC,
+    TRUTH_WIND_TOPIC,
+    WIND_RAW_TOPIC,
+)
 from buoy_common.extrinsics import check_shared_fields, shared_field
 from buoy_common.parameters import build_config, config_parameters
 from sensor_sim import messages
@@ -118,7 +131,7 @@ class ImuStream(SensorStream):
     errors: ImuErrorConfig = field(default_factory=ImuErrorConfig)
 
     def __post_init__(self):
-        self.topics = {"imu/data_raw": "sensor_msgs/msg/Imu"}
+        self.topics = {IMU_RAW_TOPIC: SENSOR_MSGTYPES[IMU_RAW_TOPIC]}
         self._simulator = ImuSimulator(
             self.truth,
             self.errors,
@@ -140,7 +153,7 @@ class ImuStream(SensorStream):
             ),
             strict=True,
         ):
-            yield "imu/data_raw", stamp, message
+            yield IMU_RAW_TOPIC, stamp, message
 
 
 @dataclass
@@ -150,10 +163,13 @@ class GnssStream(SensorStream):
 
     def __post_init__(self):
         self.topics = {
-            "gnss/fix": "sensor_msgs/msg/NavSatFix",
-            "gnss/vel": "geometry_msgs/msg/TwistWithCovarianceStamped",
-            "gnss/heading": "sensor_msgs/msg/Imu",
-            "gnss/baseline": "geometry_msgs/msg/Vector3Stamped",
+            topic: SENSOR_MSGTYPES[topic]
+            for topic in (
+                GNSS_FIX_TOPIC,
+                GNSS_VELOCITY_TOPIC,
+                GNSS_HEADING_TOPIC,
+                GNSS_BASELINE_TOPIC,
+            )
         }
         self._simulator = GnssSimulator(
             self.truth,
@@ -166,10 +182,10 @@ class GnssStream(SensorStream):
     def _messages(self, times_s, stamps_ns):
         sample = self._simulator.measure(times_s)
         per_topic = {
-            "gnss/fix": messages.gnss_fix_messages(stamps_ns, sample),
-            "gnss/vel": messages.gnss_velocity_messages(stamps_ns, sample),
-            "gnss/heading": messages.gnss_heading_messages(stamps_ns, sample),
-            "gnss/baseline": messages.gnss_baseline_messages(stamps_ns, sample),
+            GNSS_FIX_TOPIC: messages.gnss_fix_messages(stamps_ns, sample),
+            GNSS_VELOCITY_TOPIC: messages.gnss_velocity_messages(stamps_ns, sample),
+            GNSS_HEADING_TOPIC: messages.gnss_heading_messages(stamps_ns, sample),
+            GNSS_BASELINE_TOPIC: messages.gnss_baseline_messages(stamps_ns, sample),
         }
         rows = zip(stamps_ns, *per_topic.values(), strict=True)
         for stamp, *row in rows:
@@ -184,7 +200,7 @@ class AnemometerStream(SensorStream):
     extrinsics: Extrinsics = field(default_factory=Extrinsics)
 
     def __post_init__(self):
-        self.topics = {"anemometer/wind": "geometry_msgs/msg/Vector3Stamped"}
+        self.topics = {WIND_RAW_TOPIC: SENSOR_MSGTYPES[WIND_RAW_TOPIC]}
         self._simulator = AnemometerSimulator(
             self.truth,
             self.errors,
@@ -198,7 +214,7 @@ class AnemometerStream(SensorStream):
         for stamp, message in zip(
             stamps_ns, messages.anemometer_messages(stamps_ns, wind), strict=True
         ):
-            yield "anemometer/wind", stamp, message
+            yield WIND_RAW_TOPIC, stamp, message
 
 
 @dataclass
@@ -209,22 +225,27 @@ class TruthStream(SensorStream):
 
     def __post_init__(self):
         self.topics = {
-            "truth/odometry": "nav_msgs/msg/Odometry",
-            "truth/wind": "geometry_msgs/msg/Vector3Stamped",
+            topic: TRUTH_MSGTYPES[topic] for topic in (TRUTH_ODOMETRY_TOPIC, TRUTH_WIND_TOPIC)
         }
         if self.truth.evaluate(np.zeros(1)).current_enu_mps is not None:
-            self.topics["truth/current"] = "geometry_msgs/msg/Vector3Stamped"
+            self.topics[TRUTH_CURRENT_TOPIC] = TRUTH_MSGTYPES[TRUTH_CURRENT_TOPIC]
 
     def _messages(self, times_s, stamps_ns):
         state = self.truth.evaluate(times_s)
         position_map = self._position_in_map(state)
         streams = [
-            ("truth/odometry", messages.truth_odometry_messages(stamps_ns, state, position_map)),
-            ("truth/wind", messages.enu_vector_messages(stamps_ns, state.wind_enu_mps)),
+            (
+                TRUTH_ODOMETRY_TOPIC,
+                messages.truth_odometry_messages(stamps_ns, state, position_map),
+            ),
+            (TRUTH_WIND_TOPIC, messages.enu_vector_messages(stamps_ns, state.wind_enu_mps)),
         ]
         if state.current_enu_mps is not None:
             streams.append(
-                ("truth/current", messages.enu_vector_messages(stamps_ns, state.current_enu_mps))
+                (
+                    TRUTH_CURRENT_TOPIC,
+                    messages.enu_vector_messages(stamps_ns, state.current_enu_mps),
+                )
             )
         topics = [topic for topic, _ in streams]
         for stamp, *row in zip(stamps_ns, *(s for _, s in streams), strict=True):

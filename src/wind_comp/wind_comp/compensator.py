@@ -18,7 +18,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from buoy_common.contract import Reason
+from buoy_common.contract import DEFAULT_PRODUCT_WINDOWS_S, Reason
 from buoy_common.extrinsics import check_shared_fields, shared_field
 from buoy_nav.rotations import rotation_matrix_elements
 from wind_comp.miller import miller_components, mounting_rotation_from_rpy_deg
@@ -57,7 +57,7 @@ class CompensatorConfig:
     max_nav_gap_s: float = 0.1
     max_wind_speed_mps: float = 100.0
     nav_history_s: float = 10.0
-    product_windows_s: tuple[float, ...] = (60.0, 600.0)
+    product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
     gust_window_s: float = 3.0
 
     def __post_init__(self):

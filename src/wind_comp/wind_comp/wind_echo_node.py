@@ -26,11 +26,13 @@ from std_msgs.msg import Float64MultiArray
 
 from buoy_common.base_node import DATA_QOS, SuiteNode, run_node
 from buoy_common.contract import (
+    WIND_TRUE_TOPIC,
+    Reason,
     stamp_to_seconds,
+    wind_mean_topic,
+    wind_stats_topic,
 )
-from wind_comp.nav_messages import (
-    stats_values,
-)
+from wind_comp.nav_messages import stats_values
 from wind_comp.products import meteorological_direction_deg
 
 PROGRAM = "wind_echo"
@@ -73,9 +75,9 @@ class WindEcho(SuiteNode):
         super().__init__(PROGRAM)
         self.every = every
         self.n_received = 0
-        self.create_subscription(Vector3Stamped, "wind/true", self.on_wind, DATA_QOS)
-        self.create_subscription(Vector3Stamped, "wind/mean_1min", self.on_mean, DATA_QOS)
-        self.create_subscription(Float64MultiArray, "wind/stats_1min", self.on_stats, DATA_QOS)
+        self.create_subscription(Vector3Stamped, WIND_TRUE_TOPIC, self.on_wind, DATA_QOS)
+        self.create_subscription(Vector3Stamped, wind_mean_topic(60.0), self.on_mean, DATA_QOS)
+        self.create_subscription(Float64MultiArray, wind_stats_topic(60.0), self.on_stats, DATA_QOS)
 
     def on_wind(self, message: Vector3Stamped) -> None:
         self.n_received += 1
@@ -97,7 +99,7 @@ class WindEcho(SuiteNode):
             values = stats_values(message)
             print(stats_line(values), flush=True)
         except (KeyError, ValueError):
-            self.reject("wind/stats_1min", "unexpected layout")
+            self.reject(wind_stats_topic(60.0), Reason.MALFORMED)
 
 
 def positive_int(text: str) -> int:
