@@ -43,8 +43,10 @@ from buoy_common.contract import (
     WIND_TRUE_TOPIC,
     window_label,
 )
-from wind_comp.compensator import CompensatorConfig
-from wind_comp.nav_messages import stats_values
+from wind_comp.compensation_messages import (
+    stats_values,
+)
+from wind_comp.config import CompensatorConfig
 from wind_comp.products import WindAverager, WindProduct, meteorological_direction_deg
 
 # Plots count time from the start of the minute of the first sample, so simulated runs (which
