@@ -10,9 +10,10 @@ from matplotlib.image import imread
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader, BagWriter
-from buoy_nav.fuse_bag import fusion_config_from_files
+from buoy_nav.config import fusion_config_from_files
 from sensor_sim.simulate_bag import parse_arguments, simulate
-from wind_comp.process_bag import compensator_config_from_files, process_bag
+from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files
 from wind_comp.products import WindAverager
 from wind_comp.report import (
     ReportData,
