@@ -14,11 +14,11 @@ from buoy_nav.rotations import (
     quaternion_from_rotation_matrix,
     quaternion_from_rotation_vector,
     quaternion_multiply,
+    rotate_by_quaternion_components,
     rotation_matrix_from_euler,
     rotation_matrix_from_quaternion,
     rotation_matrix_from_rotation_vector,
     rotation_vector_from_rotation_matrix,
-    rotate_by_quaternion_components,
     skew,
     wrap_angle,
 )
@@ -230,4 +230,3 @@ def test_earth_rate_components_are_the_earth_rate_alone_or_in_a_batch():
         expected = earth.earth_rate_enu_rad_s(latitude)
         np.testing.assert_array_equal((east, north[k], up[k]), expected)
     np.testing.assert_allclose(np.hypot(north, up), earth.EARTH_RATE_RAD_S, rtol=1e-15)
-
