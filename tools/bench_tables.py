@@ -265,7 +265,7 @@ def print_sea(results: dict) -> None:
         print(
             f"  term sizes (RMS): tilt beyond heading {sizes['tilt_minus_heading_only']:.3f}, "
             f"rotation {sizes['rotation']:.3f}, translation {sizes['translation']:.3f} m/s; "
-            f"correct_batch vs wind/true max |Δ| {r['recomputed_vs_bag_max_abs_mps']:.1e} m/s"
+            f"recomputed vs wind/true max |Δ| {r['recomputed_vs_bag_max_abs_mps']:.1e} m/s"
         )
 
 

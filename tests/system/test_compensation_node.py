@@ -322,20 +322,24 @@ def test_corrected_wind_matches_truth_and_raw_does_not(scenario, live_run):
 
 
 def test_live_output_equals_the_pipeline_run_offline(scenario, live_run):
-    # The node's output is the pipeline's, whatever the arrival order: here all navigation
-    # first, then all wind, in one stretch.
+    # The node's output is the pipeline's fed in one stretch, the messages in stamp order.
     winds, odometries, fix, _ = scenario
     pipeline = CompensationPipeline(CompensatorConfig(ANEMOMETER_POSITION_M, (0.0, 0.0, 0.0)))
     assert pipeline.add_fix(*fix_fields(fix)) is None
     rejected = {}
-    for odometry in odometries:
+    in_stamp_order = sorted(
+        [(stamp_ns(m), 0, k) for k, m in enumerate(odometries)]
+        + [(stamp_ns(m), 1, k) for k, m in enumerate(winds)]
+    )
+    for _, is_wind, k in in_stamp_order:
+        if is_wind:
+            pipeline.add_wind(anemometer_sample(winds[k]))
+            continue
         try:
-            assert pipeline.add_odometry(*odometry_fields(odometry)) is None
+            assert pipeline.add_odometry(*odometry_fields(odometries[k])) is None
         except MalformedMessageError as error:
             rejected[error.reason] = rejected.get(error.reason, 0) + 1
     assert rejected == {"zero_quaternion": 1}
-    for wind in winds:
-        pipeline.add_wind(anemometer_sample(wind))
     batch = pipeline.flush().wind
     live = vectors(live_run["wind/true"])
     np.testing.assert_array_equal(live, batch.true_wind_enu_mps)

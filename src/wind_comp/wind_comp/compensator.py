@@ -6,13 +6,13 @@ comes out exactly once (:meth:`WindCompensator.ready`), in input order, with its
 either the motion-corrected wind or NaN with the reason it could not be corrected.
 
 Whether and how a sample is corrected depends only on stamps (the navigation samples around
-it), not on when messages happen to arrive, so :func:`correct_batch` on whole arrays gives
-identical numbers, with two exceptions. The live-only :meth:`WindCompensator.expire` gives up on
-samples whose navigation is late. And a wind sample that arrives lagging the newest navigation
-by more than ``nav_history_s`` finds its navigation forgotten. Both depend on the order of
-arrival only, never on how often the results are collected: samples may be added one at a time
-(the live node, in plain floats) or as stretches of interleaved arrivals
-(:meth:`WindCompensator.add_arrivals`, offline, on arrays), with bit-identical results.
+it), not on when messages happen to arrive, with two exceptions. The live-only
+:meth:`WindCompensator.expire` gives up on samples whose navigation is late. And a wind sample
+that arrives lagging the newest navigation by more than ``nav_history_s`` finds its navigation
+forgotten. Both depend on the order of arrival only, never on how often the results are
+collected: samples may be added one at a time (the live node, in plain floats) or as stretches
+of interleaved arrivals (:meth:`WindCompensator.add_arrivals`, offline, on columns), with
+bit-identical results.
 """
 
 import math
@@ -73,32 +73,16 @@ _NAV_OUTCOME_BY_CODE = np.array(
 
 
 @dataclass(frozen=True, eq=False)
-class CorrectedWind:
-    """One anemometer sample after correction.
+class CorrectedWindBatch:
+    """N anemometer samples after correction, in input order.
 
-    Vectors are (3,) float arrays; the ENU ones are NaN unless ``status`` is VALID.
+    The (N, 3) ENU vectors (m/s) are NaN where ``status`` is not VALID;
+    ``true_wind_enu_mps = tilt_term_enu_mps + rotation_term_enu_mps + translation_term_enu_mps``
+    (see :mod:`wind_comp.miller`).
     """
 
-    t_s: float
-    """Header stamp of the anemometer sample, s."""
-    status: WindStatus
-    true_wind_enu_mps: np.ndarray
-    tilt_term_enu_mps: np.ndarray
-    rotation_term_enu_mps: np.ndarray
-    translation_term_enu_mps: np.ndarray
-    wind_sensor_mps: np.ndarray
-    """The measured input, anemometer axes, m/s."""
-
-    @property
-    def valid(self) -> bool:
-        return self.status == WindStatus.VALID
-
-
-@dataclass(frozen=True, eq=False)
-class CorrectedWindBatch:
-    """Corrected wind for N anemometer samples, in input order (see :class:`CorrectedWind`)."""
-
     t_s: np.ndarray
+    """(N,) header stamps of the anemometer samples, s."""
     status: np.ndarray
     """(N,) int8 codes of :class:`WindStatus`."""
     true_wind_enu_mps: np.ndarray
@@ -106,22 +90,10 @@ class CorrectedWindBatch:
     rotation_term_enu_mps: np.ndarray
     translation_term_enu_mps: np.ndarray
     wind_sensor_mps: np.ndarray
+    """(N, 3) the measured inputs, anemometer axes, m/s."""
 
     def __len__(self) -> int:
         return self.t_s.shape[0]
-
-    def __iter__(self):
-        """The samples one by one, as :class:`CorrectedWind`."""
-        for i, code in enumerate(self.status.tolist()):
-            yield CorrectedWind(
-                float(self.t_s[i]),
-                WindStatus(code),
-                self.true_wind_enu_mps[i],
-                self.tilt_term_enu_mps[i],
-                self.rotation_term_enu_mps[i],
-                self.translation_term_enu_mps[i],
-                self.wind_sensor_mps[i],
-            )
 
     @property
     def valid(self) -> np.ndarray:
@@ -244,12 +216,6 @@ class WindCompensator:
         ENU velocity m/s). Returns False when the track rejects it (counted there)."""
         return self.nav_track.append(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
 
-    def add_nav_batch(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> int:
-        """:meth:`add_nav` of (N,) stamps and (N, 4), (N, 3), (N, 3) arrays, in order; returns
-        the number accepted."""
-        accepted = self.nav_track.extend(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
-        return int(np.count_nonzero(accepted))
-
     def add_wind(self, t_s, wind_sensor_mps) -> None:
         """Add one anemometer sample: stamp s, air velocity in anemometer axes m/s, (3,)."""
         wind = np.asarray(wind_sensor_mps, dtype=float)
@@ -268,8 +234,9 @@ class WindCompensator:
         after the first ``nav_before_wind[i]`` of them.
 
         Args:
-            nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) arrays of M
-                navigation samples, as :meth:`add_nav_batch` takes them.
+            nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) of M navigation
+                samples: (M,) stamps, s, and (M, 4), (M, 3), (M, 3) arrays of what
+                :meth:`add_nav` takes.
             wind_t_s, wind_sensor_mps: (N,) stamps and (N, 3) winds, as :meth:`add_wind_batch`
                 takes them.
             nav_before_wind: (N,) non-decreasing counts, 0 to M.
@@ -406,51 +373,6 @@ class WindCompensator:
         self._terms = terms
         self._first_pending -= self._head
         self._head, self._tail = 0, n_kept
-
-
-def correct_batch(
-    config: CompensatorConfig,
-    nav_t_s,
-    nav_quat_xyzw,
-    nav_angular_rate_body_rad_s,
-    nav_velocity_enu_mps,
-    wind_t_s,
-    wind_sensor_mps,
-) -> CorrectedWindBatch:
-    """Correct a whole recording at once; identical to streaming every navigation sample and
-    every wind sample in array order through :class:`WindCompensator` and flushing.
-
-    Args:
-        config: compensation settings.
-        nav_t_s: (M,) navigation stamps, s, in arrival order.
-        nav_quat_xyzw: (M, 4) body→ENU attitude.
-        nav_angular_rate_body_rad_s: (M, 3) body rate, body axes, rad/s.
-        nav_velocity_enu_mps: (M, 3) ENU velocity of the body origin, m/s.
-        wind_t_s: (N,) anemometer stamps, s, in arrival order.
-        wind_sensor_mps: (N, 3) measured air velocity, anemometer axes, m/s.
-    """
-    track = NavTrack.from_arrays(
-        nav_t_s,
-        nav_quat_xyzw,
-        nav_angular_rate_body_rad_s,
-        nav_velocity_enu_mps,
-        max_gap_s=config.max_nav_gap_s,
-    )
-    stamps, winds = _wind_arrays(wind_t_s, wind_sensor_mps)
-    status, _ = _screen_wind(stamps, winds, -np.inf, config.max_wind_speed_mps)
-    outputs = [np.full((stamps.shape[0], 3), np.nan) for _ in range(4)]
-    screened = status == _PENDING
-    nav_status, nav_outputs = _Corrector(config).correct(
-        track, stamps[screened], winds[screened], as_of_newest_s=None
-    )
-    nav_status[nav_status == _PENDING] = WindStatus.NO_NAVIGATION
-    status[screened] = nav_status
-    for output, nav_output in zip(outputs, nav_outputs, strict=True):
-        output[screened] = nav_output
-    true_wind, tilt, rotation, translation = outputs
-    return CorrectedWindBatch(
-        stamps.copy(), status, true_wind, tilt, rotation, translation, winds.copy()
-    )
 
 
 def _wind_arrays(t_s, wind_sensor_mps) -> tuple[np.ndarray, np.ndarray]:
