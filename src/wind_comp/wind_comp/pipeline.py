@@ -79,6 +79,10 @@ def level_rate_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> t
     )
 
 
+_NAV_FIELDS = 12  # stamp, quaternion (4), rate (3), body velocity (3), latitude
+_WIND_FIELDS = 4  # stamp, wind (3)
+
+
 class CompensationOutput(NamedTuple):
     """What the pipeline decided since it was last asked."""
 
@@ -101,10 +105,11 @@ class CompensationPipeline:
         """Latitude of the latest valid ``nav/fix``, deg (NaN before the first)."""
         self._nav_order = StampOrder()
         self._wind_order = StampOrder()
-        # Arrivals not yet handed to the compensator, and for each anemometer sample the number
-        # of navigation samples that arrived before it.
-        self._nav: list[tuple] = []
-        self._wind: list[tuple[float, tuple]] = []
+        # Arrivals not yet handed to the compensator: the navigation samples' numbers in a row
+        # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude), the wind
+        # samples', and for each wind sample the number of navigation samples before it.
+        self._nav: list[float] = []
+        self._wind: list[float] = []
         self._nav_before_wind: list[int] = []
 
     @property
@@ -120,7 +125,7 @@ class CompensationPipeline:
     @property
     def n_pending(self) -> int:
         """Anemometer samples received but not yet returned."""
-        return len(self._wind) + self.compensator.n_pending
+        return len(self._nav_before_wind) + self.compensator.n_pending
 
     def add_fix(self, status: int, latitude_deg: float) -> str | None:
         """One ``nav/fix`` (status, latitude deg). Returns why it is rejected (a latitude not
@@ -142,9 +147,11 @@ class CompensationPipeline:
         taken."""
         if not self._nav_order.advance(t_s):
             return Reason.STAMP_NOT_INCREASING
-        self._nav.append(
-            (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_body_mps, self.latitude_deg)
-        )
+        self._nav.append(t_s)
+        self._nav.extend(quat_xyzw)
+        self._nav.extend(angular_rate_body_rad_s)
+        self._nav.extend(velocity_body_mps)
+        self._nav.append(self.latitude_deg)
         return None
 
     def add_wind(self, sample: WindSample) -> str | None:
@@ -152,8 +159,9 @@ class CompensationPipeline:
         ``rejection``, or a stamp not later than the previous one), None when accepted. Every
         sample, rejected or not, gets its (then invalid) output."""
         stamp_increases = self._wind_order.advance(sample.t_s)
-        self._wind.append((sample.t_s, sample.wind_sensor_mps))
-        self._nav_before_wind.append(len(self._nav))
+        self._wind.append(sample.t_s)
+        self._wind.extend(sample.wind_sensor_mps)
+        self._nav_before_wind.append(len(self._nav) // _NAV_FIELDS)
         if sample.rejection is not None:
             return sample.rejection
         return None if stamp_increases else Reason.STAMP_NOT_INCREASING
@@ -184,30 +192,32 @@ class CompensationPipeline:
         if not nav and not wind:
             return
         self._nav, self._wind, self._nav_before_wind = [], [], []
-        if len(nav) == 1 and not wind:
+        if len(nav) == _NAV_FIELDS and not wind:
             # The live case: one solution, in plain floats.
-            t_s, quat, rate, velocity_body, latitude_deg = nav[0]
+            t_s, quat, rate, velocity_body = nav[0], nav[1:5], nav[5:8], nav[8:11]
             self.compensator.add_nav(
                 t_s,
                 quat,
-                level_rate_components(rate, quat, latitude_deg),
+                level_rate_components(rate, quat, nav[11]),
                 rotate_by_quaternion_components(quat, velocity_body),
             )
-        elif len(wind) == 1 and not nav:
-            self.compensator.add_wind(*wind[0])
+        elif len(wind) == _WIND_FIELDS and not nav:
+            self.compensator.add_wind(wind[0], wind[1:])
         else:
-            stamps, quats, rates, velocities_body, latitudes = _columns(nav)
-            rates_nb = level_rate_components(rates.T, quats.T, latitudes)
+            columns = np.array(nav, dtype=float).reshape(-1, _NAV_FIELDS)
+            quats, rates, velocities_body = columns[:, 1:5], columns[:, 5:8], columns[:, 8:11]
+            rates_nb = level_rate_components(rates.T, quats.T, columns[:, 11])
             velocities_enu = rotate_by_quaternion_components(quats.T, velocities_body.T)
+            winds = np.array(wind, dtype=float).reshape(-1, _WIND_FIELDS)
             self.compensator.add_arrivals(
                 (
-                    stamps,
+                    columns[:, 0],
                     quats,
                     np.stack(np.broadcast_arrays(*rates_nb), axis=-1),
                     np.stack(np.broadcast_arrays(*velocities_enu), axis=-1),
                 ),
-                np.array([t_s for t_s, _ in wind], dtype=float),
-                np.array([vector for _, vector in wind], dtype=float).reshape(-1, 3),
+                winds[:, 0],
+                winds[:, 1:],
                 nav_before_wind,
             )
 
@@ -219,18 +229,3 @@ class CompensationPipeline:
         # closed by one sample share their last sample.
         products.sort(key=lambda product: product.last_sample_s)
         return CompensationOutput(wind, products)
-
-
-def _columns(nav: list[tuple]) -> tuple[np.ndarray, ...]:
-    """Stamps (M,), quaternions (M, 4), rates (M, 3), body velocities (M, 3), latitudes (M,)
-    of navigation arrivals."""
-    if not nav:
-        return np.empty(0), np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3)), np.empty(0)
-    stamps, quats, rates, velocities, latitudes = zip(*nav, strict=True)
-    return (
-        np.array(stamps, dtype=float),
-        np.array(quats, dtype=float),
-        np.array(rates, dtype=float),
-        np.array(velocities, dtype=float),
-        np.array(latitudes, dtype=float),
-    )
