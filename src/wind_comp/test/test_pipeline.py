@@ -180,6 +180,8 @@ def test_rejections_are_reported_and_every_sample_gets_its_output():
     assert pipeline.add_wind(samples[1]) is None
     assert pipeline.add_wind(samples[0]) == "stamp_not_increasing"
     assert pipeline.add_wind(WindSample(0.02, (math.nan,) * 3, "wrong_frame")) == "wrong_frame"
+    with pytest.raises(ValueError, match="quaternion of 4"):
+        pipeline.add_odometry(0.015, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
     assert pipeline.add_odometry(*odometry[2]) is None
     output = pipeline.flush()
     assert output.wind.status.tolist() == [

@@ -125,6 +125,23 @@ def _screen_wind(
     return status, float(running_latest[-1])
 
 
+def _screen_one_wind(
+    t_s: float, x: float, y: float, z: float, latest_stamp_s: float, max_speed_mps: float
+) -> tuple[int, float]:
+    """:func:`_screen_wind` of one sample in plain floats (the same decisions)."""
+    finite_stamp = math.isfinite(t_s)
+    stamp_ok = finite_stamp and t_s > latest_stamp_s
+    if finite_stamp:
+        latest_stamp_s = max(latest_stamp_s, t_s)
+    if not stamp_ok:
+        return WindStatus.INVALID_STAMP, latest_stamp_s
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        return WindStatus.INVALID_WIND, latest_stamp_s
+    if math.sqrt(x * x + y * y + z * z) > max_speed_mps:
+        return WindStatus.WIND_SPEED_OUT_OF_RANGE, latest_stamp_s
+    return _PENDING, latest_stamp_s
+
+
 class _Corrector:
     """Navigation lookup plus Miller correction for samples that passed screening."""
 
@@ -176,6 +193,9 @@ class _Corrector:
 
 
 _NAN_TERMS = ((math.nan,) * 3,) * 4
+_NOTHING_DECIDED = CorrectedWindBatch(
+    np.empty(0), np.empty(0, dtype=np.int8), *(np.empty((0, 3)) for _ in range(5))
+)
 _INITIAL_CAPACITY = 64
 
 
@@ -217,11 +237,27 @@ class WindCompensator:
         return self.nav_track.append(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
 
     def add_wind(self, t_s, wind_sensor_mps) -> None:
-        """Add one anemometer sample: stamp s, air velocity in anemometer axes m/s, (3,)."""
-        wind = np.asarray(wind_sensor_mps, dtype=float)
-        if wind.shape != (3,):
-            raise CompensatorInputError(f"wind_sensor_mps must have shape (3,), got {wind.shape}")
-        self.add_wind_batch(np.array([float(t_s)]), wind[None, :])
+        """Add one anemometer sample: stamp s, air velocity in anemometer axes m/s, (3,).
+        :meth:`add_wind_batch` of one sample, in plain floats: the live path."""
+        try:
+            x, y, z = (float(component) for component in wind_sensor_mps)
+        except (TypeError, ValueError) as error:
+            raise CompensatorInputError(
+                f"wind_sensor_mps must be three numbers, got {wind_sensor_mps!r}"
+            ) from error
+        t_s = float(t_s)
+        status, self._latest_wind_stamp_s = _screen_one_wind(
+            t_s, x, y, z, self._latest_wind_stamp_s, self.config.max_wind_speed_mps
+        )
+        self._reserve(1)
+        i = self._tail
+        self._t_s[i] = t_s
+        self._wind_mps[i] = x, y, z
+        self._as_of_nav_s[i] = self._newest_nav_s()
+        self._status[i] = status
+        self._terms[:, i] = math.nan
+        self._tail = i + 1
+        self._advance_first_pending()
 
     def add_wind_batch(self, t_s, wind_sensor_mps) -> None:
         """:meth:`add_wind` of (N,) stamps and (N, 3) winds, in order (screened together)."""
@@ -296,12 +332,17 @@ class WindCompensator:
     def _decide(self) -> None:
         """Correct the pending samples that the navigation now brackets (or never will)."""
         first, tail = self._first_pending, self._tail
-        # A stamp after the newest navigation sample can only wait: no need to look it up.
-        undecided = first + np.flatnonzero(
-            (self._status[first:tail] == _PENDING) & (self._t_s[first:tail] <= self._newest_nav_s())
-        )
-        if undecided.shape[0] == 1:
-            # The live case: one sample, in floats, bit-identical to the batch below.
+        newest_nav_s = self._newest_nav_s()
+        if tail - first == 1:
+            # The live case: only the newest sample waits (the one at _first_pending is).
+            undecided = [first] if self._t_s[first] <= newest_nav_s else []
+        else:
+            # A stamp after the newest navigation sample can only wait: no need to look it up.
+            undecided = first + np.flatnonzero(
+                (self._status[first:tail] == _PENDING) & (self._t_s[first:tail] <= newest_nav_s)
+            )
+        if len(undecided) == 1:
+            # One sample: in floats, bit-identical to the batch below.
             i = int(undecided[0])
             status, terms = self._corrector.correct_one(
                 self.nav_track,
@@ -311,7 +352,7 @@ class WindCompensator:
             )
             self._status[i] = status
             self._terms[:, i] = terms
-        elif undecided.shape[0]:
+        elif len(undecided):
             status, terms = self._corrector.correct(
                 self.nav_track,
                 self._t_s[undecided],
@@ -328,15 +369,22 @@ class WindCompensator:
     def _give_up(self, which, status: WindStatus) -> None:
         """Decide as ``status`` the pending samples from ``_first_pending`` on where ``which``
         (a mask over them, or True for all) holds."""
+        if self._first_pending == self._tail:
+            return
         pending = self._status[self._first_pending : self._tail]
         pending[(pending == _PENDING) & which] = status
         self._advance_first_pending()
 
     def _advance_first_pending(self) -> None:
-        pending = np.flatnonzero(self._status[self._first_pending : self._tail] == _PENDING)
-        self._first_pending = self._first_pending + pending[0] if pending.size else self._tail
+        first, tail = self._first_pending, self._tail
+        if first < tail and self._status[first] == _PENDING:
+            return
+        pending = np.flatnonzero(self._status[first:tail] == _PENDING)
+        self._first_pending = first + int(pending[0]) if pending.size else tail
 
     def _pop_decided(self) -> CorrectedWindBatch:
+        if self._head == self._first_pending:
+            return _NOTHING_DECIDED
         done = slice(self._head, self._first_pending)
         self._head = self._first_pending
         status = self._status[done].copy()

@@ -72,6 +72,14 @@ def level_rate_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> t
     earth_rate_body = rotate_by_quaternion_components(
         (-x, -y, -z, w), earth_rate_enu_components(latitude_rad)
     )
+    if np.ndim(latitude_rad) == 0:
+        # One latitude: a branch, not numpy's per-call cost (the live node's path).
+        if not math.isfinite(latitude_rad):
+            return tuple(angular_rate_body_rad_s)
+        return tuple(
+            rate - earth
+            for rate, earth in zip(angular_rate_body_rad_s, earth_rate_body, strict=True)
+        )
     known = np.isfinite(latitude_rad)
     return tuple(
         np.where(known, rate - np.where(known, earth, 0.0), rate)
@@ -144,23 +152,28 @@ class CompensationPipeline:
         """One ``nav/odometry`` (stamp s, attitude (x, y, z, w), ω_ib (3,) rad/s, body velocity
         (3,) m/s), as :func:`~wind_comp.compensation_messages.odometry_fields` reads it.
         Returns why it is rejected (a stamp not later than the previous one), None when
-        taken."""
-        if not self._nav_order.advance(t_s):
+        taken; ValueError for vectors of the wrong length."""
+        if not t_s > self._nav_order.latest_s:
             return Reason.STAMP_NOT_INCREASING
-        self._nav.append(t_s)
-        self._nav.extend(quat_xyzw)
-        self._nav.extend(angular_rate_body_rad_s)
-        self._nav.extend(velocity_body_mps)
-        self._nav.append(self.latitude_deg)
+        nav, start = self._nav, len(self._nav)
+        nav.append(t_s)
+        nav.extend(quat_xyzw)
+        nav.extend(angular_rate_body_rad_s)
+        nav.extend(velocity_body_mps)
+        nav.append(self.latitude_deg)
+        if len(nav) - start != _NAV_FIELDS:
+            del nav[start:]
+            raise ValueError("odometry needs a quaternion of 4 values and vectors of 3")
+        self._nav_order.advance(t_s)
         return None
 
     def add_wind(self, sample: WindSample) -> str | None:
         """One ``anemometer/wind``. Returns why it is rejected (the message's own
         ``rejection``, or a stamp not later than the previous one), None when accepted. Every
         sample, rejected or not, gets its (then invalid) output."""
+        x, y, z = sample.wind_sensor_mps
         stamp_increases = self._wind_order.advance(sample.t_s)
-        self._wind.append(sample.t_s)
-        self._wind.extend(sample.wind_sensor_mps)
+        self._wind.extend((sample.t_s, x, y, z))
         self._nav_before_wind.append(len(self._nav) // _NAV_FIELDS)
         if sample.rejection is not None:
             return sample.rejection
@@ -223,8 +236,13 @@ class CompensationPipeline:
 
     def _output(self, wind: CorrectedWindBatch) -> CompensationOutput:
         products = []
-        for averager in self.averagers:
-            products += averager.add_batch(wind.t_s, wind.true_wind_enu_mps)
+        if len(wind) == 1:
+            # The live case: one sample, without numpy's per-call cost on one row.
+            for averager in self.averagers:
+                products += averager.add(float(wind.t_s[0]), wind.true_wind_enu_mps[0])
+        elif len(wind):
+            for averager in self.averagers:
+                products += averager.add_batch(wind.t_s, wind.true_wind_enu_mps)
         # A sample closes the windows it is the first of, in averager order: the windows
         # closed by one sample share their last sample.
         products.sort(key=lambda product: product.last_sample_s)
