@@ -37,9 +37,9 @@ _VECTOR3 = struct.Struct("<3d")
 _POSE = struct.Struct("<7d")
 _TWIST = struct.Struct("<6d")
 _POSE_WITH_COVARIANCE_SIZE = _POSE.size + 36 * 8
-# sensor_msgs/Imu after its header: orientation (4), its covariance (9), angular velocity (3),
-# its covariance (9), linear acceleration (3), its covariance (9).
-_IMU_FIELDS = struct.Struct("<4d9d3d9d3d9d")
+# sensor_msgs/Imu after its header, up to what the reader returns: orientation (4), its
+# covariance (9), angular velocity (3), its covariance (9), linear acceleration (3).
+_IMU_FIELDS = struct.Struct("<4d9d3d9d3d")
 
 
 def _aligned(position: int, size: int) -> int:
@@ -86,7 +86,7 @@ def read_imu_rate_and_acceleration(
     raw: bytes,
 ) -> tuple[int, int, tuple[float, float, float], tuple[float, float, float]] | None:
     """(sec, nanosec, angular velocity (x, y, z), linear acceleration (x, y, z)) of a
-    sensor_msgs/Imu; the frame id is skipped, not read."""
+    sensor_msgs/Imu; the frame id is skipped, not read, and nothing after the acceleration."""
     if raw[:2] != _LITTLE_ENDIAN or len(raw) < _DATA_START + _STAMP_AND_FRAME_LENGTH.size:
         return None
     sec, nanosec, frame_length = _STAMP_AND_FRAME_LENGTH.unpack_from(raw, _DATA_START)
@@ -175,6 +175,7 @@ class Vector3StampedWriter:
     def __init__(self, frame_id: str):
         layout = _Layout()
         self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
         layout.add("d", 8, 3)
         self._struct = layout.struct()
 
@@ -183,7 +184,7 @@ class Vector3StampedWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            len(self._frame),
+            self._frame_length,
             self._frame,
             x,
             y,
@@ -209,7 +210,9 @@ class OdometryWriter:
     def __init__(self, frame_id: str, child_frame_id: str):
         layout = _Layout()
         self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
         self._child_frame = layout.string(child_frame_id)
+        self._child_frame_length = len(self._child_frame)
         layout.add("d", 8, 7 + 36 + 6 + 36)
         self._struct = layout.struct()
 
@@ -229,9 +232,9 @@ class OdometryWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            len(self._frame),
+            self._frame_length,
             self._frame,
-            len(self._child_frame),
+            self._child_frame_length,
             self._child_frame,
             *position,
             *orientation_xyzw,
@@ -248,6 +251,7 @@ class ImuWriter:
     def __init__(self, frame_id: str):
         layout = _Layout()
         self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
         layout.add("d", 8, 4 + 9 + 3 + 9 + 3 + 9)
         self._struct = layout.struct()
 
@@ -267,7 +271,7 @@ class ImuWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            len(self._frame),
+            self._frame_length,
             self._frame,
             *orientation_xyzw,
             *orientation_covariance,
@@ -284,6 +288,7 @@ class TwistWithCovarianceStampedWriter:
     def __init__(self, frame_id: str):
         layout = _Layout()
         self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
         layout.add("d", 8, 6 + 36)
         self._struct = layout.struct()
 
@@ -293,7 +298,7 @@ class TwistWithCovarianceStampedWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            len(self._frame),
+            self._frame_length,
             self._frame,
             *linear,
             *angular,
@@ -307,6 +312,7 @@ class NavSatFixWriter:
     def __init__(self, frame_id: str):
         layout = _Layout()
         self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
         layout.add("b", 1)
         layout.add("H", 2)
         layout.add("d", 8, 3 + 9)
@@ -330,7 +336,7 @@ class NavSatFixWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            len(self._frame),
+            self._frame_length,
             self._frame,
             status,
             service,

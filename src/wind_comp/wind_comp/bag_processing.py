@@ -197,7 +197,9 @@ def process_bag(
                 log_time_ns = message.log_time_ns
                 topic = relative_of.get(message.topic)
                 if topic is not None:
-                    compensation.add_navigation(fusion.add_message(reader, topic, message))
+                    solutions = fusion.add_message(reader, topic, message)
+                    if solutions:
+                        compensation.add_navigation(solutions)
                 else:
                     writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
                     if message.topic == stored_wind:

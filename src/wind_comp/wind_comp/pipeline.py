@@ -27,6 +27,7 @@ sample as of its arrival, and the float and column arithmetic is the same, eleme
 from __future__ import annotations
 
 import math
+from array import array
 from typing import NamedTuple
 
 import numpy as np
@@ -116,8 +117,8 @@ class CompensationPipeline:
         # Arrivals not yet handed to the compensator: the navigation samples' numbers in a row
         # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude), the wind
         # samples', and for each wind sample the number of navigation samples before it.
-        self._nav: list[float] = []
-        self._wind: list[float] = []
+        self._nav = array("d")
+        self._wind = array("d")
         self._nav_before_wind: list[int] = []
 
     @property
@@ -204,24 +205,26 @@ class CompensationPipeline:
         nav, wind, nav_before_wind = self._nav, self._wind, self._nav_before_wind
         if not nav and not wind:
             return
-        self._nav, self._wind, self._nav_before_wind = [], [], []
+        self._nav, self._wind, self._nav_before_wind = array("d"), array("d"), []
         if len(nav) == _NAV_FIELDS and not wind:
             # The live case: one solution, in plain floats.
-            t_s, quat, rate, velocity_body = nav[0], nav[1:5], nav[5:8], nav[8:11]
+            t_s, *quat_rate_velocity, latitude_deg = nav
+            quat, rate = quat_rate_velocity[0:4], quat_rate_velocity[4:7]
             self.compensator.add_nav(
                 t_s,
                 quat,
-                level_rate_components(rate, quat, nav[11]),
-                rotate_by_quaternion_components(quat, velocity_body),
+                level_rate_components(rate, quat, latitude_deg),
+                rotate_by_quaternion_components(quat, quat_rate_velocity[7:10]),
             )
         elif len(wind) == _WIND_FIELDS and not nav:
-            self.compensator.add_wind(wind[0], wind[1:])
+            t_s, *wind_sensor_mps = wind
+            self.compensator.add_wind(t_s, wind_sensor_mps)
         else:
-            columns = np.array(nav, dtype=float).reshape(-1, _NAV_FIELDS)
+            columns = np.frombuffer(nav, dtype=float).reshape(-1, _NAV_FIELDS)
             quats, rates, velocities_body = columns[:, 1:5], columns[:, 5:8], columns[:, 8:11]
             rates_nb = level_rate_components(rates.T, quats.T, columns[:, 11])
             velocities_enu = rotate_by_quaternion_components(quats.T, velocities_body.T)
-            winds = np.array(wind, dtype=float).reshape(-1, _WIND_FIELDS)
+            winds = np.frombuffer(wind, dtype=float).reshape(-1, _WIND_FIELDS)
             self.compensator.add_arrivals(
                 (
                     columns[:, 0],
