@@ -71,7 +71,8 @@ from buoy_common.contract import (
     NAV_ODOMETRY_TOPIC,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
-    window_label,
+    wind_mean_topic,
+    wind_stats_topic,
 )
 from wind_comp.compensation_messages import (
     MalformedMessageError,
@@ -135,15 +136,11 @@ class CompensationNode(FlushingNode):
 
         self._true_wind_publisher = self.create_publisher(Vector3Stamped, WIND_TRUE_TOPIC, DATA_QOS)
         self._product_publishers = {
-            averager.window_s: (
-                self.create_publisher(
-                    Vector3Stamped, f"wind/mean_{window_label(averager.window_s)}", DATA_QOS
-                ),
-                self.create_publisher(
-                    Float64MultiArray, f"wind/stats_{window_label(averager.window_s)}", DATA_QOS
-                ),
+            window_s: (
+                self.create_publisher(Vector3Stamped, wind_mean_topic(window_s), DATA_QOS),
+                self.create_publisher(Float64MultiArray, wind_stats_topic(window_s), DATA_QOS),
             )
-            for averager in self.pipeline.averagers
+            for window_s in self.config.product_windows_s
         }
         # Raw: wind samples are read from their CDR bytes and wind/true written as CDR bytes,
         # the arithmetic process_bag runs, without building message objects on the way.
