@@ -56,6 +56,11 @@ def scenario():
     return nav_t, attitude.as_quat(), rates, velocities, wind_t, wind
 
 
+def no_navigation():
+    """No navigation samples, as :meth:`WindCompensator.add_arrivals` takes them."""
+    return np.empty(0), np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3))
+
+
 def joined(batches) -> CorrectedWindBatch:
     """Outputs collected in several goes, as one batch."""
     columns = [
@@ -134,12 +139,12 @@ def test_wind_added_in_batches_equals_wind_added_one_by_one():
     for i in range(len(wind_t)):
         one_by_one.add_wind(wind_t[i], wind[i])
     for part in np.array_split(np.arange(len(wind_t)), 7):
-        in_batches.add_wind_batch(wind_t[part], wind[part])
+        in_batches.add_arrivals(no_navigation(), wind_t[part], wind[part], np.zeros(len(part)))
     expected, got = one_by_one.flush(), in_batches.flush()
     assert rows(got) == rows(expected)
     np.testing.assert_array_equal(got.true_wind_enu_mps, expected.true_wind_enu_mps)
     with pytest.raises(CompensatorInputError):
-        in_batches.add_wind_batch(wind_t[:3], wind[:2])
+        in_batches.add_arrivals(no_navigation(), wind_t[:3], wind[:2], np.zeros(3))
 
 
 def test_every_sample_gets_one_output_with_its_stamp_and_reason():

@@ -238,7 +238,7 @@ class WindCompensator:
 
     def add_wind(self, t_s, wind_sensor_mps) -> None:
         """Add one anemometer sample: stamp s, air velocity in anemometer axes m/s, (3,).
-        :meth:`add_wind_batch` of one sample, in plain floats: the live path."""
+        In plain floats: the live path; :meth:`add_arrivals` takes stretches of samples."""
         try:
             x, y, z = (float(component) for component in wind_sensor_mps)
         except (TypeError, ValueError) as error:
@@ -259,11 +259,6 @@ class WindCompensator:
         self._tail = i + 1
         self._advance_first_pending()
 
-    def add_wind_batch(self, t_s, wind_sensor_mps) -> None:
-        """:meth:`add_wind` of (N,) stamps and (N, 3) winds, in order (screened together)."""
-        stamps, winds = _wind_arrays(t_s, wind_sensor_mps)
-        self._enqueue(stamps, winds, np.full(stamps.shape[0], self._newest_nav_s()))
-
     def add_arrivals(self, nav, wind_t_s, wind_sensor_mps, nav_before_wind) -> int:
         """Navigation and anemometer samples that arrived interleaved: exactly :meth:`add_nav`
         of each navigation sample in order, with :meth:`add_wind` of wind sample ``i`` right
@@ -273,8 +268,8 @@ class WindCompensator:
             nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) of M navigation
                 samples: (M,) stamps, s, and (M, 4), (M, 3), (M, 3) arrays of what
                 :meth:`add_nav` takes.
-            wind_t_s, wind_sensor_mps: (N,) stamps and (N, 3) winds, as :meth:`add_wind_batch`
-                takes them.
+            wind_t_s, wind_sensor_mps: (N,) stamps and (N, 3) winds, as :meth:`add_wind` takes
+                them one by one.
             nav_before_wind: (N,) non-decreasing counts, 0 to M.
 
         Returns the number of navigation samples accepted.
