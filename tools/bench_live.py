@@ -24,7 +24,6 @@ import json
 import math
 import os
 import random
-import struct
 import subprocess
 import sys
 import tempfile
@@ -33,6 +32,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from buoy_common import cdr
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -56,9 +57,6 @@ SIMULATOR_NICENESS = 10
 RUN_MARGIN_S = 90.0
 IN_SERVICE_AFTER_S = 1.0
 # CDR of a message that starts with a std_msgs/Header, after the 4-byte encapsulation header.
-HEADER_STAMP = struct.Struct("<iI")
-FRAME_LENGTH = struct.Struct("<I")
-FLOAT64 = struct.Struct("<d")
 
 
 def isolate_ros_domain() -> int:
@@ -128,9 +126,9 @@ class Listener:
             else:
                 received_ns = now_ns
                 self.callback_stamps += 1
-            key = HEADER_STAMP.unpack_from(message, 4)
+            key = cdr.read_stamp(message)
             table.setdefault(key, (received_ns, info.get("source_timestamp", 0)))
-            if topic == "wind/true" and math.isfinite(vector_x_of_cdr(message)):
+            if topic == "wind/true" and math.isfinite(cdr.read_vector3_stamped(message)[3][0]):
                 self.valid_true_wind.add(key)
             self.first_callback_ns.setdefault(topic, time.monotonic_ns())
             self.last_callback_ns[topic] = time.monotonic_ns()
@@ -209,14 +207,6 @@ def lower_priority(parent_pid: int, names) -> dict[str, int | None]:
             os.setpriority(os.PRIO_PROCESS, pid, SIMULATOR_NICENESS)
         niceness[name] = None if pid is None else os.getpriority(os.PRIO_PROCESS, pid)
     return niceness
-
-
-def vector_x_of_cdr(raw: bytes) -> float:
-    """x of a geometry_msgs/Vector3Stamped from its CDR bytes (little endian)."""
-    (frame_length,) = FRAME_LENGTH.unpack_from(raw, 12)
-    vector_at = 16 + frame_length
-    vector_at += -(vector_at - 4) % 8
-    return FLOAT64.unpack_from(raw, vector_at)[0]
 
 
 def latency_stats(inputs: dict, outputs: dict) -> dict:

@@ -16,16 +16,14 @@ path, so the real nodes' figures can be read against it.
 
 from __future__ import annotations
 
-import struct
 import sys
 
 from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import Imu
 
+from buoy_common import cdr
 from buoy_common.base_node import DATA_QOS, SuiteNode, run_node
 
-# Header stamp (sec, nanosec) of a message's CDR bytes, after the 4-byte encapsulation header.
-HEADER_STAMP = struct.Struct("<iI")
 # Stamps of navigation seen, kept for matching wind samples that arrive after them.
 NAV_STAMPS_KEPT = 1000
 
@@ -41,14 +39,14 @@ def passthrough_compensation(node) -> None:
     nav_stamps: dict[tuple[int, int], None] = {}
 
     def on_wind(raw: bytes) -> None:
-        stamp = HEADER_STAMP.unpack_from(raw, 4)
+        stamp = cdr.read_stamp(raw)
         if stamp in nav_stamps:
             publisher.publish(raw)
         else:
             waiting_wind[stamp] = raw
 
     def on_nav(raw: bytes) -> None:
-        stamp = HEADER_STAMP.unpack_from(raw, 4)
+        stamp = cdr.read_stamp(raw)
         nav_stamps[stamp] = None
         if len(nav_stamps) > NAV_STAMPS_KEPT:
             del nav_stamps[next(iter(nav_stamps))]

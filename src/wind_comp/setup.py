@@ -39,7 +39,7 @@ setup(
             "compensation_node = wind_comp.compensation_node:main",
             "process_bag = wind_comp.process_bag:main",
             "wind_echo = wind_comp.wind_echo_node:main",
-            "wind_report = wind_comp.report:main",
+            "wind_report = wind_comp.wind_report:main",
         ],
     },
 )

@@ -95,3 +95,22 @@ def test_the_simulator_and_the_filter_share_one_antenna_rule():
     vertical = {"primary_antenna_body_m": (0.0, 0.0, 1.0), "secondary_antenna_body_m": (0, 0, 1.5)}
     Extrinsics(**vertical)
     FusionConfig(**vertical)
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_every_executable_is_the_module_of_its_name(package):
+    # A node module carries the suffix the rclpy rule asks for; a command's module holds its
+    # command line, named as the command is.
+    setup = (REPO / "src" / package / "setup.py").read_text()
+    scripts = dict(
+        (name.strip(), target.strip())
+        for name, target in (
+            line.strip().strip('",').split("=") for line in setup.splitlines() if ":main" in line
+        )
+    )
+    mismatched = {
+        name: target
+        for name, target in scripts.items()
+        if target.split(":")[0] not in (f"{package}.{name}", f"{package}.{name}_node")
+    }
+    assert mismatched == {}

@@ -32,20 +32,23 @@ from std_msgs.msg import Float64MultiArray
 from buoy_common.bag_io import BagReader
 from buoy_common.base_node import DATA_QOS
 from ros_messages import reports_publishers_on, stamp_ns, to_rclpy, wait_for
-from wind_comp.compensation_node import NODE_NAME
-from wind_comp.compensator import CompensatorConfig, WindStatus, correct_batch
-from wind_comp.nav_messages import (
+from sensor_sim.geodesy import EARTH_RATE_RAD_S
+from wind_comp.compensation_messages import (
+    MalformedMessageError,
     anemometer_sample,
-    odometry_arrays,
-    remove_earth_rate,
+    fix_fields,
+    odometry_fields,
     stats_values,
 )
+from wind_comp.compensation_node import NODE_NAME
+from wind_comp.compensator import WindStatus
+from wind_comp.config import CompensatorConfig
+from wind_comp.pipeline import CompensationPipeline
 
 pytestmark = pytest.mark.ros
 
 SCENARIO_S = 20.0
 LATITUDE_DEG = 35.0  # sea_state starts at 35 N
-EARTH_RATE_RAD_S = 7.292115e-5
 ANEMOMETER_POSITION_M = (0.0, 0.0, 3.0)  # the simulator's default, also the node's
 PLAY_RATE = 10.0
 NAV_MISSING_AT_END_S = 0.5  # shorter than the node's 1 s navigation timeout: held until SIGINT
@@ -318,20 +321,26 @@ def test_corrected_wind_matches_truth_and_raw_does_not(scenario, live_run):
     assert np.sqrt(np.mean((levelled - truth_levelled) ** 2)) > 5 * ANEMOMETER_NOISE_MPS
 
 
-def test_live_output_equals_batch_correction(scenario, live_run):
-    winds, odometries, _, _ = scenario
-    nav, rejected = odometry_arrays(odometries)
-    assert rejected == {"zero_quaternion": 1}
-    samples = [anemometer_sample(m) for m in winds]
-    batch = correct_batch(
-        CompensatorConfig(ANEMOMETER_POSITION_M, (0.0, 0.0, 0.0)),
-        nav.t_s,
-        nav.quat_xyzw,
-        remove_earth_rate(nav.angular_rate_body_rad_s, nav.quat_xyzw, LATITUDE_DEG),
-        nav.velocity_enu_mps,
-        np.array([s.t_s for s in samples]),
-        np.array([s.wind_sensor_mps for s in samples]),
+def test_live_output_equals_the_pipeline_run_offline(scenario, live_run):
+    # The node's output is the pipeline's fed in one stretch, the messages in stamp order.
+    winds, odometries, fix, _ = scenario
+    pipeline = CompensationPipeline(CompensatorConfig(ANEMOMETER_POSITION_M, (0.0, 0.0, 0.0)))
+    assert pipeline.add_fix(*fix_fields(fix)) is None
+    rejected = {}
+    in_stamp_order = sorted(
+        [(stamp_ns(m), 0, k) for k, m in enumerate(odometries)]
+        + [(stamp_ns(m), 1, k) for k, m in enumerate(winds)]
     )
+    for _, is_wind, k in in_stamp_order:
+        if is_wind:
+            pipeline.add_wind(anemometer_sample(winds[k]))
+            continue
+        try:
+            assert pipeline.add_odometry(*odometry_fields(odometries[k])) is None
+        except MalformedMessageError as error:
+            rejected[error.reason] = rejected.get(error.reason, 0) + 1
+    assert rejected == {"zero_quaternion": 1}
+    batch = pipeline.flush().wind
     live = vectors(live_run["wind/true"])
     np.testing.assert_array_equal(live, batch.true_wind_enu_mps)
     counts = batch.counts()

@@ -23,10 +23,11 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from buoy_common.bag_io import BagReader, BagWriter
-from buoy_nav.fuse_bag import fusion_config_from_files
+from buoy_nav.config import fusion_config_from_files
 from ros_messages import raw_stamp_ns
 from sensor_sim.sensor_errors import GnssErrorConfig, ImuErrorConfig
-from wind_comp.process_bag import compensator_config_from_files, process_bag
+from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parents[2]
 BAGS_DIR = REPO / "bags"

@@ -25,9 +25,10 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 
 from buoy_common.bag_io import BagReader, BagWriter
-from buoy_nav.fuse_bag import fusion_config_from_files
+from buoy_nav.config import fusion_config_from_files
 from ros_messages import stamp_ns, wait_for
-from wind_comp.process_bag import compensator_config_from_files, process_bag
+from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files
 
 pytestmark = pytest.mark.ros
 

@@ -13,15 +13,19 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
-from buoy_common.contract import window_label
-from buoy_nav.fuse_bag import fuse_bag, fusion_config_from_files
+from buoy_common.contract import (
+    window_label,
+)
+from buoy_nav.bag_fusion import fuse_bag
+from buoy_nav.config import fusion_config_from_files
 from ros_messages import raw_stamp_ns
 from sensor_sim.sensor_errors import AnemometerErrorConfig
-from wind_comp.nav_messages import (
+from wind_comp.bag_processing import process_bag, products_csv_path
+from wind_comp.compensation_messages import (
     STATS_FIELDS,
     stats_values,
 )
-from wind_comp.process_bag import compensator_config_from_files, process_bag, products_csv_path
+from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parents[2]
 BAGS_DIR = REPO / "bags"

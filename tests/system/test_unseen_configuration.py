@@ -18,8 +18,9 @@ import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
 from buoy_common.bag_io import BagReader
-from buoy_nav.fuse_bag import fusion_config_from_files
-from wind_comp.process_bag import compensator_config_from_files, process_bag
+from buoy_nav.config import fusion_config_from_files
+from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files
 
 BIN = Path(sys.executable).parent
 DURATION_S = 100.0

@@ -10,22 +10,21 @@ from matplotlib.image import imread
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader, BagWriter
-from buoy_nav.fuse_bag import fusion_config_from_files
+from buoy_nav.config import fusion_config_from_files
 from sensor_sim.simulate_bag import parse_arguments, simulate
-from wind_comp.process_bag import compensator_config_from_files, process_bag
+from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files
 from wind_comp.products import WindAverager
-from wind_comp.report import (
+from wind_comp.report import write_report
+from wind_comp.report.attitude import attitude_errors_deg, rpy_rad_from_quaternions, rpy_sigma_rad
+from wind_comp.report.data import (
     ReportData,
     ReportDataError,
-    attitude_errors_deg,
     load_report_data,
-    main,
     report_data_from_bag,
-    rpy_rad_from_quaternions,
-    rpy_sigma_rad,
     save_report_data,
-    write_report,
 )
+from wind_comp.wind_report import main
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 BUOY_PARAMS = str(Path(__file__).resolve().parents[2] / "src/buoy_common/config/buoy.yaml")

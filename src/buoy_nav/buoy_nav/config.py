@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 
 from buoy_common.extrinsics import check_shared_fields, shared_field
+from buoy_common.parameters import build_config, load_parameter_files
 
 FUSION_NODE_NAME = "fusion_node"
 """Node name whose parameter-file sections configure the fusion (live and offline)."""
@@ -219,3 +220,13 @@ def _to_float(name: str, value) -> float:
     if math.isinf(number):
         raise ConfigError(f"{name} must be finite, got {value!r}")
     return number
+
+
+def fusion_config_from_files(paths) -> FusionConfig:
+    """The :class:`FusionConfig` ``fusion_node`` would build from these ROS parameter files
+    (sections ``/**`` and ``fusion_node``, later files winning). Raises
+    :class:`buoy_common.parameters.ParameterError` naming a bad file or value."""
+    values = load_parameter_files(paths, FUSION_NODE_NAME)
+    return build_config(
+        FusionConfig, values, FUSION_PARAMETER_PREFIX, skip=FUSION_FIELDS_NOT_PARAMETERS
+    )

@@ -56,11 +56,20 @@ def normal_gravity_mps2(latitude_rad: float, altitude_m: float) -> float:
     )
 
 
-def earth_rate_enu_rad_s(latitude_rad: float) -> np.ndarray:
-    """Earth rotation rate ω_ie expressed in the local ENU frame (rad/s)."""
-    return np.array(
-        (0.0, EARTH_RATE_RAD_S * math.cos(latitude_rad), EARTH_RATE_RAD_S * math.sin(latitude_rad))
+def earth_rate_enu_components(latitude_rad) -> tuple:
+    """Earth rotation rate ω_ie in the local ENU frame (rad/s) at geodetic latitude φ (rad):
+    (0, Ω cos φ, Ω sin φ) as (east, north, up). φ may be a float or an array (elementwise:
+    one latitude alone and a batch give bit-identical components)."""
+    return (
+        0.0,
+        EARTH_RATE_RAD_S * np.cos(latitude_rad),
+        EARTH_RATE_RAD_S * np.sin(latitude_rad),
     )
+
+
+def earth_rate_enu_rad_s(latitude_rad: float) -> np.ndarray:
+    """Earth rotation rate ω_ie expressed in the local ENU frame (rad/s), as a (3,) array."""
+    return np.array(earth_rate_enu_components(latitude_rad), dtype=float)
 
 
 def transport_rate_enu_rad_s(

@@ -39,12 +39,12 @@ all zeros, the ROS convention for "unknown".
 from __future__ import annotations
 
 import math
-import struct
 from collections import deque
 from typing import NamedTuple
 
 import numpy as np
 
+from buoy_common import cdr
 from buoy_common.contract import (
     BODY_FRAME,
     GNSS_BASELINE_TOPIC,
@@ -179,11 +179,6 @@ def feed_message(
     return [], engine.last_input_rejection
 
 
-_CDR_LITTLE_ENDIAN = (0, 1)
-_STAMP = struct.Struct("<iII")
-_IMU_VECTORS = struct.Struct("<4d9d3d9d3d")
-
-
 def feed_imu_cdr(
     engine: FusionEngine, raw: bytes, stamps: StampBook | None = None
 ) -> tuple[list[NavSolution], str | None] | None:
@@ -193,18 +188,14 @@ def feed_imu_cdr(
     object; the engine receives the same numbers. Returns None for bytes this reader does not
     handle (big-endian or short data): decode the message and use :func:`feed_message`.
     """
-    if tuple(raw[:2]) != _CDR_LITTLE_ENDIAN or len(raw) < 16:
+    fields = cdr.read_imu_rate_and_acceleration(raw)
+    if fields is None:
         return None
-    sec, nanosec, frame_length = _STAMP.unpack_from(raw, 4)
-    vectors_at = 4 + 12 + frame_length
-    vectors_at += -(vectors_at - 4) % 8
-    if len(raw) < vectors_at + _IMU_VECTORS.size:
-        return None
-    values = _IMU_VECTORS.unpack_from(raw, vectors_at)
+    sec, nanosec, angular_velocity, linear_acceleration = fields
     t_s = sec + nanosec * 1e-9
     if stamps is not None:
         stamps.remember(t_s, sec, nanosec)
-    solutions = engine.add_imu(t_s, values[13:16], values[25:28])
+    solutions = engine.add_imu(t_s, angular_velocity, linear_acceleration)
     return solutions, engine.last_input_rejection
 
 
@@ -427,138 +418,53 @@ def solution_messages(
 
 
 # -- CDR ------------------------------------------------------------------------------------------
-# Offline tools write the nav messages straight from the values: packing four fixed layouts is
-# several times faster than building and serialising message objects. The layouts are those of
-# ROS 2 (XCDR1, little endian: each primitive aligned to its size from the start of the data).
+# The node and the offline tools write the nav messages straight from the values: packing four
+# fixed layouts is several times faster than building and serialising message objects.
 
-
-class _CdrLayout:
-    """Accumulates a struct format for a fixed CDR layout, inserting the alignment padding."""
-
-    def __init__(self):
-        self.format = ["<"]
-        self.offset = 0
-
-    def add(self, code: str, size: int, count: int = 1) -> None:
-        padding = -self.offset % size
-        if padding:
-            self.format.append(f"{padding}x")
-        self.format.append(f"{count}{code}")
-        self.offset += padding + size * count
-
-    def string(self, text: str) -> bytes:
-        encoded = text.encode() + b"\0"
-        self.add("I", 4)
-        self.format.append(f"{len(encoded)}s")
-        self.offset += len(encoded)
-        return encoded
-
-    def header(self, frame_id: str) -> bytes:
-        self.add("i", 4)
-        self.add("I", 4)
-        return self.string(frame_id)
-
-    def struct(self) -> struct.Struct:
-        return struct.Struct("".join(self.format))
-
-
-_CDR_ENCAPSULATION = b"\x00\x01\x00\x00"
-
-
-def _odometry_layout():
-    layout = _CdrLayout()
-    frame = layout.header(MAP_FRAME)
-    child = layout.string(BODY_FRAME)
-    layout.add("d", 8, 7 + 36 + 6 + 36)
-    return layout.struct(), frame, child
-
-
-def _imu_layout():
-    layout = _CdrLayout()
-    frame = layout.header(BODY_FRAME)
-    layout.add("d", 8, 4 + 9 + 3 + 9 + 3 + 9)
-    return layout.struct(), frame
-
-
-def _twist_layout():
-    layout = _CdrLayout()
-    frame = layout.header(MAP_FRAME)
-    layout.add("d", 8, 6 + 36)
-    return layout.struct(), frame
-
-
-def _fix_layout():
-    layout = _CdrLayout()
-    frame = layout.header(BODY_FRAME)
-    layout.add("b", 1)
-    layout.add("H", 2)
-    layout.add("d", 8, 3 + 9)
-    layout.add("B", 1)
-    return layout.struct(), frame
-
-
-_ODOMETRY_CDR, _MAP_STRING, _BODY_STRING = _odometry_layout()
-_IMU_CDR, _ = _imu_layout()
-_TWIST_CDR, _ = _twist_layout()
-_FIX_CDR, _ = _fix_layout()
+_ODOMETRY_CDR = cdr.OdometryWriter(MAP_FRAME, BODY_FRAME)
+_IMU_CDR = cdr.ImuWriter(BODY_FRAME)
+_TWIST_CDR = cdr.TwistWithCovarianceStampedWriter(MAP_FRAME)
+_FIX_CDR = cdr.NavSatFixWriter(BODY_FRAME)
 _ZEROS9 = (0.0,) * 9
 
 
 def solution_cdr(v: NavValues) -> dict[str, bytes]:
     """The four ``nav/*`` messages of one solution's :func:`nav_values` as CDR bytes, by topic:
-    what ROS serialises for :func:`solution_messages` (with zeroed padding)."""
+    what ROS serialises for :func:`solution_messages`."""
     sec, nanosec = v.sec, v.nanosec
     return {
-        NAV_ODOMETRY_TOPIC: _CDR_ENCAPSULATION
-        + _ODOMETRY_CDR.pack(
+        NAV_ODOMETRY_TOPIC: _ODOMETRY_CDR.write(
             sec,
             nanosec,
-            len(_MAP_STRING),
-            _MAP_STRING,
-            len(_BODY_STRING),
-            _BODY_STRING,
-            *v.position_map_m,
-            *v.attitude_xyzw,
-            *v.pose_covariance,
-            *v.velocity_body_mps,
-            *v.angular_rate_body_rad_s,
-            *v.body_twist_covariance,
+            v.position_map_m,
+            v.attitude_xyzw,
+            v.pose_covariance,
+            v.velocity_body_mps,
+            v.angular_rate_body_rad_s,
+            v.body_twist_covariance,
         ),
-        NAV_IMU_TOPIC: _CDR_ENCAPSULATION
-        + _IMU_CDR.pack(
+        NAV_IMU_TOPIC: _IMU_CDR.write(
             sec,
             nanosec,
-            len(_BODY_STRING),
-            _BODY_STRING,
-            *v.attitude_xyzw,
-            *v.attitude_covariance_rad2,
-            *v.angular_rate_body_rad_s,
-            *_ZEROS9,
-            *v.specific_force_body_mps2,
-            *_ZEROS9,
+            v.attitude_xyzw,
+            v.attitude_covariance_rad2,
+            v.angular_rate_body_rad_s,
+            _ZEROS9,
+            v.specific_force_body_mps2,
+            _ZEROS9,
         ),
-        NAV_VELOCITY_TOPIC: _CDR_ENCAPSULATION
-        + _TWIST_CDR.pack(
-            sec,
-            nanosec,
-            len(_MAP_STRING),
-            _MAP_STRING,
-            *v.velocity_enu_mps,
-            *_ZEROS3,
-            *v.enu_twist_covariance,
+        NAV_VELOCITY_TOPIC: _TWIST_CDR.write(
+            sec, nanosec, v.velocity_enu_mps, _ZEROS3, v.enu_twist_covariance
         ),
-        NAV_FIX_TOPIC: _CDR_ENCAPSULATION
-        + _FIX_CDR.pack(
+        NAV_FIX_TOPIC: _FIX_CDR.write(
             sec,
             nanosec,
-            len(_BODY_STRING),
-            _BODY_STRING,
             STATUS_FIX,
             SERVICE_GPS,
             v.latitude_deg,
             v.longitude_deg,
             v.altitude_m,
-            *v.position_covariance_m2,
+            v.position_covariance_m2,
             COVARIANCE_TYPE_KNOWN,
         ),
     }

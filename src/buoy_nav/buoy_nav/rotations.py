@@ -97,6 +97,31 @@ def rotation_matrix_elements(x, y, z, w) -> tuple:
     )
 
 
+def cross_components(a, b) -> tuple:
+    """a × b of two 3-vectors given by components (floats or equally shaped arrays)."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
+
+
+def rotate_by_quaternion_components(quat_xyzw, vector) -> tuple:
+    """R(q)·v of a quaternion (x, y, z, w) of any non-zero norm (normalised here) and a
+    3-vector, by components: floats or equally shaped arrays, elementwise, so that one vector
+    alone and a batch give bit-identical results. v + 2w(u×v) + 2u×(u×v) with u = (x, y, z)
+    of the unit quaternion; the conjugate (−x, −y, −z, w) rotates by R(q)ᵀ."""
+    x, y, z, w = quat_xyzw
+    norm = np.sqrt(x * x + y * y + z * z + w * w)
+    axis = (x / norm, y / norm, z / norm)
+    scalar = w / norm
+    twice_cross = tuple(2.0 * component for component in cross_components(axis, vector))
+    return tuple(
+        component + scalar * first + second
+        for component, first, second in zip(
+            vector, twice_cross, cross_components(axis, twice_cross), strict=True
+        )
+    )
+
+
 def rotation_matrix_from_quaternion(q) -> np.ndarray:
     """3×3 rotation matrix of a unit (x, y, z, w) quaternion."""
     return np.array(rotation_matrix_elements(*(float(c) for c in q))).reshape(3, 3)

@@ -36,8 +36,8 @@ from buoy_common.contract import (
     NAV_VELOCITY_TOPIC,
     Reason,
 )
+from buoy_nav.config import fusion_config_from_files
 from buoy_nav.engine import FusionEngine, NavSolution
-from buoy_nav.fuse_bag import fusion_config_from_files
 from buoy_nav.fusion_messages import (
     FUSION_INPUT_MSGTYPES,
     NavMessageClasses,

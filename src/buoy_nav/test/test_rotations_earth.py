@@ -9,10 +9,12 @@ from scipy.spatial.transform import Rotation
 from buoy_nav import earth
 from buoy_nav.rotations import (
     cross,
+    cross_components,
     euler_from_rotation_matrix,
     quaternion_from_rotation_matrix,
     quaternion_from_rotation_vector,
     quaternion_multiply,
+    rotate_by_quaternion_components,
     rotation_matrix_from_euler,
     rotation_matrix_from_quaternion,
     rotation_matrix_from_rotation_vector,
@@ -196,3 +198,35 @@ def test_earth_and_transport_rate():
     transport = earth.transport_rate_enu_rad_s(latitude, 0.0, (0.0, 5.0, 0.0))
     meridian, _ = earth.radii_of_curvature_m(latitude)
     np.testing.assert_allclose(transport, (-5.0 / meridian, 0, 0))
+
+
+def test_quaternion_rotation_by_components_keeps_length_and_matches_scipy():
+    attitudes = Rotation.random(30, random_state=9)
+    vectors = RNG.normal(0, 5, (30, 3))
+    scale = RNG.uniform(0.5, 2.0, (30, 1))  # any norm: normalised, not used as given
+    rotated = np.stack(
+        rotate_by_quaternion_components((scale * attitudes.as_quat()).T, vectors.T), axis=-1
+    )
+    np.testing.assert_allclose(rotated, attitudes.apply(vectors), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(rotated, axis=1), np.linalg.norm(vectors, axis=1))
+    # The conjugate rotates back; one vector in floats is the batch's row, bit for bit.
+    x, y, z, w = attitudes.as_quat().T
+    back = rotate_by_quaternion_components((-x, -y, -z, w), tuple(rotated.T))
+    np.testing.assert_allclose(np.stack(back, axis=-1), vectors, atol=1e-12)
+    for k in range(30):
+        single = rotate_by_quaternion_components(
+            tuple((scale[k] * attitudes[k].as_quat()).tolist()), tuple(vectors[k].tolist())
+        )
+        np.testing.assert_array_equal(single, rotated[k])
+    np.testing.assert_array_equal(
+        np.stack(cross_components(vectors.T, rotated.T), axis=-1)[0], cross(vectors[0], rotated[0])
+    )
+
+
+def test_earth_rate_components_are_the_earth_rate_alone_or_in_a_batch():
+    latitudes = RNG.uniform(-math.pi / 2, math.pi / 2, 25)
+    east, north, up = earth.earth_rate_enu_components(latitudes)
+    for k, latitude in enumerate(latitudes.tolist()):
+        expected = earth.earth_rate_enu_rad_s(latitude)
+        np.testing.assert_array_equal((east, north[k], up[k]), expected)
+    np.testing.assert_allclose(np.hypot(north, up), earth.EARTH_RATE_RAD_S, rtol=1e-15)

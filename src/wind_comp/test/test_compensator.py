@@ -5,13 +5,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from wind_comp.compensator import (
-    CompensatorConfig,
     CompensatorInputError,
-    ConfigError,
+    CorrectedWindBatch,
     WindCompensator,
     WindStatus,
-    correct_batch,
 )
+from wind_comp.config import CompensatorConfig, ConfigError
 
 LEVER_ARM_M = (0.3, -0.1, 3.2)
 MOUNTING_RPY_DEG = (2.0, -1.5, 90.0)
@@ -57,6 +56,42 @@ def scenario():
     return nav_t, attitude.as_quat(), rates, velocities, wind_t, wind
 
 
+def no_navigation():
+    """No navigation samples, as :meth:`WindCompensator.add_arrivals` takes them."""
+    return np.empty(0), np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3))
+
+
+def joined(batches) -> CorrectedWindBatch:
+    """Outputs collected in several goes, as one batch."""
+    columns = [
+        np.concatenate([getattr(batch, name) for batch in batches])
+        for name in (
+            "t_s",
+            "status",
+            "true_wind_enu_mps",
+            "tilt_term_enu_mps",
+            "rotation_term_enu_mps",
+            "translation_term_enu_mps",
+            "wind_sensor_mps",
+        )
+    ]
+    return CorrectedWindBatch(*columns)
+
+
+def rows(batch: CorrectedWindBatch) -> list[tuple[float, WindStatus]]:
+    """(stamp, status) of each output."""
+    return [(t, WindStatus(code)) for t, code in zip(batch.t_s, batch.status, strict=True)]
+
+
+def correct_at_once(cfg, nav_t, quats, rates, velocities, wind_t, wind) -> CorrectedWindBatch:
+    """All samples handed over as one stretch of columns, each wind sample arriving with the
+    navigation up to its stamp, and flushed: the offline path."""
+    compensator = WindCompensator(cfg)
+    nav_before_wind = np.searchsorted(nav_t, np.maximum.accumulate(wind_t), side="right")
+    compensator.add_arrivals((nav_t, quats, rates, velocities), wind_t, wind, nav_before_wind)
+    return compensator.flush()
+
+
 def stream(nav_t, quats, rates, velocities, wind_t, wind, nav_latency_s, cfg=None):
     """Feed the samples in arrival order, navigation arriving ``nav_latency_s`` after its stamp
     and wind in array order, collecting the output after every message."""
@@ -71,26 +106,25 @@ def stream(nav_t, quats, rates, velocities, wind_t, wind, nav_latency_s, cfg=Non
             compensator.add_nav(nav_t[i], quats[i], rates[i], velocities[i])
         else:
             compensator.add_wind(wind_t[i], wind[i])
-        outputs += compensator.ready()
-    outputs += compensator.flush()
-    return outputs, compensator
+        outputs.append(compensator.ready())
+    outputs.append(compensator.flush())
+    return joined(outputs), compensator
 
 
 def test_streaming_equals_batch_whatever_the_arrival_order():
     data = scenario()
-    batch = correct_batch(config(), *data)
+    batch = correct_at_once(config(), *data)
     for nav_latency_s in (-0.5, 0.0, 0.037, 0.5):
         outputs, compensator = stream(*data, nav_latency_s=nav_latency_s)
-        np.testing.assert_array_equal([o.t_s for o in outputs], batch.t_s)
-        np.testing.assert_array_equal([o.status for o in outputs], batch.status)
+        np.testing.assert_array_equal(outputs.t_s, batch.t_s)
+        np.testing.assert_array_equal(outputs.status, batch.status)
         for name in (
             "true_wind_enu_mps",
             "tilt_term_enu_mps",
             "rotation_term_enu_mps",
             "translation_term_enu_mps",
         ):
-            streamed = np.array([getattr(o, name) for o in outputs])
-            np.testing.assert_array_equal(streamed, getattr(batch, name))
+            np.testing.assert_array_equal(getattr(outputs, name), getattr(batch, name))
         assert compensator.counts == batch.counts()
         assert compensator.n_pending == 0
 
@@ -100,23 +134,22 @@ def test_wind_added_in_batches_equals_wind_added_one_by_one():
     one_by_one = WindCompensator(config())
     in_batches = WindCompensator(config())
     for compensator in (one_by_one, in_batches):
-        compensator.add_nav_batch(nav_t, quats, rates, velocities)
+        for i in range(len(nav_t)):
+            compensator.add_nav(nav_t[i], quats[i], rates[i], velocities[i])
     for i in range(len(wind_t)):
         one_by_one.add_wind(wind_t[i], wind[i])
     for part in np.array_split(np.arange(len(wind_t)), 7):
-        in_batches.add_wind_batch(wind_t[part], wind[part])
+        in_batches.add_arrivals(no_navigation(), wind_t[part], wind[part], np.zeros(len(part)))
     expected, got = one_by_one.flush(), in_batches.flush()
-    assert [(o.t_s, o.status) for o in got] == [(o.t_s, o.status) for o in expected]
-    np.testing.assert_array_equal(
-        [o.true_wind_enu_mps for o in got], [o.true_wind_enu_mps for o in expected]
-    )
+    assert rows(got) == rows(expected)
+    np.testing.assert_array_equal(got.true_wind_enu_mps, expected.true_wind_enu_mps)
     with pytest.raises(CompensatorInputError):
-        in_batches.add_wind_batch(wind_t[:3], wind[:2])
+        in_batches.add_arrivals(no_navigation(), wind_t[:3], wind[:2], np.zeros(3))
 
 
 def test_every_sample_gets_one_output_with_its_stamp_and_reason():
     nav_t, quats, rates, velocities, wind_t, wind = scenario()
-    batch = correct_batch(config(), nav_t, quats, rates, velocities, wind_t, wind)
+    batch = correct_at_once(config(), nav_t, quats, rates, velocities, wind_t, wind)
     assert len(batch) == len(wind_t)
     status = batch.status
     assert status[20] == WindStatus.INVALID_WIND
@@ -147,13 +180,13 @@ def test_sample_waits_until_navigation_brackets_it():
     quats = attitude.as_quat()
     compensator.add_nav(0.0, quats[0], rates[0], velocities[0])
     compensator.add_wind(0.07, anemometer_readings(np.array([0.07]))[0])
-    assert compensator.ready() == []
+    assert len(compensator.ready()) == 0
     compensator.add_nav(0.05, quats[1], rates[1], velocities[1])
-    assert compensator.ready() == []
+    assert len(compensator.ready()) == 0
     compensator.add_nav(0.1, quats[2], rates[2], velocities[2])
-    (result,) = compensator.ready()
-    assert result.valid and result.t_s == 0.07
-    np.testing.assert_allclose(result.true_wind_enu_mps, TRUE_WIND_ENU, atol=1e-9)
+    result = compensator.ready()
+    assert rows(result) == [(0.07, WindStatus.VALID)]
+    np.testing.assert_allclose(result.true_wind_enu_mps[0], TRUE_WIND_ENU, atol=1e-9)
 
 
 def test_expire_gives_up_only_on_old_samples_and_flush_on_the_rest():
@@ -161,13 +194,12 @@ def test_expire_gives_up_only_on_old_samples_and_flush_on_the_rest():
     for t in (1.0, 1.1, 1.2):
         compensator.add_wind(t, [1.0, 0.0, 0.0])
     expired = compensator.expire(before_t_s=1.15)
-    assert [(o.t_s, o.status) for o in expired] == [
+    assert rows(expired) == [
         (1.0, WindStatus.NAVIGATION_TIMEOUT),
         (1.1, WindStatus.NAVIGATION_TIMEOUT),
     ]
     assert compensator.n_pending == 1
-    (last,) = compensator.flush()
-    assert (last.t_s, last.status) == (1.2, WindStatus.NO_NAVIGATION)
+    assert rows(compensator.flush()) == [(1.2, WindStatus.NO_NAVIGATION)]
     assert compensator.counts[WindStatus.NAVIGATION_TIMEOUT] == 2
 
 
@@ -176,10 +208,9 @@ def test_outputs_keep_input_order_behind_a_pending_sample():
     compensator.add_nav(0.0, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
     compensator.add_wind(0.05, [1.0, 0.0, 0.0])  # waits for navigation
     compensator.add_wind(0.04, [1.0, 0.0, 0.0])  # rejected at once, but returned second
-    assert compensator.ready() == []
+    assert len(compensator.ready()) == 0
     compensator.add_nav(0.1, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
-    outputs = compensator.ready()
-    assert [(o.t_s, o.status) for o in outputs] == [
+    assert rows(compensator.ready()) == [
         (0.05, WindStatus.VALID),
         (0.04, WindStatus.INVALID_STAMP),
     ]
@@ -191,8 +222,61 @@ def test_wind_lagging_beyond_the_navigation_history_is_reported():
         compensator.add_nav(t, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
     compensator.add_wind(2.0, [1.0, 0.0, 0.0])
     compensator.add_wind(4.5, [1.0, 0.0, 0.0])
-    outputs = compensator.ready()
-    assert [o.status for o in outputs] == [WindStatus.NAV_HISTORY_EXCEEDED, WindStatus.VALID]
+    assert rows(compensator.ready()) == [
+        (2.0, WindStatus.NAV_HISTORY_EXCEEDED),
+        (4.5, WindStatus.VALID),
+    ]
+
+
+def test_results_depend_on_the_arrival_order_only_not_on_how_often_they_are_collected():
+    # Wind from 3 s on arriving 1.5 s after its navigation, with a 1 s history: it finds its
+    # navigation forgotten. Collecting the results after every message, now and then, or once,
+    # and handing stretches of arrivals over as columns, changes nothing.
+    nav_t, quats, rates, velocities, wind_t, wind = scenario()
+    wind_arrival = np.maximum.accumulate(wind_t)
+    wind_arrival += np.where(wind_arrival >= 3.0, 1.5, 0.0)
+    arrivals = [(t, 0, i) for i, t in enumerate(nav_t)]
+    arrivals += [(t, 1, i) for i, t in enumerate(wind_arrival)]
+    arrivals.sort()
+    cfg = config(nav_history_s=1.0)
+
+    def collected(every: int):
+        compensator = WindCompensator(cfg)
+        outputs = []
+        for n, (_, kind, i) in enumerate(arrivals, 1):
+            if kind == 0:
+                compensator.add_nav(nav_t[i], quats[i], rates[i], velocities[i])
+            else:
+                compensator.add_wind(wind_t[i], wind[i])
+            if n % every == 0:
+                outputs.append(compensator.ready())
+        return joined([*outputs, compensator.flush()])
+
+    def in_stretches(size: int):
+        compensator = WindCompensator(cfg)
+        outputs = []
+        for start in range(0, len(arrivals), size):
+            stretch = arrivals[start : start + size]
+            nav = [i for _, kind, i in stretch if kind == 0]
+            winds = [i for _, kind, i in stretch if kind == 1]
+            nav_before_wind = np.cumsum([kind == 0 for _, kind, _ in stretch])[
+                [k for k, (_, kind, _) in enumerate(stretch) if kind == 1]
+            ]
+            compensator.add_arrivals(
+                (nav_t[nav], quats[nav], rates[nav], velocities[nav]),
+                wind_t[winds],
+                wind[winds].reshape(-1, 3),
+                nav_before_wind,
+            )
+            outputs.append(compensator.ready())
+        return joined([*outputs, compensator.flush()])
+
+    reference = collected(every=1)
+    statuses = set(reference.status.tolist())
+    assert {WindStatus.NAV_HISTORY_EXCEEDED, WindStatus.VALID} <= statuses
+    for outputs in (collected(13), collected(len(arrivals)), in_stretches(50), in_stretches(5000)):
+        assert rows(outputs) == rows(reference)
+        np.testing.assert_array_equal(outputs.true_wind_enu_mps, reference.true_wind_enu_mps)
 
 
 def test_wrong_wind_shape_raises():

@@ -162,8 +162,10 @@ def test_extending_in_chunks_matches_appending_one_by_one_with_bounded_history()
     queries_per_chunk = []
     for chunk in np.split(np.arange(600), boundaries):
         chunked.extend(stamps[chunk], quats[chunk], rates[chunk], velocities[chunk])
+        chunked.forget_old_samples()
         for i in chunk:
             streamed.append(stamps[i], quats[i], rates[i], velocities[i])
+            streamed.forget_old_samples()
         queries = rng.uniform(stamps[chunk[0]] - 3.0, stamps[chunk[-1]] + 0.1, 50)
         queries_per_chunk.append((chunked.interpolate(queries), streamed.interpolate(queries)))
         assert len(chunked) == len(streamed)
@@ -188,6 +190,7 @@ def test_one_stamp_in_floats_is_interpolated_exactly_as_in_a_batch_for_every_out
     velocities = rng.normal(size=(300, 3))
     track = NavTrack(history_s=3.0)
     track.extend(stamps, quats, rates, velocities)
+    track.forget_old_samples()
     queries = np.concatenate(
         (
             rng.uniform(stamps[0] - 1.0, stamps[-1] + 1.0, 2000),
@@ -209,6 +212,7 @@ def test_one_stamp_in_floats_is_interpolated_exactly_as_in_a_batch_for_every_out
 def test_history_is_bounded_and_old_stamps_are_reported_evicted():
     stamps = np.arange(0.0, 60.0, 0.01)
     track = analytic_track(stamps, history_s=1.0)
+    track.forget_old_samples()
     assert len(track) <= 102
     assert track.oldest_stamp_s <= track.newest_stamp_s - 1.0
     nav = track.interpolate([-1.0, 30.0, track.newest_stamp_s - 1.0 + 1e-3])
@@ -216,6 +220,39 @@ def test_history_is_bounded_and_old_stamps_are_reported_evicted():
         nav.status,
         [InterpolationStatus.BEFORE_START, InterpolationStatus.EVICTED, InterpolationStatus.OK],
     )
+
+
+def test_queries_as_of_an_earlier_newest_stamp_are_answered_with_the_history_then():
+    rng = np.random.default_rng(25)
+    stamps = np.cumsum(rng.uniform(0.005, 0.04, 800))
+    quats, rates, velocities = (rng.normal(size=(800, n)) for n in (4, 3, 3))
+    whole = NavTrack(history_s=2.0)
+    whole.extend(stamps, quats, rates, velocities)
+    unbounded = NavTrack.from_arrays(stamps, quats, rates, velocities)
+    queries = rng.uniform(stamps[0] - 0.5, stamps[-1] + 0.5, 3000)
+    as_of_index = rng.integers(0, 800, 3000)
+    later = whole.interpolate(queries, as_of_newest_s=stamps[as_of_index])
+    for k in range(0, 3000, 37):
+        as_of_s = float(stamps[as_of_index[k]])
+        if queries[k] <= as_of_s:
+            # Asked when the newest sample was as_of_s: the track as it stood then answers.
+            reference = NavTrack(history_s=2.0)
+            n = as_of_index[k] + 1
+            reference.extend(stamps[:n], quats[:n], rates[:n], velocities[:n])
+            reference.forget_old_samples()
+        else:
+            # Asked before the samples around it arrived: none of them was forgotten by then.
+            reference = unbounded
+        expected = reference.interpolate(queries[k : k + 1])
+        assert later.status[k] == expected.status[0]
+        np.testing.assert_array_equal(later.velocity_enu_mps[k], expected.velocity_enu_mps[0])
+        one = whole.interpolate_one(queries[k], as_of_s)
+        assert one[0] == later.status[k]
+        np.testing.assert_array_equal(one[3], later.velocity_enu_mps[k])
+    assert {InterpolationStatus.EVICTED, InterpolationStatus.OK} <= set(later.status.tolist())
+    # Asked before any sample arrived: nothing was forgotten.
+    early = whole.interpolate(stamps[5:6] + 0.001, as_of_newest_s=-np.inf)
+    assert early.status[0] == InterpolationStatus.OK
 
 
 def test_malformed_arguments_raise():

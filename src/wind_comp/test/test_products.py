@@ -157,6 +157,8 @@ def test_streaming_equals_batch():
     stamps = np.cumsum(rng.uniform(0.05, 0.15, 3000))
     wind = rng.normal(loc=[5.0, 2.0, 0.0], scale=2.0, size=(len(stamps), 3))
     wind[rng.integers(0, len(stamps), 100)] = np.nan
+    stamps[[500, 1200]] = stamps[[499, 1000]]  # a repeated and a backwards stamp
+    stamps[2000] = np.nan
     batch = WindAverager(window_s=60.0)
     batch_products = batch.add_batch(stamps, wind) + batch.flush()
     streaming = WindAverager(window_s=60.0)
@@ -166,6 +168,12 @@ def test_streaming_equals_batch():
     streamed_products += streaming.flush()
     assert streamed_products == batch_products
     assert len(batch_products) >= 5
+    in_parts = WindAverager(window_s=60.0)
+    parts_products = []
+    for part in np.array_split(np.arange(len(stamps)), 37):
+        parts_products += in_parts.add_batch(stamps[part], wind[part])
+    assert parts_products + in_parts.flush() == batch_products
+    assert batch.n_rejected_stamps == streaming.n_rejected_stamps == in_parts.n_rejected_stamps == 3
 
 
 def test_bad_settings_raise():

@@ -21,9 +21,10 @@ Publishes:
   mean of the ENU wind over each window, stamped with the window end.
 - ``wind/stats_1min``, ``wind/stats_10min`` (std_msgs/Float64MultiArray): statistics of the same
   windows; ``layout.dim[i].label`` names ``data[i]``, in the order of
-  :data:`wind_comp.nav_messages.STATS_FIELDS` (scalar_mean_speed_mps, vector_mean_speed_mps,
-  vector_mean_direction_deg (meteorological, FROM), gust_mps, std_u_mps, std_v_mps, std_w_mps,
-  n_valid, n_invalid, window_start_s, window_end_s, first_sample_s, last_sample_s).
+  :data:`wind_comp.compensation_messages.STATS_FIELDS` (scalar_mean_speed_mps,
+  vector_mean_speed_mps, vector_mean_direction_deg (meteorological, FROM), gust_mps, std_u_mps,
+  std_v_mps, std_w_mps, n_valid, n_invalid, window_start_s, window_end_s, first_sample_s,
+  last_sample_s).
   Windows come from ``compensation.product_windows_s`` (60 and 600 s by default; a window of
   other length W is named ``W s``, e.g. ``wind/mean_30s``). A window is published when the
   first sample of the next one is corrected, and the partial windows at shutdown.
@@ -32,7 +33,7 @@ Publishes:
 
 Parameters: ``anemometer.position`` (double[3], m, default [0, 0, 3]) and
 ``anemometer.rpy_deg`` (double[3], deg, default [0, 0, 0]) of the shared buoy file; every
-other :class:`wind_comp.compensator.CompensatorConfig` field as ``compensation.<field>``; and
+other :class:`wind_comp.config.CompensatorConfig` field as ``compensation.<field>``; and
 ``compensation.nav_timeout_s`` (s, default 1.0), the latency budget: a wind sample still without
 navigation on both sides once the newest anemometer stamp is this much later, and that has also
 waited this long in wall-clock time, is published invalid (navigation timeout) instead of
@@ -70,32 +71,30 @@ from buoy_common.contract import (
     NAV_ODOMETRY_TOPIC,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
-    Reason,
-    window_label,
+    wind_mean_topic,
+    wind_stats_topic,
 )
-from wind_comp.compensator import (
-    CompensatorConfig,
-    CorrectedWind,
-    WindCompensator,
-    WindStatus,
-)
-from wind_comp.nav_messages import (
+from wind_comp.compensation_messages import (
     MalformedMessageError,
-    StampOrder,
     anemometer_sample,
     anemometer_sample_cdr,
-    body_to_enu_components,
-    checked_fix_latitude_deg,
+    fix_fields,
     fix_fields_cdr,
     odometry_fields,
     odometry_fields_cdr,
     product_messages,
-    rate_relative_to_level_components,
     true_wind_cdr,
 )
-from wind_comp.products import WindAverager, WindProduct
+from wind_comp.compensator import WindStatus
+from wind_comp.config import (
+    COMPENSATION_NODE_NAME,
+    COMPENSATION_PARAMETER_PREFIX,
+    CompensatorConfig,
+)
+from wind_comp.pipeline import CompensationOutput, CompensationPipeline
+from wind_comp.products import WindProduct
 
-NODE_NAME = "compensation_node"
+NODE_NAME = COMPENSATION_NODE_NAME
 
 DEFAULT_NAV_TIMEOUT_S = 1.0
 DIAGNOSTICS_PERIOD_S = 1.0
@@ -128,14 +127,7 @@ class CompensationNode(FlushingNode):
                 f"parameter 'compensation.nav_timeout_s' must be positive, got {self.nav_timeout_s}"
             )
 
-        self.compensator = WindCompensator(self.config)
-        self.averagers = [
-            WindAverager(window_s, self.config.gust_window_s)
-            for window_s in self.config.product_windows_s
-        ]
-        self.latitude_deg = math.nan
-        self._wind_order = StampOrder()
-        self._nav_order = StampOrder()
+        self.pipeline = CompensationPipeline(self.config)
         self._pending: collections.deque[PendingStamp] = collections.deque()
         self._counters = collections.Counter()
         self._counters_at_last_report = collections.Counter()
@@ -144,15 +136,11 @@ class CompensationNode(FlushingNode):
 
         self._true_wind_publisher = self.create_publisher(Vector3Stamped, WIND_TRUE_TOPIC, DATA_QOS)
         self._product_publishers = {
-            averager.window_s: (
-                self.create_publisher(
-                    Vector3Stamped, f"wind/mean_{window_label(averager.window_s)}", DATA_QOS
-                ),
-                self.create_publisher(
-                    Float64MultiArray, f"wind/stats_{window_label(averager.window_s)}", DATA_QOS
-                ),
+            window_s: (
+                self.create_publisher(Vector3Stamped, wind_mean_topic(window_s), DATA_QOS),
+                self.create_publisher(Float64MultiArray, wind_stats_topic(window_s), DATA_QOS),
             )
-            for averager in self.averagers
+            for window_s in self.config.product_windows_s
         }
         # Raw: wind samples are read from their CDR bytes and wind/true written as CDR bytes,
         # the arithmetic process_bag runs, without building message objects on the way.
@@ -169,7 +157,7 @@ class CompensationNode(FlushingNode):
         )
 
     def _declare_compensator_config(self) -> CompensatorConfig:
-        return self.declare_config(CompensatorConfig, prefix="compensation.")
+        return self.declare_config(CompensatorConfig, prefix=COMPENSATION_PARAMETER_PREFIX)
 
     # -- inputs -----------------------------------------------------------------------------
 
@@ -184,14 +172,11 @@ class CompensationNode(FlushingNode):
                 message.header.stamp.nanosec,
             )
         sample, sec, nanosec = parsed
-        stamp_increases = self._wind_order.advance(sample.t_s)
-        if sample.rejection is not None:
-            self.reject(WIND_RAW_TOPIC, sample.rejection)
-        elif not stamp_increases:
-            self.reject(WIND_RAW_TOPIC, Reason.STAMP_NOT_INCREASING)
+        rejection = self.pipeline.add_wind(sample)
+        if rejection is not None:
+            self.reject(WIND_RAW_TOPIC, rejection)
         self._pending.append(PendingStamp(sec, nanosec, sample.t_s, time.monotonic()))
-        self.compensator.add_wind(sample.t_s, sample.wind_sensor_mps)
-        self.publish_results(self.compensator.expire(self._timeout_horizon_s()))
+        self.publish(self.pipeline.expire(self._timeout_horizon_s()))
 
     def _timeout_horizon_s(self) -> float:
         """Stamp (s) before which samples still without navigation are given up: older than
@@ -202,7 +187,7 @@ class CompensationNode(FlushingNode):
             if pending.arrival_s > waited_enough_before_s:
                 break
             horizon_s = max(horizon_s, math.nextafter(pending.t_s, math.inf))
-        return min(horizon_s, self._wind_order.latest_s - self.nav_timeout_s)
+        return min(horizon_s, self.pipeline.latest_wind_stamp_s - self.nav_timeout_s)
 
     def on_odometry(self, raw: bytes) -> None:
         self._counters["nav_in"] += 1
@@ -213,45 +198,33 @@ class CompensationNode(FlushingNode):
         except MalformedMessageError as error:
             self.reject(NAV_ODOMETRY_TOPIC, error.reason)
             return
-        t_s, quat_xyzw, rate_body_rad_s, velocity_body_mps = fields
-        if not self._nav_order.advance(t_s):
-            self.reject(NAV_ODOMETRY_TOPIC, Reason.STAMP_NOT_INCREASING)
+        rejection = self.pipeline.add_odometry(*fields)
+        if rejection is not None:
+            self.reject(NAV_ODOMETRY_TOPIC, rejection)
             return
-        # In floats, one message at a time: the arithmetic process_bag runs on whole columns.
-        rate_nb = rate_relative_to_level_components(rate_body_rad_s, quat_xyzw, self.latitude_deg)
-        velocity_enu = body_to_enu_components(quat_xyzw, velocity_body_mps)
-        if self.compensator.add_nav(t_s, quat_xyzw, rate_nb, velocity_enu):
-            self._counters["nav_accepted"] += 1
-        self.publish_results(self.compensator.ready())
+        self.publish(self.pipeline.ready())
 
     def on_fix(self, raw: bytes) -> None:
         self._counters["fix_in"] += 1
         fields = fix_fields_cdr(raw)
         if fields is None:
-            message = deserialize_message(raw, NavSatFix)
-            fields = (message.status.status, message.latitude)
-        try:
-            latitude = checked_fix_latitude_deg(*fields)
-        except MalformedMessageError as error:
-            self.reject(NAV_FIX_TOPIC, error.reason)
-            return
-        if latitude is not None:
-            self.latitude_deg = latitude
+            fields = fix_fields(deserialize_message(raw, NavSatFix))
+        rejection = self.pipeline.add_fix(*fields)
+        if rejection is not None:
+            self.reject(NAV_FIX_TOPIC, rejection)
 
     # -- outputs ----------------------------------------------------------------------------
 
-    def publish_results(self, results: list[CorrectedWind]) -> None:
-        """Publish decided samples in order, each with the stamp of its anemometer message."""
+    def publish(self, output: CompensationOutput) -> None:
+        """Publish decided samples in order, each with the stamp of its anemometer message,
+        and the averaging windows they closed."""
         now_s = time.monotonic()
-        for result in results:
+        for wind in output.wind.true_wind_enu_mps.tolist():
             pending = self._pending.popleft()
-            self._true_wind_publisher.publish(
-                true_wind_cdr(pending.sec, pending.nanosec, result.true_wind_enu_mps.tolist())
-            )
+            self._true_wind_publisher.publish(true_wind_cdr(pending.sec, pending.nanosec, wind))
             self._counters["wind_out"] += 1
             self._latencies_s.append(now_s - pending.arrival_s)
-            for averager in self.averagers:
-                self.publish_products(averager.add(result.t_s, result.true_wind_enu_mps))
+        self.publish_products(output.products)
 
     def publish_products(self, products: list[WindProduct]) -> None:
         for product in products:
@@ -264,9 +237,7 @@ class CompensationNode(FlushingNode):
 
     def flush_held_back(self) -> list:
         """End of input: publish every pending sample and the partial product windows."""
-        self.publish_results(self.compensator.flush())
-        for averager in self.averagers:
-            self.publish_products(averager.flush())
+        self.publish(self.pipeline.flush())
         publishers = [self._true_wind_publisher]
         for pair in self._product_publishers.values():
             publishers.extend(pair)
@@ -281,12 +252,12 @@ class CompensationNode(FlushingNode):
         self._counters_at_last_report = collections.Counter(self._counters)
         self._last_report_s = now_s
         latencies, self._latencies_s = self._latencies_s, []
-        counts = self.compensator.counts
+        counts = self.pipeline.counts
         n_invalid = sum(n for status, n in counts.items() if status != WindStatus.VALID)
         values = {
             "wind_samples_in": self._counters["wind_in"],
             "wind_samples_out": self._counters["wind_out"],
-            "wind_samples_pending": self.compensator.n_pending,
+            "wind_samples_pending": self.pipeline.n_pending,
             "valid": counts[WindStatus.VALID],
             "invalid": n_invalid,
         }
@@ -296,9 +267,9 @@ class CompensationNode(FlushingNode):
         values.update(
             {
                 "nav_samples_in": self._counters["nav_in"],
-                "nav_samples_accepted": self._counters["nav_accepted"],
+                "nav_samples_accepted": self.pipeline.compensator.nav_track.n_accepted,
                 "fix_messages_in": self._counters["fix_in"],
-                "latitude_deg": self.latitude_deg,
+                "latitude_deg": self.pipeline.latitude_deg,
                 "wind_rate_hz": new["wind_in"] / period_s,
                 "nav_rate_hz": new["nav_in"] / period_s,
                 "latency_mean_s": sum(latencies) / len(latencies) if latencies else math.nan,

@@ -1,112 +1,35 @@
 """Wind compensation engine shared by the live node and offline processing.
 
-Both call the same object in the same order on the same header stamps: navigation samples
-through :meth:`WindCompensator.add_nav`, anemometer samples through
-:meth:`WindCompensator.add_wind`, and collect results from :meth:`WindCompensator.ready`.
-Every anemometer sample yields exactly one :class:`CorrectedWind` with its own stamp, in input
-order: either the motion-corrected wind or NaN with the reason it could not be corrected.
-Whether and how a sample is corrected depends only on stamps (navigation samples at or around
-it), not on when messages happen to arrive, so :func:`correct_batch` on whole arrays gives
-identical numbers. The exceptions are the live-only :meth:`WindCompensator.expire` and a wind
-sample lagging the navigation by more than ``nav_history_s``.
+Navigation samples (:meth:`WindCompensator.add_nav`) and anemometer samples
+(:meth:`WindCompensator.add_wind`) go in, in the order they arrive; every anemometer sample
+comes out exactly once (:meth:`WindCompensator.ready`), in input order, with its own stamp:
+either the motion-corrected wind or NaN with the reason it could not be corrected.
+
+Whether and how a sample is corrected depends only on stamps (the navigation samples around
+it), not on when messages happen to arrive, with two exceptions. The live-only
+:meth:`WindCompensator.expire` gives up on samples whose navigation is late. And a wind sample
+that arrives lagging the newest navigation by more than ``nav_history_s`` finds its navigation
+forgotten. Both depend on the order of arrival only, never on how often the results are
+collected: samples may be added one at a time (the live node, in plain floats) or as stretches
+of interleaved arrivals (:meth:`WindCompensator.add_arrivals`, offline, on columns), with
+bit-identical results.
 """
 
 import math
-from collections import deque
 from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
 
-from buoy_common.contract import DEFAULT_PRODUCT_WINDOWS_S, Reason
-from buoy_common.extrinsics import check_shared_fields, shared_field
+from buoy_common.contract import Reason
 from buoy_nav.rotations import rotation_matrix_elements
+from wind_comp.config import CompensatorConfig
 from wind_comp.miller import miller_components, mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import InterpolationStatus, NavTrack
 
 
-class ConfigError(ValueError):
-    """A compensator setting is missing or malformed; the message names the field."""
-
-
 class CompensatorInputError(ValueError):
     """Wind arrays given to the compensator have the wrong shape."""
-
-
-@dataclass(frozen=True)
-class CompensatorConfig:
-    """Settings of the wind compensation.
-
-    Attributes:
-        anemometer_position_body_m: anemometer measurement centre in ``base_link``, m
-            (Miller's lever arm B; parameter ``anemometer.position``).
-        anemometer_rpy_deg: roll, pitch, yaw of ``anemometer_link`` relative to ``base_link``,
-            deg, applied as Rz(yaw)·Ry(pitch)·Rx(roll) (parameter ``anemometer.rpy_deg``).
-        max_nav_gap_s: largest spacing of the two navigation samples bracketing a wind stamp
-            for which the navigation is interpolated, s.
-        max_wind_speed_mps: measured wind speeds above this are rejected as absurd, m/s.
-        nav_history_s: how far behind the newest navigation sample a wind stamp may lag and
-            still be corrected in streaming use, s.
-        product_windows_s: lengths of the averaging windows of the wind products, s
-            (60 s and 600 s by default, WMO practice).
-        gust_window_s: length of the running mean whose maximum is the gust, s (WMO: 3 s).
-    """
-
-    anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
-    anemometer_rpy_deg: tuple[float, float, float] = shared_field("anemometer.rpy_deg")
-    max_nav_gap_s: float = 0.1
-    max_wind_speed_mps: float = 100.0
-    nav_history_s: float = 10.0
-    product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
-    gust_window_s: float = 3.0
-
-    def __post_init__(self):
-        for name in ("anemometer_position_body_m", "anemometer_rpy_deg"):
-            object.__setattr__(self, name, _finite_tuple(name, getattr(self, name), length=3))
-        try:
-            check_shared_fields(self)
-        except ValueError as error:
-            raise ConfigError(str(error)) from None
-        for name in ("max_nav_gap_s", "max_wind_speed_mps", "nav_history_s", "gust_window_s"):
-            object.__setattr__(self, name, _positive_float(name, getattr(self, name)))
-        windows = _finite_tuple("product_windows_s", self.product_windows_s, length=None)
-        if not windows or min(windows) <= 0:
-            raise ConfigError(f"product_windows_s must be positive window lengths, got {windows}")
-        object.__setattr__(self, "product_windows_s", windows)
-        if self.nav_history_s <= self.max_nav_gap_s:
-            raise ConfigError(
-                f"nav_history_s ({self.nav_history_s}) must exceed max_nav_gap_s "
-                f"({self.max_nav_gap_s})"
-            )
-        if self.gust_window_s >= min(windows):
-            raise ConfigError(
-                f"gust_window_s ({self.gust_window_s}) must be shorter than every product window "
-                f"{windows}"
-            )
-
-
-def _finite_tuple(name: str, value, length: int | None) -> tuple[float, ...]:
-    try:
-        numbers = tuple(float(item) for item in value)
-    except (TypeError, ValueError) as error:
-        raise ConfigError(f"{name} must be a sequence of numbers, got {value!r}") from error
-    if length is not None and len(numbers) != length:
-        raise ConfigError(f"{name} must have {length} values, got {len(numbers)}: {value!r}")
-    if not all(math.isfinite(number) for number in numbers):
-        raise ConfigError(f"{name} must be finite, got {value!r}")
-    return numbers
-
-
-def _positive_float(name: str, value) -> float:
-    if isinstance(value, bool):
-        raise ConfigError(f"{name} must be a number, got {value!r}")
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as error:
-        raise ConfigError(f"{name} must be a number, got {value!r}") from error
-    if not (math.isfinite(number) and number > 0):
-        raise ConfigError(f"{name} must be positive and finite, got {value!r}")
-    return number
 
 
 class WindStatus(IntEnum):
@@ -150,32 +73,16 @@ _NAV_OUTCOME_BY_CODE = np.array(
 
 
 @dataclass(frozen=True, eq=False)
-class CorrectedWind:
-    """One anemometer sample after correction.
+class CorrectedWindBatch:
+    """N anemometer samples after correction, in input order.
 
-    Vectors are (3,) float arrays; the ENU ones are NaN unless ``status`` is VALID.
+    The (N, 3) ENU vectors (m/s) are NaN where ``status`` is not VALID;
+    ``true_wind_enu_mps = tilt_term_enu_mps + rotation_term_enu_mps + translation_term_enu_mps``
+    (see :mod:`wind_comp.miller`).
     """
 
-    t_s: float
-    """Header stamp of the anemometer sample, s."""
-    status: WindStatus
-    true_wind_enu_mps: np.ndarray
-    tilt_term_enu_mps: np.ndarray
-    rotation_term_enu_mps: np.ndarray
-    translation_term_enu_mps: np.ndarray
-    wind_sensor_mps: np.ndarray
-    """The measured input, anemometer axes, m/s."""
-
-    @property
-    def valid(self) -> bool:
-        return self.status == WindStatus.VALID
-
-
-@dataclass(frozen=True, eq=False)
-class CorrectedWindBatch:
-    """Corrected wind for N anemometer samples, in input order (see :class:`CorrectedWind`)."""
-
     t_s: np.ndarray
+    """(N,) header stamps of the anemometer samples, s."""
     status: np.ndarray
     """(N,) int8 codes of :class:`WindStatus`."""
     true_wind_enu_mps: np.ndarray
@@ -183,6 +90,7 @@ class CorrectedWindBatch:
     rotation_term_enu_mps: np.ndarray
     translation_term_enu_mps: np.ndarray
     wind_sensor_mps: np.ndarray
+    """(N, 3) the measured inputs, anemometer axes, m/s."""
 
     def __len__(self) -> int:
         return self.t_s.shape[0]
@@ -217,6 +125,23 @@ def _screen_wind(
     return status, float(running_latest[-1])
 
 
+def _screen_one_wind(
+    t_s: float, x: float, y: float, z: float, latest_stamp_s: float, max_speed_mps: float
+) -> tuple[int, float]:
+    """:func:`_screen_wind` of one sample in plain floats (the same decisions)."""
+    finite_stamp = math.isfinite(t_s)
+    stamp_ok = finite_stamp and t_s > latest_stamp_s
+    if finite_stamp:
+        latest_stamp_s = max(latest_stamp_s, t_s)
+    if not stamp_ok:
+        return WindStatus.INVALID_STAMP, latest_stamp_s
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        return WindStatus.INVALID_WIND, latest_stamp_s
+    if math.sqrt(x * x + y * y + z * z) > max_speed_mps:
+        return WindStatus.WIND_SPEED_OUT_OF_RANGE, latest_stamp_s
+    return _PENDING, latest_stamp_s
+
+
 class _Corrector:
     """Navigation lookup plus Miller correction for samples that passed screening."""
 
@@ -225,27 +150,30 @@ class _Corrector:
         self._mounting_elements_bw = tuple(mounting_matrix_bw.ravel().tolist())
         self._lever_arm_elements_body_m = tuple(config.anemometer_position_body_m)
 
-    def correct_one(self, track: NavTrack, t_s: float, wind_mps: np.ndarray):
+    def correct_one(self, track: NavTrack, t_s: float, wind_mps, as_of_newest_s: float):
         """:meth:`correct` of one sample in plain floats (bit-identical): its status and its
-        true wind and three Miller terms as (3,) arrays, NaN unless valid."""
-        code, attitude, rate, velocity = track.interpolate_one(t_s)
+        true wind and three Miller terms as tuples, NaN unless valid."""
+        code, attitude, rate, velocity = track.interpolate_one(t_s, as_of_newest_s)
         status = _NAV_OUTCOME[code]
         if status != WindStatus.VALID:
-            return status, tuple(np.full(3, np.nan) for _ in range(4))
+            return status, _NAN_TERMS
         terms = miller_components(
-            tuple(wind_mps.tolist()),
+            tuple(wind_mps),
             rotation_matrix_elements(*attitude),
             rate,
             velocity,
             self._mounting_elements_bw,
             self._lever_arm_elements_body_m,
         )
-        return status, tuple(np.array(term, dtype=float) for term in terms)
+        return status, terms
 
-    def correct(self, track: NavTrack, stamps_s: np.ndarray, winds_mps: np.ndarray):
+    def correct(self, track: NavTrack, stamps_s, winds_mps, as_of_newest_s):
         """Return (N,) statuses (``_PENDING`` while navigation may still bracket a stamp) and
-        (N, 3) arrays of true wind and the three Miller terms, NaN where not valid."""
-        nav = track.interpolate(stamps_s)
+        (N, 3) arrays of true wind and the three Miller terms, NaN where not valid.
+
+        ``as_of_newest_s``: the newest navigation stamp when each sample arrived (see
+        :meth:`NavTrack.interpolate`)."""
+        nav = track.interpolate(stamps_s, as_of_newest_s)
         status = _NAV_OUTCOME_BY_CODE[nav.status]
         outputs = [np.full((stamps_s.shape[0], 3), np.nan) for _ in range(4)]
         valid = nav.valid
@@ -264,27 +192,34 @@ class _Corrector:
         return status, outputs
 
 
-class _Entry:
-    """An anemometer sample waiting in the output queue."""
-
-    __slots__ = ("result", "t_s", "wind_mps")
-
-    def __init__(self, t_s: float, wind_mps: np.ndarray):
-        self.t_s = t_s
-        self.wind_mps = wind_mps
-        self.result: CorrectedWind | None = None
+_NAN_TERMS = ((math.nan,) * 3,) * 4
+_NOTHING_DECIDED = CorrectedWindBatch(
+    np.empty(0), np.empty(0, dtype=np.int8), *(np.empty((0, 3)) for _ in range(5))
+)
+_INITIAL_CAPACITY = 64
 
 
 class WindCompensator:
-    """Streaming wind correction: one output per anemometer sample, in input order."""
+    """Streaming wind correction: one output per anemometer sample, in input order.
+
+    The anemometer samples wait in a queue of columns: stamp, measured wind, the newest
+    navigation stamp when the sample arrived, status (``_PENDING`` until decided) and the four
+    output vectors. Samples before ``_first_pending`` are decided, those from ``_head`` on not
+    yet returned.
+    """
 
     def __init__(self, config: CompensatorConfig):
         self.config = config
         self.nav_track = NavTrack(config.max_nav_gap_s, config.nav_history_s)
         self._corrector = _Corrector(config)
-        self._queue: deque[_Entry] = deque()
         self._latest_wind_stamp_s = -np.inf
         self._counts = dict.fromkeys(WindStatus, 0)
+        self._t_s = np.empty(_INITIAL_CAPACITY)
+        self._wind_mps = np.empty((_INITIAL_CAPACITY, 3))
+        self._as_of_nav_s = np.empty(_INITIAL_CAPACITY)
+        self._status = np.empty(_INITIAL_CAPACITY, dtype=np.int8)
+        self._terms = np.empty((4, _INITIAL_CAPACITY, 3))
+        self._head = self._first_pending = self._tail = 0
 
     @property
     def counts(self) -> dict[WindStatus, int]:
@@ -294,147 +229,193 @@ class WindCompensator:
     @property
     def n_pending(self) -> int:
         """Anemometer samples received but not yet returned."""
-        return len(self._queue)
+        return self._tail - self._head
 
     def add_nav(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> bool:
         """Add one navigation sample (stamp s, body→ENU quaternion xyzw, body rate rad/s,
         ENU velocity m/s). Returns False when the track rejects it (counted there)."""
         return self.nav_track.append(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
 
-    def add_nav_batch(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> int:
-        """:meth:`add_nav` of (N,) stamps and (N, 4), (N, 3), (N, 3) arrays, in order; returns
-        the number accepted."""
-        return self.nav_track.extend(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
-
     def add_wind(self, t_s, wind_sensor_mps) -> None:
-        """Add one anemometer sample: stamp s, air velocity in anemometer axes m/s, (3,)."""
-        wind = np.asarray(wind_sensor_mps, dtype=float)
-        if wind.shape != (3,):
-            raise CompensatorInputError(f"wind_sensor_mps must have shape (3,), got {wind.shape}")
-        self.add_wind_batch(np.array([float(t_s)]), wind[None, :])
-
-    def add_wind_batch(self, t_s, wind_sensor_mps) -> None:
-        """:meth:`add_wind` of (N,) stamps and (N, 3) winds, in order (screened together)."""
-        stamps, winds = _wind_arrays(t_s, wind_sensor_mps)
-        status, self._latest_wind_stamp_s = _screen_wind(
-            stamps, winds, self._latest_wind_stamp_s, self.config.max_wind_speed_mps
+        """Add one anemometer sample: stamp s, air velocity in anemometer axes m/s, (3,).
+        In plain floats: the live path; :meth:`add_arrivals` takes stretches of samples."""
+        try:
+            x, y, z = (float(component) for component in wind_sensor_mps)
+        except (TypeError, ValueError) as error:
+            raise CompensatorInputError(
+                f"wind_sensor_mps must be three numbers, got {wind_sensor_mps!r}"
+            ) from error
+        t_s = float(t_s)
+        status, self._latest_wind_stamp_s = _screen_one_wind(
+            t_s, x, y, z, self._latest_wind_stamp_s, self.config.max_wind_speed_mps
         )
-        for stamp, wind, code in zip(stamps.tolist(), winds, status.tolist(), strict=True):
-            entry = _Entry(stamp, wind.copy())
-            if code != _PENDING:
-                entry.result = _invalid(entry, WindStatus(code))
-            self._queue.append(entry)
+        self._reserve(1)
+        i = self._tail
+        self._t_s[i] = t_s
+        self._wind_mps[i] = x, y, z
+        self._as_of_nav_s[i] = self._newest_nav_s()
+        self._status[i] = status
+        self._terms[:, i] = math.nan
+        self._tail = i + 1
+        self._advance_first_pending()
 
-    def ready(self) -> list[CorrectedWind]:
+    def add_arrivals(self, nav, wind_t_s, wind_sensor_mps, nav_before_wind) -> int:
+        """Navigation and anemometer samples that arrived interleaved: exactly :meth:`add_nav`
+        of each navigation sample in order, with :meth:`add_wind` of wind sample ``i`` right
+        after the first ``nav_before_wind[i]`` of them.
+
+        Args:
+            nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) of M navigation
+                samples: (M,) stamps, s, and (M, 4), (M, 3), (M, 3) arrays of what
+                :meth:`add_nav` takes.
+            wind_t_s, wind_sensor_mps: (N,) stamps and (N, 3) winds, as :meth:`add_wind` takes
+                them one by one.
+            nav_before_wind: (N,) non-decreasing counts, 0 to M.
+
+        Returns the number of navigation samples accepted.
+        """
+        stamps, winds = _wind_arrays(wind_t_s, wind_sensor_mps)
+        newest_before = self._newest_nav_s()
+        accepted = self.nav_track.extend(*nav)
+        nav_t_s = np.asarray(nav[0], dtype=float)
+        # Newest accepted navigation stamp after each number of navigation arrivals.
+        newest_after = np.maximum.accumulate(
+            np.concatenate(([newest_before], np.where(accepted, nav_t_s, -np.inf)))
+        )
+        self._enqueue(stamps, winds, newest_after[np.asarray(nav_before_wind, dtype=np.intp)])
+        return int(np.count_nonzero(accepted))
+
+    def ready(self) -> CorrectedWindBatch:
         """Every sample that can now be decided, in input order."""
         self._decide()
         return self._pop_decided()
 
-    def expire(self, before_t_s: float) -> list[CorrectedWind]:
+    def expire(self, before_t_s: float) -> CorrectedWindBatch:
         """Decide what can be decided, give up on samples stamped before ``before_t_s`` (s)
         as NAVIGATION_TIMEOUT, and return the decided samples in input order."""
         self._decide()
-        for entry in self._queue:
-            if entry.result is None and entry.t_s < before_t_s:
-                entry.result = _invalid(entry, WindStatus.NAVIGATION_TIMEOUT)
+        self._give_up(
+            self._t_s[self._first_pending : self._tail] < before_t_s,
+            WindStatus.NAVIGATION_TIMEOUT,
+        )
         return self._pop_decided()
 
-    def flush(self) -> list[CorrectedWind]:
+    def flush(self) -> CorrectedWindBatch:
         """End of data: decide every pending sample (NO_NAVIGATION where navigation never
         caught up) and return them in input order."""
         self._decide()
-        for entry in self._queue:
-            if entry.result is None:
-                entry.result = _invalid(entry, WindStatus.NO_NAVIGATION)
+        self._give_up(True, WindStatus.NO_NAVIGATION)
         return self._pop_decided()
 
-    def _decide(self) -> None:
-        # A stamp after the newest navigation sample can only wait: no need to look it up.
-        newest_nav_s = self.nav_track.newest_stamp_s
-        undecided = [
-            entry for entry in self._queue if entry.result is None and entry.t_s <= newest_nav_s
-        ]
-        if not undecided:
-            return
-        if len(undecided) == 1:
-            # The live case: one sample, in floats, as bit-identical as the batch below.
-            (entry,) = undecided
-            status, terms = self._corrector.correct_one(self.nav_track, entry.t_s, entry.wind_mps)
-            if status != _PENDING:
-                entry.result = CorrectedWind(entry.t_s, WindStatus(status), *terms, entry.wind_mps)
-            return
-        stamps = np.array([entry.t_s for entry in undecided])
-        winds = np.array([entry.wind_mps for entry in undecided])
-        status, (true_wind, tilt, rotation, translation) = self._corrector.correct(
-            self.nav_track, stamps, winds
+    def _newest_nav_s(self) -> float:
+        return self.nav_track.newest_stamp_s if len(self.nav_track) else -math.inf
+
+    def _enqueue(self, stamps: np.ndarray, winds: np.ndarray, as_of_nav_s: np.ndarray) -> None:
+        status, self._latest_wind_stamp_s = _screen_wind(
+            stamps, winds, self._latest_wind_stamp_s, self.config.max_wind_speed_mps
         )
-        for i, entry in enumerate(undecided):
-            if status[i] != _PENDING:
-                entry.result = CorrectedWind(
-                    entry.t_s,
-                    WindStatus(int(status[i])),
-                    true_wind[i],
-                    tilt[i],
-                    rotation[i],
-                    translation[i],
-                    entry.wind_mps,
-                )
+        self._reserve(stamps.shape[0])
+        new = slice(self._tail, self._tail + stamps.shape[0])
+        self._t_s[new] = stamps
+        self._wind_mps[new] = winds
+        self._as_of_nav_s[new] = as_of_nav_s
+        self._status[new] = status
+        self._terms[:, new] = np.nan
+        self._tail = new.stop
+        self._advance_first_pending()
 
-    def _pop_decided(self) -> list[CorrectedWind]:
-        decided = []
-        while self._queue and self._queue[0].result is not None:
-            result = self._queue.popleft().result
-            self._counts[result.status] += 1
-            decided.append(result)
-        return decided
+    def _decide(self) -> None:
+        """Correct the pending samples that the navigation now brackets (or never will)."""
+        first, tail = self._first_pending, self._tail
+        newest_nav_s = self._newest_nav_s()
+        if tail - first == 1:
+            # The live case: only the newest sample waits (the one at _first_pending is).
+            undecided = [first] if self._t_s[first] <= newest_nav_s else []
+        else:
+            # A stamp after the newest navigation sample can only wait: no need to look it up.
+            undecided = first + np.flatnonzero(
+                (self._status[first:tail] == _PENDING) & (self._t_s[first:tail] <= newest_nav_s)
+            )
+        if len(undecided) == 1:
+            # One sample: in floats, bit-identical to the batch below.
+            i = int(undecided[0])
+            status, terms = self._corrector.correct_one(
+                self.nav_track,
+                float(self._t_s[i]),
+                self._wind_mps[i].tolist(),
+                float(self._as_of_nav_s[i]),
+            )
+            self._status[i] = status
+            self._terms[:, i] = terms
+        elif len(undecided):
+            status, terms = self._corrector.correct(
+                self.nav_track,
+                self._t_s[undecided],
+                self._wind_mps[undecided],
+                self._as_of_nav_s[undecided],
+            )
+            self._status[undecided] = status
+            self._terms[:, undecided] = terms
+        self._advance_first_pending()
+        # Every sample still pending is stamped after the newest navigation sample: the
+        # samples around it stay held (see NavTrack.forget_old_samples).
+        self.nav_track.forget_old_samples()
 
+    def _give_up(self, which, status: WindStatus) -> None:
+        """Decide as ``status`` the pending samples from ``_first_pending`` on where ``which``
+        (a mask over them, or True for all) holds."""
+        if self._first_pending == self._tail:
+            return
+        pending = self._status[self._first_pending : self._tail]
+        pending[(pending == _PENDING) & which] = status
+        self._advance_first_pending()
 
-def _invalid(entry: _Entry, status: WindStatus) -> CorrectedWind:
-    nan = np.full(3, np.nan)
-    return CorrectedWind(entry.t_s, status, nan, nan, nan, nan, entry.wind_mps)
+    def _advance_first_pending(self) -> None:
+        first, tail = self._first_pending, self._tail
+        if first < tail and self._status[first] == _PENDING:
+            return
+        pending = np.flatnonzero(self._status[first:tail] == _PENDING)
+        self._first_pending = first + int(pending[0]) if pending.size else tail
 
+    def _pop_decided(self) -> CorrectedWindBatch:
+        if self._head == self._first_pending:
+            return _NOTHING_DECIDED
+        done = slice(self._head, self._first_pending)
+        self._head = self._first_pending
+        status = self._status[done].copy()
+        for code, count in enumerate(np.bincount(status, minlength=len(WindStatus)).tolist()):
+            self._counts[WindStatus(code)] += count
+        true_wind, tilt, rotation, translation = self._terms[:, done].copy()
+        return CorrectedWindBatch(
+            self._t_s[done].copy(),
+            status,
+            true_wind,
+            tilt,
+            rotation,
+            translation,
+            self._wind_mps[done].copy(),
+        )
 
-def correct_batch(
-    config: CompensatorConfig,
-    nav_t_s,
-    nav_quat_xyzw,
-    nav_angular_rate_body_rad_s,
-    nav_velocity_enu_mps,
-    wind_t_s,
-    wind_sensor_mps,
-) -> CorrectedWindBatch:
-    """Correct a whole recording at once; identical to streaming every navigation sample and
-    every wind sample in array order through :class:`WindCompensator` and flushing.
-
-    Args:
-        config: compensation settings.
-        nav_t_s: (M,) navigation stamps, s, in arrival order.
-        nav_quat_xyzw: (M, 4) body→ENU attitude.
-        nav_angular_rate_body_rad_s: (M, 3) body rate, body axes, rad/s.
-        nav_velocity_enu_mps: (M, 3) ENU velocity of the body origin, m/s.
-        wind_t_s: (N,) anemometer stamps, s, in arrival order.
-        wind_sensor_mps: (N, 3) measured air velocity, anemometer axes, m/s.
-    """
-    track = NavTrack.from_arrays(
-        nav_t_s,
-        nav_quat_xyzw,
-        nav_angular_rate_body_rad_s,
-        nav_velocity_enu_mps,
-        max_gap_s=config.max_nav_gap_s,
-    )
-    stamps, winds = _wind_arrays(wind_t_s, wind_sensor_mps)
-    status, _ = _screen_wind(stamps, winds, -np.inf, config.max_wind_speed_mps)
-    outputs = [np.full((stamps.shape[0], 3), np.nan) for _ in range(4)]
-    screened = status == _PENDING
-    nav_status, nav_outputs = _Corrector(config).correct(track, stamps[screened], winds[screened])
-    nav_status[nav_status == _PENDING] = WindStatus.NO_NAVIGATION
-    status[screened] = nav_status
-    for output, nav_output in zip(outputs, nav_outputs, strict=True):
-        output[screened] = nav_output
-    true_wind, tilt, rotation, translation = outputs
-    return CorrectedWindBatch(
-        stamps.copy(), status, true_wind, tilt, rotation, translation, winds.copy()
-    )
+    def _reserve(self, n_more: int) -> None:
+        """Make room for ``n_more`` samples after the newest one, dropping the returned ones."""
+        capacity = self._t_s.shape[0]
+        if self._tail + n_more <= capacity:
+            return
+        kept = slice(self._head, self._tail)
+        n_kept = self._tail - self._head
+        new_capacity = max(capacity, _INITIAL_CAPACITY)
+        while n_kept + n_more > new_capacity // 2:
+            new_capacity *= 2
+        for name in ("_t_s", "_wind_mps", "_as_of_nav_s", "_status"):
+            old = getattr(self, name)
+            new = np.empty((new_capacity, *old.shape[1:]), dtype=old.dtype)
+            new[:n_kept] = old[kept]
+            setattr(self, name, new)
+        terms = np.empty((4, new_capacity, 3))
+        terms[:, :n_kept] = self._terms[:, kept]
+        self._terms = terms
+        self._first_pending -= self._head
+        self._head, self._tail = 0, n_kept
 
 
 def _wind_arrays(t_s, wind_sensor_mps) -> tuple[np.ndarray, np.ndarray]:

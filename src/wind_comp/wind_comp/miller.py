@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from buoy_nav.rotations import cross_components
+
 
 class MillerInputError(ValueError):
     """An input of the Miller correction has the wrong shape or type."""
@@ -115,13 +117,6 @@ def rotate_components(matrix_elements, vector) -> tuple:
         m10 * x + m11 * y + m12 * z,
         m20 * x + m21 * y + m22 * z,
     )
-
-
-def cross_components(a, b) -> tuple:
-    """a × b of two 3-vectors given by components (floats or equally shaped arrays)."""
-    a0, a1, a2 = a
-    b0, b1, b2 = b
-    return (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
 
 
 def miller_correction(

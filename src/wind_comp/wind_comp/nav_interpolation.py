@@ -33,7 +33,7 @@ class InterpolationStatus(IntEnum):
     GAP = 3
     """The bracketing samples are more than ``max_gap_s`` apart."""
     EVICTED = 4
-    """The bracketing samples were discarded from the bounded history."""
+    """The bracketing samples are older than the history kept (see :class:`NavTrack`)."""
     INVALID_STAMP = 5
     """The query stamp is not finite."""
 
@@ -71,16 +71,24 @@ class NavTrack:
 
     Samples are appended in strictly increasing stamp order; a sample whose stamp is not later
     than the newest accepted one is rejected and counted, as is a sample with a non-finite
-    value or a zero quaternion. The history keeps every sample needed to answer queries at or
-    after ``newest_stamp - history_s``; older samples are discarded.
+    value or a zero quaternion.
+
+    The history is bounded to ``history_s``: a query is answered from the samples needed for
+    stamps at or after ``newest - history_s`` (the last sample at or before that horizon and
+    every later one); a stamp whose bracketing samples are older is EVICTED. ``newest`` is the
+    newest stamp when the query was asked: :meth:`interpolate` takes it per query
+    (``as_of_newest_s``), so that queries asked while samples kept arriving are answered as
+    they would have been at the time, whenever they are evaluated. The samples themselves are
+    dropped only by :meth:`forget_old_samples`, which frees what no query asked from then on
+    needs.
     """
 
     def __init__(self, max_gap_s: float = 0.1, history_s: float = np.inf):
         """Args:
         max_gap_s: largest spacing of two bracketing samples that still allows
             interpolation, s.
-        history_s: how far back from the newest sample queries must stay answerable, s
-            (``inf`` keeps everything, as offline processing does).
+        history_s: how far back from the newest sample queries are answered, s (``inf``
+            keeps everything).
         """
         if not (np.isfinite(max_gap_s) and max_gap_s > 0):
             raise NavTrackError(f"max_gap_s must be a positive number of seconds, got {max_gap_s}")
@@ -165,13 +173,12 @@ class NavTrack:
         if math.isnan(self._first_stamp_s):
             self._first_stamp_s = stamp
         self.n_accepted += 1
-        self._discard_before(stamp - self.history_s)
         return True
 
-    def extend(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> int:
+    def extend(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> np.ndarray:
         """Add samples in array order, exactly as appending them one by one would (a sample is
         rejected and counted when malformed or not later than the newest accepted one); returns
-        how many were accepted.
+        the (N,) mask of the accepted ones.
 
         Args:
             t_s: (N,) stamps, s. quat_xyzw: (N, 4) body→ENU attitude.
@@ -189,7 +196,7 @@ class NavTrack:
         self.n_rejected_invalid += int(np.count_nonzero(~well_formed))
         self.n_rejected_out_of_order += int(np.count_nonzero(well_formed & ~accepted))
         if n_accepted == 0:
-            return 0
+            return accepted
         self._reserve(n_accepted)
         end = self._end + n_accepted
         self._stamps_s[self._end : end] = stamps[accepted]
@@ -200,15 +207,23 @@ class NavTrack:
         if np.isnan(self._first_stamp_s):
             self._first_stamp_s = float(stamps[accepted][0])
         self.n_accepted += n_accepted
-        self._discard_before(self._stamps_s[end - 1] - self.history_s)
-        return n_accepted
+        return accepted
 
-    def interpolate(self, t_query_s) -> InterpolatedNav:
+    def forget_old_samples(self) -> None:
+        """Drop the samples that no query asked as of the newest stamp or later needs."""
+        if len(self):
+            self._discard_before(self._stamps_s[self._end - 1] - self.history_s)
+
+    def interpolate(self, t_query_s, as_of_newest_s=None) -> InterpolatedNav:
         """Navigation state at the (N,) query stamps, s; see :class:`InterpolationStatus`.
 
         A query exactly on a sample stamp returns that sample. Otherwise the bracketing pair is
         the last sample before and the first sample after the query; attitude is slerped along
         the shortest arc between them, rate and velocity are linear in time.
+
+        ``as_of_newest_s``: (N,) or scalar newest stamp (s) when each query was asked, which
+        bounds the history it is answered from (-inf: no sample yet); default: the newest now.
+        Samples dropped by :meth:`forget_old_samples` answer no query any more.
         """
         queries = np.asarray(t_query_s, dtype=float)
         if queries.ndim != 1:
@@ -216,6 +231,7 @@ class NavTrack:
         n_queries = queries.shape[0]
         stamps = self._stamps_s[self._start : self._end]
         n_samples = stamps.shape[0]
+        kept_from = self._kept_from(stamps, as_of_newest_s)
 
         status = np.full(n_queries, InterpolationStatus.OK, dtype=np.int8)
         lower = np.searchsorted(stamps, queries, side="right") - 1
@@ -227,12 +243,12 @@ class NavTrack:
         upper = np.where(exact, lower, lower + 1)
         upper_c = np.clip(upper, 0, max(n_samples - 1, 0))
 
-        before_track = finite & (lower < 0) & (n_samples > 0)
+        before_track = finite & (lower < kept_from) & (n_samples > 0)
         never_received = queries < self._first_stamp_s
         status[before_track & never_received] = InterpolationStatus.BEFORE_START
         status[before_track & ~never_received] = InterpolationStatus.EVICTED
         status[finite & ~before_track & (upper >= n_samples)] = InterpolationStatus.AFTER_END
-        bracketed = finite & (lower >= 0) & (upper < n_samples)
+        bracketed = finite & ~before_track & (upper < n_samples)
         if n_samples:
             spacing = stamps[upper_c] - stamps[lower_c]
             status[bracketed & (spacing > self.max_gap_s)] = InterpolationStatus.GAP
@@ -261,7 +277,9 @@ class NavTrack:
             quats[valid] = slerp(self._quats_xyzw[lo], self._quats_xyzw[hi], fraction[:, 0])
         return InterpolatedNav(valid, status, quats, rates, velocities)
 
-    def interpolate_one(self, t_query_s: float) -> tuple[int, tuple, tuple, tuple]:
+    def interpolate_one(
+        self, t_query_s: float, as_of_newest_s: float | None = None
+    ) -> tuple[int, tuple, tuple, tuple]:
         """:meth:`interpolate` at one stamp (s), in plain floats: (status code, attitude
         (x, y, z, w), body rate (3,) rad/s, ENU velocity (3,) m/s), bit-identical to the
         batch; the live path, where numpy's per-call cost would dominate."""
@@ -273,7 +291,7 @@ class NavTrack:
             return InterpolationStatus.AFTER_END, *_INVALID_NAV
         stamps = self._stamps_s
         lower = int(np.searchsorted(stamps[start:end], t_s, side="right")) - 1 + start
-        if lower < start:
+        if lower < start + self._kept_from(stamps[start:end], as_of_newest_s):
             if t_s < self._first_stamp_s:
                 return InterpolationStatus.BEFORE_START, *_INVALID_NAV
             return InterpolationStatus.EVICTED, *_INVALID_NAV
@@ -291,6 +309,22 @@ class NavTrack:
         quats = self._quats_xyzw
         attitude = slerp_components(quats[lower].tolist(), quats[upper].tolist(), fraction)
         return InterpolationStatus.OK, tuple(map(float, attitude)), rate, velocity
+
+    def _kept_from(self, stamps: np.ndarray, as_of_newest_s):
+        """Index into ``stamps`` (the samples held) of the first sample that a query asked as of
+        ``as_of_newest_s`` (s, scalar or (N,); None: the newest now) may use."""
+        if as_of_newest_s is None:
+            if not stamps.shape[0]:
+                return 0
+            as_of_newest_s = float(stamps[-1])
+        if isinstance(as_of_newest_s, float):
+            horizon_s = as_of_newest_s - self.history_s
+            # The common case, live: nothing held is older than the query may use.
+            if stamps.shape[0] < 2 or not horizon_s >= stamps[1]:
+                return 0
+            return int(np.searchsorted(stamps, horizon_s, side="right")) - 1
+        horizons_s = np.asarray(as_of_newest_s, dtype=float) - self.history_s
+        return np.maximum(np.searchsorted(stamps, horizons_s, side="right") - 1, 0)
 
     def _discard_before(self, horizon_s: float) -> None:
         """Drop samples not needed to answer queries at or after ``horizon_s``: keep the last

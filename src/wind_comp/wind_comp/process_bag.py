@@ -4,315 +4,26 @@
                 [--overwrite]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
-by ``compensation_node``: the navigation solutions pass through the numbers the ``nav/*``
-messages carry, each gets the latitude of the solution before it (as the node gets it from
-``nav/fix``), and every ``anemometer/wind`` sample yields exactly one ``wind/true`` (NaN when it
-cannot be corrected). The new bag holds ``nav/*``, ``wind/true``, the wind products
-(``wind/mean_<window>``, ``wind/stats_<window>``), the measured ``anemometer/wind`` and any
-truth topics; every output message carries the log time of the input message after which it
-was produced. The wind products are also written to ``<OUT_BAG>_wind_products.csv``.
+by ``compensation_node`` (:func:`wind_comp.bag_processing.process_bag`): every
+``anemometer/wind`` sample yields exactly one ``wind/true`` (NaN when it cannot be corrected).
+The new bag holds ``nav/*``, ``wind/true``, the wind products (``wind/mean_<window>``,
+``wind/stats_<window>``), the measured ``anemometer/wind`` and any truth topics; the wind
+products are also written to ``<OUT_BAG>_wind_products.csv``. Parameters come from the same
+YAML files the nodes take.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import math
 import sys
-import time
-from collections import Counter, deque
-from dataclasses import dataclass, field, fields
-from pathlib import Path
-from typing import NamedTuple
 
-import numpy as np
-from geometry_msgs.msg import Vector3Stamped
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
-
-from buoy_common.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter, jazzy_typestore
-from buoy_common.contract import (
-    NAV_FIX_TOPIC,
-    NAV_MSGTYPES,
-    NAV_ODOMETRY_TOPIC,
-    WIND_RAW_TOPIC,
-    WIND_TRUE_TOPIC,
-    Reason,
-    bag_topic,
-    seconds_to_stamp,
-    window_label,
-)
-from buoy_common.parameters import (
-    ParameterError,
-    build_config,
-    load_parameter_files,
-)
-from buoy_common.progress import Progress
-from buoy_nav.config import FusionConfig
-from buoy_nav.fuse_bag import (
-    OfflineFusion,
-    fusion_config_from_files,
-    relative_topic,
-    sensor_topics_of,
-    truth_topics_of,
-)
-from wind_comp.compensator import (
-    CompensatorConfig,
-    CorrectedWind,
-    WindCompensator,
-    WindStatus,
-)
-from wind_comp.nav_messages import (
-    StampOrder,
-    WindSample,
-    anemometer_sample,
-    anemometer_sample_cdr,
-    body_to_enu,
-    checked_fix_latitude_deg,
-    fix_fields_cdr,
-    odometry_fields,
-    odometry_fields_cdr,
-    product_messages,
-    remove_earth_rate,
-    true_wind_cdr,
-)
-from wind_comp.products import WindAverager, WindProduct
-
-COMPENSATION_NODE_NAME = "compensation_node"
-TRUE_WIND_BAG_TOPIC = bag_topic(WIND_TRUE_TOPIC)
-ODOMETRY_BAG_TOPIC = bag_topic(NAV_ODOMETRY_TOPIC)
-NAV_FIX_BAG_TOPIC = bag_topic(NAV_FIX_TOPIC)
-ODOMETRY_MSGTYPE = NAV_MSGTYPES[NAV_ODOMETRY_TOPIC]
-NAV_FIX_MSGTYPE = NAV_MSGTYPES[NAV_FIX_TOPIC]
-VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
-FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
-PRODUCTS_CSV_SUFFIX = "_wind_products.csv"
-PROGRESS_EVERY_MESSAGES = 2000
-
-
-def compensator_config_from_files(paths) -> CompensatorConfig:
-    """The :class:`CompensatorConfig` ``compensation_node`` would build from these files."""
-    values = load_parameter_files(paths, COMPENSATION_NODE_NAME)
-    return build_config(CompensatorConfig, values, prefix="compensation.")
-
-
-def products_csv_path(out_bag) -> Path:
-    """Where the wind products of ``out_bag`` go: beside it, ``<name>_wind_products.csv``."""
-    out_bag = Path(out_bag)
-    return out_bag.with_name(out_bag.name + PRODUCTS_CSV_SUFFIX)
-
-
-@dataclass
-class ProcessSummary:
-    """What a run did: counts of outputs and rejections, products, timing."""
-
-    wind_status_counts: dict[WindStatus, int] = field(default_factory=dict)
-    rejected_wind_messages: Counter = field(default_factory=Counter)
-    products: list[WindProduct] = field(default_factory=list)
-    topic_counts: dict[str, int] = field(default_factory=dict)
-    fusion_lines: list[str] = field(default_factory=list)
-    duration_s: float = 0.0
-    wall_s: float = 0.0
-    csv_path: Path | None = None
-
-
-class CompensationResult(NamedTuple):
-    """What :class:`OfflineCompensation` reports at the end of the data."""
-
-    wind_status_counts: dict[WindStatus, int]
-    rejected_wind_messages: Counter
-    products: list[WindProduct]
-
-
-class OfflineCompensation:
-    """The compensation node's processing fed from the bag records being written.
-
-    It takes what ``compensation_node`` subscribes to, as CDR bytes: ``nav/odometry`` and
-    ``nav/fix`` as written by the fusion and the copied ``anemometer/wind``, so a solution gets
-    the latitude of the ``nav/fix`` before it, as the node does. It runs in the process that
-    writes the bag (see :class:`buoy_common.bag_io.BackgroundBagWriter`) and writes ``wind/true``
-    and the products to the same bag. Navigation and wind samples are handed to the compensator
-    in chunks of a quarter of ``nav_history_s`` of wind: its decisions depend on stamps only, so
-    chunking changes nothing but the speed.
-    """
-
-    def __init__(self, writer: BagWriter, config: CompensatorConfig, stored_wind_topic: str):
-        self.compensator = WindCompensator(config)
-        self.averagers = [
-            WindAverager(window_s, config.gust_window_s) for window_s in config.product_windows_s
-        ]
-        self.writer = writer
-        self.topics = {stored_wind_topic, ODOMETRY_BAG_TOPIC, NAV_FIX_BAG_TOPIC}
-        self._wind_topic = stored_wind_topic
-        self._typestore = jazzy_typestore()
-        self.products: list[WindProduct] = []
-        self.rejected: Counter[str] = Counter()
-        self._chunk_s = config.nav_history_s / 4.0
-        self._wind_order = StampOrder()
-        self._pending_stamps: deque[tuple[int, int]] = deque()
-        self._nav_chunk: list[tuple] = []
-        self._wind_stamps_s: list[float] = []
-        self._winds_sensor_mps: list[np.ndarray] = []
-        self._latitude_deg = math.nan
-
-    def take(self, topic: str, log_time_ns: int, raw: bytes) -> None:
-        """One record of a topic in :attr:`topics`, as written to the bag."""
-        if topic == ODOMETRY_BAG_TOPIC:
-            fields = odometry_fields_cdr(raw)
-            if fields is None:
-                fields = odometry_fields(self._decode(raw, ODOMETRY_MSGTYPE))
-            self._nav_chunk.append((*fields, self._latitude_deg))
-        elif topic == NAV_FIX_BAG_TOPIC:
-            fields = fix_fields_cdr(raw)
-            if fields is None:
-                message = self._decode(raw, NAV_FIX_MSGTYPE)
-                fields = (message.status.status, message.latitude)
-            latitude = checked_fix_latitude_deg(*fields)
-            if latitude is not None:
-                self._latitude_deg = latitude
-        else:
-            parsed = anemometer_sample_cdr(raw)
-            if parsed is None:
-                message = self._decode(raw, VECTOR3_STAMPED)
-                stamp = message.header.stamp
-                parsed = (anemometer_sample(message), stamp.sec, stamp.nanosec)
-            self._add_sample(*parsed, log_time_ns)
-
-    def _decode(self, raw: bytes, msgtype: str):
-        return self._typestore.deserialize_cdr(raw, msgtype)
-
-    def _add_sample(self, sample: WindSample, sec: int, nanosec: int, log_time_ns: int) -> None:
-        if sample.rejection is not None:
-            self.rejected[sample.rejection] += 1
-        elif not self._wind_order.advance(sample.t_s):
-            self.rejected[Reason.STAMP_NOT_INCREASING] += 1
-        self._pending_stamps.append((sec, nanosec))
-        self._wind_stamps_s.append(sample.t_s)
-        self._winds_sensor_mps.append(sample.wind_sensor_mps)
-        if sample.t_s - self._wind_stamps_s[0] >= self._chunk_s:
-            self._process_chunk(log_time_ns)
-
-    def finish(self, log_time_ns: int) -> CompensationResult:
-        """End of data: every pending sample decided and written, partial windows closed."""
-        self._process_chunk(log_time_ns)
-        self._write_results(self.compensator.flush(), log_time_ns)
-        for averager in self.averagers:
-            self._write_products(averager.flush(), log_time_ns)
-        return CompensationResult(dict(self.compensator.counts), self.rejected, self.products)
-
-    def _process_chunk(self, log_time_ns: int) -> None:
-        self._feed_navigation()
-        if self._wind_stamps_s:
-            self.compensator.add_wind_batch(
-                np.array(self._wind_stamps_s), np.array(self._winds_sensor_mps)
-            )
-            self._wind_stamps_s, self._winds_sensor_mps = [], []
-        self._write_results(self.compensator.ready(), log_time_ns)
-
-    def _feed_navigation(self) -> None:
-        """Convert the buffered solutions as the node converts ``nav/odometry``."""
-        samples, self._nav_chunk = self._nav_chunk, []
-        if not samples:
-            return
-        stamps, quats, rates, velocities_body, latitudes = (
-            np.array(column) for column in zip(*samples, strict=True)
-        )
-        rates_nb = remove_earth_rate(rates, quats, latitudes)
-        velocities_enu = body_to_enu(quats, velocities_body)
-        self.compensator.add_nav_batch(stamps, quats, rates_nb, velocities_enu)
-
-    def _write_results(self, results: list[CorrectedWind], log_time_ns: int) -> None:
-        for result in results:
-            sec, nanosec = self._pending_stamps.popleft()
-            self.writer.write_raw(
-                TRUE_WIND_BAG_TOPIC,
-                VECTOR3_STAMPED,
-                log_time_ns,
-                true_wind_cdr(sec, nanosec, result.true_wind_enu_mps.tolist()),
-            )
-            for averager in self.averagers:
-                self._write_products(
-                    averager.add(result.t_s, result.true_wind_enu_mps), log_time_ns
-                )
-
-    def _write_products(self, products: list[WindProduct], log_time_ns: int) -> None:
-        for product in products:
-            self.products.append(product)
-            mean, stats = product_messages(
-                Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
-            )
-            label = window_label(product.window_s)
-            self.writer.write(bag_topic(f"wind/mean_{label}"), VECTOR3_STAMPED, log_time_ns, mean)
-            self.writer.write(
-                bag_topic(f"wind/stats_{label}"), FLOAT64_MULTI_ARRAY, log_time_ns, stats
-            )
-
-
-def write_products_csv(products: list[WindProduct], path: Path) -> None:
-    """One row per closed averaging window; columns named with their units."""
-    names = [f.name for f in fields(WindProduct)]
-    with open(path, "w", newline="") as stream:
-        writer = csv.writer(stream)
-        writer.writerow(names)
-        for product in products:
-            writer.writerow([_csv_value(getattr(product, name)) for name in names])
-
-
-def _csv_value(value) -> str:
-    if isinstance(value, float):
-        return "nan" if math.isnan(value) else f"{value:.6f}"
-    return str(value)
-
-
-def process_bag(
-    in_bag,
-    out_bag,
-    fusion_config: FusionConfig,
-    compensator_config: CompensatorConfig,
-    overwrite: bool = False,
-) -> ProcessSummary:
-    """Fuse and correct ``in_bag`` into ``out_bag`` and the products CSV beside it.
-
-    The fusion runs here; the compensation runs in the process that writes the bag, on the
-    records it writes, so the two share the machine's cores.
-    """
-    started = time.monotonic()
-    csv_path = products_csv_path(out_bag)
-    with BagReader(in_bag) as reader:
-        sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_RAW_TOPIC,))
-        stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
-        truth = truth_topics_of(reader)
-        relative_of = {stored: relative for relative, stored in sensors.items()}
-        progress = Progress(reader.duration_s, f"process_bag {in_bag}", unit="bag s")
-        tap = (OfflineCompensation, (compensator_config, stored_wind))
-        with BackgroundBagWriter(out_bag, overwrite=overwrite, tap=tap) as writer:
-            fusion = OfflineFusion(fusion_config, writer)
-            topics = [*sensors.values(), stored_wind, *truth]
-            log_time_ns = reader.start_ns
-            for index, message in enumerate(reader.messages(topics)):
-                log_time_ns = message.log_time_ns
-                topic = relative_of.get(message.topic)
-                if topic is None:
-                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                else:
-                    fusion.add_message(reader, topic, message)
-                if index % PROGRESS_EVERY_MESSAGES == 0:
-                    progress.update((log_time_ns - reader.start_ns) * 1e-9)
-            fusion.finish()
-            writer.end_of_input(log_time_ns)
-        progress.close()
-        duration_s = reader.duration_s
-    compensation: CompensationResult = writer.tap_result
-    write_products_csv(compensation.products, csv_path)
-    return ProcessSummary(
-        wind_status_counts=compensation.wind_status_counts,
-        rejected_wind_messages=compensation.rejected_wind_messages,
-        products=compensation.products,
-        topic_counts=writer.counts,
-        fusion_lines=fusion.summary(),
-        duration_s=duration_s,
-        wall_s=time.monotonic() - started,
-        csv_path=csv_path,
-    )
+from buoy_common.bag_io import BagError
+from buoy_common.contract import WIND_RAW_TOPIC, seconds_to_stamp, window_label
+from buoy_common.parameters import ParameterError
+from buoy_nav.config import fusion_config_from_files
+from wind_comp.bag_processing import ProcessSummary, process_bag
+from wind_comp.compensator import WindStatus
+from wind_comp.config import compensator_config_from_files
 
 
 def parse_arguments(argv):
@@ -333,7 +44,7 @@ def parse_arguments(argv):
     return parser.parse_args(argv)
 
 
-def _print_summary(summary: ProcessSummary, out_bag: str) -> None:
+def print_summary(summary: ProcessSummary, out_bag: str) -> None:
     for line in summary.fusion_lines:
         print(line)
     counts = summary.wind_status_counts
@@ -378,4 +89,4 @@ def main(argv=None) -> None:
     except (ParameterError, BagError, OSError) as error:
         print(f"process_bag: {error}", file=sys.stderr)
         sys.exit(2)
-    _print_summary(summary, arguments.out_bag)
+    print_summary(summary, arguments.out_bag)

@@ -21,6 +21,7 @@ Conventions:
   :attr:`WindAverager.n_rejected_stamps`.
 """
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -135,9 +136,28 @@ class WindAverager:
             raise ProductsError(
                 f"t_s must be (N,) and wind_enu_mps (N, 3), got {stamps.shape} and {winds.shape}"
             )
+        finite = np.isfinite(stamps)
+        latest_before = np.maximum.accumulate(
+            np.concatenate(([self._latest_stamp_s], np.where(finite, stamps, -np.inf)))
+        )[:-1]
+        accepted = finite & (stamps > latest_before)
+        self.n_rejected_stamps += int(np.count_nonzero(~accepted))
+        stamps, winds = stamps[accepted], winds[accepted]
+        if not stamps.shape[0]:
+            return []
+        if math.isnan(self._first_stamp_s):
+            self._first_stamp_s = float(stamps[0])
+        self._latest_stamp_s = float(stamps[-1])
+        indices = np.floor(stamps / self.window_s)
+        bounds = [0, *(np.flatnonzero(np.diff(indices)) + 1).tolist(), stamps.shape[0]]
         completed = []
-        for stamp, wind in zip(stamps, winds, strict=True):
-            completed.extend(self.add(stamp, wind))
+        for start, stop in itertools.pairwise(bounds):
+            index = int(indices[start])
+            if self._window_index is not None and index != self._window_index:
+                completed.append(self._close_window())
+            self._window_index = index
+            self._stamps.extend(stamps[start:stop].tolist())
+            self._winds.extend(winds[start:stop])
         return completed
 
     def flush(self) -> list[WindProduct]:

@@ -32,7 +32,9 @@ from buoy_common.contract import (
     wind_mean_topic,
     wind_stats_topic,
 )
-from wind_comp.nav_messages import stats_values
+from wind_comp.compensation_messages import (
+    stats_values,
+)
 from wind_comp.products import meteorological_direction_deg
 
 PROGRAM = "wind_echo"

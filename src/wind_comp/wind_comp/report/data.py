@@ -1,24 +1,16 @@
-"""Figures and tables summarising a wind-correction run.
+"""Everything a wind report shows, as plain arrays, and where it comes from.
 
-:func:`write_report` draws, from plain arrays:
-- ``wind_time_series.png``: horizontal speed, direction and vertical wind over time, measured
-  (sensor axes, uncorrected), corrected and true (when known);
-- ``attitude_error.png`` (only with truth): roll, pitch and heading error of the navigation,
-  within the filter's own ±3σ when the navigation carries its covariance;
-- ``vertical_wind_spectrum.png``: Welch power spectra of the vertical wind before and after
-  correction (and of the truth);
-- ``wind_products.md``: the averaged wind products and, with truth, the error statistics.
+:class:`ReportData` holds the anemometer's samples, the corrected wind, the true wind and the
+attitude errors when known, and the averaged wind products. :func:`report_data_from_bag`
+gathers them from a bag that holds ``anemometer/wind`` and ``wind/true`` (written by
+``process_bag`` or recorded from the running nodes), with the truth and navigation topics when
+present; :func:`save_report_data` and :func:`load_report_data` keep them in a ``.npz`` file.
 
-Angles are degrees in every figure and table. Figures are drawn with the Agg canvas directly
-(no pyplot), so no display and no global backend state are involved.
-
-:func:`report_data_from_bag` gathers the arrays from a bag that holds ``anemometer/wind`` and
-``wind/true`` (written by ``process_bag`` or recorded from the running nodes), with the truth
-and navigation topics when present. The ``wind_report`` command draws the report of such a bag,
-or of a run saved with :func:`save_report_data`.
+The readers below (:func:`stamped_vectors`, :func:`odometry_series`, :func:`vectors_at_stamps`,
+:func:`interpolate_vectors`) turn a topic into arrays by header stamp; the benchmark reads its
+bags with them too.
 """
 
-import argparse
 import datetime
 import math
 from dataclasses import dataclass, field, fields
@@ -26,10 +18,6 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-from scipy.signal import welch
-from scipy.spatial.transform import Rotation, Slerp
 
 from buoy_common.bag_io import BagError, BagReader
 from buoy_common.contract import (
@@ -43,16 +31,14 @@ from buoy_common.contract import (
     WIND_TRUE_TOPIC,
     window_label,
 )
-from wind_comp.compensator import CompensatorConfig
-from wind_comp.nav_messages import stats_values
-from wind_comp.products import WindAverager, WindProduct, meteorological_direction_deg
+from wind_comp.compensation_messages import stats_values
+from wind_comp.config import CompensatorConfig
+from wind_comp.products import WindAverager, WindProduct
+from wind_comp.report.attitude import interpolate_rpy_rad, rpy_rad_from_quaternions, rpy_sigma_rad
 
 # Plots count time from the start of the minute of the first sample, so simulated runs (which
 # start on a whole minute) show scenario time and the 1-minute windows start on round numbers.
 _TIME_ORIGIN_STEP_S = 60
-
-_MIN_SPECTRUM_SAMPLES = 32
-_MAX_SPECTRUM_SEGMENT = 1024
 
 
 class ReportDataError(ValueError):
@@ -125,228 +111,6 @@ def _array(name: str, values, shape: tuple) -> np.ndarray:
         wanted = f"({wanted},)" if len(shape) == 1 else f"({wanted})"
         raise ReportDataError(f"{name} must have shape {wanted}, got {array.shape}")
     return array
-
-
-def write_report(data: ReportData, out_dir) -> list[Path]:
-    """Write the report figures and table into ``out_dir`` (created); return the paths."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    paths = [_plot_wind_time_series(data, out_dir / "wind_time_series.png")]
-    if data.truth_rpy_rad is not None:
-        paths.append(_plot_attitude_error(data, out_dir / "attitude_error.png"))
-    spectrum = _plot_vertical_wind_spectrum(data, out_dir / "vertical_wind_spectrum.png")
-    if spectrum is not None:
-        paths.append(spectrum)
-    table = out_dir / "wind_products.md"
-    table.write_text(_markdown_summary(data))
-    paths.append(table)
-    return paths
-
-
-def _wind_series(data: ReportData) -> list[tuple[str, np.ndarray, str]]:
-    """(label, (N, 3) wind, style) of each series; the measured one is in sensor axes."""
-    series = [
-        ("measured (sensor axes)", data.measured_wind_sensor_mps, "tab:gray"),
-        ("corrected", data.corrected_wind_enu_mps, "tab:blue"),
-    ]
-    if data.true_wind_enu_mps is not None:
-        series.append(("true", data.true_wind_enu_mps, "tab:green"))
-    return series
-
-
-def _plot_wind_time_series(data: ReportData, path: Path) -> Path:
-    figure = Figure(figsize=(10, 8))
-    speed_axis, direction_axis, vertical_axis = figure.subplots(3, 1, sharex=True)
-    t_s = data.t_s - data.time_origin_s
-    for label, wind, color in _wind_series(data):
-        speed_axis.plot(t_s, np.hypot(wind[:, 0], wind[:, 1]), color=color, label=label)
-        direction_axis.plot(
-            t_s,
-            meteorological_direction_deg(wind[:, 0], wind[:, 1]),
-            ".",
-            markersize=2,
-            color=color,
-            label=label,
-        )
-        vertical_axis.plot(t_s, wind[:, 2], color=color, label=label)
-    speed_axis.set_ylabel("horizontal speed (m/s)")
-    direction_axis.set_ylabel("direction from (deg)")
-    direction_axis.set_ylim(0, 360)
-    direction_axis.set_yticks(range(0, 361, 90))
-    vertical_axis.set_ylabel("vertical wind w (m/s)")
-    vertical_axis.set_xlabel(_time_label(data))
-    speed_axis.legend(loc="upper right")
-    speed_axis.set_title(_title(data, "wind before and after motion correction"))
-    for axis in (speed_axis, direction_axis, vertical_axis):
-        axis.grid(alpha=0.3)
-    return _save(figure, path)
-
-
-def _plot_attitude_error(data: ReportData, path: Path) -> Path:
-    errors_deg = attitude_errors_deg(data.nav_rpy_rad, data.truth_rpy_rad)
-    t_s = data.attitude_t_s - data.time_origin_s
-    figure = Figure(figsize=(10, 7))
-    axes = figure.subplots(3, 1, sharex=True)
-    for k, (axis, label) in enumerate(zip(axes, ("roll", "pitch", "heading"), strict=True)):
-        if data.nav_rpy_sigma_rad is not None:
-            # A consistent filter keeps its error inside this band but for rare moments.
-            bound_deg = 3.0 * np.degrees(data.nav_rpy_sigma_rad[:, k])
-            axis.fill_between(
-                t_s, -bound_deg, bound_deg, color="0.85", linewidth=0, label="filter ±3σ"
-            )
-        axis.plot(t_s, errors_deg[:, k], color="tab:red", label="estimate − truth")
-        if data.nav_rpy_sigma_rad is not None:
-            # Scaled to the error: the band of the first seconds after alignment is far wider.
-            largest_deg = np.nanmax(np.abs(errors_deg[:, k]), initial=0.0)
-            axis.set_ylim(-1.2 * largest_deg - 1e-3, 1.2 * largest_deg + 1e-3)
-        axis.set_ylabel(f"{label} error (deg)")
-        axis.grid(alpha=0.3)
-    if data.nav_rpy_sigma_rad is not None:
-        axes[0].legend(loc="upper right")
-    axes[-1].set_xlabel(_time_label(data))
-    axes[0].set_title(_title(data, "attitude error (estimate − truth)"))
-    return _save(figure, path)
-
-
-def attitude_errors_deg(nav_rpy_rad: np.ndarray, truth_rpy_rad: np.ndarray) -> np.ndarray:
-    """(M, 3) roll, pitch and heading errors, deg, wrapped to [-180, 180).
-
-    Heading is measured clockwise from North, so its error is the negated yaw error.
-    """
-    errors = np.degrees(nav_rpy_rad - truth_rpy_rad)
-    errors[:, 2] = -errors[:, 2]
-    return (errors + 180.0) % 360.0 - 180.0
-
-
-def _plot_vertical_wind_spectrum(data: ReportData, path: Path) -> Path | None:
-    series = _wind_series(data)
-    finite = np.all([np.isfinite(wind[:, 2]) for _, wind, _ in series], axis=0)
-    run = _longest_true_run(finite)
-    if run.stop - run.start < _MIN_SPECTRUM_SAMPLES:
-        return None
-    sample_rate_hz = 1.0 / float(np.median(np.diff(data.t_s[run])))
-    segment = min(run.stop - run.start, _MAX_SPECTRUM_SEGMENT)
-    figure = Figure(figsize=(8, 5))
-    axis = figure.subplots()
-    for label, wind, color in series:
-        frequency_hz, density = welch(wind[run, 2], fs=sample_rate_hz, nperseg=segment)
-        axis.loglog(frequency_hz[1:], density[1:], color=color, label=label)
-    axis.set_xlabel("frequency (Hz)")
-    axis.set_ylabel("PSD of w (m²/s² per Hz)")
-    axis.set_title(_title(data, "vertical wind spectrum"))
-    axis.grid(alpha=0.3, which="both")
-    axis.legend()
-    return _save(figure, path)
-
-
-def _longest_true_run(mask: np.ndarray) -> slice:
-    """Slice of the longest run of consecutive True values (empty slice when none)."""
-    padded = np.concatenate(([False], mask, [False])).astype(np.int8)
-    edges = np.flatnonzero(np.diff(padded))
-    if edges.size == 0:
-        return slice(0, 0)
-    starts, stops = edges[0::2], edges[1::2]
-    longest = int(np.argmax(stops - starts))
-    return slice(int(starts[longest]), int(stops[longest]))
-
-
-def _time_label(data: ReportData) -> str:
-    if data.time_origin_s == 0.0:
-        return "time (s)"
-    return f"time (s) since {utc_text(data.time_origin_s)}"
-
-
-def utc_text(t_s: float) -> str:
-    """ISO 8601 UTC time of ``t_s`` (s since the epoch), whole seconds."""
-    moment = datetime.datetime.fromtimestamp(t_s, tz=datetime.UTC)
-    return moment.strftime("%Y-%m-%dT%H:%M:%SZ")
-
-
-def _title(data: ReportData, what: str) -> str:
-    return f"{data.title}: {what}" if data.title else what
-
-
-def _save(figure: Figure, path: Path) -> Path:
-    FigureCanvasAgg(figure)
-    figure.tight_layout()
-    figure.savefig(path, dpi=120)
-    return path
-
-
-def _markdown_summary(data: ReportData) -> str:
-    lines = [f"# {_title(data, 'wind products')}", ""]
-    if data.true_wind_enu_mps is not None:
-        lines += [*_accuracy_table(data), ""]
-    lines += _products_table(data.products, data.products_source)
-    return "\n".join(lines) + "\n"
-
-
-def _accuracy_table(data: ReportData) -> list[str]:
-    """Bias and RMS of the measured and corrected wind against the truth.
-
-    Each row counts the samples where both the series and the truth are finite. The measured
-    wind is in sensor axes, so only its horizontal speed and w are compared; the corrected wind
-    is ENU like the truth and is also compared per component and in direction.
-    """
-    true_wind = data.true_wind_enu_mps
-    true_speed = np.hypot(true_wind[:, 0], true_wind[:, 1])
-    true_direction = meteorological_direction_deg(true_wind[:, 0], true_wind[:, 1])
-    lines = [
-        "## Error against truth",
-        "",
-        "| series | quantity | bias | RMS | samples |",
-        "|---|---|---|---|---|",
-    ]
-    for label, wind, _ in _wind_series(data)[:2]:
-        speed_error = np.hypot(wind[:, 0], wind[:, 1]) - true_speed
-        vertical_error = wind[:, 2] - true_wind[:, 2]
-        quantities = [("horizontal speed (m/s)", speed_error), ("w (m/s)", vertical_error)]
-        if label == "corrected":
-            direction = meteorological_direction_deg(wind[:, 0], wind[:, 1])
-            direction_error = (direction - true_direction + 180.0) % 360.0 - 180.0
-            quantities += [
-                ("u (m/s)", wind[:, 0] - true_wind[:, 0]),
-                ("v (m/s)", wind[:, 1] - true_wind[:, 1]),
-                ("direction (deg)", direction_error),
-            ]
-        for quantity, error in quantities:
-            error = error[np.isfinite(error)]
-            if error.size:
-                bias, rms = float(error.mean()), float(np.sqrt(np.mean(error**2)))
-            else:
-                bias = rms = math.nan
-            lines.append(f"| {label} | {quantity} | {bias:.4f} | {rms:.4f} | {error.size} |")
-    return lines
-
-
-def _products_table(products: list[WindProduct], source: str) -> list[str]:
-    lines = [
-        "## Averaged wind",
-        "",
-        "Direction: degrees clockwise from true North, where the wind blows from. "
-        "Vectors ENU. Gust: maximum running mean of horizontal speed. The last window of each "
-        "length may be partial: it was closed at the end of the data.",
-        "",
-    ]
-    if source:
-        lines += [f"Source: {source}.", ""]
-    if not products:
-        return [*lines, "No averaging window completed."]
-    lines += [
-        "| window start (UTC) | length (s) | valid | invalid | vector mean speed (m/s) "
-        "| direction (deg) | scalar mean speed (m/s) | gust (m/s) | mean w (m/s) "
-        "| std u (m/s) | std v (m/s) | std w (m/s) |",
-        "|" + "---|" * 12,
-    ]
-    for product in products:
-        lines.append(
-            f"| {utc_text(product.window_start_s)} | {product.window_s:.0f} | {product.n_valid} "
-            f"| {product.n_invalid} | {product.vector_mean_speed_mps:.2f} "
-            f"| {product.vector_mean_direction_deg:.1f} | {product.scalar_mean_speed_mps:.2f} "
-            f"| {product.gust_mps:.2f} | {product.mean_w_enu_mps:.3f} "
-            f"| {product.std_u_mps:.2f} | {product.std_v_mps:.2f} | {product.std_w_mps:.2f} |"
-        )
-    return lines
 
 
 _ARRAY_FIELDS = (
@@ -422,12 +186,6 @@ def load_report_data(path) -> ReportData:
     )
 
 
-def rpy_rad_from_quaternions(quat_xyzw) -> np.ndarray:
-    """(M, 3) roll, pitch, yaw (rad) of body→ENU quaternions (x, y, z, w), for ReportData."""
-    yaw_pitch_roll = Rotation.from_quat(np.asarray(quat_xyzw, dtype=float)).as_euler("ZYX")
-    return yaw_pitch_roll[..., ::-1]
-
-
 class StampedVectors(NamedTuple):
     """The ``Vector3Stamped`` messages of one topic, in bag order."""
 
@@ -445,7 +203,8 @@ def stored_topic(reader: BagReader, topic: str) -> str | None:
     return None
 
 
-def _has_messages(reader: BagReader, topic: str) -> bool:
+def has_messages(reader: BagReader, topic: str) -> bool:
+    """Whether ``reader``'s bag holds messages of relative ``topic``."""
     name = stored_topic(reader, topic)
     return name is not None and reader.topics[name].count > 0
 
@@ -466,48 +225,41 @@ def stamped_vectors(reader: BagReader, topic: str) -> StampedVectors:
     )
 
 
-def stamped_orientations(
-    reader: BagReader, topic: str
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(M,) int64 header stamps (ns), (M, 4) body→ENU quaternions (x, y, z, w) and (M, 3, 3)
-    attitude covariances (the pose covariance's rotation block: the ENU rotation-vector error,
-    rad²) of an ``Odometry`` topic."""
-    stamps, quats, covariances = [], [], []
+class OdometrySeries(NamedTuple):
+    """The ``Odometry`` messages of one topic, in bag order."""
+
+    stamps_ns: np.ndarray
+    """(M,) int64 header stamps, ns since the epoch."""
+    quat_xyzw: np.ndarray
+    """(M, 4) body→ENU attitudes."""
+    angular_rate_body_rad_s: np.ndarray
+    """(M, 3) ``twist.twist.angular``: body rate, body axes, rad/s."""
+    velocity_body_mps: np.ndarray
+    """(M, 3) ``twist.twist.linear``: velocity of the body origin, body axes, m/s."""
+    attitude_covariance_enu_rad2: np.ndarray
+    """(M, 3, 3) the pose covariance's rotation block: the ENU rotation-vector error, rad²."""
+
+
+def odometry_series(reader: BagReader, topic: str) -> OdometrySeries:
+    """Stamps, attitudes, body rates and velocities and attitude covariances of every
+    ``Odometry`` message of ``topic``."""
+    stamps, quats, rates, velocities, covariances = [], [], [], [], []
     for message in reader.messages([topic]):
         decoded = reader.decode(message)
         orientation = decoded.pose.pose.orientation
+        twist = decoded.twist.twist
         stamps.append(_stamp_ns(decoded.header))
         quats.append((orientation.x, orientation.y, orientation.z, orientation.w))
+        rates.append((twist.angular.x, twist.angular.y, twist.angular.z))
+        velocities.append((twist.linear.x, twist.linear.y, twist.linear.z))
         covariances.append(np.reshape(decoded.pose.covariance, (6, 6))[3:, 3:])
-    return (
+    return OdometrySeries(
         np.array(stamps, dtype=np.int64),
         np.array(quats, dtype=float).reshape(-1, 4),
+        np.array(rates, dtype=float).reshape(-1, 3),
+        np.array(velocities, dtype=float).reshape(-1, 3),
         np.array(covariances, dtype=float).reshape(-1, 3, 3),
     )
-
-
-def rpy_sigma_rad(rpy_rad, attitude_covariance_enu_rad2) -> np.ndarray:
-    """(M, 3) 1σ (rad) of roll, pitch and yaw (R = Rz(yaw)·Ry(pitch)·Rx(roll)) at attitudes
-    ``rpy_rad`` (M, 3) whose error is the ENU rotation vector φ (R_true = Exp(φ)·R) with
-    covariance ``attitude_covariance_enu_rad2`` (M, 3, 3).
-
-    To first order the Euler errors are J·φ with J the inverse of the map from Euler increments
-    to the rotation they make in ENU, [Rz·Ry·x̂ | Rz·ŷ | ẑ]; their covariance is J·P·Jᵀ.
-    """
-    _, pitch, yaw = np.moveaxis(np.asarray(rpy_rad, dtype=float), -1, 0)
-    cos_yaw, sin_yaw, cos_pitch = np.cos(yaw), np.sin(yaw), np.cos(pitch)
-    zeros, ones = np.zeros_like(yaw), np.ones_like(yaw)
-    jacobian = np.stack(
-        [
-            np.stack([cos_yaw / cos_pitch, sin_yaw / cos_pitch, zeros], axis=-1),
-            np.stack([-sin_yaw, cos_yaw, zeros], axis=-1),
-            np.stack([cos_yaw * np.tan(pitch), sin_yaw * np.tan(pitch), ones], axis=-1),
-        ],
-        axis=-2,
-    )
-    covariance = jacobian @ np.asarray(attitude_covariance_enu_rad2, dtype=float)
-    variances = np.einsum("...ij,...ij->...i", covariance, jacobian)
-    return np.sqrt(np.maximum(variances, 0.0))
 
 
 def vectors_at_stamps(stamps_ns: np.ndarray, source: StampedVectors) -> np.ndarray:
@@ -542,24 +294,6 @@ def interpolate_vectors(stamps_ns: np.ndarray, source: StampedVectors) -> np.nda
     return interpolated
 
 
-def interpolate_rpy_rad(stamps_ns: np.ndarray, source_stamps_ns, source_quat_xyzw) -> np.ndarray:
-    """(N, 3) roll, pitch, yaw (rad) of the source attitudes slerped to ``stamps_ns`` (ns);
-    NaN outside the span of the source stamps or when fewer than two source samples exist."""
-    rpy = np.full((len(stamps_ns), 3), np.nan)
-    unique_stamps, first = np.unique(
-        np.asarray(source_stamps_ns, dtype=np.int64), return_index=True
-    )
-    if unique_stamps.size < 2:
-        return rpy
-    origin_ns = unique_stamps[0]
-    slerp = Slerp((unique_stamps - origin_ns) * 1e-9, Rotation.from_quat(source_quat_xyzw[first]))
-    t_s = (np.asarray(stamps_ns, dtype=np.int64) - origin_ns) * 1e-9
-    inside = (t_s >= 0.0) & (t_s <= (unique_stamps[-1] - origin_ns) * 1e-9)
-    if np.any(inside):
-        rpy[inside] = rpy_rad_from_quaternions(slerp(t_s[inside]).as_quat())
-    return rpy
-
-
 def report_data_from_bag(bag, title: str | None = None) -> ReportData:
     """The :class:`ReportData` of a bag holding ``anemometer/wind`` and ``wind/true``.
 
@@ -584,7 +318,7 @@ def report_data_from_bag(bag, title: str | None = None) -> ReportData:
 
 def _report_data(reader: BagReader, title: str) -> ReportData:
     required = (WIND_RAW_TOPIC, WIND_TRUE_TOPIC)
-    missing = [topic for topic in required if not _has_messages(reader, topic)]
+    missing = [topic for topic in required if not has_messages(reader, topic)]
     if missing:
         raise ReportDataError(
             f"bag {reader.path} has no {' and no '.join(missing)} messages; a wind report needs "
@@ -595,19 +329,19 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
     corrected = vectors_at_stamps(measured.stamps_ns, stamped_vectors(reader, WIND_TRUE_TOPIC))
     t_s = measured.stamps_ns / NANOSECONDS_PER_SECOND
     true_wind = None
-    if _has_messages(reader, TRUTH_WIND_TOPIC):
+    if has_messages(reader, TRUTH_WIND_TOPIC):
         true_wind = interpolate_vectors(
             measured.stamps_ns, stamped_vectors(reader, TRUTH_WIND_TOPIC)
         )
     attitude_t_s = nav_rpy = truth_rpy = nav_rpy_sigma = None
-    if _has_messages(reader, NAV_ODOMETRY_TOPIC):
-        nav_stamps_ns, nav_quats, nav_covariances = stamped_orientations(reader, NAV_ODOMETRY_TOPIC)
-        attitude_t_s = nav_stamps_ns / NANOSECONDS_PER_SECOND
-        nav_rpy = rpy_rad_from_quaternions(nav_quats)
-        nav_rpy_sigma = rpy_sigma_rad(nav_rpy, nav_covariances)
-        if _has_messages(reader, TRUTH_ODOMETRY_TOPIC):
-            truth_stamps_ns, truth_quats, _ = stamped_orientations(reader, TRUTH_ODOMETRY_TOPIC)
-            truth_rpy = interpolate_rpy_rad(nav_stamps_ns, truth_stamps_ns, truth_quats)
+    if has_messages(reader, NAV_ODOMETRY_TOPIC):
+        nav = odometry_series(reader, NAV_ODOMETRY_TOPIC)
+        attitude_t_s = nav.stamps_ns / NANOSECONDS_PER_SECOND
+        nav_rpy = rpy_rad_from_quaternions(nav.quat_xyzw)
+        nav_rpy_sigma = rpy_sigma_rad(nav_rpy, nav.attitude_covariance_enu_rad2)
+        if has_messages(reader, TRUTH_ODOMETRY_TOPIC):
+            truth = odometry_series(reader, TRUTH_ODOMETRY_TOPIC)
+            truth_rpy = interpolate_rpy_rad(nav.stamps_ns, truth.stamps_ns, truth.quat_xyzw)
     products, products_source = _products(reader, t_s, corrected)
     minute_ns = _TIME_ORIGIN_STEP_S * NANOSECONDS_PER_SECOND
     return ReportData(
@@ -713,35 +447,23 @@ def _product_from_stats(values: dict[str, float], means: StampedVectors) -> Wind
     )
 
 
-def main(argv=None) -> int:
-    """Command line: draw the report of a bag, or of a run saved with :func:`save_report_data`."""
-    parser = argparse.ArgumentParser(
-        prog="wind_report", description="Draw wind-correction figures and tables."
-    )
-    parser.add_argument(
-        "source",
-        type=Path,
-        help="bag directory holding anemometer/wind and wind/true (written by process_bag or "
-        "recorded from the nodes), or a report data file (.npz)",
-    )
-    parser.add_argument(
-        "--out", type=Path, default=None, help="output folder (default: <source>_report)"
-    )
-    arguments = parser.parse_args(argv)
-    source = arguments.source
-    try:
-        if source.is_file():
-            data = load_report_data(source)
-            default_out = source.with_name(source.stem + "_report")
-        else:
-            data = report_data_from_bag(source)
-            default_out = source.with_name(source.name + "_report")
-    except ReportDataError as error:
-        parser.exit(2, f"wind_report: {error}\n")
-    for path in write_report(data, arguments.out or default_out):
-        print(path)
-    return 0
+def wind_series(data: ReportData) -> list[tuple[str, np.ndarray, str]]:
+    """(label, (N, 3) wind, style) of each series; the measured one is in sensor axes."""
+    series = [
+        ("measured (sensor axes)", data.measured_wind_sensor_mps, "tab:gray"),
+        ("corrected", data.corrected_wind_enu_mps, "tab:blue"),
+    ]
+    if data.true_wind_enu_mps is not None:
+        series.append(("true", data.true_wind_enu_mps, "tab:green"))
+    return series
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def titled(data: ReportData, what: str) -> str:
+    """A figure or table title: ``what``, after the run's title when it has one."""
+    return f"{data.title}: {what}" if data.title else what
+
+
+def utc_text(t_s: float) -> str:
+    """ISO 8601 UTC time of ``t_s`` (s since the epoch), whole seconds."""
+    moment = datetime.datetime.fromtimestamp(t_s, tz=datetime.UTC)
+    return moment.strftime("%Y-%m-%dT%H:%M:%SZ")

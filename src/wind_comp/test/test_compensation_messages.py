@@ -1,4 +1,4 @@
-"""Conversions between contract messages and the compensator's arrays (no DDS)."""
+"""Conversions between the compensation's contract messages and values (no DDS)."""
 
 import math
 
@@ -16,31 +16,28 @@ from buoy_common.contract import (
     stamp_to_seconds,
     window_label,
 )
-from wind_comp.nav_messages import (
-    EARTH_RATE_RAD_S,
+from buoy_nav.rotations import rotate_by_quaternion_components
+from wind_comp.compensation_messages import (
     STATS_FIELDS,
     MalformedMessageError,
-    StampOrder,
     anemometer_sample,
     anemometer_sample_cdr,
-    body_to_enu,
-    body_to_enu_components,
-    checked_fix_latitude_deg,
+    fix_fields,
     fix_fields_cdr,
-    fix_latitude_deg,
-    odometry_arrays,
     odometry_fields,
     odometry_fields_cdr,
     product_messages,
-    rate_relative_to_level_components,
-    remove_earth_rate,
     stats_values,
     true_wind_cdr,
+    true_winds_cdr,
 )
+from wind_comp.config import CompensatorConfig
+from wind_comp.pipeline import CompensationPipeline, StampOrder
 from wind_comp.products import WindAverager
 from wind_comp.wind_echo_node import utc_text, wind_line
 
 RNG = np.random.default_rng(11)
+CONFIG = CompensatorConfig(anemometer_position_body_m=(0, 0, 3), anemometer_rpy_deg=(0, 0, 0))
 
 
 def odometry(quat_xyzw, rate_body, velocity_body, sec=100, nanosec=0):
@@ -82,27 +79,31 @@ def test_odometry_velocity_is_rotated_into_enu_like_scipy():
     )
     assert t_s == 5.25
     np.testing.assert_allclose(
-        body_to_enu_components(quat, velocity), attitude.apply(velocity_body), atol=1e-14
+        rotate_by_quaternion_components(quat, velocity), attitude.apply(velocity_body), atol=1e-14
     )
     np.testing.assert_array_equal(rate, [0.01, 0.02, 0.03])
 
 
-def test_batch_conversion_equals_single_messages_bitwise():
+def test_messages_read_from_cdr_equal_decoded_messages_and_convert_as_columns_bitwise():
     quats = Rotation.random(20, random_state=3).as_quat()
     messages = [
         odometry(q, RNG.normal(0, 0.1, 3), RNG.normal(0, 2, 3), nanosec=i)
         for i, q in enumerate(quats)
     ]
-    arrays, rejected = odometry_arrays(messages)
-    assert rejected == {}
     # One message at a time as compensation_node takes them, from message objects and from CDR.
     singles = [odometry_fields(m) for m in messages]
     assert [odometry_fields_cdr(serialize_message(m)) for m in messages] == singles
+    # Whole columns, as process_bag converts them: the same numbers, bit for bit.
+    quat_columns = np.array([q for _, q, _, _ in singles])
+    velocity_columns = np.array([v for _, _, _, v in singles])
     np.testing.assert_array_equal(
-        arrays.velocity_enu_mps, [body_to_enu_components(q, v) for _, q, _, v in singles]
+        np.stack(rotate_by_quaternion_components(quat_columns.T, velocity_columns.T), axis=-1),
+        [rotate_by_quaternion_components(q, v) for _, q, _, v in singles],
     )
-    np.testing.assert_array_equal(arrays.quat_xyzw, [q for _, q, _, _ in singles])
-    np.testing.assert_array_equal(arrays.t_s, [t for t, _, _, _ in singles])
+    np.testing.assert_array_equal(quat_columns, quats)
+    np.testing.assert_array_equal(
+        [t for t, _, _, _ in singles], [i * 1e-9 + 100 for i in range(20)]
+    )
 
 
 @pytest.mark.parametrize(
@@ -126,9 +127,16 @@ def test_malformed_odometry_is_rejected_with_its_reason(change, reason):
         odometry_fields(message)
     assert raised.value.reason == reason
     good = odometry([0, 0, 0, 1], [0, 0, 0], [1, 0, 0])
-    arrays, rejected = odometry_arrays([good, message, good])
+    later = odometry([0, 0, 0, 1], [0, 0, 0], [1, 0, 0], nanosec=1)
+    pipeline, rejected = CompensationPipeline(CONFIG), {}
+    for candidate in (good, message, later):
+        try:
+            assert pipeline.add_odometry(*odometry_fields(candidate)) is None
+        except MalformedMessageError as error:
+            rejected[error.reason] = rejected.get(error.reason, 0) + 1
     assert rejected == {reason: 1}
-    assert arrays.t_s.shape == (2,)
+    pipeline.ready()
+    assert pipeline.compensator.nav_track.n_accepted == 2
 
 
 def test_anemometer_sample_round_trip_and_rejections():
@@ -189,68 +197,18 @@ def test_fix_latitude_and_its_rejections():
     fix = NavSatFix()
     fix.status.status = NavSatStatus.STATUS_FIX
     fix.latitude = -33.5
-    assert fix_latitude_deg(fix) == -33.5
+    pipeline = CompensationPipeline(CONFIG)
+    assert pipeline.add_fix(*fix_fields(fix)) is None
+    assert pipeline.latitude_deg == -33.5
     fix.status.status = NavSatStatus.STATUS_NO_FIX
     fix.latitude = math.nan
-    assert fix_latitude_deg(fix) is None
+    assert pipeline.add_fix(*fix_fields(fix)) is None  # no fix: the latitude is kept
+    assert pipeline.latitude_deg == -33.5
     fix.status.status = NavSatStatus.STATUS_FIX
-    with pytest.raises(MalformedMessageError, match="non_finite"):
-        fix_latitude_deg(fix)
+    assert pipeline.add_fix(*fix_fields(fix)) == "non_finite"
     fix.latitude = 91.0
-    with pytest.raises(MalformedMessageError, match="latitude_out_of_range"):
-        fix_latitude_deg(fix)
-
-
-def test_earth_rate_removal_inverts_what_a_gyro_senses():
-    attitudes = Rotation.random(50, random_state=5)
-    latitudes_deg = RNG.uniform(-89, 89, 50)
-    rates_nb = RNG.normal(0, 0.2, (50, 3))
-    phi = np.radians(latitudes_deg)
-    earth_enu = EARTH_RATE_RAD_S * np.column_stack([np.zeros(50), np.cos(phi), np.sin(phi)])
-    sensed = rates_nb + attitudes.inv().apply(earth_enu)
-    recovered = remove_earth_rate(sensed, attitudes.as_quat(), latitudes_deg)
-    np.testing.assert_allclose(recovered, rates_nb, atol=1e-15)
-    # The Earth's rate has the same length in any attitude.
-    np.testing.assert_allclose(
-        np.linalg.norm(sensed - recovered, axis=1), EARTH_RATE_RAD_S, rtol=1e-12
-    )
-
-
-def test_earth_rate_is_kept_without_a_latitude():
-    rates = RNG.normal(0, 0.1, (4, 3))
-    quats = Rotation.random(4, random_state=1).as_quat()
-    np.testing.assert_array_equal(remove_earth_rate(rates, quats, math.nan), rates)
-    single = remove_earth_rate(rates[0], quats[0], 0.0)
-    # At the equator the Earth's rate is horizontal, pointing North.
-    np.testing.assert_allclose(
-        Rotation.from_quat(quats[0]).apply(rates[0] - single), [0, EARTH_RATE_RAD_S, 0], atol=1e-15
-    )
-
-
-def test_body_to_enu_keeps_length_and_matches_scipy():
-    attitudes = Rotation.random(30, random_state=9)
-    vectors = RNG.normal(0, 5, (30, 3))
-    rotated = body_to_enu(attitudes.as_quat(), vectors)
-    np.testing.assert_allclose(rotated, attitudes.apply(vectors), atol=1e-12)
-    np.testing.assert_allclose(np.linalg.norm(rotated, axis=1), np.linalg.norm(vectors, axis=1))
-
-
-def test_one_message_in_floats_converts_exactly_as_a_batch_of_messages():
-    # The node converts each nav/odometry in plain floats, process_bag whole columns.
-    attitudes = Rotation.random(40, random_state=13).as_quat() * RNG.uniform(0.5, 2.0, (40, 1))
-    rates = RNG.normal(0, 0.3, (40, 3))
-    velocities_body = RNG.normal(0, 2.0, (40, 3))
-    latitudes_deg = RNG.uniform(-89, 89, 40)
-    latitudes_deg[[3, 17]] = math.nan
-    batch_rates = remove_earth_rate(rates, attitudes, latitudes_deg)
-    batch_velocities = body_to_enu(attitudes, velocities_body)
-    for k in range(40):
-        quat, rate = tuple(attitudes[k].tolist()), tuple(rates[k].tolist())
-        one_rate = rate_relative_to_level_components(rate, quat, float(latitudes_deg[k]))
-        one_velocity = body_to_enu_components(quat, tuple(velocities_body[k].tolist()))
-        np.testing.assert_array_equal(np.array(one_rate, dtype=float), batch_rates[k])
-        np.testing.assert_array_equal(np.array(one_velocity, dtype=float), batch_velocities[k])
-    np.testing.assert_array_equal(batch_rates[[3, 17]], rates[[3, 17]])
+    assert pipeline.add_fix(*fix_fields(fix)) == "latitude_out_of_range"
+    assert pipeline.latitude_deg == -33.5
 
 
 def test_true_wind_cdr_is_the_stamped_map_vector_ros_serialises():
@@ -266,6 +224,12 @@ def test_true_wind_cdr_is_the_stamped_map_vector_ros_serialises():
             [message.vector.x, message.vector.y, message.vector.z], vector
         )
         assert serialize_message(message) == raw
+    vectors = np.array([[1.0, -2.5, 0.25], [math.nan] * 3, [3.0, 4.0, 5.0]])
+    secs, nanosecs = np.array([1_767_225_600, 1, 2]), np.array([50_000_000, 0, 999_999_999])
+    assert true_winds_cdr(secs, nanosecs, vectors) == [
+        true_wind_cdr(int(sec), int(nanosec), vector)
+        for sec, nanosec, vector in zip(secs, nanosecs, vectors.tolist(), strict=True)
+    ]
 
 
 def test_product_messages_carry_the_window_statistics():
@@ -339,7 +303,7 @@ def test_fix_fields_from_cdr_equal_the_decoded_message(status, latitude):
     message.latitude, message.longitude, message.altitude = latitude, 120.5, 3.25
     raw = serialize_message(message)
     assert fix_fields_cdr(raw) == (status, latitude)
-    assert checked_fix_latitude_deg(*fix_fields_cdr(raw)) == fix_latitude_deg(message)
+    assert fix_fields_cdr(raw) == fix_fields(message)
 
 
 def test_nav_cdr_readers_decline_what_they_do_not_handle():

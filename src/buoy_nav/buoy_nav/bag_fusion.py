@@ -1,0 +1,196 @@
+"""Fusion over a recorded bag: the core of ``fusion_node`` fed from a bag, ``nav/*`` written
+to another.
+
+The sensor topics ``imu/data_raw``, ``gnss/fix``, ``gnss/heading`` (required), ``gnss/vel`` and
+``gnss/baseline`` (used when present) are read in log-time order and go through the same
+conversion (:mod:`buoy_nav.fusion_messages`) and engine as in the live node. Every solution's
+``nav/odometry``, ``nav/imu``, ``nav/velocity`` and ``nav/fix`` carry the log time of the IMU
+message that produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries
+its own answer. ``fuse_bag`` is the command line of :func:`fuse_bag`; ``process_bag`` runs
+:class:`OfflineFusion` ahead of the wind compensation.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Iterable
+from typing import NamedTuple
+
+from buoy_common.bag_io import BackgroundBagWriter, BagError, BagMessage, BagReader, BagWriter
+from buoy_common.contract import (
+    GNSS_BASELINE_TOPIC,
+    GNSS_FIX_TOPIC,
+    GNSS_HEADING_TOPIC,
+    GNSS_VELOCITY_TOPIC,
+    IMU_RAW_TOPIC,
+    NAV_MSGTYPES,
+    TRUTH_PREFIX,
+    bag_topic,
+)
+from buoy_common.progress import Progress
+from buoy_nav.config import FusionConfig
+from buoy_nav.engine import FusionEngine, NavSolution
+from buoy_nav.fusion_messages import (
+    FUSION_INPUT_MSGTYPES,
+    NavValues,
+    StampBook,
+    feed_imu_cdr,
+    feed_message,
+    nav_values,
+    solution_cdr,
+)
+
+REQUIRED_TOPICS = (IMU_RAW_TOPIC, GNSS_FIX_TOPIC, GNSS_HEADING_TOPIC)
+OPTIONAL_TOPICS = (GNSS_VELOCITY_TOPIC, GNSS_BASELINE_TOPIC)
+PROGRESS_EVERY_MESSAGES = 2000
+
+
+def relative_topic(name: str) -> str:
+    """A bag topic name without its leading slash (topic names of the contract are relative)."""
+    return name.lstrip("/")
+
+
+# Relative nav topic → (name stored in the bag, message type).
+NAV_BAG_TOPICS = {topic: (bag_topic(topic), msgtype) for topic, msgtype in NAV_MSGTYPES.items()}
+
+
+def sensor_topics_of(
+    reader: BagReader, config: FusionConfig, extra_required: Iterable[str] = ()
+) -> dict[str, str]:
+    """Relative → stored name of the fusion's input topics in ``reader``'s bag (``gnss/baseline``
+    only when ``config`` fuses it).
+
+    Raises BagError naming what is missing or of the wrong type.
+    """
+    reader.require(*REQUIRED_TOPICS, *extra_required)
+    stored = {relative_topic(name): name for name in reader.topics}
+    found = {}
+    for topic in (*REQUIRED_TOPICS, *OPTIONAL_TOPICS):
+        if topic not in stored or (topic == GNSS_BASELINE_TOPIC and not config.use_gnss_baseline):
+            continue
+        msgtype = reader.topics[stored[topic]].msgtype
+        if msgtype != FUSION_INPUT_MSGTYPES[topic]:
+            raise BagError(
+                f"bag {reader.path}: topic {stored[topic]} holds {msgtype}, "
+                f"expected {FUSION_INPUT_MSGTYPES[topic]}"
+            )
+        found[topic] = stored[topic]
+    return found
+
+
+def truth_topics_of(reader: BagReader) -> list[str]:
+    """Stored names of the truth topics in ``reader``'s bag."""
+    return sorted(n for n in reader.topics if relative_topic(n).startswith(TRUTH_PREFIX))
+
+
+class OfflineFusion:
+    """Feeds sensor messages to a :class:`FusionEngine` and writes its ``nav/*`` to a bag."""
+
+    def __init__(self, config: FusionConfig, writer: BagWriter | BackgroundBagWriter):
+        self.engine = FusionEngine(config)
+        self.stamps = StampBook()
+        self.writer = writer
+        self.rejections: Counter[str] = Counter()
+        self.first_solution_s: float | None = None
+        self.last_log_time_ns = 0
+
+    def add(self, topic: str, message, log_time_ns: int) -> list[NavValues]:
+        """One decoded sensor message of relative ``topic``; returns the values of the new
+        solutions' ``nav/*`` messages, which are written with log time ``log_time_ns``."""
+        return self._take(
+            topic, feed_message(self.engine, topic, message, self.stamps), log_time_ns
+        )
+
+    def add_message(self, reader: BagReader, topic: str, message: BagMessage) -> list[NavValues]:
+        """:meth:`add` of a bag message of relative ``topic``, IMU samples read from CDR."""
+        fed = (
+            feed_imu_cdr(self.engine, message.raw, self.stamps) if topic == IMU_RAW_TOPIC else None
+        )
+        if fed is None:
+            return self.add(topic, reader.decode(message), message.log_time_ns)
+        return self._take(topic, fed, message.log_time_ns)
+
+    def _take(self, topic: str, fed, log_time_ns: int) -> list[NavValues]:
+        solutions, rejection = fed
+        if rejection is not None:
+            self.rejections[f"{topic}: {rejection}"] += 1
+        self.last_log_time_ns = log_time_ns
+        return self._write(solutions, log_time_ns)
+
+    def finish(self) -> list[NavValues]:
+        """End of the data: the solutions still held back by the engine (written too)."""
+        return self._write(self.engine.flush(), self.last_log_time_ns)
+
+    def _write(self, solutions: list[NavSolution], log_time_ns: int) -> list[NavValues]:
+        written = []
+        for solution in solutions:
+            if self.first_solution_s is None:
+                self.first_solution_s = solution.t_s
+            values = nav_values(solution, self.stamps)
+            for topic, raw in solution_cdr(values).items():
+                stored_topic, msgtype = NAV_BAG_TOPICS[topic]
+                self.writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
+            written.append(values)
+        return written
+
+    def summary(self) -> list[str]:
+        """Human-readable lines: alignment, measurement use and rejections."""
+        health = self.engine.health()
+        lines = []
+        if self.first_solution_s is None:
+            lines.append(f"never aligned (alignment state: {health.alignment_state.name})")
+        else:
+            lines.append(f"first navigation solution at stamp {self.first_solution_s:.3f} s")
+        for kind, counters in health.counters.items():
+            rejected = ", ".join(f"{r} {n}" for r, n in sorted(counters.rejected.items()))
+            lines.append(
+                f"{kind:14s} accepted {counters.accepted:7d}  "
+                f"alignment {counters.used_for_alignment:4d}  "
+                f"superseded {counters.superseded:6d}  resets {counters.resets:3d}  "
+                f"mean NIS {counters.mean_nis:6.2f}  rejected: {rejected or 'none'}"
+            )
+        for key, count in sorted(self.rejections.items()):
+            lines.append(f"rejected message {key}: {count}")
+        return lines
+
+
+class FusedBag(NamedTuple):
+    """What :func:`fuse_bag` did."""
+
+    fusion: OfflineFusion
+    """The fusion that ran (its :meth:`OfflineFusion.summary` reports it)."""
+    topic_counts: dict[str, int]
+    """Messages written, per topic."""
+    wall_s: float
+    """Wall-clock time of the run, s."""
+    duration_s: float
+    """Span of the input bag's log times, s."""
+
+
+def fuse_bag(in_bag, out_bag, config: FusionConfig, overwrite: bool = False) -> FusedBag:
+    """Run the fusion over ``in_bag`` into ``out_bag`` (a new bag; replaced with
+    ``overwrite``). Raises BagError for a missing or unreadable bag or one without the fusion's
+    required topics."""
+    started = time.monotonic()
+    with BagReader(in_bag) as reader:
+        sensors = sensor_topics_of(reader, config)
+        truth = truth_topics_of(reader)
+        relative_of = {stored: relative for relative, stored in sensors.items()}
+        progress = Progress(reader.duration_s, f"fuse_bag {in_bag}", unit="bag s")
+        with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+            fusion = OfflineFusion(config, writer)
+            for index, message in enumerate(reader.messages([*sensors.values(), *truth])):
+                topic = relative_of.get(message.topic)
+                if topic is None:
+                    writer.write_raw(
+                        message.topic, message.msgtype, message.log_time_ns, message.raw
+                    )
+                else:
+                    fusion.add_message(reader, topic, message)
+                if index % PROGRESS_EVERY_MESSAGES == 0:
+                    progress.update((message.log_time_ns - reader.start_ns) * 1e-9)
+            fusion.finish()
+            progress.close()
+            counts = writer.counts
+    return FusedBag(fusion, counts, time.monotonic() - started, reader.duration_s)

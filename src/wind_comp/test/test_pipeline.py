@@ -1,0 +1,241 @@
+"""The compensation pipeline: live (one message at a time) and offline (stretches of messages)
+decide identically by construction, and the navigation conversion is the physics it claims."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from buoy_nav.earth import EARTH_RATE_RAD_S
+from buoy_nav.rotations import rotate_by_quaternion_components
+from wind_comp.compensation_messages import WindSample
+from wind_comp.compensator import WindStatus
+from wind_comp.config import CompensatorConfig
+from wind_comp.pipeline import CompensationPipeline, level_rate_components
+
+RNG = np.random.default_rng(31)
+LEVER_ARM_M = (0.2, -0.1, 3.0)
+MOUNTING_RPY_DEG = (1.0, -2.0, 30.0)
+LATITUDE_DEG = 35.0
+RATE_NB_RAD_S = np.array([0.2, -0.15, 0.1])
+ATTITUDE_0 = Rotation.from_euler("ZYX", [60.0, 4.0, -5.0], degrees=True)
+TRUE_WIND_ENU = np.array([-4.0, 7.0, 0.3])
+NAV_RATE_HZ = 100.0
+WIND_RATE_HZ = 20.0
+DURATION_S = 40.0
+ANEMOMETER_GAP_S = (15.0, 25.0)  # no anemometer samples in between: 10 s, the nav history
+NAV_LATENCY_S = 0.3  # the fusion's output delay, the log times of process_bag's nav/*
+CONFIG = CompensatorConfig(
+    anemometer_position_body_m=LEVER_ARM_M,
+    anemometer_rpy_deg=MOUNTING_RPY_DEG,
+    nav_history_s=10.0,
+    product_windows_s=(10.0, 20.0),
+)
+
+
+def navigation(t_s):
+    """Attitude, rate ω_nb and ENU velocity of a buoy turning at a constant rate and
+    accelerating uniformly: interpolating these is exact."""
+    attitude = ATTITUDE_0 * Rotation.from_rotvec(np.outer(t_s, RATE_NB_RAD_S))
+    velocity_enu = np.array([0.4, -0.2, 0.05]) + np.outer(t_s, [0.01, 0.02, -0.005])
+    return attitude, np.tile(RATE_NB_RAD_S, (len(t_s), 1)), velocity_enu
+
+
+def odometry_messages(t_s):
+    """nav/odometry values as the fusion publishes them: ω_ib (what the gyros sense, the
+    Earth's rotation included) and the velocity in body axes."""
+    attitude, rate_nb, velocity_enu = navigation(t_s)
+    latitude = math.radians(LATITUDE_DEG)
+    earth_rate_enu = EARTH_RATE_RAD_S * np.array([0.0, math.cos(latitude), math.sin(latitude)])
+    rate_ib = rate_nb + attitude.inv().apply(earth_rate_enu)
+    velocity_body = attitude.inv().apply(velocity_enu)
+    return [
+        (float(t), tuple(q), tuple(w), tuple(v))
+        for t, q, w, v in zip(
+            t_s, attitude.as_quat().tolist(), rate_ib.tolist(), velocity_body.tolist(), strict=True
+        )
+    ]
+
+
+def anemometer_samples(t_s):
+    """What an anemometer on the moving buoy reads of the steady true wind."""
+    attitude, rate_nb, velocity_enu = navigation(t_s)
+    sensor_velocity = velocity_enu + attitude.apply(np.cross(rate_nb, LEVER_ARM_M))
+    mounting = Rotation.from_euler("ZYX", MOUNTING_RPY_DEG[::-1], degrees=True)
+    readings = mounting.inv().apply(attitude.inv().apply(TRUE_WIND_ENU - sensor_velocity))
+    return [
+        WindSample(float(t), tuple(wind), None)
+        for t, wind in zip(t_s, readings.tolist(), strict=True)
+    ]
+
+
+def arrivals(nav_latency_s: float, wind_latency_s: float = 0.0):
+    """Every message in arrival order: a fix first, then each solution's odometry and fix as
+    the fusion publishes them ``nav_latency_s`` after their stamp, and anemometer samples
+    ``wind_latency_s`` after theirs, with a 10 s hole in the anemometer's record."""
+    nav_t = np.arange(0.0, DURATION_S, 1.0 / NAV_RATE_HZ)
+    wind_t = np.arange(1.0, DURATION_S - 1.0, 1.0 / WIND_RATE_HZ) + 0.0031
+    wind_t = wind_t[(wind_t < ANEMOMETER_GAP_S[0]) | (wind_t > ANEMOMETER_GAP_S[1])]
+    timeline = [
+        (t + nav_latency_s, 0, message)
+        for t, message in zip(nav_t, odometry_messages(nav_t), strict=True)
+    ]
+    timeline += [
+        (t + wind_latency_s, 1, sample)
+        for t, sample in zip(wind_t, anemometer_samples(wind_t), strict=True)
+    ]
+    timeline.sort(key=lambda item: item[:2])
+    return [("fix", (0, LATITUDE_DEG))] + [
+        ("odometry", message) if kind == 0 else ("wind", message) for _, kind, message in timeline
+    ]
+
+
+def feed(messages, wind_per_stretch: int | None):
+    """Feed the pipeline as compensation_node does (``wind_per_stretch`` None: results after
+    every message) or as process_bag does (results every ``wind_per_stretch`` anemometer
+    samples). Returns the statuses, true winds and products, in order."""
+    pipeline = CompensationPipeline(CONFIG)
+    outputs = []
+    waiting = 0
+    for kind, values in messages:
+        if kind == "fix":
+            assert pipeline.add_fix(*values) is None
+        elif kind == "odometry":
+            assert pipeline.add_odometry(*values) is None
+            pipeline.add_fix(0, LATITUDE_DEG)
+            if wind_per_stretch is None:
+                outputs.append(pipeline.ready())
+        else:
+            assert pipeline.add_wind(values) is None
+            waiting += 1
+            if wind_per_stretch is None or waiting == wind_per_stretch:
+                outputs.append(pipeline.ready())
+                waiting = 0
+    outputs.append(pipeline.flush())
+    status = np.concatenate([output.wind.status for output in outputs])
+    true_wind = np.concatenate([output.wind.true_wind_enu_mps for output in outputs])
+    products = [product for output in outputs for product in output.products]
+    return status, true_wind, products, pipeline
+
+
+@pytest.mark.parametrize(("nav_latency_s", "wind_latency_s"), [(NAV_LATENCY_S, 0.0), (0.0, 0.2)])
+def test_live_and_offline_decide_identically_across_an_anemometer_gap(
+    nav_latency_s, wind_latency_s
+):
+    messages = arrivals(nav_latency_s, wind_latency_s)
+    live_status, live_wind, live_products, live = feed(messages, wind_per_stretch=None)
+    wind_t = np.array([values.t_s for kind, values in messages if kind == "wind"])
+    # Every sample is corrected, those just before the gap included (navigation around them
+    # arrived long before the anemometer resumed), and exactly.
+    before_gap = wind_t[wind_t < ANEMOMETER_GAP_S[0]][-3:]
+    assert np.all(live_status == WindStatus.VALID), dict(
+        zip(*np.unique(live_status, return_counts=True), strict=True)
+    )
+    assert before_gap.size == 3
+    np.testing.assert_allclose(live_wind - TRUE_WIND_ENU, 0.0, atol=1e-9)
+    assert live.n_pending == 0
+    for wind_per_stretch in (1, 7, 256, 10_000):
+        status, wind, products, offline = feed(messages, wind_per_stretch)
+        np.testing.assert_array_equal(status, live_status)
+        np.testing.assert_array_equal(wind, live_wind)
+        assert products == live_products
+        assert offline.counts == live.counts
+    assert [p.window_s for p in live_products[:3]] == [10.0, 10.0, 20.0]  # in closing order
+
+
+def test_both_arrival_orders_decide_alike():
+    first, second = (
+        feed(arrivals(*latencies), None) for latencies in ((NAV_LATENCY_S, 0), (0, 0.2))
+    )
+    np.testing.assert_array_equal(first[0], second[0])
+    np.testing.assert_array_equal(first[1], second[1])
+
+
+def test_wind_arriving_after_the_navigation_history_is_reported_alike_live_and_offline():
+    # From 5 s on the anemometer's samples are held up and arrive, in order, once the
+    # navigation has reached 18 s: those lagging it by more than the 10 s history find their
+    # navigation forgotten, live and offline alike.
+    messages = arrivals(0.0)
+    held = [m for m in messages if m[0] == "wind" and m[1].t_s >= 5.0]
+    others = [m for m in messages if not (m[0] == "wind" and m[1].t_s >= 5.0)]
+    release = next(i for i, m in enumerate(others) if m[0] == "odometry" and m[1][0] >= 18.0)
+    messages = others[: release + 1] + held + others[release + 1 :]
+    live_status, live_wind, _, _ = feed(messages, None)
+    wind_t = np.array([values.t_s for kind, values in messages if kind == "wind"])
+    assert np.all(live_status[(wind_t >= 5.0) & (wind_t < 7.9)] == WindStatus.NAV_HISTORY_EXCEEDED)
+    assert np.all(live_status[(wind_t < 5.0) | (wind_t > 8.1)] == WindStatus.VALID)
+    for wind_per_stretch in (5, 10_000):
+        status, wind, _, _ = feed(messages, wind_per_stretch)
+        np.testing.assert_array_equal(status, live_status)
+        np.testing.assert_array_equal(wind, live_wind)
+
+
+def test_rejections_are_reported_and_every_sample_gets_its_output():
+    pipeline = CompensationPipeline(CONFIG)
+    odometry = odometry_messages(np.array([0.0, 0.01, 0.02]))
+    assert pipeline.add_odometry(*odometry[1]) is None
+    assert pipeline.add_odometry(*odometry[0]) == "stamp_not_increasing"
+    samples = anemometer_samples(np.array([0.005, 0.015]))
+    assert pipeline.add_wind(samples[1]) is None
+    assert pipeline.add_wind(samples[0]) == "stamp_not_increasing"
+    assert pipeline.add_wind(WindSample(0.02, (math.nan,) * 3, "wrong_frame")) == "wrong_frame"
+    with pytest.raises(ValueError, match="quaternion of 4"):
+        pipeline.add_odometry(0.015, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert pipeline.add_odometry(*odometry[2]) is None
+    output = pipeline.flush()
+    assert output.wind.status.tolist() == [
+        WindStatus.VALID,
+        WindStatus.INVALID_STAMP,
+        WindStatus.INVALID_WIND,
+    ]
+    assert pipeline.compensator.nav_track.n_accepted == 2
+
+
+def test_earth_rate_removal_inverts_what_a_gyro_senses():
+    attitudes = Rotation.random(50, random_state=5)
+    latitudes_deg = RNG.uniform(-89, 89, 50)
+    rates_nb = RNG.normal(0, 0.2, (50, 3))
+    phi = np.radians(latitudes_deg)
+    earth_enu = EARTH_RATE_RAD_S * np.column_stack([np.zeros(50), np.cos(phi), np.sin(phi)])
+    sensed = rates_nb + attitudes.inv().apply(earth_enu)
+    recovered = np.stack(
+        level_rate_components(sensed.T, attitudes.as_quat().T, latitudes_deg), axis=-1
+    )
+    np.testing.assert_allclose(recovered, rates_nb, atol=1e-15)
+    # The Earth's rate has the same length in any attitude.
+    np.testing.assert_allclose(
+        np.linalg.norm(sensed - recovered, axis=1), EARTH_RATE_RAD_S, rtol=1e-12
+    )
+
+
+def test_earth_rate_is_kept_without_a_latitude():
+    rates = RNG.normal(0, 0.1, (4, 3))
+    quats = Rotation.random(4, random_state=1).as_quat()
+    kept = np.stack(np.broadcast_arrays(*level_rate_components(rates.T, quats.T, math.nan)), -1)
+    np.testing.assert_array_equal(kept, rates)
+    single = np.array(level_rate_components(tuple(rates[0]), tuple(quats[0]), 0.0), dtype=float)
+    # At the equator the Earth's rate is horizontal, pointing North.
+    np.testing.assert_allclose(
+        Rotation.from_quat(quats[0]).apply(rates[0] - single), [0, EARTH_RATE_RAD_S, 0], atol=1e-15
+    )
+
+
+def test_one_message_in_floats_converts_exactly_as_a_batch_of_messages():
+    # The node converts each nav/odometry in plain floats, process_bag whole columns.
+    attitudes = Rotation.random(40, random_state=13).as_quat() * RNG.uniform(0.5, 2.0, (40, 1))
+    rates = RNG.normal(0, 0.3, (40, 3))
+    velocities_body = RNG.normal(0, 2.0, (40, 3))
+    latitudes_deg = RNG.uniform(-89, 89, 40)
+    latitudes_deg[[3, 17]] = math.nan
+    batch_rates = np.stack(level_rate_components(rates.T, attitudes.T, latitudes_deg), axis=-1)
+    batch_velocities = np.stack(
+        rotate_by_quaternion_components(attitudes.T, velocities_body.T), axis=-1
+    )
+    for k in range(40):
+        quat, rate = tuple(attitudes[k].tolist()), tuple(rates[k].tolist())
+        one_rate = level_rate_components(rate, quat, float(latitudes_deg[k]))
+        one_velocity = rotate_by_quaternion_components(quat, tuple(velocities_body[k].tolist()))
+        np.testing.assert_array_equal(np.array(one_rate, dtype=float), batch_rates[k])
+        np.testing.assert_array_equal(np.array(one_velocity, dtype=float), batch_velocities[k])
+    np.testing.assert_array_equal(batch_rates[[3, 17]], rates[[3, 17]])

@@ -1,0 +1,223 @@
+"""Fusion and wind compensation over a recorded bag: the offline twin of the two nodes.
+
+:func:`process_bag` runs over the bag's sensor topics, in log-time order, the core of
+``fusion_node`` (:class:`buoy_nav.bag_fusion.OfflineFusion`) followed by the core of
+``compensation_node`` (:class:`wind_comp.pipeline.CompensationPipeline`): each navigation
+solution passes to the compensation as the numbers its ``nav/odometry`` and ``nav/fix`` carry,
+in the order the node receives them, and every ``anemometer/wind`` sample yields exactly one
+``wind/true`` (NaN when it cannot be corrected). The new bag holds ``nav/*``, ``wind/true``, the
+wind products (``wind/mean_<window>``, ``wind/stats_<window>``), the measured
+``anemometer/wind`` and any truth topics; every output message carries the log time of the input
+message after which it was produced. The wind products are also written to
+``<OUT_BAG>_wind_products.csv``. ``process_bag`` is its command line.
+
+The compensation runs in this process, on whole stretches of samples at a time; the process
+that writes the bag only writes.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections import Counter, deque
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+from geometry_msgs.msg import Vector3Stamped
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagReader
+from buoy_common.contract import (
+    WIND_RAW_TOPIC,
+    WIND_TRUE_TOPIC,
+    bag_topic,
+    wind_mean_topic,
+    wind_stats_topic,
+)
+from buoy_common.progress import Progress
+from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of, truth_topics_of
+from buoy_nav.config import FusionConfig
+from buoy_nav.fusion_messages import STATUS_FIX, NavValues
+from wind_comp.compensation_messages import (
+    anemometer_sample,
+    anemometer_sample_cdr,
+    product_messages,
+    true_winds_cdr,
+)
+from wind_comp.compensator import WindStatus
+from wind_comp.config import CompensatorConfig
+from wind_comp.pipeline import CompensationOutput, CompensationPipeline
+from wind_comp.products import WindProduct
+
+TRUE_WIND_BAG_TOPIC = bag_topic(WIND_TRUE_TOPIC)
+VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
+FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+PRODUCTS_CSV_SUFFIX = "_wind_products.csv"
+PROGRESS_EVERY_MESSAGES = 2000
+# Anemometer samples handed to the compensation at a time: enough to pay numpy's per-call cost
+# once per stretch, few enough to keep the memory flat.
+SAMPLES_PER_STRETCH = 256
+
+
+def products_csv_path(out_bag) -> Path:
+    """Where the wind products of ``out_bag`` go: beside it, ``<name>_wind_products.csv``."""
+    out_bag = Path(out_bag)
+    return out_bag.with_name(out_bag.name + PRODUCTS_CSV_SUFFIX)
+
+
+@dataclass
+class ProcessSummary:
+    """What a run did: counts of outputs and rejections, products, timing."""
+
+    wind_status_counts: dict[WindStatus, int] = field(default_factory=dict)
+    rejected_wind_messages: Counter = field(default_factory=Counter)
+    products: list[WindProduct] = field(default_factory=list)
+    topic_counts: dict[str, int] = field(default_factory=dict)
+    fusion_lines: list[str] = field(default_factory=list)
+    duration_s: float = 0.0
+    wall_s: float = 0.0
+    csv_path: Path | None = None
+
+
+class OfflineCompensation:
+    """What ``compensation_node`` does, fed from a bag and writing to one.
+
+    Navigation solutions come as the fusion's :class:`~buoy_nav.fusion_messages.NavValues`
+    (what ``nav/odometry`` and ``nav/fix`` carry, in that order), anemometer samples as the
+    records of ``anemometer/wind``; ``wind/true`` and the products are written with the log
+    time of the record after which they were decided.
+    """
+
+    def __init__(self, config: CompensatorConfig, writer: BackgroundBagWriter):
+        self.pipeline = CompensationPipeline(config)
+        self.writer = writer
+        self.rejected: Counter[str] = Counter()
+        self.products: list[WindProduct] = []
+        self._stamps: deque[tuple[int, int]] = deque()
+        self._samples_waiting = 0
+
+    def add_navigation(self, solutions: list[NavValues]) -> None:
+        """The ``nav/odometry`` and ``nav/fix`` of each solution, as the node receives them."""
+        pipeline = self.pipeline
+        for values in solutions:
+            pipeline.add_odometry(
+                values.sec + values.nanosec * 1e-9,
+                values.attitude_xyzw,
+                values.angular_rate_body_rad_s,
+                values.velocity_body_mps,
+            )
+            pipeline.add_fix(STATUS_FIX, values.latitude_deg)
+
+    def add_wind(self, reader: BagReader, message: BagMessage) -> None:
+        """One ``anemometer/wind`` record; every few hundred, the decided samples are written."""
+        parsed = anemometer_sample_cdr(message.raw)
+        if parsed is None:
+            decoded = reader.decode(message)
+            stamp = decoded.header.stamp
+            parsed = (anemometer_sample(decoded), stamp.sec, stamp.nanosec)
+        sample, sec, nanosec = parsed
+        rejection = self.pipeline.add_wind(sample)
+        if rejection is not None:
+            self.rejected[rejection] += 1
+        self._stamps.append((sec, nanosec))
+        self._samples_waiting += 1
+        if self._samples_waiting >= SAMPLES_PER_STRETCH:
+            self._samples_waiting = 0
+            self._write(self.pipeline.ready(), message.log_time_ns)
+
+    def finish(self, log_time_ns: int) -> None:
+        """End of the data: every sample decided and written, partial windows closed."""
+        self._write(self.pipeline.flush(), log_time_ns)
+
+    def _write(self, output: CompensationOutput, log_time_ns: int) -> None:
+        stamps = [self._stamps.popleft() for _ in range(len(output.wind))]
+        secs = np.array([sec for sec, _ in stamps], dtype=np.int64)
+        nanosecs = np.array([nanosec for _, nanosec in stamps], dtype=np.int64)
+        for raw in true_winds_cdr(secs, nanosecs, output.wind.true_wind_enu_mps):
+            self.writer.write_raw(TRUE_WIND_BAG_TOPIC, VECTOR3_STAMPED, log_time_ns, raw)
+        for product in output.products:
+            self.products.append(product)
+            mean, stats = product_messages(
+                Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
+            )
+            self.writer.write(
+                bag_topic(wind_mean_topic(product.window_s)), VECTOR3_STAMPED, log_time_ns, mean
+            )
+            self.writer.write(
+                bag_topic(wind_stats_topic(product.window_s)),
+                FLOAT64_MULTI_ARRAY,
+                log_time_ns,
+                stats,
+            )
+
+
+def write_products_csv(products: list[WindProduct], path: Path) -> None:
+    """One row per closed averaging window; columns named with their units."""
+    names = [f.name for f in fields(WindProduct)]
+    with open(path, "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(names)
+        for product in products:
+            writer.writerow([_csv_value(getattr(product, name)) for name in names])
+
+
+def _csv_value(value) -> str:
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else f"{value:.6f}"
+    return str(value)
+
+
+def process_bag(
+    in_bag,
+    out_bag,
+    fusion_config: FusionConfig,
+    compensator_config: CompensatorConfig,
+    overwrite: bool = False,
+) -> ProcessSummary:
+    """Fuse and correct ``in_bag`` into ``out_bag`` (a new bag; replaced with ``overwrite``)
+    and the products CSV beside it. Raises BagError for a missing or unreadable bag or one
+    without the required topics."""
+    started = time.monotonic()
+    csv_path = products_csv_path(out_bag)
+    with BagReader(in_bag) as reader:
+        sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_RAW_TOPIC,))
+        stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
+        truth = truth_topics_of(reader)
+        relative_of = {stored: relative for relative, stored in sensors.items()}
+        progress = Progress(reader.duration_s, f"process_bag {in_bag}", unit="bag s")
+        with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+            fusion = OfflineFusion(fusion_config, writer)
+            compensation = OfflineCompensation(compensator_config, writer)
+            log_time_ns = reader.start_ns
+            for index, message in enumerate(
+                reader.messages([*sensors.values(), stored_wind, *truth])
+            ):
+                log_time_ns = message.log_time_ns
+                topic = relative_of.get(message.topic)
+                if topic is not None:
+                    solutions = fusion.add_message(reader, topic, message)
+                    if solutions:
+                        compensation.add_navigation(solutions)
+                else:
+                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                    if message.topic == stored_wind:
+                        compensation.add_wind(reader, message)
+                if index % PROGRESS_EVERY_MESSAGES == 0:
+                    progress.update((log_time_ns - reader.start_ns) * 1e-9)
+            compensation.add_navigation(fusion.finish())
+            compensation.finish(log_time_ns)
+        progress.close()
+        duration_s = reader.duration_s
+    write_products_csv(compensation.products, csv_path)
+    return ProcessSummary(
+        wind_status_counts=compensation.pipeline.counts,
+        rejected_wind_messages=compensation.rejected,
+        products=compensation.products,
+        topic_counts=writer.counts,
+        fusion_lines=fusion.summary(),
+        duration_s=duration_s,
+        wall_s=time.monotonic() - started,
+        csv_path=csv_path,
+    )

@@ -1,0 +1,233 @@
+"""Contract messages of the wind compensation as values, and values as contract messages.
+
+The live ``compensation_node`` and offline bag processing both convert through this module, so
+a message is accepted, rejected or built identically in both. Decoded messages are read by
+attribute access only: rclpy message objects and rosbags' decoded objects both work; the
+``*_cdr`` readers take a message's CDR bytes straight (:mod:`buoy_common.cdr`).
+
+Inputs (interface contract):
+
+- ``anemometer/wind`` (geometry_msgs/Vector3Stamped, frame ``anemometer_link``): air velocity
+  relative to the sensor in anemometer axes, m/s.
+- ``nav/odometry`` (nav_msgs/Odometry, frame ``map``, child ``base_link``):
+  ``pose.pose.orientation`` = body→ENU attitude R_nb, ``twist.twist.angular`` = bias-corrected
+  body rate ω_ib (body axes, rad/s), ``twist.twist.linear`` = velocity of the body origin in body
+  axes (m/s).
+- ``nav/fix`` (sensor_msgs/NavSatFix): WGS-84 latitude of the body origin, which removes the
+  Earth's rotation from the body rate (:mod:`wind_comp.pipeline`).
+
+Outputs:
+
+- ``wind/true`` (geometry_msgs/Vector3Stamped, frame ``map``): corrected ENU wind, m/s, with the
+  anemometer sample's own header stamp; NaN components when the sample could not be corrected.
+- ``wind/mean_<window>`` (geometry_msgs/Vector3Stamped, frame ``map``): vector mean of the ENU
+  wind over one averaging window, stamped with the window end.
+- ``wind/stats_<window>`` (std_msgs/Float64MultiArray): the statistics of the same window,
+  ``data[i]`` named by ``layout.dim[i].label`` (one dimension of size 1 per field), in the order
+  of :data:`STATS_FIELDS`.
+
+Windows are named by :func:`buoy_common.contract.window_label`: ``1min`` for 60 s, ``10min`` for
+600 s.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from buoy_common import cdr
+from buoy_common.contract import (
+    ANEMOMETER_FRAME,
+    BODY_FRAME,
+    MAP_FRAME,
+    Reason,
+    seconds_to_stamp,
+    stamp_to_seconds,
+)
+from wind_comp.nav_interpolation import MIN_QUATERNION_NORM, quaternion_norm
+from wind_comp.products import WindProduct
+
+STATS_FIELDS = (
+    "scalar_mean_speed_mps",
+    "vector_mean_speed_mps",
+    "vector_mean_direction_deg",
+    "gust_mps",
+    "std_u_mps",
+    "std_v_mps",
+    "std_w_mps",
+    "n_valid",
+    "n_invalid",
+    "window_start_s",
+    "window_end_s",
+    "first_sample_s",
+    "last_sample_s",
+)
+"""Layout of ``wind/stats_<window>``: speeds m/s (horizontal), direction meteorological deg
+(blowing FROM, clockwise from true North), standard deviations of the ENU components m/s,
+sample counts, window bounds and first/last sample stamps in s since the epoch (a window closed
+at shutdown may end before ``window_end_s``). Conventions: :mod:`wind_comp.products`."""
+
+
+class MalformedMessageError(ValueError):
+    """A message is malformed. ``reason`` is a short label for counting; the text details it."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+class WindSample(NamedTuple):
+    """One anemometer sample as the compensation takes it."""
+
+    t_s: float
+    """Header stamp, s since the epoch."""
+    wind_sensor_mps: tuple[float, float, float]
+    """Air velocity in anemometer axes, m/s; NaN when the message was rejected."""
+    rejection: str | None
+    """Reason the message was rejected (its output is then invalid), None when accepted."""
+
+
+def anemometer_sample(message) -> WindSample:
+    """``anemometer/wind`` as a :class:`WindSample`.
+
+    A message in another frame than ``anemometer_link`` or with a non-finite component is
+    rejected: its wind becomes NaN so that the compensation still returns one (invalid) output
+    for it, in order. Stamp order is checked by the compensation itself.
+    """
+    vector = message.vector
+    return _wind_sample(
+        stamp_to_seconds(message.header.stamp),
+        message.header.frame_id,
+        (float(vector.x), float(vector.y), float(vector.z)),
+    )
+
+
+def anemometer_sample_cdr(raw: bytes) -> tuple[WindSample, int, int] | None:
+    """:func:`anemometer_sample` of an ``anemometer/wind`` message straight from its CDR bytes,
+    with the header stamp (sec, nanosec). None for bytes the CDR reader does not handle: decode
+    the message and use :func:`anemometer_sample`."""
+    fields = cdr.read_vector3_stamped(raw)
+    if fields is None:
+        return None
+    sec, nanosec, frame_id, vector = fields
+    return _wind_sample(sec + nanosec * 1e-9, frame_id, vector), sec, nanosec
+
+
+_NAN_WIND = (math.nan, math.nan, math.nan)
+
+
+def _wind_sample(t_s: float, frame_id: str, wind: tuple[float, float, float]) -> WindSample:
+    if frame_id != ANEMOMETER_FRAME:
+        return WindSample(t_s, _NAN_WIND, Reason.WRONG_FRAME)
+    if not all(math.isfinite(component) for component in wind):
+        return WindSample(t_s, _NAN_WIND, Reason.NON_FINITE)
+    return WindSample(t_s, wind, None)
+
+
+def odometry_fields(message) -> tuple[float, tuple, tuple, tuple]:
+    """Stamp (s), attitude quaternion (x, y, z, w), body rate ω_ib and body velocity (tuples of
+    floats) of an Odometry, after the frame, finiteness and quaternion checks (raises
+    :class:`MalformedMessageError`)."""
+    orientation = message.pose.pose.orientation
+    angular, linear = message.twist.twist.angular, message.twist.twist.linear
+    return _checked_odometry(
+        stamp_to_seconds(message.header.stamp),
+        message.header.frame_id,
+        message.child_frame_id,
+        (float(orientation.x), float(orientation.y), float(orientation.z), float(orientation.w)),
+        (float(angular.x), float(angular.y), float(angular.z)),
+        (float(linear.x), float(linear.y), float(linear.z)),
+    )
+
+
+def odometry_fields_cdr(raw: bytes) -> tuple[float, tuple, tuple, tuple] | None:
+    """:func:`odometry_fields` of a ``nav/odometry`` message straight from its CDR bytes,
+    checked as :func:`odometry_fields` checks them. None for bytes the CDR reader does not
+    handle: decode the message instead."""
+    fields = cdr.read_odometry(raw)
+    if fields is None:
+        return None
+    sec, nanosec, frame_id, child_frame_id, pose, twist = fields
+    return _checked_odometry(
+        sec + nanosec * 1e-9, frame_id, child_frame_id, pose[3:7], twist[3:6], twist[0:3]
+    )
+
+
+def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body):
+    if frame_id != MAP_FRAME or child_frame_id != BODY_FRAME:
+        raise MalformedMessageError(
+            Reason.WRONG_FRAME,
+            f"odometry must be of {BODY_FRAME} in {MAP_FRAME}, got "
+            f"'{child_frame_id}' in '{frame_id}'",
+        )
+    if not all(math.isfinite(value) for value in (*quat, *rate, *velocity_body)):
+        raise MalformedMessageError(Reason.NON_FINITE, "odometry orientation, rate or velocity")
+    if quaternion_norm(*quat) < MIN_QUATERNION_NORM:
+        raise MalformedMessageError(Reason.ZERO_QUATERNION, "odometry orientation has zero length")
+    return t_s, quat, rate, velocity_body
+
+
+def fix_fields(message) -> tuple[int, float]:
+    """Status and latitude (deg) of a ``nav/fix`` NavSatFix."""
+    return int(message.status.status), float(message.latitude)
+
+
+def fix_fields_cdr(raw: bytes) -> tuple[int, float] | None:
+    """:func:`fix_fields` of a ``nav/fix`` message straight from its CDR bytes; None for bytes
+    the CDR reader does not handle."""
+    fields = cdr.read_nav_sat_fix(raw)
+    if fields is None:
+        return None
+    return fields[3], fields[5]
+
+
+_TRUE_WIND_CDR = cdr.Vector3StampedWriter(MAP_FRAME)
+
+
+def true_wind_cdr(sec: int, nanosec: int, wind_enu_mps) -> bytes:
+    """``wind/true`` as CDR bytes: the ENU wind (m/s, NaN when invalid) in frame ``map``,
+    stamped (sec, nanosec) with the anemometer sample's own stamp."""
+    x, y, z = wind_enu_mps
+    return _TRUE_WIND_CDR.write(int(sec), int(nanosec), float(x), float(y), float(z))
+
+
+def true_winds_cdr(sec, nanosec, winds_enu_mps) -> list[bytes]:
+    """:func:`true_wind_cdr` of (N,) stamps and (N, 3) winds at once."""
+    return _TRUE_WIND_CDR.write_many(sec, nanosec, winds_enu_mps)
+
+
+def _set_header(header, sec: int, nanosec: int, frame_id: str) -> None:
+    header.stamp.sec = int(sec)
+    header.stamp.nanosec = int(nanosec)
+    header.frame_id = frame_id
+
+
+def _set_vector(target, values) -> None:
+    target.x, target.y, target.z = (float(value) for value in values)
+
+
+def product_messages(
+    vector_stamped_class, multi_array_class, dimension_class, product: WindProduct
+) -> tuple[object, object]:
+    """(``wind/mean_<window>``, ``wind/stats_<window>``) messages of one averaging window.
+
+    The mean is the ENU vector mean (m/s, frame ``map``), stamped with the window end; the
+    statistics follow :data:`STATS_FIELDS`.
+    """
+    sec, nanosec = seconds_to_stamp(product.window_end_s)
+    mean = vector_stamped_class()
+    _set_header(mean.header, sec, nanosec, MAP_FRAME)
+    _set_vector(
+        mean.vector, (product.mean_u_enu_mps, product.mean_v_enu_mps, product.mean_w_enu_mps)
+    )
+    stats = multi_array_class()
+    stats.layout.dim = [dimension_class(label=name, size=1, stride=1) for name in STATS_FIELDS]
+    stats.layout.data_offset = 0
+    stats.data = [float(getattr(product, name)) for name in STATS_FIELDS]
+    return mean, stats
+
+
+def stats_values(stats_message) -> dict[str, float]:
+    """A ``wind/stats_<window>`` message as {field label: value}."""
+    labels = [dimension.label for dimension in stats_message.layout.dim]
+    return dict(zip(labels, (float(value) for value in stats_message.data), strict=True))

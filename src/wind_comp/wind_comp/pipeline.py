@@ -1,0 +1,252 @@
+"""The wind compensation from input values to output values: one object, live and offline.
+
+:class:`CompensationPipeline` takes what ``compensation_node`` subscribes to, in the order it
+arrives, as the values :mod:`wind_comp.compensation_messages` reads from the messages:
+
+- ``nav/odometry``: stamp, attitude R_nb, body rate ω_ib relative to inertial space and body
+  velocity. Each solution is converted with the latitude of the latest ``nav/fix`` before it:
+  ω_nb = ω_ib − R_nbᵀ·ω_ie (the Earth's rotation, :mod:`buoy_nav.earth`, removed; until the
+  first fix the rate is kept as received, an error below 3e-4 m/s of wind at a 3 m lever arm)
+  and v_ENU = R_nb·v_body. The transport rate of a buoy (< 1e-7 rad/s) is neglected.
+- ``nav/fix``: status and latitude; the latest valid latitude is kept while the fix is lost.
+- ``anemometer/wind``: one :class:`~wind_comp.compensation_messages.WindSample` each.
+
+and returns, in the order of the anemometer samples, one corrected sample per anemometer sample
+(:class:`~wind_comp.compensator.CorrectedWindBatch`) and the wind products of the averaging
+windows it closes. The caller pairs the corrected samples with the header stamps of its
+anemometer messages, first in first out.
+
+The arrivals wait in the pipeline until results are asked for (:meth:`ready`, :meth:`expire`,
+:meth:`flush`) and are then handed to the :class:`~wind_comp.compensator.WindCompensator` in
+arrival order: one message at a time in plain floats (the live node asks after every message)
+or as columns of a whole stretch (offline processing asks every few hundred samples). The
+decisions and numbers are the same either way, by construction: the compensator decides each
+sample as of its arrival, and the float and column arithmetic is the same, elementwise.
+"""
+
+from __future__ import annotations
+
+import math
+from array import array
+from typing import NamedTuple
+
+import numpy as np
+
+from buoy_common.contract import Reason
+from buoy_nav.earth import earth_rate_enu_components
+from buoy_nav.rotations import rotate_by_quaternion_components
+from wind_comp.compensation_messages import WindSample
+from wind_comp.compensator import CorrectedWindBatch, WindCompensator, WindStatus
+from wind_comp.config import CompensatorConfig
+from wind_comp.products import WindAverager, WindProduct
+
+
+class StampOrder:
+    """Tracks that the stamps of one topic strictly increase."""
+
+    def __init__(self):
+        self.latest_s = -math.inf
+
+    def advance(self, t_s: float) -> bool:
+        """True and remember ``t_s`` (s) when it is later than every earlier accepted stamp."""
+        if not t_s > self.latest_s:
+            return False
+        self.latest_s = t_s
+        return True
+
+
+def level_rate_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> tuple:
+    """Body rate relative to the local-level frame from the rate relative to inertial space:
+    ω_nb = ω_ib − R_nbᵀ·ω_ie, by components.
+
+    Args:
+        angular_rate_body_rad_s: ω_ib (x, y, z), body axes, rad/s.
+        quat_xyzw: body→ENU attitude (x, y, z, w), any non-zero norm.
+        latitude_deg: geodetic latitude, deg; NaN where unknown, which leaves the rate as
+            received.
+
+    Each component is a float or an array, all of one shape (elementwise: one sample alone and
+    a batch give bit-identical results). Returns ω_nb (x, y, z), body axes, rad/s.
+    """
+    latitude_rad = np.radians(latitude_deg)
+    x, y, z, w = quat_xyzw
+    earth_rate_body = rotate_by_quaternion_components(
+        (-x, -y, -z, w), earth_rate_enu_components(latitude_rad)
+    )
+    if np.ndim(latitude_rad) == 0:
+        # One latitude: a branch, not numpy's per-call cost (the live node's path).
+        if not math.isfinite(latitude_rad):
+            return tuple(angular_rate_body_rad_s)
+        return tuple(
+            rate - earth
+            for rate, earth in zip(angular_rate_body_rad_s, earth_rate_body, strict=True)
+        )
+    known = np.isfinite(latitude_rad)
+    return tuple(
+        np.where(known, rate - np.where(known, earth, 0.0), rate)
+        for rate, earth in zip(angular_rate_body_rad_s, earth_rate_body, strict=True)
+    )
+
+
+_NAV_FIELDS = 12  # stamp, quaternion (4), rate (3), body velocity (3), latitude
+_WIND_FIELDS = 4  # stamp, wind (3)
+
+
+class CompensationOutput(NamedTuple):
+    """What the pipeline decided since it was last asked."""
+
+    wind: CorrectedWindBatch
+    """One corrected sample per anemometer sample, in input order."""
+    products: list[WindProduct]
+    """The averaging windows closed, in the order they closed."""
+
+
+class CompensationPipeline:
+    """Navigation and anemometer samples in, corrected wind and wind products out."""
+
+    def __init__(self, config: CompensatorConfig):
+        self.config = config
+        self.compensator = WindCompensator(config)
+        self.averagers = [
+            WindAverager(window_s, config.gust_window_s) for window_s in config.product_windows_s
+        ]
+        self.latitude_deg = math.nan
+        """Latitude of the latest valid ``nav/fix``, deg (NaN before the first)."""
+        self._nav_order = StampOrder()
+        self._wind_order = StampOrder()
+        # Arrivals not yet handed to the compensator: the navigation samples' numbers in a row
+        # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude), the wind
+        # samples', and for each wind sample the number of navigation samples before it.
+        self._nav = array("d")
+        self._wind = array("d")
+        self._nav_before_wind: list[int] = []
+
+    @property
+    def counts(self) -> dict[WindStatus, int]:
+        """Corrected samples returned so far, per status."""
+        return self.compensator.counts
+
+    @property
+    def latest_wind_stamp_s(self) -> float:
+        """The latest anemometer stamp accepted in order, s (-inf before the first)."""
+        return self._wind_order.latest_s
+
+    @property
+    def n_pending(self) -> int:
+        """Anemometer samples received but not yet returned."""
+        return len(self._nav_before_wind) + self.compensator.n_pending
+
+    def add_fix(self, status: int, latitude_deg: float) -> str | None:
+        """One ``nav/fix`` (status, latitude deg). Returns why it is rejected (a latitude not
+        finite or beyond ±90° while it reports a fix), None when taken. A fix reporting no
+        fix (status < 0) leaves the latitude as it was."""
+        if status < 0:
+            return None
+        if not math.isfinite(latitude_deg):
+            return Reason.NON_FINITE
+        if abs(latitude_deg) > 90.0:
+            return Reason.LATITUDE_OUT_OF_RANGE
+        self.latitude_deg = latitude_deg
+        return None
+
+    def add_odometry(self, t_s: float, quat_xyzw, angular_rate_body_rad_s, velocity_body_mps):
+        """One ``nav/odometry`` (stamp s, attitude (x, y, z, w), ω_ib (3,) rad/s, body velocity
+        (3,) m/s), as :func:`~wind_comp.compensation_messages.odometry_fields` reads it.
+        Returns why it is rejected (a stamp not later than the previous one), None when
+        taken; ValueError for vectors of the wrong length."""
+        if not t_s > self._nav_order.latest_s:
+            return Reason.STAMP_NOT_INCREASING
+        nav, start = self._nav, len(self._nav)
+        nav.append(t_s)
+        nav.extend(quat_xyzw)
+        nav.extend(angular_rate_body_rad_s)
+        nav.extend(velocity_body_mps)
+        nav.append(self.latitude_deg)
+        if len(nav) - start != _NAV_FIELDS:
+            del nav[start:]
+            raise ValueError("odometry needs a quaternion of 4 values and vectors of 3")
+        self._nav_order.advance(t_s)
+        return None
+
+    def add_wind(self, sample: WindSample) -> str | None:
+        """One ``anemometer/wind``. Returns why it is rejected (the message's own
+        ``rejection``, or a stamp not later than the previous one), None when accepted. Every
+        sample, rejected or not, gets its (then invalid) output."""
+        x, y, z = sample.wind_sensor_mps
+        stamp_increases = self._wind_order.advance(sample.t_s)
+        self._wind.extend((sample.t_s, x, y, z))
+        self._nav_before_wind.append(len(self._nav) // _NAV_FIELDS)
+        if sample.rejection is not None:
+            return sample.rejection
+        return None if stamp_increases else Reason.STAMP_NOT_INCREASING
+
+    def ready(self) -> CompensationOutput:
+        """Every sample that can now be decided, in input order, and the windows it closes."""
+        self._hand_over()
+        return self._output(self.compensator.ready())
+
+    def expire(self, before_t_s: float) -> CompensationOutput:
+        """:meth:`ready`, giving up on samples stamped before ``before_t_s`` (s) that still
+        wait for navigation (NAVIGATION_TIMEOUT): the live node's latency budget."""
+        self._hand_over()
+        return self._output(self.compensator.expire(before_t_s))
+
+    def flush(self) -> CompensationOutput:
+        """End of the data: every sample decided (NO_NAVIGATION where navigation never caught
+        up) and every averaging window closed, partial ones included."""
+        self._hand_over()
+        output = self._output(self.compensator.flush())
+        for averager in self.averagers:
+            output.products.extend(averager.flush())
+        return output
+
+    def _hand_over(self) -> None:
+        """Give the arrivals so far to the compensator, in their order."""
+        nav, wind, nav_before_wind = self._nav, self._wind, self._nav_before_wind
+        if not nav and not wind:
+            return
+        self._nav, self._wind, self._nav_before_wind = array("d"), array("d"), []
+        if len(nav) == _NAV_FIELDS and not wind:
+            # The live case: one solution, in plain floats.
+            t_s, *quat_rate_velocity, latitude_deg = nav
+            quat, rate = quat_rate_velocity[0:4], quat_rate_velocity[4:7]
+            self.compensator.add_nav(
+                t_s,
+                quat,
+                level_rate_components(rate, quat, latitude_deg),
+                rotate_by_quaternion_components(quat, quat_rate_velocity[7:10]),
+            )
+        elif len(wind) == _WIND_FIELDS and not nav:
+            t_s, *wind_sensor_mps = wind
+            self.compensator.add_wind(t_s, wind_sensor_mps)
+        else:
+            columns = np.frombuffer(nav, dtype=float).reshape(-1, _NAV_FIELDS)
+            quats, rates, velocities_body = columns[:, 1:5], columns[:, 5:8], columns[:, 8:11]
+            rates_nb = level_rate_components(rates.T, quats.T, columns[:, 11])
+            velocities_enu = rotate_by_quaternion_components(quats.T, velocities_body.T)
+            winds = np.frombuffer(wind, dtype=float).reshape(-1, _WIND_FIELDS)
+            self.compensator.add_arrivals(
+                (
+                    columns[:, 0],
+                    quats,
+                    np.stack(np.broadcast_arrays(*rates_nb), axis=-1),
+                    np.stack(np.broadcast_arrays(*velocities_enu), axis=-1),
+                ),
+                winds[:, 0],
+                winds[:, 1:],
+                nav_before_wind,
+            )
+
+    def _output(self, wind: CorrectedWindBatch) -> CompensationOutput:
+        products = []
+        if len(wind) == 1:
+            # The live case: one sample, without numpy's per-call cost on one row.
+            for averager in self.averagers:
+                products += averager.add(float(wind.t_s[0]), wind.true_wind_enu_mps[0])
+        elif len(wind):
+            for averager in self.averagers:
+                products += averager.add_batch(wind.t_s, wind.true_wind_enu_mps)
+        # A sample closes the windows it is the first of, in averager order: the windows
+        # closed by one sample share their last sample.
+        products.sort(key=lambda product: product.last_sample_s)
+        return CompensationOutput(wind, products)

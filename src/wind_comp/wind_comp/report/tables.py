@@ -1,0 +1,87 @@
+"""The report's table: the wind's error against the truth and the averaged wind products, as
+Markdown."""
+
+import math
+
+import numpy as np
+
+from wind_comp.products import WindProduct, meteorological_direction_deg
+from wind_comp.report.data import ReportData, titled, utc_text, wind_series
+
+
+def wind_products_markdown(data: ReportData) -> str:
+    """The table of ``wind_products.md``: with truth, the error of the measured and corrected
+    wind against it; then the averaged wind products."""
+    lines = [f"# {titled(data, 'wind products')}", ""]
+    if data.true_wind_enu_mps is not None:
+        lines += [*_accuracy_table(data), ""]
+    lines += _products_table(data.products, data.products_source)
+    return "\n".join(lines) + "\n"
+
+
+def _accuracy_table(data: ReportData) -> list[str]:
+    """Bias and RMS of the measured and corrected wind against the truth.
+
+    Each row counts the samples where both the series and the truth are finite. The measured
+    wind is in sensor axes, so only its horizontal speed and w are compared; the corrected wind
+    is ENU like the truth and is also compared per component and in direction.
+    """
+    true_wind = data.true_wind_enu_mps
+    true_speed = np.hypot(true_wind[:, 0], true_wind[:, 1])
+    true_direction = meteorological_direction_deg(true_wind[:, 0], true_wind[:, 1])
+    lines = [
+        "## Error against truth",
+        "",
+        "| series | quantity | bias | RMS | samples |",
+        "|---|---|---|---|---|",
+    ]
+    for label, wind, _ in wind_series(data)[:2]:
+        speed_error = np.hypot(wind[:, 0], wind[:, 1]) - true_speed
+        vertical_error = wind[:, 2] - true_wind[:, 2]
+        quantities = [("horizontal speed (m/s)", speed_error), ("w (m/s)", vertical_error)]
+        if label == "corrected":
+            direction = meteorological_direction_deg(wind[:, 0], wind[:, 1])
+            direction_error = (direction - true_direction + 180.0) % 360.0 - 180.0
+            quantities += [
+                ("u (m/s)", wind[:, 0] - true_wind[:, 0]),
+                ("v (m/s)", wind[:, 1] - true_wind[:, 1]),
+                ("direction (deg)", direction_error),
+            ]
+        for quantity, error in quantities:
+            error = error[np.isfinite(error)]
+            if error.size:
+                bias, rms = float(error.mean()), float(np.sqrt(np.mean(error**2)))
+            else:
+                bias = rms = math.nan
+            lines.append(f"| {label} | {quantity} | {bias:.4f} | {rms:.4f} | {error.size} |")
+    return lines
+
+
+def _products_table(products: list[WindProduct], source: str) -> list[str]:
+    lines = [
+        "## Averaged wind",
+        "",
+        "Direction: degrees clockwise from true North, where the wind blows from. "
+        "Vectors ENU. Gust: maximum running mean of horizontal speed. The last window of each "
+        "length may be partial: it was closed at the end of the data.",
+        "",
+    ]
+    if source:
+        lines += [f"Source: {source}.", ""]
+    if not products:
+        return [*lines, "No averaging window completed."]
+    lines += [
+        "| window start (UTC) | length (s) | valid | invalid | vector mean speed (m/s) "
+        "| direction (deg) | scalar mean speed (m/s) | gust (m/s) | mean w (m/s) "
+        "| std u (m/s) | std v (m/s) | std w (m/s) |",
+        "|" + "---|" * 12,
+    ]
+    for product in products:
+        lines.append(
+            f"| {utc_text(product.window_start_s)} | {product.window_s:.0f} | {product.n_valid} "
+            f"| {product.n_invalid} | {product.vector_mean_speed_mps:.2f} "
+            f"| {product.vector_mean_direction_deg:.1f} | {product.scalar_mean_speed_mps:.2f} "
+            f"| {product.gust_mps:.2f} | {product.mean_w_enu_mps:.3f} "
+            f"| {product.std_u_mps:.2f} | {product.std_v_mps:.2f} | {product.std_w_mps:.2f} |"
+        )
+    return lines
