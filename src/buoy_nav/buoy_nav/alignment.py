@@ -32,7 +32,7 @@ import numpy as np
 from buoy_nav import earth
 from buoy_nav.aiding.dual_antenna import MIN_HORIZONTAL_BASELINE_FRACTION, horizontal_fraction
 from buoy_nav.config import FusionConfig
-from buoy_nav.error_state_filter import ERROR_STATES_15, ImuErrorModel, NavState
+from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.rotations import (
     IDENTITY_QUATERNION,
     euler_from_rotation_matrix,
@@ -102,7 +102,7 @@ class InMotionAligner:
     """
 
     def __init__(
-        self, config: FusionConfig, imu_model: ImuErrorModel, states: StateLayout = ERROR_STATES_15
+        self, config: FusionConfig, imu_model: ImuErrorModel, states: StateLayout = ERROR_STATES
     ):
         self._config = config
         self._imu = imu_model

@@ -53,7 +53,7 @@ from buoy_nav.aiding.base import AIDED_QUANTITIES, AidingSource, LinearisationPo
 from buoy_nav.alignment import AlignmentResult, AlignmentState, InMotionAligner
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import (
-    ERROR_STATES_15,
+    ERROR_STATES,
     ErrorStateFilter,
     ImuErrorModel,
     NavState,
@@ -86,7 +86,7 @@ class FusionEngine:
         self, config: FusionConfig, sources: Iterable[type[AidingSource]] = AIDING_SOURCES
     ):
         self.config = config
-        self.states = ERROR_STATES_15
+        self.states = ERROR_STATES
         """Names of the error states (rows and columns of :attr:`covariance`)."""
         self.sources: tuple[AidingSource, ...] = tuple(
             source(config, self.states) for source in sources

@@ -1,6 +1,6 @@
 """15-state error-state Kalman filter (closed loop) of the strapdown navigation.
 
-Error state (:data:`ERROR_STATES_15`; code addresses it by these block names only, see
+Error state (:data:`ERROR_STATES`; code addresses it by these block names only, see
 :mod:`buoy_nav.state_layout`):
 
 ==========  =====  ===========================================================
@@ -82,11 +82,13 @@ from buoy_nav.rotations import (
 )
 from buoy_nav.state_layout import EAST, NORTH, UP, StateLayout
 
-ERROR_STATES_15 = StateLayout(
+ERROR_STATES = StateLayout(
     ("attitude", 3), ("velocity", 3), ("position", 3), ("gyro_bias", 3), ("accel_bias", 3)
 )
-"""The error state of this filter (see the module docstring)."""
-_S = ERROR_STATES_15
+"""The error state of this filter (see the module docstring). States added for a richer model
+(gyro Gauss-Markov drift as ``("gyro_drift", 3)``) are appended here, with their dynamics in
+:func:`discrete_error_model` and :func:`inject_error_state`."""
+_S = ERROR_STATES
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 DEG = math.pi / 180.0
@@ -96,7 +98,7 @@ DEG = math.pi / 180.0
 SCALE_FACTOR_CORRELATION_TIME_S = 3.0
 # Smallest eigenvalue kept when a covariance has to be repaired, relative to the largest one.
 _EIGENVALUE_FLOOR_RELATIVE = 1e-15
-_IDENTITY_15 = np.eye(_S.dim)
+_IDENTITY = np.eye(_S.dim)
 _EYE3 = np.eye(3)
 
 
@@ -130,7 +132,7 @@ class NavState:
 
 
 def inject_error_state(state: NavState, error) -> NavState:
-    """Apply an error state of :data:`ERROR_STATES_15` to a nominal state (THE error-injection
+    """Apply an error state of :data:`ERROR_STATES` to a nominal state (THE error-injection
     convention)."""
     dx = np.asarray(error, dtype=float)
     phi = dx[_S.attitude]
@@ -211,7 +213,7 @@ class ImuErrorModel:
 def discrete_error_model(
     sums, latitude_rad: float, altitude_m: float, velocity_enu_mps, imu: ImuErrorModel
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Transition matrix Φ and process noise Q_d (:data:`ERROR_STATES_15`) over one
+    """Transition matrix Φ and process noise Q_d (:data:`ERROR_STATES`) over one
     propagation interval.
 
     sums: :class:`buoy_nav.mechanization.PropagationSums` of the interval.
@@ -250,7 +252,7 @@ def discrete_error_model(
     transition = a @ a
     transition *= 0.5
     transition += a
-    transition += _IDENTITY_15
+    transition += _IDENTITY
 
     mean_rotation = rotation_integral / duration
     scale_sq_time = imu.scale_factor**2 * SCALE_FACTOR_CORRELATION_TIME_S
@@ -300,7 +302,7 @@ class ErrorStateFilter:
         self,
         initial_covariance,
         gate_probability: float,
-        states: StateLayout = ERROR_STATES_15,
+        states: StateLayout = ERROR_STATES,
     ):
         covariance = np.array(initial_covariance, dtype=float)
         if covariance.shape != (states.dim, states.dim):

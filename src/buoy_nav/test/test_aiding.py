@@ -32,7 +32,7 @@ from buoy_nav.aiding.base import LinearisationPoint, floored_covariance
 from buoy_nav.aiding.dual_antenna import baseline_azimuth_rad, horizontal_fraction
 from buoy_nav.aiding.gnss_velocity import predicted_antenna_velocity_enu_mps
 from buoy_nav.config import FusionConfig
-from buoy_nav.error_state_filter import ERROR_STATES_15, NavState, inject_error_state
+from buoy_nav.error_state_filter import ERROR_STATES, NavState, inject_error_state
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_euler, wrap_angle
 from buoy_nav.state_layout import EAST, NORTH, UP, StateLayout
 
@@ -42,7 +42,7 @@ ATTITUDES_DEG = [(0, 0, 30), (35, -20, 120), (-60, 45, -170), (10, 55, 80), (-25
 PRIMARY = np.array((0.31, -0.42, 1.17))
 SECONDARY = np.array((-0.93, 0.57, 1.46))
 BASELINE = SECONDARY - PRIMARY
-STATES = ERROR_STATES_15
+STATES = ERROR_STATES
 CONFIG = FusionConfig(
     primary_antenna_body_m=tuple(PRIMARY), secondary_antenna_body_m=tuple(SECONDARY)
 )

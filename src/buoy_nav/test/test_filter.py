@@ -10,7 +10,7 @@ from scipy.stats import chi2
 from buoy_nav import earth
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import (
-    ERROR_STATES_15,
+    ERROR_STATES,
     ErrorStateFilter,
     ImuErrorModel,
     NavState,
@@ -24,7 +24,7 @@ from buoy_nav.rotations import (
 )
 
 RNG = np.random.default_rng(5)
-STATES = ERROR_STATES_15
+STATES = ERROR_STATES
 STATE_DIM = STATES.dim
 IMU_MODEL = ImuErrorModel.from_config(FusionConfig())
 
