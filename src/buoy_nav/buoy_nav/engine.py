@@ -240,8 +240,7 @@ class FusionEngine:
             self.reject_input(source.kind, refused)
             return
         if t - self._latest_imu_stamp > MAX_MEASUREMENT_LEAD_S:
-            # Only the IMU data's return can use them, for an alignment that needs the last
-            # seconds alone; those the IMU data already covers stay for the filter.
+            # An IMU outage: only the last seconds can serve the realignment that follows.
             self._queue.give_up_between(self._latest_imu_stamp, t - MAX_MEASUREMENT_LEAD_S)
 
     def reject_input(self, kind: str, reason: str) -> None:
