@@ -137,6 +137,7 @@ class AidingSource(abc.ABC):
 
     @property
     def enabled(self) -> bool:
+        """Whether this source's configuration lets the fusion use it."""
         return self.enabled_by(self.config)
 
     @classmethod
