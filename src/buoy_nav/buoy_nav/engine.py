@@ -145,7 +145,9 @@ class FusionEngine:
             else None
         )
         self._output = OutputDecimation(config.output_rate_hz)
-        self._prediction = RealtimePrediction(config.max_imu_gap_s, self.states)
+        self._prediction = RealtimePrediction(
+            config.max_imu_gap_s, self.states, self._solutions, self._output
+        )
         self.last_input_rejection: str | None = None
         """Why the latest input call rejected its input (None: accepted)."""
 
@@ -191,9 +193,17 @@ class FusionEngine:
         horizon = t - config.max_measurement_delay_s
         if not config.realtime_output:
             return self._process(horizon)
-        solutions = self._predict_ahead(sample)
         self._deferred_horizon = horizon
-        return solutions
+        if self._filter is None:
+            return []
+        return self._prediction.predict(
+            self._filter,
+            self._integrator,
+            (self._time, self._gyro, self._force),
+            self._imu_buffer,
+            sample,
+            self._coasting_flags(self._time),
+        )
 
     def catch_up(self) -> None:
         """Do the filtering that :meth:`add_imu` left for later: with ``realtime_output`` it
@@ -348,25 +358,6 @@ class FusionEngine:
             if emit_solutions and self._filter is not None and self._output.due(t, span):
                 solutions.append(self._solution(self._integrator, self._time, gyro, force))
         return solutions
-
-    def _predict_ahead(self, sample) -> list[NavSolution]:
-        """Real-time solutions up to the newest IMU ``sample`` (see :mod:`buoy_nav.prediction`)."""
-        if self._filter is None:
-            return []
-        return self._prediction.predict(
-            self._integrator,
-            self._time,
-            self._gyro,
-            self._force,
-            self._imu_buffer,
-            sample,
-            self._emit,
-        )
-
-    def _emit(self, integrator, t: float, gyro, force, span: float) -> NavSolution | None:
-        if self._output.due(t, span):
-            return self._solution(integrator, t, gyro, force)
-        return None
 
     def _advance(self, t: float, gyro, force):
         """Integrate from the current state time to ``t`` (raw samples at both ends)."""

@@ -15,35 +15,40 @@ node and an offline run of the same data give the same solutions.
 """
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 
 import numpy as np
 
 from buoy_nav import earth
-from buoy_nav.error_state_filter import NavState, inject_error_state
+from buoy_nav.error_state_filter import ErrorStateFilter, NavState, inject_error_state
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.rotations import cross
-from buoy_nav.solution import NavSolution
+from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
 from buoy_nav.state_layout import UP, StateLayout
 
 # Longest run of carried-over corrections before the real-time prediction is forked afresh from
 # the filter (s of stamps): bounds the second-order residue of the carry-over (≪ 1e-6 rad).
 PREDICTION_RESYNC_INTERVAL_S = 1.0
 
-# emit(integrator, t, raw gyro, raw force, span since the previous sample): the solution of the
-# integrator's state at t when one is due, else None.
-Emit = Callable[[StrapdownIntegrator, float, tuple, tuple, float], NavSolution | None]
-
 
 class RealtimePrediction:
-    """The copy integrated ahead of the filter (see the module docstring).
+    """The copy integrated ahead of the filter (see the module docstring); its solutions come
+    from ``solutions`` at the rate ``output`` lets through.
 
     ``states`` names the error states of the corrections carried over.
     """
 
-    def __init__(self, max_imu_gap_s: float, states: StateLayout):
+    def __init__(
+        self,
+        max_imu_gap_s: float,
+        states: StateLayout,
+        solutions: SolutionBuilder,
+        output: OutputDecimation,
+    ):
         self._max_imu_gap_s = max_imu_gap_s
         self._states = states
+        self._solutions = solutions
+        self._output = output
         # (integrator ahead of the filter, its time, raw gyro and force at that time); None when
         # it must be forked again from the filter.
         self._ahead: tuple[StrapdownIntegrator, float, tuple, tuple] | None = None
@@ -56,28 +61,29 @@ class RealtimePrediction:
 
     def predict(
         self,
+        kalman: ErrorStateFilter,
         filter_integrator: StrapdownIntegrator,
-        filter_time: float,
-        filter_gyro,
-        filter_force,
-        buffered_samples: Iterable,
+        filter_sample: tuple,
+        buffered_samples: Iterable[tuple],
         sample: tuple,
-        emit: Emit,
+        coasting: tuple[bool, bool, bool],
     ) -> list[NavSolution]:
         """The solutions up to the newest IMU ``sample`` (t, raw gyro, raw force): its own, and
-        after a fork from the filter (whose state is at ``filter_time`` with those raw samples)
-        also those of the ``buffered_samples`` ahead of the filter, the newest included."""
+        after a fork from the filter (whose state is at ``filter_sample``, the (t, raw gyro, raw
+        force) it refers to) also those of the ``buffered_samples`` ahead of the filter, the
+        newest included. Their covariances are ``kalman``'s, their coasting flags
+        ``coasting``."""
+        due = self._output.due
+        solution = self._solutions.solution
         solutions = []
         if self._ahead is None:
             integrator = filter_integrator.fork()
-            t, gyro, force = filter_time, filter_gyro, filter_force
+            t, gyro, force = filter_sample
             self._forked_at = t
             samples = buffered_samples
-            if t > self._last_predicted_stamp:
+            if t > self._last_predicted_stamp and due(t, 0.0):
                 # The filter's own sample: the first one after an alignment.
-                solution = emit(integrator, t, gyro, force, 0.0)
-                if solution is not None:
-                    solutions.append(solution)
+                solutions.append(solution(integrator, kalman, t, gyro, force, coasting))
         else:
             integrator, t, gyro, force = self._ahead
             samples = (sample,)
@@ -90,10 +96,8 @@ class RealtimePrediction:
                 return solutions
             integrator.step(span, gyro, gyro_next, force, force_next)
             t, gyro, force = t_next, gyro_next, force_next
-            if t > self._last_predicted_stamp:
-                solution = emit(integrator, t, gyro, force, span)
-                if solution is not None:
-                    solutions.append(solution)
+            if t > self._last_predicted_stamp and due(t, span):
+                solutions.append(solution(integrator, kalman, t, gyro, force, coasting))
         self._last_predicted_stamp = t
         self._ahead = (integrator, t, gyro, force)
         return solutions

@@ -33,7 +33,7 @@ import abc
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -69,8 +69,7 @@ class MeasurementModel:
     covariance: np.ndarray
 
 
-@dataclass(frozen=True, slots=True)
-class LinearisationPoint:
+class LinearisationPoint(NamedTuple):
     """The nominal state at a measurement's stamp, where its model is linearised.
 
     state: nominal navigation state. rotation_nb: its R_nb (3×3, body FLU → ENU).
@@ -128,17 +127,14 @@ class AidingSource(abc.ABC):
         """Probability of the chi-square innovation gate."""
         self.reset_after_rejections = config.gate_reset_count
         """Consecutive gate rejections after which :meth:`reset` is asked for a reset."""
+        self.enabled = self.enabled_by(config)
+        """Whether the configuration lets the fusion use this source."""
 
     @classmethod
     def enabled_by(cls, config: FusionConfig) -> bool:
         """Whether ``config`` lets the fusion use this source (its measurements are otherwise
         rejected as ``disabled``, and the tools do not read its topic)."""
         return True
-
-    @property
-    def enabled(self) -> bool:
-        """Whether this source's configuration lets the fusion use it."""
-        return self.enabled_by(self.config)
 
     @classmethod
     def msgtype(cls) -> str:

@@ -20,7 +20,7 @@ switched off by ``use_gnss_baseline``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -44,8 +44,7 @@ from buoy_nav.rotations import skew
 MAX_BASELINE_LENGTH_ERROR_FRACTION = 0.5
 
 
-@dataclass(frozen=True, slots=True)
-class GnssBaseline:
+class GnssBaseline(NamedTuple):
     """The primary → secondary antenna vector (ENU, m)."""
 
     baseline_enu_m: np.ndarray

@@ -14,7 +14,7 @@ arm. In the alignment the latest fix gives the initial position.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -40,8 +40,7 @@ STATUS_FIX = 0
 MAX_ABS_ALTITUDE_M = 1.0e4
 
 
-@dataclass(frozen=True, slots=True)
-class GnssFix:
+class GnssFix(NamedTuple):
     """A primary-antenna fix: WGS-84 latitude and longitude (deg), ellipsoidal altitude (m),
     ENU covariance (3×3 m², or row-major flat)."""
 

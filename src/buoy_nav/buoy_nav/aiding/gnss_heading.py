@@ -22,7 +22,7 @@ carrier-phase solution, carries this heading and the baseline's tilt: it superse
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -47,8 +47,7 @@ from buoy_nav.rotations import wrap_angle
 MIN_QUATERNION_NORM = 1e-9
 
 
-@dataclass(frozen=True, slots=True)
-class GnssHeading:
+class GnssHeading(NamedTuple):
     """Azimuth of the primary → secondary baseline (rad, ENU, 0 = East, CCW) and its variance
     (rad²)."""
 

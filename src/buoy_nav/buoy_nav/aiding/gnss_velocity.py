@@ -23,7 +23,7 @@ term. In the alignment the latest velocity gives the initial velocity.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,8 +46,7 @@ from buoy_nav.rotations import cross, skew
 MAX_SPEED_MPS = 100.0
 
 
-@dataclass(frozen=True, slots=True)
-class GnssVelocity:
+class GnssVelocity(NamedTuple):
     """The primary antenna's velocity over ground (ENU, m/s) and its covariance (3×3 m²/s², or
     row-major flat)."""
 
