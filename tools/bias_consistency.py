@@ -30,7 +30,6 @@ from scipy.stats import chi2
 from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of
 from buoy_nav.config import fusion_config_from_files
-from buoy_nav.error_state_filter import ACCEL_BIAS
 from sensor_sim.sensor_errors import ImuErrorConfig
 from sensor_sim.sensor_models import ImuSimulator
 from sensor_sim.simulate_bag import simulate
@@ -91,7 +90,8 @@ def run_seed(seed: int, duration_s: float, checkpoints_s: tuple[float, ...]) -> 
                 start_ns = start_ns if start_ns is not None else message.log_time_ns
                 elapsed_s = (message.log_time_ns - start_ns) * 1e-9
                 if pending and elapsed_s >= pending[0] and fusion.engine.aligned:
-                    covariance = fusion.engine.covariance[ACCEL_BIAS, ACCEL_BIAS]
+                    accel_bias = fusion.engine.states.accel_bias
+                    covariance = fusion.engine.covariance[accel_bias, accel_bias]
                     error = truth - fusion.engine.nav_state.accel_bias_mps2
                     rows.append(
                         {

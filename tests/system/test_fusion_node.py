@@ -38,14 +38,14 @@ from buoy_common.contract import (
     Reason,
 )
 from buoy_common.parameters import build_config, load_parameter_files
-from buoy_nav import engine as fusion_engine
+from buoy_nav.aiding import GnssFixSource, GnssHeadingSource, GnssVelocitySource
 from buoy_nav.config import (
     FUSION_FIELDS_NOT_PARAMETERS,
     FUSION_NODE_NAME,
     FUSION_PARAMETER_PREFIX,
     FusionConfig,
 )
-from buoy_nav.engine import FusionEngine
+from buoy_nav.engine import IMU, FusionEngine
 from buoy_nav.fusion_messages import (
     FUSION_INPUT_MSGTYPES,
     NavMessageClasses,
@@ -277,7 +277,7 @@ def test_live_solutions_equal_offline_fusion(nodes, sensor_stream):
     assert final["solutions_published"] == str(n_solutions)
     for kind, counters in health.counters.items():
         assert final[f"{kind}.accepted"] == str(counters.accepted), kind
-        if kind != fusion_engine.IMU:
+        if kind != IMU:
             assert final[f"{kind}.used_for_alignment"] == str(counters.used_for_alignment), kind
     assert final["rejected_total"] == "0"
     # The filter's uncertainty and bias estimates, in the documented units, are those of the
@@ -340,50 +340,52 @@ def malformed_messages(
 
     imu_ns, step_ns = stamp_ns(imu), 1_000_000
     variant(
-        imu, IMU_RAW_TOPIC, fusion_engine.IMU, fusion_engine.NON_FINITE, imu_ns + step_ns
+        imu, IMU_RAW_TOPIC, IMU, Reason.NON_FINITE, imu_ns + step_ns
     ).angular_velocity.y = math.nan
     variant(
-        imu, IMU_RAW_TOPIC, fusion_engine.IMU, fusion_engine.NON_FINITE, imu_ns + 2 * step_ns
+        imu, IMU_RAW_TOPIC, IMU, Reason.NON_FINITE, imu_ns + 2 * step_ns
     ).linear_acceleration.z = math.inf
     variant(
-        imu, IMU_RAW_TOPIC, fusion_engine.IMU, fusion_engine.OUT_OF_RANGE, imu_ns + 3 * step_ns
+        imu, IMU_RAW_TOPIC, IMU, Reason.OUT_OF_RANGE, imu_ns + 3 * step_ns
     ).linear_acceleration.x = 1.0e4
     # Plausible values, so that they would visibly change the state were they used.
     backwards = variant(
         imu,
         IMU_RAW_TOPIC,
-        fusion_engine.IMU,
-        fusion_engine.STAMP_NOT_INCREASING,
+        IMU,
+        Reason.STAMP_NOT_INCREASING,
         imu_ns - 500 * step_ns,
     )
     backwards.angular_velocity.z += 0.5
-    duplicate = variant(imu, IMU_RAW_TOPIC, fusion_engine.IMU, fusion_engine.DUPLICATE_STAMP)
+    duplicate = variant(imu, IMU_RAW_TOPIC, IMU, Reason.DUPLICATE_STAMP)
     duplicate.angular_velocity.z += 0.5
     duplicate.linear_acceleration.x += 2.0
 
     between_ns = stamp_ns(heading) + 50 * step_ns
-    zero = variant(heading, GNSS_HEADING_TOPIC, None, Reason.ZERO_QUATERNION, between_ns)
+    zero = variant(
+        heading, GNSS_HEADING_TOPIC, GnssHeadingSource.kind, Reason.ZERO_QUATERNION, between_ns
+    )
     zero.orientation.x = zero.orientation.y = zero.orientation.z = zero.orientation.w = 0.0
     negative = variant(
         heading,
         GNSS_HEADING_TOPIC,
-        fusion_engine.GNSS_HEADING,
-        fusion_engine.NON_POSITIVE_VARIANCE,
+        GnssHeadingSource.kind,
+        Reason.NON_POSITIVE_VARIANCE,
         between_ns,
     )
     negative.orientation.z, negative.orientation.w = math.sin(0.5), math.cos(0.5)
     negative.orientation_covariance[8] = -1.0e-4
     variant(
-        fix, GNSS_FIX_TOPIC, fusion_engine.GNSS_FIX, fusion_engine.NON_FINITE, between_ns
+        fix, GNSS_FIX_TOPIC, GnssFixSource.kind, Reason.NON_FINITE, between_ns
     ).latitude = math.nan
     variant(
         velocity,
         GNSS_VELOCITY_TOPIC,
-        fusion_engine.GNSS_VELOCITY,
-        fusion_engine.NON_FINITE,
+        GnssVelocitySource.kind,
+        Reason.NON_FINITE,
         between_ns,
     ).twist.twist.linear.x = math.inf
-    no_fix = variant(fix, GNSS_FIX_TOPIC, None, Reason.NO_FIX, between_ns)
+    no_fix = variant(fix, GNSS_FIX_TOPIC, GnssFixSource.kind, Reason.NO_FIX, between_ns)
     no_fix.status.status = -1
     no_fix.latitude += 1.0e-3
     return bad
@@ -445,9 +447,8 @@ def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_st
     for topic, _, kind, reason in bad:
         key = f"rejected[{topic}: {reason}]"
         expected_node[key] = expected_node.get(key, 0) + 1
-        if kind is not None:
-            key = f"{kind}.rejected[{reason}]"
-            expected_engine[key] = expected_engine.get(key, 0) + 1
+        key = f"{kind}.rejected[{reason}]"
+        expected_engine[key] = expected_engine.get(key, 0) + 1
     node_rejections = {k: int(v) for k, v in final.items() if k.startswith("rejected[")}
     assert node_rejections == expected_node
     assert final["rejected_total"] == str(len(bad))

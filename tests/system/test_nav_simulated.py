@@ -13,6 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
+from buoy_nav.aiding import GnssBaseline, GnssFix, GnssHeading, GnssVelocity
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
 from sensor_sim.scenario import load_scenario
@@ -56,22 +57,28 @@ def simulate(name, duration_s=None, seed=None, record_innovations=False, baselin
         while next_gnss < t_gnss.size and t_gnss[next_gnss] <= t:
             i = next_gnss
             if sample.fix_valid[i]:
-                engine.add_gnss_fix(
+                engine.add_measurement(
                     t_gnss[i],
-                    sample.latitude_deg[i],
-                    sample.longitude_deg[i],
-                    sample.altitude_m[i],
-                    sample.position_covariance_enu_m2[i],
+                    GnssFix(
+                        sample.latitude_deg[i],
+                        sample.longitude_deg[i],
+                        sample.altitude_m[i],
+                        sample.position_covariance_enu_m2[i],
+                    ),
                 )
-                engine.add_gnss_velocity(
-                    t_gnss[i], sample.velocity_enu_mps[i], sample.velocity_covariance_enu_m2s2[i]
+                engine.add_measurement(
+                    t_gnss[i],
+                    GnssVelocity(
+                        sample.velocity_enu_mps[i], sample.velocity_covariance_enu_m2s2[i]
+                    ),
                 )
             if sample.heading_valid[i]:
-                engine.add_gnss_heading(
-                    t_gnss[i], sample.heading_yaw_rad[i], sample.heading_variance_rad2[i]
+                engine.add_measurement(
+                    t_gnss[i],
+                    GnssHeading(sample.heading_yaw_rad[i], sample.heading_variance_rad2[i]),
                 )
                 if t_gnss[i] < baseline_until_s:
-                    engine.add_gnss_baseline(t_gnss[i], sample.baseline_enu_m[i])
+                    engine.add_measurement(t_gnss[i], GnssBaseline(sample.baseline_enu_m[i]))
             next_gnss += 1
         solutions += engine.add_imu(t, gyro[k], force[k])
     solutions += engine.flush()

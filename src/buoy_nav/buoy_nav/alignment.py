@@ -30,18 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from buoy_nav import earth
+from buoy_nav.aiding.dual_antenna import MIN_HORIZONTAL_BASELINE_FRACTION, horizontal_fraction
 from buoy_nav.config import FusionConfig
-from buoy_nav.error_state_filter import (
-    ACCEL_BIAS,
-    ATTITUDE,
-    GYRO_BIAS,
-    POSITION,
-    STATE_DIM,
-    VELOCITY,
-    ImuErrorModel,
-    NavState,
-)
-from buoy_nav.measurements.heading import horizontal_fraction
+from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.rotations import (
     IDENTITY_QUATERNION,
     euler_from_rotation_matrix,
@@ -53,10 +44,8 @@ from buoy_nav.rotations import (
     rotation_matrix_from_quaternion,
     wrap_angle,
 )
+from buoy_nav.state_layout import StateLayout
 
-# The baseline's horizontal projection must keep this fraction of its length for its azimuth to
-# carry heading (at 0.2 the yaw noise is 5× the tilt-free value).
-MIN_HORIZONTAL_BASELINE_FRACTION = 0.2
 # Floor of the tilt 1-σ (rad): the levelling is never trusted beyond 0.05°.
 _TILT_SIGMA_FLOOR_RAD = math.radians(0.05)
 # Velocity 1-σ (m/s) assumed when no GNSS velocity is available at alignment.
@@ -76,7 +65,8 @@ class AlignmentState(enum.Enum):
 class AlignmentResult:
     """Initial state and covariance of the filter.
 
-    t_s: alignment instant (s). state: nominal state there. covariance: 15×15 initial P.
+    t_s: alignment instant (s). state: nominal state there. covariance: initial P of the
+    aligner's error states.
     roll_rad, pitch_rad, yaw_rad: the aligned Euler angles. tilt_sigma_rad: 1-σ of roll/pitch.
     """
 
@@ -106,11 +96,17 @@ class _Velocity:
 
 
 class InMotionAligner:
-    """Collects IMU motion and GNSS measurements until an alignment can be made."""
+    """Collects IMU motion and GNSS measurements until an alignment can be made.
 
-    def __init__(self, config: FusionConfig, imu_model: ImuErrorModel):
+    ``states`` names the error states of the initial covariance.
+    """
+
+    def __init__(
+        self, config: FusionConfig, imu_model: ImuErrorModel, states: StateLayout = ERROR_STATES
+    ):
         self._config = config
         self._imu = imu_model
+        self._states = states
         self._primary = np.array(config.primary_antenna_body_m)
         self._baseline = np.array(config.baseline_body_m)
         self._fix: _Fix | None = None
@@ -216,7 +212,8 @@ class InMotionAligner:
         )
         accel_bias_variance = self._imu.initial_accel_bias_variance_m2_s4
         tilt_variance = motion_tilt_variance + accel_bias_variance / gravity**2
-        covariance = np.zeros((STATE_DIM, STATE_DIM))
+        states = self._states
+        covariance = np.zeros((states.dim, states.dim))
         attitude_bias_covariance = _attitude_and_accel_bias_covariance(
             rotation,
             rotation @ self._baseline,
@@ -225,8 +222,8 @@ class InMotionAligner:
             accel_bias_variance,
             gravity,
         )
-        for row, rows in enumerate((ATTITUDE, ACCEL_BIAS)):
-            for column, columns in enumerate((ATTITUDE, ACCEL_BIAS)):
+        for row, rows in enumerate((states.attitude, states.accel_bias)):
+            for column, columns in enumerate((states.attitude, states.accel_bias)):
                 covariance[rows, columns] = attitude_bias_covariance[
                     3 * row : 3 * row + 3, 3 * column : 3 * column + 3
                 ]
@@ -261,13 +258,15 @@ class InMotionAligner:
         lever_sq = float(self._primary @ self._primary)
         position_variance = position_variance + tilt_variance * lever_sq
         velocity_variance = velocity_variance + tilt_variance * float(rate @ rate) * lever_sq
-        covariance[VELOCITY, VELOCITY] = np.diag(
+        covariance[states.velocity, states.velocity] = np.diag(
             np.maximum(velocity_variance, config.gnss_velocity_variance_floor_m2s2)
         )
-        covariance[POSITION, POSITION] = np.diag(
+        covariance[states.position, states.position] = np.diag(
             np.maximum(position_variance, config.gnss_position_variance_floor_m2)
         )
-        covariance[GYRO_BIAS, GYRO_BIAS] = np.eye(3) * self._imu.initial_gyro_bias_variance_rad2_s2
+        covariance[states.gyro_bias, states.gyro_bias] = (
+            np.eye(3) * self._imu.initial_gyro_bias_variance_rad2_s2
+        )
         state = NavState(
             attitude_xyzw=quaternion_from_rotation_matrix(rotation),
             velocity_enu_mps=velocity,

@@ -19,16 +19,15 @@ from typing import NamedTuple
 
 from buoy_common.bag_io import BackgroundBagWriter, BagError, BagMessage, BagReader, BagWriter
 from buoy_common.contract import (
-    GNSS_BASELINE_TOPIC,
     GNSS_FIX_TOPIC,
     GNSS_HEADING_TOPIC,
-    GNSS_VELOCITY_TOPIC,
     IMU_RAW_TOPIC,
     NAV_MSGTYPES,
     TRUTH_PREFIX,
     bag_topic,
 )
 from buoy_common.progress import Progress
+from buoy_nav.aiding import disabled_topics
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine, NavSolution
 from buoy_nav.fusion_messages import (
@@ -42,7 +41,7 @@ from buoy_nav.fusion_messages import (
 )
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC, GNSS_FIX_TOPIC, GNSS_HEADING_TOPIC)
-OPTIONAL_TOPICS = (GNSS_VELOCITY_TOPIC, GNSS_BASELINE_TOPIC)
+OPTIONAL_TOPICS = tuple(topic for topic in FUSION_INPUT_MSGTYPES if topic not in REQUIRED_TOPICS)
 PROGRESS_EVERY_MESSAGES = 2000
 
 
@@ -58,16 +57,17 @@ NAV_BAG_TOPICS = {topic: (bag_topic(topic), msgtype) for topic, msgtype in NAV_M
 def sensor_topics_of(
     reader: BagReader, config: FusionConfig, extra_required: Iterable[str] = ()
 ) -> dict[str, str]:
-    """Relative → stored name of the fusion's input topics in ``reader``'s bag (``gnss/baseline``
-    only when ``config`` fuses it).
+    """Relative → stored name of the fusion's input topics in ``reader``'s bag (those of the
+    aiding sources ``config`` switches off left out, e.g. ``gnss/baseline``).
 
     Raises BagError naming what is missing or of the wrong type.
     """
     reader.require(*REQUIRED_TOPICS, *extra_required)
     stored = {relative_topic(name): name for name in reader.topics}
     found = {}
+    disabled = disabled_topics(config)
     for topic in (*REQUIRED_TOPICS, *OPTIONAL_TOPICS):
-        if topic not in stored or (topic == GNSS_BASELINE_TOPIC and not config.use_gnss_baseline):
+        if topic not in stored or topic in disabled:
             continue
         msgtype = reader.topics[stored[topic]].msgtype
         if msgtype != FUSION_INPUT_MSGTYPES[topic]:

@@ -1,36 +1,32 @@
 """Fusion engine: the one entry point of the navigation core for live nodes and offline tools.
 
-The engine buffers IMU samples and GNSS measurements and processes them strictly in stamp order,
-``max_measurement_delay_s`` behind the newest IMU stamp, so measurements that arrive out of order
-within that delay give exactly the result of in-order arrival. A measurement whose stamp falls
-between two IMU samples is applied at its own stamp: the state is integrated to it with IMU
-samples interpolated on the parabola through the last three samples (the curve the strapdown
+The engine is the clock of the fusion. It buffers IMU samples and the measurements of the
+aiding sources (:mod:`buoy_nav.aiding`: GNSS position, velocity, dual-antenna heading and
+baseline vector, each a module that owns its conversion, validation, model, gate, reset and
+role in the alignment) and processes them strictly in stamp order,
+``max_measurement_delay_s`` behind the newest IMU stamp, so measurements that arrive out of
+order within that delay give exactly the result of in-order arrival. A measurement whose stamp
+falls between two IMU samples is applied at its own stamp: the state is integrated to it with
+IMU samples interpolated on the parabola through the last three samples (the curve the strapdown
 integrator integrates, so splitting a step costs no accuracy), updated, and integrated on to the
 next sample. Measurements sharing a stamp are gated one by one and the accepted ones applied in
-one stacked update (their order: fix, velocity, baseline, heading).
+one stacked update, in the order of the registry (:data:`buoy_nav.aiding.AIDING_SOURCES`).
 
-The dual antennas give either the full baseline vector (``add_gnss_baseline``, which observes the
-baseline's azimuth and tilt) or only its azimuth (``add_gnss_heading``). Both come from the same
-carrier-phase solution, so fusing both of one epoch would count it twice: a heading with the
-stamp of a baseline is set aside and counted as superseded; headings of epochs
+A source may be superseded by another (``superseded_by``): the dual antennas give either the
+full baseline vector (which observes the baseline's azimuth and tilt) or only its azimuth. Both
+come from the same carrier-phase solution, so fusing both of one epoch would count it twice: a
+heading with the stamp of a baseline is set aside and counted as superseded; headings of epochs
 without a baseline (a receiver that sends none, or sends them at a lower rate) are fused.
 
 With ``realtime_output`` (the default) a solution leaves with its IMU sample, not
-``max_measurement_delay_s`` later: a copy of the filter's nominal state is integrated ahead
-through the buffered IMU samples to the newest one and integrated on with each new sample. Each
-correction of the filter is carried over to the copy through the error dynamics over the span
-between them (attitude error plus gyro-bias drift, velocity error plus the attitude error acting
-on the specific-force increment and the accelerometer-bias change, position error plus velocity
-error times the span), exact to first order; once per ``PREDICTION_RESYNC_INTERVAL_S`` of stamps
-the copy is instead forked afresh from the filter, so second-order residues cannot accumulate.
-The solution of a sample is predicted before the filter catches up with that sample's horizon
+``max_measurement_delay_s`` later: :mod:`buoy_nav.prediction` integrates a copy of the filter's
+nominal state ahead to the newest sample and carries each correction over to it. The solution
+of a sample is predicted before the filter catches up with that sample's horizon
 (:meth:`FusionEngine.catch_up`), so a node publishes it before the updates and covariance
-propagation it triggers, and corrections reach the prediction one IMU sample later. The
-prediction depends only on stamps (which measurements lie behind the previous sample's
-processing horizon), so a live node and an offline run of the same data give the same solutions.
-Its covariances are the filter's, from up to ``max_measurement_delay_s`` earlier.
+propagation it triggers, and corrections reach the prediction one IMU sample later. Its
+covariances are the filter's, from up to ``max_measurement_delay_s`` earlier.
 
-Before alignment the IMU samples and GNSS measurements feed :class:`InMotionAligner`; once
+Before alignment the IMU samples and the measurements feed :class:`InMotionAligner`; once
 aligned, the strapdown integrator carries the nominal state and the error-state filter corrects
 it after every accepted measurement. The covariance is propagated in batches of at most
 ``covariance_propagation_interval_s`` and always up to a measurement stamp before an update (the
@@ -39,82 +35,38 @@ batching is exact to first order, see :mod:`buoy_nav.error_state_filter`); the c
 
 Invalid input (non-finite values, absurd magnitudes, non-positive variances, IMU stamps not
 increasing, duplicated measurement stamps, measurements older than what was already processed)
-is rejected and counted by kind and reason; it never reaches the state. Measurements more than
+is rejected and counted by input and reason; it never reaches the state. Measurements more than
 ``MAX_MEASUREMENT_LEAD_S`` ahead of the newest IMU sample (an IMU outage) are given up as
 ``beyond_imu_data``, oldest first, so an outage cannot fill the memory.
 """
 
-import heapq
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from collections.abc import Iterable
 
 import numpy as np
 
+from buoy_common.contract import Reason
 from buoy_nav import earth
-from buoy_nav.alignment import (
-    MIN_HORIZONTAL_BASELINE_FRACTION,
-    AlignmentResult,
-    AlignmentState,
-    InMotionAligner,
-)
+from buoy_nav.aiding import AIDING_SOURCES
+from buoy_nav.aiding.base import AIDED_QUANTITIES, AidingSource, LinearisationPoint
+from buoy_nav.alignment import AlignmentResult, AlignmentState, InMotionAligner
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import (
-    ACCEL_BIAS,
-    ATTITUDE,
-    GYRO_BIAS,
-    POSITION,
-    VELOCITY,
+    ERROR_STATES,
     ErrorStateFilter,
     ImuErrorModel,
     NavState,
     discrete_error_model,
     inject_error_state,
 )
-from buoy_nav.measurements.baseline import baseline_azimuth_rad, baseline_vector_model
-from buoy_nav.measurements.gnss_position import position_model
-from buoy_nav.measurements.gnss_velocity import (
-    predicted_antenna_velocity_enu_mps,
-    velocity_model,
-)
-from buoy_nav.measurements.heading import heading_model, horizontal_fraction
+from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
+from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
-from buoy_nav.rotations import (
-    cross,
-    euler_from_rotation_matrix,
-    quaternion_from_rotation_matrix,
-    rotation_matrix_from_euler,
-    rotation_matrix_from_quaternion,
-    wrap_angle,
-)
+from buoy_nav.prediction import RealtimePrediction
+from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
 
-IMU = "imu"
-GNSS_FIX = "gnss_fix"
-GNSS_VELOCITY = "gnss_velocity"
-GNSS_HEADING = "gnss_heading"
-GNSS_BASELINE = "gnss_baseline"
-MEASUREMENT_KINDS = (GNSS_FIX, GNSS_VELOCITY, GNSS_BASELINE, GNSS_HEADING)
-# Order of measurements that share a stamp: the antenna attitude, which may complete the
-# alignment, comes last.
-_KIND_ORDER = {GNSS_FIX: 0, GNSS_VELOCITY: 1, GNSS_BASELINE: 2, GNSS_HEADING: 3}
-
-# Rejection reasons.
-NON_FINITE = "non_finite"
-OUT_OF_RANGE = "out_of_range"
-NON_POSITIVE_VARIANCE = "non_positive_variance"
-STAMP_NOT_INCREASING = "stamp_not_increasing"
-DUPLICATE_STAMP = "duplicate_stamp"
-TOO_LATE = "too_late"
-GATE = "gate"
-GEOMETRY = "geometry"
-SINGULAR = "singular_innovation_covariance"
-BEYOND_IMU_DATA = "beyond_imu_data"
-MALFORMED = "malformed"
-DISABLED = "disabled"
-
-# A measured baseline whose length differs from the configured antenna separation by more than
-# this fraction is a wrong configuration or a wrong fix, not a measurement.
-_MAX_BASELINE_LENGTH_ERROR_FRACTION = 0.5
+__all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
 
 # How far measurements may run ahead of the newest IMU sample (s of stamps). More can only be an
 # IMU outage (or GNSS before the IMU starts): the filter could use them only for the alignment
@@ -122,190 +74,47 @@ _MAX_BASELINE_LENGTH_ERROR_FRACTION = 0.5
 # fill the memory and, when the IMU returns, stall the node on the backlog.
 MAX_MEASUREMENT_LEAD_S = 10.0
 
-# Longest run of carried-over corrections before the real-time prediction is forked afresh from
-# the filter (s of stamps): bounds the second-order residue of the carry-over (≪ 1e-6 rad).
-PREDICTION_RESYNC_INTERVAL_S = 1.0
-
-# Plausibility limits of GNSS input beyond which a value is a malformed message, not a
-# measurement: ellipsoidal altitude (m) and speed over ground (m/s) of a buoy.
-_MAX_ABS_ALTITUDE_M = 1.0e4
-_MAX_SPEED_MPS = 100.0
-
-
-@dataclass(frozen=True, slots=True)
-class NavSolution:
-    """Navigation solution at one IMU sample (all arrays float64).
-
-    t_s: stamp (s). attitude_xyzw: quaternion of R_nb (body FLU → ENU).
-    angular_rate_body_rad_s: bias-corrected gyro rate ω_ib (body).
-    angular_rate_nb_body_rad_s: ω_nb, rate relative to ENU (Earth and transport rate removed).
-    specific_force_body_mps2: bias-corrected specific force (body).
-    velocity_enu_mps: velocity over ground of the ``base_link`` origin (ENU).
-    latitude_deg, longitude_deg, altitude_m: WGS-84 position of the ``base_link`` origin.
-    position_map_m: the same position in the ``map`` ENU frame (m).
-    attitude_covariance_rad2: covariance of the attitude error φ (ENU, 3×3, rad²), where
-      R_true = Exp([φ×]) R_estimated.
-    velocity_covariance_m2s2, position_covariance_m2: ENU 3×3 covariances.
-    gyro_bias_rad_s, accel_bias_mps2: bias estimates (body).
-    The covariance and bias arrays are read-only: consecutive solutions share them until the
-    filter changes them.
-    aligned: the filter is aligned (always True in emitted solutions).
-    coasting_fix, coasting_velocity, coasting_heading: no measurement of that kind was accepted
-      for longer than ``coasting_timeout_s`` (for the heading: neither a heading nor a baseline).
-    """
-
-    t_s: float
-    attitude_xyzw: np.ndarray
-    angular_rate_body_rad_s: np.ndarray
-    angular_rate_nb_body_rad_s: np.ndarray
-    specific_force_body_mps2: np.ndarray
-    velocity_enu_mps: np.ndarray
-    latitude_deg: float
-    longitude_deg: float
-    altitude_m: float
-    position_map_m: np.ndarray
-    attitude_covariance_rad2: np.ndarray
-    velocity_covariance_m2s2: np.ndarray
-    position_covariance_m2: np.ndarray
-    gyro_bias_rad_s: np.ndarray
-    accel_bias_mps2: np.ndarray
-    aligned: bool
-    coasting_fix: bool
-    coasting_velocity: bool
-    coasting_heading: bool
-
-    @property
-    def euler_rad(self) -> tuple[float, float, float]:
-        """(roll, pitch, yaw) in rad of R_nb = Rz(yaw) Ry(pitch) Rx(roll)."""
-        return euler_from_rotation_matrix(rotation_matrix_from_quaternion(self.attitude_xyzw))
-
-
-@dataclass(frozen=True)
-class InnovationRecord:
-    """One gated measurement (kept when ``record_innovations`` is on).
-
-    t_s: stamp. kind: measurement kind. innovation: measured − predicted.
-    innovation_covariance: S = H P H^T + R. nis: ν^T S^{-1} ν. accepted: passed the gate.
-    """
-
-    t_s: float
-    kind: str
-    innovation: np.ndarray
-    innovation_covariance: np.ndarray
-    nis: float
-    accepted: bool
-
-
-@dataclass
-class MeasurementCounters:
-    """Counters of one input kind.
-
-    accepted: samples used (IMU) or filter updates applied (GNSS).
-    used_for_alignment: GNSS measurements consumed by the alignment.
-    superseded: headings not fused because a baseline of the same stamp carries their
-    information and more.
-    rejected: rejections by reason. resets: state resets after ``gate_reset_count``
-    consecutive gate rejections. nis_sum, nis_count: over accepted updates (mean_nis).
-    """
-
-    accepted: int = 0
-    used_for_alignment: int = 0
-    superseded: int = 0
-    rejected: dict[str, int] = field(default_factory=dict)
-    resets: int = 0
-    nis_sum: float = 0.0
-    nis_count: int = 0
-
-    @property
-    def mean_nis(self) -> float:
-        """Running mean of the NIS of accepted updates (NaN before the first)."""
-        return self.nis_sum / self.nis_count if self.nis_count else math.nan
-
-    def reject(self, reason: str):
-        self.rejected[reason] = self.rejected.get(reason, 0) + 1
-
-
-@dataclass(frozen=True)
-class EngineHealth:
-    """Snapshot of the engine's health.
-
-    alignment_state: progress of the alignment. aligned: the filter runs.
-    coasting_fix, coasting_velocity, coasting_heading: see :class:`NavSolution`.
-    counters: per kind (``imu``, ``gnss_fix``, ``gnss_velocity``, ``gnss_baseline``,
-      ``gnss_heading``).
-    covariance_repairs: times P had to be made positive definite again.
-    imu_gaps: IMU gaps longer than ``max_imu_gap_s``. alignments: completed alignments.
-    time_s: stamp up to which data was processed (NaN before any).
-    alignment: the last alignment result (None before the first).
-    """
-
-    alignment_state: AlignmentState
-    aligned: bool
-    coasting_fix: bool
-    coasting_velocity: bool
-    coasting_heading: bool
-    counters: dict[str, MeasurementCounters]
-    covariance_repairs: int
-    imu_gaps: int
-    alignments: int
-    time_s: float
-    alignment: AlignmentResult | None
-
-
-@dataclass(frozen=True)
-class _Fix:
-    latitude_rad: float
-    longitude_rad: float
-    altitude_m: float
-    covariance_enu_m2: np.ndarray
-
-
-@dataclass(frozen=True)
-class _Velocity:
-    velocity_enu_mps: np.ndarray
-    covariance_m2s2: np.ndarray
-
-
-@dataclass(frozen=True)
-class _Heading:
-    yaw_rad: float
-    variance_rad2: float
-
-
-@dataclass(frozen=True)
-class _Baseline:
-    baseline_enu_m: np.ndarray
-
 
 class FusionEngine:
-    """Dual-antenna GNSS / strapdown INS fusion (see the module docstring)."""
+    """Strapdown INS aided by the sources of ``sources`` (see the module docstring).
 
-    def __init__(self, config: FusionConfig):
+    sources: the aiding-source classes to run, in the order measurements of one stamp are
+    applied (default :data:`buoy_nav.aiding.AIDING_SOURCES`).
+    """
+
+    def __init__(
+        self, config: FusionConfig, sources: Iterable[type[AidingSource]] = AIDING_SOURCES
+    ):
         self.config = config
+        self.states = ERROR_STATES
+        """Names of the error states (rows and columns of :attr:`covariance`)."""
+        self.sources: tuple[AidingSource, ...] = tuple(
+            source(config, self.states) for source in sources
+        )
+        """The aiding sources, one instance per class, in the order of application."""
+        self._source_of_type = {source.measurement_type: source for source in self.sources}
+        self._source_of_topic = {source.topic: source for source in self.sources}
+        kinds = [source.kind for source in self.sources]
+        if len(set(kinds)) != len(kinds) or IMU in kinds:
+            raise ValueError(f"aiding sources need distinct kinds other than '{IMU}': {kinds}")
+        if len(self._source_of_type) != len(kinds) or len(self._source_of_topic) != len(kinds):
+            raise ValueError("aiding sources need distinct measurement types and topics")
+        for source in self.sources:
+            if source.aids not in AIDED_QUANTITIES:
+                raise ValueError(
+                    f"{source.kind} aids '{source.aids}', not one of {AIDED_QUANTITIES}"
+                )
+        self._aided_index = {source: AIDED_QUANTITIES.index(source.aids) for source in self.sources}
+
         self._imu_model = ImuErrorModel.from_config(config)
-        self._primary = np.array(config.primary_antenna_body_m)
-        self._baseline = np.array(config.baseline_body_m)
-        self._baseline_length_m = float(np.linalg.norm(self._baseline))
-        self._aligner = InMotionAligner(config, self._imu_model)
+        self._aligner = InMotionAligner(config, self._imu_model, self.states)
         self._integrator: StrapdownIntegrator | None = None
         self._filter: ErrorStateFilter | None = None
         self._alignment: AlignmentResult | None = None
         self._alignments = 0
         self._imu_gaps = 0
-        self._map_plane = (
-            earth.LocalTangentPlane(
-                math.radians(config.origin_latitude_deg),
-                math.radians(config.origin_longitude_deg),
-                config.origin_altitude_m,
-            )
-            if config.has_origin
-            else None
-        )
 
         self._imu_buffer: deque = deque()
-        self._measurements: list = []
-        self._sequence = 0
-        self._buffered_stamps: dict[str, set] = {kind: set() for kind in MEASUREMENT_KINDS}
         self._latest_imu_stamp = -math.inf
         # State of the processing: time and (raw) IMU sample the state refers to.
         self._time = -math.inf
@@ -317,24 +126,30 @@ class FusionEngine:
         # Processing horizon that add_imu left for catch_up (None: nothing deferred).
         self._deferred_horizon: float | None = None
 
-        self._counters = {kind: MeasurementCounters() for kind in (IMU, *MEASUREMENT_KINDS)}
-        self._last_accepted = {kind: -math.inf for kind in MEASUREMENT_KINDS}
-        self._consecutive_rejections = dict.fromkeys(MEASUREMENT_KINDS, 0)
+        self._counters = {kind: MeasurementCounters() for kind in (IMU, *kinds)}
+        self._queue = MeasurementQueue(self.sources, self._counters)
+        self._consecutive_rejections = dict.fromkeys(kinds, 0)
+        # Stamp of the latest accepted measurement per aided quantity (AIDED_QUANTITIES order).
+        self._last_aided = [-math.inf] * len(AIDED_QUANTITIES)
         self.innovation_log: list[InnovationRecord] | None = (
             [] if config.record_innovations else None
         )
 
-        self._output_period = 1.0 / config.output_rate_hz if config.output_rate_hz > 0 else 0.0
-        self._next_output_time = -math.inf
-        self._covariance_blocks = None
-        self._bias_arrays = None
-        # Real-time prediction: (integrator ahead of the filter, its time, raw gyro and force at
-        # that time); None when it must be forked again from the filter state.
-        self._ahead: tuple[StrapdownIntegrator, float, tuple, tuple] | None = None
-        self._ahead_forked_at = -math.inf
-        self._last_predicted_stamp = -math.inf
-        # Why the latest add_* call rejected its input (None: accepted).
+        self._solutions = SolutionBuilder(
+            earth.LocalTangentPlane(
+                math.radians(config.origin_latitude_deg),
+                math.radians(config.origin_longitude_deg),
+                config.origin_altitude_m,
+            )
+            if config.has_origin
+            else None
+        )
+        self._output = OutputDecimation(config.output_rate_hz)
+        self._prediction = RealtimePrediction(
+            config.max_imu_gap_s, self.states, self._solutions, self._output
+        )
         self.last_input_rejection: str | None = None
+        """Why the latest input call rejected its input (None: accepted)."""
 
     # ------------------------------------------------------------------ input
     def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[NavSolution]:
@@ -353,21 +168,23 @@ class FusionEngine:
             gx, gy, gz = _float_triple(gyro_rad_s)
             fx, fy, fz = _float_triple(specific_force_mps2)
         except (TypeError, ValueError):
-            self._reject_input(IMU, MALFORMED)
+            self.reject_input(IMU, Reason.MALFORMED)
             return []
         if not (math.isfinite(t) and math.isfinite(gx + gy + gz) and math.isfinite(fx + fy + fz)):
-            self._reject_input(IMU, NON_FINITE)
+            self.reject_input(IMU, Reason.NON_FINITE)
             return []
         config = self.config
         if (
             gx * gx + gy * gy + gz * gz > config.max_angular_rate_rad_s**2
             or fx * fx + fy * fy + fz * fz > config.max_specific_force_mps2**2
         ):
-            self._reject_input(IMU, OUT_OF_RANGE)
+            self.reject_input(IMU, Reason.OUT_OF_RANGE)
             return []
         if t <= self._latest_imu_stamp:
             duplicate = t == self._latest_imu_stamp
-            self._reject_input(IMU, DUPLICATE_STAMP if duplicate else STAMP_NOT_INCREASING)
+            self.reject_input(
+                IMU, Reason.DUPLICATE_STAMP if duplicate else Reason.STAMP_NOT_INCREASING
+            )
             return []
         counters.accepted += 1
         self._latest_imu_stamp = t
@@ -376,9 +193,17 @@ class FusionEngine:
         horizon = t - config.max_measurement_delay_s
         if not config.realtime_output:
             return self._process(horizon)
-        solutions = self._predict_ahead(sample)
         self._deferred_horizon = horizon
-        return solutions
+        if self._filter is None:
+            return []
+        return self._prediction.predict(
+            self._filter,
+            self._integrator,
+            (self._time, self._gyro, self._force),
+            self._imu_buffer,
+            sample,
+            self._coasting_flags(self._time),
+        )
 
     def catch_up(self) -> None:
         """Do the filtering that :meth:`add_imu` left for later: with ``realtime_output`` it
@@ -391,80 +216,55 @@ class FusionEngine:
             self._deferred_horizon = None
             self._process(horizon)
 
-    def add_gnss_fix(
-        self,
-        t_s: float,
-        latitude_deg: float,
-        longitude_deg: float,
-        altitude_m: float,
-        position_covariance_enu_m2,
-    ) -> None:
-        """Add a primary-antenna fix (WGS-84 deg, deg, ellipsoidal m; ENU covariance 3×3 m²)."""
-        self.catch_up()
-        self.last_input_rejection = None
-        values, reason = _floats(t_s, latitude_deg, longitude_deg, altitude_m)
-        covariance, covariance_reason = _float_array(position_covariance_enu_m2, (3, 3))
-        reason = reason or covariance_reason
-        if reason is None and (
-            abs(values[1]) > 90.0 or abs(values[2]) > 360.0 or abs(values[3]) > _MAX_ABS_ALTITUDE_M
-        ):
-            reason = OUT_OF_RANGE
-        if reason is None and np.any(np.diag(covariance) <= 0.0):
-            reason = NON_POSITIVE_VARIANCE
-        if reason is None:
-            t, latitude, longitude, altitude = values
-            payload = _Fix(math.radians(latitude), math.radians(longitude), altitude, covariance)
-            self._enqueue(GNSS_FIX, t, payload)
-        else:
-            self._reject_input(GNSS_FIX, reason)
+    def add_measurement(self, t_s: float, measurement) -> None:
+        """Add a measurement stamped ``t_s`` (s) of the aiding source whose ``measurement_type``
+        it is (e.g. :class:`buoy_nav.aiding.GnssFix`); the source validates it.
 
-    def add_gnss_velocity(self, t_s: float, velocity_enu_mps, covariance_m2s2) -> None:
-        """Add the primary antenna's velocity over ground (ENU m/s; covariance 3×3 m²/s²)."""
+        Raises TypeError for a measurement no registered source takes (a programming error).
+        """
+        source = self._source_of_type.get(type(measurement))
+        if source is None:
+            raise TypeError(f"no aiding source of the fusion takes {type(measurement).__name__}")
         self.catch_up()
         self.last_input_rejection = None
-        stamp, reason = _floats(t_s)
-        velocity, velocity_reason = _float_array(velocity_enu_mps, (3,))
-        covariance, covariance_reason = _float_array(covariance_m2s2, (3, 3))
-        reason = reason or velocity_reason or covariance_reason
-        if reason is None and float(velocity @ velocity) > _MAX_SPEED_MPS**2:
-            reason = OUT_OF_RANGE
-        if reason is None and np.any(np.diag(covariance) <= 0.0):
-            reason = NON_POSITIVE_VARIANCE
-        if reason is None:
-            self._enqueue(GNSS_VELOCITY, stamp[0], _Velocity(velocity, covariance))
-        else:
-            self._reject_input(GNSS_VELOCITY, reason)
+        if not source.enabled:
+            self.reject_input(source.kind, Reason.DISABLED)
+            return
+        try:
+            t = float(t_s)
+        except (TypeError, ValueError):
+            self.reject_input(source.kind, Reason.MALFORMED)
+            return
+        if not math.isfinite(t):
+            self.reject_input(source.kind, Reason.NON_FINITE)
+            return
+        validated = source.validated(measurement)
+        if isinstance(validated, Reason):
+            self.reject_input(source.kind, validated)
+            return
+        if t <= self._last_processed_imu_stamp:
+            self.reject_input(source.kind, Reason.TOO_LATE)
+            return
+        refused = self._queue.push(source, t, validated)
+        if refused is not None:
+            self.reject_input(source.kind, refused)
+            return
+        if t - self._latest_imu_stamp > MAX_MEASUREMENT_LEAD_S:
+            # An IMU outage: only the last seconds can serve the realignment that follows.
+            self._queue.give_up_between(self._latest_imu_stamp, t - MAX_MEASUREMENT_LEAD_S)
 
-    def add_gnss_heading(self, t_s: float, yaw_rad: float, variance_rad2: float) -> None:
-        """Add a dual-antenna heading: baseline azimuth (rad, ENU, 0 = East, CCW), variance rad²."""
-        self.catch_up()
-        self.last_input_rejection = None
-        values, reason = _floats(t_s, yaw_rad, variance_rad2)
-        if reason is None and values[2] <= 0.0:
-            reason = NON_POSITIVE_VARIANCE
-        if reason is None:
-            t, yaw, variance = values
-            self._enqueue(GNSS_HEADING, t, _Heading(wrap_angle(yaw), variance))
-        else:
-            self._reject_input(GNSS_HEADING, reason)
+    def reject_input(self, kind: str, reason: str) -> None:
+        """Count an input of ``kind`` (``imu`` or a source's kind) rejected for ``reason``, also
+        when the rejection happened before the input reached the engine (message conversion)."""
+        self._counters[kind].reject(reason)
+        self.last_input_rejection = reason
 
-    def add_gnss_baseline(self, t_s: float, baseline_enu_m) -> None:
-        """Add a primary → secondary antenna vector (ENU, m) from moving-baseline RTK."""
-        self.catch_up()
-        self.last_input_rejection = None
-        stamp, reason = _floats(t_s)
-        baseline, baseline_reason = _float_array(baseline_enu_m, (3,))
-        reason = reason or baseline_reason
-        if reason is None and not self.config.use_gnss_baseline:
-            reason = DISABLED
-        if reason is None:
-            length_error = float(np.linalg.norm(baseline)) - self._baseline_length_m
-            if abs(length_error) > _MAX_BASELINE_LENGTH_ERROR_FRACTION * self._baseline_length_m:
-                reason = OUT_OF_RANGE
-        if reason is None:
-            self._enqueue(GNSS_BASELINE, stamp[0], _Baseline(baseline))
-        else:
-            self._reject_input(GNSS_BASELINE, reason)
+    def source_of_topic(self, topic: str) -> AidingSource:
+        """The aiding source that reads ``topic`` (ValueError naming it when none does)."""
+        source = self._source_of_topic.get(topic)
+        if source is None:
+            raise ValueError(f"'{topic}' is not an input topic of the fusion")
+        return source
 
     def flush(self) -> list[NavSolution]:
         """End of data: process every buffered IMU sample and every applicable measurement.
@@ -474,11 +274,7 @@ class FusionEngine:
         """
         self.catch_up()
         solutions = self._process(math.inf)
-        while self._measurements:
-            _, _, _, kind, _ = heapq.heappop(self._measurements)
-            self._counters[kind].reject(BEYOND_IMU_DATA)
-        for stamps in self._buffered_stamps.values():
-            stamps.clear()
+        self._queue.give_up_all()
         return solutions
 
     # ------------------------------------------------------------------ status
@@ -498,18 +294,7 @@ class FusionEngine:
             coasting_fix=coasting[0],
             coasting_velocity=coasting[1],
             coasting_heading=coasting[2],
-            counters={
-                kind: MeasurementCounters(
-                    c.accepted,
-                    c.used_for_alignment,
-                    c.superseded,
-                    dict(c.rejected),
-                    c.resets,
-                    c.nis_sum,
-                    c.nis_count,
-                )
-                for kind, c in self._counters.items()
-            },
+            counters={kind: c.snapshot() for kind, c in self._counters.items()},
             covariance_repairs=self._filter.covariance_repairs if self._filter else 0,
             imu_gaps=self._imu_gaps,
             alignments=self._alignments,
@@ -519,7 +304,8 @@ class FusionEngine:
 
     @property
     def covariance(self) -> np.ndarray | None:
-        """Current 15×15 error-state covariance (a copy), None before alignment."""
+        """Current error-state covariance (a copy; states named by :attr:`states`), None before
+        alignment."""
         self.catch_up()
         return None if self._filter is None else self._filter.covariance.copy()
 
@@ -527,55 +313,23 @@ class FusionEngine:
     def nav_state(self) -> NavState | None:
         """Current nominal state, None before alignment."""
         self.catch_up()
-        return None if self._integrator is None else _nav_state(self._integrator)
+        return None if self._integrator is None else self._integrator.nav_state()
 
     @property
     def map_plane(self) -> earth.LocalTangentPlane | None:
         """The ``map`` frame (None until its origin is known)."""
         self.catch_up()
-        return self._map_plane
+        return self._solutions.map_plane
 
     # ------------------------------------------------------------------ processing
-    def _enqueue(self, kind: str, t: float, payload):
-        if t <= self._last_processed_imu_stamp:
-            self._reject_input(kind, TOO_LATE)
-            return
-        stamps = self._buffered_stamps[kind]
-        if t in stamps:
-            self._reject_input(kind, DUPLICATE_STAMP)
-            return
-        stamps.add(t)
-        self._sequence += 1
-        heapq.heappush(self._measurements, (t, _KIND_ORDER[kind], self._sequence, kind, payload))
-        if t - self._latest_imu_stamp > MAX_MEASUREMENT_LEAD_S:
-            self._give_up_measurements_before(t - MAX_MEASUREMENT_LEAD_S)
-
-    def _give_up_measurements_before(self, t: float):
-        """Reject the buffered measurements ahead of the IMU data and stamped before ``t``;
-        those the IMU data already covers stay for the filter."""
-        latest_imu = self._latest_imu_stamp
-        kept = []
-        for entry in self._measurements:
-            stamp, _, _, kind, _ = entry
-            if latest_imu < stamp < t:
-                self._buffered_stamps[kind].discard(stamp)
-                self._counters[kind].reject(BEYOND_IMU_DATA)
-            else:
-                kept.append(entry)
-        heapq.heapify(kept)
-        self._measurements[:] = kept
-
-    def _reject_input(self, kind: str, reason: str):
-        self._counters[kind].reject(reason)
-        self.last_input_rejection = reason
-
     def _process(self, horizon: float) -> list[NavSolution]:
         """Filter the buffered data up to ``horizon``: the solutions of the processed IMU
         samples, unless ``realtime_output`` predicts them ahead instead."""
         emit_solutions = not self.config.realtime_output
         solutions: list[NavSolution] = []
         buffer = self._imu_buffer
-        measurements = self._measurements
+        queue = self._queue
+        measurements = queue.heap
         while buffer and buffer[0][0] <= horizon:
             t, gyro, force = buffer.popleft()
             if self._gyro is None or t - self._time > self.config.max_imu_gap_s:
@@ -583,7 +337,7 @@ class FusionEngine:
                     self._restart_alignment()
                 # Measurements up to the first sample of a run can only feed the alignment.
                 while measurements and measurements[0][0] <= t:
-                    self._handle_measurements(self._pop_same_stamp(), gyro)
+                    self._handle_measurements(*queue.pop_stamp(), gyro)
                 self._time, self._gyro, self._force = t, gyro, force
                 self._older_imu = None
                 self._last_processed_imu_stamp = t
@@ -593,72 +347,17 @@ class FusionEngine:
             t_older, gyro_older, force_older = older if older else (None, None, None)
             span = t - t0
             while measurements and measurements[0][0] <= t:
-                group = self._pop_same_stamp()
-                stamp = group[0][0]
+                stamp, group = queue.pop_stamp()
                 gyro_m = interpolate_sample(stamp, t0, gyro0, t, gyro, t_older, gyro_older)
                 force_m = interpolate_sample(stamp, t0, force0, t, force, t_older, force_older)
                 self._advance(stamp, gyro_m, force_m)
-                self._handle_measurements(group, gyro_m)
+                self._handle_measurements(stamp, group, gyro_m)
             self._advance(t, gyro, force)
             self._older_imu = (t0, gyro0, force0)
             self._last_processed_imu_stamp = t
-            if emit_solutions and self._filter is not None and self._output_due(t, span):
-                solutions.append(
-                    self._solution(self._integrator, self._time, self._gyro, self._force)
-                )
+            if emit_solutions and self._filter is not None and self._output.due(t, span):
+                solutions.append(self._solution(self._integrator, self._time, gyro, force))
         return solutions
-
-    def _predict_ahead(self, sample) -> list[NavSolution]:
-        """Real-time solutions up to the newest IMU ``sample`` (see the module docstring): its
-        own, and after an alignment those of the buffered samples since."""
-        if self._filter is None:
-            return []
-        max_gap = self.config.max_imu_gap_s
-        solutions = []
-        if self._ahead is None:
-            integrator = self._integrator.fork()
-            t, gyro, force = self._time, self._gyro, self._force
-            self._ahead_forked_at = t
-            samples = self._imu_buffer
-            if t > self._last_predicted_stamp and self._output_due(t, 0.0):
-                # The filter's own sample: the first one after an alignment.
-                solutions.append(self._solution(integrator, t, gyro, force))
-        else:
-            integrator, t, gyro, force = self._ahead
-            samples = (sample,)
-        for t_next, gyro_next, force_next in samples:
-            span = t_next - t
-            if span > max_gap:
-                # The filter restarts its alignment at this gap: nothing to predict from.
-                self._ahead = None
-                return solutions
-            integrator.step(span, gyro, gyro_next, force, force_next)
-            t, gyro, force = t_next, gyro_next, force_next
-            if t > self._last_predicted_stamp and self._output_due(t, span):
-                solutions.append(self._solution(integrator, t, gyro, force))
-        self._last_predicted_stamp = t
-        self._ahead = (integrator, t, gyro, force)
-        return solutions
-
-    def _pop_same_stamp(self) -> list:
-        """Pop the earliest measurement and all others of the same stamp (in kind order)."""
-        measurements = self._measurements
-        group = [heapq.heappop(measurements)]
-        while measurements and measurements[0][0] == group[0][0]:
-            group.append(heapq.heappop(measurements))
-        return group
-
-    def _output_due(self, t: float, span: float) -> bool:
-        """Decimation to ``output_rate_hz`` on a grid anchored at the first output."""
-        period = self._output_period
-        if period == 0.0:
-            return True
-        # Half an IMU step of tolerance absorbs stamp jitter and float rounding of the grid.
-        if t + 0.5 * span < self._next_output_time:
-            return False
-        following = self._next_output_time + period
-        self._next_output_time = following if following > t else t + period
-        return True
 
     def _advance(self, t: float, gyro, force):
         """Integrate from the current state time to ``t`` (raw samples at both ends)."""
@@ -687,47 +386,57 @@ class FusionEngine:
             self._imu_model,
         )
         self._filter.propagate(transition, noise)
-        self._covariance_blocks = None
+        self._solutions.covariance_changed()
 
     def _restart_alignment(self):
         self._imu_gaps += 1
         self._integrator = None
         self._filter = None
         self._aligner.restart()
-        self._covariance_blocks = None
-        self._ahead = None
-        self._bias_arrays = None
+        self._solutions.covariance_changed()
+        self._solutions.biases_changed()
+        self._prediction.drop()
 
-    def _handle_measurements(self, group: list, gyro):
-        """Apply the measurements of one stamp (raw gyro rate ``gyro`` at that stamp).
+    def _linearisation_point(self, gyro) -> LinearisationPoint:
+        """The nominal state now, for the models of measurements at the current stamp (raw gyro
+        sample ``gyro`` there)."""
+        integrator = self._integrator
+        state = integrator.nav_state()
+        return LinearisationPoint(
+            state, state.rotation_nb, gyro, integrator.nav_frame_rate_enu_rad_s
+        )
+
+    def _handle_measurements(self, t: float, group: list, gyro):
+        """Apply the (source, measurement) pairs of stamp ``t`` (raw gyro rate ``gyro`` there).
 
         Each measurement is gated on its own against the predicted covariance; the accepted
         ones are applied together in one stacked update, which equals applying them one after
         the other (their noises are independent) at a third of the cost.
         """
-        t = group[0][0]
-        group = self._without_superseded_headings(group)
         if not group:
             return
-        for entry in group:
-            self._buffered_stamps[entry[3]].discard(t)
         if self._filter is None:
-            # Kind order puts the antenna attitude, which may complete the alignment, last.
-            for _, _, _, kind, payload in group:
-                self._align_with(kind, t, payload, gyro)
+            # Registry order puts the antenna attitude, which may complete the alignment, last.
+            for source, measurement in group:
+                self._counters[source.kind].used_for_alignment += 1
+                result = source.align(self._aligner, t, measurement, gyro)
+                if result is not None:
+                    self._start_filter(result, t)
             return
         self._propagate_covariance()
-        state = _nav_state(self._integrator)
-        rotation = state.rotation_nb
+        point = self._linearisation_point(gyro)
         accepted = []
         persistent_rejections = []
-        for _, _, _, kind, payload in group:
-            model = self._measurement_model(kind, payload, state, rotation, gyro)
+        for source, measurement in group:
+            kind = source.kind
+            model = source.model(measurement, point)
             counters = self._counters[kind]
             if model is None:
-                counters.reject(GEOMETRY)
+                counters.reject(Reason.GEOMETRY)
                 continue
-            gate = self._filter.gate(model.innovation, model.jacobian, model.covariance)
+            gate = self._filter.gate(
+                model.innovation, model.jacobian, model.covariance, source.gate_probability
+            )
             if self.innovation_log is not None:
                 self.innovation_log.append(
                     InnovationRecord(
@@ -743,206 +452,47 @@ class FusionEngine:
                 counters.accepted += 1
                 counters.nis_sum += gate.nis
                 counters.nis_count += 1
-                self._last_accepted[kind] = t
+                self._last_aided[self._aided_index[source]] = t
                 self._consecutive_rejections[kind] = 0
                 accepted.append(model)
                 continue
-            counters.reject(GATE if math.isfinite(gate.nis) else SINGULAR)
+            counters.reject(Reason.GATE if math.isfinite(gate.nis) else Reason.SINGULAR)
             self._consecutive_rejections[kind] += 1
-            if self._consecutive_rejections[kind] >= self.config.gate_reset_count:
-                persistent_rejections.append((kind, payload, model))
+            if self._consecutive_rejections[kind] >= source.reset_after_rejections:
+                persistent_rejections.append((source, measurement, model))
         if accepted:
             correction = self._filter.update(
                 np.concatenate([m.innovation for m in accepted]),
                 np.vstack([m.jacobian for m in accepted]),
                 _block_diagonal([m.covariance for m in accepted]),
             )
-            self._inject(state, correction)
-        for kind, payload, model in persistent_rejections:
-            self._reset_to_measurement(kind, t, payload, gyro, model)
-
-    def _without_superseded_headings(self, group: list) -> list:
-        """The measurements of one stamp less the heading if a baseline has that stamp too
-        (counted)."""
-        t = group[0][0]
-        if t not in self._buffered_stamps[GNSS_BASELINE]:
-            return group
-        kept = []
-        for entry in group:
-            if entry[3] == GNSS_HEADING:
-                self._buffered_stamps[GNSS_HEADING].discard(t)
-                self._counters[GNSS_HEADING].superseded += 1
-            else:
-                kept.append(entry)
-        return kept
-
-    def _measurement_model(self, kind, payload, state: NavState, rotation, gyro):
-        """Linearised model of one measurement; None when the heading geometry is unusable."""
-        config = self.config
-        if kind == GNSS_FIX:
-            return position_model(
-                payload.latitude_rad,
-                payload.longitude_rad,
-                payload.altitude_m,
-                payload.covariance_enu_m2,
-                state.latitude_rad,
-                state.longitude_rad,
-                state.altitude_m,
-                rotation,
-                self._primary,
-                config.gnss_position_variance_floor_m2,
-            )
-        if kind == GNSS_VELOCITY:
-            return velocity_model(
-                payload.velocity_enu_mps,
-                payload.covariance_m2s2,
-                state.velocity_enu_mps,
-                rotation,
-                gyro,
-                state.gyro_bias_rad_s,
-                self._integrator.nav_frame_rate_enu_rad_s,
-                self._primary,
-                config.gnss_velocity_variance_floor_m2s2,
-            )
-        if kind == GNSS_BASELINE:
-            return baseline_vector_model(
-                payload.baseline_enu_m,
-                config.gnss_baseline_sigma_horizontal_m,
-                config.gnss_baseline_sigma_vertical_m,
-                rotation,
-                self._baseline,
-            )
-        if horizontal_fraction(rotation, self._baseline) < MIN_HORIZONTAL_BASELINE_FRACTION:
-            return None
-        return heading_model(
-            payload.yaw_rad,
-            payload.variance_rad2,
-            rotation,
-            self._baseline,
-            config.gnss_heading_variance_floor_rad2,
-        )
+            self._inject(point.state, correction)
+        for source, measurement, model in persistent_rejections:
+            self._reset_to_measurement(source, t, measurement, gyro, model)
 
     def _inject(self, state: NavState, correction):
-        new_state = inject_error_state(state, correction)
-        _set_nav_state(self._integrator, new_state)
+        self._integrator.set_nav_state(inject_error_state(state, correction))
         self._filter.reset_after_injection(correction)
-        self._covariance_blocks = None
-        self._bias_arrays = None
-        if self._ahead is not None:
-            if self._time >= self._ahead_forked_at + PREDICTION_RESYNC_INTERVAL_S:
-                self._ahead = None
-            else:
-                self._carry_over(state, correction)
+        self._solutions.covariance_changed()
+        self._solutions.biases_changed()
+        self._prediction.carry_over(self._time, state, correction)
 
-    def _carry_over(self, state: NavState, correction):
-        """Apply a correction of the filter state ``state`` to the prediction ahead of it."""
-        integrator, t_ahead, _, _ = self._ahead
-        span = t_ahead - self._time
-        dx = np.array(correction, dtype=float)
-        if span > 0.0:
-            rotation_integral = integrator.rotation_nb * span
-            velocity_ahead = np.array(integrator.velocity_enu_mps)
-            gravity = earth.normal_gravity_mps2(state.latitude_rad, state.altitude_m)
-            force_increment = velocity_ahead - state.velocity_enu_mps
-            force_increment[2] += gravity * span
-            phi, dv = dx[ATTITUDE], dx[VELOCITY].copy()
-            dx[POSITION] += dv * span
-            dx[VELOCITY] += cross(phi, force_increment) - rotation_integral @ dx[ACCEL_BIAS]
-            dx[ATTITUDE] -= rotation_integral @ dx[GYRO_BIAS]
-        _set_nav_state(integrator, inject_error_state(_nav_state(integrator), dx))
-
-    def _reset_to_measurement(self, kind, t, payload, gyro, model):
-        """Re-initialise the states a persistently rejected measurement kind observes."""
-        attitude_kind = kind in (GNSS_HEADING, GNSS_BASELINE)
-        measured = self._antenna_heading(kind, payload) if attitude_kind else None
-        if attitude_kind and measured is None:
+    def _reset_to_measurement(self, source: AidingSource, t: float, measurement, gyro, model):
+        """Re-initialise the states a persistently rejected source observes, as it says."""
+        reset = source.reset(measurement, self._linearisation_point(gyro), model)
+        if reset is None:
             return
-        state = _nav_state(self._integrator)
-        counters = self._counters[kind]
-        counters.resets += 1
-        self._consecutive_rejections[kind] = 0
-        self._last_accepted[kind] = t
-        rotation = state.rotation_nb
-        if attitude_kind:
-            azimuth, variance = measured
-            roll, pitch, _ = euler_from_rotation_matrix(rotation)
-            levelled = rotation_matrix_from_euler(roll, pitch, 0.0) @ self._baseline
-            yaw = azimuth - math.atan2(levelled[1], levelled[0])
-            new_rotation = rotation_matrix_from_euler(roll, pitch, yaw)
-            new_state = NavState(
-                quaternion_from_rotation_matrix(new_rotation),
-                state.velocity_enu_mps,
-                state.latitude_rad,
-                state.longitude_rad,
-                state.altitude_m,
-                state.gyro_bias_rad_s,
-                state.accel_bias_mps2,
-            )
-            self._filter.reset_states([2], [variance])
-        elif kind == GNSS_VELOCITY:
-            velocity = payload.velocity_enu_mps - (
-                predicted_antenna_velocity_enu_mps(
-                    np.zeros(3),
-                    rotation,
-                    np.asarray(gyro) - state.gyro_bias_rad_s,
-                    self._integrator.nav_frame_rate_enu_rad_s,
-                    self._primary,
-                )
-            )
-            new_state = NavState(
-                state.attitude_xyzw,
-                velocity,
-                state.latitude_rad,
-                state.longitude_rad,
-                state.altitude_m,
-                state.gyro_bias_rad_s,
-                state.accel_bias_mps2,
-            )
-            self._filter.reset_states(range(3, 6), np.diag(model.covariance))
-        else:
-            latitude, longitude, altitude = earth.geodetic_offset(
-                payload.latitude_rad,
-                payload.longitude_rad,
-                payload.altitude_m,
-                -(rotation @ self._primary),
-            )
-            new_state = NavState(
-                state.attitude_xyzw,
-                state.velocity_enu_mps,
-                latitude,
-                longitude,
-                altitude,
-                state.gyro_bias_rad_s,
-                state.accel_bias_mps2,
-            )
-            self._filter.reset_states(range(6, 9), np.diag(model.covariance))
-        _set_nav_state(self._integrator, new_state)
+        self._counters[source.kind].resets += 1
+        self._consecutive_rejections[source.kind] = 0
+        self._last_aided[self._aided_index[source]] = t
+        self._integrator.set_nav_state(reset.state)
+        self._filter.reset_states(reset.indices, reset.variances)
         self._filter.ensure_positive_definite()
-        self._covariance_blocks = None
-        self._ahead = None
+        self._solutions.covariance_changed()
+        self._prediction.drop()
 
-    def _align_with(self, kind: str, t: float, payload, gyro):
-        counters = self._counters[kind]
-        counters.used_for_alignment += 1
-        aligner = self._aligner
-        if kind == GNSS_FIX:
-            aligner.add_fix(
-                t,
-                payload.latitude_rad,
-                payload.longitude_rad,
-                payload.altitude_m,
-                payload.covariance_enu_m2,
-            )
-            return
-        if kind == GNSS_VELOCITY:
-            aligner.add_velocity(t, payload.velocity_enu_mps, payload.covariance_m2s2)
-            return
-        measured = self._antenna_heading(kind, payload)
-        if measured is None:
-            return
-        result = aligner.add_heading(t, *measured, gyro)
-        if result is None:
-            return
+    def _start_filter(self, result: AlignmentResult, t: float):
+        """Hand over from the aligner to the filter at stamp ``t``."""
         state = result.state
         self._integrator = StrapdownIntegrator(
             state.attitude_xyzw,
@@ -953,130 +503,37 @@ class FusionEngine:
             state.gyro_bias_rad_s,
             state.accel_bias_mps2,
         )
-        self._filter = ErrorStateFilter(result.covariance, self.config.gate_probability)
+        self._filter = ErrorStateFilter(
+            result.covariance, self.config.gate_probability, self.states
+        )
         self._alignment = result
         self._alignments += 1
-        for measurement_kind in MEASUREMENT_KINDS:
-            self._last_accepted[measurement_kind] = t
-            self._consecutive_rejections[measurement_kind] = 0
-        if self._map_plane is None:
-            self._map_plane = earth.LocalTangentPlane(
+        for kind in self._consecutive_rejections:
+            self._consecutive_rejections[kind] = 0
+        self._last_aided = [t] * len(AIDED_QUANTITIES)
+        if self._solutions.map_plane is None:
+            self._solutions.map_plane = earth.LocalTangentPlane(
                 state.latitude_rad, state.longitude_rad, state.altitude_m
             )
-        self._next_output_time = -math.inf
-        self._covariance_blocks = None
-        self._bias_arrays = None
-        self._ahead = None
-
-    def _antenna_heading(self, kind: str, payload) -> tuple[float, float] | None:
-        """Baseline azimuth (rad, ENU) and its variance (rad², floored) of a heading or a
-        baseline measurement; None for a baseline too steep to give one."""
-        config = self.config
-        if kind == GNSS_HEADING:
-            yaw, variance = payload.yaw_rad, payload.variance_rad2
-        else:
-            yaw, horizontal_length = baseline_azimuth_rad(payload.baseline_enu_m)
-            if horizontal_length < MIN_HORIZONTAL_BASELINE_FRACTION * self._baseline_length_m:
-                return None
-            variance = (config.gnss_baseline_sigma_horizontal_m / horizontal_length) ** 2
-        return yaw, max(variance, config.gnss_heading_variance_floor_rad2)
+        self._output.restart()
+        self._solutions.covariance_changed()
+        self._solutions.biases_changed()
+        self._prediction.drop()
 
     # ------------------------------------------------------------------ output
     def _coasting_flags(self, t: float) -> tuple[bool, bool, bool]:
+        """(fix, velocity, heading): no source aiding that quantity accepted for longer than
+        ``coasting_timeout_s`` at stamp ``t``."""
         timeout = self.config.coasting_timeout_s
-        last = self._last_accepted
-        return (
-            t - last[GNSS_FIX] > timeout,
-            t - last[GNSS_VELOCITY] > timeout,
-            t - max(last[GNSS_HEADING], last[GNSS_BASELINE]) > timeout,
-        )
+        fix, velocity, heading = self._last_aided
+        return t - fix > timeout, t - velocity > timeout, t - heading > timeout
 
     def _solution(self, integrator: StrapdownIntegrator, t: float, gyro, force) -> NavSolution:
         """The solution of ``integrator``'s state at stamp ``t`` (raw gyro and force there)."""
-        if self._covariance_blocks is None:
-            covariance = self._filter.covariance
-            # Shared by the solutions until P changes again, hence read-only.
-            self._covariance_blocks = tuple(
-                _read_only(covariance[block, block].copy())
-                for block in (ATTITUDE, VELOCITY, POSITION)
-            )
-        if self._bias_arrays is None:
-            self._bias_arrays = (
-                _read_only(np.array(integrator.gyro_bias_rad_s)),
-                _read_only(np.array(integrator.accel_bias_mps2)),
-            )
-        bgx, bgy, bgz = integrator.gyro_bias_rad_s
-        bax, bay, baz = integrator.accel_bias_mps2
-        gx, gy, gz = gyro
-        fx, fy, fz = force
-        wx, wy, wz = gx - bgx, gy - bgy, gz - bgz
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = integrator.rotation_elements
-        ie, in_, iu = integrator.nav_frame_rate_enu_rad_s
-        latitude = integrator.latitude_rad
-        longitude = integrator.longitude_rad
-        altitude = integrator.altitude_m
         # Coasting is judged where the filter is: measurements ahead of it are not yet used.
-        coasting = self._coasting_flags(self._time)
-        attitude_cov, velocity_cov, position_cov = self._covariance_blocks
-        gyro_bias, accel_bias = self._bias_arrays
-        return NavSolution(
-            t_s=t,
-            attitude_xyzw=np.array(integrator.attitude_xyzw),
-            angular_rate_body_rad_s=np.array((wx, wy, wz)),
-            angular_rate_nb_body_rad_s=np.array(
-                (
-                    wx - (r00 * ie + r10 * in_ + r20 * iu),
-                    wy - (r01 * ie + r11 * in_ + r21 * iu),
-                    wz - (r02 * ie + r12 * in_ + r22 * iu),
-                )
-            ),
-            specific_force_body_mps2=np.array((fx - bax, fy - bay, fz - baz)),
-            velocity_enu_mps=np.array(integrator.velocity_enu_mps),
-            latitude_deg=math.degrees(latitude),
-            longitude_deg=math.degrees(longitude),
-            altitude_m=altitude,
-            position_map_m=np.array(
-                self._map_plane.enu_from_geodetic_scalar(latitude, longitude, altitude)
-            ),
-            attitude_covariance_rad2=attitude_cov,
-            velocity_covariance_m2s2=velocity_cov,
-            position_covariance_m2=position_cov,
-            gyro_bias_rad_s=gyro_bias,
-            accel_bias_mps2=accel_bias,
-            aligned=True,
-            coasting_fix=coasting[0],
-            coasting_velocity=coasting[1],
-            coasting_heading=coasting[2],
+        return self._solutions.solution(
+            integrator, self._filter, t, gyro, force, self._coasting_flags(self._time)
         )
-
-
-def _nav_state(integrator: StrapdownIntegrator) -> NavState:
-    return NavState(
-        attitude_xyzw=integrator.attitude_xyzw,
-        velocity_enu_mps=np.array(integrator.velocity_enu_mps),
-        latitude_rad=integrator.latitude_rad,
-        longitude_rad=integrator.longitude_rad,
-        altitude_m=integrator.altitude_m,
-        gyro_bias_rad_s=np.array(integrator.gyro_bias_rad_s),
-        accel_bias_mps2=np.array(integrator.accel_bias_mps2),
-    )
-
-
-def _set_nav_state(integrator: StrapdownIntegrator, state: NavState):
-    integrator.set_state(
-        state.attitude_xyzw,
-        state.velocity_enu_mps,
-        state.latitude_rad,
-        state.longitude_rad,
-        state.altitude_m,
-        state.gyro_bias_rad_s,
-        state.accel_bias_mps2,
-    )
-
-
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array.setflags(write=False)
-    return array
 
 
 def _block_diagonal(blocks) -> np.ndarray:
@@ -1097,29 +554,3 @@ def _float_triple(values) -> tuple[float, float, float]:
         return x, y, z
     x, y, z = values
     return float(x), float(y), float(z)
-
-
-def _floats(*values) -> tuple[tuple[float, ...] | None, str | None]:
-    """Scalar inputs as floats, or (None, reason) when one is malformed or not finite."""
-    try:
-        numbers = tuple(float(v) for v in values)
-    except (TypeError, ValueError):
-        return None, MALFORMED
-    if not all(math.isfinite(n) for n in numbers):
-        return None, NON_FINITE
-    return numbers, None
-
-
-def _float_array(values, shape: tuple[int, ...]) -> tuple[np.ndarray | None, str | None]:
-    """An input as a float array of ``shape`` (a 3×3 may come row-major flat), or (None, reason)."""
-    try:
-        array = np.array(values, dtype=float)
-    except (TypeError, ValueError):
-        return None, MALFORMED
-    if array.size == math.prod(shape) and array.ndim == 1:
-        array = array.reshape(shape)
-    if array.shape != shape:
-        return None, MALFORMED
-    if not np.all(np.isfinite(array)):
-        return None, NON_FINITE
-    return array, None

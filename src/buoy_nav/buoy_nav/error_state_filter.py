@@ -1,15 +1,18 @@
 """15-state error-state Kalman filter (closed loop) of the strapdown navigation.
 
-Error state (all column indices below):
+Error state (:data:`ERROR_STATES`; code addresses it by these block names only, see
+:mod:`buoy_nav.state_layout`):
 
-====  =========  ===========================================================
-0:3   φ          attitude error, ENU (rad)
-3:6   δv         velocity error, ENU (m/s)
-6:9   δp         position error, ENU metres of the local tangent plane at the
-                 nominal position (better conditioned than δL, δλ, δh)
-9:12  δb_g       gyro bias error, body (rad/s)
-12:15 δb_a       accelerometer bias error, body (m/s²)
-====  =========  ===========================================================
+==========  =====  ===========================================================
+block       size   meaning
+==========  =====  ===========================================================
+attitude    3      φ, attitude error, ENU (rad)
+velocity    3      δv, velocity error, ENU (m/s)
+position    3      δp, position error, ENU metres of the local tangent plane at
+                   the nominal position (better conditioned than δL, δλ, δh)
+gyro_bias   3      δb_g, gyro bias error, body (rad/s)
+accel_bias  3      δb_a, accelerometer bias error, body (m/s²)
+==========  =====  ===========================================================
 
 **Error-injection convention** (the single definition, :func:`inject_error_state`): the true
 state is the nominal state with the error applied as
@@ -77,13 +80,15 @@ from buoy_nav.rotations import (
     quaternion_multiply,
     rotation_matrix_from_quaternion,
 )
+from buoy_nav.state_layout import EAST, NORTH, UP, StateLayout
 
-STATE_DIM = 15
-ATTITUDE = slice(0, 3)
-VELOCITY = slice(3, 6)
-POSITION = slice(6, 9)
-GYRO_BIAS = slice(9, 12)
-ACCEL_BIAS = slice(12, 15)
+ERROR_STATES = StateLayout(
+    ("attitude", 3), ("velocity", 3), ("position", 3), ("gyro_bias", 3), ("accel_bias", 3)
+)
+"""The error state of this filter (see the module docstring). States added for a richer model
+(gyro Gauss-Markov drift as ``("gyro_drift", 3)``) are appended here, with their dynamics in
+:func:`discrete_error_model` and :func:`inject_error_state`."""
+_S = ERROR_STATES
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 DEG = math.pi / 180.0
@@ -93,7 +98,7 @@ DEG = math.pi / 180.0
 SCALE_FACTOR_CORRELATION_TIME_S = 3.0
 # Smallest eigenvalue kept when a covariance has to be repaired, relative to the largest one.
 _EIGENVALUE_FLOOR_RELATIVE = 1e-15
-_IDENTITY = np.eye(STATE_DIM)
+_IDENTITY = np.eye(_S.dim)
 _EYE3 = np.eye(3)
 
 
@@ -127,9 +132,11 @@ class NavState:
 
 
 def inject_error_state(state: NavState, error) -> NavState:
-    """Apply a 15-element error state to a nominal state (THE error-injection convention)."""
+    """Apply an error state of :data:`ERROR_STATES` to a nominal state (THE error-injection
+    convention)."""
     dx = np.asarray(error, dtype=float)
-    phi = dx[ATTITUDE]
+    phi = dx[_S.attitude]
+    position = dx[_S.position]
     attitude = normalize_quaternion(
         quaternion_multiply(
             quaternion_from_rotation_vector(float(phi[0]), float(phi[1]), float(phi[2])),
@@ -139,13 +146,14 @@ def inject_error_state(state: NavState, error) -> NavState:
     meridian, prime_vertical = earth.radii_of_curvature_m(state.latitude_rad)
     return NavState(
         attitude_xyzw=attitude,
-        velocity_enu_mps=state.velocity_enu_mps + dx[VELOCITY],
-        latitude_rad=state.latitude_rad + float(dx[7]) / (meridian + state.altitude_m),
+        velocity_enu_mps=state.velocity_enu_mps + dx[_S.velocity],
+        latitude_rad=state.latitude_rad + float(position[NORTH]) / (meridian + state.altitude_m),
         longitude_rad=state.longitude_rad
-        + float(dx[6]) / ((prime_vertical + state.altitude_m) * math.cos(state.latitude_rad)),
-        altitude_m=state.altitude_m + float(dx[8]),
-        gyro_bias_rad_s=state.gyro_bias_rad_s + dx[GYRO_BIAS],
-        accel_bias_mps2=state.accel_bias_mps2 + dx[ACCEL_BIAS],
+        + float(position[EAST])
+        / ((prime_vertical + state.altitude_m) * math.cos(state.latitude_rad)),
+        altitude_m=state.altitude_m + float(position[UP]),
+        gyro_bias_rad_s=state.gyro_bias_rad_s + dx[_S.gyro_bias],
+        accel_bias_mps2=state.accel_bias_mps2 + dx[_S.accel_bias],
     )
 
 
@@ -205,7 +213,8 @@ class ImuErrorModel:
 def discrete_error_model(
     sums, latitude_rad: float, altitude_m: float, velocity_enu_mps, imu: ImuErrorModel
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Transition matrix Φ and process noise Q_d (15×15) over one propagation interval.
+    """Transition matrix Φ and process noise Q_d (:data:`ERROR_STATES`) over one
+    propagation interval.
 
     sums: :class:`buoy_nav.mechanization.PropagationSums` of the interval.
     latitude_rad, altitude_m, velocity_enu_mps: nominal state at the end of the interval (the
@@ -224,18 +233,21 @@ def discrete_error_model(
     coriolis = 2.0 * earth_rate + transport_rate
     force = sums.specific_force_increment_enu_mps
 
-    a = np.zeros((STATE_DIM, STATE_DIM))
-    a[ATTITUDE, ATTITUDE] = _skew_array(-duration * rate)
+    attitude, velocity, position = _S.attitude, _S.velocity, _S.position
+    phi, dv, dp = attitude.start, velocity.start, position.start
+    a = np.zeros((_S.dim, _S.dim))
+    a[attitude, attitude] = _skew_array(-duration * rate)
     # ∂ω_en/∂v: ω_en = (−v_N/(R_M+h), v_E/(R_N+h), v_E tan L/(R_N+h)).
-    a[0, 4] = duration / north_radius
-    a[1, 3] = -duration / east_radius
-    a[2, 3] = -duration * math.tan(latitude_rad) / east_radius
-    a[ATTITUDE, GYRO_BIAS] = -rotation_integral
-    a[VELOCITY, ATTITUDE] = _skew_array(-force)
-    a[VELOCITY, VELOCITY] = _skew_array(-duration * coriolis)
-    a[5, 8] = 2.0 * gravity / math.sqrt(north_radius * east_radius) * duration
-    a[VELOCITY, ACCEL_BIAS] = -rotation_integral
-    a[6, 3] = a[7, 4] = a[8, 5] = duration
+    a[phi + EAST, dv + NORTH] = duration / north_radius
+    a[phi + NORTH, dv + EAST] = -duration / east_radius
+    a[phi + UP, dv + EAST] = -duration * math.tan(latitude_rad) / east_radius
+    a[attitude, _S.gyro_bias] = -rotation_integral
+    a[velocity, attitude] = _skew_array(-force)
+    a[velocity, velocity] = _skew_array(-duration * coriolis)
+    a[dv + UP, dp + UP] = 2.0 * gravity / math.sqrt(north_radius * east_radius) * duration
+    a[velocity, _S.accel_bias] = -rotation_integral
+    for axis in (EAST, NORTH, UP):
+        a[dp + axis, dv + axis] = duration
 
     transition = a @ a
     transition *= 0.5
@@ -244,22 +256,23 @@ def discrete_error_model(
 
     mean_rotation = rotation_integral / duration
     scale_sq_time = imu.scale_factor**2 * SCALE_FACTOR_CORRELATION_TIME_S
-    noise = np.zeros((STATE_DIM, STATE_DIM))
-    noise[ATTITUDE, ATTITUDE] = (
+    noise = np.zeros((_S.dim, _S.dim))
+    noise[attitude, attitude] = (
         mean_rotation * (scale_sq_time * sums.gyro_rate_sq_integral_rad2_s)
     ) @ mean_rotation.T
-    noise[VELOCITY, VELOCITY] = (
+    noise[velocity, velocity] = (
         mean_rotation * (scale_sq_time * sums.force_deviation_sq_integral_m2_s3)
     ) @ mean_rotation.T
     gyro_noise = imu.gyro_noise_psd_rad2_s * duration
     accel_noise = imu.accel_noise_psd_m2_s3 * duration
     gyro_drift = 2.0 * imu.gyro_markov_sigma_rad_s**2 * duration / imu.gyro_correlation_time_s
     accel_drift = 2.0 * imu.accel_markov_sigma_mps2**2 * duration / imu.accel_correlation_time_s
+    gyro_bias, accel_bias = _S.gyro_bias.start, _S.accel_bias.start
     for axis in range(3):
-        noise[axis, axis] += gyro_noise
-        noise[3 + axis, 3 + axis] += accel_noise
-        noise[9 + axis, 9 + axis] = gyro_drift
-        noise[12 + axis, 12 + axis] = accel_drift
+        noise[phi + axis, phi + axis] += gyro_noise
+        noise[dv + axis, dv + axis] += accel_noise
+        noise[gyro_bias + axis, gyro_bias + axis] = gyro_drift
+        noise[accel_bias + axis, accel_bias + axis] = accel_drift
     return transition, noise
 
 
@@ -278,46 +291,60 @@ class GateResult:
 
 
 class ErrorStateFilter:
-    """Covariance bookkeeping of the 15-state error-state filter.
+    """Covariance bookkeeping of the error-state filter (states named by ``states``).
 
     The error-state mean is zero between updates (closed loop): :meth:`update` returns the
     correction, the caller injects it with :func:`inject_error_state`, and
     :meth:`reset_after_injection` accounts for the reset in the covariance.
     """
 
-    def __init__(self, initial_covariance, gate_probability: float):
+    def __init__(
+        self,
+        initial_covariance,
+        gate_probability: float,
+        states: StateLayout = ERROR_STATES,
+    ):
         covariance = np.array(initial_covariance, dtype=float)
-        if covariance.shape != (STATE_DIM, STATE_DIM):
-            raise ValueError(f"initial covariance must be {STATE_DIM}×{STATE_DIM}")
+        if covariance.shape != (states.dim, states.dim):
+            raise ValueError(f"initial covariance must be {states.dim}×{states.dim}")
+        self.states = states
         self.covariance = 0.5 * (covariance + covariance.T)
         self.gate_probability = gate_probability
-        self._thresholds: dict[int, float] = {}
+        self._identity = np.eye(states.dim)
+        self._thresholds: dict[tuple[int, float], float] = {}
         self.covariance_repairs = 0
 
-    def gate_threshold(self, dimension: int) -> float:
-        """Chi-square quantile of :attr:`gate_probability` with ``dimension`` degrees of freedom."""
-        if dimension not in self._thresholds:
+    def gate_threshold(self, dimension: int, probability: float | None = None) -> float:
+        """Chi-square quantile of ``probability`` (default :attr:`gate_probability`) with
+        ``dimension`` degrees of freedom."""
+        if probability is None:
+            probability = self.gate_probability
+        key = (dimension, probability)
+        if key not in self._thresholds:
             # The chi-square quantile as scipy.stats.chi2.ppf computes it, without the half
             # second that importing scipy.stats adds to the start of every node and tool.
-            quantile = 2.0 * gammaincinv(0.5 * dimension, self.gate_probability)
-            self._thresholds[dimension] = float(quantile)
-        return self._thresholds[dimension]
+            quantile = 2.0 * gammaincinv(0.5 * dimension, probability)
+            self._thresholds[key] = float(quantile)
+        return self._thresholds[key]
 
     def propagate(self, transition: np.ndarray, process_noise: np.ndarray):
         """P ← Φ P Φ^T + Q_d."""
         covariance = transition @ self.covariance @ transition.T + process_noise
         self.covariance = 0.5 * (covariance + covariance.T)
 
-    def gate(self, innovation, jacobian, measurement_covariance) -> GateResult:
-        """Normalised innovation squared of one measurement and its chi-square test.
+    def gate(
+        self, innovation, jacobian, measurement_covariance, probability: float | None = None
+    ) -> GateResult:
+        """Normalised innovation squared of one measurement and its chi-square test at
+        ``probability`` (default :attr:`gate_probability`).
 
-        innovation ν (m,), jacobian H (m×15), measurement covariance R (m×m).
+        innovation ν (m,), jacobian H (m × states), measurement covariance R (m×m).
         """
         nu = np.atleast_1d(np.asarray(innovation, dtype=float))
         h = np.atleast_2d(np.asarray(jacobian, dtype=float))
         s = h @ self.covariance @ h.T + np.atleast_2d(measurement_covariance)
         s = 0.5 * (s + s.T)
-        threshold = self.gate_threshold(nu.shape[0])
+        threshold = self.gate_threshold(nu.shape[0], probability)
         # LAPACK directly: numpy.linalg costs ten times more in call overhead at this size.
         factor, info = lapack.dpotrf(s)
         if info != 0:
@@ -329,7 +356,7 @@ class ErrorStateFilter:
     def update(self, innovation, jacobian, measurement_covariance) -> np.ndarray:
         """Apply a (possibly stacked) measurement in Joseph form; return the error estimate.
 
-        innovation ν (m,), jacobian H (m×15), measurement covariance R (m×m). No gating here:
+        innovation ν (m,), jacobian H (m × states), measurement covariance R (m×m). No gating here:
         gate each measurement with :meth:`gate` first. Raises ``numpy.linalg.LinAlgError`` if
         the innovation covariance is not positive definite (the gate rejects those first).
         """
@@ -343,7 +370,7 @@ class ErrorStateFilter:
             raise np.linalg.LinAlgError("innovation covariance is not positive definite")
         gain_t, _ = lapack.dpotrs(factor, hp)
         gain = gain_t.T
-        i_kh = _IDENTITY - gain @ h
+        i_kh = self._identity - gain @ h
         covariance = i_kh @ self.covariance @ i_kh.T + gain @ r @ gain_t
         self.covariance = 0.5 * (covariance + covariance.T)
         return gain @ nu
@@ -355,11 +382,12 @@ class ErrorStateFilter:
         attitude rows and columns are transformed by G = I + ½[δφ̂×]; the other states are
         additive and unchanged.
         """
-        g = _skew_array(0.5 * np.asarray(correction)[ATTITUDE])
+        attitude = self.states.attitude
+        g = _skew_array(0.5 * np.asarray(correction)[attitude])
         g += _EYE3
         covariance = self.covariance
-        covariance[ATTITUDE, :] = g @ covariance[ATTITUDE, :]
-        covariance[:, ATTITUDE] = covariance[:, ATTITUDE] @ g.T
+        covariance[attitude, :] = g @ covariance[attitude, :]
+        covariance[:, attitude] = covariance[:, attitude] @ g.T
         self.covariance = 0.5 * (covariance + covariance.T)
         self.ensure_positive_definite()
 
@@ -376,7 +404,8 @@ class ErrorStateFilter:
         return True
 
     def reset_states(self, indices, variances):
-        """Decorrelate the given states and set their variances (after an external reset)."""
+        """Decorrelate the states at ``indices`` (from :attr:`states`, e.g.
+        ``states.indices("velocity")``) and set their variances (after an external reset)."""
         index = np.asarray(indices)
         self.covariance[index, :] = 0.0
         self.covariance[:, index] = 0.0

@@ -19,6 +19,9 @@ differently still work:
 - ``gnss/baseline`` (geometry_msgs/Vector3Stamped): primary→secondary antenna vector (ENU, m);
   its error is a parameter (the message has no covariance).
 
+Each aiding source converts its own message (:mod:`buoy_nav.aiding`); this module dispatches by
+topic.
+
 Outputs (one set per navigation solution, all with the solution's stamp):
 
 - ``nav/odometry`` (nav_msgs/Odometry, ``map`` → ``base_link``): position in ``map`` (m),
@@ -38,7 +41,6 @@ all zeros, the ROS convention for "unknown".
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from typing import NamedTuple
 
@@ -47,10 +49,6 @@ import numpy as np
 from buoy_common import cdr
 from buoy_common.contract import (
     BODY_FRAME,
-    GNSS_BASELINE_TOPIC,
-    GNSS_FIX_TOPIC,
-    GNSS_HEADING_TOPIC,
-    GNSS_VELOCITY_TOPIC,
     IMU_RAW_TOPIC,
     MAP_FRAME,
     NAV_FIX_TOPIC,
@@ -62,25 +60,20 @@ from buoy_common.contract import (
     header_seconds,
     seconds_to_stamp,
 )
-from buoy_nav.engine import FusionEngine, NavSolution
+from buoy_nav.aiding import AIDING_SOURCES
+from buoy_nav.aiding.base import vector_of
+from buoy_nav.aiding.gnss_fix import STATUS_FIX
+from buoy_nav.engine import IMU, FusionEngine, NavSolution
 from buoy_nav.rotations import rotation_matrix_elements
 
 FUSION_INPUT_MSGTYPES = {
-    topic: SENSOR_MSGTYPES[topic]
-    for topic in (
-        IMU_RAW_TOPIC,
-        GNSS_FIX_TOPIC,
-        GNSS_VELOCITY_TOPIC,
-        GNSS_HEADING_TOPIC,
-        GNSS_BASELINE_TOPIC,
-    )
+    IMU_RAW_TOPIC: SENSOR_MSGTYPES[IMU_RAW_TOPIC],
+    **{source.topic: source.msgtype() for source in AIDING_SOURCES},
 }
-"""The fusion's input topics (relative names) and their message types."""
+"""The fusion's input topics (relative names) and their message types: the IMU and the topic of
+every registered aiding source."""
 
-# Quaternions shorter than this carry no heading.
-_MIN_QUATERNION_NORM = 1e-9
 # sensor_msgs/NavSatStatus and NavSatFix constants.
-STATUS_FIX = 0
 SERVICE_GPS = 1
 COVARIANCE_TYPE_KNOWN = 3
 
@@ -111,71 +104,40 @@ class StampBook:
         return seconds_to_stamp(t_s)
 
 
-def _triple(vector) -> tuple[float, float, float]:
-    return float(vector.x), float(vector.y), float(vector.z)
-
-
-def yaw_from_quaternion_rad(x: float, y: float, z: float, w: float) -> float:
-    """Yaw (rad, about ENU up, 0 = East, counter-clockwise) of the rotation of a quaternion
-    (any norm): the azimuth of the rotated body x axis projected on the horizontal."""
-    return math.atan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
-
-
 def feed_message(
     engine: FusionEngine, topic: str, message, stamps: StampBook | None = None
 ) -> tuple[list[NavSolution], str | None]:
-    """Give one sensor message of ``topic`` to ``engine``.
+    """Give one sensor message of ``topic`` to ``engine``: an IMU sample, or a measurement of
+    the aiding source that reads ``topic`` (which converts the message).
 
     Returns the navigation solutions that became available (IMU messages only) and the reason
     the message was rejected, None when it was accepted. Rejected input never reaches the
-    state; the engine counts its own rejections (see :meth:`FusionEngine.health`). IMU stamps
-    go into ``stamps`` when given.
+    state; the engine counts every rejection by input and reason (see
+    :meth:`FusionEngine.health`). IMU stamps go into ``stamps`` when given. Raises ValueError
+    for a topic the fusion does not take.
     """
+    if topic == IMU_RAW_TOPIC:
+        try:
+            t_s = header_seconds(message.header)
+            gyro = vector_of(message.angular_velocity)
+            force = vector_of(message.linear_acceleration)
+        except (AttributeError, TypeError, ValueError):
+            engine.reject_input(IMU, Reason.MALFORMED)
+            return [], Reason.MALFORMED
+        if stamps is not None:
+            stamps.remember(t_s, message.header.stamp.sec, message.header.stamp.nanosec)
+        solutions = engine.add_imu(t_s, gyro, force)
+        return solutions, engine.last_input_rejection
+    source = engine.source_of_topic(topic)
     try:
         t_s = header_seconds(message.header)
-        if topic == IMU_RAW_TOPIC:
-            if stamps is not None:
-                stamps.remember(t_s, message.header.stamp.sec, message.header.stamp.nanosec)
-            solutions = engine.add_imu(
-                t_s, _triple(message.angular_velocity), _triple(message.linear_acceleration)
-            )
-            return solutions, engine.last_input_rejection
-        if topic == GNSS_FIX_TOPIC:
-            if message.status.status < STATUS_FIX:
-                return [], Reason.NO_FIX
-            engine.add_gnss_fix(
-                t_s,
-                message.latitude,
-                message.longitude,
-                message.altitude,
-                np.asarray(message.position_covariance, dtype=float),
-            )
-        elif topic == GNSS_VELOCITY_TOPIC:
-            twist = message.twist
-            covariance = np.asarray(twist.covariance, dtype=float)
-            if covariance.shape != (36,):
-                return [], Reason.MALFORMED
-            engine.add_gnss_velocity(
-                t_s, _triple(twist.twist.linear), covariance.reshape(6, 6)[:3, :3]
-            )
-        elif topic == GNSS_HEADING_TOPIC:
-            q = message.orientation
-            x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
-            norm = math.sqrt(x * x + y * y + z * z + w * w)
-            if math.isfinite(norm) and norm < _MIN_QUATERNION_NORM:
-                return [], Reason.ZERO_QUATERNION
-            covariance = message.orientation_covariance
-            if len(covariance) != 9:
-                return [], Reason.MALFORMED
-            engine.add_gnss_heading(t_s, yaw_from_quaternion_rad(x, y, z, w), covariance[8])
-        elif topic == GNSS_BASELINE_TOPIC:
-            engine.add_gnss_baseline(t_s, _triple(message.vector))
-        else:
-            raise ValueError(f"'{topic}' is not an input topic of the fusion")
-    except (AttributeError, TypeError, ValueError) as error:
-        if isinstance(error, ValueError) and "input topic" in str(error):
-            raise
-        return [], Reason.MALFORMED
+        measurement = source.measurement_from_message(message)
+    except (AttributeError, TypeError, ValueError):
+        measurement = Reason.MALFORMED
+    if isinstance(measurement, Reason):
+        engine.reject_input(source.kind, measurement)
+        return [], measurement
+    engine.add_measurement(t_s, measurement)
     return [], engine.last_input_rejection
 
 

@@ -59,7 +59,7 @@ import collections
 import math
 import time
 
-from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
+from geometry_msgs.msg import TwistWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu, NavSatFix
@@ -69,12 +69,9 @@ from buoy_common.base_node import (
     DiagnosticsPublisher,
     FlushingNode,
     main_for,
+    message_class,
 )
 from buoy_common.contract import (
-    GNSS_BASELINE_TOPIC,
-    GNSS_FIX_TOPIC,
-    GNSS_HEADING_TOPIC,
-    GNSS_VELOCITY_TOPIC,
     IMU_RAW_TOPIC,
     NAV_FIX_TOPIC,
     NAV_IMU_TOPIC,
@@ -82,6 +79,7 @@ from buoy_common.contract import (
     NAV_VELOCITY_TOPIC,
     Reason,
 )
+from buoy_nav.aiding import disabled_topics
 from buoy_nav.config import (
     FUSION_FIELDS_NOT_PARAMETERS,
     FUSION_NODE_NAME,
@@ -91,6 +89,7 @@ from buoy_nav.config import (
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
 from buoy_nav.error_state_filter import STANDARD_GRAVITY_MPS2
 from buoy_nav.fusion_messages import (
+    FUSION_INPUT_MSGTYPES,
     StampBook,
     feed_imu_cdr,
     feed_message,
@@ -104,13 +103,7 @@ OUTPUT_CLASSES = {
     NAV_VELOCITY_TOPIC: TwistWithCovarianceStamped,
     NAV_FIX_TOPIC: NavSatFix,
 }
-INPUT_CLASSES = {
-    IMU_RAW_TOPIC: Imu,
-    GNSS_FIX_TOPIC: NavSatFix,
-    GNSS_VELOCITY_TOPIC: TwistWithCovarianceStamped,
-    GNSS_HEADING_TOPIC: Imu,
-    GNSS_BASELINE_TOPIC: Vector3Stamped,
-}
+INPUT_CLASSES = {topic: message_class(msgtype) for topic, msgtype in FUSION_INPUT_MSGTYPES.items()}
 DIAGNOSTICS_PERIOD_S = 1.0
 # How long after publishing a solution the node feeds the GNSS messages and lets the filter
 # catch up (s): long enough for the nodes and recorders that take the solution to run first;
@@ -134,15 +127,12 @@ class FusionNode(FlushingNode):
         self.filtering_overdue = 0
         self._gnss_waiting: list[tuple[str, bytes]] = []
         self.solutions_published = 0
-        self.input_topics = [
-            topic
-            for topic in INPUT_CLASSES
-            if topic != GNSS_BASELINE_TOPIC or self.config.use_gnss_baseline
-        ]
+        disabled = disabled_topics(self.config)
+        self.input_topics = [topic for topic in INPUT_CLASSES if topic not in disabled]
 
         self._nav_publishers = {
-            topic: self.create_publisher(message_class, topic, DATA_QOS)
-            for topic, message_class in OUTPUT_CLASSES.items()
+            topic: self.create_publisher(output_class, topic, DATA_QOS)
+            for topic, output_class in OUTPUT_CLASSES.items()
         }
         # Raw: the IMU sample is read straight from its CDR bytes, as offline, and saves the
         # building of a message object at 100 Hz; GNSS messages are decoded when their turn
@@ -328,10 +318,14 @@ class FusionNode(FlushingNode):
         if covariance is None or state is None:
             return {}
         variances = covariance.diagonal()
+        states = self.engine.states
         estimates = {}
         for k, axis in enumerate(("east", "north", "up")):
-            estimates[f"attitude_sigma_deg[{axis}]"] = math.degrees(math.sqrt(variances[k]))
-            estimates[f"velocity_sigma_mps[{axis}]"] = math.sqrt(variances[3 + k])
+            attitude_variance = variances[states.index("attitude", k)]
+            estimates[f"attitude_sigma_deg[{axis}]"] = math.degrees(math.sqrt(attitude_variance))
+            estimates[f"velocity_sigma_mps[{axis}]"] = math.sqrt(
+                variances[states.index("velocity", k)]
+            )
         for k, axis in enumerate("xyz"):
             estimates[f"gyro_bias_deg_s[{axis}]"] = math.degrees(state.gyro_bias_rad_s[k])
             estimates[f"accel_bias_mg[{axis}]"] = (

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from buoy_nav import earth
+from buoy_nav.error_state_filter import NavState
 from buoy_nav.rotations import (
     Quaternion,
     normalize_quaternion,
@@ -145,6 +146,30 @@ class StrapdownIntegrator:
         twin = copy.copy(self)
         twin._reset_sums()
         return twin
+
+    def nav_state(self) -> NavState:
+        """The nominal state as a :class:`NavState` (arrays are copies)."""
+        return NavState(
+            attitude_xyzw=self.attitude_xyzw,
+            velocity_enu_mps=np.array(self.velocity_enu_mps),
+            latitude_rad=self.latitude_rad,
+            longitude_rad=self.longitude_rad,
+            altitude_m=self.altitude_m,
+            gyro_bias_rad_s=np.array(self.gyro_bias_rad_s),
+            accel_bias_mps2=np.array(self.accel_bias_mps2),
+        )
+
+    def set_nav_state(self, state: NavState):
+        """:meth:`set_state` from a :class:`NavState`."""
+        self.set_state(
+            state.attitude_xyzw,
+            state.velocity_enu_mps,
+            state.latitude_rad,
+            state.longitude_rad,
+            state.altitude_m,
+            state.gyro_bias_rad_s,
+            state.accel_bias_mps2,
+        )
 
     @property
     def rotation_nb(self) -> np.ndarray:

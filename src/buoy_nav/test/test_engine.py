@@ -1,15 +1,22 @@
 """Fusion engine: ordering, interpolation at stamps, input validation, gating, outages."""
 
 import math
+from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from buoy_common.contract import Reason
 from buoy_nav import earth
+from buoy_nav.aiding import AIDING_SOURCES, GnssFix, GnssHeading, GnssVelocity
+from buoy_nav.aiding.base import FIX, AidingSource, MeasurementModel, as_floats
 from buoy_nav.alignment import AlignmentState
 from buoy_nav.config import ConfigError, FusionConfig
 from buoy_nav.engine import MAX_MEASUREMENT_LEAD_S, FusionEngine
+from buoy_nav.fusion_messages import feed_message
+from buoy_nav.state_layout import UP
 
 LATITUDE_DEG, LONGITUDE_DEG, ALTITUDE_M = 38.9, 117.7, 0.0
 LATITUDE = math.radians(LATITUDE_DEG)
@@ -90,16 +97,14 @@ def make_events(buoy, duration, imu_rate=100.0, gnss_rate=10.0, gnss_offset_s=0.
     return events
 
 
+MEASUREMENT_TYPES = {"fix": GnssFix, "vel": GnssVelocity, "heading": GnssHeading}
+
+
 def deliver(engine, event):
     t, _, kind, args = event
     if kind == "imu":
         return engine.add_imu(t, *args)
-    if kind == "fix":
-        engine.add_gnss_fix(t, *args)
-    elif kind == "vel":
-        engine.add_gnss_velocity(t, *args)
-    else:
-        engine.add_gnss_heading(t, *args)
+    engine.add_measurement(t, MEASUREMENT_TYPES[kind](*args))
     return []
 
 
@@ -221,7 +226,7 @@ def test_measurements_later_than_the_delay_are_rejected_as_too_late(rocking_run)
     engine = FusionEngine(engine_config())
     for event in late:
         deliver(engine, event)
-    engine.add_gnss_heading(20.0, 0.5, HEADING_VAR)  # 40 s after its stamp
+    engine.add_measurement(20.0, GnssHeading(0.5, HEADING_VAR))  # 40 s after its stamp
     assert engine.health().counters["gnss_heading"].rejected == {"too_late": 1}
 
 
@@ -373,7 +378,7 @@ def test_flush_rejects_measurements_after_the_last_imu_sample():
     engine = FusionEngine(engine_config())
     for event in make_events(buoy, 15.0):
         deliver(engine, event)
-    engine.add_gnss_heading(16.0, 0.1, HEADING_VAR)
+    engine.add_measurement(16.0, GnssHeading(0.1, HEADING_VAR))
     engine.flush()
     assert engine.health().counters["gnss_heading"].rejected == {"beyond_imu_data": 1}
 
@@ -428,3 +433,93 @@ def test_innovation_log_records_every_gated_measurement():
     )
     assert {record.kind for record in log} == {"gnss_fix", "gnss_velocity", "gnss_heading"}
     assert FusionEngine(engine_config()).innovation_log is None
+
+
+# -- a source the engine does not know -------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Altitude:
+    """A measurement the suite has no source for: the altitude of base_link (m) and its
+    variance (m²), as a pressure sensor or a radar gauge could give."""
+
+    altitude_m: float
+    variance_m2: float
+
+
+class AltitudeSource(AidingSource):
+    """A whole aiding source defined outside the package: message, validation, model."""
+
+    kind = "altitude"
+    topic = "test/altitude"
+    measurement_type = Altitude
+    aids = FIX
+
+    def measurement_from_message(self, message):
+        return Altitude(message.altitude, message.variance)
+
+    def validated(self, measurement):
+        values = as_floats(measurement.altitude_m, measurement.variance_m2)
+        if isinstance(values, Reason):
+            return values
+        return Altitude(*values) if values[1] > 0.0 else Reason.NON_POSITIVE_VARIANCE
+
+    def model(self, measurement, point):
+        jacobian = np.zeros((1, self.states.dim))
+        jacobian[0, self.states.index("position", UP)] = 1.0
+        predicted = np.array((point.state.altitude_m,))
+        return MeasurementModel(
+            predicted=predicted,
+            innovation=np.array((measurement.altitude_m,)) - predicted,
+            jacobian=jacobian,
+            covariance=np.array(((measurement.variance_m2,),)),
+        )
+
+    def align(self, aligner, t_s, measurement, raw_gyro_rad_s):
+        return None
+
+
+def test_a_source_registered_from_outside_runs_end_to_end():
+    """The altitude source joins the fusion by registration alone: its messages are converted
+    and validated by it, its model pulls the altitude off the (vertically vague) fixes."""
+    offset_m = 0.3
+    buoy = RockingBuoy()
+    vague_vertical = np.diag((4e-4, 4e-4, 100.0))
+    engine = FusionEngine(
+        engine_config(record_innovations=True), sources=(*AIDING_SOURCES, AltitudeSource)
+    )
+    solutions = []
+    for event in make_events(buoy, 40.0):
+        t, _, kind, args = event
+        if kind == "fix":
+            event = (t, 0, kind, (*args[:3], vague_vertical))
+        solutions += deliver(engine, event)
+        if kind == "heading":
+            message = SimpleNamespace(
+                header=SimpleNamespace(
+                    stamp=SimpleNamespace(sec=int(t), nanosec=round(t % 1 * 1e9))
+                ),
+                altitude=offset_m,
+                variance=1e-4,
+            )
+            assert feed_message(engine, "test/altitude", message) == ([], None)
+    bad = SimpleNamespace(header=message.header, altitude=0.0, variance=-1.0)
+    assert feed_message(engine, "test/altitude", bad) == ([], Reason.NON_POSITIVE_VARIANCE)
+    solutions += engine.flush()
+
+    counters = engine.health().counters["altitude"]
+    assert counters.used_for_alignment > 0
+    assert counters.accepted + counters.used_for_alignment == 400
+    assert counters.rejected == {"non_positive_variance": 1}
+    assert "altitude" in {record.kind for record in engine.innovation_log}
+    # Map origin: base_link at alignment, on the fix (truth altitude 0).
+    assert solutions[-1].position_map_m[2] == pytest.approx(offset_m, abs=0.02)
+    # The GNSS sources still do their work.
+    assert attitude_errors_rad(buoy, solutions).max() < math.radians(0.02)
+
+    # Unregistered, the same source's input is a programming error.
+    plain = FusionEngine(engine_config())
+    with pytest.raises(ValueError, match="input topic"):
+        feed_message(plain, "test/altitude", message)
+    with pytest.raises(TypeError, match="Altitude"):
+        plain.add_measurement(1.0, Altitude(0.0, 1.0))

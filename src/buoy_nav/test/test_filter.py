@@ -10,7 +10,7 @@ from scipy.stats import chi2
 from buoy_nav import earth
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import (
-    STATE_DIM,
+    ERROR_STATES,
     ErrorStateFilter,
     ImuErrorModel,
     NavState,
@@ -24,6 +24,8 @@ from buoy_nav.rotations import (
 )
 
 RNG = np.random.default_rng(5)
+STATES = ERROR_STATES
+STATE_DIM = STATES.dim
 IMU_MODEL = ImuErrorModel.from_config(FusionConfig())
 
 
@@ -116,25 +118,27 @@ def test_error_model_predicts_the_mechanization_difference():
 
     actual = error_between(true, nominal)
     predicted = transition @ initial_error
-    change = actual[:9] - initial_error[:9]
+    change = actual - initial_error
     # Over 2 s the errors change by mrad, cm/s and cm; the linear model predicts the change to
     # within a few percent (the remainder is second order in the error).
-    for block in (slice(0, 3), slice(3, 6), slice(6, 9)):
+    for block in (STATES.attitude, STATES.velocity, STATES.position):
         assert np.linalg.norm(actual[block] - predicted[block]) < 0.03 * np.linalg.norm(
             change[block]
         ), block
     # The bias errors persist (random walk without decay), as in the two strapdown runs.
-    np.testing.assert_array_equal(predicted[9:], initial_error[9:])
-    np.testing.assert_allclose(actual[9:], initial_error[9:], rtol=1e-12)
+    for block in (STATES.gyro_bias, STATES.accel_bias):
+        np.testing.assert_array_equal(predicted[block], initial_error[block])
+        np.testing.assert_allclose(actual[block], initial_error[block], rtol=1e-12)
 
 
 def test_bias_errors_are_random_walks_with_the_gauss_markov_driving_noise():
     """No decay (the switch-on bias does not go away); variance grows by 2σ²T/τ."""
     transition, noise = discrete_error_model(_still_sums(0.1), 0.6, 0.0, np.zeros(3), IMU_MODEL)
-    np.testing.assert_array_equal(transition[9:, 9:], np.eye(6))
+    biases = slice(STATES.gyro_bias.start, STATES.accel_bias.stop)
+    np.testing.assert_array_equal(transition[biases, biases], np.eye(6))
     for block, sigma, tau in (
-        (slice(9, 12), IMU_MODEL.gyro_markov_sigma_rad_s, IMU_MODEL.gyro_correlation_time_s),
-        (slice(12, 15), IMU_MODEL.accel_markov_sigma_mps2, IMU_MODEL.accel_correlation_time_s),
+        (STATES.gyro_bias, IMU_MODEL.gyro_markov_sigma_rad_s, IMU_MODEL.gyro_correlation_time_s),
+        (STATES.accel_bias, IMU_MODEL.accel_markov_sigma_mps2, IMU_MODEL.accel_correlation_time_s),
     ):
         np.testing.assert_allclose(noise[block, block], 2 * sigma**2 * 0.1 / tau * np.eye(3))
 
@@ -142,8 +146,10 @@ def test_bias_errors_are_random_walks_with_the_gauss_markov_driving_noise():
 def test_white_noise_grows_linearly_with_time():
     one = discrete_error_model(_still_sums(0.1), 0.6, 0.0, np.zeros(3), IMU_MODEL)[1]
     two = discrete_error_model(_still_sums(0.2), 0.6, 0.0, np.zeros(3), IMU_MODEL)[1]
-    np.testing.assert_allclose(two[:6, :6], 2 * one[:6, :6], rtol=1e-12)
-    assert one[0, 0] == pytest.approx(IMU_MODEL.gyro_noise_psd_rad2_s * 0.1)
+    white = slice(STATES.attitude.start, STATES.velocity.stop)
+    np.testing.assert_allclose(two[white, white], 2 * one[white, white], rtol=1e-12)
+    east = STATES.index("attitude", 0)
+    assert one[east, east] == pytest.approx(IMU_MODEL.gyro_noise_psd_rad2_s * 0.1)
     # 0.2 °/√h: after one hour, 1σ = 0.2°.
     assert math.sqrt(IMU_MODEL.gyro_noise_psd_rad2_s * 3600) == pytest.approx(math.radians(0.2))
 
@@ -209,7 +215,7 @@ def test_gate_threshold_is_the_chi_square_quantile_for_each_dimension(probabilit
 def test_gate_uses_the_chi_square_quantile_and_rejects_an_outlier():
     prior = np.eye(STATE_DIM) * 1e-2
     h = np.zeros((3, STATE_DIM))
-    h[:, 3:6] = np.eye(3)
+    h[:, STATES.velocity] = np.eye(3)
     r = np.eye(3) * 4e-4
     kalman = ErrorStateFilter(prior, 0.9999)
     s = 1e-2 + 4e-4
@@ -220,6 +226,11 @@ def test_gate_uses_the_chi_square_quantile_and_rejects_an_outlier():
     outlier = kalman.gate(np.array((0.0, 0.0, 1.0)), h, r)
     assert not outlier.accepted
     assert outlier.nis == pytest.approx(1.0 / s)
+    # A source with a narrower gate of its own rejects the inlier.
+    narrow = kalman.gate(np.array((0.1, -0.05, 0.08)), h, r, probability=0.1)
+    assert not narrow.accepted and narrow.threshold == pytest.approx(chi2.ppf(0.1, 3))
+    assert narrow.nis == inlier.nis
+    assert kalman.gate_threshold(3) == pytest.approx(chi2.ppf(0.9999, 3))
 
 
 def test_nis_is_chi_square_distributed_when_the_model_is_right():
@@ -263,13 +274,14 @@ def test_reset_jacobian_matches_the_composition_of_rotations():
         [(remaining(base + e * 1e-6) - remaining(base - e * 1e-6)) / 2e-6 for e in np.eye(3)]
     )
     # With P_φφ = I and P_φv = 0.5 I the reset turns the cross block into 0.5 G.
+    attitude, velocity = STATES.attitude, STATES.velocity
     prior = np.eye(STATE_DIM)
-    prior[0:3, 3:6] = prior[3:6, 0:3] = 0.5 * np.eye(3)
+    prior[attitude, velocity] = prior[velocity, attitude] = 0.5 * np.eye(3)
     kalman = ErrorStateFilter(prior, 0.9999)
     update = np.zeros(STATE_DIM)
-    update[:3] = correction
+    update[attitude] = correction
     kalman.reset_after_injection(update)
-    g = kalman.covariance[0:3, 3:6] / 0.5
+    g = kalman.covariance[attitude, velocity] / 0.5
     # Equal up to the second-order term |δφ̂|²/12 ≈ 3e-4 of the exact Jacobian.
     np.testing.assert_allclose(g, numeric, atol=1e-3)
     assert np.abs(g - g.T).max() > 0.02  # the skew part, whose sign matters, is present

@@ -1,0 +1,221 @@
+"""What every aiding source of the fusion provides, and the pieces they share.
+
+An aiding source is everything the filter knows about one kind of aiding measurement; the
+engine (:class:`buoy_nav.engine.FusionEngine`) is the clock that runs them. A measurement goes
+
+1. **message → measurement**: :meth:`AidingSource.measurement_from_message` reads the contract
+   message of :attr:`~AidingSource.topic` (attribute access only: rclpy and rosbags objects both
+   work) into the source's measurement type, or returns the :class:`Reason` it carries none;
+2. **validation**: :meth:`AidingSource.validated` turns the values into floats and float arrays
+   and checks them (finite, plausible, positive variances), or returns the :class:`Reason`;
+   the engine counts every rejection per source and reason and queues what passes, in stamp
+   order;
+3. **alignment** (before the filter runs): :meth:`AidingSource.align` hands the measurement to
+   the :class:`~buoy_nav.alignment.InMotionAligner`;
+4. **update**: :meth:`AidingSource.model` linearises the measurement at the nominal state
+   (:class:`LinearisationPoint`) into a :class:`MeasurementModel` (predicted h, innovation,
+   Jacobian H over the error states, noise R), or None when its geometry carries no
+   information (counted as ``geometry``); the engine gates it with the chi-square test at
+   :attr:`~AidingSource.gate_probability` and applies the accepted measurements of one stamp in
+   one stacked update;
+5. **reset**: after :attr:`~AidingSource.reset_after_rejections` consecutive gate rejections,
+   :meth:`AidingSource.reset` re-initialises the states the measurement observes
+   (:class:`StateReset`), so that a filter that has lost its way follows the sensor again.
+
+Jacobians follow the error-injection convention of
+:func:`buoy_nav.error_state_filter.inject_error_state` and address the error states by name
+(:mod:`buoy_nav.state_layout`).
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
+
+import numpy as np
+
+from buoy_common.contract import SENSOR_MSGTYPES, Reason
+from buoy_nav.config import FusionConfig
+from buoy_nav.error_state_filter import NavState
+from buoy_nav.state_layout import StateLayout
+
+if TYPE_CHECKING:
+    from buoy_nav.alignment import AlignmentResult, InMotionAligner
+
+# What a source aids, for the solutions' coasting flags (``coasting_fix``, ...): a flag is raised
+# when no source that aids its quantity was accepted for ``coasting_timeout_s``.
+FIX = "fix"
+VELOCITY = "velocity"
+HEADING = "heading"
+AIDED_QUANTITIES = (FIX, VELOCITY, HEADING)
+
+
+@dataclass(frozen=True)
+class MeasurementModel:
+    """A measurement linearised at the nominal state.
+
+    predicted: measurement predicted from the nominal state (m,).
+    innovation: measured − predicted (m,), angles wrapped to (−π, π].
+    jacobian: ∂(measurement)/∂(error state), m × number of error states.
+    covariance: measurement noise covariance R, m × m.
+    """
+
+    predicted: np.ndarray
+    innovation: np.ndarray
+    jacobian: np.ndarray
+    covariance: np.ndarray
+
+
+class LinearisationPoint(NamedTuple):
+    """The nominal state at a measurement's stamp, where its model is linearised.
+
+    state: nominal navigation state. rotation_nb: its R_nb (3×3, body FLU → ENU).
+    raw_gyro_rad_s: gyro sample at the stamp (body, rad/s; interpolated, bias not removed).
+    nav_frame_rate_enu_rad_s: ω_in = ω_ie + ω_en at the nominal state (ENU, rad/s).
+    """
+
+    state: NavState
+    rotation_nb: np.ndarray
+    raw_gyro_rad_s: tuple[float, float, float]
+    nav_frame_rate_enu_rad_s: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class StateReset:
+    """States re-initialised from a measurement.
+
+    state: the nominal state with the reset states replaced. indices: the error states reset
+    (from the source's layout, e.g. ``states.indices("velocity")``); they are decorrelated from
+    the others and given ``variances``.
+    """
+
+    state: NavState
+    indices: Sequence[int]
+    variances: Sequence[float]
+
+
+class AidingSource(abc.ABC):
+    """One aiding sensor of the fusion (see the module docstring for the life of a measurement).
+
+    Class attributes a source defines:
+      kind: its name in counters, diagnostics and the innovation log (``gnss_fix``).
+      topic: the contract topic it reads (from :mod:`buoy_common.contract`).
+      measurement_type: the class of its measurements; :meth:`FusionEngine.add_measurement`
+        finds the source by it.
+      aids: which coasting flag its accepted measurements clear (:data:`AIDED_QUANTITIES`).
+      superseded_by: kind of a source whose measurement of the same stamp carries this one's
+        information and more (None: none); such a measurement is set aside and counted as
+        superseded, so one observation is not fused twice.
+
+    A source is built once per engine from the configuration and the engine's error-state
+    layout (``states``), whose block names address the Jacobian's columns.
+    """
+
+    kind: ClassVar[str]
+    topic: ClassVar[str]
+    measurement_type: ClassVar[type]
+    aids: ClassVar[str]
+    superseded_by: ClassVar[str | None] = None
+
+    def __init__(self, config: FusionConfig, states: StateLayout):
+        self.config = config
+        self.states = states
+        self.gate_probability = config.gate_probability
+        """Probability of the chi-square innovation gate."""
+        self.reset_after_rejections = config.gate_reset_count
+        """Consecutive gate rejections after which :meth:`reset` is asked for a reset."""
+        self.enabled = self.enabled_by(config)
+        """Whether the configuration lets the fusion use this source."""
+
+    @classmethod
+    def enabled_by(cls, config: FusionConfig) -> bool:
+        """Whether ``config`` lets the fusion use this source (its measurements are otherwise
+        rejected as ``disabled``, and the tools do not read its topic)."""
+        return True
+
+    @classmethod
+    def msgtype(cls) -> str:
+        """Message type of :attr:`topic` (from the contract)."""
+        return SENSOR_MSGTYPES[cls.topic]
+
+    @abc.abstractmethod
+    def measurement_from_message(self, message) -> Any:
+        """The measurement in a contract message of :attr:`topic`, or the :class:`Reason` it
+        holds none. May raise AttributeError, TypeError or ValueError for a message that is not
+        of the type (counted as ``malformed``)."""
+
+    @abc.abstractmethod
+    def validated(self, measurement) -> Any:
+        """``measurement`` with its values as floats and float arrays, or the :class:`Reason`
+        it cannot be used (never raises for bad values)."""
+
+    @abc.abstractmethod
+    def model(self, measurement, point: LinearisationPoint) -> MeasurementModel | None:
+        """The validated ``measurement`` linearised at ``point``; None when its geometry carries
+        no information there."""
+
+    def reset(
+        self, measurement, point: LinearisationPoint, model: MeasurementModel
+    ) -> StateReset | None:
+        """The states to re-initialise from a persistently rejected ``measurement`` (``model``:
+        its model at ``point``); None: no reset. The default resets nothing."""
+        return None
+
+    @abc.abstractmethod
+    def align(
+        self, aligner: InMotionAligner, t_s: float, measurement, raw_gyro_rad_s
+    ) -> AlignmentResult | None:
+        """Give the validated ``measurement`` (stamp ``t_s``; raw gyro sample there, body
+        rad/s) to the aligner; the alignment result when it completes the alignment."""
+
+
+# -- validation helpers ----------------------------------------------------------------------
+
+
+def as_floats(*values) -> tuple[float, ...] | Reason:
+    """Scalar inputs as floats, or the reason one is malformed or not finite."""
+    try:
+        numbers = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        return Reason.MALFORMED
+    if not all(math.isfinite(n) for n in numbers):
+        return Reason.NON_FINITE
+    return numbers
+
+
+def as_float_array(values, shape: tuple[int, ...]) -> np.ndarray | Reason:
+    """An input as a float array of ``shape`` (a matrix may come row-major flat), or the reason
+    it is malformed or not finite."""
+    try:
+        array = np.array(values, dtype=float)
+    except (TypeError, ValueError):
+        return Reason.MALFORMED
+    if array.size == math.prod(shape) and array.ndim == 1:
+        array = array.reshape(shape)
+    if array.shape != shape:
+        return Reason.MALFORMED
+    if not np.all(np.isfinite(array)):
+        return Reason.NON_FINITE
+    return array
+
+
+def has_non_positive_variance(covariance: np.ndarray) -> bool:
+    """True when a variance on the diagonal of ``covariance`` is zero or negative."""
+    return bool(np.any(np.diag(covariance) <= 0.0))
+
+
+def vector_of(message_vector) -> tuple[float, float, float]:
+    """(x, y, z) of a geometry_msgs/Vector3 as floats."""
+    return float(message_vector.x), float(message_vector.y), float(message_vector.z)
+
+
+def floored_covariance(covariance, variance_floor: float) -> np.ndarray:
+    """Symmetrised covariance whose diagonal is raised to at least ``variance_floor``."""
+    matrix = np.array(covariance, dtype=float, ndmin=2)
+    matrix = 0.5 * (matrix + matrix.T)
+    diagonal = matrix.reshape(-1)[:: matrix.shape[0] + 1]
+    np.maximum(diagonal, variance_floor, out=diagonal)
+    return matrix

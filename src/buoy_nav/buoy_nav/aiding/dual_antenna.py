@@ -1,0 +1,96 @@
+"""What the dual-antenna sources (heading and baseline vector) share: the antenna geometry.
+
+A moving-baseline RTK receiver measures the primary → secondary antenna vector
+``b = R_nb · (l_s − l_p)`` (ENU); the heading it reports is the azimuth of that vector's
+horizontal projection, ``ψ = atan2(b_N, b_E)`` (0 East, counter-clockwise). This azimuth is what
+both sources contribute to the alignment and to a yaw reset, solved exactly for any tilt and any
+antenna placement: with ``R_nb = Rz(yaw) R_L``, ``R_L = Ry(pitch) Rx(roll)``, the azimuth is
+``yaw + atan2(w_y, w_x)`` where ``w = R_L (l_s − l_p)``.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+
+import numpy as np
+
+from buoy_nav.aiding.base import AidingSource, LinearisationPoint, StateReset
+from buoy_nav.error_state_filter import NavState
+from buoy_nav.rotations import (
+    euler_from_rotation_matrix,
+    quaternion_from_rotation_matrix,
+    rotation_matrix_from_euler,
+)
+from buoy_nav.state_layout import UP
+
+# The baseline's horizontal projection must keep this fraction of its length for its azimuth to
+# carry heading (at 0.2 the yaw noise is 5× the tilt-free value).
+MIN_HORIZONTAL_BASELINE_FRACTION = 0.2
+
+
+def baseline_enu_m(rotation_nb, baseline_body_m) -> np.ndarray:
+    """Primary → secondary antenna vector in ENU (m) for attitude R_nb."""
+    return np.asarray(rotation_nb, dtype=float) @ np.asarray(baseline_body_m, dtype=float)
+
+
+def horizontal_fraction(rotation_nb, baseline_body_m) -> float:
+    """Length of the baseline's horizontal projection divided by its length (0 = vertical)."""
+    baseline = baseline_enu_m(rotation_nb, baseline_body_m)
+    return math.hypot(baseline[0], baseline[1]) / float(np.linalg.norm(baseline))
+
+
+def baseline_azimuth_rad(baseline_enu_m) -> tuple[float, float]:
+    """Azimuth (rad, ENU, 0 = East, CCW) of a baseline's horizontal projection and the length
+    of that projection (m)."""
+    east, north = float(baseline_enu_m[0]), float(baseline_enu_m[1])
+    return math.atan2(north, east), math.hypot(east, north)
+
+
+class DualAntennaSource(AidingSource):
+    """A source that measures the antenna baseline's azimuth, alone or with its tilt.
+
+    Its role in the alignment is that azimuth, which completes the alignment; after persistent
+    gate rejections it resets the yaw to it, keeping roll and pitch.
+    """
+
+    def __init__(self, config, states):
+        super().__init__(config, states)
+        self._baseline_body_m = np.array(config.baseline_body_m)
+        self._heading_variance_floor_rad2 = config.gnss_heading_variance_floor_rad2
+
+    @abc.abstractmethod
+    def baseline_azimuth(self, measurement) -> tuple[float, float] | None:
+        """Azimuth of the measured baseline (rad, ENU, 0 = East, CCW) and its variance (rad²,
+        floored at ``gnss_heading_variance_floor_rad2``); None when the measurement gives
+        none (a baseline too steep)."""
+
+    def reset(self, measurement, point: LinearisationPoint, model) -> StateReset | None:
+        """The yaw that puts the baseline at the measured azimuth, roll and pitch kept."""
+        measured = self.baseline_azimuth(measurement)
+        if measured is None:
+            return None
+        azimuth, variance = measured
+        state = point.state
+        roll, pitch, _ = euler_from_rotation_matrix(point.rotation_nb)
+        levelled = rotation_matrix_from_euler(roll, pitch, 0.0) @ self._baseline_body_m
+        yaw = azimuth - math.atan2(levelled[1], levelled[0])
+        return StateReset(
+            NavState(
+                quaternion_from_rotation_matrix(rotation_matrix_from_euler(roll, pitch, yaw)),
+                state.velocity_enu_mps,
+                state.latitude_rad,
+                state.longitude_rad,
+                state.altitude_m,
+                state.gyro_bias_rad_s,
+                state.accel_bias_mps2,
+            ),
+            [self.states.index("attitude", UP)],
+            [variance],
+        )
+
+    def align(self, aligner, t_s: float, measurement, raw_gyro_rad_s):
+        measured = self.baseline_azimuth(measurement)
+        if measured is None:
+            return None
+        return aligner.add_heading(t_s, *measured, raw_gyro_rad_s)

@@ -1,0 +1,155 @@
+"""GNSS position of the primary antenna (``gnss/fix``, sensor_msgs/NavSatFix).
+
+The measured antenna position (WGS-84) is expressed in the ENU tangent plane at the nominal
+``base_link`` position, where the prediction is the lever arm turned into ENU, ``R_nb l``. The
+position error δp is in ENU metres of that plane (better conditioned than δL, δλ, δh), so under
+the convention of :func:`buoy_nav.error_state_filter.inject_error_state`::
+
+    p_ant = δp + Exp([φ×]) R_nb l   ⇒   ∂p_ant/∂φ = −[(R_nb l)×],   ∂p_ant/∂δp = I.
+
+After persistent gate rejections the position is reset to the fix moved back along the lever
+arm. In the alignment the latest fix gives the initial position.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from buoy_common.contract import GNSS_FIX_TOPIC, Reason
+from buoy_nav import earth
+from buoy_nav.aiding.base import (
+    FIX,
+    AidingSource,
+    LinearisationPoint,
+    MeasurementModel,
+    StateReset,
+    as_float_array,
+    as_floats,
+    floored_covariance,
+    has_non_positive_variance,
+)
+from buoy_nav.error_state_filter import NavState
+from buoy_nav.rotations import skew
+
+# sensor_msgs/NavSatStatus: a status below this is no fix.
+STATUS_FIX = 0
+# Beyond this ellipsoidal altitude (m) a value is a malformed message, not a buoy's position.
+MAX_ABS_ALTITUDE_M = 1.0e4
+
+
+class GnssFix(NamedTuple):
+    """A primary-antenna fix: WGS-84 latitude and longitude (deg), ellipsoidal altitude (m),
+    ENU covariance (3×3 m², or row-major flat)."""
+
+    latitude_deg: float
+    longitude_deg: float
+    altitude_m: float
+    covariance_enu_m2: np.ndarray
+
+    @property
+    def latitude_rad(self) -> float:
+        return math.radians(self.latitude_deg)
+
+    @property
+    def longitude_rad(self) -> float:
+        return math.radians(self.longitude_deg)
+
+
+class GnssFixSource(AidingSource):
+    """Position of the primary antenna (see the module docstring)."""
+
+    kind = "gnss_fix"
+    topic = GNSS_FIX_TOPIC
+    measurement_type = GnssFix
+    aids = FIX
+
+    def __init__(self, config, states):
+        super().__init__(config, states)
+        self._lever_arm_body_m = np.array(config.primary_antenna_body_m)
+        self._variance_floor_m2 = config.gnss_position_variance_floor_m2
+
+    def measurement_from_message(self, message) -> GnssFix | Reason:
+        if message.status.status < STATUS_FIX:
+            return Reason.NO_FIX
+        return GnssFix(
+            message.latitude,
+            message.longitude,
+            message.altitude,
+            np.asarray(message.position_covariance, dtype=float),
+        )
+
+    def validated(self, measurement: GnssFix) -> GnssFix | Reason:
+        values = as_floats(
+            measurement.latitude_deg, measurement.longitude_deg, measurement.altitude_m
+        )
+        covariance = as_float_array(measurement.covariance_enu_m2, (3, 3))
+        if isinstance(values, Reason):
+            return values
+        if isinstance(covariance, Reason):
+            return covariance
+        latitude, longitude, altitude = values
+        if abs(latitude) > 90.0 or abs(longitude) > 360.0 or abs(altitude) > MAX_ABS_ALTITUDE_M:
+            return Reason.OUT_OF_RANGE
+        if has_non_positive_variance(covariance):
+            return Reason.NON_POSITIVE_VARIANCE
+        return GnssFix(latitude, longitude, altitude, covariance)
+
+    def model(self, measurement: GnssFix, point: LinearisationPoint) -> MeasurementModel:
+        """Antenna position in ENU metres at the nominal position."""
+        state = point.state
+        measured = np.array(
+            earth.enu_offset_scalar(
+                state.latitude_rad,
+                state.longitude_rad,
+                state.altitude_m,
+                measurement.latitude_rad,
+                measurement.longitude_rad,
+                measurement.altitude_m,
+            )
+        )
+        lever_enu = point.rotation_nb @ self._lever_arm_body_m
+        states = self.states
+        jacobian = np.zeros((3, states.dim))
+        jacobian[:, states.attitude] = -skew(lever_enu)
+        jacobian[:, states.position] = np.eye(3)
+        return MeasurementModel(
+            predicted=lever_enu,
+            innovation=measured - lever_enu,
+            jacobian=jacobian,
+            covariance=floored_covariance(measurement.covariance_enu_m2, self._variance_floor_m2),
+        )
+
+    def reset(self, measurement: GnssFix, point: LinearisationPoint, model) -> StateReset:
+        """The position to the fix moved back along the lever arm, with the fix's variances."""
+        state = point.state
+        latitude, longitude, altitude = earth.geodetic_offset(
+            measurement.latitude_rad,
+            measurement.longitude_rad,
+            measurement.altitude_m,
+            -(point.rotation_nb @ self._lever_arm_body_m),
+        )
+        return StateReset(
+            NavState(
+                state.attitude_xyzw,
+                state.velocity_enu_mps,
+                latitude,
+                longitude,
+                altitude,
+                state.gyro_bias_rad_s,
+                state.accel_bias_mps2,
+            ),
+            self.states.indices("position"),
+            np.diag(model.covariance),
+        )
+
+    def align(self, aligner, t_s: float, measurement: GnssFix, raw_gyro_rad_s) -> None:
+        aligner.add_fix(
+            t_s,
+            measurement.latitude_rad,
+            measurement.longitude_rad,
+            measurement.altitude_m,
+            measurement.covariance_enu_m2,
+        )

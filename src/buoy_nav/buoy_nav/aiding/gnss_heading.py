@@ -1,0 +1,122 @@
+"""Dual-antenna heading (``gnss/heading``, sensor_msgs/Imu).
+
+The receiver reports the azimuth of the horizontal projection of the primary → secondary
+baseline, ``ψ = atan2(b_N, b_E)`` with ``b = R_nb · (l_s − l_p)`` in ENU (0 East,
+counter-clockwise), as the yaw of the message's orientation quaternion, its variance in
+``orientation_covariance[8]``. The model is exact for any tilt and any antenna placement, unlike
+a plain yaw difference, which only holds for a baseline along body x on a level platform.
+
+Jacobian under the convention ``R_true = Exp([φ×]) R_nb``: ``δb = φ × b``, and
+``∂ψ/∂b = (−b_N, b_E, 0) / ρ²`` with ``ρ² = b_E² + b_N²``, so
+
+    ∂ψ/∂φ = (−b_E b_U / ρ², −b_N b_U / ρ², 1)
+
+and zero for every other state. It is singular when the baseline is vertical (ρ → 0): below
+:data:`~buoy_nav.aiding.dual_antenna.MIN_HORIZONTAL_BASELINE_FRACTION` of horizontal length the
+heading is rejected as ``geometry``.
+
+A baseline vector of the same stamp (:mod:`buoy_nav.aiding.gnss_baseline`), from the same
+carrier-phase solution, carries this heading and the baseline's tilt: it supersedes the heading.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from buoy_common.contract import GNSS_HEADING_TOPIC, Reason
+from buoy_nav.aiding.base import (
+    HEADING,
+    LinearisationPoint,
+    MeasurementModel,
+    as_floats,
+    floored_covariance,
+)
+from buoy_nav.aiding.dual_antenna import (
+    MIN_HORIZONTAL_BASELINE_FRACTION,
+    DualAntennaSource,
+    baseline_enu_m,
+    horizontal_fraction,
+)
+from buoy_nav.aiding.gnss_baseline import GnssBaselineSource
+from buoy_nav.rotations import wrap_angle
+
+# Quaternions shorter than this carry no heading.
+MIN_QUATERNION_NORM = 1e-9
+
+
+class GnssHeading(NamedTuple):
+    """Azimuth of the primary → secondary baseline (rad, ENU, 0 = East, CCW) and its variance
+    (rad²)."""
+
+    yaw_rad: float
+    variance_rad2: float
+
+
+def yaw_from_quaternion_rad(x: float, y: float, z: float, w: float) -> float:
+    """Yaw (rad, about ENU up, 0 = East, counter-clockwise) of the rotation of a quaternion
+    (any norm): the azimuth of the rotated body x axis projected on the horizontal."""
+    return math.atan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
+
+
+class GnssHeadingSource(DualAntennaSource):
+    """The dual-antenna heading (see the module docstring)."""
+
+    kind = "gnss_heading"
+    topic = GNSS_HEADING_TOPIC
+    measurement_type = GnssHeading
+    aids = HEADING
+    superseded_by = GnssBaselineSource.kind
+
+    def measurement_from_message(self, message) -> GnssHeading | Reason:
+        q = message.orientation
+        x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+        norm = math.sqrt(x * x + y * y + z * z + w * w)
+        if math.isfinite(norm) and norm < MIN_QUATERNION_NORM:
+            return Reason.ZERO_QUATERNION
+        covariance = message.orientation_covariance
+        if len(covariance) != 9:
+            return Reason.MALFORMED
+        return GnssHeading(yaw_from_quaternion_rad(x, y, z, w), covariance[8])
+
+    def validated(self, measurement: GnssHeading) -> GnssHeading | Reason:
+        values = as_floats(measurement.yaw_rad, measurement.variance_rad2)
+        if isinstance(values, Reason):
+            return values
+        yaw, variance = values
+        if variance <= 0.0:
+            return Reason.NON_POSITIVE_VARIANCE
+        return GnssHeading(wrap_angle(yaw), variance)
+
+    def model(self, measurement: GnssHeading, point: LinearisationPoint) -> MeasurementModel | None:
+        """The azimuth of the projected baseline (innovation wrapped to (−π, π]); None for a
+        baseline too steep to have one."""
+        rotation = point.rotation_nb
+        baseline = self._baseline_body_m
+        if horizontal_fraction(rotation, baseline) < MIN_HORIZONTAL_BASELINE_FRACTION:
+            return None
+        b_east, b_north, b_up = baseline_enu_m(rotation, baseline)
+        horizontal_sq = b_east * b_east + b_north * b_north
+        predicted = math.atan2(b_north, b_east)
+        states = self.states
+        jacobian = np.zeros((1, states.dim))
+        jacobian[0, states.attitude] = (
+            -b_east * b_up / horizontal_sq,
+            -b_north * b_up / horizontal_sq,
+            1.0,
+        )
+        return MeasurementModel(
+            predicted=np.array((predicted,)),
+            innovation=np.array((wrap_angle(measurement.yaw_rad - predicted),)),
+            jacobian=jacobian,
+            covariance=floored_covariance(
+                measurement.variance_rad2, self._heading_variance_floor_rad2
+            ),
+        )
+
+    def baseline_azimuth(self, measurement: GnssHeading) -> tuple[float, float]:
+        return measurement.yaw_rad, max(
+            measurement.variance_rad2, self._heading_variance_floor_rad2
+        )

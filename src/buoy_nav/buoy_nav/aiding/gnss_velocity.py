@@ -1,0 +1,154 @@
+"""GNSS velocity of the primary antenna (``gnss/vel``, geometry_msgs/TwistWithCovarianceStamped).
+
+The antenna at lever arm ``l`` (``base_link``, m) moves over ground with
+
+    v_ant = v + R_nb (ω_nb × l),   ω_nb = ω_ib − R_nb^T ω_in
+
+(ENU, m/s), where ω_ib = ω_raw − b_g is the bias-corrected gyro rate (body, rad/s) and
+ω_in = ω_ie + ω_en the rotation of ENU (rad/s). Equivalently
+``v_ant = v + R_nb (ω_ib × l) − ω_in × (R_nb l)``.
+
+Jacobian under the convention of :func:`buoy_nav.error_state_filter.inject_error_state`
+(``R_true = Exp([φ×]) R_nb``, ``v_true = v + δv``, ``b_true = b + δb`` so ``ω_true = ω − δb``)::
+
+    ∂v_ant/∂φ   = −[(R_nb (ω_ib × l))×] + [ω_in×][(R_nb l)×]
+    ∂v_ant/∂δv  = I
+    ∂v_ant/∂δb_g = R_nb [l×]
+
+(the change of ω_in with δv, below 1e-6 of the other terms, is left out).
+
+After persistent gate rejections the velocity is reset to the measured one less the lever-arm
+term. In the alignment the latest velocity gives the initial velocity.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from buoy_common.contract import GNSS_VELOCITY_TOPIC, Reason
+from buoy_nav.aiding.base import (
+    VELOCITY,
+    AidingSource,
+    LinearisationPoint,
+    MeasurementModel,
+    StateReset,
+    as_float_array,
+    floored_covariance,
+    has_non_positive_variance,
+    vector_of,
+)
+from buoy_nav.error_state_filter import NavState
+from buoy_nav.rotations import cross, skew
+
+# Beyond this speed over ground (m/s) a value is a malformed message, not a buoy's velocity.
+MAX_SPEED_MPS = 100.0
+
+
+class GnssVelocity(NamedTuple):
+    """The primary antenna's velocity over ground (ENU, m/s) and its covariance (3×3 m²/s², or
+    row-major flat)."""
+
+    velocity_enu_mps: np.ndarray
+    covariance_m2s2: np.ndarray
+
+
+def predicted_antenna_velocity_enu_mps(
+    velocity_enu_mps,
+    rotation_nb,
+    angular_rate_ib_body_rad_s,
+    nav_frame_rate_enu_rad_s,
+    lever_arm_body_m,
+) -> np.ndarray:
+    """Velocity over ground of a point at ``lever_arm_body_m`` of ``base_link`` (ENU, m/s)."""
+    rotation = np.asarray(rotation_nb, dtype=float)
+    lever_arm = np.asarray(lever_arm_body_m, dtype=float)
+    return (
+        np.asarray(velocity_enu_mps, dtype=float)
+        + rotation @ cross(angular_rate_ib_body_rad_s, lever_arm)
+        - cross(nav_frame_rate_enu_rad_s, rotation @ lever_arm)
+    )
+
+
+class GnssVelocitySource(AidingSource):
+    """Velocity of the primary antenna (see the module docstring)."""
+
+    kind = "gnss_velocity"
+    topic = GNSS_VELOCITY_TOPIC
+    measurement_type = GnssVelocity
+    aids = VELOCITY
+
+    def __init__(self, config, states):
+        super().__init__(config, states)
+        self._lever_arm_body_m = np.array(config.primary_antenna_body_m)
+        self._variance_floor_m2s2 = config.gnss_velocity_variance_floor_m2s2
+
+    def measurement_from_message(self, message) -> GnssVelocity | Reason:
+        """The linear part of the twist; its covariance is the linear 3×3 block of the 6×6."""
+        twist = message.twist
+        covariance = np.asarray(twist.covariance, dtype=float)
+        if covariance.shape != (36,):
+            return Reason.MALFORMED
+        return GnssVelocity(vector_of(twist.twist.linear), covariance.reshape(6, 6)[:3, :3])
+
+    def validated(self, measurement: GnssVelocity) -> GnssVelocity | Reason:
+        velocity = as_float_array(measurement.velocity_enu_mps, (3,))
+        covariance = as_float_array(measurement.covariance_m2s2, (3, 3))
+        if isinstance(velocity, Reason):
+            return velocity
+        if isinstance(covariance, Reason):
+            return covariance
+        if float(velocity @ velocity) > MAX_SPEED_MPS**2:
+            return Reason.OUT_OF_RANGE
+        if has_non_positive_variance(covariance):
+            return Reason.NON_POSITIVE_VARIANCE
+        return GnssVelocity(velocity, covariance)
+
+    def model(self, measurement: GnssVelocity, point: LinearisationPoint) -> MeasurementModel:
+        state = point.state
+        rotation = point.rotation_nb
+        lever_arm = self._lever_arm_body_m
+        rate = np.asarray(point.raw_gyro_rad_s, dtype=float) - state.gyro_bias_rad_s
+        frame_rate = np.asarray(point.nav_frame_rate_enu_rad_s, dtype=float)
+        lever_enu = rotation @ lever_arm
+        rotation_velocity = rotation @ cross(rate, lever_arm)
+        predicted = state.velocity_enu_mps + rotation_velocity - cross(frame_rate, lever_enu)
+        states = self.states
+        jacobian = np.zeros((3, states.dim))
+        jacobian[:, states.attitude] = -skew(rotation_velocity) + skew(frame_rate) @ skew(lever_enu)
+        jacobian[:, states.velocity] = np.eye(3)
+        jacobian[:, states.gyro_bias] = rotation @ skew(lever_arm)
+        return MeasurementModel(
+            predicted=predicted,
+            innovation=measurement.velocity_enu_mps - predicted,
+            jacobian=jacobian,
+            covariance=floored_covariance(measurement.covariance_m2s2, self._variance_floor_m2s2),
+        )
+
+    def reset(self, measurement: GnssVelocity, point: LinearisationPoint, model) -> StateReset:
+        """The velocity to the measured one less the lever-arm term, with its variances."""
+        state = point.state
+        lever_arm_velocity = predicted_antenna_velocity_enu_mps(
+            np.zeros(3),
+            point.rotation_nb,
+            np.asarray(point.raw_gyro_rad_s) - state.gyro_bias_rad_s,
+            point.nav_frame_rate_enu_rad_s,
+            self._lever_arm_body_m,
+        )
+        return StateReset(
+            NavState(
+                state.attitude_xyzw,
+                measurement.velocity_enu_mps - lever_arm_velocity,
+                state.latitude_rad,
+                state.longitude_rad,
+                state.altitude_m,
+                state.gyro_bias_rad_s,
+                state.accel_bias_mps2,
+            ),
+            self.states.indices("velocity"),
+            np.diag(model.covariance),
+        )
+
+    def align(self, aligner, t_s: float, measurement: GnssVelocity, raw_gyro_rad_s) -> None:
+        aligner.add_velocity(t_s, measurement.velocity_enu_mps, measurement.covariance_m2s2)

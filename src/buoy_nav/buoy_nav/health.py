@@ -1,0 +1,96 @@
+"""What the fusion engine reports about itself: counters per input, innovations, health."""
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from buoy_nav.alignment import AlignmentResult, AlignmentState
+
+IMU = "imu"
+"""Counter name of the IMU samples (the aiding sources count under their ``kind``)."""
+
+
+@dataclass(frozen=True)
+class InnovationRecord:
+    """One gated measurement (kept when ``record_innovations`` is on).
+
+    t_s: stamp. kind: the aiding source's kind. innovation: measured − predicted.
+    innovation_covariance: S = H P H^T + R. nis: ν^T S^{-1} ν. accepted: passed the gate.
+    """
+
+    t_s: float
+    kind: str
+    innovation: np.ndarray
+    innovation_covariance: np.ndarray
+    nis: float
+    accepted: bool
+
+
+@dataclass
+class MeasurementCounters:
+    """Counters of one input (the IMU or an aiding source).
+
+    accepted: samples used (IMU) or filter updates applied (aiding sources).
+    used_for_alignment: measurements consumed by the alignment.
+    superseded: measurements not fused because one of another source with the same stamp
+    carries their information and more (a heading with the stamp of a baseline).
+    rejected: rejections by reason. resets: state resets after the source's number of
+    consecutive gate rejections. nis_sum, nis_count: over accepted updates (mean_nis).
+    """
+
+    accepted: int = 0
+    used_for_alignment: int = 0
+    superseded: int = 0
+    rejected: dict[str, int] = field(default_factory=dict)
+    resets: int = 0
+    nis_sum: float = 0.0
+    nis_count: int = 0
+
+    @property
+    def mean_nis(self) -> float:
+        """Running mean of the NIS of accepted updates (NaN before the first)."""
+        return self.nis_sum / self.nis_count if self.nis_count else math.nan
+
+    def reject(self, reason: str):
+        reason = str(reason)
+        self.rejected[reason] = self.rejected.get(reason, 0) + 1
+
+    def snapshot(self) -> "MeasurementCounters":
+        """An independent copy."""
+        return MeasurementCounters(
+            self.accepted,
+            self.used_for_alignment,
+            self.superseded,
+            dict(self.rejected),
+            self.resets,
+            self.nis_sum,
+            self.nis_count,
+        )
+
+
+@dataclass(frozen=True)
+class EngineHealth:
+    """Snapshot of the engine's health.
+
+    alignment_state: progress of the alignment. aligned: the filter runs.
+    coasting_fix, coasting_velocity, coasting_heading: see :class:`buoy_nav.solution.NavSolution`.
+    counters: per input: ``imu``, then each aiding source's kind in the order of the registry
+      (``gnss_fix``, ``gnss_velocity``, ``gnss_baseline``, ``gnss_heading``).
+    covariance_repairs: times P had to be made positive definite again.
+    imu_gaps: IMU gaps longer than ``max_imu_gap_s``. alignments: completed alignments.
+    time_s: stamp up to which data was processed (NaN before any).
+    alignment: the last alignment result (None before the first).
+    """
+
+    alignment_state: AlignmentState
+    aligned: bool
+    coasting_fix: bool
+    coasting_velocity: bool
+    coasting_heading: bool
+    counters: dict[str, MeasurementCounters]
+    covariance_repairs: int
+    imu_gaps: int
+    alignments: int
+    time_s: float
+    alignment: AlignmentResult | None

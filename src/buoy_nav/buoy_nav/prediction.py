@@ -1,0 +1,129 @@
+"""Real-time prediction: the filter's nominal state integrated ahead to the newest IMU sample.
+
+The filter runs ``max_measurement_delay_s`` behind the newest IMU stamp so that late
+measurements are applied in stamp order. With ``realtime_output`` a solution must nevertheless
+leave with its IMU sample: a copy of the filter's nominal state (forked from its integrator) is
+integrated ahead through the buffered IMU samples to the newest one and on with each new sample.
+
+Each correction of the filter is carried over to the copy through the error dynamics over the
+span between them (attitude error plus gyro-bias drift, velocity error plus the attitude error
+acting on the specific-force increment and the accelerometer-bias change, position error plus
+velocity error times the span), exact to first order; once per
+:data:`PREDICTION_RESYNC_INTERVAL_S` of stamps the copy is instead forked afresh from the filter,
+so second-order residues cannot accumulate. The prediction depends only on stamps, so a live
+node and an offline run of the same data give the same solutions.
+"""
+
+import math
+from collections.abc import Iterable
+
+import numpy as np
+
+from buoy_nav import earth
+from buoy_nav.error_state_filter import ErrorStateFilter, NavState, inject_error_state
+from buoy_nav.mechanization import StrapdownIntegrator
+from buoy_nav.rotations import cross
+from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
+from buoy_nav.state_layout import UP, StateLayout
+
+# Longest run of carried-over corrections before the real-time prediction is forked afresh from
+# the filter (s of stamps): bounds the second-order residue of the carry-over (≪ 1e-6 rad).
+PREDICTION_RESYNC_INTERVAL_S = 1.0
+
+
+class RealtimePrediction:
+    """The copy integrated ahead of the filter (see the module docstring); its solutions come
+    from ``solutions`` at the rate ``output`` lets through.
+
+    ``states`` names the error states of the corrections carried over.
+    """
+
+    def __init__(
+        self,
+        max_imu_gap_s: float,
+        states: StateLayout,
+        solutions: SolutionBuilder,
+        output: OutputDecimation,
+    ):
+        self._max_imu_gap_s = max_imu_gap_s
+        self._states = states
+        self._solutions = solutions
+        self._output = output
+        # (integrator ahead of the filter, its time, raw gyro and force at that time); None when
+        # it must be forked again from the filter.
+        self._ahead: tuple[StrapdownIntegrator, float, tuple, tuple] | None = None
+        self._forked_at = -math.inf
+        self._last_predicted_stamp = -math.inf
+
+    def drop(self) -> None:
+        """Fork afresh from the filter at the next sample (after a reset or an alignment)."""
+        self._ahead = None
+
+    def predict(
+        self,
+        kalman: ErrorStateFilter,
+        filter_integrator: StrapdownIntegrator,
+        filter_sample: tuple,
+        buffered_samples: Iterable[tuple],
+        sample: tuple,
+        coasting: tuple[bool, bool, bool],
+    ) -> list[NavSolution]:
+        """The solutions up to the newest IMU ``sample`` (t, raw gyro, raw force): its own, and
+        after a fork from the filter (whose state is at ``filter_sample``, the (t, raw gyro, raw
+        force) it refers to) also those of the ``buffered_samples`` ahead of the filter, the
+        newest included. Their covariances are ``kalman``'s, their coasting flags
+        ``coasting``."""
+        due = self._output.due
+        solution = self._solutions.solution
+        solutions = []
+        if self._ahead is None:
+            integrator = filter_integrator.fork()
+            t, gyro, force = filter_sample
+            self._forked_at = t
+            samples = buffered_samples
+            if t > self._last_predicted_stamp and due(t, 0.0):
+                # The filter's own sample: the first one after an alignment.
+                solutions.append(solution(integrator, kalman, t, gyro, force, coasting))
+        else:
+            integrator, t, gyro, force = self._ahead
+            samples = (sample,)
+        max_gap = self._max_imu_gap_s
+        for t_next, gyro_next, force_next in samples:
+            span = t_next - t
+            if span > max_gap:
+                # The filter restarts its alignment at this gap: nothing to predict from.
+                self._ahead = None
+                return solutions
+            integrator.step(span, gyro, gyro_next, force, force_next)
+            t, gyro, force = t_next, gyro_next, force_next
+            if t > self._last_predicted_stamp and due(t, span):
+                solutions.append(solution(integrator, kalman, t, gyro, force, coasting))
+        self._last_predicted_stamp = t
+        self._ahead = (integrator, t, gyro, force)
+        return solutions
+
+    def carry_over(self, filter_time: float, state: NavState, correction) -> None:
+        """Apply the filter's ``correction`` of its nominal ``state`` at ``filter_time`` to the
+        copy ahead (or drop the copy when it is due to be forked afresh)."""
+        if self._ahead is None:
+            return
+        if filter_time >= self._forked_at + PREDICTION_RESYNC_INTERVAL_S:
+            self._ahead = None
+            return
+        integrator, t_ahead, _, _ = self._ahead
+        span = t_ahead - filter_time
+        dx = np.array(correction, dtype=float)
+        if span > 0.0:
+            states = self._states
+            rotation_integral = integrator.rotation_nb * span
+            velocity_ahead = np.array(integrator.velocity_enu_mps)
+            gravity = earth.normal_gravity_mps2(state.latitude_rad, state.altitude_m)
+            force_increment = velocity_ahead - state.velocity_enu_mps
+            force_increment[UP] += gravity * span
+            phi, dv = dx[states.attitude], dx[states.velocity].copy()
+            dx[states.position] += dv * span
+            dx[states.velocity] += cross(phi, force_increment) - (
+                rotation_integral @ dx[states.accel_bias]
+            )
+            dx[states.attitude] -= rotation_integral @ dx[states.gyro_bias]
+        integrator.set_nav_state(inject_error_state(integrator.nav_state(), dx))

@@ -1,0 +1,175 @@
+"""The navigation solution the engine emits, how it is built, and at what rate."""
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from buoy_nav import earth
+from buoy_nav.error_state_filter import ErrorStateFilter
+from buoy_nav.mechanization import StrapdownIntegrator
+from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_quaternion
+
+
+@dataclass(frozen=True, slots=True)
+class NavSolution:
+    """Navigation solution at one IMU sample (all arrays float64).
+
+    t_s: stamp (s). attitude_xyzw: quaternion of R_nb (body FLU → ENU).
+    angular_rate_body_rad_s: bias-corrected gyro rate ω_ib (body).
+    angular_rate_nb_body_rad_s: ω_nb, rate relative to ENU (Earth and transport rate removed).
+    specific_force_body_mps2: bias-corrected specific force (body).
+    velocity_enu_mps: velocity over ground of the ``base_link`` origin (ENU).
+    latitude_deg, longitude_deg, altitude_m: WGS-84 position of the ``base_link`` origin.
+    position_map_m: the same position in the ``map`` ENU frame (m).
+    attitude_covariance_rad2: covariance of the attitude error φ (ENU, 3×3, rad²), where
+      R_true = Exp([φ×]) R_estimated.
+    velocity_covariance_m2s2, position_covariance_m2: ENU 3×3 covariances.
+    gyro_bias_rad_s, accel_bias_mps2: bias estimates (body).
+    The covariance and bias arrays are read-only: consecutive solutions share them until the
+    filter changes them.
+    aligned: the filter is aligned (always True in emitted solutions).
+    coasting_fix, coasting_velocity, coasting_heading: no measurement of a source aiding that
+      quantity (:data:`buoy_nav.aiding.base.AIDED_QUANTITIES`) was accepted for longer than
+      ``coasting_timeout_s`` (for the heading: neither a heading nor a baseline).
+    """
+
+    t_s: float
+    attitude_xyzw: np.ndarray
+    angular_rate_body_rad_s: np.ndarray
+    angular_rate_nb_body_rad_s: np.ndarray
+    specific_force_body_mps2: np.ndarray
+    velocity_enu_mps: np.ndarray
+    latitude_deg: float
+    longitude_deg: float
+    altitude_m: float
+    position_map_m: np.ndarray
+    attitude_covariance_rad2: np.ndarray
+    velocity_covariance_m2s2: np.ndarray
+    position_covariance_m2: np.ndarray
+    gyro_bias_rad_s: np.ndarray
+    accel_bias_mps2: np.ndarray
+    aligned: bool
+    coasting_fix: bool
+    coasting_velocity: bool
+    coasting_heading: bool
+
+    @property
+    def euler_rad(self) -> tuple[float, float, float]:
+        """(roll, pitch, yaw) in rad of R_nb = Rz(yaw) Ry(pitch) Rx(roll)."""
+        return euler_from_rotation_matrix(rotation_matrix_from_quaternion(self.attitude_xyzw))
+
+
+class SolutionBuilder:
+    """Builds :class:`NavSolution` from an integrator's state.
+
+    At the IMU rate most consecutive solutions share the filter's covariance and bias estimates:
+    their read-only arrays are made once and kept until :meth:`covariance_changed` or
+    :meth:`biases_changed`. ``map_plane`` is the ``map`` frame the positions are expressed in
+    (set before the first solution).
+    """
+
+    def __init__(self, map_plane: earth.LocalTangentPlane | None):
+        self.map_plane = map_plane
+        self._covariance_blocks: tuple[np.ndarray, ...] | None = None
+        self._bias_arrays: tuple[np.ndarray, np.ndarray] | None = None
+
+    def covariance_changed(self) -> None:
+        self._covariance_blocks = None
+
+    def biases_changed(self) -> None:
+        self._bias_arrays = None
+
+    def solution(
+        self,
+        integrator: StrapdownIntegrator,
+        kalman: ErrorStateFilter,
+        t: float,
+        gyro,
+        force,
+        coasting: tuple[bool, bool, bool],
+    ) -> NavSolution:
+        """The solution of ``integrator``'s state at stamp ``t`` (raw gyro and force there),
+        with the covariance of ``kalman`` and the (fix, velocity, heading) coasting flags."""
+        if self._covariance_blocks is None:
+            covariance = kalman.covariance
+            states = kalman.states
+            self._covariance_blocks = tuple(
+                _read_only(covariance[block, block].copy())
+                for block in (states.attitude, states.velocity, states.position)
+            )
+        if self._bias_arrays is None:
+            self._bias_arrays = (
+                _read_only(np.array(integrator.gyro_bias_rad_s)),
+                _read_only(np.array(integrator.accel_bias_mps2)),
+            )
+        bgx, bgy, bgz = integrator.gyro_bias_rad_s
+        bax, bay, baz = integrator.accel_bias_mps2
+        gx, gy, gz = gyro
+        fx, fy, fz = force
+        wx, wy, wz = gx - bgx, gy - bgy, gz - bgz
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = integrator.rotation_elements
+        ie, in_, iu = integrator.nav_frame_rate_enu_rad_s
+        latitude = integrator.latitude_rad
+        longitude = integrator.longitude_rad
+        altitude = integrator.altitude_m
+        attitude_cov, velocity_cov, position_cov = self._covariance_blocks
+        gyro_bias, accel_bias = self._bias_arrays
+        return NavSolution(
+            t_s=t,
+            attitude_xyzw=np.array(integrator.attitude_xyzw),
+            angular_rate_body_rad_s=np.array((wx, wy, wz)),
+            angular_rate_nb_body_rad_s=np.array(
+                (
+                    wx - (r00 * ie + r10 * in_ + r20 * iu),
+                    wy - (r01 * ie + r11 * in_ + r21 * iu),
+                    wz - (r02 * ie + r12 * in_ + r22 * iu),
+                )
+            ),
+            specific_force_body_mps2=np.array((fx - bax, fy - bay, fz - baz)),
+            velocity_enu_mps=np.array(integrator.velocity_enu_mps),
+            latitude_deg=math.degrees(latitude),
+            longitude_deg=math.degrees(longitude),
+            altitude_m=altitude,
+            position_map_m=np.array(
+                self.map_plane.enu_from_geodetic_scalar(latitude, longitude, altitude)
+            ),
+            attitude_covariance_rad2=attitude_cov,
+            velocity_covariance_m2s2=velocity_cov,
+            position_covariance_m2=position_cov,
+            gyro_bias_rad_s=gyro_bias,
+            accel_bias_mps2=accel_bias,
+            aligned=True,
+            coasting_fix=coasting[0],
+            coasting_velocity=coasting[1],
+            coasting_heading=coasting[2],
+        )
+
+
+class OutputDecimation:
+    """Decimation of the solutions to ``output_rate_hz`` (0: every sample) on a grid anchored at
+    the first output after each :meth:`restart`."""
+
+    def __init__(self, output_rate_hz: float):
+        self._period = 1.0 / output_rate_hz if output_rate_hz > 0 else 0.0
+        self._next_output_time = -math.inf
+
+    def restart(self) -> None:
+        self._next_output_time = -math.inf
+
+    def due(self, t: float, span: float) -> bool:
+        """Whether the sample at stamp ``t`` (``span`` s after the previous one) is output."""
+        period = self._period
+        if period == 0.0:
+            return True
+        # Half an IMU step of tolerance absorbs stamp jitter and float rounding of the grid.
+        if t + 0.5 * span < self._next_output_time:
+            return False
+        following = self._next_output_time + period
+        self._next_output_time = following if following > t else t + period
+        return True
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array

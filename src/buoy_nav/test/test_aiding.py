@@ -1,0 +1,424 @@
+"""Aiding sources: the models the filter uses, exact predictions, Jacobians against finite
+differences, resets, and the state layout they address.
+
+Every model here is the source's own ``model`` method, the one the engine calls. The finite
+differences perturb the nominal state with ``inject_error_state``, the same convention the filter
+uses for its closed-loop correction. Predictions are checked against an independent path
+(scipy's rotations for the antenna geometry, geodetic offsets for position, the rigid-body
+velocity differentiated numerically). The geometry is not the default one: antennas off the x
+axis and at different heights, attitudes tilted up to 60°.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from buoy_common.contract import Reason
+from buoy_nav import earth
+from buoy_nav.aiding import (
+    AIDING_SOURCES,
+    GnssBaseline,
+    GnssBaselineSource,
+    GnssFix,
+    GnssFixSource,
+    GnssHeading,
+    GnssHeadingSource,
+    GnssVelocity,
+    GnssVelocitySource,
+)
+from buoy_nav.aiding.base import LinearisationPoint, floored_covariance
+from buoy_nav.aiding.dual_antenna import baseline_azimuth_rad, horizontal_fraction
+from buoy_nav.aiding.gnss_velocity import predicted_antenna_velocity_enu_mps
+from buoy_nav.config import FusionConfig
+from buoy_nav.error_state_filter import ERROR_STATES, NavState, inject_error_state
+from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_euler, wrap_angle
+from buoy_nav.state_layout import EAST, NORTH, UP, StateLayout
+
+RNG = np.random.default_rng(77)
+# Large tilts (up to 60°) and antennas off every axis, at different heights.
+ATTITUDES_DEG = [(0, 0, 30), (35, -20, 120), (-60, 45, -170), (10, 55, 80), (-25, -50, 5)]
+PRIMARY = np.array((0.31, -0.42, 1.17))
+SECONDARY = np.array((-0.93, 0.57, 1.46))
+BASELINE = SECONDARY - PRIMARY
+STATES = ERROR_STATES
+CONFIG = FusionConfig(
+    primary_antenna_body_m=tuple(PRIMARY), secondary_antenna_body_m=tuple(SECONDARY)
+)
+
+
+def make_source(source_class, config=CONFIG):
+    return source_class(config, STATES)
+
+
+def random_state(roll_deg, pitch_deg, yaw_deg):
+    rotation = rotation_matrix_from_euler(*np.radians((roll_deg, pitch_deg, yaw_deg)))
+    return NavState(
+        attitude_xyzw=tuple(Rotation.from_matrix(rotation).as_quat()),
+        velocity_enu_mps=RNG.normal(0, 1.0, 3),
+        latitude_rad=math.radians(RNG.uniform(-60, 60)),
+        longitude_rad=math.radians(RNG.uniform(-180, 180)),
+        altitude_m=RNG.uniform(-10, 50),
+        gyro_bias_rad_s=RNG.normal(0, 0.01, 3),
+        accel_bias_mps2=RNG.normal(0, 0.05, 3),
+    )
+
+
+def point_at(state: NavState, raw_gyro=(0.0, 0.0, 0.0)) -> LinearisationPoint:
+    """The linearisation point the engine builds: the nominal state, its R_nb, the raw gyro at
+    the stamp and the navigation-frame rate of the nominal state."""
+    frame_rate = earth.navigation_frame_rate_enu_rad_s(
+        state.latitude_rad, state.altitude_m, state.velocity_enu_mps
+    )
+    return LinearisationPoint(state, state.rotation_nb, tuple(raw_gyro), tuple(frame_rate))
+
+
+def finite_difference_jacobian(predict, state, steps):
+    """Central differences of predict(inject_error_state(state, ±h e_i)) for every state."""
+    columns = []
+    for index in range(STATES.dim):
+        delta = np.zeros(STATES.dim)
+        delta[index] = steps[index]
+        plus = np.atleast_1d(predict(inject_error_state(state, delta)))
+        minus = np.atleast_1d(predict(inject_error_state(state, -delta)))
+        columns.append((plus - minus) / (2 * steps[index]))
+    return np.column_stack(columns)
+
+
+def steps_by_block(attitude, velocity, position, gyro_bias, accel_bias) -> np.ndarray:
+    steps = np.zeros(STATES.dim)
+    for name, step in (
+        ("attitude", attitude),
+        ("velocity", velocity),
+        ("position", position),
+        ("gyro_bias", gyro_bias),
+        ("accel_bias", accel_bias),
+    ):
+        steps[STATES.slice_of(name)] = step
+    return steps
+
+
+STEPS = steps_by_block(1e-6, 1e-5, 1e-4, 1e-7, 1e-5)
+
+
+def columns_except(*names) -> np.ndarray:
+    """Mask of the Jacobian columns outside the named blocks."""
+    mask = np.ones(STATES.dim, dtype=bool)
+    for name in names:
+        mask[STATES.slice_of(name)] = False
+    return mask
+
+
+# -- dual-antenna heading -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("attitude_deg", ATTITUDES_DEG)
+def test_heading_jacobian_matches_finite_differences(attitude_deg):
+    source = make_source(GnssHeadingSource)
+    state = random_state(*attitude_deg)
+    measurement = GnssHeading(0.3, 1e-5)
+    model = source.model(measurement, point_at(state))
+
+    def predict(s):
+        return source.model(measurement, point_at(s)).predicted
+
+    numeric = finite_difference_jacobian(predict, state, STEPS)
+    np.testing.assert_allclose(model.jacobian, numeric, atol=1e-7)
+    assert np.all(model.jacobian[0, columns_except("attitude")] == 0.0)
+    # Tilted, with the antennas at different heights, the heading also sees the tilt.
+    assert np.abs(model.jacobian[0, STATES.attitude][:2]).max() > 0.01
+
+
+def test_heading_is_the_azimuth_of_the_projected_baseline_under_tilt():
+    """Exact for any tilt and geometry; a plain yaw difference is not."""
+    source = make_source(GnssHeadingSource)
+    for roll, pitch, yaw in ATTITUDES_DEG:
+        rotation = Rotation.from_euler("ZYX", np.radians([yaw, pitch, roll]))
+        enu = rotation.apply(BASELINE)
+        state = random_state(roll, pitch, yaw)
+        predicted = source.model(GnssHeading(0.0, 1e-5), point_at(state)).predicted[0]
+        assert predicted == pytest.approx(math.atan2(enu[1], enu[0]), abs=1e-12)
+    # Level: azimuth = yaw + azimuth of the baseline in the body frame.
+    level = random_state(0.0, 0.0, math.degrees(0.4))
+    assert source.model(GnssHeading(0.0, 1e-5), point_at(level)).predicted[0] == pytest.approx(
+        wrap_angle(0.4 + math.atan2(BASELINE[1], BASELINE[0]))
+    )
+    # Tilted with antennas at different heights: no longer yaw + constant.
+    tilted = random_state(40.0, -30.0, math.degrees(0.4))
+    offset = source.model(GnssHeading(0.0, 1e-5), point_at(tilted)).predicted[0] - 0.4
+    assert abs(wrap_angle(offset - math.atan2(BASELINE[1], BASELINE[0]))) > 0.05
+
+
+def test_heading_innovation_is_wrapped_and_its_variance_floored():
+    config = FusionConfig(
+        primary_antenna_body_m=(-0.75, 0.0, 1.0),
+        secondary_antenna_body_m=(0.75, 0.0, 1.0),
+        gnss_heading_variance_floor_rad2=1e-6,
+    )
+    source = make_source(GnssHeadingSource, config)
+    level = random_state(0.0, 0.0, math.degrees(-math.pi + 0.01))
+    model = source.model(GnssHeading(math.pi - 0.01, 1e-8), point_at(level))
+    assert model.innovation[0] == pytest.approx(-0.02, abs=1e-12)
+    np.testing.assert_array_equal(model.covariance, [[1e-6]])
+
+
+def test_heading_geometry_degenerates_for_a_vertical_baseline():
+    baseline = np.array((0.0, 0.0, 1.0))
+    assert horizontal_fraction(np.eye(3), baseline) == pytest.approx(0.0)
+    tilted = rotation_matrix_from_euler(math.radians(30), 0, 0)
+    assert horizontal_fraction(tilted, baseline) == pytest.approx(0.5)
+    # The filter's model refuses a heading it cannot linearise (counted as geometry) and
+    # accepts one once the tilt lays the baseline over far enough.
+    mast = FusionConfig(primary_antenna_body_m=(0, 0, 0.5), secondary_antenna_body_m=(0, 0, 1.5))
+    source = make_source(GnssHeadingSource, mast)
+    assert source.model(GnssHeading(0.0, 1e-5), point_at(random_state(5, 0, 0))) is None
+    assert source.model(GnssHeading(0.0, 1e-5), point_at(random_state(30, 0, 0))) is not None
+
+
+# -- baseline vector ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("attitude_deg", ATTITUDES_DEG)
+def test_baseline_vector_jacobian_matches_finite_differences(attitude_deg):
+    source = make_source(GnssBaselineSource)
+    state = random_state(*attitude_deg)
+    measurement = GnssBaseline(np.zeros(3))
+    model = source.model(measurement, point_at(state))
+
+    def predict(s):
+        return source.model(measurement, point_at(s)).predicted
+
+    numeric = finite_difference_jacobian(predict, state, STEPS)
+    np.testing.assert_allclose(model.jacobian, numeric, atol=1e-7)
+    assert np.all(model.jacobian[:, columns_except("attitude")] == 0.0)
+    # A rotation about the baseline itself leaves it unchanged: not observed.
+    along_baseline = model.predicted / np.linalg.norm(model.predicted)
+    np.testing.assert_allclose(model.jacobian[:, STATES.attitude] @ along_baseline, 0.0, atol=1e-15)
+    np.testing.assert_array_equal(model.covariance, np.diag((0.003**2, 0.003**2, 0.006**2)))
+
+
+def test_baseline_vector_innovation_and_azimuth_under_tilt():
+    """Predicted = R_nb·(l_s − l_p) for any tilt; its azimuth is the dual-antenna heading."""
+    baseline_source = make_source(GnssBaselineSource)
+    heading_source = make_source(GnssHeadingSource)
+    for roll, pitch, yaw in ATTITUDES_DEG:
+        rotation = Rotation.from_euler("ZYX", np.radians([yaw, pitch, roll]))
+        measured = rotation.apply(BASELINE) + np.array((0.001, -0.002, 0.003))
+        point = point_at(random_state(roll, pitch, yaw))
+        model = baseline_source.model(GnssBaseline(measured), point)
+        np.testing.assert_allclose(model.innovation, (0.001, -0.002, 0.003), atol=1e-12)
+        azimuth, horizontal_length = baseline_azimuth_rad(model.predicted)
+        heading = heading_source.model(GnssHeading(0.0, 1e-5), point).predicted[0]
+        assert azimuth == pytest.approx(heading)
+        assert horizontal_length == pytest.approx(np.hypot(*model.predicted[:2]))
+        # What the baseline gives the alignment and a yaw reset: the measured azimuth.
+        measured_azimuth, variance = baseline_source.baseline_azimuth(GnssBaseline(measured))
+        assert measured_azimuth == pytest.approx(math.atan2(measured[1], measured[0]))
+        assert variance == pytest.approx((0.003 / np.hypot(*measured[:2])) ** 2)
+
+
+def test_a_steep_baseline_gives_no_azimuth_and_a_wrong_length_is_rejected():
+    source = make_source(GnssBaselineSource)
+    length = np.linalg.norm(BASELINE)
+    assert source.baseline_azimuth(GnssBaseline((0.1 * length, 0.0, 0.99 * length))) is None
+    assert source.validated(GnssBaseline(2.0 * BASELINE)) == Reason.OUT_OF_RANGE
+    assert source.validated(GnssBaseline((0.0, math.nan, 1.0))) == Reason.NON_FINITE
+    assert source.validated(GnssBaseline((1.0, 2.0))) == Reason.MALFORMED
+
+
+# -- yaw reset (heading and baseline) --------------------------------------------------------
+
+
+@pytest.mark.parametrize("source_class", [GnssHeadingSource, GnssBaselineSource])
+@pytest.mark.parametrize("attitude_deg", ATTITUDES_DEG)
+def test_yaw_reset_puts_the_baseline_at_the_measured_azimuth_keeping_the_tilt(
+    source_class, attitude_deg
+):
+    source = make_source(source_class)
+    state = random_state(*attitude_deg)
+    roll, pitch, yaw = np.radians(attitude_deg)
+    # The truth: the same tilt, yaw off by 20°.
+    truth = Rotation.from_euler("ZYX", [yaw + math.radians(20.0), pitch, roll])
+    measured_baseline = truth.apply(BASELINE)
+    if source_class is GnssHeadingSource:
+        measurement = GnssHeading(math.atan2(measured_baseline[1], measured_baseline[0]), 4e-6)
+    else:
+        measurement = GnssBaseline(measured_baseline)
+    point = point_at(state)
+    model = source.model(measurement, point)
+    reset = source.reset(measurement, point, model)
+    assert list(reset.indices) == [STATES.index("attitude", UP)]
+    np.testing.assert_allclose(reset.state.rotation_nb, truth.as_matrix(), atol=1e-12)
+    reset_roll, reset_pitch, _ = euler_from_rotation_matrix(reset.state.rotation_nb)
+    assert (reset_roll, reset_pitch) == pytest.approx((roll, pitch), abs=1e-12)
+    np.testing.assert_allclose(
+        source.model(measurement, point_at(reset.state)).innovation, 0.0, atol=1e-12
+    )
+    np.testing.assert_array_equal(reset.state.velocity_enu_mps, state.velocity_enu_mps)
+
+
+# -- GNSS velocity ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("attitude_deg", ATTITUDES_DEG)
+def test_velocity_jacobian_matches_finite_differences(attitude_deg):
+    source = make_source(GnssVelocitySource)
+    state = random_state(*attitude_deg)
+    raw_gyro = RNG.normal(0, 0.5, 3)
+    measurement = GnssVelocity(np.zeros(3), np.eye(3) * 4e-4)
+
+    def predict(s):
+        frame_rate = earth.navigation_frame_rate_enu_rad_s(
+            s.latitude_rad, s.altitude_m, s.velocity_enu_mps
+        )
+        return predicted_antenna_velocity_enu_mps(
+            s.velocity_enu_mps, s.rotation_nb, raw_gyro - s.gyro_bias_rad_s, frame_rate, PRIMARY
+        )
+
+    model = source.model(measurement, point_at(state, raw_gyro))
+    np.testing.assert_allclose(model.predicted, predict(state), atol=1e-12)
+    numeric = finite_difference_jacobian(predict, state, STEPS)
+    np.testing.assert_allclose(model.jacobian, numeric, atol=2e-6)
+
+
+def test_antenna_velocity_is_the_rigid_body_velocity():
+    """v_ant = v + R(ω_nb × l): compare with differentiating R(t) l numerically."""
+    rate_nb = np.array((0.3, -0.2, 0.5))
+    start = Rotation.from_euler("ZYX", [0.5, -0.2, 0.3])
+    dt = 1e-6
+
+    def antenna(t):
+        return (start * Rotation.from_rotvec(rate_nb * t)).apply(PRIMARY)
+
+    numeric = (antenna(dt) - antenna(-dt)) / (2 * dt)
+    latitude = 0.6
+    frame_rate = earth.navigation_frame_rate_enu_rad_s(latitude, 0.0, np.zeros(3))
+    # The gyro measures ω_ib = ω_nb + R^T ω_in; the model removes ω_in again.
+    rate_ib = rate_nb + start.inv().apply(frame_rate)
+    predicted = predicted_antenna_velocity_enu_mps(
+        np.zeros(3), start.as_matrix(), rate_ib, frame_rate, PRIMARY
+    )
+    np.testing.assert_allclose(predicted, numeric, atol=1e-9)
+    # The filter's model predicts the same for that state and gyro sample.
+    state = NavState(
+        tuple(start.as_quat()), np.zeros(3), latitude, 0.0, 0.0, np.zeros(3), np.zeros(3)
+    )
+    model = make_source(GnssVelocitySource).model(
+        GnssVelocity(np.zeros(3), np.eye(3)),
+        LinearisationPoint(state, start.as_matrix(), tuple(rate_ib), tuple(frame_rate)),
+    )
+    np.testing.assert_allclose(model.predicted, numeric, atol=1e-9)
+
+
+def test_velocity_reset_removes_the_lever_arm_velocity():
+    source = make_source(GnssVelocitySource)
+    state = random_state(35, -20, 120)
+    raw_gyro = RNG.normal(0, 0.5, 3)
+    point = point_at(state, raw_gyro)
+    measurement = GnssVelocity(np.array((1.5, -0.7, 0.2)), np.diag((4e-4, 9e-4, 16e-4)))
+    model = source.model(measurement, point)
+    reset = source.reset(measurement, point, model)
+    assert list(reset.indices) == list(STATES.indices("velocity"))
+    np.testing.assert_array_equal(reset.variances, (4e-4, 9e-4, 16e-4))
+    # At the reset state the antenna velocity is the measured one.
+    after = source.model(
+        measurement,
+        LinearisationPoint(
+            reset.state, point.rotation_nb, point.raw_gyro_rad_s, point.nav_frame_rate_enu_rad_s
+        ),
+    )
+    np.testing.assert_allclose(after.innovation, 0.0, atol=1e-12)
+
+
+# -- GNSS position ----------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("attitude_deg", ATTITUDES_DEG)
+def test_position_jacobian_matches_finite_differences(attitude_deg):
+    source = make_source(GnssFixSource)
+    state = random_state(*attitude_deg)
+    # The measured position is irrelevant for H; take the true antenna plus a few centimetres.
+    antenna = earth.geodetic_offset(
+        state.latitude_rad,
+        state.longitude_rad,
+        state.altitude_m,
+        state.rotation_nb @ PRIMARY + (0.02, -0.03, 0.01),
+    )
+    fix = GnssFix(math.degrees(antenna[0]), math.degrees(antenna[1]), antenna[2], np.eye(3) * 4e-4)
+    model = source.model(source.validated(fix), point_at(state))
+    np.testing.assert_allclose(model.innovation, (0.02, -0.03, 0.01), atol=1e-8)
+
+    def predict(s):
+        # Antenna of the perturbed state, as geodetic, expressed in the tangent plane at the
+        # unperturbed nominal position (where the filter expresses the measurement).
+        point = earth.geodetic_offset(
+            s.latitude_rad, s.longitude_rad, s.altitude_m, s.rotation_nb @ PRIMARY
+        )
+        origin = (state.latitude_rad, state.longitude_rad, state.altitude_m)
+        return np.array(earth.enu_offset_scalar(*origin, *point))
+
+    # Geodetic round trips carry ~1e-9 m of rounding: steps move the antenna by ~1 mm, where
+    # the neglected curvature of the Earth (δp²/R) is still far below the tolerance.
+    numeric = finite_difference_jacobian(predict, state, STEPS * 1e3)
+    np.testing.assert_allclose(model.jacobian, numeric, atol=2e-6)
+
+    # A reset moves base_link so that the antenna sits on the fix.
+    reset = source.reset(source.validated(fix), point_at(state), model)
+    assert list(reset.indices) == list(STATES.indices("position"))
+    after = source.model(source.validated(fix), point_at(reset.state))
+    np.testing.assert_allclose(after.innovation, 0.0, atol=1e-6)
+
+
+def test_fix_validation_names_the_problem():
+    source = make_source(GnssFixSource)
+    covariance = np.eye(3) * 4e-4
+    assert source.validated(GnssFix(95.0, 0.0, 0.0, covariance)) == Reason.OUT_OF_RANGE
+    assert source.validated(GnssFix(0.0, 0.0, 2e4, covariance)) == Reason.OUT_OF_RANGE
+    assert source.validated(GnssFix(math.nan, 0.0, 0.0, covariance)) == Reason.NON_FINITE
+    assert source.validated(GnssFix("x", 0.0, 0.0, covariance)) == Reason.MALFORMED
+    assert source.validated(GnssFix(0.0, 0.0, 0.0, np.eye(2))) == Reason.MALFORMED
+    assert source.validated(GnssFix(0.0, 0.0, 0.0, -covariance)) == Reason.NON_POSITIVE_VARIANCE
+    flat = source.validated(GnssFix(10, 20, 3, covariance.ravel().tolist()))
+    np.testing.assert_array_equal(flat.covariance_enu_m2, covariance)
+    assert flat.latitude_rad == math.radians(10.0)
+
+
+def test_measurement_covariance_floor_keeps_correlations():
+    covariance = np.array(((4e-6, 1e-6, 0), (1e-6, 9e-4, 0), (0, 0, 1e-3)))
+    floored = floored_covariance(covariance, 1e-4)
+    np.testing.assert_allclose(np.diag(floored), (1e-4, 9e-4, 1e-3))
+    assert floored[0, 1] == 1e-6
+    assert np.all(np.linalg.eigvalsh(floored) > 0)
+
+
+# -- registry and layout ----------------------------------------------------------------------
+
+
+def test_registry_applies_the_antenna_attitude_last_and_the_baseline_before_the_heading():
+    kinds = [source.kind for source in AIDING_SOURCES]
+    assert kinds == ["gnss_fix", "gnss_velocity", "gnss_baseline", "gnss_heading"]
+    assert GnssHeadingSource.superseded_by == GnssBaselineSource.kind
+    assert not GnssBaselineSource.enabled_by(FusionConfig(use_gnss_baseline=False))
+
+
+def test_state_layout_names_every_state_once():
+    assert STATES.dim == 15
+    assert STATES.names == ("attitude", "velocity", "position", "gyro_bias", "accel_bias")
+    covered = np.concatenate([np.arange(STATES.dim)[STATES.slice_of(n)] for n in STATES.names])
+    np.testing.assert_array_equal(covered, np.arange(STATES.dim))
+    assert STATES.index("attitude", UP) == STATES.attitude.start + 2
+    assert STATES.index("position", EAST) == STATES.position.start
+    assert list(STATES.indices("velocity")) == [
+        STATES.index("velocity", a) for a in (EAST, NORTH, UP)
+    ]
+    # A variant with more states keeps the names of the others where they were.
+    extended = StateLayout(*((n, 3) for n in STATES.names), ("gyro_drift", 3))
+    assert extended.dim == 18 and extended.gyro_drift == slice(15, 18)
+    assert all(extended.slice_of(n) == STATES.slice_of(n) for n in STATES.names)
+    with pytest.raises(IndexError):
+        STATES.index("velocity", 3)
+    with pytest.raises(ValueError, match="twice"):
+        StateLayout(("attitude", 3), ("attitude", 3))
+    with pytest.raises(ValueError, match="dim"):
+        StateLayout(("dim", 1))
