@@ -291,7 +291,10 @@ def simulator_fingerprint() -> str:
     sources = {
         Path(module.__file__)
         for name, module in list(sys.modules.items())
-        if (name.split(".")[0] == "sensor_sim" or name in SIMULATION_SHARED_MODULES)
+        if (
+            name.split(".")[0] == "sensor_sim"
+            or any(name == m or name.startswith(m + ".") for m in SIMULATION_SHARED_MODULES)
+        )
         and getattr(module, "__file__", None)
     }
     sources |= set((SIMULATOR_PACKAGE / "scenarios").glob("*.yaml"))
@@ -799,7 +802,7 @@ def run_case(case: Case, in_bag: str, out_bag: str) -> dict:
     with contextlib.redirect_stderr(io.StringIO()):
         if case.pipeline == "fuse":
             config = fusion_config_from_files(PROCESSING_PARAMS)
-            _, _, wall_s, _ = fuse_bag(in_bag, out_bag, config, overwrite=True)
+            _, _, wall_s, _, _ = fuse_bag(in_bag, out_bag, config, overwrite=True)
         else:
             summary = process_bag(
                 in_bag,
@@ -856,7 +859,7 @@ def run_speed(in_bag: Path) -> dict:
         # The bags the bench just wrote would otherwise be flushed to disk during the timing.
         os.sync()
         log(f"bench: speed: fuse_bag on the long bag, run {run} of {SPEED_RUNS}")
-        _, _, fuse_wall_s, duration_s = fuse_bag(
+        _, _, fuse_wall_s, duration_s, _ = fuse_bag(
             str(in_bag), str(out / "fused"), fusion_config_from_files(PROCESSING_PARAMS), True
         )
         walls["fuse_bag"].append(fuse_wall_s)

@@ -9,17 +9,32 @@ same conversion and engine as the live node, and writes ``nav/odometry``, ``nav/
 produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries its own
 answer. Parameters come from the same YAML files the node takes (sections ``/**`` and
 ``fusion_node``).
+
+OUT_BAG is written under a temporary name beside it and appears only when complete; it may not
+be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or bags
+(one line on stderr); 3 done, but IN_BAG was cut short (a recorder killed or out of power) and
+was processed up to its last complete chunk (a warning says how much was read).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from collections import Counter
 from collections.abc import Iterable
 
-from buoy_common.bag_io import BackgroundBagWriter, BagError, BagMessage, BagReader, BagWriter
+from tqdm import tqdm
+
+from buoy_common.bag_io import (
+    RECOVERED_BAG_EXIT_CODE,
+    BackgroundBagWriter,
+    BagError,
+    BagMessage,
+    BagReader,
+    BagWriter,
+)
 from buoy_common.contract import (
     GNSS_BASELINE_TOPIC,
     GNSS_FIX_TOPIC,
@@ -31,7 +46,7 @@ from buoy_common.contract import (
     bag_topic,
 )
 from buoy_common.parameters import ParameterError, build_config, load_parameter_files
-from buoy_common.progress import Progress
+from buoy_common.safe_output import OutputError, check_outputs_apart_from_inputs
 from buoy_nav.config import (
     FUSION_FIELDS_NOT_PARAMETERS,
     FUSION_NODE_NAME,
@@ -175,14 +190,27 @@ class OfflineFusion:
 
 
 def fuse_bag(in_bag: str, out_bag: str, config: FusionConfig, overwrite: bool = False):
-    """Run the fusion over ``in_bag`` into ``out_bag``; returns (OfflineFusion, counts, wall s)."""
+    """Run the fusion over ``in_bag`` into ``out_bag``; returns (OfflineFusion, counts, wall s,
+    bag duration s, the input's :class:`~buoy_common.bag_io.Recovery` or None).
+
+    OutputError, before anything is read or written, if ``out_bag`` is, contains or lies inside
+    ``in_bag``.
+    """
     started = time.monotonic()
+    check_outputs_apart_from_inputs([in_bag], [out_bag])
     with BagReader(in_bag) as reader:
         sensors = sensor_topics_of(reader, config)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
-        progress = Progress(reader.duration_s, f"fuse_bag {in_bag}", unit="bag s")
-        with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+        with (
+            tqdm(
+                total=math.ceil(reader.duration_s),
+                desc=f"fuse_bag {in_bag}",
+                unit="bag s",
+                disable=None,
+            ) as progress,
+            BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
+        ):
             fusion = OfflineFusion(config, writer)
             for index, message in enumerate(reader.messages([*sensors.values(), *truth])):
                 topic = relative_of.get(message.topic)
@@ -193,11 +221,13 @@ def fuse_bag(in_bag: str, out_bag: str, config: FusionConfig, overwrite: bool = 
                 else:
                     fusion.add_message(reader, topic, message)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
-                    progress.update((message.log_time_ns - reader.start_ns) * 1e-9)
+                    progress.update(
+                        int((message.log_time_ns - reader.start_ns) * 1e-9) - progress.n
+                    )
             fusion.finish()
-            progress.close()
-            counts = writer.counts
-    return fusion, counts, time.monotonic() - started, reader.duration_s
+            progress.update(progress.total - progress.n)
+        counts = writer.counts
+    return fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery
 
 
 def parse_arguments(argv):
@@ -220,10 +250,10 @@ def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     try:
         config = fusion_config_from_files(arguments.params_file)
-        fusion, counts, wall_s, duration_s = fuse_bag(
+        fusion, counts, wall_s, duration_s, recovery = fuse_bag(
             arguments.in_bag, arguments.out_bag, config, arguments.overwrite
         )
-    except (ParameterError, BagError) as error:
+    except (ParameterError, BagError, OutputError) as error:
         print(f"fuse_bag: {error}", file=sys.stderr)
         sys.exit(2)
     for line in fusion.summary():
@@ -234,3 +264,7 @@ def main(argv=None) -> None:
         f"wrote {arguments.out_bag}: {duration_s:.1f} s of data in {wall_s:.1f} s "
         f"({duration_s / max(wall_s, 1e-9):.0f}x real time)"
     )
+    if recovery is not None:
+        print(f"fuse_bag: warning: {recovery.describe(arguments.in_bag)}", file=sys.stderr)
+        if recovery.truncated:
+            sys.exit(RECOVERED_BAG_EXIT_CODE)

@@ -11,6 +11,11 @@ cannot be corrected). The new bag holds ``nav/*``, ``wind/true``, the wind produ
 (``wind/mean_<window>``, ``wind/stats_<window>``), the measured ``anemometer/wind`` and any
 truth topics; every output message carries the log time of the input message after which it
 was produced. The wind products are also written to ``<OUT_BAG>_wind_products.csv``.
+
+Both outputs are written under temporary names beside them and appear only when complete; they
+may not be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or
+bags (one line on stderr); 3 done, but IN_BAG was cut short (a recorder killed or out of power)
+and was processed up to its last complete chunk (a warning says how much was read).
 """
 
 from __future__ import annotations
@@ -28,8 +33,17 @@ from typing import NamedTuple
 import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from tqdm import tqdm
 
-from buoy_common.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter, jazzy_typestore
+from buoy_common.bag_io import (
+    RECOVERED_BAG_EXIT_CODE,
+    BackgroundBagWriter,
+    BagError,
+    BagReader,
+    BagWriter,
+    Recovery,
+    jazzy_typestore,
+)
 from buoy_common.contract import (
     NAV_FIX_TOPIC,
     NAV_MSGTYPES,
@@ -46,7 +60,7 @@ from buoy_common.parameters import (
     build_config,
     load_parameter_files,
 )
-from buoy_common.progress import Progress
+from buoy_common.safe_output import OutputError, check_outputs_apart_from_inputs, staged_file
 from buoy_nav.config import FusionConfig
 from buoy_nav.fuse_bag import (
     OfflineFusion,
@@ -98,6 +112,8 @@ def compensator_config_from_files(paths) -> CompensatorConfig:
 def products_csv_path(out_bag) -> Path:
     """Where the wind products of ``out_bag`` go: beside it, ``<name>_wind_products.csv``."""
     out_bag = Path(out_bag)
+    if not out_bag.name:  # "." or "..": named after the directory it stands for
+        out_bag = out_bag.resolve()
     return out_bag.with_name(out_bag.name + PRODUCTS_CSV_SUFFIX)
 
 
@@ -113,6 +129,7 @@ class ProcessSummary:
     duration_s: float = 0.0
     wall_s: float = 0.0
     csv_path: Path | None = None
+    recovery: Recovery | None = None
 
 
 class CompensationResult(NamedTuple):
@@ -127,15 +144,19 @@ class OfflineCompensation:
     """The compensation node's processing fed from the bag records being written.
 
     It takes what ``compensation_node`` subscribes to, as CDR bytes: ``nav/odometry`` and
-    ``nav/fix`` as written by the fusion and the copied ``anemometer/wind``, so a solution gets
-    the latitude of the ``nav/fix`` before it, as the node does. It runs in the process that
-    writes the bag (see :class:`buoy_common.bag_io.BackgroundBagWriter`) and writes ``wind/true``
-    and the products to the same bag. Navigation and wind samples are handed to the compensator
-    in chunks of a quarter of ``nav_history_s`` of wind: its decisions depend on stamps only, so
-    chunking changes nothing but the speed.
+    ``nav/fix`` as written by the fusion and the copied ``anemometer/wind`` (see
+    :class:`CompensatingWriter`), so a solution gets the latitude of the ``nav/fix`` before it,
+    as the node does, and writes ``wind/true`` and the products to the same bag. Navigation and
+    wind samples are handed to the compensator in chunks of a quarter of ``nav_history_s`` of
+    wind: its decisions depend on stamps only, so chunking changes nothing but the speed.
     """
 
-    def __init__(self, writer: BagWriter, config: CompensatorConfig, stored_wind_topic: str):
+    def __init__(
+        self,
+        writer: BagWriter | BackgroundBagWriter,
+        config: CompensatorConfig,
+        stored_wind_topic: str,
+    ):
         self.compensator = WindCompensator(config)
         self.averagers = [
             WindAverager(window_s, config.gust_window_s) for window_s in config.product_windows_s
@@ -247,10 +268,26 @@ class OfflineCompensation:
             )
 
 
+class CompensatingWriter:
+    """Writes records to the output bag and hands the ones the compensation subscribes to over
+    to it, as ``compensation_node`` receives what ``fusion_node`` publishes."""
+
+    def __init__(self, writer: BackgroundBagWriter, compensation: OfflineCompensation):
+        self._writer = writer
+        self._compensation = compensation
+        self._taken = compensation.topics
+
+    def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
+        self._writer.write_raw(topic, msgtype, log_time_ns, raw)
+        if topic in self._taken:
+            self._compensation.take(topic, log_time_ns, raw)
+
+
 def write_products_csv(products: list[WindProduct], path: Path) -> None:
-    """One row per closed averaging window; columns named with their units."""
+    """One row per closed averaging window; columns named with their units. The file appears
+    only once complete."""
     names = [f.name for f in fields(WindProduct)]
-    with open(path, "w", newline="") as stream:
+    with staged_file(path) as stream:
         writer = csv.writer(stream)
         writer.writerow(names)
         for product in products:
@@ -272,19 +309,29 @@ def process_bag(
 ) -> ProcessSummary:
     """Fuse and correct ``in_bag`` into ``out_bag`` and the products CSV beside it.
 
-    The fusion runs here; the compensation runs in the process that writes the bag, on the
-    records it writes, so the two share the machine's cores.
+    OutputError, before anything is read or written, if an output is, contains or lies inside
+    ``in_bag``. The fusion and the compensation run here; packing and writing the bag run in a
+    process of their own, so the two share the machine's cores.
     """
     started = time.monotonic()
     csv_path = products_csv_path(out_bag)
+    check_outputs_apart_from_inputs([in_bag], [out_bag, csv_path])
     with BagReader(in_bag) as reader:
         sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_RAW_TOPIC,))
         stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
-        progress = Progress(reader.duration_s, f"process_bag {in_bag}", unit="bag s")
-        tap = (OfflineCompensation, (compensator_config, stored_wind))
-        with BackgroundBagWriter(out_bag, overwrite=overwrite, tap=tap) as writer:
+        with (
+            tqdm(
+                total=math.ceil(reader.duration_s),
+                desc=f"process_bag {in_bag}",
+                unit="bag s",
+                disable=None,
+            ) as progress,
+            BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
+        ):
+            compensation = OfflineCompensation(bag_writer, compensator_config, stored_wind)
+            writer = CompensatingWriter(bag_writer, compensation)
             fusion = OfflineFusion(fusion_config, writer)
             topics = [*sensors.values(), stored_wind, *truth]
             log_time_ns = reader.start_ns
@@ -296,22 +343,22 @@ def process_bag(
                 else:
                     fusion.add_message(reader, topic, message)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
-                    progress.update((log_time_ns - reader.start_ns) * 1e-9)
+                    progress.update(int((log_time_ns - reader.start_ns) * 1e-9) - progress.n)
             fusion.finish()
-            writer.end_of_input(log_time_ns)
-        progress.close()
+            result = compensation.finish(log_time_ns)
+            progress.update(progress.total - progress.n)
         duration_s = reader.duration_s
-    compensation: CompensationResult = writer.tap_result
-    write_products_csv(compensation.products, csv_path)
+    write_products_csv(result.products, csv_path)
     return ProcessSummary(
-        wind_status_counts=compensation.wind_status_counts,
-        rejected_wind_messages=compensation.rejected_wind_messages,
-        products=compensation.products,
-        topic_counts=writer.counts,
+        wind_status_counts=result.wind_status_counts,
+        rejected_wind_messages=result.rejected_wind_messages,
+        products=result.products,
+        topic_counts=bag_writer.counts,
         fusion_lines=fusion.summary(),
         duration_s=duration_s,
         wall_s=time.monotonic() - started,
         csv_path=csv_path,
+        recovery=reader.recovery,
     )
 
 
@@ -375,7 +422,14 @@ def main(argv=None) -> None:
             compensator_config_from_files(arguments.params_file),
             arguments.overwrite,
         )
-    except (ParameterError, BagError, OSError) as error:
+    except (ParameterError, BagError, OutputError, OSError) as error:
         print(f"process_bag: {error}", file=sys.stderr)
         sys.exit(2)
     _print_summary(summary, arguments.out_bag)
+    if summary.recovery is not None:
+        print(
+            f"process_bag: warning: {summary.recovery.describe(arguments.in_bag)}",
+            file=sys.stderr,
+        )
+        if summary.recovery.truncated:
+            sys.exit(RECOVERED_BAG_EXIT_CODE)
