@@ -167,7 +167,7 @@ def test_independent_mcap_reader_decodes_the_same_messages(written_bag):
     path, messages, counts = written_bag
     (mcap_file,) = path.glob("*.mcap")
     with mcap_file.open("rb") as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        reader = make_reader(stream, validate_crcs=True, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == "ros2"
         summary = reader.get_summary()
         channel_counts = {
@@ -405,6 +405,22 @@ def test_a_bag_appears_under_its_name_only_once_complete(tmp_path, writer_class)
     with BagReader(path) as reader:
         assert reader.recovery is None
         assert reader.topics["/imu/data_raw"].count == 3000
+
+
+def test_a_recording_written_in_place_is_finished_even_when_abandoned(tmp_path):
+    path = tmp_path / "recording"
+    with pytest.raises(RuntimeError) as raised, BagWriter(path, in_place=True) as writer:
+        writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS, Imu())
+        writer.flush()
+        assert (path / "recording.mcap").stat().st_size > 0
+        assert not (path / "metadata.yaml").exists()
+        raise RuntimeError("the recorder failed")
+    assert any("closed after 1 messages" in note for note in raised.value.__notes__)
+    with BagReader(path) as reader:
+        assert reader.recovery is None
+        assert {t: i.count for t, i in reader.topics.items()} == {"/imu/data_raw": 1}
+    with pytest.raises(BagError, match="already exists"):
+        BagWriter(path, overwrite=True, in_place=True)
 
 
 def test_overwrite_replaces_the_old_bag_only_once_the_new_one_is_complete(written_bag, tmp_path):
