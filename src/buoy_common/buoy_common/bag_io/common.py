@@ -58,10 +58,10 @@ class Recovery(NamedTuple):
         """One line for the user: what was wrong with bag ``path`` and how much was read."""
         if not self.truncated:
             return f"bag {path}: {self.problem}; read all {self.messages} messages it holds"
-        listed = "" if self.listed_messages is None else f" of {self.listed_messages} listed"
+        listed = "" if self.listed_messages is None else f" of the {self.listed_messages} listed"
         return (
             f"bag {path}: {self.problem}; recovered {self.messages} messages{listed}, "
-            "up to the last complete chunk (the rest is lost)"
+            "up to its last complete chunk"
         )
 
 

@@ -138,8 +138,8 @@ class BagReader:
         self.topics = self._recovered.topics
         self.start_ns, self.end_ns = self._recovered.start_ns, self._recovered.end_ns
         self.recovery = Recovery(
-            f"{mcap_file.name} is unfinished ({self._recovered.stop}): its writer was stopped "
-            "before closing it, or the file was cut",
+            f"{mcap_file.name} ends before its index ({self._recovered.stop}; its writer was "
+            "stopped before closing it, or the file was cut)",
             truncated=True,
             messages=self._recovered.message_count,
             listed_messages=_listed_message_count(self.path) if has_metadata else None,

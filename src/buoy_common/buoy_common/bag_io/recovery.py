@@ -96,7 +96,7 @@ class RecoveredMcap:
     def _units(self) -> Iterator[list]:
         """The records of each complete chunk (or loose record) in file order, until the end of
         the readable part; sets :attr:`stop` to what ended it."""
-        self.stop = "the file ends without its summary"
+        self.stop = "the file ends before its summary"
         with self.path.open("rb") as raw:
             stream = _WholeReads(raw)
             reader = StreamReader(
@@ -114,7 +114,8 @@ class RecoveredMcap:
                 except StopIteration:
                     return
                 except EndOfFile:
-                    self.stop = f"the file is cut short within a record at byte {read_up_to}"
+                    where = "after" if stream.position == read_up_to else "within the record at"
+                    self.stop = f"cut {where} byte {read_up_to}"
                     return
                 except (McapError, ValueError, OSError) as error:
                     self.stop = f"unreadable record at byte {read_up_to} ({one_line(error)})"
