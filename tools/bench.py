@@ -213,7 +213,10 @@ def simulator_fingerprint() -> str:
     sources = {
         Path(module.__file__)
         for name, module in list(sys.modules.items())
-        if (name.split(".")[0] == "sensor_sim" or name in SIMULATION_SHARED_MODULES)
+        if (
+            name.split(".")[0] == "sensor_sim"
+            or any(name == m or name.startswith(m + ".") for m in SIMULATION_SHARED_MODULES)
+        )
         and getattr(module, "__file__", None)
     }
     sources |= set((SIMULATOR_PACKAGE / "scenarios").glob("*.yaml"))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, NavSatFix
 
 from buoy_common.bag_io import BagReader, BagWriter
+from sensor_sim.bag_recorder_node import FLUSH_PERIOD_S
 
 pytestmark = pytest.mark.ros
 
@@ -168,17 +170,15 @@ def test_recorder_stops_by_itself_after_its_duration(nodes, tmp_path):
         assert all(topic not in reader.topics for topic in ("/rosout", "/parameter_events"))
 
 
-def _truncate(bag) -> None:
-    (mcap_file,) = bag.glob("*.mcap")
-    data = mcap_file.read_bytes()
-    mcap_file.write_bytes(data[: len(data) // 3])
+def _garble_metadata(bag) -> None:
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n  : :")
 
 
 @pytest.mark.parametrize(
     ("arguments", "spoil", "expected"),
     [
         (["{missing}"], None, "does not exist"),
-        (["{bag}"], _truncate, "unreadable or corrupt"),
+        (["{bag}"], _garble_metadata, "unreadable or corrupt"),
         (["{bag}", "--topics", "imu/data_raw", "wind/true"], None, "lacks topic(s) wind/true"),
         (["{bag}", "--rate", "0"], None, "--rate must be positive"),
     ],
@@ -206,3 +206,43 @@ def test_recorder_refuses_to_overwrite_an_existing_bag(nodes, tmp_path):
     assert "already exists" in finished.stderr and str(bag) in finished.stderr
     assert "Traceback" not in finished.stderr
     assert {p.name: p.read_bytes() for p in bag.iterdir()} == before
+
+
+def test_player_plays_what_is_left_of_a_cut_bag_and_says_so(nodes, tmp_path):
+    bag = tmp_path / "source"
+    with BagWriter(bag, in_place=True) as writer:
+        for index in range(SAMPLES):
+            writer.write(
+                "/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS + index * IMU_PERIOD_NS, Imu()
+            )
+            if index == SAMPLES // 2:
+                writer.flush()
+        (mcap_file,) = bag.glob("*.mcap")
+        cut = mcap_file.read_bytes()  # what a recorder killed now leaves
+    (bag / "metadata.yaml").unlink()
+    mcap_file.write_bytes(cut)
+    finished = nodes.run("bag_player", str(bag), "--rate", "10", timeout_s=30)
+    assert finished.returncode == 3, finished.stderr
+    assert f"recovered {SAMPLES // 2 + 1} messages" in finished.stderr
+    assert "Traceback" not in finished.stderr
+
+
+def test_killed_recorder_leaves_a_bag_with_every_message_it_flushed(nodes, tmp_path):
+    source, copy = tmp_path / "source", tmp_path / "copy"
+    write_source_bag(source)
+    recorder = nodes.start("bag_recorder", str(copy), "--topics", *TOPICS)
+    played = nodes.run(
+        "bag_player", str(source), "--rate", str(RATE), "--wait-for-subscribers", "1", timeout_s=60
+    )
+    assert played.returncode == 0, played.stderr
+    time.sleep(2.5 * FLUSH_PERIOD_S)  # the recorder flushes what it holds
+    recorder.kill()
+    recorder.wait()
+
+    assert not (copy / "metadata.yaml").exists()
+    with BagReader(copy) as reader:
+        assert reader.recovery is not None and reader.recovery.truncated
+    source_types, source_contents = read_bag(source)
+    copy_types, copy_contents = read_bag(copy)
+    assert copy_types == source_types
+    assert_same_messages(source_contents, copy_contents)

@@ -17,7 +17,15 @@ from collections import Counter
 from collections.abc import Iterable
 from typing import NamedTuple
 
-from buoy_common.bag_io import BackgroundBagWriter, BagError, BagMessage, BagReader, BagWriter
+from buoy_common.bag_io import (
+    BackgroundBagWriter,
+    BagError,
+    BagMessage,
+    BagProgress,
+    BagReader,
+    BagWriter,
+    Recovery,
+)
 from buoy_common.contract import (
     GNSS_FIX_TOPIC,
     GNSS_HEADING_TOPIC,
@@ -26,7 +34,7 @@ from buoy_common.contract import (
     TRUTH_PREFIX,
     bag_topic,
 )
-from buoy_common.progress import Progress
+from buoy_common.safe_output import check_outputs_apart_from_inputs
 from buoy_nav.aiding import disabled_topics
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine, NavSolution
@@ -166,19 +174,25 @@ class FusedBag(NamedTuple):
     """Wall-clock time of the run, s."""
     duration_s: float
     """Span of the input bag's log times, s."""
+    recovery: Recovery | None
+    """What was wrong with the input bag and how much of it was read; None for a sound bag."""
 
 
 def fuse_bag(in_bag, out_bag, config: FusionConfig, overwrite: bool = False) -> FusedBag:
     """Run the fusion over ``in_bag`` into ``out_bag`` (a new bag; replaced with
     ``overwrite``). Raises BagError for a missing or unreadable bag or one without the fusion's
-    required topics."""
+    required topics, and OutputError, before anything is read or written, if ``out_bag`` is,
+    contains or lies inside ``in_bag``."""
     started = time.monotonic()
+    check_outputs_apart_from_inputs([in_bag], [out_bag])
     with BagReader(in_bag) as reader:
         sensors = sensor_topics_of(reader, config)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
-        progress = Progress(reader.duration_s, f"fuse_bag {in_bag}", unit="bag s")
-        with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+        with (
+            BagProgress(reader, f"fuse_bag {in_bag}") as progress,
+            BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
+        ):
             fusion = OfflineFusion(config, writer)
             for index, message in enumerate(reader.messages([*sensors.values(), *truth])):
                 topic = relative_of.get(message.topic)
@@ -189,8 +203,8 @@ def fuse_bag(in_bag, out_bag, config: FusionConfig, overwrite: bool = False) -> 
                 else:
                     fusion.add_message(reader, topic, message)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
-                    progress.update((message.log_time_ns - reader.start_ns) * 1e-9)
+                    progress.reached(message.log_time_ns)
             fusion.finish()
-            progress.close()
-            counts = writer.counts
-    return FusedBag(fusion, counts, time.monotonic() - started, reader.duration_s)
+            progress.done()
+        counts = writer.counts
+    return FusedBag(fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery)

@@ -9,6 +9,11 @@ same conversion and engine as the live node, and writes ``nav/odometry``, ``nav/
 produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries its own
 answer. Parameters come from the same YAML files the node takes (sections ``/**`` and
 ``fusion_node``).
+
+OUT_BAG is written under a temporary name beside it and appears only when complete; it may not
+be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or bags
+(one line on stderr); 3 done, but IN_BAG was cut short (a recorder killed or out of power) and
+was processed up to its last complete chunk (a warning says how much was read).
 """
 
 from __future__ import annotations
@@ -16,8 +21,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from buoy_common.bag_io import BagError
+from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
 from buoy_common.parameters import ParameterError
+from buoy_common.safe_output import OutputError
 from buoy_nav.bag_fusion import FusedBag, fuse_bag
 from buoy_nav.config import fusion_config_from_files
 
@@ -43,10 +49,14 @@ def main(argv=None) -> None:
     try:
         config = fusion_config_from_files(arguments.params_file)
         fused = fuse_bag(arguments.in_bag, arguments.out_bag, config, arguments.overwrite)
-    except (ParameterError, BagError) as error:
+    except (ParameterError, BagError, OutputError) as error:
         print(f"fuse_bag: {error}", file=sys.stderr)
         sys.exit(2)
     print_summary(fused, arguments.out_bag)
+    if fused.recovery is not None:
+        print(f"fuse_bag: warning: {fused.recovery.describe(arguments.in_bag)}", file=sys.stderr)
+        if fused.recovery.truncated:
+            sys.exit(RECOVERED_BAG_EXIT_CODE)
 
 
 def print_summary(fused: FusedBag, out_bag: str) -> None:

@@ -18,7 +18,9 @@ Parameters: ``wait_for_subscribers_timeout_s`` (default 30.0) bounds the wait of
 message, for reliable subscribers to acknowledge everything.
 
 Exit codes: 0 at the end of the bag or on SIGINT; 2 for a missing or corrupt bag, an unknown
-topic or a bad argument (one line on stderr); 1 when the subscribers do not appear in time.
+topic or a bad argument (one line on stderr); 1 when the subscribers do not appear in time; 3 at
+the end of a bag that was cut short (a recorder killed or out of power), played up to its last
+complete chunk (a warning on stderr says how much was read).
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from buoy_common.bag_io import BagError, BagReader
+from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError, BagReader
 from buoy_common.base_node import DATA_QOS, StartupError, SuiteNode, message_class
 from sensor_sim.bag_recorder_node import split_ros_arguments
 
@@ -244,6 +246,8 @@ def run(options: argparse.Namespace, ros_arguments: list[str]) -> int:
         print(f"{PROGRAM}: {error}", file=sys.stderr)
         return 2
     with reader:
+        if reader.recovery is not None:
+            print(f"{PROGRAM}: warning: {reader.recovery.describe(reader.path)}", file=sys.stderr)
         try:
             topics = _resolve_topics(reader, options.topics)
         except BagError as error:
@@ -286,6 +290,8 @@ def run(options: argparse.Namespace, ros_arguments: list[str]) -> int:
                 f"(at most {player.max_lag_s * 1e3:.1f} ms behind schedule), "
                 f"acknowledged after {time.monotonic() - started_s:.2f} s"
             )
+            if reader.recovery is not None and reader.recovery.truncated:
+                return RECOVERED_BAG_EXIT_CODE
             return 0
         except (StartupError, BagError, rclpy.exceptions.ParameterException) as error:
             print(f"{PROGRAM}: {error}", file=sys.stderr)

@@ -10,6 +10,11 @@ are stored fully qualified (``/imu/data_raw``, or ``/buoy1/imu/data_raw`` under 
 
 SIGINT, SIGTERM or the end of ``--duration-s`` (node-clock seconds) closes the bag properly and
 logs per-topic counts; exit code 0. An existing OUTPUT_BAG is never overwritten (exit code 2).
+
+The bag is written in place, and every second (wall time) the open chunk is closed and what was
+recorded is flushed to the disk. A recorder that is killed (SIGKILL, power lost) leaves a bag
+without metadata.yaml and without its MCAP index; the suite's tools read it up to the last flush
+and warn that it was cut short.
 """
 
 from __future__ import annotations
@@ -56,6 +61,9 @@ DEFAULT_TOPICS = (
 # ROS infrastructure that --all leaves out; /clock is recorded only when listed in --topics.
 EXCLUDED_FROM_ALL = frozenset({"/rosout", "/parameter_events", "/clock"})
 DISCOVERY_PERIOD_S = 0.5
+# Wall-clock period of closing the open chunk and flushing the bag to the disk: what a killed
+# recorder can lose at most.
+FLUSH_PERIOD_S = 1.0
 
 BEST_EFFORT_DATA_QOS = QoSProfile(
     depth=DATA_QOS.depth,
@@ -95,15 +103,17 @@ class BagRecorder(SuiteNode):
         self._rate_counts: Counter[str] = Counter()
         self._rate_since_s = time.monotonic()
         self.close_failed = False
+        self.flush_failed = False
         try:
-            self._writer = BagWriter(output_bag)
+            self._writer = BagWriter(output_bag, in_place=True)
         except BagError as error:
             raise StartupError(str(error)) from error
         self._diagnostics = DiagnosticsPublisher(self, self._report)
-        # Discovery runs on the steady clock: under use_sim_time it must not wait for /clock.
-        self._discovery_timer = self.create_timer(
-            DISCOVERY_PERIOD_S, self._discover, clock=Clock(clock_type=ClockType.STEADY_TIME)
-        )
+        # Discovery and flushing run on the steady clock: under use_sim_time they must not wait
+        # for /clock.
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover, clock=steady)
+        self._flush_timer = self.create_timer(FLUSH_PERIOD_S, self._flush, clock=steady)
         wanted = "every topic" if record_all else ", ".join(sorted(self._requested))
         self.get_logger().info(f"recording {wanted} into {output_bag}")
         self._discover()
@@ -171,6 +181,16 @@ class BagRecorder(SuiteNode):
             self._rate_counts[topic] += 1
         self._awaiting_clock.clear()
 
+    def _flush(self) -> None:
+        if self._writer.closed:
+            return
+        try:
+            self._writer.flush()
+        except (BagError, OSError) as error:
+            if not self.flush_failed:
+                self.get_logger().error(f"cannot flush bag {self._writer.path}: {error}")
+            self.flush_failed = True
+
     def _check_duration(self) -> None:
         if self._duration_ns is None:
             return
@@ -199,6 +219,9 @@ class BagRecorder(SuiteNode):
         if self._unrecordable:
             level = "warn"
             message += f"; cannot record {', '.join(sorted(self._unrecordable))}"
+        if self.flush_failed:
+            level = "error"
+            message += "; cannot flush the bag to the disk"
         return level, message, values
 
     def close_bag(self) -> None:

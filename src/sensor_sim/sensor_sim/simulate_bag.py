@@ -8,11 +8,13 @@ the fast way to make long runs for benchmarks; the committed bags are recorded l
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+
+from tqdm import tqdm
 
 from buoy_common.bag_io import BagError, BagWriter
 from buoy_common.parameters import ParameterError, load_parameter_files
-from buoy_common.progress import Progress
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS, merged_messages
 from sensor_sim.truth import TruthModel
@@ -54,16 +56,22 @@ def simulate(arguments) -> dict[str, int]:
         values = load_parameter_files(arguments.params_file, spec.node_name)
         streams.append(spec.build(scenario, truth, values))
     types = {topic: t for stream in streams for topic, t in stream.topics.items()}
-    progress = Progress(scenario.duration_s, f"simulate_bag {scenario.name}", unit="sim s")
-    with BagWriter(arguments.output, overwrite=arguments.overwrite) as writer:
+    with (
+        tqdm(
+            total=math.ceil(scenario.duration_s),
+            desc=f"simulate_bag {scenario.name}",
+            unit="sim s",
+            disable=None,
+        ) as progress,
+        BagWriter(arguments.output, overwrite=arguments.overwrite) as writer,
+    ):
         until_s = 0.0
         while not all(stream.finished() for stream in streams):
             until_s += CHUNK_S
             for topic, stamp, message in merged_messages(streams, until_s):
                 writer.write(topic, types[topic], stamp, message)
-            progress.update(min(until_s, scenario.duration_s))
-        progress.close()
-        return dict(writer.counts)
+            progress.update(min(math.ceil(until_s), progress.total) - progress.n)
+    return dict(writer.counts)
 
 
 def main(argv=None) -> None:

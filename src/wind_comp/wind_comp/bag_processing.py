@@ -28,7 +28,7 @@ import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagReader
+from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, Recovery
 from buoy_common.contract import (
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
@@ -36,7 +36,7 @@ from buoy_common.contract import (
     wind_mean_topic,
     wind_stats_topic,
 )
-from buoy_common.progress import Progress
+from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of, truth_topics_of
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
@@ -64,6 +64,8 @@ SAMPLES_PER_STRETCH = 256
 def products_csv_path(out_bag) -> Path:
     """Where the wind products of ``out_bag`` go: beside it, ``<name>_wind_products.csv``."""
     out_bag = Path(out_bag)
+    if not out_bag.name:  # "." or "..": named after the directory it stands for
+        out_bag = out_bag.resolve()
     return out_bag.with_name(out_bag.name + PRODUCTS_CSV_SUFFIX)
 
 
@@ -79,6 +81,7 @@ class ProcessSummary:
     duration_s: float = 0.0
     wall_s: float = 0.0
     csv_path: Path | None = None
+    recovery: Recovery | None = None
 
 
 class OfflineCompensation:
@@ -154,9 +157,10 @@ class OfflineCompensation:
 
 
 def write_products_csv(products: list[WindProduct], path: Path) -> None:
-    """One row per closed averaging window; columns named with their units."""
+    """One row per closed averaging window; columns named with their units. The file appears
+    only once complete."""
     names = [f.name for f in fields(WindProduct)]
-    with open(path, "w", newline="") as stream:
+    with staged_file(path) as stream:
         writer = csv.writer(stream)
         writer.writerow(names)
         for product in products:
@@ -178,16 +182,20 @@ def process_bag(
 ) -> ProcessSummary:
     """Fuse and correct ``in_bag`` into ``out_bag`` (a new bag; replaced with ``overwrite``)
     and the products CSV beside it. Raises BagError for a missing or unreadable bag or one
-    without the required topics."""
+    without the required topics, and OutputError, before anything is read or written, if an
+    output is, contains or lies inside ``in_bag``."""
     started = time.monotonic()
     csv_path = products_csv_path(out_bag)
+    check_outputs_apart_from_inputs([in_bag], [out_bag, csv_path])
     with BagReader(in_bag) as reader:
         sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_RAW_TOPIC,))
         stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
-        progress = Progress(reader.duration_s, f"process_bag {in_bag}", unit="bag s")
-        with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+        with (
+            BagProgress(reader, f"process_bag {in_bag}") as progress,
+            BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
+        ):
             fusion = OfflineFusion(fusion_config, writer)
             compensation = OfflineCompensation(compensator_config, writer)
             log_time_ns = reader.start_ns
@@ -205,10 +213,10 @@ def process_bag(
                     if message.topic == stored_wind:
                         compensation.add_wind(reader, message)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
-                    progress.update((log_time_ns - reader.start_ns) * 1e-9)
+                    progress.reached(log_time_ns)
             compensation.add_navigation(fusion.finish())
             compensation.finish(log_time_ns)
-        progress.close()
+            progress.done()
         duration_s = reader.duration_s
     write_products_csv(compensation.products, csv_path)
     return ProcessSummary(
@@ -220,4 +228,5 @@ def process_bag(
         duration_s=duration_s,
         wall_s=time.monotonic() - started,
         csv_path=csv_path,
+        recovery=reader.recovery,
     )

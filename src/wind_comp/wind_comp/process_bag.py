@@ -10,6 +10,11 @@ The new bag holds ``nav/*``, ``wind/true``, the wind products (``wind/mean_<wind
 ``wind/stats_<window>``), the measured ``anemometer/wind`` and any truth topics; the wind
 products are also written to ``<OUT_BAG>_wind_products.csv``. Parameters come from the same
 YAML files the nodes take.
+
+Both outputs are written under temporary names beside them and appear only when complete; they
+may not be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or
+bags (one line on stderr); 3 done, but IN_BAG was cut short (a recorder killed or out of power)
+and was processed up to its last complete chunk (a warning says how much was read).
 """
 
 from __future__ import annotations
@@ -17,9 +22,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from buoy_common.bag_io import BagError
+from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
 from buoy_common.contract import WIND_RAW_TOPIC, seconds_to_stamp, window_label
 from buoy_common.parameters import ParameterError
+from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
 from wind_comp.bag_processing import ProcessSummary, process_bag
 from wind_comp.compensator import WindStatus
@@ -86,7 +92,14 @@ def main(argv=None) -> None:
             compensator_config_from_files(arguments.params_file),
             arguments.overwrite,
         )
-    except (ParameterError, BagError, OSError) as error:
+    except (ParameterError, BagError, OutputError, OSError) as error:
         print(f"process_bag: {error}", file=sys.stderr)
         sys.exit(2)
     print_summary(summary, arguments.out_bag)
+    if summary.recovery is not None:
+        print(
+            f"process_bag: warning: {summary.recovery.describe(arguments.in_bag)}",
+            file=sys.stderr,
+        )
+        if summary.recovery.truncated:
+            sys.exit(RECOVERED_BAG_EXIT_CODE)

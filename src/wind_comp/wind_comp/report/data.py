@@ -13,6 +13,7 @@ bags with them too.
 
 import datetime
 import math
+import sys
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import NamedTuple
@@ -311,6 +312,8 @@ def report_data_from_bag(bag, title: str | None = None) -> ReportData:
     """
     try:
         with BagReader(bag) as reader:
+            if reader.recovery is not None:
+                print(f"wind_report: warning: {reader.recovery.describe(bag)}", file=sys.stderr)
             return _report_data(reader, Path(bag).name if title is None else title)
     except BagError as error:
         raise ReportDataError(str(error)) from error

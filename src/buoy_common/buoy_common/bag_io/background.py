@@ -1,0 +1,183 @@
+"""A bag written by a process of its own, so that packing, compressing and writing the file take
+the second core instead of the offline tool's."""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import signal
+from collections import Counter
+from pathlib import Path
+
+from buoy_common.bag_io.common import BagError, jazzy_typestore, one_line
+from buoy_common.bag_io.conversion import serialize
+from buoy_common.bag_io.writing import BagOutput, BagWriter, check_bag_destination
+
+# Messages handed to the writing process at a time: large enough that sending costs a fraction
+# of a microsecond per message, small enough to keep both processes busy.
+_BATCH_MESSAGES = 2048
+# Longest wait for the writing process to exit once the bag is finished (s).
+_WRITER_EXIT_TIMEOUT_S = 60.0
+
+
+class BackgroundBagWriter(BagOutput):
+    """A :class:`BagWriter` in a process of its own, for the offline tools.
+
+    Same interface and bag as :class:`BagWriter`. Messages are handed over in batches through a
+    pipe; an error of the writing process (a full disk, a type conflict) is raised as BagError
+    at the next hand-over or at :meth:`close`. Leaving the ``with`` block by an exception, or
+    the death of the tool, deletes the partial bag, as :class:`BagWriter` does. What is at
+    ``path`` is checked at construction; the tool does not wait for the writing process to
+    start (about a second of imports) but keeps the first batches until it is ready. The
+    writing process ignores Ctrl-C: the tool decides whether the bag is finished or abandoned.
+    """
+
+    def __init__(self, path: str | Path, overwrite: bool = False):
+        self.path = Path(path)
+        check_bag_destination(self.path, overwrite)
+        self._typestore = jazzy_typestore()
+        self._counts: Counter[str] = Counter()
+        self._batch: list[tuple[str, str, int, bytes]] = []
+        self._waiting_batches: list[list[tuple[str, str, int, bytes]]] = []
+        self._writer_ready = False
+        # Spawned, not forked: the tools may run inside processes with middleware threads.
+        context = multiprocessing.get_context("spawn")
+        self._connection, child_end = context.Pipe()
+        self._process = context.Process(
+            target=_write_bag_from_pipe,
+            args=(child_end, str(self.path), overwrite),
+            name=f"bag writer {self.path.name}",
+            daemon=True,
+        )
+        self._process.start()
+        child_end.close()
+        self._open = True
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Messages handed over so far, per topic (once closed, what the bag holds)."""
+        return dict(self._counts)
+
+    @property
+    def closed(self) -> bool:
+        return not self._open
+
+    def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
+        """Append one CDR-serialised message with log time ``log_time_ns`` (ns since the epoch)."""
+        if not self._open:
+            raise BagError(f"bag {self.path} is closed")
+        self._batch.append((topic, msgtype, log_time_ns, raw))
+        self._counts[topic] += 1
+        if len(self._batch) >= _BATCH_MESSAGES:
+            self._send_batch()
+
+    def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
+        """Serialise ``message`` (a rosbags or an rclpy message of ``msgtype``) and append it."""
+        raw = serialize(self._typestore, self.path, topic, msgtype, message)
+        self.write_raw(topic, msgtype, log_time_ns, raw)
+
+    def close(self) -> None:
+        """Finish the bag, move it into place and wait for the writing process."""
+        if not self._open:
+            return
+        self._send_batch(wait_for_writer=True)
+        self._finish("close")
+
+    def abort(self) -> None:
+        """Stop writing and delete the partial bag. Never raises: it runs while an error is
+        already on its way."""
+        if self._open:
+            self._batch.clear()
+            self._waiting_batches.clear()
+            with contextlib.suppress(BagError):
+                self._finish("abort")
+
+    def _send_batch(self, wait_for_writer: bool = False) -> None:
+        """Hand the batch over, or keep it while the writing process is still starting (unless
+        ``wait_for_writer``)."""
+        if self._batch:
+            self._waiting_batches.append(self._batch)
+            self._batch = []
+        if not self._writer_ready:
+            if not (wait_for_writer or self._connection.poll()):
+                return
+            self._await_writer()
+        try:
+            for batch in self._waiting_batches:
+                self._connection.send(batch)
+        except (BrokenPipeError, ConnectionResetError, EOFError):
+            self._open = False
+            self._raise_if_failed(self._receive())
+            raise BagError(f"bag {self.path}: the writing process stopped") from None
+        self._waiting_batches.clear()
+
+    def _finish(self, command: str) -> None:
+        """Send ``command`` and raise what the writing process reports, if it failed."""
+        self._open = False
+        if not self._writer_ready:
+            self._await_writer()
+        try:
+            self._connection.send(command)
+            reply = self._receive()
+        except (BrokenPipeError, ConnectionResetError):
+            reply = self._receive()
+        finally:
+            self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
+            if self._process.is_alive():
+                self._process.kill()
+            self._connection.close()
+        self._raise_if_failed(reply)
+
+    def _await_writer(self) -> None:
+        """Wait for the writing process to report that it has created the bag; raise its
+        error if it could not."""
+        reply = self._receive()
+        if reply[0] == "error":
+            self._open = False
+            self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
+            self._connection.close()
+            raise BagError(reply[1])
+        self._writer_ready = True
+
+    def _receive(self):
+        try:
+            return self._connection.recv()
+        except (EOFError, ConnectionResetError):
+            return ("error", f"bag {self.path}: the writing process ended unexpectedly")
+
+    @staticmethod
+    def _raise_if_failed(reply) -> None:
+        if reply[0] == "error":
+            raise BagError(reply[1])
+
+
+def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
+    """The writing process: a BagWriter fed batches of records until "close" or "abort". If the
+    tool dies first (the pipe closes), the partial bag is deleted."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        writer = BagWriter(path, overwrite=overwrite)
+    except BagError as error:
+        connection.send(("error", str(error)))
+        return
+    connection.send(("ok",))
+    try:
+        while True:
+            batch = connection.recv()
+            if batch == "abort":
+                writer.abort()
+                connection.send(("aborted",))
+                return
+            if batch == "close":
+                break
+            for topic, msgtype, log_time_ns, raw in batch:
+                writer.write_raw(topic, msgtype, log_time_ns, raw)
+        writer.close()
+    except EOFError:
+        writer.abort()
+        return
+    except Exception as error:  # reported to the tool, which raises it as a BagError
+        writer.abort()
+        connection.send(("error", f"bag {path}: {type(error).__name__}: {one_line(error)}"))
+        return
+    connection.send(("ok",))

@@ -1,0 +1,273 @@
+"""Reading rosbag2 bags: through rosbags, and a damaged bag as far as it is readable.
+
+A bag is a directory holding ``metadata.yaml`` and its storage files; rosbags opens it, reads
+its messages in log-time order and decodes them. Two kinds of damage are read rather than
+refused, and :attr:`BagReader.recovery` tells the tool, which warns:
+
+- an MCAP file without its index (the recorder was killed or lost power, or the file was cut):
+  its complete chunks are read (:mod:`buoy_common.bag_io.recovery`), whatever metadata.yaml
+  says;
+- a bag directory without metadata.yaml whose single MCAP file is whole: rosbags reads that
+  file alone (it carries its own topics, types and counts).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+import yaml
+from rosbags.interfaces import MessageDefinitionFormat
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from buoy_common.bag_io.common import (
+    MCAP_MAGIC,
+    MCAP_SUFFIX,
+    METADATA_FILE,
+    BagError,
+    BagMessage,
+    Recovery,
+    TopicInfo,
+    find_topic,
+    jazzy_typestore,
+    one_line,
+)
+from buoy_common.bag_io.recovery import RecoveredMcap
+
+
+def _is_finished_mcap(path: Path) -> bool:
+    """Whether an MCAP file ends as a finished one does (with the magic after its footer)."""
+    with path.open("rb") as stream:
+        if stream.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+            raise BagError(f"{path} is not an MCAP file")
+        size = stream.seek(0, 2)
+        if size < 2 * len(MCAP_MAGIC):
+            return False
+        stream.seek(size - len(MCAP_MAGIC))
+        return stream.read() == MCAP_MAGIC
+
+
+def _listed_message_count(path: Path) -> int | None:
+    """The message count metadata.yaml of bag ``path`` gives, None if it gives none."""
+    try:
+        information = yaml.safe_load((path / METADATA_FILE).read_text())
+        return int(information["rosbag2_bagfile_information"]["message_count"])
+    except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError):
+        return None
+
+
+class BagReader:
+    """Read a rosbag2 bag directory; a context manager.
+
+    Topic names may be given with or without the leading slash (``imu/data_raw`` finds
+    ``/imu/data_raw``). ``start_ns``/``end_ns`` are the log times (ns) of the first and last
+    message, both 0 for an empty bag. ``recovery`` is None for a sound bag; for a damaged one it
+    says what was wrong and how many messages could be read.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.recovery: Recovery | None = None
+        self._reader: Reader | None = None
+        self._recovered: RecoveredMcap | None = None
+        try:
+            self._open()
+            self._typestore = self._typestore_for_bag()
+        except BagError:
+            self.close()
+            raise
+        except Exception as error:
+            self.close()
+            raise BagError(f"bag {self.path}: unreadable or corrupt: {one_line(error)}") from error
+
+    def _open(self) -> None:
+        if not self.path.exists():
+            raise BagError(f"bag {self.path} does not exist")
+        if not self.path.is_dir():
+            raise BagError(
+                f"bag {self.path} is not a bag: a rosbag2 bag is a directory holding "
+                f"{METADATA_FILE} and an {MCAP_SUFFIX} file"
+            )
+        has_metadata = (self.path / METADATA_FILE).is_file()
+        mcap_files = sorted(self.path.glob(f"*{MCAP_SUFFIX}"))
+        if not has_metadata and not mcap_files:
+            raise BagError(f"bag {self.path} is not a bag: it has no {METADATA_FILE}")
+        unfinished = [file for file in mcap_files if not _is_finished_mcap(file)]
+        if unfinished:
+            if len(mcap_files) > 1:
+                raise BagError(
+                    f"bag {self.path}: {unfinished[0].name} is unfinished and the bag has "
+                    f"{len(mcap_files)} {MCAP_SUFFIX} files; only a single-file bag is recovered"
+                )
+            self._recover(unfinished[0], has_metadata)
+        elif has_metadata:
+            self._open_with_rosbags(self.path)
+        elif len(mcap_files) == 1:
+            self._open_with_rosbags(mcap_files[0])
+            self.recovery = Recovery(
+                f"it has no {METADATA_FILE}; its {MCAP_SUFFIX} file was read alone",
+                truncated=False,
+                messages=sum(info.count for info in self.topics.values()),
+                listed_messages=None,
+            )
+        else:
+            raise BagError(
+                f"bag {self.path} has no {METADATA_FILE} and several {MCAP_SUFFIX} files"
+            )
+
+    def _open_with_rosbags(self, source: Path) -> None:
+        try:
+            self._reader = Reader(source)
+            self._reader.open()
+        except Exception as error:
+            raise BagError(f"bag {self.path}: unreadable or corrupt: {one_line(error)}") from error
+        self.topics: dict[str, TopicInfo] = {
+            topic: TopicInfo(info.msgtype or "", info.msgcount)
+            for topic, info in self._reader.topics.items()
+        }
+        if self._reader.message_count:
+            self.start_ns = int(self._reader.start_time)
+            self.end_ns = int(self._reader.end_time) - 1
+        else:
+            self.start_ns = self.end_ns = 0
+
+    def _recover(self, mcap_file: Path, has_metadata: bool) -> None:
+        self._recovered = RecoveredMcap(mcap_file)
+        self.topics = self._recovered.topics
+        self.start_ns, self.end_ns = self._recovered.start_ns, self._recovered.end_ns
+        self.recovery = Recovery(
+            f"{mcap_file.name} ends before its index ({self._recovered.stop}; its writer was "
+            "stopped before closing it, or the file was cut)",
+            truncated=True,
+            messages=self._recovered.message_count,
+            listed_messages=_listed_message_count(self.path) if has_metadata else None,
+        )
+
+    def _definitions(self) -> Iterator[tuple[str, str, str | None]]:
+        """(topic, type, ros2msg definition or None) of each stored topic."""
+        if self._reader is not None:
+            for connection in self._reader.connections:
+                is_msg = connection.msgdef.format == MessageDefinitionFormat.MSG
+                yield (
+                    connection.topic,
+                    connection.msgtype,
+                    (connection.msgdef.data if is_msg else None),
+                )
+            return
+        for topic, info in self.topics.items():
+            encoding, text = self._recovered.definitions.get(info.msgtype, ("", ""))
+            yield topic, info.msgtype, text if encoding == "ros2msg" else None
+
+    def _typestore_for_bag(self):
+        """Jazzy's typestore, or a private copy extended by types the bag defines itself."""
+        typestore = jazzy_typestore()
+        unknown = [d for d in self._definitions() if d[1] not in typestore.fielddefs]
+        if not unknown:
+            return typestore
+        typestore = get_typestore(Stores.ROS2_JAZZY)
+        for topic, msgtype, definition in unknown:
+            if definition is None:
+                continue  # undecodable; raw bytes stay readable and decode() says why
+            try:
+                typestore.register(get_types_from_msg(definition, msgtype))
+            except Exception as error:
+                raise BagError(
+                    f"bag {self.path}: topic {topic}: cannot parse the definition "
+                    f"of {msgtype}: {one_line(error)}"
+                ) from error
+        return typestore
+
+    @property
+    def duration_s(self) -> float:
+        """Time between the first and the last message's log time, s."""
+        return (self.end_ns - self.start_ns) * 1e-9
+
+    def _topic_listing(self) -> str:
+        if not self.topics:
+            return "it has no topics"
+        return "it has " + ", ".join(
+            f"{name} ({info.msgtype}, {info.count})" for name, info in sorted(self.topics.items())
+        )
+
+    def _resolve_topics(self, topics: Iterable[str]) -> list[str]:
+        resolved, missing = [], []
+        for name in topics:
+            found = find_topic(self.topics, name)
+            if found is None:
+                missing.append(name)
+            else:
+                resolved.append(found)
+        if missing:
+            damage = "" if self.recovery is None else f" ({self.recovery.describe(self.path)})"
+            raise BagError(
+                f"bag {self.path} lacks topic(s) {', '.join(missing)}; "
+                f"{self._topic_listing()}{damage}"
+            )
+        return resolved
+
+    def require(self, *topics: str) -> None:
+        """Raise BagError naming every missing topic and listing the bag's topics."""
+        self._resolve_topics(topics)
+
+    def messages(self, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
+        """Messages of ``topics`` (all when None) in log-time order across topics.
+
+        Once the iteration has completed, the per-topic counts are checked against the bag's
+        listing, so a bag whose data were cut short raises BagError instead of passing for a
+        short bag.
+        """
+        wanted = set(self.topics if topics is None else self._resolve_topics(topics))
+        return self._iterate(wanted)
+
+    def _iterate(self, wanted: set[str]) -> Iterator[BagMessage]:
+        if not wanted:
+            return
+        seen: Counter[str] = Counter()
+        try:
+            for message in self._read(wanted):
+                seen[message.topic] += 1
+                yield message
+        except Exception as error:
+            raise BagError(f"bag {self.path}: corrupt message data: {one_line(error)}") from error
+        short = {
+            t: (seen[t], self.topics[t].count) for t in wanted if seen[t] != self.topics[t].count
+        }
+        if short:
+            detail = ", ".join(
+                f"{t}: {got} read, {want} listed" for t, (got, want) in short.items()
+            )
+            raise BagError(
+                f"bag {self.path}: corrupt data: message counts differ from "
+                f"{METADATA_FILE} ({detail})"
+            )
+
+    def _read(self, wanted: set[str]) -> Iterator[BagMessage]:
+        if self._recovered is not None:
+            yield from self._recovered.messages(wanted)
+            return
+        connections = [c for c in self._reader.connections if c.topic in wanted]
+        for connection, log_time_ns, raw in self._reader.messages(connections=connections):
+            yield BagMessage(connection.topic, connection.msgtype, log_time_ns, raw)
+
+    def decode(self, message: BagMessage):
+        """The rosbags message object of ``message`` (fields named as in ROS, arrays as numpy)."""
+        try:
+            return self._typestore.deserialize_cdr(message.raw, message.msgtype)
+        except Exception as error:
+            raise BagError(
+                f"bag {self.path}: cannot decode {message.msgtype} on {message.topic} at log time "
+                f"{message.log_time_ns} ns: {one_line(error)}"
+            ) from error
+
+    def close(self) -> None:
+        reader, self._reader = self._reader, None
+        if reader is not None and reader.is_open:
+            reader.close()
+
+    def __enter__(self) -> BagReader:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()

@@ -1,0 +1,149 @@
+"""The offline tools never destroy their input, never leave half an output under its name, and
+process what is left of a bag that was cut short, saying so with exit code 3."""
+
+from __future__ import annotations
+
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from nav_msgs.msg import Odometry
+
+from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagReader, BagWriter
+from buoy_common.safe_output import OutputError
+from buoy_nav.fuse_bag import fuse_bag, fusion_config_from_files
+from wind_comp.process_bag import compensator_config_from_files, process_bag
+
+REPO = Path(__file__).resolve().parents[2]
+BIN = Path(sys.executable).parent
+BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
+SHORT_BAG = REPO / "bags" / "static"
+LONG_BAG = REPO / "bags" / "sea_state"
+TOOLS = ("fuse_bag", "process_bag")
+
+
+def run_tool(tool: str, *arguments) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [str(BIN / tool), *map(str, arguments), "--params-file", str(BUOY_PARAMETERS)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def contents(directory: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(directory)): p.read_bytes() for p in directory.rglob("*") if p.is_file()
+    }
+
+
+@pytest.fixture
+def input_bag(tmp_path):
+    bag = tmp_path / "in"
+    shutil.copytree(SHORT_BAG, bag)
+    return bag
+
+
+@pytest.mark.parametrize("tool", TOOLS)
+def test_the_input_given_as_output_is_refused_and_left_intact(tmp_path, input_bag, tool):
+    before = contents(tmp_path)
+    completed = run_tool(tool, input_bag, input_bag, "--overwrite")
+    assert completed.returncode == 2, completed.stderr
+    message = completed.stderr.strip()
+    assert message.startswith(f"{tool}: ") and "\n" not in message, message
+    assert "is the input" in message and "corrupt" not in message
+    assert contents(tmp_path) == before
+
+
+@pytest.mark.parametrize("tool", TOOLS)
+@pytest.mark.parametrize(
+    ("output", "relation"),
+    [
+        ("./in/", "is the input"),
+        ("in/out", "lies inside the input"),
+        (".", "contains the input"),
+    ],
+)
+def test_an_output_overlapping_the_input_is_refused_before_anything_is_touched(
+    tmp_path, monkeypatch, input_bag, tool, output, relation
+):
+    monkeypatch.chdir(tmp_path)
+    before = contents(tmp_path)
+    with pytest.raises(OutputError, match=relation):
+        if tool == "fuse_bag":
+            fuse_bag("in", output, fusion_config_from_files([]), overwrite=True)
+        else:
+            process_bag(
+                "in",
+                output,
+                fusion_config_from_files([]),
+                compensator_config_from_files([]),
+                overwrite=True,
+            )
+    assert contents(tmp_path) == before
+
+
+@pytest.mark.parametrize("tool", TOOLS)
+def test_a_cut_input_is_processed_up_to_its_last_complete_chunk(tmp_path, input_bag, tool):
+    (mcap_file,) = input_bag.glob("*.mcap")
+    with mcap_file.open("r+b") as stream:
+        stream.truncate(mcap_file.stat().st_size // 3)
+    (input_bag / "metadata.yaml").unlink()  # as a recorder that lost power leaves it
+    with BagReader(input_bag) as reader:
+        recovered = reader.recovery.messages
+        recovered_imu = reader.topics["/imu/data_raw"].count
+    out = tmp_path / "out"
+    completed = run_tool(tool, input_bag, out)
+    assert completed.returncode == RECOVERED_BAG_EXIT_CODE, completed.stderr
+    assert f"recovered {recovered} messages" in completed.stderr
+    assert "Traceback" not in completed.stderr
+    with BagReader(out) as reader:
+        assert reader.recovery is None
+        # one navigation solution per IMU sample once aligned (10 s of 100 Hz)
+        assert recovered_imu - 1100 < reader.topics["/nav/odometry"].count < recovered_imu
+
+
+def leftovers(directory: Path) -> list[str]:
+    """Names of partial or set-aside outputs in ``directory``."""
+    return sorted(
+        p.name for p in directory.iterdir() if ".partial-" in p.name or ".replaced-" in p.name
+    )
+
+
+def _wait_for_partial(out: Path, process: subprocess.Popen) -> None:
+    deadline = time.monotonic() + 60
+    while not list(out.parent.glob(f"{out.name}.partial-*")):
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+
+
+@pytest.mark.parametrize("tool", TOOLS)
+@pytest.mark.parametrize("how", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
+def test_an_interrupted_run_keeps_the_old_output_and_leaves_no_partial_one(tmp_path, tool, how):
+    out = tmp_path / "out"
+    with BagWriter(out) as writer:
+        writer.write("/nav/odometry", "nav_msgs/msg/Odometry", 1, Odometry())
+    old_csv = tmp_path / "out_wind_products.csv"
+    old_csv.write_text("the products of an earlier run\n")
+    before = contents(tmp_path)
+    process = subprocess.Popen(
+        [str(BIN / tool), str(LONG_BAG), str(out), "--overwrite"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    _wait_for_partial(out, process)
+    process.send_signal(how)
+    process.communicate(timeout=60)
+    assert process.returncode != 0
+    # The writing process of a killed tool sees its pipe close and deletes the partial bag.
+    deadline = time.monotonic() + 30
+    while leftovers(tmp_path) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert leftovers(tmp_path) == []
+    assert contents(tmp_path) == before
