@@ -13,7 +13,7 @@ export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 100 + 100 )))
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)
 export PYTHONUNBUFFERED := 1
 
-.PHONY: all venv demo test bench lint format bags colcon clean help
+.PHONY: all venv demo test bench mutants lint format bags colcon clean help
 
 all: help
 
@@ -21,6 +21,7 @@ help:
 	@echo "make demo   - set up .venv and run the live demo (simulated buoy, fusion, wind correction)"
 	@echo "make test   - set up .venv, lint, and run the whole test suite"
 	@echo "make bench  - accuracy and speed tables beside the paper's (prints them, writes out/bench/results.json)"
+	@echo "make mutants - flip signs and conventions of the core on a copy, report which tests catch each"
 	@echo "make bags   - re-record the committed bags in bags/ from the live simulation nodes"
 	@echo "make colcon - colcon build of ros2_ws inside the venv"
 	@echo "make format - ruff format + autofix"
@@ -50,6 +51,9 @@ demo: venv
 
 bench: venv
 	$(BIN)/python tools/bench.py
+
+mutants: venv
+	$(BIN)/python tools/mutation_check.py
 
 bags: venv
 	$(BIN)/python tools/record_bags.py

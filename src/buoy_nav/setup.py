@@ -29,6 +29,7 @@ setup(
         *config_data_files(),
     ],
     install_requires=["setuptools"],
+    extras_require={"test": ["pytest"]},
     zip_safe=False,
     maintainer="Buoy wind maintainers",
     maintainer_email="maintainers@buoy-wind.invalid",

@@ -1,4 +1,5 @@
-"""The workspace builds with colcon like any ament_python workspace, and what it installs runs."""
+"""The workspace builds with colcon like any ament_python workspace, what it installs runs, and
+``colcon test`` finds and runs the packages' unit tests."""
 
 from __future__ import annotations
 
@@ -13,30 +14,41 @@ BIN = Path(sys.executable).parent
 PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp")
 
 
-@pytest.fixture(scope="module")
-def install_base(tmp_path_factory):
-    base = tmp_path_factory.mktemp("colcon")
-    result = subprocess.run(
+def colcon(base: Path, verb: str, *arguments: str) -> subprocess.CompletedProcess:
+    """``colcon VERB`` on the workspace, with build, install and log bases under ``base``."""
+    return subprocess.run(
         [
             str(BIN / "colcon"),
             "--log-base",
             str(base / "log"),
-            "build",
-            "--symlink-install",
+            verb,
             "--base-paths",
             str(REPO / "ros2_ws" / "src"),
             "--build-base",
             str(base / "build"),
             "--install-base",
             str(base / "install"),
+            *arguments,
         ],
         capture_output=True,
         text=True,
         timeout=600,
         cwd=base,
     )
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory):
+    """The base of a colcon build of the workspace (build/, install/, log/)."""
+    base = tmp_path_factory.mktemp("colcon")
+    result = colcon(base, "build", "--symlink-install")
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
-    return base / "install"
+    return base
+
+
+@pytest.fixture(scope="module")
+def install_base(workspace):
+    return workspace / "install"
 
 
 def test_colcon_installs_packages_with_ament_index_and_config(install_base):
@@ -71,3 +83,52 @@ def test_installed_executable_runs_where_ros2_run_looks(install_base, tmp_path):
         "bag_player",
     ):
         assert (install_base / "sensor_sim/lib/sensor_sim" / node).exists(), node
+
+
+def test_colcon_test_runs_the_unit_tests_of_a_package(workspace, tmp_path):
+    # One package, the smallest: `make test` runs every package's unit tests through pytest
+    # already (testpaths); this shows that colcon finds them too, as a ROS user runs them.
+    result = colcon(
+        workspace, "test", "--packages-select", "buoy_common", "--return-code-on-test-failure"
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    report = subprocess.run(
+        [str(BIN / "colcon"), "test-result", "--test-result-base", str(workspace / "build")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    unit_tests = REPO / "src" / "buoy_common" / "test"
+    collected = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "--collect-only",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            unit_tests,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=REPO,
+    )
+    n_tests = sum("::" in line for line in collected.stdout.splitlines())
+    assert n_tests > 0, collected.stdout
+    assert f"{n_tests} tests, 0 errors, 0 failures" in report.stdout, report.stdout
+
+    # And a failing test fails the command (plain `colcon test` would return 0).
+    failing = tmp_path / "test_failing.py"
+    failing.write_text("def test_fails():\n    assert False\n")
+    result = colcon(
+        workspace,
+        "test",
+        "--packages-select",
+        "buoy_common",
+        "--return-code-on-test-failure",
+        "--pytest-args",
+        str(failing),
+    )
+    assert result.returncode != 0, result.stdout[-3000:]

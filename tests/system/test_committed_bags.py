@@ -6,11 +6,13 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from buoy_common.bag_io import BagReader
+from ros_messages import raw_stamp_ns
 
 BAGS = sorted(p for p in (Path(__file__).resolve().parents[2] / "bags").iterdir() if p.is_dir())
 SENSOR_RATES_HZ = {
@@ -23,6 +25,10 @@ SENSOR_RATES_HZ = {
     "/truth/odometry": ("nav_msgs/msg/Odometry", 50.0),
     "/truth/wind": ("geometry_msgs/msg/Vector3Stamped", 50.0),
 }
+
+
+# A recorder that keeps pace logs a message within a sample period or two of its stamp.
+MAX_MEDIAN_LOG_DELAY_S = 0.05
 
 
 def test_there_are_committed_bags():
@@ -65,3 +71,19 @@ def test_bag_is_read_by_mcap_independently(bag):
     assert 9.0 < first["/imu/data_raw"].linear_acceleration.z < 10.6
     assert first["/anemometer/wind"].header.frame_id == "anemometer_link"
     assert -90.0 <= first["/gnss/fix"].latitude <= 90.0
+
+
+@pytest.mark.parametrize("bag", BAGS, ids=[b.name for b in BAGS])
+def test_the_recorder_kept_pace_with_every_sensor(bag):
+    # Log times are the recorder's receive times on the simulation clock. A recording made on a
+    # machine too busy for its rate factor logs whole topics seconds after their stamps, and a
+    # replay at the recorded pace then feeds the nodes measurements later than they accept.
+    with BagReader(bag) as reader:
+        for topic in SENSOR_RATES_HZ:
+            if topic.startswith("/truth/"):
+                continue
+            delays_s = np.array(
+                [(r.log_time_ns - raw_stamp_ns(r.raw)) * 1e-9 for r in reader.messages([topic])]
+            )
+            median_s = float(np.median(delays_s))
+            assert 0.0 <= median_s < MAX_MEDIAN_LOG_DELAY_S, f"{bag.name} {topic}: {median_s:.3f} s"

@@ -3,7 +3,10 @@
 The test process publishes ``nav/fix``, ``nav/odometry`` (the simulator's true attitude, body
 velocity and body rate, with the Earth's rotation added as a gyro would sense it) and the
 simulated ``anemometer/wind``, a few of them deliberately malformed, and listens to
-``wind/true``, the 1-minute products and ``diagnostics``.
+``wind/true``, the 1-minute products and ``diagnostics``. The buoy is ``off_axis``'s (an
+anemometer off the mast axis and turned about all three axes, stamped apart from the IMU), so
+each term of the correction and the mounting rotation matter; with a perfect navigation the
+corrected wind is the true wind plus the anemometer's noise.
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ from std_msgs.msg import Float64MultiArray
 
 from buoy_common.bag_io import BagReader
 from buoy_common.base_node import DATA_QOS
+from error_budget import ANEMOMETER, noise_rms_bound
+from processed_bags import CASES
 from ros_messages import reports_publishers_on, stamp_ns, to_rclpy, wait_for
 from sensor_sim.geodesy import EARTH_RATE_RAD_S
 from wind_comp.compensation_messages import (
@@ -42,20 +47,20 @@ from wind_comp.compensation_messages import (
 )
 from wind_comp.compensation_node import NODE_NAME
 from wind_comp.compensator import WindStatus
-from wind_comp.config import CompensatorConfig
+from wind_comp.config import compensator_config_from_files
 from wind_comp.pipeline import CompensationPipeline
 
 pytestmark = pytest.mark.ros
 
 SCENARIO_S = 20.0
 LATITUDE_DEG = 35.0  # sea_state starts at 35 N
-ANEMOMETER_POSITION_M = (0.0, 0.0, 3.0)  # the simulator's default, also the node's
+PARAMETER_FILES = CASES["off_axis"].buoy_parameter_files
+COMPENSATOR = compensator_config_from_files(PARAMETER_FILES)
 PLAY_RATE = 10.0
 NAV_MISSING_AT_END_S = 0.5  # shorter than the node's 1 s navigation timeout: held until SIGINT
 NAN_WIND_INDEX = 40
 WRONG_FRAME_INDEX = 41
 ZERO_QUATERNION_AFTER_INDEX = 100
-ANEMOMETER_NOISE_MPS = 0.02
 ECHO_EVERY = 10
 
 
@@ -72,6 +77,7 @@ def scenario(tmp_path_factory):
             f"duration_s={SCENARIO_S}",
             "--seed",
             "3",
+            *(a for path in PARAMETER_FILES for a in ("--params-file", str(path))),
         ],
         capture_output=True,
         text=True,
@@ -176,7 +182,11 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
     listener = Listener(module_ros_env)
     with open(log_path, "w") as log:
         process = subprocess.Popen(
-            [str(Path(sys.executable).parent / "compensation_node")],
+            [
+                str(Path(sys.executable).parent / "compensation_node"),
+                "--ros-args",
+                *(a for path in PARAMETER_FILES for a in ("--params-file", str(path))),
+            ],
             env=module_ros_env,
             stdout=log,
             stderr=subprocess.STDOUT,
@@ -285,46 +295,59 @@ def test_samples_waiting_for_navigation_are_flushed_at_sigint(scenario, live_run
     assert np.all(np.isnan(held))
 
 
+def assert_noise_only(stamps_ns, corrected_enu_mps, truth_wind, what: str) -> None:
+    """Corrected − true wind at the valid samples that share a truth stamp: with a perfect
+    navigation, nothing but the anemometer's noise."""
+    common = [
+        i
+        for i, stamp in enumerate(stamps_ns)
+        if stamp in truth_wind and np.all(np.isfinite(corrected_enu_mps[i]))
+    ]
+    assert len(common) > 0.4 * len(stamps_ns), "the truth shares every other anemometer stamp"
+    errors = np.array([corrected_enu_mps[i] - truth_wind[stamps_ns[i]] for i in common])
+    rms = np.sqrt(np.mean(errors**2, axis=0))
+    budget = noise_rms_bound(ANEMOMETER.noise_mps, len(common))
+    figures = (
+        f"{what}: RMS error E, N, U {np.round(rms, 4)} m/s, anemometer noise up to {budget:.4f}"
+    )
+    assert np.all(rms <= budget), figures
+    print(figures)
+
+
 def test_corrected_wind_matches_truth_and_raw_does_not(scenario, live_run):
     winds, odometries, _, truth_wind = scenario
     outputs = live_run["wind/true"]
-    common = [
-        i for i, m in enumerate(outputs) if stamp_ns(m) in truth_wind and not math.isnan(m.vector.x)
-    ]
-    assert len(common) > 0.4 * len(winds)
-    corrected = vectors([outputs[i] for i in common])
-    truth = np.array([truth_wind[stamp_ns(outputs[i])] for i in common])
-    rms_per_axis = np.sqrt(np.mean((corrected - truth) ** 2, axis=0))
-    assert np.all(rms_per_axis < 2.5 * ANEMOMETER_NOISE_MPS), rms_per_axis
+    stamps = [stamp_ns(m) for m in outputs]
+    corrected = vectors(outputs)
+    assert_noise_only(stamps, corrected, truth_wind, "live")
 
+    common = [
+        i for i, stamp in enumerate(stamps) if stamp in truth_wind and np.isfinite(corrected[i, 0])
+    ]
+    truth = np.array([truth_wind[stamps[i]] for i in common])
     raw = vectors([winds[i] for i in common])
     raw_rms = np.sqrt(np.mean(np.sum((raw - truth) ** 2, axis=1)))
     assert raw_rms > 1.0
 
-    # Levelled only (attitude applied, lever arm and buoy velocity ignored): still off by the
-    # motion the correction removes, well beyond the noise.
+    # Levelled only (attitude and mounting applied, lever arm and buoy velocity ignored): still
+    # off by the motion the correction removes, well beyond the noise.
     attitude_by_ns = {
         stamp_ns(o): Rotation.from_quat([getattr(o.pose.pose.orientation, axis) for axis in "xyzw"])
         for o in odometries
         if o.pose.pose.orientation.w != 0.0
     }
+    mounting = Rotation.from_euler("ZYX", COMPENSATOR.anemometer_rpy_deg[::-1], degrees=True)
+    usable = [k for k, i in enumerate(common) if stamps[i] in attitude_by_ns]
     levelled = np.array(
-        [
-            attitude_by_ns[stamp_ns(outputs[i])].apply(raw[k])
-            for k, i in enumerate(common)
-            if stamp_ns(outputs[i]) in attitude_by_ns
-        ]
+        [(attitude_by_ns[stamps[common[k]]] * mounting).apply(raw[k]) for k in usable]
     )
-    truth_levelled = np.array(
-        [truth[k] for k, i in enumerate(common) if stamp_ns(outputs[i]) in attitude_by_ns]
-    )
-    assert np.sqrt(np.mean((levelled - truth_levelled) ** 2)) > 5 * ANEMOMETER_NOISE_MPS
+    assert np.sqrt(np.mean((levelled - truth[usable]) ** 2)) > 5 * ANEMOMETER.noise_mps
 
 
 def test_live_output_equals_the_pipeline_run_offline(scenario, live_run):
     # The node's output is the pipeline's fed in one stretch, the messages in stamp order.
-    winds, odometries, fix, _ = scenario
-    pipeline = CompensationPipeline(CompensatorConfig(ANEMOMETER_POSITION_M, (0.0, 0.0, 0.0)))
+    winds, odometries, fix, truth_wind = scenario
+    pipeline = CompensationPipeline(COMPENSATOR)
     assert pipeline.add_fix(*fix_fields(fix)) is None
     rejected = {}
     in_stamp_order = sorted(
@@ -346,6 +369,8 @@ def test_live_output_equals_the_pipeline_run_offline(scenario, live_run):
     counts = batch.counts()
     assert counts[WindStatus.INVALID_WIND] == 2
     assert counts[WindStatus.NO_NAVIGATION] == live_run["n_held"]
+    # Equal outputs broken alike would pass the above: the batch one is also the true wind.
+    assert_noise_only([stamp_ns(m) for m in winds], batch.true_wind_enu_mps, truth_wind, "batch")
 
 
 def test_malformed_messages_yield_nan_outputs_and_counted_rejections(scenario, live_run):

@@ -1,16 +1,19 @@
-"""fusion_node as a real process over DDS, fed the sensor messages of the committed sea_state bag.
+"""fusion_node as a real process over DDS, fed the sensor messages of a committed bag.
 
 The test process publishes ``imu/data_raw``, ``gnss/fix``, ``gnss/vel`` and ``gnss/heading`` in
 bag order, paced at a multiple of real time, and listens to the four ``nav/*`` topics and
 ``diagnostics``. The reference is a FusionEngine fed the same messages offline through the same
 conversion (:func:`buoy_nav.fusion_messages.feed_message`): the engine's results depend on header
-stamps only, so the live node must publish exactly the offline solutions.
+stamps only, so the live node must publish exactly the offline solutions; and these must be as
+close to the simulator's truth as the sensors allow, or a fault common to both would pass. The
+bags are ``sea_state`` (shipped geometry) and ``off_axis`` (its own buoy, stamps apart).
 """
 
 from __future__ import annotations
 
 import array
 import copy
+import functools
 import math
 import os
 import threading
@@ -26,6 +29,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import Imu, NavSatFix
 
+from against_truth import Truth, assert_navigation_within_limits, odometry_errors
 from buoy_common.bag_io import BagReader
 from buoy_common.base_node import DATA_QOS
 from buoy_common.contract import (
@@ -54,13 +58,11 @@ from buoy_nav.fusion_messages import (
     solution_messages,
 )
 from buoy_nav.fusion_node import INPUT_CLASSES, OUTPUT_CLASSES
+from processed_bags import CASES
 from ros_messages import reports_publishers_on, stamp_ns, to_rclpy, wait_for
 
 pytestmark = pytest.mark.ros
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-BAG = os.path.join(REPO, "bags", "sea_state")
-BUOY_PARAMETERS = os.path.join(REPO, "src", "buoy_common", "config", "buoy.yaml")
 NODE = FUSION_NODE_NAME
 # The message-object form of the solutions: an independent path to the CDR the node publishes.
 NAV_CLASSES = NavMessageClasses(Odometry, Imu, TwistWithCovarianceStamped, NavSatFix)
@@ -69,6 +71,9 @@ MALFORMED_RUN_S = 16.0
 MALFORMED_AFTER_S = 12.0  # aligned by then
 FLUSH_RUN_S = 12.0
 PLAY_RATE = 4.0
+# The solutions are judged against the truth from this long after the first one in the long
+# run (the first seconds after the alignment carry its errors), from the first in the short.
+SETTLING_S = 20.0
 # Equality of live and offline values: relative, and absolute for values near zero.
 RELATIVE_TOLERANCE = 1e-9
 ABSOLUTE_TOLERANCE = 1e-12
@@ -78,11 +83,12 @@ def set_stamp_ns(message, time_ns: int) -> None:
     message.header.stamp.sec, message.header.stamp.nanosec = divmod(time_ns, 1_000_000_000)
 
 
-@pytest.fixture(scope="module")
-def sensor_stream():
-    """(topic, rclpy message) of the bag's first LIVE_EQUALS_OFFLINE_S of sensor data, bag order."""
+@functools.cache
+def sensor_stream_of(name: str) -> list:
+    """(topic, rclpy message) of bag ``name``'s first LIVE_EQUALS_OFFLINE_S of sensor data, in
+    bag order."""
     stream = []
-    with BagReader(BAG) as reader:
+    with BagReader(CASES[name].bag_path) as reader:
         first_ns = None
         for record in reader.messages(list(FUSION_INPUT_MSGTYPES)):
             first_ns = record.log_time_ns if first_ns is None else first_ns
@@ -93,10 +99,26 @@ def sensor_stream():
     return stream
 
 
-def node_config(**overrides) -> FusionConfig:
-    """The configuration the node builds from the shared buoy file and ``overrides``
-    (parameter name → value, as ``-p`` gives them)."""
-    parameters = load_parameter_files([BUOY_PARAMETERS], NODE) | overrides
+@pytest.fixture(scope="module")
+def sensor_stream():
+    """The first LIVE_EQUALS_OFFLINE_S of ``sea_state``'s sensor data."""
+    return sensor_stream_of("sea_state")
+
+
+@functools.cache
+def truth_of(name: str) -> Truth:
+    return Truth(CASES[name].bag_path)
+
+
+def parameter_arguments(name: str) -> list[str]:
+    """``--params-file`` arguments of the buoy that recorded bag ``name``."""
+    return [a for path in CASES[name].buoy_parameter_files for a in ("--params-file", str(path))]
+
+
+def node_config(name: str = "sea_state", **overrides) -> FusionConfig:
+    """The configuration the node builds from the parameter files of the buoy that recorded
+    bag ``name`` and ``overrides`` (parameter name → value, as ``-p`` gives them)."""
+    parameters = load_parameter_files(CASES[name].buoy_parameter_files, NODE) | overrides
     return build_config(
         FusionConfig,
         parameters,
@@ -111,15 +133,23 @@ def nav_messages(solutions, outputs: dict[str, list], stamps: StampBook) -> None
             outputs[nav_topic].append(nav_message)
 
 
-def offline_run(stream, **overrides) -> tuple[dict[str, list], FusionEngine, StampBook]:
-    """The nav messages of a fresh engine fed ``stream`` in order, by topic, the engine and the
-    book of IMU stamps its solutions are stamped from."""
-    engine = FusionEngine(node_config(**overrides))
+def offline_run(
+    stream, name: str = "sea_state", **overrides
+) -> tuple[dict[str, list], FusionEngine, StampBook]:
+    """The nav messages of a fresh engine configured for bag ``name``'s buoy and fed ``stream``
+    in order, by topic, the engine and the book of IMU stamps its solutions are stamped from."""
+    engine = FusionEngine(node_config(name, **overrides))
     outputs = {topic: [] for topic in NAV_MSGTYPES}
     stamps = StampBook()
     for topic, message in stream:
         nav_messages(feed_message(engine, topic, message, stamps)[0], outputs, stamps)
     return outputs, engine, stamps
+
+
+def assert_near_the_truth(offline: dict[str, list], name: str, settling_s: float) -> None:
+    """The offline solutions' attitude and velocity within the limits of the sensors."""
+    errors = odometry_errors(truth_of(name), offline[NAV_ODOMETRY_TOPIC], settling_s)
+    print(assert_navigation_within_limits(errors, CASES[name].navigation_limits(), name))
 
 
 class Listener:
@@ -247,14 +277,17 @@ def received_count(listener: Listener) -> int:
     return min(len(messages) for messages in listener.received.values())
 
 
-def test_live_solutions_equal_offline_fusion(nodes, sensor_stream):
-    offline, engine, _ = offline_run(sensor_stream)
+@pytest.mark.parametrize("name", ["sea_state", "off_axis"])
+def test_live_solutions_equal_offline_fusion(nodes, name):
+    sensor_stream = sensor_stream_of(name)
+    offline, engine, _ = offline_run(sensor_stream, name)
     n_solutions = len(offline[NAV_ODOMETRY_TOPIC])
     assert n_solutions > 0.6 * sum(topic == IMU_RAW_TOPIC for topic, _ in sensor_stream)
+    assert_near_the_truth(offline, name, SETTLING_S)
 
     listener = Listener(nodes.env)
     try:
-        process = nodes.start(NODE, "--ros-args", "--params-file", BUOY_PARAMETERS)
+        process = nodes.start(NODE, "--ros-args", *parameter_arguments(name))
         assert listener.wait_for_node(), nodes.log_of(process)
         listener.play([(stamp_ns(m), topic, m) for topic, m in sensor_stream])
         wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
@@ -418,13 +451,14 @@ def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_st
         if index == imu_index:
             paced.extend((stamp_ns(m), bad_topic, message) for bad_topic, message, _, _ in bad)
     reference, engine, _ = offline_run(good)
+    assert_near_the_truth(reference, "sea_state", 0.0)
     n_solutions = len(reference[NAV_ODOMETRY_TOPIC])
     last_bad_ns = max(stamp_ns(message) for _, message, _, _ in bad)
     assert sum(stamp_ns(m) > last_bad_ns for m in reference[NAV_ODOMETRY_TOPIC]) > 100
 
     listener = Listener(nodes.env)
     try:
-        process = nodes.start(NODE, "--ros-args", "--params-file", BUOY_PARAMETERS)
+        process = nodes.start(NODE, "--ros-args", *parameter_arguments("sea_state"))
         assert listener.wait_for_node(), nodes.log_of(process)
         listener.play(paced)
         wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
@@ -467,6 +501,7 @@ def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
     reference, engine, stamps = offline_run(stream, **{"fusion.realtime_output": False})
     n_before_end = len(reference[NAV_ODOMETRY_TOPIC])
     nav_messages(engine.flush(), reference, stamps)
+    assert_near_the_truth(reference, "sea_state", 0.0)
     n_solutions = len(reference[NAV_ODOMETRY_TOPIC])
     # The last max_measurement_delay_s of IMU samples wait for measurements until the end.
     assert n_solutions - n_before_end > 10
@@ -476,8 +511,7 @@ def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
         process = nodes.start(
             NODE,
             "--ros-args",
-            "--params-file",
-            BUOY_PARAMETERS,
+            *parameter_arguments("sea_state"),
             "-p",
             "fusion.realtime_output:=false",
         )
@@ -509,7 +543,7 @@ def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
 )
 def test_bad_parameter_stops_the_node_naming_it(nodes, override, parameter):
     result = nodes.run(
-        NODE, "--ros-args", "--params-file", BUOY_PARAMETERS, "-p", override, timeout_s=30.0
+        NODE, "--ros-args", *parameter_arguments("sea_state"), "-p", override, timeout_s=30.0
     )
     assert result.returncode == 2, result.stdout + result.stderr
     assert parameter in result.stderr

@@ -15,8 +15,10 @@ from nav_msgs.msg import Odometry
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagReader, BagWriter
 from buoy_common.safe_output import OutputError
-from buoy_nav.fuse_bag import fuse_bag, fusion_config_from_files
-from wind_comp.process_bag import compensator_config_from_files, process_bag
+from buoy_nav.bag_fusion import fuse_bag
+from buoy_nav.config import fusion_config_from_files
+from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent

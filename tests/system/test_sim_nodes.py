@@ -1,5 +1,6 @@
 """The simulated sensor nodes as separate processes over DDS: topics, rates, clean stops,
-and equality with the offline generator (same scenario and seed give the same messages)."""
+and equality with the offline generator (same scenario and seed give the same messages), for
+the shipped buoy and for ``off_axis``'s (its own geometry, sensor stamps that never line up)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,10 @@ import numpy as np
 import pytest
 
 from buoy_common.bag_io import BagReader
+from buoy_common.parameters import load_parameter_files
+from processed_bags import BAGS_DIR
 from ros_messages import stamp_ns
+from sensor_sim.scenario import load_scenario
 
 SCENARIO_S = 12.0
 RATES_HZ = {
@@ -37,6 +41,19 @@ CONTRACT_TYPES = {
     "truth/odometry": "nav_msgs/msg/Odometry",
     "truth/wind": "geometry_msgs/msg/Vector3Stamped",
 }
+NODES = {
+    "imu/data_raw": "imu_sim_node",
+    "gnss/fix": "gnss_sim_node",
+    "gnss/vel": "gnss_sim_node",
+    "gnss/heading": "gnss_sim_node",
+    "gnss/baseline": "gnss_sim_node",
+    "anemometer/wind": "anemometer_sim_node",
+    "truth/odometry": "truth_node",
+    "truth/wind": "truth_node",
+}
+START_NS = load_scenario("sea_state").start_time_ns
+# The shipped buoy (the nodes' defaults) and off_axis's, given as a parameter file.
+BUOYS = {"shipped": [], "off_axis": [BAGS_DIR / "off_axis.yaml"]}
 FRAMES = {
     "imu/data_raw": "imu_link",
     "gnss/fix": "gnss_primary",
@@ -72,12 +89,14 @@ def same_message(a, b) -> bool:
     return a == b
 
 
-@pytest.fixture(scope="module")
-def live_bag(tmp_path_factory, module_ros_env):
-    """A short sea_state run recorded from the live nodes, and its offline twin."""
-    folder = tmp_path_factory.mktemp("sim")
+@pytest.fixture(scope="module", params=BUOYS)
+def live_bag(request, tmp_path_factory, module_ros_env):
+    """A short sea_state run recorded from the live nodes, its offline twin and the parameter
+    files of the buoy."""
+    folder = tmp_path_factory.mktemp(f"sim_{request.param}")
     bin_dir = Path(sys.executable).parent
-    overrides = ["--set", f"duration_s={SCENARIO_S}", "--seed", "7"]
+    parameters = [a for path in BUOYS[request.param] for a in ("--params-file", str(path))]
+    overrides = ["--set", f"duration_s={SCENARIO_S}", "--seed", "7", *parameters]
     live = subprocess.run(
         [
             str(bin_dir / "run_scenario"),
@@ -103,7 +122,7 @@ def live_bag(tmp_path_factory, module_ros_env):
         timeout=120,
     )
     assert offline.returncode == 0, offline.stderr
-    return folder / "live", folder / "offline"
+    return folder / "live", folder / "offline", BUOYS[request.param]
 
 
 def test_live_nodes_publish_contract_topics_at_their_rates(live_bag):
@@ -111,8 +130,10 @@ def test_live_nodes_publish_contract_topics_at_their_rates(live_bag):
     for topic, rate_hz in RATES_HZ.items():
         assert types[topic] == CONTRACT_TYPES[topic]
         stamps = [stamp_ns(m) for m in messages[topic]]
-        # samples at t = k / rate for 0 <= t <= duration: floor(duration * rate) + 1 of them
-        assert len(stamps) == math.floor(SCENARIO_S * rate_hz) + 1, topic
+        offset_s = load_parameter_files(live_bag[2], NODES[topic]).get("time_offset_s", 0.0)
+        # samples at t = offset + k / rate for 0 <= t <= duration
+        assert len(stamps) == math.floor((SCENARIO_S - offset_s) * rate_hz + 1e-9) + 1, topic
+        assert abs(stamps[0] - START_NS - offset_s * 1e9) < 1000, topic
         steps = {b - a for a, b in itertools.pairwise(stamps)}
         assert steps == {round(1e9 / rate_hz)}, topic
         assert {m.header.frame_id for m in messages[topic]} == {FRAMES[topic]}

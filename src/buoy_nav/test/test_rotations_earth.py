@@ -189,8 +189,20 @@ def test_tangent_plane_axes_and_distances():
 def test_earth_and_transport_rate():
     latitude = math.radians(35.0)
     rate = earth.earth_rate_enu_rad_s(latitude)
-    assert np.linalg.norm(rate) == pytest.approx(earth.EARTH_RATE_RAD_S, rel=1e-15)
-    assert rate[0] == 0.0 and rate[2] > 0  # northern hemisphere: up component positive
+    # The Earth turns about its axis, which points north and, in the northern hemisphere, up:
+    # (0, Ω cos L, Ω sin L) in ENU, and in the southern hemisphere the up component turns down.
+    np.testing.assert_allclose(
+        rate,
+        (
+            0.0,
+            earth.EARTH_RATE_RAD_S * math.cos(latitude),
+            earth.EARTH_RATE_RAD_S * math.sin(latitude),
+        ),
+        rtol=1e-15,
+    )
+    assert rate[0] == 0.0 and rate[1] > 0 and rate[2] > 0
+    south = earth.earth_rate_enu_rad_s(-latitude)
+    assert south[1] == pytest.approx(rate[1], rel=1e-15) and south[2] == pytest.approx(-rate[2])
     # Moving east at v on the equator turns the ENU frame about north at v / (a + h).
     transport = earth.transport_rate_enu_rad_s(0.0, 20.0, (10.0, 0.0, 0.0))
     np.testing.assert_allclose(transport, (0, 10.0 / (earth.SEMI_MAJOR_AXIS_M + 20.0), 0))

@@ -88,29 +88,6 @@ def test_mounting_rotation_rotates_the_reading():
     np.testing.assert_allclose(np.linalg.norm(mounted, axis=1), np.linalg.norm(level, axis=1))
 
 
-def test_miller_correction_recovers_the_true_wind():
-    """V_true = R_nb R_bw V_w + R_nb (omega x B) + V_b, applied to the noise-free reading."""
-    truth = TruthModel(load_scenario("open_ocean"))
-    rpy = [1.0, -2.0, 90.0]
-    sensor = AnemometerSimulator(truth, NOISE_FREE, MAST, rpy, seed=1)
-    t = np.linspace(0.0, 60.0, 601)
-    reading = sensor.measure(t)
-    state = truth.evaluate(t)
-    anemometer_to_body = (
-        elementary_rotation("z", np.deg2rad(rpy[2]))
-        @ elementary_rotation("y", np.deg2rad(rpy[1]))
-        @ elementary_rotation("x", np.deg2rad(rpy[0]))
-    )
-    corrected = (
-        state.attitude.apply(reading @ anemometer_to_body.T)
-        + state.attitude.apply(np.cross(state.angular_rate_body_rad_s, MAST))
-        + state.velocity_enu_mps
-    )
-    np.testing.assert_allclose(corrected, state.wind_enu_mps, atol=1e-12)
-    # The uncorrected reading is far off: the motion matters.
-    assert np.max(np.linalg.norm(reading - state.wind_enu_mps, axis=1)) > 1.0
-
-
 def test_anemometer_noise_is_seeded():
     truth = TruthModel(load_scenario("static"))
     t = np.arange(0.0, 1.0, 0.1)
