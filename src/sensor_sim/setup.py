@@ -42,6 +42,7 @@ setup(
             "imu_sim_node = sensor_sim.imu_sim_node:main",
             "gnss_sim_node = sensor_sim.gnss_sim_node:main",
             "anemometer_sim_node = sensor_sim.anemometer_sim_node:main",
+            "dvl_sim_node = sensor_sim.dvl_sim_node:main",
             "truth_node = sensor_sim.truth_node:main",
             "bag_recorder = sensor_sim.bag_recorder_node:main",
             "bag_player = sensor_sim.bag_player_node:main",

@@ -28,8 +28,11 @@ RATES_HZ = {
     "gnss/heading": 10.0,
     "gnss/baseline": 10.0,
     "anemometer/wind": 20.0,
+    "dvl/velocity": 1.0,
     "truth/odometry": 50.0,
     "truth/wind": 50.0,
+    "truth/current": 50.0,
+    "truth/water_velocity": 50.0,
 }
 CONTRACT_TYPES = {
     "imu/data_raw": "sensor_msgs/msg/Imu",
@@ -38,8 +41,11 @@ CONTRACT_TYPES = {
     "gnss/heading": "sensor_msgs/msg/Imu",
     "gnss/baseline": "geometry_msgs/msg/Vector3Stamped",
     "anemometer/wind": "geometry_msgs/msg/Vector3Stamped",
+    "dvl/velocity": "geometry_msgs/msg/TwistWithCovarianceStamped",
     "truth/odometry": "nav_msgs/msg/Odometry",
     "truth/wind": "geometry_msgs/msg/Vector3Stamped",
+    "truth/current": "geometry_msgs/msg/Vector3Stamped",
+    "truth/water_velocity": "geometry_msgs/msg/Vector3Stamped",
 }
 NODES = {
     "imu/data_raw": "imu_sim_node",
@@ -61,8 +67,11 @@ FRAMES = {
     "gnss/heading": "gnss_primary",
     "gnss/baseline": "map",
     "anemometer/wind": "anemometer_link",
+    "dvl/velocity": "dvl_link",
     "truth/odometry": "map",
     "truth/wind": "map",
+    "truth/current": "map",
+    "truth/water_velocity": "map",
 }
 
 
@@ -161,6 +170,24 @@ def test_imu_message_conventions(live_bag):
     assert heading.linear_acceleration_covariance[0] == -1.0
     assert heading.orientation_covariance[8] > 0.0
     assert heading.orientation.x == 0.0 and heading.orientation.y == 0.0
+
+
+def test_dvl_message_conventions(live_bag):
+    messages, _ = messages_by_topic(live_bag[1])
+    dvl = messages["dvl/velocity"][0]
+    covariance = np.reshape(dvl.twist.covariance, (6, 6))
+    np.testing.assert_array_equal(covariance[:3, :3], 0.005**2 * np.eye(3))
+    np.testing.assert_array_equal(np.diag(covariance)[3:], [-1.0, -1.0, -1.0])
+    # The buoy drifts with the current: through the water it moves only with the waves.
+    assert abs(dvl.twist.twist.linear.x) < 0.5
+
+
+def test_dvl_node_refuses_a_platform_without_a_dvl(nodes):
+    result = nodes.run("dvl_sim_node", "--ros-args", "-p", "scenario:=static", timeout_s=60)
+    assert result.returncode != 0
+    output = result.stdout + result.stderr
+    assert "sensors.dvl" in output
+    assert "Traceback" not in output
 
 
 def test_sensor_node_stops_cleanly_on_sigint(nodes):

@@ -26,6 +26,7 @@ DVL_TOPIC = "dvl/velocity"
 TRUTH_ODOMETRY_TOPIC = "truth/odometry"
 TRUTH_WIND_TOPIC = "truth/wind"
 TRUTH_CURRENT_TOPIC = "truth/current"
+TRUTH_WATER_VELOCITY_TOPIC = "truth/water_velocity"
 TRUTH_PREFIX = "truth/"
 
 # -- output topics -------------------------------------------------------------------------------
@@ -72,6 +73,7 @@ TRUTH_MSGTYPES = {
     TRUTH_ODOMETRY_TOPIC: ODOMETRY_MSGTYPE,
     TRUTH_WIND_TOPIC: VECTOR3_MSGTYPE,
     TRUTH_CURRENT_TOPIC: VECTOR3_MSGTYPE,
+    TRUTH_WATER_VELOCITY_TOPIC: VECTOR3_MSGTYPE,
 }
 
 NAV_MSGTYPES = {

@@ -99,6 +99,18 @@ SHARED_PARAMETERS: dict[str, SharedParameter] = {
             _mounting_angles,
         ),
         SharedParameter(
+            "dvl.position",
+            (0.0, 0.0, -2.0),
+            "DVL measurement centre in base_link, m",
+            _position_in_body,
+        ),
+        SharedParameter(
+            "dvl.rpy_deg",
+            (0.0, 0.0, 0.0),
+            "roll, pitch, yaw of dvl_link in base_link, deg, R = Rz(yaw)·Ry(pitch)·Rx(roll)",
+            _mounting_angles,
+        ),
+        SharedParameter(
             "origin.latitude_deg",
             _NAN,
             "latitude of the map origin, deg; NaN: first fix",

@@ -19,6 +19,7 @@ from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
 from buoy_common.contract import (
     ANEMOMETER_FRAME,
     BODY_FRAME,
+    DVL_FRAME,
     GNSS_PRIMARY_FRAME,
     IMU_FRAME,
     MAP_FRAME,
@@ -145,6 +146,23 @@ def anemometer_messages(
         message = Vector3Stamped()
         _set_stamp(message.header, time_ns, ANEMOMETER_FRAME)
         _set_vector(message.vector, wind)
+        yield message
+
+
+def dvl_messages(
+    stamps_ns: list[int], velocity_dvl_mps: np.ndarray, noise_variance_m2s2: float
+) -> Iterator[TwistWithCovarianceStamped]:
+    """``dvl/velocity``: the DVL's velocity through the water in DVL axes (m/s), NaN for a lost
+    ping; the linear covariance is the ping noise, the angular part is not measured (-1)."""
+    covariance = np.zeros((6, 6))
+    covariance[:3, :3] = noise_variance_m2s2 * np.eye(3)
+    covariance[3:, 3:] = -np.eye(3)
+    flat_covariance = covariance.ravel()
+    for time_ns, velocity in zip(stamps_ns, velocity_dvl_mps, strict=True):
+        message = TwistWithCovarianceStamped()
+        _set_stamp(message.header, time_ns, DVL_FRAME)
+        _set_vector(message.twist.twist.linear, velocity)
+        message.twist.covariance = flat_covariance
         yield message
 
 

@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from sensor_sim.current_field import SurfaceCurrent, toward_unit_en
 from sensor_sim.scenario import CurrentConfig, MotionConfig, WaveConfig
 from sensor_sim.waveforms import RampProfile, Sinusoids
-from sensor_sim.waves import WaveField
+from sensor_sim.waves import WaveField, depth_decay
 
 MOTION_PHASE_STREAM_KEY = 101
 WAVE_STREAM_KEY = 102
@@ -70,17 +71,30 @@ class BuoyMotion:
         self._mooring_yaw = Sinusoids.single(
             deg(motion.mooring_yaw_amplitude_deg), motion.mooring_yaw_period_s, phases[3]
         )
+        translations = (
+            (motion.heave_velocity_amplitude_mps, motion.heave_period_s, phases[4]),
+            (motion.surge_velocity_amplitude_mps, motion.surge_period_s, phases[5]),
+            (motion.lateral_velocity_amplitude_mps, motion.lateral_period_s, phases[6]),
+        )
         self._heave, self._surge, self._lateral = (
             _displacement_of_velocity_sinusoid(amplitude, period, phase)
-            for amplitude, period, phase in (
-                (motion.heave_velocity_amplitude_mps, motion.heave_period_s, phases[4]),
-                (motion.surge_velocity_amplitude_mps, motion.surge_period_s, phases[5]),
-                (motion.lateral_velocity_amplitude_mps, motion.lateral_period_s, phases[6]),
-            )
+            for amplitude, period, phase in translations
         )
         heading = self._angle_offsets_rad[2]
         self._surge_axis_en = np.array([np.cos(heading), np.sin(heading)])
         self._lateral_axis_en = np.array([-np.sin(heading), np.cos(heading)])
+        # The same sinusoids as the surface water's orbital velocity: amplitude (m/s), angular
+        # frequency (rad/s), phase (rad) and ENU axis of each.
+        axes_enu = np.array(
+            [[0.0, 0.0, 1.0], [*self._surge_axis_en, 0.0], [*self._lateral_axis_en, 0.0]]
+        )
+        self._orbital_amplitudes_mps = np.array([amplitude for amplitude, _, _ in translations])
+        self._orbital_rad_s = np.array([2.0 * np.pi / period for _, period, _ in translations])
+        self._orbital_phases_rad = np.array([phase for _, _, phase in translations])
+        self._orbital_axes_enu = axes_enu
+        self.cruise_velocity_en_mps = motion.cruise_speed_mps * toward_unit_en(
+            motion.cruise_course_deg
+        )
 
         end_s = duration_s + _PROFILE_MARGIN_S
         self._sway = _sway_profile(motion, end_s)
@@ -105,12 +119,9 @@ class BuoyMotion:
             self._wave_start_elevation_m = at_start.elevation_m[0][0]
             self._wave_start_displacement_en_m = at_start.orbital_displacement_en_m[0][0]
 
-        self.current_enu_mps: np.ndarray | None = None
+        self.current: SurfaceCurrent | None = None
         if current is not None:
-            toward = np.deg2rad(current.direction_deg)
-            self.current_enu_mps = current.speed_mps * np.array(
-                [np.sin(toward), np.cos(toward), 0.0]
-            )
+            self.current = SurfaceCurrent(current)
 
     def evaluate(self, t_s: ArrayLike) -> MotionSample:
         """Motion at times t_s (s), flattened to shape (N,)."""
@@ -149,9 +160,13 @@ class BuoyMotion:
             east_north[1] += wave.orbital_displacement_en_m[1]
             east_north[2] += wave.orbital_displacement_en_m[2]
 
-        if self.current_enu_mps is not None:
-            east_north[0] += t[:, None] * self.current_enu_mps[:2]
-            east_north[1] += self.current_enu_mps[:2]
+        if self.cruise_velocity_en_mps.any():
+            east_north[0] += t[:, None] * self.cruise_velocity_en_mps
+            east_north[1] += self.cruise_velocity_en_mps
+
+        if self.current is not None and self.current.config.platform_drifts:
+            for derivative, drift in zip(east_north, self.current.drift_en_m(t), strict=True):
+                derivative += drift
 
         euler = tuple(np.stack(parts, axis=-1) for parts in zip(roll, pitch, yaw, strict=True))
         displacement = tuple(
@@ -159,6 +174,20 @@ class BuoyMotion:
             for horizontal, vertical in zip(east_north, up, strict=True)
         )
         return MotionSample(euler, displacement)
+
+    def orbital_velocity_enu_mps(self, t_s: ArrayLike, depth_m: ArrayLike) -> np.ndarray:
+        """Orbital velocity of the water (east, north, up), m/s, (N, 3), at times t_s (s) and
+        depths depth_m (m below the instantaneous surface, one per time): the waves' and the
+        heave/surge/lateral sinusoids', each decaying as exp(-k d) (sensor_sim.current_field).
+        At depth 0 it is the platform's own wave-following velocity."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=float)).ravel()
+        depth = np.broadcast_to(np.asarray(depth_m, dtype=float), t.shape)
+        angle = np.outer(t, self._orbital_rad_s) + self._orbital_phases_rad
+        at_depth = self._orbital_amplitudes_mps * depth_decay(self._orbital_rad_s, depth)
+        velocity = (at_depth * np.sin(angle)) @ self._orbital_axes_enu
+        if self.waves is not None:
+            velocity += self.waves.orbital_velocity_enu_mps(t, depth)
+        return velocity
 
     def _wave_tilt(
         self, slope_en: Derivatives, yaw: Derivatives

@@ -1,6 +1,7 @@
 """``run_scenario``: run a simulated buoy live, each node its own process, optionally recording.
 
-Starts the truth, IMU, GNSS and anemometer nodes and the simulation clock (and, on request, the
+Starts the truth node, the nodes of the sensors the scenario's platform carries (IMU, GNSS,
+anemometer, and a DVL where it has one) and the simulation clock (and, on request, the
 fusion and compensation nodes and the bag recorder) as separate processes that talk over DDS,
 waits until the scenario has played out, stops the long-running nodes with SIGINT and reports.
 It plays the role ``ros2 launch`` would on a full ROS install.
@@ -20,8 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from sensor_sim.scenario import ScenarioError, load_scenario
+from sensor_sim.streams import STREAMS
 
-SENSOR_NODES = ("truth_node", "imu_sim_node", "gnss_sim_node", "anemometer_sim_node")
 # Time for the last messages to travel through fusion, compensation and into the recorder.
 DRAIN_S = 2.0
 STOP_TIMEOUT_S = 20.0
@@ -153,7 +154,13 @@ def run(arguments) -> int:
     else:
         log_dir = Path(tempfile.mkdtemp(prefix="run_scenario-"))
     run = Run(log_dir)
-    clock_subscribers = len(SENSOR_NODES)
+    # Truth first, then the sensors the scenario's platform carries.
+    sensor_nodes = [
+        spec.node_name
+        for kind, spec in sorted(STREAMS.items(), key=lambda item: item[0] != "truth")
+        if spec.carried(scenario)
+    ]
+    clock_subscribers = len(sensor_nodes)
     if arguments.record:
         run.start("bag_recorder", [arguments.record, *ros_arguments(arguments, SIM_TIME)], False)
         clock_subscribers += 1
@@ -172,7 +179,7 @@ def run(arguments) -> int:
     sensor_values = scenario_values(arguments)
     if arguments.record:
         sensor_values["wait_for_subscriber_node"] = "bag_recorder"
-    for name in SENSOR_NODES:
+    for name in sensor_nodes:
         run.start(name, ros_arguments(arguments, sensor_values), True)
     clock_values = {
         **scenario_values(arguments),

@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike
 
 from sensor_sim.sensor_errors import (
     AnemometerErrorConfig,
+    DvlErrorConfig,
     GnssErrorConfig,
     ImuErrorConfig,
     InvalidConfigValueError,
@@ -95,8 +96,16 @@ class MotionConfig:
     rotation_rate_deg_s: float = 10.0
     rotation_dwell_s: float = 0.0
     corner_time_s: float = 0.5
+    cruise_speed_mps: float = 0.0
+    cruise_course_deg: float = 0.0
 
     def __post_init__(self) -> None:
+        check_field(
+            self,
+            "cruise_speed_mps",
+            0.0 <= self.cruise_speed_mps <= 30.0,
+            "must be within [0, 30] m/s",
+        )
         check_non_negative(
             self,
             "roll_amplitude_deg",
@@ -215,24 +224,63 @@ class WindConfig:
 
 @dataclass(frozen=True)
 class CurrentConfig:
-    """Surface current (oceanographic direction: toward, clockwise from North); the buoy drifts
-    with it."""
+    """Surface current: a mean and one tidal constituent (sensor_sim.current_field).
+
+    Directions are oceanographic: where the water flows TOWARD, clockwise from true North.
+    The tidal current is tidal_amplitude_mps along tidal_direction_deg (the flood direction)
+    and tidal_minor_amplitude_mps along the axis 90 deg counter-clockwise of it, in quadrature
+    (positive: the current vector turns counter-clockwise; 0: a rectilinear tide), with period
+    tidal_period_s (M2 by default) and phase tidal_phase_deg at t = 0 (0: full flood).
+    platform_drifts: the platform moves with the current (a drifting buoy); false: it keeps
+    its own track over ground (a ship under way, a buoy on a taut mooring).
+    """
 
     speed_mps: float = 0.0
     direction_deg: float = 0.0
+    tidal_amplitude_mps: float = 0.0
+    tidal_minor_amplitude_mps: float = 0.0
+    tidal_direction_deg: float = 0.0
+    tidal_period_s: float = 44714.2
+    tidal_phase_deg: float = 0.0
+    platform_drifts: bool = True
 
     def __post_init__(self) -> None:
-        check_non_negative(self, "speed_mps")
+        check_non_negative(self, "speed_mps", "tidal_amplitude_mps")
+        check_positive(self, "tidal_period_s")
         check_field(self, "speed_mps", self.speed_mps <= 5.0, "must be <= 5")
+        check_field(self, "tidal_amplitude_mps", self.tidal_amplitude_mps <= 5.0, "must be <= 5")
+        check_field(
+            self,
+            "tidal_minor_amplitude_mps",
+            abs(self.tidal_minor_amplitude_mps) <= self.tidal_amplitude_mps,
+            "must be within +-tidal_amplitude_mps (the minor axis of the tidal ellipse)",
+        )
+
+
+@dataclass(frozen=True)
+class SampleRates:
+    """Sample rates of the simulated sensors and the truth, Hz (a node's rate_hz overrides)."""
+
+    imu_hz: float = 100.0
+    gnss_hz: float = 10.0
+    anemometer_hz: float = 20.0
+    dvl_hz: float = 1.0
+    truth_hz: float = 50.0
+
+    def __post_init__(self) -> None:
+        for key in ("imu_hz", "gnss_hz", "anemometer_hz", "dvl_hz", "truth_hz"):
+            check_field(self, key, 0.0 < getattr(self, key) <= 2000.0, "must be in (0, 2000]")
 
 
 @dataclass(frozen=True)
 class SensorErrorConfigs:
-    """Error budgets of the simulated sensors."""
+    """Error budgets of the simulated sensors; ``dvl`` null: the platform carries no DVL."""
 
     imu: ImuErrorConfig = field(default_factory=ImuErrorConfig)
     gnss: GnssErrorConfig = field(default_factory=GnssErrorConfig)
     anemometer: AnemometerErrorConfig = field(default_factory=AnemometerErrorConfig)
+    dvl: DvlErrorConfig | None = None
+    rates: SampleRates = field(default_factory=SampleRates)
 
 
 @dataclass(frozen=True)

@@ -139,3 +139,54 @@ class AnemometerErrorConfig:
 
     def __post_init__(self) -> None:
         check_non_negative(self, "noise_mps")
+
+
+@dataclass(frozen=True)
+class DvlErrorConfig:
+    """Doppler velocity log in water-track mode: errors and lost pings.
+
+    measured = (1 + scale_factor_error_percent / 100) · v + bias_mps + noise, per axis of
+    ``dvl_link``, with v the DVL's true velocity through the water. The systematic part is the
+    accuracy the paper gives for its DVL, "0.2 % ± 0.2 cm/s", taken at its bound and held for
+    the run: a scale error common to all axes (a sound-speed or beam-angle error scales every
+    beam alike) and a constant offset per axis. ``noise_mps`` is white noise per axis and ping
+    (1σ); the paper gives none. Averaging removes the noise, never the systematic part.
+
+    A ping is lost (published with NaN components, as a DVL flags a bad ping) inside an
+    ``outages_s`` interval ([start, end) in scenario time, s), when the transducer is less than
+    ``min_depth_m`` below the sea surface (bubbles swept under the hull, or out of the water),
+    or at random with ``ping_loss_probability``.
+    """
+
+    scale_factor_error_percent: float = 0.2
+    bias_mps: tuple[float, float, float] = (0.002, 0.002, 0.002)
+    noise_mps: float = 0.005
+    min_depth_m: float = 0.5
+    ping_loss_probability: float = 0.0
+    outages_s: tuple[tuple[float, float], ...] = ()
+
+    def __post_init__(self) -> None:
+        check_non_negative(self, "noise_mps", "min_depth_m")
+        check_field(
+            self,
+            "scale_factor_error_percent",
+            abs(self.scale_factor_error_percent) <= 10.0,
+            "must be within [-10, 10] %",
+        )
+        check_field(
+            self,
+            "bias_mps",
+            len(self.bias_mps) == 3 and all(abs(b) <= 1.0 for b in self.bias_mps),
+            "must be three offsets within [-1, 1] m/s",
+        )
+        check_field(
+            self,
+            "ping_loss_probability",
+            0.0 <= self.ping_loss_probability < 1.0,
+            "must be in [0, 1)",
+        )
+        for start, end in self.outages_s:
+            if not start < end:
+                raise InvalidConfigValueError(
+                    "outages_s", self.outages_s, f"interval [{start}, {end}) must have start < end"
+                )

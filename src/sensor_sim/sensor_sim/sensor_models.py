@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
+from scipy.special import ndtri
 
 from sensor_sim.geodesy import (
     earth_rate_enu_rad_s,
@@ -28,6 +29,7 @@ from sensor_sim.geodesy import (
 from sensor_sim.sensor_errors import (
     STANDARD_GRAVITY_MPS2,
     AnemometerErrorConfig,
+    DvlErrorConfig,
     GnssErrorConfig,
     ImuErrorConfig,
 )
@@ -37,6 +39,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "AnemometerSimulator",
+    "DvlSimulator",
     "GnssSample",
     "GnssSimulator",
     "ImuSimulator",
@@ -47,6 +50,7 @@ __all__ = [
 IMU_STREAM_KEY = 1
 GNSS_STREAM_KEY = 2
 ANEMOMETER_STREAM_KEY = 3
+DVL_STREAM_KEY = 4
 
 _DEG = np.pi / 180.0
 # Keeps exp(-elapsed/tau) far from underflow inside one vectorised Gauss-Markov block.
@@ -380,6 +384,70 @@ class AnemometerSimulator:
         """Measured air velocity relative to the sensor (N,3), anemometer axes, m/s."""
         ideal = self.ideal(t_s)
         return ideal + self._rng.standard_normal(ideal.shape) * self.config.noise_mps
+
+
+class DvlSimulator:
+    """Doppler velocity log in water-track mode on a lever arm, mounted with a fixed rotation.
+
+    ideal = R_bd^T R_nb^T (v_b + R_nb (omega_nb^b x p) - w), in DVL axes: the velocity of the
+    DVL through the water, with R_bd = Rz(yaw) Ry(pitch) Rx(roll) of mounting_rpy_deg (DVL axes
+    -> body), p the DVL position in base_link, v_b the velocity of base_link over ground and w
+    the water's velocity at the DVL (current plus wave orbital velocity at its depth,
+    TruthModel.water_at). measured = (1 + s) ideal + bias + noise; lost pings are NaN
+    (DvlErrorConfig). One block of 4 normal draws per ping (3 noise, 1 for the random loss).
+    """
+
+    def __init__(
+        self,
+        truth: TruthModel,
+        config: DvlErrorConfig,
+        position_body_m: ArrayLike,
+        mounting_rpy_deg: ArrayLike,
+        seed: int | Sequence[int],
+    ):
+        """position_body_m: DVL measurement centre in base_link (FLU), m; mounting_rpy_deg:
+        roll, pitch, yaw of dvl_link relative to base_link, degrees; seed: scenario seed."""
+        self.truth = truth
+        self.config = config
+        self.position_body_m = _body_vector(position_body_m, "DVL position")
+        roll, pitch, yaw = _body_vector(mounting_rpy_deg, "DVL mounting rpy")
+        self.mounting = Rotation.from_euler("ZYX", [yaw, pitch, roll], degrees=True)
+        self._rng = sensor_rng(seed, DVL_STREAM_KEY)
+        # A ping is lost at random when its loss draw, a standard normal, falls below this.
+        self._loss_threshold = ndtri(config.ping_loss_probability)
+
+    def ideal(self, t_s: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Error-free velocity through the water (N,3), DVL axes, m/s, and the DVL's depth
+        below the surface (N,), m."""
+        state = self.truth.evaluate(_sample_times(t_s))
+        water = self.truth.water_at(state, self.position_body_m)
+        lever_velocity_body = np.cross(state.angular_rate_body_rad_s, self.position_body_m)
+        through_water_enu = (
+            state.velocity_enu_mps
+            + state.attitude.apply(lever_velocity_body)
+            - water.velocity_enu_mps
+        )
+        velocity = self.mounting.inv().apply(state.attitude.inv().apply(through_water_enu))
+        return velocity, water.depth_m
+
+    def measure(self, t_s: ArrayLike) -> np.ndarray:
+        """Measured velocity through the water (N,3), DVL axes, m/s; NaN rows for lost pings."""
+        t = _sample_times(t_s)
+        ideal, depth = self.ideal(t)
+        config = self.config
+        normals = self._rng.standard_normal((t.size, 4))
+        measured = (
+            (1.0 + config.scale_factor_error_percent / 100.0) * ideal
+            + np.asarray(config.bias_mps)
+            + normals[:, :3] * config.noise_mps
+        )
+        lost = (
+            _in_intervals(t, config.outages_s)
+            | (depth < config.min_depth_m)
+            | (normals[:, 3] < self._loss_threshold)
+        )
+        measured[lost] = np.nan
+        return measured
 
 
 def _body_vector(value: ArrayLike, what: str) -> np.ndarray:

@@ -49,6 +49,12 @@ class SimulatedSensorNode(SuiteNode):
         self.spec = STREAMS[kind]
         super().__init__(self.spec.node_name)
         self.scenario = declare_scenario(self)
+        if not self.spec.carried(self.scenario):
+            raise StartupError(
+                f"scenario '{self.scenario.name}' has no {self.spec.sensor} on its platform: "
+                f"give it a sensors.{self.spec.sensor} section (or the scenario_overrides "
+                f"entry 'sensors.{self.spec.sensor}={{}}' for the default one)"
+            )
         values = {
             name: self.declare_value(name, default)
             for name, default in self.spec.parameters(self.scenario)

@@ -49,7 +49,11 @@ def parse_arguments(argv):
 def simulate(arguments) -> dict[str, int]:
     scenario = load_scenario(arguments.scenario, arguments.overrides, arguments.seed)
     truth = TruthModel(scenario)
-    kinds = [k for k in STREAMS if not (arguments.no_truth and k == "truth")]
+    kinds = [
+        kind
+        for kind, spec in STREAMS.items()
+        if spec.carried(scenario) and not (arguments.no_truth and kind == "truth")
+    ]
     streams = []
     for kind in kinds:
         spec = STREAMS[kind]

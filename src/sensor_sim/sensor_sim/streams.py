@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from buoy_common.contract import (
+    DVL_TOPIC,
     GNSS_BASELINE_TOPIC,
     GNSS_FIX_TOPIC,
     GNSS_HEADING_TOPIC,
@@ -24,6 +25,7 @@ from buoy_common.contract import (
     TRUTH_CURRENT_TOPIC,
     TRUTH_MSGTYPES,
     TRUTH_ODOMETRY_TOPIC,
+    TRUTH_WATER_VELOCITY_TOPIC,
     TRUTH_WIND_TOPIC,
     WIND_RAW_TOPIC,
 )
@@ -32,14 +34,24 @@ from buoy_common.parameters import build_config, config_parameters
 from sensor_sim import messages
 from sensor_sim.geodesy import geodetic_to_enu_m
 from sensor_sim.scenario import Scenario
-from sensor_sim.sensor_errors import AnemometerErrorConfig, GnssErrorConfig, ImuErrorConfig
-from sensor_sim.sensor_models import AnemometerSimulator, GnssSimulator, ImuSimulator
+from sensor_sim.sensor_errors import (
+    AnemometerErrorConfig,
+    DvlErrorConfig,
+    GnssErrorConfig,
+    ImuErrorConfig,
+)
+from sensor_sim.sensor_models import (
+    AnemometerSimulator,
+    DvlSimulator,
+    GnssSimulator,
+    ImuSimulator,
+)
 from sensor_sim.truth import TruthModel
 
 SECONDS_PER_HOUR = 3600.0
 
 # Per-sensor keys for the seed: every sensor draws its own independent random stream.
-IMU_SEED_KEY, GNSS_SEED_KEY, ANEMOMETER_SEED_KEY = 1, 2, 3
+IMU_SEED_KEY, GNSS_SEED_KEY, ANEMOMETER_SEED_KEY, DVL_SEED_KEY = 1, 2, 3, 4
 
 
 @dataclass(frozen=True)
@@ -50,6 +62,8 @@ class Extrinsics:
     secondary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.secondary_antenna")
     anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
     anemometer_rpy_deg: tuple[float, float, float] = shared_field("anemometer.rpy_deg")
+    dvl_position_body_m: tuple[float, float, float] = shared_field("dvl.position")
+    dvl_rpy_deg: tuple[float, float, float] = shared_field("dvl.rpy_deg")
 
     def __post_init__(self):
         check_shared_fields(self)
@@ -218,17 +232,51 @@ class AnemometerStream(SensorStream):
 
 
 @dataclass
-class TruthStream(SensorStream):
-    """The truth topics: the bag carries its own answer."""
-
-    map_origin: MapOrigin = field(default_factory=lambda: MapOrigin())
+class DvlStream(SensorStream):
+    errors: DvlErrorConfig = field(default_factory=DvlErrorConfig)
+    extrinsics: Extrinsics = field(default_factory=Extrinsics)
 
     def __post_init__(self):
-        self.topics = {
-            topic: TRUTH_MSGTYPES[topic] for topic in (TRUTH_ODOMETRY_TOPIC, TRUTH_WIND_TOPIC)
-        }
-        if self.truth.evaluate(np.zeros(1)).current_enu_mps is not None:
-            self.topics[TRUTH_CURRENT_TOPIC] = TRUTH_MSGTYPES[TRUTH_CURRENT_TOPIC]
+        self.topics = {DVL_TOPIC: SENSOR_MSGTYPES[DVL_TOPIC]}
+        self._simulator = DvlSimulator(
+            self.truth,
+            self.errors,
+            np.asarray(self.extrinsics.dvl_position_body_m),
+            np.asarray(self.extrinsics.dvl_rpy_deg),
+            [self.scenario.seed, DVL_SEED_KEY],
+        )
+
+    def _messages(self, times_s, stamps_ns):
+        velocity = self._simulator.measure(times_s)
+        for stamp, message in zip(
+            stamps_ns,
+            messages.dvl_messages(stamps_ns, velocity, self.errors.noise_mps**2),
+            strict=True,
+        ):
+            yield DVL_TOPIC, stamp, message
+
+
+@dataclass
+class TruthStream(SensorStream):
+    """The truth topics: the bag carries its own answer.
+
+    ``truth/current`` (when the scenario has a current) is the mean and tidal current, uniform
+    over the top layer, so also the current at the DVL's place and depth. ``truth/water_velocity``
+    (when the platform carries a DVL) is the water's velocity at the DVL (``dvl.position``):
+    the current plus the waves' orbital velocity at the DVL's depth, what the DVL's single
+    pings measure against.
+    """
+
+    map_origin: MapOrigin = field(default_factory=lambda: MapOrigin())
+    extrinsics: Extrinsics = field(default_factory=Extrinsics)
+
+    def __post_init__(self):
+        names = [TRUTH_ODOMETRY_TOPIC, TRUTH_WIND_TOPIC]
+        if self.scenario.current is not None:
+            names.append(TRUTH_CURRENT_TOPIC)
+        if self.scenario.sensors.dvl is not None:
+            names.append(TRUTH_WATER_VELOCITY_TOPIC)
+        self.topics = {topic: TRUTH_MSGTYPES[topic] for topic in names}
 
     def _messages(self, times_s, stamps_ns):
         state = self.truth.evaluate(times_s)
@@ -240,11 +288,19 @@ class TruthStream(SensorStream):
             ),
             (TRUTH_WIND_TOPIC, messages.enu_vector_messages(stamps_ns, state.wind_enu_mps)),
         ]
-        if state.current_enu_mps is not None:
+        if TRUTH_CURRENT_TOPIC in self.topics:
             streams.append(
                 (
                     TRUTH_CURRENT_TOPIC,
                     messages.enu_vector_messages(stamps_ns, state.current_enu_mps),
+                )
+            )
+        if TRUTH_WATER_VELOCITY_TOPIC in self.topics:
+            water = self.truth.water_at(state, self.extrinsics.dvl_position_body_m)
+            streams.append(
+                (
+                    TRUTH_WATER_VELOCITY_TOPIC,
+                    messages.enu_vector_messages(stamps_ns, water.velocity_enu_mps),
                 )
             )
         topics = [topic for topic, _ in streams]
@@ -280,23 +336,34 @@ def merged_messages(streams: list[SensorStream], until_s: float):
 
 @dataclass(frozen=True)
 class StreamSpec:
-    """How one sensor stream is configured: its node, default rate and parameter groups.
+    """How one sensor stream is configured: its node, its rate in the scenario's
+    ``sensors.rates`` and its parameter groups.
 
     ``configs`` maps a stream field to (configuration type, parameter prefix, renamed fields).
+    ``sensor``: the scenario's ``sensors`` entry that says whether the platform carries the
+    sensor (a null entry: it does not) and gives its error budget; None for the truth.
     """
 
     node_name: str
     stream_type: type
-    default_rate_hz: float
+    rate_key: str
     configs: dict[str, tuple[type, str, dict[str, str]]]
+    sensor: str | None = None
+
+    def carried(self, scenario: Scenario) -> bool:
+        """Whether the scenario's platform carries this sensor (the truth always exists)."""
+        return self.sensor is None or getattr(scenario.sensors, self.sensor) is not None
+
+    def default_rate_hz(self, scenario: Scenario) -> float:
+        return getattr(scenario.sensors.rates, self.rate_key)
 
     def parameters(self, scenario: Scenario) -> list[tuple[str, object]]:
         """(parameter name, default) of every parameter of this stream's node.
 
-        Sensor error defaults are the scenario's (``sensors.*`` in its file), so a scenario and
-        a seed define a run; parameters override them.
+        Sample rates and sensor error defaults are the scenario's (``sensors.*`` in its file),
+        so a scenario and a seed define a run; parameters override them.
         """
-        names = [("rate_hz", float(self.default_rate_hz)), ("time_offset_s", 0.0)]
+        names = [("rate_hz", float(self.default_rate_hz(scenario))), ("time_offset_s", 0.0)]
         for field_name, (config_type, prefix, renamed) in self.configs.items():
             base = self._scenario_default(scenario, field_name)
             names += [
@@ -307,11 +374,13 @@ class StreamSpec:
     def _scenario_default(self, scenario: Scenario, field_name: str):
         if field_name != "errors":
             return None
-        return getattr(scenario.sensors, self.node_name.split("_")[0])
+        return getattr(scenario.sensors, self.sensor)
 
     def build(self, scenario: Scenario, truth: TruthModel, values: dict) -> SensorStream:
         """The stream configured by parameter ``values`` (absent ones: the scenario's values)."""
-        timing = build_config(StreamTiming, {"rate_hz": self.default_rate_hz, **values}, renamed={})
+        timing = build_config(
+            StreamTiming, {"rate_hz": self.default_rate_hz(scenario), **values}, renamed={}
+        )
         configs = {
             field_name: build_config(
                 config_type,
@@ -325,25 +394,37 @@ class StreamSpec:
         return self.stream_type(scenario, truth, timing, **configs)
 
 
+_EXTRINSICS = (Extrinsics, "", {})
+
 STREAMS = {
-    "imu": StreamSpec("imu_sim_node", ImuStream, 100.0, {"errors": (ImuErrorConfig, "imu.", {})}),
+    "imu": StreamSpec(
+        "imu_sim_node", ImuStream, "imu_hz", {"errors": (ImuErrorConfig, "imu.", {})}, "imu"
+    ),
     "gnss": StreamSpec(
         "gnss_sim_node",
         GnssStream,
-        10.0,
-        {
-            "errors": (GnssErrorConfig, "gnss.", {}),
-            "extrinsics": (Extrinsics, "", {}),
-        },
+        "gnss_hz",
+        {"errors": (GnssErrorConfig, "gnss.", {}), "extrinsics": _EXTRINSICS},
+        "gnss",
     ),
     "anemometer": StreamSpec(
         "anemometer_sim_node",
         AnemometerStream,
-        20.0,
-        {
-            "errors": (AnemometerErrorConfig, "anemometer.", {}),
-            "extrinsics": (Extrinsics, "", {}),
-        },
+        "anemometer_hz",
+        {"errors": (AnemometerErrorConfig, "anemometer.", {}), "extrinsics": _EXTRINSICS},
+        "anemometer",
     ),
-    "truth": StreamSpec("truth_node", TruthStream, 50.0, {"map_origin": (MapOrigin, "", {})}),
+    "dvl": StreamSpec(
+        "dvl_sim_node",
+        DvlStream,
+        "dvl_hz",
+        {"errors": (DvlErrorConfig, "dvl.", {}), "extrinsics": _EXTRINSICS},
+        "dvl",
+    ),
+    "truth": StreamSpec(
+        "truth_node",
+        TruthStream,
+        "truth_hz",
+        {"map_origin": (MapOrigin, "", {}), "extrinsics": _EXTRINSICS},
+    ),
 }

@@ -50,7 +50,8 @@ class TruthState:
     velocity_enu_mps: (N,3) base_link origin over ground, local ENU.
     acceleration_enu_mps2: (N,3) time derivative of velocity_enu_mps.
     wind_enu_mps: (N,3) air velocity over ground (direction it moves toward), ENU.
-    current_enu_mps: (N,3) surface current (toward), ENU, or None when not simulated.
+    current_enu_mps: (N,3) surface current (mean and tidal, toward), ENU, or None when not
+    simulated.
     """
 
     t_s: np.ndarray
@@ -107,6 +108,22 @@ def body_rate_from_euler(
     return rate, accel
 
 
+@dataclass(frozen=True)
+class WaterAtSensor:
+    """The water at a point fixed to the platform (a DVL), at N times.
+
+    depth_m: (N,) depth below the sea surface, m: base_link floats on the surface, so it is the
+    point's height below base_link along the vertical, -(R_nb p)_up.
+    current_enu_mps: (N,3) the current there (mean and tidal), ENU, m/s; zero without one.
+    velocity_enu_mps: (N,3) the water's velocity there: the current plus the orbital velocity
+    of the waves at that depth, ENU, m/s.
+    """
+
+    depth_m: np.ndarray
+    current_enu_mps: np.ndarray
+    velocity_enu_mps: np.ndarray
+
+
 class TruthModel:
     """Truth of one scenario, evaluable at any times, identical for every caller."""
 
@@ -135,6 +152,17 @@ class TruthModel:
         self._east_radius_m = (
             prime_vertical_radius_m(self.origin_latitude_rad) + self.origin_altitude_m
         ) * np.cos(self.origin_latitude_rad)
+
+    def water_at(self, state: TruthState, position_body_m: ArrayLike) -> WaterAtSensor:
+        """The water at ``position_body_m`` (base_link, m) at the times of ``state``."""
+        offset_enu = state.attitude.apply(np.asarray(position_body_m, dtype=float))
+        depth = -offset_enu[:, 2]
+        if state.current_enu_mps is None:
+            current = np.zeros((state.t_s.size, 3))
+        else:
+            current = state.current_enu_mps
+        orbital = self.motion.orbital_velocity_enu_mps(state.t_s, depth)
+        return WaterAtSensor(depth, current, current + orbital)
 
     def evaluate(self, t_s: ArrayLike) -> TruthState:
         """Truth at times t_s (s since the scenario start), flattened to shape (N,)."""
@@ -187,8 +215,8 @@ class TruthModel:
             self.origin_altitude_m,
         )
         current = None
-        if self.motion.current_enu_mps is not None:
-            current = np.broadcast_to(self.motion.current_enu_mps, (t.size, 3)).copy()
+        if self.motion.current is not None:
+            current = self.motion.current.velocity_enu_mps(t)
         return TruthState(
             t_s=t,
             attitude=attitude,

@@ -23,6 +23,15 @@ HIGHEST_FREQUENCY_RATIO = 3.0
 _CHUNK = 4096
 
 
+def depth_decay(angular_frequency_rad_s: ArrayLike, depth_m: ArrayLike) -> np.ndarray:
+    """exp(−k d) of linear deep-water waves, k = ω²/g: the ratio of the orbital velocity at
+    depth d below the surface to the surface's. (N, K) for (K,) angular frequencies (rad/s) and
+    (N,) depths (m); a point above the surface counts as at the surface (ratio 1)."""
+    wavenumber = np.asarray(angular_frequency_rad_s, dtype=float) ** 2 / STANDARD_GRAVITY_MPS2
+    depth = np.maximum(np.atleast_1d(np.asarray(depth_m, dtype=float)), 0.0)
+    return np.exp(-np.outer(depth, wavenumber))
+
+
 def jonswap_spectral_shape(
     frequency_hz: ArrayLike, peak_frequency_hz: float, peak_enhancement: float
 ) -> np.ndarray:
@@ -143,3 +152,21 @@ class WaveField:
         slope = (by_sin[:, 1:3], by_cos[:, 2:4], by_sin[:, 3:5])
         displacement = (by_sin[:, 5:7], by_cos[:, 4:6], by_sin[:, 7:9])
         return WaveSample(elevation, slope, displacement)
+
+    def orbital_velocity_enu_mps(self, t_s: ArrayLike, depth_m: ArrayLike) -> np.ndarray:
+        """Water velocity of the waves (east, north, up), m/s, (N, 3), at times t_s (s) and
+        depths depth_m (m, below the instantaneous surface, one per time) under the buoy's mean
+        position: each component's surface orbital velocity times exp(−k d). At depth 0 it is
+        the rate of the surface particle's displacement and elevation of :meth:`evaluate`."""
+        t = np.atleast_1d(np.asarray(t_s, dtype=float)).ravel()
+        depth = np.broadcast_to(np.asarray(depth_m, dtype=float), t.shape)
+        # Surface particle velocity of component k: a ω (cos θ u_k, sin θ), θ = phase − ω t.
+        speed = self.amplitudes_m * self.angular_frequencies_rad_s
+        velocity = np.empty((t.size, 3))
+        for start in range(0, t.size, _CHUNK):
+            rows = slice(start, start + _CHUNK)
+            theta = self.phases_rad - np.outer(t[rows], self.angular_frequencies_rad_s)
+            at_depth = speed * depth_decay(self.angular_frequencies_rad_s, depth[rows])
+            velocity[rows, :2] = (at_depth * np.cos(theta)) @ self.propagation_unit_en
+            velocity[rows, 2] = np.sum(at_depth * np.sin(theta), axis=1)
+        return velocity

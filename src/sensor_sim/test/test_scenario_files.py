@@ -13,7 +13,15 @@ from sensor_sim.scenario import (
     load_scenario,
 )
 
-SHIPPED = ["open_ocean", "sea_state", "static", "tilt_table", "vertical_wind", "wind_tunnel"]
+SHIPPED = [
+    "open_ocean",
+    "sea_state",
+    "ship_current",
+    "static",
+    "tilt_table",
+    "vertical_wind",
+    "wind_tunnel",
+]
 
 
 def test_all_shipped_scenarios_are_listed_and_load():

@@ -129,8 +129,13 @@ def test_sea_state_paper_002_amplitudes_and_periods():
     assert dominant_period_s(lateral, DT, 2.0, 60.0) == pytest.approx(8.0, rel=0.01)
     assert s.latitude_deg[0] == pytest.approx(35.0)
     assert s.longitude_deg[0] == pytest.approx(120.0)
+    # 0.15 m/s toward 60 deg and the tide, 30 deg of phase before full flood toward 150 deg.
+    flood = np.array([np.sin(np.deg2rad(150.0)), np.cos(np.deg2rad(150.0)), 0.0])
     np.testing.assert_allclose(
-        s.current_enu_mps[0], 0.15 * np.array([np.sin(np.pi / 3), np.cos(np.pi / 3), 0.0])
+        s.current_enu_mps[0],
+        0.15 * np.array([np.sin(np.pi / 3), np.cos(np.pi / 3), 0.0])
+        + 0.25 * np.cos(np.deg2rad(-30.0)) * flood,
+        atol=1e-15,
     )
 
 

@@ -90,10 +90,19 @@ def test_tangent_plane_position_follows_the_drift():
     np.testing.assert_allclose(s.latitude_deg[0], 20.0, atol=1e-12)
     # Waves are zero-mean and bounded: over 20 minutes the mean ENU velocity is the current's.
     drift_velocity = (s.position_enu_m[-1] - s.position_enu_m[0]) / 1200.0
-    np.testing.assert_allclose(drift_velocity, s.current_enu_mps[0], atol=0.01)
-    np.testing.assert_allclose(
-        s.current_enu_mps[0], 0.2 * np.array([np.sin(np.pi / 4), np.cos(np.pi / 4), 0.0])
+    np.testing.assert_allclose(drift_velocity, s.current_enu_mps.mean(axis=0), atol=0.01)
+
+    # 0.2 m/s toward 45 deg, plus the tide 30 deg past full flood: 0.15 cos 30 toward 100 deg
+    # and 0.05 sin 30 along the minor axis, 90 deg counter-clockwise of it (toward 10 deg).
+    def toward(direction_deg):
+        return np.array([np.sin(np.deg2rad(direction_deg)), np.cos(np.deg2rad(direction_deg)), 0])
+
+    expected = (
+        0.2 * toward(45.0)
+        + 0.15 * np.cos(np.deg2rad(30.0)) * toward(100.0)
+        + 0.05 * np.sin(np.deg2rad(30.0)) * toward(10.0)
     )
+    np.testing.assert_allclose(s.current_enu_mps[0], expected, atol=1e-15)
 
 
 def test_same_truth_at_any_sampling():
