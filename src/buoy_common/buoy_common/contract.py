@@ -39,6 +39,8 @@ WIND_TRUE_TOPIC = "wind/true"
 WIND_MEAN_PREFIX = "wind/mean_"
 WIND_STATS_PREFIX = "wind/stats_"
 CURRENT_TOPIC = "current/velocity"
+CURRENT_MEAN_PREFIX = "current/mean_"
+CURRENT_STATS_PREFIX = "current/stats_"
 DIAGNOSTICS_TOPIC = "diagnostics"
 CLOCK_TOPIC = "clock"
 
@@ -91,8 +93,9 @@ OUTPUT_MSGTYPES = {
     CURRENT_TOPIC: VECTOR3_MSGTYPE,
     DIAGNOSTICS_TOPIC: DIAGNOSTICS_MSGTYPE,
 }
-"""Every fixed-name output topic (the wind products are named per window, see
-:func:`wind_mean_topic` and :func:`wind_stats_topic`)."""
+"""Every fixed-name output topic (the wind and current products are named per window, see
+:func:`wind_mean_topic`, :func:`wind_stats_topic`, :func:`current_mean_topic` and
+:func:`current_stats_topic`)."""
 
 # -- frames ----------------------------------------------------------------------------------------
 MAP_FRAME = "map"
@@ -126,6 +129,16 @@ def wind_mean_topic(window_s: float) -> str:
 def wind_stats_topic(window_s: float) -> str:
     """Topic of the wind statistics of windows of ``window_s`` seconds."""
     return WIND_STATS_PREFIX + window_label(window_s)
+
+
+def current_mean_topic(window_s: float) -> str:
+    """Topic of the vector-mean current of windows of ``window_s`` seconds."""
+    return CURRENT_MEAN_PREFIX + window_label(window_s)
+
+
+def current_stats_topic(window_s: float) -> str:
+    """Topic of the current statistics of windows of ``window_s`` seconds."""
+    return CURRENT_STATS_PREFIX + window_label(window_s)
 
 
 def bag_topic(topic: str) -> str:
@@ -165,7 +178,7 @@ class Reason(StrEnum):
     DISABLED = "disabled"
     """The input is switched off by a parameter."""
     LATITUDE_OUT_OF_RANGE = "latitude_out_of_range"
-    # Outcomes of the wind correction of one anemometer sample.
+    # Outcomes of the correction of one anemometer or DVL sample.
     NO_NAVIGATION = "no_navigation"
     NAV_GAP = "nav_gap"
     NAVIGATION_TIMEOUT = "navigation_timeout"
@@ -173,6 +186,8 @@ class Reason(StrEnum):
     INVALID_WIND = "invalid_wind"
     WIND_SPEED_OUT_OF_RANGE = "wind_speed_out_of_range"
     INVALID_STAMP = "invalid_stamp"
+    INVALID_DVL = "invalid_dvl"
+    DVL_SPEED_OUT_OF_RANGE = "dvl_speed_out_of_range"
 
 
 # -- stamps ----------------------------------------------------------------------------------------

@@ -44,11 +44,14 @@ from buoy_common.contract import (
     SENSOR_MSGTYPES,
     TRUTH_MSGTYPES,
     WIND_TRUE_TOPIC,
+    current_mean_topic,
+    current_stats_topic,
     wind_mean_topic,
     wind_stats_topic,
 )
 
-# The contract's sensor, truth, navigation and wind topics; relative, so a namespace applies.
+# The contract's sensor, truth, navigation, wind and current topics; relative, so a namespace
+# applies.
 DEFAULT_TOPICS = (
     *SENSOR_MSGTYPES,
     *TRUTH_MSGTYPES,
@@ -57,6 +60,8 @@ DEFAULT_TOPICS = (
     *(wind_mean_topic(window_s) for window_s in DEFAULT_PRODUCT_WINDOWS_S),
     *(wind_stats_topic(window_s) for window_s in DEFAULT_PRODUCT_WINDOWS_S),
     CURRENT_TOPIC,
+    *(current_mean_topic(window_s) for window_s in DEFAULT_PRODUCT_WINDOWS_S),
+    *(current_stats_topic(window_s) for window_s in DEFAULT_PRODUCT_WINDOWS_S),
 )
 # ROS infrastructure that --all leaves out; /clock is recorded only when listed in --topics.
 EXCLUDED_FROM_ALL = frozenset({"/rosout", "/parameter_events", "/clock"})

@@ -274,11 +274,12 @@ class SampleRates:
 
 @dataclass(frozen=True)
 class SensorErrorConfigs:
-    """Error budgets of the simulated sensors; ``dvl`` null: the platform carries no DVL."""
+    """Error budgets of the simulated sensors and their sample rates. An anemometer or a DVL
+    set to null is not on the platform (the default: an anemometer, no DVL)."""
 
     imu: ImuErrorConfig = field(default_factory=ImuErrorConfig)
     gnss: GnssErrorConfig = field(default_factory=GnssErrorConfig)
-    anemometer: AnemometerErrorConfig = field(default_factory=AnemometerErrorConfig)
+    anemometer: AnemometerErrorConfig | None = field(default_factory=AnemometerErrorConfig)
     dvl: DvlErrorConfig | None = None
     rates: SampleRates = field(default_factory=SampleRates)
 
