@@ -1,9 +1,16 @@
-"""Averaged wind products on analytic windows and the meteorological direction convention."""
+"""Averaged wind and current products on analytic windows; the meteorological and oceanographic
+direction conventions."""
 
 import numpy as np
 import pytest
 
-from wind_comp.products import ProductsError, WindAverager, meteorological_direction_deg
+from wind_comp.products import (
+    CurrentAverager,
+    ProductsError,
+    WindAverager,
+    meteorological_direction_deg,
+    oceanographic_direction_deg,
+)
 
 RATE_HZ = 10.0
 
@@ -181,5 +188,92 @@ def test_bad_settings_raise():
         WindAverager(window_s=0.0)
     with pytest.raises(ProductsError, match="gust_window_s"):
         WindAverager(window_s=60.0, gust_window_s=60.0)
-    with pytest.raises(ProductsError, match="wind_enu_mps"):
+    with pytest.raises(ProductsError, match="vector_enu_mps"):
         WindAverager().add(0.0, [1.0, 2.0])
+    with pytest.raises(ProductsError, match="window_s"):
+        CurrentAverager(window_s=-60.0)
+
+
+@pytest.mark.parametrize(
+    ("u_east", "v_north", "toward_deg"),
+    [
+        (1.0, 0.0, 90.0),
+        (0.0, 1.0, 0.0),
+        (-1.0, 0.0, 270.0),
+        (0.0, -1.0, 180.0),
+        (np.sqrt(3.0), 1.0, 60.0),  # paper 003's current
+        (-2.0, -2.0, 225.0),
+    ],
+)
+def test_oceanographic_direction_is_where_the_water_goes(u_east, v_north, toward_deg):
+    assert oceanographic_direction_deg(u_east, v_north) == pytest.approx(toward_deg, abs=1e-12)
+    # The same vector as a wind comes from the opposite side.
+    from_deg = meteorological_direction_deg(u_east, v_north)
+    assert (toward_deg - from_deg) % 360.0 == pytest.approx(180.0, abs=1e-12)
+
+
+def test_slack_water_has_no_direction():
+    assert np.isnan(oceanographic_direction_deg(0.0, 0.0))
+    directions = oceanographic_direction_deg(-np.geomspace(1e-20, 1e-12, 50), np.ones(50))
+    assert directions.min() >= 0.0 and directions.max() < 360.0
+
+
+def test_current_window_keeps_of_the_wave_orbital_motion_its_sampled_mean():
+    """A steady current plus a wave orbital velocity A sin(w t + phase) along x, sampled at
+    1 Hz: the window mean is the current plus the sampled sinusoid's mean, in closed form
+    (A/N) sin(phase + w (N-1)/2) sin(N w/2) / sin(w/2), and its standard deviation is the
+    sinusoid's."""
+    amplitude, period, phase = 0.5, 9.0, 0.7
+    omega = 2.0 * np.pi / period
+    current = np.array([0.3 * np.sin(np.deg2rad(120.0)), 0.3 * np.cos(np.deg2rad(120.0)), 0.0])
+    stamps = np.arange(600.0, 1200.0)
+    orbital = amplitude * np.sin(omega * stamps + phase)
+    samples = current + np.outer(orbital, [1.0, 0.0, 0.0])
+    averager = CurrentAverager(window_s=600.0)
+    assert averager.add_batch(stamps, samples) == []
+    (product,) = averager.flush()
+    n = stamps.size
+    sampled_mean = (
+        amplitude
+        / n
+        * np.sin(omega * stamps[0] + phase + omega * (n - 1) / 2)
+        * np.sin(n * omega / 2)
+        / np.sin(omega / 2)
+    )
+    assert product.mean_u_enu_mps == pytest.approx(current[0] + sampled_mean, abs=1e-12)
+    assert product.mean_v_enu_mps == pytest.approx(current[1], abs=1e-12)
+    mean = np.array([product.mean_u_enu_mps, product.mean_v_enu_mps])
+    assert product.speed_mps == pytest.approx(np.hypot(*mean), abs=1e-15)
+    assert product.direction_deg == pytest.approx(
+        np.degrees(np.arctan2(mean[0], mean[1])) % 360.0, abs=1e-12
+    )
+    assert abs(product.direction_deg - 120.0) < 0.2
+    assert product.std_u_mps == pytest.approx(orbital.std(), abs=1e-12)
+    assert product.std_v_mps == pytest.approx(0.0, abs=1e-12)
+    assert (product.window_start_s, product.window_end_s) == (600.0, 1200.0)
+    assert (product.n_valid, product.n_invalid) == (600, 0)
+
+
+def test_current_streaming_equals_batch_and_invalid_samples_are_counted():
+    rng = np.random.default_rng(3)
+    stamps = np.arange(0.0, 1900.0)
+    currents = rng.normal([0.2, -0.1, 0.0], 0.3, (stamps.size, 3))
+    currents[rng.uniform(size=stamps.size) < 0.05] = np.nan
+    streaming = CurrentAverager(600.0)
+    one_by_one = [p for t, c in zip(stamps, currents, strict=True) for p in streaming.add(t, c)]
+    one_by_one += streaming.flush()
+    batched = CurrentAverager(600.0)
+    in_batches = batched.add_batch(stamps[:700], currents[:700])
+    in_batches += batched.add_batch(stamps[700:], currents[700:]) + batched.flush()
+    assert one_by_one == in_batches
+    assert [p.window_start_s for p in in_batches] == [0.0, 600.0, 1200.0, 1800.0]
+    for product in in_batches:
+        inside = (stamps >= product.window_start_s) & (stamps < product.window_end_s)
+        valid = inside & np.all(np.isfinite(currents), axis=1)
+        assert product.n_valid == np.count_nonzero(valid)
+        assert product.n_invalid == np.count_nonzero(inside & ~valid)
+        np.testing.assert_allclose(
+            [product.mean_u_enu_mps, product.mean_v_enu_mps, product.mean_w_enu_mps],
+            currents[valid].mean(axis=0),
+            atol=1e-15,
+        )

@@ -1,12 +1,14 @@
-"""Averaged wind products over fixed windows (WMO practice).
+"""Averaged wind and current products over fixed windows (WMO practice).
 
 Conventions:
 - Windows are aligned to multiples of their length in sensor time: a window of length W
   covers stamps [k·W, (k+1)·W). A window is reported when the first sample of a later window
   arrives, or at :meth:`WindAverager.flush`; windows that received no sample are not reported.
 - Vectors are ENU (u east, v north, w up), m/s. Horizontal speed is hypot(u, v).
-- Direction is meteorological: degrees clockwise from true North of the direction the wind
-  blows FROM, in [0, 360). Wind moving toward East (u > 0, v = 0) comes from 270°.
+- Wind direction is meteorological: degrees clockwise from true North of the direction the
+  wind blows FROM, in [0, 360). Wind moving toward East (u > 0, v = 0) comes from 270°.
+- Current direction is oceanographic: degrees clockwise from true North of the direction the
+  water flows TOWARD, in [0, 360). A current toward East (u > 0, v = 0) is 90°.
 - Vector mean: the components are averaged, then speed and direction are taken from the mean
   vector. Scalar mean: the horizontal speeds are averaged. Vector mean ≤ scalar mean, equal
   only when the direction is steady.
@@ -18,12 +20,16 @@ Conventions:
   samples.
 - Invalid samples (any non-finite component) count in ``n_invalid`` and nowhere else. Samples
   whose stamp is not later than the previous one are ignored and counted in
-  :attr:`WindAverager.n_rejected_stamps`.
+  :attr:`WindowAverager.n_rejected_stamps`.
+- The current has no gust and no scalar mean speed: its products are the vector mean, its speed
+  and direction and the standard deviations, which over a window of several wave periods hold
+  the waves' orbital motion the mean has averaged away.
 """
 
 import itertools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -44,11 +50,27 @@ def meteorological_direction_deg(u_east_mps, v_north_mps):
 
     Returns NaN for a calm (zero) or non-finite vector; a float for scalar input.
     """
-    u = np.asarray(u_east_mps, dtype=float)
-    v = np.asarray(v_north_mps, dtype=float)
-    direction = np.degrees(np.arctan2(-u, -v)) % 360.0
+    return _azimuth_deg(-np.asarray(u_east_mps, dtype=float), -np.asarray(v_north_mps, dtype=float))
+
+
+def oceanographic_direction_deg(u_east_mps, v_north_mps):
+    """Direction the water flows TOWARD, degrees clockwise from true North, in [0, 360).
+
+    Args:
+        u_east_mps: eastward component(s) of the current, m/s.
+        v_north_mps: northward component(s), m/s.
+
+    Returns NaN for slack water (a zero vector) or a non-finite one; a float for scalar input.
+    """
+    return _azimuth_deg(np.asarray(u_east_mps, dtype=float), np.asarray(v_north_mps, dtype=float))
+
+
+def _azimuth_deg(east, north):
+    """Azimuth of the vector (east, north), degrees clockwise from North in [0, 360); NaN for
+    a zero vector."""
+    direction = np.degrees(np.arctan2(east, north)) % 360.0
     direction = np.where(direction >= 360.0, direction - 360.0, direction)
-    direction = np.where((u == 0) & (v == 0), np.nan, direction)
+    direction = np.where((east == 0) & (north == 0), np.nan, direction)
     return float(direction) if direction.ndim == 0 else direction
 
 
@@ -80,38 +102,28 @@ class WindProduct:
     std_w_mps: float
 
 
-class WindAverager:
-    """Streaming and batch averaging of ENU wind samples over one window length."""
+class WindowAverager:
+    """Streaming and batch averaging of ENU vectors over windows of one length: the window
+    bookkeeping every product shares. A subclass summarises each closed window
+    (:meth:`_summarise`) into its product."""
 
-    def __init__(self, window_s: float = 600.0, gust_window_s: float = 3.0):
-        """Args:
-        window_s: window length, s (WMO: 600 s for the mean wind, 60 s also common).
-        gust_window_s: running-mean length for the gust, s (WMO: 3 s).
-        """
+    def __init__(self, window_s: float):
+        """window_s: window length, s (WMO: 600 s for the mean wind, 60 s also common)."""
         if not (math.isfinite(window_s) and window_s > 0):
             raise ProductsError(f"window_s must be positive, got {window_s}")
-        if not (math.isfinite(gust_window_s) and 0 < gust_window_s < window_s):
-            raise ProductsError(
-                f"gust_window_s must be positive and shorter than window_s ({window_s}), "
-                f"got {gust_window_s}"
-            )
         self.window_s = float(window_s)
-        self.gust_window_s = float(gust_window_s)
         self.n_rejected_stamps = 0
         self._first_stamp_s = math.nan
         self._latest_stamp_s = -math.inf
         self._window_index: int | None = None
         self._stamps: list[float] = []
-        self._winds: list[np.ndarray] = []
-        self._tail_stamps = np.empty(0)
-        self._tail_speeds = np.empty(0)
-        self._tail_valid = np.empty(0, dtype=bool)
+        self._vectors: list[np.ndarray] = []
 
-    def add(self, t_s: float, wind_enu_mps) -> list[WindProduct]:
-        """Add one sample (stamp s, ENU wind m/s, NaN when invalid); return completed windows."""
-        wind = np.asarray(wind_enu_mps, dtype=float)
-        if wind.shape != (3,):
-            raise ProductsError(f"wind_enu_mps must have shape (3,), got {wind.shape}")
+    def add(self, t_s: float, vector_enu_mps) -> list:
+        """Add one sample (stamp s, ENU vector m/s, NaN when invalid); return completed windows."""
+        vector = np.asarray(vector_enu_mps, dtype=float)
+        if vector.shape != (3,):
+            raise ProductsError(f"vector_enu_mps must have shape (3,), got {vector.shape}")
         t_s = float(t_s)
         if not (math.isfinite(t_s) and t_s > self._latest_stamp_s):
             self.n_rejected_stamps += 1
@@ -125,16 +137,18 @@ class WindAverager:
             completed.append(self._close_window())
         self._window_index = index
         self._stamps.append(t_s)
-        self._winds.append(wind)
+        self._vectors.append(vector)
         return completed
 
-    def add_batch(self, t_s, wind_enu_mps) -> list[WindProduct]:
-        """Add (N,) stamps and (N, 3) winds in order; identical to calling :meth:`add` on each."""
+    def add_batch(self, t_s, vectors_enu_mps) -> list:
+        """Add (N,) stamps and (N, 3) vectors in order; identical to calling :meth:`add` on
+        each."""
         stamps = np.asarray(t_s, dtype=float)
-        winds = np.asarray(wind_enu_mps, dtype=float)
-        if stamps.ndim != 1 or winds.shape != (stamps.shape[0], 3):
+        vectors = np.asarray(vectors_enu_mps, dtype=float)
+        if stamps.ndim != 1 or vectors.shape != (stamps.shape[0], 3):
             raise ProductsError(
-                f"t_s must be (N,) and wind_enu_mps (N, 3), got {stamps.shape} and {winds.shape}"
+                f"t_s must be (N,) and vectors_enu_mps (N, 3), got {stamps.shape} and "
+                f"{vectors.shape}"
             )
         finite = np.isfinite(stamps)
         latest_before = np.maximum.accumulate(
@@ -142,7 +156,7 @@ class WindAverager:
         )[:-1]
         accepted = finite & (stamps > latest_before)
         self.n_rejected_stamps += int(np.count_nonzero(~accepted))
-        stamps, winds = stamps[accepted], winds[accepted]
+        stamps, vectors = stamps[accepted], vectors[accepted]
         if not stamps.shape[0]:
             return []
         if math.isnan(self._first_stamp_s):
@@ -157,10 +171,10 @@ class WindAverager:
                 completed.append(self._close_window())
             self._window_index = index
             self._stamps.extend(stamps[start:stop].tolist())
-            self._winds.extend(winds[start:stop])
+            self._vectors.extend(vectors[start:stop])
         return completed
 
-    def flush(self) -> list[WindProduct]:
+    def flush(self) -> list:
         """Close the current (possibly partial) window at end of data."""
         if self._window_index is None:
             return []
@@ -168,10 +182,58 @@ class WindAverager:
         self._window_index = None
         return [product]
 
-    def _close_window(self) -> WindProduct:
+    def _close_window(self):
         stamps = np.array(self._stamps)
-        winds = np.array(self._winds)
-        valid = np.all(np.isfinite(winds), axis=1)
+        vectors = np.array(self._vectors)
+        self._stamps, self._vectors = [], []
+        return self._summarise(self._window_index * self.window_s, stamps, vectors)
+
+    def _summarise(self, window_start_s: float, stamps: np.ndarray, vectors: np.ndarray):
+        """The product of one window: its start (s), its (n,) stamps and (n, 3) vectors."""
+        raise NotImplementedError
+
+
+class _WindowStatistics(NamedTuple):
+    valid: np.ndarray
+    n_valid: int
+    mean: np.ndarray
+    std: np.ndarray
+
+
+def _statistics(vectors: np.ndarray) -> _WindowStatistics:
+    """Valid rows (every component finite), their number, mean and population standard
+    deviation (NaN without valid rows)."""
+    valid = np.all(np.isfinite(vectors), axis=1)
+    n_valid = int(np.count_nonzero(valid))
+    if n_valid:
+        return _WindowStatistics(
+            valid, n_valid, vectors[valid].mean(axis=0), vectors[valid].std(axis=0)
+        )
+    return _WindowStatistics(valid, 0, np.full(3, np.nan), np.full(3, np.nan))
+
+
+class WindAverager(WindowAverager):
+    """The wind products (:class:`WindProduct`) of one window length."""
+
+    def __init__(self, window_s: float = 600.0, gust_window_s: float = 3.0):
+        """Args:
+        window_s: window length, s (WMO: 600 s for the mean wind, 60 s also common).
+        gust_window_s: running-mean length for the gust, s (WMO: 3 s).
+        """
+        super().__init__(window_s)
+        if not (math.isfinite(gust_window_s) and 0 < gust_window_s < window_s):
+            raise ProductsError(
+                f"gust_window_s must be positive and shorter than window_s ({window_s}), "
+                f"got {gust_window_s}"
+            )
+        self.gust_window_s = float(gust_window_s)
+        self._tail_stamps = np.empty(0)
+        self._tail_speeds = np.empty(0)
+        self._tail_valid = np.empty(0, dtype=bool)
+
+    def _summarise(self, window_start_s: float, stamps: np.ndarray, winds: np.ndarray):
+        statistics = _statistics(winds)
+        valid = statistics.valid
         speeds = np.hypot(winds[:, 0], winds[:, 1])
         gust = self._gust(stamps, speeds, valid)
 
@@ -180,25 +242,17 @@ class WindAverager:
         self._tail_stamps = all_stamps[keep]
         self._tail_speeds = np.concatenate((self._tail_speeds, speeds))[keep]
         self._tail_valid = np.concatenate((self._tail_valid, valid))[keep]
-        self._stamps, self._winds = [], []
 
-        n_valid = int(np.count_nonzero(valid))
-        if n_valid:
-            mean = winds[valid].mean(axis=0)
-            std = winds[valid].std(axis=0)
-            scalar_mean_speed = float(speeds[valid].mean())
-        else:
-            mean = std = np.full(3, np.nan)
-            scalar_mean_speed = math.nan
-        start = self._window_index * self.window_s
+        mean, std = statistics.mean, statistics.std
+        scalar_mean_speed = float(speeds[valid].mean()) if statistics.n_valid else math.nan
         return WindProduct(
             window_s=self.window_s,
-            window_start_s=start,
-            window_end_s=start + self.window_s,
+            window_start_s=window_start_s,
+            window_end_s=window_start_s + self.window_s,
             first_sample_s=float(stamps[0]),
             last_sample_s=float(stamps[-1]),
-            n_valid=n_valid,
-            n_invalid=int(stamps.shape[0] - n_valid),
+            n_valid=statistics.n_valid,
+            n_invalid=int(stamps.shape[0] - statistics.n_valid),
             mean_u_enu_mps=float(mean[0]),
             mean_v_enu_mps=float(mean[1]),
             mean_w_enu_mps=float(mean[2]),
@@ -234,3 +288,53 @@ class WindAverager:
             qualifies
         ]
         return float(running_means.max())
+
+
+@dataclass(frozen=True)
+class CurrentProduct:
+    """Statistics of one averaging window of the current (see the module docstring)."""
+
+    window_s: float
+    window_start_s: float
+    """Start of the window, s (a multiple of ``window_s``)."""
+    window_end_s: float
+    """End of the window (exclusive), s."""
+    first_sample_s: float
+    last_sample_s: float
+    n_valid: int
+    n_invalid: int
+    mean_u_enu_mps: float
+    mean_v_enu_mps: float
+    mean_w_enu_mps: float
+    speed_mps: float
+    """Horizontal speed of the vector mean, m/s."""
+    direction_deg: float
+    """Oceanographic direction of the vector mean (toward, clockwise from true North), deg."""
+    std_u_mps: float
+    std_v_mps: float
+    std_w_mps: float
+
+
+class CurrentAverager(WindowAverager):
+    """The current products (:class:`CurrentProduct`) of one window length."""
+
+    def _summarise(self, window_start_s: float, stamps: np.ndarray, currents: np.ndarray):
+        statistics = _statistics(currents)
+        mean, std = statistics.mean, statistics.std
+        return CurrentProduct(
+            window_s=self.window_s,
+            window_start_s=window_start_s,
+            window_end_s=window_start_s + self.window_s,
+            first_sample_s=float(stamps[0]),
+            last_sample_s=float(stamps[-1]),
+            n_valid=statistics.n_valid,
+            n_invalid=int(stamps.shape[0] - statistics.n_valid),
+            mean_u_enu_mps=float(mean[0]),
+            mean_v_enu_mps=float(mean[1]),
+            mean_w_enu_mps=float(mean[2]),
+            speed_mps=float(np.hypot(mean[0], mean[1])),
+            direction_deg=oceanographic_direction_deg(mean[0], mean[1]),
+            std_u_mps=float(std[0]),
+            std_v_mps=float(std[1]),
+            std_w_mps=float(std[2]),
+        )
