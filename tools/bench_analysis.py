@@ -32,11 +32,11 @@ from buoy_common.contract import (
     WIND_TRUE_TOPIC,
 )
 from wind_comp.compensation_messages import anemometer_sample, fix_fields, odometry_fields
-from wind_comp.compensator import CorrectedWindBatch, WindStatus
+from wind_comp.compensator import CorrectedBatch, SampleStatus
 from wind_comp.config import compensator_config_from_files
 from wind_comp.miller import mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import NavTrack
-from wind_comp.pipeline import CompensationPipeline
+from wind_comp.pipeline import wind_pipeline
 from wind_comp.products import meteorological_direction_deg
 from wind_comp.report.data import (
     interpolate_vectors,
@@ -197,11 +197,11 @@ def seconds(stamps_ns: np.ndarray) -> np.ndarray:
     return sec + nanosec * 1e-9
 
 
-def recorrected_wind(out_bag: str, config) -> CorrectedWindBatch:
+def recorrected_wind(out_bag: str, config) -> CorrectedBatch:
     """The bag's ``anemometer/wind`` corrected again from its ``nav/odometry`` and ``nav/fix``,
     given to the compensation pipeline in log-time order as ``compensation_node`` receives
     them: the Miller terms of every sample."""
-    pipeline = CompensationPipeline(config)
+    pipeline = wind_pipeline(config)
     with BagReader(out_bag) as reader:
         for message in reader.messages([NAV_ODOMETRY_TOPIC, NAV_FIX_TOPIC, WIND_RAW_TOPIC]):
             topic = message.topic.lstrip("/")
@@ -210,8 +210,8 @@ def recorrected_wind(out_bag: str, config) -> CorrectedWindBatch:
             elif topic == NAV_FIX_TOPIC:
                 pipeline.add_fix(*fix_fields(reader.decode(message)))
             else:
-                pipeline.add_wind(anemometer_sample(reader.decode(message)))
-    return pipeline.flush().wind
+                pipeline.add_sample(anemometer_sample(reader.decode(message)))
+    return pipeline.flush().samples
 
 
 def nav_attitude_at(run: WindRun, config) -> tuple[Rotation, np.ndarray]:
@@ -381,9 +381,9 @@ def analyse_sea(out_bag: str, scenario_duration_s: float) -> dict:
 
     # The Miller terms, recomputed from the output bag's navigation as process_bag feeds it.
     batch = recorrected_wind(out_bag, config)
-    batch_valid = batch.status == WindStatus.VALID
+    batch_valid = batch.status == SampleStatus.VALID
     recompute_difference = float(
-        np.max(np.abs(batch.true_wind_enu_mps[valid] - run.corrected_enu_mps[valid]))
+        np.max(np.abs(batch.flow_enu_mps[valid] - run.corrected_enu_mps[valid]))
     )
     attitude, _ = nav_attitude_at(run, config)
     heading_rad = attitude.as_euler("ZYX")[:, 0]

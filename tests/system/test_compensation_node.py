@@ -46,9 +46,9 @@ from wind_comp.compensation_messages import (
     stats_values,
 )
 from wind_comp.compensation_node import NODE_NAME
-from wind_comp.compensator import WindStatus
+from wind_comp.compensator import SampleStatus
 from wind_comp.config import compensator_config_from_files
-from wind_comp.pipeline import CompensationPipeline
+from wind_comp.pipeline import wind_pipeline
 
 pytestmark = pytest.mark.ros
 
@@ -347,7 +347,7 @@ def test_corrected_wind_matches_truth_and_raw_does_not(scenario, live_run):
 def test_live_output_equals_the_pipeline_run_offline(scenario, live_run):
     # The node's output is the pipeline's fed in one stretch, the messages in stamp order.
     winds, odometries, fix, truth_wind = scenario
-    pipeline = CompensationPipeline(COMPENSATOR)
+    pipeline = wind_pipeline(COMPENSATOR)
     assert pipeline.add_fix(*fix_fields(fix)) is None
     rejected = {}
     in_stamp_order = sorted(
@@ -356,21 +356,21 @@ def test_live_output_equals_the_pipeline_run_offline(scenario, live_run):
     )
     for _, is_wind, k in in_stamp_order:
         if is_wind:
-            pipeline.add_wind(anemometer_sample(winds[k]))
+            pipeline.add_sample(anemometer_sample(winds[k]))
             continue
         try:
             assert pipeline.add_odometry(*odometry_fields(odometries[k])) is None
         except MalformedMessageError as error:
             rejected[error.reason] = rejected.get(error.reason, 0) + 1
     assert rejected == {"zero_quaternion": 1}
-    batch = pipeline.flush().wind
+    batch = pipeline.flush().samples
     live = vectors(live_run["wind/true"])
-    np.testing.assert_array_equal(live, batch.true_wind_enu_mps)
+    np.testing.assert_array_equal(live, batch.flow_enu_mps)
     counts = batch.counts()
-    assert counts[WindStatus.INVALID_WIND] == 2
-    assert counts[WindStatus.NO_NAVIGATION] == live_run["n_held"]
+    assert counts[SampleStatus.INVALID_MEASUREMENT] == 2
+    assert counts[SampleStatus.NO_NAVIGATION] == live_run["n_held"]
     # Equal outputs broken alike would pass the above: the batch one is also the true wind.
-    assert_noise_only([stamp_ns(m) for m in winds], batch.true_wind_enu_mps, truth_wind, "batch")
+    assert_noise_only([stamp_ns(m) for m in winds], batch.flow_enu_mps, truth_wind, "batch")
 
 
 def test_malformed_messages_yield_nan_outputs_and_counted_rejections(scenario, live_run):

@@ -24,15 +24,15 @@ from wind_comp.compensation_messages import (
     anemometer_sample_cdr,
     fix_fields,
     fix_fields_cdr,
+    flow_cdr,
+    flows_cdr,
     odometry_fields,
     odometry_fields_cdr,
     product_messages,
     stats_values,
-    true_wind_cdr,
-    true_winds_cdr,
 )
 from wind_comp.config import CompensatorConfig
-from wind_comp.pipeline import CompensationPipeline, StampOrder
+from wind_comp.pipeline import StampOrder, wind_pipeline
 from wind_comp.products import WindAverager
 from wind_comp.wind_echo_node import utc_text, wind_line
 
@@ -128,7 +128,7 @@ def test_malformed_odometry_is_rejected_with_its_reason(change, reason):
     assert raised.value.reason == reason
     good = odometry([0, 0, 0, 1], [0, 0, 0], [1, 0, 0])
     later = odometry([0, 0, 0, 1], [0, 0, 0], [1, 0, 0], nanosec=1)
-    pipeline, rejected = CompensationPipeline(CONFIG), {}
+    pipeline, rejected = wind_pipeline(CONFIG), {}
     for candidate in (good, message, later):
         try:
             assert pipeline.add_odometry(*odometry_fields(candidate)) is None
@@ -143,7 +143,7 @@ def test_anemometer_sample_round_trip_and_rejections():
     sample = anemometer_sample(wind([3.0, -4.0, 0.5], sec=7, nanosec=500_000_000))
     assert sample.rejection is None
     assert sample.t_s == 7.5
-    np.testing.assert_array_equal(sample.wind_sensor_mps, [3.0, -4.0, 0.5])
+    np.testing.assert_array_equal(sample.flow_sensor_mps, [3.0, -4.0, 0.5])
     for message, reason in [
         (wind([math.nan, 1.0, 0.0]), "non_finite"),
         (wind([1.0, math.inf, 0.0]), "non_finite"),
@@ -152,7 +152,7 @@ def test_anemometer_sample_round_trip_and_rejections():
         rejected = anemometer_sample(message)
         assert rejected.rejection == reason
         assert rejected.t_s == 100.0  # the stamp survives: the output keeps its place
-        assert np.all(np.isnan(rejected.wind_sensor_mps))
+        assert np.all(np.isnan(rejected.flow_sensor_mps))
 
 
 @pytest.mark.parametrize(
@@ -172,7 +172,7 @@ def test_anemometer_sample_from_cdr_equals_the_decoded_message(vector, frame):
     assert (sec, nanosec) == (1_767_225_600, 123_456_789)
     assert sample.t_s == expected.t_s
     assert sample.rejection == expected.rejection
-    np.testing.assert_array_equal(sample.wind_sensor_mps, expected.wind_sensor_mps)
+    np.testing.assert_array_equal(sample.flow_sensor_mps, expected.flow_sensor_mps)
 
 
 def test_anemometer_cdr_reader_declines_what_it_does_not_handle():
@@ -197,7 +197,7 @@ def test_fix_latitude_and_its_rejections():
     fix = NavSatFix()
     fix.status.status = NavSatStatus.STATUS_FIX
     fix.latitude = -33.5
-    pipeline = CompensationPipeline(CONFIG)
+    pipeline = wind_pipeline(CONFIG)
     assert pipeline.add_fix(*fix_fields(fix)) is None
     assert pipeline.latitude_deg == -33.5
     fix.status.status = NavSatStatus.STATUS_NO_FIX
@@ -211,9 +211,9 @@ def test_fix_latitude_and_its_rejections():
     assert pipeline.latitude_deg == -33.5
 
 
-def test_true_wind_cdr_is_the_stamped_map_vector_ros_serialises():
+def test_flow_cdr_is_the_stamped_map_vector_ros_serialises():
     for vector in ([1.0, -2.5, 0.25], [math.nan, math.nan, math.nan]):
-        raw = true_wind_cdr(1_767_225_600, 50_000_000, vector)
+        raw = flow_cdr(1_767_225_600, 50_000_000, vector)
         message = deserialize_message(raw, Vector3Stamped)
         assert (message.header.stamp.sec, message.header.stamp.nanosec) == (
             1_767_225_600,
@@ -226,8 +226,8 @@ def test_true_wind_cdr_is_the_stamped_map_vector_ros_serialises():
         assert serialize_message(message) == raw
     vectors = np.array([[1.0, -2.5, 0.25], [math.nan] * 3, [3.0, 4.0, 5.0]])
     secs, nanosecs = np.array([1_767_225_600, 1, 2]), np.array([50_000_000, 0, 999_999_999])
-    assert true_winds_cdr(secs, nanosecs, vectors) == [
-        true_wind_cdr(int(sec), int(nanosec), vector)
+    assert flows_cdr(secs, nanosecs, vectors) == [
+        flow_cdr(int(sec), int(nanosec), vector)
         for sec, nanosec, vector in zip(secs, nanosecs, vectors.tolist(), strict=True)
     ]
 

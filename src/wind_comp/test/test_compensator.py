@@ -1,4 +1,5 @@
-"""Wind compensator: streaming equals batch, one output per input, decisions from stamps only."""
+"""Flow compensator on an anemometer: streaming equals batch, one output per input, decisions
+from stamps only."""
 
 import numpy as np
 import pytest
@@ -6,9 +7,9 @@ from scipy.spatial.transform import Rotation
 
 from wind_comp.compensator import (
     CompensatorInputError,
-    CorrectedWindBatch,
-    WindCompensator,
-    WindStatus,
+    CorrectedBatch,
+    FlowCompensator,
+    SampleStatus,
 )
 from wind_comp.config import CompensatorConfig, ConfigError
 
@@ -23,6 +24,10 @@ def config(**overrides) -> CompensatorConfig:
     return CompensatorConfig(
         anemometer_position_body_m=LEVER_ARM_M, anemometer_rpy_deg=MOUNTING_RPY_DEG, **overrides
     )
+
+
+def compensator_of(cfg: CompensatorConfig) -> FlowCompensator:
+    return FlowCompensator(cfg.flow_sensor(), cfg.max_nav_gap_s, cfg.nav_history_s)
 
 
 def nav_truth(t_s):
@@ -57,36 +62,36 @@ def scenario():
 
 
 def no_navigation():
-    """No navigation samples, as :meth:`WindCompensator.add_arrivals` takes them."""
+    """No navigation samples, as :meth:`FlowCompensator.add_arrivals` takes them."""
     return np.empty(0), np.empty((0, 4)), np.empty((0, 3)), np.empty((0, 3))
 
 
-def joined(batches) -> CorrectedWindBatch:
+def joined(batches) -> CorrectedBatch:
     """Outputs collected in several goes, as one batch."""
     columns = [
         np.concatenate([getattr(batch, name) for batch in batches])
         for name in (
             "t_s",
             "status",
-            "true_wind_enu_mps",
+            "flow_enu_mps",
             "tilt_term_enu_mps",
             "rotation_term_enu_mps",
             "translation_term_enu_mps",
-            "wind_sensor_mps",
+            "flow_sensor_mps",
         )
     ]
-    return CorrectedWindBatch(*columns)
+    return CorrectedBatch(*columns)
 
 
-def rows(batch: CorrectedWindBatch) -> list[tuple[float, WindStatus]]:
+def rows(batch: CorrectedBatch) -> list[tuple[float, SampleStatus]]:
     """(stamp, status) of each output."""
-    return [(t, WindStatus(code)) for t, code in zip(batch.t_s, batch.status, strict=True)]
+    return [(t, SampleStatus(code)) for t, code in zip(batch.t_s, batch.status, strict=True)]
 
 
-def correct_at_once(cfg, nav_t, quats, rates, velocities, wind_t, wind) -> CorrectedWindBatch:
+def correct_at_once(cfg, nav_t, quats, rates, velocities, wind_t, wind) -> CorrectedBatch:
     """All samples handed over as one stretch of columns, each wind sample arriving with the
     navigation up to its stamp, and flushed: the offline path."""
-    compensator = WindCompensator(cfg)
+    compensator = compensator_of(cfg)
     nav_before_wind = np.searchsorted(nav_t, np.maximum.accumulate(wind_t), side="right")
     compensator.add_arrivals((nav_t, quats, rates, velocities), wind_t, wind, nav_before_wind)
     return compensator.flush()
@@ -95,7 +100,7 @@ def correct_at_once(cfg, nav_t, quats, rates, velocities, wind_t, wind) -> Corre
 def stream(nav_t, quats, rates, velocities, wind_t, wind, nav_latency_s, cfg=None):
     """Feed the samples in arrival order, navigation arriving ``nav_latency_s`` after its stamp
     and wind in array order, collecting the output after every message."""
-    compensator = WindCompensator(cfg or config())
+    compensator = compensator_of(cfg or config())
     wind_arrival = np.maximum.accumulate(wind_t)  # a bad stamp arrives in its array place
     arrivals = [(t + nav_latency_s, 0, i) for i, t in enumerate(nav_t)]
     arrivals += [(t, 1, i) for i, t in enumerate(wind_arrival)]
@@ -105,7 +110,7 @@ def stream(nav_t, quats, rates, velocities, wind_t, wind, nav_latency_s, cfg=Non
         if kind == 0:
             compensator.add_nav(nav_t[i], quats[i], rates[i], velocities[i])
         else:
-            compensator.add_wind(wind_t[i], wind[i])
+            compensator.add_sample(wind_t[i], wind[i])
         outputs.append(compensator.ready())
     outputs.append(compensator.flush())
     return joined(outputs), compensator
@@ -119,7 +124,7 @@ def test_streaming_equals_batch_whatever_the_arrival_order():
         np.testing.assert_array_equal(outputs.t_s, batch.t_s)
         np.testing.assert_array_equal(outputs.status, batch.status)
         for name in (
-            "true_wind_enu_mps",
+            "flow_enu_mps",
             "tilt_term_enu_mps",
             "rotation_term_enu_mps",
             "translation_term_enu_mps",
@@ -131,18 +136,18 @@ def test_streaming_equals_batch_whatever_the_arrival_order():
 
 def test_wind_added_in_batches_equals_wind_added_one_by_one():
     nav_t, quats, rates, velocities, wind_t, wind = scenario()
-    one_by_one = WindCompensator(config())
-    in_batches = WindCompensator(config())
+    one_by_one = compensator_of(config())
+    in_batches = compensator_of(config())
     for compensator in (one_by_one, in_batches):
         for i in range(len(nav_t)):
             compensator.add_nav(nav_t[i], quats[i], rates[i], velocities[i])
     for i in range(len(wind_t)):
-        one_by_one.add_wind(wind_t[i], wind[i])
+        one_by_one.add_sample(wind_t[i], wind[i])
     for part in np.array_split(np.arange(len(wind_t)), 7):
         in_batches.add_arrivals(no_navigation(), wind_t[part], wind[part], np.zeros(len(part)))
     expected, got = one_by_one.flush(), in_batches.flush()
     assert rows(got) == rows(expected)
-    np.testing.assert_array_equal(got.true_wind_enu_mps, expected.true_wind_enu_mps)
+    np.testing.assert_array_equal(got.flow_enu_mps, expected.flow_enu_mps)
     with pytest.raises(CompensatorInputError):
         in_batches.add_arrivals(no_navigation(), wind_t[:3], wind[:2], np.zeros(3))
 
@@ -152,79 +157,79 @@ def test_every_sample_gets_one_output_with_its_stamp_and_reason():
     batch = correct_at_once(config(), nav_t, quats, rates, velocities, wind_t, wind)
     assert len(batch) == len(wind_t)
     status = batch.status
-    assert status[20] == WindStatus.INVALID_WIND
-    assert status[30] == WindStatus.WIND_SPEED_OUT_OF_RANGE
-    assert status[40] == WindStatus.INVALID_STAMP
-    assert status[80] == WindStatus.INVALID_STAMP
+    assert status[20] == SampleStatus.INVALID_MEASUREMENT
+    assert status[30] == SampleStatus.SPEED_OUT_OF_RANGE
+    assert status[40] == SampleStatus.INVALID_STAMP
+    assert status[80] == SampleStatus.INVALID_STAMP
     before_nav = wind_t < nav_t[0]
     after_nav = wind_t > nav_t[-1]
     in_gap = (wind_t > 5.0) & (wind_t < 5.3)
-    assert (status[before_nav] == WindStatus.NO_NAVIGATION).all()
-    assert (status[after_nav] == WindStatus.NO_NAVIGATION).all()
-    assert (status[in_gap] == WindStatus.NAV_GAP).all()
-    assert np.isnan(batch.true_wind_enu_mps[~batch.valid]).all()
+    assert (status[before_nav] == SampleStatus.NO_NAVIGATION).all()
+    assert (status[after_nav] == SampleStatus.NO_NAVIGATION).all()
+    assert (status[in_gap] == SampleStatus.NAV_GAP).all()
+    assert np.isnan(batch.flow_enu_mps[~batch.valid]).all()
     counts = batch.counts()
-    assert counts[WindStatus.INVALID_STAMP] == 2
+    assert counts[SampleStatus.INVALID_STAMP] == 2
     assert sum(counts.values()) == len(wind_t)
     # Everything else is bracketed by exact navigation and recovers the true wind.
     expected_valid = ~(before_nav | after_nav | in_gap)
     expected_valid[[20, 30, 40, 80]] = False
     np.testing.assert_array_equal(batch.valid, expected_valid)
-    recovered = batch.true_wind_enu_mps[batch.valid]
+    recovered = batch.flow_enu_mps[batch.valid]
     np.testing.assert_allclose(recovered - TRUE_WIND_ENU, 0.0, atol=1e-9)
 
 
 def test_sample_waits_until_navigation_brackets_it():
-    compensator = WindCompensator(config())
+    compensator = compensator_of(config())
     attitude, rates, velocities = nav_truth(np.array([0.0, 0.05, 0.1]))
     quats = attitude.as_quat()
     compensator.add_nav(0.0, quats[0], rates[0], velocities[0])
-    compensator.add_wind(0.07, anemometer_readings(np.array([0.07]))[0])
+    compensator.add_sample(0.07, anemometer_readings(np.array([0.07]))[0])
     assert len(compensator.ready()) == 0
     compensator.add_nav(0.05, quats[1], rates[1], velocities[1])
     assert len(compensator.ready()) == 0
     compensator.add_nav(0.1, quats[2], rates[2], velocities[2])
     result = compensator.ready()
-    assert rows(result) == [(0.07, WindStatus.VALID)]
-    np.testing.assert_allclose(result.true_wind_enu_mps[0], TRUE_WIND_ENU, atol=1e-9)
+    assert rows(result) == [(0.07, SampleStatus.VALID)]
+    np.testing.assert_allclose(result.flow_enu_mps[0], TRUE_WIND_ENU, atol=1e-9)
 
 
 def test_expire_gives_up_only_on_old_samples_and_flush_on_the_rest():
-    compensator = WindCompensator(config())
+    compensator = compensator_of(config())
     for t in (1.0, 1.1, 1.2):
-        compensator.add_wind(t, [1.0, 0.0, 0.0])
+        compensator.add_sample(t, [1.0, 0.0, 0.0])
     expired = compensator.expire(before_t_s=1.15)
     assert rows(expired) == [
-        (1.0, WindStatus.NAVIGATION_TIMEOUT),
-        (1.1, WindStatus.NAVIGATION_TIMEOUT),
+        (1.0, SampleStatus.NAVIGATION_TIMEOUT),
+        (1.1, SampleStatus.NAVIGATION_TIMEOUT),
     ]
     assert compensator.n_pending == 1
-    assert rows(compensator.flush()) == [(1.2, WindStatus.NO_NAVIGATION)]
-    assert compensator.counts[WindStatus.NAVIGATION_TIMEOUT] == 2
+    assert rows(compensator.flush()) == [(1.2, SampleStatus.NO_NAVIGATION)]
+    assert compensator.counts[SampleStatus.NAVIGATION_TIMEOUT] == 2
 
 
 def test_outputs_keep_input_order_behind_a_pending_sample():
-    compensator = WindCompensator(config())
+    compensator = compensator_of(config())
     compensator.add_nav(0.0, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
-    compensator.add_wind(0.05, [1.0, 0.0, 0.0])  # waits for navigation
-    compensator.add_wind(0.04, [1.0, 0.0, 0.0])  # rejected at once, but returned second
+    compensator.add_sample(0.05, [1.0, 0.0, 0.0])  # waits for navigation
+    compensator.add_sample(0.04, [1.0, 0.0, 0.0])  # rejected at once, but returned second
     assert len(compensator.ready()) == 0
     compensator.add_nav(0.1, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
     assert rows(compensator.ready()) == [
-        (0.05, WindStatus.VALID),
-        (0.04, WindStatus.INVALID_STAMP),
+        (0.05, SampleStatus.VALID),
+        (0.04, SampleStatus.INVALID_STAMP),
     ]
 
 
 def test_wind_lagging_beyond_the_navigation_history_is_reported():
-    compensator = WindCompensator(config(nav_history_s=1.0))
+    compensator = compensator_of(config(nav_history_s=1.0))
     for t in np.arange(0.0, 5.0, 0.01):
         compensator.add_nav(t, [0, 0, 0, 1], np.zeros(3), np.zeros(3))
-    compensator.add_wind(2.0, [1.0, 0.0, 0.0])
-    compensator.add_wind(4.5, [1.0, 0.0, 0.0])
+    compensator.add_sample(2.0, [1.0, 0.0, 0.0])
+    compensator.add_sample(4.5, [1.0, 0.0, 0.0])
     assert rows(compensator.ready()) == [
-        (2.0, WindStatus.NAV_HISTORY_EXCEEDED),
-        (4.5, WindStatus.VALID),
+        (2.0, SampleStatus.NAV_HISTORY_EXCEEDED),
+        (4.5, SampleStatus.VALID),
     ]
 
 
@@ -241,19 +246,19 @@ def test_results_depend_on_the_arrival_order_only_not_on_how_often_they_are_coll
     cfg = config(nav_history_s=1.0)
 
     def collected(every: int):
-        compensator = WindCompensator(cfg)
+        compensator = compensator_of(cfg)
         outputs = []
         for n, (_, kind, i) in enumerate(arrivals, 1):
             if kind == 0:
                 compensator.add_nav(nav_t[i], quats[i], rates[i], velocities[i])
             else:
-                compensator.add_wind(wind_t[i], wind[i])
+                compensator.add_sample(wind_t[i], wind[i])
             if n % every == 0:
                 outputs.append(compensator.ready())
         return joined([*outputs, compensator.flush()])
 
     def in_stretches(size: int):
-        compensator = WindCompensator(cfg)
+        compensator = compensator_of(cfg)
         outputs = []
         for start in range(0, len(arrivals), size):
             stretch = arrivals[start : start + size]
@@ -273,15 +278,15 @@ def test_results_depend_on_the_arrival_order_only_not_on_how_often_they_are_coll
 
     reference = collected(every=1)
     statuses = set(reference.status.tolist())
-    assert {WindStatus.NAV_HISTORY_EXCEEDED, WindStatus.VALID} <= statuses
+    assert {SampleStatus.NAV_HISTORY_EXCEEDED, SampleStatus.VALID} <= statuses
     for outputs in (collected(13), collected(len(arrivals)), in_stretches(50), in_stretches(5000)):
         assert rows(outputs) == rows(reference)
-        np.testing.assert_array_equal(outputs.true_wind_enu_mps, reference.true_wind_enu_mps)
+        np.testing.assert_array_equal(outputs.flow_enu_mps, reference.flow_enu_mps)
 
 
 def test_wrong_wind_shape_raises():
-    with pytest.raises(CompensatorInputError, match="wind_sensor_mps"):
-        WindCompensator(config()).add_wind(0.0, [1.0, 2.0])
+    with pytest.raises(CompensatorInputError, match="flow_sensor_mps"):
+        compensator_of(config()).add_sample(0.0, [1.0, 2.0])
 
 
 @pytest.mark.parametrize(

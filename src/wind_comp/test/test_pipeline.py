@@ -9,10 +9,10 @@ from scipy.spatial.transform import Rotation
 
 from buoy_nav.earth import EARTH_RATE_RAD_S
 from buoy_nav.rotations import rotate_by_quaternion_components
-from wind_comp.compensation_messages import WindSample
-from wind_comp.compensator import WindStatus
+from wind_comp.compensation_messages import FlowSample
+from wind_comp.compensator import SampleStatus
 from wind_comp.config import CompensatorConfig
-from wind_comp.pipeline import CompensationPipeline, level_rate_components
+from wind_comp.pipeline import level_rate_components, wind_pipeline
 
 RNG = np.random.default_rng(31)
 LEVER_ARM_M = (0.2, -0.1, 3.0)
@@ -65,7 +65,7 @@ def anemometer_samples(t_s):
     mounting = Rotation.from_euler("ZYX", MOUNTING_RPY_DEG[::-1], degrees=True)
     readings = mounting.inv().apply(attitude.inv().apply(TRUE_WIND_ENU - sensor_velocity))
     return [
-        WindSample(float(t), tuple(wind), None)
+        FlowSample(float(t), tuple(wind), None)
         for t, wind in zip(t_s, readings.tolist(), strict=True)
     ]
 
@@ -95,7 +95,7 @@ def feed(messages, wind_per_stretch: int | None):
     """Feed the pipeline as compensation_node does (``wind_per_stretch`` None: results after
     every message) or as process_bag does (results every ``wind_per_stretch`` anemometer
     samples). Returns the statuses, true winds and products, in order."""
-    pipeline = CompensationPipeline(CONFIG)
+    pipeline = wind_pipeline(CONFIG)
     outputs = []
     waiting = 0
     for kind, values in messages:
@@ -107,14 +107,14 @@ def feed(messages, wind_per_stretch: int | None):
             if wind_per_stretch is None:
                 outputs.append(pipeline.ready())
         else:
-            assert pipeline.add_wind(values) is None
+            assert pipeline.add_sample(values) is None
             waiting += 1
             if wind_per_stretch is None or waiting == wind_per_stretch:
                 outputs.append(pipeline.ready())
                 waiting = 0
     outputs.append(pipeline.flush())
-    status = np.concatenate([output.wind.status for output in outputs])
-    true_wind = np.concatenate([output.wind.true_wind_enu_mps for output in outputs])
+    status = np.concatenate([output.samples.status for output in outputs])
+    true_wind = np.concatenate([output.samples.flow_enu_mps for output in outputs])
     products = [product for output in outputs for product in output.products]
     return status, true_wind, products, pipeline
 
@@ -129,7 +129,7 @@ def test_live_and_offline_decide_identically_across_an_anemometer_gap(
     # Every sample is corrected, those just before the gap included (navigation around them
     # arrived long before the anemometer resumed), and exactly.
     before_gap = wind_t[wind_t < ANEMOMETER_GAP_S[0]][-3:]
-    assert np.all(live_status == WindStatus.VALID), dict(
+    assert np.all(live_status == SampleStatus.VALID), dict(
         zip(*np.unique(live_status, return_counts=True), strict=True)
     )
     assert before_gap.size == 3
@@ -163,8 +163,10 @@ def test_wind_arriving_after_the_navigation_history_is_reported_alike_live_and_o
     messages = others[: release + 1] + held + others[release + 1 :]
     live_status, live_wind, _, _ = feed(messages, None)
     wind_t = np.array([values.t_s for kind, values in messages if kind == "wind"])
-    assert np.all(live_status[(wind_t >= 5.0) & (wind_t < 7.9)] == WindStatus.NAV_HISTORY_EXCEEDED)
-    assert np.all(live_status[(wind_t < 5.0) | (wind_t > 8.1)] == WindStatus.VALID)
+    assert np.all(
+        live_status[(wind_t >= 5.0) & (wind_t < 7.9)] == SampleStatus.NAV_HISTORY_EXCEEDED
+    )
+    assert np.all(live_status[(wind_t < 5.0) | (wind_t > 8.1)] == SampleStatus.VALID)
     for wind_per_stretch in (5, 10_000):
         status, wind, _, _ = feed(messages, wind_per_stretch)
         np.testing.assert_array_equal(status, live_status)
@@ -172,22 +174,22 @@ def test_wind_arriving_after_the_navigation_history_is_reported_alike_live_and_o
 
 
 def test_rejections_are_reported_and_every_sample_gets_its_output():
-    pipeline = CompensationPipeline(CONFIG)
+    pipeline = wind_pipeline(CONFIG)
     odometry = odometry_messages(np.array([0.0, 0.01, 0.02]))
     assert pipeline.add_odometry(*odometry[1]) is None
     assert pipeline.add_odometry(*odometry[0]) == "stamp_not_increasing"
     samples = anemometer_samples(np.array([0.005, 0.015]))
-    assert pipeline.add_wind(samples[1]) is None
-    assert pipeline.add_wind(samples[0]) == "stamp_not_increasing"
-    assert pipeline.add_wind(WindSample(0.02, (math.nan,) * 3, "wrong_frame")) == "wrong_frame"
+    assert pipeline.add_sample(samples[1]) is None
+    assert pipeline.add_sample(samples[0]) == "stamp_not_increasing"
+    assert pipeline.add_sample(FlowSample(0.02, (math.nan,) * 3, "wrong_frame")) == "wrong_frame"
     with pytest.raises(ValueError, match="quaternion of 4"):
         pipeline.add_odometry(0.015, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
     assert pipeline.add_odometry(*odometry[2]) is None
     output = pipeline.flush()
-    assert output.wind.status.tolist() == [
-        WindStatus.VALID,
-        WindStatus.INVALID_STAMP,
-        WindStatus.INVALID_WIND,
+    assert output.samples.status.tolist() == [
+        SampleStatus.VALID,
+        SampleStatus.INVALID_STAMP,
+        SampleStatus.INVALID_MEASUREMENT,
     ]
     assert pipeline.compensator.nav_track.n_accepted == 2
 

@@ -43,12 +43,12 @@ from buoy_nav.fusion_messages import STATUS_FIX, NavValues
 from wind_comp.compensation_messages import (
     anemometer_sample,
     anemometer_sample_cdr,
+    flows_cdr,
     product_messages,
-    true_winds_cdr,
 )
-from wind_comp.compensator import WindStatus
+from wind_comp.compensator import SampleStatus
 from wind_comp.config import CompensatorConfig
-from wind_comp.pipeline import CompensationOutput, CompensationPipeline
+from wind_comp.pipeline import CompensationOutput, wind_pipeline
 from wind_comp.products import WindProduct
 
 TRUE_WIND_BAG_TOPIC = bag_topic(WIND_TRUE_TOPIC)
@@ -73,7 +73,8 @@ def products_csv_path(out_bag) -> Path:
 class ProcessSummary:
     """What a run did: counts of outputs and rejections, products, timing."""
 
-    wind_status_counts: dict[WindStatus, int] = field(default_factory=dict)
+    wind_status_counts: dict[str, int] = field(default_factory=dict)
+    """Corrected wind samples by outcome: ``valid`` or the reason they are invalid."""
     rejected_wind_messages: Counter = field(default_factory=Counter)
     products: list[WindProduct] = field(default_factory=list)
     topic_counts: dict[str, int] = field(default_factory=dict)
@@ -94,7 +95,7 @@ class OfflineCompensation:
     """
 
     def __init__(self, config: CompensatorConfig, writer: BackgroundBagWriter):
-        self.pipeline = CompensationPipeline(config)
+        self.pipeline = wind_pipeline(config)
         self.writer = writer
         self.rejected: Counter[str] = Counter()
         self.products: list[WindProduct] = []
@@ -121,7 +122,7 @@ class OfflineCompensation:
             stamp = decoded.header.stamp
             parsed = (anemometer_sample(decoded), stamp.sec, stamp.nanosec)
         sample, sec, nanosec = parsed
-        rejection = self.pipeline.add_wind(sample)
+        rejection = self.pipeline.add_sample(sample)
         if rejection is not None:
             self.rejected[rejection] += 1
         self._stamps.append((sec, nanosec))
@@ -135,10 +136,10 @@ class OfflineCompensation:
         self._write(self.pipeline.flush(), log_time_ns)
 
     def _write(self, output: CompensationOutput, log_time_ns: int) -> None:
-        stamps = [self._stamps.popleft() for _ in range(len(output.wind))]
+        stamps = [self._stamps.popleft() for _ in range(len(output.samples))]
         secs = np.array([sec for sec, _ in stamps], dtype=np.int64)
         nanosecs = np.array([nanosec for _, nanosec in stamps], dtype=np.int64)
-        for raw in true_winds_cdr(secs, nanosecs, output.wind.true_wind_enu_mps):
+        for raw in flows_cdr(secs, nanosecs, output.samples.flow_enu_mps):
             self.writer.write_raw(TRUE_WIND_BAG_TOPIC, VECTOR3_STAMPED, log_time_ns, raw)
         for product in output.products:
             self.products.append(product)
@@ -220,7 +221,12 @@ def process_bag(
         duration_s = reader.duration_s
     write_products_csv(compensation.products, csv_path)
     return ProcessSummary(
-        wind_status_counts=compensation.pipeline.counts,
+        wind_status_counts={
+            "valid"
+            if status == SampleStatus.VALID
+            else compensation.pipeline.sensor.reason(status): n
+            for status, n in compensation.pipeline.counts.items()
+        },
         rejected_wind_messages=compensation.rejected,
         products=compensation.products,
         topic_counts=writer.counts,

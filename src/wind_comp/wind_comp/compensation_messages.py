@@ -1,14 +1,18 @@
-"""Contract messages of the wind compensation as values, and values as contract messages.
+"""Contract messages of the wind compensation and the current estimate as values, and values as
+contract messages.
 
-The live ``compensation_node`` and offline bag processing both convert through this module, so
-a message is accepted, rejected or built identically in both. Decoded messages are read by
-attribute access only: rclpy message objects and rosbags' decoded objects both work; the
-``*_cdr`` readers take a message's CDR bytes straight (:mod:`buoy_common.cdr`).
+The live ``compensation_node`` and ``current_node`` and offline bag processing all convert
+through this module, so a message is accepted, rejected or built identically in each. Decoded
+messages are read by attribute access only: rclpy message objects and rosbags' decoded objects
+both work; the ``*_cdr`` readers take a message's CDR bytes straight (:mod:`buoy_common.cdr`).
 
 Inputs (interface contract):
 
 - ``anemometer/wind`` (geometry_msgs/Vector3Stamped, frame ``anemometer_link``): air velocity
   relative to the sensor in anemometer axes, m/s.
+- ``dvl/velocity`` (geometry_msgs/TwistWithCovarianceStamped, frame ``dvl_link``):
+  ``twist.twist.linear`` = velocity of the DVL relative to the water (water track) in DVL axes,
+  m/s; NaN components for a ping the DVL flags invalid.
 - ``nav/odometry`` (nav_msgs/Odometry, frame ``map``, child ``base_link``):
   ``pose.pose.orientation`` = body→ENU attitude R_nb, ``twist.twist.angular`` = bias-corrected
   body rate ω_ib (body axes, rad/s), ``twist.twist.linear`` = velocity of the body origin in body
@@ -25,6 +29,11 @@ Outputs:
 - ``wind/stats_<window>`` (std_msgs/Float64MultiArray): the statistics of the same window,
   ``data[i]`` named by ``layout.dim[i].label`` (one dimension of size 1 per field), in the order
   of :data:`STATS_FIELDS`.
+- ``current/velocity`` (geometry_msgs/Vector3Stamped, frame ``map``): the current, ENU, m/s
+  (where the water flows TOWARD), with the DVL sample's own header stamp; NaN components when
+  it could not be computed.
+- ``current/mean_<window>``, ``current/stats_<window>``: as the wind's, the statistics in the
+  order of :data:`CURRENT_STATS_FIELDS`.
 
 Windows are named by :func:`buoy_common.contract.window_label`: ``1min`` for 60 s, ``10min`` for
 600 s.
@@ -39,13 +48,14 @@ from buoy_common import cdr
 from buoy_common.contract import (
     ANEMOMETER_FRAME,
     BODY_FRAME,
+    DVL_FRAME,
     MAP_FRAME,
     Reason,
     seconds_to_stamp,
     stamp_to_seconds,
 )
 from wind_comp.nav_interpolation import MIN_QUATERNION_NORM, quaternion_norm
-from wind_comp.products import WindProduct
+from wind_comp.products import CurrentProduct, WindProduct
 
 STATS_FIELDS = (
     "scalar_mean_speed_mps",
@@ -67,6 +77,24 @@ STATS_FIELDS = (
 sample counts, window bounds and first/last sample stamps in s since the epoch (a window closed
 at shutdown may end before ``window_end_s``). Conventions: :mod:`wind_comp.products`."""
 
+CURRENT_STATS_FIELDS = (
+    "speed_mps",
+    "direction_deg",
+    "std_u_mps",
+    "std_v_mps",
+    "std_w_mps",
+    "n_valid",
+    "n_invalid",
+    "window_start_s",
+    "window_end_s",
+    "first_sample_s",
+    "last_sample_s",
+)
+"""Layout of ``current/stats_<window>``: horizontal speed of the vector mean m/s, its direction
+oceanographic deg (flowing TOWARD, clockwise from true North), standard deviations of the ENU
+components m/s (over a window of wave periods, mostly the waves' orbital motion), sample counts,
+window bounds and first/last sample stamps as in :data:`STATS_FIELDS`."""
+
 
 class MalformedMessageError(ValueError):
     """A message is malformed. ``reason`` is a short label for counting; the text details it."""
@@ -76,19 +104,20 @@ class MalformedMessageError(ValueError):
         self.reason = reason
 
 
-class WindSample(NamedTuple):
-    """One anemometer sample as the compensation takes it."""
+class FlowSample(NamedTuple):
+    """One anemometer or DVL sample as the compensation takes it."""
 
     t_s: float
     """Header stamp, s since the epoch."""
-    wind_sensor_mps: tuple[float, float, float]
-    """Air velocity in anemometer axes, m/s; NaN when the message was rejected."""
+    flow_sensor_mps: tuple[float, float, float]
+    """The fluid's velocity relative to the sensor, in the sensor's axes, m/s; NaN when the
+    message was rejected."""
     rejection: str | None
     """Reason the message was rejected (its output is then invalid), None when accepted."""
 
 
-def anemometer_sample(message) -> WindSample:
-    """``anemometer/wind`` as a :class:`WindSample`.
+def anemometer_sample(message) -> FlowSample:
+    """``anemometer/wind`` as a :class:`FlowSample`: the air's velocity past the sensor.
 
     A message in another frame than ``anemometer_link`` or with a non-finite component is
     rejected: its wind becomes NaN so that the compensation still returns one (invalid) output
@@ -102,7 +131,7 @@ def anemometer_sample(message) -> WindSample:
     )
 
 
-def anemometer_sample_cdr(raw: bytes) -> tuple[WindSample, int, int] | None:
+def anemometer_sample_cdr(raw: bytes) -> tuple[FlowSample, int, int] | None:
     """:func:`anemometer_sample` of an ``anemometer/wind`` message straight from its CDR bytes,
     with the header stamp (sec, nanosec). None for bytes the CDR reader does not handle: decode
     the message and use :func:`anemometer_sample`."""
@@ -113,15 +142,33 @@ def anemometer_sample_cdr(raw: bytes) -> tuple[WindSample, int, int] | None:
     return _wind_sample(sec + nanosec * 1e-9, frame_id, vector), sec, nanosec
 
 
-_NAN_WIND = (math.nan, math.nan, math.nan)
+_NAN_VECTOR = (math.nan, math.nan, math.nan)
 
 
-def _wind_sample(t_s: float, frame_id: str, wind: tuple[float, float, float]) -> WindSample:
+def _wind_sample(t_s: float, frame_id: str, wind: tuple[float, float, float]) -> FlowSample:
     if frame_id != ANEMOMETER_FRAME:
-        return WindSample(t_s, _NAN_WIND, Reason.WRONG_FRAME)
+        return FlowSample(t_s, _NAN_VECTOR, Reason.WRONG_FRAME)
     if not all(math.isfinite(component) for component in wind):
-        return WindSample(t_s, _NAN_WIND, Reason.NON_FINITE)
-    return WindSample(t_s, wind, None)
+        return FlowSample(t_s, _NAN_VECTOR, Reason.NON_FINITE)
+    return FlowSample(t_s, wind, None)
+
+
+def dvl_sample(message) -> FlowSample:
+    """``dvl/velocity`` as a :class:`FlowSample`: the water's velocity past the DVL, the
+    negative of the DVL's velocity through the water it reports.
+
+    A message in another frame than ``dvl_link`` or with a non-finite component (a ping the DVL
+    flags invalid) is rejected: its flow becomes NaN so that the estimate still returns one
+    (invalid) output for it, in order. Speed and stamp order are checked by the compensation.
+    """
+    linear = message.twist.twist.linear
+    t_s = stamp_to_seconds(message.header.stamp)
+    if message.header.frame_id != DVL_FRAME:
+        return FlowSample(t_s, _NAN_VECTOR, Reason.WRONG_FRAME)
+    velocity = (float(linear.x), float(linear.y), float(linear.z))
+    if not all(math.isfinite(component) for component in velocity):
+        return FlowSample(t_s, _NAN_VECTOR, Reason.NON_FINITE)
+    return FlowSample(t_s, (-velocity[0], -velocity[1], -velocity[2]), None)
 
 
 def odometry_fields(message) -> tuple[float, tuple, tuple, tuple]:
@@ -181,19 +228,19 @@ def fix_fields_cdr(raw: bytes) -> tuple[int, float] | None:
     return fields[3], fields[5]
 
 
-_TRUE_WIND_CDR = cdr.Vector3StampedWriter(MAP_FRAME)
+_MAP_VECTOR_CDR = cdr.Vector3StampedWriter(MAP_FRAME)
 
 
-def true_wind_cdr(sec: int, nanosec: int, wind_enu_mps) -> bytes:
-    """``wind/true`` as CDR bytes: the ENU wind (m/s, NaN when invalid) in frame ``map``,
-    stamped (sec, nanosec) with the anemometer sample's own stamp."""
-    x, y, z = wind_enu_mps
-    return _TRUE_WIND_CDR.write(int(sec), int(nanosec), float(x), float(y), float(z))
+def flow_cdr(sec: int, nanosec: int, flow_enu_mps) -> bytes:
+    """``wind/true`` or ``current/velocity`` as CDR bytes: the ENU vector (m/s, NaN when
+    invalid) in frame ``map``, stamped (sec, nanosec) with the sensor sample's own stamp."""
+    x, y, z = flow_enu_mps
+    return _MAP_VECTOR_CDR.write(int(sec), int(nanosec), float(x), float(y), float(z))
 
 
-def true_winds_cdr(sec, nanosec, winds_enu_mps) -> list[bytes]:
-    """:func:`true_wind_cdr` of (N,) stamps and (N, 3) winds at once."""
-    return _TRUE_WIND_CDR.write_many(sec, nanosec, winds_enu_mps)
+def flows_cdr(sec, nanosec, flows_enu_mps) -> list[bytes]:
+    """:func:`flow_cdr` of (N,) stamps and (N, 3) vectors at once."""
+    return _MAP_VECTOR_CDR.write_many(sec, nanosec, flows_enu_mps)
 
 
 def _set_header(header, sec: int, nanosec: int, frame_id: str) -> None:
@@ -207,13 +254,18 @@ def _set_vector(target, values) -> None:
 
 
 def product_messages(
-    vector_stamped_class, multi_array_class, dimension_class, product: WindProduct
+    vector_stamped_class,
+    multi_array_class,
+    dimension_class,
+    product: WindProduct | CurrentProduct,
 ) -> tuple[object, object]:
-    """(``wind/mean_<window>``, ``wind/stats_<window>``) messages of one averaging window.
+    """(``<wind|current>/mean_<window>``, ``<wind|current>/stats_<window>``) messages of one
+    averaging window.
 
     The mean is the ENU vector mean (m/s, frame ``map``), stamped with the window end; the
-    statistics follow :data:`STATS_FIELDS`.
+    statistics follow :data:`STATS_FIELDS` (wind) or :data:`CURRENT_STATS_FIELDS` (current).
     """
+    fields = CURRENT_STATS_FIELDS if isinstance(product, CurrentProduct) else STATS_FIELDS
     sec, nanosec = seconds_to_stamp(product.window_end_s)
     mean = vector_stamped_class()
     _set_header(mean.header, sec, nanosec, MAP_FRAME)
@@ -221,13 +273,13 @@ def product_messages(
         mean.vector, (product.mean_u_enu_mps, product.mean_v_enu_mps, product.mean_w_enu_mps)
     )
     stats = multi_array_class()
-    stats.layout.dim = [dimension_class(label=name, size=1, stride=1) for name in STATS_FIELDS]
+    stats.layout.dim = [dimension_class(label=name, size=1, stride=1) for name in fields]
     stats.layout.data_offset = 0
-    stats.data = [float(getattr(product, name)) for name in STATS_FIELDS]
+    stats.data = [float(getattr(product, name)) for name in fields]
     return mean, stats
 
 
 def stats_values(stats_message) -> dict[str, float]:
-    """A ``wind/stats_<window>`` message as {field label: value}."""
+    """A ``wind/stats_<window>`` or ``current/stats_<window>`` message as {field label: value}."""
     labels = [dimension.label for dimension in stats_message.layout.dim]
     return dict(zip(labels, (float(value) for value in stats_message.data), strict=True))

@@ -80,18 +80,18 @@ from wind_comp.compensation_messages import (
     anemometer_sample_cdr,
     fix_fields,
     fix_fields_cdr,
+    flow_cdr,
     odometry_fields,
     odometry_fields_cdr,
     product_messages,
-    true_wind_cdr,
 )
-from wind_comp.compensator import WindStatus
+from wind_comp.compensator import SampleStatus
 from wind_comp.config import (
     COMPENSATION_NODE_NAME,
     COMPENSATION_PARAMETER_PREFIX,
     CompensatorConfig,
 )
-from wind_comp.pipeline import CompensationOutput, CompensationPipeline
+from wind_comp.pipeline import CompensationOutput, wind_pipeline
 from wind_comp.products import WindProduct
 
 NODE_NAME = COMPENSATION_NODE_NAME
@@ -127,7 +127,7 @@ class CompensationNode(FlushingNode):
                 f"parameter 'compensation.nav_timeout_s' must be positive, got {self.nav_timeout_s}"
             )
 
-        self.pipeline = CompensationPipeline(self.config)
+        self.pipeline = wind_pipeline(self.config)
         self._pending: collections.deque[PendingStamp] = collections.deque()
         self._counters = collections.Counter()
         self._counters_at_last_report = collections.Counter()
@@ -172,7 +172,7 @@ class CompensationNode(FlushingNode):
                 message.header.stamp.nanosec,
             )
         sample, sec, nanosec = parsed
-        rejection = self.pipeline.add_wind(sample)
+        rejection = self.pipeline.add_sample(sample)
         if rejection is not None:
             self.reject(WIND_RAW_TOPIC, rejection)
         self._pending.append(PendingStamp(sec, nanosec, sample.t_s, time.monotonic()))
@@ -187,7 +187,7 @@ class CompensationNode(FlushingNode):
             if pending.arrival_s > waited_enough_before_s:
                 break
             horizon_s = max(horizon_s, math.nextafter(pending.t_s, math.inf))
-        return min(horizon_s, self.pipeline.latest_wind_stamp_s - self.nav_timeout_s)
+        return min(horizon_s, self.pipeline.latest_sample_stamp_s - self.nav_timeout_s)
 
     def on_odometry(self, raw: bytes) -> None:
         self._counters["nav_in"] += 1
@@ -219,9 +219,9 @@ class CompensationNode(FlushingNode):
         """Publish decided samples in order, each with the stamp of its anemometer message,
         and the averaging windows they closed."""
         now_s = time.monotonic()
-        for wind in output.wind.true_wind_enu_mps.tolist():
+        for wind in output.samples.flow_enu_mps.tolist():
             pending = self._pending.popleft()
-            self._true_wind_publisher.publish(true_wind_cdr(pending.sec, pending.nanosec, wind))
+            self._true_wind_publisher.publish(flow_cdr(pending.sec, pending.nanosec, wind))
             self._counters["wind_out"] += 1
             self._latencies_s.append(now_s - pending.arrival_s)
         self.publish_products(output.products)
@@ -253,17 +253,17 @@ class CompensationNode(FlushingNode):
         self._last_report_s = now_s
         latencies, self._latencies_s = self._latencies_s, []
         counts = self.pipeline.counts
-        n_invalid = sum(n for status, n in counts.items() if status != WindStatus.VALID)
+        n_invalid = sum(n for status, n in counts.items() if status != SampleStatus.VALID)
         values = {
             "wind_samples_in": self._counters["wind_in"],
             "wind_samples_out": self._counters["wind_out"],
             "wind_samples_pending": self.pipeline.n_pending,
-            "valid": counts[WindStatus.VALID],
+            "valid": counts[SampleStatus.VALID],
             "invalid": n_invalid,
         }
-        for status in WindStatus:
-            if status != WindStatus.VALID:
-                values[f"invalid[{status.reason}]"] = counts[status]
+        for status in SampleStatus:
+            if status != SampleStatus.VALID:
+                values[f"invalid[{self.pipeline.sensor.reason(status)}]"] = counts[status]
         values.update(
             {
                 "nav_samples_in": self._counters["nav_in"],
@@ -280,7 +280,7 @@ class CompensationNode(FlushingNode):
             return "warn", f"no {WIND_RAW_TOPIC} samples", values
         if new["nav_in"] == 0:
             return "warn", f"no {NAV_ODOMETRY_TOPIC} samples: wind cannot be corrected", values
-        return "ok", f"{counts[WindStatus.VALID]} valid, {n_invalid} invalid wind samples", values
+        return "ok", f"{counts[SampleStatus.VALID]} valid, {n_invalid} invalid wind samples", values
 
 
 main = main_for(CompensationNode)

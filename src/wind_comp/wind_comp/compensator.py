@@ -1,17 +1,23 @@
-"""Wind compensation engine shared by the live node and offline processing.
+"""Motion compensation of a flow sensor, shared by the live nodes and offline processing.
 
-Navigation samples (:meth:`WindCompensator.add_nav`) and anemometer samples
-(:meth:`WindCompensator.add_wind`) go in, in the order they arrive; every anemometer sample
-comes out exactly once (:meth:`WindCompensator.ready`), in input order, with its own stamp:
-either the motion-corrected wind or NaN with the reason it could not be corrected.
+A flow sensor measures the velocity of a fluid relative to itself, in its own axes, from a
+moving platform: an anemometer the air's, a DVL in water track the water's (its reading is its
+own velocity through the water, the negative of the water's past it). Removing the platform's
+motion with the Miller correction (:mod:`wind_comp.miller`) gives the fluid's velocity over
+ground, ENU: the true wind, or the current.
+
+Navigation samples (:meth:`FlowCompensator.add_nav`) and sensor samples
+(:meth:`FlowCompensator.add_sample`) go in, in the order they arrive; every sensor sample comes
+out exactly once (:meth:`FlowCompensator.ready`), in input order, with its own stamp: either
+the motion-corrected flow or NaN with the reason it could not be corrected.
 
 Whether and how a sample is corrected depends only on stamps (the navigation samples around
 it), not on when messages happen to arrive, with two exceptions. The live-only
-:meth:`WindCompensator.expire` gives up on samples whose navigation is late. And a wind sample
-that arrives lagging the newest navigation by more than ``nav_history_s`` finds its navigation
+:meth:`FlowCompensator.expire` gives up on samples whose navigation is late. And a sample that
+arrives lagging the newest navigation by more than ``nav_history_s`` finds its navigation
 forgotten. Both depend on the order of arrival only, never on how often the results are
-collected: samples may be added one at a time (the live node, in plain floats) or as stretches
-of interleaved arrivals (:meth:`WindCompensator.add_arrivals`, offline, on columns), with
+collected: samples may be added one at a time (the live nodes, in plain floats) or as stretches
+of interleaved arrivals (:meth:`FlowCompensator.add_arrivals`, offline, on columns), with
 bit-identical results.
 """
 
@@ -23,17 +29,16 @@ import numpy as np
 
 from buoy_common.contract import Reason
 from buoy_nav.rotations import rotation_matrix_elements
-from wind_comp.config import CompensatorConfig
 from wind_comp.miller import miller_components, mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import InterpolationStatus, NavTrack
 
 
 class CompensatorInputError(ValueError):
-    """Wind arrays given to the compensator have the wrong shape."""
+    """Sample arrays given to the compensator have the wrong shape."""
 
 
-class WindStatus(IntEnum):
-    """Outcome of correcting one anemometer sample."""
+class SampleStatus(IntEnum):
+    """Outcome of correcting one sensor sample."""
 
     VALID = 0
     NO_NAVIGATION = 1
@@ -41,30 +46,53 @@ class WindStatus(IntEnum):
     NAV_GAP = 2
     """The bracketing navigation samples are more than ``max_nav_gap_s`` apart."""
     NAVIGATION_TIMEOUT = 3
-    """Given up by :meth:`WindCompensator.expire` before navigation caught up."""
+    """Given up by :meth:`FlowCompensator.expire` before navigation caught up."""
     NAV_HISTORY_EXCEEDED = 4
     """The stamp lags the newest navigation by more than ``nav_history_s``."""
-    INVALID_WIND = 5
-    """The measured vector is not finite."""
-    WIND_SPEED_OUT_OF_RANGE = 6
-    """The measured speed exceeds ``max_wind_speed_mps``."""
+    INVALID_MEASUREMENT = 5
+    """The measured vector is not finite (flagged invalid by the sensor, or rejected)."""
+    SPEED_OUT_OF_RANGE = 6
+    """The measured speed exceeds the sensor's ``max_speed_mps``."""
     INVALID_STAMP = 7
-    """The stamp is not finite, or not later than the previous wind stamp."""
+    """The stamp is not finite, or not later than the previous sample's."""
 
-    @property
-    def reason(self) -> Reason:
-        """Why the sample is invalid, in the contract's words (not defined for VALID)."""
-        return Reason[self.name]
+
+@dataclass(frozen=True)
+class FlowSensor:
+    """A flow sensor on the platform, as the correction sees it.
+
+    Attributes:
+        position_body_m: measurement centre in ``base_link``, m (Miller's lever arm).
+        rpy_deg: roll, pitch, yaw of the sensor's axes relative to ``base_link``, deg, applied
+            as Rz(yaw)·Ry(pitch)·Rx(roll).
+        max_speed_mps: measured speeds above this are absurd and rejected, m/s.
+        invalid_reason, speed_reason: the contract's words for INVALID_MEASUREMENT and
+            SPEED_OUT_OF_RANGE of this sensor (``invalid_wind``, ``invalid_dvl``, ...).
+    """
+
+    position_body_m: tuple[float, float, float]
+    rpy_deg: tuple[float, float, float]
+    max_speed_mps: float
+    invalid_reason: Reason
+    speed_reason: Reason
+
+    def reason(self, status: SampleStatus) -> Reason:
+        """Why a sample of this sensor is invalid, in the contract's words (not for VALID)."""
+        if status == SampleStatus.INVALID_MEASUREMENT:
+            return self.invalid_reason
+        if status == SampleStatus.SPEED_OUT_OF_RANGE:
+            return self.speed_reason
+        return Reason[status.name]
 
 
 _PENDING = -1
 _NAV_OUTCOME = {
-    InterpolationStatus.OK: WindStatus.VALID,
-    InterpolationStatus.BEFORE_START: WindStatus.NO_NAVIGATION,
+    InterpolationStatus.OK: SampleStatus.VALID,
+    InterpolationStatus.BEFORE_START: SampleStatus.NO_NAVIGATION,
     InterpolationStatus.AFTER_END: _PENDING,
-    InterpolationStatus.GAP: WindStatus.NAV_GAP,
-    InterpolationStatus.EVICTED: WindStatus.NAV_HISTORY_EXCEEDED,
-    InterpolationStatus.INVALID_STAMP: WindStatus.INVALID_STAMP,
+    InterpolationStatus.GAP: SampleStatus.NAV_GAP,
+    InterpolationStatus.EVICTED: SampleStatus.NAV_HISTORY_EXCEEDED,
+    InterpolationStatus.INVALID_STAMP: SampleStatus.INVALID_STAMP,
 }
 _NAV_OUTCOME_BY_CODE = np.array(
     [_NAV_OUTCOME[InterpolationStatus(code)] for code in range(len(InterpolationStatus))],
@@ -73,39 +101,40 @@ _NAV_OUTCOME_BY_CODE = np.array(
 
 
 @dataclass(frozen=True, eq=False)
-class CorrectedWindBatch:
-    """N anemometer samples after correction, in input order.
+class CorrectedBatch:
+    """N sensor samples after correction, in input order.
 
     The (N, 3) ENU vectors (m/s) are NaN where ``status`` is not VALID;
-    ``true_wind_enu_mps = tilt_term_enu_mps + rotation_term_enu_mps + translation_term_enu_mps``
+    ``flow_enu_mps = tilt_term_enu_mps + rotation_term_enu_mps + translation_term_enu_mps``
     (see :mod:`wind_comp.miller`).
     """
 
     t_s: np.ndarray
-    """(N,) header stamps of the anemometer samples, s."""
+    """(N,) header stamps of the sensor samples, s."""
     status: np.ndarray
-    """(N,) int8 codes of :class:`WindStatus`."""
-    true_wind_enu_mps: np.ndarray
+    """(N,) int8 codes of :class:`SampleStatus`."""
+    flow_enu_mps: np.ndarray
+    """(N, 3) the fluid's velocity over ground, ENU, m/s: the true wind, or the current."""
     tilt_term_enu_mps: np.ndarray
     rotation_term_enu_mps: np.ndarray
     translation_term_enu_mps: np.ndarray
-    wind_sensor_mps: np.ndarray
-    """(N, 3) the measured inputs, anemometer axes, m/s."""
+    flow_sensor_mps: np.ndarray
+    """(N, 3) the inputs: the fluid's velocity relative to the sensor, sensor axes, m/s."""
 
     def __len__(self) -> int:
         return self.t_s.shape[0]
 
     @property
     def valid(self) -> np.ndarray:
-        return self.status == WindStatus.VALID
+        return self.status == SampleStatus.VALID
 
-    def counts(self) -> dict[WindStatus, int]:
+    def counts(self) -> dict[SampleStatus, int]:
         """Number of samples per status."""
-        return {status: int(np.count_nonzero(self.status == status)) for status in WindStatus}
+        return {status: int(np.count_nonzero(self.status == status)) for status in SampleStatus}
 
 
-def _screen_wind(
-    stamps_s: np.ndarray, winds_mps: np.ndarray, latest_stamp_s: float, max_speed_mps: float
+def _screen_samples(
+    stamps_s: np.ndarray, flows_mps: np.ndarray, latest_stamp_s: float, max_speed_mps: float
 ) -> tuple[np.ndarray, float]:
     """Status of each sample from its own values and stamp order alone.
 
@@ -116,60 +145,60 @@ def _screen_wind(
     candidates = np.where(finite_stamp, stamps_s, -np.inf)
     running_latest = np.maximum.accumulate(np.concatenate(([latest_stamp_s], candidates)))
     stamp_ok = finite_stamp & (stamps_s > running_latest[:-1])
-    finite_wind = np.all(np.isfinite(winds_mps), axis=1)
-    speed = np.sqrt(np.sum(np.where(finite_wind[:, None], winds_mps, 0.0) ** 2, axis=1))
+    finite_flow = np.all(np.isfinite(flows_mps), axis=1)
+    speed = np.sqrt(np.sum(np.where(finite_flow[:, None], flows_mps, 0.0) ** 2, axis=1))
     status = np.full(stamps_s.shape[0], _PENDING, dtype=np.int8)
-    status[speed > max_speed_mps] = WindStatus.WIND_SPEED_OUT_OF_RANGE
-    status[~finite_wind] = WindStatus.INVALID_WIND
-    status[~stamp_ok] = WindStatus.INVALID_STAMP
+    status[speed > max_speed_mps] = SampleStatus.SPEED_OUT_OF_RANGE
+    status[~finite_flow] = SampleStatus.INVALID_MEASUREMENT
+    status[~stamp_ok] = SampleStatus.INVALID_STAMP
     return status, float(running_latest[-1])
 
 
-def _screen_one_wind(
+def _screen_one_sample(
     t_s: float, x: float, y: float, z: float, latest_stamp_s: float, max_speed_mps: float
 ) -> tuple[int, float]:
-    """:func:`_screen_wind` of one sample in plain floats (the same decisions)."""
+    """:func:`_screen_samples` of one sample in plain floats (the same decisions)."""
     finite_stamp = math.isfinite(t_s)
     stamp_ok = finite_stamp and t_s > latest_stamp_s
     if finite_stamp:
         latest_stamp_s = max(latest_stamp_s, t_s)
     if not stamp_ok:
-        return WindStatus.INVALID_STAMP, latest_stamp_s
+        return SampleStatus.INVALID_STAMP, latest_stamp_s
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-        return WindStatus.INVALID_WIND, latest_stamp_s
+        return SampleStatus.INVALID_MEASUREMENT, latest_stamp_s
     if math.sqrt(x * x + y * y + z * z) > max_speed_mps:
-        return WindStatus.WIND_SPEED_OUT_OF_RANGE, latest_stamp_s
+        return SampleStatus.SPEED_OUT_OF_RANGE, latest_stamp_s
     return _PENDING, latest_stamp_s
 
 
 class _Corrector:
     """Navigation lookup plus Miller correction for samples that passed screening."""
 
-    def __init__(self, config: CompensatorConfig):
-        mounting_matrix_bw = mounting_rotation_from_rpy_deg(config.anemometer_rpy_deg).as_matrix()
-        self._mounting_elements_bw = tuple(mounting_matrix_bw.ravel().tolist())
-        self._lever_arm_elements_body_m = tuple(config.anemometer_position_body_m)
+    def __init__(self, sensor: FlowSensor):
+        mounting_matrix = mounting_rotation_from_rpy_deg(sensor.rpy_deg).as_matrix()
+        self._mounting_elements = tuple(mounting_matrix.ravel().tolist())
+        self._lever_arm_elements_body_m = tuple(float(c) for c in sensor.position_body_m)
 
-    def correct_one(self, track: NavTrack, t_s: float, wind_mps, as_of_newest_s: float):
+    def correct_one(self, track: NavTrack, t_s: float, flow_mps, as_of_newest_s: float):
         """:meth:`correct` of one sample in plain floats (bit-identical): its status and its
-        true wind and three Miller terms as tuples, NaN unless valid."""
+        flow and three Miller terms as tuples, NaN unless valid."""
         code, attitude, rate, velocity = track.interpolate_one(t_s, as_of_newest_s)
         status = _NAV_OUTCOME[code]
-        if status != WindStatus.VALID:
+        if status != SampleStatus.VALID:
             return status, _NAN_TERMS
         terms = miller_components(
-            tuple(wind_mps),
+            tuple(flow_mps),
             rotation_matrix_elements(*attitude),
             rate,
             velocity,
-            self._mounting_elements_bw,
+            self._mounting_elements,
             self._lever_arm_elements_body_m,
         )
         return status, terms
 
-    def correct(self, track: NavTrack, stamps_s, winds_mps, as_of_newest_s):
+    def correct(self, track: NavTrack, stamps_s, flows_mps, as_of_newest_s):
         """Return (N,) statuses (``_PENDING`` while navigation may still bracket a stamp) and
-        (N, 3) arrays of true wind and the three Miller terms, NaN where not valid.
+        (N, 3) arrays of the flow and the three Miller terms, NaN where not valid.
 
         ``as_of_newest_s``: the newest navigation stamp when each sample arrived (see
         :meth:`NavTrack.interpolate`)."""
@@ -180,11 +209,11 @@ class _Corrector:
         if np.any(valid):
             # The arithmetic of correct_one, on the columns of the valid samples.
             terms = miller_components(
-                tuple(winds_mps[valid].T),
+                tuple(flows_mps[valid].T),
                 rotation_matrix_elements(*nav.attitude_xyzw[valid].T),
                 tuple(nav.angular_rate_body_rad_s[valid].T),
                 tuple(nav.velocity_enu_mps[valid].T),
-                self._mounting_elements_bw,
+                self._mounting_elements,
                 self._lever_arm_elements_body_m,
             )
             for output, term in zip(outputs, terms, strict=True):
@@ -193,42 +222,46 @@ class _Corrector:
 
 
 _NAN_TERMS = ((math.nan,) * 3,) * 4
-_NOTHING_DECIDED = CorrectedWindBatch(
+_NOTHING_DECIDED = CorrectedBatch(
     np.empty(0), np.empty(0, dtype=np.int8), *(np.empty((0, 3)) for _ in range(5))
 )
 _INITIAL_CAPACITY = 64
 
 
-class WindCompensator:
-    """Streaming wind correction: one output per anemometer sample, in input order.
+class FlowCompensator:
+    """Streaming motion correction of one flow sensor: one output per sensor sample, in input
+    order.
 
-    The anemometer samples wait in a queue of columns: stamp, measured wind, the newest
+    The sensor samples wait in a queue of columns: stamp, measured flow, the newest
     navigation stamp when the sample arrived, status (``_PENDING`` until decided) and the four
     output vectors. Samples before ``_first_pending`` are decided, those from ``_head`` on not
     yet returned.
     """
 
-    def __init__(self, config: CompensatorConfig):
-        self.config = config
-        self.nav_track = NavTrack(config.max_nav_gap_s, config.nav_history_s)
-        self._corrector = _Corrector(config)
-        self._latest_wind_stamp_s = -np.inf
-        self._counts = dict.fromkeys(WindStatus, 0)
+    def __init__(self, sensor: FlowSensor, max_nav_gap_s: float, nav_history_s: float):
+        """sensor: the flow sensor; max_nav_gap_s: widest spacing of the navigation samples
+        around a stamp that is still interpolated, s; nav_history_s: how far a sample may lag
+        the newest navigation sample and still be corrected, s."""
+        self.sensor = sensor
+        self.nav_track = NavTrack(max_nav_gap_s, nav_history_s)
+        self._corrector = _Corrector(sensor)
+        self._latest_sample_stamp_s = -np.inf
+        self._counts = dict.fromkeys(SampleStatus, 0)
         self._t_s = np.empty(_INITIAL_CAPACITY)
-        self._wind_mps = np.empty((_INITIAL_CAPACITY, 3))
+        self._flow_mps = np.empty((_INITIAL_CAPACITY, 3))
         self._as_of_nav_s = np.empty(_INITIAL_CAPACITY)
         self._status = np.empty(_INITIAL_CAPACITY, dtype=np.int8)
         self._terms = np.empty((4, _INITIAL_CAPACITY, 3))
         self._head = self._first_pending = self._tail = 0
 
     @property
-    def counts(self) -> dict[WindStatus, int]:
+    def counts(self) -> dict[SampleStatus, int]:
         """Number of output samples per status so far."""
         return dict(self._counts)
 
     @property
     def n_pending(self) -> int:
-        """Anemometer samples received but not yet returned."""
+        """Sensor samples received but not yet returned."""
         return self._tail - self._head
 
     def add_nav(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> bool:
@@ -236,45 +269,46 @@ class WindCompensator:
         ENU velocity m/s). Returns False when the track rejects it (counted there)."""
         return self.nav_track.append(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
 
-    def add_wind(self, t_s, wind_sensor_mps) -> None:
-        """Add one anemometer sample: stamp s, air velocity in anemometer axes m/s, (3,).
-        In plain floats: the live path; :meth:`add_arrivals` takes stretches of samples."""
+    def add_sample(self, t_s, flow_sensor_mps) -> None:
+        """Add one sensor sample: stamp s, the fluid's velocity relative to the sensor in its
+        axes m/s, (3,). In plain floats: the live path; :meth:`add_arrivals` takes stretches
+        of samples."""
         try:
-            x, y, z = (float(component) for component in wind_sensor_mps)
+            x, y, z = (float(component) for component in flow_sensor_mps)
         except (TypeError, ValueError) as error:
             raise CompensatorInputError(
-                f"wind_sensor_mps must be three numbers, got {wind_sensor_mps!r}"
+                f"flow_sensor_mps must be three numbers, got {flow_sensor_mps!r}"
             ) from error
         t_s = float(t_s)
-        status, self._latest_wind_stamp_s = _screen_one_wind(
-            t_s, x, y, z, self._latest_wind_stamp_s, self.config.max_wind_speed_mps
+        status, self._latest_sample_stamp_s = _screen_one_sample(
+            t_s, x, y, z, self._latest_sample_stamp_s, self.sensor.max_speed_mps
         )
         self._reserve(1)
         i = self._tail
         self._t_s[i] = t_s
-        self._wind_mps[i] = x, y, z
+        self._flow_mps[i] = x, y, z
         self._as_of_nav_s[i] = self._newest_nav_s()
         self._status[i] = status
         self._terms[:, i] = math.nan
         self._tail = i + 1
         self._advance_first_pending()
 
-    def add_arrivals(self, nav, wind_t_s, wind_sensor_mps, nav_before_wind) -> int:
-        """Navigation and anemometer samples that arrived interleaved: exactly :meth:`add_nav`
-        of each navigation sample in order, with :meth:`add_wind` of wind sample ``i`` right
-        after the first ``nav_before_wind[i]`` of them.
+    def add_arrivals(self, nav, sample_t_s, flow_sensor_mps, nav_before_sample) -> int:
+        """Navigation and sensor samples that arrived interleaved: exactly :meth:`add_nav`
+        of each navigation sample in order, with :meth:`add_sample` of sensor sample ``i``
+        right after the first ``nav_before_sample[i]`` of them.
 
         Args:
             nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) of M navigation
                 samples: (M,) stamps, s, and (M, 4), (M, 3), (M, 3) arrays of what
                 :meth:`add_nav` takes.
-            wind_t_s, wind_sensor_mps: (N,) stamps and (N, 3) winds, as :meth:`add_wind` takes
-                them one by one.
-            nav_before_wind: (N,) non-decreasing counts, 0 to M.
+            sample_t_s, flow_sensor_mps: (N,) stamps and (N, 3) flows, as
+                :meth:`add_sample` takes them one by one.
+            nav_before_sample: (N,) non-decreasing counts, 0 to M.
 
         Returns the number of navigation samples accepted.
         """
-        stamps, winds = _wind_arrays(wind_t_s, wind_sensor_mps)
+        stamps, flows = _sample_arrays(sample_t_s, flow_sensor_mps)
         newest_before = self._newest_nav_s()
         accepted = self.nav_track.extend(*nav)
         nav_t_s = np.asarray(nav[0], dtype=float)
@@ -282,42 +316,42 @@ class WindCompensator:
         newest_after = np.maximum.accumulate(
             np.concatenate(([newest_before], np.where(accepted, nav_t_s, -np.inf)))
         )
-        self._enqueue(stamps, winds, newest_after[np.asarray(nav_before_wind, dtype=np.intp)])
+        self._enqueue(stamps, flows, newest_after[np.asarray(nav_before_sample, dtype=np.intp)])
         return int(np.count_nonzero(accepted))
 
-    def ready(self) -> CorrectedWindBatch:
+    def ready(self) -> CorrectedBatch:
         """Every sample that can now be decided, in input order."""
         self._decide()
         return self._pop_decided()
 
-    def expire(self, before_t_s: float) -> CorrectedWindBatch:
+    def expire(self, before_t_s: float) -> CorrectedBatch:
         """Decide what can be decided, give up on samples stamped before ``before_t_s`` (s)
         as NAVIGATION_TIMEOUT, and return the decided samples in input order."""
         self._decide()
         self._give_up(
             self._t_s[self._first_pending : self._tail] < before_t_s,
-            WindStatus.NAVIGATION_TIMEOUT,
+            SampleStatus.NAVIGATION_TIMEOUT,
         )
         return self._pop_decided()
 
-    def flush(self) -> CorrectedWindBatch:
+    def flush(self) -> CorrectedBatch:
         """End of data: decide every pending sample (NO_NAVIGATION where navigation never
         caught up) and return them in input order."""
         self._decide()
-        self._give_up(True, WindStatus.NO_NAVIGATION)
+        self._give_up(True, SampleStatus.NO_NAVIGATION)
         return self._pop_decided()
 
     def _newest_nav_s(self) -> float:
         return self.nav_track.newest_stamp_s if len(self.nav_track) else -math.inf
 
-    def _enqueue(self, stamps: np.ndarray, winds: np.ndarray, as_of_nav_s: np.ndarray) -> None:
-        status, self._latest_wind_stamp_s = _screen_wind(
-            stamps, winds, self._latest_wind_stamp_s, self.config.max_wind_speed_mps
+    def _enqueue(self, stamps: np.ndarray, flows: np.ndarray, as_of_nav_s: np.ndarray) -> None:
+        status, self._latest_sample_stamp_s = _screen_samples(
+            stamps, flows, self._latest_sample_stamp_s, self.sensor.max_speed_mps
         )
         self._reserve(stamps.shape[0])
         new = slice(self._tail, self._tail + stamps.shape[0])
         self._t_s[new] = stamps
-        self._wind_mps[new] = winds
+        self._flow_mps[new] = flows
         self._as_of_nav_s[new] = as_of_nav_s
         self._status[new] = status
         self._terms[:, new] = np.nan
@@ -342,7 +376,7 @@ class WindCompensator:
             status, terms = self._corrector.correct_one(
                 self.nav_track,
                 float(self._t_s[i]),
-                self._wind_mps[i].tolist(),
+                self._flow_mps[i].tolist(),
                 float(self._as_of_nav_s[i]),
             )
             self._status[i] = status
@@ -351,7 +385,7 @@ class WindCompensator:
             status, terms = self._corrector.correct(
                 self.nav_track,
                 self._t_s[undecided],
-                self._wind_mps[undecided],
+                self._flow_mps[undecided],
                 self._as_of_nav_s[undecided],
             )
             self._status[undecided] = status
@@ -361,7 +395,7 @@ class WindCompensator:
         # samples around it stay held (see NavTrack.forget_old_samples).
         self.nav_track.forget_old_samples()
 
-    def _give_up(self, which, status: WindStatus) -> None:
+    def _give_up(self, which, status: SampleStatus) -> None:
         """Decide as ``status`` the pending samples from ``_first_pending`` on where ``which``
         (a mask over them, or True for all) holds."""
         if self._first_pending == self._tail:
@@ -377,23 +411,23 @@ class WindCompensator:
         pending = np.flatnonzero(self._status[first:tail] == _PENDING)
         self._first_pending = first + int(pending[0]) if pending.size else tail
 
-    def _pop_decided(self) -> CorrectedWindBatch:
+    def _pop_decided(self) -> CorrectedBatch:
         if self._head == self._first_pending:
             return _NOTHING_DECIDED
         done = slice(self._head, self._first_pending)
         self._head = self._first_pending
         status = self._status[done].copy()
-        for code, count in enumerate(np.bincount(status, minlength=len(WindStatus)).tolist()):
-            self._counts[WindStatus(code)] += count
-        true_wind, tilt, rotation, translation = self._terms[:, done].copy()
-        return CorrectedWindBatch(
+        for code, count in enumerate(np.bincount(status, minlength=len(SampleStatus)).tolist()):
+            self._counts[SampleStatus(code)] += count
+        flow, tilt, rotation, translation = self._terms[:, done].copy()
+        return CorrectedBatch(
             self._t_s[done].copy(),
             status,
-            true_wind,
+            flow,
             tilt,
             rotation,
             translation,
-            self._wind_mps[done].copy(),
+            self._flow_mps[done].copy(),
         )
 
     def _reserve(self, n_more: int) -> None:
@@ -406,7 +440,7 @@ class WindCompensator:
         new_capacity = max(capacity, _INITIAL_CAPACITY)
         while n_kept + n_more > new_capacity // 2:
             new_capacity *= 2
-        for name in ("_t_s", "_wind_mps", "_as_of_nav_s", "_status"):
+        for name in ("_t_s", "_flow_mps", "_as_of_nav_s", "_status"):
             old = getattr(self, name)
             new = np.empty((new_capacity, *old.shape[1:]), dtype=old.dtype)
             new[:n_kept] = old[kept]
@@ -418,14 +452,14 @@ class WindCompensator:
         self._head, self._tail = 0, n_kept
 
 
-def _wind_arrays(t_s, wind_sensor_mps) -> tuple[np.ndarray, np.ndarray]:
-    """(N,) stamps (s) and (N, 3) winds (m/s) as float arrays; CompensatorInputError if their
+def _sample_arrays(t_s, flow_sensor_mps) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) stamps (s) and (N, 3) flows (m/s) as float arrays; CompensatorInputError if their
     shapes do not match."""
     stamps = np.asarray(t_s, dtype=float)
-    winds = np.asarray(wind_sensor_mps, dtype=float)
-    if stamps.ndim != 1 or winds.shape != (stamps.shape[0], 3):
+    flows = np.asarray(flow_sensor_mps, dtype=float)
+    if stamps.ndim != 1 or flows.shape != (stamps.shape[0], 3):
         raise CompensatorInputError(
-            f"stamps and winds must have shapes (N,) and (N, 3), got {stamps.shape} and "
-            f"{winds.shape}"
+            f"stamps and flows must have shapes (N,) and (N, 3), got {stamps.shape} and "
+            f"{flows.shape}"
         )
-    return stamps, winds
+    return stamps, flows

@@ -1,24 +1,32 @@
-"""Typed configuration of the wind compensation, live and offline.
+"""Typed configuration of the wind compensation and the current estimate, live and offline.
 
-:class:`CompensatorConfig` is a frozen dataclass with unit-suffixed field names, so that
-``compensation_node`` declares one ROS parameter per field: ``compensation.<field>``, except the
-shared extrinsic ones (interface contract), declared with their own names
-(``anemometer.position``, ``anemometer.rpy_deg``). The offline tools build the same
-configuration from the same parameter files (:func:`compensator_config_from_files`).
+:class:`CompensatorConfig` (wind) and :class:`CurrentConfig` (current) are frozen dataclasses
+with unit-suffixed field names, so that ``compensation_node`` and ``current_node`` declare one
+ROS parameter per field: ``compensation.<field>`` and ``current.<field>``, except the shared
+extrinsic ones (interface contract), declared with their own names (``anemometer.position``,
+``anemometer.rpy_deg``, ``dvl.position``, ``dvl.rpy_deg``). The offline tools build the same
+configurations from the same parameter files (:func:`compensator_config_from_files`,
+:func:`current_config_from_files`).
 """
 
 import math
 from dataclasses import dataclass
 
-from buoy_common.contract import DEFAULT_PRODUCT_WINDOWS_S
+from buoy_common.contract import DEFAULT_PRODUCT_WINDOWS_S, Reason
 from buoy_common.extrinsics import check_shared_fields, shared_field
 from buoy_common.parameters import build_config, load_parameter_files
+from wind_comp.compensator import FlowSensor
 
 COMPENSATION_NODE_NAME = "compensation_node"
 """Node name whose parameter-file sections configure the compensation (live and offline)."""
 COMPENSATION_PARAMETER_PREFIX = "compensation."
 """ROS parameter of a :class:`CompensatorConfig` field ``f``: ``compensation.f``, except the
 shared ones."""
+CURRENT_NODE_NAME = "current_node"
+"""Node name whose parameter-file sections configure the current estimate (live and offline)."""
+CURRENT_PARAMETER_PREFIX = "current."
+"""ROS parameter of a :class:`CurrentConfig` field ``f``: ``current.f``, except the shared
+ones."""
 
 
 class ConfigError(ValueError):
@@ -53,28 +61,94 @@ class CompensatorConfig:
     gust_window_s: float = 3.0
 
     def __post_init__(self):
-        for name in ("anemometer_position_body_m", "anemometer_rpy_deg"):
-            object.__setattr__(self, name, _finite_tuple(name, getattr(self, name), length=3))
-        try:
-            check_shared_fields(self)
-        except ValueError as error:
-            raise ConfigError(str(error)) from None
-        for name in ("max_nav_gap_s", "max_wind_speed_mps", "nav_history_s", "gust_window_s"):
-            object.__setattr__(self, name, _positive_float(name, getattr(self, name)))
-        windows = _finite_tuple("product_windows_s", self.product_windows_s, length=None)
-        if not windows or min(windows) <= 0:
-            raise ConfigError(f"product_windows_s must be positive window lengths, got {windows}")
-        object.__setattr__(self, "product_windows_s", windows)
-        if self.nav_history_s <= self.max_nav_gap_s:
-            raise ConfigError(
-                f"nav_history_s ({self.nav_history_s}) must exceed max_nav_gap_s "
-                f"({self.max_nav_gap_s})"
-            )
-        if self.gust_window_s >= min(windows):
+        _check_and_coerce(
+            self,
+            ("anemometer_position_body_m", "anemometer_rpy_deg"),
+            ("max_nav_gap_s", "max_wind_speed_mps", "nav_history_s", "gust_window_s"),
+        )
+        if self.gust_window_s >= min(self.product_windows_s):
             raise ConfigError(
                 f"gust_window_s ({self.gust_window_s}) must be shorter than every product window "
-                f"{windows}"
+                f"{self.product_windows_s}"
             )
+
+    def flow_sensor(self) -> FlowSensor:
+        """The anemometer as the correction sees it."""
+        return FlowSensor(
+            self.anemometer_position_body_m,
+            self.anemometer_rpy_deg,
+            self.max_wind_speed_mps,
+            Reason.INVALID_WIND,
+            Reason.WIND_SPEED_OUT_OF_RANGE,
+        )
+
+
+@dataclass(frozen=True)
+class CurrentConfig:
+    """Settings of the current estimate from a DVL in water track.
+
+    Attributes:
+        dvl_position_body_m: DVL measurement centre in ``base_link``, m (parameter
+            ``dvl.position``).
+        dvl_rpy_deg: roll, pitch, yaw of ``dvl_link`` relative to ``base_link``, deg, applied as
+            Rz(yaw)·Ry(pitch)·Rx(roll) (parameter ``dvl.rpy_deg``).
+        max_nav_gap_s: largest spacing of the two navigation samples bracketing a DVL stamp for
+            which the navigation is interpolated, s.
+        max_dvl_speed_mps: DVL velocities faster than this are rejected as absurd, m/s (beyond
+            the velocity range of any DVL).
+        nav_history_s: how far behind the newest navigation sample a DVL stamp may lag and still
+            be corrected in streaming use, s.
+        product_windows_s: lengths of the averaging windows of the current products, s (60 s
+            and 600 s by default).
+    """
+
+    dvl_position_body_m: tuple[float, float, float] = shared_field("dvl.position")
+    dvl_rpy_deg: tuple[float, float, float] = shared_field("dvl.rpy_deg")
+    max_nav_gap_s: float = 0.1
+    max_dvl_speed_mps: float = 20.0
+    nav_history_s: float = 10.0
+    product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
+
+    def __post_init__(self):
+        _check_and_coerce(
+            self,
+            ("dvl_position_body_m", "dvl_rpy_deg"),
+            ("max_nav_gap_s", "max_dvl_speed_mps", "nav_history_s"),
+        )
+
+    def flow_sensor(self) -> FlowSensor:
+        """The DVL as the correction sees it. The correction takes the water's velocity past
+        the DVL, the negative of its reading
+        (:func:`wind_comp.compensation_messages.dvl_sample`)."""
+        return FlowSensor(
+            self.dvl_position_body_m,
+            self.dvl_rpy_deg,
+            self.max_dvl_speed_mps,
+            Reason.INVALID_DVL,
+            Reason.DVL_SPEED_OUT_OF_RANGE,
+        )
+
+
+def _check_and_coerce(config, vector_fields: tuple[str, ...], positive_fields: tuple[str, ...]):
+    """The checks both configurations share: finite 3-vectors, the shared parameters' rules,
+    positive numbers, product windows, and a navigation history longer than the gap."""
+    for name in vector_fields:
+        object.__setattr__(config, name, _finite_tuple(name, getattr(config, name), length=3))
+    try:
+        check_shared_fields(config)
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
+    for name in positive_fields:
+        object.__setattr__(config, name, _positive_float(name, getattr(config, name)))
+    windows = _finite_tuple("product_windows_s", config.product_windows_s, length=None)
+    if not windows or min(windows) <= 0:
+        raise ConfigError(f"product_windows_s must be positive window lengths, got {windows}")
+    object.__setattr__(config, "product_windows_s", windows)
+    if config.nav_history_s <= config.max_nav_gap_s:
+        raise ConfigError(
+            f"nav_history_s ({config.nav_history_s}) must exceed max_nav_gap_s "
+            f"({config.max_nav_gap_s})"
+        )
 
 
 def _finite_tuple(name: str, value, length: int | None) -> tuple[float, ...]:
@@ -107,3 +181,11 @@ def compensator_config_from_files(paths) -> CompensatorConfig:
     :class:`buoy_common.parameters.ParameterError` naming a bad file or value."""
     values = load_parameter_files(paths, COMPENSATION_NODE_NAME)
     return build_config(CompensatorConfig, values, prefix=COMPENSATION_PARAMETER_PREFIX)
+
+
+def current_config_from_files(paths) -> CurrentConfig:
+    """The :class:`CurrentConfig` ``current_node`` would build from these ROS parameter files
+    (sections ``/**`` and ``current_node``, later files winning). Raises
+    :class:`buoy_common.parameters.ParameterError` naming a bad file or value."""
+    values = load_parameter_files(paths, CURRENT_NODE_NAME)
+    return build_config(CurrentConfig, values, prefix=CURRENT_PARAMETER_PREFIX)

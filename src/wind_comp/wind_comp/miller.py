@@ -14,6 +14,12 @@ true wind in the world frame:
 - B: anemometer measurement centre in the body frame, m.
 - V_b: ENU velocity of the body origin, m/s.
 
+The same correction gives the ocean current from a DVL in water track (paper 003): the DVL
+measures its own velocity through the water, v_DVL, in its own axes, so the water moves past it
+at V_w = −v_DVL, and with the DVL's mounting R_bd and position l in place of R_bw and B
+
+    current = R_nb · R_bd · (−v_DVL)  +  R_nb · (ω × l)  +  V_b.
+
 One component-wise routine, :func:`miller_components`, corrects one sample (floats, live) or a
 whole recording (arrays, offline), with bit-identical results.
 """
@@ -54,18 +60,20 @@ class MillerTerms:
 
 
 def mounting_rotation_from_rpy_deg(rpy_deg) -> Rotation:
-    """Anemometer→body rotation R_bw from roll, pitch, yaw in degrees.
+    """Sensor→body rotation (R_bw of the anemometer, R_bd of the DVL) from roll, pitch, yaw in
+    degrees.
 
-    Applied as R = Rz(yaw)·Ry(pitch)·Rx(roll), the convention of parameter ``anemometer.rpy_deg``.
+    Applied as R = Rz(yaw)·Ry(pitch)·Rx(roll), the convention of parameters
+    ``anemometer.rpy_deg`` and ``dvl.rpy_deg``.
     """
     angles_deg = np.asarray(rpy_deg, dtype=float)
     if angles_deg.shape != (3,):
         raise MillerInputError(
-            f"anemometer rpy_deg must be three angles (roll, pitch, yaw) in degrees, "
+            f"mounting rpy_deg must be three angles (roll, pitch, yaw) in degrees, "
             f"got shape {angles_deg.shape}"
         )
     if not np.all(np.isfinite(angles_deg)):
-        raise MillerInputError(f"anemometer rpy_deg must be finite, got {angles_deg.tolist()}")
+        raise MillerInputError(f"mounting rpy_deg must be finite, got {angles_deg.tolist()}")
     roll_deg, pitch_deg, yaw_deg = angles_deg
     return Rotation.from_euler("ZYX", [yaw_deg, pitch_deg, roll_deg], degrees=True)
 
@@ -208,36 +216,39 @@ def miller_terms(
 
 
 def miller_components(
-    wind_sensor_mps,
+    flow_sensor_mps,
     attitude_elements_nb,
     angular_rate_body_rad_s,
     velocity_enu_mps,
-    mounting_elements_bw,
-    anemometer_position_body_m,
+    mounting_elements,
+    sensor_position_body_m,
 ) -> tuple[tuple, tuple, tuple, tuple]:
     """The Miller correction written out by components: the one routine every path runs, live
     on one sample's floats, offline on a recording's columns.
 
     Args:
-        wind_sensor_mps: (u, v, w) in anemometer axes, m/s.
+        flow_sensor_mps: the fluid's velocity relative to the sensor in the sensor's axes, m/s
+            (the anemometer's (u, v, w); the negative of a DVL's water-track velocity).
         attitude_elements_nb: the nine row-major elements of the body→ENU matrix R_nb.
         angular_rate_body_rad_s: body rate relative to the local-level frame, body axes, rad/s.
         velocity_enu_mps: ENU velocity of the body origin, m/s.
-        mounting_elements_bw: the nine row-major elements of R_bw (floats).
-        anemometer_position_body_m: the lever arm B, body axes, m (floats).
+        mounting_elements: the nine row-major elements of the sensor→body rotation (R_bw of
+            the anemometer, R_bd of the DVL; floats).
+        sensor_position_body_m: the lever arm (Miller's B), body axes, m (floats).
 
-    Each per-sample component is a float or an array, all of one shape. Returns the true wind
-    and the tilt, rotation and translation terms, ENU m/s, as component triples.
+    Each per-sample component is a float or an array, all of one shape. Returns the fluid's
+    velocity over ground (the true wind, the current) and the tilt, rotation and translation
+    terms, ENU m/s, as component triples.
     """
-    wind_body = rotate_components(mounting_elements_bw, wind_sensor_mps)
-    tilt_term = rotate_components(attitude_elements_nb, wind_body)
-    lever_arm_velocity_body = cross_components(angular_rate_body_rad_s, anemometer_position_body_m)
+    flow_body = rotate_components(mounting_elements, flow_sensor_mps)
+    tilt_term = rotate_components(attitude_elements_nb, flow_body)
+    lever_arm_velocity_body = cross_components(angular_rate_body_rad_s, sensor_position_body_m)
     rotation_term = rotate_components(attitude_elements_nb, lever_arm_velocity_body)
     translation_term = tuple(velocity_enu_mps)
-    true_wind = tuple(
+    flow = tuple(
         tilt + rotation + translation
         for tilt, rotation, translation in zip(
             tilt_term, rotation_term, translation_term, strict=True
         )
     )
-    return true_wind, tilt_term, rotation_term, translation_term
+    return flow, tilt_term, rotation_term, translation_term

@@ -1,23 +1,27 @@
-"""The wind compensation from input values to output values: one object, live and offline.
+"""The motion compensation from input values to output values: one object, live and offline.
 
-:class:`CompensationPipeline` takes what ``compensation_node`` subscribes to, in the order it
-arrives, as the values :mod:`wind_comp.compensation_messages` reads from the messages:
+:class:`CompensationPipeline` corrects the samples of one flow sensor: the anemometer's
+(:func:`wind_pipeline`, the true wind of ``compensation_node``) or the DVL's
+(:func:`current_pipeline`, the current of ``current_node``). It takes what the node subscribes
+to, in the order it arrives, as the values :mod:`wind_comp.compensation_messages` reads from
+the messages:
 
 - ``nav/odometry``: stamp, attitude R_nb, body rate ω_ib relative to inertial space and body
   velocity. Each solution is converted with the latitude of the latest ``nav/fix`` before it:
   ω_nb = ω_ib − R_nbᵀ·ω_ie (the Earth's rotation, :mod:`buoy_nav.earth`, removed; until the
-  first fix the rate is kept as received, an error below 3e-4 m/s of wind at a 3 m lever arm)
+  first fix the rate is kept as received, an error below 3e-4 m/s at a 3 m lever arm)
   and v_ENU = R_nb·v_body. The transport rate of a buoy (< 1e-7 rad/s) is neglected.
 - ``nav/fix``: status and latitude; the latest valid latitude is kept while the fix is lost.
-- ``anemometer/wind``: one :class:`~wind_comp.compensation_messages.WindSample` each.
+- ``anemometer/wind`` or ``dvl/velocity``: one
+  :class:`~wind_comp.compensation_messages.FlowSample` each.
 
-and returns, in the order of the anemometer samples, one corrected sample per anemometer sample
-(:class:`~wind_comp.compensator.CorrectedWindBatch`) and the wind products of the averaging
-windows it closes. The caller pairs the corrected samples with the header stamps of its
-anemometer messages, first in first out.
+and returns, in the order of the sensor samples, one corrected sample per sensor sample
+(:class:`~wind_comp.compensator.CorrectedBatch`) and the products of the averaging windows it
+closes. The caller pairs the corrected samples with the header stamps of its sensor messages,
+first in first out.
 
 The arrivals wait in the pipeline until results are asked for (:meth:`ready`, :meth:`expire`,
-:meth:`flush`) and are then handed to the :class:`~wind_comp.compensator.WindCompensator` in
+:meth:`flush`) and are then handed to the :class:`~wind_comp.compensator.FlowCompensator` in
 arrival order: one message at a time in plain floats (the live node asks after every message)
 or as columns of a whole stretch (offline processing asks every few hundred samples). The
 decisions and numbers are the same either way, by construction: the compensator decides each
@@ -35,10 +39,10 @@ import numpy as np
 from buoy_common.contract import Reason
 from buoy_nav.earth import earth_rate_enu_components
 from buoy_nav.rotations import rotate_by_quaternion_components
-from wind_comp.compensation_messages import WindSample
-from wind_comp.compensator import CorrectedWindBatch, WindCompensator, WindStatus
-from wind_comp.config import CompensatorConfig
-from wind_comp.products import WindAverager, WindProduct
+from wind_comp.compensation_messages import FlowSample
+from wind_comp.compensator import CorrectedBatch, FlowCompensator, FlowSensor, SampleStatus
+from wind_comp.config import CompensatorConfig, CurrentConfig
+from wind_comp.products import CurrentAverager, WindAverager, WindowAverager
 
 
 class StampOrder:
@@ -89,52 +93,58 @@ def level_rate_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> t
 
 
 _NAV_FIELDS = 12  # stamp, quaternion (4), rate (3), body velocity (3), latitude
-_WIND_FIELDS = 4  # stamp, wind (3)
+_SAMPLE_FIELDS = 4  # stamp, flow (3)
 
 
 class CompensationOutput(NamedTuple):
     """What the pipeline decided since it was last asked."""
 
-    wind: CorrectedWindBatch
-    """One corrected sample per anemometer sample, in input order."""
-    products: list[WindProduct]
-    """The averaging windows closed, in the order they closed."""
+    samples: CorrectedBatch
+    """One corrected sample per sensor sample, in input order."""
+    products: list
+    """The products of the averaging windows closed, in the order they closed."""
 
 
 class CompensationPipeline:
-    """Navigation and anemometer samples in, corrected wind and wind products out."""
+    """Navigation and flow-sensor samples in, corrected samples and their products out."""
 
-    def __init__(self, config: CompensatorConfig):
-        self.config = config
-        self.compensator = WindCompensator(config)
-        self.averagers = [
-            WindAverager(window_s, config.gust_window_s) for window_s in config.product_windows_s
-        ]
+    def __init__(
+        self,
+        sensor: FlowSensor,
+        max_nav_gap_s: float,
+        nav_history_s: float,
+        averagers: list[WindowAverager],
+    ):
+        """sensor, max_nav_gap_s, nav_history_s: as :class:`FlowCompensator` takes them;
+        averagers: one per product window, fed the corrected samples."""
+        self.sensor = sensor
+        self.compensator = FlowCompensator(sensor, max_nav_gap_s, nav_history_s)
+        self.averagers = averagers
         self.latitude_deg = math.nan
         """Latitude of the latest valid ``nav/fix``, deg (NaN before the first)."""
         self._nav_order = StampOrder()
-        self._wind_order = StampOrder()
+        self._sample_order = StampOrder()
         # Arrivals not yet handed to the compensator: the navigation samples' numbers in a row
-        # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude), the wind
-        # samples', and for each wind sample the number of navigation samples before it.
+        # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude), the sensor
+        # samples', and for each sensor sample the number of navigation samples before it.
         self._nav = array("d")
-        self._wind = array("d")
-        self._nav_before_wind: list[int] = []
+        self._samples = array("d")
+        self._nav_before_sample: list[int] = []
 
     @property
-    def counts(self) -> dict[WindStatus, int]:
+    def counts(self) -> dict[SampleStatus, int]:
         """Corrected samples returned so far, per status."""
         return self.compensator.counts
 
     @property
-    def latest_wind_stamp_s(self) -> float:
-        """The latest anemometer stamp accepted in order, s (-inf before the first)."""
-        return self._wind_order.latest_s
+    def latest_sample_stamp_s(self) -> float:
+        """The latest sensor stamp accepted in order, s (-inf before the first)."""
+        return self._sample_order.latest_s
 
     @property
     def n_pending(self) -> int:
-        """Anemometer samples received but not yet returned."""
-        return len(self._nav_before_wind) + self.compensator.n_pending
+        """Sensor samples received but not yet returned."""
+        return len(self._nav_before_sample) + self.compensator.n_pending
 
     def add_fix(self, status: int, latitude_deg: float) -> str | None:
         """One ``nav/fix`` (status, latitude deg). Returns why it is rejected (a latitude not
@@ -168,14 +178,14 @@ class CompensationPipeline:
         self._nav_order.advance(t_s)
         return None
 
-    def add_wind(self, sample: WindSample) -> str | None:
-        """One ``anemometer/wind``. Returns why it is rejected (the message's own
-        ``rejection``, or a stamp not later than the previous one), None when accepted. Every
-        sample, rejected or not, gets its (then invalid) output."""
-        x, y, z = sample.wind_sensor_mps
-        stamp_increases = self._wind_order.advance(sample.t_s)
-        self._wind.extend((sample.t_s, x, y, z))
-        self._nav_before_wind.append(len(self._nav) // _NAV_FIELDS)
+    def add_sample(self, sample: FlowSample) -> str | None:
+        """One ``anemometer/wind`` or ``dvl/velocity``. Returns why it is rejected (the
+        message's own ``rejection``, or a stamp not later than the previous one), None when
+        accepted. Every sample, rejected or not, gets its (then invalid) output."""
+        x, y, z = sample.flow_sensor_mps
+        stamp_increases = self._sample_order.advance(sample.t_s)
+        self._samples.extend((sample.t_s, x, y, z))
+        self._nav_before_sample.append(len(self._nav) // _NAV_FIELDS)
         if sample.rejection is not None:
             return sample.rejection
         return None if stamp_increases else Reason.STAMP_NOT_INCREASING
@@ -202,11 +212,11 @@ class CompensationPipeline:
 
     def _hand_over(self) -> None:
         """Give the arrivals so far to the compensator, in their order."""
-        nav, wind, nav_before_wind = self._nav, self._wind, self._nav_before_wind
-        if not nav and not wind:
+        nav, samples, nav_before_sample = self._nav, self._samples, self._nav_before_sample
+        if not nav and not samples:
             return
-        self._nav, self._wind, self._nav_before_wind = array("d"), array("d"), []
-        if len(nav) == _NAV_FIELDS and not wind:
+        self._nav, self._samples, self._nav_before_sample = array("d"), array("d"), []
+        if len(nav) == _NAV_FIELDS and not samples:
             # The live case: one solution, in plain floats.
             t_s, *quat_rate_velocity, latitude_deg = nav
             quat, rate = quat_rate_velocity[0:4], quat_rate_velocity[4:7]
@@ -216,15 +226,15 @@ class CompensationPipeline:
                 level_rate_components(rate, quat, latitude_deg),
                 rotate_by_quaternion_components(quat, quat_rate_velocity[7:10]),
             )
-        elif len(wind) == _WIND_FIELDS and not nav:
-            t_s, *wind_sensor_mps = wind
-            self.compensator.add_wind(t_s, wind_sensor_mps)
+        elif len(samples) == _SAMPLE_FIELDS and not nav:
+            t_s, *flow_sensor_mps = samples
+            self.compensator.add_sample(t_s, flow_sensor_mps)
         else:
             columns = np.frombuffer(nav, dtype=float).reshape(-1, _NAV_FIELDS)
             quats, rates, velocities_body = columns[:, 1:5], columns[:, 5:8], columns[:, 8:11]
             rates_nb = level_rate_components(rates.T, quats.T, columns[:, 11])
             velocities_enu = rotate_by_quaternion_components(quats.T, velocities_body.T)
-            winds = np.frombuffer(wind, dtype=float).reshape(-1, _WIND_FIELDS)
+            flows = np.frombuffer(samples, dtype=float).reshape(-1, _SAMPLE_FIELDS)
             self.compensator.add_arrivals(
                 (
                     columns[:, 0],
@@ -232,21 +242,43 @@ class CompensationPipeline:
                     np.stack(np.broadcast_arrays(*rates_nb), axis=-1),
                     np.stack(np.broadcast_arrays(*velocities_enu), axis=-1),
                 ),
-                winds[:, 0],
-                winds[:, 1:],
-                nav_before_wind,
+                flows[:, 0],
+                flows[:, 1:],
+                nav_before_sample,
             )
 
-    def _output(self, wind: CorrectedWindBatch) -> CompensationOutput:
+    def _output(self, corrected: CorrectedBatch) -> CompensationOutput:
         products = []
-        if len(wind) == 1:
+        if len(corrected) == 1:
             # The live case: one sample, without numpy's per-call cost on one row.
             for averager in self.averagers:
-                products += averager.add(float(wind.t_s[0]), wind.true_wind_enu_mps[0])
-        elif len(wind):
+                products += averager.add(float(corrected.t_s[0]), corrected.flow_enu_mps[0])
+        elif len(corrected):
             for averager in self.averagers:
-                products += averager.add_batch(wind.t_s, wind.true_wind_enu_mps)
+                products += averager.add_batch(corrected.t_s, corrected.flow_enu_mps)
         # A sample closes the windows it is the first of, in averager order: the windows
         # closed by one sample share their last sample.
         products.sort(key=lambda product: product.last_sample_s)
-        return CompensationOutput(wind, products)
+        return CompensationOutput(corrected, products)
+
+
+def wind_pipeline(config: CompensatorConfig) -> CompensationPipeline:
+    """The pipeline of ``compensation_node``: the anemometer's samples corrected into the true
+    wind, averaged into the wind products."""
+    return CompensationPipeline(
+        config.flow_sensor(),
+        config.max_nav_gap_s,
+        config.nav_history_s,
+        [WindAverager(window_s, config.gust_window_s) for window_s in config.product_windows_s],
+    )
+
+
+def current_pipeline(config: CurrentConfig) -> CompensationPipeline:
+    """The pipeline of ``current_node``: the DVL's samples corrected into the current,
+    averaged into the current products."""
+    return CompensationPipeline(
+        config.flow_sensor(),
+        config.max_nav_gap_s,
+        config.nav_history_s,
+        [CurrentAverager(window_s) for window_s in config.product_windows_s],
+    )

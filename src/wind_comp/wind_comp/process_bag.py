@@ -28,7 +28,6 @@ from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
 from wind_comp.bag_processing import ProcessSummary, process_bag
-from wind_comp.compensator import WindStatus
 from wind_comp.config import compensator_config_from_files
 
 
@@ -55,10 +54,10 @@ def print_summary(summary: ProcessSummary, out_bag: str) -> None:
         print(line)
     counts = summary.wind_status_counts
     invalid = ", ".join(
-        f"{status.reason} {n}" for status, n in counts.items() if status != WindStatus.VALID and n
+        f"{outcome} {n}" for outcome, n in counts.items() if outcome != "valid" and n
     )
     print(
-        f"wind samples: {sum(counts.values())} in, {counts.get(WindStatus.VALID, 0)} corrected, "
+        f"wind samples: {sum(counts.values())} in, {counts.get('valid', 0)} corrected, "
         f"invalid: {invalid or 'none'}"
     )
     for reason, n in sorted(summary.rejected_wind_messages.items()):
