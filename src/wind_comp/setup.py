@@ -38,6 +38,7 @@ setup(
     entry_points={
         "console_scripts": [
             "compensation_node = wind_comp.compensation_node:main",
+            "current_node = wind_comp.current_node:main",
             "process_bag = wind_comp.process_bag:main",
             "wind_echo = wind_comp.wind_echo_node:main",
             "wind_report = wind_comp.wind_report:main",

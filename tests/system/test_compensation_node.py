@@ -45,8 +45,8 @@ from wind_comp.compensation_messages import (
     odometry_fields,
     stats_values,
 )
-from wind_comp.compensation_node import NODE_NAME
 from wind_comp.compensator import SampleStatus
+from wind_comp.config import COMPENSATION_NODE_NAME as NODE_NAME
 from wind_comp.config import compensator_config_from_files
 from wind_comp.pipeline import wind_pipeline
 

@@ -45,6 +45,9 @@ Malformed messages (non-finite values, zero quaternion, wrong frame, stamps not 
 counted and warned about (rate-limited). A rejected anemometer message still yields its NaN
 ``wind/true``. On SIGINT or SIGTERM the samples still waiting for navigation are published
 (invalid) before the node exits with code 0.
+
+:class:`CorrectionNode` is the shape this node shares with ``current_node``, which corrects
+``dvl/velocity`` into ``current/velocity`` the same way.
 """
 
 from __future__ import annotations
@@ -75,6 +78,7 @@ from buoy_common.contract import (
     wind_stats_topic,
 )
 from wind_comp.compensation_messages import (
+    FlowSample,
     MalformedMessageError,
     anemometer_sample,
     anemometer_sample_cdr,
@@ -91,17 +95,14 @@ from wind_comp.config import (
     COMPENSATION_PARAMETER_PREFIX,
     CompensatorConfig,
 )
-from wind_comp.pipeline import CompensationOutput, wind_pipeline
-from wind_comp.products import WindProduct
-
-NODE_NAME = COMPENSATION_NODE_NAME
+from wind_comp.pipeline import CompensationOutput, CompensationPipeline, wind_pipeline
 
 DEFAULT_NAV_TIMEOUT_S = 1.0
 DIAGNOSTICS_PERIOD_S = 1.0
 
 
 class PendingStamp:
-    """Header stamp and wall arrival time of an anemometer sample awaiting its output."""
+    """Header stamp and wall arrival time of a sensor sample awaiting its output."""
 
     __slots__ = ("arrival_s", "nanosec", "sec", "t_s")
 
@@ -112,75 +113,99 @@ class PendingStamp:
         self.arrival_s = arrival_s
 
 
-class CompensationNode(FlushingNode):
-    def __init__(self):
-        super().__init__(NODE_NAME)
-        self.config = self._declare_compensator_config()
+class CorrectionNode(FlushingNode):
+    """What ``compensation_node`` and ``current_node`` share: the navigation (``nav/odometry``,
+    ``nav/fix``) and one flow sensor's samples in, exactly one corrected sample per sensor
+    sample out with the sensor sample's stamp, the products of the averaging windows, and
+    ``diagnostics``. A subclass names its topics and reads its sensor's messages
+    (:meth:`read_sample`)."""
+
+    def __init__(
+        self,
+        node_name: str,
+        parameter_prefix: str,
+        config_type: type,
+        make_pipeline,
+        sensor_topic: str,
+        sensor_message_type: type,
+        output_topic: str,
+        product_topics,
+        samples_name: str,
+    ):
+        """Args:
+        node_name, parameter_prefix: the node's name and the prefix of its own parameters.
+        config_type, make_pipeline: the configuration dataclass, declared as parameters, and
+            what makes the pipeline of such a configuration.
+        sensor_topic, sensor_message_type: the flow sensor's input.
+        output_topic: one corrected sample per input, frame ``map``.
+        product_topics: (mean topic, statistics topic) of a window length (s).
+        samples_name: what the diagnostics call the input samples (``wind``, ``dvl``).
+        """
+        super().__init__(node_name)
+        self.config = self.declare_config(config_type, prefix=parameter_prefix)
         self.nav_timeout_s = self.declare_value(
-            "compensation.nav_timeout_s",
+            parameter_prefix + "nav_timeout_s",
             DEFAULT_NAV_TIMEOUT_S,
-            "s: wind samples this much older than the newest anemometer stamp, waiting this long "
-            "in wall time and still without navigation around them are published invalid",
+            "s: samples this much older than the newest sensor stamp, waiting this long in wall "
+            "time and still without navigation around them are published invalid",
         )
         if not (math.isfinite(self.nav_timeout_s) and self.nav_timeout_s > 0):
             raise StartupError(
-                f"parameter 'compensation.nav_timeout_s' must be positive, got {self.nav_timeout_s}"
+                f"parameter '{parameter_prefix}nav_timeout_s' must be positive, "
+                f"got {self.nav_timeout_s}"
             )
-
-        self.pipeline = wind_pipeline(self.config)
+        self.sensor_topic = sensor_topic
+        self.samples_name = samples_name
+        self.pipeline: CompensationPipeline = make_pipeline(self.config)
         self._pending: collections.deque[PendingStamp] = collections.deque()
         self._counters = collections.Counter()
         self._counters_at_last_report = collections.Counter()
         self._last_report_s = time.monotonic()
         self._latencies_s: list[float] = []
 
-        self._true_wind_publisher = self.create_publisher(Vector3Stamped, WIND_TRUE_TOPIC, DATA_QOS)
+        self._output_publisher = self.create_publisher(Vector3Stamped, output_topic, DATA_QOS)
+        mean_topic, stats_topic = product_topics
         self._product_publishers = {
             window_s: (
-                self.create_publisher(Vector3Stamped, wind_mean_topic(window_s), DATA_QOS),
-                self.create_publisher(Float64MultiArray, wind_stats_topic(window_s), DATA_QOS),
+                self.create_publisher(Vector3Stamped, mean_topic(window_s), DATA_QOS),
+                self.create_publisher(Float64MultiArray, stats_topic(window_s), DATA_QOS),
             )
             for window_s in self.config.product_windows_s
         }
-        # Raw: wind samples are read from their CDR bytes and wind/true written as CDR bytes,
-        # the arithmetic process_bag runs, without building message objects on the way.
-        self.create_subscription(Vector3Stamped, WIND_RAW_TOPIC, self.on_wind, DATA_QOS, raw=True)
+        # Raw: sensor samples are read from their CDR bytes where a fast reader exists and the
+        # outputs written as CDR bytes, the arithmetic process_bag runs.
+        self.create_subscription(
+            sensor_message_type, sensor_topic, self.on_sample, DATA_QOS, raw=True
+        )
         # Raw: 100 Hz each, read straight from CDR as process_bag reads them.
         self.create_subscription(Odometry, NAV_ODOMETRY_TOPIC, self.on_odometry, DATA_QOS, raw=True)
         self.create_subscription(NavSatFix, NAV_FIX_TOPIC, self.on_fix, DATA_QOS, raw=True)
         self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
+        sensor = self.pipeline.sensor
         self.get_logger().info(
-            f"correcting {WIND_RAW_TOPIC} with {NAV_ODOMETRY_TOPIC}: anemometer at "
-            f"{list(self.config.anemometer_position_body_m)} m, rpy "
-            f"{list(self.config.anemometer_rpy_deg)} deg; products over "
-            f"{list(self.config.product_windows_s)} s"
+            f"correcting {sensor_topic} with {NAV_ODOMETRY_TOPIC} into {output_topic}: sensor at "
+            f"{list(sensor.position_body_m)} m, rpy {list(sensor.rpy_deg)} deg; products over "
+            f"{[averager.window_s for averager in self.pipeline.averagers]} s"
         )
 
-    def _declare_compensator_config(self) -> CompensatorConfig:
-        return self.declare_config(CompensatorConfig, prefix=COMPENSATION_PARAMETER_PREFIX)
+    def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:
+        """A sensor message's CDR bytes as (sample, header sec, header nanosec)."""
+        raise NotImplementedError
 
     # -- inputs -----------------------------------------------------------------------------
 
-    def on_wind(self, raw: bytes) -> None:
-        self._counters["wind_in"] += 1
-        parsed = anemometer_sample_cdr(raw)
-        if parsed is None:
-            message = deserialize_message(raw, Vector3Stamped)
-            parsed = (
-                anemometer_sample(message),
-                message.header.stamp.sec,
-                message.header.stamp.nanosec,
-            )
-        sample, sec, nanosec = parsed
+    def on_sample(self, raw: bytes) -> None:
+        self._counters["samples_in"] += 1
+        sample, sec, nanosec = self.read_sample(raw)
         rejection = self.pipeline.add_sample(sample)
         if rejection is not None:
-            self.reject(WIND_RAW_TOPIC, rejection)
+            self.reject(self.sensor_topic, rejection)
         self._pending.append(PendingStamp(sec, nanosec, sample.t_s, time.monotonic()))
         self.publish(self.pipeline.expire(self._timeout_horizon_s()))
 
     def _timeout_horizon_s(self) -> float:
         """Stamp (s) before which samples still without navigation are given up: older than
-        the newest anemometer stamp by ``nav_timeout_s`` and waiting that long in wall time."""
+        the newest sensor stamp by ``nav_timeout_s`` and waiting that long in wall time."""
         waited_enough_before_s = time.monotonic() - self.nav_timeout_s
         horizon_s = -math.inf
         for pending in self._pending:
@@ -216,18 +241,15 @@ class CompensationNode(FlushingNode):
     # -- outputs ----------------------------------------------------------------------------
 
     def publish(self, output: CompensationOutput) -> None:
-        """Publish decided samples in order, each with the stamp of its anemometer message,
-        and the averaging windows they closed."""
+        """Publish decided samples in order, each with the stamp of its sensor message, and
+        the averaging windows they closed."""
         now_s = time.monotonic()
-        for wind in output.samples.flow_enu_mps.tolist():
+        for flow in output.samples.flow_enu_mps.tolist():
             pending = self._pending.popleft()
-            self._true_wind_publisher.publish(flow_cdr(pending.sec, pending.nanosec, wind))
-            self._counters["wind_out"] += 1
+            self._output_publisher.publish(flow_cdr(pending.sec, pending.nanosec, flow))
+            self._counters["samples_out"] += 1
             self._latencies_s.append(now_s - pending.arrival_s)
-        self.publish_products(output.products)
-
-    def publish_products(self, products: list[WindProduct]) -> None:
-        for product in products:
+        for product in output.products:
             mean_publisher, stats_publisher = self._product_publishers[product.window_s]
             mean, stats = product_messages(
                 Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
@@ -238,7 +260,7 @@ class CompensationNode(FlushingNode):
     def flush_held_back(self) -> list:
         """End of input: publish every pending sample and the partial product windows."""
         self.publish(self.pipeline.flush())
-        publishers = [self._true_wind_publisher]
+        publishers = [self._output_publisher]
         for pair in self._product_publishers.values():
             publishers.extend(pair)
         return publishers
@@ -254,10 +276,11 @@ class CompensationNode(FlushingNode):
         latencies, self._latencies_s = self._latencies_s, []
         counts = self.pipeline.counts
         n_invalid = sum(n for status, n in counts.items() if status != SampleStatus.VALID)
+        name = self.samples_name
         values = {
-            "wind_samples_in": self._counters["wind_in"],
-            "wind_samples_out": self._counters["wind_out"],
-            "wind_samples_pending": self.pipeline.n_pending,
+            f"{name}_samples_in": self._counters["samples_in"],
+            f"{name}_samples_out": self._counters["samples_out"],
+            f"{name}_samples_pending": self.pipeline.n_pending,
             "valid": counts[SampleStatus.VALID],
             "invalid": n_invalid,
         }
@@ -270,17 +293,44 @@ class CompensationNode(FlushingNode):
                 "nav_samples_accepted": self.pipeline.compensator.nav_track.n_accepted,
                 "fix_messages_in": self._counters["fix_in"],
                 "latitude_deg": self.pipeline.latitude_deg,
-                "wind_rate_hz": new["wind_in"] / period_s,
+                f"{name}_rate_hz": new["samples_in"] / period_s,
                 "nav_rate_hz": new["nav_in"] / period_s,
                 "latency_mean_s": sum(latencies) / len(latencies) if latencies else math.nan,
                 "latency_max_s": max(latencies) if latencies else math.nan,
             }
         )
-        if new["wind_in"] == 0:
-            return "warn", f"no {WIND_RAW_TOPIC} samples", values
+        if new["samples_in"] == 0:
+            return "warn", f"no {self.sensor_topic} samples", values
         if new["nav_in"] == 0:
-            return "warn", f"no {NAV_ODOMETRY_TOPIC} samples: wind cannot be corrected", values
-        return "ok", f"{counts[SampleStatus.VALID]} valid, {n_invalid} invalid wind samples", values
+            return "warn", f"no {NAV_ODOMETRY_TOPIC} samples: nothing can be corrected", values
+        return (
+            "ok",
+            f"{counts[SampleStatus.VALID]} valid, {n_invalid} invalid {name} samples",
+            values,
+        )
+
+
+class CompensationNode(CorrectionNode):
+    def __init__(self):
+        super().__init__(
+            COMPENSATION_NODE_NAME,
+            COMPENSATION_PARAMETER_PREFIX,
+            CompensatorConfig,
+            wind_pipeline,
+            WIND_RAW_TOPIC,
+            Vector3Stamped,
+            WIND_TRUE_TOPIC,
+            (wind_mean_topic, wind_stats_topic),
+            "wind",
+        )
+
+    def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:
+        parsed = anemometer_sample_cdr(raw)
+        if parsed is None:
+            message = deserialize_message(raw, Vector3Stamped)
+            stamp = message.header.stamp
+            parsed = anemometer_sample(message), stamp.sec, stamp.nanosec
+        return parsed
 
 
 main = main_for(CompensationNode)
