@@ -1,8 +1,8 @@
 """``run_scenario``: run a simulated buoy live, each node its own process, optionally recording.
 
 Starts the truth node, the nodes of the sensors the scenario's platform carries (IMU, GNSS,
-anemometer, and a DVL where it has one) and the simulation clock (and, on request, the
-fusion and compensation nodes and the bag recorder) as separate processes that talk over DDS,
+anemometer, and a DVL where it has one) and the simulation clock (and, on request, the fusion,
+compensation and current nodes and the bag recorder) as separate processes that talk over DDS,
 waits until the scenario has played out, stops the long-running nodes with SIGINT and reports.
 It plays the role ``ros2 launch`` would on a full ROS install.
 """
@@ -23,11 +23,12 @@ from pathlib import Path
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS
 
-# Time for the last messages to travel through fusion, compensation and into the recorder.
+# Time for the last messages to travel through fusion, compensation (or the current estimate)
+# and into the recorder.
 DRAIN_S = 2.0
 STOP_TIMEOUT_S = 20.0
 SIM_TIME = {"use_sim_time": True}
-STOP_ORDER = ("fusion_node", "compensation_node", "bag_recorder")
+STOP_ORDER = ("fusion_node", "compensation_node", "current_node", "bag_recorder")
 
 
 def executable(name: str) -> str:
@@ -138,6 +139,11 @@ def parse_arguments(argv):
     parser.add_argument(
         "--compensation", action="store_true", help="also run compensation_node (implies --fusion)"
     )
+    parser.add_argument(
+        "--current",
+        action="store_true",
+        help="also run current_node (implies --fusion; the scenario must carry a DVL)",
+    )
     parser.add_argument("--namespace", help="put every node in this namespace, e.g. /buoy1")
     parser.add_argument("--log-dir", default=None, help="where node logs go (default: a temp dir)")
     return parser.parse_args(argv)
@@ -167,10 +173,19 @@ def run(arguments) -> int:
     # The processing nodes run on header stamps and the wall clock, as on a buoy: on simulated
     # time each would also take every /clock message, a callback per 5 ms for nothing.
     processing_nodes = []
-    if arguments.fusion or arguments.compensation:
+    if arguments.fusion or arguments.compensation or arguments.current:
         processing_nodes.append("fusion_node")
     if arguments.compensation:
         processing_nodes.append("compensation_node")
+    if arguments.current:
+        if not STREAMS["dvl"].carried(scenario):
+            print(
+                f"run_scenario: --current: scenario '{scenario.name}' carries no DVL "
+                "(add one with --set sensors.dvl={})",
+                file=sys.stderr,
+            )
+            return 2
+        processing_nodes.append("current_node")
     for name in processing_nodes:
         run.start(name, ros_arguments(arguments, {}), False)
     # A recording must start with the first sample of every topic; without a recorder some
