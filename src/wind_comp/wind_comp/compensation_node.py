@@ -97,7 +97,7 @@ from wind_comp.config import (
 )
 from wind_comp.pipeline import CompensationOutput, CompensationPipeline, wind_pipeline
 
-DEFAULT_NAV_TIMEOUT_S = 1.0
+WIND_NAV_TIMEOUT_S = 1.0
 DIAGNOSTICS_PERIOD_S = 1.0
 
 
@@ -131,6 +131,7 @@ class CorrectionNode(FlushingNode):
         output_topic: str,
         product_topics,
         samples_name: str,
+        default_nav_timeout_s: float,
     ):
         """Args:
         node_name, parameter_prefix: the node's name and the prefix of its own parameters.
@@ -140,12 +141,13 @@ class CorrectionNode(FlushingNode):
         output_topic: one corrected sample per input, frame ``map``.
         product_topics: (mean topic, statistics topic) of a window length (s).
         samples_name: what the diagnostics call the input samples (``wind``, ``dvl``).
+        default_nav_timeout_s: default of the latency budget ``<prefix>nav_timeout_s``, s.
         """
         super().__init__(node_name)
         self.config = self.declare_config(config_type, prefix=parameter_prefix)
         self.nav_timeout_s = self.declare_value(
             parameter_prefix + "nav_timeout_s",
-            DEFAULT_NAV_TIMEOUT_S,
+            default_nav_timeout_s,
             "s: samples this much older than the newest sensor stamp, waiting this long in wall "
             "time and still without navigation around them are published invalid",
         )
@@ -322,6 +324,7 @@ class CompensationNode(CorrectionNode):
             WIND_TRUE_TOPIC,
             (wind_mean_topic, wind_stats_topic),
             "wind",
+            WIND_NAV_TIMEOUT_S,
         )
 
     def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:

@@ -35,7 +35,8 @@ Publishes:
 Parameters: ``dvl.position`` (double[3], m, default [0, 0, -2]) and ``dvl.rpy_deg`` (double[3],
 deg, default [0, 0, 0]) of the shared buoy file; every other
 :class:`wind_comp.config.CurrentConfig` field as ``current.<field>``; and
-``current.nav_timeout_s`` (s, default 1.0), the latency budget, as ``compensation_node``'s.
+``current.nav_timeout_s`` (s, default 5.0), the latency budget, as ``compensation_node``'s (a
+current is an average over minutes: a DVL sample may well wait for late navigation).
 """
 
 from __future__ import annotations
@@ -55,6 +56,10 @@ from wind_comp.compensation_node import CorrectionNode
 from wind_comp.config import CURRENT_NODE_NAME, CURRENT_PARAMETER_PREFIX, CurrentConfig
 from wind_comp.pipeline import current_pipeline
 
+CURRENT_NAV_TIMEOUT_S = 5.0
+"""A current is an average of minutes: waiting for late navigation costs nothing, giving a
+sample up costs a sample."""
+
 
 class CurrentNode(CorrectionNode):
     def __init__(self):
@@ -68,6 +73,7 @@ class CurrentNode(CorrectionNode):
             CURRENT_TOPIC,
             (current_mean_topic, current_stats_topic),
             "dvl",
+            CURRENT_NAV_TIMEOUT_S,
         )
 
     def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:
