@@ -314,7 +314,7 @@ def test_report_of_a_processed_bag(tmp_path_factory, geometry, tmp_path, capsys)
     # The published products are read back as process_bag computed them (the gust window is
     # not published).
     published = [dataclasses.replace(p, gust_window_s=3.0) for p in data.products]
-    assert published == sorted(summary.products, key=lambda p: (p.window_s, p.window_start_s))
+    assert published == sorted(summary.wind.products, key=lambda p: (p.window_s, p.window_start_s))
     assert "published on wind/stats_1min, wind/stats_10min" in markdown
 
 

@@ -1,15 +1,19 @@
-"""Fusion and wind compensation over a recorded bag: the offline twin of the two nodes.
+"""Fusion, wind compensation and current estimate over a recorded bag: the offline twin of the
+nodes.
 
 :func:`process_bag` runs over the bag's sensor topics, in log-time order, the core of
-``fusion_node`` (:class:`buoy_nav.bag_fusion.OfflineFusion`) followed by the core of
-``compensation_node`` (:class:`wind_comp.pipeline.CompensationPipeline`): each navigation
-solution passes to the compensation as the numbers its ``nav/odometry`` and ``nav/fix`` carry,
-in the order the node receives them, and every ``anemometer/wind`` sample yields exactly one
-``wind/true`` (NaN when it cannot be corrected). The new bag holds ``nav/*``, ``wind/true``, the
-wind products (``wind/mean_<window>``, ``wind/stats_<window>``), the measured
-``anemometer/wind`` and any truth topics; every output message carries the log time of the input
-message after which it was produced. The wind products are also written to
-``<OUT_BAG>_wind_products.csv``. ``process_bag`` is its command line.
+``fusion_node`` (:class:`buoy_nav.bag_fusion.OfflineFusion`) followed by the cores of
+``compensation_node`` (when the bag has ``anemometer/wind``) and ``current_node`` (when it has
+``dvl/velocity``), :class:`wind_comp.pipeline.CompensationPipeline` both: each navigation
+solution passes to them as the numbers its ``nav/odometry`` and ``nav/fix`` carry, in the order
+the nodes receive them, and every ``anemometer/wind`` sample yields exactly one ``wind/true``,
+every ``dvl/velocity`` sample one ``current/velocity`` (NaN when they cannot be computed). The
+new bag holds ``nav/*``, those outputs and their products (``wind/mean_<window>``,
+``wind/stats_<window>``, ``current/mean_<window>``, ``current/stats_<window>``), the measured
+``anemometer/wind`` and ``dvl/velocity`` and any truth topics; every output message carries the
+log time of the input message after which it was produced. The products are also written to
+``<OUT_BAG>_wind_products.csv`` and ``<OUT_BAG>_current_products.csv``. ``process_bag`` is its
+command line.
 
 The compensation runs in this process, on whole stretches of samples at a time; the process
 that writes the bag only writes.
@@ -28,11 +32,25 @@ import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, Recovery
+from buoy_common.bag_io import (
+    BackgroundBagWriter,
+    BagError,
+    BagMessage,
+    BagProgress,
+    BagReader,
+    Recovery,
+)
 from buoy_common.contract import (
+    CURRENT_TOPIC,
+    DVL_TOPIC,
+    FLOAT64_ARRAY_MSGTYPE,
+    TWIST_COVARIANCE_MSGTYPE,
+    VECTOR3_MSGTYPE,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
     bag_topic,
+    current_mean_topic,
+    current_stats_topic,
     wind_mean_topic,
     wind_stats_topic,
 )
@@ -41,64 +59,110 @@ from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of,
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
 from wind_comp.compensation_messages import (
+    FlowSample,
     anemometer_sample,
     anemometer_sample_cdr,
+    dvl_sample,
     flows_cdr,
     product_messages,
 )
 from wind_comp.compensator import SampleStatus
-from wind_comp.config import CompensatorConfig
-from wind_comp.pipeline import CompensationOutput, wind_pipeline
-from wind_comp.products import WindProduct
+from wind_comp.config import CompensatorConfig, CurrentConfig
+from wind_comp.pipeline import (
+    CompensationOutput,
+    CompensationPipeline,
+    current_pipeline,
+    wind_pipeline,
+)
+from wind_comp.products import CurrentProduct, WindProduct
 
-TRUE_WIND_BAG_TOPIC = bag_topic(WIND_TRUE_TOPIC)
-VECTOR3_STAMPED = "geometry_msgs/msg/Vector3Stamped"
-FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
-PRODUCTS_CSV_SUFFIX = "_wind_products.csv"
+WIND_PRODUCTS_CSV_SUFFIX = "_wind_products.csv"
+CURRENT_PRODUCTS_CSV_SUFFIX = "_current_products.csv"
 PROGRESS_EVERY_MESSAGES = 2000
-# Anemometer samples handed to the compensation at a time: enough to pay numpy's per-call cost
+# Sensor samples handed to the compensation at a time: enough to pay numpy's per-call cost
 # once per stretch, few enough to keep the memory flat.
 SAMPLES_PER_STRETCH = 256
 
 
-def products_csv_path(out_bag) -> Path:
-    """Where the wind products of ``out_bag`` go: beside it, ``<name>_wind_products.csv``."""
+def products_csv_path(out_bag, suffix: str = WIND_PRODUCTS_CSV_SUFFIX) -> Path:
+    """Where the products of ``out_bag`` go: beside it, ``<name>_wind_products.csv`` (or the
+    ``suffix`` given, ``_current_products.csv`` for the current)."""
     out_bag = Path(out_bag)
     if not out_bag.name:  # "." or "..": named after the directory it stands for
         out_bag = out_bag.resolve()
-    return out_bag.with_name(out_bag.name + PRODUCTS_CSV_SUFFIX)
+    return out_bag.with_name(out_bag.name + suffix)
+
+
+@dataclass
+class CorrectionSummary:
+    """What one correction (the wind's or the current's) did over a bag."""
+
+    status_counts: dict[str, int] = field(default_factory=dict)
+    """Output samples by outcome: ``valid`` or the reason they are invalid."""
+    rejected_messages: Counter = field(default_factory=Counter)
+    """Input messages rejected, by reason (their outputs are invalid)."""
+    products: list = field(default_factory=list)
+    csv_path: Path | None = None
 
 
 @dataclass
 class ProcessSummary:
     """What a run did: counts of outputs and rejections, products, timing."""
 
-    wind_status_counts: dict[str, int] = field(default_factory=dict)
-    """Corrected wind samples by outcome: ``valid`` or the reason they are invalid."""
-    rejected_wind_messages: Counter = field(default_factory=Counter)
-    products: list[WindProduct] = field(default_factory=list)
+    wind: CorrectionSummary | None = None
+    """The wind compensation; None when the bag has no ``anemometer/wind``."""
+    current: CorrectionSummary | None = None
+    """The current estimate; None when the bag has no ``dvl/velocity``."""
     topic_counts: dict[str, int] = field(default_factory=dict)
     fusion_lines: list[str] = field(default_factory=list)
     duration_s: float = 0.0
     wall_s: float = 0.0
-    csv_path: Path | None = None
     recovery: Recovery | None = None
+    """How much of a cut input bag was recovered; None for a complete bag."""
 
 
-class OfflineCompensation:
-    """What ``compensation_node`` does, fed from a bag and writing to one.
+def _anemometer_record(reader: BagReader, message: BagMessage) -> tuple[FlowSample, int, int]:
+    parsed = anemometer_sample_cdr(message.raw)
+    if parsed is None:
+        decoded = reader.decode(message)
+        stamp = decoded.header.stamp
+        parsed = (anemometer_sample(decoded), stamp.sec, stamp.nanosec)
+    return parsed
+
+
+def _dvl_record(reader: BagReader, message: BagMessage) -> tuple[FlowSample, int, int]:
+    decoded = reader.decode(message)
+    stamp = decoded.header.stamp
+    return dvl_sample(decoded), stamp.sec, stamp.nanosec
+
+
+class OfflineCorrection:
+    """What ``compensation_node`` or ``current_node`` does, fed from a bag and writing to one.
 
     Navigation solutions come as the fusion's :class:`~buoy_nav.fusion_messages.NavValues`
-    (what ``nav/odometry`` and ``nav/fix`` carry, in that order), anemometer samples as the
-    records of ``anemometer/wind``; ``wind/true`` and the products are written with the log
-    time of the record after which they were decided.
+    (what ``nav/odometry`` and ``nav/fix`` carry, in that order), sensor samples as the records
+    of the sensor's topic; the outputs and the products are written with the log time of the
+    record after which they were decided.
     """
 
-    def __init__(self, config: CompensatorConfig, writer: BackgroundBagWriter):
-        self.pipeline = wind_pipeline(config)
+    def __init__(
+        self,
+        pipeline: CompensationPipeline,
+        writer: BackgroundBagWriter,
+        output_topic: str,
+        product_topics,
+        read_record,
+    ):
+        """pipeline: the node's pipeline; output_topic: one vector per sample; product_topics:
+        (mean topic, statistics topic) of a window length, s; read_record: a sensor record as
+        (sample, header sec, header nanosec)."""
+        self.pipeline = pipeline
         self.writer = writer
         self.rejected: Counter[str] = Counter()
-        self.products: list[WindProduct] = []
+        self.products: list = []
+        self._output_topic = bag_topic(output_topic)
+        self._product_topics = product_topics
+        self._read_record = read_record
         self._stamps: deque[tuple[int, int]] = deque()
         self._samples_waiting = 0
 
@@ -114,14 +178,9 @@ class OfflineCompensation:
             )
             pipeline.add_fix(STATUS_FIX, values.latitude_deg)
 
-    def add_wind(self, reader: BagReader, message: BagMessage) -> None:
-        """One ``anemometer/wind`` record; every few hundred, the decided samples are written."""
-        parsed = anemometer_sample_cdr(message.raw)
-        if parsed is None:
-            decoded = reader.decode(message)
-            stamp = decoded.header.stamp
-            parsed = (anemometer_sample(decoded), stamp.sec, stamp.nanosec)
-        sample, sec, nanosec = parsed
+    def add_sample(self, reader: BagReader, message: BagMessage) -> None:
+        """One sensor record; every few hundred, the decided samples are written."""
+        sample, sec, nanosec = self._read_record(reader, message)
         rejection = self.pipeline.add_sample(sample)
         if rejection is not None:
             self.rejected[rejection] += 1
@@ -135,32 +194,42 @@ class OfflineCompensation:
         """End of the data: every sample decided and written, partial windows closed."""
         self._write(self.pipeline.flush(), log_time_ns)
 
+    def summary(self, csv_path: Path) -> CorrectionSummary:
+        sensor = self.pipeline.sensor
+        return CorrectionSummary(
+            status_counts={
+                "valid" if status == SampleStatus.VALID else sensor.reason(status): n
+                for status, n in self.pipeline.counts.items()
+            },
+            rejected_messages=self.rejected,
+            products=self.products,
+            csv_path=csv_path,
+        )
+
     def _write(self, output: CompensationOutput, log_time_ns: int) -> None:
         stamps = [self._stamps.popleft() for _ in range(len(output.samples))]
         secs = np.array([sec for sec, _ in stamps], dtype=np.int64)
         nanosecs = np.array([nanosec for _, nanosec in stamps], dtype=np.int64)
         for raw in flows_cdr(secs, nanosecs, output.samples.flow_enu_mps):
-            self.writer.write_raw(TRUE_WIND_BAG_TOPIC, VECTOR3_STAMPED, log_time_ns, raw)
+            self.writer.write_raw(self._output_topic, VECTOR3_MSGTYPE, log_time_ns, raw)
+        mean_topic, stats_topic = self._product_topics
         for product in output.products:
             self.products.append(product)
             mean, stats = product_messages(
                 Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
             )
             self.writer.write(
-                bag_topic(wind_mean_topic(product.window_s)), VECTOR3_STAMPED, log_time_ns, mean
+                bag_topic(mean_topic(product.window_s)), VECTOR3_MSGTYPE, log_time_ns, mean
             )
             self.writer.write(
-                bag_topic(wind_stats_topic(product.window_s)),
-                FLOAT64_MULTI_ARRAY,
-                log_time_ns,
-                stats,
+                bag_topic(stats_topic(product.window_s)), FLOAT64_ARRAY_MSGTYPE, log_time_ns, stats
             )
 
 
-def write_products_csv(products: list[WindProduct], path: Path) -> None:
-    """One row per closed averaging window; columns named with their units. The file appears
-    only once complete."""
-    names = [f.name for f in fields(WindProduct)]
+def write_products_csv(products: list, product_type: type, path: Path) -> None:
+    """One row per closed averaging window (``WindProduct`` or ``CurrentProduct`` fields);
+    columns named with their units. The file appears only once complete."""
+    names = [f.name for f in fields(product_type)]
     with staged_file(path) as stream:
         writer = csv.writer(stream)
         writer.writerow(names)
@@ -174,23 +243,50 @@ def _csv_value(value) -> str:
     return str(value)
 
 
+def _stored_sensor(reader: BagReader, topic: str, msgtype: str) -> str | None:
+    """The stored name of a flow sensor's topic in the bag, None when absent; BagError when it
+    holds another type."""
+    stored = next((n for n in reader.topics if relative_topic(n) == topic), None)
+    if stored is not None and reader.topics[stored].msgtype != msgtype:
+        raise BagError(
+            f"bag {reader.path}: topic {stored} holds {reader.topics[stored].msgtype}, "
+            f"expected {msgtype}"
+        )
+    return stored
+
+
 def process_bag(
     in_bag,
     out_bag,
     fusion_config: FusionConfig,
     compensator_config: CompensatorConfig,
     overwrite: bool = False,
+    current_config: CurrentConfig | None = None,
 ) -> ProcessSummary:
-    """Fuse and correct ``in_bag`` into ``out_bag`` (a new bag; replaced with ``overwrite``)
-    and the products CSV beside it. Raises BagError for a missing or unreadable bag or one
-    without the required topics, and OutputError, before anything is read or written, if an
-    output is, contains or lies inside ``in_bag``."""
+    """Fuse ``in_bag`` and correct its wind and its DVL samples into ``out_bag`` (a new bag;
+    replaced with ``overwrite``) and the products CSVs beside it. ``current_config`` None: the
+    defaults of ``current_node`` (``dvl.position`` and ``dvl.rpy_deg`` included). Raises
+    BagError for a missing or unreadable bag or one without the fusion's topics and without
+    both ``anemometer/wind`` and ``dvl/velocity``, and OutputError, before anything is read or
+    written, if an output is, contains or lies inside ``in_bag``."""
     started = time.monotonic()
-    csv_path = products_csv_path(out_bag)
-    check_outputs_apart_from_inputs([in_bag], [out_bag, csv_path])
+    csv_paths = {
+        name: products_csv_path(out_bag, suffix)
+        for name, suffix in (
+            ("wind", WIND_PRODUCTS_CSV_SUFFIX),
+            ("current", CURRENT_PRODUCTS_CSV_SUFFIX),
+        )
+    }
+    check_outputs_apart_from_inputs([in_bag], [out_bag, *csv_paths.values()])
     with BagReader(in_bag) as reader:
-        sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_RAW_TOPIC,))
-        stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
+        sensors = sensor_topics_of(reader, fusion_config)
+        stored_wind = _stored_sensor(reader, WIND_RAW_TOPIC, VECTOR3_MSGTYPE)
+        stored_dvl = _stored_sensor(reader, DVL_TOPIC, TWIST_COVARIANCE_MSGTYPE)
+        if stored_wind is None and stored_dvl is None:
+            raise BagError(
+                f"bag {reader.path} has neither {WIND_RAW_TOPIC} nor {DVL_TOPIC}: nothing to "
+                "correct"
+            )
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
         with (
@@ -198,41 +294,61 @@ def process_bag(
             BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
         ):
             fusion = OfflineFusion(fusion_config, writer)
-            compensation = OfflineCompensation(compensator_config, writer)
+            corrections: dict[str, OfflineCorrection] = {}
+            if stored_wind is not None:
+                corrections[stored_wind] = OfflineCorrection(
+                    wind_pipeline(compensator_config),
+                    writer,
+                    WIND_TRUE_TOPIC,
+                    (wind_mean_topic, wind_stats_topic),
+                    _anemometer_record,
+                )
+            if stored_dvl is not None:
+                corrections[stored_dvl] = OfflineCorrection(
+                    current_pipeline(current_config or CurrentConfig()),
+                    writer,
+                    CURRENT_TOPIC,
+                    (current_mean_topic, current_stats_topic),
+                    _dvl_record,
+                )
             log_time_ns = reader.start_ns
             for index, message in enumerate(
-                reader.messages([*sensors.values(), stored_wind, *truth])
+                reader.messages([*sensors.values(), *corrections, *truth])
             ):
                 log_time_ns = message.log_time_ns
                 topic = relative_of.get(message.topic)
                 if topic is not None:
                     solutions = fusion.add_message(reader, topic, message)
                     if solutions:
-                        compensation.add_navigation(solutions)
+                        for correction in corrections.values():
+                            correction.add_navigation(solutions)
                 else:
                     writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                    if message.topic == stored_wind:
-                        compensation.add_wind(reader, message)
+                    correction = corrections.get(message.topic)
+                    if correction is not None:
+                        correction.add_sample(reader, message)
                 if index % PROGRESS_EVERY_MESSAGES == 0:
                     progress.reached(log_time_ns)
-            compensation.add_navigation(fusion.finish())
-            compensation.finish(log_time_ns)
+            solutions = fusion.finish()
+            for correction in corrections.values():
+                correction.add_navigation(solutions)
+                correction.finish(log_time_ns)
             progress.done()
         duration_s = reader.duration_s
-    write_products_csv(compensation.products, csv_path)
+    summaries = {}
+    for stored, product_type, name in (
+        (stored_wind, WindProduct, "wind"),
+        (stored_dvl, CurrentProduct, "current"),
+    ):
+        if stored is None:
+            continue
+        write_products_csv(corrections[stored].products, product_type, csv_paths[name])
+        summaries[name] = corrections[stored].summary(csv_paths[name])
     return ProcessSummary(
-        wind_status_counts={
-            "valid"
-            if status == SampleStatus.VALID
-            else compensation.pipeline.sensor.reason(status): n
-            for status, n in compensation.pipeline.counts.items()
-        },
-        rejected_wind_messages=compensation.rejected,
-        products=compensation.products,
+        **summaries,
         topic_counts=writer.counts,
         fusion_lines=fusion.summary(),
         duration_s=duration_s,
         wall_s=time.monotonic() - started,
-        csv_path=csv_path,
         recovery=reader.recovery,
     )

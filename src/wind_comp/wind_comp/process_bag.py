@@ -1,17 +1,20 @@
-"""``process_bag``: fusion and wind correction over a recorded bag, the offline twin of the nodes.
+"""``process_bag``: fusion, wind correction and current over a recorded bag, the offline twin of
+the nodes.
 
     process_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file compensation.yaml]
-                [--overwrite]
+                [--params-file current.yaml] [--overwrite]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
-by ``compensation_node`` (:func:`wind_comp.bag_processing.process_bag`): every
-``anemometer/wind`` sample yields exactly one ``wind/true`` (NaN when it cannot be corrected).
-The new bag holds ``nav/*``, ``wind/true``, the wind products (``wind/mean_<window>``,
-``wind/stats_<window>``), the measured ``anemometer/wind`` and any truth topics; the wind
-products are also written to ``<OUT_BAG>_wind_products.csv``. Parameters come from the same
-YAML files the nodes take.
+by ``compensation_node`` and ``current_node`` (:func:`wind_comp.bag_processing.process_bag`):
+every ``anemometer/wind`` sample yields exactly one ``wind/true``, every ``dvl/velocity`` sample
+one ``current/velocity`` (NaN when they cannot be computed). The bag needs the fusion's topics
+and at least one of the two. The new bag holds ``nav/*``, ``wind/true``, ``current/velocity``,
+their products (``wind/mean_<window>``, ``wind/stats_<window>``, ``current/mean_<window>``,
+``current/stats_<window>``), the measured ``anemometer/wind`` and ``dvl/velocity`` and any truth
+topics; the products are also written to ``<OUT_BAG>_wind_products.csv`` and
+``<OUT_BAG>_current_products.csv``. Parameters come from the same YAML files the nodes take.
 
-Both outputs are written under temporary names beside them and appear only when complete; they
+All outputs are written under temporary names beside them and appear only when complete; they
 may not be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or
 bags (one line on stderr); 3 done, but IN_BAG was cut short (a recorder killed or out of power)
 and was processed up to its last complete chunk (a warning says how much was read).
@@ -23,20 +26,21 @@ import argparse
 import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
-from buoy_common.contract import WIND_RAW_TOPIC, seconds_to_stamp, window_label
+from buoy_common.contract import DVL_TOPIC, WIND_RAW_TOPIC, seconds_to_stamp, window_label
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
 from wind_comp.bag_processing import ProcessSummary, process_bag
-from wind_comp.config import compensator_config_from_files
+from wind_comp.config import compensator_config_from_files, current_config_from_files
+from wind_comp.products import CurrentProduct, WindProduct
 
 
 def parse_arguments(argv):
     parser = argparse.ArgumentParser(prog="process_bag", description=__doc__.split("\n")[0])
     parser.add_argument(
         "in_bag",
-        help="bag with imu/data_raw, gnss/fix, gnss/heading, anemometer/wind"
-        "[, gnss/vel, gnss/baseline]",
+        help="bag with imu/data_raw, gnss/fix, gnss/heading[, gnss/vel, gnss/baseline] and "
+        "anemometer/wind, dvl/velocity or both",
     )
     parser.add_argument("out_bag", help="bag directory to create")
     parser.add_argument(
@@ -52,32 +56,51 @@ def parse_arguments(argv):
 def print_summary(summary: ProcessSummary, out_bag: str) -> None:
     for line in summary.fusion_lines:
         print(line)
-    counts = summary.wind_status_counts
-    invalid = ", ".join(
-        f"{outcome} {n}" for outcome, n in counts.items() if outcome != "valid" and n
-    )
-    print(
-        f"wind samples: {sum(counts.values())} in, {counts.get('valid', 0)} corrected, "
-        f"invalid: {invalid or 'none'}"
-    )
-    for reason, n in sorted(summary.rejected_wind_messages.items()):
-        print(f"rejected message {WIND_RAW_TOPIC}: {reason}: {n}")
-    for product in summary.products:
-        if product.window_end_s - product.window_start_s < product.window_s:
+    written = [out_bag]
+    for name, topic, correction in (
+        ("wind", WIND_RAW_TOPIC, summary.wind),
+        ("current", DVL_TOPIC, summary.current),
+    ):
+        if correction is None:
             continue
-        start_sec, _ = seconds_to_stamp(product.window_start_s)
-        print(
-            f"{window_label(product.window_s):>6s} window from {start_sec}: "
-            f"{product.vector_mean_speed_mps:6.2f} m/s from "
-            f"{product.vector_mean_direction_deg:6.1f} deg, gust {product.gust_mps:6.2f} m/s, "
-            f"{product.n_valid} valid / {product.n_invalid} invalid"
+        counts = correction.status_counts
+        invalid = ", ".join(
+            f"{outcome} {n}" for outcome, n in counts.items() if outcome != "valid" and n
         )
+        print(
+            f"{topic} samples: {sum(counts.values())} in, {counts.get('valid', 0)} {name} "
+            f"samples out, invalid: {invalid or 'none'}"
+        )
+        for reason, n in sorted(correction.rejected_messages.items()):
+            print(f"rejected message {topic}: {reason}: {n}")
+        for product in correction.products:
+            if product.window_end_s - product.window_start_s < product.window_s:
+                continue
+            print(
+                f"{window_label(product.window_s):>6s} {name} window from "
+                f"{seconds_to_stamp(product.window_start_s)[0]}: {_product_text(product)}"
+            )
+        written.append(str(correction.csv_path))
     for topic, count in sorted(summary.topic_counts.items()):
         print(f"{topic:22s} {count:8d}")
-    print(f"wrote {out_bag} and {summary.csv_path}")
+    print(f"wrote {', '.join(written)}")
     print(
         f"{summary.duration_s:.1f} s of data in {summary.wall_s:.1f} s "
         f"({summary.duration_s / max(summary.wall_s, 1e-9):.0f}x real time)"
+    )
+
+
+def _product_text(product: WindProduct | CurrentProduct) -> str:
+    counts = f"{product.n_valid} valid / {product.n_invalid} invalid"
+    if isinstance(product, CurrentProduct):
+        return (
+            f"{product.speed_mps:6.3f} m/s toward {product.direction_deg:6.1f} deg, "
+            f"std u/v {product.std_u_mps:5.3f}/{product.std_v_mps:5.3f} m/s, {counts}"
+        )
+    return (
+        f"{product.vector_mean_speed_mps:6.2f} m/s from "
+        f"{product.vector_mean_direction_deg:6.1f} deg, gust {product.gust_mps:6.2f} m/s, "
+        f"{counts}"
     )
 
 
@@ -90,6 +113,7 @@ def main(argv=None) -> None:
             fusion_config_from_files(arguments.params_file),
             compensator_config_from_files(arguments.params_file),
             arguments.overwrite,
+            current_config_from_files(arguments.params_file),
         )
     except (ParameterError, BagError, OutputError, OSError) as error:
         print(f"process_bag: {error}", file=sys.stderr)
