@@ -25,6 +25,7 @@ from wind_comp.bag_processing import CURRENT_PRODUCTS_CSV_SUFFIX, process_bag, p
 from wind_comp.compensation_messages import CURRENT_STATS_FIELDS, stats_values
 from wind_comp.config import compensator_config_from_files, current_config_from_files
 from wind_comp.process_bag import main as process_bag_main
+from wind_comp.wind_report import main as wind_report_main
 
 REPO = Path(__file__).resolve().parents[2]
 PARAMETER_FILES = [
@@ -206,3 +207,29 @@ def _quaternion(odometry) -> list[float]:
 
 def _vector(v) -> np.ndarray:
     return np.array([v.x, v.y, v.z])
+
+
+def test_wind_report_draws_the_current_of_a_bag_without_wind(ship, tmp_path, capsys):
+    _, out, _ = ship
+    assert wind_report_main([str(out), "--out", str(tmp_path / "report")]) == 0
+    written = {Path(line).name for line in capsys.readouterr().out.split()}
+    assert written == {"current_time_series.png", "current_averaging.png", "current_products.md"}
+    table = (tmp_path / "report" / "current_products.md").read_text()
+    ten_minutes = [line for line in table.splitlines() if line.startswith("| 600 s means")]
+    assert len(ten_minutes) == 1
+
+
+def test_wind_report_draws_wind_and_current_of_a_buoy(open_ocean, tmp_path, capsys):
+    _, out, _ = open_ocean
+    assert wind_report_main([str(out), "--out", str(tmp_path / "report")]) == 0
+    written = {Path(line).name for line in capsys.readouterr().out.split()}
+    assert {"wind_time_series.png", "wind_products.md", "current_time_series.png"} <= written
+
+
+def test_wind_report_names_both_reports_when_a_bag_has_neither(ship, tmp_path, capsys):
+    sensors, _, _ = ship  # the ship's sensor bag: a DVL, but no current/velocity yet
+    with pytest.raises(SystemExit) as exit_info:
+        wind_report_main([str(sensors), "--out", str(tmp_path / "report")])
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "wind/true" in error and "current/velocity" in error

@@ -1,8 +1,10 @@
-"""The report of a wind-correction run: figures and tables in a folder.
+"""The report of a wind-correction run, and of a current estimate: figures and tables in a folder.
 
 - :mod:`wind_comp.report.data`: everything a report shows, as plain arrays (:class:`ReportData`),
   gathered from a bag or a saved ``.npz`` file;
 - :mod:`wind_comp.report.attitude`: Euler angles, their 1σ and their errors;
+- :mod:`wind_comp.report.current`: the current of a bag (:class:`CurrentData`), its accuracy by
+  window and against the window length;
 - :mod:`wind_comp.report.figures` and :mod:`wind_comp.report.tables`: what is drawn and tabulated;
 - :func:`write_report`: all of it into one folder. The ``wind_report`` command
   (:mod:`wind_comp.wind_report`) runs it on a bag or a saved file.
@@ -10,17 +12,28 @@
 
 from pathlib import Path
 
+from wind_comp.report.current import CurrentData
 from wind_comp.report.data import ReportData
-from wind_comp.report.figures import write_figures
-from wind_comp.report.tables import wind_products_markdown
+from wind_comp.report.figures import write_current_figures, write_figures
+from wind_comp.report.tables import current_markdown, wind_products_markdown
 
 
-def write_report(data: ReportData, out_dir) -> list[Path]:
-    """Write the report figures and table into ``out_dir`` (created); return the paths."""
+def write_report(
+    data: ReportData | None, out_dir, current: CurrentData | None = None, title: str = ""
+) -> list[Path]:
+    """Write the report figures and tables into ``out_dir`` (created): the wind's of ``data``,
+    the current's of ``current``, whichever is given; return the paths."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = write_figures(data, out_dir)
-    table = out_dir / "wind_products.md"
-    table.write_text(wind_products_markdown(data))
-    paths.append(table)
+    paths = []
+    if data is not None:
+        paths += write_figures(data, out_dir)
+        table = out_dir / "wind_products.md"
+        table.write_text(wind_products_markdown(data))
+        paths.append(table)
+    if current is not None:
+        paths += write_current_figures(current, out_dir)
+        table = out_dir / "current_products.md"
+        table.write_text(current_markdown(current, title or (data.title if data else "")))
+        paths.append(table)
     return paths

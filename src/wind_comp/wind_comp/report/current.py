@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from buoy_common.bag_io import BagReader
+from buoy_common.bag_io import BagError, BagReader
 from buoy_common.contract import (
     CURRENT_STATS_PREFIX,
     CURRENT_TOPIC,
@@ -30,6 +30,7 @@ from buoy_common.contract import (
 from wind_comp.compensation_messages import stats_values
 from wind_comp.products import CurrentProduct, oceanographic_direction_deg
 from wind_comp.report.data import (
+    ReportDataError,
     has_messages,
     interpolate_vectors,
     stamped_vectors,
@@ -60,6 +61,16 @@ class CurrentData:
     products: list[CurrentProduct]
     truth_current_enu_mps: np.ndarray | None = None
     truth_water_enu_mps: np.ndarray | None = None
+
+
+def current_report_data(bag) -> CurrentData | None:
+    """:func:`current_data_from_bag` of the bag at path ``bag``; :class:`ReportDataError` (one
+    line) for a missing or unreadable bag."""
+    try:
+        with BagReader(bag) as reader:
+            return current_data_from_bag(reader)
+    except BagError as error:
+        raise ReportDataError(str(error)) from error
 
 
 def current_data_from_bag(reader: BagReader) -> CurrentData | None:

@@ -6,7 +6,11 @@ global backend state are involved:
 - ``attitude_error.png`` (only with truth): roll, pitch and heading error of the navigation,
   within the filter's own ±3σ when the navigation carries its covariance;
 - ``vertical_wind_spectrum.png``: Welch power spectra of the vertical wind before and after
-  correction (and of the truth).
+  correction (and of the truth);
+- ``current_time_series.png`` (bags with ``current/velocity``): the current's single samples,
+  its window means and the truth;
+- ``current_averaging.png`` (with the simulator's truth): the error of the window means against
+  the window length.
 
 Angles are degrees in every figure.
 """
@@ -18,8 +22,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from scipy.signal import welch
 
-from wind_comp.products import meteorological_direction_deg
+from wind_comp.products import meteorological_direction_deg, oceanographic_direction_deg
 from wind_comp.report.attitude import attitude_errors_deg
+from wind_comp.report.current import CurrentData, error_by_window_length
 from wind_comp.report.data import ReportData, titled, utc_text, wind_series
 
 _MIN_SPECTRUM_SAMPLES = 32
@@ -134,3 +139,105 @@ def _save(figure: Figure, path: Path) -> Path:
     figure.tight_layout()
     figure.savefig(path, dpi=120)
     return path
+
+
+def write_current_figures(current: CurrentData, out_dir: Path) -> list[Path]:
+    """Draw the current's figures into ``out_dir``: ``current_time_series.png`` always,
+    ``current_averaging.png`` when the bag carries both truth topics; return their paths."""
+    paths = [_plot_current_time_series(current, out_dir / "current_time_series.png")]
+    if current.truth_current_enu_mps is not None and current.truth_water_enu_mps is not None:
+        paths.append(_plot_current_averaging(current, out_dir / "current_averaging.png"))
+    return paths
+
+
+def _plot_current_time_series(current: CurrentData, path: Path) -> Path:
+    """East and north components: the single samples (waves and all), the window means, and
+    the truth; then speed and direction (toward) of the means."""
+    origin_s = _minute_origin_s(current.t_s)
+    t_s = current.t_s - origin_s
+    figure = Figure(figsize=(10, 9))
+    east_axis, north_axis, speed_axis, direction_axis = figure.subplots(4, 1, sharex=True)
+    for axis, k, name in ((east_axis, 0, "east"), (north_axis, 1, "north")):
+        axis.plot(
+            t_s,
+            current.current_enu_mps[:, k],
+            ".",
+            markersize=2,
+            color="0.6",
+            label="current/velocity (single samples)",
+        )
+        if current.truth_water_enu_mps is not None:
+            axis.plot(
+                t_s,
+                current.truth_water_enu_mps[:, k],
+                color="tab:cyan",
+                linewidth=0.6,
+                label="water at the DVL (truth)",
+            )
+        if current.truth_current_enu_mps is not None:
+            axis.plot(
+                t_s, current.truth_current_enu_mps[:, k], color="tab:green", label="current (truth)"
+            )
+        axis.set_ylabel(f"{name} (m/s)")
+    for product, color in _window_colours(current.products):
+        # Over the samples the window holds: a window closed at the end of the data is short.
+        start, end = product.first_sample_s - origin_s, product.last_sample_s - origin_s
+        label = f"{product.window_s:g} s mean"
+        east_axis.hlines(product.mean_u_enu_mps, start, end, color=color, label=label)
+        north_axis.hlines(product.mean_v_enu_mps, start, end, color=color, label=label)
+        speed_axis.hlines(product.speed_mps, start, end, color=color, label=label)
+        direction_axis.hlines(product.direction_deg, start, end, color=color, label=label)
+    if current.truth_current_enu_mps is not None:
+        truth = current.truth_current_enu_mps
+        speed_axis.plot(
+            t_s, np.hypot(truth[:, 0], truth[:, 1]), color="tab:green", label="current (truth)"
+        )
+        direction_axis.plot(
+            t_s,
+            oceanographic_direction_deg(truth[:, 0], truth[:, 1]),
+            color="tab:green",
+            label="current (truth)",
+        )
+    speed_axis.set_ylabel("speed of the mean (m/s)")
+    direction_axis.set_ylabel("toward (deg)")
+    direction_axis.set_xlabel(
+        "time (s)" if origin_s == 0.0 else f"time (s) since {utc_text(origin_s)}"
+    )
+    for axis in (east_axis, north_axis, speed_axis, direction_axis):
+        axis.grid(alpha=0.3)
+        handles, labels = axis.get_legend_handles_labels()
+        unique = dict(zip(labels, handles, strict=True))
+        axis.legend(unique.values(), unique.keys(), loc="upper right", fontsize="small")
+    east_axis.set_title("current: single DVL samples and window means (ENU, toward)")
+    return _save(figure, path)
+
+
+def _plot_current_averaging(current: CurrentData, path: Path) -> Path:
+    rows = [row for row in error_by_window_length(current) if row.n_windows > 0]
+    windows = np.array([row.window_s for row in rows[1:]])
+    figure = Figure(figsize=(8, 5))
+    axis = figure.subplots()
+    for field, label, color in (
+        ("estimate_vs_current_mps", "estimate − current (what a user gets)", "tab:red"),
+        ("water_vs_current_mps", "water at the DVL − current (the waves' part)", "tab:cyan"),
+        ("estimate_vs_water_mps", "estimate − water at the DVL (navigation, DVL)", "tab:gray"),
+    ):
+        values = np.array([getattr(row, field) for row in rows])
+        axis.loglog(windows, values[1:], "o-", color=color, label=label)
+        axis.axhline(values[0], color=color, linestyle=":", linewidth=0.8)
+    axis.set_xlabel("averaging window (s); dotted: single samples")
+    axis.set_ylabel("RMS horizontal error of the window mean (m/s)")
+    axis.set_title("what averaging removes: the waves fall as 1/T, noise as 1/√T")
+    axis.grid(alpha=0.3, which="both")
+    axis.legend(fontsize="small")
+    return _save(figure, path)
+
+
+def _window_colours(products):
+    colours = {60.0: "tab:orange", 600.0: "tab:red"}
+    for product in products:
+        yield product, colours.get(product.window_s, "tab:purple")
+
+
+def _minute_origin_s(t_s: np.ndarray) -> float:
+    return float(np.floor(t_s[0] / 60.0) * 60.0) if t_s.size else 0.0

@@ -1,12 +1,17 @@
-"""The report's table: the wind's error against the truth and the averaged wind products, as
-Markdown."""
+"""The report's tables, as Markdown: the wind's error against the truth and the averaged wind
+products; the current's error against the truth and the averaged current."""
 
 import math
 
 import numpy as np
 
 from wind_comp.products import WindProduct, meteorological_direction_deg
+from wind_comp.report.current import CurrentData, window_errors
 from wind_comp.report.data import ReportData, titled, utc_text, wind_series
+
+MIN_CURRENT_FOR_DIRECTION_MPS = 0.2
+"""Windows whose true current is slower than this leave out of the direction error: the
+direction of a slack current is not defined."""
 
 
 def wind_products_markdown(data: ReportData) -> str:
@@ -85,3 +90,81 @@ def _products_table(products: list[WindProduct], source: str) -> list[str]:
             f"| {product.std_u_mps:.2f} | {product.std_v_mps:.2f} | {product.std_w_mps:.2f} |"
         )
     return lines
+
+
+def current_markdown(current: CurrentData, title: str) -> str:
+    """The table of ``current_products.md``: with truth, the error of the single samples and of
+    the window means against it; then the averaged current."""
+    lines = [f"# {title}: current", ""]
+    if current.truth_current_enu_mps is not None:
+        lines += [*_current_accuracy(current), ""]
+    lines += [
+        "## Averaged current",
+        "",
+        "Direction: degrees clockwise from true North, where the water flows toward. Vectors "
+        "ENU. The standard deviations of a window hold the waves' orbital motion its mean "
+        "averaged away. The last window of each length may be partial.",
+        "",
+    ]
+    if not current.products:
+        return "\n".join([*lines, "No averaging window completed."]) + "\n"
+    lines += [
+        "| window start (UTC) | length (s) | valid | invalid | speed (m/s) | toward (deg) "
+        "| mean u (m/s) | mean v (m/s) | mean w (m/s) | std u (m/s) | std v (m/s) "
+        "| std w (m/s) |",
+        "|" + "---|" * 12,
+    ]
+    for product in current.products:
+        lines.append(
+            f"| {utc_text(product.window_start_s)} | {product.window_s:.0f} | {product.n_valid} "
+            f"| {product.n_invalid} | {product.speed_mps:.4f} | {product.direction_deg:.2f} "
+            f"| {product.mean_u_enu_mps:.4f} | {product.mean_v_enu_mps:.4f} "
+            f"| {product.mean_w_enu_mps:.4f} | {product.std_u_mps:.3f} "
+            f"| {product.std_v_mps:.3f} | {product.std_w_mps:.3f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _current_accuracy(current: CurrentData) -> list[str]:
+    lines = [
+        "## Error against truth",
+        "",
+        "Single samples against the water's velocity at the DVL (the estimate's own error) and "
+        "against the current (which the waves' orbital velocity is not part of); window means "
+        "against the current's mean over the same samples. Horizontal errors; the direction "
+        f"only over windows whose current is {MIN_CURRENT_FOR_DIRECTION_MPS} m/s or faster.",
+        "",
+        "| series | against | windows | RMS error (m/s) | max error (m/s) "
+        "| max direction error (deg) |",
+        "|---|---|---|---|---|---|",
+    ]
+    valid = np.all(np.isfinite(current.current_enu_mps), axis=1)
+    references = [("current", current.truth_current_enu_mps)]
+    if current.truth_water_enu_mps is not None:
+        references.insert(0, ("water at the DVL", current.truth_water_enu_mps))
+    for name, reference in references:
+        error = np.hypot(*(current.current_enu_mps[valid] - reference[valid])[:, :2].T)
+        lines.append(
+            f"| single samples | {name} | {error.size} | {_rms(error):.4f} "
+            f"| {_largest(error):.4f} | |"
+        )
+    for window_s in sorted({product.window_s for product in current.products}):
+        errors = window_errors(
+            current.t_s, current.current_enu_mps, current.truth_current_enu_mps, window_s
+        )
+        fast = errors.reference_speed_mps >= MIN_CURRENT_FOR_DIRECTION_MPS
+        direction = np.abs(errors.direction_error_deg[fast])
+        lines.append(
+            f"| {window_s:g} s means | current | {errors.vector_error_mps.size} "
+            f"| {_rms(errors.vector_error_mps):.4f} "
+            f"| {_largest(errors.vector_error_mps):.4f} | {_largest(direction):.2f} |"
+        )
+    return lines
+
+
+def _rms(values: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(values)))) if values.size else math.nan
+
+
+def _largest(values: np.ndarray) -> float:
+    return float(np.max(values)) if values.size else math.nan
