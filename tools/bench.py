@@ -15,13 +15,15 @@ as constants and printed beside our figures:
    pass-through stand-ins for both nodes (tools/passthrough_node.py): the floor it is read
    against;
 7. consistency: Monte-Carlo normalised errors of the accelerometer bias over many seeds
-   (tools/bias_consistency.py).
+   (tools/bias_consistency.py);
+8. current (paper 003): process_bag on ship_current, sea_state and open_ocean with their DVL
+   (tools/bench_current.py).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency ...]
+    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|current ...]
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -45,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 from bench_analysis import ANALYSES, wrap_deg
+from bench_current import CURRENT_ANALYSES, current_cases, print_current
 from bench_plan import (
     ATTITUDE_MAX_ERROR_DEG,
     ATTITUDE_RMS_DEG,
@@ -91,7 +94,7 @@ from buoy_nav.config import fusion_config_from_files
 from sensor_sim.scenario import load_scenario
 from sensor_sim.simulate_bag import simulate
 from wind_comp.bag_processing import process_bag
-from wind_comp.config import compensator_config_from_files
+from wind_comp.config import compensator_config_from_files, current_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"
 CACHE_DIR = OUT_DIR / "cache"
@@ -99,7 +102,7 @@ RUNS_DIR = OUT_DIR / "runs"
 SIMULATOR_PACKAGE = REPO / "src/sensor_sim/sensor_sim"
 # Modules outside sensor_sim whose code decides what simulate_bag writes.
 SIMULATION_SHARED_MODULES = ("buoy_common.parameters", "buoy_common.bag_io")
-SECTIONS = ("attitude", "wind", "speed", "live", "consistency")
+SECTIONS = ("attitude", "wind", "speed", "live", "consistency", "current")
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 
 
@@ -111,7 +114,7 @@ class Case:
     scenario: str
     overrides: tuple[str, ...]
     pipeline: str  # "fuse" (fuse_bag) or "process" (process_bag)
-    analysis: str  # "attitude", "tunnel", "vertical", "sea"
+    analysis: str  # "attitude", "tunnel", "vertical", "sea", "paper_current", "buoy_current"
     label: str
 
 
@@ -195,6 +198,8 @@ def plan_cases(sections: set[str], quick: bool) -> list[Case]:
                     scenario,
                 )
             )
+    if "current" in sections:
+        cases += current_cases(quick, Case)
     return cases
 
 
@@ -291,10 +296,11 @@ def run_case(case: Case, in_bag: str, out_bag: str) -> dict:
                 fusion_config_from_files(PROCESSING_PARAMS),
                 compensator_config_from_files(PROCESSING_PARAMS),
                 overwrite=True,
+                current_config=current_config_from_files(PROCESSING_PARAMS),
             )
             wall_s = summary.wall_s
     started = time.monotonic()
-    result = ANALYSES[case.analysis](out_bag, scenario_duration_s)
+    result = {**ANALYSES, **CURRENT_ANALYSES}[case.analysis](out_bag, scenario_duration_s)
     result["pipeline"] = "fuse_bag" if case.pipeline == "fuse" else "process_bag"
     result["pipeline_wall_s"] = wall_s
     result["analysis_wall_s"] = time.monotonic() - started
@@ -508,6 +514,19 @@ def main(argv=None) -> None:
             "Table 6b — the floor: the same run with pass-through stand-ins for both nodes "
             "(tools/passthrough_node.py)",
         )
+    if "current" in sections:
+        paper = {
+            key.split("/")[1]: value
+            for key, value in case_results.items()
+            if key.startswith("current_paper/")
+        }
+        buoys = {
+            key.split("/")[1]: value
+            for key, value in case_results.items()
+            if key.startswith("current_buoy/")
+        }
+        results["current"] = {"paper_003": paper, "buoys": buoys}
+        print_current(paper, buoys, quick)
     if "consistency" in sections:
         import bias_consistency
 

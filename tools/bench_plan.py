@@ -11,6 +11,7 @@ PROCESSING_PARAMS = [
     str(BUOY_PARAMS),
     str(REPO / "src/buoy_nav/config/fusion.yaml"),
     str(REPO / "src/wind_comp/config/compensation.yaml"),
+    str(REPO / "src/wind_comp/config/current.yaml"),
 ]
 SIMULATION_PARAMS = [str(BUOY_PARAMS)]
 
