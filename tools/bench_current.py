@@ -97,6 +97,19 @@ def _horizontal_rms(errors: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(errors[:, :2] ** 2, axis=1)))) if len(errors) else math.nan
 
 
+def _direction_rms_deg(estimate: np.ndarray, reference: np.ndarray) -> float:
+    """RMS of the direction (toward) of each estimate minus its reference's, over the samples
+    whose reference flows at least BUOY_MIN_CURRENT_MPS (a slack reference has no direction)."""
+    fast = np.hypot(reference[:, 0], reference[:, 1]) >= BUOY_MIN_CURRENT_MPS
+    if not fast.any():
+        return math.nan
+    difference = np.degrees(
+        np.arctan2(estimate[fast, 0], estimate[fast, 1])
+        - np.arctan2(reference[fast, 0], reference[fast, 1])
+    )
+    return float(np.sqrt(np.mean(((difference + 180.0) % 360.0 - 180.0) ** 2)))
+
+
 def _toward_deg(vector) -> float:
     return math.degrees(math.atan2(vector[0], vector[1])) % 360.0
 
@@ -153,6 +166,12 @@ def analyse_buoy_current(out_bag: str, scenario_duration_s: float) -> dict:
         ),
         "single_sample_rms_vs_current_mps": _horizontal_rms(
             data.current_enu_mps[valid] - data.truth_current_enu_mps[valid]
+        ),
+        "single_sample_direction_rms_vs_water_deg": _direction_rms_deg(
+            data.current_enu_mps[valid], data.truth_water_enu_mps[valid]
+        ),
+        "single_sample_direction_rms_vs_current_deg": _direction_rms_deg(
+            data.current_enu_mps[valid], data.truth_current_enu_mps[valid]
         ),
         "windows": int(errors.vector_error_mps.size),
         "windows_at_or_above_min_current": int(np.count_nonzero(fast)),
@@ -229,14 +248,22 @@ def print_current(paper: dict[str, dict], buoys: dict[str, dict], quick: bool) -
         f"{BUOY_DIRECTION_ERROR_DEG}° where the current is ≥ {BUOY_MIN_CURRENT_MPS} m/s)"
     )
     print(
-        f"{'scenario':12s} {'current':>13s} {'vs water':>9s} {'vs current':>11s} "
-        f"{'10-min max':>11s} {'RMS':>7s} {'dir max':>8s} {'windows':>8s}"
+        "single-sample directions where the reference flows at ≥ "
+        f"{BUOY_MIN_CURRENT_MPS} m/s; speeds in m/s"
+    )
+    print(f"{'':12s} {'':13s} {'single samples, RMS':^37s} {'10-min means':^26s}")
+    print(
+        f"{'scenario':12s} {'current':>13s} {'vs water':>9s} {'dir':>7s} {'vs current':>11s} "
+        f"{'dir':>7s} {'max':>9s} {'RMS':>7s} {'dir max':>8s} {'windows':>8s}"
     )
     for scenario, r in buoys.items():
         low, high = r["true_speed_range_mps"]
         print(
             f"{scenario:12s} {low:5.2f}–{high:4.2f} m/s {r['single_sample_rms_vs_water_mps']:9.4f} "
-            f"{r['single_sample_rms_vs_current_mps']:11.4f} {r['mean_vector_error_max_mps']:11.4f} "
+            f"{r['single_sample_direction_rms_vs_water_deg']:6.2f}° "
+            f"{r['single_sample_rms_vs_current_mps']:11.4f} "
+            f"{r['single_sample_direction_rms_vs_current_deg']:6.2f}° "
+            f"{r['mean_vector_error_max_mps']:9.4f} "
             f"{r['mean_vector_error_rms_mps']:7.4f} {r['mean_direction_error_max_deg']:7.2f}° "
             f"{r['windows']:8d}   error {_mark(r['pass_mean_error'])}, direction "
             f"{_mark(r['pass_direction'])}"
