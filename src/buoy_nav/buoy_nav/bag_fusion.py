@@ -158,6 +158,11 @@ class OfflineFusion:
                 f"superseded {counters.superseded:6d}  resets {counters.resets:3d}  "
                 f"mean NIS {counters.mean_nis:6.2f}  rejected: {rejected or 'none'}"
             )
+        for t_s, step_s in health.imu_clock_steps:
+            lines.append(
+                f"IMU clock stepped by {step_s:+.6f} s before stamp {t_s:.3f} s: "
+                "later IMU samples re-stamped onto the GNSS clock"
+            )
         for key, count in sorted(self.rejections.items()):
             lines.append(f"rejected message {key}: {count}")
         return lines

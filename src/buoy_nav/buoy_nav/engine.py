@@ -40,6 +40,7 @@ is rejected and counted by input and reason; it never reaches the state. Measure
 ``beyond_imu_data``, oldest first, so an outage cannot fill the memory.
 """
 
+import dataclasses
 import math
 from collections import deque
 from collections.abc import Iterable
@@ -61,6 +62,8 @@ from buoy_nav.error_state_filter import (
     inject_error_state,
 )
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
+from buoy_nav.imu_screening import ImuPlausibility
+from buoy_nav.integrity import IntegrityMonitor
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
 from buoy_nav.prediction import RealtimePrediction
@@ -73,6 +76,9 @@ __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "Nav
 # that follows, which needs the last seconds alone, and keeping them all would let an outage
 # fill the memory and, when the IMU returns, stall the node on the backlog.
 MAX_MEASUREMENT_LEAD_S = 10.0
+# Longest interval between aiding measurements of a running GNSS receiver (s): aiding stamps this
+# close to the newest IMU stamp say the aiding sources and the IMU ran on together.
+MAX_AIDING_INTERVAL_S = 1.0
 
 
 class FusionEngine:
@@ -107,15 +113,33 @@ class FusionEngine:
         self._aided_index = {source: AIDED_QUANTITIES.index(source.aids) for source in self.sources}
 
         self._imu_model = ImuErrorModel.from_config(config)
+        self._integrity = IntegrityMonitor(
+            config.integrity_rejection_count,
+            config.integrity_realign_s,
+            config.integrity_recovery_s,
+        )
+        self._imu_plausibility = ImuPlausibility(
+            config.max_angular_acceleration_rad_s2,
+            config.max_jerk_mps3,
+            math.radians(config.gyro_noise_deg_sqrt_h) / 60.0,
+            config.accel_noise_mps_sqrt_h / 60.0,
+        )
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
         self._integrator: StrapdownIntegrator | None = None
         self._filter: ErrorStateFilter | None = None
         self._alignment: AlignmentResult | None = None
         self._alignments = 0
         self._imu_gaps = 0
+        self._realignments = 0
 
         self._imu_buffer: deque = deque()
         self._latest_imu_stamp = -math.inf
+        # IMU clock steps: (stamp after re-stamping, s; step of the IMU clock, s), and the
+        # correction added to IMU stamps since, to put them on the clock of the aiding sources.
+        self._imu_clock_steps: list[tuple[float, float]] = []
+        self._imu_clock_offset_s = 0.0
+        self._imu_interval_s = math.nan
+        self._newest_measurement_stamp = -math.inf
         # State of the processing: time and (raw) IMU sample the state refers to.
         self._time = -math.inf
         self._gyro: tuple[float, float, float] | None = None
@@ -180,13 +204,27 @@ class FusionEngine:
         ):
             self.reject_input(IMU, Reason.OUT_OF_RANGE)
             return []
+        t += self._imu_clock_offset_s
+        if self._is_imu_clock_step(t):
+            # Re-stamp onto the other sensors' clock, one sample interval after the last sample.
+            step = t - (self._latest_imu_stamp + self._imu_interval_s)
+            self._imu_clock_offset_s -= step
+            t -= step
+            self._imu_clock_steps.append((t, step))
         if t <= self._latest_imu_stamp:
             duplicate = t == self._latest_imu_stamp
             self.reject_input(
                 IMU, Reason.DUPLICATE_STAMP if duplicate else Reason.STAMP_NOT_INCREASING
             )
             return []
+        if t - self._latest_imu_stamp > config.max_imu_gap_s:
+            self._imu_plausibility.restart()
+        if not self._imu_plausibility.plausible(t, (gx, gy, gz), (fx, fy, fz)):
+            self.reject_input(IMU, Reason.IMPLAUSIBLE_CHANGE)
+            return []
         counters.accepted += 1
+        if t - self._latest_imu_stamp <= config.max_imu_gap_s:
+            self._imu_interval_s = t - self._latest_imu_stamp
         self._latest_imu_stamp = t
         sample = (t, (gx, gy, gz), (fx, fy, fz))
         self._imu_buffer.append(sample)
@@ -203,6 +241,29 @@ class FusionEngine:
             self._imu_buffer,
             sample,
             self._coasting_flags(self._time),
+        )
+
+    def _is_imu_clock_step(self, t: float) -> bool:
+        """Whether the IMU stamp ``t`` (s) is a step of the IMU's clock rather than a sample
+        out of order or after an outage.
+
+        A stamp more than ``max_imu_gap_s`` before the newest one cannot be a late sample (the
+        transport keeps a sensor's messages in order): the clock went back. A stamp more than
+        ``max_imu_gap_s`` after it is an outage if the aiding sources' stamps went on meanwhile,
+        and a clock step if they were running with the IMU until then and did not: their
+        newest stamp is still nearer the IMU's last stamp than this one.
+        """
+        latest = self._latest_imu_stamp
+        if not math.isfinite(latest) or not math.isfinite(self._imu_interval_s):
+            return False
+        gap_limit = self.config.max_imu_gap_s
+        if t < latest - gap_limit:
+            return True
+        newest_aiding = self._newest_measurement_stamp
+        return (
+            t > latest + gap_limit
+            and newest_aiding > latest - MAX_AIDING_INTERVAL_S
+            and newest_aiding < 0.5 * (latest + t)
         )
 
     def catch_up(self) -> None:
@@ -245,6 +306,7 @@ class FusionEngine:
         if t <= self._last_processed_imu_stamp:
             self.reject_input(source.kind, Reason.TOO_LATE)
             return
+        self._newest_measurement_stamp = max(self._newest_measurement_stamp, t)
         refused = self._queue.push(source, t, validated)
         if refused is not None:
             self.reject_input(source.kind, refused)
@@ -300,6 +362,10 @@ class FusionEngine:
             alignments=self._alignments,
             time_s=self._time if math.isfinite(self._time) else math.nan,
             alignment=self._alignment,
+            imu_clock_steps=tuple(self._imu_clock_steps),
+            trusted=self._integrity.trusted,
+            integrity_events=tuple(dataclasses.replace(e) for e in self._integrity.events),
+            realignments=self._realignments,
         )
 
     @property
@@ -334,6 +400,7 @@ class FusionEngine:
             t, gyro, force = buffer.popleft()
             if self._gyro is None or t - self._time > self.config.max_imu_gap_s:
                 if self._gyro is not None:
+                    self._imu_gaps += 1
                     self._restart_alignment()
                 # Measurements up to the first sample of a run can only feed the alignment.
                 while measurements and measurements[0][0] <= t:
@@ -389,7 +456,6 @@ class FusionEngine:
         self._solutions.covariance_changed()
 
     def _restart_alignment(self):
-        self._imu_gaps += 1
         self._integrator = None
         self._filter = None
         self._aligner.restart()
@@ -427,6 +493,7 @@ class FusionEngine:
         point = self._linearisation_point(gyro)
         accepted = []
         persistent_rejections = []
+        rejected_kinds: dict[str, int] = {}
         for source, measurement in group:
             kind = source.kind
             model = source.model(measurement, point)
@@ -458,6 +525,7 @@ class FusionEngine:
                 continue
             counters.reject(Reason.GATE if math.isfinite(gate.nis) else Reason.SINGULAR)
             self._consecutive_rejections[kind] += 1
+            rejected_kinds[kind] = self._consecutive_rejections[kind]
             if self._consecutive_rejections[kind] >= source.reset_after_rejections:
                 persistent_rejections.append((source, measurement, model))
         if accepted:
@@ -469,6 +537,24 @@ class FusionEngine:
             self._inject(point.state, correction)
         for source, measurement, model in persistent_rejections:
             self._reset_to_measurement(source, t, measurement, gyro, model)
+        action = self._integrity.gate_outcomes(t, rejected_kinds)
+        if action == "inflate":
+            self._inflate_covariance()
+        elif action == "realign":
+            self._realignments += 1
+            self._restart_alignment()
+
+    def _inflate_covariance(self):
+        """Widen the attitude and velocity uncertainty: the filter has found itself wrong."""
+        config, states = self.config, self.states
+        covariance = self._filter.covariance
+        attitude_variance = math.radians(config.integrity_attitude_sigma_deg) ** 2
+        velocity_variance = config.integrity_velocity_sigma_mps**2
+        for index in states.indices("attitude"):
+            covariance[index, index] += attitude_variance
+        for index in states.indices("velocity"):
+            covariance[index, index] += velocity_variance
+        self._solutions.covariance_changed()
 
     def _inject(self, state: NavState, correction):
         self._integrator.set_nav_state(inject_error_state(state, correction))
@@ -508,6 +594,7 @@ class FusionEngine:
         )
         self._alignment = result
         self._alignments += 1
+        self._integrity.realigned(t)
         for kind in self._consecutive_rejections:
             self._consecutive_rejections[kind] = 0
         self._last_aided = [t] * len(AIDED_QUANTITIES)

@@ -274,6 +274,8 @@ class FusionNode(FlushingNode):
                 "covariance_repairs": health.covariance_repairs,
                 "imu_gaps": health.imu_gaps,
                 "alignments": health.alignments,
+                "imu_clock_steps": len(health.imu_clock_steps),
+                "imu_clock_correction_s": -sum(step for _, step in health.imu_clock_steps),
                 # Full precision: a stamp in seconds since the epoch.
                 "processed_up_to_s": f"{health.time_s:.6f}",
             }
