@@ -74,7 +74,7 @@ def test_odometry_velocity_is_rotated_into_enu_like_scipy():
     attitude = Rotation.from_euler("ZYX", [0.7, -0.2, 0.3])
     velocity_body = np.array([1.5, -0.4, 0.2])
     scale = 3.0  # unnormalised quaternions are normalised, not used as given
-    t_s, quat, rate, velocity = odometry_fields(
+    t_s, quat, rate, velocity, _ = odometry_fields(
         odometry(scale * attitude.as_quat(), [0.01, 0.02, 0.03], velocity_body, 5, 250_000_000)
     )
     assert t_s == 5.25
