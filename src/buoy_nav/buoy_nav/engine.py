@@ -113,6 +113,10 @@ class FusionEngine:
         self._aided_index = {source: AIDED_QUANTITIES.index(source.aids) for source in self.sources}
 
         self._imu_model = ImuErrorModel.from_config(config)
+        self._distrust_variances = (
+            math.radians(config.integrity_attitude_sigma_deg) ** 2,
+            config.integrity_velocity_sigma_mps**2,
+        )
         self._integrity = IntegrityMonitor(
             config.integrity_rejection_count,
             config.integrity_realign_s,
@@ -543,13 +547,17 @@ class FusionEngine:
         elif action == "realign":
             self._realignments += 1
             self._restart_alignment()
+        self._solutions.distrust(None if self._integrity.trusted else self._distrust_variances)
 
     def _inflate_covariance(self):
-        """Widen the attitude and velocity uncertainty: the filter has found itself wrong."""
-        config, states = self.config, self.states
+        """Widen the attitude and velocity uncertainty: the filter has found itself wrong.
+
+        The filter's own covariance may shrink again as the gate lets measurements through,
+        even towards a wrong state, so the published covariance keeps the inflation as long as
+        the trust is not back (:meth:`SolutionBuilder.distrust`)."""
+        states = self.states
         covariance = self._filter.covariance
-        attitude_variance = math.radians(config.integrity_attitude_sigma_deg) ** 2
-        velocity_variance = config.integrity_velocity_sigma_mps**2
+        attitude_variance, velocity_variance = self._distrust_variances
         for index in states.indices("attitude"):
             covariance[index, index] += attitude_variance
         for index in states.indices("velocity"):
@@ -595,6 +603,7 @@ class FusionEngine:
         self._alignment = result
         self._alignments += 1
         self._integrity.realigned(t)
+        self._solutions.distrust(None)
         for kind in self._consecutive_rejections:
             self._consecutive_rejections[kind] = 0
         self._last_aided = [t] * len(AIDED_QUANTITIES)
