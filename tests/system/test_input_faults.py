@@ -51,7 +51,9 @@ def judged(out: Path):
         truth = odometry_series(reader, "truth/odometry")
         wind = stamped_vectors(reader, "wind/true")
         true_wind = stamped_vectors(reader, "truth/wind")
-    wind_error = np.linalg.norm(wind.vectors - interpolate_vectors(wind.stamps_ns, true_wind), 1)
+    wind_error = np.linalg.norm(
+        wind.vectors - interpolate_vectors(wind.stamps_ns, true_wind), axis=1
+    )
     valid = np.isfinite(wind_error)
     position = np.clip(np.searchsorted(truth.stamps_ns, nav.stamps_ns), 0, truth.stamps_ns.size - 1)
     matched = np.abs(truth.stamps_ns[position] - nav.stamps_ns) <= STAMP_MATCH_NS
