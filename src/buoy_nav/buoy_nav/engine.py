@@ -37,7 +37,13 @@ Invalid input (non-finite values, absurd magnitudes, non-positive variances, IMU
 increasing, duplicated measurement stamps, measurements older than what was already processed)
 is rejected and counted by input and reason; it never reaches the state. Measurements more than
 ``MAX_MEASUREMENT_LEAD_S`` ahead of the newest IMU sample (an IMU outage) are given up as
-``beyond_imu_data``, oldest first, so an outage cannot fill the memory.
+``beyond_imu_data``, oldest first, so an outage cannot fill the memory. An IMU sample whose
+change from the last accepted one no platform can make is rejected as ``implausible_change``
+(:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
+(:mod:`buoy_nav.imu_clock`). When the gates keep rejecting the aiding, the filter no longer
+agrees with it: the integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
+published inflated while the trust is not back, and the alignment started again if that does
+not bring the aiding back into the gates.
 """
 
 import dataclasses
@@ -62,6 +68,7 @@ from buoy_nav.error_state_filter import (
     inject_error_state,
 )
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
+from buoy_nav.imu_clock import ImuClock
 from buoy_nav.imu_screening import ImuPlausibility
 from buoy_nav.integrity import IntegrityMonitor
 from buoy_nav.measurement_queue import MeasurementQueue
@@ -76,9 +83,6 @@ __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "Nav
 # that follows, which needs the last seconds alone, and keeping them all would let an outage
 # fill the memory and, when the IMU returns, stall the node on the backlog.
 MAX_MEASUREMENT_LEAD_S = 10.0
-# Longest interval between aiding measurements of a running GNSS receiver (s): aiding stamps this
-# close to the newest IMU stamp say the aiding sources and the IMU ran on together.
-MAX_AIDING_INTERVAL_S = 1.0
 
 
 class FusionEngine:
@@ -138,12 +142,7 @@ class FusionEngine:
 
         self._imu_buffer: deque = deque()
         self._latest_imu_stamp = -math.inf
-        # IMU clock steps: (stamp after re-stamping, s; step of the IMU clock, s), and the
-        # correction added to IMU stamps since, to put them on the clock of the aiding sources.
-        self._imu_clock_steps: list[tuple[float, float]] = []
-        self._imu_clock_offset_s = 0.0
-        self._imu_interval_s = math.nan
-        self._newest_measurement_stamp = -math.inf
+        self._imu_clock = ImuClock(config.max_imu_gap_s)
         # State of the processing: time and (raw) IMU sample the state refers to.
         self._time = -math.inf
         self._gyro: tuple[float, float, float] | None = None
@@ -208,13 +207,7 @@ class FusionEngine:
         ):
             self.reject_input(IMU, Reason.OUT_OF_RANGE)
             return []
-        t += self._imu_clock_offset_s
-        if self._is_imu_clock_step(t):
-            # Re-stamp onto the other sensors' clock, one sample interval after the last sample.
-            step = t - (self._latest_imu_stamp + self._imu_interval_s)
-            self._imu_clock_offset_s -= step
-            t -= step
-            self._imu_clock_steps.append((t, step))
+        t = self._imu_clock.restamp(t, self._latest_imu_stamp)
         if t <= self._latest_imu_stamp:
             duplicate = t == self._latest_imu_stamp
             self.reject_input(
@@ -227,8 +220,7 @@ class FusionEngine:
             self.reject_input(IMU, Reason.IMPLAUSIBLE_CHANGE)
             return []
         counters.accepted += 1
-        if t - self._latest_imu_stamp <= config.max_imu_gap_s:
-            self._imu_interval_s = t - self._latest_imu_stamp
+        self._imu_clock.accepted(t, self._latest_imu_stamp)
         self._latest_imu_stamp = t
         sample = (t, (gx, gy, gz), (fx, fy, fz))
         self._imu_buffer.append(sample)
@@ -245,29 +237,6 @@ class FusionEngine:
             self._imu_buffer,
             sample,
             self._coasting_flags(self._time),
-        )
-
-    def _is_imu_clock_step(self, t: float) -> bool:
-        """Whether the IMU stamp ``t`` (s) is a step of the IMU's clock rather than a sample
-        out of order or after an outage.
-
-        A stamp more than ``max_imu_gap_s`` before the newest one cannot be a late sample (the
-        transport keeps a sensor's messages in order): the clock went back. A stamp more than
-        ``max_imu_gap_s`` after it is an outage if the aiding sources' stamps went on meanwhile,
-        and a clock step if they were running with the IMU until then and did not: their
-        newest stamp is still nearer the IMU's last stamp than this one.
-        """
-        latest = self._latest_imu_stamp
-        if not math.isfinite(latest) or not math.isfinite(self._imu_interval_s):
-            return False
-        gap_limit = self.config.max_imu_gap_s
-        if t < latest - gap_limit:
-            return True
-        newest_aiding = self._newest_measurement_stamp
-        return (
-            t > latest + gap_limit
-            and newest_aiding > latest - MAX_AIDING_INTERVAL_S
-            and newest_aiding < 0.5 * (latest + t)
         )
 
     def catch_up(self) -> None:
@@ -310,7 +279,7 @@ class FusionEngine:
         if t <= self._last_processed_imu_stamp:
             self.reject_input(source.kind, Reason.TOO_LATE)
             return
-        self._newest_measurement_stamp = max(self._newest_measurement_stamp, t)
+        self._imu_clock.aiding_stamp(t)
         refused = self._queue.push(source, t, validated)
         if refused is not None:
             self.reject_input(source.kind, refused)
@@ -366,7 +335,7 @@ class FusionEngine:
             alignments=self._alignments,
             time_s=self._time if math.isfinite(self._time) else math.nan,
             alignment=self._alignment,
-            imu_clock_steps=tuple(self._imu_clock_steps),
+            imu_clock_steps=tuple(self._imu_clock.steps),
             trusted=self._integrity.trusted,
             integrity_events=tuple(dataclasses.replace(e) for e in self._integrity.events),
             realignments=self._realignments,
