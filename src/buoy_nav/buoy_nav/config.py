@@ -74,7 +74,7 @@ class FusionConfig:
         navigation is not trusted [3].
       integrity_attitude_sigma_deg, integrity_velocity_sigma_mps: 1σ added to each attitude
         (deg) and velocity (m/s) error state when the trust is lost, and added to the published
-        covariance until it returns [10, 1].
+        covariance until it returns [5, 1].
       integrity_realign_s: the alignment starts again when the gate still rejects this long
         after the trust was lost (s) [5].
       integrity_recovery_s: the trust returns after this long without a gate rejection (s) [2].
@@ -132,7 +132,7 @@ class FusionConfig:
     coasting_timeout_s: float = 1.0
 
     integrity_rejection_count: int = 3
-    integrity_attitude_sigma_deg: float = 10.0
+    integrity_attitude_sigma_deg: float = 5.0
     integrity_velocity_sigma_mps: float = 1.0
     integrity_realign_s: float = 5.0
     integrity_recovery_s: float = 2.0

@@ -45,7 +45,7 @@ class CompensatorConfig:
         max_attitude_sigma_deg: a navigation sample whose attitude 1σ (the largest of the
             three in its pose covariance) exceeds this corrects no wind: the samples it
             brackets are invalid as ``navigation_not_trusted``, deg. The fusion publishes its
-            attitude 1σ at least ``fusion.integrity_attitude_sigma_deg`` (10°) while it finds
+            attitude 1σ at least ``fusion.integrity_attitude_sigma_deg`` (5°) while it finds
             itself inconsistent with its aiding, so this is how an untrustworthy navigation
             reaches the wind; the default lies between that and the 1σ a sound filter reports
             in the first second after its alignment (up to about 3°).
@@ -58,7 +58,7 @@ class CompensatorConfig:
     nav_history_s: float = 10.0
     product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
     gust_window_s: float = 3.0
-    max_attitude_sigma_deg: float = 5.0
+    max_attitude_sigma_deg: float = 4.0
 
     def __post_init__(self):
         for name in ("anemometer_position_body_m", "anemometer_rpy_deg"):
