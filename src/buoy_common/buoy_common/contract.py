@@ -144,6 +144,9 @@ class Reason(StrEnum):
     NON_FINITE = "non_finite"
     OUT_OF_RANGE = "out_of_range"
     """A value no instrument of this kind can report (absurd magnitude)."""
+    IMPLAUSIBLE_CHANGE = "implausible_change"
+    """A change from the previous sample that the platform cannot make in the time between them
+    (an angular acceleration or jerk beyond the platform's limits)."""
     NON_POSITIVE_VARIANCE = "non_positive_variance"
     ZERO_QUATERNION = "zero_quaternion"
     WRONG_FRAME = "wrong_frame"
@@ -171,6 +174,9 @@ class Reason(StrEnum):
     INVALID_WIND = "invalid_wind"
     WIND_SPEED_OUT_OF_RANGE = "wind_speed_out_of_range"
     INVALID_STAMP = "invalid_stamp"
+    NAVIGATION_NOT_TRUSTED = "navigation_not_trusted"
+    """The navigation's attitude is too uncertain to correct the wind with: the fusion has
+    found itself inconsistent with its aiding, or has not converged yet."""
 
 
 # -- stamps ----------------------------------------------------------------------------------------

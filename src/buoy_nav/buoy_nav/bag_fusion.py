@@ -12,6 +12,7 @@ its own answer. ``fuse_bag`` is the command line of :func:`fuse_bag`; ``process_
 
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
 from collections.abc import Iterable
@@ -157,6 +158,21 @@ class OfflineFusion:
                 f"alignment {counters.used_for_alignment:4d}  "
                 f"superseded {counters.superseded:6d}  resets {counters.resets:3d}  "
                 f"mean NIS {counters.mean_nis:6.2f}  rejected: {rejected or 'none'}"
+            )
+        for event in health.integrity_events:
+            ended = (
+                "still at the end"
+                if math.isnan(event.end_s)
+                else f"{event.duration_s:.2f} s, ended by "
+                + ("a new alignment" if event.realigned else "agreement with the aiding")
+            )
+            lines.append(
+                f"navigation not trusted from stamp {event.start_s:.3f} s ({event.reason}): {ended}"
+            )
+        for t_s, step_s in health.imu_clock_steps:
+            lines.append(
+                f"IMU clock stepped by {step_s:+.6f} s before stamp {t_s:.3f} s: "
+                "later IMU samples re-stamped onto the GNSS clock"
             )
         for key, count in sorted(self.rejections.items()):
             lines.append(f"rejected message {key}: {count}")

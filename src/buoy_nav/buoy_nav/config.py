@@ -69,6 +69,16 @@ class FusionConfig:
       coasting_timeout_s: a measurement kind not accepted for this long is reported as coasting
         (s) [1].
 
+    Integrity (:mod:`buoy_nav.integrity`)
+      integrity_rejection_count: consecutive gate rejections of one source after which the
+        navigation is not trusted [3].
+      integrity_attitude_sigma_deg, integrity_velocity_sigma_mps: 1σ added to each attitude
+        (deg) and velocity (m/s) error state when the trust is lost, and added to the published
+        covariance until it returns [5, 1].
+      integrity_realign_s: the alignment starts again when the gate still rejects this long
+        after the trust was lost (s) [5].
+      integrity_recovery_s: the trust returns after this long without a gate rejection (s) [2].
+
     Timing and input validation
       max_measurement_delay_s: how long measurements may arrive after the IMU sample of the same
         stamp; processing lags the newest IMU stamp by this much (s) [0.3].
@@ -77,6 +87,11 @@ class FusionConfig:
       max_imu_gap_s: an IMU gap longer than this restarts the alignment (s) [0.5].
       max_angular_rate_rad_s: IMU samples with a larger rate magnitude are rejected (rad/s) [35].
       max_specific_force_mps2: IMU samples with a larger specific force are rejected (m/s²) [160].
+      max_angular_acceleration_rad_s2: largest angular acceleration the platform can reach; an
+        IMU sample whose rate differs from the last accepted one by more than this times their
+        interval (plus the sensor's noise) is rejected as ``implausible_change`` (rad/s²) [50].
+      max_jerk_mps3: the same for the specific force: largest rate of change of the platform's
+        specific force (m/s³) [2000].
 
     Output
       realtime_output: emit each solution as soon as its IMU sample arrives, predicted by
@@ -116,11 +131,19 @@ class FusionConfig:
     gnss_baseline_sigma_vertical_m: float = 0.006
     coasting_timeout_s: float = 1.0
 
+    integrity_rejection_count: int = 3
+    integrity_attitude_sigma_deg: float = 5.0
+    integrity_velocity_sigma_mps: float = 1.0
+    integrity_realign_s: float = 5.0
+    integrity_recovery_s: float = 2.0
+
     max_measurement_delay_s: float = 0.3
     covariance_propagation_interval_s: float = 0.1
     max_imu_gap_s: float = 0.5
     max_angular_rate_rad_s: float = 35.0
     max_specific_force_mps2: float = 160.0
+    max_angular_acceleration_rad_s2: float = 50.0
+    max_jerk_mps3: float = 2000.0
 
     realtime_output: bool = True
     output_rate_hz: float = 0.0
@@ -164,10 +187,17 @@ class FusionConfig:
             "max_imu_gap_s",
             "max_angular_rate_rad_s",
             "max_specific_force_mps2",
+            "max_angular_acceleration_rad_s2",
+            "max_jerk_mps3",
+            "integrity_attitude_sigma_deg",
+            "integrity_velocity_sigma_mps",
+            "integrity_realign_s",
+            "integrity_recovery_s",
         ):
             _require(getattr(self, name) > 0.0, name, "finite and > 0")
         _require(0.0 < self.gate_probability < 1.0, "gate_probability", "in (0, 1)")
         _require(self.gate_reset_count >= 1, "gate_reset_count", "≥ 1")
+        _require(self.integrity_rejection_count >= 1, "integrity_rejection_count", "≥ 1")
         _require(self.scale_factor_error_percent < 100.0, "scale_factor_error_percent", "< 100")
 
     @property

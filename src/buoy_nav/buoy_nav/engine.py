@@ -37,9 +37,16 @@ Invalid input (non-finite values, absurd magnitudes, non-positive variances, IMU
 increasing, duplicated measurement stamps, measurements older than what was already processed)
 is rejected and counted by input and reason; it never reaches the state. Measurements more than
 ``MAX_MEASUREMENT_LEAD_S`` ahead of the newest IMU sample (an IMU outage) are given up as
-``beyond_imu_data``, oldest first, so an outage cannot fill the memory.
+``beyond_imu_data``, oldest first, so an outage cannot fill the memory. An IMU sample whose
+change from the last accepted one no platform can make is rejected as ``implausible_change``
+(:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
+(:mod:`buoy_nav.imu_clock`). When the gates keep rejecting the aiding, the filter no longer
+agrees with it: the integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
+published inflated while the trust is not back, and the alignment started again if that does
+not bring the aiding back into the gates.
 """
 
+import dataclasses
 import math
 from collections import deque
 from collections.abc import Iterable
@@ -61,6 +68,9 @@ from buoy_nav.error_state_filter import (
     inject_error_state,
 )
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
+from buoy_nav.imu_clock import ImuClock
+from buoy_nav.imu_screening import ImuPlausibility
+from buoy_nav.integrity import IntegrityMonitor
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
 from buoy_nav.prediction import RealtimePrediction
@@ -107,15 +117,32 @@ class FusionEngine:
         self._aided_index = {source: AIDED_QUANTITIES.index(source.aids) for source in self.sources}
 
         self._imu_model = ImuErrorModel.from_config(config)
+        self._distrust_variances = (
+            math.radians(config.integrity_attitude_sigma_deg) ** 2,
+            config.integrity_velocity_sigma_mps**2,
+        )
+        self._integrity = IntegrityMonitor(
+            config.integrity_rejection_count,
+            config.integrity_realign_s,
+            config.integrity_recovery_s,
+        )
+        self._imu_plausibility = ImuPlausibility(
+            config.max_angular_acceleration_rad_s2,
+            config.max_jerk_mps3,
+            math.radians(config.gyro_noise_deg_sqrt_h) / 60.0,
+            config.accel_noise_mps_sqrt_h / 60.0,
+        )
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
         self._integrator: StrapdownIntegrator | None = None
         self._filter: ErrorStateFilter | None = None
         self._alignment: AlignmentResult | None = None
         self._alignments = 0
         self._imu_gaps = 0
+        self._realignments = 0
 
         self._imu_buffer: deque = deque()
         self._latest_imu_stamp = -math.inf
+        self._imu_clock = ImuClock(config.max_imu_gap_s)
         # State of the processing: time and (raw) IMU sample the state refers to.
         self._time = -math.inf
         self._gyro: tuple[float, float, float] | None = None
@@ -180,13 +207,20 @@ class FusionEngine:
         ):
             self.reject_input(IMU, Reason.OUT_OF_RANGE)
             return []
+        t = self._imu_clock.restamp(t, self._latest_imu_stamp)
         if t <= self._latest_imu_stamp:
             duplicate = t == self._latest_imu_stamp
             self.reject_input(
                 IMU, Reason.DUPLICATE_STAMP if duplicate else Reason.STAMP_NOT_INCREASING
             )
             return []
+        if t - self._latest_imu_stamp > config.max_imu_gap_s:
+            self._imu_plausibility.restart()
+        if not self._imu_plausibility.plausible(t, (gx, gy, gz), (fx, fy, fz)):
+            self.reject_input(IMU, Reason.IMPLAUSIBLE_CHANGE)
+            return []
         counters.accepted += 1
+        self._imu_clock.accepted(t, self._latest_imu_stamp)
         self._latest_imu_stamp = t
         sample = (t, (gx, gy, gz), (fx, fy, fz))
         self._imu_buffer.append(sample)
@@ -245,6 +279,7 @@ class FusionEngine:
         if t <= self._last_processed_imu_stamp:
             self.reject_input(source.kind, Reason.TOO_LATE)
             return
+        self._imu_clock.aiding_stamp(t)
         refused = self._queue.push(source, t, validated)
         if refused is not None:
             self.reject_input(source.kind, refused)
@@ -300,6 +335,10 @@ class FusionEngine:
             alignments=self._alignments,
             time_s=self._time if math.isfinite(self._time) else math.nan,
             alignment=self._alignment,
+            imu_clock_steps=tuple(self._imu_clock.steps),
+            trusted=self._integrity.trusted,
+            integrity_events=tuple(dataclasses.replace(e) for e in self._integrity.events),
+            realignments=self._realignments,
         )
 
     @property
@@ -334,6 +373,7 @@ class FusionEngine:
             t, gyro, force = buffer.popleft()
             if self._gyro is None or t - self._time > self.config.max_imu_gap_s:
                 if self._gyro is not None:
+                    self._imu_gaps += 1
                     self._restart_alignment()
                 # Measurements up to the first sample of a run can only feed the alignment.
                 while measurements and measurements[0][0] <= t:
@@ -389,7 +429,6 @@ class FusionEngine:
         self._solutions.covariance_changed()
 
     def _restart_alignment(self):
-        self._imu_gaps += 1
         self._integrator = None
         self._filter = None
         self._aligner.restart()
@@ -427,6 +466,7 @@ class FusionEngine:
         point = self._linearisation_point(gyro)
         accepted = []
         persistent_rejections = []
+        rejected_kinds: dict[str, int] = {}
         for source, measurement in group:
             kind = source.kind
             model = source.model(measurement, point)
@@ -458,6 +498,7 @@ class FusionEngine:
                 continue
             counters.reject(Reason.GATE if math.isfinite(gate.nis) else Reason.SINGULAR)
             self._consecutive_rejections[kind] += 1
+            rejected_kinds[kind] = self._consecutive_rejections[kind]
             if self._consecutive_rejections[kind] >= source.reset_after_rejections:
                 persistent_rejections.append((source, measurement, model))
         if accepted:
@@ -469,6 +510,28 @@ class FusionEngine:
             self._inject(point.state, correction)
         for source, measurement, model in persistent_rejections:
             self._reset_to_measurement(source, t, measurement, gyro, model)
+        action = self._integrity.gate_outcomes(t, rejected_kinds)
+        if action == "inflate":
+            self._inflate_covariance()
+        elif action == "realign":
+            self._realignments += 1
+            self._restart_alignment()
+        self._solutions.distrust(None if self._integrity.trusted else self._distrust_variances)
+
+    def _inflate_covariance(self):
+        """Widen the attitude and velocity uncertainty: the filter has found itself wrong.
+
+        The filter's own covariance may shrink again as the gate lets measurements through,
+        even towards a wrong state, so the published covariance keeps the inflation as long as
+        the trust is not back (:meth:`SolutionBuilder.distrust`)."""
+        states = self.states
+        covariance = self._filter.covariance
+        attitude_variance, velocity_variance = self._distrust_variances
+        for index in states.indices("attitude"):
+            covariance[index, index] += attitude_variance
+        for index in states.indices("velocity"):
+            covariance[index, index] += velocity_variance
+        self._solutions.covariance_changed()
 
     def _inject(self, state: NavState, correction):
         self._integrator.set_nav_state(inject_error_state(state, correction))
@@ -508,6 +571,8 @@ class FusionEngine:
         )
         self._alignment = result
         self._alignments += 1
+        self._integrity.realigned(t)
+        self._solutions.distrust(None)
         for kind in self._consecutive_rejections:
             self._consecutive_rejections[kind] = 0
         self._last_aided = [t] * len(AIDED_QUANTITIES)

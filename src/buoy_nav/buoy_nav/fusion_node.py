@@ -19,14 +19,16 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``)
 - ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
   superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps;
+  the integrity of the filter (``navigation_trusted``, ``integrity_events``, ``realignments``,
+  ``untrusted_s``) and IMU clock steps undone (``imu_clock_steps``, ``imu_clock_correction_s``);
   once aligned the filter's 1σ of attitude (``attitude_sigma_deg[east|north|up]``) and velocity
   (``velocity_sigma_mps[...]``) and its bias estimates (``gyro_bias_deg_s[x|y|z]``,
   ``accel_bias_mg[x|y|z]``); input rates per topic, solutions published, and in wall-clock time
   the IMU callback up to its solution's publishing (``latency_*``) and the filtering after it
   (``filtering_*``), mean and max over the period, and how often that filtering was still undone
   when the next IMU sample came (``filtering_overdue``, a sign of an overloaded machine). Level
-  warn while not aligned, while a GNSS kind is coasting or when no IMU sample came in the
-  period.
+  warn while not aligned, while the navigation is not trusted, while a GNSS kind is coasting or
+  when no IMU sample came in the period.
 
 Messages are converted and fed to :class:`buoy_nav.engine.FusionEngine` by
 :mod:`buoy_nav.fusion_messages`, the code the offline ``fuse_bag`` uses, so a bag replayed to
@@ -274,6 +276,15 @@ class FusionNode(FlushingNode):
                 "covariance_repairs": health.covariance_repairs,
                 "imu_gaps": health.imu_gaps,
                 "alignments": health.alignments,
+                "navigation_trusted": health.trusted,
+                "integrity_events": len(health.integrity_events),
+                "realignments": health.realignments,
+                "untrusted_s": sum(
+                    (event.end_s if math.isfinite(event.end_s) else health.time_s) - event.start_s
+                    for event in health.integrity_events
+                ),
+                "imu_clock_steps": len(health.imu_clock_steps),
+                "imu_clock_correction_s": -sum(step for _, step in health.imu_clock_steps),
                 # Full precision: a stamp in seconds since the epoch.
                 "processed_up_to_s": f"{health.time_s:.6f}",
             }
@@ -306,6 +317,9 @@ class FusionNode(FlushingNode):
             )
             if flag
         ]
+        if not health.trusted:
+            reason = health.integrity_events[-1].reason
+            return "warn", f"aligned, navigation not trusted ({reason})", values
         if coasting:
             return "warn", f"aligned, coasting without GNSS {', '.join(coasting)}", values
         return "ok", f"aligned, {self.solutions_published} solutions published", values

@@ -110,6 +110,11 @@ class OfflineCompensation:
                 values.attitude_xyzw,
                 values.angular_rate_body_rad_s,
                 values.velocity_body_mps,
+                max(
+                    values.pose_covariance[21],
+                    values.pose_covariance[28],
+                    values.pose_covariance[35],
+                ),
             )
             pipeline.add_fix(STATUS_FIX, values.latitude_deg)
 
