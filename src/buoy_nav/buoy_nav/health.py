@@ -81,6 +81,9 @@ class EngineHealth:
     imu_gaps: IMU gaps longer than ``max_imu_gap_s``. alignments: completed alignments.
     time_s: stamp up to which data was processed (NaN before any).
     alignment: the last alignment result (None before the first).
+    sensor_set: the sensor set in use (:func:`buoy_nav.sensor_sets.sensor_set`).
+    coasting_sources: kinds of the aiding sources accepted before but not within
+      ``coasting_timeout_s`` (their quantities are carried by the inertial solution).
     """
 
     alignment_state: AlignmentState
@@ -94,3 +97,5 @@ class EngineHealth:
     alignments: int
     time_s: float
     alignment: AlignmentResult | None
+    sensor_set: str = ""
+    coasting_sources: tuple[str, ...] = ()
