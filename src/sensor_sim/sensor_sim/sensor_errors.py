@@ -180,6 +180,7 @@ class MagnetometerErrorConfig:
     """
 
     fitted: bool = False
+    sample_every: int = 10
     noise_ut: float = 0.1
     hard_iron_ut: tuple[float, float, float] = (0.0, 0.0, 0.0)
     soft_iron: tuple[float, ...] = _IDENTITY_3X3
@@ -188,6 +189,7 @@ class MagnetometerErrorConfig:
 
     def __post_init__(self) -> None:
         check_non_negative(self, "noise_ut")
+        check_field(self, "sample_every", self.sample_every >= 1, "must be >= 1")
         check_field(
             self, "soft_iron", len(self.soft_iron) == 9, "must be 9 numbers (3×3, row-major)"
         )
@@ -211,10 +213,11 @@ class AhrsErrorConfig:
     rotation (1-σ ``error_deg`` per axis, correlation ``error_correlation_time_s``), its sample
     noise white (``noise_deg``). Its yaw is referenced as ``ahrs.yaw_reference`` says; with
     ``magnetic_north`` the IGRF declination at the scenario's place is in it. ``fitted: false``:
-    no motion pack.
+    no motion pack. One sample every ``sample_every`` IMU samples.
     """
 
     fitted: bool = False
+    sample_every: int = 10
     lag_time_constant_s: float = 0.2
     error_deg: float = 0.3
     error_correlation_time_s: float = 120.0
@@ -223,6 +226,7 @@ class AhrsErrorConfig:
 
     def __post_init__(self) -> None:
         check_non_negative(self, "lag_time_constant_s", "error_deg", "noise_deg")
+        check_field(self, "sample_every", self.sample_every >= 1, "must be >= 1")
         check_positive(self, "error_correlation_time_s")
         try:
             check_shared_fields(self)

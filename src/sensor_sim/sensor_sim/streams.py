@@ -159,7 +159,11 @@ class ImuStream(SensorStream):
         if self.ahrs.fitted:
             self.topics[AHRS_TOPIC] = SENSOR_MSGTYPES[AHRS_TOPIC]
             self._ahrs = AhrsSimulator(
-                self.truth, self.ahrs, self.scenario, [seed, AHRS_SEED_KEY], self.timing.rate_hz
+                self.truth,
+                self.ahrs,
+                self.scenario,
+                [seed, AHRS_SEED_KEY],
+                self.timing.rate_hz / self.ahrs.sample_every,
             )
         self._simulator = ImuSimulator(
             self.truth,
@@ -173,7 +177,15 @@ class ImuStream(SensorStream):
         self._gyro_variance = gyro_density_rad_sqrt_s**2 * self.timing.rate_hz
         self._accel_variance = accel_density_mps_sqrt_s**2 * self.timing.rate_hz
 
+    def _every(self, times_s, stamps_ns, every: int):
+        """The samples whose index (counted from the first of the run) is a multiple of
+        ``every``."""
+        first_index = self.next_index - len(times_s)
+        keep = [k for k in range(len(times_s)) if (first_index + k) % every == 0]
+        return times_s[keep], [stamps_ns[k] for k in keep]
+
     def _messages(self, times_s, stamps_ns):
+        all_times_s, all_stamps_ns = times_s, stamps_ns
         gyro, force = self._simulator.measure(times_s)
         for stamp, message in zip(
             stamps_ns,
@@ -184,6 +196,7 @@ class ImuStream(SensorStream):
         ):
             yield IMU_RAW_TOPIC, stamp, message
         if self._magnetometer is not None:
+            times_s, stamps_ns = self._every(times_s, stamps_ns, self.magnetometer.sample_every)
             field_body_t = self._magnetometer.measure(times_s)
             yield from (
                 (MAGNETOMETER_TOPIC, stamp, message)
@@ -196,6 +209,7 @@ class ImuStream(SensorStream):
                 )
             )
         if self._ahrs is not None:
+            times_s, stamps_ns = self._every(all_times_s, all_stamps_ns, self.ahrs.sample_every)
             attitude, gyro, force, variance = self._ahrs.measure(times_s)
             yield from (
                 (AHRS_TOPIC, stamp, message)
