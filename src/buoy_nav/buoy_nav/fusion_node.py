@@ -17,7 +17,9 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``nav/imu`` (sensor_msgs/Imu, ``base_link``)
 - ``nav/velocity`` (geometry_msgs/TwistWithCovarianceStamped, ``map``)
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``)
-- ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
+- ``diagnostics`` (1 s): alignment state, coasting flags, the sensor set in use
+  (``sensor_set``, :mod:`buoy_nav.sensor_sets`) and the sources that coast (``coasting_sources``:
+  accepted before, not now), per input kind the accepted, aligning,
   superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps;
   once aligned the filter's 1σ of attitude (``attitude_sigma_deg[east|north|up]``) and velocity
   (``velocity_sigma_mps[...]``) and its bias estimates (``gyro_bias_deg_s[x|y|z]``,
@@ -259,6 +261,8 @@ class FusionNode(FlushingNode):
             "coasting_fix": health.coasting_fix,
             "coasting_velocity": health.coasting_velocity,
             "coasting_heading": health.coasting_heading,
+            "sensor_set": health.sensor_set,
+            "coasting_sources": ",".join(health.coasting_sources),
         }
         for kind, counters in health.counters.items():
             values[f"{kind}.accepted"] = counters.accepted
@@ -307,8 +311,16 @@ class FusionNode(FlushingNode):
             if flag
         ]
         if coasting:
-            return "warn", f"aligned, coasting without GNSS {', '.join(coasting)}", values
-        return "ok", f"aligned, {self.solutions_published} solutions published", values
+            return (
+                "warn",
+                f"aligned on {health.sensor_set}, coasting without GNSS {', '.join(coasting)}",
+                values,
+            )
+        return (
+            "ok",
+            f"aligned on {health.sensor_set}, {self.solutions_published} solutions published",
+            values,
+        )
 
     def _filter_estimates(self) -> dict[str, float]:
         """The filter's 1σ of attitude (ENU error angles, deg) and velocity (ENU, m/s) and its
