@@ -6,8 +6,8 @@ positions (paper 004's six-position method; :mod:`buoy_nav.calibration`).
 Reads ``imu/data_raw``, finds the still positions (at least 10 s each), fits the gravity sphere
 and writes a parameter file the fusion takes (``fusion.imu_accel_bias_mps2``,
 ``fusion.imu_accel_scale``, ``fusion.imu_gyro_bias_rad_s`` and the bias's remaining 1-σ as
-``fusion.accel_turn_on_bias_mg``). Gravity is the normal gravity at ``site.*`` (else
-``origin.*``, else 45°) from the parameter files. A bag in which an axis is never held up or down
+``fusion.accel_turn_on_bias_mg``, at least :data:`MIN_CALIBRATED_BIAS_MG`). Gravity is the
+normal gravity at ``site.*`` (else ``origin.*``, else 45°) from the parameter files. A bag in which an axis is never held up or down
 is refused with a message naming the missing attitudes. Exit codes: 0 written; 2 bad bag,
 parameters or coverage (one line on stderr).
 """
@@ -30,6 +30,9 @@ from buoy_nav.config import FusionConfig, fusion_config_from_files
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 DEFAULT_LATITUDE_DEG = 45.0
+MIN_CALIBRATED_BIAS_MG = 0.5
+"""Smallest bias 1-σ written: six positions fix six unknowns exactly, so the fit cannot show
+its own error; the positions' noise and the drift until deployment leave about this much."""
 
 
 def site_latitude_deg(config: FusionConfig) -> float:
@@ -81,7 +84,7 @@ def main(argv=None) -> None:
         "fusion.imu_accel_bias_mps2": calibration.accel_bias_mps2.tolist(),
         "fusion.imu_accel_scale": calibration.accel_scale.tolist(),
         "fusion.imu_gyro_bias_rad_s": calibration.gyro_bias_rad_s.tolist(),
-        "fusion.accel_turn_on_bias_mg": max(bias_sigma_mg, config.accel_bias_instability_mg),
+        "fusion.accel_turn_on_bias_mg": max(bias_sigma_mg, MIN_CALIBRATED_BIAS_MG),
     }
     comment = (
         f"calibrate_imu {arguments.in_bag}: {len(calibration.positions)} still positions, "

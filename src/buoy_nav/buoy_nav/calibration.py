@@ -157,10 +157,10 @@ class MagnetometerCalibration:
     field_t: float
 
 
-def missing_magnetometer_coverage(field_t: np.ndarray) -> list[str]:
-    """What a turn lacks for the fit: heading sectors never seen, too little tilt."""
-    centre = 0.5 * (field_t.max(axis=0) + field_t.min(axis=0))
-    centred = field_t - centre
+def missing_magnetometer_coverage(field_t: np.ndarray, centre_t: np.ndarray) -> list[str]:
+    """What a turn lacks for the fit: field azimuths (about ``centre_t``, body x-y plane)
+    never seen, too little tilt."""
+    centred = field_t - centre_t
     magnitude = float(np.mean(np.linalg.norm(centred, axis=1)))
     azimuth = np.degrees(np.arctan2(centred[:, 1], centred[:, 0])) % 360.0
     width = 360.0 / HEADING_BINS
@@ -191,9 +191,6 @@ def calibrate_magnetometer(field_t) -> MagnetometerCalibration:
     field = field[np.all(np.isfinite(field), axis=1)]
     if len(field) < 50:
         raise CalibrationError(f"{len(field)} finite magnetometer samples: at least 50 needed")
-    missing = missing_magnetometer_coverage(field)
-    if missing:
-        raise CalibrationError("; ".join(missing))
     low, high = field.min(axis=0), field.max(axis=0)
     min_max_centre = 0.5 * (high + low)
     half_ranges = 0.5 * (high - low)
@@ -220,6 +217,10 @@ def calibrate_magnetometer(field_t) -> MagnetometerCalibration:
         )
     soft = np.real(sqrtm(quadric / k))
     hard = min_max_centre + centre_scaled * scale
+    # Coverage judged about the fitted centre: a partial arc would centre min/max on itself.
+    missing = missing_magnetometer_coverage(field, hard)
+    if missing:
+        raise CalibrationError("; ".join(missing))
     calibrated = (field - hard) @ soft.T
     magnitude = np.linalg.norm(calibrated, axis=1)
     target = float(np.mean(np.linalg.norm(field - hard, axis=1)))
