@@ -7,9 +7,9 @@ Reads ``imu/data_raw``, finds the still positions (at least 10 s each), fits the
 and writes a parameter file the fusion takes (``fusion.imu_accel_bias_mps2``,
 ``fusion.imu_accel_scale``, ``fusion.imu_gyro_bias_rad_s`` and the bias's remaining 1-σ as
 ``fusion.accel_turn_on_bias_mg``, at least :data:`MIN_CALIBRATED_BIAS_MG`). Gravity is the
-normal gravity at ``site.*`` (else ``origin.*``, else 45°) from the parameter files. A bag in which an axis is never held up or down
-is refused with a message naming the missing attitudes. Exit codes: 0 written; 2 bad bag,
-parameters or coverage (one line on stderr).
+normal gravity at ``site.*`` (else ``origin.*``, else 45°) from the parameter files. A bag in
+which an axis is never held up or down is refused with a message naming the missing attitudes.
+Exit codes: 0 written; 2 bad bag, parameters or coverage (one line on stderr).
 """
 
 from __future__ import annotations
