@@ -32,7 +32,7 @@ from bench_plan import PROCESSING_PARAMS, SIMULATION_PARAMS
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
-from buoy_common.contract import AHRS_TOPIC, TRUTH_ODOMETRY_TOPIC
+from buoy_common.contract import AHRS_TOPIC, NAV_ODOMETRY_TOPIC, TRUTH_ODOMETRY_TOPIC
 from buoy_nav.config import fusion_config_from_files
 from sensor_sim.scenario import load_scenario
 from sensor_sim.simulate_bag import parse_arguments as simulate_arguments
@@ -161,6 +161,52 @@ def vertical_residual_share(out_bag: str, params: list[str]) -> float:
     return float(corrected / uncorrected)
 
 
+def outage_split(out_bag: str, intervals, start_ns: int) -> dict:
+    """Attitude (RMS and max, deg) and per-sample wind (vector RMS, m/s) errors inside and
+    outside the GNSS outages, after the first two minutes."""
+    with BagReader(out_bag) as reader:
+        nav = odometry_series(reader, NAV_ODOMETRY_TOPIC)
+        truth = odometry_series(reader, TRUTH_ODOMETRY_TOPIC)
+    common, i_nav, i_truth = np.intersect1d(nav.stamps_ns, truth.stamps_ns, return_indices=True)
+    error = wrap_deg(
+        np.degrees(
+            Rotation.from_quat(nav.quat_xyzw[i_nav]).as_euler("ZYX")
+            - Rotation.from_quat(truth.quat_xyzw[i_truth]).as_euler("ZYX")
+        )
+    )
+    run = read_wind_run(out_bag)
+    wind_error = run.corrected_enu_mps - run.truth_enu_mps
+
+    def inside(stamps_ns):
+        t = (stamps_ns - start_ns) * 1e-9
+        flag = np.zeros(t.shape, dtype=bool)
+        for begin, end in intervals:
+            flag |= (t >= begin) & (t < end)
+        return flag, t >= 120.0
+
+    result = {}
+    nav_in, nav_late = inside(common)
+    wind_in, wind_late = inside(run.wind_stamp_ns)
+    finite = np.all(np.isfinite(wind_error), axis=1)
+    for name, nav_mask, wind_mask in (
+        ("inside", nav_in & nav_late, wind_in & wind_late & finite),
+        ("outside", ~nav_in & nav_late, ~wind_in & wind_late & finite),
+    ):
+        angles = error[nav_mask]
+        result[name] = {
+            "attitude_rms_deg": {
+                axis: float(np.sqrt(np.mean(angles[:, k] ** 2)))
+                for k, axis in ((2, "roll"), (1, "pitch"), (0, "heading"))
+            },
+            "attitude_max_deg": {
+                axis: float(np.abs(angles[:, k]).max())
+                for k, axis in ((2, "roll"), (1, "pitch"), (0, "heading"))
+            },
+            "wind_rms_mps": float(np.sqrt(np.mean(np.sum(wind_error[wind_mask] ** 2, axis=1)))),
+        }
+    return result
+
+
 def ahrs_lag_cost(scenario_name: str, duration_s: float) -> dict:
     """RMS and max of the motion pack's own roll/pitch error against the truth (what its lag
     costs when used as is)."""
@@ -217,9 +263,22 @@ def main(argv=None) -> None:
         for key, future in futures.items():
             results["/".join(key)] = future.result()
             print(f"done {key}", file=sys.stderr)
+    for (scenario_name, name), result in zip(cases, results.values(), strict=True):
+        start_ns = load_scenario(scenario_name).start_time_ns
+        if name == "e_rtk_outages":
+            out_bag = WORK / f"{scenario_name}_{name}" / "out"
+            result["outage_split"] = outage_split(
+                str(out_bag), outage_intervals(duration), start_ns
+            )
+        if name == "d_motion_pack":
+            result["motion_pack_own_error"] = ahrs_lag_cost(scenario_name, duration)
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "sensor_sets.json").write_text(json.dumps(results, indent=1, default=str))
     print_table(results)
+    for key, result in results.items():
+        for extra in ("outage_split", "motion_pack_own_error"):
+            if extra in result:
+                print(f"{key} {extra}: {json.dumps(result[extra])}")
 
 
 def print_table(results: dict) -> None:
