@@ -21,7 +21,7 @@ Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency ...]
+    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets ...]
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -99,7 +99,7 @@ RUNS_DIR = OUT_DIR / "runs"
 SIMULATOR_PACKAGE = REPO / "src/sensor_sim/sensor_sim"
 # Modules outside sensor_sim whose code decides what simulate_bag writes.
 SIMULATION_SHARED_MODULES = ("buoy_common.parameters", "buoy_common.bag_io")
-SECTIONS = ("attitude", "wind", "speed", "live", "consistency")
+SECTIONS = ("attitude", "wind", "speed", "live", "consistency", "sensor_sets")
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 
 
@@ -423,6 +423,16 @@ def main(argv=None) -> None:
         }
     }
     case_results = run_cases(cases, bag_of) if cases else {}
+    if "sensor_sets" in sections:
+        # Sensor sets beyond RTK, the outage test and the motion pack's lag: their own tool,
+        # which writes out/bench/sensor_sets.json.
+        import bench_sensor_sets
+
+        for scenario in ("sea_state", "open_ocean"):
+            bench_sensor_sets.main(
+                ["--scenario", scenario, "--outages", *(["--quick"] if quick else [])]
+            )
+            shutil.copy(OUT_DIR / "sensor_sets.json", OUT_DIR / f"sensor_sets_{scenario}.json")
     if "attitude" in sections:
         attitude = {c.scenario: case_results[c.key] for c in cases if c.key.startswith("attitude/")}
         other_seeds = {

@@ -39,6 +39,8 @@ setup(
         "console_scripts": [
             "fusion_node = buoy_nav.fusion_node:main",
             "fuse_bag = buoy_nav.fuse_bag:main",
+            "calibrate_imu = buoy_nav.calibrate_imu:main",
+            "calibrate_magnetometer = buoy_nav.calibrate_magnetometer:main",
         ],
     },
 )

@@ -248,7 +248,8 @@ def test_cli_output_is_read_by_the_independent_mcap_readers(cli_run):
 
 @pytest.fixture(scope="module")
 def short_bags(tmp_path_factory):
-    """The first 12 s of the static bag (alignment takes 10 s), with and without gnss/heading."""
+    """The first 12 s of the static bag (alignment takes 10 s), with and without a heading
+    reference (gnss/heading and gnss/baseline)."""
     directory = tmp_path_factory.mktemp("short_bags")
     bags = {"complete": directory / "complete", "no_heading": directory / "no_heading"}
     with BagReader(BAGS_DIR / "static") as reader:
@@ -257,7 +258,7 @@ def short_bags(tmp_path_factory):
     for name, path in bags.items():
         with BagWriter(path) as writer:
             for record in records:
-                if name == "no_heading" and record.topic == "/gnss/heading":
+                if name == "no_heading" and record.topic in ("/gnss/heading", "/gnss/baseline"):
                     continue
                 writer.write_raw(record.topic, record.msgtype, record.log_time_ns, record.raw)
     return bags
@@ -285,9 +286,9 @@ def test_missing_input_bag(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-def test_bag_without_heading_names_the_missing_topic(short_bags, tmp_path):
+def test_bag_without_heading_names_the_missing_topics(short_bags, tmp_path):
     completed = run_fuse_bag(short_bags["no_heading"], tmp_path / "out")
-    assert_one_line_error(completed, "gnss/heading")
+    assert_one_line_error(completed, "gnss/heading", "gnss/baseline", "imu/mag", "imu/data")
     assert not (tmp_path / "out").exists()
 
 

@@ -149,6 +149,8 @@ class Reason(StrEnum):
     (an angular acceleration or jerk beyond the platform's limits)."""
     NON_POSITIVE_VARIANCE = "non_positive_variance"
     ZERO_QUATERNION = "zero_quaternion"
+    NON_UNIT_QUATERNION = "non_unit_quaternion"
+    """An orientation quaternion whose norm is not 1 (a driver's error, not a rotation)."""
     WRONG_FRAME = "wrong_frame"
     NO_FIX = "no_fix"
     """``gnss/fix`` with ``status.status < 0``."""

@@ -1,8 +1,9 @@
 """Fusion over a recorded bag: the core of ``fusion_node`` fed from a bag, ``nav/*`` written
 to another.
 
-The sensor topics ``imu/data_raw``, ``gnss/fix``, ``gnss/heading`` (required), ``gnss/vel`` and
-``gnss/baseline`` (used when present) are read in log-time order and go through the same
+The sensor topics ``imu/data_raw`` (required), one heading reference at least (``gnss/heading``,
+``gnss/baseline``, ``imu/mag`` or ``imu/data``), and ``gnss/fix``, ``gnss/vel``, the others
+(used when present) are read in log-time order and go through the same
 conversion (:mod:`buoy_nav.fusion_messages`) and engine as in the live node. Every solution's
 ``nav/odometry``, ``nav/imu``, ``nav/velocity`` and ``nav/fix`` carry the log time of the IMU
 message that produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries
@@ -28,9 +29,11 @@ from buoy_common.bag_io import (
     Recovery,
 )
 from buoy_common.contract import (
-    GNSS_FIX_TOPIC,
+    AHRS_TOPIC,
+    GNSS_BASELINE_TOPIC,
     GNSS_HEADING_TOPIC,
     IMU_RAW_TOPIC,
+    MAGNETOMETER_TOPIC,
     NAV_MSGTYPES,
     TRUTH_PREFIX,
     bag_topic,
@@ -49,7 +52,9 @@ from buoy_nav.fusion_messages import (
     solution_cdr,
 )
 
-REQUIRED_TOPICS = (IMU_RAW_TOPIC, GNSS_FIX_TOPIC, GNSS_HEADING_TOPIC)
+REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
+HEADING_TOPICS = (GNSS_HEADING_TOPIC, GNSS_BASELINE_TOPIC, MAGNETOMETER_TOPIC, AHRS_TOPIC)
+"""The fusion needs one of these at least: without a heading reference it cannot align."""
 OPTIONAL_TOPICS = tuple(topic for topic in FUSION_INPUT_MSGTYPES if topic not in REQUIRED_TOPICS)
 PROGRESS_EVERY_MESSAGES = 2000
 
@@ -75,6 +80,12 @@ def sensor_topics_of(
     stored = {relative_topic(name): name for name in reader.topics}
     found = {}
     disabled = disabled_topics(config)
+    usable_headings = [t for t in HEADING_TOPICS if t in stored and t not in disabled]
+    if not usable_headings:
+        raise BagError(
+            f"bag {reader.path}: no heading reference to align with: it needs one of "
+            f"{', '.join(HEADING_TOPICS)} (not switched off by a parameter)"
+        )
     for topic in (*REQUIRED_TOPICS, *OPTIONAL_TOPICS):
         if topic not in stored or topic in disabled:
             continue
@@ -151,6 +162,10 @@ class OfflineFusion:
             lines.append(f"never aligned (alignment state: {health.alignment_state.name})")
         else:
             lines.append(f"first navigation solution at stamp {self.first_solution_s:.3f} s")
+            lines.append(f"sensor set at the end: {health.sensor_set}")
+            lines.append(
+                "coasting sources at the end: " + (", ".join(health.coasting_sources) or "none")
+            )
         for kind, counters in health.counters.items():
             rejected = ", ".join(f"{r} {n}" for r, n in sorted(counters.rejected.items()))
             lines.append(

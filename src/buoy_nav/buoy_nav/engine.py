@@ -74,6 +74,7 @@ from buoy_nav.integrity import IntegrityMonitor
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
 from buoy_nav.prediction import RealtimePrediction
+from buoy_nav.sensor_sets import sensor_set
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
 
 __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
@@ -103,11 +104,16 @@ class FusionEngine:
         )
         """The aiding sources, one instance per class, in the order of application."""
         self._source_of_type = {source.measurement_type: source for source in self.sources}
-        self._source_of_topic = {source.topic: source for source in self.sources}
+        self._source_of_topic = {
+            source.topic: source for source in self.sources if not source.pseudo
+        }
+        # Constraints that read no topic, asked for a measurement at IMU samples.
+        self._pseudo_sources = tuple(s for s in self.sources if s.pseudo and s.enabled)
         kinds = [source.kind for source in self.sources]
         if len(set(kinds)) != len(kinds) or IMU in kinds:
             raise ValueError(f"aiding sources need distinct kinds other than '{IMU}': {kinds}")
-        if len(self._source_of_type) != len(kinds) or len(self._source_of_topic) != len(kinds):
+        topic_sources = sum(1 for source in self.sources if not source.pseudo)
+        if len(self._source_of_type) != len(kinds) or len(self._source_of_topic) != topic_sources:
             raise ValueError("aiding sources need distinct measurement types and topics")
         for source in self.sources:
             if source.aids not in AIDED_QUANTITIES:
@@ -116,6 +122,7 @@ class FusionEngine:
                 )
         self._aided_index = {source: AIDED_QUANTITIES.index(source.aids) for source in self.sources}
 
+        self._imu_calibration = _imu_calibration(config)
         self._imu_model = ImuErrorModel.from_config(config)
         self._distrust_variances = (
             math.radians(config.integrity_attitude_sigma_deg) ** 2,
@@ -156,6 +163,8 @@ class FusionEngine:
         self._counters = {kind: MeasurementCounters() for kind in (IMU, *kinds)}
         self._queue = MeasurementQueue(self.sources, self._counters)
         self._consecutive_rejections = dict.fromkeys(kinds, 0)
+        # Stamp of the latest accepted measurement per source kind (sensor set, coasting).
+        self._last_accepted = dict.fromkeys(kinds, -math.inf)
         # Stamp of the latest accepted measurement per aided quantity (AIDED_QUANTITIES order).
         self._last_aided = [-math.inf] * len(AIDED_QUANTITIES)
         self.innovation_log: list[InnovationRecord] | None = (
@@ -200,6 +209,10 @@ class FusionEngine:
         if not (math.isfinite(t) and math.isfinite(gx + gy + gz) and math.isfinite(fx + fy + fz)):
             self.reject_input(IMU, Reason.NON_FINITE)
             return []
+        if self._imu_calibration is not None:
+            (bgx, bgy, bgz), (bax, bay, baz), (sx, sy, sz) = self._imu_calibration
+            gx, gy, gz = gx - bgx, gy - bgy, gz - bgz
+            fx, fy, fz = (fx - bax) / sx, (fy - bay) / sy, (fz - baz) / sz
         config = self.config
         if (
             gx * gx + gy * gy + gz * gz > config.max_angular_rate_rad_s**2
@@ -323,6 +336,13 @@ class FusionEngine:
         """Counters, alignment and coasting state (a snapshot)."""
         self.catch_up()
         coasting = self._coasting_flags(self._time)
+        timeout = self.config.coasting_timeout_s
+        active = {k for k, t in self._last_accepted.items() if self._time - t <= timeout}
+        lapsed = {
+            k
+            for k, t in self._last_accepted.items()
+            if math.isfinite(t) and self._time - t > timeout
+        }
         return EngineHealth(
             alignment_state=AlignmentState.ALIGNED if self.aligned else self._aligner.state,
             aligned=self.aligned,
@@ -339,6 +359,8 @@ class FusionEngine:
             trusted=self._integrity.trusted,
             integrity_events=tuple(dataclasses.replace(e) for e in self._integrity.events),
             realignments=self._realignments,
+            sensor_set=sensor_set(active, lapsed) if self.aligned else "",
+            coasting_sources=tuple(sorted(lapsed)),
         )
 
     @property
@@ -393,6 +415,8 @@ class FusionEngine:
                 self._advance(stamp, gyro_m, force_m)
                 self._handle_measurements(stamp, group, gyro_m)
             self._advance(t, gyro, force)
+            if self._pseudo_sources and self._filter is not None:
+                self._apply_pseudo_measurements(t, gyro)
             self._older_imu = (t0, gyro0, force0)
             self._last_processed_imu_stamp = t
             if emit_solutions and self._filter is not None and self._output.due(t, span):
@@ -429,6 +453,8 @@ class FusionEngine:
         self._solutions.covariance_changed()
 
     def _restart_alignment(self):
+        for source in self._pseudo_sources:
+            source.restart()
         self._integrator = None
         self._filter = None
         self._aligner.restart()
@@ -493,6 +519,7 @@ class FusionEngine:
                 counters.nis_sum += gate.nis
                 counters.nis_count += 1
                 self._last_aided[self._aided_index[source]] = t
+                self._last_accepted[kind] = t
                 self._consecutive_rejections[kind] = 0
                 accepted.append(model)
                 continue
@@ -532,6 +559,20 @@ class FusionEngine:
         for index in states.indices("velocity"):
             covariance[index, index] += velocity_variance
         self._solutions.covariance_changed()
+
+    def _apply_pseudo_measurements(self, t: float, gyro):
+        """Ask the constraints that are due at IMU stamp ``t`` for their measurements."""
+        due = [source for source in self._pseudo_sources if t >= source.next_due_s]
+        if not due:
+            return
+        state = self._integrator.nav_state()
+        fix_age = t - self._last_aided[AIDED_QUANTITIES.index("fix")]
+        group = []
+        for source in due:
+            measurement = source.pseudo_measurement(t, state, fix_age)
+            if measurement is not None:
+                group.append((source, measurement))
+        self._handle_measurements(t, group, gyro)
 
     def _inject(self, state: NavState, correction):
         self._integrator.set_nav_state(inject_error_state(state, correction))
@@ -590,7 +631,7 @@ class FusionEngine:
         """(fix, velocity, heading): no source aiding that quantity accepted for longer than
         ``coasting_timeout_s`` at stamp ``t``."""
         timeout = self.config.coasting_timeout_s
-        fix, velocity, heading = self._last_aided
+        fix, velocity, heading = self._last_aided[:3]
         return t - fix > timeout, t - velocity > timeout, t - heading > timeout
 
     def _solution(self, integrator: StrapdownIntegrator, t: float, gyro, force) -> NavSolution:
@@ -599,6 +640,15 @@ class FusionEngine:
         return self._solutions.solution(
             integrator, self._filter, t, gyro, force, self._coasting_flags(self._time)
         )
+
+
+def _imu_calibration(config: FusionConfig):
+    """(gyro bias rad/s, accelerometer bias m/s², accelerometer scale) from ``calibrate_imu``,
+    None when they are the identity (nothing to apply)."""
+    calibration = (config.imu_gyro_bias_rad_s, config.imu_accel_bias_mps2, config.imu_accel_scale)
+    if calibration == ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)):
+        return None
+    return calibration
 
 
 def _block_diagonal(blocks) -> np.ndarray:

@@ -60,7 +60,7 @@ from buoy_common.contract import (
     header_seconds,
     seconds_to_stamp,
 )
-from buoy_nav.aiding import AIDING_SOURCES
+from buoy_nav.aiding import TOPIC_SOURCES
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.aiding.gnss_fix import STATUS_FIX
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
@@ -68,7 +68,7 @@ from buoy_nav.rotations import rotation_matrix_elements
 
 FUSION_INPUT_MSGTYPES = {
     IMU_RAW_TOPIC: SENSOR_MSGTYPES[IMU_RAW_TOPIC],
-    **{source.topic: source.msgtype() for source in AIDING_SOURCES},
+    **{source.topic: source.msgtype() for source in TOPIC_SOURCES},
 }
 """The fusion's input topics (relative names) and their message types: the IMU and the topic of
 every registered aiding source."""

@@ -17,7 +17,9 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``nav/imu`` (sensor_msgs/Imu, ``base_link``)
 - ``nav/velocity`` (geometry_msgs/TwistWithCovarianceStamped, ``map``)
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``)
-- ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
+- ``diagnostics`` (1 s): alignment state, coasting flags, the sensor set in use
+  (``sensor_set``, :mod:`buoy_nav.sensor_sets`) and the sources that coast (``coasting_sources``:
+  accepted before, not now), per input kind the accepted, aligning,
   superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps;
   the integrity of the filter (``navigation_trusted``, ``integrity_events``, ``realignments``,
   ``untrusted_s``) and IMU clock steps undone (``imu_clock_steps``, ``imu_clock_correction_s``);
@@ -261,6 +263,8 @@ class FusionNode(FlushingNode):
             "coasting_fix": health.coasting_fix,
             "coasting_velocity": health.coasting_velocity,
             "coasting_heading": health.coasting_heading,
+            "sensor_set": health.sensor_set,
+            "coasting_sources": ",".join(health.coasting_sources),
         }
         for kind, counters in health.counters.items():
             values[f"{kind}.accepted"] = counters.accepted
@@ -321,8 +325,16 @@ class FusionNode(FlushingNode):
             reason = health.integrity_events[-1].reason
             return "warn", f"aligned, navigation not trusted ({reason})", values
         if coasting:
-            return "warn", f"aligned, coasting without GNSS {', '.join(coasting)}", values
-        return "ok", f"aligned, {self.solutions_published} solutions published", values
+            return (
+                "warn",
+                f"aligned on {health.sensor_set}, coasting without GNSS {', '.join(coasting)}",
+                values,
+            )
+        return (
+            "ok",
+            f"aligned on {health.sensor_set}, {self.solutions_published} solutions published",
+            values,
+        )
 
     def _filter_estimates(self) -> dict[str, float]:
         """The filter's 1σ of attitude (ENU error angles, deg) and velocity (ENU, m/s) and its

@@ -88,6 +88,9 @@ class EngineHealth:
     trusted: the filter agrees with its aiding (see :mod:`buoy_nav.integrity`).
     integrity_events: the periods in which it did not, oldest first.
     realignments: alignments started again because the filter stayed inconsistent.
+    sensor_set: the sensor set in use (:func:`buoy_nav.sensor_sets.sensor_set`).
+    coasting_sources: kinds of the aiding sources accepted before but not within
+      ``coasting_timeout_s`` (their quantities are carried by the inertial solution).
     """
 
     alignment_state: AlignmentState
@@ -105,3 +108,5 @@ class EngineHealth:
     trusted: bool = True
     integrity_events: tuple[IntegrityEvent, ...] = ()
     realignments: int = 0
+    sensor_set: str = ""
+    coasting_sources: tuple[str, ...] = ()

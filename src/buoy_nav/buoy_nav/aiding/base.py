@@ -50,7 +50,9 @@ if TYPE_CHECKING:
 FIX = "fix"
 VELOCITY = "velocity"
 HEADING = "heading"
-AIDED_QUANTITIES = (FIX, VELOCITY, HEADING)
+MOORING = "mooring"
+"""The zero-mean-velocity constraint of a moored buoy: it clears no GNSS coasting flag."""
+AIDED_QUANTITIES = (FIX, VELOCITY, HEADING, MOORING)
 
 
 @dataclass(frozen=True)
@@ -109,6 +111,9 @@ class AidingSource(abc.ABC):
       superseded_by: kind of a source whose measurement of the same stamp carries this one's
         information and more (None: none); such a measurement is set aside and counted as
         superseded, so one observation is not fused twice.
+      pseudo: True for a constraint that reads no topic (``topic`` None): the engine asks it
+        for a measurement with ``pseudo_measurement(t_s, state, fix_age_s)`` once an IMU
+        sample reaches its ``next_due_s``.
 
     A source is built once per engine from the configuration and the engine's error-state
     layout (``states``), whose block names address the Jacobian's columns.
@@ -119,6 +124,7 @@ class AidingSource(abc.ABC):
     measurement_type: ClassVar[type]
     aids: ClassVar[str]
     superseded_by: ClassVar[str | None] = None
+    pseudo: ClassVar[bool] = False
 
     def __init__(self, config: FusionConfig, states: StateLayout):
         self.config = config
