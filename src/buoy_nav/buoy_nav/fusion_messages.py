@@ -37,6 +37,9 @@ Covariances not estimated (the rates, the specific force, the angular part of th
 all zeros, the ROS convention for "unknown".
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``): WGS-84 position of the ``base_link``
   origin, ENU covariance (known), status FIX, service GPS.
+- ``tf`` (tf2_msgs/TFMessage): the transform ``map`` → ``base_link`` (position in ``map``, m;
+  attitude body→ENU), serialised through rosbags' Jazzy typestore (:func:`transform_cdr`), so
+  bags carry it without tf2 installed and the node publishes the same bytes where it is.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ from typing import NamedTuple
 import numpy as np
 
 from buoy_common import cdr
+from buoy_common.bag_io import jazzy_typestore
 from buoy_common.contract import (
     BODY_FRAME,
     IMU_RAW_TOPIC,
@@ -56,6 +60,7 @@ from buoy_common.contract import (
     NAV_ODOMETRY_TOPIC,
     NAV_VELOCITY_TOPIC,
     SENSOR_MSGTYPES,
+    TF_MSGTYPE,
     Reason,
     header_seconds,
     seconds_to_stamp,
@@ -430,3 +435,28 @@ def solution_cdr(v: NavValues) -> dict[str, bytes]:
             COVARIANCE_TYPE_KNOWN,
         ),
     }
+
+
+_TYPES = jazzy_typestore().types
+
+
+def transform_cdr(v: NavValues) -> bytes:
+    """The ``tf`` message of one solution's :func:`nav_values`, as CDR bytes: the transform
+    ``map`` → ``base_link`` at the solution's stamp (translation m in ``map``, rotation
+    body→ENU)."""
+    header = _TYPES["std_msgs/msg/Header"](
+        stamp=_TYPES["builtin_interfaces/msg/Time"](sec=v.sec, nanosec=v.nanosec),
+        frame_id=MAP_FRAME,
+    )
+    x, y, z = v.position_map_m
+    qx, qy, qz, qw = v.attitude_xyzw
+    transform = _TYPES["geometry_msgs/msg/TransformStamped"](
+        header=header,
+        child_frame_id=BODY_FRAME,
+        transform=_TYPES["geometry_msgs/msg/Transform"](
+            translation=_TYPES["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
+            rotation=_TYPES["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
+        ),
+    )
+    message = _TYPES[TF_MSGTYPE](transforms=[transform])
+    return bytes(jazzy_typestore().serialize_cdr(message, TF_MSGTYPE))
