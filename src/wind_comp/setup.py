@@ -48,6 +48,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
+            "calibrate_mounting = wind_comp.calibrate_mounting:main",
             "compensation_node = wind_comp.compensation_node:main",
             "process_bag = wind_comp.process_bag:main",
             "wind_echo = wind_comp.wind_echo_node:main",

@@ -45,6 +45,7 @@ DEFAULT_MAX_UNCERTAINTY_DEG = 0.1
 """Largest 1σ of any angle for the angles to be given (2σ = 0.2°, the accuracy a sonic's
 mounting should have for 1 % of the wind speed in the vertical)."""
 ITERATIONS = 5
+RANK_TOLERANCE = 1e-10
 CONVERGED_RAD = 1e-9
 
 
@@ -132,7 +133,7 @@ def estimate_mounting(
         design, residual = _linear_system(
             attitude, measured, corrected, nominal, mounting, window_index, windows
         )
-        step, *_ = np.linalg.lstsq(design, -residual, rcond=None)
+        step, *_ = np.linalg.lstsq(design, -residual, rcond=RANK_TOLERANCE)
         delta = delta + step
         if np.max(np.abs(step)) < CONVERGED_RAD:
             break
@@ -140,8 +141,12 @@ def estimate_mounting(
     design, residual = _linear_system(
         attitude, measured, corrected, nominal, mounting, window_index, windows
     )
-    covariance = _cluster_robust_covariance(design, residual, np.tile(window_index, 3))
-    rpy_sigma = _rpy_sigma_deg(mounting, covariance)
+    rpy_sigma = np.maximum(
+        _rpy_sigma_deg(
+            mounting, _cluster_robust_covariance(design, residual, np.tile(window_index, 3))
+        ),
+        _rpy_sigma_deg(mounting, _independent_covariance(design, residual)),
+    )
     final_vertical = corrected[:, 2] + _mounting_shift(attitude, measured, nominal, mounting)[:, 2]
     estimate = MountingEstimate(
         rpy_deg=tuple(float(a) for a in _rpy_deg(mounting)),
@@ -201,18 +206,40 @@ def _linear_system(attitude, measured, corrected, nominal, mounting, window_inde
     return design, residual
 
 
+def _inverse_normal_matrix(design: np.ndarray) -> np.ndarray:
+    """(DᵀD)⁻¹; infinite where a combination of the angles is not observed at all (no motion,
+    one wind direction), rather than the zero a pseudo-inverse would give it."""
+    normal = design.T @ design
+    eigenvalues = np.linalg.eigvalsh(normal)
+    if eigenvalues[0] <= RANK_TOLERANCE * eigenvalues[-1]:
+        return np.full(normal.shape, np.inf)
+    return np.linalg.inv(normal)
+
+
 def _cluster_robust_covariance(design: np.ndarray, residual: np.ndarray, cluster: np.ndarray):
     """Covariance of the least-squares parameters with residuals correlated inside each
     cluster (the sandwich estimator)."""
-    bread = np.linalg.pinv(design.T @ design)
+    bread = _inverse_normal_matrix(design)
+    if not np.isfinite(bread).all():
+        return bread
     per_cluster = np.zeros((int(cluster.max()) + 1, design.shape[1]))
     np.add.at(per_cluster, cluster, design * residual[:, None])
     return bread @ (per_cluster.T @ per_cluster) @ bread
 
 
+def _independent_covariance(design: np.ndarray, residual: np.ndarray):
+    """Covariance of the least-squares parameters with independent residuals: the floor of the
+    sandwich, whose scores vanish identically where the regressors carry only the measured
+    wind itself (a rotation of the wind is orthogonal to it), with no motion to observe."""
+    variance = float(residual @ residual) / max(residual.size - design.shape[1], 1)
+    return variance * _inverse_normal_matrix(design)
+
+
 def _rpy_sigma_deg(mounting: Rotation, delta_covariance_rad2: np.ndarray) -> np.ndarray:
     """1σ of roll, pitch, yaw (deg) from the covariance of the rotation vector δ (rad²),
     propagated through the Euler angles by numerical derivatives."""
+    if not np.isfinite(delta_covariance_rad2).all():
+        return np.full(3, np.inf)
     base = _rpy_deg(mounting)
     derivative = np.empty((3, 3))
     for axis in range(3):
