@@ -17,7 +17,6 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.interfaces import Nodetype
 from scipy.spatial.transform import Rotation
-from test_process_bag import processed_bag
 
 from buoy_common.bag_io import BagReader, jazzy_typestore
 from buoy_common.contract import (
@@ -30,6 +29,7 @@ from buoy_common.contract import (
     TF_TOPIC,
     TRUTH_MSGTYPES,
 )
+from processed_bags import processed_bag
 
 REPO = Path(__file__).resolve().parents[2]
 LAYOUT = REPO / "src" / "buoy_common" / "config" / "foxglove_layout.json"
