@@ -40,6 +40,9 @@ WIND_STATS_PREFIX = "wind/stats_"
 CURRENT_TOPIC = "current/velocity"
 DIAGNOSTICS_TOPIC = "diagnostics"
 CLOCK_TOPIC = "clock"
+TF_TOPIC = "tf"
+"""``map`` → ``base_link`` of each navigation solution. Relative, like every topic here, so each
+buoy of a fleet has its own tree under its namespace (tf2 listeners take ``-r /tf:=tf``)."""
 
 # -- message types -------------------------------------------------------------------------------
 IMU_MSGTYPE = "sensor_msgs/msg/Imu"
@@ -52,6 +55,7 @@ ODOMETRY_MSGTYPE = "nav_msgs/msg/Odometry"
 FLOAT64_ARRAY_MSGTYPE = "std_msgs/msg/Float64MultiArray"
 DIAGNOSTICS_MSGTYPE = "diagnostic_msgs/msg/DiagnosticArray"
 CLOCK_MSGTYPE = "rosgraph_msgs/msg/Clock"
+TF_MSGTYPE = "tf2_msgs/msg/TFMessage"
 
 SENSOR_MSGTYPES = {
     IMU_RAW_TOPIC: IMU_MSGTYPE,
@@ -88,6 +92,7 @@ OUTPUT_MSGTYPES = {
     WIND_TRUE_TOPIC: VECTOR3_MSGTYPE,
     CURRENT_TOPIC: VECTOR3_MSGTYPE,
     DIAGNOSTICS_TOPIC: DIAGNOSTICS_MSGTYPE,
+    TF_TOPIC: TF_MSGTYPE,
 }
 """Every fixed-name output topic (the wind products are named per window, see
 :func:`wind_mean_topic` and :func:`wind_stats_topic`)."""
