@@ -93,8 +93,9 @@ def sensor_stream_of(name: str) -> list:
     bag order."""
     stream = []
     with BagReader(CASES[name].bag_path) as reader:
+        present = {name.lstrip("/") for name in reader.topics}
         first_ns = None
-        for record in reader.messages(list(FUSION_INPUT_MSGTYPES)):
+        for record in reader.messages([t for t in FUSION_INPUT_MSGTYPES if t in present]):
             first_ns = record.log_time_ns if first_ns is None else first_ns
             if record.log_time_ns - first_ns > LIVE_EQUALS_OFFLINE_S * 1e9:
                 break
