@@ -525,7 +525,8 @@ class FusionEngine:
                 continue
             counters.reject(Reason.GATE if math.isfinite(gate.nis) else Reason.SINGULAR)
             self._consecutive_rejections[kind] += 1
-            rejected_kinds[kind] = self._consecutive_rejections[kind]
+            if source.witnesses_integrity:
+                rejected_kinds[kind] = self._consecutive_rejections[kind]
             if self._consecutive_rejections[kind] >= source.reset_after_rejections:
                 persistent_rejections.append((source, measurement, model))
         if accepted:

@@ -125,6 +125,10 @@ class AidingSource(abc.ABC):
     aids: ClassVar[str]
     superseded_by: ClassVar[str | None] = None
     pseudo: ClassVar[bool] = False
+    witnesses_integrity: ClassVar[bool] = True
+    """Whether persistent gate rejections of this source mean that the filter is wrong (see
+    :mod:`buoy_nav.integrity`); False for a sensor whose own disturbances are expected and
+    stopped by the gate, such as a magnetometer beside a passing hull."""
 
     def __init__(self, config: FusionConfig, states: StateLayout):
         self.config = config

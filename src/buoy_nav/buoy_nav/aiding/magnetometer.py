@@ -79,6 +79,9 @@ class MagnetometerSource(AidingSource):
     topic = MAGNETOMETER_TOPIC
     measurement_type = MagneticField
     aids = HEADING
+    # A steel hull or a winch disturbs the field for tens of seconds: the gate stops it, and the
+    # filter is not to be distrusted for it.
+    witnesses_integrity = False
 
     def __init__(self, config, states):
         super().__init__(config, states)
