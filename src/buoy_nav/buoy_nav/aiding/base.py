@@ -40,7 +40,12 @@ import numpy as np
 from buoy_common.contract import SENSOR_MSGTYPES, Reason
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import NavState
-from buoy_nav.state_layout import StateLayout
+from buoy_nav.rotations import (
+    euler_from_rotation_matrix,
+    quaternion_from_rotation_matrix,
+    rotation_matrix_from_euler,
+)
+from buoy_nav.state_layout import UP, StateLayout
 
 if TYPE_CHECKING:
     from buoy_nav.alignment import AlignmentResult, InMotionAligner
@@ -97,6 +102,31 @@ class StateReset:
     state: NavState
     indices: Sequence[int]
     variances: Sequence[float]
+
+
+def yaw_reset(
+    states: StateLayout, point: LinearisationPoint, body_vector, azimuth_rad: float, variance_rad2
+) -> StateReset:
+    """The reset of the yaw alone that turns ``body_vector`` (body axes, any unit) to the
+    azimuth ``azimuth_rad`` (ENU, 0 = East, counter-clockwise) with roll and pitch kept, the
+    yaw error given ``variance_rad2`` (rad²)."""
+    roll, pitch, _ = euler_from_rotation_matrix(point.rotation_nb)
+    levelled = rotation_matrix_from_euler(roll, pitch, 0.0) @ np.asarray(body_vector, dtype=float)
+    yaw = azimuth_rad - math.atan2(levelled[1], levelled[0])
+    state = point.state
+    return StateReset(
+        NavState(
+            quaternion_from_rotation_matrix(rotation_matrix_from_euler(roll, pitch, yaw)),
+            state.velocity_enu_mps,
+            state.latitude_rad,
+            state.longitude_rad,
+            state.altitude_m,
+            state.gyro_bias_rad_s,
+            state.accel_bias_mps2,
+        ),
+        [states.index("attitude", UP)],
+        [variance_rad2],
+    )
 
 
 class AidingSource(abc.ABC):

@@ -43,19 +43,14 @@ from buoy_nav.aiding.base import (
     AidingSource,
     LinearisationPoint,
     MeasurementModel,
-    StateReset,
     as_float_array,
     vector_of,
+    yaw_reset,
 )
-from buoy_nav.error_state_filter import NavState
 from buoy_nav.geomagnetism import declination_rad
 from buoy_nav.rotations import (
-    euler_from_rotation_matrix,
-    quaternion_from_rotation_matrix,
-    rotation_matrix_from_euler,
     wrap_angle,
 )
-from buoy_nav.state_layout import UP
 
 MIN_HORIZONTAL_FIELD_FRACTION = 0.15
 MIN_FIELD_T = 1e-6
@@ -163,27 +158,17 @@ class MagnetometerSource(AidingSource):
 
     def reset(self, measurement: MagneticField, point: LinearisationPoint, model):
         """The yaw that puts the field's horizontal part on magnetic north, tilt kept."""
-        roll, pitch, _ = euler_from_rotation_matrix(point.rotation_nb)
-        levelled = rotation_matrix_from_euler(roll, pitch, 0.0) @ measurement.field_body_t
-        horizontal_sq = levelled[0] ** 2 + levelled[1] ** 2
+        field = measurement.field_body_t
+        # Turning about the vertical keeps the horizontal part's length: the current attitude
+        # gives it.
+        horizontal = np.asarray(point.rotation_nb, dtype=float) @ field
+        horizontal_sq = horizontal[0] ** 2 + horizontal[1] ** 2
         state = point.state
         target = self.magnetic_north_azimuth_rad(
             state.latitude_rad, state.longitude_rad, measurement.t_s
         )
-        yaw = target - math.atan2(levelled[1], levelled[0])
-        return StateReset(
-            NavState(
-                quaternion_from_rotation_matrix(rotation_matrix_from_euler(roll, pitch, yaw)),
-                state.velocity_enu_mps,
-                state.latitude_rad,
-                state.longitude_rad,
-                state.altitude_m,
-                state.gyro_bias_rad_s,
-                state.accel_bias_mps2,
-            ),
-            [self.states.index("attitude", UP)],
-            [self._variance(measurement, max(horizontal_sq, MIN_FIELD_T**2))],
-        )
+        variance = self._variance(measurement, max(horizontal_sq, MIN_FIELD_T**2))
+        return yaw_reset(self.states, point, field, target, variance)
 
     def align(self, aligner, t_s: float, measurement: MagneticField, raw_gyro_rad_s):
         """The azimuth of the field's horizontal part (magnetic north) completes the alignment
