@@ -16,14 +16,19 @@ as constants and printed beside our figures:
    against;
 7. consistency: Monte-Carlo normalised errors of the accelerometer bias over many seeds
    (tools/bias_consistency.py);
-8. current (paper 003): process_bag on ship_current, sea_state and open_ocean with their DVL
+8. current (paper 003): process_bag on ship_current and sea_state with its DVL, short runs; and,
+   opt-in (current_long), an hour of ship_current, sea_state and open_ocean
    (tools/bench_current.py).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|current ...]
+    python tools/bench.py [--quick] [--only SECTION ...]
+
+SECTION: attitude, wind, speed, live, consistency, sensor_sets, current (the default set) or
+current_long (opt-in: an hour of paper 003's ship and of each buoy with its DVL, tens of
+minutes).
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -47,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 from bench_analysis import ANALYSES, wrap_deg
-from bench_current import CURRENT_ANALYSES, current_cases, print_current
+from bench_current import CURRENT_ANALYSES, current_cases, current_results, print_current
 from bench_plan import (
     ATTITUDE_MAX_ERROR_DEG,
     ATTITUDE_RMS_DEG,
@@ -102,7 +107,9 @@ RUNS_DIR = OUT_DIR / "runs"
 SIMULATOR_PACKAGE = REPO / "src/sensor_sim/sensor_sim"
 # Modules outside sensor_sim whose code decides what simulate_bag writes.
 SIMULATION_SHARED_MODULES = ("buoy_common.parameters", "buoy_common.bag_io")
-SECTIONS = ("attitude", "wind", "speed", "live", "consistency", "current")
+SECTIONS = ("attitude", "wind", "speed", "live", "consistency", "sensor_sets", "current")
+# Sections that take several minutes more than the rest are run only when named with --only.
+OPT_IN_SECTIONS = ("current_long",)
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 
 
@@ -198,8 +205,9 @@ def plan_cases(sections: set[str], quick: bool) -> list[Case]:
                     scenario,
                 )
             )
-    if "current" in sections:
-        cases += current_cases(quick, Case)
+    for section in ("current", "current_long"):
+        if section in sections:
+            cases += current_cases(section, quick, Case)
     return cases
 
 
@@ -391,8 +399,9 @@ def parse_arguments(argv):
     parser.add_argument(
         "--only",
         action="append",
-        choices=SECTIONS,
-        help="run only this part (repeatable); wind = tables 2, 3 and 4",
+        choices=(*SECTIONS, *OPT_IN_SECTIONS),
+        help="run only this part (repeatable); wind = tables 2, 3 and 4; without it, every "
+        f"section but the opt-in ones ({', '.join(OPT_IN_SECTIONS)})",
     )
     return parser.parse_args(argv)
 
@@ -429,6 +438,16 @@ def main(argv=None) -> None:
         }
     }
     case_results = run_cases(cases, bag_of) if cases else {}
+    if "sensor_sets" in sections:
+        # Sensor sets beyond RTK, the outage test and the motion pack's lag: their own tool,
+        # which writes out/bench/sensor_sets.json.
+        import bench_sensor_sets
+
+        for scenario in ("sea_state", "open_ocean"):
+            bench_sensor_sets.main(
+                ["--scenario", scenario, "--outages", *(["--quick"] if quick else [])]
+            )
+            shutil.copy(OUT_DIR / "sensor_sets.json", OUT_DIR / f"sensor_sets_{scenario}.json")
     if "attitude" in sections:
         attitude = {c.scenario: case_results[c.key] for c in cases if c.key.startswith("attitude/")}
         other_seeds = {
@@ -514,19 +533,11 @@ def main(argv=None) -> None:
             "Table 6b — the floor: the same run with pass-through stand-ins for both nodes "
             "(tools/passthrough_node.py)",
         )
-    if "current" in sections:
-        paper = {
-            key.split("/")[1]: value
-            for key, value in case_results.items()
-            if key.startswith("current_paper/")
-        }
-        buoys = {
-            key.split("/")[1]: value
-            for key, value in case_results.items()
-            if key.startswith("current_buoy/")
-        }
-        results["current"] = {"paper_003": paper, "buoys": buoys}
-        print_current(paper, buoys, quick)
+    for section in ("current", "current_long"):
+        if section in sections:
+            paper, buoys = current_results(section, case_results)
+            results[section] = {"paper_003": paper, "buoys": buoys}
+            print_current(section, paper, buoys, quick)
     if "consistency" in sections:
         import bias_consistency
 

@@ -1,14 +1,22 @@
-"""The current section of ``make bench`` (tools/bench.py): paper 003's ship, the buoy scenarios
+"""The current sections of ``make bench`` (tools/bench.py): paper 003's ship, the buoy scenarios
 with a DVL, and what averaging removes, beside the paper's figures and this project's targets.
 
-Table 7 (paper 003, its test case): ``ship_current`` for an hour, processed by ``process_bag``;
-the mean of the current estimates after 0.2 h, as the paper averages them, beside its 60.29°, its
-East and North errors and its claim of 0.1 % of the current's speed. Twice: with the DVL of the
-scenario (the paper's 0.2 % ± 0.2 cm/s, systematic) and with that DVL's systematic errors taken
-out (ping noise only), which is the estimate's own accuracy.
+Two sections, the same tables:
 
-Table 8 (the buoys): ``sea_state`` and ``open_ocean`` with their DVL for an hour: single samples
-against the water at the DVL and against the current, the 10-minute means against the current.
+- ``current`` (in the default set, about two minutes): ``ship_current`` for 20 minutes (the
+  paper's 0.2 h and 8 minutes of averaging after it), ``sea_state`` for 11 minutes (one
+  complete 10-minute window);
+- ``current_long`` (opt-in, ``--only current_long``; tens of minutes): ``ship_current`` for the
+  paper's hour, ``sea_state`` and ``open_ocean`` for an hour each (six 10-minute windows).
+
+Table 7 (paper 003, its test case): ``ship_current`` processed by ``process_bag``; the mean of
+the current estimates after 0.2 h, as the paper averages them, beside its 60.29°, its East and
+North errors and its claim of 0.1 % of the current's speed. Twice: with the DVL of the scenario
+(the paper's 0.2 % ± 0.2 cm/s, systematic) and with that DVL's systematic errors taken out (ping
+noise only), which is the estimate's own accuracy.
+
+Table 8 (the buoys): single samples against the water at the DVL and against the current, the
+10-minute means against the current.
 
 Table 8b: the error of the window means against the window length, on the same runs.
 """
@@ -49,22 +57,36 @@ BUOY_DIRECTION_ERROR_DEG = 2.0
 BUOY_MIN_CURRENT_MPS = 0.2  # the direction target holds for currents this fast or faster
 BUOY_MEAN_WINDOW_S = 600.0
 
-# Runs.
-CURRENT_DURATION_S = {"full": 3600.0, "quick": 1200.0}
-BUOY_CURRENT_SCENARIOS = ("sea_state", "open_ocean")
+# Runs: section -> (paper run length, buoy run length, buoy scenarios); with --quick the long
+# section runs as long as the short one's paper runs.
+CURRENT_RUNS = {
+    "current": (1200.0, 660.0, ("sea_state",)),
+    "current_long": (3600.0, 3600.0, ("sea_state", "open_ocean")),
+}
+QUICK_LONG_DURATION_S = 1200.0
 # The paper's DVL without its systematic errors: ping noise only.
 CALIBRATED_DVL = ("sensors.dvl.scale_factor_error_percent=0", "sensors.dvl.bias_mps=[0, 0, 0]")
 PAPER_RUNS = {"paper_dvl": (), "calibrated_dvl": CALIBRATED_DVL}
 
 
-def current_cases(quick: bool, case_type):
-    """The section's runs as ``case_type(key, scenario, overrides, pipeline, analysis, label)``."""
-    duration = f"duration_s={CURRENT_DURATION_S['quick' if quick else 'full']:g}"
+def current_durations(section: str, quick: bool) -> tuple[float, float]:
+    """(paper run, buoy run) lengths of ``section``, s."""
+    paper_s, buoy_s, _ = CURRENT_RUNS[section]
+    if quick and section == "current_long":
+        return QUICK_LONG_DURATION_S, QUICK_LONG_DURATION_S
+    return paper_s, buoy_s
+
+
+def current_cases(section: str, quick: bool, case_type):
+    """The runs of ``section`` (``current`` or ``current_long``) as ``case_type(key, scenario,
+    overrides, pipeline, analysis, label)``; keys ``<section>/paper/<run>`` and
+    ``<section>/buoy/<scenario>``."""
+    paper_s, buoy_s = current_durations(section, quick)
     cases = [
         case_type(
-            f"current_paper/{name}",
+            f"{section}/paper/{name}",
             "ship_current",
-            (duration, *overrides),
+            (f"duration_s={paper_s:g}", *overrides),
             "process",
             "paper_current",
             f"ship_current, {name.replace('_', ' ')}",
@@ -73,16 +95,26 @@ def current_cases(quick: bool, case_type):
     ]
     cases += [
         case_type(
-            f"current_buoy/{scenario}",
+            f"{section}/buoy/{scenario}",
             scenario,
-            (duration,),
+            (f"duration_s={buoy_s:g}",),
             "process",
             "buoy_current",
             f"{scenario} with its DVL",
         )
-        for scenario in BUOY_CURRENT_SCENARIOS
+        for scenario in CURRENT_RUNS[section][2]
     ]
     return cases
+
+
+def current_results(section: str, case_results: dict) -> tuple[dict, dict]:
+    """(paper runs, buoy runs) of ``section`` among the bench's results."""
+    found = {"paper": {}, "buoy": {}}
+    for key, value in case_results.items():
+        parts = key.split("/")
+        if parts[0] == section:
+            found[parts[1]][parts[2]] = value
+    return found["paper"], found["buoy"]
 
 
 def _read(out_bag: str) -> CurrentData:
@@ -210,9 +242,12 @@ def _mark(passed: bool) -> str:
     return "PASS" if passed else "MISS"
 
 
-def print_current(paper: dict[str, dict], buoys: dict[str, dict], quick: bool) -> None:
-    duration = CURRENT_DURATION_S["quick" if quick else "full"]
-    print(f"\nTable 7 — current, paper 003's ship: process_bag on ship_current ({duration:g} s)")
+def print_current(section: str, paper: dict[str, dict], buoys: dict[str, dict], quick: bool):
+    paper_s, buoy_s = current_durations(section, quick)
+    print(
+        f"\nTable 7 — current ({section}), paper 003's ship: process_bag on ship_current "
+        f"({paper_s:g} s)"
+    )
     print(
         "mean of current/velocity after 0.2 h against truth/current (2 m/s toward 60°); targets "
         f"|speed error| ≤ {PAPER_SPEED_ERROR_FRACTION:.1%} of the speed, |direction error| ≤ "
@@ -240,7 +275,7 @@ def print_current(paper: dict[str, dict], buoys: dict[str, dict], quick: bool) -
             f"speed {_mark(r['pass_speed'])}, direction {_mark(r['pass_direction'])}"
         )
 
-    print(f"\nTable 8 — current, the buoys with a DVL: process_bag ({duration:g} s)")
+    print(f"\nTable 8 — current ({section}), the buoys with a DVL: process_bag ({buoy_s:g} s)")
     print(
         "single samples against the water at the DVL (the estimate's own error) and against "
         "the current (the waves' orbital velocity included); 10-min means against the current "

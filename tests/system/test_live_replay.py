@@ -5,12 +5,14 @@ are as close to the simulator's truth as the sensors allow (two outputs broken t
 would be equal too). Likewise ``current_node`` and ``current/velocity`` for a bag with a DVL.
 
 The first minute of ``sea_state`` (shipped geometry) and of ``off_axis`` (its own buoy, sensor
-stamps that never line up), sensor topics and the anemometer cut by log time, and a minute of
-``sea_state`` with its DVL written by ``simulate_bag`` (the committed bags carry no DVL), are
-played at twice their pace. The nodes decide on header stamps only, so message timing over DDS
-must not matter, given a latency budget the replay stays within; the compensation and current
-nodes publish the samples that still wait for navigation when they are interrupted, as
-``process_bag`` does at the end of its data.
+stamps that never line up), sensor topics and the anemometer cut by log time, are played at
+twice their pace; ``sea_state`` also with IMU faults written into it (a gyro and an
+accelerometer spike, the IMU clock stepping back 5 s and forward again 10 s later); and a minute
+of ``sea_state`` with its DVL written by ``simulate_bag`` (the committed bags carry no DVL). The
+nodes decide on header stamps only, so message timing over DDS must not matter, given a latency
+budget the replay stays within; the compensation and current nodes publish the samples that
+still wait for navigation when they are interrupted, as ``process_bag`` does at the end of its
+data.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rclpy
+from bag_faults import accelerometer_spike, clock_back, clock_forward, faulty_bag, gyro_spike
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -37,7 +40,7 @@ from against_truth import (
     assert_wind_within_budget,
     odometry_errors,
 )
-from buoy_common.bag_io import BagReader, BagWriter
+from buoy_common.bag_io import BagReader
 from buoy_nav.config import fusion_config_from_files
 from processed_bags import CASES
 from ros_messages import stamp_ns, wait_for
@@ -67,6 +70,13 @@ FLUSH_TIMEOUT_S = 10.0
 # The navigation is judged against the truth from this long after its first solution: the
 # first seconds after the alignment carry its errors, which the limits are not about.
 SETTLING_S = 20.0
+# Seconds after the first IMU stamp; the navigation aligns about 10 s in.
+LIVE_FAULTS = [
+    (25.0, gyro_spike),
+    (30.0, accelerometer_spike),
+    (35.0, clock_back),
+    (45.0, clock_forward),
+]
 
 
 class DiagnosticsWatcher:
@@ -123,17 +133,13 @@ WIND = Correction("compensation_node", "anemometer/wind", "wind/true", "compensa
 CURRENT = Correction("current_node", "dvl/velocity", "current/velocity", "current.nav_timeout_s")
 
 
-def cut_bag(source: Path, out: Path, seconds: float, correction: Correction) -> None:
+def cut_bag(source: Path, out: Path, seconds: float, correction: Correction, imu_faults=()) -> None:
     """The first ``seconds`` (log time) of ``source``'s navigation topics and the correction's
-    input, bytes unchanged."""
+    input, bytes unchanged but for the ``imu_faults`` (:func:`bag_faults.faulty_bag`)."""
     wanted = {*NAVIGATION_TOPICS, correction.input_topic}
-    with BagReader(source) as reader, BagWriter(out) as writer:
-        end_ns = reader.start_ns + int(seconds * NANOSECONDS_PER_SECOND)
+    with BagReader(source) as reader:
         topics = [name for name in reader.topics if name.lstrip("/") in wanted]
-        for record in reader.messages(topics):
-            if record.log_time_ns > end_ns:
-                break
-            writer.write_raw(record.topic, record.msgtype, record.log_time_ns, record.raw)
+    faulty_bag(source, out, seconds, imu_faults, topics)
 
 
 def vector_arrays(bag: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
@@ -185,11 +191,15 @@ def assert_offline_run_is_near_the_truth(name: str, played: Path, offline: Path)
     print(assert_navigation_within_limits(errors, case.navigation_limits(), name))
 
 
-@pytest.mark.parametrize("name", ["sea_state", "off_axis"])
-def test_live_pipeline_equals_process_bag(nodes, tmp_path, name):
+@pytest.mark.parametrize(
+    ("name", "faults"),
+    [("sea_state", False), ("off_axis", False), ("sea_state", True)],
+    ids=["sea_state", "off_axis", "sea_state_imu_faults"],
+)
+def test_live_pipeline_equals_process_bag(nodes, tmp_path, name, faults):
     parameter_files = CASES[name].parameter_files(tmp_path)
     played = tmp_path / "played"
-    cut_bag(CASES[name].bag_path, played, PLAYED_S, WIND)
+    cut_bag(CASES[name].bag_path, played, PLAYED_S, WIND, LIVE_FAULTS if faults else ())
     offline = replay_and_compare(nodes, tmp_path, played, WIND, parameter_files)
     assert_offline_run_is_near_the_truth(name, played, offline)
 

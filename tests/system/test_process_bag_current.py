@@ -213,7 +213,12 @@ def test_wind_report_draws_the_current_of_a_bag_without_wind(ship, tmp_path, cap
     _, out, _ = ship
     assert wind_report_main([str(out), "--out", str(tmp_path / "report")]) == 0
     written = {Path(line).name for line in capsys.readouterr().out.split()}
-    assert written == {"current_time_series.png", "current_averaging.png", "current_products.md"}
+    assert written == {
+        "current_time_series.png",
+        "current_averaging.png",
+        "current_products.md",
+        "summary.md",
+    }
     table = (tmp_path / "report" / "current_products.md").read_text()
     ten_minutes = [line for line in table.splitlines() if line.startswith("| 600 s means")]
     assert len(ten_minutes) == 1

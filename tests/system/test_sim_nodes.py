@@ -54,8 +54,11 @@ NODES = {
     "gnss/heading": "gnss_sim_node",
     "gnss/baseline": "gnss_sim_node",
     "anemometer/wind": "anemometer_sim_node",
+    "dvl/velocity": "dvl_sim_node",
     "truth/odometry": "truth_node",
     "truth/wind": "truth_node",
+    "truth/current": "truth_node",
+    "truth/water_velocity": "truth_node",
 }
 START_NS = load_scenario("sea_state").start_time_ns
 # The shipped buoy (the nodes' defaults) and off_axis's, given as a parameter file.

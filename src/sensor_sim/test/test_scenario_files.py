@@ -14,11 +14,14 @@ from sensor_sim.scenario import (
 )
 
 SHIPPED = [
+    "moored_motion_pack",
     "open_ocean",
     "sea_state",
     "ship_current",
+    "six_position",
     "static",
     "tilt_table",
+    "turning",
     "vertical_wind",
     "wind_tunnel",
 ]

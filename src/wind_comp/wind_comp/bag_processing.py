@@ -54,6 +54,7 @@ from buoy_common.contract import (
     wind_mean_topic,
     wind_stats_topic,
 )
+from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of, truth_topics_of
 from buoy_nav.config import FusionConfig
@@ -148,7 +149,7 @@ class OfflineCorrection:
     def __init__(
         self,
         pipeline: CompensationPipeline,
-        writer: BackgroundBagWriter,
+        writer: BackgroundBagWriter | NamespacedWriter,
         output_topic: str,
         product_topics,
         read_record,
@@ -175,6 +176,11 @@ class OfflineCorrection:
                 values.attitude_xyzw,
                 values.angular_rate_body_rad_s,
                 values.velocity_body_mps,
+                max(
+                    values.pose_covariance[21],
+                    values.pose_covariance[28],
+                    values.pose_covariance[35],
+                ),
             )
             pipeline.add_fix(STATUS_FIX, values.latitude_deg)
 
@@ -262,10 +268,12 @@ def process_bag(
     compensator_config: CompensatorConfig,
     overwrite: bool = False,
     current_config: CurrentConfig | None = None,
+    view: TopicView | None = None,
 ) -> ProcessSummary:
     """Fuse ``in_bag`` and correct its wind and its DVL samples into ``out_bag`` (a new bag;
-    replaced with ``overwrite``) and the products CSVs beside it. ``current_config`` None: the
-    defaults of ``current_node`` (``dvl.position`` and ``dvl.rpy_deg`` included). Raises
+    replaced with ``overwrite``) and the products CSVs beside it, over the topics of ``view``'s
+    namespace (the root when None), writing into the same namespace. ``current_config`` None:
+    the defaults of ``current_node`` (``dvl.position`` and ``dvl.rpy_deg`` included). Raises
     BagError for a missing or unreadable bag or one without the fusion's topics and without
     both ``anemometer/wind`` and ``dvl/velocity``, and OutputError, before anything is read or
     written, if an output is, contains or lies inside ``in_bag``."""
@@ -278,21 +286,24 @@ def process_bag(
         )
     }
     check_outputs_apart_from_inputs([in_bag], [out_bag, *csv_paths.values()])
-    with BagReader(in_bag) as reader:
+    view = view or TopicView()
+    with BagReader(in_bag, view) as reader:
         sensors = sensor_topics_of(reader, fusion_config)
         stored_wind = _stored_sensor(reader, WIND_RAW_TOPIC, VECTOR3_MSGTYPE)
         stored_dvl = _stored_sensor(reader, DVL_TOPIC, TWIST_COVARIANCE_MSGTYPE)
         if stored_wind is None and stored_dvl is None:
+            where = f" in namespace {view.label}" if view.namespace else ""
             raise BagError(
-                f"bag {reader.path} has neither {WIND_RAW_TOPIC} nor {DVL_TOPIC}: nothing to "
-                "correct"
+                f"bag {reader.path} has neither {WIND_RAW_TOPIC} nor {DVL_TOPIC}{where}: "
+                "nothing to correct"
             )
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
         with (
             BagProgress(reader, f"process_bag {in_bag}") as progress,
-            BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
+            BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
         ):
+            writer = NamespacedWriter(bag_writer, view)
             fusion = OfflineFusion(fusion_config, writer)
             corrections: dict[str, OfflineCorrection] = {}
             if stored_wind is not None:

@@ -55,6 +55,9 @@ class SampleStatus(IntEnum):
     """The measured speed exceeds the sensor's ``max_speed_mps``."""
     INVALID_STAMP = 7
     """The stamp is not finite, or not later than the previous sample's."""
+    NAVIGATION_NOT_TRUSTED = 8
+    """A bracketing navigation sample's attitude is more uncertain than
+    ``max_attitude_sigma_deg`` (the navigation marks itself untrustworthy by its covariance)."""
 
 
 @dataclass(frozen=True)
@@ -93,6 +96,7 @@ _NAV_OUTCOME = {
     InterpolationStatus.GAP: SampleStatus.NAV_GAP,
     InterpolationStatus.EVICTED: SampleStatus.NAV_HISTORY_EXCEEDED,
     InterpolationStatus.INVALID_STAMP: SampleStatus.INVALID_STAMP,
+    InterpolationStatus.UNTRUSTED: SampleStatus.NAVIGATION_NOT_TRUSTED,
 }
 _NAV_OUTCOME_BY_CODE = np.array(
     [_NAV_OUTCOME[InterpolationStatus(code)] for code in range(len(InterpolationStatus))],
@@ -264,10 +268,15 @@ class FlowCompensator:
         """Sensor samples received but not yet returned."""
         return self._tail - self._head
 
-    def add_nav(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> bool:
+    def add_nav(
+        self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted: bool = True
+    ) -> bool:
         """Add one navigation sample (stamp s, body→ENU quaternion xyzw, body rate rad/s,
-        ENU velocity m/s). Returns False when the track rejects it (counted there)."""
-        return self.nav_track.append(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
+        ENU velocity m/s; ``trusted`` False: no sample is corrected with it). Returns False when
+        the track rejects it (counted there)."""
+        return self.nav_track.append(
+            t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted
+        )
 
     def add_sample(self, t_s, flow_sensor_mps) -> None:
         """Add one sensor sample: stamp s, the fluid's velocity relative to the sensor in its
@@ -299,9 +308,9 @@ class FlowCompensator:
         right after the first ``nav_before_sample[i]`` of them.
 
         Args:
-            nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) of M navigation
-                samples: (M,) stamps, s, and (M, 4), (M, 3), (M, 3) arrays of what
-                :meth:`add_nav` takes.
+            nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps[, trusted]) of M
+                navigation samples: (M,) stamps, s, (M, 4), (M, 3), (M, 3) arrays and (M,)
+                bools of what :meth:`add_nav` takes.
             sample_t_s, flow_sensor_mps: (N,) stamps and (N, 3) flows, as
                 :meth:`add_sample` takes them one by one.
             nav_before_sample: (N,) non-decreasing counts, 0 to M.

@@ -50,6 +50,13 @@ class CompensatorConfig:
         product_windows_s: lengths of the averaging windows of the wind products, s
             (60 s and 600 s by default, WMO practice).
         gust_window_s: length of the running mean whose maximum is the gust, s (WMO: 3 s).
+        max_attitude_sigma_deg: a navigation sample whose attitude 1σ (the largest of the
+            three in its pose covariance) exceeds this corrects no wind: the samples it
+            brackets are invalid as ``navigation_not_trusted``, deg. The fusion publishes its
+            attitude 1σ at least ``fusion.integrity_attitude_sigma_deg`` (5°) while it finds
+            itself inconsistent with its aiding, so this is how an untrustworthy navigation
+            reaches the wind; the default lies between that and the 1σ a sound filter reports
+            in the first second after its alignment (up to about 3°).
     """
 
     anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
@@ -59,12 +66,19 @@ class CompensatorConfig:
     nav_history_s: float = 10.0
     product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
     gust_window_s: float = 3.0
+    max_attitude_sigma_deg: float = 4.0
 
     def __post_init__(self):
         _check_and_coerce(
             self,
             ("anemometer_position_body_m", "anemometer_rpy_deg"),
-            ("max_nav_gap_s", "max_wind_speed_mps", "nav_history_s", "gust_window_s"),
+            (
+                "max_nav_gap_s",
+                "max_wind_speed_mps",
+                "nav_history_s",
+                "gust_window_s",
+                "max_attitude_sigma_deg",
+            ),
         )
         if self.gust_window_s >= min(self.product_windows_s):
             raise ConfigError(
@@ -100,6 +114,10 @@ class CurrentConfig:
             be corrected in streaming use, s.
         product_windows_s: lengths of the averaging windows of the current products, s (60 s
             and 600 s by default).
+        max_attitude_sigma_deg: a navigation sample whose attitude 1σ exceeds this corrects no
+            DVL sample (``navigation_not_trusted``), deg: as for the wind
+            (:class:`CompensatorConfig`); an attitude error of 4° turns a 5 m/s water track
+            by 0.35 m/s.
     """
 
     dvl_position_body_m: tuple[float, float, float] = shared_field("dvl.position")
@@ -108,12 +126,13 @@ class CurrentConfig:
     max_dvl_speed_mps: float = 20.0
     nav_history_s: float = 10.0
     product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
+    max_attitude_sigma_deg: float = 4.0
 
     def __post_init__(self):
         _check_and_coerce(
             self,
             ("dvl_position_body_m", "dvl_rpy_deg"),
-            ("max_nav_gap_s", "max_dvl_speed_mps", "nav_history_s"),
+            ("max_nav_gap_s", "max_dvl_speed_mps", "nav_history_s", "max_attitude_sigma_deg"),
         )
 
     def flow_sensor(self) -> FlowSensor:

@@ -2,7 +2,8 @@
 the nodes.
 
     process_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file compensation.yaml]
-                [--params-file current.yaml] [--overwrite]
+                [--params-file current.yaml] [--overwrite] [--namespace NS]
+                [--remap FROM:=TO ...]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
 by ``compensation_node`` and ``current_node`` (:func:`wind_comp.bag_processing.process_bag`):
@@ -13,6 +14,9 @@ their products (``wind/mean_<window>``, ``wind/stats_<window>``, ``current/mean_
 ``current/stats_<window>``), the measured ``anemometer/wind`` and ``dvl/velocity`` and any truth
 topics; the products are also written to ``<OUT_BAG>_wind_products.csv`` and
 ``<OUT_BAG>_current_products.csv``. Parameters come from the same YAML files the nodes take.
+Namespaces and remappings as for ``fuse_bag``: a bag recorded under one namespace is read and
+written in it; a bag of several buoys gives one output per namespace holding an anemometer or a
+DVL (``OUT_BAG/buoy1`` and its CSVs ``OUT_BAG/buoy1_wind_products.csv``, ...).
 
 All outputs are written under temporary names beside them and appear only when complete; they
 may not be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or
@@ -27,6 +31,12 @@ import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
 from buoy_common.contract import DVL_TOPIC, WIND_RAW_TOPIC, seconds_to_stamp, window_label
+from buoy_common.namespaces import (
+    NamespaceError,
+    add_namespace_arguments,
+    output_for,
+    views_of_bag,
+)
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
@@ -50,13 +60,14 @@ def parse_arguments(argv):
         help="ROS parameter YAML as given to the nodes (repeatable; later files win)",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing OUT_BAG")
+    add_namespace_arguments(parser)
     return parser.parse_args(argv)
 
 
 def print_summary(summary: ProcessSummary, out_bag: str) -> None:
     for line in summary.fusion_lines:
         print(line)
-    written = [out_bag]
+    written = [str(out_bag)]
     for name, topic, correction in (
         ("wind", WIND_RAW_TOPIC, summary.wind),
         ("current", DVL_TOPIC, summary.current),
@@ -106,23 +117,32 @@ def _product_text(product: WindProduct | CurrentProduct) -> str:
 
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
+    truncated = False
     try:
-        summary = process_bag(
-            arguments.in_bag,
-            arguments.out_bag,
-            fusion_config_from_files(arguments.params_file),
-            compensator_config_from_files(arguments.params_file),
-            arguments.overwrite,
-            current_config_from_files(arguments.params_file),
-        )
-    except (ParameterError, BagError, OutputError, OSError) as error:
+        fusion_config = fusion_config_from_files(arguments.params_file)
+        compensator_config = compensator_config_from_files(arguments.params_file)
+        current_config = current_config_from_files(arguments.params_file)
+        views = views_of_bag(arguments, arguments.in_bag, WIND_RAW_TOPIC, DVL_TOPIC)
+        for view in views:
+            out_bag = output_for(arguments.out_bag, view, several=len(views) > 1)
+            if len(views) > 1:
+                print(f"namespace {view.label} -> {out_bag}")
+            summary = process_bag(
+                arguments.in_bag,
+                out_bag,
+                fusion_config,
+                compensator_config,
+                arguments.overwrite,
+                current_config,
+                view,
+            )
+            print_summary(summary, out_bag)
+            if summary.recovery is not None:
+                warning = summary.recovery.describe(arguments.in_bag)
+                print(f"process_bag: warning: {warning}", file=sys.stderr)
+                truncated = truncated or summary.recovery.truncated
+    except (ParameterError, BagError, OutputError, NamespaceError, OSError) as error:
         print(f"process_bag: {error}", file=sys.stderr)
         sys.exit(2)
-    print_summary(summary, arguments.out_bag)
-    if summary.recovery is not None:
-        print(
-            f"process_bag: warning: {summary.recovery.describe(arguments.in_bag)}",
-            file=sys.stderr,
-        )
-        if summary.recovery.truncated:
-            sys.exit(RECOVERED_BAG_EXIT_CODE)
+    if truncated:
+        sys.exit(RECOVERED_BAG_EXIT_CODE)

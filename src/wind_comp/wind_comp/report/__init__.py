@@ -15,25 +15,29 @@ from pathlib import Path
 from wind_comp.report.current import CurrentData
 from wind_comp.report.data import ReportData
 from wind_comp.report.figures import write_current_figures, write_figures
-from wind_comp.report.tables import current_markdown, wind_products_markdown
+from wind_comp.report.tables import current_markdown, summary_markdown, wind_products_markdown
 
 
 def write_report(
     data: ReportData | None, out_dir, current: CurrentData | None = None, title: str = ""
 ) -> list[Path]:
     """Write the report figures and tables into ``out_dir`` (created): the wind's of ``data``,
-    the current's of ``current``, whichever is given; return the paths."""
+    the current's of ``current``, whichever is given, and the summary page that shows them all
+    (``summary.md``); return the paths."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = []
+    title = title or (data.title if data is not None else "")
+    figures, tables = [], []
     if data is not None:
-        paths += write_figures(data, out_dir)
+        figures += write_figures(data, out_dir)
         table = out_dir / "wind_products.md"
         table.write_text(wind_products_markdown(data))
-        paths.append(table)
+        tables.append(table)
     if current is not None:
-        paths += write_current_figures(current, out_dir)
+        figures += write_current_figures(current, out_dir)
         table = out_dir / "current_products.md"
-        table.write_text(current_markdown(current, title or (data.title if data else "")))
-        paths.append(table)
-    return paths
+        table.write_text(current_markdown(current, title))
+        tables.append(table)
+    summary = out_dir / "summary.md"
+    summary.write_text(summary_markdown(data, [path.name for path in figures], current, title))
+    return [*figures, *tables, summary]

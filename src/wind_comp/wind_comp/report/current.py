@@ -27,6 +27,7 @@ from buoy_common.contract import (
     TRUTH_CURRENT_TOPIC,
     TRUTH_WATER_VELOCITY_TOPIC,
 )
+from buoy_common.namespaces import TopicView
 from wind_comp.compensation_messages import stats_values
 from wind_comp.products import CurrentProduct, oceanographic_direction_deg
 from wind_comp.report.data import (
@@ -63,11 +64,12 @@ class CurrentData:
     truth_water_enu_mps: np.ndarray | None = None
 
 
-def current_report_data(bag) -> CurrentData | None:
-    """:func:`current_data_from_bag` of the bag at path ``bag``; :class:`ReportDataError` (one
-    line) for a missing or unreadable bag."""
+def current_report_data(bag, view: TopicView | None = None) -> CurrentData | None:
+    """:func:`current_data_from_bag` of the bag at path ``bag``, its topics read in ``view``'s
+    namespace (the root when None); :class:`ReportDataError` (one line) for a missing or
+    unreadable bag."""
     try:
-        with BagReader(bag) as reader:
+        with BagReader(bag, view) as reader:
             return current_data_from_bag(reader)
     except BagError as error:
         raise ReportDataError(str(error)) from error
