@@ -29,8 +29,11 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from buoy_common.parameters import (
     ParameterError,
     build_config,
+    check_parameter_names,
     coerce_parameter,
+    command_line_parameters,
     config_parameters,
+    load_parameter_sections,
     to_ros_value,
 )
 
@@ -134,20 +137,29 @@ class SuiteNode(Node):
         except ParameterError as error:
             raise StartupError(str(error)) from error
 
+    def refuse_unknown_parameters(self, ros_arguments: list[str]) -> None:
+        """Raise StartupError for a parameter given to this node that it has not declared.
+
+        Called once every parameter is declared. ``-p`` values and the node's own sections of
+        the parameter files must all be known; ``/**`` sections may hold other nodes'
+        parameters (see :func:`buoy_common.parameters.check_parameter_names`).
+        """
+        params_files, command_line = command_line_parameters(ros_arguments)
+        try:
+            wildcard, own = load_parameter_sections(params_files, self.get_name())
+            declared = self.list_parameters([], 0).names
+            check_parameter_names(declared, shared=wildcard, own=[*own, *command_line])
+        except ParameterError as error:
+            raise StartupError(str(error)) from error
+
 
 class FlushingNode(SuiteNode):
     """A node that holds output back (waiting for later input) and publishes it when it stops.
 
-    SIGINT and SIGTERM are taken from rclpy so that they only end the spin loop: the context
-    stays valid, :meth:`flush_held_back` can still publish, and the node waits (at most
+    SIGINT and SIGTERM only end the spin loop (:func:`take_stop_signals`): the context stays
+    valid, :meth:`flush_held_back` can still publish, and the node waits (at most
     ``FLUSH_ACK_TIMEOUT_S``) for the subscribers to acknowledge what it published.
     """
-
-    def __init__(self, node_name: str, **kwargs):
-        super().__init__(node_name, **kwargs)
-        rclpy.signals.uninstall_signal_handlers()
-        for signal_number in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signal_number, lambda *_: self.finish(0))
 
     def flush_held_back(self) -> list:
         """Publish what is held back; return the publishers to wait for."""
@@ -164,6 +176,19 @@ class FlushingNode(SuiteNode):
             except Exception as error:  # a failing flush must not hide the node's exit
                 self.get_logger().error(f"could not publish the held-back output: {error}")
         super().destroy_node()
+
+
+def take_stop_signals(on_stop: Callable[[], None]) -> None:
+    """Make SIGINT and SIGTERM, however often and however close together they come, call
+    ``on_stop`` instead of rclpy's handling.
+
+    rclpy turns SIGINT into a KeyboardInterrupt raised wherever the program happens to be: in a
+    callback run by the C++ executor that aborts the process, elsewhere it leaves a traceback.
+    ``on_stop`` only records the request; the program's loop ends at its next turn.
+    """
+    rclpy.signals.uninstall_signal_handlers()
+    for signal_number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signal_number, lambda *_: on_stop())
 
 
 def message_class(msgtype: str):
@@ -234,8 +259,9 @@ def run_node(node_factory: Callable[[], SuiteNode], args: list[str] | None = Non
     one line on stderr, without a traceback).
     """
     program = sys.argv[0].rsplit("/", 1)[-1]
+    args = sys.argv if args is None else args
     try:
-        rclpy.init(args=sys.argv if args is None else args)
+        rclpy.init(args=args)
     except Exception as error:  # rclpy raises RCLError for a missing --params-file
         print(f"{program}: cannot start: {error}", file=sys.stderr)
         return 2
@@ -247,6 +273,8 @@ def run_node(node_factory: Callable[[], SuiteNode], args: list[str] | None = Non
         # built before the node, whose own handlers (FlushingNode) must be the ones in force.
         executor = EventsExecutor()
         node = node_factory()
+        take_stop_signals(lambda: node.finish(0))
+        node.refuse_unknown_parameters(args)
         executor.add_node(node)
         while rclpy.ok() and not node.finished:
             due_s = node.deferred_work_due_s

@@ -22,6 +22,7 @@ import argparse
 import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
+from buoy_common.cli import interruptible
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.bag_fusion import FusedBag, fuse_bag
@@ -44,12 +45,13 @@ def parse_arguments(argv):
     return parser.parse_args(argv)
 
 
+@interruptible("fuse_bag")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     try:
         config = fusion_config_from_files(arguments.params_file)
         fused = fuse_bag(arguments.in_bag, arguments.out_bag, config, arguments.overwrite)
-    except (ParameterError, BagError, OutputError) as error:
+    except (ParameterError, BagError, OutputError, OSError) as error:
         print(f"fuse_bag: {error}", file=sys.stderr)
         sys.exit(2)
     print_summary(fused, arguments.out_bag)

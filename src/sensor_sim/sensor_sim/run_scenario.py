@@ -19,6 +19,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from buoy_common.cli import interruptible
 from sensor_sim.scenario import ScenarioError, load_scenario
 
 SENSOR_NODES = ("truth_node", "imu_sim_node", "gnss_sim_node", "anemometer_sim_node")
@@ -229,6 +230,7 @@ def run(arguments) -> int:
     return 0
 
 
+@interruptible("run_scenario")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     try:

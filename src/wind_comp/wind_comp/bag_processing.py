@@ -32,6 +32,7 @@ from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, Bag
 from buoy_common.contract import (
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
+    Reason,
     bag_topic,
     wind_mean_topic,
     wind_stats_topic,
@@ -75,6 +76,8 @@ class ProcessSummary:
 
     wind_status_counts: dict[WindStatus, int] = field(default_factory=dict)
     rejected_wind_messages: Counter = field(default_factory=Counter)
+    wrong_wind_frames: Counter = field(default_factory=Counter)
+    """Frames of the ``anemometer/wind`` messages rejected for their frame, with counts."""
     products: list[WindProduct] = field(default_factory=list)
     topic_counts: dict[str, int] = field(default_factory=dict)
     fusion_lines: list[str] = field(default_factory=list)
@@ -94,9 +97,11 @@ class OfflineCompensation:
     """
 
     def __init__(self, config: CompensatorConfig, writer: BackgroundBagWriter):
+        self.config = config
         self.pipeline = CompensationPipeline(config)
         self.writer = writer
         self.rejected: Counter[str] = Counter()
+        self.wrong_frames: Counter[str] = Counter()
         self.products: list[WindProduct] = []
         self._stamps: deque[tuple[int, int]] = deque()
         self._samples_waiting = 0
@@ -115,15 +120,18 @@ class OfflineCompensation:
 
     def add_wind(self, reader: BagReader, message: BagMessage) -> None:
         """One ``anemometer/wind`` record; every few hundred, the decided samples are written."""
-        parsed = anemometer_sample_cdr(message.raw)
+        expected_frame_id = self.config.anemometer_frame_id
+        parsed = anemometer_sample_cdr(message.raw, expected_frame_id)
         if parsed is None:
             decoded = reader.decode(message)
             stamp = decoded.header.stamp
-            parsed = (anemometer_sample(decoded), stamp.sec, stamp.nanosec)
+            parsed = (anemometer_sample(decoded, expected_frame_id), stamp.sec, stamp.nanosec)
         sample, sec, nanosec = parsed
         rejection = self.pipeline.add_wind(sample)
         if rejection is not None:
             self.rejected[rejection] += 1
+            if rejection == Reason.WRONG_FRAME:
+                self.wrong_frames[sample.frame_id] += 1
         self._stamps.append((sec, nanosec))
         self._samples_waiting += 1
         if self._samples_waiting >= SAMPLES_PER_STRETCH:
@@ -222,6 +230,7 @@ def process_bag(
     return ProcessSummary(
         wind_status_counts=compensation.pipeline.counts,
         rejected_wind_messages=compensation.rejected,
+        wrong_wind_frames=compensation.wrong_frames,
         products=compensation.products,
         topic_counts=writer.counts,
         fusion_lines=fusion.summary(),

@@ -85,24 +85,30 @@ class WindSample(NamedTuple):
     """Air velocity in anemometer axes, m/s; NaN when the message was rejected."""
     rejection: str | None
     """Reason the message was rejected (its output is then invalid), None when accepted."""
+    frame_id: str = ANEMOMETER_FRAME
+    """The message's frame, which a rejection for a wrong frame reports."""
 
 
-def anemometer_sample(message) -> WindSample:
+def anemometer_sample(message, expected_frame_id: str = ANEMOMETER_FRAME) -> WindSample:
     """``anemometer/wind`` as a :class:`WindSample`.
 
-    A message in another frame than ``anemometer_link`` or with a non-finite component is
-    rejected: its wind becomes NaN so that the compensation still returns one (invalid) output
-    for it, in order. Stamp order is checked by the compensation itself.
+    A message in another frame than ``expected_frame_id`` (the parameter
+    ``compensation.anemometer_frame_id``) or with a non-finite component is rejected: its wind
+    becomes NaN so that the compensation still returns one (invalid) output for it, in order.
+    Stamp order is checked by the compensation itself.
     """
     vector = message.vector
     return _wind_sample(
         stamp_to_seconds(message.header.stamp),
         message.header.frame_id,
         (float(vector.x), float(vector.y), float(vector.z)),
+        expected_frame_id,
     )
 
 
-def anemometer_sample_cdr(raw: bytes) -> tuple[WindSample, int, int] | None:
+def anemometer_sample_cdr(
+    raw: bytes, expected_frame_id: str = ANEMOMETER_FRAME
+) -> tuple[WindSample, int, int] | None:
     """:func:`anemometer_sample` of an ``anemometer/wind`` message straight from its CDR bytes,
     with the header stamp (sec, nanosec). None for bytes the CDR reader does not handle: decode
     the message and use :func:`anemometer_sample`."""
@@ -110,15 +116,17 @@ def anemometer_sample_cdr(raw: bytes) -> tuple[WindSample, int, int] | None:
     if fields is None:
         return None
     sec, nanosec, frame_id, vector = fields
-    return _wind_sample(sec + nanosec * 1e-9, frame_id, vector), sec, nanosec
+    return _wind_sample(sec + nanosec * 1e-9, frame_id, vector, expected_frame_id), sec, nanosec
 
 
 _NAN_WIND = (math.nan, math.nan, math.nan)
 
 
-def _wind_sample(t_s: float, frame_id: str, wind: tuple[float, float, float]) -> WindSample:
-    if frame_id != ANEMOMETER_FRAME:
-        return WindSample(t_s, _NAN_WIND, Reason.WRONG_FRAME)
+def _wind_sample(
+    t_s: float, frame_id: str, wind: tuple[float, float, float], expected_frame_id: str
+) -> WindSample:
+    if frame_id != expected_frame_id:
+        return WindSample(t_s, _NAN_WIND, Reason.WRONG_FRAME, frame_id)
     if not all(math.isfinite(component) for component in wind):
         return WindSample(t_s, _NAN_WIND, Reason.NON_FINITE)
     return WindSample(t_s, wind, None)

@@ -71,6 +71,7 @@ from buoy_common.contract import (
     NAV_ODOMETRY_TOPIC,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
+    Reason,
     wind_mean_topic,
     wind_stats_topic,
 )
@@ -89,9 +90,15 @@ from wind_comp.compensator import WindStatus
 from wind_comp.config import (
     COMPENSATION_NODE_NAME,
     COMPENSATION_PARAMETER_PREFIX,
+    NAV_TIMEOUT_PARAMETER,
     CompensatorConfig,
 )
-from wind_comp.pipeline import CompensationOutput, CompensationPipeline
+from wind_comp.pipeline import (
+    CompensationOutput,
+    CompensationPipeline,
+    mostly_invalid_warning,
+    wrong_frame_message,
+)
 from wind_comp.products import WindProduct
 
 NODE_NAME = COMPENSATION_NODE_NAME
@@ -117,14 +124,14 @@ class CompensationNode(FlushingNode):
         super().__init__(NODE_NAME)
         self.config = self._declare_compensator_config()
         self.nav_timeout_s = self.declare_value(
-            "compensation.nav_timeout_s",
+            NAV_TIMEOUT_PARAMETER,
             DEFAULT_NAV_TIMEOUT_S,
             "s: wind samples this much older than the newest anemometer stamp, waiting this long "
             "in wall time and still without navigation around them are published invalid",
         )
         if not (math.isfinite(self.nav_timeout_s) and self.nav_timeout_s > 0):
             raise StartupError(
-                f"parameter 'compensation.nav_timeout_s' must be positive, got {self.nav_timeout_s}"
+                f"parameter '{NAV_TIMEOUT_PARAMETER}' must be positive, got {self.nav_timeout_s}"
             )
 
         self.pipeline = CompensationPipeline(self.config)
@@ -133,6 +140,7 @@ class CompensationNode(FlushingNode):
         self._counters_at_last_report = collections.Counter()
         self._last_report_s = time.monotonic()
         self._latencies_s: list[float] = []
+        self._wrong_frames: set[str] = set()
 
         self._true_wind_publisher = self.create_publisher(Vector3Stamped, WIND_TRUE_TOPIC, DATA_QOS)
         self._product_publishers = {
@@ -163,11 +171,12 @@ class CompensationNode(FlushingNode):
 
     def on_wind(self, raw: bytes) -> None:
         self._counters["wind_in"] += 1
-        parsed = anemometer_sample_cdr(raw)
+        expected_frame_id = self.config.anemometer_frame_id
+        parsed = anemometer_sample_cdr(raw, expected_frame_id)
         if parsed is None:
             message = deserialize_message(raw, Vector3Stamped)
             parsed = (
-                anemometer_sample(message),
+                anemometer_sample(message, expected_frame_id),
                 message.header.stamp.sec,
                 message.header.stamp.nanosec,
             )
@@ -175,6 +184,9 @@ class CompensationNode(FlushingNode):
         rejection = self.pipeline.add_wind(sample)
         if rejection is not None:
             self.reject(WIND_RAW_TOPIC, rejection)
+            if rejection == Reason.WRONG_FRAME and sample.frame_id not in self._wrong_frames:
+                self._wrong_frames.add(sample.frame_id)
+                self.get_logger().error(wrong_frame_message(sample.frame_id, expected_frame_id))
         self._pending.append(PendingStamp(sec, nanosec, sample.t_s, time.monotonic()))
         self.publish(self.pipeline.expire(self._timeout_horizon_s()))
 
@@ -238,6 +250,9 @@ class CompensationNode(FlushingNode):
     def flush_held_back(self) -> list:
         """End of input: publish every pending sample and the partial product windows."""
         self.publish(self.pipeline.flush())
+        warning = mostly_invalid_warning(self.pipeline.counts)
+        if warning is not None:
+            self.get_logger().error(warning)
         publishers = [self._true_wind_publisher]
         for pair in self._product_publishers.values():
             publishers.extend(pair)

@@ -10,15 +10,24 @@ configuration from the same parameter files (:func:`compensator_config_from_file
 import math
 from dataclasses import dataclass
 
-from buoy_common.contract import DEFAULT_PRODUCT_WINDOWS_S
+from buoy_common.contract import ANEMOMETER_FRAME, DEFAULT_PRODUCT_WINDOWS_S
 from buoy_common.extrinsics import check_shared_fields, shared_field
-from buoy_common.parameters import build_config, load_parameter_files
+from buoy_common.parameters import (
+    build_config,
+    check_parameter_files,
+    config_parameters,
+    load_parameter_files,
+)
 
 COMPENSATION_NODE_NAME = "compensation_node"
 """Node name whose parameter-file sections configure the compensation (live and offline)."""
 COMPENSATION_PARAMETER_PREFIX = "compensation."
 """ROS parameter of a :class:`CompensatorConfig` field ``f``: ``compensation.f``, except the
 shared ones."""
+
+NAV_TIMEOUT_PARAMETER = "compensation.nav_timeout_s"
+"""Latency budget of the live node (s); offline processing has no wall clock to wait on."""
+LIVE_ONLY_PARAMETERS = (NAV_TIMEOUT_PARAMETER,)
 
 
 class ConfigError(ValueError):
@@ -42,6 +51,9 @@ class CompensatorConfig:
         product_windows_s: lengths of the averaging windows of the wind products, s
             (60 s and 600 s by default, WMO practice).
         gust_window_s: length of the running mean whose maximum is the gust, s (WMO: 3 s).
+        anemometer_frame_id: the ``frame_id`` of ``anemometer/wind`` messages; a message in
+            another frame is rejected (``wrong_frame``) and its output is NaN. The contract's
+            ``anemometer_link`` unless a driver names its frame otherwise.
     """
 
     anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
@@ -51,6 +63,7 @@ class CompensatorConfig:
     nav_history_s: float = 10.0
     product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
     gust_window_s: float = 3.0
+    anemometer_frame_id: str = ANEMOMETER_FRAME
 
     def __post_init__(self):
         for name in ("anemometer_position_body_m", "anemometer_rpy_deg"):
@@ -62,6 +75,10 @@ class CompensatorConfig:
         for name in ("max_nav_gap_s", "max_wind_speed_mps", "nav_history_s", "gust_window_s"):
             object.__setattr__(self, name, _positive_float(name, getattr(self, name)))
         windows = _finite_tuple("product_windows_s", self.product_windows_s, length=None)
+        if not isinstance(self.anemometer_frame_id, str) or not self.anemometer_frame_id.strip():
+            raise ConfigError(
+                f"anemometer_frame_id must be a frame name, got {self.anemometer_frame_id!r}"
+            )
         if not windows or min(windows) <= 0:
             raise ConfigError(f"product_windows_s must be positive window lengths, got {windows}")
         object.__setattr__(self, "product_windows_s", windows)
@@ -105,5 +122,12 @@ def compensator_config_from_files(paths) -> CompensatorConfig:
     """The :class:`CompensatorConfig` ``compensation_node`` would build from these ROS parameter
     files (sections ``/**`` and ``compensation_node``, later files winning). Raises
     :class:`buoy_common.parameters.ParameterError` naming a bad file or value."""
+    check_parameter_files(paths, COMPENSATION_NODE_NAME, compensation_parameter_names())
     values = load_parameter_files(paths, COMPENSATION_NODE_NAME)
     return build_config(CompensatorConfig, values, prefix=COMPENSATION_PARAMETER_PREFIX)
+
+
+def compensation_parameter_names() -> list[str]:
+    """Every parameter ``compensation_node`` declares, the live-only ones included."""
+    names = config_parameters(CompensatorConfig, COMPENSATION_PARAMETER_PREFIX)
+    return [parameter for _, parameter, _ in names] + list(LIVE_ONLY_PARAMETERS)

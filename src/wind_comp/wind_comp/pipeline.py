@@ -250,3 +250,35 @@ class CompensationPipeline:
         # closed by one sample share their last sample.
         products.sort(key=lambda product: product.last_sample_s)
         return CompensationOutput(wind, products)
+
+
+MOSTLY_INVALID_FRACTION = 0.5
+"""A run whose wind outputs are invalid in more than this fraction ends with a loud warning
+(and ``process_bag`` with exit code 4): a wrong frame or a dead sensor must not look like a
+successful run."""
+
+
+def mostly_invalid_warning(counts: dict[WindStatus, int]) -> str | None:
+    """The warning for a run in which most wind samples came out invalid, None otherwise.
+
+    ``counts`` are the outcomes of the run (:attr:`CompensationPipeline.counts`); the warning
+    names the most frequent reason."""
+    total = sum(counts.values())
+    invalid = {status: n for status, n in counts.items() if status != WindStatus.VALID and n}
+    n_invalid = sum(invalid.values())
+    if total == 0 or n_invalid <= MOSTLY_INVALID_FRACTION * total:
+        return None
+    main_status = max(invalid, key=invalid.get)
+    return (
+        f"most wind samples are invalid: {n_invalid} of {total} "
+        f"(mostly {main_status.reason}: {invalid[main_status]})"
+    )
+
+
+def wrong_frame_message(frame_id: str, expected_frame_id: str) -> str:
+    """The error for an ``anemometer/wind`` message in an unexpected frame."""
+    return (
+        f"anemometer/wind in frame '{frame_id}', expected '{expected_frame_id}': its samples "
+        "are rejected (wrong_frame); set compensation.anemometer_frame_id if the driver names "
+        "the anemometer frame so"
+    )

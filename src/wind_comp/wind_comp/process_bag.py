@@ -12,9 +12,13 @@ products are also written to ``<OUT_BAG>_wind_products.csv``. Parameters come fr
 YAML files the nodes take.
 
 Both outputs are written under temporary names beside them and appear only when complete; they
-may not be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or
-bags (one line on stderr); 3 done, but IN_BAG was cut short (a recorder killed or out of power)
-and was processed up to its last complete chunk (a warning says how much was read).
+may not be, contain or lie inside IN_BAG. It prints the extrinsics it used first.
+
+Exit codes: 0 done; 2 bad arguments, parameters (an unknown name among them) or bags (one line
+on stderr); 3 done, but IN_BAG was cut short (a recorder killed or out of power) and was
+processed up to its last complete chunk (a warning says how much was read); 4 done, but most
+wind samples came out invalid (a warning names the main reason, such as a wrong frame); 130
+interrupted (SIGINT or SIGTERM), nothing left under OUT_BAG.
 """
 
 from __future__ import annotations
@@ -23,13 +27,19 @@ import argparse
 import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
+from buoy_common.cli import interruptible
 from buoy_common.contract import WIND_RAW_TOPIC, seconds_to_stamp, window_label
+from buoy_common.extrinsics import describe_shared_fields
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
 from wind_comp.bag_processing import ProcessSummary, process_bag
 from wind_comp.compensator import WindStatus
 from wind_comp.config import compensator_config_from_files
+from wind_comp.pipeline import mostly_invalid_warning, wrong_frame_message
+
+MOSTLY_INVALID_EXIT_CODE = 4
+"""Exit code of a run that completed but whose wind samples came out mostly invalid."""
 
 
 def parse_arguments(argv):
@@ -82,20 +92,31 @@ def print_summary(summary: ProcessSummary, out_bag: str) -> None:
     )
 
 
+@interruptible("process_bag")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     try:
+        fusion_config = fusion_config_from_files(arguments.params_file)
+        compensator_config = compensator_config_from_files(arguments.params_file)
+        print(f"extrinsics: {describe_shared_fields(fusion_config)}")
+        print(
+            f"extrinsics: {describe_shared_fields(compensator_config)}; anemometer/wind "
+            f"expected in frame '{compensator_config.anemometer_frame_id}'"
+        )
         summary = process_bag(
             arguments.in_bag,
             arguments.out_bag,
-            fusion_config_from_files(arguments.params_file),
-            compensator_config_from_files(arguments.params_file),
+            fusion_config,
+            compensator_config,
             arguments.overwrite,
         )
     except (ParameterError, BagError, OutputError, OSError) as error:
         print(f"process_bag: {error}", file=sys.stderr)
         sys.exit(2)
     print_summary(summary, arguments.out_bag)
+    for frame_id, n in sorted(summary.wrong_wind_frames.items()):
+        message = wrong_frame_message(frame_id, compensator_config.anemometer_frame_id)
+        print(f"process_bag: error: {n} samples of {message}", file=sys.stderr)
     if summary.recovery is not None:
         print(
             f"process_bag: warning: {summary.recovery.describe(arguments.in_bag)}",
@@ -103,3 +124,7 @@ def main(argv=None) -> None:
         )
         if summary.recovery.truncated:
             sys.exit(RECOVERED_BAG_EXIT_CODE)
+    warning = mostly_invalid_warning(summary.wind_status_counts)
+    if warning is not None:
+        print(f"process_bag: warning: {warning}", file=sys.stderr)
+        sys.exit(MOSTLY_INVALID_EXIT_CODE)

@@ -11,10 +11,12 @@ report goes to FOLDER, by default ``<SOURCE>_report``: see :mod:`wind_comp.repor
 import argparse
 from pathlib import Path
 
+from buoy_common.cli import interruptible
 from wind_comp.report import write_report
 from wind_comp.report.data import ReportDataError, load_report_data, report_data_from_bag
 
 
+@interruptible("wind_report")
 def main(argv=None) -> int:
     """Command line: draw the report of a bag, or of a run saved with :func:`save_report_data`."""
     parser = argparse.ArgumentParser(
@@ -40,7 +42,11 @@ def main(argv=None) -> int:
             default_out = source.with_name(source.name + "_report")
     except ReportDataError as error:
         parser.exit(2, f"wind_report: {error}\n")
-    for path in write_report(data, arguments.out or default_out):
+    try:
+        written = write_report(data, arguments.out or default_out)
+    except OSError as error:
+        parser.exit(2, f"wind_report: cannot write the report: {error}\n")
+    for path in written:
         print(path)
     return 0
 
