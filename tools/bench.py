@@ -15,13 +15,16 @@ as constants and printed beside our figures:
    pass-through stand-ins for both nodes (tools/passthrough_node.py): the floor it is read
    against;
 7. consistency: Monte-Carlo normalised errors of the accelerometer bias over many seeds
-   (tools/bias_consistency.py).
+   (tools/bias_consistency.py);
+8. soak: 24 simulated hours of sea_state through the live nodes at 4x (tools/soak.py): RSS of
+   each node over time, latency percentiles per simulated hour, samples in and out. It runs
+   last and takes six hours of wall-clock time (``--quick``: six simulated minutes).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency ...]
+    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|soak ...]
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -99,7 +102,9 @@ RUNS_DIR = OUT_DIR / "runs"
 SIMULATOR_PACKAGE = REPO / "src/sensor_sim/sensor_sim"
 # Modules outside sensor_sim whose code decides what simulate_bag writes.
 SIMULATION_SHARED_MODULES = ("buoy_common.parameters", "buoy_common.bag_io")
-SECTIONS = ("attitude", "wind", "speed", "live", "consistency")
+SECTIONS = ("attitude", "wind", "speed", "live", "consistency", "soak")
+SOAK_HOURS = {"quick": 0.1, "full": 24.0}
+SOAK_RATE_FACTOR = 4.0
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 
 
@@ -517,6 +522,16 @@ def main(argv=None) -> None:
             CONSISTENCY_CHECKPOINTS_S,
         )
         bias_consistency.print_table(results["consistency"]["table"])
+    if "soak" in sections:
+        import soak
+
+        results["soak"] = soak.soak(
+            SOAK_HOURS["quick" if quick else "full"],
+            SOAK_RATE_FACTOR,
+            rss_period_s=10.0,
+            log_dir=OUT_DIR / "soak_logs",
+        )
+        soak.print_table(results["soak"])
 
     results["meta"]["wall_s"] = time.monotonic() - started
     with open(OUT_DIR / "results.json", "w") as stream:

@@ -9,7 +9,10 @@ until it exists.
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import bag_faults as faults
 import fault_matrix as matrix
@@ -17,9 +20,11 @@ import numpy as np
 import pytest
 from test_live_replay import DiagnosticsWatcher
 
-from buoy_common.bag_io import BagReader
+from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagReader
 from ros_messages import wait_for
+from wind_comp.process_bag import MOSTLY_INVALID_EXIT_CODE
 
+BIN = Path(sys.executable).parent
 # The replay pace and latency budget of the live equality test (see test_live_replay).
 RATE = 2.0
 LATENCY_BUDGET_S = 120.0
@@ -131,3 +136,92 @@ def test_live_equals_offline(group, faulted_bags, nodes, tmp_path):
     matrix.compare_live_to_offline(live, offline, failures)
     matrix.check_outputs(records, live, f"{group.name} live", failures)
     assert not failures, "\n".join(failures)
+
+
+# -- file faults -----------------------------------------------------------------------------------
+
+FILE_FAULT_SECONDS = 25.0
+
+
+@pytest.fixture(scope="module")
+def short_bag(tmp_path_factory):
+    """The first seconds of the source bag, sensors and true wind."""
+    bag = tmp_path_factory.mktemp("file_faults") / "short"
+    records = faults.read_records(
+        matrix.SOURCE_BAG, (*matrix.SENSOR_TOPICS, matrix.TRUTH_WIND_TOPIC), FILE_FAULT_SECONDS
+    )
+    faults.write_records(records, bag)
+    return bag
+
+
+def process_bag_cli(ros_env, *arguments):
+    return subprocess.run(
+        [str(BIN / "process_bag"), *map(str, arguments)],
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def one_output_per_input(bag, out) -> None:
+    with BagReader(bag) as reader:
+        inputs_ns = [
+            faults.stamp_to_ns(reader.decode(m).header.stamp)
+            for m in reader.messages(["/anemometer/wind"])
+        ]
+    outcome = matrix.bag_outcome(out)
+    assert outcome.wind_ns.tolist() == inputs_ns
+
+
+@pytest.mark.slow
+def test_truncated_bag_is_processed_up_to_its_cut(short_bag, tmp_path, ros_env):
+    cut = faults.copy_bag(short_bag, tmp_path / "cut")
+    faults.truncate_file(cut, 0.6)
+    result = process_bag_cli(ros_env, cut, tmp_path / "out")
+    assert result.returncode == RECOVERED_BAG_EXIT_CODE, result.stderr
+    assert "Traceback" not in result.stderr
+    one_output_per_input(cut, tmp_path / "out")
+
+
+@pytest.mark.slow
+def test_bag_without_metadata_is_processed(short_bag, tmp_path, ros_env):
+    bare = faults.copy_bag(short_bag, tmp_path / "bare")
+    faults.remove_metadata(bare)
+    result = process_bag_cli(ros_env, bare, tmp_path / "out")
+    assert result.returncode in (0, RECOVERED_BAG_EXIT_CODE), result.stderr
+    one_output_per_input(bare, tmp_path / "out")
+
+
+def test_empty_bag_is_one_line_error(tmp_path, ros_env):
+    empty = tmp_path / "empty"
+    faults.write_records([], empty)
+    result = process_bag_cli(ros_env, empty, tmp_path / "out")
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_wrong_anemometer_frame_is_an_error_naming_both_frames(short_bag, tmp_path, ros_env):
+    records = faults.read_records(short_bag, matrix.SENSOR_TOPICS, FILE_FAULT_SECONDS)
+    sonic = tmp_path / "sonic"
+    faults.write_records(faults.set_frame("/anemometer/wind", "sonic")(records), sonic)
+
+    refused = process_bag_cli(ros_env, sonic, tmp_path / "refused")
+    assert refused.returncode == MOSTLY_INVALID_EXIT_CODE, refused.stderr
+    assert "'sonic'" in refused.stderr and "'anemometer_link'" in refused.stderr
+    assert "compensation.anemometer_frame_id" in refused.stderr
+    assert np.isnan(matrix.bag_outcome(tmp_path / "refused").wind).all()
+
+    driver_frame = tmp_path / "driver_frame.yaml"
+    driver_frame.write_text(
+        "/**:\n  ros__parameters:\n    compensation: {anemometer_frame_id: sonic}\n"
+    )
+    accepted = process_bag_cli(ros_env, sonic, tmp_path / "accepted", "--params-file", driver_frame)
+    assert accepted.returncode == 0, accepted.stderr
+    reference = tmp_path / "reference"
+    assert process_bag_cli(ros_env, short_bag, reference).returncode == 0
+    np.testing.assert_array_equal(
+        matrix.bag_outcome(tmp_path / "accepted").wind, matrix.bag_outcome(reference).wind
+    )

@@ -1,0 +1,48 @@
+"""A short soak: minutes of simulated sea through the live nodes at four times real time, every
+anemometer sample out on ``wind/true`` (the full day runs in ``make bench``, tools/soak.py)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+REPO = Path(__file__).resolve().parents[2]
+SIMULATED_HOURS = 0.04  # 144 s: alignment, then two minutes of corrected wind
+RATE_FACTOR = 4.0
+
+
+def test_short_soak_loses_no_sample(tmp_path, ros_env):
+    figures = tmp_path / "soak.json"
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(REPO / "tools" / "soak.py"),
+            "--hours",
+            str(SIMULATED_HOURS),
+            "--rate-factor",
+            str(RATE_FACTOR),
+            "--rss-period-s",
+            "1",
+            "--json",
+            str(figures),
+        ],
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    counts = json.loads(figures.read_text())["counts"]
+    expected_in = SIMULATED_HOURS * 3600.0 * 20.0  # the anemometer's 20 Hz
+    assert counts["anemometer/wind in"] >= 0.95 * expected_in, counts
+    assert counts["wind/true out"] == counts["anemometer/wind in"], counts
+    assert counts["wind/true without its input"] == 0, counts
+    assert counts["anemometer/wind without output"] == 0, counts
+    # after the alignment the wind is corrected
+    assert counts["wind/true valid"] >= 0.5 * counts["wind/true out"], counts
