@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from buoy_common.cli import INTERRUPTED_EXIT_CODE
+from ros_messages import wait_for
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -22,8 +23,11 @@ REPO = Path(__file__).resolve().parents[2]
 BUOY_PARAMETERS = str(REPO / "src" / "buoy_common" / "config" / "buoy.yaml")
 SEA_STATE = str(REPO / "bags" / "sea_state")
 PARAMETERS = ("--ros-args", "--params-file", BUOY_PARAMETERS)
-# Long enough for every program to be at work (rclpy imported, nodes spinning, bags open).
-AT_WORK_S = 6.0
+# A program takes its signals over once its modules are imported, which on a loaded machine
+# takes seconds: each is signalled once it has written its first line, then after this settling.
+AT_WORK_S = 2.0
+STARTUP_TIMEOUT_S = 40.0
+SILENT_AT_START = ("wind_echo", "simulate_bag")
 SECOND_SIGNAL_AFTER_S = 0.05
 NODES_STOP_CODE = 0
 
@@ -62,6 +66,14 @@ def commands(folder: Path) -> dict[str, tuple[tuple[str, ...], int]]:
 def test_two_signals_in_quick_succession(signals, nodes, tmp_path):
     expected = commands(tmp_path)
     processes = {name: nodes.start(name, *arguments) for name, (arguments, _) in expected.items()}
+    wait_for(
+        lambda: all(
+            nodes.log_of(process) or process.poll() is not None
+            for name, process in processes.items()
+            if name not in SILENT_AT_START
+        ),
+        STARTUP_TIMEOUT_S,
+    )
     time.sleep(AT_WORK_S)
     finished_early = {name: p.returncode for name, p in processes.items() if p.poll() is not None}
     for process in processes.values():

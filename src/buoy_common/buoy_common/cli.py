@@ -24,24 +24,33 @@ BROKEN_PIPE_EXIT_CODE = 141
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
-def _interrupt(signal_number, frame) -> None:
-    for number in _STOP_SIGNALS:
-        signal.signal(number, signal.SIG_IGN)
-    raise KeyboardInterrupt
+class _Interruption:
+    """The handler of SIGINT and SIGTERM: the first one raises KeyboardInterrupt, later ones
+    (a wrapper forwarding the signal again) are counted and otherwise ignored, so that they
+    cannot interrupt the clean-up the first one started."""
+
+    def __init__(self):
+        self.signals = 0
+
+    def __call__(self, signal_number, frame) -> None:
+        self.signals += 1
+        if self.signals == 1:
+            raise KeyboardInterrupt
 
 
 def interruptible(program: str) -> Callable:
     """Decorate a command's ``main``: SIGINT or SIGTERM end it with one line on stderr and
-    exit code :data:`INTERRUPTED_EXIT_CODE`, without a traceback."""
+    exit code :data:`INTERRUPTED_EXIT_CODE`, a closed output pipe with
+    :data:`BROKEN_PIPE_EXIT_CODE`, both without a traceback."""
 
     def decorate(main: Callable) -> Callable:
         @functools.wraps(main)
         def run(*args, **kwargs):
             if threading.current_thread() is not threading.main_thread():
                 return main(*args, **kwargs)
-            previous = {number: signal.getsignal(number) for number in _STOP_SIGNALS}
+            interruption = _Interruption()
             for number in _STOP_SIGNALS:
-                signal.signal(number, _interrupt)
+                signal.signal(number, interruption)
             try:
                 return main(*args, **kwargs)
             except KeyboardInterrupt:
@@ -52,8 +61,11 @@ def interruptible(program: str) -> Callable:
                 os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
                 sys.exit(BROKEN_PIPE_EXIT_CODE)
             finally:
-                for number, handler in previous.items():
-                    signal.signal(number, handler)
+                if interruption.signals:
+                    # Exiting: the interpreter would reset the handler to the default action
+                    # while it exits, and a late signal then kill the process.
+                    for number in _STOP_SIGNALS:
+                        signal.signal(number, signal.SIG_IGN)
 
         return run
 

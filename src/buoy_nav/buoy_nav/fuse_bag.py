@@ -23,6 +23,7 @@ import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
 from buoy_common.cli import interruptible
+from buoy_common.extrinsics import describe_shared_fields
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.bag_fusion import FusedBag, fuse_bag
@@ -50,6 +51,7 @@ def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     try:
         config = fusion_config_from_files(arguments.params_file)
+        print(f"extrinsics: {describe_shared_fields(config)}")
         fused = fuse_bag(arguments.in_bag, arguments.out_bag, config, arguments.overwrite)
     except (ParameterError, BagError, OutputError, OSError) as error:
         print(f"fuse_bag: {error}", file=sys.stderr)

@@ -41,6 +41,7 @@ from buoy_common.base_node import (
     DATA_QOS,
     StartupError,
     SuiteNode,
+    ignore_stop_signals,
     message_class,
     take_stop_signals,
 )
@@ -320,6 +321,7 @@ def run(options: argparse.Namespace, ros_arguments: list[str]) -> int:
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
+            ignore_stop_signals()
 
 
 def _stopped(player: BagPlayer | None) -> int:
