@@ -8,7 +8,6 @@ import itertools
 import math
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,7 @@ import pytest
 from buoy_common.bag_io import BagReader
 from buoy_common.parameters import load_parameter_files
 from processed_bags import BAGS_DIR
-from ros_messages import stamp_ns
+from ros_messages import stamp_ns, wait_for
 from sensor_sim.scenario import load_scenario
 
 SCENARIO_S = 12.0
@@ -165,7 +164,9 @@ def test_imu_message_conventions(live_bag):
 
 def test_sensor_node_stops_cleanly_on_sigint(nodes):
     process = nodes.start("imu_sim_node", "--ros-args", "-p", "scenario:=static")
-    time.sleep(3.0)
+    # Signalled once it runs: before its modules are loaded, a signal kills it by the default
+    # action, as any Python program.
+    assert wait_for(lambda: "scenario 'static'" in nodes.log_of(process), 30.0)
     assert process.poll() is None, nodes.log_of(process)
     assert nodes.interrupt(process) == 0, nodes.log_of(process)
     assert "Traceback" not in nodes.log_of(process)
