@@ -13,7 +13,7 @@ Runs ``run_scenario sea_state --fusion --compensation`` for ``--hours`` of simul
 Prints a table and writes the figures as JSON (``--json``). ``make bench`` runs the full day
 (``tools/bench.py --only soak``); ``make test`` a few minutes of it (tests/system/test_soak.py).
 
-    python tools/soak.py [--hours 24] [--rate-factor 4] [--json out/bench/soak.json]
+    python tools/soak.py [--hours 24] [--rate-factor 2] [--json out/bench/soak.json]
 """
 
 from __future__ import annotations
@@ -278,7 +278,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--hours", type=float, default=24.0, help="simulated hours (24)")
     parser.add_argument(
-        "--rate-factor", type=float, default=4.0, help="simulated seconds per wall second (4)"
+        "--rate-factor", type=float, default=2.0, help="simulated seconds per wall second (2)"
     )
     parser.add_argument("--rss-period-s", type=float, default=10.0, help="RSS sampling period")
     parser.add_argument("--json", type=Path, help="write the figures here")
