@@ -3,7 +3,12 @@
 A bag is taken as a list of :class:`Record` (topic, type, log time, serialised bytes). Each fault
 is a function of that list returning a new one; the messages it touches are decoded, changed and
 serialised again, every other record keeps its bytes. Times are given in seconds from the first
-record's log time. The file faults (a cut file, a lost ``metadata.yaml``) act on a written bag.
+record's log time, and a fault picks its messages by log time, which no fault on stamps moves.
+The file faults (a cut file, a lost ``metadata.yaml``) act on a written bag.
+
+The IMU faults the filter's integrity monitoring is judged on are named in :data:`IMU_FAULTS`:
+five gyro samples of 30 rad/s on one axis and one accelerometer sample of 100 m/s² (inside the
+magnitude limits of 35 rad/s and 160 m/s²), and the IMU's stamps stepping back or forward 5 s.
 """
 
 from __future__ import annotations
@@ -18,7 +23,11 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from buoy_common.bag_io import BagReader, BagWriter
 from buoy_common.base_node import message_class
+from buoy_common.cdr import read_stamp
 from buoy_common.contract import NANOSECONDS_PER_SECOND, stamp_to_ns
+
+IMU_TOPIC = "/imu/data_raw"
+CLOCK_STEP_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -40,12 +49,13 @@ class Record:
 Fault = Callable[[list[Record]], list[Record]]
 
 
-def read_records(bag: Path, topics: Iterable[str], seconds: float) -> list[Record]:
-    """The first ``seconds`` (log time) of ``topics`` of ``bag``, bytes unchanged."""
+def read_records(bag: Path, topics: Iterable[str] | None, seconds: float) -> list[Record]:
+    """The first ``seconds`` (log time) of ``topics`` (None: every topic) of ``bag``, bytes
+    unchanged."""
     with BagReader(bag) as reader:
         end_ns = reader.start_ns + round(seconds * NANOSECONDS_PER_SECOND)
         records = []
-        for message in reader.messages(list(topics)):
+        for message in reader.messages(None if topics is None else list(topics)):
             if message.log_time_ns > end_ns:
                 break
             records.append(Record(message.topic, message.msgtype, message.log_time_ns, message.raw))
@@ -59,6 +69,16 @@ def write_records(records: list[Record], out: Path) -> None:
             writer.write_raw(record.topic, record.msgtype, record.log_time_ns, record.raw)
 
 
+def write_faulty_bag(
+    source: Path, out: Path, seconds: float, fault: Fault, topics: Iterable[str] | None = None
+) -> list[Record]:
+    """The first ``seconds`` of ``source`` (its ``topics``, default all) with ``fault`` in it,
+    written to ``out``; returns the records written."""
+    records = sorted(fault(read_records(source, topics, seconds)), key=lambda r: r.log_time_ns)
+    write_records(records, out)
+    return records
+
+
 def _indices(records: list[Record], topic: str, from_s: float, to_s: float = math.inf) -> list:
     """Indices of ``topic``'s records logged in [from_s, to_s) after the first record."""
     start_ns = records[0].log_time_ns
@@ -70,7 +90,15 @@ def _indices(records: list[Record], topic: str, from_s: float, to_s: float = mat
 
 
 def header_stamp_ns(record: Record) -> int:
-    return stamp_to_ns(record.message().header.stamp)
+    stamp = read_stamp(record.raw)
+    if stamp is None:
+        return stamp_to_ns(record.message().header.stamp)
+    return stamp[0] * NANOSECONDS_PER_SECOND + stamp[1]
+
+
+def stamp_at_s(records: list[Record], topic: str, at_s: float) -> float:
+    """The header stamp (s) of the first message of ``topic`` a fault from ``at_s`` touches."""
+    return header_stamp_ns(records[_indices(records, topic, at_s)[0]]) / NANOSECONDS_PER_SECOND
 
 
 # -- value faults ---------------------------------------------------------------------------------
@@ -98,6 +126,18 @@ def set_vector(path: str, value: tuple[float, float, float]) -> Callable:
         for name in path.split("."):
             target = getattr(target, name)
         target.x, target.y, target.z = value
+
+    return change
+
+
+def set_axis(path: str, axis: str, value: float) -> Callable:
+    """A ``change`` that sets one axis (``"x"``) of the Vector3 at dotted attribute ``path``."""
+
+    def change(message) -> None:
+        target = message
+        for name in path.split("."):
+            target = getattr(target, name)
+        setattr(target, axis, value)
 
     return change
 
@@ -216,6 +256,37 @@ def combine(*faults: Fault) -> Fault:
         return records
 
     return fault
+
+
+# -- the IMU faults of the integrity monitoring ------------------------------------------------
+
+
+def gyro_spike(at_s: float) -> Fault:
+    """Five gyro samples of 30 rad/s about x from ``at_s``."""
+    return mutate(IMU_TOPIC, at_s, 5, set_axis("angular_velocity", "x", 30.0))
+
+
+def accelerometer_spike(at_s: float) -> Fault:
+    """One accelerometer sample of 100 m/s² along z at ``at_s``."""
+    return mutate(IMU_TOPIC, at_s, 1, set_axis("linear_acceleration", "z", 100.0))
+
+
+def imu_clock_back(at_s: float) -> Fault:
+    """The IMU's stamps 5 s behind from ``at_s`` on."""
+    return shift_stamps(IMU_TOPIC, at_s, -CLOCK_STEP_S)
+
+
+def imu_clock_forward(at_s: float) -> Fault:
+    """The IMU's stamps 5 s ahead from ``at_s`` on."""
+    return shift_stamps(IMU_TOPIC, at_s, CLOCK_STEP_S)
+
+
+IMU_FAULTS: dict[str, Callable[[float], Fault]] = {
+    "gyro_spike": gyro_spike,
+    "accelerometer_spike": accelerometer_spike,
+    "clock_back": imu_clock_back,
+    "clock_forward": imu_clock_forward,
+}
 
 
 # -- file faults ----------------------------------------------------------------------------------

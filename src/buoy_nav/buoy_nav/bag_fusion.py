@@ -1,17 +1,20 @@
-"""Fusion over a recorded bag: the core of ``fusion_node`` fed from a bag, ``nav/*`` written
-to another.
+"""Fusion over a recorded bag: the core of ``fusion_node`` fed from a bag, ``nav/*`` and ``tf``
+written to another.
 
-The sensor topics ``imu/data_raw``, ``gnss/fix``, ``gnss/heading`` (required), ``gnss/vel`` and
-``gnss/baseline`` (used when present) are read in log-time order and go through the same
+The sensor topics ``imu/data_raw`` (required), one heading reference at least (``gnss/heading``,
+``gnss/baseline``, ``imu/mag`` or ``imu/data``), and ``gnss/fix``, ``gnss/vel``, the others
+(used when present) are read in log-time order and go through the same
 conversion (:mod:`buoy_nav.fusion_messages`) and engine as in the live node. Every solution's
 ``nav/odometry``, ``nav/imu``, ``nav/velocity`` and ``nav/fix`` carry the log time of the IMU
-message that produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries
+message that produced it, and so does its ``tf`` (``map`` → ``base_link``, for 3-D views in
+Foxglove or RViz). Truth topics (``truth/*``) are copied unchanged, so the output carries
 its own answer. ``fuse_bag`` is the command line of :func:`fuse_bag`; ``process_bag`` runs
 :class:`OfflineFusion` ahead of the wind compensation.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
 from collections.abc import Iterable
@@ -27,13 +30,18 @@ from buoy_common.bag_io import (
     Recovery,
 )
 from buoy_common.contract import (
-    GNSS_FIX_TOPIC,
+    AHRS_TOPIC,
+    GNSS_BASELINE_TOPIC,
     GNSS_HEADING_TOPIC,
     IMU_RAW_TOPIC,
+    MAGNETOMETER_TOPIC,
     NAV_MSGTYPES,
+    TF_MSGTYPE,
+    TF_TOPIC,
     TRUTH_PREFIX,
     bag_topic,
 )
+from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs
 from buoy_nav.aiding import disabled_topics
 from buoy_nav.config import FusionConfig
@@ -46,9 +54,12 @@ from buoy_nav.fusion_messages import (
     feed_message,
     nav_values,
     solution_cdr,
+    transform_cdr,
 )
 
-REQUIRED_TOPICS = (IMU_RAW_TOPIC, GNSS_FIX_TOPIC, GNSS_HEADING_TOPIC)
+REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
+HEADING_TOPICS = (GNSS_HEADING_TOPIC, GNSS_BASELINE_TOPIC, MAGNETOMETER_TOPIC, AHRS_TOPIC)
+"""The fusion needs one of these at least: without a heading reference it cannot align."""
 OPTIONAL_TOPICS = tuple(topic for topic in FUSION_INPUT_MSGTYPES if topic not in REQUIRED_TOPICS)
 PROGRESS_EVERY_MESSAGES = 2000
 
@@ -60,6 +71,7 @@ def relative_topic(name: str) -> str:
 
 # Relative nav topic → (name stored in the bag, message type).
 NAV_BAG_TOPICS = {topic: (bag_topic(topic), msgtype) for topic, msgtype in NAV_MSGTYPES.items()}
+TF_BAG_TOPIC = bag_topic(TF_TOPIC)
 
 
 def sensor_topics_of(
@@ -74,6 +86,12 @@ def sensor_topics_of(
     stored = {relative_topic(name): name for name in reader.topics}
     found = {}
     disabled = disabled_topics(config)
+    usable_headings = [t for t in HEADING_TOPICS if t in stored and t not in disabled]
+    if not usable_headings:
+        raise BagError(
+            f"bag {reader.path}: no heading reference to align with: it needs one of "
+            f"{', '.join(HEADING_TOPICS)} (not switched off by a parameter)"
+        )
     for topic in (*REQUIRED_TOPICS, *OPTIONAL_TOPICS):
         if topic not in stored or topic in disabled:
             continue
@@ -95,7 +113,9 @@ def truth_topics_of(reader: BagReader) -> list[str]:
 class OfflineFusion:
     """Feeds sensor messages to a :class:`FusionEngine` and writes its ``nav/*`` to a bag."""
 
-    def __init__(self, config: FusionConfig, writer: BagWriter | BackgroundBagWriter):
+    def __init__(
+        self, config: FusionConfig, writer: BagWriter | BackgroundBagWriter | NamespacedWriter
+    ):
         self.engine = FusionEngine(config)
         self.stamps = StampBook()
         self.writer = writer
@@ -139,6 +159,7 @@ class OfflineFusion:
             for topic, raw in solution_cdr(values).items():
                 stored_topic, msgtype = NAV_BAG_TOPICS[topic]
                 self.writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
+            self.writer.write_raw(TF_BAG_TOPIC, TF_MSGTYPE, log_time_ns, transform_cdr(values))
             written.append(values)
         return written
 
@@ -150,6 +171,10 @@ class OfflineFusion:
             lines.append(f"never aligned (alignment state: {health.alignment_state.name})")
         else:
             lines.append(f"first navigation solution at stamp {self.first_solution_s:.3f} s")
+            lines.append(f"sensor set at the end: {health.sensor_set}")
+            lines.append(
+                "coasting sources at the end: " + (", ".join(health.coasting_sources) or "none")
+            )
         for kind, counters in health.counters.items():
             rejected = ", ".join(f"{r} {n}" for r, n in sorted(counters.rejected.items()))
             lines.append(
@@ -157,6 +182,21 @@ class OfflineFusion:
                 f"alignment {counters.used_for_alignment:4d}  "
                 f"superseded {counters.superseded:6d}  resets {counters.resets:3d}  "
                 f"mean NIS {counters.mean_nis:6.2f}  rejected: {rejected or 'none'}"
+            )
+        for event in health.integrity_events:
+            ended = (
+                "still at the end"
+                if math.isnan(event.end_s)
+                else f"{event.duration_s:.2f} s, ended by "
+                + ("a new alignment" if event.realigned else "agreement with the aiding")
+            )
+            lines.append(
+                f"navigation not trusted from stamp {event.start_s:.3f} s ({event.reason}): {ended}"
+            )
+        for t_s, step_s in health.imu_clock_steps:
+            lines.append(
+                f"IMU clock stepped by {step_s:+.6f} s before stamp {t_s:.3f} s: "
+                "later IMU samples re-stamped onto the GNSS clock"
             )
         for key, count in sorted(self.rejections.items()):
             lines.append(f"rejected message {key}: {count}")
@@ -178,21 +218,26 @@ class FusedBag(NamedTuple):
     """What was wrong with the input bag and how much of it was read; None for a sound bag."""
 
 
-def fuse_bag(in_bag, out_bag, config: FusionConfig, overwrite: bool = False) -> FusedBag:
+def fuse_bag(
+    in_bag, out_bag, config: FusionConfig, overwrite: bool = False, view: TopicView | None = None
+) -> FusedBag:
     """Run the fusion over ``in_bag`` into ``out_bag`` (a new bag; replaced with
-    ``overwrite``). Raises BagError for a missing or unreadable bag or one without the fusion's
+    ``overwrite``), over the topics of ``view``'s namespace (the root when None), writing into
+    the same namespace. Raises BagError for a missing or unreadable bag or one without the fusion's
     required topics, and OutputError, before anything is read or written, if ``out_bag`` is,
     contains or lies inside ``in_bag``."""
     started = time.monotonic()
     check_outputs_apart_from_inputs([in_bag], [out_bag])
-    with BagReader(in_bag) as reader:
+    view = view or TopicView()
+    with BagReader(in_bag, view) as reader:
         sensors = sensor_topics_of(reader, config)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
         with (
             BagProgress(reader, f"fuse_bag {in_bag}") as progress,
-            BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
+            BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
         ):
+            writer = NamespacedWriter(bag_writer, view)
             fusion = OfflineFusion(config, writer)
             for index, message in enumerate(reader.messages([*sensors.values(), *truth])):
                 topic = relative_of.get(message.topic)

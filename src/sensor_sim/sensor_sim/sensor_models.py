@@ -237,11 +237,13 @@ class GnssSample:
     heading_yaw_rad: np.ndarray
     heading_variance_rad2: np.ndarray
     fix_valid: np.ndarray
+    velocity_valid: np.ndarray
     heading_valid: np.ndarray
 
 
 class GnssSimulator:
-    """Dual-antenna receiver: primary antenna position and velocity, baseline and heading."""
+    """GNSS receiver: primary antenna position and velocity, and with two antennas the
+    baseline and heading."""
 
     def __init__(
         self,
@@ -312,13 +314,16 @@ class GnssSimulator:
         heading_variance = config.baseline_noise_horizontal_m**2 / horizontal_length_sq
 
         fix_valid = ~_in_intervals(t, config.fix_outages_s)
+        velocity_valid = fix_valid & ~_in_intervals(t, config.velocity_outages_s)
         heading_valid = fix_valid & ~_in_intervals(t, config.heading_outages_s)
+        if config.receiver != "dual_antenna":
+            heading_valid[:] = False
         no_fix = ~fix_valid
         no_heading = ~heading_valid
         latitude_deg = np.where(no_fix, np.nan, np.rad2deg(latitude))
         longitude_deg = np.where(no_fix, np.nan, np.rad2deg(longitude))
         altitude = np.where(no_fix, np.nan, altitude)
-        velocity[no_fix] = np.nan
+        velocity[~velocity_valid] = np.nan
         baseline[no_heading] = np.nan
         heading = np.where(no_heading, np.nan, heading)
         heading_variance = np.where(no_heading, np.nan, heading_variance)
@@ -338,6 +343,7 @@ class GnssSimulator:
             heading_yaw_rad=heading,
             heading_variance_rad2=heading_variance,
             fix_valid=fix_valid,
+            velocity_valid=velocity_valid,
             heading_valid=heading_valid,
         )
 

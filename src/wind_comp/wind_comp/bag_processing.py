@@ -37,6 +37,7 @@ from buoy_common.contract import (
     wind_mean_topic,
     wind_stats_topic,
 )
+from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of, truth_topics_of
 from buoy_nav.config import FusionConfig
@@ -96,7 +97,7 @@ class OfflineCompensation:
     time of the record after which they were decided.
     """
 
-    def __init__(self, config: CompensatorConfig, writer: BackgroundBagWriter):
+    def __init__(self, config: CompensatorConfig, writer: BackgroundBagWriter | NamespacedWriter):
         self.config = config
         self.pipeline = CompensationPipeline(config)
         self.writer = writer
@@ -115,6 +116,11 @@ class OfflineCompensation:
                 values.attitude_xyzw,
                 values.angular_rate_body_rad_s,
                 values.velocity_body_mps,
+                max(
+                    values.pose_covariance[21],
+                    values.pose_covariance[28],
+                    values.pose_covariance[35],
+                ),
             )
             pipeline.add_fix(STATUS_FIX, values.latitude_deg)
 
@@ -187,23 +193,27 @@ def process_bag(
     fusion_config: FusionConfig,
     compensator_config: CompensatorConfig,
     overwrite: bool = False,
+    view: TopicView | None = None,
 ) -> ProcessSummary:
     """Fuse and correct ``in_bag`` into ``out_bag`` (a new bag; replaced with ``overwrite``)
-    and the products CSV beside it. Raises BagError for a missing or unreadable bag or one
+    and the products CSV beside it, over the topics of ``view``'s namespace (the root when
+    None), writing into the same namespace. Raises BagError for a missing or unreadable bag or one
     without the required topics, and OutputError, before anything is read or written, if an
     output is, contains or lies inside ``in_bag``."""
     started = time.monotonic()
     csv_path = products_csv_path(out_bag)
     check_outputs_apart_from_inputs([in_bag], [out_bag, csv_path])
-    with BagReader(in_bag) as reader:
+    view = view or TopicView()
+    with BagReader(in_bag, view) as reader:
         sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_RAW_TOPIC,))
         stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
         with (
             BagProgress(reader, f"process_bag {in_bag}") as progress,
-            BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
+            BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
         ):
+            writer = NamespacedWriter(bag_writer, view)
             fusion = OfflineFusion(fusion_config, writer)
             compensation = OfflineCompensation(compensator_config, writer)
             log_time_ns = reader.start_ns

@@ -54,6 +54,13 @@ class CompensatorConfig:
         anemometer_frame_id: the ``frame_id`` of ``anemometer/wind`` messages; a message in
             another frame is rejected (``wrong_frame``) and its output is NaN. The contract's
             ``anemometer_link`` unless a driver names its frame otherwise.
+        max_attitude_sigma_deg: a navigation sample whose attitude 1σ (the largest of the
+            three in its pose covariance) exceeds this corrects no wind: the samples it
+            brackets are invalid as ``navigation_not_trusted``, deg. The fusion publishes its
+            attitude 1σ at least ``fusion.integrity_attitude_sigma_deg`` (5°) while it finds
+            itself inconsistent with its aiding, so this is how an untrustworthy navigation
+            reaches the wind; the default lies between that and the 1σ a sound filter reports
+            in the first second after its alignment (up to about 3°).
     """
 
     anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
@@ -64,6 +71,7 @@ class CompensatorConfig:
     product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
     gust_window_s: float = 3.0
     anemometer_frame_id: str = ANEMOMETER_FRAME
+    max_attitude_sigma_deg: float = 4.0
 
     def __post_init__(self):
         for name in ("anemometer_position_body_m", "anemometer_rpy_deg"):
@@ -72,16 +80,22 @@ class CompensatorConfig:
             check_shared_fields(self)
         except ValueError as error:
             raise ConfigError(str(error)) from None
-        for name in ("max_nav_gap_s", "max_wind_speed_mps", "nav_history_s", "gust_window_s"):
+        for name in (
+            "max_nav_gap_s",
+            "max_wind_speed_mps",
+            "nav_history_s",
+            "gust_window_s",
+            "max_attitude_sigma_deg",
+        ):
             object.__setattr__(self, name, _positive_float(name, getattr(self, name)))
         windows = _finite_tuple("product_windows_s", self.product_windows_s, length=None)
+        if not windows or min(windows) <= 0:
+            raise ConfigError(f"product_windows_s must be positive window lengths, got {windows}")
+        object.__setattr__(self, "product_windows_s", windows)
         if not isinstance(self.anemometer_frame_id, str) or not self.anemometer_frame_id.strip():
             raise ConfigError(
                 f"anemometer_frame_id must be a frame name, got {self.anemometer_frame_id!r}"
             )
-        if not windows or min(windows) <= 0:
-            raise ConfigError(f"product_windows_s must be positive window lengths, got {windows}")
-        object.__setattr__(self, "product_windows_s", windows)
         if self.nav_history_s <= self.max_nav_gap_s:
             raise ConfigError(
                 f"nav_history_s ({self.nav_history_s}) must exceed max_nav_gap_s "

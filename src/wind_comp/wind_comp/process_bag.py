@@ -1,7 +1,7 @@
 """``process_bag``: fusion and wind correction over a recorded bag, the offline twin of the nodes.
 
     process_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file compensation.yaml]
-                [--overwrite]
+                [--overwrite] [--namespace NS] [--remap FROM:=TO ...]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
 by ``compensation_node`` (:func:`wind_comp.bag_processing.process_bag`): every
@@ -9,7 +9,9 @@ by ``compensation_node`` (:func:`wind_comp.bag_processing.process_bag`): every
 The new bag holds ``nav/*``, ``wind/true``, the wind products (``wind/mean_<window>``,
 ``wind/stats_<window>``), the measured ``anemometer/wind`` and any truth topics; the wind
 products are also written to ``<OUT_BAG>_wind_products.csv``. Parameters come from the same
-YAML files the nodes take.
+YAML files the nodes take. Namespaces and remappings as for ``fuse_bag``: a bag recorded under
+one namespace is read and written in it; a bag of several buoys gives one output per namespace
+(``OUT_BAG/buoy1`` and its CSV ``OUT_BAG/buoy1_wind_products.csv``, ...).
 
 Both outputs are written under temporary names beside them and appear only when complete; they
 may not be, contain or lie inside IN_BAG. It prints the extrinsics it used first.
@@ -30,6 +32,12 @@ from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
 from buoy_common.cli import interruptible
 from buoy_common.contract import WIND_RAW_TOPIC, seconds_to_stamp, window_label
 from buoy_common.extrinsics import describe_shared_fields
+from buoy_common.namespaces import (
+    NamespaceError,
+    add_namespace_arguments,
+    output_for,
+    views_of_bag,
+)
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
@@ -57,6 +65,7 @@ def parse_arguments(argv):
         help="ROS parameter YAML as given to the nodes (repeatable; later files win)",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing OUT_BAG")
+    add_namespace_arguments(parser)
     return parser.parse_args(argv)
 
 
@@ -95,6 +104,7 @@ def print_summary(summary: ProcessSummary, out_bag: str) -> None:
 @interruptible("process_bag")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
+    truncated = mostly_invalid = False
     try:
         fusion_config = fusion_config_from_files(arguments.params_file)
         compensator_config = compensator_config_from_files(arguments.params_file)
@@ -103,28 +113,35 @@ def main(argv=None) -> None:
             f"extrinsics: {describe_shared_fields(compensator_config)}; anemometer/wind "
             f"expected in frame '{compensator_config.anemometer_frame_id}'"
         )
-        summary = process_bag(
-            arguments.in_bag,
-            arguments.out_bag,
-            fusion_config,
-            compensator_config,
-            arguments.overwrite,
-        )
-    except (ParameterError, BagError, OutputError, OSError) as error:
+        views = views_of_bag(arguments, arguments.in_bag, WIND_RAW_TOPIC)
+        for view in views:
+            out_bag = output_for(arguments.out_bag, view, several=len(views) > 1)
+            if len(views) > 1:
+                print(f"namespace {view.label} -> {out_bag}")
+            summary = process_bag(
+                arguments.in_bag,
+                out_bag,
+                fusion_config,
+                compensator_config,
+                arguments.overwrite,
+                view,
+            )
+            print_summary(summary, out_bag)
+            for frame_id, n in sorted(summary.wrong_wind_frames.items()):
+                message = wrong_frame_message(frame_id, compensator_config.anemometer_frame_id)
+                print(f"process_bag: error: {n} samples of {message}", file=sys.stderr)
+            if summary.recovery is not None:
+                warning = summary.recovery.describe(arguments.in_bag)
+                print(f"process_bag: warning: {warning}", file=sys.stderr)
+                truncated = truncated or summary.recovery.truncated
+            warning = mostly_invalid_warning(summary.wind_status_counts)
+            if warning is not None:
+                print(f"process_bag: warning: {warning}", file=sys.stderr)
+                mostly_invalid = True
+    except (ParameterError, BagError, OutputError, NamespaceError, OSError) as error:
         print(f"process_bag: {error}", file=sys.stderr)
         sys.exit(2)
-    print_summary(summary, arguments.out_bag)
-    for frame_id, n in sorted(summary.wrong_wind_frames.items()):
-        message = wrong_frame_message(frame_id, compensator_config.anemometer_frame_id)
-        print(f"process_bag: error: {n} samples of {message}", file=sys.stderr)
-    if summary.recovery is not None:
-        print(
-            f"process_bag: warning: {summary.recovery.describe(arguments.in_bag)}",
-            file=sys.stderr,
-        )
-        if summary.recovery.truncated:
-            sys.exit(RECOVERED_BAG_EXIT_CODE)
-    warning = mostly_invalid_warning(summary.wind_status_counts)
-    if warning is not None:
-        print(f"process_bag: warning: {warning}", file=sys.stderr)
+    if truncated:
+        sys.exit(RECOVERED_BAG_EXIT_CODE)
+    if mostly_invalid:
         sys.exit(MOSTLY_INVALID_EXIT_CODE)
