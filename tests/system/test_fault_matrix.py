@@ -80,10 +80,10 @@ def short_bag(tmp_path_factory):
     return bag
 
 
-def process_bag_cli(ros_env, *arguments):
+def process_bag_cli(*arguments):
+    """``process_bag`` as a user runs it (it takes no part in DDS)."""
     return subprocess.run(
         [str(BIN / "process_bag"), *map(str, arguments)],
-        env=ros_env,
         capture_output=True,
         text=True,
         timeout=300,
@@ -101,40 +101,40 @@ def one_output_per_input(bag, out) -> None:
 
 
 @pytest.mark.slow
-def test_truncated_bag_is_processed_up_to_its_cut(short_bag, tmp_path, ros_env):
+def test_truncated_bag_is_processed_up_to_its_cut(short_bag, tmp_path):
     cut = faults.copy_bag(short_bag, tmp_path / "cut")
     faults.truncate_file(cut, 0.6)
-    result = process_bag_cli(ros_env, cut, tmp_path / "out")
+    result = process_bag_cli(cut, tmp_path / "out")
     assert result.returncode == RECOVERED_BAG_EXIT_CODE, result.stderr
     assert "Traceback" not in result.stderr
     one_output_per_input(cut, tmp_path / "out")
 
 
 @pytest.mark.slow
-def test_bag_without_metadata_is_processed(short_bag, tmp_path, ros_env):
+def test_bag_without_metadata_is_processed(short_bag, tmp_path):
     bare = faults.copy_bag(short_bag, tmp_path / "bare")
     faults.remove_metadata(bare)
-    result = process_bag_cli(ros_env, bare, tmp_path / "out")
+    result = process_bag_cli(bare, tmp_path / "out")
     assert result.returncode in (0, RECOVERED_BAG_EXIT_CODE), result.stderr
     one_output_per_input(bare, tmp_path / "out")
 
 
-def test_empty_bag_is_one_line_error(tmp_path, ros_env):
+def test_empty_bag_is_one_line_error(tmp_path):
     empty = tmp_path / "empty"
     faults.write_records([], empty)
-    result = process_bag_cli(ros_env, empty, tmp_path / "out")
+    result = process_bag_cli(empty, tmp_path / "out")
     assert result.returncode == 2
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.slow
-def test_wrong_anemometer_frame_is_an_error_naming_both_frames(short_bag, tmp_path, ros_env):
+def test_wrong_anemometer_frame_is_an_error_naming_both_frames(short_bag, tmp_path):
     records = faults.read_records(short_bag, matrix.SENSOR_TOPICS, FILE_FAULT_SECONDS)
     sonic = tmp_path / "sonic"
     faults.write_records(faults.set_frame("/anemometer/wind", "sonic")(records), sonic)
 
-    refused = process_bag_cli(ros_env, sonic, tmp_path / "refused")
+    refused = process_bag_cli(sonic, tmp_path / "refused")
     assert refused.returncode == MOSTLY_INVALID_EXIT_CODE, refused.stderr
     assert "'sonic'" in refused.stderr and "'anemometer_link'" in refused.stderr
     assert "compensation.anemometer_frame_id" in refused.stderr
@@ -144,10 +144,10 @@ def test_wrong_anemometer_frame_is_an_error_naming_both_frames(short_bag, tmp_pa
     driver_frame.write_text(
         "/**:\n  ros__parameters:\n    compensation: {anemometer_frame_id: sonic}\n"
     )
-    accepted = process_bag_cli(ros_env, sonic, tmp_path / "accepted", "--params-file", driver_frame)
+    accepted = process_bag_cli(sonic, tmp_path / "accepted", "--params-file", driver_frame)
     assert accepted.returncode == 0, accepted.stderr
     reference = tmp_path / "reference"
-    assert process_bag_cli(ros_env, short_bag, reference).returncode == 0
+    assert process_bag_cli(short_bag, reference).returncode == 0
     np.testing.assert_array_equal(
         matrix.bag_outcome(tmp_path / "accepted").wind, matrix.bag_outcome(reference).wind
     )

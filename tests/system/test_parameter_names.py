@@ -36,7 +36,7 @@ def misspelt_file(folder: Path, name: str) -> Path:
 
 
 @pytest.mark.parametrize("name", sorted(MISSPELT))
-def test_offline_refuses_a_misspelt_parameter_naming_the_closest(name, tmp_path, ros_env):
+def test_offline_refuses_a_misspelt_parameter_naming_the_closest(name, tmp_path):
     params = ["--params-file", *map(str, SHARED_FILES[:1])]
     result = subprocess.run(
         [
@@ -47,7 +47,6 @@ def test_offline_refuses_a_misspelt_parameter_naming_the_closest(name, tmp_path,
             "--params-file",
             str(misspelt_file(tmp_path, name)),
         ],
-        env=ros_env,
         capture_output=True,
         text=True,
         timeout=120,
