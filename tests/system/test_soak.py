@@ -1,4 +1,4 @@
-"""A short soak: 30 simulated seconds of sea through the live nodes at twice real time, every
+"""A short soak: 20 simulated seconds of sea through the live nodes at twice real time, every
 anemometer sample out on ``wind/true`` (the full day is the opt-in ``soak`` section of
 ``tools/bench.py``, tools/soak.py).
 How many come out corrected depends on how busy the machine is (a sample whose navigation is
@@ -16,7 +16,7 @@ import pytest
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 REPO = Path(__file__).resolve().parents[2]
-SIMULATED_S = 30.0  # the alignment, then 20 s of corrected wind
+SIMULATED_S = 20.0  # the alignment, then 10 s of corrected wind
 SIMULATED_HOURS = SIMULATED_S / 3600.0
 RATE_FACTOR = 2.0
 
