@@ -18,7 +18,11 @@ as constants and printed beside our figures:
    (tools/bias_consistency.py);
 8. current (paper 003): process_bag on ship_current and sea_state with its DVL, short runs; and,
    opt-in (current_long), an hour of ship_current, sea_state and open_ocean
-   (tools/bench_current.py).
+   (tools/bench_current.py);
+9. soak, opt-in: 24 simulated hours of sea_state through the live nodes at 2x (tools/soak.py):
+   RSS of each node over time, latency percentiles per simulated hour, samples in and out. It
+   takes twelve hours of wall-clock time (``--quick``: six simulated minutes), so the default
+   set (``make bench``) leaves it out and only ``--only soak`` runs it.
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -26,9 +30,9 @@ go to stdout and out/bench/results.json, progress to stderr.
 
     python tools/bench.py [--quick] [--only SECTION ...]
 
-SECTION: attitude, wind, speed, live, consistency, sensor_sets, current (the default set) or
-current_long (opt-in: an hour of paper 003's ship and of each buoy with its DVL, tens of
-minutes).
+SECTION: attitude, wind, speed, live, consistency, sensor_sets, current (the default set), or
+the opt-in ones, run only when named: current_long (an hour of paper 003's ship and of each
+buoy with its DVL, tens of minutes) and soak (twelve hours).
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -107,9 +111,12 @@ RUNS_DIR = OUT_DIR / "runs"
 SIMULATOR_PACKAGE = REPO / "src/sensor_sim/sensor_sim"
 # Modules outside sensor_sim whose code decides what simulate_bag writes.
 SIMULATION_SHARED_MODULES = ("buoy_common.parameters", "buoy_common.bag_io")
+# The default set, what `make bench` runs.
 SECTIONS = ("attitude", "wind", "speed", "live", "consistency", "sensor_sets", "current")
-# Sections that take several minutes more than the rest are run only when named with --only.
-OPT_IN_SECTIONS = ("current_long",)
+# Sections too long for the default set, run only when named with --only.
+OPT_IN_SECTIONS = ("current_long", "soak")
+SOAK_HOURS = {"quick": 0.1, "full": 24.0}
+SOAK_RATE_FACTOR = 2.0
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 
 
@@ -547,6 +554,16 @@ def main(argv=None) -> None:
             CONSISTENCY_CHECKPOINTS_S,
         )
         bias_consistency.print_table(results["consistency"]["table"])
+    if "soak" in sections:
+        import soak
+
+        results["soak"] = soak.soak(
+            SOAK_HOURS["quick" if quick else "full"],
+            SOAK_RATE_FACTOR,
+            rss_period_s=10.0,
+            log_dir=OUT_DIR / "soak_logs",
+        )
+        soak.print_table(results["soak"])
 
     results["meta"]["wall_s"] = time.monotonic() - started
     with open(OUT_DIR / "results.json", "w") as stream:

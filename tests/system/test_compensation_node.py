@@ -383,6 +383,11 @@ def test_malformed_messages_yield_nan_outputs_and_counted_rejections(scenario, l
     assert values["rejected[anemometer/wind: wrong_frame]"] == "1"
     assert values["rejected[nav/odometry: zero_quaternion]"] == "1"
     assert values["rejected_total"] == "3"
+    # the wrong frame is named with the expected one, once
+    assert (
+        live_run["log"].count("anemometer/wind in frame 'imu_link', expected 'anemometer_link'")
+        == 1
+    )
 
 
 def test_one_minute_products_summarise_the_published_wind(live_run):

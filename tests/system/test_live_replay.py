@@ -5,45 +5,32 @@ are as close to the simulator's truth as the sensors allow (two outputs broken t
 would be equal too). Likewise ``current_node`` and ``current/velocity`` for a bag with a DVL.
 
 The first minute of ``sea_state`` (shipped geometry) and of ``off_axis`` (its own buoy, sensor
-stamps that never line up), sensor topics and the anemometer cut by log time, are played at
-twice their pace; ``sea_state`` also with IMU faults written into it (a gyro and an
-accelerometer spike, the IMU clock stepping back 5 s and forward again 10 s later); and a minute
-of ``sea_state`` with its DVL written by ``simulate_bag`` (the committed bags carry no DVL). The
-nodes decide on header stamps only, so message timing over DDS must not matter, given a latency
-budget the replay stays within; the compensation and current nodes publish the samples that
-still wait for navigation when they are interrupted, as ``process_bag`` does at the end of its
-data.
+stamps that never line up), sensor topics and the anemometer cut by log time, is played at twice
+its pace (:mod:`live_replay`); and a minute of ``sea_state`` with its DVL written by
+``simulate_bag`` (the committed bags carry no DVL). The same replay of faulted bags is the live
+half of the fault matrix (``test_fault_matrix``).
 """
 
 from __future__ import annotations
 
-import math
-import os
 import subprocess
 import sys
-import threading
-import time
-from dataclasses import dataclass
 from pathlib import Path
 
+import bag_faults
 import numpy as np
 import pytest
-import rclpy
-from bag_faults import accelerometer_spike, clock_back, clock_forward, faulty_bag, gyro_spike
-from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-
-from against_truth import (
-    Truth,
-    assert_navigation_within_limits,
-    assert_wind_within_budget,
-    odometry_errors,
+from live_replay import (
+    CURRENT,
+    SENSOR_TOPICS,
+    assert_offline_run_is_near_the_truth,
+    differences_from_offline,
+    replay,
+    vector_arrays,
 )
-from buoy_common.bag_io import BagReader
+
 from buoy_nav.config import fusion_config_from_files
 from processed_bags import CASES
-from ros_messages import stamp_ns, wait_for
 from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files, current_config_from_files
 
@@ -51,157 +38,28 @@ pytestmark = pytest.mark.ros
 
 REPO = Path(__file__).resolve().parents[2]
 BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
-NAVIGATION_TOPICS = ("imu/data_raw", "gnss/fix", "gnss/vel", "gnss/heading", "gnss/baseline")
 PLAYED_S = 60.0
-# Twice the pace: the Python nodes, the player and the recorder then need about a core; at 4x
-# a busy 2-core machine starves them long enough for the 1000-deep reliable queues to overflow.
-RATE = 2.0
-NANOSECONDS_PER_SECOND = 1_000_000_000
-EQUAL_TO = 1e-9  # m/s, rad, m: the same arithmetic on the same numbers
-# compensation_node and current_node give up on a sample whose navigation is this late (in
-# stamps and in wall time): a live-only latency budget that process_bag does not have. Their
-# defaults (1 s, 5 s) are exceeded by a fusion_node starved of CPU for that long; the test is
-# about equal numbers, so the budget is longer than the whole replay.
-LATENCY_BUDGET_S = 60.0
-STARTUP_TIMEOUT_S = 30.0
-# After the player has finished: the nodes' queues drain in well under this.
-DRAIN_TIMEOUT_S = 30.0
-FLUSH_TIMEOUT_S = 10.0
-# The navigation is judged against the truth from this long after its first solution: the
-# first seconds after the alignment carry its errors, which the limits are not about.
-SETTLING_S = 20.0
-# Seconds after the first IMU stamp; the navigation aligns about 10 s in.
-LIVE_FAULTS = [
-    (25.0, gyro_spike),
-    (30.0, accelerometer_spike),
-    (35.0, clock_back),
-    (45.0, clock_forward),
-]
 
 
-class DiagnosticsWatcher:
-    """The latest ``diagnostics`` values of each node, to know when the nodes are done (an
-    in-process participant in the test's isolated domain; it takes none of the 100 Hz data)."""
-
-    def __init__(self, env: dict[str, str]):
-        self._saved = {
-            name: os.environ.get(name)
-            for name in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")
-        }
-        for name in self._saved:
-            os.environ[name] = env[name]
-        self.context = Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("live_replay_test", context=self.context)
-        self.latest: dict[str, dict[str, str]] = {}
-        self.node.create_subscription(DiagnosticArray, "diagnostics", self._on_diagnostics, 50)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
-
-    def _on_diagnostics(self, message: DiagnosticArray) -> None:
-        for status in message.status:
-            self.latest[status.name.lstrip("/")] = {kv.key: kv.value for kv in status.values}
-
-    def value(self, node: str, key: str) -> int:
-        return int(self.latest.get(node, {}).get(key, 0))
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self.thread.join(timeout=5.0)
-        for name, value in self._saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
-
-
-@dataclass(frozen=True)
-class Correction:
-    """One of the two corrections replayed: its node, input and output."""
-
-    node: str
-    input_topic: str
-    output_topic: str
-    timeout_parameter: str
-
-
-WIND = Correction("compensation_node", "anemometer/wind", "wind/true", "compensation.nav_timeout_s")
-CURRENT = Correction("current_node", "dvl/velocity", "current/velocity", "current.nav_timeout_s")
-
-
-def cut_bag(source: Path, out: Path, seconds: float, correction: Correction, imu_faults=()) -> None:
-    """The first ``seconds`` (log time) of ``source``'s navigation topics and the correction's
-    input, bytes unchanged but for the ``imu_faults`` (:func:`bag_faults.faulty_bag`)."""
-    wanted = {*NAVIGATION_TOPICS, correction.input_topic}
-    with BagReader(source) as reader:
-        topics = [name for name in reader.topics if name.lstrip("/") in wanted]
-    faulty_bag(source, out, seconds, imu_faults, topics)
-
-
-def vector_arrays(bag: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
-    with BagReader(bag) as reader:
-        messages = [reader.decode(r) for r in reader.messages([topic])]
-    return (
-        np.array([stamp_ns(m) for m in messages]),
-        np.array([[m.vector.x, m.vector.y, m.vector.z] for m in messages]),
-    )
-
-
-def odometry_arrays(bag: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Stamps and every number of nav/odometry: position, orientation, pose covariance, twist
-    and its covariance."""
-    with BagReader(bag) as reader:
-        messages = [reader.decode(r) for r in reader.messages(["nav/odometry"])]
-    rows = []
-    for m in messages:
-        p, q = m.pose.pose.position, m.pose.pose.orientation
-        v, w = m.twist.twist.linear, m.twist.twist.angular
-        rows.append(
-            [
-                *(p.x, p.y, p.z, q.x, q.y, q.z, q.w),
-                *m.pose.covariance,
-                *(v.x, v.y, v.z, w.x, w.y, w.z),
-                *m.twist.covariance,
-            ]
-        )
-    return np.array([stamp_ns(m) for m in messages]), np.array(rows)
-
-
-def assert_offline_run_is_near_the_truth(name: str, played: Path, offline: Path) -> None:
-    """The offline wind within the wind budget, its navigation within the limits."""
-    case = CASES[name]
-    truth = Truth(case.bag_path)
-    wind_ns, wind = vector_arrays(offline, "wind/true")
-    _, measured = vector_arrays(played, "anemometer/wind")
-    print(
-        assert_wind_within_budget(
-            truth.wind_errors(wind_ns, wind),
-            measured,
-            case.anemometer_position_body_m,
-            f"{name}, first {PLAYED_S:g} s",
-        )
-    )
-    with BagReader(offline) as reader:
-        odometry = [reader.decode(r) for r in reader.messages(["nav/odometry"])]
-    errors = odometry_errors(truth, odometry, SETTLING_S)
-    print(assert_navigation_within_limits(errors, case.navigation_limits(), name))
-
-
-@pytest.mark.parametrize(
-    ("name", "faults"),
-    [("sea_state", False), ("off_axis", False), ("sea_state", True)],
-    ids=["sea_state", "off_axis", "sea_state_imu_faults"],
-)
-def test_live_pipeline_equals_process_bag(nodes, tmp_path, name, faults):
+@pytest.mark.parametrize("name", ["sea_state", "off_axis"])
+def test_live_pipeline_equals_process_bag(nodes, tmp_path, name):
     parameter_files = CASES[name].parameter_files(tmp_path)
     played = tmp_path / "played"
-    cut_bag(CASES[name].bag_path, played, PLAYED_S, WIND, LIVE_FAULTS if faults else ())
-    offline = replay_and_compare(nodes, tmp_path, played, WIND, parameter_files)
-    assert_offline_run_is_near_the_truth(name, played, offline)
+    bag_faults.write_records(
+        bag_faults.read_records(CASES[name].bag_path, SENSOR_TOPICS, PLAYED_S), played
+    )
+    offline = tmp_path / "offline"
+    process_bag(
+        played,
+        offline,
+        fusion_config_from_files(parameter_files),
+        compensator_config_from_files(parameter_files),
+    )
+    assert_offline_run_is_near_the_truth(name, played, offline, f"{name}, first {PLAYED_S:g} s")
+    recorded = tmp_path / "live"
+    figures = replay(nodes, played, parameter_files, offline, recorded)
+    differences = differences_from_offline(recorded, offline)
+    assert not differences, "; ".join(differences) + f"; {figures}"
 
 
 def test_live_current_equals_process_bag(nodes, tmp_path):
@@ -223,15 +81,10 @@ def test_live_current_equals_process_bag(nodes, tmp_path):
     )
     assert result.returncode == 0, result.stderr
     played = tmp_path / "played"
-    cut_bag(simulated, played, PLAYED_S, CURRENT)
-    replay_and_compare(nodes, tmp_path, played, CURRENT, [BUOY_PARAMETERS])
-
-
-def replay_and_compare(
-    nodes, tmp_path: Path, played: Path, correction: Correction, parameter_files
-) -> Path:
-    """Run ``played`` through ``process_bag`` and through the live nodes; assert both give the
-    same navigation and the same outputs of the correction; return the offline bag."""
+    bag_faults.write_records(
+        bag_faults.read_records(simulated, CURRENT.sensor_topics, PLAYED_S), played
+    )
+    parameter_files = [BUOY_PARAMETERS]
     offline = tmp_path / "offline"
     process_bag(
         played,
@@ -240,106 +93,10 @@ def replay_and_compare(
         compensator_config_from_files(parameter_files),
         current_config=current_config_from_files(parameter_files),
     )
-    offline_nav_ns, offline_nav = odometry_arrays(offline)
-    offline_out_ns, offline_out = vector_arrays(offline, correction.output_topic)
-    with BagReader(played) as reader:
-        n_inputs = next(
-            info.count
-            for name, info in reader.topics.items()
-            if name.lstrip("/") == correction.input_topic
-        )
-    # samples after the last navigation wait for it until the node is interrupted
-    n_held_back = int(np.count_nonzero(offline_out_ns > offline_nav_ns[-1]))
-
+    _, offline_current = vector_arrays(offline, CURRENT.output_topic)
+    n_valid = int(np.count_nonzero(np.isfinite(offline_current).all(axis=1)))
+    assert n_valid > 0.5 * len(offline_current), f"{n_valid} of {len(offline_current)} valid"
     recorded = tmp_path / "live"
-    parameters = (
-        "--ros-args",
-        *(a for path in parameter_files for a in ("--params-file", str(path))),
-    )
-    watcher = DiagnosticsWatcher(nodes.env)
-    try:
-        fusion = nodes.start("fusion_node", *parameters)
-        compensation = nodes.start(
-            correction.node,
-            *parameters,
-            "-p",
-            f"{correction.timeout_parameter}:={LATENCY_BUDGET_S}",
-        )
-        recorder = nodes.start(
-            "bag_recorder", str(recorded), "--topics", "nav/odometry", correction.output_topic
-        )
-        assert wait_for(
-            lambda: all(
-                f"recording /{topic} (" in nodes.log_of(recorder)
-                for topic in ("nav/odometry", correction.output_topic)
-            ),
-            STARTUP_TIMEOUT_S,
-        ), nodes.log_of(recorder) + nodes.log_of(fusion) + nodes.log_of(compensation)
-
-        started = time.monotonic()
-        player = nodes.run(
-            "bag_player",
-            str(played),
-            "--rate",
-            str(RATE),
-            "--wait-for-subscribers",
-            "1",
-            timeout_s=STARTUP_TIMEOUT_S + PLAYED_S / RATE * 3,
-        )
-        played_wall_s = time.monotonic() - started
-        assert player.returncode == 0, player.stderr
-
-        def recorded_count(topic: str) -> int:
-            return watcher.value("bag_recorder", f"count[/{topic}]")
-
-        drained = wait_for(
-            lambda: (
-                recorded_count("nav/odometry") >= offline_nav_ns.size
-                and recorded_count(correction.output_topic) >= n_inputs - n_held_back
-            ),
-            DRAIN_TIMEOUT_S,
-        )
-        compensation_before_interrupt = dict(watcher.latest.get(correction.node, {}))
-        assert nodes.interrupt(fusion) == 0, nodes.log_of(fusion)
-        assert nodes.interrupt(compensation) == 0, nodes.log_of(compensation)
-        wait_for(lambda: recorded_count(correction.output_topic) >= n_inputs, FLUSH_TIMEOUT_S)
-        assert nodes.interrupt(recorder) == 0, nodes.log_of(recorder)
-    finally:
-        watcher.close()
-    live_invalid_reasons = {
-        key: value
-        for key, value in compensation_before_interrupt.items()
-        if key.startswith("invalid[") and value != "0"
-    }
-    figures = (
-        f"played {PLAYED_S:g} s at {RATE:g}x in {played_wall_s:.1f} s (drained: {drained}); "
-        f"{correction.node} before SIGINT: nav samples in "
-        f"{compensation_before_interrupt.get('nav_samples_in')}, {live_invalid_reasons}; "
-        f"offline: {offline_nav_ns.size} nav/odometry, {n_inputs} {correction.output_topic} of "
-        f"which {n_held_back} wait for navigation"
-    )
-
-    live_out_ns, live_out = vector_arrays(recorded, correction.output_topic)
-    assert live_out_ns.size == n_inputs, figures
-    np.testing.assert_array_equal(live_out_ns, offline_out_ns, err_msg=figures)
-    live_invalid, offline_invalid = np.isnan(live_out), np.isnan(offline_out)
-    differently_invalid = np.flatnonzero((live_invalid != offline_invalid).any(axis=1))
-    assert differently_invalid.size == 0, (
-        f"{differently_invalid.size} samples NaN in one run only, the first at "
-        f"{[(offline_out_ns[i] - offline_nav_ns[0]) * 1e-9 for i in differently_invalid[:5]]} "
-        f"s from the first solution; {figures}"
-    )
-    valid = ~offline_invalid.any(axis=1)
-    assert np.count_nonzero(valid) > 0.5 * n_inputs, figures
-    difference = float(np.max(np.abs(live_out[valid] - offline_out[valid])))
-    assert difference <= EQUAL_TO, (
-        f"max |live - offline| {correction.output_topic} {difference:.3g} m/s"
-    )
-
-    live_nav_ns, live_nav = odometry_arrays(recorded)
-    assert live_nav_ns.size == offline_nav_ns.size, figures
-    np.testing.assert_array_equal(live_nav_ns, offline_nav_ns, err_msg=figures)
-    nav_difference = float(np.max(np.abs(live_nav - offline_nav)))
-    assert math.isfinite(nav_difference)
-    assert nav_difference <= EQUAL_TO, f"max |live - offline| nav/odometry {nav_difference:.3g}"
-    return offline
+    figures = replay(nodes, played, parameter_files, offline, recorded, correction=CURRENT)
+    differences = differences_from_offline(recorded, offline, CURRENT)
+    assert not differences, "; ".join(differences) + f"; {figures}"

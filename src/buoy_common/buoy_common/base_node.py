@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib
 import signal
 import sys
+import threading
 import time
 import typing
 from collections import Counter
@@ -25,12 +26,16 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 
 from buoy_common.parameters import (
     ParameterError,
     build_config,
+    check_parameter_names,
     coerce_parameter,
+    command_line_parameters,
     config_parameters,
+    load_parameter_sections,
     to_ros_value,
 )
 
@@ -47,6 +52,9 @@ REJECTION_LOG_PERIOD_S = 5.0
 SPIN_TIMEOUT_S = 0.1
 # Bound on the wait, at shutdown, for subscribers to acknowledge the last published messages.
 FLUSH_ACK_TIMEOUT_S = 2.0
+
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class StartupError(Exception):
@@ -134,20 +142,29 @@ class SuiteNode(Node):
         except ParameterError as error:
             raise StartupError(str(error)) from error
 
+    def refuse_unknown_parameters(self, ros_arguments: list[str]) -> None:
+        """Raise StartupError for a parameter given to this node that it has not declared.
+
+        Called once every parameter is declared. ``-p`` values and the node's own sections of
+        the parameter files must all be known; ``/**`` sections may hold other nodes'
+        parameters (see :func:`buoy_common.parameters.check_parameter_names`).
+        """
+        params_files, command_line = command_line_parameters(ros_arguments)
+        try:
+            wildcard, own = load_parameter_sections(params_files, self.get_name())
+            declared = self.list_parameters([], 0).names
+            check_parameter_names(declared, shared=wildcard, own=[*own, *command_line])
+        except ParameterError as error:
+            raise StartupError(str(error)) from error
+
 
 class FlushingNode(SuiteNode):
     """A node that holds output back (waiting for later input) and publishes it when it stops.
 
-    SIGINT and SIGTERM are taken from rclpy so that they only end the spin loop: the context
-    stays valid, :meth:`flush_held_back` can still publish, and the node waits (at most
+    SIGINT and SIGTERM only end the spin loop (:func:`take_stop_signals`): the context stays
+    valid, :meth:`flush_held_back` can still publish, and the node waits (at most
     ``FLUSH_ACK_TIMEOUT_S``) for the subscribers to acknowledge what it published.
     """
-
-    def __init__(self, node_name: str, **kwargs):
-        super().__init__(node_name, **kwargs)
-        rclpy.signals.uninstall_signal_handlers()
-        for signal_number in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signal_number, lambda *_: self.finish(0))
 
     def flush_held_back(self) -> list:
         """Publish what is held back; return the publishers to wait for."""
@@ -164,6 +181,28 @@ class FlushingNode(SuiteNode):
             except Exception as error:  # a failing flush must not hide the node's exit
                 self.get_logger().error(f"could not publish the held-back output: {error}")
         super().destroy_node()
+
+
+def take_stop_signals(on_stop: Callable[[], None]) -> None:
+    """Make SIGINT and SIGTERM, however often and however close together they come, call
+    ``on_stop`` instead of rclpy's handling.
+
+    rclpy turns SIGINT into a KeyboardInterrupt raised wherever the program happens to be: in a
+    callback run by the C++ executor that aborts the process, elsewhere it leaves a traceback.
+    ``on_stop`` only records the request (it may be called more than once); the program's loop
+    ends at its next turn, and :func:`ignore_stop_signals` is called on the way out.
+    """
+    rclpy.signals.uninstall_signal_handlers()
+    for signal_number in STOP_SIGNALS:
+        signal.signal(signal_number, lambda *_: on_stop())
+
+
+def ignore_stop_signals() -> None:
+    """Ignore SIGINT and SIGTERM from here on: the process is ending. The interpreter resets a
+    handler written in Python to the default action while it exits, so a signal in its last
+    milliseconds would otherwise kill the process; an ignored one stays ignored."""
+    for signal_number in STOP_SIGNALS:
+        signal.signal(signal_number, signal.SIG_IGN)
 
 
 def message_class(msgtype: str):
@@ -234,8 +273,12 @@ def run_node(node_factory: Callable[[], SuiteNode], args: list[str] | None = Non
     one line on stderr, without a traceback).
     """
     program = sys.argv[0].rsplit("/", 1)[-1]
+    args = sys.argv if args is None else args
+    # Taken before anything else, so that a signal during start-up is a stop request too.
+    stop_requested = threading.Event()
+    take_stop_signals(stop_requested.set)
     try:
-        rclpy.init(args=sys.argv if args is None else args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as error:  # rclpy raises RCLError for a missing --params-file
         print(f"{program}: cannot start: {error}", file=sys.stderr)
         return 2
@@ -243,12 +286,14 @@ def run_node(node_factory: Callable[[], SuiteNode], args: list[str] | None = Non
     try:
         # The events executor dispatches each message as the middleware reports it, in arrival
         # order, without rebuilding a wait set per message: half the CPU per message of the
-        # wait-set executors. It installs its own SIGINT/SIGTERM handling when built, so it is
-        # built before the node, whose own handlers (FlushingNode) must be the ones in force.
+        # wait-set executors. It installs rclpy's SIGINT/SIGTERM handling when built, which is
+        # taken back at once.
         executor = EventsExecutor()
+        take_stop_signals(stop_requested.set)
         node = node_factory()
+        node.refuse_unknown_parameters(args)
         executor.add_node(node)
-        while rclpy.ok() and not node.finished:
+        while rclpy.ok() and not node.finished and not stop_requested.is_set():
             due_s = node.deferred_work_due_s
             if due_s is None:
                 executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
@@ -277,6 +322,7 @@ def run_node(node_factory: Callable[[], SuiteNode], args: list[str] | None = Non
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        ignore_stop_signals()
 
 
 def main_for(node_factory: Callable[[], SuiteNode]) -> Callable[[], None]:

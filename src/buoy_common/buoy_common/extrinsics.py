@@ -183,6 +183,20 @@ def field_parameter(field: dataclasses.Field) -> str | None:
     return field.metadata.get(PARAMETER_METADATA_KEY)
 
 
+def describe_shared_fields(config) -> str:
+    """The shared parameters a configuration holds, as ``name=value`` pairs for the line every
+    tool prints at start (the lever arms and mounting actually used)."""
+    pairs = []
+    for field in dataclasses.fields(config):
+        parameter = field_parameter(field)
+        if parameter is None:
+            continue
+        value = getattr(config, field.name)
+        shown = f"[{', '.join(f'{c:g}' for c in value)}]" if isinstance(value, tuple) else value
+        pairs.append(f"{parameter}={shown}")
+    return ", ".join(pairs)
+
+
 def check_shared_fields(config) -> None:
     """Apply the rule of every shared parameter a configuration holds; ValueError naming the
     first parameter whose value breaks its rule."""

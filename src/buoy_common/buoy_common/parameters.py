@@ -9,6 +9,7 @@ so a value is accepted or refused identically, with a message that names the par
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import re
 from collections.abc import Iterable, Mapping
@@ -178,6 +179,15 @@ def load_parameter_files(paths: Iterable[str | Path], node_name: str) -> dict[st
     Sections ``/**`` and the node's own name (``node``, ``/node``, ``/**/node``) apply, later
     files and node sections overriding earlier ones. Nested keys become dotted names.
     """
+    wildcard, own = load_parameter_sections(paths, node_name)
+    return {**wildcard, **own}
+
+
+def load_parameter_sections(
+    paths: Iterable[str | Path], node_name: str
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The parameters of the ``/**`` sections and those of node ``node_name``'s own sections
+    (``node``, ``/node``, ``/**/node``) in these files, each with later files winning."""
     wildcard: dict[str, Any] = {}
     own: dict[str, Any] = {}
     for path in paths:
@@ -209,4 +219,69 @@ def load_parameter_files(paths: Iterable[str | Path], node_name: str) -> dict[st
                 wildcard.update(_flatten(parameters))
             elif target in (node_name, f"**/{node_name}"):
                 own.update(_flatten(parameters))
-    return {**wildcard, **own}
+    return wildcard, own
+
+
+ROS_BUILTIN_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service"})
+"""Parameters every ROS node declares by itself."""
+
+
+def parameter_group(name: str) -> str:
+    """The first component of a dotted parameter name (``anemometer`` of
+    ``anemometer.position``); a name without a dot is its own group."""
+    return name.split(".", 1)[0]
+
+
+def check_parameter_names(
+    known: Iterable[str], shared: Iterable[str] = (), own: Iterable[str] = ()
+) -> None:
+    """Refuse parameters given to a node that it does not know, naming the closest known one.
+
+    ``own`` are the names given to this node alone (its own section of a parameter file, or
+    ``-p`` on its command line): each must be known. ``shared`` are the names of ``/**``
+    sections, which every node of a system reads: such a file legitimately holds the
+    parameters of other nodes, so a name is refused only when its group (``anemometer`` of
+    ``anemometer.position``) is one of this node's groups. A misspelt ``anemometer.postion``
+    is thus refused by every node that uses the anemometer's parameters and ignored by the
+    others. Raises ParameterError.
+    """
+    known = set(known) | ROS_BUILTIN_PARAMETERS
+    groups = {parameter_group(name) for name in known}
+    unknown = {name for name in own if name not in known}
+    unknown |= {name for name in shared if name not in known and parameter_group(name) in groups}
+    if not unknown:
+        return
+    descriptions = []
+    for name in sorted(unknown):
+        closest = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.6)
+        hint = f"did you mean '{closest[0]}'?" if closest else "no similar parameter is known"
+        descriptions.append(f"unknown parameter '{name}' ({hint})")
+    raise ParameterError("; ".join(descriptions))
+
+
+def check_parameter_files(
+    paths: Iterable[str | Path], node_name: str, known: Iterable[str]
+) -> None:
+    """:func:`check_parameter_names` for the parameters these files give node ``node_name``."""
+    wildcard, own = load_parameter_sections(paths, node_name)
+    check_parameter_names(known, shared=wildcard, own=own)
+
+
+def command_line_parameters(ros_arguments: Iterable[str]) -> tuple[list[str], list[str]]:
+    """(``--params-file`` paths, names set with ``-p``/``--param``) of a ROS command line,
+    from every ``--ros-args`` block."""
+    params_files, names = [], []
+    in_ros_arguments = False
+    arguments = list(ros_arguments)
+    for index, argument in enumerate(arguments):
+        if argument == "--ros-args":
+            in_ros_arguments = True
+        elif argument == "--":
+            in_ros_arguments = False
+        elif in_ros_arguments and index + 1 < len(arguments):
+            value = arguments[index + 1]
+            if argument == "--params-file":
+                params_files.append(value)
+            elif argument in ("-p", "--param"):
+                names.append(value.split(":=", 1)[0])
+    return params_files, names

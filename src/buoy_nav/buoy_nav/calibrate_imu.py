@@ -9,7 +9,8 @@ and writes a parameter file the fusion takes (``fusion.imu_accel_bias_mps2``,
 ``fusion.accel_turn_on_bias_mg``, at least :data:`MIN_CALIBRATED_BIAS_MG`). Gravity is the
 normal gravity at ``site.*`` (else ``origin.*``, else 45°) from the parameter files. A bag in
 which an axis is never held up or down is refused with a message naming the missing attitudes.
-Exit codes: 0 written; 2 bad bag, parameters or coverage (one line on stderr).
+Exit codes: 0 written; 2 bad bag, parameters or coverage, or an output it cannot write (one line
+on stderr); 130 interrupted (SIGINT or SIGTERM), nothing written.
 """
 
 from __future__ import annotations
@@ -22,8 +23,10 @@ from pathlib import Path
 import numpy as np
 
 from buoy_common.bag_io import BagError, BagReader
+from buoy_common.cli import interruptible
 from buoy_common.contract import IMU_RAW_TOPIC, header_seconds
 from buoy_common.parameters import ParameterError
+from buoy_common.safe_output import staged_file
 from buoy_nav import earth
 from buoy_nav.calibration import CalibrationError, calibrate_imu, parameter_yaml
 from buoy_nav.config import FusionConfig, fusion_config_from_files
@@ -66,6 +69,7 @@ def parse_arguments(argv):
     return parser.parse_args(argv)
 
 
+@interruptible("calibrate_imu")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     output = Path(arguments.out_yaml)
@@ -90,7 +94,12 @@ def main(argv=None) -> None:
         f"calibrate_imu {arguments.in_bag}: {len(calibration.positions)} still positions, "
         f"residual |f| - g {calibration.residual_mps2 * 1e3:.2f} mm/s^2"
     )
-    output.write_text(parameter_yaml(values, comment))
+    try:
+        with staged_file(output) as stream:
+            stream.write(parameter_yaml(values, comment))
+    except OSError as error:
+        print(f"calibrate_imu: cannot write {output}: {error}", file=sys.stderr)
+        sys.exit(2)
     print(comment)
     for name, value in values.items():
         print(f"{name}: {value}")

@@ -6,8 +6,8 @@ min/max hard iron, then a least-squares ellipsoid; :mod:`buoy_nav.calibration`).
 Reads ``imu/mag``, refuses a turn that misses heading sectors or tilt (the message says which),
 and writes a parameter file the fusion takes (``fusion.magnetometer_hard_iron_t``,
 ``fusion.magnetometer_soft_iron``). Prints the residual of the calibrated field magnitude, with
-the min/max method's beside it. Exit codes: 0 written; 2 bad bag or coverage (one line on
-stderr).
+the min/max method's beside it. Exit codes: 0 written; 2 bad bag or coverage, or an output it
+cannot write (one line on stderr); 130 interrupted (SIGINT or SIGTERM), nothing written.
 """
 
 from __future__ import annotations
@@ -19,7 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from buoy_common.bag_io import BagError, BagReader
+from buoy_common.cli import interruptible
 from buoy_common.contract import MAGNETOMETER_TOPIC
+from buoy_common.safe_output import staged_file
 from buoy_nav.calibration import CalibrationError, calibrate_magnetometer, parameter_yaml
 
 
@@ -44,6 +46,7 @@ def parse_arguments(argv):
     return parser.parse_args(argv)
 
 
+@interruptible("calibrate_magnetometer")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     output = Path(arguments.out_yaml)
@@ -63,7 +66,12 @@ def main(argv=None) -> None:
         f"residual {calibration.residual_t * 1e9:.0f} nT RMS "
         f"(min/max method alone: {calibration.min_max_residual_t * 1e9:.0f} nT)"
     )
-    output.write_text(parameter_yaml(values, comment))
+    try:
+        with staged_file(output) as stream:
+            stream.write(parameter_yaml(values, comment))
+    except OSError as error:
+        print(f"calibrate_magnetometer: cannot write {output}: {error}", file=sys.stderr)
+        sys.exit(2)
     print(comment)
     print(f"min/max hard iron (uT): {np.round(calibration.min_max_hard_iron_t * 1e6, 3).tolist()}")
     for name, value in values.items():

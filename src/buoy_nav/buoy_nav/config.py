@@ -11,7 +11,12 @@ import math
 from dataclasses import dataclass
 
 from buoy_common.extrinsics import check_shared_fields, shared_field
-from buoy_common.parameters import build_config, load_parameter_files
+from buoy_common.parameters import (
+    build_config,
+    check_parameter_files,
+    config_parameters,
+    load_parameter_files,
+)
 
 FUSION_NODE_NAME = "fusion_node"
 """Node name whose parameter-file sections configure the fusion (live and offline)."""
@@ -332,7 +337,16 @@ def fusion_config_from_files(paths) -> FusionConfig:
     """The :class:`FusionConfig` ``fusion_node`` would build from these ROS parameter files
     (sections ``/**`` and ``fusion_node``, later files winning). Raises
     :class:`buoy_common.parameters.ParameterError` naming a bad file or value."""
+    check_parameter_files(paths, FUSION_NODE_NAME, fusion_parameter_names())
     values = load_parameter_files(paths, FUSION_NODE_NAME)
     return build_config(
         FusionConfig, values, FUSION_PARAMETER_PREFIX, skip=FUSION_FIELDS_NOT_PARAMETERS
     )
+
+
+def fusion_parameter_names() -> list[str]:
+    """Every parameter ``fusion_node`` declares."""
+    names = config_parameters(
+        FusionConfig, FUSION_PARAMETER_PREFIX, skip=FUSION_FIELDS_NOT_PARAMETERS
+    )
+    return [parameter for _, parameter, _ in names]

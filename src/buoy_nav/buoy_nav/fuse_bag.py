@@ -28,7 +28,9 @@ import argparse
 import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
+from buoy_common.cli import interruptible
 from buoy_common.contract import IMU_RAW_TOPIC
+from buoy_common.extrinsics import describe_shared_fields
 from buoy_common.namespaces import (
     NamespaceError,
     add_namespace_arguments,
@@ -58,11 +60,13 @@ def parse_arguments(argv):
     return parser.parse_args(argv)
 
 
+@interruptible("fuse_bag")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     truncated = False
     try:
         config = fusion_config_from_files(arguments.params_file)
+        print(f"extrinsics: {describe_shared_fields(config)}")
         views = views_of_bag(arguments, arguments.in_bag, IMU_RAW_TOPIC)
         for view in views:
             out_bag = output_for(arguments.out_bag, view, several=len(views) > 1)
@@ -74,7 +78,7 @@ def main(argv=None) -> None:
                 warning = fused.recovery.describe(arguments.in_bag)
                 print(f"fuse_bag: warning: {warning}", file=sys.stderr)
                 truncated = truncated or fused.recovery.truncated
-    except (ParameterError, BagError, OutputError, NamespaceError) as error:
+    except (ParameterError, BagError, OutputError, NamespaceError, OSError) as error:
         print(f"fuse_bag: {error}", file=sys.stderr)
         sys.exit(2)
     if truncated:

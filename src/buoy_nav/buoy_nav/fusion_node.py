@@ -46,8 +46,10 @@ messages received meanwhile, runs ``FILTERING_DELAY_S`` (at most half an IMU int
 the publishing, so that the nodes taking the solution (``compensation_node`` above all, whose
 wind samples share the GNSS epochs) get the cores first; a GNSS message is converted only then
 (or at the next diagnostics report when no IMU sample comes), since the engine needs it only
-``max_measurement_delay_s`` later. The solutions do not depend on this timing: they depend on
-the stamps alone.
+``max_measurement_delay_s`` later. An IMU sample after a gap in the IMU stamps is the exception:
+the GNSS messages received before it go to the engine first, which tells an IMU outage from a
+step of the IMU's clock by the aiding stamps it has seen, as ``fuse_bag`` does in log-time
+order. The solutions do not depend on this timing: they depend on the stamps alone.
 
 Parameters: ``gnss.primary_antenna``, ``gnss.secondary_antenna`` (double[3], m, in
 ``base_link``) and ``origin.latitude_deg``, ``origin.longitude_deg``, ``origin.altitude_m``
@@ -86,6 +88,7 @@ from buoy_common.base_node import (
     main_for,
     message_class,
 )
+from buoy_common.cdr import read_stamp
 from buoy_common.contract import (
     IMU_RAW_TOPIC,
     NAV_FIX_TOPIC,
@@ -144,6 +147,7 @@ class FusionNode(FlushingNode):
         self._imu_callback_durations_s: list[float] = []
         self._filtering_durations_s: list[float] = []
         self._previous_imu_callback_s = -math.inf
+        self._previous_imu_stamp_s = math.nan
         self.filtering_overdue = 0
         self._gnss_waiting: list[tuple[str, bytes]] = []
         self.solutions_published = 0
@@ -205,6 +209,10 @@ class FusionNode(FlushingNode):
         now_s = time.monotonic()
         interval_s, self._previous_imu_callback_s = now_s - self._previous_imu_callback_s, now_s
         self._messages_in[IMU_RAW_TOPIC] += 1
+        if self._follows_an_imu_gap(raw) and self._gnss_waiting:
+            # The engine tells an IMU outage from a step of the IMU's clock by the aiding stamps
+            # it has seen: it must see those received before this sample, as offline.
+            self.feed_waiting_gnss()
         fed = feed_imu_cdr(self.engine, raw, self.stamps)
         if fed is None:
             message = _decoded(raw, Imu)
@@ -222,6 +230,16 @@ class FusionNode(FlushingNode):
             self.filtering_overdue += 1
             self.run_deferred_work()
         self._imu_callback_durations_s.append(time.perf_counter() - started_s)
+
+    def _follows_an_imu_gap(self, raw: bytes) -> bool:
+        """Whether this IMU message's stamp lies more than ``max_imu_gap_s`` from the previous
+        one's, either way (an outage or a step of the IMU's clock); True when unreadable."""
+        stamp = read_stamp(raw)
+        if stamp is None:
+            return True
+        t_s = stamp[0] + stamp[1] * 1e-9
+        previous_s, self._previous_imu_stamp_s = self._previous_imu_stamp_s, t_s
+        return abs(t_s - previous_s) > self.config.max_imu_gap_s
 
     def run_deferred_work(self) -> None:
         started_s = time.perf_counter()

@@ -17,10 +17,11 @@ Parameters: ``wait_for_subscribers_timeout_s`` (default 30.0) bounds the wait of
 ``--wait-for-subscribers``; ``drain_timeout_s`` (default 5.0) bounds the wait, after the last
 message, for reliable subscribers to acknowledge everything.
 
-Exit codes: 0 at the end of the bag or on SIGINT; 2 for a missing or corrupt bag, an unknown
-topic or a bad argument (one line on stderr); 1 when the subscribers do not appear in time; 3 at
-the end of a bag that was cut short (a recorder killed or out of power), played up to its last
-complete chunk (a warning on stderr says how much was read).
+Exit codes: 0 at the end of the bag or on SIGINT or SIGTERM (however often repeated); 2 for a
+missing or corrupt bag, an unknown topic, an unknown parameter or a bad argument (one line on
+stderr); 1 when the subscribers do not appear in time; 3 at the end of a bag that was cut short
+(a recorder killed or out of power), played up to its last complete chunk (a warning on stderr
+says how much was read).
 """
 
 from __future__ import annotations
@@ -36,7 +37,14 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError, BagReader
-from buoy_common.base_node import DATA_QOS, StartupError, SuiteNode, message_class
+from buoy_common.base_node import (
+    DATA_QOS,
+    StartupError,
+    SuiteNode,
+    ignore_stop_signals,
+    message_class,
+    take_stop_signals,
+)
 from sensor_sim.bag_recorder_node import split_ros_arguments
 
 PROGRAM = "bag_player"
@@ -261,12 +269,15 @@ def run(options: argparse.Namespace, ros_arguments: list[str]) -> int:
         node = player = None
         try:
             node = SuiteNode(PROGRAM)
+            # A stop request shuts the context down: every wait and the playing loop notice it.
+            take_stop_signals(rclpy.try_shutdown)
             wait_timeout_s = node.declare_value(
                 "wait_for_subscribers_timeout_s", 30.0, "longest wait for subscribers, s"
             )
             drain_timeout_s = node.declare_value(
                 "drain_timeout_s", 5.0, "longest wait for acknowledgements at the end, s"
             )
+            node.refuse_unknown_parameters(ros_arguments)
             player = BagPlayer(node, reader, topics, options.rate, options.clock)
             logger = node.get_logger()
             if options.wait_for_subscribers and not player.wait_for_subscribers(
@@ -310,6 +321,7 @@ def run(options: argparse.Namespace, ros_arguments: list[str]) -> int:
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
+            ignore_stop_signals()
 
 
 def _stopped(player: BagPlayer | None) -> int:

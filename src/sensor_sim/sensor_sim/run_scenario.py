@@ -20,6 +20,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from buoy_common.cli import interruptible
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS
 
@@ -293,6 +294,7 @@ def run(arguments) -> int:
     return 0
 
 
+@interruptible("run_scenario")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     try:

@@ -14,6 +14,7 @@ import sys
 from tqdm import tqdm
 
 from buoy_common.bag_io import BagError, BagWriter
+from buoy_common.cli import interruptible
 from buoy_common.parameters import ParameterError, load_parameter_files
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS, merged_messages
@@ -78,11 +79,12 @@ def simulate(arguments) -> dict[str, int]:
     return dict(writer.counts)
 
 
+@interruptible("simulate_bag")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     try:
         counts = simulate(arguments)
-    except (ScenarioError, ParameterError, BagError) as error:
+    except (ScenarioError, ParameterError, BagError, OSError) as error:
         print(f"simulate_bag: {error}", file=sys.stderr)
         sys.exit(2)
     for topic, count in sorted(counts.items()):

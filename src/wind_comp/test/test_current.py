@@ -15,7 +15,7 @@ from buoy_common.contract import Reason
 from wind_comp.compensation_messages import dvl_sample
 from wind_comp.compensator import SampleStatus
 from wind_comp.config import ConfigError, CurrentConfig
-from wind_comp.pipeline import current_pipeline
+from wind_comp.pipeline import current_pipeline, mostly_invalid_warning
 
 NAV_RATE_HZ = 50.0
 DVL_RATE_HZ = 1.0
@@ -88,7 +88,7 @@ def estimate(platform: Platform, readings, config: CurrentConfig, duration_s: fl
         if kind == 0:
             assert pipeline.add_odometry(*item) is None
         else:
-            rejections.append(pipeline.add_sample(dvl_sample(item)))
+            rejections.append(pipeline.add_sample(dvl_sample(item, config.dvl_frame_id)))
         outputs.append(pipeline.ready().samples)
     outputs.append(pipeline.flush().samples)
     status = np.concatenate([o.status for o in outputs])
@@ -215,13 +215,36 @@ def test_bad_dvl_samples_are_rejected_counted_and_answered_with_nan():
     assert rejections[3] == Reason.NON_FINITE
     assert rejections[7] == Reason.WRONG_FRAME
     assert rejections[9] == Reason.STAMP_NOT_INCREASING
-    counts = pipeline.counts
-    sensor = pipeline.sensor
-    assert {sensor.reason(s): n for s, n in counts.items() if s != SampleStatus.VALID and n} == {
+    assert {reason: n for reason, n in pipeline.status_counts().items() if n} == {
+        "valid": len(readings) - 4,
         Reason.INVALID_DVL: 2,
         Reason.DVL_SPEED_OUT_OF_RANGE: 1,
         Reason.INVALID_STAMP: 1,
     }
+    assert mostly_invalid_warning(pipeline.status_counts(), "DVL") is None
+
+
+def test_a_driver_s_dvl_frame_is_rejected_unless_configured():
+    platform = Platform(Rotation.from_euler("ZYX", [20.0, 0, 0], degrees=True), [0] * 3, [0] * 3)
+    current = np.array([0.3, 0.5, 0.0])
+    readings = readings_of(platform, current, POSITION, RPY, DVL_TIMES)
+    for message in readings:
+        message.header.frame_id = "adcp"
+    config = CurrentConfig(dvl_position_body_m=POSITION, dvl_rpy_deg=RPY)
+    assert dvl_sample(readings[0], config.dvl_frame_id).frame_id == "adcp"
+    pipeline, status, estimated, rejections = estimate(platform, readings, config)
+    assert set(rejections) == {Reason.WRONG_FRAME}
+    assert np.isnan(estimated).all()
+    warning = mostly_invalid_warning(pipeline.status_counts(), "DVL")
+    assert warning == f"most DVL samples are invalid: {len(readings)} of {len(readings)} " + (
+        f"(mostly invalid_dvl: {len(readings)})"
+    )
+
+    config = CurrentConfig(dvl_position_body_m=POSITION, dvl_rpy_deg=RPY, dvl_frame_id="adcp")
+    _, status, estimated, rejections = estimate(platform, readings, config)
+    assert set(rejections) == {None}
+    assert np.all(status == SampleStatus.VALID)
+    np.testing.assert_allclose(estimated, np.tile(current, (DVL_TIMES.size, 1)), atol=1e-12)
 
 
 def test_products_are_vector_means_with_the_direction_the_water_goes():
@@ -258,3 +281,5 @@ def test_bad_settings_name_the_setting():
         CurrentConfig(dvl_rpy_deg=(0.0, 95.0, 0.0))
     with pytest.raises(ConfigError, match="nav_history_s"):
         CurrentConfig(max_nav_gap_s=5.0, nav_history_s=2.0)
+    with pytest.raises(ConfigError, match="dvl_frame_id"):
+        CurrentConfig(dvl_frame_id=" ")

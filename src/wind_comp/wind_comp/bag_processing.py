@@ -48,6 +48,7 @@ from buoy_common.contract import (
     VECTOR3_MSGTYPE,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
+    Reason,
     bag_topic,
     current_mean_topic,
     current_stats_topic,
@@ -67,7 +68,6 @@ from wind_comp.compensation_messages import (
     flows_cdr,
     product_messages,
 )
-from wind_comp.compensator import SampleStatus
 from wind_comp.config import CompensatorConfig, CurrentConfig
 from wind_comp.pipeline import (
     CompensationOutput,
@@ -102,6 +102,8 @@ class CorrectionSummary:
     """Output samples by outcome: ``valid`` or the reason they are invalid."""
     rejected_messages: Counter = field(default_factory=Counter)
     """Input messages rejected, by reason (their outputs are invalid)."""
+    wrong_frames: Counter = field(default_factory=Counter)
+    """Frames of the input messages rejected for their frame, with counts."""
     products: list = field(default_factory=list)
     csv_path: Path | None = None
 
@@ -122,19 +124,23 @@ class ProcessSummary:
     """How much of a cut input bag was recovered; None for a complete bag."""
 
 
-def _anemometer_record(reader: BagReader, message: BagMessage) -> tuple[FlowSample, int, int]:
-    parsed = anemometer_sample_cdr(message.raw)
+def _anemometer_record(
+    reader: BagReader, message: BagMessage, expected_frame_id: str
+) -> tuple[FlowSample, int, int]:
+    parsed = anemometer_sample_cdr(message.raw, expected_frame_id)
     if parsed is None:
         decoded = reader.decode(message)
         stamp = decoded.header.stamp
-        parsed = (anemometer_sample(decoded), stamp.sec, stamp.nanosec)
+        parsed = (anemometer_sample(decoded, expected_frame_id), stamp.sec, stamp.nanosec)
     return parsed
 
 
-def _dvl_record(reader: BagReader, message: BagMessage) -> tuple[FlowSample, int, int]:
+def _dvl_record(
+    reader: BagReader, message: BagMessage, expected_frame_id: str
+) -> tuple[FlowSample, int, int]:
     decoded = reader.decode(message)
     stamp = decoded.header.stamp
-    return dvl_sample(decoded), stamp.sec, stamp.nanosec
+    return dvl_sample(decoded, expected_frame_id), stamp.sec, stamp.nanosec
 
 
 class OfflineCorrection:
@@ -153,13 +159,16 @@ class OfflineCorrection:
         output_topic: str,
         product_topics,
         read_record,
+        expected_frame_id: str,
     ):
         """pipeline: the node's pipeline; output_topic: one vector per sample; product_topics:
-        (mean topic, statistics topic) of a window length, s; read_record: a sensor record as
-        (sample, header sec, header nanosec)."""
+        (mean topic, statistics topic) of a window length, s; read_record: a sensor record and
+        the frame expected of it as (sample, header sec, header nanosec)."""
         self.pipeline = pipeline
         self.writer = writer
         self.rejected: Counter[str] = Counter()
+        self.wrong_frames: Counter[str] = Counter()
+        self._expected_frame_id = expected_frame_id
         self.products: list = []
         self._output_topic = bag_topic(output_topic)
         self._product_topics = product_topics
@@ -186,10 +195,12 @@ class OfflineCorrection:
 
     def add_sample(self, reader: BagReader, message: BagMessage) -> None:
         """One sensor record; every few hundred, the decided samples are written."""
-        sample, sec, nanosec = self._read_record(reader, message)
+        sample, sec, nanosec = self._read_record(reader, message, self._expected_frame_id)
         rejection = self.pipeline.add_sample(sample)
         if rejection is not None:
             self.rejected[rejection] += 1
+            if rejection == Reason.WRONG_FRAME:
+                self.wrong_frames[sample.frame_id] += 1
         self._stamps.append((sec, nanosec))
         self._samples_waiting += 1
         if self._samples_waiting >= SAMPLES_PER_STRETCH:
@@ -201,13 +212,10 @@ class OfflineCorrection:
         self._write(self.pipeline.flush(), log_time_ns)
 
     def summary(self, csv_path: Path) -> CorrectionSummary:
-        sensor = self.pipeline.sensor
         return CorrectionSummary(
-            status_counts={
-                "valid" if status == SampleStatus.VALID else sensor.reason(status): n
-                for status, n in self.pipeline.counts.items()
-            },
+            status_counts=self.pipeline.status_counts(),
             rejected_messages=self.rejected,
+            wrong_frames=self.wrong_frames,
             products=self.products,
             csv_path=csv_path,
         )
@@ -313,14 +321,17 @@ def process_bag(
                     WIND_TRUE_TOPIC,
                     (wind_mean_topic, wind_stats_topic),
                     _anemometer_record,
+                    compensator_config.anemometer_frame_id,
                 )
             if stored_dvl is not None:
+                current_config = current_config or CurrentConfig()
                 corrections[stored_dvl] = OfflineCorrection(
-                    current_pipeline(current_config or CurrentConfig()),
+                    current_pipeline(current_config),
                     writer,
                     CURRENT_TOPIC,
                     (current_mean_topic, current_stats_topic),
                     _dvl_record,
+                    current_config.dvl_frame_id,
                 )
             log_time_ns = reader.start_ns
             for index, message in enumerate(

@@ -13,7 +13,8 @@ as a parameter file the nodes and tools take after the others::
 
 It prints the angles with their 1σ. When the data cannot determine an angle to
 ``--max-uncertainty-deg`` (1σ), it writes nothing and says why. Exit codes: 0 done; 2 bad
-arguments, parameters or bag, or data that do not determine the mounting.
+arguments, parameters or bag, or data that do not determine the mounting; 130 interrupted
+(SIGINT or SIGTERM), nothing written. It prints the extrinsics it used first.
 """
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from buoy_common.bag_io import BagError, BagReader
+from buoy_common.cli import interruptible
 from buoy_common.contract import NAV_ODOMETRY_TOPIC, WIND_RAW_TOPIC, WIND_TRUE_TOPIC
+from buoy_common.extrinsics import describe_shared_fields
 from buoy_common.namespaces import (
     NamespaceError,
     TopicView,
@@ -127,6 +130,7 @@ def calibrate(arguments) -> MountingEstimate:
         )
     (view,) = views
     compensator = compensator_config_from_files(arguments.params_file)
+    print(f"extrinsics: {describe_shared_fields(compensator)}")
     with tempfile.TemporaryDirectory(prefix="calibrate_mounting-") as folder:
         processed = Path(folder) / "processed"
         process_bag(
@@ -148,11 +152,19 @@ def calibrate(arguments) -> MountingEstimate:
     return estimate
 
 
+@interruptible("calibrate_mounting")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     try:
         estimate = calibrate(arguments)
-    except (ParameterError, BagError, OutputError, NamespaceError, CalibrationError) as error:
+    except (
+        ParameterError,
+        BagError,
+        OutputError,
+        NamespaceError,
+        CalibrationError,
+        OSError,
+    ) as error:
         print(f"calibrate_mounting: {error}", file=sys.stderr)
         sys.exit(2)
     for name, angle, sigma in zip(

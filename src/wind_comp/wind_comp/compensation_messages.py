@@ -114,24 +114,31 @@ class FlowSample(NamedTuple):
     message was rejected."""
     rejection: str | None
     """Reason the message was rejected (its output is then invalid), None when accepted."""
+    frame_id: str = ""
+    """The frame of a message rejected for its frame (which the rejection reports); empty
+    otherwise."""
 
 
-def anemometer_sample(message) -> FlowSample:
+def anemometer_sample(message, expected_frame_id: str = ANEMOMETER_FRAME) -> FlowSample:
     """``anemometer/wind`` as a :class:`FlowSample`: the air's velocity past the sensor.
 
-    A message in another frame than ``anemometer_link`` or with a non-finite component is
-    rejected: its wind becomes NaN so that the compensation still returns one (invalid) output
-    for it, in order. Stamp order is checked by the compensation itself.
+    A message in another frame than ``expected_frame_id`` (the parameter
+    ``compensation.anemometer_frame_id``) or with a non-finite component is rejected: its wind
+    becomes NaN so that the compensation still returns one (invalid) output for it, in order.
+    Stamp order is checked by the compensation itself.
     """
     vector = message.vector
     return _wind_sample(
         stamp_to_seconds(message.header.stamp),
         message.header.frame_id,
         (float(vector.x), float(vector.y), float(vector.z)),
+        expected_frame_id,
     )
 
 
-def anemometer_sample_cdr(raw: bytes) -> tuple[FlowSample, int, int] | None:
+def anemometer_sample_cdr(
+    raw: bytes, expected_frame_id: str = ANEMOMETER_FRAME
+) -> tuple[FlowSample, int, int] | None:
     """:func:`anemometer_sample` of an ``anemometer/wind`` message straight from its CDR bytes,
     with the header stamp (sec, nanosec). None for bytes the CDR reader does not handle: decode
     the message and use :func:`anemometer_sample`."""
@@ -139,32 +146,36 @@ def anemometer_sample_cdr(raw: bytes) -> tuple[FlowSample, int, int] | None:
     if fields is None:
         return None
     sec, nanosec, frame_id, vector = fields
-    return _wind_sample(sec + nanosec * 1e-9, frame_id, vector), sec, nanosec
+    return _wind_sample(sec + nanosec * 1e-9, frame_id, vector, expected_frame_id), sec, nanosec
 
 
 _NAN_VECTOR = (math.nan, math.nan, math.nan)
 
 
-def _wind_sample(t_s: float, frame_id: str, wind: tuple[float, float, float]) -> FlowSample:
-    if frame_id != ANEMOMETER_FRAME:
-        return FlowSample(t_s, _NAN_VECTOR, Reason.WRONG_FRAME)
+def _wind_sample(
+    t_s: float, frame_id: str, wind: tuple[float, float, float], expected_frame_id: str
+) -> FlowSample:
+    if frame_id != expected_frame_id:
+        return FlowSample(t_s, _NAN_VECTOR, Reason.WRONG_FRAME, frame_id)
     if not all(math.isfinite(component) for component in wind):
         return FlowSample(t_s, _NAN_VECTOR, Reason.NON_FINITE)
     return FlowSample(t_s, wind, None)
 
 
-def dvl_sample(message) -> FlowSample:
+def dvl_sample(message, expected_frame_id: str = DVL_FRAME) -> FlowSample:
     """``dvl/velocity`` as a :class:`FlowSample`: the water's velocity past the DVL, the
     negative of the DVL's velocity through the water it reports.
 
-    A message in another frame than ``dvl_link`` or with a non-finite component (a ping the DVL
+    A message in another frame than ``expected_frame_id`` (the parameter
+    ``current.dvl_frame_id``) or with a non-finite component (a ping the DVL
     flags invalid) is rejected: its flow becomes NaN so that the estimate still returns one
     (invalid) output for it, in order. Speed and stamp order are checked by the compensation.
     """
     linear = message.twist.twist.linear
     t_s = stamp_to_seconds(message.header.stamp)
-    if message.header.frame_id != DVL_FRAME:
-        return FlowSample(t_s, _NAN_VECTOR, Reason.WRONG_FRAME)
+    frame_id = message.header.frame_id
+    if frame_id != expected_frame_id:
+        return FlowSample(t_s, _NAN_VECTOR, Reason.WRONG_FRAME, frame_id)
     velocity = (float(linear.x), float(linear.y), float(linear.z))
     if not all(math.isfinite(component) for component in velocity):
         return FlowSample(t_s, _NAN_VECTOR, Reason.NON_FINITE)

@@ -74,6 +74,7 @@ from buoy_common.contract import (
     NAV_ODOMETRY_TOPIC,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
+    Reason,
     wind_mean_topic,
     wind_stats_topic,
 )
@@ -93,9 +94,16 @@ from wind_comp.compensator import SampleStatus
 from wind_comp.config import (
     COMPENSATION_NODE_NAME,
     COMPENSATION_PARAMETER_PREFIX,
+    NAV_TIMEOUT_PARAMETER,
     CompensatorConfig,
 )
-from wind_comp.pipeline import CompensationOutput, CompensationPipeline, wind_pipeline
+from wind_comp.pipeline import (
+    CompensationOutput,
+    CompensationPipeline,
+    mostly_invalid_warning,
+    wind_pipeline,
+    wrong_frame_message,
+)
 
 WIND_NAV_TIMEOUT_S = 1.0
 DIAGNOSTICS_PERIOD_S = 1.0
@@ -131,6 +139,8 @@ class CorrectionNode(FlushingNode):
         output_topic: str,
         product_topics,
         samples_name: str,
+        frame_field: str,
+        nav_timeout_parameter: str,
         default_nav_timeout_s: float,
     ):
         """Args:
@@ -141,29 +151,34 @@ class CorrectionNode(FlushingNode):
         output_topic: one corrected sample per input, frame ``map``.
         product_topics: (mean topic, statistics topic) of a window length (s).
         samples_name: what the diagnostics call the input samples (``wind``, ``dvl``).
-        default_nav_timeout_s: default of the latency budget ``<prefix>nav_timeout_s``, s.
+        frame_field: the configuration field naming the sensor's ``frame_id`` (a message in
+            another frame is rejected as ``wrong_frame``).
+        nav_timeout_parameter, default_nav_timeout_s: the live-only latency budget and its
+            default, s.
         """
         super().__init__(node_name)
         self.config = self.declare_config(config_type, prefix=parameter_prefix)
         self.nav_timeout_s = self.declare_value(
-            parameter_prefix + "nav_timeout_s",
+            nav_timeout_parameter,
             default_nav_timeout_s,
             "s: samples this much older than the newest sensor stamp, waiting this long in wall "
             "time and still without navigation around them are published invalid",
         )
         if not (math.isfinite(self.nav_timeout_s) and self.nav_timeout_s > 0):
             raise StartupError(
-                f"parameter '{parameter_prefix}nav_timeout_s' must be positive, "
-                f"got {self.nav_timeout_s}"
+                f"parameter '{nav_timeout_parameter}' must be positive, got {self.nav_timeout_s}"
             )
         self.sensor_topic = sensor_topic
         self.samples_name = samples_name
+        self.expected_frame_id: str = getattr(self.config, frame_field)
+        self._frame_parameter = parameter_prefix + frame_field
         self.pipeline: CompensationPipeline = make_pipeline(self.config)
         self._pending: collections.deque[PendingStamp] = collections.deque()
         self._counters = collections.Counter()
         self._counters_at_last_report = collections.Counter()
         self._last_report_s = time.monotonic()
         self._latencies_s: list[float] = []
+        self._wrong_frames: set[str] = set()
 
         self._output_publisher = self.create_publisher(Vector3Stamped, output_topic, DATA_QOS)
         mean_topic, stats_topic = product_topics
@@ -191,7 +206,8 @@ class CorrectionNode(FlushingNode):
         )
 
     def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:
-        """A sensor message's CDR bytes as (sample, header sec, header nanosec)."""
+        """A sensor message's CDR bytes as (sample, header sec, header nanosec), rejected
+        unless in frame :attr:`expected_frame_id`."""
         raise NotImplementedError
 
     # -- inputs -----------------------------------------------------------------------------
@@ -202,6 +218,16 @@ class CorrectionNode(FlushingNode):
         rejection = self.pipeline.add_sample(sample)
         if rejection is not None:
             self.reject(self.sensor_topic, rejection)
+            if rejection == Reason.WRONG_FRAME and sample.frame_id not in self._wrong_frames:
+                self._wrong_frames.add(sample.frame_id)
+                self.get_logger().error(
+                    wrong_frame_message(
+                        self.sensor_topic,
+                        sample.frame_id,
+                        self.expected_frame_id,
+                        self._frame_parameter,
+                    )
+                )
         self._pending.append(PendingStamp(sec, nanosec, sample.t_s, time.monotonic()))
         self.publish(self.pipeline.expire(self._timeout_horizon_s()))
 
@@ -262,6 +288,9 @@ class CorrectionNode(FlushingNode):
     def flush_held_back(self) -> list:
         """End of input: publish every pending sample and the partial product windows."""
         self.publish(self.pipeline.flush())
+        warning = mostly_invalid_warning(self.pipeline.status_counts(), self.samples_name)
+        if warning is not None:
+            self.get_logger().error(warning)
         publishers = [self._output_publisher]
         for pair in self._product_publishers.values():
             publishers.extend(pair)
@@ -324,15 +353,17 @@ class CompensationNode(CorrectionNode):
             WIND_TRUE_TOPIC,
             (wind_mean_topic, wind_stats_topic),
             "wind",
+            "anemometer_frame_id",
+            NAV_TIMEOUT_PARAMETER,
             WIND_NAV_TIMEOUT_S,
         )
 
     def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:
-        parsed = anemometer_sample_cdr(raw)
+        parsed = anemometer_sample_cdr(raw, self.expected_frame_id)
         if parsed is None:
             message = deserialize_message(raw, Vector3Stamped)
             stamp = message.header.stamp
-            parsed = anemometer_sample(message), stamp.sec, stamp.nanosec
+            parsed = anemometer_sample(message, self.expected_frame_id), stamp.sec, stamp.nanosec
         return parsed
 
 

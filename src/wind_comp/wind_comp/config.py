@@ -12,9 +12,14 @@ configurations from the same parameter files (:func:`compensator_config_from_fil
 import math
 from dataclasses import dataclass
 
-from buoy_common.contract import DEFAULT_PRODUCT_WINDOWS_S, Reason
+from buoy_common.contract import ANEMOMETER_FRAME, DEFAULT_PRODUCT_WINDOWS_S, DVL_FRAME, Reason
 from buoy_common.extrinsics import check_shared_fields, shared_field
-from buoy_common.parameters import build_config, load_parameter_files
+from buoy_common.parameters import (
+    build_config,
+    check_parameter_files,
+    config_parameters,
+    load_parameter_files,
+)
 from wind_comp.compensator import FlowSensor
 
 COMPENSATION_NODE_NAME = "compensation_node"
@@ -27,6 +32,12 @@ CURRENT_NODE_NAME = "current_node"
 CURRENT_PARAMETER_PREFIX = "current."
 """ROS parameter of a :class:`CurrentConfig` field ``f``: ``current.f``, except the shared
 ones."""
+
+NAV_TIMEOUT_PARAMETER = COMPENSATION_PARAMETER_PREFIX + "nav_timeout_s"
+"""Latency budget of the live compensation (s); offline processing has no wall clock to wait
+on."""
+CURRENT_NAV_TIMEOUT_PARAMETER = CURRENT_PARAMETER_PREFIX + "nav_timeout_s"
+"""Latency budget of the live current estimate (s), live-only as the compensation's."""
 
 
 class ConfigError(ValueError):
@@ -50,6 +61,9 @@ class CompensatorConfig:
         product_windows_s: lengths of the averaging windows of the wind products, s
             (60 s and 600 s by default, WMO practice).
         gust_window_s: length of the running mean whose maximum is the gust, s (WMO: 3 s).
+        anemometer_frame_id: the ``frame_id`` of ``anemometer/wind`` messages; a message in
+            another frame is rejected (``wrong_frame``) and its output is NaN. The contract's
+            ``anemometer_link`` unless a driver names its frame otherwise.
         max_attitude_sigma_deg: a navigation sample whose attitude 1σ (the largest of the
             three in its pose covariance) exceeds this corrects no wind: the samples it
             brackets are invalid as ``navigation_not_trusted``, deg. The fusion publishes its
@@ -66,6 +80,7 @@ class CompensatorConfig:
     nav_history_s: float = 10.0
     product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
     gust_window_s: float = 3.0
+    anemometer_frame_id: str = ANEMOMETER_FRAME
     max_attitude_sigma_deg: float = 4.0
 
     def __post_init__(self):
@@ -79,6 +94,7 @@ class CompensatorConfig:
                 "gust_window_s",
                 "max_attitude_sigma_deg",
             ),
+            "anemometer_frame_id",
         )
         if self.gust_window_s >= min(self.product_windows_s):
             raise ConfigError(
@@ -114,6 +130,9 @@ class CurrentConfig:
             be corrected in streaming use, s.
         product_windows_s: lengths of the averaging windows of the current products, s (60 s
             and 600 s by default).
+        dvl_frame_id: the ``frame_id`` of ``dvl/velocity`` messages; a message in another frame
+            is rejected (``wrong_frame``) and its output is NaN. The contract's ``dvl_link``
+            unless a driver names its frame otherwise.
         max_attitude_sigma_deg: a navigation sample whose attitude 1σ exceeds this corrects no
             DVL sample (``navigation_not_trusted``), deg: as for the wind
             (:class:`CompensatorConfig`); an attitude error of 4° turns a 5 m/s water track
@@ -126,6 +145,7 @@ class CurrentConfig:
     max_dvl_speed_mps: float = 20.0
     nav_history_s: float = 10.0
     product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
+    dvl_frame_id: str = DVL_FRAME
     max_attitude_sigma_deg: float = 4.0
 
     def __post_init__(self):
@@ -133,6 +153,7 @@ class CurrentConfig:
             self,
             ("dvl_position_body_m", "dvl_rpy_deg"),
             ("max_nav_gap_s", "max_dvl_speed_mps", "nav_history_s", "max_attitude_sigma_deg"),
+            "dvl_frame_id",
         )
 
     def flow_sensor(self) -> FlowSensor:
@@ -148,9 +169,12 @@ class CurrentConfig:
         )
 
 
-def _check_and_coerce(config, vector_fields: tuple[str, ...], positive_fields: tuple[str, ...]):
+def _check_and_coerce(
+    config, vector_fields: tuple[str, ...], positive_fields: tuple[str, ...], frame_field: str
+):
     """The checks both configurations share: finite 3-vectors, the shared parameters' rules,
-    positive numbers, product windows, and a navigation history longer than the gap."""
+    positive numbers, product windows, the sensor's frame name, and a navigation history
+    longer than the gap."""
     for name in vector_fields:
         object.__setattr__(config, name, _finite_tuple(name, getattr(config, name), length=3))
     try:
@@ -163,6 +187,9 @@ def _check_and_coerce(config, vector_fields: tuple[str, ...], positive_fields: t
     if not windows or min(windows) <= 0:
         raise ConfigError(f"product_windows_s must be positive window lengths, got {windows}")
     object.__setattr__(config, "product_windows_s", windows)
+    frame_id = getattr(config, frame_field)
+    if not isinstance(frame_id, str) or not frame_id.strip():
+        raise ConfigError(f"{frame_field} must be a frame name, got {frame_id!r}")
     if config.nav_history_s <= config.max_nav_gap_s:
         raise ConfigError(
             f"nav_history_s ({config.nav_history_s}) must exceed max_nav_gap_s "
@@ -198,6 +225,7 @@ def compensator_config_from_files(paths) -> CompensatorConfig:
     """The :class:`CompensatorConfig` ``compensation_node`` would build from these ROS parameter
     files (sections ``/**`` and ``compensation_node``, later files winning). Raises
     :class:`buoy_common.parameters.ParameterError` naming a bad file or value."""
+    check_parameter_files(paths, COMPENSATION_NODE_NAME, compensation_parameter_names())
     values = load_parameter_files(paths, COMPENSATION_NODE_NAME)
     return build_config(CompensatorConfig, values, prefix=COMPENSATION_PARAMETER_PREFIX)
 
@@ -205,6 +233,20 @@ def compensator_config_from_files(paths) -> CompensatorConfig:
 def current_config_from_files(paths) -> CurrentConfig:
     """The :class:`CurrentConfig` ``current_node`` would build from these ROS parameter files
     (sections ``/**`` and ``current_node``, later files winning). Raises
-    :class:`buoy_common.parameters.ParameterError` naming a bad file or value."""
+    :class:`buoy_common.parameters.ParameterError` naming a bad file or value (an unknown
+    parameter name among them)."""
+    check_parameter_files(paths, CURRENT_NODE_NAME, current_parameter_names())
     values = load_parameter_files(paths, CURRENT_NODE_NAME)
     return build_config(CurrentConfig, values, prefix=CURRENT_PARAMETER_PREFIX)
+
+
+def compensation_parameter_names() -> list[str]:
+    """Every parameter ``compensation_node`` declares, the live-only one included."""
+    names = config_parameters(CompensatorConfig, COMPENSATION_PARAMETER_PREFIX)
+    return [parameter for _, parameter, _ in names] + [NAV_TIMEOUT_PARAMETER]
+
+
+def current_parameter_names() -> list[str]:
+    """Every parameter ``current_node`` declares, the live-only one included."""
+    names = config_parameters(CurrentConfig, CURRENT_PARAMETER_PREFIX)
+    return [parameter for _, parameter, _ in names] + [CURRENT_NAV_TIMEOUT_PARAMETER]

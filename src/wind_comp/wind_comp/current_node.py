@@ -19,8 +19,9 @@ Publishes:
   with the navigation interpolated to the DVL's stamp (attitude R_nb by slerp, body rate ω and
   velocity v_nav linearly), R_bd and l the DVL's mounting and position. A sample that cannot be
   computed (a ping flagged invalid, a velocity beyond ``current.max_dvl_speed_mps``, another
-  frame than ``dvl_link``, a stamp not after the previous one, no navigation around its stamp)
-  is published with NaN components, never dropped, and counted by reason.
+  frame than ``current.dvl_frame_id`` (``dvl_link`` by default), a stamp not after the previous
+  one, no navigation around its stamp) is published with NaN components, never dropped, and
+  counted by reason.
 - ``current/mean_1min``, ``current/mean_10min`` (geometry_msgs/Vector3Stamped, frame ``map``):
   vector mean of the current over each window, stamped with the window end.
 - ``current/stats_1min``, ``current/stats_10min`` (std_msgs/Float64MultiArray): statistics of
@@ -37,6 +38,11 @@ deg, default [0, 0, 0]) of the shared buoy file; every other
 :class:`wind_comp.config.CurrentConfig` field as ``current.<field>``; and
 ``current.nav_timeout_s`` (s, default 5.0), the latency budget, as ``compensation_node``'s (a
 current is an average over minutes: a DVL sample may well wait for late navigation).
+
+A sample in another frame is logged once per frame as an error naming the frame expected; a
+run whose samples came out mostly invalid ends with an error naming the main reason. On SIGINT
+or SIGTERM the samples still waiting for navigation are published (invalid) before the node
+exits with code 0.
 """
 
 from __future__ import annotations
@@ -53,7 +59,12 @@ from buoy_common.contract import (
 )
 from wind_comp.compensation_messages import FlowSample, dvl_sample
 from wind_comp.compensation_node import CorrectionNode
-from wind_comp.config import CURRENT_NODE_NAME, CURRENT_PARAMETER_PREFIX, CurrentConfig
+from wind_comp.config import (
+    CURRENT_NAV_TIMEOUT_PARAMETER,
+    CURRENT_NODE_NAME,
+    CURRENT_PARAMETER_PREFIX,
+    CurrentConfig,
+)
 from wind_comp.pipeline import current_pipeline
 
 CURRENT_NAV_TIMEOUT_S = 5.0
@@ -73,6 +84,8 @@ class CurrentNode(CorrectionNode):
             CURRENT_TOPIC,
             (current_mean_topic, current_stats_topic),
             "dvl",
+            "dvl_frame_id",
+            CURRENT_NAV_TIMEOUT_PARAMETER,
             CURRENT_NAV_TIMEOUT_S,
         )
 
@@ -80,7 +93,7 @@ class CurrentNode(CorrectionNode):
         # One ping a second: decoding the message costs nothing worth a CDR reader of its own.
         message = deserialize_message(raw, TwistWithCovarianceStamped)
         stamp = message.header.stamp
-        return dvl_sample(message), stamp.sec, stamp.nanosec
+        return dvl_sample(message, self.expected_frame_id), stamp.sec, stamp.nanosec
 
 
 main = main_for(CurrentNode)

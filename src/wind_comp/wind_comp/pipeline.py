@@ -96,6 +96,10 @@ _NAV_FIELDS = 13  # stamp, quaternion (4), rate (3), body velocity (3), latitude
 _SAMPLE_FIELDS = 4  # stamp, flow (3)
 
 
+VALID = "valid"
+"""The outcome of a valid sample in :meth:`CompensationPipeline.status_counts`."""
+
+
 class CompensationOutput(NamedTuple):
     """What the pipeline decided since it was last asked."""
 
@@ -139,6 +143,13 @@ class CompensationPipeline:
     def counts(self) -> dict[SampleStatus, int]:
         """Corrected samples returned so far, per status."""
         return self.compensator.counts
+
+    def status_counts(self) -> dict[str, int]:
+        """:attr:`counts` by name: ``valid`` or the contract's reason of the invalid ones."""
+        return {
+            VALID if status == SampleStatus.VALID else self.sensor.reason(status): n
+            for status, n in self.counts.items()
+        }
 
     @property
     def latest_sample_stamp_s(self) -> float:
@@ -299,4 +310,37 @@ def current_pipeline(config: CurrentConfig) -> CompensationPipeline:
         config.nav_history_s,
         config.max_attitude_sigma_deg,
         [CurrentAverager(window_s) for window_s in config.product_windows_s],
+    )
+
+
+MOSTLY_INVALID_FRACTION = 0.5
+"""A run whose outputs are invalid in more than this fraction ends with a loud warning (and
+``process_bag`` with exit code 4): a wrong frame or a dead sensor must not look like a
+successful run."""
+
+
+def mostly_invalid_warning(status_counts: dict[str, int], samples_name: str) -> str | None:
+    """The warning for a run in which most samples came out invalid, None otherwise.
+
+    ``status_counts`` are the outcomes of the run (:meth:`CompensationPipeline.status_counts`)
+    of samples called ``samples_name`` (``wind``, ``DVL``); the warning names the most frequent
+    reason."""
+    total = sum(status_counts.values())
+    invalid = {reason: n for reason, n in status_counts.items() if reason != VALID and n}
+    n_invalid = sum(invalid.values())
+    if total == 0 or n_invalid <= MOSTLY_INVALID_FRACTION * total:
+        return None
+    main_reason = max(invalid, key=invalid.get)
+    return (
+        f"most {samples_name} samples are invalid: {n_invalid} of {total} "
+        f"(mostly {main_reason}: {invalid[main_reason]})"
+    )
+
+
+def wrong_frame_message(topic: str, frame_id: str, expected_frame_id: str, parameter: str) -> str:
+    """The error for a sensor message on ``topic`` in an unexpected frame; ``parameter`` is
+    the one naming the frame expected (``compensation.anemometer_frame_id``, ...)."""
+    return (
+        f"{topic} in frame '{frame_id}', expected '{expected_frame_id}': its samples are "
+        f"rejected (wrong_frame); set {parameter} if the driver names the sensor's frame so"
     )

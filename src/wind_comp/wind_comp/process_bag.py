@@ -19,9 +19,13 @@ written in it; a bag of several buoys gives one output per namespace holding an 
 DVL (``OUT_BAG/buoy1`` and its CSVs ``OUT_BAG/buoy1_wind_products.csv``, ...).
 
 All outputs are written under temporary names beside them and appear only when complete; they
-may not be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or
-bags (one line on stderr); 3 done, but IN_BAG was cut short (a recorder killed or out of power)
-and was processed up to its last complete chunk (a warning says how much was read).
+may not be, contain or lie inside IN_BAG. It prints the extrinsics it used first.
+
+Exit codes: 0 done; 2 bad arguments, parameters (an unknown name among them) or bags (one line
+on stderr); 3 done, but IN_BAG was cut short (a recorder killed or out of power) and was
+processed up to its last complete chunk (a warning says how much was read); 4 done, but most
+wind samples or most DVL samples came out invalid (a warning names the main reason, such as a
+wrong frame); 130 interrupted (SIGINT or SIGTERM), nothing left under OUT_BAG.
 """
 
 from __future__ import annotations
@@ -30,7 +34,9 @@ import argparse
 import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
+from buoy_common.cli import interruptible
 from buoy_common.contract import DVL_TOPIC, WIND_RAW_TOPIC, seconds_to_stamp, window_label
+from buoy_common.extrinsics import describe_shared_fields
 from buoy_common.namespaces import (
     NamespaceError,
     add_namespace_arguments,
@@ -41,8 +47,17 @@ from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
 from wind_comp.bag_processing import ProcessSummary, process_bag
-from wind_comp.config import compensator_config_from_files, current_config_from_files
+from wind_comp.config import (
+    COMPENSATION_PARAMETER_PREFIX,
+    CURRENT_PARAMETER_PREFIX,
+    compensator_config_from_files,
+    current_config_from_files,
+)
+from wind_comp.pipeline import mostly_invalid_warning, wrong_frame_message
 from wind_comp.products import CurrentProduct, WindProduct
+
+MOSTLY_INVALID_EXIT_CODE = 4
+"""Exit code of a run that completed but whose wind or DVL samples came out mostly invalid."""
 
 
 def parse_arguments(argv):
@@ -115,13 +130,23 @@ def _product_text(product: WindProduct | CurrentProduct) -> str:
     )
 
 
+@interruptible("process_bag")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
-    truncated = False
+    truncated = mostly_invalid = False
     try:
         fusion_config = fusion_config_from_files(arguments.params_file)
         compensator_config = compensator_config_from_files(arguments.params_file)
         current_config = current_config_from_files(arguments.params_file)
+        print(f"extrinsics: {describe_shared_fields(fusion_config)}")
+        print(
+            f"extrinsics: {describe_shared_fields(compensator_config)}; {WIND_RAW_TOPIC} "
+            f"expected in frame '{compensator_config.anemometer_frame_id}'"
+        )
+        print(
+            f"extrinsics: {describe_shared_fields(current_config)}; {DVL_TOPIC} "
+            f"expected in frame '{current_config.dvl_frame_id}'"
+        )
         views = views_of_bag(arguments, arguments.in_bag, WIND_RAW_TOPIC, DVL_TOPIC)
         for view in views:
             out_bag = output_for(arguments.out_bag, view, several=len(views) > 1)
@@ -137,6 +162,31 @@ def main(argv=None) -> None:
                 view,
             )
             print_summary(summary, out_bag)
+            for correction, topic, expected_frame_id, parameter, samples_name in (
+                (
+                    summary.wind,
+                    WIND_RAW_TOPIC,
+                    compensator_config.anemometer_frame_id,
+                    COMPENSATION_PARAMETER_PREFIX + "anemometer_frame_id",
+                    "wind",
+                ),
+                (
+                    summary.current,
+                    DVL_TOPIC,
+                    current_config.dvl_frame_id,
+                    CURRENT_PARAMETER_PREFIX + "dvl_frame_id",
+                    "DVL",
+                ),
+            ):
+                if correction is None:
+                    continue
+                for frame_id, n in sorted(correction.wrong_frames.items()):
+                    message = wrong_frame_message(topic, frame_id, expected_frame_id, parameter)
+                    print(f"process_bag: error: {n} samples of {message}", file=sys.stderr)
+                warning = mostly_invalid_warning(correction.status_counts, samples_name)
+                if warning is not None:
+                    print(f"process_bag: warning: {warning}", file=sys.stderr)
+                    mostly_invalid = True
             if summary.recovery is not None:
                 warning = summary.recovery.describe(arguments.in_bag)
                 print(f"process_bag: warning: {warning}", file=sys.stderr)
@@ -146,3 +196,5 @@ def main(argv=None) -> None:
         sys.exit(2)
     if truncated:
         sys.exit(RECOVERED_BAG_EXIT_CODE)
+    if mostly_invalid:
+        sys.exit(MOSTLY_INVALID_EXIT_CODE)

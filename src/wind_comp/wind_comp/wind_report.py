@@ -15,6 +15,7 @@ import argparse
 from pathlib import Path
 
 from buoy_common.bag_io import BagError, BagReader
+from buoy_common.cli import interruptible
 from buoy_common.contract import CURRENT_TOPIC, WIND_RAW_TOPIC, WIND_TRUE_TOPIC
 from buoy_common.namespaces import (
     NamespaceError,
@@ -34,6 +35,7 @@ from wind_comp.report.data import (
 )
 
 
+@interruptible("wind_report")
 def main(argv=None) -> int:
     """Command line: draw the report of a bag, or of a run saved with :func:`save_report_data`."""
     parser = argparse.ArgumentParser(
@@ -64,7 +66,11 @@ def main(argv=None) -> int:
             message += f"; a current report needs {CURRENT_TOPIC}"
         parser.exit(2, f"wind_report: {message}\n")
     for data, current, title, out in reports:
-        for path in write_report(data, out, current, title):
+        try:
+            written = write_report(data, out, current, title)
+        except OSError as error:
+            parser.exit(2, f"wind_report: cannot write the report: {error}\n")
+        for path in written:
             print(path)
     return 0
 

@@ -1,0 +1,50 @@
+"""A short soak: 20 simulated seconds of sea through the live nodes at twice real time, every
+anemometer sample out on ``wind/true`` (the full day is the opt-in ``soak`` section of
+``tools/bench.py``, tools/soak.py).
+How many come out corrected depends on how busy the machine is (a sample whose navigation is
+later than the latency budget is published invalid): the figures, not this test, say it."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+REPO = Path(__file__).resolve().parents[2]
+SIMULATED_S = 20.0  # the alignment, then 10 s of corrected wind
+SIMULATED_HOURS = SIMULATED_S / 3600.0
+RATE_FACTOR = 2.0
+
+
+def test_short_soak_loses_no_sample(tmp_path, ros_env):
+    figures = tmp_path / "soak.json"
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(REPO / "tools" / "soak.py"),
+            "--hours",
+            str(SIMULATED_HOURS),
+            "--rate-factor",
+            str(RATE_FACTOR),
+            "--rss-period-s",
+            "1",
+            "--json",
+            str(figures),
+        ],
+        env=ros_env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    counts = json.loads(figures.read_text())["counts"]
+    expected_in = SIMULATED_S * 20.0  # the anemometer's 20 Hz
+    assert counts["anemometer/wind in"] >= 0.95 * expected_in, counts
+    assert counts["wind/true out"] == counts["anemometer/wind in"], counts
+    assert counts["wind/true without its input"] == 0, counts
+    assert counts["anemometer/wind without output"] == 0, counts
