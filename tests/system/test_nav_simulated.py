@@ -17,6 +17,7 @@ from scipy.stats import chi2
 from buoy_nav.aiding import GnssBaseline, GnssFix, GnssHeading, GnssVelocity
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
+from buoy_nav.smoothed_solutions import FixedIntervalSmoother
 from error_budget import gyro_bias_limit_rad_s
 from sensor_sim.scenario import load_scenario
 from sensor_sim.sensor_models import GnssSimulator, ImuSimulator
@@ -42,12 +43,34 @@ def simulate(
     (never: the filter is configured without it). ``imu_errors`` replaces the scenario's IMU
     error budget.
     """
-    scenario = load_scenario(name, seed=seed)
-    duration = duration_s or scenario.duration_s
-    truth = TruthModel(scenario)
     config = FusionConfig(
         record_innovations=record_innovations, use_gnss_baseline=baseline_until_s > 0.0
     )
+    engine = FusionEngine(config)
+    solutions, truth = run_engine(engine, name, duration_s, seed, baseline_until_s, imu_errors)
+    return engine, solutions, truth
+
+
+def simulate_smoothed(name, duration_s=None, seed=None):
+    """Run the engine with the fixed-interval smoother on a scenario; return the engine, the
+    forward and the smoothed solutions, and truth at the solution stamps."""
+    engine = FusionEngine(FusionConfig(realtime_output=False))
+    with FixedIntervalSmoother(engine) as smoother:
+        solutions, truth = run_engine(engine, name, duration_s, seed, math.inf)
+        for solution in solutions:
+            smoother.add(solution, 0, 0, 0)
+        smoothed = [pair.smoothed for pair in smoother.smoothed()]
+    return engine, solutions, smoothed, truth
+
+
+def run_engine(engine, name, duration_s, seed, baseline_until_s, imu_errors=None):
+    """Feed ``engine`` the simulated IMU and GNSS of a scenario (baseline vectors up to
+    ``baseline_until_s``; ``imu_errors`` in place of the scenario's IMU error budget); return
+    its solutions and truth at their stamps."""
+    scenario = load_scenario(name, seed=seed)
+    duration = duration_s or scenario.duration_s
+    truth = TruthModel(scenario)
+    config = engine.config
     imu = ImuSimulator(truth, imu_errors or scenario.sensors.imu, scenario.seed)
     gnss = GnssSimulator(
         truth,
@@ -60,7 +83,6 @@ def simulate(
     t_gnss = np.arange(0.0, duration, 1.0 / GNSS_RATE_HZ)
     gyro, force = imu.measure(t_imu)
     sample = gnss.measure(t_gnss)
-    engine = FusionEngine(config)
     solutions = []
     next_gnss = 0
     for k, t in enumerate(t_imu):
@@ -93,7 +115,7 @@ def simulate(
         solutions += engine.add_imu(t, gyro[k], force[k])
     solutions += engine.flush()
     stamps = np.array([s.t_s for s in solutions])
-    return engine, solutions, truth.evaluate(stamps)
+    return solutions, truth.evaluate(stamps)
 
 
 def euler_errors_deg(solutions, truth):

@@ -8,13 +8,21 @@ conversion (:mod:`buoy_nav.fusion_messages`) and engine as in the live node. Eve
 message that produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries
 its own answer. ``fuse_bag`` is the command line of :func:`fuse_bag`; ``process_bag`` runs
 :class:`OfflineFusion` ahead of the wind compensation.
+
+With ``smooth`` the run takes two passes (:mod:`buoy_nav.smoothed_solutions`): the forward
+filter over the sensor topics, its epochs and solutions spilled to a temporary directory beside
+the output; then the smoother's backward pass, and a second read of the bag for the topics that
+are copied, merged in log-time order with the solutions: ``nav/*`` carry the smoothed solution,
+``nav/forward/odometry`` the forward filter's.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from pathlib import Path
 from typing import NamedTuple
 
 from buoy_common.bag_io import (
@@ -30,7 +38,9 @@ from buoy_common.contract import (
     GNSS_FIX_TOPIC,
     GNSS_HEADING_TOPIC,
     IMU_RAW_TOPIC,
+    NAV_FORWARD_ODOMETRY_TOPIC,
     NAV_MSGTYPES,
+    ODOMETRY_MSGTYPE,
     TRUTH_PREFIX,
     bag_topic,
 )
@@ -45,8 +55,10 @@ from buoy_nav.fusion_messages import (
     feed_imu_cdr,
     feed_message,
     nav_values,
+    odometry_cdr,
     solution_cdr,
 )
+from buoy_nav.smoothed_solutions import FixedIntervalSmoother
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC, GNSS_FIX_TOPIC, GNSS_HEADING_TOPIC)
 OPTIONAL_TOPICS = tuple(topic for topic in FUSION_INPUT_MSGTYPES if topic not in REQUIRED_TOPICS)
@@ -60,6 +72,7 @@ def relative_topic(name: str) -> str:
 
 # Relative nav topic → (name stored in the bag, message type).
 NAV_BAG_TOPICS = {topic: (bag_topic(topic), msgtype) for topic, msgtype in NAV_MSGTYPES.items()}
+FORWARD_ODOMETRY_BAG_TOPIC = bag_topic(NAV_FORWARD_ODOMETRY_TOPIC)
 
 
 def sensor_topics_of(
@@ -95,8 +108,23 @@ def truth_topics_of(reader: BagReader) -> list[str]:
 class OfflineFusion:
     """Feeds sensor messages to a :class:`FusionEngine` and writes its ``nav/*`` to a bag."""
 
-    def __init__(self, config: FusionConfig, writer: BagWriter | BackgroundBagWriter):
+    def __init__(
+        self,
+        config: FusionConfig,
+        writer: BagWriter | BackgroundBagWriter | None,
+        smoother_spill_parent: str | Path | None = None,
+        smooth: bool = False,
+    ):
+        """``writer`` receives the ``nav/*`` messages. With ``smooth`` (the filter's own
+        solutions, ``realtime_output`` off) nothing is written: the solutions are kept by
+        :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``) and
+        written smoothed by :meth:`write_smoothed` after :meth:`finish`."""
+        if smooth:
+            config = dataclasses.replace(config, realtime_output=False)
         self.engine = FusionEngine(config)
+        self.smoother = (
+            FixedIntervalSmoother(self.engine, smoother_spill_parent) if smooth else None
+        )
         self.stamps = StampBook()
         self.writer = writer
         self.rejections: Counter[str] = Counter()
@@ -132,15 +160,42 @@ class OfflineFusion:
 
     def _write(self, solutions: list[NavSolution], log_time_ns: int) -> list[NavValues]:
         written = []
+        smoother = self.smoother
         for solution in solutions:
             if self.first_solution_s is None:
                 self.first_solution_s = solution.t_s
+            if smoother is not None:
+                smoother.add(solution, *self.stamps.exact(solution.t_s), log_time_ns)
+                continue
             values = nav_values(solution, self.stamps)
             for topic, raw in solution_cdr(values).items():
                 stored_topic, msgtype = NAV_BAG_TOPICS[topic]
                 self.writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
             written.append(values)
         return written
+
+    def smoothed_values(self) -> Iterator[tuple[NavValues, NavValues, int]]:
+        """After :meth:`finish` of a smoothing run: (forward values, smoothed values, log time)
+        of every solution, in order."""
+        for pair in self.smoother.smoothed():
+            forward = nav_values(pair.forward)._replace(sec=pair.sec, nanosec=pair.nanosec)
+            smoothed = nav_values(pair.smoothed)._replace(sec=pair.sec, nanosec=pair.nanosec)
+            yield forward, smoothed, pair.log_time_ns
+
+    def write_smoothed_values(self, forward: NavValues, smoothed: NavValues, log_time_ns: int):
+        """``nav/forward/odometry`` of ``forward`` and ``nav/*`` of ``smoothed``."""
+        writer = self.writer
+        writer.write_raw(
+            FORWARD_ODOMETRY_BAG_TOPIC, ODOMETRY_MSGTYPE, log_time_ns, odometry_cdr(forward)
+        )
+        for topic, raw in solution_cdr(smoothed).items():
+            stored_topic, msgtype = NAV_BAG_TOPICS[topic]
+            writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
+
+    def close(self) -> None:
+        """Remove the smoother's temporary records (nothing to do without smoothing)."""
+        if self.smoother is not None:
+            self.smoother.close()
 
     def summary(self) -> list[str]:
         """Human-readable lines: alignment, measurement use and rejections."""
@@ -178,9 +233,12 @@ class FusedBag(NamedTuple):
     """What was wrong with the input bag and how much of it was read; None for a sound bag."""
 
 
-def fuse_bag(in_bag, out_bag, config: FusionConfig, overwrite: bool = False) -> FusedBag:
+def fuse_bag(
+    in_bag, out_bag, config: FusionConfig, overwrite: bool = False, smooth: bool = False
+) -> FusedBag:
     """Run the fusion over ``in_bag`` into ``out_bag`` (a new bag; replaced with
-    ``overwrite``). Raises BagError for a missing or unreadable bag or one without the fusion's
+    ``overwrite``); with ``smooth`` the fixed-interval smoother's solution (see the module
+    docstring). Raises BagError for a missing or unreadable bag or one without the fusion's
     required topics, and OutputError, before anything is read or written, if ``out_bag`` is,
     contains or lies inside ``in_bag``."""
     started = time.monotonic()
@@ -189,6 +247,25 @@ def fuse_bag(in_bag, out_bag, config: FusionConfig, overwrite: bool = False) -> 
         sensors = sensor_topics_of(reader, config)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
+        if smooth:
+            fusion = OfflineFusion(config, None, spill_parent_of(out_bag), smooth=True)
+            try:
+                forward_pass(reader, fusion, sensors, relative_of, f"fuse_bag {in_bag}")
+                with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+                    fusion.writer = writer
+                    for message, values in merged_with_smoothed(reader, fusion, truth):
+                        if message is not None:
+                            writer.write_raw(
+                                message.topic, message.msgtype, message.log_time_ns, message.raw
+                            )
+                        else:
+                            fusion.write_smoothed_values(*values)
+            finally:
+                fusion.close()
+            counts = writer.counts
+            return FusedBag(
+                fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery
+            )
         with (
             BagProgress(reader, f"fuse_bag {in_bag}") as progress,
             BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
@@ -208,3 +285,45 @@ def fuse_bag(in_bag, out_bag, config: FusionConfig, overwrite: bool = False) -> 
             progress.done()
         counts = writer.counts
     return FusedBag(fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery)
+
+
+def spill_parent_of(out_bag) -> Path:
+    """Where a smoothing run keeps its temporary records: beside the output bag, on the disk
+    the user chose for the output (a day of data needs gigabytes)."""
+    return Path(out_bag).resolve().parent
+
+
+def forward_pass(
+    reader: BagReader,
+    fusion: OfflineFusion,
+    sensors: dict[str, str],
+    relative_of: dict[str, str],
+    label: str,
+) -> None:
+    """The forward filter of a smoothing run over the sensor topics of ``reader``'s bag."""
+    with BagProgress(reader, f"{label} (forward filter)") as progress:
+        for index, message in enumerate(reader.messages(list(sensors.values()))):
+            fusion.add_message(reader, relative_of[message.topic], message)
+            if index % PROGRESS_EVERY_MESSAGES == 0:
+                progress.reached(message.log_time_ns)
+        fusion.finish()
+        progress.done()
+
+
+def merged_with_smoothed(
+    reader: BagReader, fusion: OfflineFusion, topics: list[str]
+) -> Iterator[tuple[BagMessage | None, tuple | None]]:
+    """The messages of ``topics`` (stored names) of ``reader``'s bag and the smoothed
+    solutions of ``fusion`` (forward values, smoothed values, log time) in log-time order, as
+    ``(message, None)`` or ``(None, solution)``; a solution goes before the messages logged
+    after the IMU sample that produced it."""
+    solutions = fusion.smoothed_values()
+    pending = next(solutions, None)
+    for message in reader.messages(topics) if topics else ():
+        while pending is not None and pending[2] <= message.log_time_ns:
+            yield None, pending
+            pending = next(solutions, None)
+        yield message, None
+    while pending is not None:
+        yield None, pending
+        pending = next(solutions, None)

@@ -106,6 +106,9 @@ class FusionEngine:
                 )
         self._aided_index = {source: AIDED_QUANTITIES.index(source.aids) for source in self.sources}
 
+        self.recorder = None
+        """Receives the filter's epochs for a smoother (:class:`buoy_nav.smoother.SmootherRecorder`
+        or None): set it before the first sample."""
         self._imu_model = ImuErrorModel.from_config(config)
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
         self._integrator: StrapdownIntegrator | None = None
@@ -275,6 +278,8 @@ class FusionEngine:
         self.catch_up()
         solutions = self._process(math.inf)
         self._queue.give_up_all()
+        if self.recorder is not None and self._filter is not None:
+            self.recorder.end_segment(self._filter.covariance)
         return solutions
 
     # ------------------------------------------------------------------ status
@@ -370,10 +375,12 @@ class FusionEngine:
                 integrator.step(dt, self._gyro, gyro, self._force, force)
                 interval = self.config.covariance_propagation_interval_s
                 if integrator.accumulated_duration_s >= interval:
-                    self._propagate_covariance()
+                    self._propagate_covariance(t)
         self._time, self._gyro, self._force = t, gyro, force
 
-    def _propagate_covariance(self):
+    def _propagate_covariance(self, t: float):
+        """Propagate the covariance over the interval integrated since the last time, up to
+        stamp ``t``."""
         integrator = self._integrator
         if integrator.accumulated_duration_s <= 0.0:
             return
@@ -385,10 +392,15 @@ class FusionEngine:
             integrator.velocity_enu_mps,
             self._imu_model,
         )
+        posterior = self._filter.covariance
         self._filter.propagate(transition, noise)
+        if self.recorder is not None:
+            self.recorder.propagated(t, transition, self._filter.covariance, posterior)
         self._solutions.covariance_changed()
 
     def _restart_alignment(self):
+        if self.recorder is not None and self._filter is not None:
+            self.recorder.end_segment(self._filter.covariance)
         self._imu_gaps += 1
         self._integrator = None
         self._filter = None
@@ -423,7 +435,7 @@ class FusionEngine:
                 if result is not None:
                     self._start_filter(result, t)
             return
-        self._propagate_covariance()
+        self._propagate_covariance(t)
         point = self._linearisation_point(gyro)
         accepted = []
         persistent_rejections = []
@@ -473,6 +485,8 @@ class FusionEngine:
     def _inject(self, state: NavState, correction):
         self._integrator.set_nav_state(inject_error_state(state, correction))
         self._filter.reset_after_injection(correction)
+        if self.recorder is not None:
+            self.recorder.corrected(correction)
         self._solutions.covariance_changed()
         self._solutions.biases_changed()
         self._prediction.carry_over(self._time, state, correction)
@@ -485,9 +499,13 @@ class FusionEngine:
         self._counters[source.kind].resets += 1
         self._consecutive_rejections[source.kind] = 0
         self._last_aided[self._aided_index[source]] = t
+        if self.recorder is not None:
+            self.recorder.end_segment(self._filter.covariance)
         self._integrator.set_nav_state(reset.state)
         self._filter.reset_states(reset.indices, reset.variances)
         self._filter.ensure_positive_definite()
+        if self.recorder is not None:
+            self.recorder.begin_segment(t, self._filter.covariance)
         self._solutions.covariance_changed()
         self._prediction.drop()
 
@@ -506,6 +524,8 @@ class FusionEngine:
         self._filter = ErrorStateFilter(
             result.covariance, self.config.gate_probability, self.states
         )
+        if self.recorder is not None:
+            self.recorder.begin_segment(t, self._filter.covariance)
         self._alignment = result
         self._alignments += 1
         for kind in self._consecutive_rejections:
