@@ -15,13 +15,20 @@ as constants and printed beside our figures:
    pass-through stand-ins for both nodes (tools/passthrough_node.py): the floor it is read
    against;
 7. consistency: Monte-Carlo normalised errors of the accelerometer bias over many seeds
-   (tools/bias_consistency.py).
+   (tools/bias_consistency.py);
+8. smoother (paper 002 Table 1): process_bag --smooth on 4000 s of sea_state with the paper's
+   sensors and with the default ones, and on open_ocean; forward against smoothed errors, and
+   the wind corrected with each (tools/bench_smoother.py);
+9. smoother_speed: wall time and peak memory of fuse_bag/process_bag with and without --smooth
+   on one hour of open_ocean; smoother_day: the same on 24 hours (a long section: the
+   simulation and four runs of a day of data take hours).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency ...]
+    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|smoother|
+                                            smoother_speed|smoother_day ...]
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -43,6 +50,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
+import bench_smoother
 import numpy as np
 from bench_analysis import ANALYSES, wrap_deg
 from bench_plan import (
@@ -99,7 +107,19 @@ RUNS_DIR = OUT_DIR / "runs"
 SIMULATOR_PACKAGE = REPO / "src/sensor_sim/sensor_sim"
 # Modules outside sensor_sim whose code decides what simulate_bag writes.
 SIMULATION_SHARED_MODULES = ("buoy_common.parameters", "buoy_common.bag_io")
-SECTIONS = ("attitude", "wind", "speed", "live", "consistency")
+SECTIONS = (
+    "attitude",
+    "wind",
+    "speed",
+    "live",
+    "consistency",
+    "smoother",
+    "smoother_speed",
+    "smoother_day",
+)
+# One day of data: simulated and processed only when asked for by name.
+DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s != "smoother_day")
+SMOOTHER_DAY_S = 86400.0
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 
 
@@ -322,6 +342,29 @@ def run_cases(cases: list[Case], bag_of: dict[str, Path]) -> dict[str, dict]:
     return results
 
 
+def run_smoothing_cases(cases, bag_of: dict[str, Path]) -> dict[str, dict]:
+    RUNS_DIR.mkdir(parents=True, exist_ok=True)
+    results = {}
+    with ProcessPoolExecutor(WORKERS) as pool:
+        futures = {
+            pool.submit(
+                bench_smoother.run_case,
+                case,
+                str(bag_of[case.key]),
+                str(RUNS_DIR / case.key.replace("/", "_")),
+            ): case
+            for case in cases
+        }
+        for done, future in enumerate(as_completed(futures), 1):
+            case = futures[future]
+            results[case.key] = future.result()
+            log(
+                f"bench: [{done}/{len(cases)}] process_bag --smooth {case.label}: "
+                f"{results[case.key]['process_bag_smooth_wall_s']:.1f} s"
+            )
+    return results
+
+
 # ---------------------------------------------------------------------------------------------
 # Table 5: speed.
 
@@ -393,7 +436,7 @@ def parse_arguments(argv):
 
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
-    sections = set(arguments.only or SECTIONS)
+    sections = set(arguments.only or DEFAULT_SECTIONS)
     quick = arguments.quick
     started = time.monotonic()
     OUT_DIR.mkdir(parents=True, exist_ok=True)
@@ -405,9 +448,18 @@ def main(argv=None) -> None:
         path = cached_bag_path(case.scenario, case.overrides, fingerprint)
         wanted[path] = (case.scenario, case.overrides)
         bag_of[case.key] = path
-    if "speed" in sections:
+    if sections & {"speed", "smoother_speed"}:
         speed_bag = cached_bag_path("open_ocean", speed_overrides(quick), fingerprint)
         wanted[speed_bag] = ("open_ocean", speed_overrides(quick))
+    smoothing_cases = bench_smoother.plan(quick) if "smoother" in sections else []
+    for case in smoothing_cases:
+        path = cached_bag_path(case.scenario, case.overrides, fingerprint)
+        wanted[path] = (case.scenario, case.overrides)
+        bag_of[case.key] = path
+    if "smoother_day" in sections:
+        day_overrides = (f"duration_s={SMOOTHER_DAY_S:g}",)
+        day_bag = cached_bag_path("open_ocean", day_overrides, fingerprint)
+        wanted[day_bag] = ("open_ocean", day_overrides)
     simulation_walls = ensure_bags(wanted)
 
     results = {
@@ -517,6 +569,21 @@ def main(argv=None) -> None:
             CONSISTENCY_CHECKPOINTS_S,
         )
         bias_consistency.print_table(results["consistency"]["table"])
+
+    if "smoother" in sections:
+        results["smoother"] = {
+            "paper002_table1": bench_smoother.PAPER002_TABLE1,
+            "attitude_rms_ratio_target": bench_smoother.ATTITUDE_RMS_RATIO_TARGET,
+            "runs": run_smoothing_cases(smoothing_cases, bag_of),
+        }
+        bench_smoother.print_table1(results["smoother"]["runs"])
+    for section, bags in (
+        ("smoother_speed", {"1 h": speed_bag} if "smoother_speed" in sections else {}),
+        ("smoother_day", {"24 h": day_bag} if "smoother_day" in sections else {}),
+    ):
+        if bags:
+            results[section] = bench_smoother.run_smoother_speed(bags, RUNS_DIR / section)
+            bench_smoother.print_smoother_speed(results[section])
 
     results["meta"]["wall_s"] = time.monotonic() - started
     with open(OUT_DIR / "results.json", "w") as stream:

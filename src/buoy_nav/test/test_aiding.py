@@ -397,7 +397,13 @@ def test_measurement_covariance_floor_keeps_correlations():
 
 def test_registry_applies_the_antenna_attitude_last_and_the_baseline_before_the_heading():
     kinds = [source.kind for source in AIDING_SOURCES]
-    assert kinds == ["gnss_fix", "gnss_velocity", "gnss_baseline", "gnss_heading"]
+    assert kinds == [
+        "gnss_fix",
+        "gnss_velocity",
+        "gnss_baseline",
+        "gnss_baseline_tertiary",
+        "gnss_heading",
+    ]
     assert GnssHeadingSource.superseded_by == GnssBaselineSource.kind
     assert not GnssBaselineSource.enabled_by(FusionConfig(use_gnss_baseline=False))
 

@@ -9,6 +9,7 @@ that list (see "Adding a sensor" in the README).
 
 from buoy_nav.aiding.base import AidingSource
 from buoy_nav.aiding.gnss_baseline import GnssBaseline, GnssBaselineSource
+from buoy_nav.aiding.gnss_baseline_tertiary import GnssBaselineTertiary, GnssBaselineTertiarySource
 from buoy_nav.aiding.gnss_fix import GnssFix, GnssFixSource
 from buoy_nav.aiding.gnss_heading import GnssHeading, GnssHeadingSource
 from buoy_nav.aiding.gnss_velocity import GnssVelocity, GnssVelocitySource
@@ -18,6 +19,7 @@ AIDING_SOURCES: tuple[type[AidingSource], ...] = (
     GnssFixSource,
     GnssVelocitySource,
     GnssBaselineSource,
+    GnssBaselineTertiarySource,
     GnssHeadingSource,
 )
 """The sources the fusion runs. Measurements that share a stamp are applied in this order; the
@@ -34,6 +36,8 @@ __all__ = [
     "AidingSource",
     "GnssBaseline",
     "GnssBaselineSource",
+    "GnssBaselineTertiary",
+    "GnssBaselineTertiarySource",
     "GnssFix",
     "GnssFixSource",
     "GnssHeading",
