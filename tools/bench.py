@@ -19,7 +19,9 @@ as constants and printed beside our figures:
 8. smoother (paper 002 Table 1): process_bag --smooth on 4000 s of sea_state with the paper's
    sensors and with the default ones, and on open_ocean; forward against smoothed errors, and
    the wind corrected with each (tools/bench_smoother.py);
-9. smoother_speed: wall time and peak memory of fuse_bag/process_bag with and without --smooth
+9. antennas (paper 001): heading-only, baseline-vector and three-antenna models side by side on
+   a flight-like and two buoy trajectories (tools/bench_antennas.py);
+10. smoother_speed: wall time and peak memory of fuse_bag/process_bag with and without --smooth
    on one hour of open_ocean; smoother_day: the same on 24 hours (a long section: the
    simulation and four runs of a day of data take hours).
 
@@ -28,7 +30,7 @@ hash of the simulator's sources and parameter files, so a second run only proces
 go to stdout and out/bench/results.json, progress to stderr.
 
     python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|smoother|
-                                            smoother_speed|smoother_day ...]
+                                            antennas|smoother_speed|smoother_day ...]
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -50,6 +52,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
+import bench_antennas
 import bench_smoother
 import numpy as np
 from bench_analysis import ANALYSES, wrap_deg
@@ -114,6 +117,7 @@ SECTIONS = (
     "live",
     "consistency",
     "smoother",
+    "antennas",
     "smoother_speed",
     "smoother_day",
 )
@@ -577,6 +581,9 @@ def main(argv=None) -> None:
             "runs": run_smoothing_cases(smoothing_cases, bag_of),
         }
         bench_smoother.print_table1(results["smoother"]["runs"])
+    if "antennas" in sections:
+        results["antennas"] = bench_antennas.run_antennas(quick)
+        bench_antennas.print_antennas(results["antennas"])
     for section, bags in (
         ("smoother_speed", {"1 h": speed_bag} if "smoother_speed" in sections else {}),
         ("smoother_day", {"24 h": day_bag} if "smoother_day" in sections else {}),

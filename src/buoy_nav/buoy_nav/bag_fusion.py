@@ -215,6 +215,9 @@ class OfflineFusion:
             )
         for key, count in sorted(self.rejections.items()):
             lines.append(f"rejected message {key}: {count}")
+        for source in self.engine.sources:
+            if source.enabled and source.configuration_problem is not None:
+                lines.append(f"warning: {source.kind}: {source.configuration_problem}")
         return lines
 
 

@@ -11,7 +11,7 @@ produced it. Truth topics (``truth/*``) are copied unchanged, so the output carr
 answer. With ``--smooth`` ``nav/*`` carry the fixed-interval smoother's solution (every sample
 estimated from the whole recording, :mod:`buoy_nav.smoother`) and ``nav/forward/odometry`` the
 forward filter's; the run reads the bag twice and keeps its records in a temporary directory
-beside OUT_BAG (about 1.5 GB per hour of 100 Hz data, removed at the end). Parameters come
+beside OUT_BAG (about 0.35 GB per hour of 100 Hz data, removed at the end). Parameters come
 from the same YAML files the node takes (sections ``/**`` and ``fusion_node``).
 
 OUT_BAG is written under a temporary name beside it and appears only when complete; it may not

@@ -162,6 +162,9 @@ class FusionNode(FlushingNode):
             f"{origin}; output {rate}, "
             f"{'real time' if config.realtime_output else 'delayed'}"
         )
+        for source in self.engine.sources:
+            if source.enabled and source.configuration_problem is not None:
+                self.get_logger().warning(f"{source.kind}: {source.configuration_problem}")
 
     def _declare_fusion_config(self) -> FusionConfig:
         return self.declare_config(

@@ -1,9 +1,9 @@
 """The forward filter's solutions kept on disk, and the smoothed solutions made from them.
 
 A solution is stored as the forward filter emitted it (nominal state, bias-corrected rates and
-force, covariance blocks) with the exact header stamp and the bag log time it is written with;
-208 float64 per kB, 0.35 kB per solution, 1.2 GB per hour at 100 Hz (on disk, see
-:mod:`buoy_nav.spill`). After the backward pass the smoothed error of each solution's stamp
+force, covariance blocks) with the exact header stamp and the bag log time it is written with:
+475 bytes per solution, 0.17 GB per hour at 100 Hz (on disk, see :mod:`buoy_nav.spill`). After
+the backward pass the smoothed error of each solution's stamp
 (:class:`buoy_nav.smoother.SmoothedEpochs`) is injected into its nominal state with the filter's
 own convention (:func:`buoy_nav.error_state_filter.inject_error_state`, here for whole blocks of
 solutions at once): ``R = Exp([φ×]) R``, ``v + δv``, the position moved by δp ENU metres, the

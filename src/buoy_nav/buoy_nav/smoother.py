@@ -34,11 +34,11 @@ x_k⁺) and δx̂_{k+1} + δx_{k+1}^s (relative to x_{k+1}⁻); over the 0.1 s o
 changes by the bias errors times 0.1 s, far below its σ. Its covariance is P_k^s.
 
 **Memory.** The records go to a temporary file (:mod:`buoy_nav.spill`), not to memory: per
-epoch Φ (n²) and two packed covariances (n(n+1)/2 each) plus n, 3.9 kB for n = 15, 6.8 kB for
-n = 18, 10-20 epochs per second. In memory there are the epochs' stamps (9 bytes each) and
-blocks of a few thousand records, so the memory stays under a few hundred MB whatever the
-length of the recording; the disk holds about 0.3 GB per hour of 10 Hz GNSS aiding (more with
-the solutions, see :mod:`buoy_nav.smoothed_solutions`).
+epoch Φ (n²) and two packed covariances (n(n+1)/2 each) plus n, 3.8 kB for n = 15, and 1.2 kB
+of smoothed results; one epoch per measurement stamp (ten a second with 10 Hz GNSS), so 0.18 GB
+per hour. In memory there are the epochs' stamps (16 bytes each) and blocks of a few thousand
+records, so the memory stays under a few hundred MB whatever the length of the recording (the
+solutions are kept alike, see :mod:`buoy_nav.smoothed_solutions`).
 """
 
 from __future__ import annotations

@@ -84,11 +84,11 @@ def test_near_collinear_layout_is_reported_and_its_baselines_not_fused():
         tertiary_antenna_body_m=off_line,
     )
     source = GnssBaselineTertiarySource(config, STATES)
-    assert "near-collinear" in source.layout_problem
+    assert "near-collinear" in source.configuration_problem
     assert source.validated(GnssBaselineTertiary(np.subtract(off_line, PRIMARY))) == (
         Reason.GEOMETRY
     )
-    assert GnssBaselineTertiarySource(CONFIG, STATES).layout_problem is None
+    assert GnssBaselineTertiarySource(CONFIG, STATES).configuration_problem is None
 
 
 def test_length_disagreeing_with_the_antennas_is_rejected_and_counted():

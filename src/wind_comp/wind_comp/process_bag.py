@@ -11,7 +11,7 @@ The new bag holds ``nav/*``, ``wind/true``, the wind products (``wind/mean_<wind
 products are also written to ``<OUT_BAG>_wind_products.csv``. With ``--smooth`` ``nav/*`` carry
 the fixed-interval smoother's solution, the wind is corrected with the smoothed attitude and
 velocity, and the forward filter's odometry is kept as ``nav/forward/odometry`` (the bag is read
-twice; temporary records beside OUT_BAG, about 1.5 GB per hour of 100 Hz data). Parameters come
+twice; temporary records beside OUT_BAG, about 0.35 GB per hour of 100 Hz data). Parameters come
 from the same YAML files the nodes take.
 
 Both outputs are written under temporary names beside them and appear only when complete; they

@@ -16,7 +16,7 @@ per-baseline noise).
 whose two baselines are within :data:`~buoy_common.extrinsics.MIN_TERTIARY_BASELINE_ANGLE_DEG`
 of each other (near-collinear antennas) adds nothing the first baseline does not observe and
 would count one direction twice: the source says so (:attr:`GnssBaselineTertiarySource.
-layout_problem`, reported by the tools and the node) and rejects every measurement as
+configuration_problem`, reported by the tools and the node) and rejects every measurement as
 ``geometry`` instead of fusing it.
 
 **Bad input.** A measured vector whose length differs from the configured primary → tertiary
@@ -68,12 +68,10 @@ class GnssBaselineTertiarySource(DualAntennaSource):
     def __init__(self, config, states):
         super().__init__(config, states)
         tertiary = config.tertiary_baseline_body_m
-        self.layout_problem: str | None = None
-        """Why the configured antennas cannot fix the attitude (None: they can)."""
         if tertiary is None:
             self._baseline_body_m = np.full(3, np.nan)
             self._baseline_length_m = np.nan
-            self.layout_problem = "no tertiary antenna configured (gnss.tertiary_antenna)"
+            self.configuration_problem = "no tertiary antenna configured (gnss.tertiary_antenna)"
         else:
             self._baseline_body_m = np.array(tertiary)
             self._baseline_length_m = float(np.linalg.norm(tertiary))
@@ -83,7 +81,7 @@ class GnssBaselineTertiarySource(DualAntennaSource):
                 config.tertiary_antenna_body_m,
             )
             if angle_deg < MIN_TERTIARY_BASELINE_ANGLE_DEG:
-                self.layout_problem = (
+                self.configuration_problem = (
                     f"near-collinear antennas: the primary-tertiary baseline is {angle_deg:.1f}° "
                     f"from the primary-secondary one (at least "
                     f"{MIN_TERTIARY_BASELINE_ANGLE_DEG:g}° needed); gnss/baseline_tertiary is "
@@ -107,7 +105,7 @@ class GnssBaselineTertiarySource(DualAntennaSource):
         baseline = as_float_array(measurement.baseline_enu_m, (3,))
         if isinstance(baseline, Reason):
             return baseline
-        if self.layout_problem is not None:
+        if self.configuration_problem is not None:
             return Reason.GEOMETRY
         length_error = float(np.linalg.norm(baseline)) - self._baseline_length_m
         if abs(length_error) > self._length_tolerance_m:
