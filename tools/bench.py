@@ -346,29 +346,6 @@ def run_cases(cases: list[Case], bag_of: dict[str, Path]) -> dict[str, dict]:
     return results
 
 
-def run_smoothing_cases(cases, bag_of: dict[str, Path]) -> dict[str, dict]:
-    RUNS_DIR.mkdir(parents=True, exist_ok=True)
-    results = {}
-    with ProcessPoolExecutor(WORKERS) as pool:
-        futures = {
-            pool.submit(
-                bench_smoother.run_case,
-                case,
-                str(bag_of[case.key]),
-                str(RUNS_DIR / case.key.replace("/", "_")),
-            ): case
-            for case in cases
-        }
-        for done, future in enumerate(as_completed(futures), 1):
-            case = futures[future]
-            results[case.key] = future.result()
-            log(
-                f"bench: [{done}/{len(cases)}] process_bag --smooth {case.label}: "
-                f"{results[case.key]['process_bag_smooth_wall_s']:.1f} s"
-            )
-    return results
-
-
 # ---------------------------------------------------------------------------------------------
 # Table 5: speed.
 
@@ -578,7 +555,7 @@ def main(argv=None) -> None:
         results["smoother"] = {
             "paper002_table1": bench_smoother.PAPER002_TABLE1,
             "attitude_rms_ratio_target": bench_smoother.ATTITUDE_RMS_RATIO_TARGET,
-            "runs": run_smoothing_cases(smoothing_cases, bag_of),
+            "runs": bench_smoother.run_cases(smoothing_cases, bag_of, RUNS_DIR, WORKERS),
         }
         bench_smoother.print_table1(results["smoother"]["runs"])
     if "antennas" in sections:

@@ -26,6 +26,7 @@ import resource
 import subprocess
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -141,6 +142,31 @@ def run_case(case: SmoothingCase, in_bag: str, out_bag: str) -> dict:
     result["overrides"] = list(case.overrides)
     result["label"] = case.label
     return result
+
+
+def run_cases(
+    cases: list[SmoothingCase], bag_of: dict[str, Path], runs_dir: Path, workers: int
+) -> dict[str, dict]:
+    """:func:`run_case` of each case on its bag, ``workers`` at a time."""
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    results = {}
+    with ProcessPoolExecutor(workers) as pool:
+        futures = {
+            pool.submit(
+                run_case, case, str(bag_of[case.key]), str(runs_dir / case.key.replace("/", "_"))
+            ): case
+            for case in cases
+        }
+        for done, future in enumerate(as_completed(futures), 1):
+            case = futures[future]
+            results[case.key] = future.result()
+            print(
+                f"bench: [{done}/{len(cases)}] process_bag --smooth {case.label}: "
+                f"{results[case.key]['process_bag_smooth_wall_s']:.1f} s",
+                file=sys.stderr,
+                flush=True,
+            )
+    return results
 
 
 def odometry_arrays(reader: BagReader, topic: str):
