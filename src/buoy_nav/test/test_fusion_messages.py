@@ -106,7 +106,9 @@ def sensor_inputs():
     inputs = []
     with BagReader(SEA_STATE_BAG) as reader:
         end_ns = reader.start_ns + int(SECONDS_OF_BAG * NANOSECONDS_PER_SECOND)
-        for record in reader.messages(list(FUSION_INPUT_MSGTYPES)):
+        # The bag's inputs: a dual-antenna receiver, so no gnss/baseline_tertiary.
+        present = {name.lstrip("/") for name in reader.topics}
+        for record in reader.messages([t for t in FUSION_INPUT_MSGTYPES if t in present]):
             if record.log_time_ns > end_ns:
                 break
             message = deserialize_message(record.raw, RCLPY_CLASSES[record.msgtype])
