@@ -7,19 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from test_process_bag import (
-    BAGS_DIR,
-    BUOY_PARAMETERS,
-    COMPENSATOR,
-    WindRun,
-    processed_bag,
-    quaternion,
-)
 
 from buoy_common.bag_io import BagReader
 from buoy_nav.config import fusion_config_from_files
+from processed_bags import BAGS_DIR, BUOY_PARAMETERS, processed_bag
 from ros_messages import raw_stamp_ns
 from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files
 
 BAG = "sea_state"
 CONVERGED_AFTER_S = 30.0
@@ -29,13 +23,22 @@ CONVERGED_AFTER_S = 30.0
 def smoothed_bag(tmp_path_factory):
     out = tmp_path_factory.mktemp("smoothed") / BAG
     process_bag(
-        BAGS_DIR / BAG, out, fusion_config_from_files([BUOY_PARAMETERS]), COMPENSATOR, smooth=True
+        BAGS_DIR / BAG,
+        out,
+        fusion_config_from_files([BUOY_PARAMETERS]),
+        compensator_config_from_files([BUOY_PARAMETERS]),
+        smooth=True,
     )
     return out
 
 
 def odometry_by_stamp(reader: BagReader, topic: str) -> dict[int, object]:
     return {raw_stamp_ns(r.raw): reader.decode(r) for r in reader.messages([topic])}
+
+
+def quaternion(message) -> list[float]:
+    q = message.pose.pose.orientation
+    return [q.x, q.y, q.z, q.w]
 
 
 def attitude_rms_deg(odometry: dict[int, object], truth: dict[int, object], from_ns: int):
@@ -71,18 +74,27 @@ def test_smoothed_attitude_is_closer_to_the_truth_than_the_forward_one(smoothed_
     assert np.linalg.norm(smoothed_rms) < np.linalg.norm(forward_rms), figures
 
 
-def wind_error_rms_mps(run: WindRun) -> float:
-    """RMS norm of corrected − true wind per sample, on the samples with a truth sample."""
-    valid = ~np.isnan(run.true_wind_enu_mps).any(axis=1)
-    common, at_wind, at_truth = np.intersect1d(
-        run.true_wind_ns[valid], run.truth_ns, return_indices=True
-    )
-    assert common.size > 1000
-    error = run.true_wind_enu_mps[valid][at_wind] - run.truth_enu_mps[at_truth]
+def stamped_vectors(reader: BagReader, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    records = list(reader.messages([topic]))
+    stamps = np.array([raw_stamp_ns(r.raw) for r in records])
+    vectors = np.array([[m.vector.x, m.vector.y, m.vector.z] for m in map(reader.decode, records)])
+    return stamps, vectors
+
+
+def wind_error_rms_mps(bag) -> float:
+    """RMS norm of corrected − true wind per sample, on the samples with a truth sample of the
+    same stamp."""
+    with BagReader(bag) as reader:
+        wind_ns, wind = stamped_vectors(reader, "wind/true")
+        truth_ns, truth = stamped_vectors(reader, "truth/wind")
+    valid = ~np.isnan(wind).any(axis=1)
+    _, at_wind, at_truth = np.intersect1d(wind_ns[valid], truth_ns, return_indices=True)
+    assert at_wind.size > 1000
+    error = wind[valid][at_wind] - truth[at_truth]
     return float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
 
 
 def test_smoothed_wind_is_no_worse_than_the_forward_wind(smoothed_bag, tmp_path_factory):
-    forward = wind_error_rms_mps(WindRun(processed_bag(tmp_path_factory, BAG)))
-    smoothed = wind_error_rms_mps(WindRun(smoothed_bag))
+    forward = wind_error_rms_mps(processed_bag(tmp_path_factory, BAG))
+    smoothed = wind_error_rms_mps(smoothed_bag)
     assert smoothed <= forward, f"wind RMS error: forward {forward:.5f}, smoothed {smoothed:.5f}"
