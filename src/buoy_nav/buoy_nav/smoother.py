@@ -48,7 +48,7 @@ from array import array
 import numpy as np
 from scipy.linalg import lapack
 
-from buoy_nav.spill import BLOCK_RECORDS, SpillDirectory, SpillTable
+from buoy_nav.spill import BLOCK_RECORDS, SpillDirectory, SpillTable, read_rows
 from buoy_nav.state_layout import StateLayout
 
 
@@ -110,7 +110,6 @@ class SmootherRecorder:
         self.packing = SymmetricPacking(states.dim)
         self.epochs: SpillTable = spill.table("epochs", packed_dtype(states.dim))
         self._smoothed_path = spill.path / "smoothed.bin"
-        self._smoothed: np.memmap | None = None
         self._pending: np.void | None = None
         self._times = array("d")  # 8 bytes per epoch, not a Python float's 32
         self._segment_starts = array("q")
@@ -177,16 +176,15 @@ class SmootherRecorder:
         next_transition = identity
         next_prior = identity
         next_continues = False  # epoch k+1 exists and is in the segment of epoch k
-        smoothed = np.memmap(
-            self._smoothed_path, dtype=smoothed_dtype(n), mode="w+", shape=(max(count, 1),)
-        )
+        smoothed_records = smoothed_dtype(n)
+        smoothed = open(self._smoothed_path, "wb")  # noqa: SIM115 (closed below)
         stop = count
         while stop > 0:
             start = max(0, stop - BLOCK_RECORDS)
             rows = self.epochs.rows(start, stop)
             posterior_all = packing.unpack(rows["posterior"])
             prior_all = packing.unpack(rows["prior"])
-            block = np.zeros(stop - start, dtype=smoothed.dtype)
+            block = np.zeros(stop - start, dtype=smoothed_records)
             for i in range(stop - start - 1, -1, -1):
                 posterior = posterior_all[i]
                 if next_continues:
@@ -212,10 +210,11 @@ class SmootherRecorder:
                 next_transition = rows["transition"][i]
                 next_prior = prior_all[i]
                 next_continues = not rows["segment_start"][i]
-            smoothed[start:stop] = block
+            # Made last block first; each goes to its place in the file.
+            smoothed.seek(start * smoothed_records.itemsize)
+            block.tofile(smoothed)
             stop = start
-        smoothed.flush()
-        self._smoothed = smoothed
+        smoothed.close()
         self.epochs.close()
         self.smoothed_epochs = SmoothedEpochs(
             np.frombuffer(self._times, dtype=np.float64),
@@ -226,7 +225,7 @@ class SmootherRecorder:
 
     def smoothed_rows(self, start: int, stop: int) -> np.ndarray:
         """Smoothed epochs ``start`` to ``stop`` (:func:`smoothed_dtype` records, a copy)."""
-        return np.array(self._smoothed[start:stop])
+        return read_rows(self._smoothed_path, smoothed_dtype(self.states.dim), start, stop)
 
 
 class SmoothedEpochs:

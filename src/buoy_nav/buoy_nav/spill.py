@@ -3,7 +3,8 @@
 The smoother stores what its backward pass needs (one record per covariance epoch, one per
 navigation solution) while the forward filter runs; a day of 100 Hz data is gigabytes, which
 belong on disk, not in memory. Records are buffered in blocks and written with one call per
-block; reading maps the file (numpy.memmap), so a slice costs only the pages it touches.
+block; a slice is read back with one positioned read (not a memory map, whose pages would count
+as the process's memory until the kernel drops them: the resident memory stays at one block).
 """
 
 from __future__ import annotations
@@ -27,7 +28,6 @@ class SpillTable:
         self._block = np.zeros(BLOCK_RECORDS, dtype=self.dtype)
         self._filled = 0
         self._written = 0
-        self._view: np.memmap | None = None
 
     def __len__(self) -> int:
         return self._written + self._filled
@@ -60,17 +60,20 @@ class SpillTable:
         self._stream.close()
 
     def rows(self, start: int, stop: int) -> np.ndarray:
-        """Records ``start`` to ``stop`` (a copy in memory)."""
+        """Records ``start`` to ``stop`` (read into memory)."""
         self.finish_writing()
-        if self._written == 0:
-            return np.zeros(0, dtype=self.dtype)
-        if self._view is None:
-            self._view = np.memmap(self.path, dtype=self.dtype, mode="r", shape=(self._written,))
-        return np.array(self._view[start:stop])
+        return read_rows(self.path, self.dtype, start, min(stop, self._written))
 
     def close(self) -> None:
         self.finish_writing()
-        self._view = None
+
+
+def read_rows(path: Path, dtype: np.dtype, start: int, stop: int) -> np.ndarray:
+    """Records ``start`` to ``stop`` of a file of ``dtype`` records."""
+    count = max(0, stop - start)
+    if count == 0:
+        return np.zeros(0, dtype=dtype)
+    return np.fromfile(path, dtype=dtype, count=count, offset=start * dtype.itemsize)
 
 
 class SpillDirectory:
