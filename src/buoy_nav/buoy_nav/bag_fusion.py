@@ -253,8 +253,10 @@ def fuse_bag(
         if smooth:
             fusion = OfflineFusion(config, None, spill_parent_of(out_bag), smooth=True)
             try:
-                forward_pass(reader, fusion, sensors, relative_of, f"fuse_bag {in_bag}")
+                # The writing process starts during the forward pass: until it is ready the
+                # writer keeps what it is given, and the second pass produces fast.
                 with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+                    forward_pass(reader, fusion, sensors, relative_of, f"fuse_bag {in_bag}")
                     fusion.writer = writer
                     for message, values in merged_with_smoothed(reader, fusion, truth):
                         if message is not None:

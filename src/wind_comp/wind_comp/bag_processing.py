@@ -211,13 +211,15 @@ def process_bag(
         if smooth:
             fusion = OfflineFusion(fusion_config, None, spill_parent_of(out_bag), smooth=True)
             try:
-                forward_pass(reader, fusion, sensors, relative_of, f"process_bag {in_bag}")
-                compensation = smoothed_compensation(
-                    reader, fusion, compensator_config, out_bag, overwrite, stored_wind, truth
-                )
+                # The writing process starts during the forward pass: until it is ready the
+                # writer keeps what it is given, and the second pass produces fast.
+                with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+                    forward_pass(reader, fusion, sensors, relative_of, f"process_bag {in_bag}")
+                    compensation = smoothed_compensation(
+                        reader, fusion, compensator_config, writer, stored_wind, truth
+                    )
             finally:
                 fusion.close()
-            writer = compensation.writer
         else:
             fusion, compensation, writer = forward_compensation(
                 reader,
@@ -250,28 +252,26 @@ def smoothed_compensation(
     reader: BagReader,
     fusion: OfflineFusion,
     compensator_config: CompensatorConfig,
-    out_bag,
-    overwrite: bool,
+    writer: BackgroundBagWriter,
     stored_wind: str,
     truth: list[str],
 ) -> OfflineCompensation:
     """The compensation of a smoothing run, after ``fusion``'s forward pass: the smoothed
-    solutions and the anemometer samples in log-time order; the output bag written."""
-    with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
-        fusion.writer = writer
-        compensation = OfflineCompensation(compensator_config, writer)
-        log_time_ns = reader.start_ns
-        for message, solution in merged_with_smoothed(reader, fusion, [stored_wind, *truth]):
-            if message is None:
-                forward, smoothed, log_time_ns = solution
-                fusion.write_smoothed_values(forward, smoothed, log_time_ns)
-                compensation.add_navigation([smoothed])
-                continue
-            log_time_ns = message.log_time_ns
-            writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-            if message.topic == stored_wind:
-                compensation.add_wind(reader, message)
-        compensation.finish(log_time_ns)
+    solutions and the anemometer samples in log-time order, written to ``writer``."""
+    fusion.writer = writer
+    compensation = OfflineCompensation(compensator_config, writer)
+    log_time_ns = reader.start_ns
+    for message, solution in merged_with_smoothed(reader, fusion, [stored_wind, *truth]):
+        if message is None:
+            forward, smoothed, log_time_ns = solution
+            fusion.write_smoothed_values(forward, smoothed, log_time_ns)
+            compensation.add_navigation([smoothed])
+            continue
+        log_time_ns = message.log_time_ns
+        writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+        if message.topic == stored_wind:
+            compensation.add_wind(reader, message)
+    compensation.finish(log_time_ns)
     return compensation
 
 
