@@ -59,7 +59,8 @@ bags: venv
 	$(BIN)/python tools/record_bags.py
 
 colcon: venv
-	cd ros2_ws && ../$(BIN)/colcon build --symlink-install
+	# The venv is no colcon install space: without this, colcon warns that it lacks local_setup.
+	cd ros2_ws && env -u AMENT_PREFIX_PATH ../$(BIN)/colcon build --symlink-install
 
 clean:
 	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log out .pytest_cache .ruff_cache

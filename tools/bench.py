@@ -16,21 +16,29 @@ as constants and printed beside our figures:
    against;
 7. consistency: Monte-Carlo normalised errors of the accelerometer bias over many seeds
    (tools/bias_consistency.py);
-8. smoother (paper 002 Table 1): process_bag --smooth on 4000 s of sea_state with the paper's
-   sensors and with the default ones, and on open_ocean; forward against smoothed errors, and
-   the wind corrected with each (tools/bench_smoother.py);
-9. antennas (paper 001): heading-only, baseline-vector and three-antenna models side by side on
+8. sensor_sets: the sensor sets beyond RTK on sea_state and open_ocean, with outages
+   (tools/bench_sensor_sets.py);
+9. smoother (paper 002 Table 1, short): process_bag --smooth on sea_state with the paper's
+   sensors and with the default ones, and on open_ocean, 600 s each; forward against smoothed
+   errors, and the wind corrected with each (tools/bench_smoother.py); smoother_table1: the
+   same on the paper's 4000 s (long);
+10. antennas (paper 001): heading-only, baseline-vector and three-antenna models side by side on
    a flight-like and two buoy trajectories (tools/bench_antennas.py);
-10. smoother_speed: wall time and peak memory of fuse_bag/process_bag with and without --smooth
-   on one hour of open_ocean; smoother_day: the same on 24 hours (a long section: the
+11. smoother_speed (long): wall time and peak memory of fuse_bag/process_bag with and without
+   --smooth on one hour of open_ocean; smoother_day (long): the same on 24 hours (the
    simulation and four runs of a day of data take hours).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|smoother|
-                                            antennas|smoother_speed|smoother_day ...]
+    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
+                                            smoother|antennas|smoother_table1|smoother_speed|
+                                            smoother_day ...]
+
+Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
+runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours), which run only when
+named.
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -116,13 +124,16 @@ SECTIONS = (
     "speed",
     "live",
     "consistency",
+    "sensor_sets",
     "smoother",
     "antennas",
+    "smoother_table1",
     "smoother_speed",
     "smoother_day",
 )
-# One day of data: simulated and processed only when asked for by name.
-DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s != "smoother_day")
+LONG_SECTIONS = ("smoother_table1", "smoother_speed", "smoother_day")
+"""Sections of long runs (simulated and processed only when named with --only)."""
+DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in LONG_SECTIONS)
 SMOOTHER_DAY_S = 86400.0
 WORKERS = max(1, min(2, os.cpu_count() or 1))
 
@@ -432,7 +443,12 @@ def main(argv=None) -> None:
     if sections & {"speed", "smoother_speed"}:
         speed_bag = cached_bag_path("open_ocean", speed_overrides(quick), fingerprint)
         wanted[speed_bag] = ("open_ocean", speed_overrides(quick))
-    smoothing_cases = bench_smoother.plan(quick) if "smoother" in sections else []
+    smoothing_cases = [
+        case
+        for section in ("smoother", "smoother_table1")
+        if section in sections
+        for case in bench_smoother.plan(section, quick)
+    ]
     for case in smoothing_cases:
         path = cached_bag_path(case.scenario, case.overrides, fingerprint)
         wanted[path] = (case.scenario, case.overrides)
@@ -456,6 +472,16 @@ def main(argv=None) -> None:
         }
     }
     case_results = run_cases(cases, bag_of) if cases else {}
+    if "sensor_sets" in sections:
+        # Sensor sets beyond RTK, the outage test and the motion pack's lag: their own tool,
+        # which writes out/bench/sensor_sets.json.
+        import bench_sensor_sets
+
+        for scenario in ("sea_state", "open_ocean"):
+            bench_sensor_sets.main(
+                ["--scenario", scenario, "--outages", *(["--quick"] if quick else [])]
+            )
+            shutil.copy(OUT_DIR / "sensor_sets.json", OUT_DIR / f"sensor_sets_{scenario}.json")
     if "attitude" in sections:
         attitude = {c.scenario: case_results[c.key] for c in cases if c.key.startswith("attitude/")}
         other_seeds = {
@@ -551,13 +577,20 @@ def main(argv=None) -> None:
         )
         bias_consistency.print_table(results["consistency"]["table"])
 
-    if "smoother" in sections:
-        results["smoother"] = {
-            "paper002_table1": bench_smoother.PAPER002_TABLE1,
-            "attitude_rms_ratio_target": bench_smoother.ATTITUDE_RMS_RATIO_TARGET,
-            "runs": bench_smoother.run_cases(smoothing_cases, bag_of, RUNS_DIR, WORKERS),
-        }
-        bench_smoother.print_table1(results["smoother"]["runs"])
+    smoothed_runs = (
+        bench_smoother.run_cases(smoothing_cases, bag_of, RUNS_DIR, WORKERS)
+        if smoothing_cases
+        else {}
+    )
+    for section in ("smoother", "smoother_table1"):
+        if section in sections:
+            runs = {k: v for k, v in smoothed_runs.items() if k.startswith(f"{section}/")}
+            results[section] = {
+                "paper002_table1": bench_smoother.PAPER002_TABLE1,
+                "attitude_rms_ratio_target": bench_smoother.ATTITUDE_RMS_RATIO_TARGET,
+                "runs": runs,
+            }
+            bench_smoother.print_table1(runs)
     if "antennas" in sections:
         results["antennas"] = bench_antennas.run_antennas(quick)
         bench_antennas.print_antennas(results["antennas"])

@@ -6,14 +6,25 @@ PACKAGE = "buoy_common"
 HERE = Path(__file__).parent
 
 
-def config_files():
-    return [str(p.relative_to(HERE)) for p in sorted((HERE / "config").rglob("*.yaml"))]
+# What ros2 launch and the nodes look for under share/<package>: parameter files, the Foxglove
+# layout and the launch files.
+SHARED_FOLDERS = ("config", "launch")
+SHARED_SUFFIXES = (".yaml", ".json", ".py")
 
 
-def config_data_files():
-    """Install config/ (and its sub-folders) under share/<package>/config."""
+def shared_files():
+    return [
+        str(path.relative_to(HERE))
+        for folder in SHARED_FOLDERS
+        for path in sorted((HERE / folder).rglob("*"))
+        if path.suffix in SHARED_SUFFIXES
+    ]
+
+
+def shared_data_files():
+    """Install config/ and launch/ (and their sub-folders) under share/<package>/."""
     grouped = {}
-    for relative in config_files():
+    for relative in shared_files():
         folder = str(Path("share", PACKAGE, Path(relative).parent))
         grouped.setdefault(folder, []).append(relative)
     return sorted(grouped.items())
@@ -26,7 +37,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
-        *config_data_files(),
+        *shared_data_files(),
     ],
     install_requires=["setuptools"],
     extras_require={"test": ["pytest"]},

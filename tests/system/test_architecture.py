@@ -29,6 +29,9 @@ ROSDEP_KEYS = {
     "mcap": "python3-mcap",
     "mcap_ros2": "python3-mcap-ros2-support",
     "tqdm": "python3-tqdm",
+    "foxglove": "python3-foxglove-sdk-pip",
+    "ppigrf": "python3-ppigrf-pip",
+    "pygeomag": "python3-pygeomag-pip",
 }
 
 

@@ -206,7 +206,9 @@ def test_cli_writes_one_nav_set_per_imu_sample_after_alignment(cli_run):
         truth_topics = {n: i for n, i in source.topics.items() if n.startswith("/truth/")}
         truth_raw = {n: [r.raw for r in source.messages([n])] for n in truth_topics}
     with BagReader(out) as fused:
-        assert set(fused.topics) == set(NAV_TOPICS) | set(truth_topics)
+        assert set(fused.topics) == set(NAV_TOPICS) | {"/tf"} | set(truth_topics)
+        assert fused.topics["/tf"].msgtype == "tf2_msgs/msg/TFMessage"
+        assert fused.topics["/tf"].count == fused.topics["/nav/odometry"].count
         assert fused.topics["/nav/odometry"].msgtype == "nav_msgs/msg/Odometry"
         nav_stamps = {topic: stamps_of(fused, topic) for topic in NAV_TOPICS}
         for topic, info in truth_topics.items():
@@ -248,7 +250,8 @@ def test_cli_output_is_read_by_the_independent_mcap_readers(cli_run):
 
 @pytest.fixture(scope="module")
 def short_bags(tmp_path_factory):
-    """The first 12 s of the static bag (alignment takes 10 s), with and without gnss/heading."""
+    """The first 12 s of the static bag (alignment takes 10 s), with and without a heading
+    reference (gnss/heading and gnss/baseline)."""
     directory = tmp_path_factory.mktemp("short_bags")
     bags = {"complete": directory / "complete", "no_heading": directory / "no_heading"}
     with BagReader(BAGS_DIR / "static") as reader:
@@ -257,7 +260,7 @@ def short_bags(tmp_path_factory):
     for name, path in bags.items():
         with BagWriter(path) as writer:
             for record in records:
-                if name == "no_heading" and record.topic == "/gnss/heading":
+                if name == "no_heading" and record.topic in ("/gnss/heading", "/gnss/baseline"):
                     continue
                 writer.write_raw(record.topic, record.msgtype, record.log_time_ns, record.raw)
     return bags
@@ -285,9 +288,9 @@ def test_missing_input_bag(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-def test_bag_without_heading_names_the_missing_topic(short_bags, tmp_path):
+def test_bag_without_heading_names_the_missing_topics(short_bags, tmp_path):
     completed = run_fuse_bag(short_bags["no_heading"], tmp_path / "out")
-    assert_one_line_error(completed, "gnss/heading")
+    assert_one_line_error(completed, "gnss/heading", "gnss/baseline", "imu/mag", "imu/data")
     assert not (tmp_path / "out").exists()
 
 

@@ -6,9 +6,11 @@ would be equal too).
 
 The first minute of ``sea_state`` (shipped geometry) and of ``off_axis`` (its own buoy, sensor
 stamps that never line up), sensor topics and the anemometer cut by log time, is played at twice
-its pace. Both nodes decide on header stamps only, so message timing over DDS must not matter,
-given a latency budget the replay stays within; the compensation node publishes the samples that
-still wait for navigation when it is interrupted, as ``process_bag`` does at the end of its data.
+its pace; ``sea_state`` also with IMU faults written into it (a gyro and an accelerometer spike,
+the IMU clock stepping back 5 s and forward again 10 s later). Both nodes decide on header
+stamps only, so message timing over DDS must not matter, given a latency budget the replay stays
+within; the compensation node publishes the samples that still wait for navigation when it is
+interrupted, as ``process_bag`` does at the end of its data.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rclpy
+from bag_faults import accelerometer_spike, clock_back, clock_forward, faulty_bag, gyro_spike
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -68,6 +71,13 @@ FLUSH_TIMEOUT_S = 10.0
 # The navigation is judged against the truth from this long after its first solution: the
 # first seconds after the alignment carry its errors, which the limits are not about.
 SETTLING_S = 20.0
+# Seconds after the first IMU stamp; the navigation aligns about 10 s in.
+LIVE_FAULTS = [
+    (25.0, gyro_spike),
+    (30.0, accelerometer_spike),
+    (35.0, clock_back),
+    (45.0, clock_forward),
+]
 
 
 class DiagnosticsWatcher:
@@ -169,11 +179,18 @@ def assert_offline_run_is_near_the_truth(name: str, played: Path, offline: Path)
     print(assert_navigation_within_limits(errors, case.navigation_limits(), name))
 
 
-@pytest.mark.parametrize("name", ["sea_state", "off_axis"])
-def test_live_pipeline_equals_process_bag(nodes, tmp_path, name):
+@pytest.mark.parametrize(
+    ("name", "faults"),
+    [("sea_state", False), ("off_axis", False), ("sea_state", True)],
+    ids=["sea_state", "off_axis", "sea_state_imu_faults"],
+)
+def test_live_pipeline_equals_process_bag(nodes, tmp_path, name, faults):
     parameter_files = CASES[name].parameter_files(tmp_path)
     played = tmp_path / "played"
-    cut_bag(CASES[name].bag_path, played, PLAYED_S)
+    if faults:
+        faulty_bag(CASES[name].bag_path, played, PLAYED_S, LIVE_FAULTS, PLAYED_TOPICS)
+    else:
+        cut_bag(CASES[name].bag_path, played, PLAYED_S)
     offline = tmp_path / "offline"
     process_bag(
         played,

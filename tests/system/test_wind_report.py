@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from matplotlib.image import imread
+from scipy.signal import welch
 from scipy.spatial.transform import Rotation
 
 from against_truth import assert_wind_within_budget
@@ -16,7 +17,7 @@ from sensor_sim.simulate_bag import parse_arguments, simulate
 from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files
 from wind_comp.products import WindAverager
-from wind_comp.report import write_report
+from wind_comp.report import figures, write_report
 from wind_comp.report.attitude import attitude_errors_deg, rpy_rad_from_quaternions, rpy_sigma_rad
 from wind_comp.report.data import (
     ReportData,
@@ -67,6 +68,7 @@ def test_report_with_truth_writes_all_figures_and_tables(tmp_path):
     names = sorted(path.name for path in paths)
     assert names == [
         "attitude_error.png",
+        "summary.md",
         "vertical_wind_spectrum.png",
         "wind_products.md",
         "wind_time_series.png",
@@ -85,6 +87,7 @@ def test_report_with_truth_writes_all_figures_and_tables(tmp_path):
 def test_report_without_truth_skips_the_attitude_error(tmp_path):
     paths = write_report(sample_data(with_truth=False), tmp_path)
     assert sorted(path.name for path in paths) == [
+        "summary.md",
         "vertical_wind_spectrum.png",
         "wind_products.md",
         "wind_time_series.png",
@@ -344,3 +347,48 @@ def test_missing_bag_or_wind_topics_exit_with_one_line(sea_state_bags, tmp_path,
         assert error.startswith("wind_report: ") and expected in error
         assert error.count("\n") == 1
     assert not (tmp_path / "report").exists()
+
+
+def test_summary_page_shows_every_figure_the_quality_and_the_filter_health(tmp_path):
+    data = sample_data(with_truth=True)
+    paths = write_report(data, tmp_path)
+    summary = (tmp_path / "summary.md").read_text()
+    for path in paths:
+        if path.suffix == ".png":
+            assert f"]({path.name})" in summary
+    # 10 of the 1300 samples have no corrected wind.
+    assert "| corrected | 1290 | 99.2 % |" in summary
+    assert "| not corrected (NaN: before alignment, gaps, rejected) | 10 | 0.8 % |" in summary
+    # Errors of 0.1°, 0.2°, 0.3° against a 1σ of 0.2°: all inside ±3σ, RMS the offset itself.
+    assert "| roll | 0.200 | 0.200 | 0.100 | 100.0 % |" in summary
+    assert "| heading | 0.200 | 0.200 | 0.300 | 100.0 % |" in summary
+    assert "| 288.4 |" in summary
+
+
+def test_wave_band_holds_the_period_of_the_tilt():
+    # The sample's roll and pitch sway with a 6 s period.
+    low_hz, high_hz = figures._wave_band_hz(sample_data(with_truth=True))
+    assert low_hz < 1 / 6.0 < high_hz
+    assert high_hz - low_hz < 0.1
+
+
+def test_log_band_averaging_keeps_the_level_of_white_noise():
+    rate_hz, sigma = 10.0, 0.3
+    noise = np.random.default_rng(3).normal(scale=sigma, size=36_000)
+    segment = figures._segment_samples(noise.size, rate_hz)
+    frequency_hz, density = welch(noise, fs=rate_hz, nperseg=segment)
+    frequency_hz, density = figures._log_band_average(frequency_hz[1:], density[1:])
+    assert segment == 60 * rate_hz  # an hour of data: 60 s segments, 119 of them
+    assert np.all(np.diff(np.log10(frequency_hz)) > 0)
+    # One-sided density of white noise: 2σ²/f_s.
+    assert np.allclose(density, 2 * sigma**2 / rate_hz, rtol=0.35)
+
+
+def test_directions_across_north_are_drawn_without_jumps():
+    direction = np.array([350.0, 356.0, np.nan, 3.0, 10.0, 359.0])
+    unwrapped = figures._unwrapped_deg(direction)
+    assert np.isnan(unwrapped[2])
+    steps = np.diff(unwrapped[np.isfinite(unwrapped)])
+    assert np.all(np.abs(steps) < 20.0)
+    assert np.allclose(unwrapped[np.isfinite(unwrapped)] % 360.0, direction[np.isfinite(direction)])
+    assert np.allclose(figures._near_deg([5.0, 355.0], 0.0), [5.0, -5.0])

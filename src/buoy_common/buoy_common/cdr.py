@@ -97,10 +97,11 @@ def read_imu_rate_and_acceleration(
     return sec, nanosec, values[13:16], values[25:28]
 
 
-def read_odometry(raw: bytes) -> tuple[int, int, str, str, tuple, tuple] | None:
-    """(sec, nanosec, frame_id, child_frame_id, pose, twist) of a nav_msgs/Odometry: ``pose``
-    = position (x, y, z) then orientation (x, y, z, w), ``twist`` = linear (x, y, z) then
-    angular (x, y, z); the covariances are skipped."""
+def read_odometry(raw: bytes) -> tuple[int, int, str, str, tuple, tuple, tuple] | None:
+    """(sec, nanosec, frame_id, child_frame_id, pose, twist, attitude_variances) of a
+    nav_msgs/Odometry: ``pose`` = position (x, y, z) then orientation (x, y, z, w), ``twist`` =
+    linear (x, y, z) then angular (x, y, z), ``attitude_variances`` = the diagonal of the pose
+    covariance's rotation block (its elements 21, 28, 35); the other covariances are skipped."""
     if raw[:2] != _LITTLE_ENDIAN:
         return None
     try:
@@ -109,10 +110,13 @@ def read_odometry(raw: bytes) -> tuple[int, int, str, str, tuple, tuple] | None:
         child_frame_id, position = _string_at(raw, position)
         position = _aligned(position, 8)
         pose = _POSE.unpack_from(raw, position)
+        attitude_variances = tuple(
+            _F64.unpack_from(raw, position + _POSE.size + 8 * index)[0] for index in (21, 28, 35)
+        )
         twist = _TWIST.unpack_from(raw, position + _POSE_WITH_COVARIANCE_SIZE)
     except (struct.error, ValueError):
         return None
-    return sec, nanosec, frame_id, child_frame_id, pose, twist
+    return sec, nanosec, frame_id, child_frame_id, pose, twist, attitude_variances
 
 
 def read_nav_sat_fix(

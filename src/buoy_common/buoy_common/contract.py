@@ -40,6 +40,9 @@ WIND_STATS_PREFIX = "wind/stats_"
 CURRENT_TOPIC = "current/velocity"
 DIAGNOSTICS_TOPIC = "diagnostics"
 CLOCK_TOPIC = "clock"
+TF_TOPIC = "tf"
+"""``map`` → ``base_link`` of each navigation solution. Relative, like every topic here, so each
+buoy of a fleet has its own tree under its namespace (tf2 listeners take ``-r /tf:=tf``)."""
 
 # -- message types -------------------------------------------------------------------------------
 IMU_MSGTYPE = "sensor_msgs/msg/Imu"
@@ -52,6 +55,7 @@ ODOMETRY_MSGTYPE = "nav_msgs/msg/Odometry"
 FLOAT64_ARRAY_MSGTYPE = "std_msgs/msg/Float64MultiArray"
 DIAGNOSTICS_MSGTYPE = "diagnostic_msgs/msg/DiagnosticArray"
 CLOCK_MSGTYPE = "rosgraph_msgs/msg/Clock"
+TF_MSGTYPE = "tf2_msgs/msg/TFMessage"
 
 SENSOR_MSGTYPES = {
     IMU_RAW_TOPIC: IMU_MSGTYPE,
@@ -88,6 +92,7 @@ OUTPUT_MSGTYPES = {
     WIND_TRUE_TOPIC: VECTOR3_MSGTYPE,
     CURRENT_TOPIC: VECTOR3_MSGTYPE,
     DIAGNOSTICS_TOPIC: DIAGNOSTICS_MSGTYPE,
+    TF_TOPIC: TF_MSGTYPE,
 }
 """Every fixed-name output topic (the wind products are named per window, see
 :func:`wind_mean_topic` and :func:`wind_stats_topic`)."""
@@ -144,8 +149,13 @@ class Reason(StrEnum):
     NON_FINITE = "non_finite"
     OUT_OF_RANGE = "out_of_range"
     """A value no instrument of this kind can report (absurd magnitude)."""
+    IMPLAUSIBLE_CHANGE = "implausible_change"
+    """A change from the previous sample that the platform cannot make in the time between them
+    (an angular acceleration or jerk beyond the platform's limits)."""
     NON_POSITIVE_VARIANCE = "non_positive_variance"
     ZERO_QUATERNION = "zero_quaternion"
+    NON_UNIT_QUATERNION = "non_unit_quaternion"
+    """An orientation quaternion whose norm is not 1 (a driver's error, not a rotation)."""
     WRONG_FRAME = "wrong_frame"
     NO_FIX = "no_fix"
     """``gnss/fix`` with ``status.status < 0``."""
@@ -171,6 +181,9 @@ class Reason(StrEnum):
     INVALID_WIND = "invalid_wind"
     WIND_SPEED_OUT_OF_RANGE = "wind_speed_out_of_range"
     INVALID_STAMP = "invalid_stamp"
+    NAVIGATION_NOT_TRUSTED = "navigation_not_trusted"
+    """The navigation's attitude is too uncertain to correct the wind with: the fusion has
+    found itself inconsistent with its aiding, or has not converged yet."""
 
 
 # -- stamps ----------------------------------------------------------------------------------------

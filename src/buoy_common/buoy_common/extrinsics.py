@@ -81,6 +81,18 @@ def _altitude(value) -> str | None:
     return None if math.isnan(value) or abs(value) < 1.0e5 else "within ±100 km or NaN"
 
 
+def _declination(value) -> str | None:
+    return None if math.isnan(value) or abs(value) <= 180.0 else "within ±180° or NaN"
+
+
+YAW_REFERENCES = ("true_north", "magnetic_north")
+"""What the yaw of ``imu/data`` may be referenced to (parameter ``ahrs.yaw_reference``)."""
+
+
+def _yaw_reference(value) -> str | None:
+    return None if value in YAW_REFERENCES else f"one of {', '.join(YAW_REFERENCES)}"
+
+
 _NAN = math.nan
 
 SHARED_PARAMETERS: dict[str, SharedParameter] = {
@@ -134,11 +146,36 @@ SHARED_PARAMETERS: dict[str, SharedParameter] = {
             "ellipsoidal altitude of the map origin, m; NaN: first fix",
             _altitude,
         ),
+        SharedParameter(
+            "ahrs.yaw_reference",
+            "true_north",
+            "what the yaw of imu/data is referenced to: true_north or magnetic_north",
+            _yaw_reference,
+        ),
+        SharedParameter(
+            "magnetic.declination_deg",
+            _NAN,
+            "magnetic declination at the site, deg, east positive; NaN: geomagnetic model",
+            _declination,
+        ),
+        SharedParameter(
+            "site.latitude_deg",
+            _NAN,
+            "latitude of the site when there is no GNSS fix, deg; NaN: origin.latitude_deg",
+            _latitude,
+        ),
+        SharedParameter(
+            "site.longitude_deg",
+            _NAN,
+            "longitude of the site when there is no GNSS fix, deg; NaN: origin.longitude_deg",
+            _longitude,
+        ),
     )
 }
 """Every shared parameter, by ROS name."""
 
 ORIGIN_PARAMETERS = ("origin.latitude_deg", "origin.longitude_deg", "origin.altitude_m")
+SITE_PARAMETERS = ("site.latitude_deg", "site.longitude_deg")
 
 
 def shared_field(parameter: str) -> Any:
@@ -167,6 +204,7 @@ def check_shared_fields(config) -> None:
     _check_antenna_separation(values)
     _check_tertiary_antenna_separation(values)
     _check_origin_complete(values)
+    _check_site_complete(values)
 
 
 def _check_antenna_separation(values: dict[str, Any]) -> None:
@@ -218,4 +256,14 @@ def _check_origin_complete(values: dict[str, Any]) -> None:
         raise ValueError(
             f"parameter '{unset[0]}': origin.latitude_deg, origin.longitude_deg and "
             "origin.altitude_m must be all set or all NaN"
+        )
+
+
+def _check_site_complete(values: dict[str, Any]) -> None:
+    given = [name for name in SITE_PARAMETERS if name in values]
+    unset = [name for name in given if math.isnan(values[name])]
+    if unset and len(unset) != len(given):
+        raise ValueError(
+            f"parameter '{unset[0]}': site.latitude_deg and site.longitude_deg must be both set "
+            "or both NaN"
         )

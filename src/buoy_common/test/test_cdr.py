@@ -128,6 +128,7 @@ def test_odometry(frame_id, child_frame_id):
         child_frame_id,
         (*xyz(pose.position), *xyzw(pose.orientation)),
         (*xyz(twist.linear), *xyz(twist.angular)),
+        tuple(float(message.pose.covariance[i]) for i in (21, 28, 35)),
     )
     written = cdr.OdometryWriter(frame_id, child_frame_id).write(
         *STAMPS[0],

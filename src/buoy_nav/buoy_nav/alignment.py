@@ -20,7 +20,14 @@ eq. 4 generalised): with ``R_nb = Rz(ψ) R_L``, ``R_L = Ry(pitch) Rx(roll)``, th
 is ``ψ + atan2(w_y, w_x)`` where ``w = R_L (l_s − l_p)``, so ``ψ = ψ_measured − atan2(w_y, w_x)``.
 The attitude covariance carries the correlation this creates between yaw and tilt errors.
 
+The same solution serves any heading reference that gives the azimuth of a known body vector:
+the magnetometer (the calibrated field, whose azimuth is magnetic north) and a motion pack's
+attitude (its body x axis) as well as the antenna baseline.
+
 Position and velocity come from the latest fix and GNSS velocity, with the lever arm removed.
+Without GNSS (a moored buoy with a magnetometer or a motion pack) the position is the site
+(``site.*``, else ``origin.*``) with :data:`_SITE_POSITION_SIGMA_M`, and the velocity zero with
+the spread of the wave motion seen in the levelling window.
 """
 
 import enum
@@ -50,6 +57,8 @@ from buoy_nav.state_layout import StateLayout
 _TILT_SIGMA_FLOOR_RAD = math.radians(0.05)
 # Velocity 1-σ (m/s) assumed when no GNSS velocity is available at alignment.
 _UNKNOWN_VELOCITY_SIGMA_MPS = 5.0
+# Position 1-σ (m) of a site without a fix: a mooring's watch circle.
+_SITE_POSITION_SIGMA_M = 100.0
 
 
 class AlignmentState(enum.Enum):
@@ -111,6 +120,7 @@ class InMotionAligner:
         self._baseline = np.array(config.baseline_body_m)
         self._fix: _Fix | None = None
         self._velocity: _Velocity | None = None
+        self._site = _site_of(config)
         self.restart()
 
     def restart(self):
@@ -160,30 +170,42 @@ class InMotionAligner:
             t_s, np.array(velocity_enu_mps, dtype=float), np.array(covariance_m2s2, dtype=float)
         )
 
-    def _level_and_head(self, mean_force, yaw_rad: float) -> np.ndarray | None:
-        """R_nb from the mean specific force (body) and a baseline azimuth; None if too steep."""
+    def _level_and_head(self, mean_force, yaw_rad: float, body_vector) -> np.ndarray | None:
+        """R_nb from the mean specific force (body) and the azimuth of ``body_vector``; None if
+        the vector is too steep."""
         roll = math.atan2(mean_force[1], mean_force[2])
         pitch = math.atan2(-mean_force[0], math.hypot(mean_force[1], mean_force[2]))
         levelled = rotation_matrix_from_euler(roll, pitch, 0.0)
-        if horizontal_fraction(levelled, self._baseline) < MIN_HORIZONTAL_BASELINE_FRACTION:
+        if horizontal_fraction(levelled, body_vector) < MIN_HORIZONTAL_BASELINE_FRACTION:
             return None
-        levelled_baseline = levelled @ self._baseline
-        yaw = wrap_angle(yaw_rad - math.atan2(levelled_baseline[1], levelled_baseline[0]))
+        levelled_vector = levelled @ body_vector
+        yaw = wrap_angle(yaw_rad - math.atan2(levelled_vector[1], levelled_vector[0]))
         return rotation_matrix_from_euler(roll, pitch, yaw)
 
     def add_heading(
-        self, t_s: float, yaw_rad: float, variance_rad2: float, gyro_rad_s
+        self,
+        t_s: float,
+        yaw_rad: float,
+        variance_rad2: float,
+        gyro_rad_s,
+        body_vector=None,
     ) -> AlignmentResult | None:
-        """Try to complete the alignment at a heading measurement's stamp.
+        """Try to complete the alignment at a heading measurement's stamp: ``yaw_rad`` is the
+        azimuth (ENU, rad) of the horizontal projection of ``body_vector`` (``base_link``;
+        default: the antenna baseline), ``variance_rad2`` its variance.
 
         The IMU motion must already be integrated up to ``t_s``; ``gyro_rad_s`` is the raw gyro
         rate there (body, rad/s), used to remove the lever-arm velocity. Returns None while the
-        window is short, no recent fix exists, or the baseline is too steep.
+        window is short, no recent fix exists (and no site is configured to stand for one), or
+        the vector is too steep.
         """
         config = self._config
         if self.state is not AlignmentState.WAITING_FOR_GNSS:
             return None
+        body_vector = self._baseline if body_vector is None else np.asarray(body_vector, float)
         fix = self._fix
+        if fix is None and self._site is not None:
+            fix = self._site_fix(t_s)
         if fix is None or t_s - fix.t_s > config.alignment_max_fix_age_s:
             return None
 
@@ -192,13 +214,13 @@ class InMotionAligner:
         relative = rotation_matrix_from_quaternion(self._relative)
         mean_force = relative.T @ mean_start_frame
         earth_rate = earth.earth_rate_enu_rad_s(fix.latitude_rad)
-        rotation = self._level_and_head(mean_force, yaw_rad)
+        rotation = self._level_and_head(mean_force, yaw_rad, body_vector)
         if rotation is None:
             return None
         # The window's frame is inertial, so gravity turned with the Earth during it: the mean
         # lags the end-of-window direction by ω_ie × T/2. Correct with the first solution.
         mean_force = mean_force + np.cross(rotation.T @ earth_rate, mean_force) * (0.5 * duration)
-        rotation = self._level_and_head(mean_force, yaw_rad)
+        rotation = self._level_and_head(mean_force, yaw_rad, body_vector)
         if rotation is None:
             return None
         roll, pitch, yaw = euler_from_rotation_matrix(rotation)
@@ -216,7 +238,7 @@ class InMotionAligner:
         covariance = np.zeros((states.dim, states.dim))
         attitude_bias_covariance = _attitude_and_accel_bias_covariance(
             rotation,
-            rotation @ self._baseline,
+            rotation @ body_vector,
             motion_tilt_variance,
             max(variance_rad2, 0.0),
             accel_bias_variance,
@@ -238,6 +260,10 @@ class InMotionAligner:
         )
         velocity = np.zeros(3)
         velocity_variance = np.full(3, _UNKNOWN_VELOCITY_SIGMA_MPS**2)
+        if self._fix is None:
+            # At a site without GNSS the buoy moves with the waves about a fixed mean: the
+            # window's acceleration spread over a wave's angular frequency bounds the speed.
+            velocity_variance = np.full(3, max(acceleration_variance, 0.01))
         rate = np.asarray(gyro_rad_s, dtype=float)
         measured = self._velocity
         if measured is not None and t_s - measured.t_s <= config.alignment_max_fix_age_s:
@@ -285,6 +311,34 @@ class InMotionAligner:
             yaw_rad=yaw,
             tilt_sigma_rad=math.sqrt(tilt_variance),
         )
+
+    def latest_position_rad(self) -> tuple[float, float] | None:
+        """(latitude, longitude) in rad of the latest fix, else of the site; None: neither."""
+        if self._fix is not None:
+            return self._fix.latitude_rad, self._fix.longitude_rad
+        return self._site
+
+    def _site_fix(self, t_s: float) -> _Fix:
+        """The configured site standing for a fix at ``t_s`` (sea level, watch-circle σ)."""
+        latitude_rad, longitude_rad = self._site
+        return _Fix(
+            t_s,
+            latitude_rad,
+            longitude_rad,
+            0.0,
+            np.eye(3) * _SITE_POSITION_SIGMA_M**2,
+        )
+
+
+def _site_of(config: FusionConfig) -> tuple[float, float] | None:
+    """(latitude, longitude) in rad of the site (``site.*``, else ``origin.*``); None when
+    neither is configured."""
+    latitude, longitude = config.site_latitude_deg, config.site_longitude_deg
+    if math.isnan(latitude):
+        latitude, longitude = config.origin_latitude_deg, config.origin_longitude_deg
+    if math.isnan(latitude):
+        return None
+    return math.radians(latitude), math.radians(longitude)
 
 
 def _attitude_and_accel_bias_covariance(

@@ -1,24 +1,27 @@
-"""Fusion over a recorded bag: the core of ``fusion_node`` fed from a bag, ``nav/*`` written
-to another.
+"""Fusion over a recorded bag: the core of ``fusion_node`` fed from a bag, ``nav/*`` and ``tf``
+written to another.
 
-The sensor topics ``imu/data_raw``, ``gnss/fix``, ``gnss/heading`` (required), ``gnss/vel`` and
-``gnss/baseline`` (used when present) are read in log-time order and go through the same
+The sensor topics ``imu/data_raw`` (required), one heading reference at least (``gnss/heading``,
+``gnss/baseline``, ``imu/mag`` or ``imu/data``), and ``gnss/fix``, ``gnss/vel``, the others
+(used when present) are read in log-time order and go through the same
 conversion (:mod:`buoy_nav.fusion_messages`) and engine as in the live node. Every solution's
 ``nav/odometry``, ``nav/imu``, ``nav/velocity`` and ``nav/fix`` carry the log time of the IMU
-message that produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries
+message that produced it, and so does its ``tf`` (``map`` → ``base_link``, for 3-D views in
+Foxglove or RViz). Truth topics (``truth/*``) are copied unchanged, so the output carries
 its own answer. ``fuse_bag`` is the command line of :func:`fuse_bag`; ``process_bag`` runs
 :class:`OfflineFusion` ahead of the wind compensation.
 
 With ``smooth`` the run takes two passes (:mod:`buoy_nav.smoothed_solutions`): the forward
 filter over the sensor topics, its epochs and solutions spilled to a temporary directory beside
 the output; then the smoother's backward pass, and a second read of the bag for the topics that
-are copied, merged in log-time order with the solutions: ``nav/*`` carry the smoothed solution,
-``nav/forward/odometry`` the forward filter's.
+are copied, merged in log-time order with the solutions: ``nav/*`` and ``tf`` carry the smoothed
+solution, ``nav/forward/odometry`` the forward filter's.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections import Counter
 from collections.abc import Iterable, Iterator
@@ -35,15 +38,20 @@ from buoy_common.bag_io import (
     Recovery,
 )
 from buoy_common.contract import (
-    GNSS_FIX_TOPIC,
+    AHRS_TOPIC,
+    GNSS_BASELINE_TOPIC,
     GNSS_HEADING_TOPIC,
     IMU_RAW_TOPIC,
+    MAGNETOMETER_TOPIC,
     NAV_FORWARD_ODOMETRY_TOPIC,
     NAV_MSGTYPES,
     ODOMETRY_MSGTYPE,
+    TF_MSGTYPE,
+    TF_TOPIC,
     TRUTH_PREFIX,
     bag_topic,
 )
+from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs
 from buoy_nav.aiding import disabled_topics
 from buoy_nav.config import FusionConfig
@@ -57,10 +65,13 @@ from buoy_nav.fusion_messages import (
     nav_values,
     odometry_cdr,
     solution_cdr,
+    transform_cdr,
 )
 from buoy_nav.smoothed_solutions import FixedIntervalSmoother
 
-REQUIRED_TOPICS = (IMU_RAW_TOPIC, GNSS_FIX_TOPIC, GNSS_HEADING_TOPIC)
+REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
+HEADING_TOPICS = (GNSS_HEADING_TOPIC, GNSS_BASELINE_TOPIC, MAGNETOMETER_TOPIC, AHRS_TOPIC)
+"""The fusion needs one of these at least: without a heading reference it cannot align."""
 OPTIONAL_TOPICS = tuple(topic for topic in FUSION_INPUT_MSGTYPES if topic not in REQUIRED_TOPICS)
 PROGRESS_EVERY_MESSAGES = 2000
 
@@ -73,6 +84,7 @@ def relative_topic(name: str) -> str:
 # Relative nav topic → (name stored in the bag, message type).
 NAV_BAG_TOPICS = {topic: (bag_topic(topic), msgtype) for topic, msgtype in NAV_MSGTYPES.items()}
 FORWARD_ODOMETRY_BAG_TOPIC = bag_topic(NAV_FORWARD_ODOMETRY_TOPIC)
+TF_BAG_TOPIC = bag_topic(TF_TOPIC)
 
 
 def sensor_topics_of(
@@ -87,6 +99,12 @@ def sensor_topics_of(
     stored = {relative_topic(name): name for name in reader.topics}
     found = {}
     disabled = disabled_topics(config)
+    usable_headings = [t for t in HEADING_TOPICS if t in stored and t not in disabled]
+    if not usable_headings:
+        raise BagError(
+            f"bag {reader.path}: no heading reference to align with: it needs one of "
+            f"{', '.join(HEADING_TOPICS)} (not switched off by a parameter)"
+        )
     for topic in (*REQUIRED_TOPICS, *OPTIONAL_TOPICS):
         if topic not in stored or topic in disabled:
             continue
@@ -111,14 +129,14 @@ class OfflineFusion:
     def __init__(
         self,
         config: FusionConfig,
-        writer: BagWriter | BackgroundBagWriter | None,
+        writer: BagWriter | BackgroundBagWriter | NamespacedWriter | None,
         smoother_spill_parent: str | Path | None = None,
         smooth: bool = False,
     ):
-        """``writer`` receives the ``nav/*`` messages. With ``smooth`` (the filter's own
-        solutions, ``realtime_output`` off) nothing is written: the solutions are kept by
+        """``writer`` receives the ``nav/*`` and ``tf`` messages. With ``smooth`` (the filter's
+        own solutions, ``realtime_output`` off) nothing is written: the solutions are kept by
         :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``) and
-        written smoothed by :meth:`write_smoothed` after :meth:`finish`."""
+        written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
         if smooth:
             config = dataclasses.replace(config, realtime_output=False)
         self.engine = FusionEngine(config)
@@ -168,11 +186,17 @@ class OfflineFusion:
                 smoother.add(solution, *self.stamps.exact(solution.t_s), log_time_ns)
                 continue
             values = nav_values(solution, self.stamps)
-            for topic, raw in solution_cdr(values).items():
-                stored_topic, msgtype = NAV_BAG_TOPICS[topic]
-                self.writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
+            self._write_nav(values, log_time_ns)
             written.append(values)
         return written
+
+    def _write_nav(self, values: NavValues, log_time_ns: int) -> None:
+        """``nav/*`` and ``tf`` of one solution."""
+        writer = self.writer
+        for topic, raw in solution_cdr(values).items():
+            stored_topic, msgtype = NAV_BAG_TOPICS[topic]
+            writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
+        writer.write_raw(TF_BAG_TOPIC, TF_MSGTYPE, log_time_ns, transform_cdr(values))
 
     def smoothed_values(self) -> Iterator[tuple[NavValues, NavValues, int]]:
         """After :meth:`finish` of a smoothing run: (forward values, smoothed values, log time)
@@ -183,14 +207,11 @@ class OfflineFusion:
             yield forward, smoothed, pair.log_time_ns
 
     def write_smoothed_values(self, forward: NavValues, smoothed: NavValues, log_time_ns: int):
-        """``nav/forward/odometry`` of ``forward`` and ``nav/*`` of ``smoothed``."""
-        writer = self.writer
-        writer.write_raw(
+        """``nav/forward/odometry`` of ``forward``; ``nav/*`` and ``tf`` of ``smoothed``."""
+        self.writer.write_raw(
             FORWARD_ODOMETRY_BAG_TOPIC, ODOMETRY_MSGTYPE, log_time_ns, odometry_cdr(forward)
         )
-        for topic, raw in solution_cdr(smoothed).items():
-            stored_topic, msgtype = NAV_BAG_TOPICS[topic]
-            writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
+        self._write_nav(smoothed, log_time_ns)
 
     def close(self) -> None:
         """Remove the smoother's temporary records (nothing to do without smoothing)."""
@@ -205,6 +226,10 @@ class OfflineFusion:
             lines.append(f"never aligned (alignment state: {health.alignment_state.name})")
         else:
             lines.append(f"first navigation solution at stamp {self.first_solution_s:.3f} s")
+            lines.append(f"sensor set at the end: {health.sensor_set}")
+            lines.append(
+                "coasting sources at the end: " + (", ".join(health.coasting_sources) or "none")
+            )
         for kind, counters in health.counters.items():
             rejected = ", ".join(f"{r} {n}" for r, n in sorted(counters.rejected.items()))
             lines.append(
@@ -212,6 +237,21 @@ class OfflineFusion:
                 f"alignment {counters.used_for_alignment:4d}  "
                 f"superseded {counters.superseded:6d}  resets {counters.resets:3d}  "
                 f"mean NIS {counters.mean_nis:6.2f}  rejected: {rejected or 'none'}"
+            )
+        for event in health.integrity_events:
+            ended = (
+                "still at the end"
+                if math.isnan(event.end_s)
+                else f"{event.duration_s:.2f} s, ended by "
+                + ("a new alignment" if event.realigned else "agreement with the aiding")
+            )
+            lines.append(
+                f"navigation not trusted from stamp {event.start_s:.3f} s ({event.reason}): {ended}"
+            )
+        for t_s, step_s in health.imu_clock_steps:
+            lines.append(
+                f"IMU clock stepped by {step_s:+.6f} s before stamp {t_s:.3f} s: "
+                "later IMU samples re-stamped onto the GNSS clock"
             )
         for key, count in sorted(self.rejections.items()):
             lines.append(f"rejected message {key}: {count}")
@@ -237,16 +277,23 @@ class FusedBag(NamedTuple):
 
 
 def fuse_bag(
-    in_bag, out_bag, config: FusionConfig, overwrite: bool = False, smooth: bool = False
+    in_bag,
+    out_bag,
+    config: FusionConfig,
+    overwrite: bool = False,
+    view: TopicView | None = None,
+    smooth: bool = False,
 ) -> FusedBag:
     """Run the fusion over ``in_bag`` into ``out_bag`` (a new bag; replaced with
-    ``overwrite``); with ``smooth`` the fixed-interval smoother's solution (see the module
+    ``overwrite``), over the topics of ``view``'s namespace (the root when None), writing into
+    the same namespace; with ``smooth`` the fixed-interval smoother's solution (see the module
     docstring). Raises BagError for a missing or unreadable bag or one without the fusion's
     required topics, and OutputError, before anything is read or written, if ``out_bag`` is,
     contains or lies inside ``in_bag``."""
     started = time.monotonic()
     check_outputs_apart_from_inputs([in_bag], [out_bag])
-    with BagReader(in_bag) as reader:
+    view = view or TopicView()
+    with BagReader(in_bag, view) as reader:
         sensors = sensor_topics_of(reader, config)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
@@ -255,7 +302,8 @@ def fuse_bag(
             try:
                 # The writing process starts during the forward pass: until it is ready the
                 # writer keeps what it is given, and the second pass produces fast.
-                with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+                with BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer:
+                    writer = NamespacedWriter(bag_writer, view)
                     forward_pass(reader, fusion, sensors, relative_of, f"fuse_bag {in_bag}")
                     fusion.writer = writer
                     for message, values in merged_with_smoothed(reader, fusion, truth):
@@ -273,8 +321,9 @@ def fuse_bag(
             )
         with (
             BagProgress(reader, f"fuse_bag {in_bag}") as progress,
-            BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
+            BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
         ):
+            writer = NamespacedWriter(bag_writer, view)
             fusion = OfflineFusion(config, writer)
             for index, message in enumerate(reader.messages([*sensors.values(), *truth])):
                 topic = relative_of.get(message.topic)
@@ -294,8 +343,12 @@ def fuse_bag(
 
 def spill_parent_of(out_bag) -> Path:
     """Where a smoothing run keeps its temporary records: beside the output bag, on the disk
-    the user chose for the output (a day of data needs gigabytes)."""
-    return Path(out_bag).resolve().parent
+    the user chose for the output (a day of data needs gigabytes); the nearest existing folder
+    above it while the output's own folder (``OUT_BAG/buoy1`` of a fleet) is not made yet."""
+    parent = Path(out_bag).resolve().parent
+    while not parent.is_dir():
+        parent = parent.parent
+    return parent
 
 
 def forward_pass(

@@ -77,6 +77,16 @@ class FusionConfig:
       coasting_timeout_s: a measurement kind not accepted for this long is reported as coasting
         (s) [1].
 
+    Integrity (:mod:`buoy_nav.integrity`)
+      integrity_rejection_count: consecutive gate rejections of one source after which the
+        navigation is not trusted [3].
+      integrity_attitude_sigma_deg, integrity_velocity_sigma_mps: 1σ added to each attitude
+        (deg) and velocity (m/s) error state when the trust is lost, and added to the published
+        covariance until it returns [5, 1].
+      integrity_realign_s: the alignment starts again when the gate still rejects this long
+        after the trust was lost (s) [5].
+      integrity_recovery_s: the trust returns after this long without a gate rejection (s) [2].
+
     Timing and input validation
       max_measurement_delay_s: how long measurements may arrive after the IMU sample of the same
         stamp; processing lags the newest IMU stamp by this much (s) [0.3].
@@ -85,6 +95,38 @@ class FusionConfig:
       max_imu_gap_s: an IMU gap longer than this restarts the alignment (s) [0.5].
       max_angular_rate_rad_s: IMU samples with a larger rate magnitude are rejected (rad/s) [35].
       max_specific_force_mps2: IMU samples with a larger specific force are rejected (m/s²) [160].
+      max_angular_acceleration_rad_s2: largest angular acceleration the platform can reach; an
+        IMU sample whose rate differs from the last accepted one by more than this times their
+        interval (plus the sensor's noise) is rejected as ``implausible_change`` (rad/s²) [50].
+      max_jerk_mps3: the same for the specific force: largest rate of change of the platform's
+        specific force (m/s³) [2000].
+
+    Sites without GNSS, magnetometer and motion pack (see the aiding sources for the models)
+      site_latitude_deg, site_longitude_deg: the site (deg) when there is no GNSS fix; NaN =
+        ``origin.*`` [NaN].
+      magnetic_declination_deg: declination (deg, east positive); NaN = the WMM at the
+        position [NaN].
+      ahrs_yaw_reference: what the yaw of ``imu/data`` is referenced to [``true_north``].
+      use_magnetometer: fuse ``imu/mag`` [True]. use_ahrs: fuse ``imu/data`` [True].
+      magnetometer_hard_iron_t: hard-iron offset subtracted from the raw field (T) [0, 0, 0].
+      magnetometer_soft_iron: row-major 3×3 matrix applied after it [identity].
+      magnetometer_heading_sigma_deg: 1-σ of the magnetic heading beyond the sensor noise:
+        residual calibration, unmodelled local fields (deg) [1].
+      magnetometer_full_scale_t: a component this large is a saturated sample (T) [8e-4].
+      ahrs_lag_s: the motion pack's own lag (s); its orientation is carried forward by it with
+        the gyro [0]. ahrs_lag_uncertainty_s: what is not known of that lag, added as noise
+        proportional to the body rate (s) [0.1]. ahrs_variance_floor_rad2: smallest attitude
+        variance used per axis (rad²) [1e-5]. ahrs_error_correlation_time_s: how long the
+        pack's attitude error stays alike (s): samples closer than this share one error, so
+        each is weighted as if it were one of a sample per this time [60].
+      moored: constrain a moored buoy's position to its slowly moving mean (zero mean velocity)
+        while no GNSS fix is accepted [False]. moored_position_sigma_horizontal_m,
+        moored_position_sigma_vertical_m: 1-σ of the wave excursion about that mean (m)
+        [3, 1]. moored_anchor_time_constant_s: time constant of the mean (s) [600].
+        moored_update_period_s: interval of the constraint (s) [1].
+      imu_gyro_bias_rad_s, imu_accel_bias_mps2, imu_accel_scale: calibration of the raw IMU
+        (``calibrate_imu``): f = (f_raw − b_a) / scale per axis, ω = ω_raw − b_g
+        [0, 0, (1, 1, 1)].
 
     Output
       realtime_output: emit each solution as soon as its IMU sample arrives, predicted by
@@ -127,11 +169,42 @@ class FusionConfig:
     gnss_tertiary_length_tolerance_m: float = 0.05
     coasting_timeout_s: float = 1.0
 
+    integrity_rejection_count: int = 3
+    integrity_attitude_sigma_deg: float = 5.0
+    integrity_velocity_sigma_mps: float = 1.0
+    integrity_realign_s: float = 5.0
+    integrity_recovery_s: float = 2.0
+
     max_measurement_delay_s: float = 0.3
     covariance_propagation_interval_s: float = 0.1
     max_imu_gap_s: float = 0.5
     max_angular_rate_rad_s: float = 35.0
     max_specific_force_mps2: float = 160.0
+    max_angular_acceleration_rad_s2: float = 50.0
+    max_jerk_mps3: float = 2000.0
+
+    site_latitude_deg: float = shared_field("site.latitude_deg")
+    site_longitude_deg: float = shared_field("site.longitude_deg")
+    magnetic_declination_deg: float = shared_field("magnetic.declination_deg")
+    ahrs_yaw_reference: str = shared_field("ahrs.yaw_reference")
+    use_magnetometer: bool = True
+    use_ahrs: bool = True
+    magnetometer_hard_iron_t: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    magnetometer_soft_iron: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    magnetometer_heading_sigma_deg: float = 1.0
+    magnetometer_full_scale_t: float = 8e-4
+    ahrs_lag_s: float = 0.0
+    ahrs_lag_uncertainty_s: float = 0.1
+    ahrs_variance_floor_rad2: float = 1e-5
+    ahrs_error_correlation_time_s: float = 60.0
+    moored: bool = False
+    moored_position_sigma_horizontal_m: float = 3.0
+    moored_position_sigma_vertical_m: float = 1.0
+    moored_anchor_time_constant_s: float = 600.0
+    moored_update_period_s: float = 1.0
+    imu_gyro_bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    imu_accel_bias_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    imu_accel_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
     realtime_output: bool = True
     output_rate_hz: float = 0.0
@@ -176,10 +249,33 @@ class FusionConfig:
             "max_imu_gap_s",
             "max_angular_rate_rad_s",
             "max_specific_force_mps2",
+            "max_angular_acceleration_rad_s2",
+            "max_jerk_mps3",
+            "integrity_attitude_sigma_deg",
+            "integrity_velocity_sigma_mps",
+            "integrity_realign_s",
+            "integrity_recovery_s",
+            "magnetometer_heading_sigma_deg",
+            "magnetometer_full_scale_t",
+            "ahrs_variance_floor_rad2",
+            "ahrs_error_correlation_time_s",
+            "moored_position_sigma_horizontal_m",
+            "moored_position_sigma_vertical_m",
+            "moored_anchor_time_constant_s",
+            "moored_update_period_s",
         ):
             _require(getattr(self, name) > 0.0, name, "finite and > 0")
+        for name in ("ahrs_lag_s", "ahrs_lag_uncertainty_s"):
+            _require(getattr(self, name) >= 0.0, name, "finite and ≥ 0")
+        _require(len(self.magnetometer_soft_iron) == 9, "magnetometer_soft_iron", "9 numbers")
+        _require(
+            all(0.5 < scale < 2.0 for scale in self.imu_accel_scale),
+            "imu_accel_scale",
+            "three scale factors in (0.5, 2)",
+        )
         _require(0.0 < self.gate_probability < 1.0, "gate_probability", "in (0, 1)")
         _require(self.gate_reset_count >= 1, "gate_reset_count", "≥ 1")
+        _require(self.integrity_rejection_count >= 1, "integrity_rejection_count", "≥ 1")
         _require(self.scale_factor_error_percent < 100.0, "scale_factor_error_percent", "< 100")
 
     @property
@@ -196,6 +292,15 @@ class FusionConfig:
             return None
         tertiary, primary = self.tertiary_antenna_body_m, self.primary_antenna_body_m
         return tuple(t - p for t, p in zip(tertiary, primary, strict=True))
+
+    @property
+    def imu_calibration(self):
+        """(gyro bias rad/s, accelerometer bias m/s², accelerometer scale) from
+        ``calibrate_imu``, None when they are the identity (nothing to apply)."""
+        calibration = (self.imu_gyro_bias_rad_s, self.imu_accel_bias_mps2, self.imu_accel_scale)
+        if calibration == ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)):
+            return None
+        return calibration
 
     @property
     def has_origin(self) -> bool:
@@ -225,9 +330,19 @@ def _coerce(name: str, annotation, value):
         return int(value)
     if annotation is float or annotation == "float":
         return _to_float(name, value)
-    # tuple[float, float, float]
-    if isinstance(value, str) or not hasattr(value, "__len__") or len(value) != 3:
-        raise ConfigError(f"{name} must be a sequence of three numbers, got {value!r}")
+    if annotation is str or annotation == "str":
+        if isinstance(value, str):
+            return value
+        raise ConfigError(f"{name} must be a string, got {value!r}")
+    # tuple[float, float, float] or tuple[float, ...] (any length)
+    length = None if "..." in str(annotation) else 3
+    if (
+        isinstance(value, str)
+        or not hasattr(value, "__len__")
+        or len(value) != (length or len(value))
+    ):
+        expected = "a sequence of three numbers" if length else "a sequence of numbers"
+        raise ConfigError(f"{name} must be {expected}, got {value!r}")
     return tuple(_to_float(name, c) for c in value)
 
 

@@ -37,14 +37,22 @@ Invalid input (non-finite values, absurd magnitudes, non-positive variances, IMU
 increasing, duplicated measurement stamps, measurements older than what was already processed)
 is rejected and counted by input and reason; it never reaches the state. Measurements more than
 ``MAX_MEASUREMENT_LEAD_S`` ahead of the newest IMU sample (an IMU outage) are given up as
-``beyond_imu_data``, oldest first, so an outage cannot fill the memory.
+``beyond_imu_data``, oldest first, so an outage cannot fill the memory. An IMU sample whose
+change from the last accepted one no platform can make is rejected as ``implausible_change``
+(:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
+(:mod:`buoy_nav.imu_clock`). When the gates keep rejecting the aiding, the filter no longer
+agrees with it: the integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
+published inflated while the trust is not back, and the alignment started again if that does
+not bring the aiding back into the gates.
 """
 
+import dataclasses
 import math
 from collections import deque
 from collections.abc import Iterable
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from buoy_common.contract import Reason
 from buoy_nav import earth
@@ -52,6 +60,7 @@ from buoy_nav.aiding import AIDING_SOURCES
 from buoy_nav.aiding.base import AIDED_QUANTITIES, AidingSource, LinearisationPoint
 from buoy_nav.alignment import AlignmentResult, AlignmentState, InMotionAligner
 from buoy_nav.config import FusionConfig
+from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_state_filter import (
     ERROR_STATES,
     ErrorStateFilter,
@@ -61,9 +70,13 @@ from buoy_nav.error_state_filter import (
     inject_error_state,
 )
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
+from buoy_nav.imu_clock import ImuClock
+from buoy_nav.imu_screening import ImuPlausibility
+from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
 from buoy_nav.prediction import RealtimePrediction
+from buoy_nav.sensor_sets import sensor_set
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
 
 __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
@@ -93,11 +106,16 @@ class FusionEngine:
         )
         """The aiding sources, one instance per class, in the order of application."""
         self._source_of_type = {source.measurement_type: source for source in self.sources}
-        self._source_of_topic = {source.topic: source for source in self.sources}
+        self._source_of_topic = {
+            source.topic: source for source in self.sources if not source.pseudo
+        }
+        # Constraints that read no topic, asked for a measurement at IMU samples.
+        self._pseudo_sources = tuple(s for s in self.sources if s.pseudo and s.enabled)
         kinds = [source.kind for source in self.sources]
         if len(set(kinds)) != len(kinds) or IMU in kinds:
             raise ValueError(f"aiding sources need distinct kinds other than '{IMU}': {kinds}")
-        if len(self._source_of_type) != len(kinds) or len(self._source_of_topic) != len(kinds):
+        topic_sources = sum(1 for source in self.sources if not source.pseudo)
+        if len(self._source_of_type) != len(kinds) or len(self._source_of_topic) != topic_sources:
             raise ValueError("aiding sources need distinct measurement types and topics")
         for source in self.sources:
             if source.aids not in AIDED_QUANTITIES:
@@ -106,19 +124,33 @@ class FusionEngine:
                 )
         self._aided_index = {source: AIDED_QUANTITIES.index(source.aids) for source in self.sources}
 
-        self.recorder = None
-        """Receives the filter's epochs for a smoother (:class:`buoy_nav.smoother.SmootherRecorder`
-        or None): set it before the first sample."""
+        self.recorder = EpochRecorder()
+        """Told of every covariance epoch, correction and reset (for a smoother)."""
+        self._imu_calibration = config.imu_calibration
         self._imu_model = ImuErrorModel.from_config(config)
+        self._distrust_variances = distrust_variances(config)
+        self._integrity = IntegrityMonitor(
+            config.integrity_rejection_count,
+            config.integrity_realign_s,
+            config.integrity_recovery_s,
+        )
+        self._imu_plausibility = ImuPlausibility(
+            config.max_angular_acceleration_rad_s2,
+            config.max_jerk_mps3,
+            math.radians(config.gyro_noise_deg_sqrt_h) / 60.0,
+            config.accel_noise_mps_sqrt_h / 60.0,
+        )
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
         self._integrator: StrapdownIntegrator | None = None
         self._filter: ErrorStateFilter | None = None
         self._alignment: AlignmentResult | None = None
         self._alignments = 0
         self._imu_gaps = 0
+        self._realignments = 0
 
         self._imu_buffer: deque = deque()
         self._latest_imu_stamp = -math.inf
+        self._imu_clock = ImuClock(config.max_imu_gap_s)
         # State of the processing: time and (raw) IMU sample the state refers to.
         self._time = -math.inf
         self._gyro: tuple[float, float, float] | None = None
@@ -132,6 +164,8 @@ class FusionEngine:
         self._counters = {kind: MeasurementCounters() for kind in (IMU, *kinds)}
         self._queue = MeasurementQueue(self.sources, self._counters)
         self._consecutive_rejections = dict.fromkeys(kinds, 0)
+        # Stamp of the latest accepted measurement per source kind (sensor set, coasting).
+        self._last_accepted = dict.fromkeys(kinds, -math.inf)
         # Stamp of the latest accepted measurement per aided quantity (AIDED_QUANTITIES order).
         self._last_aided = [-math.inf] * len(AIDED_QUANTITIES)
         self.innovation_log: list[InnovationRecord] | None = (
@@ -176,6 +210,10 @@ class FusionEngine:
         if not (math.isfinite(t) and math.isfinite(gx + gy + gz) and math.isfinite(fx + fy + fz)):
             self.reject_input(IMU, Reason.NON_FINITE)
             return []
+        if self._imu_calibration is not None:
+            (bgx, bgy, bgz), (bax, bay, baz), (sx, sy, sz) = self._imu_calibration
+            gx, gy, gz = gx - bgx, gy - bgy, gz - bgz
+            fx, fy, fz = (fx - bax) / sx, (fy - bay) / sy, (fz - baz) / sz
         config = self.config
         if (
             gx * gx + gy * gy + gz * gz > config.max_angular_rate_rad_s**2
@@ -183,13 +221,20 @@ class FusionEngine:
         ):
             self.reject_input(IMU, Reason.OUT_OF_RANGE)
             return []
+        t = self._imu_clock.restamp(t, self._latest_imu_stamp)
         if t <= self._latest_imu_stamp:
             duplicate = t == self._latest_imu_stamp
             self.reject_input(
                 IMU, Reason.DUPLICATE_STAMP if duplicate else Reason.STAMP_NOT_INCREASING
             )
             return []
+        if t - self._latest_imu_stamp > config.max_imu_gap_s:
+            self._imu_plausibility.restart()
+        if not self._imu_plausibility.plausible(t, (gx, gy, gz), (fx, fy, fz)):
+            self.reject_input(IMU, Reason.IMPLAUSIBLE_CHANGE)
+            return []
         counters.accepted += 1
+        self._imu_clock.accepted(t, self._latest_imu_stamp)
         self._latest_imu_stamp = t
         sample = (t, (gx, gy, gz), (fx, fy, fz))
         self._imu_buffer.append(sample)
@@ -248,6 +293,7 @@ class FusionEngine:
         if t <= self._last_processed_imu_stamp:
             self.reject_input(source.kind, Reason.TOO_LATE)
             return
+        self._imu_clock.aiding_stamp(t)
         refused = self._queue.push(source, t, validated)
         if refused is not None:
             self.reject_input(source.kind, refused)
@@ -278,8 +324,7 @@ class FusionEngine:
         self.catch_up()
         solutions = self._process(math.inf)
         self._queue.give_up_all()
-        if self.recorder is not None and self._filter is not None:
-            self.recorder.end_segment(self._filter.covariance)
+        self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
         return solutions
 
     # ------------------------------------------------------------------ status
@@ -293,6 +338,13 @@ class FusionEngine:
         """Counters, alignment and coasting state (a snapshot)."""
         self.catch_up()
         coasting = self._coasting_flags(self._time)
+        timeout = self.config.coasting_timeout_s
+        active = {k for k, t in self._last_accepted.items() if self._time - t <= timeout}
+        lapsed = {
+            k
+            for k, t in self._last_accepted.items()
+            if math.isfinite(t) and self._time - t > timeout
+        }
         return EngineHealth(
             alignment_state=AlignmentState.ALIGNED if self.aligned else self._aligner.state,
             aligned=self.aligned,
@@ -305,6 +357,12 @@ class FusionEngine:
             alignments=self._alignments,
             time_s=self._time if math.isfinite(self._time) else math.nan,
             alignment=self._alignment,
+            imu_clock_steps=tuple(self._imu_clock.steps),
+            trusted=self._integrity.trusted,
+            integrity_events=tuple(dataclasses.replace(e) for e in self._integrity.events),
+            realignments=self._realignments,
+            sensor_set=sensor_set(active, lapsed) if self.aligned else "",
+            coasting_sources=tuple(sorted(lapsed)),
         )
 
     @property
@@ -339,6 +397,7 @@ class FusionEngine:
             t, gyro, force = buffer.popleft()
             if self._gyro is None or t - self._time > self.config.max_imu_gap_s:
                 if self._gyro is not None:
+                    self._imu_gaps += 1
                     self._restart_alignment()
                 # Measurements up to the first sample of a run can only feed the alignment.
                 while measurements and measurements[0][0] <= t:
@@ -358,6 +417,8 @@ class FusionEngine:
                 self._advance(stamp, gyro_m, force_m)
                 self._handle_measurements(stamp, group, gyro_m)
             self._advance(t, gyro, force)
+            if self._pseudo_sources and self._filter is not None:
+                self._apply_pseudo_measurements(t, gyro)
             self._older_imu = (t0, gyro0, force0)
             self._last_processed_imu_stamp = t
             if emit_solutions and self._filter is not None and self._output.due(t, span):
@@ -379,8 +440,7 @@ class FusionEngine:
         self._time, self._gyro, self._force = t, gyro, force
 
     def _propagate_covariance(self, t: float):
-        """Propagate the covariance over the interval integrated since the last time, up to
-        stamp ``t``."""
+        """Propagate the covariance over the interval integrated so far, to stamp ``t``."""
         integrator = self._integrator
         if integrator.accumulated_duration_s <= 0.0:
             return
@@ -394,14 +454,13 @@ class FusionEngine:
         )
         posterior = self._filter.covariance
         self._filter.propagate(transition, noise)
-        if self.recorder is not None:
-            self.recorder.propagated(t, transition, self._filter.covariance, posterior)
+        self.recorder.propagated(t, transition, self._filter.covariance, posterior)
         self._solutions.covariance_changed()
 
     def _restart_alignment(self):
-        if self.recorder is not None and self._filter is not None:
-            self.recorder.end_segment(self._filter.covariance)
-        self._imu_gaps += 1
+        self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
+        for source in self._pseudo_sources:
+            source.restart()
         self._integrator = None
         self._filter = None
         self._aligner.restart()
@@ -439,6 +498,7 @@ class FusionEngine:
         point = self._linearisation_point(gyro)
         accepted = []
         persistent_rejections = []
+        rejected_kinds: dict[str, int] = {}
         for source, measurement in group:
             kind = source.kind
             model = source.model(measurement, point)
@@ -465,28 +525,68 @@ class FusionEngine:
                 counters.nis_sum += gate.nis
                 counters.nis_count += 1
                 self._last_aided[self._aided_index[source]] = t
+                self._last_accepted[kind] = t
                 self._consecutive_rejections[kind] = 0
                 accepted.append(model)
                 continue
             counters.reject(Reason.GATE if math.isfinite(gate.nis) else Reason.SINGULAR)
             self._consecutive_rejections[kind] += 1
+            if source.witnesses_integrity:
+                rejected_kinds[kind] = self._consecutive_rejections[kind]
             if self._consecutive_rejections[kind] >= source.reset_after_rejections:
                 persistent_rejections.append((source, measurement, model))
         if accepted:
             correction = self._filter.update(
                 np.concatenate([m.innovation for m in accepted]),
                 np.vstack([m.jacobian for m in accepted]),
-                _block_diagonal([m.covariance for m in accepted]),
+                block_diag(*(m.covariance for m in accepted)),
             )
             self._inject(point.state, correction)
         for source, measurement, model in persistent_rejections:
             self._reset_to_measurement(source, t, measurement, gyro, model)
+        action = self._integrity.gate_outcomes(t, rejected_kinds)
+        if action == "inflate":
+            self._inflate_covariance(t)
+        elif action == "realign":
+            self._realignments += 1
+            self._restart_alignment()
+        self._solutions.distrust(None if self._integrity.trusted else self._distrust_variances)
+
+    def _inflate_covariance(self, t: float):
+        """Widen the attitude and velocity uncertainty: the filter has found itself wrong.
+
+        The filter's own covariance may shrink again as the gate lets measurements through,
+        even towards a wrong state, so the published covariance keeps the inflation as long as
+        the trust is not back (:meth:`SolutionBuilder.distrust`)."""
+        states = self.states
+        covariance = self._filter.covariance.copy()
+        attitude_variance, velocity_variance = self._distrust_variances
+        for index in states.indices("attitude"):
+            covariance[index, index] += attitude_variance
+        for index in states.indices("velocity"):
+            covariance[index, index] += velocity_variance
+        self.recorder.noise_added(t, self._filter.covariance, covariance)
+        self._filter.covariance = covariance
+        self._solutions.covariance_changed()
+
+    def _apply_pseudo_measurements(self, t: float, gyro):
+        """Ask the constraints that are due at IMU stamp ``t`` for their measurements."""
+        due = [source for source in self._pseudo_sources if t >= source.next_due_s]
+        if not due:
+            return
+        state = self._integrator.nav_state()
+        fix_age = t - self._last_aided[AIDED_QUANTITIES.index("fix")]
+        group = []
+        for source in due:
+            measurement = source.pseudo_measurement(t, state, fix_age)
+            if measurement is not None:
+                group.append((source, measurement))
+        self._handle_measurements(t, group, gyro)
 
     def _inject(self, state: NavState, correction):
         self._integrator.set_nav_state(inject_error_state(state, correction))
         self._filter.reset_after_injection(correction)
-        if self.recorder is not None:
-            self.recorder.corrected(correction)
+        self.recorder.corrected(correction)
         self._solutions.covariance_changed()
         self._solutions.biases_changed()
         self._prediction.carry_over(self._time, state, correction)
@@ -499,13 +599,11 @@ class FusionEngine:
         self._counters[source.kind].resets += 1
         self._consecutive_rejections[source.kind] = 0
         self._last_aided[self._aided_index[source]] = t
-        if self.recorder is not None:
-            self.recorder.end_segment(self._filter.covariance)
+        self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
         self._integrator.set_nav_state(reset.state)
         self._filter.reset_states(reset.indices, reset.variances)
         self._filter.ensure_positive_definite()
-        if self.recorder is not None:
-            self.recorder.begin_segment(t, self._filter.covariance)
+        self.recorder.begin_segment(t, self._filter.covariance)
         self._solutions.covariance_changed()
         self._prediction.drop()
 
@@ -524,10 +622,11 @@ class FusionEngine:
         self._filter = ErrorStateFilter(
             result.covariance, self.config.gate_probability, self.states
         )
-        if self.recorder is not None:
-            self.recorder.begin_segment(t, self._filter.covariance)
+        self.recorder.begin_segment(t, self._filter.covariance)
         self._alignment = result
         self._alignments += 1
+        self._integrity.realigned(t)
+        self._solutions.distrust(None)
         for kind in self._consecutive_rejections:
             self._consecutive_rejections[kind] = 0
         self._last_aided = [t] * len(AIDED_QUANTITIES)
@@ -545,7 +644,7 @@ class FusionEngine:
         """(fix, velocity, heading): no source aiding that quantity accepted for longer than
         ``coasting_timeout_s`` at stamp ``t``."""
         timeout = self.config.coasting_timeout_s
-        fix, velocity, heading = self._last_aided
+        fix, velocity, heading = self._last_aided[:3]
         return t - fix > timeout, t - velocity > timeout, t - heading > timeout
 
     def _solution(self, integrator: StrapdownIntegrator, t: float, gyro, force) -> NavSolution:
@@ -554,17 +653,6 @@ class FusionEngine:
         return self._solutions.solution(
             integrator, self._filter, t, gyro, force, self._coasting_flags(self._time)
         )
-
-
-def _block_diagonal(blocks) -> np.ndarray:
-    size = sum(block.shape[0] for block in blocks)
-    matrix = np.zeros((size, size))
-    offset = 0
-    for block in blocks:
-        n = block.shape[0]
-        matrix[offset : offset + n, offset : offset + n] = block
-        offset += n
-    return matrix
 
 
 def _float_triple(values) -> tuple[float, float, float]:

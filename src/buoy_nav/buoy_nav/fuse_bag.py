@@ -1,7 +1,7 @@
 """``fuse_bag``: the fusion of ``fusion_node`` run over a recorded bag, as fast as it goes.
 
     fuse_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file fusion.yaml] [--overwrite]
-             [--smooth]
+             [--namespace NS] [--remap FROM:=TO ...] [--smooth]
 
 Reads the sensor topics ``imu/data_raw``, ``gnss/fix``, ``gnss/heading`` (required),
 ``gnss/vel`` and ``gnss/baseline`` (used when present) in log-time order, feeds them through the
@@ -13,6 +13,11 @@ estimated from the whole recording, :mod:`buoy_nav.smoother`) and ``nav/forward/
 forward filter's; the run reads the bag twice and keeps its records in a temporary directory
 beside OUT_BAG (about 0.35 GB per hour of 100 Hz data, removed at the end). Parameters come
 from the same YAML files the node takes (sections ``/**`` and ``fusion_node``).
+
+A bag recorded under a namespace (``/buoy1/imu/data_raw``) is read in that namespace, and the
+outputs go into it (``/buoy1/nav/odometry``); ``--namespace`` picks one of several, ``--remap``
+reads single topics from other names. A bag of several buoys, without ``--namespace``, gives one
+output bag per namespace: ``OUT_BAG/buoy1``, ``OUT_BAG/buoy2`` (:mod:`buoy_common.namespaces`).
 
 OUT_BAG is written under a temporary name beside it and appears only when complete; it may not
 be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or bags
@@ -26,6 +31,13 @@ import argparse
 import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
+from buoy_common.contract import IMU_RAW_TOPIC
+from buoy_common.namespaces import (
+    NamespaceError,
+    add_namespace_arguments,
+    output_for,
+    views_of_bag,
+)
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.bag_fusion import FusedBag, fuse_bag
@@ -51,24 +63,33 @@ def parse_arguments(argv):
         help="write the fixed-interval smoother's solution (nav/*) and the forward filter's "
         "(nav/forward/odometry)",
     )
+    add_namespace_arguments(parser)
     return parser.parse_args(argv)
 
 
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
+    truncated = False
     try:
         config = fusion_config_from_files(arguments.params_file)
-        fused = fuse_bag(
-            arguments.in_bag, arguments.out_bag, config, arguments.overwrite, arguments.smooth
-        )
-    except (ParameterError, BagError, OutputError) as error:
+        views = views_of_bag(arguments, arguments.in_bag, IMU_RAW_TOPIC)
+        for view in views:
+            out_bag = output_for(arguments.out_bag, view, several=len(views) > 1)
+            if len(views) > 1:
+                print(f"namespace {view.label} -> {out_bag}")
+            fused = fuse_bag(
+                arguments.in_bag, out_bag, config, arguments.overwrite, view, arguments.smooth
+            )
+            print_summary(fused, out_bag)
+            if fused.recovery is not None:
+                warning = fused.recovery.describe(arguments.in_bag)
+                print(f"fuse_bag: warning: {warning}", file=sys.stderr)
+                truncated = truncated or fused.recovery.truncated
+    except (ParameterError, BagError, OutputError, NamespaceError) as error:
         print(f"fuse_bag: {error}", file=sys.stderr)
         sys.exit(2)
-    print_summary(fused, arguments.out_bag)
-    if fused.recovery is not None:
-        print(f"fuse_bag: warning: {fused.recovery.describe(arguments.in_bag)}", file=sys.stderr)
-        if fused.recovery.truncated:
-            sys.exit(RECOVERED_BAG_EXIT_CODE)
+    if truncated:
+        sys.exit(RECOVERED_BAG_EXIT_CODE)
 
 
 def print_summary(fused: FusedBag, out_bag: str) -> None:

@@ -37,16 +37,21 @@ Covariances not estimated (the rates, the specific force, the angular part of th
 all zeros, the ROS convention for "unknown".
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``): WGS-84 position of the ``base_link``
   origin, ENU covariance (known), status FIX, service GPS.
+- ``tf`` (tf2_msgs/TFMessage): the transform ``map`` → ``base_link`` (position in ``map``, m;
+  attitude body→ENU), laid out by rosbags' Jazzy typestore (:func:`transform_cdr`), so bags
+  carry it without tf2 installed and the node publishes the same bytes where it is.
 """
 
 from __future__ import annotations
 
+import struct
 from collections import deque
 from typing import NamedTuple
 
 import numpy as np
 
 from buoy_common import cdr
+from buoy_common.bag_io import jazzy_typestore
 from buoy_common.contract import (
     BODY_FRAME,
     IMU_RAW_TOPIC,
@@ -56,11 +61,12 @@ from buoy_common.contract import (
     NAV_ODOMETRY_TOPIC,
     NAV_VELOCITY_TOPIC,
     SENSOR_MSGTYPES,
+    TF_MSGTYPE,
     Reason,
     header_seconds,
     seconds_to_stamp,
 )
-from buoy_nav.aiding import AIDING_SOURCES
+from buoy_nav.aiding import TOPIC_SOURCES
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.aiding.gnss_fix import STATUS_FIX
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
@@ -68,7 +74,7 @@ from buoy_nav.rotations import rotation_matrix_elements
 
 FUSION_INPUT_MSGTYPES = {
     IMU_RAW_TOPIC: SENSOR_MSGTYPES[IMU_RAW_TOPIC],
-    **{source.topic: source.msgtype() for source in AIDING_SOURCES},
+    **{source.topic: source.msgtype() for source in TOPIC_SOURCES},
 }
 """The fusion's input topics (relative names) and their message types: the IMU and the topic of
 every registered aiding source."""
@@ -436,3 +442,46 @@ def solution_cdr(v: NavValues) -> dict[str, bytes]:
             COVARIANCE_TYPE_KNOWN,
         ),
     }
+
+
+def transform_message(sec: int, nanosec: int, position_map_m, attitude_xyzw):
+    """The ``tf`` message of one solution as a rosbags message object: the transform ``map`` →
+    ``base_link`` at stamp (sec, nanosec), translation ``position_map_m`` (m, in ``map``),
+    rotation ``attitude_xyzw`` (body→ENU)."""
+    types = jazzy_typestore().types
+    x, y, z = position_map_m
+    qx, qy, qz, qw = attitude_xyzw
+    transform = types["geometry_msgs/msg/TransformStamped"](
+        header=types["std_msgs/msg/Header"](
+            stamp=types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
+            frame_id=MAP_FRAME,
+        ),
+        child_frame_id=BODY_FRAME,
+        transform=types["geometry_msgs/msg/Transform"](
+            translation=types["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
+            rotation=types["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
+        ),
+    )
+    return types[TF_MSGTYPE](transforms=[transform])
+
+
+# One transform of fixed frame ids has a fixed layout: rosbags serialises it once, and each
+# solution's stamp and seven numbers are written into a copy (80 µs → 1 µs per solution).
+_TF_TEMPLATE = bytes(
+    jazzy_typestore().serialize_cdr(
+        transform_message(0, 0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)), TF_MSGTYPE
+    )
+)
+_TF_STAMP = struct.Struct("<iI")
+_TF_STAMP_OFFSET = 8  # after the encapsulation header and the length of the transforms sequence
+_TF_POSE = struct.Struct("<7d")
+_TF_POSE_OFFSET = len(_TF_TEMPLATE) - _TF_POSE.size
+
+
+def transform_cdr(v: NavValues) -> bytes:
+    """The ``tf`` message of one solution's :func:`nav_values` as CDR bytes: what rosbags
+    (and rclpy) serialise for its :func:`transform_message`."""
+    raw = bytearray(_TF_TEMPLATE)
+    _TF_STAMP.pack_into(raw, _TF_STAMP_OFFSET, v.sec, v.nanosec)
+    _TF_POSE.pack_into(raw, _TF_POSE_OFFSET, *v.position_map_m, *v.attitude_xyzw)
+    return bytes(raw)

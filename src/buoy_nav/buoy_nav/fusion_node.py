@@ -17,16 +17,23 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``nav/imu`` (sensor_msgs/Imu, ``base_link``)
 - ``nav/velocity`` (geometry_msgs/TwistWithCovarianceStamped, ``map``)
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``)
-- ``diagnostics`` (1 s): alignment state, coasting flags, per input kind the accepted, aligning,
+- ``tf`` (tf2_msgs/TFMessage, ``map`` → ``base_link``) where tf2_msgs is installed (a full ROS
+  install; the PyPI wheels lack it, and the node then says so at start-up and goes without);
+  the bytes ``fuse_bag`` writes to its bags
+- ``diagnostics`` (1 s): alignment state, coasting flags, the sensor set in use
+  (``sensor_set``, :mod:`buoy_nav.sensor_sets`) and the sources that coast (``coasting_sources``:
+  accepted before, not now), per input kind the accepted, aligning,
   superseded and rejected (by reason) counts, resets and mean NIS, covariance repairs, IMU gaps;
+  the integrity of the filter (``navigation_trusted``, ``integrity_events``, ``realignments``,
+  ``untrusted_s``) and IMU clock steps undone (``imu_clock_steps``, ``imu_clock_correction_s``);
   once aligned the filter's 1σ of attitude (``attitude_sigma_deg[east|north|up]``) and velocity
   (``velocity_sigma_mps[...]``) and its bias estimates (``gyro_bias_deg_s[x|y|z]``,
   ``accel_bias_mg[x|y|z]``); input rates per topic, solutions published, and in wall-clock time
   the IMU callback up to its solution's publishing (``latency_*``) and the filtering after it
   (``filtering_*``), mean and max over the period, and how often that filtering was still undone
   when the next IMU sample came (``filtering_overdue``, a sign of an overloaded machine). Level
-  warn while not aligned, while a GNSS kind is coasting or when no IMU sample came in the
-  period.
+  warn while not aligned, while the navigation is not trusted, while a GNSS kind is coasting or
+  when no IMU sample came in the period.
 
 Messages are converted and fed to :class:`buoy_nav.engine.FusionEngine` by
 :mod:`buoy_nav.fusion_messages`, the code the offline ``fuse_bag`` uses, so a bag replayed to
@@ -47,6 +54,8 @@ Parameters: ``gnss.primary_antenna``, ``gnss.secondary_antenna`` (double[3], m, 
 (deg, deg, m; NaN or absent = the position at alignment) of the shared buoy file; every other
 :class:`buoy_nav.config.FusionConfig` field as ``fusion.<field>`` (see ``config/fusion.yaml``).
 A bad value stops the node at start-up with exit code 2 and a message naming the parameter.
+At start-up the node logs the sensors it fuses, the antennas, the map origin and its output;
+once aligned, the stamp, attitude and position of its first solution.
 
 Rejected input (malformed, non-finite, out of range, stamps not increasing, no fix, ...) is
 counted by topic and reason and warned about (rate-limited); it never reaches the state. On
@@ -61,8 +70,14 @@ import time
 
 from geometry_msgs.msg import TwistWithCovarianceStamped
 from nav_msgs.msg import Odometry
+from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu, NavSatFix
+
+try:  # tf2_msgs comes with a full ROS install, not with the PyPI wheels
+    from tf2_msgs.msg import TFMessage
+except ImportError:
+    TFMessage = None
 
 from buoy_common.base_node import (
     DATA_QOS,
@@ -77,6 +92,7 @@ from buoy_common.contract import (
     NAV_IMU_TOPIC,
     NAV_ODOMETRY_TOPIC,
     NAV_VELOCITY_TOPIC,
+    TF_TOPIC,
     Reason,
 )
 from buoy_nav.aiding import disabled_topics
@@ -95,7 +111,9 @@ from buoy_nav.fusion_messages import (
     feed_message,
     nav_values,
     solution_cdr,
+    transform_cdr,
 )
+from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_quaternion
 
 OUTPUT_CLASSES = {
     NAV_ODOMETRY_TOPIC: Odometry,
@@ -110,6 +128,8 @@ DIAGNOSTICS_PERIOD_S = 1.0
 # at most half the interval between IMU samples, so that it is done before the next one, whose
 # prediction needs it.
 FILTERING_DELAY_S = 0.003
+# tf2_ros's broadcaster profile: reliable, volatile, 100 deep.
+TF_QOS = QoSProfile(depth=100)
 
 
 class FusionNode(FlushingNode):
@@ -146,6 +166,9 @@ class FusionNode(FlushingNode):
                 DATA_QOS,
                 raw=True,
             )
+        self._tf_publisher = (
+            None if TFMessage is None else self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
+        )
         self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
         config = self.config
         origin = (
@@ -161,6 +184,11 @@ class FusionNode(FlushingNode):
             f"{list(config.secondary_antenna_body_m)} m (secondary) in base_link; map origin "
             f"{origin}; output {rate}, "
             f"{'real time' if config.realtime_output else 'delayed'}"
+        )
+        self.get_logger().info(
+            f"broadcasting map -> base_link on {TF_TOPIC}"
+            if self._tf_publisher is not None
+            else f"tf2_msgs is not installed: map -> base_link is not broadcast on {TF_TOPIC}"
         )
         for source in self.engine.sources:
             if source.enabled and source.configuration_problem is not None:
@@ -233,9 +261,29 @@ class FusionNode(FlushingNode):
     def publish_solutions(self, solutions: list[NavSolution]) -> None:
         """Publish as CDR bytes: the bytes ``fuse_bag`` writes, without building messages."""
         for solution in solutions:
-            for topic, raw in solution_cdr(nav_values(solution, self.stamps)).items():
+            values = nav_values(solution, self.stamps)
+            for topic, raw in solution_cdr(values).items():
                 self._nav_publishers[topic].publish(raw)
+            if self._tf_publisher is not None:
+                self._tf_publisher.publish(transform_cdr(values))
+            if self.solutions_published == 0:
+                self._log_alignment(values)
             self.solutions_published += 1
+
+    def _log_alignment(self, values) -> None:
+        roll, pitch, yaw = (
+            math.degrees(angle)
+            for angle in euler_from_rotation_matrix(
+                rotation_matrix_from_quaternion(values.attitude_xyzw)
+            )
+        )
+        east, north, up = values.position_map_m
+        self.get_logger().info(
+            f"aligned at stamp {values.t_s:.3f} s: roll {roll:.2f} deg, pitch {pitch:.2f} deg, "
+            f"yaw {yaw:.2f} deg (ENU, from East counter-clockwise), position "
+            f"({east:.2f}, {north:.2f}, {up:.2f}) m in map, "
+            f"({values.latitude_deg:.6f}, {values.longitude_deg:.6f}) deg"
+        )
 
     def flush_held_back(self) -> list:
         """End of input: publish the solutions the engine still holds."""
@@ -262,6 +310,8 @@ class FusionNode(FlushingNode):
             "coasting_fix": health.coasting_fix,
             "coasting_velocity": health.coasting_velocity,
             "coasting_heading": health.coasting_heading,
+            "sensor_set": health.sensor_set,
+            "coasting_sources": ",".join(health.coasting_sources),
         }
         for kind, counters in health.counters.items():
             values[f"{kind}.accepted"] = counters.accepted
@@ -277,6 +327,15 @@ class FusionNode(FlushingNode):
                 "covariance_repairs": health.covariance_repairs,
                 "imu_gaps": health.imu_gaps,
                 "alignments": health.alignments,
+                "navigation_trusted": health.trusted,
+                "integrity_events": len(health.integrity_events),
+                "realignments": health.realignments,
+                "untrusted_s": sum(
+                    (event.end_s if math.isfinite(event.end_s) else health.time_s) - event.start_s
+                    for event in health.integrity_events
+                ),
+                "imu_clock_steps": len(health.imu_clock_steps),
+                "imu_clock_correction_s": -sum(step for _, step in health.imu_clock_steps),
                 # Full precision: a stamp in seconds since the epoch.
                 "processed_up_to_s": f"{health.time_s:.6f}",
             }
@@ -309,9 +368,20 @@ class FusionNode(FlushingNode):
             )
             if flag
         ]
+        if not health.trusted:
+            reason = health.integrity_events[-1].reason
+            return "warn", f"aligned, navigation not trusted ({reason})", values
         if coasting:
-            return "warn", f"aligned, coasting without GNSS {', '.join(coasting)}", values
-        return "ok", f"aligned, {self.solutions_published} solutions published", values
+            return (
+                "warn",
+                f"aligned on {health.sensor_set}, coasting without GNSS {', '.join(coasting)}",
+                values,
+            )
+        return (
+            "ok",
+            f"aligned on {health.sensor_set}, {self.solutions_published} solutions published",
+            values,
+        )
 
     def _filter_estimates(self) -> dict[str, float]:
         """The filter's 1σ of attitude (ENU error angles, deg) and velocity (ENU, m/s) and its

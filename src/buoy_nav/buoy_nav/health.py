@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from buoy_nav.alignment import AlignmentResult, AlignmentState
+from buoy_nav.integrity import IntegrityEvent
 
 IMU = "imu"
 """Counter name of the IMU samples (the aiding sources count under their ``kind``)."""
@@ -81,6 +82,15 @@ class EngineHealth:
     imu_gaps: IMU gaps longer than ``max_imu_gap_s``. alignments: completed alignments.
     time_s: stamp up to which data was processed (NaN before any).
     alignment: the last alignment result (None before the first).
+    imu_clock_steps: steps of the IMU's clock relative to the aiding sources, as (stamp of the
+      first sample after the step on the aiding sources' clock, s; step, s, negative when the
+      IMU clock went back); the IMU samples are re-stamped by the sum of the steps.
+    trusted: the filter agrees with its aiding (see :mod:`buoy_nav.integrity`).
+    integrity_events: the periods in which it did not, oldest first.
+    realignments: alignments started again because the filter stayed inconsistent.
+    sensor_set: the sensor set in use (:func:`buoy_nav.sensor_sets.sensor_set`).
+    coasting_sources: kinds of the aiding sources accepted before but not within
+      ``coasting_timeout_s`` (their quantities are carried by the inertial solution).
     """
 
     alignment_state: AlignmentState
@@ -94,3 +104,9 @@ class EngineHealth:
     alignments: int
     time_s: float
     alignment: AlignmentResult | None
+    imu_clock_steps: tuple[tuple[float, float], ...] = ()
+    trusted: bool = True
+    integrity_events: tuple[IntegrityEvent, ...] = ()
+    realignments: int = 0
+    sensor_set: str = ""
+    coasting_sources: tuple[str, ...] = ()

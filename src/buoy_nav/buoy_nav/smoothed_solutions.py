@@ -8,6 +8,9 @@ the backward pass the smoothed error of each solution's stamp
 own convention (:func:`buoy_nav.error_state_filter.inject_error_state`, here for whole blocks of
 solutions at once): ``R = Exp([φ×]) R``, ``v + δv``, the position moved by δp ENU metres, the
 biases plus δb, hence the bias-corrected rate ``ω − δb_g`` and specific force ``f − δb_a``.
+Where the integrity monitor distrusted the forward filter, the smoothed covariance keeps the
+inflation the forward solution was published with (:func:`buoy_nav.integrity.distrust_variances`):
+the smoother inherits the forward filter's error there, and the wind refuses it alike.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from buoy_nav import earth
+from buoy_nav.integrity import IntegrityEvent, distrust_variances, distrusted_at
 from buoy_nav.smoother import SmoothedEpochs, SmootherRecorder
 from buoy_nav.solution import NavSolution
 from buoy_nav.spill import SpillDirectory
@@ -106,13 +110,27 @@ class SolutionStore:
         epochs: SmoothedEpochs,
         states: StateLayout,
         map_plane: earth.LocalTangentPlane,
+        distrust: tuple[list[IntegrityEvent], tuple[float, float]],
     ) -> Iterator[StampedSolution]:
-        """Every stored solution with its smoothed twin, in the stored order."""
+        """Every stored solution with its smoothed twin, in the stored order; ``distrust``:
+        the periods the forward filter was not trusted and the (attitude, velocity) variances
+        its solutions had added then."""
+        events, (attitude_variance, velocity_variance) = distrust
+        diagonal = np.diag_indices(3)
         total = len(self._table)
         for start in range(0, total, SOLUTIONS_PER_BLOCK):
             rows = self._table.rows(start, min(total, start + SOLUTIONS_PER_BLOCK))
             error, covariance = epochs.at(rows["t_s"])
             smoothed = smoothed_rows(rows, error, covariance, states, map_plane)
+            distrusted = distrusted_at(rows["t_s"], events)
+            if distrusted.any():
+                for name, variance in (
+                    ("attitude_covariance_rad2", attitude_variance),
+                    ("velocity_covariance_m2s2", velocity_variance),
+                ):
+                    blocks = smoothed[name][distrusted]
+                    blocks[:, diagonal[0], diagonal[1]] += variance
+                    smoothed[name][distrusted] = blocks
             for forward_row, smoothed_row in zip(rows, smoothed, strict=True):
                 yield StampedSolution(
                     _solution(forward_row),
@@ -217,7 +235,9 @@ class FixedIntervalSmoother:
         if len(self.store) == 0:
             return
         epochs = self.recorder.smooth()
-        yield from self.store.smoothed(epochs, self.engine.states, self.engine.map_plane)
+        engine = self.engine
+        distrust = (list(engine.health().integrity_events), distrust_variances(engine.config))
+        yield from self.store.smoothed(epochs, engine.states, engine.map_plane, distrust)
 
     def close(self) -> None:
         self.store.close()

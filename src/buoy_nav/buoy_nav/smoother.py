@@ -4,15 +4,18 @@ Offline, every sample has a future: the smoother (paper 002) runs the forward fi
 whole recording, then a backward pass that combines each epoch's filtered estimate with
 everything measured after it.
 
-**What the forward pass stores** (:class:`SmootherRecorder`, hooked into the engine): one
-record per *covariance epoch* k, i.e. each propagation of the covariance (every
-``covariance_propagation_interval_s`` and at every measurement stamp), holding its stamp t_k,
-the transition Φ_k from epoch k−1, the predicted covariance P_k⁻, the correction δx̂_k injected
-into the nominal state at t_k (the sum of the updates of that stamp; zero without
-measurements) and the covariance P_k⁺ after the updates and their resets (taken when the next
-epoch starts). A reset of the nominal state that is not a correction (a source's persistent
-rejection re-initialising states, an alignment after an IMU gap) ends a *segment*: the
-smoother never smooths across one.
+**What the forward pass stores** (:class:`SmootherRecorder`, told by the engine through the
+hooks of :mod:`buoy_nav.epoch_recorder`): one record per *covariance epoch* k, i.e. each
+propagation of the covariance (every ``covariance_propagation_interval_s`` and at every
+measurement stamp), holding its stamp t_k, the transition Φ_k from epoch k−1, the predicted
+covariance P_k⁻, the correction δx̂_k injected into the nominal state at t_k (the sum of the
+updates of that stamp; zero without measurements) and the covariance P_k⁺ after the updates
+and their resets (taken when the next epoch starts). The integrity monitor's inflation of the
+covariance is process noise at its stamp: an epoch of its own with Φ = I and P⁻ = P⁺ + the
+inflation, so little of what follows reaches back across it. A reset of the nominal state that
+is not a correction (a source's persistent rejection re-initialising states, such as the yaw
+reset; an alignment after an IMU gap or a loss of integrity) ends a *segment*: the smoother
+never smooths across one.
 
 **The backward pass for a closed-loop filter.** After each update the filter injects δx̂_k into
 the nominal state and resets its error mean to zero, so every filtered error mean is zero,
@@ -48,6 +51,7 @@ from array import array
 import numpy as np
 from scipy.linalg import lapack
 
+from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.spill import BLOCK_RECORDS, SpillDirectory, SpillTable, read_rows
 from buoy_nav.state_layout import StateLayout
 
@@ -98,11 +102,11 @@ class SymmetricPacking:
         return matrix
 
 
-class SmootherRecorder:
+class SmootherRecorder(EpochRecorder):
     """Stores the forward filter's epochs for the backward pass (see the module docstring).
 
-    The engine calls :meth:`begin_segment`, :meth:`propagated`, :meth:`corrected` and
-    :meth:`end_segment`; ``spill`` is the temporary directory the records go to.
+    The engine calls the hooks of :class:`~buoy_nav.epoch_recorder.EpochRecorder`; ``spill`` is
+    the temporary directory the records go to.
     """
 
     def __init__(self, states: StateLayout, spill: SpillDirectory):
@@ -113,15 +117,14 @@ class SmootherRecorder:
         self._pending: np.void | None = None
         self._times = array("d")  # 8 bytes per epoch, not a Python float's 32
         self._segment_starts = array("q")
+        self._identity = np.eye(states.dim)
         self.smoothed_epochs: SmoothedEpochs | None = None
 
     # ------------------------------------------------------------ engine hooks
     def begin_segment(self, t_s: float, covariance: np.ndarray) -> None:
-        """The filter starts (alignment) or restarts (state reset) at stamp ``t_s`` with
-        ``covariance``."""
         self._close_pending(covariance)
         self._segment_starts.append(len(self._times))
-        self._open(t_s, np.eye(self.states.dim), covariance, segment_start=True)
+        self._open(t_s, self._identity, covariance, segment_start=True)
 
     def propagated(
         self,
@@ -130,19 +133,23 @@ class SmootherRecorder:
         prior_covariance: np.ndarray,
         previous_posterior: np.ndarray,
     ) -> None:
-        """The covariance was propagated to stamp ``t_s`` by ``transition`` from
-        ``previous_posterior`` (P⁺ of the previous epoch) to ``prior_covariance``."""
         self._close_pending(previous_posterior)
         self._open(t_s, transition, prior_covariance, segment_start=False)
 
     def corrected(self, correction: np.ndarray) -> None:
-        """A correction was injected into the nominal state at the current epoch."""
         if self._pending is not None:
             self._pending["correction"] += correction
 
-    def end_segment(self, covariance: np.ndarray) -> None:
-        """The filter stops (IMU gap, state reset, end of data) with ``covariance``."""
-        self._close_pending(covariance)
+    def noise_added(
+        self, t_s: float, covariance_before: np.ndarray, covariance: np.ndarray
+    ) -> None:
+        # An epoch of zero duration: Φ = I, P⁻ = P⁺ + the added noise.
+        self._close_pending(covariance_before)
+        self._open(t_s, self._identity, covariance, segment_start=False)
+
+    def end_segment(self, covariance: np.ndarray | None) -> None:
+        if covariance is not None:
+            self._close_pending(covariance)
 
     # ------------------------------------------------------------ storage
     def _open(self, t_s, transition, prior, segment_start: bool) -> None:

@@ -71,11 +71,20 @@ class SolutionBuilder:
 
     def __init__(self, map_plane: earth.LocalTangentPlane | None):
         self.map_plane = map_plane
+        self._distrust_variances: tuple[float, float] | None = None
         self._covariance_blocks: tuple[np.ndarray, ...] | None = None
         self._bias_arrays: tuple[np.ndarray, np.ndarray] | None = None
 
     def covariance_changed(self) -> None:
         self._covariance_blocks = None
+
+    def distrust(self, variances: tuple[float, float] | None) -> None:
+        """While the filter is found inconsistent with its aiding, its own covariance is not
+        to be believed: ``variances`` (attitude rad², velocity m²/s²) are added to each axis of
+        the published blocks; None: the filter's covariance as it is."""
+        if variances != self._distrust_variances:
+            self._distrust_variances = variances
+            self._covariance_blocks = None
 
     def biases_changed(self) -> None:
         self._bias_arrays = None
@@ -94,10 +103,14 @@ class SolutionBuilder:
         if self._covariance_blocks is None:
             covariance = kalman.covariance
             states = kalman.states
-            self._covariance_blocks = tuple(
-                _read_only(covariance[block, block].copy())
+            blocks = [
+                covariance[block, block].copy()
                 for block in (states.attitude, states.velocity, states.position)
-            )
+            ]
+            if self._distrust_variances is not None:
+                for block, variance in zip(blocks, self._distrust_variances, strict=False):
+                    block[np.diag_indices(3)] += variance
+            self._covariance_blocks = tuple(_read_only(block) for block in blocks)
         if self._bias_arrays is None:
             self._bias_arrays = (
                 _read_only(np.array(integrator.gyro_bias_rad_s)),

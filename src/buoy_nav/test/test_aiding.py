@@ -395,7 +395,7 @@ def test_measurement_covariance_floor_keeps_correlations():
 # -- registry and layout ----------------------------------------------------------------------
 
 
-def test_registry_applies_the_antenna_attitude_last_and_the_baseline_before_the_heading():
+def test_registry_applies_the_heading_references_last_and_the_baseline_before_the_heading():
     kinds = [source.kind for source in AIDING_SOURCES]
     assert kinds == [
         "gnss_fix",
@@ -403,6 +403,9 @@ def test_registry_applies_the_antenna_attitude_last_and_the_baseline_before_the_
         "gnss_baseline",
         "gnss_baseline_tertiary",
         "gnss_heading",
+        "magnetometer",
+        "ahrs",
+        "moored",
     ]
     assert GnssHeadingSource.superseded_by == GnssBaselineSource.kind
     assert not GnssBaselineSource.enabled_by(FusionConfig(use_gnss_baseline=False))

@@ -523,3 +523,100 @@ def test_a_source_registered_from_outside_runs_end_to_end():
         feed_message(plain, "test/altitude", message)
     with pytest.raises(TypeError, match="Altitude"):
         plain.add_measurement(1.0, Altitude(0.0, 1.0))
+
+
+@pytest.mark.parametrize("step_s", [-5.0, 5.0])
+def test_a_step_of_the_imu_clock_is_undone(step_s):
+    """IMU stamps stepping back or ahead (the samples arriving as before, with the GNSS's in
+    between) are put back on the GNSS clock: the run is the one without the step, but for the
+    rounding of the re-stamped stamps (measurements then fall a few ulps off an IMU stamp, and
+    the integration steps are split there) and, for a step back, the first sample after it:
+    one stale sample is not a step, so it is rejected, and its successor confirms the step."""
+    buoy = RockingBuoy()
+    events = make_events(buoy, 50.0)
+    stepped = [
+        (e[0] + step_s, *e[1:]) if e[2] == "imu" and e[0] >= 30.0 - 1e-9 else e for e in events
+    ]
+    engine, solutions = run(stepped)
+    _, reference = run(events)
+    health = engine.health()
+    assert len(health.imu_clock_steps) == 1
+    stamp_s, measured_step_s = health.imu_clock_steps[0]
+    lost = 1 if step_s < 0 else 0
+    assert stamp_s == pytest.approx(30.0 + 0.01 * lost, abs=1e-9)
+    assert measured_step_s == pytest.approx(step_s, abs=1e-9)
+    assert health.counters["imu"].rejected == ({"stamp_not_increasing": 1} if lost else {})
+    assert health.imu_gaps == 0 and health.alignments == 1
+    if lost:
+        reference = [s for s in reference if abs(s.t_s - 30.0) > 1e-6]
+    assert len(solutions) == len(reference)
+    stamps, reference_stamps = (np.array([s.t_s for s in run]) for run in (solutions, reference))
+    np.testing.assert_allclose(stamps, reference_stamps, rtol=0.0, atol=1e-9)
+    attitudes, reference_attitudes = (
+        Rotation.from_quat(np.array([s.attitude_xyzw for s in run]))
+        for run in (solutions, reference)
+    )
+    assert (attitudes * reference_attitudes.inv()).magnitude().max() < 1e-4  # rad
+    velocity_difference = np.array(
+        [s.velocity_enu_mps - r.velocity_enu_mps for s, r in zip(solutions, reference, strict=True)]
+    )
+    assert np.abs(velocity_difference).max() < 1e-4
+    assert attitude_errors_rad(buoy, solutions).max() < math.radians(0.02)
+
+
+def test_an_imu_outage_is_not_taken_for_a_clock_step():
+    buoy = RockingBuoy()
+    events = [e for e in make_events(buoy, 40.0) if not (e[2] == "imu" and 20.0 < e[0] < 21.0)]
+    engine, _ = run(events)
+    health = engine.health()
+    assert health.imu_clock_steps == ()
+    assert health.imu_gaps == 1
+
+
+def test_an_imu_spike_inside_the_magnitude_limits_is_rejected_and_leaves_no_trace(rocking_run):
+    """Five gyro samples of 30 rad/s and one accelerometer sample of 100 m/s² (inside the
+    magnitude limits) change no solution beyond what losing those samples does."""
+    buoy, events, _, reference = rocking_run
+    spiked = []
+    for event in events:
+        t, order, kind, args = event
+        if kind == "imu" and 30.0 - 1e-9 <= t < 30.05 - 1e-9:
+            args = (np.array([30.0, 0.0, 0.0]), args[1])
+        elif kind == "imu" and 40.0 - 1e-9 <= t < 40.01 - 1e-9:
+            args = (args[0], np.array([0.0, 0.0, 100.0]))
+        spiked.append((t, order, kind, args))
+    engine, solutions = run(spiked)
+    assert engine.health().counters["imu"].rejected == {"implausible_change": 6}
+    assert len(solutions) == len(reference) - 6
+    assert attitude_errors_rad(buoy, solutions).max() < math.radians(0.02)
+    assert engine.health().trusted
+
+
+def test_a_filter_at_odds_with_its_aiding_says_so_and_realigns():
+    """A gyro offset of 0.3 rad/s for 1 s (each sample within the platform's limits) turns the
+    attitude 17° away: the gates reject the GNSS, the navigation is declared not trusted, its
+    attitude covariance grows past 1° at once, and a realignment brings the attitude back."""
+    buoy = RockingBuoy()
+    events = []
+    for t, order, kind, args in make_events(buoy, 70.0):
+        if kind == "imu" and 30.0 - 1e-9 <= t < 31.0 - 1e-9:
+            args = (args[0] + np.array([0.3, 0.0, 0.0]), args[1])
+        events.append((t, order, kind, args))
+    engine, solutions = run(events)
+    health = engine.health()
+    assert health.counters["imu"].rejected == {}
+    assert len(health.integrity_events) >= 1
+    event = health.integrity_events[0]
+    assert 30.0 < event.start_s < 31.5
+    assert event.reason.startswith("gate_rejections:")
+    stamps = np.array([s.t_s for s in solutions])
+    errors = attitude_errors_rad(buoy, solutions)
+    sigma = np.sqrt([s.attitude_covariance_rad2.diagonal().max() for s in solutions])
+    # Every solution whose attitude is off by more than 1° says so by its covariance, except
+    # those emitted before the gates could see the error (processing lags by the measurement
+    # delay, and the trust ends at the third rejection).
+    detected_by_s = event.start_s + engine.config.max_measurement_delay_s + 0.01
+    wrong = (errors > math.radians(1.0)) & (stamps > detected_by_s)
+    assert np.all(sigma[wrong] > math.radians(1.0))
+    assert health.trusted
+    assert errors[stamps > 65.0].max() < math.radians(0.1)

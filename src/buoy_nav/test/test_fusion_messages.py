@@ -24,16 +24,19 @@ from sensor_msgs.msg import Imu, NavSatFix
 
 from buoy_common.bag_io import BagReader, BagWriter, jazzy_typestore
 from buoy_common.contract import (
+    BODY_FRAME,
     GNSS_BASELINE_TOPIC,
     GNSS_FIX_TOPIC,
     GNSS_HEADING_TOPIC,
     GNSS_VELOCITY_TOPIC,
     IMU_RAW_TOPIC,
+    MAP_FRAME,
     NAV_FIX_TOPIC,
     NAV_IMU_TOPIC,
     NAV_MSGTYPES,
     NAV_ODOMETRY_TOPIC,
     NAV_VELOCITY_TOPIC,
+    TF_MSGTYPE,
     Reason,
 )
 from buoy_nav.config import fusion_config_from_files
@@ -48,6 +51,8 @@ from buoy_nav.fusion_messages import (
     nav_values,
     solution_cdr,
     solution_messages,
+    transform_cdr,
+    transform_message,
 )
 
 REPO = Path(__file__).resolve().parents[3]
@@ -106,9 +111,9 @@ def sensor_inputs():
     inputs = []
     with BagReader(SEA_STATE_BAG) as reader:
         end_ns = reader.start_ns + int(SECONDS_OF_BAG * NANOSECONDS_PER_SECOND)
-        # The bag's inputs: a dual-antenna receiver, so no gnss/baseline_tertiary.
-        present = {name.lstrip("/") for name in reader.topics}
-        for record in reader.messages([t for t in FUSION_INPUT_MSGTYPES if t in present]):
+        stored = {name.lstrip("/") for name in reader.topics}
+        topics = [t for t in FUSION_INPUT_MSGTYPES if t in stored]
+        for record in reader.messages(topics):
             if record.log_time_ns > end_ns:
                 break
             message = deserialize_message(record.raw, RCLPY_CLASSES[record.msgtype])
@@ -158,6 +163,29 @@ def test_cdr_is_byte_for_byte_what_rosbags_writes_for_the_messages(produced, tmp
             # and rosbags reads our bytes back to the very stamp
             decoded = jazzy_typestore().deserialize_cdr(raw, NAV_MSGTYPES[topic])
             assert stamp_ns(decoded) == stamp_ns(messages[topic])
+
+
+def test_tf_is_what_rosbags_serialises_and_carries_the_odometry_pose(produced):
+    for solution, values, messages in produced:
+        raw = transform_cdr(values)
+        expected = transform_message(
+            values.sec, values.nanosec, values.position_map_m, values.attitude_xyzw
+        )
+        assert raw == bytes(jazzy_typestore().serialize_cdr(expected, TF_MSGTYPE)), solution.t_s
+        (transform,) = jazzy_typestore().deserialize_cdr(raw, TF_MSGTYPE).transforms
+        odometry = messages[NAV_ODOMETRY_TOPIC]
+        assert transform.header.frame_id == odometry.header.frame_id == MAP_FRAME
+        assert transform.child_frame_id == odometry.child_frame_id == BODY_FRAME
+        assert stamp_ns(transform) == stamp_ns(odometry)
+        pose = odometry.pose.pose
+        t, q = transform.transform.translation, transform.transform.rotation
+        assert (t.x, t.y, t.z) == (pose.position.x, pose.position.y, pose.position.z)
+        assert (q.x, q.y, q.z, q.w) == (
+            pose.orientation.x,
+            pose.orientation.y,
+            pose.orientation.z,
+            pose.orientation.w,
+        )
 
 
 def test_nav_stamps_are_the_imu_stamps_to_the_nanosecond(sensor_inputs, produced):
@@ -408,4 +436,4 @@ def test_spoiled_messages_are_rejected_with_their_reason_and_leave_no_trace(
 def test_an_unknown_topic_is_a_programming_error(sensor_inputs):
     engine = FusionEngine(fusion_config_from_files([BUOY_PARAMETERS]))
     with pytest.raises(ValueError, match="input topic"):
-        feed_message(engine, "imu/mag", sensor_inputs[0][1])
+        feed_message(engine, "anemometer/wind", sensor_inputs[0][1])

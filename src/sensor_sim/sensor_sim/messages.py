@@ -14,7 +14,8 @@ from collections.abc import Iterator
 import numpy as np
 from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, NavSatFix, NavSatStatus
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import Imu, MagneticField, NavSatFix, NavSatStatus
 
 from buoy_common.contract import (
     ANEMOMETER_FRAME,
@@ -92,7 +93,7 @@ def gnss_velocity_messages(
 ) -> Iterator[TwistWithCovarianceStamped | None]:
     """``gnss/vel``: primary antenna ENU velocity over ground (m/s); None while there is no fix."""
     for i, time_ns in enumerate(stamps_ns):
-        if not sample.fix_valid[i]:
+        if not sample.velocity_valid[i]:
             yield None
             continue
         message = TwistWithCovarianceStamped()
@@ -149,6 +150,40 @@ def gnss_baseline_tertiary_messages(
         message = Vector3Stamped()
         _set_stamp(message.header, time_ns, MAP_FRAME)
         _set_vector(message.vector, sample.tertiary_baseline_enu_m[i])
+        yield message
+
+
+def magnetic_field_messages(
+    stamps_ns: list[int], field_body_t: np.ndarray, noise_variance_t2: float
+) -> Iterator[MagneticField]:
+    """``imu/mag``: uncalibrated magnetic field in imu_link (tesla)."""
+    for time_ns, field in zip(stamps_ns, field_body_t, strict=True):
+        message = MagneticField()
+        _set_stamp(message.header, time_ns, IMU_FRAME)
+        _set_vector(message.magnetic_field, field)
+        message.magnetic_field_covariance[0::4] = noise_variance_t2
+        yield message
+
+
+def ahrs_messages(
+    stamps_ns: list[int],
+    attitude: Rotation,
+    gyro_rad_s: np.ndarray,
+    specific_force_mps2: np.ndarray,
+    orientation_variance_rad2: float,
+) -> Iterator[Imu]:
+    """``imu/data``: the motion pack's attitude (body→ENU of its yaw reference) with its
+    covariance (small rotation about the ENU axes, rad²), rates and specific force."""
+    quaternions = attitude.as_quat()
+    for time_ns, quaternion, gyro, force in zip(
+        stamps_ns, quaternions, gyro_rad_s, specific_force_mps2, strict=True
+    ):
+        message = Imu()
+        _set_stamp(message.header, time_ns, IMU_FRAME)
+        _set_quaternion(message.orientation, quaternion)
+        message.orientation_covariance[0::4] = orientation_variance_rad2
+        _set_vector(message.angular_velocity, gyro)
+        _set_vector(message.linear_acceleration, force)
         yield message
 
 

@@ -85,6 +85,7 @@ class BuoyMotion:
         end_s = duration_s + _PROFILE_MARGIN_S
         self._sway = _sway_profile(motion, end_s)
         self._rotation = _rotation_profile(motion, end_s)
+        self._positions = _positions_progress(motion)
 
         self.waves: WaveField | None = None
         self.wave_tilt_gain = 0.0
@@ -130,6 +131,14 @@ class BuoyMotion:
                 pitch = _add(pitch, sway)
         if self._rotation is not None:
             yaw = _add(yaw, self._rotation.evaluate(t))
+        if self._positions is not None:
+            for axis, angles in enumerate(self._position_angles(t)):
+                if axis == 0:
+                    roll = _add(roll, angles)
+                elif axis == 1:
+                    pitch = _add(pitch, angles)
+                else:
+                    yaw = _add(yaw, angles)
 
         east_north = [np.zeros((t.size, 2)) for _ in range(3)]
         up = list(self._heave(t))
@@ -159,6 +168,20 @@ class BuoyMotion:
             for horizontal, vertical in zip(east_north, up, strict=True)
         )
         return MotionSample(euler, displacement)
+
+    def _position_angles(self, t: np.ndarray) -> list[Derivatives]:
+        """Roll, pitch and yaw of the static positions (calibration table): piecewise linear
+        in a progress s(t) that ramps from position k to k + 1 and holds there, so the angles
+        change together and are still during the holds."""
+        progress, progress_rate, progress_accel = self._positions.evaluate(t)
+        angles = np.deg2rad(np.asarray(self.config.positions_rpy_deg, dtype=float))
+        segment = np.clip(np.floor(progress).astype(int), 0, len(angles) - 2)
+        slope = angles[segment + 1] - angles[segment]
+        fraction = (progress - segment)[:, None]
+        value = angles[segment] + fraction * slope
+        rate = slope * progress_rate[:, None]
+        accel = slope * progress_accel[:, None]
+        return [(value[:, k], rate[:, k], accel[:, k]) for k in range(3)]
 
     def _wave_tilt(
         self, slope_en: Derivatives, yaw: Derivatives
@@ -237,6 +260,22 @@ def _sway_profile(motion: MotionConfig, end_s: float) -> RampProfile | None:
     holds = [hold] * len(targets)
     return RampProfile.from_waypoints(
         motion.still_before_s, 0.0, targets, holds, rate, motion.corner_time_s
+    )
+
+
+def _positions_progress(motion: MotionConfig) -> RampProfile | None:
+    """Progress through the static positions: k → k + 1 in position_transition_s (rounded),
+    held position_dwell_s at each, from still_before_s."""
+    count = len(motion.positions_rpy_deg)
+    if count == 0:
+        return None
+    if count == 1:
+        return RampProfile.from_waypoints(0.0, 0.0, [], [], 1.0, 1.0)
+    rate = 1.0 / motion.position_transition_s
+    targets = [float(k) for k in range(1, count)]
+    holds = [motion.position_dwell_s] * len(targets)
+    return RampProfile.from_waypoints(
+        motion.still_before_s, 0.0, targets, holds, rate, 0.5 * motion.position_transition_s
     )
 
 

@@ -27,6 +27,10 @@ DRAIN_S = 2.0
 STOP_TIMEOUT_S = 20.0
 SIM_TIME = {"use_sim_time": True}
 STOP_ORDER = ("fusion_node", "compensation_node", "bag_recorder")
+PROGRESS_PERIOD_S = 10.0
+# The node whose log line announces its alignment, and the words that begin that line.
+ALIGNMENT_LOGGERS = ("fusion_node",)
+ALIGNMENT_MARK = "aligned at stamp"
 
 
 def executable(name: str) -> str:
@@ -85,6 +89,41 @@ class Run:
             except subprocess.TimeoutExpired:
                 process.popen.kill()
                 process.popen.wait()
+
+
+class Progress:
+    """A line every ``PROGRESS_PERIOD_S`` while the scenario plays, and each processing node's
+    alignment as its log reports it, so that a run of minutes never looks hung."""
+
+    def __init__(self, started: float, expected_wall_s: float, processes: list[Process]):
+        self.started = started
+        self.expected_wall_s = expected_wall_s
+        self.next_report = started + PROGRESS_PERIOD_S
+        self.watched = [p for p in processes if p.name in ALIGNMENT_LOGGERS]
+
+    def report(self) -> None:
+        now = time.monotonic()
+        for process in list(self.watched):
+            line = _line_with(process.log_path, ALIGNMENT_MARK)
+            if line is not None:
+                print(f"run_scenario: {process.name}: {line}", flush=True)
+                self.watched.remove(process)
+        if now >= self.next_report:
+            self.next_report += PROGRESS_PERIOD_S
+            print(
+                f"run_scenario: {now - self.started:.0f} s of about {self.expected_wall_s:.0f} s",
+                flush=True,
+            )
+
+
+def _line_with(path: Path, mark: str) -> str | None:
+    """The text from ``mark`` on of the first line of ``path`` holding it, or None."""
+    try:
+        text = path.read_text(errors="replace")
+    except OSError:
+        return None
+    index = text.find(mark)
+    return None if index < 0 else text[index:].splitlines()[0]
 
 
 def ros_arguments(arguments, values: dict[str, object]) -> list[str]:
@@ -190,9 +229,12 @@ def run(arguments) -> int:
     self_stopping = [p for p in run.processes if p.stops_by_itself]
     long_running = [p for p in run.processes if not p.stops_by_itself]
     expected_wall_s = scenario.duration_s / arguments.rate_factor
-    deadline = time.monotonic() + expected_wall_s + 60.0
+    started = time.monotonic()
+    deadline = started + expected_wall_s + 60.0
+    progress = Progress(started, expected_wall_s, run.processes)
     try:
         while any(p.popen.poll() is None for p in self_stopping):
+            progress.report()
             failure = run.failed()
             if failure is not None:
                 print(

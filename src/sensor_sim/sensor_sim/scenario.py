@@ -31,10 +31,12 @@ import yaml
 from numpy.typing import ArrayLike
 
 from sensor_sim.sensor_errors import (
+    AhrsErrorConfig,
     AnemometerErrorConfig,
     GnssErrorConfig,
     ImuErrorConfig,
     InvalidConfigValueError,
+    MagnetometerErrorConfig,
     check_field,
     check_non_negative,
     check_positive,
@@ -61,6 +63,9 @@ class MotionConfig:
       sway_cycles full swings or continuous when null, starting from level)
     + a turntable rotation in yaw (0 -> rotation_range_deg -> 0 at rotation_rate_deg_s with
       rotation_dwell_s at each end)
+    + static positions of a calibration table: ``positions_rpy_deg`` (roll, pitch, yaw in deg,
+      added to the rest), held ``position_dwell_s`` each (the first from t = 0 to
+      still_before_s), turned from one to the next in ``position_transition_s``
     + wave-following tilt from the ``waves`` section.
     Sway and rotation start after still_before_s. Translation (curvilinear east/north/up) =
     paper-002 velocity sinusoids (heave up; surge along and lateral to the left of the mean
@@ -95,6 +100,9 @@ class MotionConfig:
     rotation_rate_deg_s: float = 10.0
     rotation_dwell_s: float = 0.0
     corner_time_s: float = 0.5
+    positions_rpy_deg: tuple[tuple[float, float, float], ...] = ()
+    position_dwell_s: float = 30.0
+    position_transition_s: float = 10.0
 
     def __post_init__(self) -> None:
         check_non_negative(
@@ -122,7 +130,16 @@ class MotionConfig:
             "sway_rate_deg_s",
             "rotation_rate_deg_s",
             "corner_time_s",
+            "position_dwell_s",
+            "position_transition_s",
         )
+        for _roll, pitch, _yaw in self.positions_rpy_deg:
+            check_field(
+                self,
+                "positions_rpy_deg",
+                abs(pitch) <= MAX_PITCH_EXCURSION_DEG,
+                f"pitch of each position must be within ±{MAX_PITCH_EXCURSION_DEG} deg",
+            )
         check_field(
             self,
             "rotation_range_deg",
@@ -233,6 +250,8 @@ class SensorErrorConfigs:
     imu: ImuErrorConfig = field(default_factory=ImuErrorConfig)
     gnss: GnssErrorConfig = field(default_factory=GnssErrorConfig)
     anemometer: AnemometerErrorConfig = field(default_factory=AnemometerErrorConfig)
+    magnetometer: MagnetometerErrorConfig = field(default_factory=MagnetometerErrorConfig)
+    ahrs: AhrsErrorConfig = field(default_factory=AhrsErrorConfig)
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""Error budgets of the simulated sensors: MEMS IMU, dual-antenna GNSS, sonic anemometer.
+"""Error budgets of the simulated sensors: MEMS IMU, GNSS, sonic anemometer, magnetometer and
+the motion pack's AHRS.
 
 The budgets are in the units data sheets use and are validated on construction, so a scenario
 file or a parameter with an impossible value is refused with a message naming the key.
@@ -7,8 +8,11 @@ file or a parameter with an impossible value is refused with a message naming th
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
+
+from buoy_common.extrinsics import check_shared_fields, shared_field
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 _DEG = np.pi / 180.0
@@ -96,12 +100,27 @@ class ImuErrorConfig:
         return self.accel_bias_instability_mg * 1e-3 * STANDARD_GRAVITY_MPS2
 
 
+def check_intervals(config: object, *keys: str) -> None:
+    """Each named field of config holds [start, end) intervals with start < end."""
+    for key in keys:
+        for start, end in getattr(config, key):
+            if not start < end:
+                raise InvalidConfigValueError(
+                    key, getattr(config, key), f"interval [{start}, {end}) must have start < end"
+                )
+
+
 @dataclass(frozen=True)
 class GnssErrorConfig:
-    """Dual-antenna GNSS (moving-baseline RTK) errors, 1-sigma per ENU axis, white.
+    """GNSS receiver errors, 1-sigma per ENU axis, white.
 
-    Outages are [start, end) intervals in scenario time (s). A receiver without a fix has no
-    heading either, so heading is also invalid during fix outages.
+    ``receiver``: ``dual_antenna`` (moving-baseline RTK: fix, velocity, heading, baseline),
+    ``single_antenna`` (fix and velocity) or ``none`` (no GNSS topic at all).
+    Outages are [start, end) intervals in scenario time (s), one list per topic: the message is
+    then published with NaN values and ``status -1`` (as a receiver without a solution does). A
+    receiver without a fix has no velocity, heading or baseline either, so fix outages blank
+    every GNSS topic; heading outages blank the heading and the baseline (one carrier-phase
+    solution).
     """
 
     position_noise_horizontal_m: float = 0.02
@@ -110,7 +129,9 @@ class GnssErrorConfig:
     velocity_noise_vertical_mps: float = 0.04
     baseline_noise_horizontal_m: float = 0.003
     baseline_noise_vertical_m: float = 0.006
+    receiver: Literal["dual_antenna", "single_antenna", "none"] = "dual_antenna"
     fix_outages_s: tuple[tuple[float, float], ...] = ()
+    velocity_outages_s: tuple[tuple[float, float], ...] = ()
     heading_outages_s: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
@@ -123,12 +144,13 @@ class GnssErrorConfig:
             "baseline_noise_horizontal_m",
             "baseline_noise_vertical_m",
         )
-        for key in ("fix_outages_s", "heading_outages_s"):
-            for start, end in getattr(self, key):
-                if not start < end:
-                    raise InvalidConfigValueError(
-                        key, getattr(self, key), f"interval [{start}, {end}) must have start < end"
-                    )
+        check_field(
+            self,
+            "receiver",
+            self.receiver in ("dual_antenna", "single_antenna", "none"),
+            "must be dual_antenna, single_antenna or none",
+        )
+        check_intervals(self, "fix_outages_s", "velocity_outages_s", "heading_outages_s")
 
 
 @dataclass(frozen=True)
@@ -139,3 +161,74 @@ class AnemometerErrorConfig:
 
     def __post_init__(self) -> None:
         check_non_negative(self, "noise_mps")
+
+
+_IDENTITY_3X3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class MagnetometerErrorConfig:
+    """Three-axis magnetometer on the IMU (``imu_link``), uncalibrated as the contract says.
+
+    measured = soft_iron · B_body + hard_iron + white noise (tesla), with B_body the
+    geomagnetic field of the IGRF at the scenario's place turned into the body frame.
+    ``soft_iron`` is a row-major 3×3 matrix (dimensionless), ``hard_iron_ut`` the constant
+    offset (µT) of the buoy's own permanent magnetism. ``disturbances_s`` are [start, end)
+    intervals during which a passing steel hull turns the local horizontal field by
+    ``disturbance_heading_bias_deg`` (clockwise seen from above: the compass heading grows by
+    it). ``fitted: false``: no magnetometer.
+    """
+
+    fitted: bool = False
+    sample_every: int = 10
+    noise_ut: float = 0.1
+    hard_iron_ut: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    soft_iron: tuple[float, ...] = _IDENTITY_3X3
+    disturbances_s: tuple[tuple[float, float], ...] = ()
+    disturbance_heading_bias_deg: float = 30.0
+
+    def __post_init__(self) -> None:
+        check_non_negative(self, "noise_ut")
+        check_field(self, "sample_every", self.sample_every >= 1, "must be >= 1")
+        check_field(
+            self, "soft_iron", len(self.soft_iron) == 9, "must be 9 numbers (3×3, row-major)"
+        )
+        check_field(
+            self,
+            "soft_iron",
+            abs(np.linalg.det(np.reshape(self.soft_iron, (3, 3)))) > 0.1,
+            "must be an invertible matrix near the identity (|det| > 0.1)",
+        )
+        check_field(self, "hard_iron_ut", len(self.hard_iron_ut) == 3, "must be 3 numbers")
+        check_intervals(self, "disturbances_s")
+
+
+@dataclass(frozen=True)
+class AhrsErrorConfig:
+    """A motion pack's own attitude solution (``imu/data``), from a filter of its own.
+
+    The pack's filter follows the attitude with a first-order lag of time constant
+    ``lag_time_constant_s`` (what a complementary filter that trusts its gyro over
+    ``lag_time_constant_s`` does to wave motion); its slow error is a first-order Gauss-Markov
+    rotation (1-σ ``error_deg`` per axis, correlation ``error_correlation_time_s``), its sample
+    noise white (``noise_deg``). Its yaw is referenced as ``ahrs.yaw_reference`` says; with
+    ``magnetic_north`` the IGRF declination at the scenario's place is in it. ``fitted: false``:
+    no motion pack. One sample every ``sample_every`` IMU samples.
+    """
+
+    fitted: bool = False
+    sample_every: int = 10
+    lag_time_constant_s: float = 0.2
+    error_deg: float = 0.3
+    error_correlation_time_s: float = 120.0
+    noise_deg: float = 0.05
+    yaw_reference: str = shared_field("ahrs.yaw_reference")
+
+    def __post_init__(self) -> None:
+        check_non_negative(self, "lag_time_constant_s", "error_deg", "noise_deg")
+        check_field(self, "sample_every", self.sample_every >= 1, "must be >= 1")
+        check_positive(self, "error_correlation_time_s")
+        try:
+            check_shared_fields(self)
+        except ValueError as error:
+            raise InvalidConfigValueError("yaw_reference", self.yaw_reference, str(error)) from None

@@ -241,13 +241,14 @@ class GnssSample:
     heading_yaw_rad: np.ndarray
     heading_variance_rad2: np.ndarray
     fix_valid: np.ndarray
+    velocity_valid: np.ndarray
     heading_valid: np.ndarray
     tertiary_baseline_enu_m: np.ndarray | None = None
 
 
 class GnssSimulator:
-    """Dual-antenna receiver: primary antenna position and velocity, baseline and heading; with
-    a third antenna, also the primary -> tertiary baseline (same noise as the first)."""
+    """GNSS receiver: primary antenna position and velocity; with two antennas the baseline and
+    heading, and with a third the primary -> tertiary baseline (same noise as the first)."""
 
     def __init__(
         self,
@@ -324,13 +325,16 @@ class GnssSimulator:
         heading_variance = config.baseline_noise_horizontal_m**2 / horizontal_length_sq
 
         fix_valid = ~_in_intervals(t, config.fix_outages_s)
+        velocity_valid = fix_valid & ~_in_intervals(t, config.velocity_outages_s)
         heading_valid = fix_valid & ~_in_intervals(t, config.heading_outages_s)
+        if config.receiver != "dual_antenna":
+            heading_valid[:] = False
         no_fix = ~fix_valid
         no_heading = ~heading_valid
         latitude_deg = np.where(no_fix, np.nan, np.rad2deg(latitude))
         longitude_deg = np.where(no_fix, np.nan, np.rad2deg(longitude))
         altitude = np.where(no_fix, np.nan, altitude)
-        velocity[no_fix] = np.nan
+        velocity[~velocity_valid] = np.nan
         baseline[no_heading] = np.nan
         heading = np.where(no_heading, np.nan, heading)
         heading_variance = np.where(no_heading, np.nan, heading_variance)
@@ -357,6 +361,7 @@ class GnssSimulator:
             heading_yaw_rad=heading,
             heading_variance_rad2=heading_variance,
             fix_valid=fix_valid,
+            velocity_valid=velocity_valid,
             heading_valid=heading_valid,
             tertiary_baseline_enu_m=tertiary,
         )

@@ -15,12 +15,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from buoy_common.contract import (
+    AHRS_TOPIC,
     GNSS_BASELINE_TERTIARY_TOPIC,
     GNSS_BASELINE_TOPIC,
     GNSS_FIX_TOPIC,
     GNSS_HEADING_TOPIC,
     GNSS_VELOCITY_TOPIC,
     IMU_RAW_TOPIC,
+    MAGNETOMETER_TOPIC,
     SENSOR_MSGTYPES,
     TRUTH_CURRENT_TOPIC,
     TRUTH_MSGTYPES,
@@ -32,8 +34,15 @@ from buoy_common.extrinsics import check_shared_fields, shared_field
 from buoy_common.parameters import build_config, config_parameters
 from sensor_sim import messages
 from sensor_sim.geodesy import geodetic_to_enu_m
+from sensor_sim.motion_pack import MICROTESLA, AhrsSimulator, MagnetometerSimulator
 from sensor_sim.scenario import Scenario
-from sensor_sim.sensor_errors import AnemometerErrorConfig, GnssErrorConfig, ImuErrorConfig
+from sensor_sim.sensor_errors import (
+    AhrsErrorConfig,
+    AnemometerErrorConfig,
+    GnssErrorConfig,
+    ImuErrorConfig,
+    MagnetometerErrorConfig,
+)
 from sensor_sim.sensor_models import AnemometerSimulator, GnssSimulator, ImuSimulator
 from sensor_sim.truth import TruthModel
 
@@ -41,6 +50,7 @@ SECONDS_PER_HOUR = 3600.0
 
 # Per-sensor keys for the seed: every sensor draws its own independent random stream.
 IMU_SEED_KEY, GNSS_SEED_KEY, ANEMOMETER_SEED_KEY = 1, 2, 3
+MAGNETOMETER_SEED_KEY, AHRS_SEED_KEY = 4, 5
 
 
 @dataclass(frozen=True)
@@ -130,10 +140,33 @@ class SensorStream:
 
 @dataclass
 class ImuStream(SensorStream):
+    """The IMU, and when the motion pack carries them its magnetometer (``imu/mag``) and its
+    own AHRS attitude (``imu/data``), all at the IMU's sample times."""
+
     errors: ImuErrorConfig = field(default_factory=ImuErrorConfig)
+    magnetometer: MagnetometerErrorConfig = field(default_factory=MagnetometerErrorConfig)
+    ahrs: AhrsErrorConfig = field(default_factory=AhrsErrorConfig)
 
     def __post_init__(self):
         self.topics = {IMU_RAW_TOPIC: SENSOR_MSGTYPES[IMU_RAW_TOPIC]}
+        seed = self.scenario.seed
+        self._magnetometer = None
+        self._ahrs = None
+        if self.magnetometer.fitted:
+            self.topics[MAGNETOMETER_TOPIC] = SENSOR_MSGTYPES[MAGNETOMETER_TOPIC]
+            self._magnetometer = MagnetometerSimulator(
+                self.truth, self.magnetometer, self.scenario, [seed, MAGNETOMETER_SEED_KEY]
+            )
+            self._magnetometer_variance_t2 = (self.magnetometer.noise_ut * MICROTESLA) ** 2
+        if self.ahrs.fitted:
+            self.topics[AHRS_TOPIC] = SENSOR_MSGTYPES[AHRS_TOPIC]
+            self._ahrs = AhrsSimulator(
+                self.truth,
+                self.ahrs,
+                self.scenario,
+                [seed, AHRS_SEED_KEY],
+                self.timing.rate_hz / self.ahrs.sample_every,
+            )
         self._simulator = ImuSimulator(
             self.truth,
             self.errors,
@@ -146,7 +179,15 @@ class ImuStream(SensorStream):
         self._gyro_variance = gyro_density_rad_sqrt_s**2 * self.timing.rate_hz
         self._accel_variance = accel_density_mps_sqrt_s**2 * self.timing.rate_hz
 
+    def _every(self, times_s, stamps_ns, every: int):
+        """The samples whose index (counted from the first of the run) is a multiple of
+        ``every``."""
+        first_index = self.next_index - len(times_s)
+        keep = [k for k in range(len(times_s)) if (first_index + k) % every == 0]
+        return times_s[keep], [stamps_ns[k] for k in keep]
+
     def _messages(self, times_s, stamps_ns):
+        all_times_s, all_stamps_ns = times_s, stamps_ns
         gyro, force = self._simulator.measure(times_s)
         for stamp, message in zip(
             stamps_ns,
@@ -156,6 +197,30 @@ class ImuStream(SensorStream):
             strict=True,
         ):
             yield IMU_RAW_TOPIC, stamp, message
+        if self._magnetometer is not None:
+            times_s, stamps_ns = self._every(times_s, stamps_ns, self.magnetometer.sample_every)
+            field_body_t = self._magnetometer.measure(times_s)
+            yield from (
+                (MAGNETOMETER_TOPIC, stamp, message)
+                for stamp, message in zip(
+                    stamps_ns,
+                    messages.magnetic_field_messages(
+                        stamps_ns, field_body_t, self._magnetometer_variance_t2
+                    ),
+                    strict=True,
+                )
+            )
+        if self._ahrs is not None:
+            times_s, stamps_ns = self._every(all_times_s, all_stamps_ns, self.ahrs.sample_every)
+            attitude, gyro, force, variance = self._ahrs.measure(times_s)
+            yield from (
+                (AHRS_TOPIC, stamp, message)
+                for stamp, message in zip(
+                    stamps_ns,
+                    messages.ahrs_messages(stamps_ns, attitude, gyro, force, variance),
+                    strict=True,
+                )
+            )
 
 
 @dataclass
@@ -164,15 +229,17 @@ class GnssStream(SensorStream):
     extrinsics: Extrinsics = field(default_factory=Extrinsics)
 
     def __post_init__(self):
-        self.topics = {
-            topic: SENSOR_MSGTYPES[topic]
-            for topic in (
+        receiver_topics = {
+            "dual_antenna": (
                 GNSS_FIX_TOPIC,
                 GNSS_VELOCITY_TOPIC,
                 GNSS_HEADING_TOPIC,
                 GNSS_BASELINE_TOPIC,
-            )
-        }
+            ),
+            "single_antenna": (GNSS_FIX_TOPIC, GNSS_VELOCITY_TOPIC),
+            "none": (),
+        }[self.errors.receiver]
+        self.topics = {topic: SENSOR_MSGTYPES[topic] for topic in receiver_topics}
         self._simulator = GnssSimulator(
             self.truth,
             self.errors,
@@ -181,12 +248,18 @@ class GnssStream(SensorStream):
             [self.scenario.seed, GNSS_SEED_KEY],
             np.asarray(self.extrinsics.tertiary_antenna_body_m),
         )
-        if self._simulator.tertiary_antenna_body_m is not None:
+        # The third antenna's vector comes from a receiver that solves the first baseline too.
+        if (
+            self._simulator.tertiary_antenna_body_m is not None
+            and GNSS_BASELINE_TOPIC in self.topics
+        ):
             self.topics[GNSS_BASELINE_TERTIARY_TOPIC] = SENSOR_MSGTYPES[
                 GNSS_BASELINE_TERTIARY_TOPIC
             ]
 
     def _messages(self, times_s, stamps_ns):
+        if not self.topics:
+            return
         sample = self._simulator.measure(times_s)
         per_topic = {
             GNSS_FIX_TOPIC: messages.gnss_fix_messages(stamps_ns, sample),
@@ -198,6 +271,7 @@ class GnssStream(SensorStream):
             per_topic[GNSS_BASELINE_TERTIARY_TOPIC] = messages.gnss_baseline_tertiary_messages(
                 stamps_ns, sample
             )
+        per_topic = {topic: rows for topic, rows in per_topic.items() if topic in self.topics}
         rows = zip(stamps_ns, *per_topic.values(), strict=True)
         for stamp, *row in rows:
             for topic, message in zip(per_topic, row, strict=True):
@@ -316,9 +390,9 @@ class StreamSpec:
         return names
 
     def _scenario_default(self, scenario: Scenario, field_name: str):
-        if field_name != "errors":
-            return None
-        return getattr(scenario.sensors, self.node_name.split("_")[0])
+        if field_name == "errors":
+            return getattr(scenario.sensors, self.node_name.split("_")[0])
+        return getattr(scenario.sensors, field_name, None)
 
     def build(self, scenario: Scenario, truth: TruthModel, values: dict) -> SensorStream:
         """The stream configured by parameter ``values`` (absent ones: the scenario's values)."""
@@ -337,7 +411,16 @@ class StreamSpec:
 
 
 STREAMS = {
-    "imu": StreamSpec("imu_sim_node", ImuStream, 100.0, {"errors": (ImuErrorConfig, "imu.", {})}),
+    "imu": StreamSpec(
+        "imu_sim_node",
+        ImuStream,
+        100.0,
+        {
+            "errors": (ImuErrorConfig, "imu.", {}),
+            "magnetometer": (MagnetometerErrorConfig, "magnetometer.", {}),
+            "ahrs": (AhrsErrorConfig, "motion_pack.", {}),
+        },
+    ),
     "gnss": StreamSpec(
         "gnss_sim_node",
         GnssStream,

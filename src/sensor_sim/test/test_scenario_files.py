@@ -13,7 +13,17 @@ from sensor_sim.scenario import (
     load_scenario,
 )
 
-SHIPPED = ["open_ocean", "sea_state", "static", "tilt_table", "vertical_wind", "wind_tunnel"]
+SHIPPED = [
+    "moored_motion_pack",
+    "open_ocean",
+    "sea_state",
+    "six_position",
+    "static",
+    "tilt_table",
+    "turning",
+    "vertical_wind",
+    "wind_tunnel",
+]
 
 
 def test_all_shipped_scenarios_are_listed_and_load():

@@ -74,7 +74,7 @@ def test_odometry_velocity_is_rotated_into_enu_like_scipy():
     attitude = Rotation.from_euler("ZYX", [0.7, -0.2, 0.3])
     velocity_body = np.array([1.5, -0.4, 0.2])
     scale = 3.0  # unnormalised quaternions are normalised, not used as given
-    t_s, quat, rate, velocity = odometry_fields(
+    t_s, quat, rate, velocity, _ = odometry_fields(
         odometry(scale * attitude.as_quat(), [0.01, 0.02, 0.03], velocity_body, 5, 250_000_000)
     )
     assert t_s == 5.25
@@ -94,15 +94,15 @@ def test_messages_read_from_cdr_equal_decoded_messages_and_convert_as_columns_bi
     singles = [odometry_fields(m) for m in messages]
     assert [odometry_fields_cdr(serialize_message(m)) for m in messages] == singles
     # Whole columns, as process_bag converts them: the same numbers, bit for bit.
-    quat_columns = np.array([q for _, q, _, _ in singles])
-    velocity_columns = np.array([v for _, _, _, v in singles])
+    quat_columns = np.array([q for _, q, _, _, _ in singles])
+    velocity_columns = np.array([v for _, _, _, v, _ in singles])
     np.testing.assert_array_equal(
         np.stack(rotate_by_quaternion_components(quat_columns.T, velocity_columns.T), axis=-1),
-        [rotate_by_quaternion_components(q, v) for _, q, _, v in singles],
+        [rotate_by_quaternion_components(q, v) for _, q, _, v, _ in singles],
     )
     np.testing.assert_array_equal(quat_columns, quats)
     np.testing.assert_array_equal(
-        [t for t, _, _, _ in singles], [i * 1e-9 + 100 for i in range(20)]
+        [t for t, _, _, _, _ in singles], [i * 1e-9 + 100 for i in range(20)]
     )
 
 

@@ -188,8 +188,10 @@ def test_one_stamp_in_floats_is_interpolated_exactly_as_in_a_batch_for_every_out
     quats = rng.normal(size=(300, 4))
     rates = rng.normal(size=(300, 3))
     velocities = rng.normal(size=(300, 3))
+    trusted = np.ones(300, dtype=bool)
+    trusted[280] = False  # one sample the navigation does not vouch for
     track = NavTrack(history_s=3.0)
-    track.extend(stamps, quats, rates, velocities)
+    track.extend(stamps, quats, rates, velocities, trusted)
     track.forget_old_samples()
     queries = np.concatenate(
         (

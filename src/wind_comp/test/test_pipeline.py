@@ -239,3 +239,29 @@ def test_one_message_in_floats_converts_exactly_as_a_batch_of_messages():
         np.testing.assert_array_equal(np.array(one_rate, dtype=float), batch_rates[k])
         np.testing.assert_array_equal(np.array(one_velocity, dtype=float), batch_velocities[k])
     np.testing.assert_array_equal(batch_rates[[3, 17]], rates[[3, 17]])
+
+
+def test_navigation_too_uncertain_corrects_no_wind_alike_live_and_offline():
+    """Solutions whose attitude 1σ exceeds max_attitude_sigma_deg (from 10 s to 12 s) leave
+    the wind samples they bracket invalid as navigation_not_trusted, and only those."""
+    limit_rad = math.radians(CONFIG.max_attitude_sigma_deg)
+    untrusted_s = (10.0, 12.0)
+    messages = []
+    for kind, values in arrivals(NAV_LATENCY_S):
+        if kind == "odometry":
+            inside = untrusted_s[0] <= values[0] <= untrusted_s[1]
+            values = (*values, (2.0 * limit_rad) ** 2 if inside else (0.5 * limit_rad) ** 2)
+        messages.append((kind, values))
+    live_status, live_wind, _, _ = feed(messages, None)
+    wind_t = np.array([values.t_s for kind, values in messages if kind == "wind"])
+    # The samples bracketed by a navigation sample inside the span (one nav interval, 10 ms,
+    # on either side of it).
+    affected = (wind_t > untrusted_s[0] - 0.01) & (wind_t < untrusted_s[1] + 0.01)
+    assert np.all(live_status[affected] == WindStatus.NAVIGATION_NOT_TRUSTED)
+    assert np.all(np.isnan(live_wind[affected]))
+    assert np.all(live_status[~affected] == WindStatus.VALID)
+    assert WindStatus.NAVIGATION_NOT_TRUSTED.reason == "navigation_not_trusted"
+    for wind_per_stretch in (1, 7, 10_000):
+        status, wind, _, _ = feed(messages, wind_per_stretch)
+        np.testing.assert_array_equal(status, live_status)
+        np.testing.assert_array_equal(wind, live_wind)

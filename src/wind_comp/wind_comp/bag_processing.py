@@ -42,6 +42,7 @@ from buoy_common.contract import (
     wind_mean_topic,
     wind_stats_topic,
 )
+from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_nav.bag_fusion import (
     OfflineFusion,
@@ -107,7 +108,7 @@ class OfflineCompensation:
     time of the record after which they were decided.
     """
 
-    def __init__(self, config: CompensatorConfig, writer: BackgroundBagWriter):
+    def __init__(self, config: CompensatorConfig, writer: BackgroundBagWriter | NamespacedWriter):
         self.pipeline = CompensationPipeline(config)
         self.writer = writer
         self.rejected: Counter[str] = Counter()
@@ -124,6 +125,11 @@ class OfflineCompensation:
                 values.attitude_xyzw,
                 values.angular_rate_body_rad_s,
                 values.velocity_body_mps,
+                max(
+                    values.pose_covariance[21],
+                    values.pose_covariance[28],
+                    values.pose_covariance[35],
+                ),
             )
             pipeline.add_fix(STATUS_FIX, values.latitude_deg)
 
@@ -193,17 +199,20 @@ def process_bag(
     fusion_config: FusionConfig,
     compensator_config: CompensatorConfig,
     overwrite: bool = False,
+    view: TopicView | None = None,
     smooth: bool = False,
 ) -> ProcessSummary:
     """Fuse and correct ``in_bag`` into ``out_bag`` (a new bag; replaced with ``overwrite``)
-    and the products CSV beside it; with ``smooth`` on the smoothed navigation (see the module
-    docstring). Raises BagError for a missing or unreadable bag or one
+    and the products CSV beside it, over the topics of ``view``'s namespace (the root when
+    None), writing into the same namespace; with ``smooth`` on the smoothed navigation (see the
+    module docstring). Raises BagError for a missing or unreadable bag or one
     without the required topics, and OutputError, before anything is read or written, if an
     output is, contains or lies inside ``in_bag``."""
     started = time.monotonic()
     csv_path = products_csv_path(out_bag)
     check_outputs_apart_from_inputs([in_bag], [out_bag, csv_path])
-    with BagReader(in_bag) as reader:
+    view = view or TopicView()
+    with BagReader(in_bag, view) as reader:
         sensors = sensor_topics_of(reader, fusion_config, extra_required=(WIND_RAW_TOPIC,))
         stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
         truth = truth_topics_of(reader)
@@ -213,7 +222,8 @@ def process_bag(
             try:
                 # The writing process starts during the forward pass: until it is ready the
                 # writer keeps what it is given, and the second pass produces fast.
-                with BackgroundBagWriter(out_bag, overwrite=overwrite) as writer:
+                with BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer:
+                    writer = NamespacedWriter(bag_writer, view)
                     forward_pass(reader, fusion, sensors, relative_of, f"process_bag {in_bag}")
                     compensation = smoothed_compensation(
                         reader, fusion, compensator_config, writer, stored_wind, truth
@@ -226,6 +236,7 @@ def process_bag(
                 in_bag,
                 out_bag,
                 overwrite,
+                view,
                 fusion_config,
                 compensator_config,
                 sensors,
@@ -252,7 +263,7 @@ def smoothed_compensation(
     reader: BagReader,
     fusion: OfflineFusion,
     compensator_config: CompensatorConfig,
-    writer: BackgroundBagWriter,
+    writer: NamespacedWriter,
     stored_wind: str,
     truth: list[str],
 ) -> OfflineCompensation:
@@ -280,18 +291,21 @@ def forward_compensation(
     in_bag,
     out_bag,
     overwrite: bool,
+    view: TopicView,
     fusion_config: FusionConfig,
     compensator_config: CompensatorConfig,
     sensors: dict[str, str],
     relative_of: dict[str, str],
     stored_wind: str,
     truth: list[str],
-) -> tuple[OfflineFusion, OfflineCompensation, BackgroundBagWriter]:
-    """Fusion and compensation in one pass over the bag, the output bag written."""
+) -> tuple[OfflineFusion, OfflineCompensation, NamespacedWriter]:
+    """Fusion and compensation in one pass over the bag, the output bag written into
+    ``view``'s namespace."""
     with (
         BagProgress(reader, f"process_bag {in_bag}") as progress,
-        BackgroundBagWriter(out_bag, overwrite=overwrite) as writer,
+        BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
     ):
+        writer = NamespacedWriter(bag_writer, view)
         fusion = OfflineFusion(fusion_config, writer)
         compensation = OfflineCompensation(compensator_config, writer)
         log_time_ns = reader.start_ns

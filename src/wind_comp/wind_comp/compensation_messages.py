@@ -124,12 +124,14 @@ def _wind_sample(t_s: float, frame_id: str, wind: tuple[float, float, float]) ->
     return WindSample(t_s, wind, None)
 
 
-def odometry_fields(message) -> tuple[float, tuple, tuple, tuple]:
+def odometry_fields(message) -> tuple[float, tuple, tuple, tuple, float]:
     """Stamp (s), attitude quaternion (x, y, z, w), body rate ω_ib and body velocity (tuples of
-    floats) of an Odometry, after the frame, finiteness and quaternion checks (raises
-    :class:`MalformedMessageError`)."""
+    floats) and the largest attitude error variance (rad², from the pose covariance; NaN counts
+    as unknown, i.e. infinite) of an Odometry, after the frame, finiteness and quaternion checks
+    (raises :class:`MalformedMessageError`)."""
     orientation = message.pose.pose.orientation
     angular, linear = message.twist.twist.angular, message.twist.twist.linear
+    covariance = message.pose.covariance
     return _checked_odometry(
         stamp_to_seconds(message.header.stamp),
         message.header.frame_id,
@@ -137,6 +139,7 @@ def odometry_fields(message) -> tuple[float, tuple, tuple, tuple]:
         (float(orientation.x), float(orientation.y), float(orientation.z), float(orientation.w)),
         (float(angular.x), float(angular.y), float(angular.z)),
         (float(linear.x), float(linear.y), float(linear.z)),
+        (float(covariance[21]), float(covariance[28]), float(covariance[35])),
     )
 
 
@@ -147,13 +150,19 @@ def odometry_fields_cdr(raw: bytes) -> tuple[float, tuple, tuple, tuple] | None:
     fields = cdr.read_odometry(raw)
     if fields is None:
         return None
-    sec, nanosec, frame_id, child_frame_id, pose, twist = fields
+    sec, nanosec, frame_id, child_frame_id, pose, twist, attitude_variances = fields
     return _checked_odometry(
-        sec + nanosec * 1e-9, frame_id, child_frame_id, pose[3:7], twist[3:6], twist[0:3]
+        sec + nanosec * 1e-9,
+        frame_id,
+        child_frame_id,
+        pose[3:7],
+        twist[3:6],
+        twist[0:3],
+        attitude_variances,
     )
 
 
-def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body):
+def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body, variances):
     if frame_id != MAP_FRAME or child_frame_id != BODY_FRAME:
         raise MalformedMessageError(
             Reason.WRONG_FRAME,
@@ -164,7 +173,9 @@ def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body):
         raise MalformedMessageError(Reason.NON_FINITE, "odometry orientation, rate or velocity")
     if quaternion_norm(*quat) < MIN_QUATERNION_NORM:
         raise MalformedMessageError(Reason.ZERO_QUATERNION, "odometry orientation has zero length")
-    return t_s, quat, rate, velocity_body
+    # max() would pass a NaN over: an unknown variance is an infinite one.
+    largest_variance = max(math.inf if math.isnan(v) else v for v in variances)
+    return t_s, quat, rate, velocity_body, largest_variance
 
 
 def fix_fields(message) -> tuple[int, float]:

@@ -50,6 +50,9 @@ class WindStatus(IntEnum):
     """The measured speed exceeds ``max_wind_speed_mps``."""
     INVALID_STAMP = 7
     """The stamp is not finite, or not later than the previous wind stamp."""
+    NAVIGATION_NOT_TRUSTED = 8
+    """A bracketing navigation sample's attitude is more uncertain than
+    ``max_attitude_sigma_deg`` (the navigation marks itself untrustworthy by its covariance)."""
 
     @property
     def reason(self) -> Reason:
@@ -65,6 +68,7 @@ _NAV_OUTCOME = {
     InterpolationStatus.GAP: WindStatus.NAV_GAP,
     InterpolationStatus.EVICTED: WindStatus.NAV_HISTORY_EXCEEDED,
     InterpolationStatus.INVALID_STAMP: WindStatus.INVALID_STAMP,
+    InterpolationStatus.UNTRUSTED: WindStatus.NAVIGATION_NOT_TRUSTED,
 }
 _NAV_OUTCOME_BY_CODE = np.array(
     [_NAV_OUTCOME[InterpolationStatus(code)] for code in range(len(InterpolationStatus))],
@@ -231,10 +235,15 @@ class WindCompensator:
         """Anemometer samples received but not yet returned."""
         return self._tail - self._head
 
-    def add_nav(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> bool:
+    def add_nav(
+        self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted: bool = True
+    ) -> bool:
         """Add one navigation sample (stamp s, body→ENU quaternion xyzw, body rate rad/s,
-        ENU velocity m/s). Returns False when the track rejects it (counted there)."""
-        return self.nav_track.append(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
+        ENU velocity m/s; ``trusted`` False: no wind is corrected with it). Returns False when
+        the track rejects it (counted there)."""
+        return self.nav_track.append(
+            t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted
+        )
 
     def add_wind(self, t_s, wind_sensor_mps) -> None:
         """Add one anemometer sample: stamp s, air velocity in anemometer axes m/s, (3,).
@@ -265,9 +274,9 @@ class WindCompensator:
         after the first ``nav_before_wind[i]`` of them.
 
         Args:
-            nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) of M navigation
-                samples: (M,) stamps, s, and (M, 4), (M, 3), (M, 3) arrays of what
-                :meth:`add_nav` takes.
+            nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps[, trusted]) of M
+                navigation samples: (M,) stamps, s, (M, 4), (M, 3), (M, 3) arrays and (M,)
+                bools of what :meth:`add_nav` takes.
             wind_t_s, wind_sensor_mps: (N,) stamps and (N, 3) winds, as :meth:`add_wind` takes
                 them one by one.
             nav_before_wind: (N,) non-decreasing counts, 0 to M.

@@ -42,6 +42,13 @@ class CompensatorConfig:
         product_windows_s: lengths of the averaging windows of the wind products, s
             (60 s and 600 s by default, WMO practice).
         gust_window_s: length of the running mean whose maximum is the gust, s (WMO: 3 s).
+        max_attitude_sigma_deg: a navigation sample whose attitude 1σ (the largest of the
+            three in its pose covariance) exceeds this corrects no wind: the samples it
+            brackets are invalid as ``navigation_not_trusted``, deg. The fusion publishes its
+            attitude 1σ at least ``fusion.integrity_attitude_sigma_deg`` (5°) while it finds
+            itself inconsistent with its aiding, so this is how an untrustworthy navigation
+            reaches the wind; the default lies between that and the 1σ a sound filter reports
+            in the first second after its alignment (up to about 3°).
     """
 
     anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
@@ -51,6 +58,7 @@ class CompensatorConfig:
     nav_history_s: float = 10.0
     product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
     gust_window_s: float = 3.0
+    max_attitude_sigma_deg: float = 4.0
 
     def __post_init__(self):
         for name in ("anemometer_position_body_m", "anemometer_rpy_deg"):
@@ -59,7 +67,13 @@ class CompensatorConfig:
             check_shared_fields(self)
         except ValueError as error:
             raise ConfigError(str(error)) from None
-        for name in ("max_nav_gap_s", "max_wind_speed_mps", "nav_history_s", "gust_window_s"):
+        for name in (
+            "max_nav_gap_s",
+            "max_wind_speed_mps",
+            "nav_history_s",
+            "gust_window_s",
+            "max_attitude_sigma_deg",
+        ):
             object.__setattr__(self, name, _positive_float(name, getattr(self, name)))
         windows = _finite_tuple("product_windows_s", self.product_windows_s, length=None)
         if not windows or min(windows) <= 0:

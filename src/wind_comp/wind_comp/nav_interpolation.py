@@ -3,7 +3,9 @@
 A wind sample is corrected with the navigation state interpolated at its own stamp: attitude
 by spherical linear interpolation between the two bracketing navigation samples, angular rate
 and velocity linearly. Nothing is extrapolated: a stamp that is not bracketed, or whose
-bracketing samples are too far apart, is reported invalid with a reason.
+bracketing samples are too far apart, is reported invalid with a reason, and so is a stamp
+whose bracketing samples include one the navigation does not vouch for (an attitude too
+uncertain to correct the wind with, see :class:`wind_comp.config.CompensatorConfig`).
 """
 
 import math
@@ -36,6 +38,8 @@ class InterpolationStatus(IntEnum):
     """The bracketing samples are older than the history kept (see :class:`NavTrack`)."""
     INVALID_STAMP = 5
     """The query stamp is not finite."""
+    UNTRUSTED = 6
+    """A bracketing sample is marked untrusted (its attitude is too uncertain)."""
 
 
 class InterpolatedNav(NamedTuple):
@@ -100,6 +104,7 @@ class NavTrack:
         self._quats_xyzw = np.empty((_INITIAL_CAPACITY, 4))
         self._rates_body_rad_s = np.empty((_INITIAL_CAPACITY, 3))
         self._velocities_enu_mps = np.empty((_INITIAL_CAPACITY, 3))
+        self._trusted = np.empty(_INITIAL_CAPACITY, dtype=bool)
         self._start = 0
         self._end = 0
         self._first_stamp_s = np.nan
@@ -140,13 +145,16 @@ class NavTrack:
         """Stamp of the oldest retained sample, s (NaN when empty)."""
         return float(self._stamps_s[self._start]) if len(self) else np.nan
 
-    def append(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> bool:
+    def append(
+        self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted: bool = True
+    ) -> bool:
         """Add one sample; return False (and count it) when it is rejected. Exactly
         :meth:`extend` of one sample, in plain floats: the live path, one sample at a time.
 
         Args:
             t_s: stamp, s. quat_xyzw: 4 values, body→ENU attitude, any non-zero norm.
             angular_rate_body_rad_s: 3 values, body axes. velocity_enu_mps: 3 values, ENU.
+            trusted: False for a sample no wind may be corrected with (UNTRUSTED).
         """
         stamp = float(t_s)
         quat = _floats("quat_xyzw", quat_xyzw, 4)
@@ -169,13 +177,16 @@ class NavTrack:
         self._quats_xyzw[end] = [component / norm for component in quat]
         self._rates_body_rad_s[end] = rate
         self._velocities_enu_mps[end] = velocity
+        self._trusted[end] = trusted
         self._end = end + 1
         if math.isnan(self._first_stamp_s):
             self._first_stamp_s = stamp
         self.n_accepted += 1
         return True
 
-    def extend(self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps) -> np.ndarray:
+    def extend(
+        self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted=True
+    ) -> np.ndarray:
         """Add samples in array order, exactly as appending them one by one would (a sample is
         rejected and counted when malformed or not later than the newest accepted one); returns
         the (N,) mask of the accepted ones.
@@ -183,6 +194,7 @@ class NavTrack:
         Args:
             t_s: (N,) stamps, s. quat_xyzw: (N, 4) body→ENU attitude.
             angular_rate_body_rad_s: (N, 3). velocity_enu_mps: (N, 3).
+            trusted: (N,) bools or one for all, as :meth:`append` takes it.
         """
         stamps, quats, rates, velocities = _validated_arrays(
             t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps
@@ -203,6 +215,7 @@ class NavTrack:
         self._quats_xyzw[self._end : end] = _normalised(quats[accepted])
         self._rates_body_rad_s[self._end : end] = rates[accepted]
         self._velocities_enu_mps[self._end : end] = velocities[accepted]
+        self._trusted[self._end : end] = np.broadcast_to(trusted, accepted.shape)[accepted]
         self._end = end
         if np.isnan(self._first_stamp_s):
             self._first_stamp_s = float(stamps[accepted][0])
@@ -252,6 +265,11 @@ class NavTrack:
         if n_samples:
             spacing = stamps[upper_c] - stamps[lower_c]
             status[bracketed & (spacing > self.max_gap_s)] = InterpolationStatus.GAP
+            trusted = self._trusted[self._start : self._end]
+            untrusted = ~(trusted[lower_c] & trusted[upper_c])
+            status[bracketed & (spacing <= self.max_gap_s) & untrusted] = (
+                InterpolationStatus.UNTRUSTED
+            )
         status[~finite] = InterpolationStatus.INVALID_STAMP
         valid = status == InterpolationStatus.OK
 
@@ -302,6 +320,8 @@ class NavTrack:
         span_s = upper_stamp_s - lower_stamp_s
         if span_s > self.max_gap_s:
             return InterpolationStatus.GAP, *_INVALID_NAV
+        if not (self._trusted[lower] and self._trusted[upper]):
+            return InterpolationStatus.UNTRUSTED, *_INVALID_NAV
         fraction = (t_s - lower_stamp_s) / span_s if span_s > 0 else 0.0
         rates, velocities = self._rates_body_rad_s, self._velocities_enu_mps
         rate = _lerp(rates[lower].tolist(), rates[upper].tolist(), fraction)
@@ -343,9 +363,15 @@ class NavTrack:
         new_capacity = max(capacity, _INITIAL_CAPACITY)
         while n_kept + n_more > new_capacity // 2:
             new_capacity *= 2
-        for name in ("_stamps_s", "_quats_xyzw", "_rates_body_rad_s", "_velocities_enu_mps"):
+        for name in (
+            "_stamps_s",
+            "_quats_xyzw",
+            "_rates_body_rad_s",
+            "_velocities_enu_mps",
+            "_trusted",
+        ):
             old = getattr(self, name)
-            new = np.empty((new_capacity, *old.shape[1:]))
+            new = np.empty((new_capacity, *old.shape[1:]), dtype=old.dtype)
             new[:n_kept] = old[self._start : self._end]
             setattr(self, name, new)
         self._start = 0

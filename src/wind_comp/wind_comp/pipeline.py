@@ -88,7 +88,7 @@ def level_rate_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> t
     )
 
 
-_NAV_FIELDS = 12  # stamp, quaternion (4), rate (3), body velocity (3), latitude
+_NAV_FIELDS = 13  # stamp, quaternion (4), rate (3), body velocity (3), latitude, trusted
 _WIND_FIELDS = 4  # stamp, wind (3)
 
 
@@ -113,6 +113,7 @@ class CompensationPipeline:
         self.latitude_deg = math.nan
         """Latitude of the latest valid ``nav/fix``, deg (NaN before the first)."""
         self._nav_order = StampOrder()
+        self._max_attitude_variance_rad2 = math.radians(config.max_attitude_sigma_deg) ** 2
         self._wind_order = StampOrder()
         # Arrivals not yet handed to the compensator: the navigation samples' numbers in a row
         # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude), the wind
@@ -149,11 +150,20 @@ class CompensationPipeline:
         self.latitude_deg = latitude_deg
         return None
 
-    def add_odometry(self, t_s: float, quat_xyzw, angular_rate_body_rad_s, velocity_body_mps):
+    def add_odometry(
+        self,
+        t_s: float,
+        quat_xyzw,
+        angular_rate_body_rad_s,
+        velocity_body_mps,
+        attitude_variance_rad2: float = 0.0,
+    ):
         """One ``nav/odometry`` (stamp s, attitude (x, y, z, w), ω_ib (3,) rad/s, body velocity
-        (3,) m/s), as :func:`~wind_comp.compensation_messages.odometry_fields` reads it.
-        Returns why it is rejected (a stamp not later than the previous one), None when
-        taken; ValueError for vectors of the wrong length."""
+        (3,) m/s, largest attitude error variance rad²), as
+        :func:`~wind_comp.compensation_messages.odometry_fields` reads it. A sample whose
+        attitude variance exceeds ``max_attitude_sigma_deg``² corrects no wind
+        (NAVIGATION_NOT_TRUSTED). Returns why it is rejected (a stamp not later than the
+        previous one), None when taken; ValueError for vectors of the wrong length."""
         if not t_s > self._nav_order.latest_s:
             return Reason.STAMP_NOT_INCREASING
         nav, start = self._nav, len(self._nav)
@@ -162,6 +172,7 @@ class CompensationPipeline:
         nav.extend(angular_rate_body_rad_s)
         nav.extend(velocity_body_mps)
         nav.append(self.latitude_deg)
+        nav.append(float(attitude_variance_rad2 <= self._max_attitude_variance_rad2))
         if len(nav) - start != _NAV_FIELDS:
             del nav[start:]
             raise ValueError("odometry needs a quaternion of 4 values and vectors of 3")
@@ -208,13 +219,14 @@ class CompensationPipeline:
         self._nav, self._wind, self._nav_before_wind = array("d"), array("d"), []
         if len(nav) == _NAV_FIELDS and not wind:
             # The live case: one solution, in plain floats.
-            t_s, *quat_rate_velocity, latitude_deg = nav
+            t_s, *quat_rate_velocity, latitude_deg, trusted = nav
             quat, rate = quat_rate_velocity[0:4], quat_rate_velocity[4:7]
             self.compensator.add_nav(
                 t_s,
                 quat,
                 level_rate_components(rate, quat, latitude_deg),
                 rotate_by_quaternion_components(quat, quat_rate_velocity[7:10]),
+                trusted == 1.0,
             )
         elif len(wind) == _WIND_FIELDS and not nav:
             t_s, *wind_sensor_mps = wind
@@ -231,6 +243,7 @@ class CompensationPipeline:
                     quats,
                     np.stack(np.broadcast_arrays(*rates_nb), axis=-1),
                     np.stack(np.broadcast_arrays(*velocities_enu), axis=-1),
+                    columns[:, 12] == 1.0,
                 ),
                 winds[:, 0],
                 winds[:, 1:],

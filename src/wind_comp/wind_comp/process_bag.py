@@ -1,7 +1,7 @@
 """``process_bag``: fusion and wind correction over a recorded bag, the offline twin of the nodes.
 
     process_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file compensation.yaml]
-                [--overwrite] [--smooth]
+                [--overwrite] [--namespace NS] [--remap FROM:=TO ...] [--smooth]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
 by ``compensation_node`` (:func:`wind_comp.bag_processing.process_bag`): every
@@ -12,7 +12,9 @@ products are also written to ``<OUT_BAG>_wind_products.csv``. With ``--smooth`` 
 the fixed-interval smoother's solution, the wind is corrected with the smoothed attitude and
 velocity, and the forward filter's odometry is kept as ``nav/forward/odometry`` (the bag is read
 twice; temporary records beside OUT_BAG, about 0.35 GB per hour of 100 Hz data). Parameters come
-from the same YAML files the nodes take.
+from the same YAML files the nodes take. Namespaces and remappings as for ``fuse_bag``: a bag
+recorded under one namespace is read and written in it; a bag of several buoys gives one output
+per namespace (``OUT_BAG/buoy1`` and its CSV ``OUT_BAG/buoy1_wind_products.csv``, ...).
 
 Both outputs are written under temporary names beside them and appear only when complete; they
 may not be, contain or lie inside IN_BAG. Exit codes: 0 done; 2 bad arguments, parameters or
@@ -27,6 +29,12 @@ import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
 from buoy_common.contract import WIND_RAW_TOPIC, seconds_to_stamp, window_label
+from buoy_common.namespaces import (
+    NamespaceError,
+    add_namespace_arguments,
+    output_for,
+    views_of_bag,
+)
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
@@ -56,6 +64,7 @@ def parse_arguments(argv):
         help="correct the wind with the fixed-interval smoother's navigation (nav/*); the "
         "forward filter's odometry goes to nav/forward/odometry",
     )
+    add_namespace_arguments(parser)
     return parser.parse_args(argv)
 
 
@@ -93,23 +102,31 @@ def print_summary(summary: ProcessSummary, out_bag: str) -> None:
 
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
+    truncated = False
     try:
-        summary = process_bag(
-            arguments.in_bag,
-            arguments.out_bag,
-            fusion_config_from_files(arguments.params_file),
-            compensator_config_from_files(arguments.params_file),
-            arguments.overwrite,
-            arguments.smooth,
-        )
-    except (ParameterError, BagError, OutputError, OSError) as error:
+        fusion_config = fusion_config_from_files(arguments.params_file)
+        compensator_config = compensator_config_from_files(arguments.params_file)
+        views = views_of_bag(arguments, arguments.in_bag, WIND_RAW_TOPIC)
+        for view in views:
+            out_bag = output_for(arguments.out_bag, view, several=len(views) > 1)
+            if len(views) > 1:
+                print(f"namespace {view.label} -> {out_bag}")
+            summary = process_bag(
+                arguments.in_bag,
+                out_bag,
+                fusion_config,
+                compensator_config,
+                arguments.overwrite,
+                view,
+                arguments.smooth,
+            )
+            print_summary(summary, out_bag)
+            if summary.recovery is not None:
+                warning = summary.recovery.describe(arguments.in_bag)
+                print(f"process_bag: warning: {warning}", file=sys.stderr)
+                truncated = truncated or summary.recovery.truncated
+    except (ParameterError, BagError, OutputError, NamespaceError, OSError) as error:
         print(f"process_bag: {error}", file=sys.stderr)
         sys.exit(2)
-    print_summary(summary, arguments.out_bag)
-    if summary.recovery is not None:
-        print(
-            f"process_bag: warning: {summary.recovery.describe(arguments.in_bag)}",
-            file=sys.stderr,
-        )
-        if summary.recovery.truncated:
-            sys.exit(RECOVERED_BAG_EXIT_CODE)
+    if truncated:
+        sys.exit(RECOVERED_BAG_EXIT_CODE)

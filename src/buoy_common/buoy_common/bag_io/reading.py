@@ -16,6 +16,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import yaml
 from rosbags.interfaces import MessageDefinitionFormat
@@ -35,6 +36,9 @@ from buoy_common.bag_io.common import (
     one_line,
 )
 from buoy_common.bag_io.recovery import RecoveredMcap
+
+if TYPE_CHECKING:
+    from buoy_common.namespaces import TopicView
 
 
 def _is_finished_mcap(path: Path) -> bool:
@@ -62,19 +66,28 @@ class BagReader:
     """Read a rosbag2 bag directory; a context manager.
 
     Topic names may be given with or without the leading slash (``imu/data_raw`` finds
-    ``/imu/data_raw``). ``start_ns``/``end_ns`` are the log times (ns) of the first and last
-    message, both 0 for an empty bag. ``recovery`` is None for a sound bag; for a damaged one it
-    says what was wrong and how many messages could be read.
+    ``/imu/data_raw``). With a ``view`` (:class:`~buoy_common.namespaces.TopicView`), the reader
+    shows only that namespace's topics, under their contract names (``/buoy1/imu/data_raw`` as
+    ``/imu/data_raw``, remapped topics under the names they stand for); ``stored_topics`` keeps
+    every topic under its stored name. ``start_ns``/``end_ns`` are the log times (ns) of the
+    first and last message, both 0 for an empty bag. ``recovery`` is None for a sound bag; for
+    a damaged one it says what was wrong and how many messages could be read.
     """
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, view: TopicView | None = None):
         self.path = Path(path)
+        self.view = view
         self.recovery: Recovery | None = None
         self._reader: Reader | None = None
         self._recovered: RecoveredMcap | None = None
         try:
             self._open()
             self._typestore = self._typestore_for_bag()
+            self.stored_topics: dict[str, TopicInfo] = self.topics
+            self._stored_of = {name: name for name in self.topics}
+            if view is not None:
+                self._stored_of = view.visible(self.stored_topics)
+                self.topics = {name: self.stored_topics[s] for name, s in self._stored_of.items()}
         except BagError:
             self.close()
             raise
@@ -185,10 +198,11 @@ class BagReader:
         return (self.end_ns - self.start_ns) * 1e-9
 
     def _topic_listing(self) -> str:
-        if not self.topics:
+        if not self.stored_topics:
             return "it has no topics"
         return "it has " + ", ".join(
-            f"{name} ({info.msgtype}, {info.count})" for name, info in sorted(self.topics.items())
+            f"{name} ({info.msgtype}, {info.count})"
+            for name, info in sorted(self.stored_topics.items())
         )
 
     def _resolve_topics(self, topics: Iterable[str]) -> list[str]:
@@ -201,8 +215,12 @@ class BagReader:
                 resolved.append(found)
         if missing:
             damage = "" if self.recovery is None else f" ({self.recovery.describe(self.path)})"
+            where = ""
+            if self.view is not None and (self.view.namespace or self.view.remaps):
+                looked_for = ", ".join(self.view.stored_name(name) for name in missing)
+                where = f" (looked for {looked_for} in namespace {self.view.label})"
             raise BagError(
-                f"bag {self.path} lacks topic(s) {', '.join(missing)}; "
+                f"bag {self.path} lacks topic(s) {', '.join(missing)}{where}; "
                 f"{self._topic_listing()}{damage}"
             )
         return resolved
@@ -244,12 +262,14 @@ class BagReader:
             )
 
     def _read(self, wanted: set[str]) -> Iterator[BagMessage]:
+        view_of = {self._stored_of[name]: name for name in wanted}
         if self._recovered is not None:
-            yield from self._recovered.messages(wanted)
+            for message in self._recovered.messages(set(view_of)):
+                yield message._replace(topic=view_of[message.topic])
             return
-        connections = [c for c in self._reader.connections if c.topic in wanted]
+        connections = [c for c in self._reader.connections if c.topic in view_of]
         for connection, log_time_ns, raw in self._reader.messages(connections=connections):
-            yield BagMessage(connection.topic, connection.msgtype, log_time_ns, raw)
+            yield BagMessage(view_of[connection.topic], connection.msgtype, log_time_ns, raw)
 
     def decode(self, message: BagMessage):
         """The rosbags message object of ``message`` (fields named as in ROS, arrays as numpy)."""

@@ -7,12 +7,15 @@ sources listed in :data:`AIDING_SOURCES`; adding a sensor is a new module here a
 that list (see "Adding a sensor" in the README).
 """
 
+from buoy_nav.aiding.ahrs_attitude import AhrsAttitude, AhrsAttitudeSource
 from buoy_nav.aiding.base import AidingSource
 from buoy_nav.aiding.gnss_baseline import GnssBaseline, GnssBaselineSource
 from buoy_nav.aiding.gnss_baseline_tertiary import GnssBaselineTertiary, GnssBaselineTertiarySource
 from buoy_nav.aiding.gnss_fix import GnssFix, GnssFixSource
 from buoy_nav.aiding.gnss_heading import GnssHeading, GnssHeadingSource
 from buoy_nav.aiding.gnss_velocity import GnssVelocity, GnssVelocitySource
+from buoy_nav.aiding.magnetometer import MagneticField, MagnetometerSource
+from buoy_nav.aiding.moored import MooredSource, MooringAnchor
 from buoy_nav.config import FusionConfig
 
 AIDING_SOURCES: tuple[type[AidingSource], ...] = (
@@ -21,18 +24,28 @@ AIDING_SOURCES: tuple[type[AidingSource], ...] = (
     GnssBaselineSource,
     GnssBaselineTertiarySource,
     GnssHeadingSource,
+    MagnetometerSource,
+    AhrsAttitudeSource,
+    MooredSource,
 )
 """The sources the fusion runs. Measurements that share a stamp are applied in this order; the
-antenna attitude, which may complete the alignment, comes last."""
+heading references, which may complete the alignment, come last, the antennas first among them
+(the magnetometer and the motion pack align only a run without them)."""
+
+TOPIC_SOURCES = tuple(source for source in AIDING_SOURCES if not source.pseudo)
+"""The sources that read a topic (the others are constraints the engine asks for)."""
 
 
 def disabled_topics(config: FusionConfig) -> frozenset[str]:
     """Topics of the registered sources that ``config`` switches off (not to be read)."""
-    return frozenset(source.topic for source in AIDING_SOURCES if not source.enabled_by(config))
+    return frozenset(source.topic for source in TOPIC_SOURCES if not source.enabled_by(config))
 
 
 __all__ = [
     "AIDING_SOURCES",
+    "TOPIC_SOURCES",
+    "AhrsAttitude",
+    "AhrsAttitudeSource",
     "AidingSource",
     "GnssBaseline",
     "GnssBaselineSource",
@@ -44,5 +57,9 @@ __all__ = [
     "GnssHeadingSource",
     "GnssVelocity",
     "GnssVelocitySource",
+    "MagneticField",
+    "MagnetometerSource",
+    "MooredSource",
+    "MooringAnchor",
     "disabled_topics",
 ]

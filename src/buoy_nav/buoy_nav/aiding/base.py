@@ -40,7 +40,12 @@ import numpy as np
 from buoy_common.contract import SENSOR_MSGTYPES, Reason
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import NavState
-from buoy_nav.state_layout import StateLayout
+from buoy_nav.rotations import (
+    euler_from_rotation_matrix,
+    quaternion_from_rotation_matrix,
+    rotation_matrix_from_euler,
+)
+from buoy_nav.state_layout import UP, StateLayout
 
 if TYPE_CHECKING:
     from buoy_nav.alignment import AlignmentResult, InMotionAligner
@@ -50,7 +55,9 @@ if TYPE_CHECKING:
 FIX = "fix"
 VELOCITY = "velocity"
 HEADING = "heading"
-AIDED_QUANTITIES = (FIX, VELOCITY, HEADING)
+MOORING = "mooring"
+"""The zero-mean-velocity constraint of a moored buoy: it clears no GNSS coasting flag."""
+AIDED_QUANTITIES = (FIX, VELOCITY, HEADING, MOORING)
 
 
 @dataclass(frozen=True)
@@ -97,6 +104,31 @@ class StateReset:
     variances: Sequence[float]
 
 
+def yaw_reset(
+    states: StateLayout, point: LinearisationPoint, body_vector, azimuth_rad: float, variance_rad2
+) -> StateReset:
+    """The reset of the yaw alone that turns ``body_vector`` (body axes, any unit) to the
+    azimuth ``azimuth_rad`` (ENU, 0 = East, counter-clockwise) with roll and pitch kept, the
+    yaw error given ``variance_rad2`` (rad²)."""
+    roll, pitch, _ = euler_from_rotation_matrix(point.rotation_nb)
+    levelled = rotation_matrix_from_euler(roll, pitch, 0.0) @ np.asarray(body_vector, dtype=float)
+    yaw = azimuth_rad - math.atan2(levelled[1], levelled[0])
+    state = point.state
+    return StateReset(
+        NavState(
+            quaternion_from_rotation_matrix(rotation_matrix_from_euler(roll, pitch, yaw)),
+            state.velocity_enu_mps,
+            state.latitude_rad,
+            state.longitude_rad,
+            state.altitude_m,
+            state.gyro_bias_rad_s,
+            state.accel_bias_mps2,
+        ),
+        [states.index("attitude", UP)],
+        [variance_rad2],
+    )
+
+
 class AidingSource(abc.ABC):
     """One aiding sensor of the fusion (see the module docstring for the life of a measurement).
 
@@ -109,6 +141,9 @@ class AidingSource(abc.ABC):
       superseded_by: kind of a source whose measurement of the same stamp carries this one's
         information and more (None: none); such a measurement is set aside and counted as
         superseded, so one observation is not fused twice.
+      pseudo: True for a constraint that reads no topic (``topic`` None): the engine asks it
+        for a measurement with ``pseudo_measurement(t_s, state, fix_age_s)`` once an IMU
+        sample reaches its ``next_due_s``.
 
     A source is built once per engine from the configuration and the engine's error-state
     layout (``states``), whose block names address the Jacobian's columns.
@@ -119,6 +154,11 @@ class AidingSource(abc.ABC):
     measurement_type: ClassVar[type]
     aids: ClassVar[str]
     superseded_by: ClassVar[str | None] = None
+    pseudo: ClassVar[bool] = False
+    witnesses_integrity: ClassVar[bool] = True
+    """Whether persistent gate rejections of this source mean that the filter is wrong (see
+    :mod:`buoy_nav.integrity`); False for a sensor whose own disturbances are expected and
+    stopped by the gate, such as a magnetometer beside a passing hull."""
 
     def __init__(self, config: FusionConfig, states: StateLayout):
         self.config = config

@@ -15,14 +15,7 @@ import math
 
 import numpy as np
 
-from buoy_nav.aiding.base import AidingSource, LinearisationPoint, StateReset
-from buoy_nav.error_state_filter import NavState
-from buoy_nav.rotations import (
-    euler_from_rotation_matrix,
-    quaternion_from_rotation_matrix,
-    rotation_matrix_from_euler,
-)
-from buoy_nav.state_layout import UP
+from buoy_nav.aiding.base import AidingSource, LinearisationPoint, StateReset, yaw_reset
 
 # The baseline's horizontal projection must keep this fraction of its length for its azimuth to
 # carry heading (at 0.2 the yaw noise is 5× the tilt-free value).
@@ -71,23 +64,7 @@ class DualAntennaSource(AidingSource):
         if measured is None:
             return None
         azimuth, variance = measured
-        state = point.state
-        roll, pitch, _ = euler_from_rotation_matrix(point.rotation_nb)
-        levelled = rotation_matrix_from_euler(roll, pitch, 0.0) @ self._baseline_body_m
-        yaw = azimuth - math.atan2(levelled[1], levelled[0])
-        return StateReset(
-            NavState(
-                quaternion_from_rotation_matrix(rotation_matrix_from_euler(roll, pitch, yaw)),
-                state.velocity_enu_mps,
-                state.latitude_rad,
-                state.longitude_rad,
-                state.altitude_m,
-                state.gyro_bias_rad_s,
-                state.accel_bias_mps2,
-            ),
-            [self.states.index("attitude", UP)],
-            [variance],
-        )
+        return yaw_reset(self.states, point, self._baseline_body_m, azimuth, variance)
 
     def align(self, aligner, t_s: float, measurement, raw_gyro_rad_s):
         measured = self.baseline_azimuth(measurement)

@@ -64,6 +64,10 @@ class GnssBaselineTertiarySource(DualAntennaSource):
     topic = GNSS_BASELINE_TERTIARY_TOPIC
     measurement_type = GnssBaselineTertiary
     aids = HEADING
+    # A carrier-phase vector like the first baseline: its own faults (a wrong fix, a wrong
+    # antenna) are stopped by the length check before the gate, so persistent gate rejections
+    # of a valid vector mean the filter's attitude is wrong.
+    witnesses_integrity = True
 
     def __init__(self, config, states):
         super().__init__(config, states)

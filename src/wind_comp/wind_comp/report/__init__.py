@@ -12,15 +12,17 @@ from pathlib import Path
 
 from wind_comp.report.data import ReportData
 from wind_comp.report.figures import write_figures
-from wind_comp.report.tables import wind_products_markdown
+from wind_comp.report.tables import summary_markdown, wind_products_markdown
 
 
 def write_report(data: ReportData, out_dir) -> list[Path]:
-    """Write the report figures and table into ``out_dir`` (created); return the paths."""
+    """Write the report figures, the products table and the summary page that shows them all
+    (``summary.md``) into ``out_dir`` (created); return the paths."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = write_figures(data, out_dir)
     table = out_dir / "wind_products.md"
     table.write_text(wind_products_markdown(data))
-    paths.append(table)
-    return paths
+    summary = out_dir / "summary.md"
+    summary.write_text(summary_markdown(data, [path.name for path in paths]))
+    return [*paths, table, summary]

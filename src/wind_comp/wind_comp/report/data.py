@@ -32,6 +32,7 @@ from buoy_common.contract import (
     WIND_TRUE_TOPIC,
     window_label,
 )
+from buoy_common.namespaces import TopicView
 from wind_comp.compensation_messages import stats_values
 from wind_comp.config import CompensatorConfig
 from wind_comp.products import WindAverager, WindProduct
@@ -295,7 +296,9 @@ def interpolate_vectors(stamps_ns: np.ndarray, source: StampedVectors) -> np.nda
     return interpolated
 
 
-def report_data_from_bag(bag, title: str | None = None) -> ReportData:
+def report_data_from_bag(
+    bag, title: str | None = None, view: TopicView | None = None
+) -> ReportData:
     """The :class:`ReportData` of a bag holding ``anemometer/wind`` and ``wind/true``.
 
     - ``t_s`` and the measured wind: every ``anemometer/wind`` message (header stamps).
@@ -307,11 +310,13 @@ def report_data_from_bag(bag, title: str | None = None) -> ReportData:
       when the bag has them, otherwise recomputed from the corrected wind with the default
       windows of the compensation.
 
+    Topics are read in ``view``'s namespace (the root when None).
+
     Raises :class:`ReportDataError` (one line) for a missing or unreadable bag or one without
     the two wind topics.
     """
     try:
-        with BagReader(bag) as reader:
+        with BagReader(bag, view) as reader:
             if reader.recovery is not None:
                 print(f"wind_report: warning: {reader.recovery.describe(bag)}", file=sys.stderr)
             return _report_data(reader, Path(bag).name if title is None else title)

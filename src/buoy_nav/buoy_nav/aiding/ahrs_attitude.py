@@ -1,0 +1,175 @@
+"""A motion pack's own attitude (``imu/data``, sensor_msgs/Imu) as a measurement.
+
+The pack (an AHRS) reports ``R_m``, body→ENU of its yaw reference, and its covariance as a small
+rotation about the ENU axes (rad²). With ``ahrs.yaw_reference: magnetic_north`` its yaw is a
+compass's, so the true attitude is ``Rz(−D) R_m`` (declination D east positive, from
+``magnetic.declination_deg`` or the WMM at the position).
+
+**Its lag.** The pack's own filter trusts its gyro over a time constant τ and so follows the
+motion late: at a wave's rate ω the lag costs ω·τ of attitude (10° of roll at 9 s period with
+τ = 0.2 s is 1.4° at the peak rate). The fusion avoids the cost twice over: the measurement is
+carried forward by the configured lag with the bias-corrected gyro,
+``R_m' = R_m Exp([ω_ib τ]×)``, what remains of an unknown lag is noise
+``(|ω_ib| · ahrs_lag_uncertainty_s)²`` per axis, and the pack's error, which stays alike for
+``ahrs_error_correlation_time_s``, is weighted as one sample per that time. The pack then only
+holds the fusion's slow attitude (minutes), while the IMU carries the wave motion.
+
+Model: ``R_true = Exp([φ×]) R_nb``, so the innovation ``Log(R_m' R_nbᵀ)`` measures φ directly:
+H = I on the attitude error. Gated as a whole; no reset (a pack that disagrees for long is
+reported through the gate counts, and the yaw alignment starts from it).
+
+Bad input: a zero quaternion (``zero_quaternion``), a quaternion whose norm is off 1 by more
+than :data:`UNIT_NORM_TOLERANCE` (``non_unit_quaternion``), a stamp not after the previous one
+(``stamp_not_increasing``, ``duplicate_stamp``), a non-finite or non-positive covariance.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from buoy_common.contract import AHRS_TOPIC, Reason, header_seconds
+from buoy_nav.aiding.base import (
+    HEADING,
+    AidingSource,
+    LinearisationPoint,
+    MeasurementModel,
+    as_float_array,
+    floored_covariance,
+    has_non_positive_variance,
+)
+from buoy_nav.geomagnetism import declination_rad
+from buoy_nav.rotations import (
+    rotation_matrix_from_euler,
+    rotation_matrix_from_quaternion,
+    rotation_matrix_from_rotation_vector,
+    rotation_vector_from_rotation_matrix,
+)
+
+UNIT_NORM_TOLERANCE = 1e-3
+MIN_QUATERNION_NORM = 1e-9
+BODY_X = np.array((1.0, 0.0, 0.0))
+
+
+class AhrsAttitude(NamedTuple):
+    """The pack's attitude: R_m body→ENU of its yaw reference (3×3), its covariance (3×3 ENU
+    rad²), the interval to the previous sample (s; NaN for the first) and its stamp (s)."""
+
+    rotation_nb: np.ndarray
+    covariance_rad2: np.ndarray
+    interval_s: float
+    t_s: float
+
+
+class AhrsAttitudeSource(AidingSource):
+    """The motion pack's attitude (see the module docstring)."""
+
+    kind = "ahrs"
+    topic = AHRS_TOPIC
+    measurement_type = AhrsAttitude
+    aids = HEADING
+
+    def __init__(self, config, states):
+        super().__init__(config, states)
+        self._magnetic = config.ahrs_yaw_reference == "magnetic_north"
+        self._declination_deg = config.magnetic_declination_deg
+        self._lag_s = config.ahrs_lag_s
+        self._lag_uncertainty_s = config.ahrs_lag_uncertainty_s
+        self._floor_rad2 = config.ahrs_variance_floor_rad2
+        self._correlation_s = config.ahrs_error_correlation_time_s
+        self._last_stamp_s = -math.inf
+
+    @classmethod
+    def enabled_by(cls, config) -> bool:
+        return config.use_ahrs
+
+    def measurement_from_message(self, message) -> AhrsAttitude | Reason:
+        t_s = header_seconds(message.header)
+        q = message.orientation
+        x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+        norm = math.sqrt(x * x + y * y + z * z + w * w)
+        if not math.isfinite(norm):
+            return Reason.NON_FINITE
+        if norm < MIN_QUATERNION_NORM:
+            return Reason.ZERO_QUATERNION
+        if abs(norm - 1.0) > UNIT_NORM_TOLERANCE:
+            return Reason.NON_UNIT_QUATERNION
+        if not math.isfinite(t_s):
+            return Reason.NON_FINITE
+        if t_s <= self._last_stamp_s:
+            return (
+                Reason.DUPLICATE_STAMP if t_s == self._last_stamp_s else Reason.STAMP_NOT_INCREASING
+            )
+        interval = t_s - self._last_stamp_s
+        self._last_stamp_s = t_s
+        covariance = message.orientation_covariance
+        if len(covariance) != 9:
+            return Reason.MALFORMED
+        return AhrsAttitude(
+            rotation_matrix_from_quaternion((x / norm, y / norm, z / norm, w / norm)),
+            np.asarray(covariance, dtype=float).reshape(3, 3),
+            interval if math.isfinite(interval) else math.nan,
+            t_s,
+        )
+
+    def validated(self, measurement: AhrsAttitude) -> AhrsAttitude | Reason:
+        rotation = as_float_array(measurement.rotation_nb, (3, 3))
+        covariance = as_float_array(measurement.covariance_rad2, (3, 3))
+        if isinstance(rotation, Reason):
+            return rotation
+        if isinstance(covariance, Reason):
+            return covariance
+        if has_non_positive_variance(covariance):
+            return Reason.NON_POSITIVE_VARIANCE
+        return AhrsAttitude(rotation, covariance, measurement.interval_s, measurement.t_s)
+
+    def _true_north(self, measurement: AhrsAttitude, latitude_rad, longitude_rad) -> np.ndarray:
+        rotation = measurement.rotation_nb
+        if self._magnetic:
+            declination = declination_rad(
+                self._declination_deg, latitude_rad, longitude_rad, measurement.t_s
+            )
+            rotation = rotation_matrix_from_euler(0.0, 0.0, -declination) @ rotation
+        return rotation
+
+    def _weight(self, measurement: AhrsAttitude) -> float:
+        """Variance multiplier of one sample: samples per correlation time share one error."""
+        interval = measurement.interval_s
+        if not (math.isfinite(interval) and interval > 0.0):
+            return 1.0
+        return max(1.0, self._correlation_s / interval)
+
+    def model(self, measurement: AhrsAttitude, point: LinearisationPoint) -> MeasurementModel:
+        state = point.state
+        rate = np.asarray(point.raw_gyro_rad_s, dtype=float) - state.gyro_bias_rad_s
+        measured = self._true_north(measurement, state.latitude_rad, state.longitude_rad)
+        if self._lag_s > 0.0:
+            measured = measured @ rotation_matrix_from_rotation_vector(rate * self._lag_s)
+        innovation = rotation_vector_from_rotation_matrix(measured @ point.rotation_nb.T)
+        states = self.states
+        jacobian = np.zeros((3, states.dim))
+        jacobian[:, states.attitude] = np.eye(3)
+        lag_variance = float(rate @ rate) * self._lag_uncertainty_s**2
+        covariance = floored_covariance(measurement.covariance_rad2, self._floor_rad2)
+        covariance = (covariance + np.eye(3) * lag_variance) * self._weight(measurement)
+        return MeasurementModel(
+            predicted=np.zeros(3),
+            innovation=innovation,
+            jacobian=jacobian,
+            covariance=covariance,
+        )
+
+    def align(self, aligner, t_s: float, measurement: AhrsAttitude, raw_gyro_rad_s):
+        """The pack's heading (azimuth of its body x axis) completes the alignment at a known
+        place; the levelling is the fusion's own."""
+        place = aligner.latest_position_rad()
+        if place is None:
+            return None
+        rotation = self._true_north(measurement, *place)
+        forward = rotation @ BODY_X
+        variance = max(float(measurement.covariance_rad2[2, 2]), self._floor_rad2)
+        return aligner.add_heading(
+            t_s, math.atan2(forward[1], forward[0]), variance, raw_gyro_rad_s, body_vector=BODY_X
+        )

@@ -1,0 +1,184 @@
+"""Magnetometer heading (``imu/mag``, sensor_msgs/MagneticField, tesla, uncalibrated).
+
+**Model: a heading derived from the field, not the 3-D field.** The calibrated field
+``m_b = S (m_raw − h)`` (soft iron S, hard iron h: ``calibrate_magnetometer``) is turned into
+ENU with the nominal attitude, ``m = R_nb m_b``, and its horizontal projection must point to
+magnetic north, whose ENU azimuth is ``π/2 − D`` (declination D east positive, from
+``magnetic.declination_deg`` or the WMM at the position)::
+
+    h(x) = atan2(m_N, m_E),   z = π/2 − D.
+
+Why not the 3-D field: a 3-D model also needs the field's magnitude and dip to a fraction of a
+percent and lets every residual soft-iron error and every steel hull that passes pull on roll
+and pitch, which the accelerometers and the inertial solution already hold far better than a
+compass can. The derived heading carries the one thing the magnetometer is needed for; its
+dependence on tilt is kept exactly in the Jacobian (below), so no approximation is made, but a
+disturbance can only move the heading and is gated as a heading.
+
+Jacobian under ``R_true = Exp([φ×]) R_nb`` (the same geometry as the antenna heading, with the
+field in place of the baseline): ``∂h/∂φ = (−m_E m_U / ρ², −m_N m_U / ρ², 1)``, ρ² = m_E² + m_N².
+Noise: the sensor's own (``magnetic_field_covariance``, over ρ²) plus
+``magnetometer_heading_sigma_deg`` for what calibration leaves and local fields. A field whose
+horizontal part is under :data:`MIN_HORIZONTAL_FIELD_FRACTION` of its length (near the magnetic
+poles, or a steep tilt) carries no heading (``geometry``).
+
+Bad input: a non-finite component (``non_finite``), a component at full scale
+(``magnetometer_full_scale_t``: saturated, ``out_of_range``), a field below
+:data:`MIN_FIELD_T` after calibration (``out_of_range``). Disturbances (a steel hull passing, a
+winch motor) fail the chi-square gate and are counted as ``gate``; the yaw is reset to the
+magnetometer only after :data:`RESET_AFTER_GATE_RESETS` times the usual count of consecutive
+rejections, since a compass that disagrees for seconds is disturbed, not right.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from buoy_common.contract import MAGNETOMETER_TOPIC, Reason, header_seconds
+from buoy_nav.aiding.base import (
+    HEADING,
+    AidingSource,
+    LinearisationPoint,
+    MeasurementModel,
+    as_float_array,
+    vector_of,
+    yaw_reset,
+)
+from buoy_nav.geomagnetism import declination_rad
+from buoy_nav.rotations import (
+    wrap_angle,
+)
+
+MIN_HORIZONTAL_FIELD_FRACTION = 0.15
+MIN_FIELD_T = 1e-6
+"""The Earth's field is 22–67 µT; under 1 µT the sensor reads no field at all."""
+RESET_AFTER_GATE_RESETS = 100
+
+
+class MagneticField(NamedTuple):
+    """A raw magnetometer sample: field in ``imu_link`` (T), its mean per-axis noise variance
+    (T², 0 when unknown) and its stamp (s, for the geomagnetic model's date)."""
+
+    field_body_t: np.ndarray
+    noise_variance_t2: float
+    t_s: float
+
+
+class MagnetometerSource(AidingSource):
+    """Magnetic heading (see the module docstring)."""
+
+    kind = "magnetometer"
+    topic = MAGNETOMETER_TOPIC
+    measurement_type = MagneticField
+    aids = HEADING
+    # A steel hull or a winch disturbs the field for tens of seconds: the gate stops it, and the
+    # filter is not to be distrusted for it.
+    witnesses_integrity = False
+
+    def __init__(self, config, states):
+        super().__init__(config, states)
+        self._hard_iron_t = np.array(config.magnetometer_hard_iron_t, dtype=float)
+        self._soft_iron = np.array(config.magnetometer_soft_iron, dtype=float).reshape(3, 3)
+        self._heading_variance_rad2 = math.radians(config.magnetometer_heading_sigma_deg) ** 2
+        self._full_scale_t = config.magnetometer_full_scale_t
+        self._declination_deg = config.magnetic_declination_deg
+        self.reset_after_rejections = config.gate_reset_count * RESET_AFTER_GATE_RESETS
+
+    @classmethod
+    def enabled_by(cls, config) -> bool:
+        return config.use_magnetometer
+
+    def measurement_from_message(self, message) -> MagneticField | Reason:
+        covariance = np.asarray(message.magnetic_field_covariance, dtype=float)
+        if covariance.shape != (9,):
+            return Reason.MALFORMED
+        variance = float(np.mean(covariance[0::4]))
+        return MagneticField(
+            vector_of(message.magnetic_field),
+            variance if math.isfinite(variance) and variance > 0.0 else 0.0,
+            header_seconds(message.header),
+        )
+
+    def validated(self, measurement: MagneticField) -> MagneticField | Reason:
+        raw = as_float_array(measurement.field_body_t, (3,))
+        if isinstance(raw, Reason):
+            return raw
+        if np.any(np.abs(raw) >= self._full_scale_t):
+            return Reason.OUT_OF_RANGE
+        calibrated = self._soft_iron @ (raw - self._hard_iron_t)
+        if float(np.linalg.norm(calibrated)) < MIN_FIELD_T:
+            return Reason.OUT_OF_RANGE
+        variance = float(measurement.noise_variance_t2)
+        return MagneticField(
+            calibrated, variance if math.isfinite(variance) else 0.0, float(measurement.t_s)
+        )
+
+    def magnetic_north_azimuth_rad(self, latitude_rad: float, longitude_rad: float, t_s: float):
+        """ENU azimuth (rad, 0 = East, counter-clockwise) of magnetic north at a place."""
+        return wrap_angle(
+            0.5 * math.pi - declination_rad(self._declination_deg, latitude_rad, longitude_rad, t_s)
+        )
+
+    def _field_geometry(self, rotation_nb, field_body_t):
+        field = np.asarray(rotation_nb) @ field_body_t
+        horizontal_sq = field[0] * field[0] + field[1] * field[1]
+        if horizontal_sq < (MIN_HORIZONTAL_FIELD_FRACTION**2) * float(field @ field):
+            return None
+        return field, horizontal_sq
+
+    def _variance(self, measurement: MagneticField, horizontal_sq: float) -> float:
+        return self._heading_variance_rad2 + measurement.noise_variance_t2 / horizontal_sq
+
+    def model(self, measurement: MagneticField, point: LinearisationPoint):
+        geometry = self._field_geometry(point.rotation_nb, measurement.field_body_t)
+        if geometry is None:
+            return None
+        (east, north, up), horizontal_sq = geometry
+        state = point.state
+        target = self.magnetic_north_azimuth_rad(
+            state.latitude_rad, state.longitude_rad, measurement.t_s
+        )
+        predicted = math.atan2(north, east)
+        states = self.states
+        jacobian = np.zeros((1, states.dim))
+        jacobian[0, states.attitude] = (
+            -east * up / horizontal_sq,
+            -north * up / horizontal_sq,
+            1.0,
+        )
+        return MeasurementModel(
+            predicted=np.array((predicted,)),
+            innovation=np.array((wrap_angle(target - predicted),)),
+            jacobian=jacobian,
+            covariance=np.array([[self._variance(measurement, horizontal_sq)]]),
+        )
+
+    def reset(self, measurement: MagneticField, point: LinearisationPoint, model):
+        """The yaw that puts the field's horizontal part on magnetic north, tilt kept."""
+        field = measurement.field_body_t
+        # Turning about the vertical keeps the horizontal part's length: the current attitude
+        # gives it.
+        horizontal = np.asarray(point.rotation_nb, dtype=float) @ field
+        horizontal_sq = horizontal[0] ** 2 + horizontal[1] ** 2
+        state = point.state
+        target = self.magnetic_north_azimuth_rad(
+            state.latitude_rad, state.longitude_rad, measurement.t_s
+        )
+        variance = self._variance(measurement, max(horizontal_sq, MIN_FIELD_T**2))
+        return yaw_reset(self.states, point, field, target, variance)
+
+    def align(self, aligner, t_s: float, measurement: MagneticField, raw_gyro_rad_s):
+        """The azimuth of the field's horizontal part (magnetic north) completes the alignment
+        at a known place (a fix, or the configured site)."""
+        place = aligner.latest_position_rad()
+        if place is None:
+            return None
+        target = self.magnetic_north_azimuth_rad(*place, measurement.t_s)
+        field = measurement.field_body_t
+        variance = self._heading_variance_rad2 + measurement.noise_variance_t2 / float(
+            field @ field
+        )
+        return aligner.add_heading(t_s, target, variance, raw_gyro_rad_s, body_vector=field)

@@ -1,0 +1,58 @@
+"""Magnetic declination: the ``magnetic.declination_deg`` parameter, or the World Magnetic Model
+at the position (package ``pygeomag``, the NOAA/BGS model that compasses and charts use).
+
+The declination changes by about 0.1° per 10 km and per year at mid latitudes, so it is
+evaluated once per 0.05° cell of latitude and longitude and per tenth of a year, and kept.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+from pygeomag import GeoMag
+
+SECONDS_PER_JULIAN_YEAR = 365.25 * 86400.0
+UNIX_EPOCH_DECIMAL_YEAR = 1970.0
+_CELL_DEG = 0.05
+_YEAR_STEP = 0.1
+
+
+@lru_cache(maxsize=1)
+def _model() -> GeoMag:
+    return GeoMag()
+
+
+@lru_cache(maxsize=256)
+def _wmm_declination_cell_deg(latitude_cell: int, longitude_cell: int, year_step: int) -> float:
+    model = _model()
+    year = min(max(year_step * _YEAR_STEP, model.life_span[0]), model.life_span[1] - 1e-3)
+    result = model.calculate(
+        glat=latitude_cell * _CELL_DEG,
+        glon=longitude_cell * _CELL_DEG,
+        alt=0.0,
+        time=year,
+        allow_date_outside_lifespan=True,
+    )
+    return float(result.d)
+
+
+def wmm_declination_deg(latitude_rad: float, longitude_rad: float, t_s: float) -> float:
+    """Declination (deg, east positive) of the WMM at a position (rad) and a time (s since the
+    Unix epoch), at sea level."""
+    year = UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
+    return _wmm_declination_cell_deg(
+        round(math.degrees(latitude_rad) / _CELL_DEG),
+        round(math.degrees(longitude_rad) / _CELL_DEG),
+        round(year / _YEAR_STEP),
+    )
+
+
+def declination_rad(
+    configured_deg: float, latitude_rad: float, longitude_rad: float, t_s: float
+) -> float:
+    """The declination to use (rad, east positive): ``configured_deg`` unless NaN, else the WMM
+    at the position and time."""
+    if not math.isnan(configured_deg):
+        return math.radians(configured_deg)
+    return math.radians(wmm_declination_deg(latitude_rad, longitude_rad, t_s))

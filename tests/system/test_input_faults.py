@@ -1,0 +1,105 @@
+"""IMU faults injected into ``bags/sea_state``, judged against the bag's own truth.
+
+Each fault is written into a copy of the first ``KEPT_S`` seconds of the bag (the IMU messages
+decoded, changed and written again with the bag library), processed by ``process_bag``, and the
+output compared with ``truth/odometry`` and ``truth/wind``:
+
+- five gyro samples of 30 rad/s on one axis (inside the 35 rad/s magnitude limit);
+- one accelerometer sample of 100 m/s² (inside the 160 m/s² limit);
+- the IMU's stamps jumping back 5 s, or forward 5 s, for the rest of the recording.
+
+After each, no valid ``wind/true`` sample may be off the true wind by more than
+``MAX_WIND_ERROR_MPS``, the attitude must be within the RTK targets from 30 s after the fault
+on, and the run must still correct nearly every wind sample a clean run corrects (a fault
+handled by invalidating everything would pass the first two checks).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from bag_faults import FAULTS, faulty_bag
+from scipy.spatial.transform import Rotation
+
+from buoy_common.bag_io import BagReader
+from buoy_nav.config import fusion_config_from_files
+from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files
+from wind_comp.report.data import interpolate_vectors, odometry_series, stamped_vectors
+
+REPO = Path(__file__).resolve().parents[2]
+SOURCE_BAG = REPO / "bags" / "sea_state"
+BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
+KEPT_S = 110.0  # of log time: alignment, 60 s of convergence, the fault, 40 s after it
+FAULT_AT_S = 65.0  # after the first IMU stamp
+RECOVERY_S = 30.0
+MAX_WIND_ERROR_MPS = 0.5
+# RTK attitude targets (roll, pitch, heading), deg.
+ATTITUDE_TARGETS_DEG = np.array([0.1, 0.1, 0.15])
+# Samples a fault may cost (the wind of the spike's own 50 ms, interpolated across).
+MAX_LOST_WIND_SAMPLES = 5
+STAMP_MATCH_NS = 1000
+
+
+def judged(out: Path):
+    """(wind errors of the valid samples m/s, number valid, attitude errors deg (roll, pitch,
+    heading) with their stamps s)."""
+    with BagReader(out) as reader:
+        nav = odometry_series(reader, "nav/odometry")
+        truth = odometry_series(reader, "truth/odometry")
+        wind = stamped_vectors(reader, "wind/true")
+        true_wind = stamped_vectors(reader, "truth/wind")
+    wind_error = np.linalg.norm(
+        wind.vectors - interpolate_vectors(wind.stamps_ns, true_wind), axis=1
+    )
+    valid = np.isfinite(wind_error)
+    position = np.clip(np.searchsorted(truth.stamps_ns, nav.stamps_ns), 0, truth.stamps_ns.size - 1)
+    matched = np.abs(truth.stamps_ns[position] - nav.stamps_ns) <= STAMP_MATCH_NS
+    estimated = Rotation.from_quat(nav.quat_xyzw[matched])
+    true = Rotation.from_quat(truth.quat_xyzw[position[matched]])
+    # as_euler("ZYX") is (yaw, pitch, roll) of R = Rz(yaw)·Ry(pitch)·Rx(roll)
+    difference = np.degrees(estimated.as_euler("ZYX") - true.as_euler("ZYX"))[:, ::-1]
+    attitude_error = np.abs((difference + 180.0) % 360.0 - 180.0)
+    return wind_error[valid], int(valid.sum()), attitude_error, nav.stamps_ns[matched] * 1e-9
+
+
+@pytest.fixture(scope="module")
+def processed(tmp_path_factory):
+    runs = {}
+    base = tmp_path_factory.mktemp("input_faults")
+
+    def run(name: str):
+        if name not in runs:
+            bag, out = base / f"in_{name}", base / f"out_{name}"
+            faults = [(FAULT_AT_S, FAULTS[name])] if name in FAULTS else []
+            fault_s = faulty_bag(SOURCE_BAG, bag, KEPT_S, faults) + FAULT_AT_S
+            summary = process_bag(
+                bag,
+                out,
+                fusion_config_from_files([BUOY_PARAMETERS]),
+                compensator_config_from_files([BUOY_PARAMETERS]),
+            )
+            runs[name] = (fault_s, summary, *judged(out))
+        return runs[name]
+
+    return run
+
+
+@pytest.mark.parametrize(
+    "fault", ["gyro_spike", "accelerometer_spike", "clock_back", "clock_forward"]
+)
+def test_no_wrong_wind_and_the_attitude_recovers(processed, fault):
+    fault_s, summary, wind_error, n_valid, attitude_error, attitude_t_s = processed(fault)
+    _, _, _, n_valid_clean, _, _ = processed("clean")
+    figures = (
+        f"{fault}: {n_valid} valid wind samples (clean run {n_valid_clean}), largest error "
+        f"{wind_error.max():.3f} m/s; fusion: {summary.fusion_lines}"
+    )
+    assert np.count_nonzero(wind_error > MAX_WIND_ERROR_MPS) == 0, figures
+    assert n_valid >= n_valid_clean - MAX_LOST_WIND_SAMPLES, figures
+    after = attitude_t_s >= fault_s + RECOVERY_S
+    assert np.count_nonzero(after) > 0, figures
+    worst = attitude_error[after].max(axis=0)
+    assert np.all(worst <= ATTITUDE_TARGETS_DEG), f"roll, pitch, heading {worst} deg; {figures}"
