@@ -19,9 +19,9 @@ as constants and printed beside our figures:
 8. sensor_sets: the sensor sets beyond RTK on sea_state and open_ocean, with outages
    (tools/bench_sensor_sets.py);
 9. smoother (paper 002 Table 1, short): process_bag --smooth on sea_state with the paper's
-   sensors and with the default ones, and on open_ocean, 600 s each; forward against smoothed
+   sensors and with the default ones, and on open_ocean, 300 s each; forward against smoothed
    errors, and the wind corrected with each (tools/bench_smoother.py); smoother_table1: the
-   same on the paper's 4000 s (long);
+   same on the paper's 4000 s (long; 600 s with --quick);
 10. antennas (paper 001): heading-only, baseline-vector and three-antenna models side by side on
    a flight-like and two buoy trajectories (tools/bench_antennas.py);
 11. smoother_speed (long): wall time and peak memory of fuse_bag/process_bag with and without

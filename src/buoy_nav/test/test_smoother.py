@@ -163,6 +163,28 @@ def test_segments_are_smoothed_apart():
     np.testing.assert_allclose(error, [np.full(5, 0.5), np.zeros(5), np.ones(5), np.zeros(5)])
 
 
+def test_an_inflation_of_the_covariance_is_process_noise_at_its_stamp():
+    """The integrity monitor's inflation (P⁺ = I widened to 3I at 0.1 s) is an epoch of zero
+    duration with Φ = I: the RTS gain across it is P⁺ (P⁺ + Q)⁻¹ = 1/3, so a third of what
+    follows reaches back across it."""
+    identity = np.eye(5)
+    with SpillDirectory() as spill:
+        recorder = SmootherRecorder(STATES, spill)
+        recorder.begin_segment(0.0, identity)
+        recorder.propagated(0.1, identity, 2 * identity, identity)
+        recorder.corrected(np.ones(5))
+        recorder.noise_added(0.1, identity, 3 * identity)
+        recorder.propagated(0.2, identity, 4 * identity, 3 * identity)
+        recorder.corrected(np.full(5, 2.0))
+        recorder.end_segment(identity)
+        error, covariance = recorder.smooth().at(np.array((0.0, 0.1, 0.2)))
+    # Backwards: at 0.1 s after the inflation C = 3/4, δx = 3/4 · 2 = 1.5 and
+    # P^s = 3 + (3/4)² (1 − 4) = 1.3125; before it C = 1/3, δx = (1.5 + 0) / 3 = 0.5, relative to
+    # the state before its correction of 1 that is 1.5; at 0 s C = 1/2: 0.75.
+    np.testing.assert_allclose(error, [np.full(5, 0.75), np.full(5, 1.5), np.zeros(5)])
+    np.testing.assert_allclose(covariance[1], 1.3125 * identity)
+
+
 def test_symmetric_packing_round_trip():
     rng = np.random.default_rng(0)
     matrix = rng.normal(size=(7, 7))
