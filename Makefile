@@ -44,7 +44,7 @@ format: venv
 	$(BIN)/ruff check --fix .
 
 test: venv lint
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadgroup
 
 demo: venv
 	$(BIN)/python tools/demo.py

@@ -90,6 +90,18 @@ class NodeProcesses:
                 process.wait()
 
 
+# Tests that run nodes over DDS share one pytest-xdist worker, one after another: side by side
+# on a 2-core machine their nodes would starve each other of the CPU their latency budgets
+# assume. The offline tests share the other workers.
+LIVE_FIXTURES = {"nodes", "ros_env", "module_ros_env"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if LIVE_FIXTURES & set(item.fixturenames) or item.get_closest_marker("ros"):
+            item.add_marker(pytest.mark.xdist_group("live"))
+
+
 @pytest.fixture
 def nodes(tmp_path):
     """Start node executables in an isolated DDS domain; all are stopped after the test."""

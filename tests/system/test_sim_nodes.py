@@ -17,10 +17,12 @@ import pytest
 from buoy_common.bag_io import BagReader
 from buoy_common.parameters import load_parameter_files
 from processed_bags import BAGS_DIR
-from ros_messages import stamp_ns
+from ros_messages import stamp_ns, wait_for
 from sensor_sim.scenario import load_scenario
 
 SCENARIO_S = 12.0
+# Imports and DDS discovery of a node on a busy machine.
+STARTUP_TIMEOUT_S = 30.0
 RATES_HZ = {
     "imu/data_raw": 100.0,
     "gnss/fix": 10.0,
@@ -165,7 +167,12 @@ def test_imu_message_conventions(live_bag):
 
 def test_sensor_node_stops_cleanly_on_sigint(nodes):
     process = nodes.start("imu_sim_node", "--ros-args", "-p", "scenario:=static")
-    time.sleep(3.0)
+    # Interrupted while Python still imports, any program prints a KeyboardInterrupt traceback:
+    # the node is judged once it has started publishing.
+    assert wait_for(lambda: "imu/data_raw at" in nodes.log_of(process), STARTUP_TIMEOUT_S), (
+        nodes.log_of(process)
+    )
+    time.sleep(1.0)
     assert process.poll() is None, nodes.log_of(process)
     assert nodes.interrupt(process) == 0, nodes.log_of(process)
     assert "Traceback" not in nodes.log_of(process)

@@ -198,12 +198,20 @@ class NamespacedWriter:
     def __init__(self, writer, view: TopicView):
         self._writer = writer
         self._view = view
+        # A tool writes a handful of topics at the IMU's rate: name each once.
+        self._output_names: dict[str, str] = {}
+
+    def _output_name(self, topic: str) -> str:
+        name = self._output_names.get(topic)
+        if name is None:
+            name = self._output_names[topic] = self._view.output_name(topic)
+        return name
 
     def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
-        self._writer.write_raw(self._view.output_name(topic), msgtype, log_time_ns, raw)
+        self._writer.write_raw(self._output_name(topic), msgtype, log_time_ns, raw)
 
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
-        self._writer.write(self._view.output_name(topic), msgtype, log_time_ns, message)
+        self._writer.write(self._output_name(topic), msgtype, log_time_ns, message)
 
     @property
     def counts(self) -> dict[str, int]:

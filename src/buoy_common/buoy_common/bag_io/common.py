@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Iterable
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 from rosbags.typesys import Stores, get_typestore
 
@@ -29,6 +29,21 @@ class TopicInfo(NamedTuple):
 
     msgtype: str
     count: int
+
+
+class TopicSelection(Protocol):
+    """What a reader needs of a namespace view (:class:`~buoy_common.namespaces.TopicView`):
+    the bag does not depend on how names are resolved, only on the mapping it yields."""
+
+    namespace: str
+    remaps: tuple[tuple[str, str], ...]
+
+    @property
+    def label(self) -> str: ...
+
+    def stored_name(self, topic: str) -> str: ...
+
+    def visible(self, stored_topics: Iterable[str]) -> dict[str, str]: ...
 
 
 class BagMessage(NamedTuple):

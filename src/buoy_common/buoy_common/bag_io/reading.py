@@ -16,7 +16,6 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import yaml
 from rosbags.interfaces import MessageDefinitionFormat
@@ -31,14 +30,12 @@ from buoy_common.bag_io.common import (
     BagMessage,
     Recovery,
     TopicInfo,
+    TopicSelection,
     find_topic,
     jazzy_typestore,
     one_line,
 )
 from buoy_common.bag_io.recovery import RecoveredMcap
-
-if TYPE_CHECKING:
-    from buoy_common.namespaces import TopicView
 
 
 def _is_finished_mcap(path: Path) -> bool:
@@ -74,7 +71,7 @@ class BagReader:
     a damaged one it says what was wrong and how many messages could be read.
     """
 
-    def __init__(self, path: str | Path, view: TopicView | None = None):
+    def __init__(self, path: str | Path, view: TopicSelection | None = None):
         self.path = Path(path)
         self.view = view
         self.recovery: Recovery | None = None
