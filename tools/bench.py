@@ -443,12 +443,7 @@ def main(argv=None) -> None:
     if sections & {"speed", "smoother_speed"}:
         speed_bag = cached_bag_path("open_ocean", speed_overrides(quick), fingerprint)
         wanted[speed_bag] = ("open_ocean", speed_overrides(quick))
-    smoothing_cases = [
-        case
-        for section in ("smoother", "smoother_table1")
-        if section in sections
-        for case in bench_smoother.plan(section, quick)
-    ]
+    smoothing_cases = bench_smoother.plan(sections, quick)
     for case in smoothing_cases:
         path = cached_bag_path(case.scenario, case.overrides, fingerprint)
         wanted[path] = (case.scenario, case.overrides)
@@ -577,20 +572,9 @@ def main(argv=None) -> None:
         )
         bias_consistency.print_table(results["consistency"]["table"])
 
-    smoothed_runs = (
-        bench_smoother.run_cases(smoothing_cases, bag_of, RUNS_DIR, WORKERS)
-        if smoothing_cases
-        else {}
-    )
-    for section in ("smoother", "smoother_table1"):
-        if section in sections:
-            runs = {k: v for k, v in smoothed_runs.items() if k.startswith(f"{section}/")}
-            results[section] = {
-                "paper002_table1": bench_smoother.PAPER002_TABLE1,
-                "attitude_rms_ratio_target": bench_smoother.ATTITUDE_RMS_RATIO_TARGET,
-                "runs": runs,
-            }
-            bench_smoother.print_table1(runs)
+    if smoothing_cases:
+        runs = bench_smoother.run_cases(smoothing_cases, bag_of, RUNS_DIR, WORKERS)
+        results.update(bench_smoother.table1_results(sections, runs))
     if "antennas" in sections:
         results["antennas"] = bench_antennas.run_antennas(quick)
         bench_antennas.print_antennas(results["antennas"])

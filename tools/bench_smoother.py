@@ -103,7 +103,33 @@ class SmoothingCase:
     label: str
 
 
-def plan(section: str, quick: bool) -> list[SmoothingCase]:
+def plan(sections: set[str], quick: bool) -> list[SmoothingCase]:
+    """The cases of the bench sections ``smoother`` and ``smoother_table1`` in ``sections``."""
+    return [
+        case
+        for section in TABLE1_DURATION_S
+        if section in sections
+        for case in section_plan(section, quick)
+    ]
+
+
+def table1_results(sections: set[str], runs: dict) -> dict:
+    """The results of the sections ``smoother`` and ``smoother_table1`` in ``sections`` from
+    :func:`run_cases`'s ``runs``, each table printed."""
+    results = {}
+    for section in TABLE1_DURATION_S:
+        if section in sections:
+            section_runs = {k: v for k, v in runs.items() if k.startswith(f"{section}/")}
+            results[section] = {
+                "paper002_table1": PAPER002_TABLE1,
+                "attitude_rms_ratio_target": ATTITUDE_RMS_RATIO_TARGET,
+                "runs": section_runs,
+            }
+            print_table1(section_runs)
+    return results
+
+
+def section_plan(section: str, quick: bool) -> list[SmoothingCase]:
     """The cases of bench section ``section`` (``smoother`` or ``smoother_table1``)."""
     duration_s = TABLE1_DURATION_S[section]["quick" if quick else "full"]
     duration = f"duration_s={duration_s:g}"
