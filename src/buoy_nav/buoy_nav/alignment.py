@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from buoy_nav import earth
-from buoy_nav.aiding.dual_antenna import MIN_HORIZONTAL_BASELINE_FRACTION, horizontal_fraction
+from buoy_nav.antenna_geometry import MIN_HORIZONTAL_BASELINE_FRACTION, horizontal_fraction
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.rotations import (

@@ -29,8 +29,8 @@ from buoy_nav.aiding import (
     GnssVelocitySource,
 )
 from buoy_nav.aiding.base import LinearisationPoint, floored_covariance
-from buoy_nav.aiding.dual_antenna import baseline_azimuth_rad, horizontal_fraction
 from buoy_nav.aiding.gnss_velocity import predicted_antenna_velocity_enu_mps
+from buoy_nav.antenna_geometry import baseline_azimuth_rad, horizontal_fraction
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ERROR_STATES, NavState, inject_error_state
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_euler, wrap_angle

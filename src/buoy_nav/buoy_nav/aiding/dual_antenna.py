@@ -1,4 +1,5 @@
-"""What the dual-antenna sources (heading and baseline vector) share: the antenna geometry.
+"""What the dual-antenna sources (heading and baseline vector) share: the baseline azimuth's
+role in the alignment and in a yaw reset (the geometry is :mod:`buoy_nav.antenna_geometry`).
 
 A moving-baseline RTK receiver measures the primary → secondary antenna vector
 ``b = R_nb · (l_s − l_p)`` (ENU); the heading it reports is the azimuth of that vector's
@@ -11,33 +12,10 @@ antenna placement: with ``R_nb = Rz(yaw) R_L``, ``R_L = Ry(pitch) Rx(roll)``, th
 from __future__ import annotations
 
 import abc
-import math
 
 import numpy as np
 
 from buoy_nav.aiding.base import AidingSource, LinearisationPoint, StateReset, yaw_reset
-
-# The baseline's horizontal projection must keep this fraction of its length for its azimuth to
-# carry heading (at 0.2 the yaw noise is 5× the tilt-free value).
-MIN_HORIZONTAL_BASELINE_FRACTION = 0.2
-
-
-def baseline_enu_m(rotation_nb, baseline_body_m) -> np.ndarray:
-    """Primary → secondary antenna vector in ENU (m) for attitude R_nb."""
-    return np.asarray(rotation_nb, dtype=float) @ np.asarray(baseline_body_m, dtype=float)
-
-
-def horizontal_fraction(rotation_nb, baseline_body_m) -> float:
-    """Length of the baseline's horizontal projection divided by its length (0 = vertical)."""
-    baseline = baseline_enu_m(rotation_nb, baseline_body_m)
-    return math.hypot(baseline[0], baseline[1]) / float(np.linalg.norm(baseline))
-
-
-def baseline_azimuth_rad(baseline_enu_m) -> tuple[float, float]:
-    """Azimuth (rad, ENU, 0 = East, CCW) of a baseline's horizontal projection and the length
-    of that projection (m)."""
-    east, north = float(baseline_enu_m[0]), float(baseline_enu_m[1])
-    return math.atan2(north, east), math.hypot(east, north)
 
 
 class DualAntennaSource(AidingSource):

@@ -32,11 +32,8 @@ from buoy_nav.aiding.base import (
     as_float_array,
     vector_of,
 )
-from buoy_nav.aiding.dual_antenna import (
-    MIN_HORIZONTAL_BASELINE_FRACTION,
-    DualAntennaSource,
-    baseline_azimuth_rad,
-)
+from buoy_nav.aiding.dual_antenna import DualAntennaSource
+from buoy_nav.antenna_geometry import MIN_HORIZONTAL_BASELINE_FRACTION, baseline_azimuth_rad
 from buoy_nav.rotations import skew
 
 # A measured baseline whose length differs from the configured antenna separation by more than

@@ -12,7 +12,7 @@ Jacobian under the convention ``R_true = Exp([φ×]) R_nb``: ``δb = φ × b``, 
     ∂ψ/∂φ = (−b_E b_U / ρ², −b_N b_U / ρ², 1)
 
 and zero for every other state. It is singular when the baseline is vertical (ρ → 0): below
-:data:`~buoy_nav.aiding.dual_antenna.MIN_HORIZONTAL_BASELINE_FRACTION` of horizontal length the
+:data:`~buoy_nav.antenna_geometry.MIN_HORIZONTAL_BASELINE_FRACTION` of horizontal length the
 heading is rejected as ``geometry``.
 
 A baseline vector of the same stamp (:mod:`buoy_nav.aiding.gnss_baseline`), from the same
@@ -34,13 +34,13 @@ from buoy_nav.aiding.base import (
     as_floats,
     floored_covariance,
 )
-from buoy_nav.aiding.dual_antenna import (
+from buoy_nav.aiding.dual_antenna import DualAntennaSource
+from buoy_nav.aiding.gnss_baseline import GnssBaselineSource
+from buoy_nav.antenna_geometry import (
     MIN_HORIZONTAL_BASELINE_FRACTION,
-    DualAntennaSource,
     baseline_enu_m,
     horizontal_fraction,
 )
-from buoy_nav.aiding.gnss_baseline import GnssBaselineSource
 from buoy_nav.rotations import wrap_angle
 
 # Quaternions shorter than this carry no heading.
