@@ -11,6 +11,12 @@ wind products (``wind/mean_<window>``, ``wind/stats_<window>``), the measured
 message after which it was produced. The wind products are also written to
 ``<OUT_BAG>_wind_products.csv``. ``process_bag`` is its command line.
 
+With ``smooth`` the fusion runs first over the sensor topics alone (a forward filter whose
+epochs and solutions are spilled to a temporary directory beside the output), then the
+smoother's backward pass; a second read of the bag feeds the smoothed solutions and the
+anemometer samples, in log-time order, to the compensation, so the wind is corrected with the
+smoothed attitude and velocity (:func:`buoy_nav.bag_fusion.merged_with_smoothed`).
+
 The compensation runs in this process, on whole stretches of samples at a time; the process
 that writes the bag only writes.
 """
@@ -39,7 +45,15 @@ from buoy_common.contract import (
 )
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
-from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of, truth_topics_of
+from buoy_nav.bag_fusion import (
+    OfflineFusion,
+    forward_pass,
+    merged_with_smoothed,
+    relative_topic,
+    sensor_topics_of,
+    spill_parent_of,
+    truth_topics_of,
+)
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
 from wind_comp.compensation_messages import (
@@ -194,10 +208,12 @@ def process_bag(
     compensator_config: CompensatorConfig,
     overwrite: bool = False,
     view: TopicView | None = None,
+    smooth: bool = False,
 ) -> ProcessSummary:
     """Fuse and correct ``in_bag`` into ``out_bag`` (a new bag; replaced with ``overwrite``)
     and the products CSV beside it, over the topics of ``view``'s namespace (the root when
-    None), writing into the same namespace. Raises BagError for a missing or unreadable bag or one
+    None), writing into the same namespace; with ``smooth`` on the smoothed navigation (see the
+    module docstring). Raises BagError for a missing or unreadable bag or one
     without the required topics, and OutputError, before anything is read or written, if an
     output is, contains or lies inside ``in_bag``."""
     started = time.monotonic()
@@ -209,32 +225,33 @@ def process_bag(
         stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
-        with (
-            BagProgress(reader, f"process_bag {in_bag}") as progress,
-            BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
-        ):
-            writer = NamespacedWriter(bag_writer, view)
-            fusion = OfflineFusion(fusion_config, writer)
-            compensation = OfflineCompensation(compensator_config, writer)
-            log_time_ns = reader.start_ns
-            for index, message in enumerate(
-                reader.messages([*sensors.values(), stored_wind, *truth])
-            ):
-                log_time_ns = message.log_time_ns
-                topic = relative_of.get(message.topic)
-                if topic is not None:
-                    solutions = fusion.add_message(reader, topic, message)
-                    if solutions:
-                        compensation.add_navigation(solutions)
-                else:
-                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                    if message.topic == stored_wind:
-                        compensation.add_wind(reader, message)
-                if index % PROGRESS_EVERY_MESSAGES == 0:
-                    progress.reached(log_time_ns)
-            compensation.add_navigation(fusion.finish())
-            compensation.finish(log_time_ns)
-            progress.done()
+        if smooth:
+            fusion = OfflineFusion(fusion_config, None, spill_parent_of(out_bag), smooth=True)
+            try:
+                # The writing process starts during the forward pass: until it is ready the
+                # writer keeps what it is given, and the second pass produces fast.
+                with BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer:
+                    writer = NamespacedWriter(bag_writer, view)
+                    forward_pass(reader, fusion, sensors, relative_of, f"process_bag {in_bag}")
+                    compensation = smoothed_compensation(
+                        reader, fusion, compensator_config, writer, stored_wind, truth
+                    )
+            finally:
+                fusion.close()
+        else:
+            fusion, compensation, writer = forward_compensation(
+                reader,
+                in_bag,
+                out_bag,
+                overwrite,
+                view,
+                fusion_config,
+                compensator_config,
+                sensors,
+                relative_of,
+                stored_wind,
+                truth,
+            )
         duration_s = reader.duration_s
     write_products_csv(compensation.products, csv_path)
     return ProcessSummary(
@@ -249,3 +266,72 @@ def process_bag(
         csv_path=csv_path,
         recovery=reader.recovery,
     )
+
+
+def smoothed_compensation(
+    reader: BagReader,
+    fusion: OfflineFusion,
+    compensator_config: CompensatorConfig,
+    writer: NamespacedWriter,
+    stored_wind: str,
+    truth: list[str],
+) -> OfflineCompensation:
+    """The compensation of a smoothing run, after ``fusion``'s forward pass: the smoothed
+    solutions and the anemometer samples in log-time order, written to ``writer``."""
+    fusion.writer = writer
+    compensation = OfflineCompensation(compensator_config, writer)
+    log_time_ns = reader.start_ns
+    for message, solution in merged_with_smoothed(reader, fusion, [stored_wind, *truth]):
+        if message is None:
+            forward, smoothed, log_time_ns = solution
+            fusion.write_smoothed_values(forward, smoothed, log_time_ns)
+            compensation.add_navigation([smoothed])
+            continue
+        log_time_ns = message.log_time_ns
+        writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+        if message.topic == stored_wind:
+            compensation.add_wind(reader, message)
+    compensation.finish(log_time_ns)
+    return compensation
+
+
+def forward_compensation(
+    reader: BagReader,
+    in_bag,
+    out_bag,
+    overwrite: bool,
+    view: TopicView,
+    fusion_config: FusionConfig,
+    compensator_config: CompensatorConfig,
+    sensors: dict[str, str],
+    relative_of: dict[str, str],
+    stored_wind: str,
+    truth: list[str],
+) -> tuple[OfflineFusion, OfflineCompensation, NamespacedWriter]:
+    """Fusion and compensation in one pass over the bag, the output bag written into
+    ``view``'s namespace."""
+    with (
+        BagProgress(reader, f"process_bag {in_bag}") as progress,
+        BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
+    ):
+        writer = NamespacedWriter(bag_writer, view)
+        fusion = OfflineFusion(fusion_config, writer)
+        compensation = OfflineCompensation(compensator_config, writer)
+        log_time_ns = reader.start_ns
+        for index, message in enumerate(reader.messages([*sensors.values(), stored_wind, *truth])):
+            log_time_ns = message.log_time_ns
+            topic = relative_of.get(message.topic)
+            if topic is not None:
+                solutions = fusion.add_message(reader, topic, message)
+                if solutions:
+                    compensation.add_navigation(solutions)
+            else:
+                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                if message.topic == stored_wind:
+                    compensation.add_wind(reader, message)
+            if index % PROGRESS_EVERY_MESSAGES == 0:
+                progress.reached(log_time_ns)
+        compensation.add_navigation(fusion.finish())
+        compensation.finish(log_time_ns)
+        progress.done()
+    return fusion, compensation, writer

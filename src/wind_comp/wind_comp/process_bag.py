@@ -1,17 +1,20 @@
 """``process_bag``: fusion and wind correction over a recorded bag, the offline twin of the nodes.
 
     process_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file compensation.yaml]
-                [--overwrite] [--namespace NS] [--remap FROM:=TO ...]
+                [--overwrite] [--namespace NS] [--remap FROM:=TO ...] [--smooth]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
 by ``compensation_node`` (:func:`wind_comp.bag_processing.process_bag`): every
 ``anemometer/wind`` sample yields exactly one ``wind/true`` (NaN when it cannot be corrected).
 The new bag holds ``nav/*``, ``wind/true``, the wind products (``wind/mean_<window>``,
 ``wind/stats_<window>``), the measured ``anemometer/wind`` and any truth topics; the wind
-products are also written to ``<OUT_BAG>_wind_products.csv``. Parameters come from the same
-YAML files the nodes take. Namespaces and remappings as for ``fuse_bag``: a bag recorded under
-one namespace is read and written in it; a bag of several buoys gives one output per namespace
-(``OUT_BAG/buoy1`` and its CSV ``OUT_BAG/buoy1_wind_products.csv``, ...).
+products are also written to ``<OUT_BAG>_wind_products.csv``. With ``--smooth`` ``nav/*`` carry
+the fixed-interval smoother's solution, the wind is corrected with the smoothed attitude and
+velocity, and the forward filter's odometry is kept as ``nav/forward/odometry`` (the bag is read
+twice; temporary records beside OUT_BAG, about 0.35 GB per hour of 100 Hz data). Parameters come
+from the same YAML files the nodes take. Namespaces and remappings as for ``fuse_bag``: a bag
+recorded under one namespace is read and written in it; a bag of several buoys gives one output
+per namespace (``OUT_BAG/buoy1`` and its CSV ``OUT_BAG/buoy1_wind_products.csv``, ...).
 
 Both outputs are written under temporary names beside them and appear only when complete; they
 may not be, contain or lie inside IN_BAG. It prints the extrinsics it used first.
@@ -65,6 +68,12 @@ def parse_arguments(argv):
         help="ROS parameter YAML as given to the nodes (repeatable; later files win)",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing OUT_BAG")
+    parser.add_argument(
+        "--smooth",
+        action="store_true",
+        help="correct the wind with the fixed-interval smoother's navigation (nav/*); the "
+        "forward filter's odometry goes to nav/forward/odometry",
+    )
     add_namespace_arguments(parser)
     return parser.parse_args(argv)
 
@@ -125,6 +134,7 @@ def main(argv=None) -> None:
                 compensator_config,
                 arguments.overwrite,
                 view,
+                arguments.smooth,
             )
             print_summary(summary, out_bag)
             for frame_id, n in sorted(summary.wrong_wind_frames.items()):
