@@ -136,7 +136,7 @@ def compare(record: Path, ion_functions: str | None) -> dict:
     }
     try:
         module = edson_fdchp.load_reference(edson_fdchp.ion_functions_dir(ion_functions))
-    except edson_fdchp.ReferenceUnavailable as error:
+    except edson_fdchp.ReferenceUnavailableError as error:
         result["edson"] = {"unavailable": str(error)}
         return result
     run = edson_fdchp.run_reference(edson_fdchp.load_record(record), module)

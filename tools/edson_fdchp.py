@@ -45,19 +45,19 @@ PUBLISHED_TOLERANCE = (1e-4 * 0.350371566926, 1e-4 * 0.115496951668, 1e-4)
 """Absolute: ion-functions' test holds u'w' and v'w' at a relative 1e-4, w'Ts' at 1e-4."""
 
 
-class ReferenceUnavailable(RuntimeError):
+class ReferenceUnavailableError(RuntimeError):
     """No checkout of ion-functions was given or found."""
 
 
 def ion_functions_dir(given: str | None = None) -> Path:
     """The ion-functions checkout: ``given``, else ``$ION_FUNCTIONS_DIR``, else
-    ``out/ion-functions`` of this repository; ReferenceUnavailable if none holds the module."""
+    ``out/ion-functions`` of this repository; ReferenceUnavailableError if none holds the module."""
     repository = Path(__file__).resolve().parent.parent
     candidates = [given, os.environ.get("ION_FUNCTIONS_DIR"), repository / "out/ion-functions"]
     for candidate in candidates:
         if candidate and (Path(candidate) / MODULE_PATH).is_file():
             return Path(candidate)
-    raise ReferenceUnavailable(
+    raise ReferenceUnavailableError(
         "Edson's processing needs a checkout of oceanobservatories/ion-functions: "
         "git clone https://github.com/oceanobservatories/ion-functions out/ion-functions "
         "(or set ION_FUNCTIONS_DIR)"
@@ -125,14 +125,21 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(prog="edson_fdchp", description=__doc__.split("\n")[0])
     parser.add_argument("record", help="the FDCHP L0 record (fdchp_test_dp.dat)")
     parser.add_argument("--ion-functions", help="checkout of oceanobservatories/ion-functions")
+    parser.add_argument(
+        "--save-wind",
+        metavar="NPY",
+        help="also write his corrected wind of the kept samples (North, West, Up; m/s, float64)",
+    )
     arguments = parser.parse_args(argv)
     try:
         module = load_reference(ion_functions_dir(arguments.ion_functions))
-    except ReferenceUnavailable as error:
+    except ReferenceUnavailableError as error:
         print(f"edson_fdchp: {error}", file=sys.stderr)
         sys.exit(2)
     run = run_reference(load_record(arguments.record), module)
     check_published_fluxes(run)
+    if arguments.save_wind:
+        np.save(arguments.save_wind, run.wind_nwu_mps)
     for name, value, published in zip(
         ("u'w'", "v'w'", "w'Ts'"), run.fluxes, PUBLISHED_FLUXES, strict=True
     ):

@@ -28,6 +28,7 @@ from buoy_common.contract import (
     TEMPERATURE_MSGTYPE,
     VECTOR3_MSGTYPE,
     WIND_RAW_TOPIC,
+    bag_topic,
     ns_to_stamp,
 )
 from buoy_common.records.column_map import MapError, load_column_map
@@ -96,7 +97,7 @@ def _imu_raws(samples: ContractSamples, stamps, orientations, orientation_covari
 
 def contract_messages(samples: ContractSamples) -> list[tuple[str, str, list[bytes]]]:
     """(topic, message type, CDR bytes of each sample) of every topic the samples fill."""
-    stamps = [ns_to_stamp(int(t)) for t in np.round(samples.time_s * 1e9).astype(np.int64)]
+    stamps = [ns_to_stamp(int(t)) for t in samples.time_ns]
     topics = []
     if samples.wind_mps is not None:
         sec, nanosec = zip(*stamps, strict=True)
@@ -120,12 +121,12 @@ def contract_messages(samples: ContractSamples) -> list[tuple[str, str, list[byt
 def write_contract_bag(samples: ContractSamples, output: str | Path, overwrite: bool) -> dict:
     """Write ``samples`` as the contract's sensor topics, sample after sample in time order
     (log time = header stamp); returns the messages per topic."""
-    stamps_ns = np.round(samples.time_s * 1e9).astype(np.int64)
+    stamps_ns = samples.time_ns
     topics = contract_messages(samples)
     with BagWriter(output, overwrite=overwrite) as bag:
         for i in np.argsort(stamps_ns, kind="stable"):
             for topic, msgtype, raws in topics:
-                bag.write_raw(topic, msgtype, int(stamps_ns[i]), raws[i])
+                bag.write_raw(bag_topic(topic), msgtype, int(stamps_ns[i]), raws[i])
     return dict(bag.counts)
 
 

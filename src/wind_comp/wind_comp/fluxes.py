@@ -176,10 +176,10 @@ def vickers_mahrt_spikes(values, rate_hz: float, test: SpikeTest = SpikeTest()) 
         valid = np.isfinite(values) & ~spikes
         if valid.sum() < 3:
             break
-        weight = uniform_filter1d(valid.astype(float), width, mode="nearest")
+        weight = uniform_filter1d(valid.astype(float), width, mode="constant")
         x = np.where(valid, values, 0.0)
-        mean = uniform_filter1d(x, width, mode="nearest") / np.maximum(weight, 1e-12)
-        square = uniform_filter1d(x * x, width, mode="nearest") / np.maximum(weight, 1e-12)
+        mean = uniform_filter1d(x, width, mode="constant") / np.maximum(weight, 1e-12)
+        square = uniform_filter1d(x * x, width, mode="constant") / np.maximum(weight, 1e-12)
         sigma = np.sqrt(np.maximum(square - mean * mean, 0.0))
         outside = valid & (np.abs(values - mean) > threshold * sigma)
         starts, lengths = _runs(outside)

@@ -107,7 +107,7 @@ class TimeSpec:
     """Sample times: a stamp column (unit, epoch) or a start time and a rate."""
 
     stamp: Field | None
-    epoch_s: float
+    epoch_ns: int
     rate_hz: float
 
 
@@ -182,7 +182,7 @@ def _field(spec, key: str, kind: str, binary: bool, column=None) -> Field:
     unit = spec.get("unit")
     if unit not in UNITS[kind]:
         raise MapError(
-            f"{key}: unit {unit!r} is not a {kind.replace('_', ' ')} unit this map reader knows "
+            f"{key}: unit {unit!r} is not a unit of {kind.replace('_', ' ')} this map reader knows "
             f"(one of {', '.join(UNITS[kind])})"
         )
     invalid = spec.get("invalid", [])
@@ -215,8 +215,8 @@ def _vector(spec, key: str, kind: str, binary: bool, labels=("x", "y", "z")) -> 
     )
 
 
-def _epoch_s(value, key: str) -> float:
-    """An ISO 8601 time (UTC unless it says otherwise) as seconds since the Unix epoch."""
+def _epoch_ns(value, key: str) -> int:
+    """An ISO 8601 time (UTC unless it says otherwise) as nanoseconds since the Unix epoch."""
     if isinstance(value, dt.datetime):
         when = value
     else:
@@ -226,21 +226,22 @@ def _epoch_s(value, key: str) -> float:
             raise MapError(f"{key}: not an ISO 8601 time: {value!r}") from error
     if when.tzinfo is None:
         when = when.replace(tzinfo=dt.UTC)
-    return when.timestamp()
+    since_epoch = when - dt.datetime(1970, 1, 1, tzinfo=dt.UTC)
+    return (since_epoch // dt.timedelta(microseconds=1)) * 1000
 
 
 def _time(spec, binary: bool) -> TimeSpec:
     spec = _require_mapping(spec, "time")
     if "column" in spec:
         stamp = _field(spec, "time", "time", binary)
-        epoch = _epoch_s(spec.get("epoch", "1970-01-01T00:00:00Z"), "time.epoch")
-        return TimeSpec(stamp=stamp, epoch_s=epoch, rate_hz=math.nan)
+        epoch = _epoch_ns(spec.get("epoch", "1970-01-01T00:00:00Z"), "time.epoch")
+        return TimeSpec(stamp=stamp, epoch_ns=epoch, rate_hz=math.nan)
     if "start" not in spec or "rate_hz" not in spec:
         raise MapError("time: give either column (with unit and epoch) or start and rate_hz")
     rate_hz = _number(spec["rate_hz"], "time.rate_hz")
     if not rate_hz > 0:
         raise MapError(f"time.rate_hz: must be positive, got {rate_hz}")
-    return TimeSpec(stamp=None, epoch_s=_epoch_s(spec["start"], "time.start"), rate_hz=rate_hz)
+    return TimeSpec(stamp=None, epoch_ns=_epoch_ns(spec["start"], "time.start"), rate_hz=rate_hz)
 
 
 def _layout(spec) -> np.dtype:

@@ -38,7 +38,8 @@ class ContractSamples:
     vectors into East-North-Up, yaw referenced as ``yaw_reference`` says.
     """
 
-    time_s: np.ndarray
+    time_ns: np.ndarray
+    """int64 header stamps, ns since the Unix epoch."""
     wind_mps: np.ndarray | None
     sonic_temperature_degc: np.ndarray | None
     angular_rate_rad_s: np.ndarray | None
@@ -48,7 +49,7 @@ class ContractSamples:
     yaw_reference: str
 
     def __len__(self) -> int:
-        return self.time_s.size
+        return self.time_ns.size
 
 
 def _column_index(field: Field, column_count: int) -> int:
@@ -158,12 +159,17 @@ def orientation_enu_flu(angles_rad: np.ndarray, convention: str) -> np.ndarray:
     return quaternions
 
 
-def sample_times_s(table, column_map: ColumnMap, count: int) -> np.ndarray:
-    """Seconds since the Unix epoch of each sample."""
+def sample_times_ns(table, column_map: ColumnMap, count: int) -> np.ndarray:
+    """Nanoseconds since the Unix epoch of each sample (integers: float seconds since 1970
+    resolve only a quarter of a microsecond)."""
     spec = column_map.time
     if spec.stamp is not None:
-        return spec.epoch_s + spec.stamp.to_si(table[spec.stamp.name])
-    return spec.epoch_s + np.arange(count) / spec.rate_hz
+        offsets_s = spec.stamp.to_si(table[spec.stamp.name])
+    else:
+        offsets_s = np.arange(count) / spec.rate_hz
+    if not np.isfinite(offsets_s).all():
+        raise MapError(f"time: {np.count_nonzero(~np.isfinite(offsets_s))} samples have no valid time")
+    return spec.epoch_ns + np.round(offsets_s * 1e9).astype(np.int64)
 
 
 def decode(table: dict[str, np.ndarray], column_map: ColumnMap) -> ContractSamples:
@@ -189,7 +195,7 @@ def decode(table: dict[str, np.ndarray], column_map: ColumnMap) -> ContractSampl
         angles = np.column_stack([f.to_si(table[f.name]) for f in column_map.ahrs_angles])
         orientation = orientation_enu_flu(angles, column_map.ahrs_convention)
     return ContractSamples(
-        time_s=sample_times_s(table, column_map, count),
+        time_ns=sample_times_ns(table, column_map, count),
         wind_mps=wind,
         sonic_temperature_degc=temperature,
         angular_rate_rad_s=rate,
@@ -210,7 +216,7 @@ def plausibility_warnings(samples: ContractSamples, column_map: ColumnMap) -> li
     did not remove, or a buoy turning steadily.
     """
     warnings = []
-    not_increasing = np.count_nonzero(~(np.diff(samples.time_s) > 0))
+    not_increasing = np.count_nonzero(~(np.diff(samples.time_ns) > 0))
     if not_increasing:
         warnings.append(
             f"{not_increasing} samples are not later than the sample before them: check the "
