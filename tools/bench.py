@@ -30,6 +30,8 @@ as constants and printed beside our figures:
 12. soak (long): 24 simulated hours of sea_state through the live nodes at 2x (tools/soak.py):
     RSS of each node over time, latency percentiles per simulated hour, samples in and out
     (twelve hours of wall-clock time; ``--quick``: six simulated minutes).
+13. real_record: OOI's FDCHP flux-buoy record, ours beside Edson's processing
+    (tools/bench_fdchp.py).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -37,7 +39,8 @@ go to stdout and out/bench/results.json, progress to stderr.
 
     python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
                                             smoother|antennas|smoother_table1|smoother_speed|
-                                            smoother_day|soak ...]
+                                            smoother_day|soak|
+                                            real_record ...]
 
 Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
 runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 24
@@ -135,6 +138,7 @@ SECTIONS = (
     "smoother_speed",
     "smoother_day",
     "soak",
+    "real_record",
 )
 LONG_SECTIONS = ("smoother_table1", "smoother_speed", "smoother_day", "soak")
 """Sections of long runs (simulated and processed only when named with --only)."""
@@ -485,6 +489,11 @@ def main(argv=None) -> None:
                 ["--scenario", scenario, "--outages", *(["--quick"] if quick else [])]
             )
             shutil.copy(OUT_DIR / "sensor_sets.json", OUT_DIR / f"sensor_sets_{scenario}.json")
+    if "real_record" in sections:
+        # OOI's FDCHP record beside Edson's processing: its own tool, out/bench/fdchp.json.
+        import bench_fdchp
+
+        bench_fdchp.main([])
     if "attitude" in sections:
         attitude = {c.scenario: case_results[c.key] for c in cases if c.key.startswith("attitude/")}
         other_seeds = {

@@ -30,8 +30,8 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-import numpy as np
 import edson_fdchp
+import numpy as np
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import (
@@ -154,9 +154,16 @@ def compare(record: Path, ion_functions: str | None) -> dict:
     return result
 
 
-def _row(label: str, values, fmt: str) -> str:
-    cells = "".join(f"{v:>14{fmt}}" if isinstance(v, float) else f"{v!s:>14}" for v in values)
-    return f"{label:38s}{cells}"
+def _cell(value) -> str:
+    if isinstance(value, float):
+        return f"{value:>12.4f}"
+    if isinstance(value, list):
+        return f"{' '.join(f'{v:6.2f}' for v in value):>22}"
+    return f"{value!s:>12}"
+
+
+def _row(label: str, *values) -> str:
+    return f"{label:36s}" + "".join(_cell(v) for v in values)
 
 
 def print_comparison(result: dict) -> None:
@@ -164,60 +171,57 @@ def print_comparison(result: dict) -> None:
     motion = ours["motion"]
     low, high = motion["band_hz"]
     print(
-        f"\nReal record: OOI FDCHP ({result['samples']} samples at 10 Hz kept, as Edson's), "
-        f"wave band {low:.3f}–{high:.3f} Hz"
+        f"\nReal record: OOI FDCHP, {result['samples']} samples at 10 Hz (those Edson keeps), "
+        f"wave band {low:.3f}-{high:.3f} Hz, {result['invalid_corrected_samples']} of ours invalid"
     )
     if "unavailable" in edson:
         print(f"  Edson's processing not run: {edson['unavailable']}")
         edson = {}
-    em = edson.get("motion", {})
-    print(_row("", ("uncorrected", "Edson", "ours"), "s"))
+    theirs = edson.get("motion", {})
+    print(_row("", "uncorrected", "Edson", "ours"))
     print(
         _row(
             "wave-band variance of w, share",
-            (1.0, em.get("variance_share", "-"), motion["variance_share"]),
-            ".3f",
+            1.0,
+            theirs.get("variance_share", "-"),
+            motion["variance_share"],
         )
     )
     print(
         _row(
             "coherence of w with heave accel.",
-            (motion["coherence_before"], em.get("coherence_after", "-"), motion["coherence_after"]),
-            ".3f",
+            motion["coherence_before"],
+            theirs.get("coherence_after", "-"),
+            motion["coherence_after"],
         )
     )
-    for key, label in (
-        ("mean_enu_mps", "mean E, N, U (m/s)"),
-        ("std_enu_mps", "std E, N, U (m/s)"),
-    ):
-        theirs = edson.get("wind", {}).get(key, "-")
-        print(_row(label, ("", str(theirs), str(ours["wind"][key])), "s"))
+    for key, label in (("mean_enu_mps", "mean E, N, U, m/s"), ("std_enu_mps", "std E, N, U, m/s")):
+        print(_row(label, "Edson", edson.get("wind", {}).get(key, "-")))
+        print(_row("", "ours", ours["wind"][key]))
     published = result["edson_published_fluxes"]
-    print(_row("", ("published", "Edson (run)", "ours"), "s"))
+    print(_row("", "published", "Edson (run)", "ours"))
     for key, label in (
-        ("u_w_m2_s2", "u'w' (m²/s²)"),
-        ("v_w_m2_s2", "v'w' (m²/s²)"),
-        ("w_ts_k_mps", "w'Ts' (K m/s)"),
+        ("u_w_m2_s2", "u'w', m2/s2"),
+        ("v_w_m2_s2", "v'w', m2/s2"),
+        ("w_ts_k_mps", "w'Ts', K m/s"),
     ):
-        print(
-            _row(
-                label,
-                (published[key], edson.get("fluxes", {}).get(key, "-"), ours["fluxes"][key]),
-                ".5f",
-            )
-        )
-    fluxes = ours["fluxes"]
+        mine = ours["fluxes"][key]
+        print(_row(label, published[key], edson.get("fluxes", {}).get(key, "-"), mine))
+    f = ours["fluxes"]
     print(
-        f"  ours: u* {fluxes['friction_velocity_mps']:.3f} m/s, stress {fluxes['stress_n_m2']:.3f} N/m² "
-        f"(ρ {fluxes['air_density_kg_m3']:.3f} kg/m³), tilt {fluxes['tilt_deg']:.2f}°, spikes u,v,w,Ts "
-        f"{fluxes['spikes']}, stationarity u'w' {fluxes['stationarity_u_w_percent']:.0f} %, "
-        f"w'Ts' {fluxes['stationarity_w_ts_percent']:.0f} %, invalid {fluxes['invalid_share']:.3f}"
+        f"  ours: u* {f['friction_velocity_mps']:.3f} m/s, stress {f['stress_n_m2']:.3f} N/m2 "
+        f"(air density {f['air_density_kg_m3']:.3f} kg/m3), tilt {f['tilt_deg']:.2f} deg, "
+        f"spikes u, v, w, Ts {f['spikes']}, stationarity u'w' "
+        f"{f['stationarity_u_w_percent']:.0f} %, w'Ts' {f['stationarity_w_ts_percent']:.0f} %"
     )
     if "our_flux_core_on_his_wind" in edson:
         core = edson["our_flux_core_on_his_wind"]
         print(
             f"  wind_comp.fluxes on Edson's corrected wind: u'w' {core['u_w_m2_s2']:.5f}, "
-            f"v'w' {core['v_w_m2_s2']:.5f}, w'Ts' {core['w_ts_k_mps']:.5f}"
+            f"v'w' {core['v_w_m2_s2']:.5f}, w'Ts' {core['w_ts_k_mps']:.5f}; tilt "
+            f"{core['tilt_deg']:.2f} deg, stationarity u'w' "
+            f"{core['stationarity_u_w_percent']:.0f} %, w'Ts' "
+            f"{core['stationarity_w_ts_percent']:.0f} %"
         )
 
 

@@ -74,6 +74,9 @@ def _temperature_raws(samples: ContractSamples, stamps) -> list[bytes]:
 
 def _imu_raws(samples: ContractSamples, stamps, orientations, orientation_covariance):
     writer = ImuWriter(IMU_FRAME)
+    rows = zip(
+        stamps, orientations, samples.angular_rate_rad_s, samples.specific_force_mps2, strict=True
+    )
     return [
         writer.write(
             sec,
@@ -84,14 +87,8 @@ def _imu_raws(samples: ContractSamples, stamps, orientations, orientation_covari
             NO_COVARIANCE,
             force,
             NO_COVARIANCE,
-        )  # fmt: skip
-        for (sec, nanosec), orientation, rate, force in zip(
-            stamps,
-            orientations,
-            samples.angular_rate_rad_s,
-            samples.specific_force_mps2,
-            strict=True,
         )
+        for (sec, nanosec), orientation, rate, force in rows
     ]
 
 

@@ -173,7 +173,11 @@ def bad_map(**changes):
             bad_map(columns=None),
             "ahrs.pitch: the map reads column 13, the file has only 12 columns",
         ),
-        ([row(0)], bad_map(imu__specific_force__unit="gee"), "unit 'gee' is not a unit of acceleration"),
+        (
+            [row(0)],
+            bad_map(imu__specific_force__unit="gee"),
+            "unit 'gee' is not a unit of acceleration",
+        ),
         ([row(0)], bad_map(anemometer__u__unit="m/s/s"), "anemometer.u: unit 'm/s/s'"),
         ([row(0)], bad_map(imu__axes="FLD"), "left-handed"),
         ([row(0).replace("500", "5OO", 1)], MAP, "line 1 column 2: not a number: '5OO'"),

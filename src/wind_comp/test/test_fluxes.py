@@ -101,7 +101,8 @@ def test_planar_fit_recovers_the_plane_of_the_mean_streamlines():
     normal = Rotation.from_rotvec(np.radians(3.0) * np.array([1, 1, 0]) / math.sqrt(2))
     directions = np.radians(np.arange(0.0, 360.0, 20.0))
     horizontal = np.column_stack([np.cos(directions), np.sin(directions), 0 * directions])
-    means = normal.apply(horizontal * 6.0) + [0.0, 0.0, 0.02]
+    offset = np.array([0.0, 0.0, 0.02])
+    means = normal.apply(horizontal * 6.0) + offset
     plane = fit_plane(means)
     np.testing.assert_allclose(plane.normal, normal.apply([0.0, 0.0, 1.0]), atol=1e-12)
     assert math.isclose(plane.tilt_deg, 3.0, rel_tol=1e-9)
@@ -109,7 +110,7 @@ def test_planar_fit_recovers_the_plane_of_the_mean_streamlines():
     # a window of the tilted plane then keeps its known fluxes, with only a yaw per window
     t, streamwise, temperature = turbulence(5)
     measured = normal.apply(Rotation.from_euler("Z", 70.0, degrees=True).apply(streamwise))
-    window = window_fluxes(t, measured + [0, 0, 0.02], temperature, plane=plane)
+    window = window_fluxes(t, measured + offset, temperature, plane=plane)
     assert abs(window.u_w_m2_s2 - COVARIANCE[0, 2]) < 4 * sampling_sigma(0, 2, t.size) + 0.003
     assert math.isclose(window.tilt_deg, 3.0, rel_tol=1e-9)
 

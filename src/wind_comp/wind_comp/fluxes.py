@@ -170,7 +170,7 @@ def vickers_mahrt_spikes(values, rate_hz: float, test: SpikeTest = SpikeTest()) 
     raised by ``threshold_step_sigma``, until a pass finds none."""
     values = np.asarray(values, dtype=float)
     spikes = np.zeros(values.size, dtype=bool)
-    width = max(3, int(round(test.window_s * rate_hz)) | 1)
+    width = max(3, round(test.window_s * rate_hz) | 1)
     threshold = test.threshold_sigma
     for _ in range(test.max_passes):
         valid = np.isfinite(values) & ~spikes

@@ -168,7 +168,9 @@ def sample_times_ns(table, column_map: ColumnMap, count: int) -> np.ndarray:
     else:
         offsets_s = np.arange(count) / spec.rate_hz
     if not np.isfinite(offsets_s).all():
-        raise MapError(f"time: {np.count_nonzero(~np.isfinite(offsets_s))} samples have no valid time")
+        raise MapError(
+            f"time: {np.count_nonzero(~np.isfinite(offsets_s))} samples have no valid time"
+        )
     return spec.epoch_ns + np.round(offsets_s * 1e9).astype(np.int64)
 
 
