@@ -32,10 +32,12 @@ from pathlib import Path
 
 import edson_fdchp
 import numpy as np
+from scipy import signal
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import (
     IMU_RAW_TOPIC,
+    NAV_VELOCITY_TOPIC,
     SONIC_TEMPERATURE_TOPIC,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
@@ -44,7 +46,7 @@ from buoy_common.import_records import import_records
 from buoy_nav.config import fusion_config_from_files
 from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files
-from wind_comp.fluxes import window_fluxes
+from wind_comp.fluxes import linear_detrend, rotation_into_mean_wind, window_fluxes
 from wind_comp.motion_residual import motion_residual, vertical_acceleration_mps2
 from wind_comp.report.data import stamped_vectors
 
@@ -57,6 +59,10 @@ OUT_DIR = REPO / "out/bench"
 RATE_HZ = 10.0
 KEPT = slice(300, 11700)
 """The samples Edson's fluxes use: the first 12 000 rows less 30 s at each end."""
+BANDS_HZ = ((0.0, 0.005), (0.005, 0.02), (0.02, 0.05), (0.05, 0.3), (0.3, 1.0), (1.0, 5.1))
+"""Frequency bands of the flux split: the low frequencies where a platform velocity drifts, the
+wave band, the turbulence above it."""
+SLOW_HZ = 0.05
 ENU_FROM_NWU = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -98,6 +104,45 @@ def read_processed(processed: Path) -> dict[str, np.ndarray]:
     }
 
 
+def band_split(time_s, wind, temperature) -> dict:
+    """u'w', v'w', w'Ts' and the variance of w per band of :data:`BANDS_HZ`: real parts of the
+    cross-spectra of the series rotated into their mean wind and detrended (NaN filled by
+    linear interpolation), integrated over each band."""
+    filled = np.array(wind, dtype=float)
+    for axis in range(3):
+        valid = np.isfinite(filled[:, axis])
+        filled[:, axis] = np.interp(time_s, time_s[valid], filled[valid, axis])
+    rotation, _ = rotation_into_mean_wind(filled.mean(axis=0))
+    u, v, w = (linear_detrend(time_s, c) for c in (filled @ rotation.T).T)
+    ts = linear_detrend(time_s, temperature)
+    split = {}
+    for name, a, b in (("u_w", u, w), ("v_w", v, w), ("w_ts", w, ts), ("w_w", w, w)):
+        frequency, density = signal.csd(a, b, fs=RATE_HZ, nperseg=4096, detrend=False)
+        step = frequency[1] - frequency[0]
+        split[name] = [
+            round(float(np.real(density[(frequency >= lo) & (frequency < hi)]).sum() * step), 5)
+            for lo, hi in BANDS_HZ
+        ]
+    return split
+
+
+def slow_platform_velocity_std(processed: Path, time_s) -> list[float]:
+    """Standard deviation of ``nav/velocity`` (E, N, U; m/s) below :data:`SLOW_HZ`."""
+    with BagReader(processed) as reader:
+        rows = []
+        for message in reader.messages([NAV_VELOCITY_TOPIC]):
+            decoded = reader.decode(message)
+            stamp = decoded.header.stamp
+            linear = decoded.twist.twist.linear
+            rows.append((stamp.sec + stamp.nanosec * 1e-9, linear.x, linear.y, linear.z))
+    rows = np.array(rows)
+    slow = signal.butter(2, SLOW_HZ, fs=RATE_HZ, output="sos")
+    return [
+        round(float(signal.sosfiltfilt(slow, np.interp(time_s, rows[:, 0], rows[:, i])).std()), 3)
+        for i in (1, 2, 3)
+    ]
+
+
 def wind_statistics(wind_enu: np.ndarray) -> dict:
     return {
         "mean_enu_mps": np.nanmean(wind_enu, axis=0).round(3).tolist(),
@@ -129,6 +174,8 @@ def compare(record: Path, ion_functions: str | None) -> dict:
             ),
             "wind": wind_statistics(corrected),
             "fluxes": flux_figures(t, corrected, temperature),
+            "flux_bands": band_split(t, corrected, temperature),
+            "slow_platform_velocity_std_enu_mps": slow_platform_velocity_std(processed, t),
         },
         "edson_published_fluxes": dict(
             zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), edson_fdchp.PUBLISHED_FLUXES, strict=True)
@@ -150,6 +197,7 @@ def compare(record: Path, ion_functions: str | None) -> dict:
         "wind": wind_statistics(edson_wind),
         "fluxes": dict(zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), run.fluxes, strict=True)),
         "our_flux_core_on_his_wind": flux_figures(t, edson_wind, temperature),
+        "flux_bands": band_split(t, edson_wind, temperature),
     }
     return result
 
@@ -213,6 +261,16 @@ def print_comparison(result: dict) -> None:
         f"(air density {f['air_density_kg_m3']:.3f} kg/m3), tilt {f['tilt_deg']:.2f} deg, "
         f"spikes u, v, w, Ts {f['spikes']}, stationarity u'w' "
         f"{f['stationarity_u_w_percent']:.0f} %, w'Ts' {f['stationarity_w_ts_percent']:.0f} %"
+    )
+    bands = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in BANDS_HZ)
+    print(f"  by band ({bands} Hz):")
+    for key in ("u_w", "v_w", "w_ts", "w_w"):
+        print(f"    {key:5s} ours  {ours['flux_bands'][key]}")
+        if "flux_bands" in edson:
+            print(f"    {key:5s} Edson {edson['flux_bands'][key]}")
+    print(
+        f"  our platform velocity below {SLOW_HZ} Hz, std E, N, U: "
+        f"{ours['slow_platform_velocity_std_enu_mps']} m/s"
     )
     if "our_flux_core_on_his_wind" in edson:
         core = edson["our_flux_core_on_his_wind"]
