@@ -16,23 +16,39 @@ as constants and printed beside our figures:
    against;
 7. consistency: Monte-Carlo normalised errors of the accelerometer bias over many seeds
    (tools/bias_consistency.py);
-8. current (paper 003): process_bag on ship_current and sea_state with its DVL, short runs; and,
-   opt-in (current_long), an hour of ship_current, sea_state and open_ocean
-   (tools/bench_current.py);
-9. soak, opt-in: 24 simulated hours of sea_state through the live nodes at 2x (tools/soak.py):
-   RSS of each node over time, latency percentiles per simulated hour, samples in and out. It
-   takes twelve hours of wall-clock time (``--quick``: six simulated minutes), so the default
-   set (``make bench``) leaves it out and only ``--only soak`` runs it.
+8. sensor_sets: the sensor sets beyond RTK on sea_state and open_ocean, with outages
+   (tools/bench_sensor_sets.py);
+9. smoother (paper 002 Table 1, short): process_bag --smooth on sea_state with the paper's
+   sensors and with the default ones, and on open_ocean, 300 s each; forward against smoothed
+   errors, and the wind corrected with each (tools/bench_smoother.py); smoother_table1: the
+   same on the paper's 4000 s (long; 600 s with --quick);
+10. antennas (paper 001): heading-only, baseline-vector and three-antenna models side by side on
+   a flight-like and two buoy trajectories (tools/bench_antennas.py);
+11. smoother_speed (long): wall time and peak memory of fuse_bag/process_bag with and without
+   --smooth on one hour of open_ocean; smoother_day (long): the same on 24 hours (the
+   simulation and four runs of a day of data take hours).
+12. soak (long): 24 simulated hours of sea_state through the live nodes at 2x (tools/soak.py):
+    RSS of each node over time, latency percentiles per simulated hour, samples in and out
+    (twelve hours of wall-clock time; ``--quick``: six simulated minutes).
+13. real_record: OOI's FDCHP flux-buoy record, ours beside Edson's processing
+    (tools/bench_fdchp.py).
+14. current (paper 003): process_bag on ship_current and sea_state with its DVL, short runs;
+    current_long (long): an hour of ship_current, sea_state and open_ocean
+    (tools/bench_current.py).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only SECTION ...]
+    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
+                                            smoother|antennas|smoother_table1|smoother_speed|
+                                            smoother_day|soak|real_record|current|
+                                            current_long ...]
 
-SECTION: attitude, wind, speed, live, consistency, sensor_sets, current (the default set), or
-the opt-in ones, run only when named: current_long (an hour of paper 003's ship and of each
-buoy with its DVL, tens of minutes) and soak (twelve hours).
+Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
+runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 24
+simulated hours through the live nodes; current_long, an hour of paper 003's ship and of each
+buoy with its DVL, tens of minutes), which run only when named.
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -54,6 +70,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
+import bench_antennas
+import bench_smoother
 import numpy as np
 from bench_analysis import ANALYSES, wrap_deg
 from bench_current import CURRENT_ANALYSES, current_cases, current_results, print_current
@@ -111,10 +129,27 @@ RUNS_DIR = OUT_DIR / "runs"
 SIMULATOR_PACKAGE = REPO / "src/sensor_sim/sensor_sim"
 # Modules outside sensor_sim whose code decides what simulate_bag writes.
 SIMULATION_SHARED_MODULES = ("buoy_common.parameters", "buoy_common.bag_io")
-# The default set, what `make bench` runs.
-SECTIONS = ("attitude", "wind", "speed", "live", "consistency", "sensor_sets", "current")
-# Sections too long for the default set, run only when named with --only.
-OPT_IN_SECTIONS = ("current_long", "soak")
+SECTIONS = (
+    "attitude",
+    "wind",
+    "speed",
+    "live",
+    "consistency",
+    "sensor_sets",
+    "smoother",
+    "antennas",
+    "smoother_table1",
+    "smoother_speed",
+    "smoother_day",
+    "soak",
+    "real_record",
+    "current",
+    "current_long",
+)
+LONG_SECTIONS = ("smoother_table1", "smoother_speed", "smoother_day", "soak", "current_long")
+"""Sections of long runs (simulated and processed only when named with --only)."""
+DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in LONG_SECTIONS)
+SMOOTHER_DAY_S = 86400.0
 SOAK_HOURS = {"quick": 0.1, "full": 24.0}
 SOAK_RATE_FACTOR = 2.0
 WORKERS = max(1, min(2, os.cpu_count() or 1))
@@ -406,16 +441,16 @@ def parse_arguments(argv):
     parser.add_argument(
         "--only",
         action="append",
-        choices=(*SECTIONS, *OPT_IN_SECTIONS),
+        choices=SECTIONS,
         help="run only this part (repeatable); wind = tables 2, 3 and 4; without it, every "
-        f"section but the opt-in ones ({', '.join(OPT_IN_SECTIONS)})",
+        f"section but the long ones ({', '.join(LONG_SECTIONS)})",
     )
     return parser.parse_args(argv)
 
 
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
-    sections = set(arguments.only or SECTIONS)
+    sections = set(arguments.only or DEFAULT_SECTIONS)
     quick = arguments.quick
     started = time.monotonic()
     OUT_DIR.mkdir(parents=True, exist_ok=True)
@@ -427,9 +462,18 @@ def main(argv=None) -> None:
         path = cached_bag_path(case.scenario, case.overrides, fingerprint)
         wanted[path] = (case.scenario, case.overrides)
         bag_of[case.key] = path
-    if "speed" in sections:
+    if sections & {"speed", "smoother_speed"}:
         speed_bag = cached_bag_path("open_ocean", speed_overrides(quick), fingerprint)
         wanted[speed_bag] = ("open_ocean", speed_overrides(quick))
+    smoothing_cases = bench_smoother.plan(sections, quick)
+    for case in smoothing_cases:
+        path = cached_bag_path(case.scenario, case.overrides, fingerprint)
+        wanted[path] = (case.scenario, case.overrides)
+        bag_of[case.key] = path
+    if "smoother_day" in sections:
+        day_overrides = (f"duration_s={SMOOTHER_DAY_S:g}",)
+        day_bag = cached_bag_path("open_ocean", day_overrides, fingerprint)
+        wanted[day_bag] = ("open_ocean", day_overrides)
     simulation_walls = ensure_bags(wanted)
 
     results = {
@@ -455,6 +499,11 @@ def main(argv=None) -> None:
                 ["--scenario", scenario, "--outages", *(["--quick"] if quick else [])]
             )
             shutil.copy(OUT_DIR / "sensor_sets.json", OUT_DIR / f"sensor_sets_{scenario}.json")
+    if "real_record" in sections:
+        # OOI's FDCHP record beside Edson's processing: its own tool, out/bench/fdchp.json.
+        import bench_fdchp
+
+        bench_fdchp.main([])
     if "attitude" in sections:
         attitude = {c.scenario: case_results[c.key] for c in cases if c.key.startswith("attitude/")}
         other_seeds = {
@@ -564,6 +613,20 @@ def main(argv=None) -> None:
             log_dir=OUT_DIR / "soak_logs",
         )
         soak.print_table(results["soak"])
+
+    if smoothing_cases:
+        runs = bench_smoother.run_cases(smoothing_cases, bag_of, RUNS_DIR, WORKERS)
+        results.update(bench_smoother.table1_results(sections, runs))
+    if "antennas" in sections:
+        results["antennas"] = bench_antennas.run_antennas(quick)
+        bench_antennas.print_antennas(results["antennas"])
+    for section, bags in (
+        ("smoother_speed", {"1 h": speed_bag} if "smoother_speed" in sections else {}),
+        ("smoother_day", {"24 h": day_bag} if "smoother_day" in sections else {}),
+    ):
+        if bags:
+            results[section] = bench_smoother.run_smoother_speed(bags, RUNS_DIR / section)
+            bench_smoother.print_smoother_speed(results[section])
 
     results["meta"]["wall_s"] = time.monotonic() - started
     with open(OUT_DIR / "results.json", "w") as stream:

@@ -46,4 +46,9 @@ setup(
     maintainer_email="maintainers@buoy-wind.invalid",
     description="Shared infrastructure of the buoy wind suite: contract, nodes, parameters, bags.",
     license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "import_records = buoy_common.import_records:main",
+        ],
+    },
 )

@@ -339,3 +339,17 @@ def test_bad_parameters_stop_with_a_message_naming_them(short_bags, tmp_path, te
     if "YAML" in expected[0]:
         assert str(parameters) in completed.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_cli_smooth_writes_the_forward_odometry_beside_the_smoothed_nav(short_bags, tmp_path):
+    """``--smooth`` on the first 12 s of the static bag: ``nav/*`` and
+    ``nav/forward/odometry``, one of each per solution, and no temporary records left behind."""
+    out = tmp_path / "smoothed"
+    completed = run_fuse_bag(
+        short_bags["complete"], out, "--params-file", BUOY_PARAMETERS, "--smooth"
+    )
+    assert completed.returncode == 0, completed.stderr
+    with BagReader(out) as fused:
+        forward = stamps_of(fused, "nav/forward/odometry")
+        assert forward and all(stamps_of(fused, topic) == forward for topic in NAV_TOPICS)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["smoothed"]

@@ -20,6 +20,11 @@ from typing import Any
 MIN_ANTENNA_SEPARATION_M = 0.1
 """Closest two GNSS antennas may be: a few mm of carrier-phase baseline noise on a shorter
 baseline is more than a degree of attitude."""
+MIN_TERTIARY_BASELINE_ANGLE_DEG = 10.0
+"""Smallest angle between the primary → secondary and primary → tertiary baselines for the third
+antenna to be used: below it the two baselines observe nearly the same direction and the
+rotation about it, the reason for a third antenna, is lost in their noise (at 10° a rotation
+about the first baseline moves the second by a sixth of what it would at 90°)."""
 MAX_LEVER_ARM_M = 100.0
 """Farthest a sensor may sit from ``base_link``: anything larger is a unit or sign mistake."""
 
@@ -46,6 +51,13 @@ def _position_in_body(value) -> str | None:
     if math.hypot(*value) > MAX_LEVER_ARM_M:
         return f"within {MAX_LEVER_ARM_M:g} m of base_link"
     return None
+
+
+def _optional_position_in_body(value) -> str | None:
+    if len(value) == 3 and all(math.isnan(c) for c in value):
+        return None
+    problem = _position_in_body(value)
+    return None if problem is None else f"{problem}, or three NaN (no such antenna)"
 
 
 def _mounting_angles(value) -> str | None:
@@ -97,6 +109,12 @@ SHARED_PARAMETERS: dict[str, SharedParameter] = {
             (0.75, 0.0, 1.0),
             "secondary antenna phase centre in base_link, m",
             _position_in_body,
+        ),
+        SharedParameter(
+            "gnss.tertiary_antenna",
+            (_NAN, _NAN, _NAN),
+            "third antenna phase centre in base_link, m (with gnss/baseline_tertiary); NaN: none",
+            _optional_position_in_body,
         ),
         SharedParameter(
             "anemometer.position",
@@ -210,6 +228,7 @@ def check_shared_fields(config) -> None:
         if expectation is not None:
             raise ValueError(f"parameter '{parameter}' must be {expectation}, got {value!r}")
     _check_antenna_separation(values)
+    _check_tertiary_antenna_separation(values)
     _check_origin_complete(values)
     _check_site_complete(values)
 
@@ -223,6 +242,37 @@ def _check_antenna_separation(values: dict[str, Any]) -> None:
             f"parameter 'gnss.secondary_antenna' must be at least {MIN_ANTENNA_SEPARATION_M} m "
             f"from 'gnss.primary_antenna', got {separation:.3f} m"
         )
+
+
+def tertiary_baseline_angle_deg(primary, secondary, tertiary) -> float:
+    """Angle (deg, 0 to 90) between the primary → secondary and primary → tertiary baselines.
+
+    Below :data:`MIN_TERTIARY_BASELINE_ANGLE_DEG` the layout is near-collinear: the fusion does
+    not use the third antenna (a valid configuration, reported, not an error)."""
+    first = [s - p for s, p in zip(secondary, primary, strict=True)]
+    second = [t - p for t, p in zip(tertiary, primary, strict=True)]
+    cross = (
+        first[1] * second[2] - first[2] * second[1],
+        first[2] * second[0] - first[0] * second[2],
+        first[0] * second[1] - first[1] * second[0],
+    )
+    sine = math.hypot(*cross) / (math.hypot(*first) * math.hypot(*second))
+    return math.degrees(math.asin(min(1.0, sine)))
+
+
+def _check_tertiary_antenna_separation(values: dict[str, Any]) -> None:
+    tertiary = values.get("gnss.tertiary_antenna")
+    if tertiary is None or any(math.isnan(c) for c in tertiary):
+        return
+    for name in ("gnss.primary_antenna", "gnss.secondary_antenna"):
+        if name not in values:
+            continue
+        separation = math.dist(tertiary, values[name])
+        if separation < MIN_ANTENNA_SEPARATION_M:
+            raise ValueError(
+                f"parameter 'gnss.tertiary_antenna' must be at least {MIN_ANTENNA_SEPARATION_M} "
+                f"m from '{name}', got {separation:.3f} m"
+            )
 
 
 def _check_origin_complete(values: dict[str, Any]) -> None:

@@ -10,14 +10,22 @@ message that produced it, and so does its ``tf`` (``map`` → ``base_link``, for
 Foxglove or RViz). Truth topics (``truth/*``) are copied unchanged, so the output carries
 its own answer. ``fuse_bag`` is the command line of :func:`fuse_bag`; ``process_bag`` runs
 :class:`OfflineFusion` ahead of the wind compensation.
+
+With ``smooth`` the run takes two passes (:mod:`buoy_nav.smoothed_solutions`): the forward
+filter over the sensor topics, its epochs and solutions spilled to a temporary directory beside
+the output; then the smoother's backward pass, and a second read of the bag for the topics that
+are copied, merged in log-time order with the solutions: ``nav/*`` and ``tf`` carry the smoothed
+solution, ``nav/forward/odometry`` the forward filter's.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from pathlib import Path
 from typing import NamedTuple
 
 from buoy_common.bag_io import (
@@ -35,7 +43,9 @@ from buoy_common.contract import (
     GNSS_HEADING_TOPIC,
     IMU_RAW_TOPIC,
     MAGNETOMETER_TOPIC,
+    NAV_FORWARD_ODOMETRY_TOPIC,
     NAV_MSGTYPES,
+    ODOMETRY_MSGTYPE,
     TF_MSGTYPE,
     TF_TOPIC,
     TRUTH_PREFIX,
@@ -53,9 +63,11 @@ from buoy_nav.fusion_messages import (
     feed_imu_cdr,
     feed_message,
     nav_values,
+    odometry_cdr,
     solution_cdr,
     transform_cdr,
 )
+from buoy_nav.smoothed_solutions import FixedIntervalSmoother
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
 HEADING_TOPICS = (GNSS_HEADING_TOPIC, GNSS_BASELINE_TOPIC, MAGNETOMETER_TOPIC, AHRS_TOPIC)
@@ -71,6 +83,7 @@ def relative_topic(name: str) -> str:
 
 # Relative nav topic → (name stored in the bag, message type).
 NAV_BAG_TOPICS = {topic: (bag_topic(topic), msgtype) for topic, msgtype in NAV_MSGTYPES.items()}
+FORWARD_ODOMETRY_BAG_TOPIC = bag_topic(NAV_FORWARD_ODOMETRY_TOPIC)
 TF_BAG_TOPIC = bag_topic(TF_TOPIC)
 
 
@@ -114,9 +127,22 @@ class OfflineFusion:
     """Feeds sensor messages to a :class:`FusionEngine` and writes its ``nav/*`` to a bag."""
 
     def __init__(
-        self, config: FusionConfig, writer: BagWriter | BackgroundBagWriter | NamespacedWriter
+        self,
+        config: FusionConfig,
+        writer: BagWriter | BackgroundBagWriter | NamespacedWriter | None,
+        smoother_spill_parent: str | Path | None = None,
+        smooth: bool = False,
     ):
+        """``writer`` receives the ``nav/*`` and ``tf`` messages. With ``smooth`` (the filter's
+        own solutions, ``realtime_output`` off) nothing is written: the solutions are kept by
+        :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``) and
+        written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
+        if smooth:
+            config = dataclasses.replace(config, realtime_output=False)
         self.engine = FusionEngine(config)
+        self.smoother = (
+            FixedIntervalSmoother(self.engine, smoother_spill_parent) if smooth else None
+        )
         self.stamps = StampBook()
         self.writer = writer
         self.rejections: Counter[str] = Counter()
@@ -152,16 +178,45 @@ class OfflineFusion:
 
     def _write(self, solutions: list[NavSolution], log_time_ns: int) -> list[NavValues]:
         written = []
+        smoother = self.smoother
         for solution in solutions:
             if self.first_solution_s is None:
                 self.first_solution_s = solution.t_s
+            if smoother is not None:
+                smoother.add(solution, *self.stamps.exact(solution.t_s), log_time_ns)
+                continue
             values = nav_values(solution, self.stamps)
-            for topic, raw in solution_cdr(values).items():
-                stored_topic, msgtype = NAV_BAG_TOPICS[topic]
-                self.writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
-            self.writer.write_raw(TF_BAG_TOPIC, TF_MSGTYPE, log_time_ns, transform_cdr(values))
+            self._write_nav(values, log_time_ns)
             written.append(values)
         return written
+
+    def _write_nav(self, values: NavValues, log_time_ns: int) -> None:
+        """``nav/*`` and ``tf`` of one solution."""
+        writer = self.writer
+        for topic, raw in solution_cdr(values).items():
+            stored_topic, msgtype = NAV_BAG_TOPICS[topic]
+            writer.write_raw(stored_topic, msgtype, log_time_ns, raw)
+        writer.write_raw(TF_BAG_TOPIC, TF_MSGTYPE, log_time_ns, transform_cdr(values))
+
+    def smoothed_values(self) -> Iterator[tuple[NavValues, NavValues, int]]:
+        """After :meth:`finish` of a smoothing run: (forward values, smoothed values, log time)
+        of every solution, in order."""
+        for pair in self.smoother.smoothed():
+            forward = nav_values(pair.forward)._replace(sec=pair.sec, nanosec=pair.nanosec)
+            smoothed = nav_values(pair.smoothed)._replace(sec=pair.sec, nanosec=pair.nanosec)
+            yield forward, smoothed, pair.log_time_ns
+
+    def write_smoothed_values(self, forward: NavValues, smoothed: NavValues, log_time_ns: int):
+        """``nav/forward/odometry`` of ``forward``; ``nav/*`` and ``tf`` of ``smoothed``."""
+        self.writer.write_raw(
+            FORWARD_ODOMETRY_BAG_TOPIC, ODOMETRY_MSGTYPE, log_time_ns, odometry_cdr(forward)
+        )
+        self._write_nav(smoothed, log_time_ns)
+
+    def close(self) -> None:
+        """Remove the smoother's temporary records (nothing to do without smoothing)."""
+        if self.smoother is not None:
+            self.smoother.close()
 
     def summary(self) -> list[str]:
         """Human-readable lines: alignment, measurement use and rejections."""
@@ -200,6 +255,9 @@ class OfflineFusion:
             )
         for key, count in sorted(self.rejections.items()):
             lines.append(f"rejected message {key}: {count}")
+        for source in self.engine.sources:
+            if source.enabled and source.configuration_problem is not None:
+                lines.append(f"warning: {source.kind}: {source.configuration_problem}")
         return lines
 
 
@@ -219,11 +277,17 @@ class FusedBag(NamedTuple):
 
 
 def fuse_bag(
-    in_bag, out_bag, config: FusionConfig, overwrite: bool = False, view: TopicView | None = None
+    in_bag,
+    out_bag,
+    config: FusionConfig,
+    overwrite: bool = False,
+    view: TopicView | None = None,
+    smooth: bool = False,
 ) -> FusedBag:
     """Run the fusion over ``in_bag`` into ``out_bag`` (a new bag; replaced with
     ``overwrite``), over the topics of ``view``'s namespace (the root when None), writing into
-    the same namespace. Raises BagError for a missing or unreadable bag or one without the fusion's
+    the same namespace; with ``smooth`` the fixed-interval smoother's solution (see the module
+    docstring). Raises BagError for a missing or unreadable bag or one without the fusion's
     required topics, and OutputError, before anything is read or written, if ``out_bag`` is,
     contains or lies inside ``in_bag``."""
     started = time.monotonic()
@@ -233,6 +297,28 @@ def fuse_bag(
         sensors = sensor_topics_of(reader, config)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
+        if smooth:
+            fusion = OfflineFusion(config, None, spill_parent_of(out_bag), smooth=True)
+            try:
+                # The writing process starts during the forward pass: until it is ready the
+                # writer keeps what it is given, and the second pass produces fast.
+                with BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer:
+                    writer = NamespacedWriter(bag_writer, view)
+                    forward_pass(reader, fusion, sensors, relative_of, f"fuse_bag {in_bag}")
+                    fusion.writer = writer
+                    for message, values in merged_with_smoothed(reader, fusion, truth):
+                        if message is not None:
+                            writer.write_raw(
+                                message.topic, message.msgtype, message.log_time_ns, message.raw
+                            )
+                        else:
+                            fusion.write_smoothed_values(*values)
+            finally:
+                fusion.close()
+            counts = writer.counts
+            return FusedBag(
+                fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery
+            )
         with (
             BagProgress(reader, f"fuse_bag {in_bag}") as progress,
             BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
@@ -253,3 +339,49 @@ def fuse_bag(
             progress.done()
         counts = writer.counts
     return FusedBag(fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery)
+
+
+def spill_parent_of(out_bag) -> Path:
+    """Where a smoothing run keeps its temporary records: beside the output bag, on the disk
+    the user chose for the output (a day of data needs gigabytes); the nearest existing folder
+    above it while the output's own folder (``OUT_BAG/buoy1`` of a fleet) is not made yet."""
+    parent = Path(out_bag).resolve().parent
+    while not parent.is_dir():
+        parent = parent.parent
+    return parent
+
+
+def forward_pass(
+    reader: BagReader,
+    fusion: OfflineFusion,
+    sensors: dict[str, str],
+    relative_of: dict[str, str],
+    label: str,
+) -> None:
+    """The forward filter of a smoothing run over the sensor topics of ``reader``'s bag."""
+    with BagProgress(reader, f"{label} (forward filter)") as progress:
+        for index, message in enumerate(reader.messages(list(sensors.values()))):
+            fusion.add_message(reader, relative_of[message.topic], message)
+            if index % PROGRESS_EVERY_MESSAGES == 0:
+                progress.reached(message.log_time_ns)
+        fusion.finish()
+        progress.done()
+
+
+def merged_with_smoothed(
+    reader: BagReader, fusion: OfflineFusion, topics: list[str]
+) -> Iterator[tuple[BagMessage | None, tuple | None]]:
+    """The messages of ``topics`` (stored names) of ``reader``'s bag and the smoothed
+    solutions of ``fusion`` (forward values, smoothed values, log time) in log-time order, as
+    ``(message, None)`` or ``(None, solution)``; a solution goes before the messages logged
+    after the IMU sample that produced it."""
+    solutions = fusion.smoothed_values()
+    pending = next(solutions, None)
+    for message in reader.messages(topics) if topics else ():
+        while pending is not None and pending[2] <= message.log_time_ns:
+            yield None, pending
+            pending = next(solutions, None)
+        yield message, None
+    while pending is not None:
+        yield None, pending
+        pending = next(solutions, None)

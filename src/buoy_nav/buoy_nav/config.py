@@ -38,6 +38,9 @@ class FusionConfig:
     Antennas and map origin
       primary_antenna_body_m: primary antenna phase centre in ``base_link`` (m) [(−0.75, 0, 1)].
       secondary_antenna_body_m: secondary antenna phase centre in ``base_link`` (m) [(0.75, 0, 1)].
+      tertiary_antenna_body_m: third antenna phase centre in ``base_link`` (m), whose baseline
+        ``gnss/baseline_tertiary`` fixes the rotation about the first baseline; NaN: none
+        [(NaN, NaN, NaN)].
       origin_latitude_deg, origin_longitude_deg, origin_altitude_m: origin of the ``map`` ENU
         frame (deg, deg, m ellipsoidal); all NaN = the ``base_link`` position at alignment [NaN].
 
@@ -71,6 +74,11 @@ class FusionConfig:
       gnss_baseline_sigma_horizontal_m, gnss_baseline_sigma_vertical_m: 1-σ error of the
         baseline vector per horizontal ENU axis and vertically, from the receiver's data sheet
         (m) [0.003, 0.006].
+      use_gnss_baseline_tertiary: fuse the primary → tertiary baseline vector
+        (``gnss/baseline_tertiary``) when a tertiary antenna is configured [True].
+      gnss_tertiary_length_tolerance_m: a tertiary baseline whose length differs from the
+        configured primary → tertiary distance by more than this is rejected
+        (``out_of_range``) (m) [0.05].
       coasting_timeout_s: a measurement kind not accepted for this long is reported as coasting
         (s) [1].
 
@@ -136,6 +144,7 @@ class FusionConfig:
 
     primary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.primary_antenna")
     secondary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.secondary_antenna")
+    tertiary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.tertiary_antenna")
     origin_latitude_deg: float = shared_field("origin.latitude_deg")
     origin_longitude_deg: float = shared_field("origin.longitude_deg")
     origin_altitude_m: float = shared_field("origin.altitude_m")
@@ -161,6 +170,8 @@ class FusionConfig:
     use_gnss_baseline: bool = True
     gnss_baseline_sigma_horizontal_m: float = 0.003
     gnss_baseline_sigma_vertical_m: float = 0.006
+    use_gnss_baseline_tertiary: bool = True
+    gnss_tertiary_length_tolerance_m: float = 0.05
     coasting_timeout_s: float = 1.0
 
     integrity_rejection_count: int = 3
@@ -237,6 +248,7 @@ class FusionConfig:
             "gnss_heading_variance_floor_rad2",
             "gnss_baseline_sigma_horizontal_m",
             "gnss_baseline_sigma_vertical_m",
+            "gnss_tertiary_length_tolerance_m",
             "coasting_timeout_s",
             "covariance_propagation_interval_s",
             "max_imu_gap_s",
@@ -276,6 +288,24 @@ class FusionConfig:
         """Primary → secondary antenna vector in ``base_link`` (m)."""
         secondary, primary = self.secondary_antenna_body_m, self.primary_antenna_body_m
         return tuple(s - p for s, p in zip(secondary, primary, strict=True))
+
+    @property
+    def tertiary_baseline_body_m(self) -> tuple[float, float, float] | None:
+        """Primary → tertiary antenna vector in ``base_link`` (m), None without a third
+        antenna."""
+        if any(math.isnan(c) for c in self.tertiary_antenna_body_m):
+            return None
+        tertiary, primary = self.tertiary_antenna_body_m, self.primary_antenna_body_m
+        return tuple(t - p for t, p in zip(tertiary, primary, strict=True))
+
+    @property
+    def imu_calibration(self):
+        """(gyro bias rad/s, accelerometer bias m/s², accelerometer scale) from
+        ``calibrate_imu``, None when they are the identity (nothing to apply)."""
+        calibration = (self.imu_gyro_bias_rad_s, self.imu_accel_bias_mps2, self.imu_accel_scale)
+        if calibration == ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)):
+            return None
+        return calibration
 
     @property
     def has_origin(self) -> bool:

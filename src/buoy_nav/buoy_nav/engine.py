@@ -52,6 +52,7 @@ from collections import deque
 from collections.abc import Iterable
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from buoy_common.contract import Reason
 from buoy_nav import earth
@@ -59,6 +60,7 @@ from buoy_nav.aiding import AIDING_SOURCES
 from buoy_nav.aiding.base import AIDED_QUANTITIES, AidingSource, LinearisationPoint
 from buoy_nav.alignment import AlignmentResult, AlignmentState, InMotionAligner
 from buoy_nav.config import FusionConfig
+from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_state_filter import (
     ERROR_STATES,
     ErrorStateFilter,
@@ -70,7 +72,7 @@ from buoy_nav.error_state_filter import (
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
 from buoy_nav.imu_clock import ImuClock
 from buoy_nav.imu_screening import ImuPlausibility
-from buoy_nav.integrity import IntegrityMonitor
+from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
 from buoy_nav.prediction import RealtimePrediction
@@ -122,12 +124,11 @@ class FusionEngine:
                 )
         self._aided_index = {source: AIDED_QUANTITIES.index(source.aids) for source in self.sources}
 
-        self._imu_calibration = _imu_calibration(config)
+        self.recorder = EpochRecorder()
+        """Told of every covariance epoch, correction and reset (for a smoother)."""
+        self._imu_calibration = config.imu_calibration
         self._imu_model = ImuErrorModel.from_config(config)
-        self._distrust_variances = (
-            math.radians(config.integrity_attitude_sigma_deg) ** 2,
-            config.integrity_velocity_sigma_mps**2,
-        )
+        self._distrust_variances = distrust_variances(config)
         self._integrity = IntegrityMonitor(
             config.integrity_rejection_count,
             config.integrity_realign_s,
@@ -323,6 +324,7 @@ class FusionEngine:
         self.catch_up()
         solutions = self._process(math.inf)
         self._queue.give_up_all()
+        self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
         return solutions
 
     # ------------------------------------------------------------------ status
@@ -434,10 +436,11 @@ class FusionEngine:
                 integrator.step(dt, self._gyro, gyro, self._force, force)
                 interval = self.config.covariance_propagation_interval_s
                 if integrator.accumulated_duration_s >= interval:
-                    self._propagate_covariance()
+                    self._propagate_covariance(t)
         self._time, self._gyro, self._force = t, gyro, force
 
-    def _propagate_covariance(self):
+    def _propagate_covariance(self, t: float):
+        """Propagate the covariance over the interval integrated so far, to stamp ``t``."""
         integrator = self._integrator
         if integrator.accumulated_duration_s <= 0.0:
             return
@@ -449,10 +452,13 @@ class FusionEngine:
             integrator.velocity_enu_mps,
             self._imu_model,
         )
+        posterior = self._filter.covariance
         self._filter.propagate(transition, noise)
+        self.recorder.propagated(t, transition, self._filter.covariance, posterior)
         self._solutions.covariance_changed()
 
     def _restart_alignment(self):
+        self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
         for source in self._pseudo_sources:
             source.restart()
         self._integrator = None
@@ -488,7 +494,7 @@ class FusionEngine:
                 if result is not None:
                     self._start_filter(result, t)
             return
-        self._propagate_covariance()
+        self._propagate_covariance(t)
         point = self._linearisation_point(gyro)
         accepted = []
         persistent_rejections = []
@@ -533,32 +539,34 @@ class FusionEngine:
             correction = self._filter.update(
                 np.concatenate([m.innovation for m in accepted]),
                 np.vstack([m.jacobian for m in accepted]),
-                _block_diagonal([m.covariance for m in accepted]),
+                block_diag(*(m.covariance for m in accepted)),
             )
             self._inject(point.state, correction)
         for source, measurement, model in persistent_rejections:
             self._reset_to_measurement(source, t, measurement, gyro, model)
         action = self._integrity.gate_outcomes(t, rejected_kinds)
         if action == "inflate":
-            self._inflate_covariance()
+            self._inflate_covariance(t)
         elif action == "realign":
             self._realignments += 1
             self._restart_alignment()
         self._solutions.distrust(None if self._integrity.trusted else self._distrust_variances)
 
-    def _inflate_covariance(self):
+    def _inflate_covariance(self, t: float):
         """Widen the attitude and velocity uncertainty: the filter has found itself wrong.
 
         The filter's own covariance may shrink again as the gate lets measurements through,
         even towards a wrong state, so the published covariance keeps the inflation as long as
         the trust is not back (:meth:`SolutionBuilder.distrust`)."""
         states = self.states
-        covariance = self._filter.covariance
+        covariance = self._filter.covariance.copy()
         attitude_variance, velocity_variance = self._distrust_variances
         for index in states.indices("attitude"):
             covariance[index, index] += attitude_variance
         for index in states.indices("velocity"):
             covariance[index, index] += velocity_variance
+        self.recorder.noise_added(t, self._filter.covariance, covariance)
+        self._filter.covariance = covariance
         self._solutions.covariance_changed()
 
     def _apply_pseudo_measurements(self, t: float, gyro):
@@ -578,6 +586,7 @@ class FusionEngine:
     def _inject(self, state: NavState, correction):
         self._integrator.set_nav_state(inject_error_state(state, correction))
         self._filter.reset_after_injection(correction)
+        self.recorder.corrected(correction)
         self._solutions.covariance_changed()
         self._solutions.biases_changed()
         self._prediction.carry_over(self._time, state, correction)
@@ -590,9 +599,11 @@ class FusionEngine:
         self._counters[source.kind].resets += 1
         self._consecutive_rejections[source.kind] = 0
         self._last_aided[self._aided_index[source]] = t
+        self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
         self._integrator.set_nav_state(reset.state)
         self._filter.reset_states(reset.indices, reset.variances)
         self._filter.ensure_positive_definite()
+        self.recorder.begin_segment(t, self._filter.covariance)
         self._solutions.covariance_changed()
         self._prediction.drop()
 
@@ -611,6 +622,7 @@ class FusionEngine:
         self._filter = ErrorStateFilter(
             result.covariance, self.config.gate_probability, self.states
         )
+        self.recorder.begin_segment(t, self._filter.covariance)
         self._alignment = result
         self._alignments += 1
         self._integrity.realigned(t)
@@ -641,26 +653,6 @@ class FusionEngine:
         return self._solutions.solution(
             integrator, self._filter, t, gyro, force, self._coasting_flags(self._time)
         )
-
-
-def _imu_calibration(config: FusionConfig):
-    """(gyro bias rad/s, accelerometer bias m/s², accelerometer scale) from ``calibrate_imu``,
-    None when they are the identity (nothing to apply)."""
-    calibration = (config.imu_gyro_bias_rad_s, config.imu_accel_bias_mps2, config.imu_accel_scale)
-    if calibration == ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)):
-        return None
-    return calibration
-
-
-def _block_diagonal(blocks) -> np.ndarray:
-    size = sum(block.shape[0] for block in blocks)
-    matrix = np.zeros((size, size))
-    offset = 0
-    for block in blocks:
-        n = block.shape[0]
-        matrix[offset : offset + n, offset : offset + n] = block
-        offset += n
-    return matrix
 
 
 def _float_triple(values) -> tuple[float, float, float]:

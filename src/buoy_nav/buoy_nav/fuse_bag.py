@@ -1,15 +1,18 @@
 """``fuse_bag``: the fusion of ``fusion_node`` run over a recorded bag, as fast as it goes.
 
     fuse_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file fusion.yaml] [--overwrite]
-             [--namespace NS] [--remap FROM:=TO ...]
+             [--namespace NS] [--remap FROM:=TO ...] [--smooth]
 
 Reads the sensor topics ``imu/data_raw``, ``gnss/fix``, ``gnss/heading`` (required),
 ``gnss/vel`` and ``gnss/baseline`` (used when present) in log-time order, feeds them through the
 same conversion and engine as the live node, and writes ``nav/odometry``, ``nav/imu``,
 ``nav/velocity`` and ``nav/fix`` to a new bag, each with the log time of the IMU message that
 produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries its own
-answer. Parameters come from the same YAML files the node takes (sections ``/**`` and
-``fusion_node``).
+answer. With ``--smooth`` ``nav/*`` carry the fixed-interval smoother's solution (every sample
+estimated from the whole recording, :mod:`buoy_nav.smoother`) and ``nav/forward/odometry`` the
+forward filter's; the run reads the bag twice and keeps its records in a temporary directory
+beside OUT_BAG (about 0.35 GB per hour of 100 Hz data, removed at the end). Parameters come
+from the same YAML files the node takes (sections ``/**`` and ``fusion_node``).
 
 A bag recorded under a namespace (``/buoy1/imu/data_raw``) is read in that namespace, and the
 outputs go into it (``/buoy1/nav/odometry``); ``--namespace`` picks one of several, ``--remap``
@@ -56,6 +59,12 @@ def parse_arguments(argv):
         help="ROS parameter YAML as given to fusion_node (repeatable; later files win)",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing OUT_BAG")
+    parser.add_argument(
+        "--smooth",
+        action="store_true",
+        help="write the fixed-interval smoother's solution (nav/*) and the forward filter's "
+        "(nav/forward/odometry)",
+    )
     add_namespace_arguments(parser)
     return parser.parse_args(argv)
 
@@ -72,7 +81,9 @@ def main(argv=None) -> None:
             out_bag = output_for(arguments.out_bag, view, several=len(views) > 1)
             if len(views) > 1:
                 print(f"namespace {view.label} -> {out_bag}")
-            fused = fuse_bag(arguments.in_bag, out_bag, config, arguments.overwrite, view)
+            fused = fuse_bag(
+                arguments.in_bag, out_bag, config, arguments.overwrite, view, arguments.smooth
+            )
             print_summary(fused, out_bag)
             if fused.recovery is not None:
                 warning = fused.recovery.describe(arguments.in_bag)

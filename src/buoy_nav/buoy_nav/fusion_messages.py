@@ -396,21 +396,27 @@ _FIX_CDR = cdr.NavSatFixWriter(BODY_FRAME)
 _ZEROS9 = (0.0,) * 9
 
 
+def odometry_cdr(v: NavValues) -> bytes:
+    """The ``nav/odometry`` message of one solution's :func:`nav_values` as CDR bytes (also
+    the forward filter's ``nav/forward/odometry`` of a smoothed run)."""
+    return _ODOMETRY_CDR.write(
+        v.sec,
+        v.nanosec,
+        v.position_map_m,
+        v.attitude_xyzw,
+        v.pose_covariance,
+        v.velocity_body_mps,
+        v.angular_rate_body_rad_s,
+        v.body_twist_covariance,
+    )
+
+
 def solution_cdr(v: NavValues) -> dict[str, bytes]:
     """The four ``nav/*`` messages of one solution's :func:`nav_values` as CDR bytes, by topic:
     what ROS serialises for :func:`solution_messages`."""
     sec, nanosec = v.sec, v.nanosec
     return {
-        NAV_ODOMETRY_TOPIC: _ODOMETRY_CDR.write(
-            sec,
-            nanosec,
-            v.position_map_m,
-            v.attitude_xyzw,
-            v.pose_covariance,
-            v.velocity_body_mps,
-            v.angular_rate_body_rad_s,
-            v.body_twist_covariance,
-        ),
+        NAV_ODOMETRY_TOPIC: odometry_cdr(v),
         NAV_IMU_TOPIC: _IMU_CDR.write(
             sec,
             nanosec,

@@ -194,6 +194,9 @@ class FusionNode(FlushingNode):
             if self._tf_publisher is not None
             else f"tf2_msgs is not installed: map -> base_link is not broadcast on {TF_TOPIC}"
         )
+        for source in self.engine.sources:
+            if source.enabled and source.configuration_problem is not None:
+                self.get_logger().warning(f"{source.kind}: {source.configuration_problem}")
 
     def _declare_fusion_config(self) -> FusionConfig:
         return self.declare_config(

@@ -24,6 +24,8 @@ ended) for the diagnostics and the offline summary.
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 
 @dataclass
 class IntegrityEvent:
@@ -42,6 +44,26 @@ class IntegrityEvent:
     def duration_s(self) -> float:
         """Length (s; NaN while it lasts)."""
         return self.end_s - self.start_s
+
+
+def distrust_variances(config) -> tuple[float, float]:
+    """(attitude rad², velocity m²/s²) added per axis to the covariance while the navigation
+    is not trusted, from ``integrity_attitude_sigma_deg`` and ``integrity_velocity_sigma_mps`` of
+    a :class:`~buoy_nav.config.FusionConfig`."""
+    return (
+        math.radians(config.integrity_attitude_sigma_deg) ** 2,
+        config.integrity_velocity_sigma_mps**2,
+    )
+
+
+def distrusted_at(t_s, events: list[IntegrityEvent]):
+    """Which stamps ``t_s`` (s, an array) fall in one of the periods of distrust ``events``."""
+    t_s = np.asarray(t_s, dtype=float)
+    inside = np.zeros(t_s.shape, dtype=bool)
+    for event in events:
+        end_s = math.inf if math.isnan(event.end_s) else event.end_s
+        inside |= (t_s >= event.start_s) & (t_s < end_s)
+    return inside
 
 
 class IntegrityMonitor:

@@ -12,8 +12,9 @@ receiving a kind of measurement.
 from __future__ import annotations
 
 DUAL_ANTENNA_KINDS = ("gnss_heading", "gnss_baseline")
+TERTIARY_ANTENNA_KIND = "gnss_baseline_tertiary"
 SINGLE_ANTENNA_KINDS = ("gnss_fix", "gnss_velocity")
-GNSS_KINDS = (*SINGLE_ANTENNA_KINDS, *DUAL_ANTENNA_KINDS)
+GNSS_KINDS = (*SINGLE_ANTENNA_KINDS, *DUAL_ANTENNA_KINDS, TERTIARY_ANTENNA_KIND)
 MAGNETOMETER_KIND = "magnetometer"
 AHRS_KIND = "ahrs"
 
@@ -21,7 +22,9 @@ AHRS_KIND = "ahrs"
 def sensor_set(active: set[str], coasting: set[str]) -> str:
     """The set's label (``a``…``d``, with ``+e`` during a GNSS outage) and its sensors."""
     if active & set(DUAL_ANTENNA_KINDS):
-        label = "a: dual-antenna GNSS"
+        label = "a: dual-antenna GNSS" + (
+            " + third antenna" if TERTIARY_ANTENNA_KIND in active else ""
+        )
     elif active & set(SINGLE_ANTENNA_KINDS):
         label = "b: single-antenna GNSS" + (
             " + magnetometer" if MAGNETOMETER_KIND in active else ""

@@ -401,6 +401,7 @@ def test_registry_applies_the_heading_references_last_and_the_baseline_before_th
         "gnss_fix",
         "gnss_velocity",
         "gnss_baseline",
+        "gnss_baseline_tertiary",
         "gnss_heading",
         "magnetometer",
         "ahrs",

@@ -16,6 +16,7 @@ from buoy_nav.alignment import AlignmentState
 from buoy_nav.config import ConfigError, FusionConfig
 from buoy_nav.engine import MAX_MEASUREMENT_LEAD_S, FusionEngine
 from buoy_nav.fusion_messages import feed_message
+from buoy_nav.smoothed_solutions import FixedIntervalSmoother
 from buoy_nav.state_layout import UP
 
 LATITUDE_DEG, LONGITUDE_DEG, ALTITUDE_M = 38.9, 117.7, 0.0
@@ -592,17 +593,22 @@ def test_an_imu_spike_inside_the_magnitude_limits_is_rejected_and_leaves_no_trac
     assert engine.health().trusted
 
 
-def test_a_filter_at_odds_with_its_aiding_says_so_and_realigns():
-    """A gyro offset of 0.3 rad/s for 1 s (each sample within the platform's limits) turns the
-    attitude 17° away: the gates reject the GNSS, the navigation is declared not trusted, its
-    attitude covariance grows past 1° at once, and a realignment brings the attitude back."""
-    buoy = RockingBuoy()
+def gyro_fault_events(buoy):
+    """70 s of the rocking buoy with a gyro offset of 0.3 rad/s from 30 to 31 s."""
     events = []
     for t, order, kind, args in make_events(buoy, 70.0):
         if kind == "imu" and 30.0 - 1e-9 <= t < 31.0 - 1e-9:
             args = (args[0] + np.array([0.3, 0.0, 0.0]), args[1])
         events.append((t, order, kind, args))
-    engine, solutions = run(events)
+    return events
+
+
+def test_a_filter_at_odds_with_its_aiding_says_so_and_realigns():
+    """A gyro offset of 0.3 rad/s for 1 s (each sample within the platform's limits) turns the
+    attitude 17° away: the gates reject the GNSS, the navigation is declared not trusted, its
+    attitude covariance grows past 1° at once, and a realignment brings the attitude back."""
+    buoy = RockingBuoy()
+    engine, solutions = run(gyro_fault_events(buoy))
     health = engine.health()
     assert health.counters["imu"].rejected == {}
     assert len(health.integrity_events) >= 1
@@ -620,3 +626,36 @@ def test_a_filter_at_odds_with_its_aiding_says_so_and_realigns():
     assert np.all(sigma[wrong] > math.radians(1.0))
     assert health.trusted
     assert errors[stamps > 65.0].max() < math.radians(0.1)
+
+
+def test_the_smoother_is_told_of_the_integrity_monitors_inflation_and_realignment():
+    """The gyro fault smoothed: the inflation is process noise to the smoother, so the
+    corrections that pull the state back after it do not reach back to the sound stretch
+    before the fault; the smoothed solutions of the period of distrust keep the inflated
+    covariance (the wind refuses them alike); after the realignment the smoothed attitude is
+    on its truth."""
+    buoy = RockingBuoy()
+    engine = FusionEngine(engine_config(realtime_output=False))
+    with FixedIntervalSmoother(engine) as smoother:
+        for event in gyro_fault_events(buoy):
+            for solution in deliver(engine, event):
+                smoother.add(solution, 0, 0, 0)
+        for solution in engine.flush():
+            smoother.add(solution, 0, 0, 0)
+        pairs = list(smoother.smoothed())
+    event = engine.health().integrity_events[0]
+    forward = [pair.forward for pair in pairs]
+    smoothed = [pair.smoothed for pair in pairs]
+    stamps = np.array([s.t_s for s in smoothed])
+    errors = attitude_errors_rad(buoy, smoothed)
+    assert errors[(stamps > 10.0) & (stamps < 30.0)].max() < math.radians(0.1)
+    assert errors[stamps > 65.0].max() < math.radians(0.1)
+    distrusted = (stamps >= event.start_s) & (stamps < event.end_s)
+    assert distrusted.any()
+    for forward_solution, smoothed_solution in zip(
+        np.array(forward)[distrusted], np.array(smoothed)[distrusted], strict=True
+    ):
+        forward_sigma = np.sqrt(forward_solution.attitude_covariance_rad2.diagonal())
+        smoothed_sigma = np.sqrt(smoothed_solution.attitude_covariance_rad2.diagonal())
+        assert np.all(smoothed_sigma > math.radians(engine.config.integrity_attitude_sigma_deg))
+        assert np.all(forward_sigma > math.radians(engine.config.integrity_attitude_sigma_deg))

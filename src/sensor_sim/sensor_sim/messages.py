@@ -139,6 +139,21 @@ def gnss_baseline_messages(
         yield message
 
 
+def gnss_baseline_tertiary_messages(
+    stamps_ns: list[int], sample: GnssSample
+) -> Iterator[Vector3Stamped | None]:
+    """``gnss/baseline_tertiary``: measured primary→tertiary vector in ENU (m); None during
+    outages."""
+    for i, time_ns in enumerate(stamps_ns):
+        if not sample.heading_valid[i]:
+            yield None
+            continue
+        message = Vector3Stamped()
+        _set_stamp(message.header, time_ns, MAP_FRAME)
+        _set_vector(message.vector, sample.tertiary_baseline_enu_m[i])
+        yield message
+
+
 def magnetic_field_messages(
     stamps_ns: list[int], field_body_t: np.ndarray, noise_variance_t2: float
 ) -> Iterator[MagneticField]:

@@ -50,7 +50,10 @@ __all__ = [
 IMU_STREAM_KEY = 1
 GNSS_STREAM_KEY = 2
 ANEMOMETER_STREAM_KEY = 3
-DVL_STREAM_KEY = 4
+# The third antenna's baseline noise draws from a stream of its own, so a receiver with or
+# without it gives the same measurements of the other kinds.
+GNSS_TERTIARY_STREAM_KEY = 4
+DVL_STREAM_KEY = 5
 
 _DEG = np.pi / 180.0
 # Keeps exp(-elapsed/tau) far from underflow inside one vectorised Gauss-Markov block.
@@ -228,6 +231,7 @@ class GnssSample:
     velocity_covariance_enu_m2s2: (N,3,3). baseline_enu_m: (N,3) primary -> secondary, measured.
     heading_yaw_rad: (N,) ENU azimuth atan2(bN, bE) of the measured baseline's horizontal part.
     heading_variance_rad2: (N,) sigma_h² / (horizontal baseline length)².
+    tertiary_baseline_enu_m: (N,3) primary -> tertiary, measured; None without a third antenna.
     """
 
     t_s: np.ndarray
@@ -243,11 +247,12 @@ class GnssSample:
     fix_valid: np.ndarray
     velocity_valid: np.ndarray
     heading_valid: np.ndarray
+    tertiary_baseline_enu_m: np.ndarray | None = None
 
 
 class GnssSimulator:
-    """GNSS receiver: primary antenna position and velocity, and with two antennas the
-    baseline and heading."""
+    """GNSS receiver: primary antenna position and velocity; with two antennas the baseline and
+    heading, and with a third the primary -> tertiary baseline (same noise as the first)."""
 
     def __init__(
         self,
@@ -256,8 +261,10 @@ class GnssSimulator:
         primary_antenna_body_m: ArrayLike,
         secondary_antenna_body_m: ArrayLike,
         seed: int | Sequence[int],
+        tertiary_antenna_body_m: ArrayLike | None = None,
     ):
-        """Antenna phase centres are in base_link (FLU), metres; seed is the scenario seed."""
+        """Antenna phase centres are in base_link (FLU), metres (the tertiary one None or NaN
+        for a dual-antenna receiver); seed is the scenario seed."""
         self.truth = truth
         self.config = config
         self.primary_antenna_body_m = _body_vector(primary_antenna_body_m, "primary_antenna")
@@ -266,6 +273,10 @@ class GnssSimulator:
         if not np.linalg.norm(baseline) > 0.0:
             raise ValueError("primary and secondary antennas must not coincide")
         self._rng = sensor_rng(seed, GNSS_STREAM_KEY)
+        self.tertiary_antenna_body_m = None
+        if tertiary_antenna_body_m is not None and not np.isnan(tertiary_antenna_body_m).any():
+            self.tertiary_antenna_body_m = _body_vector(tertiary_antenna_body_m, "tertiary_antenna")
+        self._tertiary_rng = sensor_rng(seed, GNSS_TERTIARY_STREAM_KEY)
 
     def measure(self, t_s: ArrayLike) -> GnssSample:
         """Measurements at times t_s (s), one block of 9 normal draws per sample."""
@@ -331,6 +342,13 @@ class GnssSimulator:
         baseline[no_heading] = np.nan
         heading = np.where(no_heading, np.nan, heading)
         heading_variance = np.where(no_heading, np.nan, heading_variance)
+        tertiary = None
+        if self.tertiary_antenna_body_m is not None:
+            tertiary = (
+                attitude.apply(self.tertiary_antenna_body_m - self.primary_antenna_body_m)
+                + self._tertiary_rng.standard_normal((t.size, 3)) * baseline_sigma
+            )
+            tertiary[no_heading] = np.nan
         return GnssSample(
             t_s=t,
             latitude_deg=latitude_deg,
@@ -349,6 +367,7 @@ class GnssSimulator:
             fix_valid=fix_valid,
             velocity_valid=velocity_valid,
             heading_valid=heading_valid,
+            tertiary_baseline_enu_m=tertiary,
         )
 
 

@@ -17,6 +17,7 @@ import numpy as np
 from buoy_common.contract import (
     AHRS_TOPIC,
     DVL_TOPIC,
+    GNSS_BASELINE_TERTIARY_TOPIC,
     GNSS_BASELINE_TOPIC,
     GNSS_FIX_TOPIC,
     GNSS_HEADING_TOPIC,
@@ -66,6 +67,7 @@ class Extrinsics:
 
     primary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.primary_antenna")
     secondary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.secondary_antenna")
+    tertiary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.tertiary_antenna")
     anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
     anemometer_rpy_deg: tuple[float, float, float] = shared_field("anemometer.rpy_deg")
     dvl_position_body_m: tuple[float, float, float] = shared_field("dvl.position")
@@ -254,7 +256,16 @@ class GnssStream(SensorStream):
             np.asarray(self.extrinsics.primary_antenna_body_m),
             np.asarray(self.extrinsics.secondary_antenna_body_m),
             [self.scenario.seed, GNSS_SEED_KEY],
+            np.asarray(self.extrinsics.tertiary_antenna_body_m),
         )
+        # The third antenna's vector comes from a receiver that solves the first baseline too.
+        if (
+            self._simulator.tertiary_antenna_body_m is not None
+            and GNSS_BASELINE_TOPIC in self.topics
+        ):
+            self.topics[GNSS_BASELINE_TERTIARY_TOPIC] = SENSOR_MSGTYPES[
+                GNSS_BASELINE_TERTIARY_TOPIC
+            ]
 
     def _messages(self, times_s, stamps_ns):
         if not self.topics:
@@ -266,6 +277,10 @@ class GnssStream(SensorStream):
             GNSS_HEADING_TOPIC: messages.gnss_heading_messages(stamps_ns, sample),
             GNSS_BASELINE_TOPIC: messages.gnss_baseline_messages(stamps_ns, sample),
         }
+        if sample.tertiary_baseline_enu_m is not None:
+            per_topic[GNSS_BASELINE_TERTIARY_TOPIC] = messages.gnss_baseline_tertiary_messages(
+                stamps_ns, sample
+            )
         per_topic = {topic: rows for topic, rows in per_topic.items() if topic in self.topics}
         rows = zip(stamps_ns, *per_topic.values(), strict=True)
         for stamp, *row in rows:

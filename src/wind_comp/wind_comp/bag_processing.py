@@ -15,6 +15,13 @@ log time of the input message after which it was produced. The products are also
 ``<OUT_BAG>_wind_products.csv`` and ``<OUT_BAG>_current_products.csv``. ``process_bag`` is its
 command line.
 
+With ``smooth`` the fusion runs first over the sensor topics alone (a forward filter whose
+epochs and solutions are spilled to a temporary directory beside the output), then the
+smoother's backward pass; a second read of the bag feeds the smoothed solutions and the
+anemometer and DVL samples, in log-time order, to the corrections, so the wind and the current
+are computed with the smoothed attitude and velocity
+(:func:`buoy_nav.bag_fusion.merged_with_smoothed`).
+
 The compensation runs in this process, on whole stretches of samples at a time; the process
 that writes the bag only writes.
 """
@@ -57,7 +64,15 @@ from buoy_common.contract import (
 )
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
-from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of, truth_topics_of
+from buoy_nav.bag_fusion import (
+    OfflineFusion,
+    forward_pass,
+    merged_with_smoothed,
+    relative_topic,
+    sensor_topics_of,
+    spill_parent_of,
+    truth_topics_of,
+)
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
 from wind_comp.compensation_messages import (
@@ -277,13 +292,15 @@ def process_bag(
     overwrite: bool = False,
     current_config: CurrentConfig | None = None,
     view: TopicView | None = None,
+    smooth: bool = False,
 ) -> ProcessSummary:
     """Fuse ``in_bag`` and correct its wind and its DVL samples into ``out_bag`` (a new bag;
     replaced with ``overwrite``) and the products CSVs beside it, over the topics of ``view``'s
-    namespace (the root when None), writing into the same namespace. ``current_config`` None:
-    the defaults of ``current_node`` (``dvl.position`` and ``dvl.rpy_deg`` included). Raises
-    BagError for a missing or unreadable bag or one without the fusion's topics and without
-    both ``anemometer/wind`` and ``dvl/velocity``, and OutputError, before anything is read or
+    namespace (the root when None), writing into the same namespace; with ``smooth`` on the
+    smoothed navigation (see the module docstring). ``current_config`` None: the defaults of
+    ``current_node`` (``dvl.position`` and ``dvl.rpy_deg`` included). Raises BagError for a
+    missing or unreadable bag or one without the fusion's topics and without both
+    ``anemometer/wind`` and ``dvl/velocity``, and OutputError, before anything is read or
     written, if an output is, contains or lies inside ``in_bag``."""
     started = time.monotonic()
     csv_paths = {
@@ -295,6 +312,7 @@ def process_bag(
     }
     check_outputs_apart_from_inputs([in_bag], [out_bag, *csv_paths.values()])
     view = view or TopicView()
+    current_config = current_config or CurrentConfig()
     with BagReader(in_bag, view) as reader:
         sensors = sensor_topics_of(reader, fusion_config)
         stored_wind = _stored_sensor(reader, WIND_RAW_TOPIC, VECTOR3_MSGTYPE)
@@ -307,13 +325,10 @@ def process_bag(
             )
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
-        with (
-            BagProgress(reader, f"process_bag {in_bag}") as progress,
-            BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
-        ):
-            writer = NamespacedWriter(bag_writer, view)
-            fusion = OfflineFusion(fusion_config, writer)
-            corrections: dict[str, OfflineCorrection] = {}
+
+        def corrections_into(writer: NamespacedWriter) -> dict[str, OfflineCorrection]:
+            """The corrections of the bag's flow sensors, by stored topic."""
+            corrections = {}
             if stored_wind is not None:
                 corrections[stored_wind] = OfflineCorrection(
                     wind_pipeline(compensator_config),
@@ -324,7 +339,6 @@ def process_bag(
                     compensator_config.anemometer_frame_id,
                 )
             if stored_dvl is not None:
-                current_config = current_config or CurrentConfig()
                 corrections[stored_dvl] = OfflineCorrection(
                     current_pipeline(current_config),
                     writer,
@@ -333,29 +347,31 @@ def process_bag(
                     _dvl_record,
                     current_config.dvl_frame_id,
                 )
-            log_time_ns = reader.start_ns
-            for index, message in enumerate(
-                reader.messages([*sensors.values(), *corrections, *truth])
+            return corrections
+
+        if smooth:
+            fusion = OfflineFusion(fusion_config, None, spill_parent_of(out_bag), smooth=True)
+            try:
+                # The writing process starts during the forward pass: until it is ready the
+                # writer keeps what it is given, and the second pass produces fast.
+                with BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer:
+                    writer = NamespacedWriter(bag_writer, view)
+                    forward_pass(reader, fusion, sensors, relative_of, f"process_bag {in_bag}")
+                    corrections = corrections_into(writer)
+                    smoothed_corrections(reader, fusion, corrections, writer, truth)
+            finally:
+                fusion.close()
+        else:
+            with (
+                BagProgress(reader, f"process_bag {in_bag}") as progress,
+                BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
             ):
-                log_time_ns = message.log_time_ns
-                topic = relative_of.get(message.topic)
-                if topic is not None:
-                    solutions = fusion.add_message(reader, topic, message)
-                    if solutions:
-                        for correction in corrections.values():
-                            correction.add_navigation(solutions)
-                else:
-                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                    correction = corrections.get(message.topic)
-                    if correction is not None:
-                        correction.add_sample(reader, message)
-                if index % PROGRESS_EVERY_MESSAGES == 0:
-                    progress.reached(log_time_ns)
-            solutions = fusion.finish()
-            for correction in corrections.values():
-                correction.add_navigation(solutions)
-                correction.finish(log_time_ns)
-            progress.done()
+                writer = NamespacedWriter(bag_writer, view)
+                fusion = OfflineFusion(fusion_config, writer)
+                corrections = corrections_into(writer)
+                forward_corrections(
+                    reader, fusion, corrections, writer, relative_of, truth, progress
+                )
         duration_s = reader.duration_s
     summaries = {}
     for stored, product_type, name in (
@@ -374,3 +390,64 @@ def process_bag(
         wall_s=time.monotonic() - started,
         recovery=reader.recovery,
     )
+
+
+def smoothed_corrections(
+    reader: BagReader,
+    fusion: OfflineFusion,
+    corrections: dict[str, OfflineCorrection],
+    writer: NamespacedWriter,
+    truth: list[str],
+) -> None:
+    """The corrections of a smoothing run, after ``fusion``'s forward pass: the smoothed
+    solutions and the sensor samples in log-time order, written to ``writer``."""
+    fusion.writer = writer
+    log_time_ns = reader.start_ns
+    for message, solution in merged_with_smoothed(reader, fusion, [*corrections, *truth]):
+        if message is None:
+            forward, smoothed, log_time_ns = solution
+            fusion.write_smoothed_values(forward, smoothed, log_time_ns)
+            for correction in corrections.values():
+                correction.add_navigation([smoothed])
+            continue
+        log_time_ns = message.log_time_ns
+        writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+        correction = corrections.get(message.topic)
+        if correction is not None:
+            correction.add_sample(reader, message)
+    for correction in corrections.values():
+        correction.finish(log_time_ns)
+
+
+def forward_corrections(
+    reader: BagReader,
+    fusion: OfflineFusion,
+    corrections: dict[str, OfflineCorrection],
+    writer: NamespacedWriter,
+    relative_of: dict[str, str],
+    truth: list[str],
+    progress: BagProgress,
+) -> None:
+    """Fusion and corrections in one pass over the bag: each solution to every correction as
+    it comes, each sensor sample to its correction."""
+    log_time_ns = reader.start_ns
+    for index, message in enumerate(reader.messages([*relative_of, *corrections, *truth])):
+        log_time_ns = message.log_time_ns
+        topic = relative_of.get(message.topic)
+        if topic is not None:
+            solutions = fusion.add_message(reader, topic, message)
+            if solutions:
+                for correction in corrections.values():
+                    correction.add_navigation(solutions)
+        else:
+            writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+            correction = corrections.get(message.topic)
+            if correction is not None:
+                correction.add_sample(reader, message)
+        if index % PROGRESS_EVERY_MESSAGES == 0:
+            progress.reached(log_time_ns)
+    solutions = fusion.finish()
+    for correction in corrections.values():
+        correction.add_navigation(solutions)
+        correction.finish(log_time_ns)
+    progress.done()

@@ -10,6 +10,7 @@ that list (see "Adding a sensor" in the README).
 from buoy_nav.aiding.ahrs_attitude import AhrsAttitude, AhrsAttitudeSource
 from buoy_nav.aiding.base import AidingSource
 from buoy_nav.aiding.gnss_baseline import GnssBaseline, GnssBaselineSource
+from buoy_nav.aiding.gnss_baseline_tertiary import GnssBaselineTertiary, GnssBaselineTertiarySource
 from buoy_nav.aiding.gnss_fix import GnssFix, GnssFixSource
 from buoy_nav.aiding.gnss_heading import GnssHeading, GnssHeadingSource
 from buoy_nav.aiding.gnss_velocity import GnssVelocity, GnssVelocitySource
@@ -21,6 +22,7 @@ AIDING_SOURCES: tuple[type[AidingSource], ...] = (
     GnssFixSource,
     GnssVelocitySource,
     GnssBaselineSource,
+    GnssBaselineTertiarySource,
     GnssHeadingSource,
     MagnetometerSource,
     AhrsAttitudeSource,
@@ -47,6 +49,8 @@ __all__ = [
     "AidingSource",
     "GnssBaseline",
     "GnssBaselineSource",
+    "GnssBaselineTertiary",
+    "GnssBaselineTertiarySource",
     "GnssFix",
     "GnssFixSource",
     "GnssHeading",

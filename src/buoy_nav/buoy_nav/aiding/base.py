@@ -169,6 +169,10 @@ class AidingSource(abc.ABC):
         """Consecutive gate rejections after which :meth:`reset` is asked for a reset."""
         self.enabled = self.enabled_by(config)
         """Whether the configuration lets the fusion use this source."""
+        self.configuration_problem: str | None = None
+        """Why this enabled source cannot contribute with the configuration it was given (its
+        measurements are then rejected, not fused), for the tools and the node to report; None
+        when it can."""
 
     @classmethod
     def enabled_by(cls, config: FusionConfig) -> bool:

@@ -1,0 +1,302 @@
+"""The real record: OOI's FDCHP flux-buoy record, our processing beside Edson's.
+
+Imports ``fdchp_test_dp.dat`` with the shipped column map (``import_records``), processes it with
+the motion-pack sensor set (``process_bag`` with ``ooi_fdchp_params.yaml``), runs Edson's
+published processing on the same record (``tools/edson_fdchp.py``; skipped, with the published
+fluxes only, when no ion-functions checkout is at hand), and prints over the samples Edson keeps
+(30 s trimmed at each end):
+
+- the wave-band variance of the corrected vertical wind as a share of the uncorrected;
+- the mean coherence of the vertical wind with the buoy's vertical acceleration in the wave
+  band, before and after correction;
+- mean and standard deviation of the corrected wind (East, North, Up; referenced to magnetic
+  north on both sides);
+- the fluxes u'w', v'w', w'Ts', u*, with the flux QC, from ``wind_comp.fluxes`` for ours, and
+  both Edson's own and ``wind_comp.fluxes`` applied to his corrected wind.
+
+    python tools/bench_fdchp.py [--record PATH] [--ion-functions DIR]
+
+Results go to out/bench/fdchp.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import os
+import sys
+from dataclasses import asdict
+from pathlib import Path
+
+import edson_fdchp
+import numpy as np
+from scipy import signal
+
+from buoy_common.bag_io import BagReader
+from buoy_common.contract import (
+    IMU_RAW_TOPIC,
+    NAV_VELOCITY_TOPIC,
+    SONIC_TEMPERATURE_TOPIC,
+    WIND_RAW_TOPIC,
+    WIND_TRUE_TOPIC,
+)
+from buoy_common.import_records import import_records
+from buoy_nav.config import fusion_config_from_files
+from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files
+from wind_comp.fluxes import linear_detrend, rotation_into_mean_wind, window_fluxes
+from wind_comp.motion_residual import motion_residual, vertical_acceleration_mps2
+from wind_comp.report.data import stamped_vectors
+
+REPO = Path(__file__).resolve().parent.parent
+RECORD = Path(os.environ.get("FDCHP_RECORD", "/work/shared/data/ooi_fdchp/fdchp_test_dp.dat"))
+CONFIG = REPO / "src/buoy_common/config/records"
+COLUMN_MAP = CONFIG / "ooi_fdchp.yaml"
+PARAMS = CONFIG / "ooi_fdchp_params.yaml"
+OUT_DIR = REPO / "out/bench"
+RATE_HZ = 10.0
+KEPT = slice(300, 11700)
+"""The samples Edson's fluxes use: the first 12 000 rows less 30 s at each end."""
+BANDS_HZ = ((0.0, 0.005), (0.005, 0.02), (0.02, 0.05), (0.05, 0.3), (0.3, 1.0), (1.0, 5.1))
+"""Frequency bands of the flux split: the low frequencies where a platform velocity drifts, the
+wave band, the turbulence above it."""
+SLOW_HZ = 0.05
+ENU_FROM_NWU = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def process_record(record: Path, work: Path) -> Path:
+    """Import and process the record into ``work``; returns the processed bag."""
+    imported, processed = work / "fdchp", work / "fdchp_processed"
+    import_records(record, COLUMN_MAP, imported, overwrite=True)
+    with contextlib.redirect_stdout(io.StringIO()):
+        process_bag(
+            imported,
+            processed,
+            fusion_config_from_files([str(PARAMS)]),
+            compensator_config_from_files([str(PARAMS)]),
+            overwrite=True,
+        )
+    return processed
+
+
+def read_processed(processed: Path) -> dict[str, np.ndarray]:
+    """Stamps, sensor-axes and corrected wind, sonic temperature and specific force."""
+    with BagReader(processed) as reader:
+        measured = stamped_vectors(reader, WIND_RAW_TOPIC)
+        corrected = stamped_vectors(reader, WIND_TRUE_TOPIC)
+    imported = processed.with_name("fdchp")
+    with BagReader(imported) as reader:
+        temperature = [
+            reader.decode(m).temperature for m in reader.messages([SONIC_TEMPERATURE_TOPIC])
+        ]
+        force = [
+            (lambda a: (a.x, a.y, a.z))(reader.decode(m).linear_acceleration)
+            for m in reader.messages([IMU_RAW_TOPIC])
+        ]
+    return {
+        "time_s": measured.stamps_ns * 1e-9,
+        "measured": measured.vectors,
+        "corrected": corrected.vectors,
+        "temperature_degc": np.array(temperature),
+        "specific_force": np.array(force),
+    }
+
+
+def band_split(time_s, wind, temperature) -> dict:
+    """u'w', v'w', w'Ts' and the variance of w per band of :data:`BANDS_HZ`: real parts of the
+    cross-spectra of the series rotated into their mean wind and detrended (NaN filled by
+    linear interpolation), integrated over each band."""
+    filled = np.array(wind, dtype=float)
+    for axis in range(3):
+        valid = np.isfinite(filled[:, axis])
+        filled[:, axis] = np.interp(time_s, time_s[valid], filled[valid, axis])
+    rotation, _ = rotation_into_mean_wind(filled.mean(axis=0))
+    u, v, w = (linear_detrend(time_s, c) for c in (filled @ rotation.T).T)
+    ts = linear_detrend(time_s, temperature)
+    split = {}
+    for name, a, b in (("u_w", u, w), ("v_w", v, w), ("w_ts", w, ts), ("w_w", w, w)):
+        frequency, density = signal.csd(a, b, fs=RATE_HZ, nperseg=4096, detrend=False)
+        step = frequency[1] - frequency[0]
+        split[name] = [
+            round(float(np.real(density[(frequency >= lo) & (frequency < hi)]).sum() * step), 5)
+            for lo, hi in BANDS_HZ
+        ]
+    return split
+
+
+def slow_platform_velocity_std(processed: Path, time_s) -> list[float]:
+    """Standard deviation of ``nav/velocity`` (E, N, U; m/s) below :data:`SLOW_HZ`."""
+    with BagReader(processed) as reader:
+        rows = []
+        for message in reader.messages([NAV_VELOCITY_TOPIC]):
+            decoded = reader.decode(message)
+            stamp = decoded.header.stamp
+            linear = decoded.twist.twist.linear
+            rows.append((stamp.sec + stamp.nanosec * 1e-9, linear.x, linear.y, linear.z))
+    rows = np.array(rows)
+    slow = signal.butter(2, SLOW_HZ, fs=RATE_HZ, output="sos")
+    return [
+        round(float(signal.sosfiltfilt(slow, np.interp(time_s, rows[:, 0], rows[:, i])).std()), 3)
+        for i in (1, 2, 3)
+    ]
+
+
+def wind_statistics(wind_enu: np.ndarray) -> dict:
+    return {
+        "mean_enu_mps": np.nanmean(wind_enu, axis=0).round(3).tolist(),
+        "std_enu_mps": np.nanstd(wind_enu, axis=0).round(3).tolist(),
+        "mean_horizontal_speed_mps": round(float(np.nanmean(np.hypot(*wind_enu[:, :2].T))), 3),
+    }
+
+
+def flux_figures(time_s, wind, temperature) -> dict:
+    window = window_fluxes(time_s, wind, temperature)
+    return {k: v for k, v in asdict(window).items() if k not in ("window_start_s", "window_end_s")}
+
+
+def compare(record: Path, ion_functions: str | None) -> dict:
+    processed = process_record(record, OUT_DIR / "fdchp")
+    ours = read_processed(processed)
+    t = ours["time_s"][KEPT]
+    uncorrected_w = ours["measured"][KEPT, 2]
+    acceleration = vertical_acceleration_mps2(ours["specific_force"])[KEPT]
+    temperature = ours["temperature_degc"][KEPT]
+    corrected = ours["corrected"][KEPT]
+    result = {
+        "record": str(record),
+        "samples": int(t.size),
+        "invalid_corrected_samples": int(np.count_nonzero(~np.isfinite(corrected[:, 2]))),
+        "ours": {
+            "motion": asdict(
+                motion_residual(uncorrected_w, corrected[:, 2], acceleration, RATE_HZ)
+            ),
+            "wind": wind_statistics(corrected),
+            "fluxes": flux_figures(t, corrected, temperature),
+            "flux_bands": band_split(t, corrected, temperature),
+            "slow_platform_velocity_std_enu_mps": slow_platform_velocity_std(processed, t),
+        },
+        "edson_published_fluxes": dict(
+            zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), edson_fdchp.PUBLISHED_FLUXES, strict=True)
+        ),
+    }
+    try:
+        module = edson_fdchp.load_reference(edson_fdchp.ion_functions_dir(ion_functions))
+    except edson_fdchp.ReferenceUnavailableError as error:
+        result["edson"] = {"unavailable": str(error)}
+        return result
+    run = edson_fdchp.run_reference(edson_fdchp.load_record(record), module)
+    edson_fdchp.check_published_fluxes(run)
+    edson_wind = run.wind_nwu_mps @ ENU_FROM_NWU.T
+    band = tuple(result["ours"]["motion"]["band_hz"])
+    result["edson"] = {
+        "motion": asdict(
+            motion_residual(uncorrected_w, edson_wind[:, 2], acceleration, RATE_HZ, band)
+        ),
+        "wind": wind_statistics(edson_wind),
+        "fluxes": dict(zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), run.fluxes, strict=True)),
+        "our_flux_core_on_his_wind": flux_figures(t, edson_wind, temperature),
+        "flux_bands": band_split(t, edson_wind, temperature),
+    }
+    return result
+
+
+def _cell(value) -> str:
+    if isinstance(value, float):
+        return f"{value:>12.4f}"
+    if isinstance(value, list):
+        return f"{' '.join(f'{v:6.2f}' for v in value):>22}"
+    return f"{value!s:>12}"
+
+
+def _row(label: str, *values) -> str:
+    return f"{label:36s}" + "".join(_cell(v) for v in values)
+
+
+def print_comparison(result: dict) -> None:
+    ours, edson = result["ours"], result.get("edson", {})
+    motion = ours["motion"]
+    low, high = motion["band_hz"]
+    print(
+        f"\nReal record: OOI FDCHP, {result['samples']} samples at 10 Hz (those Edson keeps), "
+        f"wave band {low:.3f}-{high:.3f} Hz, {result['invalid_corrected_samples']} of ours invalid"
+    )
+    if "unavailable" in edson:
+        print(f"  Edson's processing not run: {edson['unavailable']}")
+        edson = {}
+    theirs = edson.get("motion", {})
+    print(_row("", "uncorrected", "Edson", "ours"))
+    print(
+        _row(
+            "wave-band variance of w, share",
+            1.0,
+            theirs.get("variance_share", "-"),
+            motion["variance_share"],
+        )
+    )
+    print(
+        _row(
+            "coherence of w with heave accel.",
+            motion["coherence_before"],
+            theirs.get("coherence_after", "-"),
+            motion["coherence_after"],
+        )
+    )
+    for key, label in (("mean_enu_mps", "mean E, N, U, m/s"), ("std_enu_mps", "std E, N, U, m/s")):
+        print(_row(label, "Edson", edson.get("wind", {}).get(key, "-")))
+        print(_row("", "ours", ours["wind"][key]))
+    published = result["edson_published_fluxes"]
+    print(_row("", "published", "Edson (run)", "ours"))
+    for key, label in (
+        ("u_w_m2_s2", "u'w', m2/s2"),
+        ("v_w_m2_s2", "v'w', m2/s2"),
+        ("w_ts_k_mps", "w'Ts', K m/s"),
+    ):
+        mine = ours["fluxes"][key]
+        print(_row(label, published[key], edson.get("fluxes", {}).get(key, "-"), mine))
+    f = ours["fluxes"]
+    print(
+        f"  ours: u* {f['friction_velocity_mps']:.3f} m/s, stress {f['stress_n_m2']:.3f} N/m2 "
+        f"(air density {f['air_density_kg_m3']:.3f} kg/m3), tilt {f['tilt_deg']:.2f} deg, "
+        f"spikes u, v, w, Ts {f['spikes']}, stationarity u'w' "
+        f"{f['stationarity_u_w_percent']:.0f} %, w'Ts' {f['stationarity_w_ts_percent']:.0f} %"
+    )
+    bands = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in BANDS_HZ)
+    print(f"  by band ({bands} Hz):")
+    for key in ("u_w", "v_w", "w_ts", "w_w"):
+        print(f"    {key:5s} ours  {ours['flux_bands'][key]}")
+        if "flux_bands" in edson:
+            print(f"    {key:5s} Edson {edson['flux_bands'][key]}")
+    print(
+        f"  our platform velocity below {SLOW_HZ} Hz, std E, N, U: "
+        f"{ours['slow_platform_velocity_std_enu_mps']} m/s"
+    )
+    if "our_flux_core_on_his_wind" in edson:
+        core = edson["our_flux_core_on_his_wind"]
+        print(
+            f"  wind_comp.fluxes on Edson's corrected wind: u'w' {core['u_w_m2_s2']:.5f}, "
+            f"v'w' {core['v_w_m2_s2']:.5f}, w'Ts' {core['w_ts_k_mps']:.5f}; tilt "
+            f"{core['tilt_deg']:.2f} deg, stationarity u'w' "
+            f"{core['stationarity_u_w_percent']:.0f} %, w'Ts' "
+            f"{core['stationarity_w_ts_percent']:.0f} %"
+        )
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(prog="bench_fdchp", description=__doc__.split("\n")[0])
+    parser.add_argument("--record", default=str(RECORD), help="fdchp_test_dp.dat")
+    parser.add_argument("--ion-functions", help="checkout of oceanobservatories/ion-functions")
+    arguments = parser.parse_args(argv)
+    record = Path(arguments.record)
+    if not record.is_file():
+        print(f"bench_fdchp: no record at {record} (set FDCHP_RECORD)", file=sys.stderr)
+        sys.exit(2)
+    OUT_DIR.mkdir(parents=True, exist_ok=True)
+    result = compare(record, arguments.ion_functions)
+    print_comparison(result)
+    (OUT_DIR / "fdchp.json").write_text(json.dumps(result, indent=2, default=float))
+
+
+if __name__ == "__main__":
+    main()
