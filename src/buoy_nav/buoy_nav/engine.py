@@ -40,8 +40,9 @@ is rejected and counted by input and reason; it never reaches the state. Measure
 ``beyond_imu_data``, oldest first, so an outage cannot fill the memory. An IMU sample whose
 change from the last accepted one no platform can make is rejected as ``implausible_change``
 (:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
-(:mod:`buoy_nav.imu_clock`); :mod:`buoy_nav.imu_input` holds that screening of the IMU samples. When the gates keep rejecting the aiding, the filter no longer
-agrees with it: the integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
+(:mod:`buoy_nav.imu_clock`); :mod:`buoy_nav.imu_input` holds that screening of the IMU
+samples. When the gates keep rejecting the aiding, the filter no longer agrees with it: the
+integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
 published inflated while the trust is not back, and the alignment started again if that does
 not bring the aiding back into the gates.
 """
