@@ -243,8 +243,15 @@ def _process(job: BagJob, started: float) -> BagOutcome:
         for view in views:
             output = output_for(out_bag, view, several=len(views) > 1)
             output.parent.mkdir(parents=True, exist_ok=True)
+            # Every core runs a bag of its own: the bag is written in this process.
             summary = process_bag(
-                in_bag, output, job.fusion_config, job.compensator_config, True, view
+                in_bag,
+                output,
+                job.fusion_config,
+                job.compensator_config,
+                overwrite=True,
+                view=view,
+                write_in_background=False,
             )
             outcome.outputs += [str(output), str(summary.csv_path)]
             outcome.duration_s += summary.duration_s
@@ -412,6 +419,8 @@ def plan_archive(
             to_do.append(job)
         else:
             skipped.append(done)
+    # Largest first: the workers then finish close together, not with one long bag at the end.
+    to_do.sort(key=lambda job: -sum(size for size, _ in bag_identity(job.in_bag).values()))
     return ArchivePlan(jobs, to_do, skipped)
 
 

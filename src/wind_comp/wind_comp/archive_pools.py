@@ -5,9 +5,9 @@ Both pools take :class:`~wind_comp.archive.BagJob` s and give back
 under a bag (killed, out of memory) into a ``failed`` outcome of that bag.
 
 - :class:`LocalPool`: ``concurrent.futures.ProcessPoolExecutor``, one bag per process at a
-  time, processes started by ``spawn`` (the tools' bag writer starts a process of its own, and a
-  fork of a process with threads is unsafe). Ctrl-C reaches the workers as it reaches the tool
-  (one process group): a bag in progress is abandoned, its partial outputs deleted.
+  time, processes started by ``spawn`` (a fork of a process with threads is unsafe). Ctrl-C
+  reaches the workers as it reaches the tool (one process group): a bag in progress is
+  abandoned, its partial outputs deleted.
 - :class:`DaskPool`: ``distributed.Client(address)``, one task per bag. Dask cannot stop a task
   that is running: on Ctrl-C the bags not started are cancelled and those running finish on
   their workers, complete and marked, for the next run to skip.
@@ -25,11 +25,6 @@ from wind_comp.archive import ArchiveError, BagJob, BagOutcome, prepare_pool_wor
 
 # How long to wait for a Dask scheduler to answer before giving up (s).
 SCHEDULER_TIMEOUT_S = 30.0
-DAEMONIC_WORKERS_HELP = (
-    "the Dask workers run as daemonic processes, which may not start the process that writes "
-    "each output bag; start them with DASK_DISTRIBUTED__WORKER__DAEMON=False (or dask worker "
-    "--no-nanny)"
-)
 
 
 def default_workers() -> int:
@@ -102,10 +97,6 @@ class DaskPool:
         if not workers:
             self._client.close()
             raise ArchiveError(f"Dask scheduler {address} has no workers")
-        daemonic = self._client.run(_is_daemonic)
-        if any(daemonic.values()):
-            self._client.close()
-            raise ArchiveError(f"Dask scheduler {address}: {DAEMONIC_WORKERS_HELP}")
         threads = sum(worker["nthreads"] for worker in workers.values())
         self.description = f"Dask scheduler {address}: {len(workers)} workers, {threads} threads"
         self._running: dict = {}
@@ -131,7 +122,3 @@ class DaskPool:
         (they are reported as not done: the next run finds them marked and skips them)."""
         self._client.cancel(list(self._running))
         return []
-
-
-def _is_daemonic() -> bool:
-    return multiprocessing.current_process().daemon
