@@ -99,6 +99,11 @@ def print_report(report: ArchiveReport) -> None:
             print(f"process_archive: warning: {outcome.relative}: {warning}", file=sys.stderr)
     for outcome in report.with_status("failed"):
         print(f"process_archive: failed: {outcome.relative}: {outcome.reason}", file=sys.stderr)
+    if report.interrupted:
+        print(
+            "process_archive: interrupted; the bags not finished are processed by the next run",
+            file=sys.stderr,
+        )
 
 
 _STATUSES = ("done", "skipped", "failed", "interrupted")
