@@ -1,12 +1,14 @@
 """``process_archive`` on a Dask ``LocalCluster`` of two worker processes, over an archive of
-committed bags (linked in), a corrupt bag and a bag without IMU: every good bag's outputs are
-``process_bag``'s, the combined table holds every product of every bag, the failures are listed,
-a second run skips what is done, and a changed parameter re-does it."""
+committed bags (linked in), a bag of two buoys under namespaces, a corrupt bag and a bag
+without IMU: every good bag's outputs are ``process_bag``'s, the combined table holds every
+product of every bag, the failures are listed, a second run skips what is done, and a changed
+parameter re-does it."""
 
 from __future__ import annotations
 
 import contextlib
 import csv
+import heapq
 import io
 import math
 import shutil
@@ -17,7 +19,7 @@ import pyarrow.parquet as pq
 import pytest
 from bag_faults import faulty_bag
 
-from buoy_common.bag_io import BagReader
+from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.config import fusion_config_from_files
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS
 from wind_comp.archive import BAG_COLUMN, COMBINED_TABLE, MARKER_SUFFIX, STATE_DIRECTORY
@@ -29,6 +31,10 @@ pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("process_archive")]
 
 # The two shortest committed bags, at two depths of the tree.
 GOOD_BAGS = {"buoy_a/2026-01/static": "static", "buoy_b/wind_tunnel_10": "wind_tunnel_10"}
+# A bag of two buoys under namespaces: the first FLEET_KEPT_S of two committed bags.
+FLEET_BAG = "fleet/2026-02"
+FLEET = {"/buoy1": "static", "/buoy2": "wind_tunnel_10"}
+FLEET_KEPT_S = 20.0
 CORRUPT_BAG = "buoy_b/corrupt"
 NO_IMU_BAG = "buoy_c/no_imu"
 # CSV values carry 6 decimals.
@@ -54,7 +60,27 @@ def build_archive(root: Path) -> Path:
         faults=[],
         topics=["/gnss/fix", "/gnss/heading", "/anemometer/wind"],
     )
+    write_fleet(archive / FLEET_BAG)
     return archive
+
+
+def write_fleet(out: Path) -> None:
+    """Each bag of FLEET under its namespace, cut to FLEET_KEPT_S, merged in log-time order."""
+
+    def tagged(namespace: str, name: str):
+        with BagReader(BAGS_DIR / name) as reader:
+            end_ns = reader.start_ns + int(FLEET_KEPT_S * 1e9)
+            for message in reader.messages():
+                if message.log_time_ns <= end_ns:
+                    yield message.log_time_ns, namespace + message.topic, message
+
+    out.parent.mkdir(parents=True)
+    with BagWriter(out) as writer:
+        for log_time_ns, topic, message in heapq.merge(
+            *(tagged(namespace, name) for namespace, name in FLEET.items()),
+            key=lambda item: item[0],
+        ):
+            writer.write_raw(topic, message.msgtype, log_time_ns, message.raw)
 
 
 def parameter_file(directory: Path, anemometer_height_m: float, comment: str = "") -> Path:
@@ -157,7 +183,7 @@ def test_failures_are_listed_with_their_reasons_and_the_exit_code_says_so(archiv
     assert set(failed) == {CORRUPT_BAG, NO_IMU_BAG}
     assert "imu/data_raw" in failed[NO_IMU_BAG]
     assert "static.mcap" in failed[CORRUPT_BAG]
-    assert first.done() == set(GOOD_BAGS)
+    assert first.done() == {*GOOD_BAGS, FLEET_BAG}
 
 
 def test_each_bag_gets_what_process_bag_writes_for_it(archive_runs, tmp_path):
@@ -175,9 +201,22 @@ def test_each_bag_gets_what_process_bag_writes_for_it(archive_runs, tmp_path):
         assert archived_csv == products_csv_path(reference).read_text()
 
 
+def test_a_fleet_bag_gets_one_output_per_buoy_as_process_bag_writes_them(archive_runs):
+    fleet_out = archive_runs["out"] / FLEET_BAG
+    rows = [row for row in archive_runs["table_after_first"] if row[BAG_COLUMN] == FLEET_BAG]
+    for namespace in FLEET:
+        buoy = namespace.strip("/")
+        with BagReader(fleet_out / buoy) as reader:
+            assert f"{namespace}/wind/true" in reader.topics
+        products = list(csv.DictReader(products_csv_path(fleet_out / buoy).open()))
+        buoy_rows = [row for row in rows if row["namespace"] == namespace]
+        assert len(buoy_rows) == len(products) > 0
+    assert {row["namespace"] for row in rows} == set(FLEET)
+
+
 def test_combined_table_holds_every_product_of_every_bag(archive_runs):
     rows = archive_runs["table_after_first"]
-    assert {row[BAG_COLUMN] for row in rows} == set(GOOD_BAGS)
+    assert {row[BAG_COLUMN] for row in rows} == {*GOOD_BAGS, FLEET_BAG}
     for relative in GOOD_BAGS:
         bag_rows = [row for row in rows if row[BAG_COLUMN] == relative]
         expected = list(
@@ -198,14 +237,14 @@ def test_a_second_run_skips_the_bags_done_and_retries_the_failed(archive_runs):
     for run in (archive_runs["again"], archive_runs["commented"]):
         assert run.code == EXIT_FAILED_BAGS
         assert run.done() == set()
-        assert "2 done before" in run.stdout
+        assert "3 done before" in run.stdout
         assert f"failed: {CORRUPT_BAG}" in run.stderr
     assert archive_runs["markers_unchanged"]
 
 
 def test_a_changed_parameter_redoes_every_bag(archive_runs):
     higher = archive_runs["higher"]
-    assert higher.done() == set(GOOD_BAGS)
+    assert higher.done() == {*GOOD_BAGS, FLEET_BAG}
     before = archive_runs["table_after_first"]
     after = archive_runs["higher_table"]
     assert len(after) == len(before)
