@@ -42,6 +42,7 @@ def test_bags_are_found_at_any_depth_through_links_and_not_searched_inside(tmp_p
     elsewhere = make_bag(tmp_path / "elsewhere" / "linked")
     (archive / "buoy3").mkdir()
     (archive / "buoy3" / "linked").symlink_to(elsewhere)
+    (archive / "buoy3" / "linked_again").symlink_to(elsewhere)
     (archive / "buoy3" / "loop").symlink_to(archive)
 
     assert find_bags(archive) == [
@@ -49,6 +50,7 @@ def test_bags_are_found_at_any_depth_through_links_and_not_searched_inside(tmp_p
         "buoy1/2026-01-02",
         "buoy2/unfinished",
         "buoy3/linked",
+        "buoy3/linked_again",
     ]
 
 

@@ -109,25 +109,25 @@ def is_bag(directory: Path) -> bool:
 
 
 def find_bags(archive: Path) -> list[str]:
-    """Relative paths (POSIX) of the bags under ``archive``, sorted; symbolic links to
-    directories are followed (each real directory once). A bag's own directory is not searched
-    further."""
-    found = []
-    seen = set()
-    for root, directories, _ in os.walk(archive, followlinks=True):
-        here = Path(root)
-        real = here.resolve()
-        if real in seen:
-            directories[:] = []
-            continue
-        seen.add(real)
-        if here != archive and is_bag(here):
-            found.append(here.relative_to(archive).as_posix())
-            directories[:] = []
-        else:
-            directories.sort()
+    """Relative paths (POSIX) of the bags under ``archive``, sorted. Symbolic links to
+    directories are followed (a bag linked in twice is two bags of the archive), except a link
+    back to a directory above it; a bag's own directory is not searched further."""
     if is_bag(archive):
         raise ArchiveError(f"{archive} is a bag, not a directory of bags; use process_bag")
+    found: list[str] = []
+
+    def search(directory: Path, above: frozenset[Path]) -> None:
+        real = directory.resolve()
+        if real in above:
+            return
+        if directory != archive and is_bag(directory):
+            found.append(directory.relative_to(archive).as_posix())
+            return
+        for child in sorted(directory.iterdir()):
+            if child.is_dir():
+                search(child, above | {real})
+
+    search(archive, frozenset())
     return sorted(found)
 
 
