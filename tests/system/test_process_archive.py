@@ -17,7 +17,6 @@ from pathlib import Path
 import distributed
 import pyarrow.parquet as pq
 import pytest
-from bag_faults import faulty_bag
 
 from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.config import fusion_config_from_files
@@ -53,13 +52,12 @@ def build_archive(root: Path) -> Path:
     (corrupt / "static.mcap").write_bytes((BAGS_DIR / "static" / "static.mcap").read_bytes()[:4000])
     no_imu = archive / NO_IMU_BAG
     no_imu.parent.mkdir(parents=True)
-    faulty_bag(
-        BAGS_DIR / "wind_tunnel_10",
-        no_imu,
-        kept_s=5.0,
-        faults=[],
-        topics=["/gnss/fix", "/gnss/heading", "/anemometer/wind"],
-    )
+    # The first 5 s of a committed bag without its IMU.
+    with BagReader(BAGS_DIR / "wind_tunnel_10") as reader, BagWriter(no_imu) as writer:
+        end_ns = reader.start_ns + 5_000_000_000
+        for message in reader.messages(["/gnss/fix", "/gnss/heading", "/anemometer/wind"]):
+            if message.log_time_ns <= end_ns:
+                writer.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
     write_fleet(archive / FLEET_BAG)
     return archive
 
