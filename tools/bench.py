@@ -32,6 +32,8 @@ as constants and printed beside our figures:
     (twelve hours of wall-clock time; ``--quick``: six simulated minutes).
 13. real_record: OOI's FDCHP flux-buoy record, ours beside Edson's processing
     (tools/bench_fdchp.py).
+14. archive: process_archive over a tree of the committed bags, one local worker against two
+    (tools/bench_archive.py).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -40,7 +42,7 @@ go to stdout and out/bench/results.json, progress to stderr.
     python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
                                             smoother|antennas|smoother_table1|smoother_speed|
                                             smoother_day|soak|
-                                            real_record ...]
+                                            real_record|archive ...]
 
 Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
 runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 24
@@ -139,6 +141,7 @@ SECTIONS = (
     "smoother_day",
     "soak",
     "real_record",
+    "archive",
 )
 LONG_SECTIONS = ("smoother_table1", "smoother_speed", "smoother_day", "soak")
 """Sections of long runs (simulated and processed only when named with --only)."""
@@ -612,6 +615,11 @@ def main(argv=None) -> None:
         if bags:
             results[section] = bench_smoother.run_smoother_speed(bags, RUNS_DIR / section)
             bench_smoother.print_smoother_speed(results[section])
+    if "archive" in sections:
+        import bench_archive
+
+        results["archive"] = bench_archive.run_archive_throughput(OUT_DIR / "archive")
+        bench_archive.print_archive(results["archive"])
 
     results["meta"]["wall_s"] = time.monotonic() - started
     with open(OUT_DIR / "results.json", "w") as stream:

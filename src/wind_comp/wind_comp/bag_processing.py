@@ -34,7 +34,14 @@ import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, Recovery
+from buoy_common.bag_io import (
+    BackgroundBagWriter,
+    BagMessage,
+    BagProgress,
+    BagReader,
+    BagWriter,
+    Recovery,
+)
 from buoy_common.contract import (
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
@@ -209,13 +216,18 @@ def process_bag(
     overwrite: bool = False,
     view: TopicView | None = None,
     smooth: bool = False,
+    write_in_background: bool = True,
 ) -> ProcessSummary:
     """Fuse and correct ``in_bag`` into ``out_bag`` (a new bag; replaced with ``overwrite``)
     and the products CSV beside it, over the topics of ``view``'s namespace (the root when
     None), writing into the same namespace; with ``smooth`` on the smoothed navigation (see the
     module docstring). Raises BagError for a missing or unreadable bag or one
     without the required topics, and OutputError, before anything is read or written, if an
-    output is, contains or lies inside ``in_bag``."""
+    output is, contains or lies inside ``in_bag``.
+
+    The bag is written by a process of its own, on a second core; with ``write_in_background``
+    False, the same bag is written in this process, for a caller that keeps every core busy
+    with bags of its own (``process_archive``)."""
     started = time.monotonic()
     csv_path = products_csv_path(out_bag)
     check_outputs_apart_from_inputs([in_bag], [out_bag, csv_path])
@@ -225,12 +237,13 @@ def process_bag(
         stored_wind = next(n for n in reader.topics if relative_topic(n) == WIND_RAW_TOPIC)
         truth = truth_topics_of(reader)
         relative_of = {stored: relative for relative, stored in sensors.items()}
+        writer_class = BackgroundBagWriter if write_in_background else BagWriter
         if smooth:
             fusion = OfflineFusion(fusion_config, None, spill_parent_of(out_bag), smooth=True)
             try:
                 # The writing process starts during the forward pass: until it is ready the
                 # writer keeps what it is given, and the second pass produces fast.
-                with BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer:
+                with writer_class(out_bag, overwrite=overwrite) as bag_writer:
                     writer = NamespacedWriter(bag_writer, view)
                     forward_pass(reader, fusion, sensors, relative_of, f"process_bag {in_bag}")
                     compensation = smoothed_compensation(
@@ -251,6 +264,7 @@ def process_bag(
                 relative_of,
                 stored_wind,
                 truth,
+                writer_class,
             )
         duration_s = reader.duration_s
     write_products_csv(compensation.products, csv_path)
@@ -307,12 +321,13 @@ def forward_compensation(
     relative_of: dict[str, str],
     stored_wind: str,
     truth: list[str],
+    writer_class: type[BackgroundBagWriter] | type[BagWriter] = BackgroundBagWriter,
 ) -> tuple[OfflineFusion, OfflineCompensation, NamespacedWriter]:
     """Fusion and compensation in one pass over the bag, the output bag written into
-    ``view``'s namespace."""
+    ``view``'s namespace by ``writer_class``."""
     with (
         BagProgress(reader, f"process_bag {in_bag}") as progress,
-        BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
+        writer_class(out_bag, overwrite=overwrite) as bag_writer,
     ):
         writer = NamespacedWriter(bag_writer, view)
         fusion = OfflineFusion(fusion_config, writer)
