@@ -32,7 +32,9 @@ as constants and printed beside our figures:
     (twelve hours of wall-clock time; ``--quick``: six simulated minutes).
 13. real_record: OOI's FDCHP flux-buoy record, ours beside Edson's processing
     (tools/bench_fdchp.py).
-14. current (paper 003): process_bag on ship_current and sea_state with its DVL, short runs;
+14. archive: process_archive over a tree of the committed bags, one local worker against two
+    (tools/bench_archive.py).
+15. current (paper 003): process_bag on ship_current and sea_state with its DVL, short runs;
     current_long (long): an hour of ship_current, sea_state and open_ocean
     (tools/bench_current.py).
 
@@ -42,8 +44,8 @@ go to stdout and out/bench/results.json, progress to stderr.
 
     python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
                                             smoother|antennas|smoother_table1|smoother_speed|
-                                            smoother_day|soak|real_record|current|
-                                            current_long ...]
+                                            smoother_day|soak|real_record|archive|
+                                            current|current_long ...]
 
 Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
 runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 24
@@ -143,6 +145,7 @@ SECTIONS = (
     "smoother_day",
     "soak",
     "real_record",
+    "archive",
     "current",
     "current_long",
 )
@@ -627,6 +630,11 @@ def main(argv=None) -> None:
         if bags:
             results[section] = bench_smoother.run_smoother_speed(bags, RUNS_DIR / section)
             bench_smoother.print_smoother_speed(results[section])
+    if "archive" in sections:
+        import bench_archive
+
+        results["archive"] = bench_archive.run_archive_throughput(OUT_DIR / "archive")
+        bench_archive.print_archive(results["archive"])
 
     results["meta"]["wall_s"] = time.monotonic() - started
     with open(OUT_DIR / "results.json", "w") as stream:

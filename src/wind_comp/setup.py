@@ -52,6 +52,7 @@ setup(
             "compensation_node = wind_comp.compensation_node:main",
             "current_node = wind_comp.current_node:main",
             "foxglove_bridge = wind_comp.foxglove_bridge_node:main",
+            "process_archive = wind_comp.process_archive:main",
             "process_bag = wind_comp.process_bag:main",
             "wind_echo = wind_comp.wind_echo_node:main",
             "wind_report = wind_comp.wind_report:main",

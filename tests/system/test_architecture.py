@@ -32,6 +32,8 @@ ROSDEP_KEYS = {
     "foxglove": "python3-foxglove-sdk-pip",
     "ppigrf": "python3-ppigrf-pip",
     "pygeomag": "python3-pygeomag-pip",
+    "distributed": "python3-distributed-pip",
+    "pyarrow": "python3-pyarrow-pip",
 }
 
 

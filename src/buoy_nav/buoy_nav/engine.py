@@ -40,8 +40,9 @@ is rejected and counted by input and reason; it never reaches the state. Measure
 ``beyond_imu_data``, oldest first, so an outage cannot fill the memory. An IMU sample whose
 change from the last accepted one no platform can make is rejected as ``implausible_change``
 (:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
-(:mod:`buoy_nav.imu_clock`). When the gates keep rejecting the aiding, the filter no longer
-agrees with it: the integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
+(:mod:`buoy_nav.imu_clock`); :mod:`buoy_nav.imu_input` holds that screening of the IMU
+samples. When the gates keep rejecting the aiding, the filter no longer agrees with it: the
+integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
 published inflated while the trust is not back, and the alignment started again if that does
 not bring the aiding back into the gates.
 """
@@ -70,8 +71,7 @@ from buoy_nav.error_state_filter import (
     inject_error_state,
 )
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
-from buoy_nav.imu_clock import ImuClock
-from buoy_nav.imu_screening import ImuPlausibility
+from buoy_nav.imu_input import ImuInput
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
@@ -126,19 +126,12 @@ class FusionEngine:
 
         self.recorder = EpochRecorder()
         """Told of every covariance epoch, correction and reset (for a smoother)."""
-        self._imu_calibration = config.imu_calibration
         self._imu_model = ImuErrorModel.from_config(config)
         self._distrust_variances = distrust_variances(config)
         self._integrity = IntegrityMonitor(
             config.integrity_rejection_count,
             config.integrity_realign_s,
             config.integrity_recovery_s,
-        )
-        self._imu_plausibility = ImuPlausibility(
-            config.max_angular_acceleration_rad_s2,
-            config.max_jerk_mps3,
-            math.radians(config.gyro_noise_deg_sqrt_h) / 60.0,
-            config.accel_noise_mps_sqrt_h / 60.0,
         )
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
         self._integrator: StrapdownIntegrator | None = None
@@ -149,8 +142,7 @@ class FusionEngine:
         self._realignments = 0
 
         self._imu_buffer: deque = deque()
-        self._latest_imu_stamp = -math.inf
-        self._imu_clock = ImuClock(config.max_imu_gap_s)
+        self._imu_input = ImuInput(config)
         # State of the processing: time and (raw) IMU sample the state refers to.
         self._time = -math.inf
         self._gyro: tuple[float, float, float] | None = None
@@ -199,46 +191,14 @@ class FusionEngine:
         """
         self.catch_up()
         self.last_input_rejection = None
-        counters = self._counters[IMU]
-        try:
-            t = float(t_s)
-            gx, gy, gz = _float_triple(gyro_rad_s)
-            fx, fy, fz = _float_triple(specific_force_mps2)
-        except (TypeError, ValueError):
-            self.reject_input(IMU, Reason.MALFORMED)
+        sample = self._imu_input.accept(t_s, gyro_rad_s, specific_force_mps2)
+        if isinstance(sample, Reason):
+            self.reject_input(IMU, sample)
             return []
-        if not (math.isfinite(t) and math.isfinite(gx + gy + gz) and math.isfinite(fx + fy + fz)):
-            self.reject_input(IMU, Reason.NON_FINITE)
-            return []
-        if self._imu_calibration is not None:
-            (bgx, bgy, bgz), (bax, bay, baz), (sx, sy, sz) = self._imu_calibration
-            gx, gy, gz = gx - bgx, gy - bgy, gz - bgz
-            fx, fy, fz = (fx - bax) / sx, (fy - bay) / sy, (fz - baz) / sz
-        config = self.config
-        if (
-            gx * gx + gy * gy + gz * gz > config.max_angular_rate_rad_s**2
-            or fx * fx + fy * fy + fz * fz > config.max_specific_force_mps2**2
-        ):
-            self.reject_input(IMU, Reason.OUT_OF_RANGE)
-            return []
-        t = self._imu_clock.restamp(t, self._latest_imu_stamp)
-        if t <= self._latest_imu_stamp:
-            duplicate = t == self._latest_imu_stamp
-            self.reject_input(
-                IMU, Reason.DUPLICATE_STAMP if duplicate else Reason.STAMP_NOT_INCREASING
-            )
-            return []
-        if t - self._latest_imu_stamp > config.max_imu_gap_s:
-            self._imu_plausibility.restart()
-        if not self._imu_plausibility.plausible(t, (gx, gy, gz), (fx, fy, fz)):
-            self.reject_input(IMU, Reason.IMPLAUSIBLE_CHANGE)
-            return []
-        counters.accepted += 1
-        self._imu_clock.accepted(t, self._latest_imu_stamp)
-        self._latest_imu_stamp = t
-        sample = (t, (gx, gy, gz), (fx, fy, fz))
+        self._counters[IMU].accepted += 1
         self._imu_buffer.append(sample)
-        horizon = t - config.max_measurement_delay_s
+        config = self.config
+        horizon = sample[0] - config.max_measurement_delay_s
         if not config.realtime_output:
             return self._process(horizon)
         self._deferred_horizon = horizon
@@ -293,14 +253,15 @@ class FusionEngine:
         if t <= self._last_processed_imu_stamp:
             self.reject_input(source.kind, Reason.TOO_LATE)
             return
-        self._imu_clock.aiding_stamp(t)
+        self._imu_input.clock.aiding_stamp(t)
         refused = self._queue.push(source, t, validated)
         if refused is not None:
             self.reject_input(source.kind, refused)
             return
-        if t - self._latest_imu_stamp > MAX_MEASUREMENT_LEAD_S:
+        latest_imu_stamp = self._imu_input.latest_stamp_s
+        if t - latest_imu_stamp > MAX_MEASUREMENT_LEAD_S:
             # An IMU outage: only the last seconds can serve the realignment that follows.
-            self._queue.give_up_between(self._latest_imu_stamp, t - MAX_MEASUREMENT_LEAD_S)
+            self._queue.give_up_between(latest_imu_stamp, t - MAX_MEASUREMENT_LEAD_S)
 
     def reject_input(self, kind: str, reason: str) -> None:
         """Count an input of ``kind`` (``imu`` or a source's kind) rejected for ``reason``, also
@@ -357,7 +318,7 @@ class FusionEngine:
             alignments=self._alignments,
             time_s=self._time if math.isfinite(self._time) else math.nan,
             alignment=self._alignment,
-            imu_clock_steps=tuple(self._imu_clock.steps),
+            imu_clock_steps=tuple(self._imu_input.clock.steps),
             trusted=self._integrity.trusted,
             integrity_events=tuple(dataclasses.replace(e) for e in self._integrity.events),
             realignments=self._realignments,
@@ -653,12 +614,3 @@ class FusionEngine:
         return self._solutions.solution(
             integrator, self._filter, t, gyro, force, self._coasting_flags(self._time)
         )
-
-
-def _float_triple(values) -> tuple[float, float, float]:
-    """Three floats from a 3-element array or sequence (ValueError/TypeError otherwise)."""
-    if isinstance(values, np.ndarray) and values.dtype == np.float64:
-        x, y, z = values.tolist()
-        return x, y, z
-    x, y, z = values
-    return float(x), float(y), float(z)

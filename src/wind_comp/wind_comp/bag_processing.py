@@ -45,6 +45,7 @@ from buoy_common.bag_io import (
     BagMessage,
     BagProgress,
     BagReader,
+    BagWriter,
     Recovery,
 )
 from buoy_common.contract import (
@@ -293,6 +294,7 @@ def process_bag(
     current_config: CurrentConfig | None = None,
     view: TopicView | None = None,
     smooth: bool = False,
+    write_in_background: bool = True,
 ) -> ProcessSummary:
     """Fuse ``in_bag`` and correct its wind and its DVL samples into ``out_bag`` (a new bag;
     replaced with ``overwrite``) and the products CSVs beside it, over the topics of ``view``'s
@@ -301,7 +303,11 @@ def process_bag(
     ``current_node`` (``dvl.position`` and ``dvl.rpy_deg`` included). Raises BagError for a
     missing or unreadable bag or one without the fusion's topics and without both
     ``anemometer/wind`` and ``dvl/velocity``, and OutputError, before anything is read or
-    written, if an output is, contains or lies inside ``in_bag``."""
+    written, if an output is, contains or lies inside ``in_bag``.
+
+    The bag is written by a process of its own, on a second core; with ``write_in_background``
+    False, the same bag is written in this process, for a caller that keeps every core busy
+    with bags of its own (``process_archive``)."""
     started = time.monotonic()
     csv_paths = {
         name: products_csv_path(out_bag, suffix)
@@ -349,12 +355,13 @@ def process_bag(
                 )
             return corrections
 
+        writer_class = BackgroundBagWriter if write_in_background else BagWriter
         if smooth:
             fusion = OfflineFusion(fusion_config, None, spill_parent_of(out_bag), smooth=True)
             try:
                 # The writing process starts during the forward pass: until it is ready the
                 # writer keeps what it is given, and the second pass produces fast.
-                with BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer:
+                with writer_class(out_bag, overwrite=overwrite) as bag_writer:
                     writer = NamespacedWriter(bag_writer, view)
                     forward_pass(reader, fusion, sensors, relative_of, f"process_bag {in_bag}")
                     corrections = corrections_into(writer)
@@ -364,7 +371,7 @@ def process_bag(
         else:
             with (
                 BagProgress(reader, f"process_bag {in_bag}") as progress,
-                BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
+                writer_class(out_bag, overwrite=overwrite) as bag_writer,
             ):
                 writer = NamespacedWriter(bag_writer, view)
                 fusion = OfflineFusion(fusion_config, writer)
