@@ -162,7 +162,11 @@ def replay(
     offline_nav_ns, _ = odometry_arrays(offline)
     offline_out_ns, _ = vector_arrays(offline, correction.output_topic)
     with BagReader(played) as reader:
-        n_inputs = reader.topics[f"/{correction.input_topic}"].count
+        n_inputs = next(
+            info.count
+            for name, info in reader.topics.items()
+            if name.lstrip("/") == correction.input_topic
+        )
         duration_s = reader.duration_s
     # samples after the last navigation wait for it until the node is interrupted
     n_held_back = int(np.count_nonzero(offline_out_ns > offline_nav_ns[-1]))

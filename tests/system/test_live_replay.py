@@ -29,6 +29,7 @@ from live_replay import (
     vector_arrays,
 )
 
+from buoy_common.bag_io import BagReader
 from buoy_nav.config import fusion_config_from_files
 from processed_bags import CASES
 from wind_comp.bag_processing import process_bag
@@ -81,9 +82,11 @@ def test_live_current_equals_process_bag(nodes, tmp_path):
     )
     assert result.returncode == 0, result.stderr
     played = tmp_path / "played"
-    bag_faults.write_records(
-        bag_faults.read_records(simulated, CURRENT.sensor_topics, PLAYED_S), played
-    )
+    wanted = {topic.lstrip("/") for topic in CURRENT.sensor_topics}
+    with BagReader(simulated) as reader:
+        # simulate_bag names its topics without the leading slash the recorder writes
+        topics = [name for name in reader.topics if name.lstrip("/") in wanted]
+    bag_faults.write_records(bag_faults.read_records(simulated, topics, PLAYED_S), played)
     parameter_files = [BUOY_PARAMETERS]
     offline = tmp_path / "offline"
     process_bag(
