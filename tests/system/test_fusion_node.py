@@ -192,16 +192,25 @@ class Listener:
         """Until the node's subscriptions and publishers are matched with ours, on both sides."""
         return wait_for(
             lambda: (
-                all(p.get_subscription_count() > 0 for p in self.publishers.values())
+                self.node_sees_publishers()
+                and all(self.publishers[t].get_subscription_count() > 0 for t in self.node_inputs())
                 and all(self.node.count_publishers(topic) > 0 for topic in NAV_MSGTYPES)
-                and self.node_sees_publishers()
             ),
             timeout_s,
         )
 
+    def node_inputs(self) -> list[str]:
+        """The input topics the node subscribes to, as its latest diagnostics list them (a
+        source the configuration disables, such as a third antenna, has no subscription)."""
+        if not self.diagnostics:
+            return []
+        keys = {item.key for item in self.diagnostics[-1].values}
+        return [topic for topic in INPUT_CLASSES if f"publishers[/{topic}]" in keys]
+
     def node_sees_publishers(self) -> bool:
-        """The node's latest diagnostics report a matched publisher on every input."""
-        return bool(self.diagnostics) and reports_publishers_on(self.diagnostics[-1], INPUT_CLASSES)
+        """The node's latest diagnostics report a matched publisher on every input it takes."""
+        inputs = self.node_inputs()
+        return bool(inputs) and reports_publishers_on(self.diagnostics[-1], inputs)
 
     def play(self, paced_stream) -> None:
         """Publish (pace stamp ns, topic, message) rows at PLAY_RATE times real time."""
