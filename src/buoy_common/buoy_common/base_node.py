@@ -189,12 +189,22 @@ def take_stop_signals(on_stop: Callable[[], None]) -> None:
 
     rclpy turns SIGINT into a KeyboardInterrupt raised wherever the program happens to be: in a
     callback run by the C++ executor that aborts the process, elsewhere it leaves a traceback.
-    ``on_stop`` only records the request (it may be called more than once); the program's loop
+    ``on_stop`` only records the request and is called once, at the first signal; the program's loop
     ends at its next turn, and :func:`ignore_stop_signals` is called on the way out.
     """
     rclpy.signals.uninstall_signal_handlers()
+    stop_requested = False
+
+    def request_stop(*_) -> None:
+        # A second signal can arrive while the first one's ``on_stop`` holds a lock of rclpy's
+        # (try_shutdown does): calling it again there would wait for that lock forever.
+        nonlocal stop_requested
+        if not stop_requested:
+            stop_requested = True
+            on_stop()
+
     for signal_number in STOP_SIGNALS:
-        signal.signal(signal_number, lambda *_: on_stop())
+        signal.signal(signal_number, request_stop)
 
 
 def ignore_stop_signals() -> None:
