@@ -9,6 +9,9 @@ Runs ``run_scenario sea_state --fusion --compensation`` for ``--hours`` of simul
   the delay between their receptions, per simulated hour (percentiles; the pairs still open are
   the only state it keeps, so its own memory stays flat);
 - counts samples in and out: every ``anemometer/wind`` sample must come out on ``wind/true``.
+  Samples stamped before the first pair this process saw are counted apart: DDS delivers a
+  message only to subscriptions already matched, so on a busy machine this listener, or the
+  compensation node, may join a few samples after the simulation starts publishing.
 
 Prints a table and writes the figures as JSON (``--json``). ``make bench`` runs the full day
 (``tools/bench.py --only soak``); ``make test`` a few minutes of it (tests/system/test_soak.py).
@@ -78,6 +81,8 @@ class WindPairs:
         self.wind_out = 0
         self.wind_out_valid = 0
         self.unpaired_out = 0
+        self.first_paired_stamp: tuple[int, int] | None = None
+        self.out_before_first_pair = 0
         self.node.create_subscription(
             Vector3Stamped, "anemometer/wind", self._on_wind, DATA_QOS, raw=True
         )
@@ -110,18 +115,27 @@ class WindPairs:
             self.wind_out_valid += valid
             sent_ns = self._open.pop(stamp, None)
             if sent_ns is None:
-                self.unpaired_out += 1
+                if self.first_paired_stamp is None:
+                    self.out_before_first_pair += 1
+                else:
+                    self.unpaired_out += 1
                 return
+            if self.first_paired_stamp is None:
+                self.first_paired_stamp = stamp
             stamp_s = stamp[0] + stamp[1] * 1e-9
             if self.first_stamp_s is None:
                 self.first_stamp_s = stamp_s
             hour = int((stamp_s - self.first_stamp_s) // SECONDS_PER_HOUR)
             self.delays_by_hour_s.setdefault(hour, []).append((received_ns - sent_ns) * 1e-9)
 
-    @property
-    def open_pairs(self) -> int:
+    def open_pairs(self) -> tuple[int, int]:
+        """Inputs still without output: (stamped before the first pair, after it)."""
         with self._lock:
-            return len(self._open)
+            first = self.first_paired_stamp
+            if first is None:
+                return len(self._open), 0
+            before = sum(stamp < first for stamp in self._open)
+            return before, len(self._open) - before
 
     def close(self) -> None:
         self.executor.shutdown()
@@ -210,12 +224,15 @@ def soak(hours: float, rate_factor: float, rss_period_s: float, log_dir: Path) -
     result["wall_s"] = time.monotonic() - started_s
     if scenario.returncode != 0:
         result["error"] = f"run_scenario exited with {scenario.returncode}"
+    open_before_first_pair, open_after_first_pair = pairs.open_pairs()
     result["counts"] = {
         "anemometer/wind in": pairs.wind_in,
         "wind/true out": pairs.wind_out,
         "wind/true valid": pairs.wind_out_valid,
         "wind/true without its input": pairs.unpaired_out,
-        "anemometer/wind without output": pairs.open_pairs,
+        "anemometer/wind without output": open_after_first_pair,
+        "before the first pair: wind/true alone": pairs.out_before_first_pair,
+        "before the first pair: anemometer/wind alone": open_before_first_pair,
     }
     result["latency_s_by_simulated_hour"] = {
         str(hour): {
