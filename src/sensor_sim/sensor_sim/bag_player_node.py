@@ -108,25 +108,29 @@ class BagPlayer:
         self.max_lag_s = 0.0
 
     def wait_for_subscribers(self, minimum: int, timeout_s: float) -> bool:
-        """Block until every played topic has ``minimum`` subscribers.
+        """Block until every played topic, and /clock when it is published, has ``minimum``
+        subscribers.
 
         Returns False when shutdown was requested meanwhile; PlaybackError on timeout.
         """
+        waited_for = dict(self._publishers)
+        if self._clock_publisher is not None:
+            # A node on the bag's clock that gets a message before its first /clock stamps
+            # that message with a time of its own.
+            waited_for[CLOCK_TOPIC] = self._clock_publisher
         logger = self._node.get_logger()
         deadline = time.monotonic() + timeout_s
         next_report = time.monotonic()
         while rclpy.ok():
             lacking = {
                 topic: publisher.get_subscription_count()
-                for topic, publisher in self._publishers.items()
+                for topic, publisher in waited_for.items()
                 if publisher.get_subscription_count() < minimum
             }
             if not lacking:
                 return True
             now = time.monotonic()
-            detail = ", ".join(
-                f"{self._publishers[t].topic_name} (has {n})" for t, n in lacking.items()
-            )
+            detail = ", ".join(f"{waited_for[t].topic_name} (has {n})" for t, n in lacking.items())
             if now >= deadline:
                 raise PlaybackError(
                     f"gave up after {timeout_s:g} s waiting for {minimum} subscriber(s) on: "
@@ -219,7 +223,8 @@ def parse_arguments(arguments: list[str]) -> argparse.Namespace:
         type=int,
         default=0,
         metavar="N",
-        help="before playing, wait until every played topic has N subscribers",
+        help="before playing, wait until every played topic (and /clock with --clock) has N "
+        "subscribers",
     )
     parser.add_argument(
         "--start-delay-s",
