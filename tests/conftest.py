@@ -92,7 +92,8 @@ class NodeProcesses:
 
 # Tests that run nodes over DDS share one pytest-xdist worker, one after another: side by side
 # on a 2-core machine their nodes would starve each other of the CPU their latency budgets
-# assume. The offline tests share the other workers.
+# assume. The offline tests of one module stay on one worker too, so that a module's fixtures
+# (simulated bags, processed bags) are made once rather than once per worker.
 LIVE_FIXTURES = {"nodes", "ros_env", "module_ros_env"}
 
 
@@ -100,6 +101,8 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if LIVE_FIXTURES & set(item.fixturenames) or item.get_closest_marker("ros"):
             item.add_marker(pytest.mark.xdist_group("live"))
+        else:
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
 @pytest.fixture

@@ -10,6 +10,10 @@ of a receiver that sends no baseline vector, where the heading depends on the ti
 
 from __future__ import annotations
 
+import fcntl
+import os
+import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -76,18 +80,38 @@ CASES = {
 }
 
 
+def made_once(tmp_path_factory, name: str, make: Callable[[Path], None]) -> Path:
+    """The directory ``name`` that ``make(directory)`` fills, made once per test session even
+    when pytest-xdist splits the session over workers: the first worker to ask makes it while
+    holding a lock, the others wait for it and read it."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the session's directory, above every worker's own
+    out = root / "made_once" / name
+    out.parent.mkdir(parents=True, exist_ok=True)
+    done = out.parent / f"{name}.done"
+    with open(out.parent / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.is_file():
+            shutil.rmtree(out, ignore_errors=True)  # what a failed attempt left
+            out.mkdir()
+            make(out)
+            done.touch()
+    return out
+
+
 def processed_bag(tmp_path_factory, name: str) -> Path:
     """``process_bag``'s output of case ``name``, made once per test session."""
-    out = tmp_path_factory.getbasetemp() / "processed_bags" / name
-    if not (out / "metadata.yaml").is_file():
-        out.parent.mkdir(exist_ok=True)
+
+    def make(directory: Path) -> None:
         case = CASES[name]
-        files = case.parameter_files(out.parent)
+        files = case.parameter_files(directory)
         process_bag(
             case.bag_path,
-            out,
+            directory / "bag",
             fusion_config_from_files(files),
             compensator_config_from_files(files),
             overwrite=True,
         )
-    return out
+
+    return made_once(tmp_path_factory, f"processed_{name}", make) / "bag"
