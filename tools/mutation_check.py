@@ -85,10 +85,10 @@ MUTANTS = (
         (
             Edit(
                 MILLER,
-                "    tilt_term = rotate_components(attitude_elements_nb, wind_body)\n",
+                "    tilt_term = rotate_components(attitude_elements_nb, flow_body)\n",
                 "    a = attitude_elements_nb\n"
                 "    tilt_term = rotate_components(\n"
-                "        (a[0], a[3], a[6], a[1], a[4], a[7], a[2], a[5], a[8]), wind_body\n"
+                "        (a[0], a[3], a[6], a[1], a[4], a[7], a[2], a[5], a[8]), flow_body\n"
                 "    )\n",
             ),
         ),
@@ -121,8 +121,8 @@ MUTANTS = (
         (
             Edit(
                 COMPENSATOR,
-                "_lever_arm_elements_body_m = tuple(config.anemometer_position_body_m)",
-                "_lever_arm_elements_body_m = tuple(-c for c in config.anemometer_position_body_m)",
+                "_lever_arm_elements_body_m = tuple(float(c) for c in sensor.position_body_m)",
+                "_lever_arm_elements_body_m = tuple(-float(c) for c in sensor.position_body_m)",
             ),
         ),
     ),
@@ -206,8 +206,8 @@ MUTANTS = (
         (
             Edit(
                 "src/wind_comp/wind_comp/compensation_messages.py",
-                "pose[3:7], twist[3:6]",
-                "(pose[6], *pose[3:6]), twist[3:6]",
+                "        pose[3:7],\n",
+                "        (pose[6], *pose[3:6]),\n",
             ),
             Edit(
                 "src/wind_comp/wind_comp/compensation_messages.py",
