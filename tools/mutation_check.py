@@ -15,6 +15,12 @@ exits with 1 otherwise (or when a mutant no longer applies because the code it e
     python tools/mutation_check.py                 # every mutant (about an hour on two cores)
     python tools/mutation_check.py --only gravity  # some of them
     python tools/mutation_check.py --list          # the mutants and their edits
+    python tools/mutation_check.py --first-catch --workers 2   # quicker: see below
+
+``--first-catch`` stops each mutant's system run at its first catching test (pytest ``-x``,
+the unmutated copy's own failures deselected), so the table names one catching system test
+per mutant rather than all of them; ``--workers N`` runs the system tests on N pytest-xdist
+workers, the live ones on one of them as in ``make test``; ``--system-tests`` picks the modules.
 
 The unit tests of several mutants run in parallel (``--jobs``); the system tests, whose live
 tests are sensitive to a busy machine, one mutant at a time. Results go to
@@ -320,11 +326,11 @@ def short(test_id: str) -> str:
     return test_id.rsplit("/", 1)[-1]
 
 
-def ros_tests(root: Path) -> set[str]:
+def ros_tests(root: Path, system_tests) -> set[str]:
     """Node ids of the tests that start nodes over DDS (marker ``ros``)."""
     collect = ("-q", "--collect-only", "-p", "no:cacheprovider", "-m", "ros")
     listed = subprocess.run(
-        [sys.executable, "-m", "pytest", *collect, *SYSTEM_TESTS],
+        [sys.executable, "-m", "pytest", *collect, *system_tests],
         cwd=root,
         env=environment(root),
         capture_output=True,
@@ -339,6 +345,21 @@ def parse_arguments(argv):
     parser.add_argument("--list", action="store_true", help="list the mutants and exit")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="parallel unit runs")
     parser.add_argument("--out", default=str(REPO / "out" / "mutants"), help="results directory")
+    parser.add_argument(
+        "--system-tests",
+        nargs="+",
+        default=list(SYSTEM_TESTS),
+        metavar="PATH",
+        help="system test modules to run (default: those that judge results against the truth)",
+    )
+    parser.add_argument(
+        "--workers", type=int, default=1, help="pytest-xdist workers of each system run (1)"
+    )
+    parser.add_argument(
+        "--first-catch",
+        action="store_true",
+        help="stop each mutant's system run at its first catching test",
+    )
     return parser.parse_args(argv)
 
 
@@ -390,14 +411,21 @@ def main(argv=None) -> int:
         with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, arguments.jobs)) as pool:
             unit = dict(pool.map(unit_run, ["baseline", *(m.name for m in runnable)]))
         system = {}
-        live = ros_tests(roots["baseline"])
+        system_tests = arguments.system_tests
+        live = ros_tests(roots["baseline"], system_tests)
+        parallel = ("-n", str(arguments.workers), "--dist", "loadgroup")
+        system_options = parallel if arguments.workers > 1 else ()
         for name in ["baseline", *(m.name for m in runnable)]:
             print(
                 f"mutation_check: system tests of {name} ({time.monotonic() - started:.0f} s)",
                 flush=True,
             )
+            options = system_options
+            if name != "baseline" and arguments.first_catch:
+                deselected = (f"--deselect={test}" for test in sorted(system["baseline"].failed))
+                options = (*system_options, "-x", *deselected)
             outcome = run_tests(
-                roots[name], SYSTEM_TESTS, scratch / f"{name}-system.xml", SYSTEM_TIMEOUT_S
+                roots[name], system_tests, scratch / f"{name}-system.xml", SYSTEM_TIMEOUT_S, options
             )
             flaky_candidates = sorted(outcome.failed & live)
             if name != "baseline" and flaky_candidates:
@@ -409,6 +437,8 @@ def main(argv=None) -> int:
             system[name] = outcome
 
     results = {
+        "system_tests": system_tests,
+        "first_catch_only": arguments.first_catch,
         "baseline_failures": {
             "unit": sorted(unit["baseline"].failed),
             "system": sorted(system["baseline"].failed),
@@ -447,6 +477,8 @@ def print_report(rows, results, elapsed_s: float, results_path: Path) -> None:
 
     print()
     print(f"Mutation check: {len(rows)} mutants in {elapsed_s / 60:.0f} min")
+    if results["first_catch_only"]:
+        print("  each mutant's system run stopped at its first catching test")
     for label, failures in results["baseline_failures"].items():
         if failures:
             print(
