@@ -13,13 +13,14 @@ export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 100 + 100 )))
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)
 export PYTHONUNBUFFERED := 1
 
-.PHONY: all venv demo test bench mutants lint format bags colcon clean help
+.PHONY: all venv demo test test-long bench mutants lint format bags colcon clean help
 
 all: help
 
 help:
 	@echo "make demo   - set up .venv and run the live demo (simulated buoy, fusion, wind correction)"
-	@echo "make test   - set up .venv, lint, and run the whole test suite"
+	@echo "make test   - set up .venv, lint, and run the test suite (all but the long runs)"
+	@echo "make test-long - the long runs: live fault matrix, double signals, soak, archive, DVL replay"
 	@echo "make bench  - accuracy and speed tables beside the paper's (prints them, writes out/bench/results.json)"
 	@echo "make mutants - flip signs and conventions of the core on a copy, report which tests catch each"
 	@echo "make bags   - re-record the committed bags in bags/ from the live simulation nodes"
@@ -43,14 +44,20 @@ format: venv
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
+# Long runs (marker `long`: the live fault matrix, double signals to every executable, the
+# soak, the archive on a Dask cluster, the DVL's live replay) belong to `make bench`.
 test: venv lint
-	$(BIN)/python -m pytest -n auto --dist loadgroup
+	$(BIN)/python -m pytest -n auto --dist loadgroup -m "not long"
+
+test-long: venv
+	$(BIN)/python -m pytest -n auto --dist loadgroup -m long
 
 demo: venv
 	$(BIN)/python tools/demo.py
 
 bench: venv
 	$(BIN)/python tools/bench.py
+	$(MAKE) test-long
 
 mutants: venv
 	$(BIN)/python tools/mutation_check.py

@@ -51,7 +51,7 @@ def test_offline_does_what_each_row_demands(group, faulted_bags):
 
 
 @pytest.mark.ros
-@pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.parametrize("group", GROUP_PARAMETERS)
 def test_live_equals_offline(group, faulted_bags, nodes, tmp_path):
     bag, records, offline, _ = faulted_bags(group)

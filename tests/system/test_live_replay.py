@@ -63,6 +63,7 @@ def test_live_pipeline_equals_process_bag(nodes, tmp_path, name):
     assert not differences, "; ".join(differences) + f"; {figures}"
 
 
+@pytest.mark.long
 def test_live_current_equals_process_bag(nodes, tmp_path):
     simulated = tmp_path / "simulated"
     result = subprocess.run(

@@ -26,7 +26,7 @@ from wind_comp.bag_processing import process_bag, products_csv_path
 from wind_comp.config import compensator_config_from_files
 from wind_comp.process_archive import EXIT_FAILED_BAGS, main
 
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("process_archive")]
+pytestmark = [pytest.mark.long, pytest.mark.xdist_group("process_archive")]
 
 # The two shortest committed bags, at two depths of the tree.
 GOOD_BAGS = {"buoy_a/2026-01/static": "static", "buoy_b/wind_tunnel_10": "wind_tunnel_10"}

@@ -20,7 +20,7 @@ import pytest
 from buoy_common.cli import INTERRUPTED_EXIT_CODE
 from ros_messages import wait_for
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.long]
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.long]
 
 REPO = Path(__file__).resolve().parents[2]
 SIMULATED_S = 20.0  # the alignment, then 10 s of corrected wind
