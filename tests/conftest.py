@@ -97,6 +97,7 @@ class NodeProcesses:
 LIVE_FIXTURES = {"nodes", "ros_env", "module_ros_env"}
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if LIVE_FIXTURES & set(item.fixturenames) or item.get_closest_marker("ros"):

@@ -119,3 +119,12 @@ def test_every_executable_is_the_module_of_its_name(package):
         if target.split(":")[0] not in (f"{package}.{name}", f"{package}.{name}_node")
     }
     assert mismatched == {}
+
+
+def test_a_parallel_run_keeps_a_module_on_one_worker(request):
+    """`make test` relies on pytest-xdist's groups: the live tests one after another on one
+    worker, a module's fixtures made once. A pytest that drops the groups silently would let
+    live nodes starve each other and every fixture be made twice."""
+    if not getattr(request.config.option, "loadgroup", False):
+        pytest.skip("not a pytest-xdist run with --dist loadgroup")
+    assert request.node.nodeid.endswith("@tests/system/test_architecture.py"), request.node.nodeid
