@@ -5,6 +5,7 @@ products that match their CSV, and the same navigation as ``fuse_bag``."""
 from __future__ import annotations
 
 import csv
+import datetime
 import math
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from buoy_nav.config import fusion_config_from_files
 from error_budget import ANEMOMETER
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS, CASES, processed_bag
 from ros_messages import raw_stamp_ns
-from wind_comp.bag_processing import products_csv_path
+from wind_comp.bag_processing import ISO_TIME_COLUMNS, products_csv_path
 from wind_comp.compensation_messages import (
     STATS_FIELDS,
     stats_values,
@@ -127,8 +128,22 @@ def test_corrected_wind_matches_the_truth_within_the_error_budget(runs, name):
 
 
 def read_products_csv(path: Path) -> list[dict[str, float]]:
+    """The rows of a products CSV as numbers; the ISO 8601 bounds are checked against the
+    numeric ones and left out."""
+    rows = []
     with open(path, newline="") as stream:
-        return [{key: float(value) for key, value in row.items()} for row in csv.DictReader(stream)]
+        for row in csv.DictReader(stream):
+            numbers = {
+                key: float(value) for key, value in row.items() if key not in ISO_TIME_COLUMNS
+            }
+            for iso_column, seconds_column in zip(
+                ISO_TIME_COLUMNS, ("window_start_s", "window_end_s"), strict=True
+            ):
+                moment = datetime.datetime.fromisoformat(row[iso_column])
+                assert moment.tzinfo == datetime.UTC, row[iso_column]
+                assert abs(moment.timestamp() - numbers[seconds_column]) < 1e-3, row
+            rows.append(numbers)
+    return rows
 
 
 @pytest.mark.parametrize("name", CASES)

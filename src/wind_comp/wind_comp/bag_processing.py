@@ -60,6 +60,7 @@ from buoy_common.contract import (
     bag_topic,
     current_mean_topic,
     current_stats_topic,
+    seconds_to_iso8601,
     wind_mean_topic,
     wind_stats_topic,
 )
@@ -256,15 +257,27 @@ class OfflineCorrection:
             )
 
 
+ISO_TIME_COLUMNS = ("window_start_utc", "window_end_utc")
+"""The first columns of a products CSV: the window's bounds as ISO 8601 UTC times
+(``window_start_s`` and ``window_end_s`` as text a spreadsheet or pandas reads as time)."""
+
+
 def write_products_csv(products: list, product_type: type, path: Path) -> None:
-    """One row per closed averaging window (``WindProduct`` or ``CurrentProduct`` fields);
-    columns named with their units. The file appears only once complete."""
+    """One row per closed averaging window: the window's bounds in ISO 8601 UTC
+    (:data:`ISO_TIME_COLUMNS`), then the ``WindProduct`` or ``CurrentProduct`` fields, columns
+    named with their units. The file appears only once complete."""
     names = [f.name for f in fields(product_type)]
     with staged_file(path) as stream:
         writer = csv.writer(stream)
-        writer.writerow(names)
+        writer.writerow([*ISO_TIME_COLUMNS, *names])
         for product in products:
-            writer.writerow([_csv_value(getattr(product, name)) for name in names])
+            writer.writerow(
+                [
+                    seconds_to_iso8601(product.window_start_s),
+                    seconds_to_iso8601(product.window_end_s),
+                    *(_csv_value(getattr(product, name)) for name in names),
+                ]
+            )
 
 
 def _csv_value(value) -> str:

@@ -71,11 +71,16 @@ STATS_FIELDS = (
     "window_end_s",
     "first_sample_s",
     "last_sample_s",
+    "coverage",
+    "quality_flag",
 )
 """Layout of ``wind/stats_<window>``: speeds m/s (horizontal), direction meteorological deg
 (blowing FROM, clockwise from true North), standard deviations of the ENU components m/s,
 sample counts, window bounds and first/last sample stamps in s since the epoch (a window closed
-at shutdown may end before ``window_end_s``). Conventions: :mod:`wind_comp.products`."""
+at shutdown may end before ``window_end_s``), the coverage (share of a full window's samples
+held valid) and the QARTOD quality flag (1 good, 2 not evaluated, 3 suspect, 4 bad, 9 missing).
+Conventions: :mod:`wind_comp.products`. New fields are only ever appended: a reader takes the
+fields by their labels."""
 
 CURRENT_STATS_FIELDS = (
     "speed_mps",
@@ -89,11 +94,14 @@ CURRENT_STATS_FIELDS = (
     "window_end_s",
     "first_sample_s",
     "last_sample_s",
+    "coverage",
+    "quality_flag",
 )
 """Layout of ``current/stats_<window>``: horizontal speed of the vector mean m/s, its direction
 oceanographic deg (flowing TOWARD, clockwise from true North), standard deviations of the ENU
 components m/s (over a window of wave periods, mostly the waves' orbital motion), sample counts,
-window bounds and first/last sample stamps as in :data:`STATS_FIELDS`."""
+window bounds and first/last sample stamps, coverage and quality flag as in
+:data:`STATS_FIELDS`."""
 
 
 class MalformedMessageError(ValueError):

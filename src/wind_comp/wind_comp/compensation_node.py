@@ -24,7 +24,8 @@ Publishes:
   :data:`wind_comp.compensation_messages.STATS_FIELDS` (scalar_mean_speed_mps,
   vector_mean_speed_mps, vector_mean_direction_deg (meteorological, FROM), gust_mps, std_u_mps,
   std_v_mps, std_w_mps, n_valid, n_invalid, window_start_s, window_end_s, first_sample_s,
-  last_sample_s).
+  last_sample_s, coverage, quality_flag: the share of a full window's samples held valid and
+  its QARTOD flag, :mod:`wind_comp.products`).
   Windows come from ``compensation.product_windows_s`` (60 and 600 s by default; a window of
   other length W is named ``W s``, e.g. ``wind/mean_30s``). A window is published when the
   first sample of the next one is corrected, and the partial windows at shutdown.
