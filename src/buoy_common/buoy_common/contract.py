@@ -39,6 +39,7 @@ NAV_FIX_TOPIC = "nav/fix"
 WIND_TRUE_TOPIC = "wind/true"
 WIND_MEAN_PREFIX = "wind/mean_"
 WIND_STATS_PREFIX = "wind/stats_"
+WIND_FLUXES_PREFIX = "wind/fluxes_"
 CURRENT_TOPIC = "current/velocity"
 CURRENT_MEAN_PREFIX = "current/mean_"
 CURRENT_STATS_PREFIX = "current/stats_"
@@ -100,8 +101,8 @@ OUTPUT_MSGTYPES = {
     TF_TOPIC: TF_MSGTYPE,
 }
 """Every fixed-name output topic (the wind and current products are named per window, see
-:func:`wind_mean_topic`, :func:`wind_stats_topic`, :func:`current_mean_topic` and
-:func:`current_stats_topic`)."""
+:func:`wind_mean_topic`, :func:`wind_stats_topic`, :func:`wind_fluxes_topic`,
+:func:`current_mean_topic` and :func:`current_stats_topic`)."""
 
 # -- frames ----------------------------------------------------------------------------------------
 MAP_FRAME = "map"
@@ -138,6 +139,13 @@ def wind_stats_topic(window_s: float) -> str:
     STATS_FIELDS``). Fields are only appended: ``coverage`` and ``quality_flag``
     (:class:`QualityFlag`) came after ``last_sample_s``."""
     return WIND_STATS_PREFIX + window_label(window_s)
+
+
+def wind_fluxes_topic(window_s: float) -> str:
+    """Topic of the eddy-covariance fluxes of windows of ``window_s`` seconds
+    (``wind/fluxes_30min``): a Float64MultiArray labelled like the statistics
+    (``wind_comp.compensation_messages.FLUX_FIELDS``)."""
+    return WIND_FLUXES_PREFIX + window_label(window_s)
 
 
 def current_mean_topic(window_s: float) -> str:

@@ -202,7 +202,7 @@ def test_coverage_counts_the_valid_samples_of_a_full_window_and_flags_the_short_
     averager = WindAverager(window_s=60.0)
     products = averager.add_batch(stamps, wind) + averager.flush()
     coverages = [product.coverage for product in products]
-    assert coverages == pytest.approx([1.0, 0.75, 0.25, 1 / 600, 0.0], abs=1e-9)
+    assert coverages == pytest.approx([1.0, 0.75, 0.25, 1 / 600, 0.0], abs=0.5e-4)  # to 1e-4
     assert [product.quality_flag for product in products] == [
         QualityFlag.GOOD,
         QualityFlag.SUSPECT,
