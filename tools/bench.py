@@ -37,6 +37,9 @@ as constants and printed beside our figures:
 15. current (paper 003): process_bag on ship_current and sea_state with its DVL, short runs;
     current_long (long): an hour of ship_current, sea_state and open_ocean
     (tools/bench_current.py).
+16. fluxes: u* and w'Ts' of the corrected wind against those of the truth over two 30-min
+    windows of open_ocean with a surface layer carrying fluxes (tools/bench_fluxes.py; about
+    fifteen minutes; ``--quick``: two 10-min windows).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -45,7 +48,7 @@ go to stdout and out/bench/results.json, progress to stderr.
     python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
                                             smoother|antennas|smoother_table1|smoother_speed|
                                             smoother_day|soak|real_record|archive|
-                                            current|current_long ...]
+                                            current|current_long|fluxes ...]
 
 Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
 runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 24
@@ -148,6 +151,7 @@ SECTIONS = (
     "archive",
     "current",
     "current_long",
+    "fluxes",
 )
 LONG_SECTIONS = ("smoother_table1", "smoother_speed", "smoother_day", "soak", "current_long")
 """Sections of long runs (simulated and processed only when named with --only)."""
@@ -597,6 +601,15 @@ def main(argv=None) -> None:
             paper, buoys = current_results(section, case_results)
             results[section] = {"paper_003": paper, "buoys": buoys}
             print_current(section, paper, buoys, quick)
+    if "fluxes" in sections:
+        # The fluxes of the corrected wind against the truth: its own tool (tools/bench_fluxes.py),
+        # two 30-min windows of open_ocean with a surface layer (one 10-min window with --quick).
+        import bench_fluxes
+
+        window_s = 600.0 if quick else 1800.0
+        rows = bench_fluxes.run(2 * window_s, window_s)
+        results["fluxes"] = {"window_s": window_s, "windows": rows}
+        print(bench_fluxes.table(rows, window_s))
     if "consistency" in sections:
         import bias_consistency
 

@@ -153,12 +153,13 @@ def replay(
     recorded: Path,
     topics: tuple[str, ...] = (),
     correction: Correction = WIND,
+    also_recorded: tuple[str, ...] = (),
 ) -> str:
     """Replay ``played`` (its ``topics``, default all) to ``fusion_node`` and the
     ``correction``'s node started with ``parameter_files``, record their outputs to
     ``recorded``, and return a line of figures for the assertion messages. ``offline`` is
     ``process_bag``'s output for the same bag: the replay waits until the recorder holds as
-    many messages."""
+    many messages. ``also_recorded``: further output topics to record."""
     offline_nav_ns, _ = odometry_arrays(offline)
     offline_out_ns, _ = vector_arrays(offline, correction.output_topic)
     with BagReader(played) as reader:
@@ -170,7 +171,7 @@ def replay(
         duration_s = reader.duration_s
     # samples after the last navigation wait for it until the node is interrupted
     n_held_back = int(np.count_nonzero(offline_out_ns > offline_nav_ns[-1]))
-    recorded_topics = ("nav/odometry", correction.output_topic)
+    recorded_topics = ("nav/odometry", correction.output_topic, *also_recorded)
     parameters = (
         "--ros-args",
         *(a for path in parameter_files for a in ("--params-file", str(path))),

@@ -101,7 +101,8 @@ def made_once(tmp_path_factory, name: str, make: Callable[[Path], None]) -> Path
 
 
 def processed_bag(tmp_path_factory, name: str) -> Path:
-    """``process_bag``'s output of case ``name``, made once per test session."""
+    """``process_bag``'s output of case ``name``, made once per test session, with its NetCDF
+    file beside it (:func:`processed_netcdf`)."""
 
     def make(directory: Path) -> None:
         case = CASES[name]
@@ -112,6 +113,12 @@ def processed_bag(tmp_path_factory, name: str) -> Path:
             fusion_config_from_files(files),
             compensator_config_from_files(files),
             overwrite=True,
+            netcdf_path=directory / f"{name}.nc",
         )
 
     return made_once(tmp_path_factory, f"processed_{name}", make) / "bag"
+
+
+def processed_netcdf(tmp_path_factory, name: str) -> Path:
+    """The NetCDF file ``process_bag`` wrote beside :func:`processed_bag` of case ``name``."""
+    return processed_bag(tmp_path_factory, name).with_name(f"{name}.nc")

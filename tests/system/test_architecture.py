@@ -34,6 +34,7 @@ ROSDEP_KEYS = {
     "pygeomag": "python3-pygeomag-pip",
     "distributed": "python3-distributed-pip",
     "pyarrow": "python3-pyarrow-pip",
+    "xarray": "python3-xarray",
 }
 
 

@@ -7,8 +7,9 @@ would be equal too). Likewise ``current_node`` and ``current/velocity`` for a ba
 The first minute of ``sea_state`` (shipped geometry) and of ``off_axis`` (its own buoy, sensor
 stamps that never line up), sensor topics and the anemometer cut by log time, is played at twice
 its pace (:mod:`live_replay`); and a minute of ``sea_state`` with its DVL written by
-``simulate_bag`` (the committed bags carry no DVL). The same replay of faulted bags is the live
-half of the fault matrix (``test_fault_matrix``).
+``simulate_bag`` (the committed bags carry no DVL). The eddy-covariance fluxes alike, over
+windows of 20 s, with a sonic temperature added to the played minute of ``sea_state``. The same
+replay of faulted bags is the live half of the fault matrix (``test_fault_matrix``).
 """
 
 from __future__ import annotations
@@ -23,16 +24,21 @@ import pytest
 from live_replay import (
     CURRENT,
     SENSOR_TOPICS,
+    WIND,
     assert_offline_run_is_near_the_truth,
     differences_from_offline,
     replay,
     vector_arrays,
 )
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import Temperature
 
 from buoy_common.bag_io import BagReader
+from buoy_common.contract import wind_fluxes_topic
 from buoy_nav.config import fusion_config_from_files
 from processed_bags import CASES
 from wind_comp.bag_processing import process_bag
+from wind_comp.compensation_messages import FLUX_FIELDS
 from wind_comp.config import compensator_config_from_files, current_config_from_files
 
 pytestmark = pytest.mark.ros
@@ -61,6 +67,76 @@ def test_live_pipeline_equals_process_bag(nodes, tmp_path, name):
     figures = replay(nodes, played, parameter_files, offline, recorded)
     differences = differences_from_offline(recorded, offline)
     assert not differences, "; ".join(differences) + f"; {figures}"
+
+
+FLUX_WINDOW_S = 20.0
+
+
+def with_sonic_temperature(records: list[bag_faults.Record]) -> list[bag_faults.Record]:
+    """``records`` and an ``anemometer/temperature`` for each ``anemometer/wind`` record, with
+    its stamp, logged just after it: a sonic's temperature, following its vertical wind."""
+    temperatures = []
+    for record in records:
+        if record.topic.lstrip("/") != WIND.input_topic:
+            continue
+        wind = record.message()
+        temperature = Temperature()
+        temperature.header = wind.header
+        temperature.temperature = 20.0 + 0.2 * wind.vector.z
+        temperatures.append(
+            bag_faults.Record(
+                "/anemometer/temperature",
+                "sensor_msgs/msg/Temperature",
+                record.log_time_ns + 1000,
+                serialize_message(temperature),
+            )
+        )
+    return records + temperatures
+
+
+def flux_rows(bag: Path) -> list[list[float]]:
+    with BagReader(bag) as reader:
+        return [
+            list(reader.decode(message).data)
+            for message in reader.messages([wind_fluxes_topic(FLUX_WINDOW_S)])
+        ]
+
+
+def test_live_fluxes_equal_process_bag(nodes, tmp_path):
+    parameter_files = CASES["sea_state"].parameter_files(tmp_path)
+    short_windows = tmp_path / "flux_window.yaml"
+    short_windows.write_text(
+        f"/**:\n  ros__parameters:\n    compensation:\n      flux_window_s: {FLUX_WINDOW_S}\n"
+    )
+    parameter_files = [*parameter_files, short_windows]
+    played = tmp_path / "played"
+    records = bag_faults.read_records(CASES["sea_state"].bag_path, SENSOR_TOPICS, PLAYED_S)
+    bag_faults.write_records(with_sonic_temperature(records), played)
+    offline = tmp_path / "offline"
+    process_bag(
+        played,
+        offline,
+        fusion_config_from_files(parameter_files),
+        compensator_config_from_files(parameter_files),
+    )
+    offline_fluxes = flux_rows(offline)
+    # windows of 20 s over a minute, the first before the fusion's alignment
+    assert len(offline_fluxes) >= 3
+    n_temperature = FLUX_FIELDS.index("n_temperature")
+    assert all(row[n_temperature] > 0 for row in offline_fluxes)
+    recorded = tmp_path / "live"
+    figures = replay(
+        nodes,
+        played,
+        parameter_files,
+        offline,
+        recorded,
+        also_recorded=(wind_fluxes_topic(FLUX_WINDOW_S),),
+    )
+    assert not differences_from_offline(recorded, offline), figures
+    live_fluxes = flux_rows(recorded)
+    assert len(live_fluxes) == len(offline_fluxes), figures
+    np.testing.assert_allclose(live_fluxes, offline_fluxes, rtol=0, atol=1e-9)
 
 
 @pytest.mark.long

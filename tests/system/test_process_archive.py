@@ -22,7 +22,7 @@ from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.config import fusion_config_from_files
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS
 from wind_comp.archive import BAG_COLUMN, COMBINED_TABLE, MARKER_SUFFIX, STATE_DIRECTORY
-from wind_comp.bag_processing import process_bag, products_csv_path
+from wind_comp.bag_processing import ISO_TIME_COLUMNS, process_bag, products_csv_path
 from wind_comp.config import compensator_config_from_files
 from wind_comp.process_archive import EXIT_FAILED_BAGS, main
 
@@ -224,6 +224,8 @@ def test_combined_table_holds_every_product_of_every_bag(archive_runs):
         for row, csv_row in zip(bag_rows, expected, strict=True):
             assert row["namespace"] == "/"
             for name, text in csv_row.items():
+                if name in ISO_TIME_COLUMNS:
+                    continue
                 value = float(text)
                 if math.isnan(value):
                     assert math.isnan(row[name])

@@ -5,11 +5,14 @@ products that match their CSV, and the same navigation as ``fuse_bag``."""
 from __future__ import annotations
 
 import csv
+import datetime
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+import xarray as xr
+from scipy.spatial.transform import Rotation
 
 from against_truth import Truth, assert_wind_within_budget
 from buoy_common.bag_io import BagReader
@@ -19,14 +22,15 @@ from buoy_common.contract import (
 from buoy_nav.bag_fusion import fuse_bag
 from buoy_nav.config import fusion_config_from_files
 from error_budget import ANEMOMETER
-from processed_bags import BAGS_DIR, BUOY_PARAMETERS, CASES, processed_bag
+from processed_bags import BAGS_DIR, BUOY_PARAMETERS, CASES, processed_bag, processed_netcdf
 from ros_messages import raw_stamp_ns
-from wind_comp.bag_processing import products_csv_path
+from wind_comp.bag_processing import ISO_TIME_COLUMNS, products_csv_path
 from wind_comp.compensation_messages import (
     STATS_FIELDS,
     stats_values,
 )
 from wind_comp.config import compensator_config_from_files
+from wind_comp.netcdf_variables import product_time_name, product_variable_name
 
 COMPENSATOR = compensator_config_from_files([BUOY_PARAMETERS])
 NAV_TOPICS = ("/nav/odometry", "/nav/imu", "/nav/velocity", "/nav/fix")
@@ -127,8 +131,22 @@ def test_corrected_wind_matches_the_truth_within_the_error_budget(runs, name):
 
 
 def read_products_csv(path: Path) -> list[dict[str, float]]:
+    """The rows of a products CSV as numbers; the ISO 8601 bounds are checked against the
+    numeric ones and left out."""
+    rows = []
     with open(path, newline="") as stream:
-        return [{key: float(value) for key, value in row.items()} for row in csv.DictReader(stream)]
+        for row in csv.DictReader(stream):
+            numbers = {
+                key: float(value) for key, value in row.items() if key not in ISO_TIME_COLUMNS
+            }
+            for iso_column, seconds_column in zip(
+                ISO_TIME_COLUMNS, ("window_start_s", "window_end_s"), strict=True
+            ):
+                moment = datetime.datetime.fromisoformat(row[iso_column])
+                assert moment.tzinfo == datetime.UTC, row[iso_column]
+                assert abs(moment.timestamp() - numbers[seconds_column]) < 1e-3, row
+            rows.append(numbers)
+    return rows
 
 
 @pytest.mark.parametrize("name", CASES)
@@ -166,6 +184,63 @@ def test_csv_rows_are_the_published_products(runs, tmp_path_factory, name):
         end_ns = mean.header.stamp.sec * NANOSECONDS_PER_SECOND + mean.header.stamp.nanosec
         assert abs(end_ns * 1e-9 - row["window_end_s"]) < CSV_TOLERANCE
     assert seen == {topic: len(messages) for topic, messages in run.stats.items()}
+
+
+def _netcdf_reference_s(units: str) -> float:
+    """The epoch seconds of a CF time unit ``seconds since <ISO 8601 time>``."""
+    prefix = "seconds since "
+    assert units.startswith(prefix), units
+    return datetime.datetime.fromisoformat(units.removeprefix(prefix)).timestamp()
+
+
+@pytest.mark.parametrize("name", ["sea_state", "off_axis"])
+def test_netcdf_holds_the_bag_outputs_value_for_value(runs, tmp_path_factory, name):
+    run = runs[name]
+    path = processed_netcdf(tmp_path_factory, name)
+    with xr.open_dataset(path) as decoded:
+        # CF decoding gives the sensors' stamps back to within a nanosecond (xarray truncates
+        # the float seconds it decodes: 2.05 s comes back as 2.049999999 s)
+        decoded_ns = decoded["time"].values.astype("datetime64[ns]").astype(np.int64)
+        assert np.abs(decoded_ns - run.true_wind_ns).max() <= 1
+    with xr.open_dataset(path, decode_times=False) as dataset:
+        reference_s = _netcdf_reference_s(dataset["time"].attrs["units"])
+        for axis, variable in enumerate(("eastward_wind", "northward_wind", "upward_air_velocity")):
+            np.testing.assert_array_equal(dataset[variable].values, run.true_wind_enu_mps[:, axis])
+        valid = np.isfinite(run.true_wind_enu_mps).all(axis=1)
+        np.testing.assert_array_equal(dataset["wind_status"].values == 0, valid)
+        for stats_topic, stats in run.stats.items():
+            window_s = stats[0]["window_end_s"] - stats[0]["window_start_s"]
+            bounds = dataset[f"{product_time_name('wind', window_s)}_bounds"].values
+            np.testing.assert_allclose(
+                bounds + reference_s,
+                [[row["window_start_s"], row["window_end_s"]] for row in stats],
+                rtol=0,
+                atol=CSV_TOLERANCE,
+            )
+            for field in STATS_FIELDS:
+                if field in ("window_start_s", "window_end_s"):
+                    continue
+                values = dataset[product_variable_name("wind", window_s, field)].values
+                if field.endswith("sample_s"):
+                    values = values + reference_s
+                    np.testing.assert_allclose(
+                        values, [row[field] for row in stats], rtol=0, atol=CSV_TOLERANCE
+                    )
+                else:
+                    np.testing.assert_array_equal(
+                        values, [row[field] for row in stats], err_msg=f"{stats_topic} {field}"
+                    )
+        with BagReader(processed_bag(tmp_path_factory, name)) as reader:
+            fixes = [reader.decode(r) for r in reader.messages(["nav/fix"])]
+            odometry = [reader.decode(r) for r in reader.messages(["nav/odometry"])]
+        np.testing.assert_array_equal(dataset["latitude"].values, [m.latitude for m in fixes])
+        np.testing.assert_array_equal(dataset["longitude"].values, [m.longitude for m in fixes])
+        quaternions = [[q.x, q.y, q.z, q.w] for q in (m.pose.pose.orientation for m in odometry)]
+        yaw_pitch_roll = Rotation.from_quat(quaternions).as_euler("ZYX", degrees=True)
+        np.testing.assert_allclose(dataset["roll"].values, yaw_pitch_roll[:, 2], atol=1e-9)
+        np.testing.assert_allclose(dataset["pitch"].values, yaw_pitch_roll[:, 1], atol=1e-9)
+        heading_error = (dataset["heading"].values - (90.0 - yaw_pitch_roll[:, 0]) + 180) % 360
+        np.testing.assert_allclose(heading_error - 180, 0.0, atol=1e-9)
 
 
 def test_navigation_is_fuse_bags_byte_for_byte(tmp_path_factory, tmp_path):

@@ -10,10 +10,13 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+import xarray as xr
 from nav_msgs.msg import Odometry
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagReader, BagWriter
+from buoy_common.contract import QualityFlag
 from buoy_common.safe_output import OutputError
 from buoy_nav.bag_fusion import fuse_bag
 from buoy_nav.config import fusion_config_from_files
@@ -170,3 +173,54 @@ def test_an_interrupted_run_keeps_the_old_output_and_leaves_no_partial_one(tmp_p
         time.sleep(0.05)
     assert leftovers(tmp_path) == []
     assert contents(tmp_path) == before
+
+
+def test_an_existing_netcdf_file_is_replaced_only_with_overwrite(tmp_path, input_bag):
+    netcdf = tmp_path / "out.nc"
+    netcdf.write_text("someone's file")
+    completed = run_tool("process_bag", input_bag, tmp_path / "out", "--netcdf", netcdf)
+    assert completed.returncode == 2, completed.stderr
+    message = completed.stderr.strip()
+    assert message.startswith("process_bag: ") and "--overwrite" in message, message
+    assert netcdf.read_text() == "someone's file"
+    assert not (tmp_path / "out").exists()
+    completed = run_tool(
+        "process_bag", input_bag, tmp_path / "out", "--netcdf", netcdf, "--overwrite"
+    )
+    assert completed.returncode == 0, completed.stderr
+    with xr.open_dataset(netcdf) as dataset:
+        assert dataset["eastward_wind"].size > 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "in",
+        "out",
+        "out.nc",
+        "out_wind_fluxes.csv",
+        "out_wind_products.csv",
+    ]
+
+
+def test_all_invalid_wind_still_gives_the_navigation_and_says_why(tmp_path, input_bag):
+    wrong_frame = tmp_path / "wrong_frame.yaml"
+    wrong_frame.write_text(
+        "/**:\n  ros__parameters:\n    compensation:\n      anemometer_frame_id: sonic_link\n"
+    )
+    netcdf = tmp_path / "out.nc"
+    completed = run_tool(
+        "process_bag",
+        input_bag,
+        tmp_path / "out",
+        "--netcdf",
+        netcdf,
+        "--params-file",
+        wrong_frame,
+    )
+    assert completed.returncode == 4, completed.stderr
+    assert "most wind samples are invalid" in completed.stderr
+    assert "expected 'sonic_link'" in completed.stderr
+    with xr.open_dataset(netcdf) as dataset:
+        assert np.isnan(dataset["eastward_wind"].values).all()
+        meanings = dataset["wind_status"].attrs["flag_meanings"].split()
+        assert {meanings[code] for code in dataset["wind_status"].values} == {"invalid_wind"}
+        assert np.isfinite(dataset["latitude"].values).all() and dataset["latitude"].size > 0
+        flags = dataset["wind_1min_quality_flag"].values
+        assert (flags == QualityFlag.MISSING).all() and flags.size > 0

@@ -7,7 +7,8 @@ whole buoy can be put in a namespace with ``-r __ns:=/buoy1``.
 
 from __future__ import annotations
 
-from enum import StrEnum
+import datetime
+from enum import IntEnum, StrEnum
 
 # -- sensor topics (published by the simulator, a driver or a bag replay) -----------------------
 IMU_RAW_TOPIC = "imu/data_raw"
@@ -38,6 +39,7 @@ NAV_FIX_TOPIC = "nav/fix"
 WIND_TRUE_TOPIC = "wind/true"
 WIND_MEAN_PREFIX = "wind/mean_"
 WIND_STATS_PREFIX = "wind/stats_"
+WIND_FLUXES_PREFIX = "wind/fluxes_"
 CURRENT_TOPIC = "current/velocity"
 CURRENT_MEAN_PREFIX = "current/mean_"
 CURRENT_STATS_PREFIX = "current/stats_"
@@ -99,8 +101,8 @@ OUTPUT_MSGTYPES = {
     TF_TOPIC: TF_MSGTYPE,
 }
 """Every fixed-name output topic (the wind and current products are named per window, see
-:func:`wind_mean_topic`, :func:`wind_stats_topic`, :func:`current_mean_topic` and
-:func:`current_stats_topic`)."""
+:func:`wind_mean_topic`, :func:`wind_stats_topic`, :func:`wind_fluxes_topic`,
+:func:`current_mean_topic` and :func:`current_stats_topic`)."""
 
 # -- frames ----------------------------------------------------------------------------------------
 MAP_FRAME = "map"
@@ -132,8 +134,18 @@ def wind_mean_topic(window_s: float) -> str:
 
 
 def wind_stats_topic(window_s: float) -> str:
-    """Topic of the wind statistics of windows of ``window_s`` seconds."""
+    """Topic of the wind statistics of windows of ``window_s`` seconds: a Float64MultiArray
+    whose ``layout.dim[i].label`` names ``data[i]`` (``wind_comp.compensation_messages.
+    STATS_FIELDS``). Fields are only appended: ``coverage`` and ``quality_flag``
+    (:class:`QualityFlag`) came after ``last_sample_s``."""
     return WIND_STATS_PREFIX + window_label(window_s)
+
+
+def wind_fluxes_topic(window_s: float) -> str:
+    """Topic of the eddy-covariance fluxes of windows of ``window_s`` seconds
+    (``wind/fluxes_30min``): a Float64MultiArray labelled like the statistics
+    (``wind_comp.compensation_messages.FLUX_FIELDS``)."""
+    return WIND_FLUXES_PREFIX + window_label(window_s)
 
 
 def current_mean_topic(window_s: float) -> str:
@@ -142,13 +154,26 @@ def current_mean_topic(window_s: float) -> str:
 
 
 def current_stats_topic(window_s: float) -> str:
-    """Topic of the current statistics of windows of ``window_s`` seconds."""
+    """Topic of the current statistics of windows of ``window_s`` seconds, laid out as the
+    wind's (``wind_comp.compensation_messages.CURRENT_STATS_FIELDS``)."""
     return CURRENT_STATS_PREFIX + window_label(window_s)
 
 
 def bag_topic(topic: str) -> str:
     """A relative topic as a bag stores it: fully qualified, like ``ros2 bag record``."""
     return topic if topic.startswith("/") else "/" + topic
+
+
+class QualityFlag(IntEnum):
+    """IOOS QARTOD flags (Manual for Real-Time Quality Control of In-situ Data, 2017): the
+    ``quality_flag`` of every averaged window on the statistics topics, in the products CSVs
+    and in the NetCDF files."""
+
+    GOOD = 1
+    NOT_EVALUATED = 2
+    SUSPECT = 3
+    BAD = 4
+    MISSING = 9
 
 
 # -- rejection reasons ---------------------------------------------------------------------------
@@ -231,3 +256,10 @@ def seconds_to_stamp(t_s: float) -> tuple[int, int]:
 def ns_to_stamp(t_ns: int) -> tuple[int, int]:
     """(sec, nanosec) of a time in integer nanoseconds."""
     return divmod(t_ns, NANOSECONDS_PER_SECOND)
+
+
+def seconds_to_iso8601(t_s: float) -> str:
+    """ISO 8601 UTC time of ``t_s`` (s since the epoch), millisecond resolution (truncated):
+    ``2026-01-01T00:00:00.050Z``. The time of the CSV products and of human-facing lines."""
+    moment = datetime.datetime.fromtimestamp(t_s, tz=datetime.UTC)
+    return moment.strftime("%Y-%m-%dT%H:%M:%S.") + f"{moment.microsecond // 1000:03d}Z"

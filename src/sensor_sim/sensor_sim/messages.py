@@ -15,7 +15,7 @@ import numpy as np
 from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import Imu, MagneticField, NavSatFix, NavSatStatus
+from sensor_msgs.msg import Imu, MagneticField, NavSatFix, NavSatStatus, Temperature
 
 from buoy_common.contract import (
     ANEMOMETER_FRAME,
@@ -196,6 +196,19 @@ def anemometer_messages(
         message = Vector3Stamped()
         _set_stamp(message.header, time_ns, ANEMOMETER_FRAME)
         _set_vector(message.vector, wind)
+        yield message
+
+
+def temperature_messages(
+    stamps_ns: list[int], temperature_degc: np.ndarray, noise_variance_k2: float
+) -> Iterator[Temperature]:
+    """``anemometer/temperature``: the sonic temperature (°C) of each anemometer record, with
+    its stamp, frame ``anemometer_link``; the variance is the noise's."""
+    for time_ns, value in zip(stamps_ns, temperature_degc, strict=True):
+        message = Temperature()
+        _set_stamp(message.header, time_ns, ANEMOMETER_FRAME)
+        message.temperature = float(value)
+        message.variance = float(noise_variance_k2)
         yield message
 
 

@@ -207,6 +207,13 @@ class WindConfig:
 
     turbulence_intensity = sigma_u / speed_mps (0 = steady wind); sigma_v and sigma_w follow from
     the ratios (IEC 61400-1 defaults 0.8 and 0.5); height_m sets the Kaimal length scales.
+
+    Fluxes: momentum_flux_correlation is the correlation of the along-wind and the vertical
+    turbulence (negative: momentum carried down, u'w' = corr sigma_u sigma_w). A finite
+    sonic_temperature_degc gives the anemometer a sonic temperature (anemometer/temperature):
+    that mean plus fluctuations of temperature_sigma_k whose correlation with the vertical wind is
+    heat_flux_correlation (w'T' = corr sigma_w sigma_T; positive: an unstable, heated surface
+    layer); NaN (the default): no temperature.
     """
 
     speed_mps: float = 5.0
@@ -217,6 +224,10 @@ class WindConfig:
     height_m: float = 4.0
     turbulence_components: int = 96
     turbulence_max_frequency_hz: float = 10.0
+    momentum_flux_correlation: float = 0.0
+    sonic_temperature_degc: float = math.nan
+    temperature_sigma_k: float = 0.1
+    heat_flux_correlation: float = 0.0
 
     def __post_init__(self) -> None:
         check_non_negative(
@@ -225,6 +236,15 @@ class WindConfig:
             "turbulence_intensity",
             "lateral_intensity_ratio",
             "vertical_intensity_ratio",
+            "temperature_sigma_k",
+        )
+        for key in ("momentum_flux_correlation", "heat_flux_correlation"):
+            check_field(self, key, -1.0 <= getattr(self, key) <= 1.0, "must be in [-1, 1]")
+        check_field(
+            self,
+            "sonic_temperature_degc",
+            math.isnan(self.sonic_temperature_degc) or -60.0 <= self.sonic_temperature_degc <= 60.0,
+            "must be NaN (no sonic temperature) or in [-60, 60]",
         )
         check_positive(self, "height_m", "turbulence_max_frequency_hz")
         check_field(self, "speed_mps", self.speed_mps <= 100.0, "must be <= 100")

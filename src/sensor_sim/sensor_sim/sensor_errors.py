@@ -155,12 +155,13 @@ class GnssErrorConfig:
 
 @dataclass(frozen=True)
 class AnemometerErrorConfig:
-    """Sonic anemometer white noise, m/s, 1-sigma per axis."""
+    """Sonic anemometer white noise, m/s, 1-sigma per axis, and of its sonic temperature, K."""
 
     noise_mps: float = 0.02
+    temperature_noise_k: float = 0.02
 
     def __post_init__(self) -> None:
-        check_non_negative(self, "noise_mps")
+        check_non_negative(self, "noise_mps", "temperature_noise_k")
 
 
 @dataclass(frozen=True)

@@ -54,6 +54,7 @@ ANEMOMETER_STREAM_KEY = 3
 # without it gives the same measurements of the other kinds.
 GNSS_TERTIARY_STREAM_KEY = 4
 DVL_STREAM_KEY = 5
+SONIC_TEMPERATURE_STREAM_KEY = 6
 
 _DEG = np.pi / 180.0
 # Keeps exp(-elapsed/tau) far from underflow inside one vectorised Gauss-Markov block.
@@ -395,6 +396,7 @@ class AnemometerSimulator:
         roll, pitch, yaw = _body_vector(mounting_rpy_deg, "anemometer mounting rpy")
         self.mounting = Rotation.from_euler("ZYX", [yaw, pitch, roll], degrees=True)
         self._rng = sensor_rng(seed, ANEMOMETER_STREAM_KEY)
+        self._temperature_rng = sensor_rng(seed, SONIC_TEMPERATURE_STREAM_KEY)
 
     def ideal(self, t_s: ArrayLike) -> np.ndarray:
         """Error-free air velocity relative to the sensor (N,3), anemometer axes, m/s."""
@@ -409,6 +411,15 @@ class AnemometerSimulator:
         """Measured air velocity relative to the sensor (N,3), anemometer axes, m/s."""
         ideal = self.ideal(t_s)
         return ideal + self._rng.standard_normal(ideal.shape) * self.config.noise_mps
+
+    def measure_temperature(self, t_s: ArrayLike) -> np.ndarray | None:
+        """Measured sonic temperature (N,), °C, with white noise; None when the scenario's air
+        has no sonic temperature."""
+        temperature = self.truth.wind.sonic_temperature_degc(_sample_times(t_s))
+        if temperature is None:
+            return None
+        noise = self._temperature_rng.standard_normal(temperature.shape)
+        return temperature + noise * self.config.temperature_noise_k
 
 
 class DvlSimulator:

@@ -25,6 +25,7 @@ from buoy_common.contract import (
     IMU_RAW_TOPIC,
     MAGNETOMETER_TOPIC,
     SENSOR_MSGTYPES,
+    SONIC_TEMPERATURE_TOPIC,
     TRUTH_CURRENT_TOPIC,
     TRUTH_MSGTYPES,
     TRUTH_ODOMETRY_TOPIC,
@@ -296,6 +297,8 @@ class AnemometerStream(SensorStream):
 
     def __post_init__(self):
         self.topics = {WIND_RAW_TOPIC: SENSOR_MSGTYPES[WIND_RAW_TOPIC]}
+        if self.truth.wind.temperature is not None:
+            self.topics[SONIC_TEMPERATURE_TOPIC] = SENSOR_MSGTYPES[SONIC_TEMPERATURE_TOPIC]
         self._simulator = AnemometerSimulator(
             self.truth,
             self.errors,
@@ -306,10 +309,18 @@ class AnemometerStream(SensorStream):
 
     def _messages(self, times_s, stamps_ns):
         wind = self._simulator.measure(times_s)
-        for stamp, message in zip(
-            stamps_ns, messages.anemometer_messages(stamps_ns, wind), strict=True
-        ):
+        temperature = self._simulator.measure_temperature(times_s)
+        winds = messages.anemometer_messages(stamps_ns, wind)
+        if temperature is None:
+            for stamp, message in zip(stamps_ns, winds, strict=True):
+                yield WIND_RAW_TOPIC, stamp, message
+            return
+        temperatures = messages.temperature_messages(
+            stamps_ns, temperature, self.errors.temperature_noise_k**2
+        )
+        for stamp, message, sonic in zip(stamps_ns, winds, temperatures, strict=True):
             yield WIND_RAW_TOPIC, stamp, message
+            yield SONIC_TEMPERATURE_TOPIC, stamp, sonic
 
 
 @dataclass

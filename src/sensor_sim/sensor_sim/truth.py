@@ -14,6 +14,7 @@ rate.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,9 +30,10 @@ from sensor_sim.geodesy import (
 )
 from sensor_sim.motion import BuoyMotion
 from sensor_sim.scenario import Scenario
-from sensor_sim.wind_field import WindField
+from sensor_sim.wind_field import SonicTemperatureConfig, WindField
 
 TURBULENCE_STREAM_KEY = 103
+TEMPERATURE_STREAM_KEY = 104
 # Turbulence is represented from 1/record length, but never from longer than 10 minutes (the
 # standard averaging window), down to the configured highest frequency.
 _LONGEST_TURBULENCE_PERIOD_FLOOR_S = 600.0
@@ -144,6 +146,15 @@ class TruthModel:
             1.0 / max(scenario.duration_s, _LONGEST_TURBULENCE_PERIOD_FLOOR_S),
             wind.turbulence_max_frequency_hz,
             np.random.default_rng([scenario.seed, TURBULENCE_STREAM_KEY]),
+            wind.momentum_flux_correlation,
+            None
+            if math.isnan(wind.sonic_temperature_degc)
+            else SonicTemperatureConfig(
+                wind.sonic_temperature_degc,
+                wind.temperature_sigma_k,
+                wind.heat_flux_correlation,
+                np.random.default_rng([scenario.seed, TEMPERATURE_STREAM_KEY]),
+            ),
         )
         self.origin_latitude_rad = np.deg2rad(scenario.origin_latitude_deg)
         self.origin_longitude_rad = np.deg2rad(scenario.origin_longitude_deg)

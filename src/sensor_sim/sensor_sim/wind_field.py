@@ -11,9 +11,18 @@ its left, vertical w up) whose amplitudes follow the Kaimal spectrum in the IEC 
 so it is evaluable at any time and identical for every node. Frequencies are log-spaced
 between 1/record length and the highest frequency asked for, each drawn inside its own bin;
 the components are scaled so that each axis carries exactly its variance sigma_k^2.
+
+Fluxes: the along-wind turbulence is mixed with the vertical one, u = sqrt(1 - r^2) u_0 +
+r (sigma_u / sigma_w) w, so that u'w' = r sigma_u sigma_w (expected; a record of finite length
+holds that within its sampling error) while u keeps its variance. A sonic temperature follows
+the same construction with its own sinusoids of the vertical's spectrum shape: T' =
+r_T (sigma_T / sigma_w) w + sqrt(1 - r_T^2) T_0, w'T' = r_T sigma_w sigma_T.
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -46,6 +55,17 @@ def meteorological_to_enu_unit(from_direction_deg: float) -> np.ndarray:
     return np.array([-np.sin(from_rad), -np.cos(from_rad), 0.0])
 
 
+@dataclass(frozen=True)
+class SonicTemperatureConfig:
+    """The sonic temperature of a wind field: mean °C, fluctuation 1σ K, its correlation with
+    the vertical wind, and the random stream of its own fluctuations."""
+
+    mean_degc: float
+    sigma_k: float
+    heat_flux_correlation: float
+    rng: np.random.Generator
+
+
 class WindField:
     """Mean wind plus optional Kaimal turbulence, evaluable at arbitrary times."""
 
@@ -61,6 +81,8 @@ class WindField:
         lowest_frequency_hz: float,
         highest_frequency_hz: float,
         rng: np.random.Generator,
+        momentum_flux_correlation: float = 0.0,
+        temperature: SonicTemperatureConfig | None = None,
     ):
         """Build the field.
 
@@ -68,8 +90,12 @@ class WindField:
         turbulence_intensity: sigma_u / speed (0 disables turbulence). lateral/vertical
         intensity ratios: sigma_v / sigma_u and sigma_w / sigma_u. height_m: anemometer height
         above the sea (sets the length scales). component_count: sinusoids per axis.
-        lowest/highest_frequency_hz: band represented.
+        lowest/highest_frequency_hz: band represented. momentum_flux_correlation: of u and w.
+        temperature: the sonic temperature, None for none.
         """
+        self.momentum_flux_correlation = float(momentum_flux_correlation)
+        self.temperature = temperature
+        self._temperature_sinusoids = None
         self.mean_enu_mps = speed_mps * meteorological_to_enu_unit(from_direction_deg)
         along = meteorological_to_enu_unit(from_direction_deg)
         left = np.array([-along[1], along[0], 0.0])
@@ -97,6 +123,20 @@ class WindField:
         self._angular_frequencies = 2.0 * np.pi * frequencies
         self._amplitudes = amplitudes
         self._phases = rng.uniform(0.0, 2.0 * np.pi, size=(3, component_count))
+        if temperature is not None:
+            # The temperature's own fluctuations: the vertical's spectrum shape, unit variance.
+            temperature_frequencies = edges[:-1] + temperature.rng.uniform(
+                size=component_count
+            ) * np.diff(edges)
+            variances = kaimal_spectrum(
+                temperature_frequencies, 1.0, length_scales[2], speed_mps
+            ) * np.diff(edges)
+            variances /= variances.sum()
+            self._temperature_sinusoids = (
+                2.0 * np.pi * temperature_frequencies,
+                np.sqrt(2.0 * variances),
+                temperature.rng.uniform(0.0, 2.0 * np.pi, size=component_count),
+            )
 
     def turbulence_uvw_mps(self, t_s: ArrayLike) -> np.ndarray:
         """Turbulent fluctuations (N,3): longitudinal, lateral (left), vertical, m/s."""
@@ -109,7 +149,34 @@ class WindField:
             for axis in range(3):
                 phase = np.outer(block, self._angular_frequencies[axis]) + self._phases[axis]
                 result[start : start + _CHUNK, axis] = np.cos(phase) @ self._amplitudes[axis]
+        correlation = self.momentum_flux_correlation
+        if correlation and self.sigmas_mps[2] > 0.0:
+            result[:, 0] = (
+                math.sqrt(1.0 - correlation**2) * result[:, 0]
+                + correlation * self.sigmas_mps[0] / self.sigmas_mps[2] * result[:, 2]
+            )
         return result
+
+    def sonic_temperature_degc(self, t_s: ArrayLike) -> np.ndarray | None:
+        """The air's sonic temperature (N,), °C, at times t_s; None without one."""
+        temperature = self.temperature
+        if temperature is None:
+            return None
+        t = np.atleast_1d(np.asarray(t_s, dtype=float)).ravel()
+        own = np.zeros(t.size)
+        if self._temperature_sinusoids is not None:
+            frequencies, amplitudes, phases = self._temperature_sinusoids
+            for start in range(0, t.size, _CHUNK):
+                block = t[start : start + _CHUNK]
+                own[start : start + _CHUNK] = (
+                    np.cos(np.outer(block, frequencies) + phases) @ amplitudes
+                )
+        correlation = temperature.heat_flux_correlation
+        fluctuation = math.sqrt(1.0 - correlation**2) * temperature.sigma_k * own
+        if correlation and self.sigmas_mps[2] > 0.0:
+            vertical = self.turbulence_uvw_mps(t)[:, 2]
+            fluctuation += correlation * temperature.sigma_k / self.sigmas_mps[2] * vertical
+        return temperature.mean_degc + fluctuation
 
     def evaluate_enu_mps(self, t_s: ArrayLike) -> np.ndarray:
         """True wind (N,3), ENU, m/s: air velocity over ground (the direction it moves toward)."""

@@ -86,3 +86,33 @@ def test_steady_wind_has_no_fluctuation():
     truth = TruthModel(load_scenario("wind_tunnel"))
     wind = truth.evaluate(np.linspace(0.0, 600.0, 101)).wind_enu_mps
     np.testing.assert_allclose(wind, [[-5.0, 0.0, 0.0]] * 101, atol=1e-12)
+
+
+def test_a_surface_layer_carries_the_momentum_and_heat_fluxes_asked_for():
+    scenario = load_scenario(
+        "open_ocean",
+        [
+            "duration_s=3600",
+            "wind.momentum_flux_correlation=-0.3",
+            "wind.sonic_temperature_degc=25.0",
+            "wind.temperature_sigma_k=0.1",
+            "wind.heat_flux_correlation=0.4",
+        ],
+    )
+    truth = TruthModel(scenario)
+    t = np.arange(0.0, 3600.0, 0.1)
+    uvw = truth.wind.turbulence_uvw_mps(t)
+    temperature = truth.wind.sonic_temperature_degc(t)
+    sigma_u, _, sigma_w = truth.wind.sigmas_mps
+    # the mixing keeps each component's variance and gives the covariances asked for
+    assert np.std(uvw[:, 0]) == pytest.approx(sigma_u, rel=0.05)
+    assert np.cov(uvw[:, 0], uvw[:, 2])[0, 1] == pytest.approx(-0.3 * sigma_u * sigma_w, rel=0.1)
+    assert np.std(temperature) == pytest.approx(0.1, rel=0.05)
+    assert np.mean(temperature) == pytest.approx(25.0, abs=0.01)
+    assert np.cov(uvw[:, 2], temperature)[0, 1] == pytest.approx(0.4 * sigma_w * 0.1, rel=0.1)
+    # without fluxes asked for, the wind is the one it was: no correlation, no temperature
+    plain = TruthModel(load_scenario("open_ocean", ["duration_s=3600"]))
+    plain_uvw = plain.wind.turbulence_uvw_mps(t)
+    np.testing.assert_array_equal(plain_uvw[:, 1:], uvw[:, 1:])
+    assert abs(np.corrcoef(plain_uvw[:, 0], plain_uvw[:, 2])[0, 1]) < 0.05
+    assert plain.wind.sonic_temperature_degc(t) is None

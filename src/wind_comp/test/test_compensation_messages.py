@@ -12,6 +12,7 @@ from sensor_msgs.msg import NavSatFix, NavSatStatus
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from buoy_common.contract import (
+    seconds_to_iso8601,
     seconds_to_stamp,
     stamp_to_seconds,
     window_label,
@@ -34,7 +35,7 @@ from wind_comp.compensation_messages import (
 from wind_comp.config import CompensatorConfig
 from wind_comp.pipeline import StampOrder, wind_pipeline
 from wind_comp.products import WindAverager
-from wind_comp.wind_echo_node import utc_text, wind_line
+from wind_comp.wind_echo_node import wind_line
 
 RNG = np.random.default_rng(11)
 CONFIG = CompensatorConfig(anemometer_position_body_m=(0, 0, 3), anemometer_rpy_deg=(0, 0, 0))
@@ -261,7 +262,7 @@ def test_window_labels():
 
 
 def test_echo_lines():
-    assert utc_text(1_767_225_600.05) == "2026-01-01T00:00:00.050Z"
+    assert seconds_to_iso8601(1_767_225_600.05) == "2026-01-01T00:00:00.050Z"
     line = wind_line(0.0, 1.0, 0.0, 0.0)  # blowing toward East: from the West
     assert "speed   1.00 m/s" in line and "from 270.0 deg" in line
     assert wind_line(0.0, math.nan, 0.0, 0.0).endswith("invalid")

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from wind_comp.flux_products import FluxAverager
 from wind_comp.fluxes import (
     SpikeTest,
     air_density_kg_m3,
     fit_plane,
-    fluxes_per_window,
     rotation_into_mean_wind,
     stationarity_percent,
     vickers_mahrt_spikes,
@@ -123,11 +123,15 @@ def test_planar_fit_refuses_windows_of_one_direction():
 def test_windows_are_aligned_to_their_length_and_count_invalid_samples():
     t, streamwise, temperature = turbulence(6, samples=int(2.5 * WINDOW_S * RATE_HZ))
     streamwise[100:400] = np.nan
-    windows = fluxes_per_window(t + 3 * WINDOW_S, streamwise, temperature, window_s=WINDOW_S)
+    averager = FluxAverager(WINDOW_S)
+    for stamp, value in zip(t + 3 * WINDOW_S, temperature, strict=True):
+        averager.add_temperature(stamp, value)
+    windows = averager.add_batch(t + 3 * WINDOW_S, streamwise) + averager.flush()
     assert [w.window_start_s for w in windows] == [5400.0, 7200.0, 9000.0]
     assert math.isclose(windows[0].invalid_share, 300 / (WINDOW_S * RATE_HZ))
+    assert windows[0].n_invalid == 300
     assert windows[1].invalid_share == 0.0
-    assert windows[2].samples == int(0.5 * WINDOW_S * RATE_HZ)
+    assert windows[2].n_valid == int(0.5 * WINDOW_S * RATE_HZ)
 
 
 def test_vickers_mahrt_counts_short_spikes_and_keeps_long_excursions():

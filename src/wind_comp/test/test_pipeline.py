@@ -2,6 +2,7 @@
 decide identically by construction, and the navigation conversion is the physics it claims."""
 
 import math
+from dataclasses import astuple
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from buoy_nav.rotations import rotate_by_quaternion_components
 from wind_comp.compensation_messages import FlowSample
 from wind_comp.compensator import SampleStatus
 from wind_comp.config import CompensatorConfig
+from wind_comp.flux_products import FluxProduct
 from wind_comp.pipeline import level_rate_components, wind_pipeline
 
 RNG = np.random.default_rng(31)
@@ -31,6 +33,7 @@ CONFIG = CompensatorConfig(
     anemometer_rpy_deg=MOUNTING_RPY_DEG,
     nav_history_s=10.0,
     product_windows_s=(10.0, 20.0),
+    flux_window_s=10.0,
 )
 
 
@@ -70,10 +73,14 @@ def anemometer_samples(t_s):
     ]
 
 
-def arrivals(nav_latency_s: float, wind_latency_s: float = 0.0):
+def arrivals(
+    nav_latency_s: float, wind_latency_s: float = 0.0, temperature_latency_s: float = 0.001
+):
     """Every message in arrival order: a fix first, then each solution's odometry and fix as
     the fusion publishes them ``nav_latency_s`` after their stamp, and anemometer samples
-    ``wind_latency_s`` after theirs, with a 10 s hole in the anemometer's record."""
+    ``wind_latency_s`` after theirs, with a 10 s hole in the anemometer's record; the sonic
+    temperature of each anemometer sample, with its stamp, ``temperature_latency_s`` after
+    it."""
     nav_t = np.arange(0.0, DURATION_S, 1.0 / NAV_RATE_HZ)
     wind_t = np.arange(1.0, DURATION_S - 1.0, 1.0 / WIND_RATE_HZ) + 0.0031
     wind_t = wind_t[(wind_t < ANEMOMETER_GAP_S[0]) | (wind_t > ANEMOMETER_GAP_S[1])]
@@ -85,10 +92,13 @@ def arrivals(nav_latency_s: float, wind_latency_s: float = 0.0):
         (t + wind_latency_s, 1, sample)
         for t, sample in zip(wind_t, anemometer_samples(wind_t), strict=True)
     ]
-    timeline.sort(key=lambda item: item[:2])
-    return [("fix", (0, LATITUDE_DEG))] + [
-        ("odometry", message) if kind == 0 else ("wind", message) for _, kind, message in timeline
+    timeline += [
+        (t + wind_latency_s + temperature_latency_s, 2, (t, 20.0 + 0.3 * math.sin(t)))
+        for t in wind_t
     ]
+    timeline.sort(key=lambda item: item[:2])
+    kinds = ("odometry", "wind", "temperature")
+    return [("fix", (0, LATITUDE_DEG))] + [(kinds[kind], message) for _, kind, message in timeline]
 
 
 def feed(messages, wind_per_stretch: int | None):
@@ -97,6 +107,7 @@ def feed(messages, wind_per_stretch: int | None):
     samples). Returns the statuses, true winds and products, in order."""
     pipeline = wind_pipeline(CONFIG)
     outputs = []
+    temperature_products = []
     waiting = 0
     for kind, values in messages:
         if kind == "fix":
@@ -106,6 +117,8 @@ def feed(messages, wind_per_stretch: int | None):
             pipeline.add_fix(0, LATITUDE_DEG)
             if wind_per_stretch is None:
                 outputs.append(pipeline.ready())
+        elif kind == "temperature":
+            temperature_products.extend(pipeline.add_temperature(*values))
         else:
             assert pipeline.add_sample(values) is None
             waiting += 1
@@ -116,7 +129,14 @@ def feed(messages, wind_per_stretch: int | None):
     status = np.concatenate([output.samples.status for output in outputs])
     true_wind = np.concatenate([output.samples.flow_enu_mps for output in outputs])
     products = [product for output in outputs for product in output.products]
-    return status, true_wind, products, pipeline
+    return status, true_wind, products + temperature_products, pipeline
+
+
+def in_order(products) -> list[tuple]:
+    """Products as tuples, by kind, window length and start: flux windows waiting for the
+    temperature may close after a later window of another kind."""
+    rows = [(type(p).__name__, p.window_s, p.window_start_s, *astuple(p)) for p in products]
+    return sorted(rows, key=lambda row: row[:3])
 
 
 @pytest.mark.parametrize(("nav_latency_s", "wind_latency_s"), [(NAV_LATENCY_S, 0.0), (0.0, 0.2)])
@@ -139,9 +159,19 @@ def test_live_and_offline_decide_identically_across_an_anemometer_gap(
         status, wind, products, offline = feed(messages, wind_per_stretch)
         np.testing.assert_array_equal(status, live_status)
         np.testing.assert_array_equal(wind, live_wind)
-        assert products == live_products
+        np.testing.assert_equal(in_order(products), in_order(live_products))
         assert offline.counts == live.counts
-    assert [p.window_s for p in live_products[:3]] == [10.0, 10.0, 20.0]  # in closing order
+    wind_products = [p for p in live_products if not isinstance(p, FluxProduct)]
+    assert [p.window_s for p in wind_products[:3]] == [10.0, 10.0, 20.0]  # in closing order
+    fluxes = sorted(
+        (p for p in live_products if isinstance(p, FluxProduct)), key=lambda p: p.window_start_s
+    )
+    # wind from 1 to 39 s, a gap from 15 to 25 s: the windows on both sides of it are partial
+    assert [p.window_start_s for p in fluxes] == [0.0, 10.0, 20.0, 30.0]
+    assert [p.coverage for p in fluxes] == [0.9, 0.5, 0.5, 0.9]
+    # every wind sample found its temperature; a steady wind carries no flux
+    assert all(p.n_temperature == p.n_valid + p.n_invalid for p in fluxes)
+    np.testing.assert_allclose([p.friction_velocity_mps for p in fluxes], 0.0, atol=1e-4)
 
 
 def test_both_arrival_orders_decide_alike():

@@ -7,6 +7,7 @@ import pytest
 from wind_comp.products import (
     CurrentAverager,
     ProductsError,
+    QualityFlag,
     WindAverager,
     meteorological_direction_deg,
     oceanographic_direction_deg,
@@ -181,6 +182,55 @@ def test_streaming_equals_batch():
         parts_products += in_parts.add_batch(stamps[part], wind[part])
     assert parts_products + in_parts.flush() == batch_products
     assert batch.n_rejected_stamps == streaming.n_rejected_stamps == in_parts.n_rejected_stamps == 3
+
+
+def test_coverage_counts_the_valid_samples_of_a_full_window_and_flags_the_short_ones():
+    stamps = np.concatenate(
+        (
+            regular_stamps(0.0, 60.0),  # full
+            regular_stamps(60.0, 70.0),  # then a 15 s gap: three quarters
+            regular_stamps(85.0, 120.0),
+            regular_stamps(120.0, 180.0),  # invalid after its first 15 s: a quarter
+            [180.0],  # a lone sample: the trailing window of a record cut short
+            regular_stamps(240.0, 300.0),  # all invalid
+        )
+    )
+    rng = np.random.default_rng(3)
+    wind = rng.normal(loc=[6.0, -2.0, 0.0], scale=1.0, size=(len(stamps), 3))
+    wind[(stamps >= 135.0) & (stamps < 180.0)] = np.nan
+    wind[stamps >= 240.0] = np.nan
+    averager = WindAverager(window_s=60.0)
+    products = averager.add_batch(stamps, wind) + averager.flush()
+    coverages = [product.coverage for product in products]
+    assert coverages == pytest.approx([1.0, 0.75, 0.25, 1 / 600, 0.0], abs=0.5e-4)  # to 1e-4
+    assert [product.quality_flag for product in products] == [
+        QualityFlag.GOOD,
+        QualityFlag.SUSPECT,
+        QualityFlag.BAD,
+        QualityFlag.BAD,
+        QualityFlag.MISSING,
+    ]
+    lone = products[3]
+    assert lone.n_valid == 1
+    # One sample has no spread: not a standard deviation of 0, which reads as a steady wind.
+    assert np.isnan([lone.std_u_mps, lone.std_v_mps, lone.std_w_mps]).all()
+
+
+def test_coverage_is_not_evaluated_before_the_sampling_interval_is_known():
+    averager = WindAverager(window_s=60.0)
+    averager.add_batch(regular_stamps(0.0, 0.5), np.tile([3.0, 0.0, 0.0], (5, 1)))
+    (product,) = averager.flush()
+    assert np.isnan(product.coverage)
+    assert product.quality_flag == QualityFlag.NOT_EVALUATED
+
+
+def test_coverage_follows_a_change_of_sampling_rate():
+    # 10 Hz for a minute, then 1 Hz: after the change the full 1 Hz windows are full.
+    stamps = np.concatenate((regular_stamps(0.0, 60.0), np.arange(60.0, 3600.0, 1.0)))
+    averager = WindAverager(window_s=600.0)
+    products = averager.add_batch(stamps, np.tile([3.0, 0.0, 0.0], (len(stamps), 1)))
+    assert products[-1].coverage == pytest.approx(1.0, abs=1e-12)
+    assert products[-1].quality_flag == QualityFlag.GOOD
 
 
 def test_bad_settings_raise():

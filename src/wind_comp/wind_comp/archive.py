@@ -253,9 +253,13 @@ def _process(job: BagJob, started: float) -> BagOutcome:
                 view=view,
                 write_in_background=False,
             )
-            # The products table is the wind's; a bag with a DVL also gets its current CSV.
+            # The products table is the wind's; a bag with a DVL also gets its current CSV,
+            # one with an anemometer the CSV of its fluxes.
             corrections = [c for c in (summary.wind, summary.current) if c is not None]
             outcome.outputs += [str(output), *(str(c.csv_path) for c in corrections)]
+            outcome.outputs += [
+                str(c.fluxes_csv_path) for c in corrections if c.fluxes_csv_path is not None
+            ]
             outcome.duration_s += summary.duration_s
             if summary.recovery is not None:
                 outcome.warnings.append(summary.recovery.describe(str(in_bag)))

@@ -52,6 +52,8 @@ from buoy_common.contract import (
     CURRENT_TOPIC,
     DVL_TOPIC,
     FLOAT64_ARRAY_MSGTYPE,
+    SONIC_TEMPERATURE_TOPIC,
+    TEMPERATURE_MSGTYPE,
     TWIST_COVARIANCE_MSGTYPE,
     VECTOR3_MSGTYPE,
     WIND_RAW_TOPIC,
@@ -60,6 +62,8 @@ from buoy_common.contract import (
     bag_topic,
     current_mean_topic,
     current_stats_topic,
+    seconds_to_iso8601,
+    wind_fluxes_topic,
     wind_mean_topic,
     wind_stats_topic,
 )
@@ -82,9 +86,14 @@ from wind_comp.compensation_messages import (
     anemometer_sample_cdr,
     dvl_sample,
     flows_cdr,
+    flux_message,
     product_messages,
+    temperature_sample,
 )
 from wind_comp.config import CompensatorConfig, CurrentConfig
+from wind_comp.flux_products import FluxProduct
+from wind_comp.netcdf_output import NetcdfContent, check_netcdf_output, write_netcdf
+from wind_comp.netcdf_variables import FlowSeries, NavigationSeries
 from wind_comp.pipeline import (
     CompensationOutput,
     CompensationPipeline,
@@ -94,6 +103,7 @@ from wind_comp.pipeline import (
 from wind_comp.products import CurrentProduct, WindProduct
 
 WIND_PRODUCTS_CSV_SUFFIX = "_wind_products.csv"
+WIND_FLUXES_CSV_SUFFIX = "_wind_fluxes.csv"
 CURRENT_PRODUCTS_CSV_SUFFIX = "_current_products.csv"
 PROGRESS_EVERY_MESSAGES = 2000
 # Sensor samples handed to the compensation at a time: enough to pay numpy's per-call cost
@@ -122,6 +132,11 @@ class CorrectionSummary:
     """Frames of the input messages rejected for their frame, with counts."""
     products: list = field(default_factory=list)
     csv_path: Path | None = None
+    fluxes: list = field(default_factory=list)
+    """The eddy-covariance fluxes (:class:`~wind_comp.flux_products.FluxProduct`), wind only."""
+    fluxes_csv_path: Path | None = None
+    rejected_temperatures: Counter = field(default_factory=Counter)
+    """``anemometer/temperature`` messages rejected, by reason."""
 
 
 @dataclass
@@ -176,19 +191,27 @@ class OfflineCorrection:
         product_topics,
         read_record,
         expected_frame_id: str,
+        keep_series: bool = False,
+        temperature_topic: str | None = None,
     ):
         """pipeline: the node's pipeline; output_topic: one vector per sample; product_topics:
         (mean topic, statistics topic) of a window length, s; read_record: a sensor record and
-        the frame expected of it as (sample, header sec, header nanosec)."""
+        the frame expected of it as (sample, header sec, header nanosec); keep_series: keep the
+        corrected samples (:attr:`series`) for the NetCDF file; temperature_topic: the stored
+        ``anemometer/temperature`` whose records go to the fluxes (None: no temperature)."""
         self.pipeline = pipeline
         self.writer = writer
         self.rejected: Counter[str] = Counter()
         self.wrong_frames: Counter[str] = Counter()
         self._expected_frame_id = expected_frame_id
         self.products: list = []
+        self.fluxes: list[FluxProduct] = []
+        self.temperature_topic = temperature_topic
+        self.rejected_temperatures: Counter[str] = Counter()
         self._output_topic = bag_topic(output_topic)
         self._product_topics = product_topics
         self._read_record = read_record
+        self.series = FlowSeries(pipeline.sensor.reason) if keep_series else None
         self._stamps: deque[tuple[int, int]] = deque()
         self._samples_waiting = 0
 
@@ -223,17 +246,28 @@ class OfflineCorrection:
             self._samples_waiting = 0
             self._write(self.pipeline.ready(), message.log_time_ns)
 
+    def add_temperature(self, reader: BagReader, message: BagMessage) -> None:
+        """One ``anemometer/temperature`` record, for the fluxes."""
+        sample = temperature_sample(reader.decode(message), self._expected_frame_id)
+        if isinstance(sample, str):
+            self.rejected_temperatures[sample] += 1
+            return
+        self._write_products(self.pipeline.add_temperature(*sample), message.log_time_ns)
+
     def finish(self, log_time_ns: int) -> None:
         """End of the data: every sample decided and written, partial windows closed."""
         self._write(self.pipeline.flush(), log_time_ns)
 
-    def summary(self, csv_path: Path) -> CorrectionSummary:
+    def summary(self, csv_path: Path, fluxes_csv_path: Path | None = None) -> CorrectionSummary:
         return CorrectionSummary(
             status_counts=self.pipeline.status_counts(),
             rejected_messages=self.rejected,
             wrong_frames=self.wrong_frames,
             products=self.products,
             csv_path=csv_path,
+            fluxes=self.fluxes,
+            fluxes_csv_path=fluxes_csv_path,
+            rejected_temperatures=self.rejected_temperatures,
         )
 
     def _write(self, output: CompensationOutput, log_time_ns: int) -> None:
@@ -242,8 +276,22 @@ class OfflineCorrection:
         nanosecs = np.array([nanosec for _, nanosec in stamps], dtype=np.int64)
         for raw in flows_cdr(secs, nanosecs, output.samples.flow_enu_mps):
             self.writer.write_raw(self._output_topic, VECTOR3_MSGTYPE, log_time_ns, raw)
+        if self.series is not None:
+            self.series.add(secs, nanosecs, output.samples)
+        self._write_products(output.products, log_time_ns)
+
+    def _write_products(self, products: list, log_time_ns: int) -> None:
         mean_topic, stats_topic = self._product_topics
-        for product in output.products:
+        for product in products:
+            if isinstance(product, FluxProduct):
+                self.fluxes.append(product)
+                self.writer.write(
+                    bag_topic(wind_fluxes_topic(product.window_s)),
+                    FLOAT64_ARRAY_MSGTYPE,
+                    log_time_ns,
+                    flux_message(Float64MultiArray, MultiArrayDimension, product),
+                )
+                continue
             self.products.append(product)
             mean, stats = product_messages(
                 Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
@@ -256,15 +304,27 @@ class OfflineCorrection:
             )
 
 
+ISO_TIME_COLUMNS = ("window_start_utc", "window_end_utc")
+"""The first columns of a products CSV: the window's bounds as ISO 8601 UTC times
+(``window_start_s`` and ``window_end_s`` as text a spreadsheet or pandas reads as time)."""
+
+
 def write_products_csv(products: list, product_type: type, path: Path) -> None:
-    """One row per closed averaging window (``WindProduct`` or ``CurrentProduct`` fields);
-    columns named with their units. The file appears only once complete."""
+    """One row per closed averaging window: the window's bounds in ISO 8601 UTC
+    (:data:`ISO_TIME_COLUMNS`), then the ``WindProduct`` or ``CurrentProduct`` fields, columns
+    named with their units. The file appears only once complete."""
     names = [f.name for f in fields(product_type)]
     with staged_file(path) as stream:
         writer = csv.writer(stream)
-        writer.writerow(names)
+        writer.writerow([*ISO_TIME_COLUMNS, *names])
         for product in products:
-            writer.writerow([_csv_value(getattr(product, name)) for name in names])
+            writer.writerow(
+                [
+                    seconds_to_iso8601(product.window_start_s),
+                    seconds_to_iso8601(product.window_end_s),
+                    *(_csv_value(getattr(product, name)) for name in names),
+                ]
+            )
 
 
 def _csv_value(value) -> str:
@@ -295,6 +355,9 @@ def process_bag(
     view: TopicView | None = None,
     smooth: bool = False,
     write_in_background: bool = True,
+    netcdf_path=None,
+    history: str = "",
+    netcdf_attributes: dict[str, str] | None = None,
 ) -> ProcessSummary:
     """Fuse ``in_bag`` and correct its wind and its DVL samples into ``out_bag`` (a new bag;
     replaced with ``overwrite``) and the products CSVs beside it, over the topics of ``view``'s
@@ -307,22 +370,35 @@ def process_bag(
 
     The bag is written by a process of its own, on a second core; with ``write_in_background``
     False, the same bag is written in this process, for a caller that keeps every core busy
-    with bags of its own (``process_archive``)."""
+    with bags of its own (``process_archive``).
+
+    With ``netcdf_path`` the corrected series, the products and the navigation are also
+    written there as NetCDF-CF (:mod:`wind_comp.netcdf_output`; ``history`` is the command
+    that asked for it, ``netcdf_attributes`` global attributes of the user's); an existing
+    file is replaced only with ``overwrite`` (OutputError before anything is read
+    otherwise)."""
     started = time.monotonic()
     csv_paths = {
         name: products_csv_path(out_bag, suffix)
         for name, suffix in (
             ("wind", WIND_PRODUCTS_CSV_SUFFIX),
             ("current", CURRENT_PRODUCTS_CSV_SUFFIX),
+            ("fluxes", WIND_FLUXES_CSV_SUFFIX),
         )
     }
-    check_outputs_apart_from_inputs([in_bag], [out_bag, *csv_paths.values()])
+    extra_outputs = [] if netcdf_path is None else [netcdf_path]
+    check_outputs_apart_from_inputs([in_bag], [out_bag, *csv_paths.values(), *extra_outputs])
+    if netcdf_path is not None:
+        check_netcdf_output(netcdf_path, overwrite)
+    keep = netcdf_path is not None
+    navigation = NavigationSeries() if keep else None
     view = view or TopicView()
     current_config = current_config or CurrentConfig()
     with BagReader(in_bag, view) as reader:
         sensors = sensor_topics_of(reader, fusion_config)
         stored_wind = _stored_sensor(reader, WIND_RAW_TOPIC, VECTOR3_MSGTYPE)
         stored_dvl = _stored_sensor(reader, DVL_TOPIC, TWIST_COVARIANCE_MSGTYPE)
+        stored_temperature = _stored_sensor(reader, SONIC_TEMPERATURE_TOPIC, TEMPERATURE_MSGTYPE)
         if stored_wind is None and stored_dvl is None:
             where = f" in namespace {view.label}" if view.namespace else ""
             raise BagError(
@@ -343,6 +419,8 @@ def process_bag(
                     (wind_mean_topic, wind_stats_topic),
                     _anemometer_record,
                     compensator_config.anemometer_frame_id,
+                    keep,
+                    stored_temperature,
                 )
             if stored_dvl is not None:
                 corrections[stored_dvl] = OfflineCorrection(
@@ -352,6 +430,7 @@ def process_bag(
                     (current_mean_topic, current_stats_topic),
                     _dvl_record,
                     current_config.dvl_frame_id,
+                    keep,
                 )
             return corrections
 
@@ -365,7 +444,7 @@ def process_bag(
                     writer = NamespacedWriter(bag_writer, view)
                     forward_pass(reader, fusion, sensors, relative_of, f"process_bag {in_bag}")
                     corrections = corrections_into(writer)
-                    smoothed_corrections(reader, fusion, corrections, writer, truth)
+                    smoothed_corrections(reader, fusion, corrections, writer, truth, navigation)
             finally:
                 fusion.close()
         else:
@@ -377,7 +456,7 @@ def process_bag(
                 fusion = OfflineFusion(fusion_config, writer)
                 corrections = corrections_into(writer)
                 forward_corrections(
-                    reader, fusion, corrections, writer, relative_of, truth, progress
+                    reader, fusion, corrections, writer, relative_of, truth, progress, navigation
                 )
         duration_s = reader.duration_s
     summaries = {}
@@ -387,8 +466,28 @@ def process_bag(
     ):
         if stored is None:
             continue
-        write_products_csv(corrections[stored].products, product_type, csv_paths[name])
-        summaries[name] = corrections[stored].summary(csv_paths[name])
+        correction = corrections[stored]
+        write_products_csv(correction.products, product_type, csv_paths[name])
+        if name == "wind":
+            write_products_csv(correction.fluxes, FluxProduct, csv_paths["fluxes"])
+            summaries[name] = correction.summary(csv_paths[name], csv_paths["fluxes"])
+        else:
+            summaries[name] = correction.summary(csv_paths[name])
+    if netcdf_path is not None:
+        wind = corrections.get(stored_wind)
+        current = corrections.get(stored_dvl)
+        content = NetcdfContent(
+            source=str(in_bag),
+            navigation=navigation,
+            wind=None if wind is None else wind.series,
+            current=None if current is None else current.series,
+            wind_products=[] if wind is None else wind.products,
+            fluxes=[] if wind is None else wind.fluxes,
+            current_products=[] if current is None else current.products,
+            history=history,
+            attributes=dict(netcdf_attributes or {}),
+        )
+        write_netcdf(netcdf_path, content, overwrite)
     return ProcessSummary(
         **summaries,
         topic_counts=writer.counts,
@@ -399,29 +498,48 @@ def process_bag(
     )
 
 
+def _temperature_topics(corrections: dict[str, OfflineCorrection]) -> list[str]:
+    return [c.temperature_topic for c in corrections.values() if c.temperature_topic]
+
+
+def _route(corrections: dict[str, OfflineCorrection], reader: BagReader, message) -> None:
+    """A sensor record to the correction that takes it: a flow sensor's sample, or the sonic
+    temperature of the wind's fluxes."""
+    correction = corrections.get(message.topic)
+    if correction is not None:
+        correction.add_sample(reader, message)
+        return
+    for correction in corrections.values():
+        if message.topic == correction.temperature_topic:
+            correction.add_temperature(reader, message)
+
+
 def smoothed_corrections(
     reader: BagReader,
     fusion: OfflineFusion,
     corrections: dict[str, OfflineCorrection],
     writer: NamespacedWriter,
     truth: list[str],
+    navigation: NavigationSeries | None = None,
 ) -> None:
     """The corrections of a smoothing run, after ``fusion``'s forward pass: the smoothed
-    solutions and the sensor samples in log-time order, written to ``writer``."""
+    solutions and the sensor samples in log-time order, written to ``writer`` (the solutions
+    also kept in ``navigation`` when given)."""
     fusion.writer = writer
     log_time_ns = reader.start_ns
-    for message, solution in merged_with_smoothed(reader, fusion, [*corrections, *truth]):
+    topics = [*corrections, *_temperature_topics(corrections), *truth]
+    for message, solution in merged_with_smoothed(reader, fusion, topics):
         if message is None:
             forward, smoothed, log_time_ns = solution
             fusion.write_smoothed_values(forward, smoothed, log_time_ns)
+            if navigation is not None:
+                navigation.add([smoothed])
             for correction in corrections.values():
                 correction.add_navigation([smoothed])
             continue
         log_time_ns = message.log_time_ns
         writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-        correction = corrections.get(message.topic)
-        if correction is not None:
-            correction.add_sample(reader, message)
+        _route(corrections, reader, message)
     for correction in corrections.values():
         correction.finish(log_time_ns)
 
@@ -434,26 +552,30 @@ def forward_corrections(
     relative_of: dict[str, str],
     truth: list[str],
     progress: BagProgress,
+    navigation: NavigationSeries | None = None,
 ) -> None:
     """Fusion and corrections in one pass over the bag: each solution to every correction as
-    it comes, each sensor sample to its correction."""
+    it comes (and to ``navigation`` when given), each sensor sample to its correction."""
     log_time_ns = reader.start_ns
-    for index, message in enumerate(reader.messages([*relative_of, *corrections, *truth])):
+    topics = [*relative_of, *corrections, *_temperature_topics(corrections), *truth]
+    for index, message in enumerate(reader.messages(topics)):
         log_time_ns = message.log_time_ns
         topic = relative_of.get(message.topic)
         if topic is not None:
             solutions = fusion.add_message(reader, topic, message)
             if solutions:
+                if navigation is not None:
+                    navigation.add(solutions)
                 for correction in corrections.values():
                     correction.add_navigation(solutions)
         else:
             writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-            correction = corrections.get(message.topic)
-            if correction is not None:
-                correction.add_sample(reader, message)
+            _route(corrections, reader, message)
         if index % PROGRESS_EVERY_MESSAGES == 0:
             progress.reached(log_time_ns)
     solutions = fusion.finish()
+    if navigation is not None:
+        navigation.add(solutions)
     for correction in corrections.values():
         correction.add_navigation(solutions)
         correction.finish(log_time_ns)

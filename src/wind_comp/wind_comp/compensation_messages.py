@@ -29,6 +29,8 @@ Outputs:
 - ``wind/stats_<window>`` (std_msgs/Float64MultiArray): the statistics of the same window,
   ``data[i]`` named by ``layout.dim[i].label`` (one dimension of size 1 per field), in the order
   of :data:`STATS_FIELDS`.
+- ``wind/fluxes_<window>`` (std_msgs/Float64MultiArray): the eddy-covariance fluxes of one
+  window, in the order of :data:`FLUX_FIELDS`.
 - ``current/velocity`` (geometry_msgs/Vector3Stamped, frame ``map``): the current, ENU, m/s
   (where the water flows TOWARD), with the DVL sample's own header stamp; NaN components when
   it could not be computed.
@@ -41,6 +43,7 @@ Windows are named by :func:`buoy_common.contract.window_label`: ``1min`` for 60 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import NamedTuple
 
@@ -54,6 +57,7 @@ from buoy_common.contract import (
     seconds_to_stamp,
     stamp_to_seconds,
 )
+from wind_comp.flux_products import FluxProduct
 from wind_comp.nav_interpolation import MIN_QUATERNION_NORM, quaternion_norm
 from wind_comp.products import CurrentProduct, WindProduct
 
@@ -71,11 +75,16 @@ STATS_FIELDS = (
     "window_end_s",
     "first_sample_s",
     "last_sample_s",
+    "coverage",
+    "quality_flag",
 )
 """Layout of ``wind/stats_<window>``: speeds m/s (horizontal), direction meteorological deg
 (blowing FROM, clockwise from true North), standard deviations of the ENU components m/s,
 sample counts, window bounds and first/last sample stamps in s since the epoch (a window closed
-at shutdown may end before ``window_end_s``). Conventions: :mod:`wind_comp.products`."""
+at shutdown may end before ``window_end_s``), the coverage (share of a full window's samples
+held valid) and the QARTOD quality flag (1 good, 2 not evaluated, 3 suspect, 4 bad, 9 missing).
+Conventions: :mod:`wind_comp.products`. New fields are only ever appended: a reader takes the
+fields by their labels."""
 
 CURRENT_STATS_FIELDS = (
     "speed_mps",
@@ -89,11 +98,22 @@ CURRENT_STATS_FIELDS = (
     "window_end_s",
     "first_sample_s",
     "last_sample_s",
+    "coverage",
+    "quality_flag",
 )
 """Layout of ``current/stats_<window>``: horizontal speed of the vector mean m/s, its direction
 oceanographic deg (flowing TOWARD, clockwise from true North), standard deviations of the ENU
 components m/s (over a window of wave periods, mostly the waves' orbital motion), sample counts,
-window bounds and first/last sample stamps as in :data:`STATS_FIELDS`."""
+window bounds and first/last sample stamps, coverage and quality flag as in
+:data:`STATS_FIELDS`."""
+
+
+FLUX_FIELDS = tuple(field.name for field in dataclasses.fields(FluxProduct))
+"""Layout of ``wind/fluxes_<window>``, the fields of
+:class:`~wind_comp.flux_products.FluxProduct` in order: window bounds and sample stamps s since
+the epoch, counts, mean speed m/s, tilt deg, u'w' and v'w' m²/s² (frame of the mean wind),
+u* m/s, stress N/m², air density kg/m³, w'Ts' K·m/s, Vickers–Mahrt spike counts, invalid share,
+Foken–Wichura non-stationarity %, coverage and QARTOD quality flag."""
 
 
 class MalformedMessageError(ValueError):
@@ -299,6 +319,29 @@ def product_messages(
     stats.layout.data_offset = 0
     stats.data = [float(getattr(product, name)) for name in fields]
     return mean, stats
+
+
+def flux_message(multi_array_class, dimension_class, product: FluxProduct):
+    """``wind/fluxes_<window>`` of one flux window, labelled in the order of
+    :data:`FLUX_FIELDS`."""
+    message = multi_array_class()
+    message.layout.dim = [dimension_class(label=name, size=1, stride=1) for name in FLUX_FIELDS]
+    message.layout.data_offset = 0
+    message.data = [float(getattr(product, name)) for name in FLUX_FIELDS]
+    return message
+
+
+def temperature_sample(
+    message, expected_frame_id: str = ANEMOMETER_FRAME
+) -> tuple[float, float] | str:
+    """``anemometer/temperature`` (sensor_msgs/Temperature, °C) as (stamp s, °C), or the
+    reason it is rejected (another frame than ``expected_frame_id``, a non-finite value)."""
+    if message.header.frame_id != expected_frame_id:
+        return Reason.WRONG_FRAME
+    value = float(message.temperature)
+    if not math.isfinite(value):
+        return Reason.NON_FINITE
+    return stamp_to_seconds(message.header.stamp), value
 
 
 def stats_values(stats_message) -> dict[str, float]:

@@ -10,6 +10,8 @@ Subscribes (reliable, deep queue):
   rate (ω_nb = ω_ib − R_nb^T·ω_ie). Until the first fix the rate is used as received: at a 3 m
   lever arm that is an error below 3e-4 m/s of wind. The latest valid latitude is kept while
   the fix is lost.
+- ``anemometer/temperature`` (sensor_msgs/Temperature, °C, optional): the sonic temperature of
+  the fluxes (w'Ts', air density).
 
 Publishes:
 
@@ -24,10 +26,14 @@ Publishes:
   :data:`wind_comp.compensation_messages.STATS_FIELDS` (scalar_mean_speed_mps,
   vector_mean_speed_mps, vector_mean_direction_deg (meteorological, FROM), gust_mps, std_u_mps,
   std_v_mps, std_w_mps, n_valid, n_invalid, window_start_s, window_end_s, first_sample_s,
-  last_sample_s).
+  last_sample_s, coverage, quality_flag: the share of a full window's samples held valid and
+  its QARTOD flag, :mod:`wind_comp.products`).
   Windows come from ``compensation.product_windows_s`` (60 and 600 s by default; a window of
   other length W is named ``W s``, e.g. ``wind/mean_30s``). A window is published when the
   first sample of the next one is corrected, and the partial windows at shutdown.
+- ``wind/fluxes_30min`` (std_msgs/Float64MultiArray): the eddy-covariance fluxes of each
+  window of ``compensation.flux_window_s`` (:mod:`wind_comp.flux_products`), labelled in the
+  order of :data:`wind_comp.compensation_messages.FLUX_FIELDS`.
 - ``diagnostics``: samples in and out, valid and invalid by reason, navigation samples seen,
   input rates, processing latency, rejected messages by reason.
 
@@ -59,7 +65,7 @@ import time
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import NavSatFix
+from sensor_msgs.msg import NavSatFix, Temperature
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from buoy_common.base_node import (
@@ -72,9 +78,11 @@ from buoy_common.base_node import (
 from buoy_common.contract import (
     NAV_FIX_TOPIC,
     NAV_ODOMETRY_TOPIC,
+    SONIC_TEMPERATURE_TOPIC,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
     Reason,
+    wind_fluxes_topic,
     wind_mean_topic,
     wind_stats_topic,
 )
@@ -86,9 +94,11 @@ from wind_comp.compensation_messages import (
     fix_fields,
     fix_fields_cdr,
     flow_cdr,
+    flux_message,
     odometry_fields,
     odometry_fields_cdr,
     product_messages,
+    temperature_sample,
 )
 from wind_comp.compensator import SampleStatus
 from wind_comp.config import (
@@ -97,6 +107,7 @@ from wind_comp.config import (
     NAV_TIMEOUT_PARAMETER,
     CompensatorConfig,
 )
+from wind_comp.flux_products import FluxProduct
 from wind_comp.pipeline import (
     CompensationOutput,
     CompensationPipeline,
@@ -278,12 +289,16 @@ class CorrectionNode(FlushingNode):
             self._counters["samples_out"] += 1
             self._latencies_s.append(now_s - pending.arrival_s)
         for product in output.products:
-            mean_publisher, stats_publisher = self._product_publishers[product.window_s]
-            mean, stats = product_messages(
-                Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
-            )
-            mean_publisher.publish(mean)
-            stats_publisher.publish(stats)
+            self.publish_product(product)
+
+    def publish_product(self, product) -> None:
+        """One closed averaging window, on its mean and statistics topics."""
+        mean_publisher, stats_publisher = self._product_publishers[product.window_s]
+        mean, stats = product_messages(
+            Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
+        )
+        mean_publisher.publish(mean)
+        stats_publisher.publish(stats)
 
     def flush_held_back(self) -> list:
         """End of input: publish every pending sample and the partial product windows."""
@@ -342,6 +357,9 @@ class CorrectionNode(FlushingNode):
 
 
 class CompensationNode(CorrectionNode):
+    """The wind's :class:`CorrectionNode`, with the eddy-covariance fluxes of the corrected
+    wind and the sonic temperature (``anemometer/temperature``) on ``wind/fluxes_<window>``."""
+
     def __init__(self):
         super().__init__(
             COMPENSATION_NODE_NAME,
@@ -357,6 +375,40 @@ class CompensationNode(CorrectionNode):
             NAV_TIMEOUT_PARAMETER,
             WIND_NAV_TIMEOUT_S,
         )
+        self._flux_publishers = {
+            averager.window_s: self.create_publisher(
+                Float64MultiArray, wind_fluxes_topic(averager.window_s), DATA_QOS
+            )
+            for averager in self.pipeline.flux_averagers
+        }
+        self.create_subscription(
+            Temperature, SONIC_TEMPERATURE_TOPIC, self.on_temperature, DATA_QOS
+        )
+
+    def on_temperature(self, message) -> None:
+        self._counters["temperature_in"] += 1
+        sample = temperature_sample(message, self.expected_frame_id)
+        if isinstance(sample, str):
+            self.reject(SONIC_TEMPERATURE_TOPIC, sample)
+            return
+        for product in self.pipeline.add_temperature(*sample):
+            self.publish_product(product)
+
+    def publish_product(self, product) -> None:
+        if isinstance(product, FluxProduct):
+            self._flux_publishers[product.window_s].publish(
+                flux_message(Float64MultiArray, MultiArrayDimension, product)
+            )
+            return
+        super().publish_product(product)
+
+    def flush_held_back(self) -> list:
+        return [*super().flush_held_back(), *self._flux_publishers.values()]
+
+    def report(self):
+        level, text, values = super().report()
+        values["temperature_messages_in"] = self._counters["temperature_in"]
+        return level, text, values
 
     def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:
         parsed = anemometer_sample_cdr(raw, self.expected_frame_id)

@@ -21,6 +21,8 @@ from buoy_common.parameters import (
     load_parameter_files,
 )
 from wind_comp.compensator import FlowSensor
+from wind_comp.flux_products import DEFAULT_FLUX_WINDOW_S
+from wind_comp.fluxes import STANDARD_PRESSURE_PA, PlanarFit
 
 COMPENSATION_NODE_NAME = "compensation_node"
 """Node name whose parameter-file sections configure the compensation (live and offline)."""
@@ -71,6 +73,13 @@ class CompensatorConfig:
             itself inconsistent with its aiding, so this is how an untrustworthy navigation
             reaches the wind; the default lies between that and the 1σ a sound filter reports
             in the first second after its alignment (up to about 3°).
+        flux_window_s: averaging window of the eddy-covariance fluxes, s (30 min by default).
+        flux_planar_fit: the plane w̄ = b0 + b1·ū + b2·v̄ (b0 m/s, b1 and b2 dimensionless)
+            to rotate the wind with for the fluxes (planar fit, Wilczak et al. 2001, fitted to
+            the mean winds of many windows with :func:`wind_comp.fluxes.fit_plane`); all NaN
+            (the default): double rotation, window by window.
+        air_pressure_pa: air pressure for the air density of the stress, Pa (the standard
+            atmosphere by default: ±30 hPa of weather changes the stress by 3 %).
     """
 
     anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
@@ -82,6 +91,9 @@ class CompensatorConfig:
     gust_window_s: float = 3.0
     anemometer_frame_id: str = ANEMOMETER_FRAME
     max_attitude_sigma_deg: float = 4.0
+    flux_window_s: float = DEFAULT_FLUX_WINDOW_S
+    flux_planar_fit: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    air_pressure_pa: float = STANDARD_PRESSURE_PA
 
     def __post_init__(self):
         _check_and_coerce(
@@ -93,14 +105,35 @@ class CompensatorConfig:
                 "nav_history_s",
                 "gust_window_s",
                 "max_attitude_sigma_deg",
+                "flux_window_s",
+                "air_pressure_pa",
             ),
             "anemometer_frame_id",
         )
+        try:
+            plane = tuple(float(value) for value in self.flux_planar_fit)
+        except (TypeError, ValueError) as error:
+            raise ConfigError(
+                f"flux_planar_fit must be three numbers, got {self.flux_planar_fit!r}"
+            ) from error
+        finite = [math.isfinite(value) for value in plane]
+        if len(plane) != 3 or (any(finite) and not all(finite)):
+            raise ConfigError(
+                "flux_planar_fit must be three finite numbers (b0 m/s, b1, b2) or all NaN "
+                f"(double rotation), got {self.flux_planar_fit!r}"
+            )
+        object.__setattr__(self, "flux_planar_fit", plane)
         if self.gust_window_s >= min(self.product_windows_s):
             raise ConfigError(
                 f"gust_window_s ({self.gust_window_s}) must be shorter than every product window "
                 f"{self.product_windows_s}"
             )
+
+    def planar_fit(self) -> PlanarFit | None:
+        """The plane of :attr:`flux_planar_fit`; None for double rotation."""
+        if math.isnan(self.flux_planar_fit[0]):
+            return None
+        return PlanarFit(*self.flux_planar_fit)
 
     def flow_sensor(self) -> FlowSensor:
         """The anemometer as the correction sees it."""

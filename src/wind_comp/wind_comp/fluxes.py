@@ -1,6 +1,7 @@
 """Eddy-covariance fluxes of the motion-corrected wind, per averaging window.
 
-For each window (aligned to multiples of its length in sensor time, like the wind products):
+For each window (:mod:`wind_comp.flux_products` aligns them to multiples of their length in
+sensor time, like the wind products):
 
 1. Rotation into the mean wind. Double rotation (Kaimal and Finnigan 1994): a yaw about the
    vertical so that the mean cross-wind v̄ = 0, then a tilt about the new cross-wind axis so
@@ -291,34 +292,3 @@ def window_fluxes(
         stationarity_u_w_percent=stationarity_percent(rotated[:, 0], rotated[:, 2]),
         stationarity_w_ts_percent=stationarity_w_ts,
     )
-
-
-def fluxes_per_window(
-    time_s,
-    wind_mps,
-    sonic_temperature_degc=None,
-    window_s: float = 1800.0,
-    **options,
-) -> list[FluxWindow]:
-    """:func:`window_fluxes` of each window [k·W, (k+1)·W) of ``window_s`` that holds samples,
-    in time order; ``options`` as :func:`window_fluxes` takes them."""
-    if not (math.isfinite(window_s) and window_s > 0):
-        raise FluxError(f"window_s must be positive, got {window_s}")
-    t = np.asarray(time_s, dtype=float)
-    wind = np.asarray(wind_mps, dtype=float).reshape(-1, 3)
-    temperature = None if sonic_temperature_degc is None else np.asarray(sonic_temperature_degc)
-    indices = np.floor(t / window_s).astype(np.int64)
-    windows = []
-    for index in np.unique(indices):
-        members = indices == index
-        windows.append(
-            window_fluxes(
-                t[members],
-                wind[members],
-                None if temperature is None else temperature[members],
-                window_start_s=float(index * window_s),
-                window_end_s=float((index + 1) * window_s),
-                **options,
-            )
-        )
-    return windows

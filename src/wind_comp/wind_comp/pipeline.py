@@ -42,6 +42,7 @@ from buoy_nav.rotations import rotate_by_quaternion_components
 from wind_comp.compensation_messages import FlowSample
 from wind_comp.compensator import CorrectedBatch, FlowCompensator, FlowSensor, SampleStatus
 from wind_comp.config import CompensatorConfig, CurrentConfig
+from wind_comp.flux_products import FluxAverager, FluxProduct
 from wind_comp.products import CurrentAverager, WindAverager, WindowAverager
 
 
@@ -119,13 +120,16 @@ class CompensationPipeline:
         nav_history_s: float,
         max_attitude_sigma_deg: float,
         averagers: list[WindowAverager],
+        flux_averagers: list[FluxAverager] = (),
     ):
         """sensor, max_nav_gap_s, nav_history_s: as :class:`FlowCompensator` takes them;
         max_attitude_sigma_deg: navigation whose attitude 1σ exceeds it corrects no sample,
-        deg; averagers: one per product window, fed the corrected samples."""
+        deg; averagers: one per product window, fed the corrected samples; flux_averagers:
+        the eddy-covariance fluxes of the corrected samples and the sonic temperature."""
         self.sensor = sensor
         self.compensator = FlowCompensator(sensor, max_nav_gap_s, nav_history_s)
         self.averagers = averagers
+        self.flux_averagers = list(flux_averagers)
         self.latitude_deg = math.nan
         """Latitude of the latest valid ``nav/fix``, deg (NaN before the first)."""
         self._nav_order = StampOrder()
@@ -203,6 +207,14 @@ class CompensationPipeline:
         self._nav_order.advance(t_s)
         return None
 
+    def add_temperature(self, t_s: float, temperature_degc: float) -> list[FluxProduct]:
+        """One ``anemometer/temperature`` (stamp s, °C) for the fluxes; returns the flux
+        windows it lets close (:class:`~wind_comp.flux_products.FluxAverager`)."""
+        products = []
+        for averager in self.flux_averagers:
+            products += averager.add_temperature(t_s, temperature_degc)
+        return products
+
     def add_sample(self, sample: FlowSample) -> str | None:
         """One ``anemometer/wind`` or ``dvl/velocity``. Returns why it is rejected (the
         message's own ``rejection``, or a stamp not later than the previous one), None when
@@ -231,7 +243,7 @@ class CompensationPipeline:
         up) and every averaging window closed, partial ones included."""
         self._hand_over()
         output = self._output(self.compensator.flush())
-        for averager in self.averagers:
+        for averager in (*self.averagers, *self.flux_averagers):
             output.products.extend(averager.flush())
         return output
 
@@ -283,6 +295,9 @@ class CompensationPipeline:
         elif len(corrected):
             for averager in self.averagers:
                 products += averager.add_batch(corrected.t_s, corrected.flow_enu_mps)
+        if len(corrected):
+            for flux_averager in self.flux_averagers:
+                products += flux_averager.add_batch(corrected.t_s, corrected.flow_enu_mps)
         # A sample closes the windows it is the first of, in averager order: the windows
         # closed by one sample share their last sample.
         products.sort(key=lambda product: product.last_sample_s)
@@ -298,6 +313,7 @@ def wind_pipeline(config: CompensatorConfig) -> CompensationPipeline:
         config.nav_history_s,
         config.max_attitude_sigma_deg,
         [WindAverager(window_s, config.gust_window_s) for window_s in config.product_windows_s],
+        [FluxAverager(config.flux_window_s, config.planar_fit(), config.air_pressure_pa)],
     )
 
 

@@ -4,6 +4,7 @@ the nodes.
     process_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file compensation.yaml]
                 [--params-file current.yaml] [--overwrite] [--namespace NS]
                 [--remap FROM:=TO ...] [--smooth]
+                [--netcdf PATH [--netcdf-attribute NAME=VALUE ...]]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
 by ``compensation_node`` and ``current_node`` (:func:`wind_comp.bag_processing.process_bag`):
@@ -11,16 +12,24 @@ every ``anemometer/wind`` sample yields exactly one ``wind/true``, every ``dvl/v
 one ``current/velocity`` (NaN when they cannot be computed). The bag needs the fusion's topics
 and at least one of the two. The new bag holds ``nav/*``, ``wind/true``, ``current/velocity``,
 their products (``wind/mean_<window>``, ``wind/stats_<window>``, ``current/mean_<window>``,
-``current/stats_<window>``), the measured ``anemometer/wind`` and ``dvl/velocity`` and any truth
-topics; the products are also written to ``<OUT_BAG>_wind_products.csv`` and
-``<OUT_BAG>_current_products.csv``. With ``--smooth`` ``nav/*`` carry the fixed-interval
-smoother's solution, the wind and the current are computed with the smoothed attitude and
-velocity, and the forward filter's odometry is kept as ``nav/forward/odometry`` (the bag is read
-twice; temporary records beside OUT_BAG, about 0.35 GB per hour of 100 Hz data). Parameters come
-from the same YAML files the nodes take. Namespaces and remappings as for ``fuse_bag``: a bag
-recorded under one namespace is read and written in it; a bag of several buoys gives one output
-per namespace holding an anemometer or a DVL (``OUT_BAG/buoy1`` and its CSVs
-``OUT_BAG/buoy1_wind_products.csv``, ...).
+``current/stats_<window>``), the eddy-covariance fluxes of the wind (``wind/fluxes_<window>``,
+with the sonic temperature of ``anemometer/temperature`` when the bag has it), the measured
+``anemometer/wind``, ``anemometer/temperature`` and ``dvl/velocity`` and any truth topics; the
+products are also written to ``<OUT_BAG>_wind_products.csv``,
+``<OUT_BAG>_current_products.csv`` and ``<OUT_BAG>_wind_fluxes.csv`` (each window with its
+ISO 8601 bounds, coverage and QARTOD quality flag). With ``--netcdf PATH`` the corrected
+series, the products, the fluxes, the navigation and their quality flags are also written to
+PATH as NetCDF-CF (CF-1.10, ACDD-1.3; :mod:`wind_comp.netcdf_output`), with the global
+attributes given as ``--netcdf-attribute NAME=VALUE`` (``creator_name``, ``institution``,
+``license``, ...); an existing PATH is replaced only with ``--overwrite``. For a bag of several
+buoys each namespace gets its own file, named after it (``out.nc`` → ``out_buoy1.nc``).
+With ``--smooth`` ``nav/*`` carry the fixed-interval smoother's solution, the wind and the
+current are computed with the smoothed attitude and velocity, and the forward filter's odometry
+is kept as ``nav/forward/odometry`` (the bag is read twice; temporary records beside OUT_BAG,
+about 0.35 GB per hour of 100 Hz data). Parameters come from the same YAML files the nodes take.
+Namespaces and remappings as for ``fuse_bag``: a bag recorded under one namespace is read and
+written in it; a bag of several buoys gives one output per namespace holding an anemometer or a
+DVL (``OUT_BAG/buoy1`` and its CSVs ``OUT_BAG/buoy1_wind_products.csv``, ...).
 
 All outputs are written under temporary names beside them and appear only when complete; they
 may not be, contain or lie inside IN_BAG. It prints the extrinsics it used first.
@@ -35,11 +44,19 @@ wrong frame); 130 interrupted (SIGINT or SIGTERM), nothing left under OUT_BAG.
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
+from pathlib import Path
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
 from buoy_common.cli import interruptible
-from buoy_common.contract import DVL_TOPIC, WIND_RAW_TOPIC, seconds_to_stamp, window_label
+from buoy_common.contract import (
+    DVL_TOPIC,
+    SONIC_TEMPERATURE_TOPIC,
+    WIND_RAW_TOPIC,
+    seconds_to_iso8601,
+    window_label,
+)
 from buoy_common.extrinsics import describe_shared_fields
 from buoy_common.namespaces import (
     NamespaceError,
@@ -58,7 +75,7 @@ from wind_comp.config import (
     current_config_from_files,
 )
 from wind_comp.pipeline import mostly_invalid_warning, wrong_frame_message
-from wind_comp.products import CurrentProduct, WindProduct
+from wind_comp.products import CurrentProduct, QualityFlag, WindProduct
 
 MOSTLY_INVALID_EXIT_CODE = 4
 """Exit code of a run that completed but whose wind or DVL samples came out mostly invalid."""
@@ -85,11 +102,43 @@ def parse_arguments(argv):
         help="correct the wind and the current with the fixed-interval smoother's navigation "
         "(nav/*); the forward filter's odometry goes to nav/forward/odometry",
     )
+    parser.add_argument(
+        "--netcdf",
+        metavar="PATH",
+        help="also write the corrected series, products, navigation and quality flags as "
+        "NetCDF-CF (CF-1.10, ACDD-1.3) to PATH",
+    )
+    parser.add_argument(
+        "--netcdf-attribute",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        type=_attribute,
+        help="a global attribute of the NetCDF file (repeatable), such as creator_name=..., "
+        "institution=..., license=..., project=...",
+    )
     add_namespace_arguments(parser)
     return parser.parse_args(argv)
 
 
-def print_summary(summary: ProcessSummary, out_bag: str) -> None:
+def _attribute(text: str) -> tuple[str, str]:
+    name, separator, value = text.partition("=")
+    if not separator or not name.strip().isidentifier():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    return name.strip(), value
+
+
+def netcdf_output_for(netcdf_path: str, view, several: bool) -> Path:
+    """The NetCDF file of ``view``: ``netcdf_path`` for a single buoy, else named after the
+    namespace beside it (``out.nc`` → ``out_buoy1.nc``, ``out_fleet_buoy2.nc``)."""
+    path = Path(netcdf_path)
+    if not several:
+        return path
+    name = "_".join(view.namespace.strip("/").split("/")) if view.namespace else "root"
+    return path.with_name(f"{path.stem}_{name}{path.suffix}")
+
+
+def print_summary(summary: ProcessSummary, out_bag: str, netcdf_path: Path | None) -> None:
     for line in summary.fusion_lines:
         print(line)
     written = [str(out_bag)]
@@ -110,13 +159,25 @@ def print_summary(summary: ProcessSummary, out_bag: str) -> None:
         for reason, n in sorted(correction.rejected_messages.items()):
             print(f"rejected message {topic}: {reason}: {n}")
         for product in correction.products:
-            if product.window_end_s - product.window_start_s < product.window_s:
-                continue
             print(
                 f"{window_label(product.window_s):>6s} {name} window from "
-                f"{seconds_to_stamp(product.window_start_s)[0]}: {_product_text(product)}"
+                f"{seconds_to_iso8601(product.window_start_s)}: {_product_text(product)}"
+            )
+        for reason, n in sorted(correction.rejected_temperatures.items()):
+            print(f"rejected message {SONIC_TEMPERATURE_TOPIC}: {reason}: {n}")
+        for flux in correction.fluxes:
+            print(
+                f"{window_label(flux.window_s):>6s} fluxes from "
+                f"{seconds_to_iso8601(flux.window_start_s)}: u* {flux.friction_velocity_mps:.3f} "
+                f"m/s, w'Ts' {flux.w_ts_k_mps:.4f} K m/s, tilt {flux.tilt_deg:.1f} deg, "
+                f"stationarity {flux.stationarity_u_w_percent:.0f} %, coverage "
+                f"{100 * flux.coverage:.0f} %, {QualityFlag(flux.quality_flag).name.lower()}"
             )
         written.append(str(correction.csv_path))
+        if correction.fluxes_csv_path is not None:
+            written.append(str(correction.fluxes_csv_path))
+    if netcdf_path is not None:
+        written.append(str(netcdf_path))
     for topic, count in sorted(summary.topic_counts.items()):
         print(f"{topic:22s} {count:8d}")
     print(f"wrote {', '.join(written)}")
@@ -127,7 +188,10 @@ def print_summary(summary: ProcessSummary, out_bag: str) -> None:
 
 
 def _product_text(product: WindProduct | CurrentProduct) -> str:
-    counts = f"{product.n_valid} valid / {product.n_invalid} invalid"
+    counts = (
+        f"{product.n_valid} valid / {product.n_invalid} invalid, coverage "
+        f"{100 * product.coverage:.0f} %, {QualityFlag(product.quality_flag).name.lower()}"
+    )
     if isinstance(product, CurrentProduct):
         return (
             f"{product.speed_mps:6.3f} m/s toward {product.direction_deg:6.1f} deg, "
@@ -142,7 +206,8 @@ def _product_text(product: WindProduct | CurrentProduct) -> str:
 
 @interruptible("process_bag")
 def main(argv=None) -> None:
-    arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
+    argv = sys.argv[1:] if argv is None else argv
+    arguments = parse_arguments(argv)
     truncated = mostly_invalid = False
     try:
         fusion_config = fusion_config_from_files(arguments.params_file)
@@ -160,6 +225,11 @@ def main(argv=None) -> None:
         views = views_of_bag(arguments, arguments.in_bag, WIND_RAW_TOPIC, DVL_TOPIC)
         for view in views:
             out_bag = output_for(arguments.out_bag, view, several=len(views) > 1)
+            netcdf_path = (
+                None
+                if arguments.netcdf is None
+                else netcdf_output_for(arguments.netcdf, view, several=len(views) > 1)
+            )
             if len(views) > 1:
                 print(f"namespace {view.label} -> {out_bag}")
             summary = process_bag(
@@ -171,8 +241,11 @@ def main(argv=None) -> None:
                 current_config,
                 view,
                 arguments.smooth,
+                netcdf_path=netcdf_path,
+                history=shlex.join(["process_bag", *argv]),
+                netcdf_attributes=dict(arguments.netcdf_attribute),
             )
-            print_summary(summary, out_bag)
+            print_summary(summary, out_bag, netcdf_path)
             for correction, topic, expected_frame_id, parameter, samples_name in (
                 (
                     summary.wind,

@@ -21,6 +21,19 @@ Conventions:
 - Invalid samples (any non-finite component) count in ``n_invalid`` and nowhere else. Samples
   whose stamp is not later than the previous one are ignored and counted in
   :attr:`WindowAverager.n_rejected_stamps`.
+- Coverage: the share of the samples a full window holds that the window holds valid,
+  n_valid / (window_s / Δt), at most 1, where Δt is the sensor's sampling interval: the median
+  of the intervals between the latest :data:`RATE_MEMORY_INTERVALS` stamps up to the window's
+  last sample (invalid samples included: a sensor that reports every sample, as the
+  corrections do, keeps its interval through a stretch of invalid output). A gap in the data,
+  a window cut by the start or the end of a record, or a stretch of invalid samples lowers
+  it; a window of a single sample after a full one has a coverage of one sample's share.
+- Quality flag: the IOOS QARTOD flag of the window, from its coverage (:func:`quality_flag`):
+  1 good (coverage ≥ :data:`GOOD_COVERAGE`), 3 suspect (≥ :data:`MIN_COVERAGE`), 4 bad (below,
+  with at least one valid sample), 9 missing (no valid sample), 2 not evaluated (the sampling
+  interval is not known yet: fewer than :data:`MIN_RATE_INTERVALS` intervals seen).
+- Standard deviations need two valid samples (NaN with fewer): one sample has no spread to
+  report, and a standard deviation of 0 would read as a steady wind.
 - The current has no gust and no scalar mean speed: its products are the vector mean, its speed
   and direction and the standard deviations, which over a window of several wave periods hold
   the waves' orbital motion the mean has averaged away.
@@ -33,8 +46,43 @@ from typing import NamedTuple
 
 import numpy as np
 
+from buoy_common.contract import QualityFlag
+
 _MIN_GUST_VALID_FRACTION = 0.5
 _STAMP_TOLERANCE_S = 1e-6
+
+GOOD_COVERAGE = 0.9
+"""A window holding at least this share of a full window's samples valid is good (flag 1)."""
+MIN_COVERAGE = 0.5
+"""Below this share a window is bad (flag 4); between it and :data:`GOOD_COVERAGE`, suspect
+(flag 3)."""
+RATE_MEMORY_INTERVALS = 1000
+"""Stamp intervals whose median is the sampling interval: 50 s at 20 Hz, long enough that a
+gap does not move the median, short enough to follow a sensor reconfigured to another rate."""
+MIN_RATE_INTERVALS = 10
+"""Fewer intervals than this since the first sample: the sampling interval is not known."""
+
+
+def window_coverage(n_valid: int, interval_s: float, window_s: float) -> float:
+    """The share of a full window of ``window_s`` (s) that ``n_valid`` samples of a sensor
+    sampling every ``interval_s`` (s, NaN when unknown) cover, at most 1, to 1e-4: epoch
+    stamps in float64 seconds resolve 0.24 µs, which moves the interval of a 10 Hz sensor by a
+    part in a million, and a full window must read 1, a window holding exactly 90 % 0.9."""
+    return round(min(n_valid * interval_s / window_s, 1.0), 4)
+
+
+def quality_flag(coverage: float, n_valid: int) -> QualityFlag:
+    """The flag of a window of ``coverage`` (share of a full window's samples held valid, NaN
+    when the sampling interval is unknown) with ``n_valid`` valid samples."""
+    if n_valid == 0:
+        return QualityFlag.MISSING
+    if math.isnan(coverage):
+        return QualityFlag.NOT_EVALUATED
+    if coverage >= GOOD_COVERAGE:
+        return QualityFlag.GOOD
+    if coverage >= MIN_COVERAGE:
+        return QualityFlag.SUSPECT
+    return QualityFlag.BAD
 
 
 class ProductsError(ValueError):
@@ -100,6 +148,12 @@ class WindProduct:
     std_u_mps: float
     std_v_mps: float
     std_w_mps: float
+    coverage: float
+    """Share of a full window's samples the window holds valid, in [0, 1]; NaN while the
+    sampling interval is unknown."""
+    quality_flag: int
+    """:class:`QualityFlag` of the window (1 good, 2 not evaluated, 3 suspect, 4 bad,
+    9 missing)."""
 
 
 class WindowAverager:
@@ -118,6 +172,9 @@ class WindowAverager:
         self._window_index: int | None = None
         self._stamps: list[float] = []
         self._vectors: list[np.ndarray] = []
+        # The latest stamps before the open window: with its own, they give the sampling
+        # interval of its coverage.
+        self._earlier_stamps = np.empty(0)
 
     def add(self, t_s: float, vector_enu_mps) -> list:
         """Add one sample (stamp s, ENU vector m/s, NaN when invalid); return completed windows."""
@@ -186,11 +243,26 @@ class WindowAverager:
         stamps = np.array(self._stamps)
         vectors = np.array(self._vectors)
         self._stamps, self._vectors = [], []
-        return self._summarise(self._window_index * self.window_s, stamps, vectors)
+        recent = np.concatenate((self._earlier_stamps, stamps))[-(RATE_MEMORY_INTERVALS + 1) :]
+        self._earlier_stamps = recent
+        intervals = np.diff(recent)
+        interval_s = (
+            float(np.median(intervals)) if intervals.size >= MIN_RATE_INTERVALS else math.nan
+        )
+        return self._summarise(self._window_index * self.window_s, stamps, vectors, interval_s)
 
-    def _summarise(self, window_start_s: float, stamps: np.ndarray, vectors: np.ndarray):
-        """The product of one window: its start (s), its (n,) stamps and (n, 3) vectors."""
+    def _summarise(
+        self, window_start_s: float, stamps: np.ndarray, vectors: np.ndarray, interval_s: float
+    ):
+        """The product of one window: its start (s), its (n,) stamps and (n, 3) vectors, and
+        the sensor's sampling interval (s, NaN when unknown)."""
         raise NotImplementedError
+
+    def _coverage(self, n_valid: int, interval_s: float) -> tuple[float, int]:
+        """Coverage and quality flag of a window of ``n_valid`` valid samples of a sensor
+        sampling every ``interval_s`` seconds."""
+        coverage = window_coverage(n_valid, interval_s, self.window_s)
+        return coverage, int(quality_flag(coverage, n_valid))
 
 
 class _WindowStatistics(NamedTuple):
@@ -201,15 +273,13 @@ class _WindowStatistics(NamedTuple):
 
 
 def _statistics(vectors: np.ndarray) -> _WindowStatistics:
-    """Valid rows (every component finite), their number, mean and population standard
-    deviation (NaN without valid rows)."""
+    """Valid rows (every component finite), their number, mean (NaN without valid rows) and
+    population standard deviation (NaN with fewer than two)."""
     valid = np.all(np.isfinite(vectors), axis=1)
     n_valid = int(np.count_nonzero(valid))
-    if n_valid:
-        return _WindowStatistics(
-            valid, n_valid, vectors[valid].mean(axis=0), vectors[valid].std(axis=0)
-        )
-    return _WindowStatistics(valid, 0, np.full(3, np.nan), np.full(3, np.nan))
+    mean = vectors[valid].mean(axis=0) if n_valid else np.full(3, np.nan)
+    std = vectors[valid].std(axis=0) if n_valid >= 2 else np.full(3, np.nan)
+    return _WindowStatistics(valid, n_valid, mean, std)
 
 
 class WindAverager(WindowAverager):
@@ -231,7 +301,9 @@ class WindAverager(WindowAverager):
         self._tail_speeds = np.empty(0)
         self._tail_valid = np.empty(0, dtype=bool)
 
-    def _summarise(self, window_start_s: float, stamps: np.ndarray, winds: np.ndarray):
+    def _summarise(
+        self, window_start_s: float, stamps: np.ndarray, winds: np.ndarray, interval_s: float
+    ):
         statistics = _statistics(winds)
         valid = statistics.valid
         speeds = np.hypot(winds[:, 0], winds[:, 1])
@@ -245,6 +317,7 @@ class WindAverager(WindowAverager):
 
         mean, std = statistics.mean, statistics.std
         scalar_mean_speed = float(speeds[valid].mean()) if statistics.n_valid else math.nan
+        coverage, flag = self._coverage(statistics.n_valid, interval_s)
         return WindProduct(
             window_s=self.window_s,
             window_start_s=window_start_s,
@@ -264,6 +337,8 @@ class WindAverager(WindowAverager):
             std_u_mps=float(std[0]),
             std_v_mps=float(std[1]),
             std_w_mps=float(std[2]),
+            coverage=coverage,
+            quality_flag=flag,
         )
 
     def _gust(self, stamps: np.ndarray, speeds: np.ndarray, valid: np.ndarray) -> float:
@@ -313,14 +388,21 @@ class CurrentProduct:
     std_u_mps: float
     std_v_mps: float
     std_w_mps: float
+    coverage: float
+    """As :attr:`WindProduct.coverage`."""
+    quality_flag: int
+    """As :attr:`WindProduct.quality_flag`."""
 
 
 class CurrentAverager(WindowAverager):
     """The current products (:class:`CurrentProduct`) of one window length."""
 
-    def _summarise(self, window_start_s: float, stamps: np.ndarray, currents: np.ndarray):
+    def _summarise(
+        self, window_start_s: float, stamps: np.ndarray, currents: np.ndarray, interval_s: float
+    ):
         statistics = _statistics(currents)
         mean, std = statistics.mean, statistics.std
+        coverage, flag = self._coverage(statistics.n_valid, interval_s)
         return CurrentProduct(
             window_s=self.window_s,
             window_start_s=window_start_s,
@@ -337,4 +419,6 @@ class CurrentAverager(WindowAverager):
             std_u_mps=float(std[0]),
             std_v_mps=float(std[1]),
             std_w_mps=float(std[2]),
+            coverage=coverage,
+            quality_flag=flag,
         )

@@ -16,7 +16,6 @@ the 1-minute products always print. SIGINT ends it with exit code 0.
 from __future__ import annotations
 
 import argparse
-import datetime
 import math
 import sys
 
@@ -28,6 +27,7 @@ from buoy_common.base_node import DATA_QOS, SuiteNode, run_node
 from buoy_common.contract import (
     WIND_TRUE_TOPIC,
     Reason,
+    seconds_to_iso8601,
     stamp_to_seconds,
     wind_mean_topic,
     wind_stats_topic,
@@ -40,21 +40,16 @@ from wind_comp.products import meteorological_direction_deg
 PROGRAM = "wind_echo"
 
 
-def utc_text(t_s: float) -> str:
-    """ISO 8601 UTC time of ``t_s`` (s since the epoch), millisecond resolution."""
-    moment = datetime.datetime.fromtimestamp(t_s, tz=datetime.UTC)
-    return moment.strftime("%Y-%m-%dT%H:%M:%S.") + f"{moment.microsecond // 1000:03d}Z"
-
-
 def wind_line(t_s: float, u_east_mps: float, v_north_mps: float, w_up_mps: float) -> str:
     """One printed line for an ENU wind vector (m/s) stamped ``t_s`` (s since the epoch)."""
     if not all(math.isfinite(value) for value in (u_east_mps, v_north_mps, w_up_mps)):
-        return f"{utc_text(t_s)}  invalid"
+        return f"{seconds_to_iso8601(t_s)}  invalid"
     speed = math.hypot(u_east_mps, v_north_mps)
     direction = meteorological_direction_deg(u_east_mps, v_north_mps)
     direction_text = "calm" if math.isnan(direction) else f"from {direction:5.1f} deg"
     return (
-        f"{utc_text(t_s)}  u {u_east_mps:6.2f}  v {v_north_mps:6.2f}  w {w_up_mps:6.2f} m/s  "
+        f"{seconds_to_iso8601(t_s)}  u {u_east_mps:6.2f}  v {v_north_mps:6.2f}  "
+        f"w {w_up_mps:6.2f} m/s  "
         f"speed {speed:6.2f} m/s  {direction_text}"
     )
 
@@ -62,7 +57,7 @@ def wind_line(t_s: float, u_east_mps: float, v_north_mps: float, w_up_mps: float
 def stats_line(values: dict[str, float]) -> str:
     """One printed line for a ``wind/stats_1min`` message given as {label: value}."""
     return (
-        f"{utc_text(values['window_end_s'])}  1-min stats: "
+        f"{seconds_to_iso8601(values['window_end_s'])}  1-min stats: "
         f"scalar mean {values['scalar_mean_speed_mps']:.2f} m/s, "
         f"vector mean {values['vector_mean_speed_mps']:.2f} m/s "
         f"from {values['vector_mean_direction_deg']:.1f} deg, gust {values['gust_mps']:.2f} m/s, "

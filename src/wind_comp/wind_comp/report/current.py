@@ -14,6 +14,7 @@ water velocity (the estimate's own part).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -26,6 +27,7 @@ from buoy_common.contract import (
     NANOSECONDS_PER_SECOND,
     TRUTH_CURRENT_TOPIC,
     TRUTH_WATER_VELOCITY_TOPIC,
+    QualityFlag,
 )
 from buoy_common.namespaces import TopicView
 from wind_comp.compensation_messages import stats_values
@@ -125,6 +127,9 @@ def _stored_products(reader: BagReader) -> list[CurrentProduct]:
                     std_u_mps=values["std_u_mps"],
                     std_v_mps=values["std_v_mps"],
                     std_w_mps=values["std_w_mps"],
+                    # Bags written before coverage was published carry neither: not evaluated.
+                    coverage=values.get("coverage", math.nan),
+                    quality_flag=int(values.get("quality_flag", QualityFlag.NOT_EVALUATED)),
                 )
             )
     return sorted(products, key=lambda product: (product.window_s, product.window_start_s))

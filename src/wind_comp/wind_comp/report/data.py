@@ -30,6 +30,7 @@ from buoy_common.contract import (
     WIND_RAW_TOPIC,
     WIND_STATS_PREFIX,
     WIND_TRUE_TOPIC,
+    QualityFlag,
     window_label,
 )
 from buoy_common.namespaces import TopicView
@@ -452,6 +453,9 @@ def _product_from_stats(values: dict[str, float], means: StampedVectors) -> Wind
         std_u_mps=values["std_u_mps"],
         std_v_mps=values["std_v_mps"],
         std_w_mps=values["std_w_mps"],
+        # Bags written before coverage was published carry neither: not evaluated.
+        coverage=values.get("coverage", math.nan),
+        quality_flag=int(values.get("quality_flag", QualityFlag.NOT_EVALUATED)),
     )
 
 

@@ -1,0 +1,243 @@
+"""The NetCDF-CF file: read back with xarray it holds what was given, to the bit; the IOOS
+compliance checker finds it CF-1.10 compliant and ACDD-1.3 complete; it never replaces a file
+it was not allowed to."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import xarray as xr
+from compliance_checker.runner import CheckSuite
+from scipy.spatial.transform import Rotation
+
+from buoy_common.contract import QualityFlag
+from buoy_common.safe_output import OutputError
+from wind_comp.compensator import CorrectedBatch, SampleStatus
+from wind_comp.config import CompensatorConfig
+from wind_comp.flux_products import FluxAverager
+from wind_comp.netcdf_output import NetcdfContent, write_netcdf
+from wind_comp.netcdf_variables import (
+    FlowSeries,
+    NavigationSeries,
+    product_time_name,
+    product_variable_name,
+)
+from wind_comp.products import WindAverager
+
+START_S = 1_767_225_600  # 2026-01-01T00:00:00Z
+WIND_RATE_HZ = 20
+NAV_RATE_HZ = 50
+DURATION_S = 150
+ROLL_DEG, PITCH_DEG, YAW_ENU_DEG = 5.0, -3.0, 30.0  # yaw from East: heading 60°
+VELOCITY_ENU_MPS = (1.0, 1.0, 0.1)  # toward North-East: course 45°, √2 m/s
+LATITUDE_DEG, LONGITUDE_DEG, ALTITUDE_M = 41.5, -70.7, 3.0
+RNG = np.random.default_rng(5)
+
+
+def wind_series(valid: bool = True) -> tuple[FlowSeries, np.ndarray, np.ndarray, np.ndarray]:
+    """A wind series of 150 s at 20 Hz: random wind, every 20th sample invalid (or all)."""
+    n = DURATION_S * WIND_RATE_HZ
+    nanosecs = (np.arange(n) % WIND_RATE_HZ) * (1_000_000_000 // WIND_RATE_HZ)
+    secs = START_S + np.arange(n) // WIND_RATE_HZ
+    flows = RNG.normal([6.0, -3.0, 0.0], 1.5, size=(n, 3))
+    status = np.zeros(n, dtype=np.int8)
+    status[::20] = SampleStatus.NAV_GAP
+    if not valid:
+        status[:] = SampleStatus.INVALID_MEASUREMENT
+    flows[status != 0] = np.nan
+    zeros = np.zeros((n, 3))
+    batch = CorrectedBatch(
+        secs + nanosecs * 1e-9, status, flows, zeros, zeros, zeros, np.full((n, 3), 5.0)
+    )
+    series = FlowSeries(CompensatorConfig().flow_sensor().reason)
+    # in two pieces, as process_bag hands them over
+    for part in (slice(0, 1000), slice(1000, n)):
+        series.add(
+            secs[part],
+            nanosecs[part],
+            CorrectedBatch(
+                batch.t_s[part],
+                status[part],
+                flows[part],
+                zeros[part],
+                zeros[part],
+                zeros[part],
+                zeros[part],
+            ),
+        )
+    return series, secs * 1_000_000_000 + nanosecs, flows, status
+
+
+def navigation() -> NavigationSeries:
+    quaternion = Rotation.from_euler("ZYX", [YAW_ENU_DEG, PITCH_DEG, ROLL_DEG], degrees=True)
+    series = NavigationSeries()
+    n = DURATION_S * NAV_RATE_HZ
+    series.add(
+        SimpleNamespace(
+            sec=START_S + i // NAV_RATE_HZ,
+            nanosec=(i % NAV_RATE_HZ) * (1_000_000_000 // NAV_RATE_HZ),
+            latitude_deg=LATITUDE_DEG,
+            longitude_deg=LONGITUDE_DEG,
+            altitude_m=ALTITUDE_M,
+            attitude_xyzw=tuple(quaternion.as_quat()),
+            velocity_enu_mps=VELOCITY_ENU_MPS,
+        )
+        for i in range(n)
+    )
+    return series
+
+
+def content(valid: bool = True) -> tuple[NetcdfContent, np.ndarray, np.ndarray, np.ndarray]:
+    series, stamps_ns, flows, status = wind_series(valid)
+    products = []
+    for window_s in (60.0, 600.0):
+        averager = WindAverager(window_s)
+        products += averager.add_batch(stamps_ns * 1e-9, flows) + averager.flush()
+    fluxes = FluxAverager(60.0)
+    for stamp_ns in stamps_ns:
+        fluxes.add_temperature(stamp_ns * 1e-9, 20.0 + RNG.normal(0.0, 0.2))
+    flux_products = fluxes.add_batch(stamps_ns * 1e-9, flows) + fluxes.flush()
+    return (
+        NetcdfContent(
+            source="bags/example",
+            navigation=navigation(),
+            wind=series,
+            wind_products=products,
+            fluxes=flux_products,
+            history="process_bag bags/example out --netcdf out.nc",
+            attributes={"license": "CC-BY-4.0"},
+        ),
+        stamps_ns,
+        flows,
+        status,
+    )
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    path = tmp_path_factory.mktemp("netcdf") / "example.nc"
+    made, stamps_ns, flows, status = content()
+    write_netcdf(path, made, overwrite=False)
+    return path, made, stamps_ns, flows, status
+
+
+def test_the_file_holds_the_series_the_products_and_the_navigation(written):
+    path, made, stamps_ns, flows, status = written
+    with xr.open_dataset(path, decode_times=False) as dataset:
+        np.testing.assert_array_equal(dataset["time"].values, (stamps_ns - START_S * 10**9) / 1e9)
+        assert dataset["time"].attrs["units"] == "seconds since 2026-01-01T00:00:00Z"
+        for axis, name in enumerate(("eastward_wind", "northward_wind", "upward_air_velocity")):
+            np.testing.assert_array_equal(dataset[name].values, flows[:, axis])
+        np.testing.assert_array_equal(dataset["wind_status"].values, status)
+        meanings = dataset["wind_status"].attrs["flag_meanings"].split()
+        assert meanings[SampleStatus.NAV_GAP] == "nav_gap"
+        assert meanings[SampleStatus.INVALID_MEASUREMENT] == "invalid_wind"
+        # a wind toward ESE, (6, -3): blowing from WNW, 296.6°
+        valid = status == 0
+        np.testing.assert_allclose(
+            dataset["wind_from_direction"].values[valid],
+            np.degrees(np.arctan2(-flows[valid, 0], -flows[valid, 1])) % 360,
+            atol=1e-12,
+        )
+        assert np.isnan(dataset["wind_speed"].values[~valid]).all()
+        np.testing.assert_allclose(dataset["roll"].values, ROLL_DEG, atol=1e-9)
+        np.testing.assert_allclose(dataset["pitch"].values, PITCH_DEG, atol=1e-9)
+        np.testing.assert_allclose(dataset["heading"].values, 90.0 - YAW_ENU_DEG, atol=1e-9)
+        np.testing.assert_allclose(dataset["speed_over_ground"].values, math.sqrt(2), atol=1e-12)
+        np.testing.assert_allclose(dataset["course_over_ground"].values, 45.0, atol=1e-9)
+        np.testing.assert_array_equal(dataset["latitude"].values, LATITUDE_DEG)
+        assert dataset.attrs["time_coverage_start"] == "2026-01-01T00:00:00.000Z"
+        assert dataset.attrs["time_coverage_resolution"] == "PT0.05S"
+        assert dataset.attrs["license"] == "CC-BY-4.0"
+        assert dataset.attrs["geospatial_lat_min"] == LATITUDE_DEG
+        for window_s in (60.0, 600.0):
+            products = [p for p in made.wind_products if p.window_s == window_s]
+            bounds = dataset[f"{product_time_name('wind', window_s)}_bounds"].values
+            np.testing.assert_array_equal(
+                bounds, [[p.window_start_s - START_S, p.window_end_s - START_S] for p in products]
+            )
+            for field in ("vector_mean_speed_mps", "gust_mps", "std_w_mps", "coverage"):
+                np.testing.assert_array_equal(
+                    dataset[product_variable_name("wind", window_s, field)].values,
+                    [getattr(p, field) for p in products],
+                )
+            flags = dataset[product_variable_name("wind", window_s, "quality_flag")].values
+            assert flags.tolist() == [p.quality_flag for p in products]
+        for field in ("friction_velocity_mps", "w_ts_k_mps", "stationarity_u_w_percent"):
+            np.testing.assert_array_equal(
+                dataset[product_variable_name("flux", 60.0, field)].values,
+                [getattr(p, field) for p in made.fluxes],
+            )
+        assert dataset["flux_1min_n_temperature"].values.tolist() == [1200, 1200, 600]
+    # Full 1-min windows hold 95 % of their samples valid; the trailing 30 s of the 150 s are
+    # a partial one, and the 10-min window a quarter full: flagged, not passed off as full.
+    one_minute = [p for p in made.wind_products if p.window_s == 60.0]
+    assert [p.quality_flag for p in one_minute] == [1, 1, 4]
+    assert [p.quality_flag for p in made.wind_products if p.window_s == 600.0] == [4]
+    with xr.open_dataset(path) as decoded:  # CF time decoding, as any reader does
+        assert decoded["time"].values[1] == np.datetime64("2026-01-01T00:00:00.050")
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # the checker's own, of its plugins
+def test_the_file_is_cf_compliant_and_acdd_complete(written):
+    path = written[0]
+    suite = CheckSuite()
+    suite.load_all_available_checkers()
+    results = suite.run_all(suite.load_dataset(str(path)), ["cf:1.10", "acdd:1.3"], [])
+
+    def failed(result) -> bool:
+        value = result.value
+        return value[0] < value[1] if isinstance(value, tuple) else not value
+
+    cf_results, cf_errors = results["cf:1.10"]
+    assert not cf_errors
+    assert [(r.name, r.msgs) for r in cf_results if failed(r)] == []
+    acdd_results, acdd_errors = results["acdd:1.3"]
+    assert not acdd_errors
+    high_failures = [r for r in acdd_results if r.weight == 3 and failed(r)]
+    # Every highly recommended global attribute is there, and every variable has a CF
+    # standard name but the bounds and the quantities that have none.
+    with xr.open_dataset(path) as dataset:
+        without = {
+            name
+            for name, variable in dataset.variables.items()
+            if "standard_name" not in variable.attrs
+        }
+    no_cf_name = ("_bounds", "_coverage", "_n_invalid", "_n_temperature", "_invalid_share")
+    no_cf_name += ("_tilt", "_u_w", "_v_w", "_w_ts", "_spikes_u", "_spikes_v", "_spikes_w")
+    no_cf_name += ("_spikes_ts", "_stationarity_u_w", "_stationarity_w_ts")
+    assert all(name.endswith(no_cf_name) for name in without), without
+    assert any(name.startswith("flux_1min_") for name in without)
+    assert all(r.msgs == ["standard_name"] for r in high_failures), high_failures
+    assert {r.name.split('"')[1] for r in high_failures} <= without
+
+
+def test_all_invalid_wind_still_gives_the_navigation_and_missing_windows(tmp_path):
+    made, _, _, _ = content(valid=False)
+    path = write_netcdf(tmp_path / "invalid.nc", made, overwrite=False)
+    with xr.open_dataset(path, decode_times=False) as dataset:
+        assert np.isnan(dataset["eastward_wind"].values).all()
+        assert (dataset["wind_status"].values == SampleStatus.INVALID_MEASUREMENT).all()
+        assert dataset["latitude"].size == DURATION_S * NAV_RATE_HZ
+        flags = dataset[product_variable_name("wind", 60.0, "quality_flag")].values
+        assert (flags == QualityFlag.MISSING).all()
+
+
+def test_an_existing_file_is_replaced_only_when_asked(tmp_path):
+    made, _, _, _ = content()
+    path = tmp_path / "out.nc"
+    path.write_text("someone's file")
+    with pytest.raises(OutputError, match="--overwrite"):
+        write_netcdf(path, made, overwrite=False)
+    assert path.read_text() == "someone's file"
+    write_netcdf(path, made, overwrite=True)
+    with xr.open_dataset(path) as dataset:
+        assert "eastward_wind" in dataset
+    directory = tmp_path / "a_directory.nc"
+    directory.mkdir()
+    with pytest.raises(OutputError, match="not a file"):
+        write_netcdf(directory, made, overwrite=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_directory.nc", "out.nc"]

@@ -1,0 +1,276 @@
+"""Eddy-covariance fluxes of the corrected wind per averaging window, as a stream: the flux
+products of ``compensation_node`` (``wind/fluxes_<window>``) and of ``process_bag``.
+
+Windows are aligned to multiples of their length in sensor time, as the wind products'
+(:mod:`wind_comp.products`); the fluxes of a window are :func:`wind_comp.fluxes.window_fluxes`
+of its corrected wind samples and, when ``anemometer/temperature`` is there, of the sonic
+temperature paired with each of them: the temperature sample nearest in stamp, within half the
+wind's sampling interval (a sonic reports both from one record, with one stamp), NaN where
+there is none.
+
+A window closes once the corrected wind has passed its end and, if sonic temperatures stamped
+inside it came, once the temperature has passed its end too (or the wind has passed it by
+:data:`TEMPERATURE_WAIT_S`, for a temperature stream that stopped). Both conditions are on
+stamps, not on arrival, so that the live node, which hands over every message at once, and
+``process_bag``, which hands over stretches of a few hundred, close the same windows on the same
+samples.
+
+Quality flag (IOOS QARTOD, :class:`buoy_common.contract.QualityFlag`): from the window's
+coverage as for the wind products, then lowered by the flux tests: suspect when the
+Foken–Wichura non-stationarity of u'w' exceeds :data:`STATIONARY_PERCENT` or spikes exceed
+:data:`MAX_SPIKE_SHARE` of the samples of a component, bad when the non-stationarity exceeds
+:data:`NON_STATIONARY_PERCENT` (Foken et al. 2004: classes 1–3 below 30 %, class 9 above 100 %).
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from buoy_common.contract import QualityFlag
+from wind_comp.fluxes import (
+    STANDARD_PRESSURE_PA,
+    FluxError,
+    PlanarFit,
+    window_fluxes,
+)
+from wind_comp.products import (
+    MIN_RATE_INTERVALS,
+    RATE_MEMORY_INTERVALS,
+    quality_flag,
+    window_coverage,
+)
+
+DEFAULT_FLUX_WINDOW_S = 1800.0
+"""Averaging window of the fluxes unless configured otherwise, s (30 min: long enough for the
+largest eddies of the marine surface layer, short enough to stay stationary)."""
+TEMPERATURE_WAIT_S = 10.0
+"""How far the wind may pass a window's end before the window closes without waiting for a
+temperature that has stopped coming, s."""
+STATIONARY_PERCENT = 30.0
+NON_STATIONARY_PERCENT = 100.0
+MAX_SPIKE_SHARE = 0.01
+
+
+@dataclass(frozen=True)
+class FluxProduct:
+    """Fluxes and quality control of one window (:class:`wind_comp.fluxes.FluxWindow`, with the
+    window's bookkeeping). Fluxes are in the frame of the mean wind: u along it, w up."""
+
+    window_s: float
+    window_start_s: float
+    window_end_s: float
+    first_sample_s: float
+    last_sample_s: float
+    n_valid: int
+    n_invalid: int
+    n_temperature: int
+    """Wind samples paired with a sonic temperature."""
+    mean_speed_mps: float
+    tilt_deg: float
+    u_w_m2_s2: float
+    v_w_m2_s2: float
+    friction_velocity_mps: float
+    stress_n_m2: float
+    air_density_kg_m3: float
+    w_ts_k_mps: float
+    spikes_u: int
+    spikes_v: int
+    spikes_w: int
+    spikes_ts: int
+    invalid_share: float
+    stationarity_u_w_percent: float
+    stationarity_w_ts_percent: float
+    coverage: float
+    quality_flag: int
+
+
+def flux_quality_flag(coverage: float, n_valid: int, fluxes) -> QualityFlag:
+    """The flag of a window of ``coverage`` and ``n_valid`` valid samples whose fluxes are
+    ``fluxes`` (:class:`wind_comp.fluxes.FluxWindow`)."""
+    flag = quality_flag(coverage, n_valid)
+    if flag == QualityFlag.MISSING or not math.isfinite(fluxes.friction_velocity_mps):
+        return QualityFlag.MISSING
+    stationarity = fluxes.stationarity_u_w_percent
+    if stationarity > NON_STATIONARY_PERCENT:
+        return QualityFlag.BAD
+    spikes = max(fluxes.spikes) / max(fluxes.samples, 1)
+    if flag == QualityFlag.GOOD and (
+        not stationarity <= STATIONARY_PERCENT or spikes > MAX_SPIKE_SHARE
+    ):
+        return QualityFlag.SUSPECT
+    return flag
+
+
+class FluxAverager:
+    """The flux products of one window length, from the corrected wind (ENU, m/s) and the sonic
+    temperature (°C), as they come."""
+
+    def __init__(
+        self,
+        window_s: float = DEFAULT_FLUX_WINDOW_S,
+        plane: PlanarFit | None = None,
+        pressure_pa: float = STANDARD_PRESSURE_PA,
+    ):
+        """Args:
+        window_s: window length, s.
+        plane: the planar fit to rotate with (Wilczak et al. 2001); None: double rotation.
+        pressure_pa: air pressure for the air density of the stress, Pa.
+        """
+        if not (math.isfinite(window_s) and window_s > 0):
+            raise FluxError(f"flux window_s must be positive, got {window_s}")
+        self.window_s = float(window_s)
+        self.plane = plane
+        self.pressure_pa = float(pressure_pa)
+        self.n_rejected_stamps = 0
+        self._stamps: list[float] = []
+        self._winds: list[np.ndarray] = []
+        self._temperature_stamps: list[float] = []
+        self._temperatures: list[float] = []
+        self._latest_wind_s = -math.inf
+        self._latest_temperature_s = -math.inf
+        self._interval_stamps = np.empty(0)
+
+    def add_batch(self, t_s, winds_enu_mps) -> list[FluxProduct]:
+        """(N,) stamps (s) and (N, 3) corrected winds (NaN when invalid), in output order;
+        returns the windows they close."""
+        stamps = np.asarray(t_s, dtype=float)
+        winds = np.asarray(winds_enu_mps, dtype=float).reshape(-1, 3)
+        closed = []
+        for t, wind in zip(stamps.tolist(), winds, strict=True):
+            if not (math.isfinite(t) and t > self._latest_wind_s):
+                self.n_rejected_stamps += 1
+                continue
+            closed += self._close_windows_before(t)
+            self._latest_wind_s = t
+            self._stamps.append(t)
+            self._winds.append(wind)
+        return closed
+
+    def add_temperature(self, t_s: float, temperature_degc: float) -> list[FluxProduct]:
+        """One sonic temperature (stamp s, °C; ignored unless later than the previous one);
+        returns the windows it lets close."""
+        if not (math.isfinite(t_s) and t_s > self._latest_temperature_s):
+            return []
+        self._latest_temperature_s = t_s
+        self._temperature_stamps.append(t_s)
+        self._temperatures.append(float(temperature_degc))
+        return self._close_windows_before(self._latest_wind_s)
+
+    def flush(self) -> list[FluxProduct]:
+        """End of the data: the open windows close, partial as they are."""
+        closed = []
+        while self._stamps:
+            closed.append(self._close(self._window_start(self._stamps[0])))
+        return closed
+
+    def _window_start(self, t_s: float) -> float:
+        return math.floor(t_s / self.window_s) * self.window_s
+
+    def _close_windows_before(self, wind_t_s: float) -> list[FluxProduct]:
+        """Close the open windows the wind at ``wind_t_s`` (s) is past, unless a temperature
+        is awaited."""
+        closed = []
+        while self._stamps:
+            start = self._window_start(self._stamps[0])
+            end = start + self.window_s
+            if wind_t_s < end:
+                break
+            temperatures = self._temperature_stamps
+            awaiting_temperature = (
+                bisect.bisect_left(temperatures, start) < bisect.bisect_left(temperatures, end)
+                and self._latest_temperature_s < end
+                and wind_t_s < end + TEMPERATURE_WAIT_S
+            )
+            if awaiting_temperature:
+                break
+            closed.append(self._close(start))
+        return closed
+
+    def _close(self, start: float) -> FluxProduct:
+        end = start + self.window_s
+        count = bisect.bisect_left(self._stamps, end)
+        stamps = np.array(self._stamps[:count])
+        winds = np.array(self._winds[:count])
+        del self._stamps[:count], self._winds[:count]
+        temperature_stamps = np.array(self._temperature_stamps)
+        temperatures = np.array(self._temperatures)
+        keep = temperature_stamps >= end
+        self._temperature_stamps = temperature_stamps[keep].tolist()
+        self._temperatures = temperatures[keep].tolist()
+
+        recent = np.concatenate((self._interval_stamps, stamps))[-(RATE_MEMORY_INTERVALS + 1) :]
+        self._interval_stamps = recent
+        intervals = np.diff(recent)
+        interval_s = (
+            float(np.median(intervals)) if intervals.size >= MIN_RATE_INTERVALS else math.nan
+        )
+        paired = _paired_temperatures(
+            stamps, temperature_stamps[~keep], temperatures[~keep], interval_s
+        )
+        valid = np.all(np.isfinite(winds), axis=1)
+        n_valid = int(np.count_nonzero(valid))
+        n_temperature = int(np.count_nonzero(np.isfinite(paired)))
+        fluxes = window_fluxes(
+            stamps,
+            winds,
+            paired if n_temperature else None,
+            window_start_s=start,
+            window_end_s=end,
+            plane=self.plane,
+            pressure_pa=self.pressure_pa,
+        )
+        coverage = window_coverage(n_valid, interval_s, self.window_s)
+        return FluxProduct(
+            window_s=self.window_s,
+            window_start_s=start,
+            window_end_s=end,
+            first_sample_s=float(stamps[0]),
+            last_sample_s=float(stamps[-1]),
+            n_valid=n_valid,
+            n_invalid=int(stamps.size - n_valid),
+            n_temperature=n_temperature,
+            mean_speed_mps=fluxes.mean_speed_mps,
+            tilt_deg=fluxes.tilt_deg,
+            u_w_m2_s2=fluxes.u_w_m2_s2,
+            v_w_m2_s2=fluxes.v_w_m2_s2,
+            friction_velocity_mps=fluxes.friction_velocity_mps,
+            stress_n_m2=fluxes.stress_n_m2,
+            air_density_kg_m3=fluxes.air_density_kg_m3,
+            w_ts_k_mps=fluxes.w_ts_k_mps,
+            spikes_u=fluxes.spikes[0],
+            spikes_v=fluxes.spikes[1],
+            spikes_w=fluxes.spikes[2],
+            spikes_ts=fluxes.spikes[3],
+            invalid_share=fluxes.invalid_share,
+            stationarity_u_w_percent=fluxes.stationarity_u_w_percent,
+            stationarity_w_ts_percent=fluxes.stationarity_w_ts_percent,
+            coverage=coverage,
+            quality_flag=int(flux_quality_flag(coverage, n_valid, fluxes)),
+        )
+
+
+def _paired_temperatures(
+    wind_stamps_s: np.ndarray, stamps_s: np.ndarray, temperatures_degc: np.ndarray, interval_s
+) -> np.ndarray:
+    """For each wind stamp (s), the temperature (°C) stamped nearest to it within half the
+    sampling interval ``interval_s`` (s; 1 ms when unknown), NaN where there is none."""
+    paired = np.full(wind_stamps_s.shape, np.nan)
+    if not stamps_s.size:
+        return paired
+    tolerance_s = 0.5 * interval_s if math.isfinite(interval_s) else 1e-3
+    right = np.clip(np.searchsorted(stamps_s, wind_stamps_s), 1, stamps_s.size - 1)
+    left = right - 1
+    if stamps_s.size == 1:
+        left = right = np.zeros_like(right)
+    nearest = np.where(
+        np.abs(stamps_s[left] - wind_stamps_s) <= np.abs(stamps_s[right] - wind_stamps_s),
+        left,
+        right,
+    )
+    close = np.abs(stamps_s[nearest] - wind_stamps_s) <= tolerance_s
+    paired[close] = temperatures_degc[nearest[close]]
+    return paired

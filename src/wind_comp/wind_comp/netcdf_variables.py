@@ -1,0 +1,501 @@
+"""The variables of the NetCDF-CF file of ``process_bag`` (:mod:`wind_comp.netcdf_output`):
+the series kept for it while the bag is processed, its time coding, and the CF variables of the
+series, the navigation and the products, with their standard names, units, cell methods and
+flags.
+"""
+
+from __future__ import annotations
+
+import datetime
+from array import array
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from buoy_common.contract import QualityFlag, window_label
+from wind_comp.compensator import CorrectedBatch, SampleStatus
+from wind_comp.flux_products import (
+    MAX_SPIKE_SHARE,
+    NON_STATIONARY_PERCENT,
+    STATIONARY_PERCENT,
+)
+from wind_comp.products import (
+    GOOD_COVERAGE,
+    MIN_COVERAGE,
+    meteorological_direction_deg,
+    oceanographic_direction_deg,
+)
+from wind_comp.report.attitude import rpy_rad_from_quaternions
+
+TIME_UNITS = "seconds"
+"""Marks a product field that is a time: written in the file's time units."""
+_NANOSECONDS = 1_000_000_000
+_NAV_FIELDS = 10  # latitude, longitude, altitude, quaternion (4), ENU velocity (3)
+
+
+class FlowSeries:
+    """The corrected samples of one flow sensor, in output order: what ``wind/true`` or
+    ``current/velocity`` carry, and each sample's :class:`SampleStatus`."""
+
+    def __init__(self, reason: Callable[[SampleStatus], str]):
+        """reason: the contract's name of an invalid sample's status (the sensor's
+        :meth:`~wind_comp.compensator.FlowSensor.reason`, as ``diagnostics`` counts it)."""
+        self.reason = reason
+        self.stamps_ns = array("q")
+        self.flows_enu_mps = array("d")
+        self.status = array("b")
+
+    def add(self, secs: np.ndarray, nanosecs: np.ndarray, batch: CorrectedBatch) -> None:
+        """The header stamps (s, ns) of a batch's sensor messages and the batch."""
+        self.stamps_ns.extend((secs * _NANOSECONDS + nanosecs).astype(np.int64).tolist())
+        self.flows_enu_mps.extend(np.asarray(batch.flow_enu_mps, dtype=float).ravel().tolist())
+        self.status.extend(np.asarray(batch.status, dtype=np.int8).tolist())
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N,) stamps ns, (N, 3) ENU vectors m/s, (N,) status codes."""
+        return (
+            np.frombuffer(self.stamps_ns, dtype=np.int64),
+            np.frombuffer(self.flows_enu_mps, dtype=float).reshape(-1, 3),
+            np.frombuffer(self.status, dtype=np.int8),
+        )
+
+
+class NavigationSeries:
+    """The navigation solutions handed to the corrections (``nav/odometry`` and ``nav/fix``)."""
+
+    def __init__(self):
+        self._stamps_ns = array("q")
+        self._values = array("d")
+
+    def add(self, solutions: Iterable) -> None:
+        """Solutions as :class:`buoy_nav.fusion_messages.NavValues`."""
+        values = self._values
+        for solution in solutions:
+            self._stamps_ns.append(solution.sec * _NANOSECONDS + solution.nanosec)
+            values.extend((solution.latitude_deg, solution.longitude_deg, solution.altitude_m))
+            values.extend(solution.attitude_xyzw)
+            values.extend(solution.velocity_enu_mps)
+
+    def __len__(self) -> int:
+        return len(self._stamps_ns)
+
+    def columns(self) -> tuple[np.ndarray, np.ndarray]:
+        """(M,) stamps ns and (M, 10): latitude, longitude, altitude, quaternion x y z w,
+        velocity E N U."""
+        return (
+            np.frombuffer(self._stamps_ns, dtype=np.int64),
+            np.frombuffer(self._values, dtype=float).reshape(-1, _NAV_FIELDS),
+        )
+
+
+@dataclass(frozen=True)
+class TimeAxis:
+    """The file's time coding: float64 seconds since midnight UTC of the day its data start.
+
+    A reference near the data keeps the float64 seconds exact to far below a nanosecond (at
+    the epoch 1970 they would resolve only 0.24 µs), so a reader decoding them gets the
+    sensors' stamps back to within a nanosecond."""
+
+    reference_ns: int
+
+    @classmethod
+    def starting_on_the_day_of(cls, first_stamp_ns: int) -> TimeAxis:
+        day_ns = 86_400 * _NANOSECONDS
+        return cls(first_stamp_ns // day_ns * day_ns)
+
+    @property
+    def units(self) -> str:
+        day = datetime.datetime.fromtimestamp(self.reference_ns // _NANOSECONDS, tz=datetime.UTC)
+        return f"seconds since {day:%Y-%m-%dT%H:%M:%S}Z"
+
+    def from_ns(self, stamps_ns: np.ndarray) -> np.ndarray:
+        """Integer nanoseconds since the epoch as the file's seconds."""
+        return (np.asarray(stamps_ns, dtype=np.int64) - self.reference_ns) / _NANOSECONDS
+
+    def from_s(self, t_s) -> np.ndarray:
+        """Float seconds since the epoch as the file's seconds."""
+        return np.asarray(t_s, dtype=float) - self.reference_ns // _NANOSECONDS
+
+
+def _time_attributes(axis: TimeAxis, long_name: str, bounds: str | None = None) -> dict:
+    attributes = {
+        "standard_name": "time",
+        "long_name": long_name,
+        "units": axis.units,
+        "calendar": "standard",
+        "axis": "T",
+    }
+    if bounds is not None:
+        attributes["bounds"] = bounds
+    return attributes
+
+
+def _status_attributes(what: str, reason: Callable[[SampleStatus], str]) -> dict:
+    meanings = " ".join(
+        "valid" if status == SampleStatus.VALID else str(reason(status)) for status in SampleStatus
+    )
+    return {
+        "standard_name": "status_flag",
+        "long_name": f"outcome of the motion correction of each {what} sample",
+        "flag_values": np.array([status.value for status in SampleStatus], dtype=np.int8),
+        "flag_meanings": meanings,
+        "comment": "0: corrected; any other value: the sample is NaN, for the reason named",
+    }
+
+
+def _quality_flag_attributes(what: str) -> dict:
+    comment = (
+        f"good: coverage >= {GOOD_COVERAGE}; suspect: coverage >= {MIN_COVERAGE}; bad: "
+        "lower coverage; missing: no valid sample; not_evaluated: the sampling interval "
+        "was not yet known (IOOS QARTOD flags)"
+    )
+    if what == "flux":
+        comment += (
+            f"; then suspect above {STATIONARY_PERCENT:g} % non-stationarity of u'w' or "
+            f"{100 * MAX_SPIKE_SHARE:g} % spikes in a component, bad above "
+            f"{NON_STATIONARY_PERCENT:g} % non-stationarity"
+        )
+    return {
+        "standard_name": "quality_flag",
+        "long_name": f"QARTOD quality flag of each {what} window",
+        "flag_values": np.array([flag.value for flag in QualityFlag], dtype=np.int8),
+        "flag_meanings": " ".join(flag.name.lower() for flag in QualityFlag),
+        "comment": comment,
+    }
+
+
+def flow_variables(series: FlowSeries, wind: bool, axis: TimeAxis) -> dict[str, xr.DataArray]:
+    """The per-sample variables of the wind (``wind``) or the current."""
+    stamps_ns, flows, status = series.columns()
+    dimension = "time" if wind else "current_time"
+    speeds = np.hypot(flows[:, 0], flows[:, 1])
+    if wind:
+        names = ("eastward_wind", "northward_wind", "upward_air_velocity")
+        what, direction = "wind", meteorological_direction_deg(flows[:, 0], flows[:, 1])
+        speed_name, direction_name, status_name = (
+            "wind_speed",
+            "wind_from_direction",
+            "wind_status",
+        )
+        standard_names = (*names, "wind_speed", "wind_from_direction")
+        direction_comment = "meteorological: where the wind blows FROM, clockwise from North"
+    else:
+        names = ("eastward_current", "northward_current", "upward_current")
+        what, direction = "current", oceanographic_direction_deg(flows[:, 0], flows[:, 1])
+        speed_name, direction_name, status_name = (
+            "current_speed",
+            "current_to_direction",
+            "current_status",
+        )
+        standard_names = (
+            "eastward_sea_water_velocity",
+            "northward_sea_water_velocity",
+            "upward_sea_water_velocity",
+            "sea_water_speed",
+            "sea_water_velocity_to_direction",
+        )
+        direction_comment = "oceanographic: where the water flows TOWARD, clockwise from North"
+    common = {"ancillary_variables": status_name, "coverage_content_type": "physicalMeasurement"}
+    variables = {
+        dimension: xr.DataArray(
+            axis.from_ns(stamps_ns),
+            dims=dimension,
+            attrs=_time_attributes(axis, f"header stamp of each {what} sample"),
+        )
+    }
+    for column, (name, standard_name) in enumerate(zip(names, standard_names, strict=False)):
+        variables[name] = xr.DataArray(
+            flows[:, column],
+            dims=dimension,
+            attrs={
+                "standard_name": standard_name,
+                "long_name": f"motion-corrected {what}, {('east', 'north', 'up')[column]}",
+                "units": "m s-1",
+                **common,
+            },
+        )
+    variables[speed_name] = xr.DataArray(
+        speeds,
+        dims=dimension,
+        attrs={
+            "standard_name": standard_names[3],
+            "long_name": f"horizontal speed of the motion-corrected {what}",
+            "units": "m s-1",
+            **common,
+        },
+    )
+    variables[direction_name] = xr.DataArray(
+        np.asarray(direction, dtype=float),
+        dims=dimension,
+        attrs={
+            "standard_name": standard_names[4],
+            "long_name": f"direction of the motion-corrected {what}",
+            "units": "degree",
+            "comment": direction_comment,
+            **common,
+        },
+    )
+    variables[status_name] = xr.DataArray(
+        status.copy(), dims=dimension, attrs=_status_attributes(what, series.reason)
+    )
+    return variables
+
+
+def navigation_variables(navigation: NavigationSeries, axis: TimeAxis) -> dict[str, xr.DataArray]:
+    stamps_ns, columns = navigation.columns()
+    dimension = "nav_time"
+    rpy_deg = (
+        np.degrees(rpy_rad_from_quaternions(columns[:, 3:7])) if len(columns) else np.empty((0, 3))
+    )
+    heading_deg = (90.0 - rpy_deg[:, 2]) % 360.0
+    common = {"coverage_content_type": "referenceInformation"}
+
+    def variable(values, standard_name, long_name, units, **extra):
+        attributes = {"long_name": long_name, "units": units, **common, **extra}
+        if standard_name:
+            attributes["standard_name"] = standard_name
+        return xr.DataArray(values, dims=dimension, attrs=attributes)
+
+    return {
+        dimension: xr.DataArray(
+            axis.from_ns(stamps_ns),
+            dims=dimension,
+            attrs=_time_attributes(axis, "stamp of each navigation solution (nav/odometry)"),
+        ),
+        "latitude": variable(
+            columns[:, 0], "latitude", "latitude of the IMU (base_link origin)", "degrees_north"
+        ),
+        "longitude": variable(
+            columns[:, 1], "longitude", "longitude of the IMU (base_link origin)", "degrees_east"
+        ),
+        "altitude": variable(
+            columns[:, 2],
+            "height_above_reference_ellipsoid",
+            "ellipsoidal height of the IMU (WGS-84)",
+            "m",
+            positive="up",
+        ),
+        "roll": variable(
+            rpy_deg[:, 0],
+            "platform_roll_starboard_down",
+            "roll of the buoy, R = Rz(yaw) Ry(pitch) Rx(roll) about forward-left-up body axes",
+            "degree",
+        ),
+        "pitch": variable(
+            rpy_deg[:, 1],
+            "platform_pitch_fore_down",
+            "pitch of the buoy, R = Rz(yaw) Ry(pitch) Rx(roll) about forward-left-up body axes",
+            "degree",
+        ),
+        "heading": variable(
+            heading_deg,
+            "platform_orientation",
+            "heading of the buoy's forward (x) axis, clockwise from true North",
+            "degree",
+        ),
+        "speed_over_ground": variable(
+            np.hypot(columns[:, 7], columns[:, 8]),
+            "platform_speed_wrt_ground",
+            "horizontal speed of the IMU over ground",
+            "m s-1",
+        ),
+        "course_over_ground": variable(
+            oceanographic_direction_deg(columns[:, 7], columns[:, 8]),
+            "platform_course",
+            "direction the IMU moves over ground, clockwise from true North",
+            "degree",
+        ),
+        "heave_rate": variable(
+            columns[:, 9], "platform_heave_rate_up", "upward velocity of the IMU", "m s-1"
+        ),
+    }
+
+
+@dataclass(frozen=True)
+class _ProductVariable:
+    field: str
+    name: str
+    standard_name: str | None
+    units: str | None
+    cell_method: str | None
+    long_name: str
+
+
+_SHARED_PRODUCT_VARIABLES = (
+    _ProductVariable("n_valid", "n_valid", "number_of_observations", "1", None,
+                     "valid samples in the window"),
+    _ProductVariable("n_invalid", "n_invalid", None, "1", None,
+                     "invalid samples in the window (counted, not averaged)"),
+    _ProductVariable("coverage", "coverage", None, "1", None,
+                     "share of a full window's samples the window holds valid"),
+    _ProductVariable("first_sample_s", "first_sample_time", "time", TIME_UNITS, None,
+                     "stamp of the window's first sample"),
+    _ProductVariable("last_sample_s", "last_sample_time", "time", TIME_UNITS, None,
+                     "stamp of the window's last sample"),
+)  # fmt: skip
+
+_WIND_PRODUCT_VARIABLES = (
+    _ProductVariable("mean_u_enu_mps", "mean_eastward_wind", "eastward_wind", "m s-1", "mean",
+                     "vector-mean wind, east"),
+    _ProductVariable("mean_v_enu_mps", "mean_northward_wind", "northward_wind", "m s-1", "mean",
+                     "vector-mean wind, north"),
+    _ProductVariable("mean_w_enu_mps", "mean_upward_air_velocity", "upward_air_velocity",
+                     "m s-1", "mean", "vector-mean wind, up"),
+    _ProductVariable("vector_mean_speed_mps", "vector_mean_wind_speed", "wind_speed", "m s-1",
+                     "mean", "horizontal speed of the vector-mean wind"),
+    _ProductVariable("vector_mean_direction_deg", "vector_mean_wind_from_direction",
+                     "wind_from_direction", "degree", "mean",
+                     "direction of the vector-mean wind (FROM, clockwise from true North)"),
+    _ProductVariable("scalar_mean_speed_mps", "scalar_mean_wind_speed", "wind_speed", "m s-1",
+                     "mean", "mean of the horizontal speeds"),
+    _ProductVariable("gust_mps", "gust", "wind_speed_of_gust", "m s-1", "maximum",
+                     "largest running mean of the horizontal speed over gust_window_s"),
+    _ProductVariable("std_u_mps", "std_eastward_wind", "eastward_wind", "m s-1",
+                     "standard_deviation", "standard deviation of the east wind"),
+    _ProductVariable("std_v_mps", "std_northward_wind", "northward_wind", "m s-1",
+                     "standard_deviation", "standard deviation of the north wind"),
+    _ProductVariable("std_w_mps", "std_upward_air_velocity", "upward_air_velocity", "m s-1",
+                     "standard_deviation", "standard deviation of the vertical wind"),
+    *_SHARED_PRODUCT_VARIABLES,
+)  # fmt: skip
+
+_CURRENT_PRODUCT_VARIABLES = (
+    _ProductVariable("mean_u_enu_mps", "mean_eastward_current", "eastward_sea_water_velocity",
+                     "m s-1", "mean", "vector-mean current, east"),
+    _ProductVariable("mean_v_enu_mps", "mean_northward_current", "northward_sea_water_velocity",
+                     "m s-1", "mean", "vector-mean current, north"),
+    _ProductVariable("mean_w_enu_mps", "mean_upward_current", "upward_sea_water_velocity",
+                     "m s-1", "mean", "vector-mean current, up"),
+    _ProductVariable("speed_mps", "current_speed", "sea_water_speed", "m s-1", "mean",
+                     "horizontal speed of the vector-mean current"),
+    _ProductVariable("direction_deg", "current_to_direction", "sea_water_velocity_to_direction",
+                     "degree", "mean",
+                     "direction of the vector-mean current (TOWARD, clockwise from true North)"),
+    _ProductVariable("std_u_mps", "std_eastward_current", "eastward_sea_water_velocity",
+                     "m s-1", "standard_deviation", "standard deviation of the east current"),
+    _ProductVariable("std_v_mps", "std_northward_current", "northward_sea_water_velocity",
+                     "m s-1", "standard_deviation", "standard deviation of the north current"),
+    _ProductVariable("std_w_mps", "std_upward_current", "upward_sea_water_velocity", "m s-1",
+                     "standard_deviation", "standard deviation of the vertical current"),
+    *_SHARED_PRODUCT_VARIABLES,
+)  # fmt: skip
+
+
+_FLUX_VARIABLES = (
+    _ProductVariable("mean_speed_mps", "mean_wind_speed", "wind_speed", "m s-1", "mean",
+                     "mean wind along the rotated x axis (the mean wind)"),
+    _ProductVariable("tilt_deg", "tilt", None, "degree", None,
+                     "tilt of the rotation: of the mean wind (double rotation) or of the plane "
+                     "(planar fit)"),
+    _ProductVariable("u_w_m2_s2", "u_w", None, "m2 s-2", None,
+                     "kinematic momentum flux u'w', along the mean wind, linearly detrended"),
+    _ProductVariable("v_w_m2_s2", "v_w", None, "m2 s-2", None,
+                     "kinematic momentum flux v'w', across the mean wind, linearly detrended"),
+    _ProductVariable("friction_velocity_mps", "friction_velocity",
+                     "magnitude_of_surface_friction_velocity_in_air", "m s-1", None,
+                     "friction velocity u* = (u'w'^2 + v'w'^2)^(1/4)"),
+    _ProductVariable("stress_n_m2", "stress", "magnitude_of_surface_downward_stress", "N m-2",
+                     None, "wind stress rho u*^2"),
+    _ProductVariable("air_density_kg_m3", "air_density", "air_density", "kg m-3", "mean",
+                     "air density of the stress, from the sonic temperature as virtual "
+                     "temperature and air_pressure_pa"),
+    _ProductVariable("w_ts_k_mps", "w_ts", None, "K m s-1", None,
+                     "buoyancy flux w'Ts' of the sonic temperature; NaN without one"),
+    _ProductVariable("spikes_u", "spikes_u", None, "1", None,
+                     "Vickers-Mahrt spikes in u"),
+    _ProductVariable("spikes_v", "spikes_v", None, "1", None, "Vickers-Mahrt spikes in v"),
+    _ProductVariable("spikes_w", "spikes_w", None, "1", None, "Vickers-Mahrt spikes in w"),
+    _ProductVariable("spikes_ts", "spikes_ts", None, "1", None,
+                     "Vickers-Mahrt spikes in the sonic temperature"),
+    _ProductVariable("invalid_share", "invalid_share", None, "1", None,
+                     "share of the window's samples that are invalid"),
+    _ProductVariable("stationarity_u_w_percent", "stationarity_u_w", None, "percent", None,
+                     "Foken-Wichura non-stationarity of u'w' (six sub-windows; < 30 % "
+                     "stationary)"),
+    _ProductVariable("stationarity_w_ts_percent", "stationarity_w_ts", None, "percent", None,
+                     "Foken-Wichura non-stationarity of w'Ts'"),
+    _ProductVariable("n_temperature", "n_temperature", None, "1", None,
+                     "wind samples paired with a sonic temperature"),
+    *_SHARED_PRODUCT_VARIABLES,
+)  # fmt: skip
+_TABLES = {
+    "wind": _WIND_PRODUCT_VARIABLES,
+    "current": _CURRENT_PRODUCT_VARIABLES,
+    "flux": _FLUX_VARIABLES,
+}
+
+
+def product_variable_name(what: str, window_s: float, field_name: str) -> str:
+    """The NetCDF variable of product field ``field_name`` (a :class:`WindProduct`,
+    :class:`CurrentProduct` or :class:`FluxProduct` field) of ``what`` (``wind``, ``current``,
+    ``flux``) windows of ``window_s`` seconds: ``wind_10min_gust``,
+    ``current_1min_quality_flag``, ``flux_30min_friction_velocity``, ..."""
+    table = _TABLES[what]
+    if field_name == "quality_flag":
+        return f"{what}_{window_label(window_s)}_quality_flag"
+    spec = next(spec for spec in table if spec.field == field_name)
+    return f"{what}_{window_label(window_s)}_{spec.name}"
+
+
+def product_time_name(what: str, window_s: float) -> str:
+    """The time dimension (and coordinate) of the ``what`` products of ``window_s`` s."""
+    return f"{what}_time_{window_label(window_s)}"
+
+
+def product_variables(what: str, products: list, axis: TimeAxis) -> dict[str, xr.DataArray]:
+    table = _TABLES[what]
+    variables = {}
+    for window_s in sorted({product.window_s for product in products}):
+        windows = [product for product in products if product.window_s == window_s]
+        dimension = product_time_name(what, window_s)
+        bounds_name = f"{dimension}_bounds"
+        starts = np.array([product.window_start_s for product in windows])
+        ends = np.array([product.window_end_s for product in windows])
+        label = window_label(window_s)
+        flag_name = product_variable_name(what, window_s, "quality_flag")
+        variables[dimension] = xr.DataArray(
+            axis.from_s((starts + ends) / 2.0),
+            dims=dimension,
+            attrs=_time_attributes(axis, f"middle of each {label} {what} window", bounds_name),
+        )
+        variables[bounds_name] = xr.DataArray(
+            axis.from_s(np.column_stack((starts, ends))), dims=(dimension, "bounds")
+        )
+        for spec in table:
+            values = np.array([getattr(product, spec.field) for product in windows])
+            attributes = {"long_name": f"{spec.long_name} ({label} windows)"}
+            if spec.standard_name:
+                attributes["standard_name"] = spec.standard_name
+            if spec.units == TIME_UNITS:
+                values = axis.from_s(values)
+                attributes.update(units=axis.units, calendar="standard")
+            elif spec.units:
+                attributes["units"] = spec.units
+            if spec.cell_method:
+                attributes["cell_methods"] = f"{dimension}: {spec.cell_method}"
+            if spec.field == "gust_mps":
+                attributes["gust_window_s"] = windows[0].gust_window_s
+            if spec.field.startswith(("n_", "first", "last", "spikes_", "stationarity_")):
+                attributes["coverage_content_type"] = "auxiliaryInformation"
+            else:
+                attributes["coverage_content_type"] = "physicalMeasurement"
+                attributes["ancillary_variables"] = flag_name
+            if spec.field.startswith(("n_", "spikes_")):
+                values = values.astype(np.int32)
+            variables[f"{what}_{label}_{spec.name}"] = xr.DataArray(
+                values, dims=dimension, attrs=attributes
+            )
+        variables[flag_name] = xr.DataArray(
+            np.array([product.quality_flag for product in windows], dtype=np.int8),
+            dims=dimension,
+            attrs={
+                **_quality_flag_attributes(what),
+                "coverage_content_type": "qualityInformation",
+            },
+        )
+    return variables
