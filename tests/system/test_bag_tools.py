@@ -21,6 +21,10 @@ IMU_PERIOD_NS = 10_000_000  # 100 Hz
 SLOW_EVERY = 10  # the other topics at 10 Hz
 SAMPLES = 300  # 3 s of bag time
 RATE = 5.0
+# The pace is judged over 2.5 s of wall time, so that one stall of the player or the recorder by
+# the operating system (100 ms happen on a loaded machine) stays above the 95th percentile.
+PACE_SAMPLES = 1000
+PACE_RATE = 4.0
 
 SLOW_TOPICS = {
     "/gnss/fix": ("sensor_msgs/msg/NavSatFix", NavSatFix),
@@ -30,11 +34,11 @@ SLOW_TOPICS = {
 TOPICS = ("imu/data_raw", *(topic.lstrip("/") for topic in SLOW_TOPICS))
 
 
-def write_source_bag(path) -> None:
-    """IMU at 100 Hz and three topics at 10 Hz with varied contents, 3 s."""
+def write_source_bag(path, samples: int = SAMPLES) -> None:
+    """IMU at 100 Hz (``samples`` of them) and three topics at 10 Hz with varied contents."""
     rng = np.random.default_rng(7)
     with BagWriter(path) as writer:
-        for index in range(SAMPLES):
+        for index in range(samples):
             time_ns = T0_NS + index * IMU_PERIOD_NS
             imu = Imu()
             imu.header.stamp.sec, imu.header.stamp.nanosec = divmod(time_ns, 1_000_000_000)
@@ -105,10 +109,16 @@ def paired_log_times_s(source_contents, copy_contents):
 
 def test_record_play_record_keeps_every_message_and_the_pace(nodes, tmp_path):
     source, copy = tmp_path / "source", tmp_path / "copy"
-    write_source_bag(source)
+    write_source_bag(source, PACE_SAMPLES)
     recorder = nodes.start("bag_recorder", str(copy), "--topics", *TOPICS)
     played = nodes.run(
-        "bag_player", str(source), "--rate", str(RATE), "--wait-for-subscribers", "1", timeout_s=60
+        "bag_player",
+        str(source),
+        "--rate",
+        str(PACE_RATE),
+        "--wait-for-subscribers",
+        "1",
+        timeout_s=60,
     )
     assert played.returncode == 0, played.stderr
     assert nodes.interrupt(recorder) == 0, nodes.log_of(recorder)
@@ -122,11 +132,11 @@ def test_record_play_record_keeps_every_message_and_the_pace(nodes, tmp_path):
     # Wall-clock log times of the copy, stretched by the rate, reproduce the bag's spacing.
     source_s, copy_s = paired_log_times_s(source_contents, copy_contents)
     source_offsets_s = source_s - source_s.min()
-    copy_offsets_s = (copy_s - copy_s.min()) * RATE
+    copy_offsets_s = (copy_s - copy_s.min()) * PACE_RATE
     assert copy_offsets_s.max() == pytest.approx(source_offsets_s.max(), abs=0.15)
     error_s = copy_offsets_s - source_offsets_s
     spread_s = np.abs(error_s - np.median(error_s))
-    assert np.percentile(spread_s, 95) < 0.05  # 10 ms of wall time at rate 5
+    assert np.percentile(spread_s, 95) < 0.04  # 10 ms of wall time at rate 4
     assert spread_s.max() < 0.5
 
 
