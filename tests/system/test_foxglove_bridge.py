@@ -93,7 +93,19 @@ def test_a_websocket_client_receives_the_corrected_wind(nodes):
         message.header.frame_id = "map"
         message.header.stamp.sec = 1767225600
         message.vector.x, message.vector.y, message.vector.z = WIND_ENU_MPS
-        channel, payload = asyncio.run(receive_one_wind(port, lambda: publisher.publish(message)))
+        # Only a subscription DDS has matched receives: the bridge must be seen first.
+        deadline = time.monotonic() + TIMEOUT_S
+        while publisher.get_subscription_count() == 0:
+            assert time.monotonic() < deadline, "DDS never matched the bridge's subscription:\n" + (
+                nodes.log_of(process)
+            )
+            time.sleep(0.1)
+        try:
+            channel, payload = asyncio.run(
+                receive_one_wind(port, lambda: publisher.publish(message))
+            )
+        except AssertionError as error:
+            raise AssertionError(f"{error}; the bridge's log:\n{nodes.log_of(process)}") from None
     finally:
         rclpy.shutdown(context=context)
     assert nodes.interrupt(process) == 0, nodes.log_of(process)
