@@ -53,7 +53,6 @@ from collections import deque
 from collections.abc import Iterable
 
 import numpy as np
-from scipy.linalg import block_diag
 
 from buoy_common.contract import Reason
 from buoy_nav import earth
@@ -67,6 +66,7 @@ from buoy_nav.error_state_filter import (
     ErrorStateFilter,
     ImuErrorModel,
     NavState,
+    block_diagonal,
     discrete_error_model,
     inject_error_state,
 )
@@ -500,7 +500,7 @@ class FusionEngine:
             correction = self._filter.update(
                 np.concatenate([m.innovation for m in accepted]),
                 np.vstack([m.jacobian for m in accepted]),
-                block_diag(*(m.covariance for m in accepted)),
+                block_diagonal([m.covariance for m in accepted]),
             )
             self._inject(point.state, correction)
         for source, measurement, model in persistent_rejections:
