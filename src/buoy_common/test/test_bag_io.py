@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import itertools
 import shutil
 from pathlib import Path
@@ -11,6 +12,7 @@ import pytest
 import yaml
 from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
@@ -19,6 +21,7 @@ from sensor_msgs.msg import Image, Imu, NavSatFix
 from std_msgs.msg import Byte, ByteMultiArray, Char
 
 from buoy_common.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter
+from buoy_common.bag_io.mcap_writer import McapWriter
 
 T0_NS = 1_700_000_000_000_000_000
 IMU_PERIOD_NS = 10_000_000  # 100 Hz
@@ -241,6 +244,38 @@ def test_chunks_overlapping_in_time_are_read_in_the_order_rosbags_reads(tmp_path
         with BagReader(path) as reader:
             read = [(m.topic, m.log_time_ns, m.raw) for m in reader.messages(topics)]
         assert read == [entry for entry in expected if topics is None or entry[0] in topics]
+
+
+def _mcap_file_of(writer_class) -> bytes:
+    """An MCAP file written by ``writer_class``: three channels, one registered between
+    messages, log times out of order, messages of every size up to a few hundred bytes, chunks
+    of 4 KiB (dozens of them, some overlapping in time) and one flushed early."""
+    rng = np.random.default_rng(7)
+    stream = io.BytesIO()
+    writer = writer_class(stream, chunk_size=4096, compression=CompressionType.ZSTD)
+    writer.start(profile="ros2", library="test")
+    schema = writer.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+    channels = [writer.register_channel(f"/topic_{i}", "cdr", schema) for i in range(2)]
+    for index in range(600):
+        if index == 200:
+            channels.append(writer.register_channel("/late", "cdr", schema, {"k": "v"}))
+        if index == 300:
+            writer.flush()
+        log_time_ns = T0_NS + int(rng.integers(0, 1_000_000_000))
+        data = rng.bytes(int(rng.integers(0, 400)))
+        channel = channels[index % len(channels)]
+        writer.add_message(channel, log_time_ns, data, log_time_ns + 7, sequence=index)
+    writer.finish()
+    return stream.getvalue()
+
+
+def test_lean_message_writer_writes_the_mcap_librarys_bytes():
+    """BagWriter's writer packs message records itself: the file must stay the library's, byte
+    for byte (chunk boundaries, message indexes, statistics); this fails if the internals of
+    the pinned mcap version it relies on change."""
+    library_file = _mcap_file_of(Writer)
+    assert len(make_reader(io.BytesIO(library_file)).get_summary().chunk_indexes) > 20
+    assert _mcap_file_of(McapWriter) == library_file
 
 
 def test_chunk_compression_makes_the_bag_smaller(tmp_path):

@@ -1,6 +1,7 @@
 """Writing rosbag2 bags: metadata.yaml (version 9) beside one MCAP file.
 
-The MCAP file is written by the ``mcap`` library with the ``ros2`` profile, as the rosbag2 MCAP
+The MCAP file is written by the ``mcap`` library (its messages packed by
+:mod:`~buoy_common.bag_io.mcap_writer`) with the ``ros2`` profile, as the rosbag2 MCAP
 storage plugin writes it: ``ros2msg`` schemas (definitions and RIHS01 hashes from rosbags'
 Jazzy typestore), ``cdr`` channels, zstd-compressed chunks of about 1 MiB with their CRCs and
 message indexes, the ``rosbag2`` metadata record and a summary. metadata.yaml then declares no
@@ -20,7 +21,6 @@ from pathlib import Path
 
 import yaml
 from mcap.writer import CompressionType
-from mcap.writer import Writer as McapWriter
 
 from buoy_common.bag_io.common import (
     BAG_VERSION,
@@ -32,6 +32,7 @@ from buoy_common.bag_io.common import (
     one_line,
 )
 from buoy_common.bag_io.conversion import require_known_type, serialize
+from buoy_common.bag_io.mcap_writer import McapWriter
 from buoy_common.safe_output import OutputError, move_into_place, staging_path
 
 # Uncompressed bytes after which a chunk is closed: rosbag2's and mcap's default. Larger chunks
