@@ -278,6 +278,19 @@ def test_lean_message_writer_writes_the_mcap_librarys_bytes():
     assert _mcap_file_of(McapWriter) == library_file
 
 
+def test_bag_reader_reads_what_rosbags_reads_of_a_bag_the_writer_wrote(written_bag):
+    """The chunk index path of BagReader against rosbags' own reading."""
+    path, _, _ = written_bag
+    with Reader(path) as reference:
+        expected = [
+            (connection.topic, connection.msgtype, time_ns, bytes(raw))
+            for connection, time_ns, raw in reference.messages()
+        ]
+    with BagReader(path) as reader:
+        read = [(m.topic, m.msgtype, m.log_time_ns, m.raw) for m in reader.messages()]
+    assert read == expected
+
+
 def test_chunk_compression_makes_the_bag_smaller(tmp_path):
     messages = make_messages(seed=2)
     path = tmp_path / "compressed"
