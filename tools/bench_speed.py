@@ -19,11 +19,16 @@ import json
 import os
 import resource
 import sys
+import time
 from pathlib import Path
 
 from bench_plan import PROCESSING_PARAMS, REPO, SPEED_DURATION_S, SPEED_RUNS, SPEED_TARGET_REAL_TIME
+from mcap.writer import CompressionType, Writer
+from rosbags.rosbag2 import Reader
 
 from buoy_common.bag_io import BagReader
+from buoy_common.bag_io.mcap_writer import McapWriter
+from buoy_common.bag_io.writing import CHUNK_BYTES
 from buoy_nav.bag_fusion import fuse_bag
 from buoy_nav.config import fusion_config_from_files
 from wind_comp.bag_processing import process_bag
@@ -101,7 +106,85 @@ def run_speed(in_bag: Path, work_dir: Path, log=lambda text: None) -> dict:
         "load_average_1min_after": os.getloadavg()[0],
         "cpus": os.cpu_count(),
         **steps,
+        "bag_io": run_bag_io(in_bag, work_dir / "bag_io"),
     }
+
+
+def _read_us(read_all, count: int) -> float:
+    """CPU µs a message of one call of ``read_all`` (reads ``count`` messages)."""
+    start_s = time.process_time()
+    read = read_all()
+    if read != count:
+        raise RuntimeError(f"read {read} messages, expected {count}")
+    return (time.process_time() - start_s) / count * 1e6
+
+
+def _write_us(writer_class, messages: list, path: Path) -> float:
+    """CPU µs a message of writing ``messages`` (BagMessage) through ``writer_class`` into an MCAP
+    file as the suite's bags are written: zstd chunks of CHUNK_BYTES with CRCs, finish included."""
+    with path.open("wb") as stream:
+        writer = writer_class(
+            stream, chunk_size=CHUNK_BYTES, compression=CompressionType.ZSTD, enable_crcs=True
+        )
+        writer.start(profile="ros2", library="bench")
+        channels = {}
+        for topic, msgtype in sorted({(m.topic, m.msgtype) for m in messages}):
+            schema_id = writer.register_schema(msgtype, "ros2msg", b"")
+            channels[topic] = writer.register_channel(topic, "cdr", schema_id)
+        start_s = time.process_time()
+        for message in messages:
+            writer.add_message(
+                channels[message.topic], message.log_time_ns, message.raw, message.log_time_ns
+            )
+        writer.finish()
+        return (time.process_time() - start_s) / len(messages) * 1e6
+
+
+def run_bag_io(in_bag: Path, work_dir: Path) -> dict:
+    """CPU µs a message of reading every message of ``in_bag`` through the chunk index and through
+    rosbags' reader, and of writing them through McapWriter and the ``mcap`` library's Writer;
+    each the best of SPEED_RUNS, alternating."""
+    work_dir.mkdir(parents=True, exist_ok=True)
+    with BagReader(in_bag) as reader:
+        messages = list(reader.messages())
+
+    def through_index() -> int:
+        with BagReader(in_bag) as reader:
+            return sum(1 for _ in reader.messages())
+
+    def through_rosbags() -> int:
+        with Reader(in_bag) as reader:
+            return sum(1 for _ in reader.messages())
+
+    figures: dict[str, list[float]] = {key: [] for key in ("read_index", "read_rosbags")}
+    figures |= {"write_fast": [], "write_library": []}
+    for _ in range(SPEED_RUNS):
+        figures["read_index"].append(_read_us(through_index, len(messages)))
+        figures["read_rosbags"].append(_read_us(through_rosbags, len(messages)))
+        figures["write_fast"].append(_write_us(McapWriter, messages, work_dir / "fast.mcap"))
+        figures["write_library"].append(_write_us(Writer, messages, work_dir / "library.mcap"))
+    if (work_dir / "fast.mcap").read_bytes() != (work_dir / "library.mcap").read_bytes():
+        raise RuntimeError("McapWriter's file differs from the mcap library's")
+    return {
+        "messages": len(messages),
+        **{f"{key}_us_per_message": min(runs) for key, runs in figures.items()},
+        "runs_us_per_message": figures,
+    }
+
+
+def print_bag_io(result: dict) -> None:
+    print(
+        f"\n  Bag I/O, CPU µs a message over the {result['messages']} messages of the bag "
+        "(best of the runs; writing: zstd chunks and CRCs included)"
+    )
+    print(
+        f"    read:  chunk index {result['read_index_us_per_message']:5.1f}   "
+        f"rosbags' reader {result['read_rosbags_us_per_message']:5.1f}"
+    )
+    print(
+        f"    write: McapWriter  {result['write_fast_us_per_message']:5.1f}   "
+        f"mcap's Writer   {result['write_library_us_per_message']:5.1f}   (same bytes)"
+    )
 
 
 def print_speed(result: dict, quick: bool = False) -> None:
@@ -130,6 +213,7 @@ def print_speed(result: dict, quick: bool = False) -> None:
             f"{verdict:13s} {s['cpu_s']:7.2f} {s['cpu_real_time_multiple']:11.1f} "
             f"{s['messages_in_per_s']:9.0f} {s['messages_out_per_s']:9.0f}   {runs}"
         )
+    print_bag_io(result["bag_io"])
 
 
 def print_to_stderr(text: str) -> None:
