@@ -10,7 +10,8 @@ as constants and printed beside our figures:
    and sway-and-rotation run;
 3. vertical wind (paper Table 3): process_bag on vertical_wind at 5 and 15 m/s;
 4. sea: process_bag on sea_state and open_ocean, with the share of each Miller term;
-5. speed: fuse_bag and process_bag on one hour of open_ocean;
+5. speed: fuse_bag and process_bag on one hour of open_ocean: wall and CPU time, messages read
+   and written per second, × real time (tools/bench_speed.py);
 6. live latency and CPU of fusion_node (tools/bench_live.py), and (6b) the same run with
    pass-through stand-ins for both nodes (tools/passthrough_node.py): the floor it is read
    against;
@@ -66,7 +67,6 @@ import contextlib
 import hashlib
 import io
 import json
-import math
 import os
 import shutil
 import sys
@@ -103,20 +103,18 @@ from bench_plan import (
     SEED_SPREAD_SCENARIOS,
     SIMULATION_PARAMS,
     SPEED_DURATION_S,
-    SPEED_RUNS,
-    SPEED_TARGET_REAL_TIME,
     STILL_LEVEL,
     TUNNEL_SPEEDS_MPS,
     VERTICAL_RESIDUAL_SHARE_TARGET,
     VERTICAL_SPEED_ERROR_TARGET,
     VERTICAL_SPEEDS_MPS,
 )
+from bench_speed import print_speed, run_speed
 from bench_tables import (
     print_attitude,
     print_live,
     print_sea,
     print_seed_spread,
-    print_speed,
     print_tunnel,
     print_vertical,
 )
@@ -386,60 +384,6 @@ def run_cases(cases: list[Case], bag_of: dict[str, Path]) -> dict[str, dict]:
 
 
 # ---------------------------------------------------------------------------------------------
-# Table 5: speed.
-
-
-def run_speed(in_bag: Path) -> dict:
-    """fuse_bag and process_bag on the long bag, SPEED_RUNS times each, alternating, nothing else
-    running in the bench. The figure of a tool is its fastest run: on a shared machine the
-    other runs measure the neighbours as much as the code (all runs are kept in the results)."""
-    out = RUNS_DIR / "speed"
-    out.mkdir(parents=True, exist_ok=True)
-    # Other work on the machine slows this down; the load average says how much there was.
-    load_before = os.getloadavg()[0]
-    walls: dict[str, list[float]] = {"fuse_bag": [], "process_bag": []}
-    duration_s = math.nan
-    for run in range(1, SPEED_RUNS + 1):
-        # The bags the bench just wrote would otherwise be flushed to disk during the timing.
-        os.sync()
-        log(f"bench: speed: fuse_bag on the long bag, run {run} of {SPEED_RUNS}")
-        fused = fuse_bag(
-            str(in_bag), str(out / "fused"), fusion_config_from_files(PROCESSING_PARAMS), True
-        )
-        duration_s = fused.duration_s
-        walls["fuse_bag"].append(fused.wall_s)
-        os.sync()
-        log(f"bench: speed: process_bag on the long bag, run {run} of {SPEED_RUNS}")
-        summary = process_bag(
-            str(in_bag),
-            str(out / "processed"),
-            fusion_config_from_files(PROCESSING_PARAMS),
-            compensator_config_from_files(PROCESSING_PARAMS),
-            overwrite=True,
-        )
-        walls["process_bag"].append(summary.wall_s)
-    steps = {}
-    for name, runs_wall_s in walls.items():
-        multiple = duration_s / min(runs_wall_s)
-        steps[name] = {
-            "data_s": duration_s,
-            "wall_s": min(runs_wall_s),
-            "runs_wall_s": runs_wall_s,
-            "runs_real_time_multiple": [duration_s / wall for wall in runs_wall_s],
-            "real_time_multiple": multiple,
-            "pass": bool(multiple >= SPEED_TARGET_REAL_TIME),
-        }
-    return {
-        "bag": in_bag.name,
-        "target_real_time_multiple": SPEED_TARGET_REAL_TIME,
-        "load_average_1min_before": load_before,
-        "load_average_1min_after": os.getloadavg()[0],
-        "cpus": os.cpu_count(),
-        **steps,
-    }
-
-
-# ---------------------------------------------------------------------------------------------
 
 
 def parse_arguments(argv):
@@ -575,7 +519,7 @@ def main(argv=None) -> None:
         print_vertical(vertical)
         print_sea(sea)
     if "speed" in sections:
-        results["speed"] = run_speed(speed_bag)
+        results["speed"] = run_speed(speed_bag, RUNS_DIR / "speed", log)
         print_speed(results["speed"], quick)
     if "live" in sections:
         import bench_live

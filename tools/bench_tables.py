@@ -17,7 +17,6 @@ from bench_plan import (
     QUICK_DURATION_S,
     SEA_MEAN_WINDOW_S,
     SEA_SCENARIOS,
-    SPEED_DURATION_S,
     TUNNEL_SPEEDS_MPS,
     VERTICAL_SPEEDS_MPS,
 )
@@ -266,27 +265,6 @@ def print_sea(results: dict) -> None:
             f"  term sizes (RMS): tilt beyond heading {sizes['tilt_minus_heading_only']:.3f}, "
             f"rotation {sizes['rotation']:.3f}, translation {sizes['translation']:.3f} m/s; "
             f"recomputed vs wind/true max |Δ| {r['recomputed_vs_bag_max_abs_mps']:.1e} m/s"
-        )
-
-
-def print_speed(result: dict, quick: bool) -> None:
-    print(
-        "\nTable 5 — offline speed: open_ocean, in the bench process, nothing else running in "
-        f"the bench (machine load average {result['load_average_1min_before']:.2f} before, "
-        f"{result['load_average_1min_after']:.2f} after, {result['cpus']} CPUs)"
-    )
-    if quick:
-        print(f"  (--quick: {SPEED_DURATION_S['quick']:g} s of data instead of one hour)")
-    print(
-        f"  {'step':12s} {'data s':>8s} {'wall s':>8s} {'× real time':>12s}  target ≥ 100×   "
-        "× real time of each run (the best counts)"
-    )
-    for name in ("fuse_bag", "process_bag"):
-        s = result[name]
-        runs = " / ".join(f"{multiple:.1f}" for multiple in s["runs_real_time_multiple"])
-        print(
-            f"  {name:12s} {s['data_s']:8.0f} {s['wall_s']:8.1f} "
-            f"{s['real_time_multiple']:12.1f}  {mark(s['pass']):14s} {runs}"
         )
 
 

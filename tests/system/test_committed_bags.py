@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from rosbags.rosbag2 import Reader
 
 from buoy_common.bag_io import BagReader
 from ros_messages import raw_stamp_ns
@@ -51,6 +52,20 @@ def test_bag_has_contract_topics_types_and_counts(bag):
         # one sample per period over the run (a topic may start or stop within a period)
         expected = duration_s * rate_hz + 1
         assert math.isclose(topics[topic].count, expected, abs_tol=2), topic
+
+
+@pytest.mark.parametrize("bag", BAGS, ids=[b.name for b in BAGS])
+def test_bag_reader_gives_the_messages_rosbags_reads_in_its_order(bag):
+    """BagReader reads a finished bag through the MCAP chunk index, not through rosbags: the
+    same messages, bytes, types and order."""
+    with Reader(bag) as reference:
+        expected = [
+            (connection.topic, connection.msgtype, time_ns, bytes(raw))
+            for connection, time_ns, raw in reference.messages()
+        ]
+    with BagReader(bag) as reader:
+        read = [(m.topic, m.msgtype, m.log_time_ns, m.raw) for m in reader.messages()]
+    assert read == expected
 
 
 @pytest.mark.parametrize("bag", BAGS, ids=[b.name for b in BAGS])

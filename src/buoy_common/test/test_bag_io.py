@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import importlib
+import io
 import itertools
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +15,7 @@ import pytest
 import yaml
 from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
@@ -19,6 +24,7 @@ from sensor_msgs.msg import Image, Imu, NavSatFix
 from std_msgs.msg import Byte, ByteMultiArray, Char
 
 from buoy_common.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter
+from buoy_common.bag_io.mcap_writer import McapWriter
 
 T0_NS = 1_700_000_000_000_000_000
 IMU_PERIOD_NS = 10_000_000  # 100 Hz
@@ -241,6 +247,51 @@ def test_chunks_overlapping_in_time_are_read_in_the_order_rosbags_reads(tmp_path
         with BagReader(path) as reader:
             read = [(m.topic, m.log_time_ns, m.raw) for m in reader.messages(topics)]
         assert read == [entry for entry in expected if topics is None or entry[0] in topics]
+
+
+def _mcap_file_of(writer_class) -> bytes:
+    """An MCAP file written by ``writer_class``: three channels, one registered between
+    messages, log times out of order, messages of every size up to a few hundred bytes, chunks
+    of 4 KiB (dozens of them, some overlapping in time) and one flushed early."""
+    rng = np.random.default_rng(7)
+    stream = io.BytesIO()
+    writer = writer_class(stream, chunk_size=4096, compression=CompressionType.ZSTD)
+    writer.start(profile="ros2", library="test")
+    schema = writer.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+    channels = [writer.register_channel(f"/topic_{i}", "cdr", schema) for i in range(2)]
+    for index in range(600):
+        if index == 200:
+            channels.append(writer.register_channel("/late", "cdr", schema, {"k": "v"}))
+        if index == 300:
+            writer.flush()
+        log_time_ns = T0_NS + int(rng.integers(0, 1_000_000_000))
+        data = rng.bytes(int(rng.integers(0, 400)))
+        channel = channels[index % len(channels)]
+        writer.add_message(channel, log_time_ns, data, log_time_ns + 7, sequence=index)
+    writer.finish()
+    return stream.getvalue()
+
+
+def test_lean_message_writer_writes_the_mcap_librarys_bytes():
+    """BagWriter's writer packs message records itself: the file must stay the library's, byte
+    for byte (chunk boundaries, message indexes, statistics); this fails if the internals of
+    the pinned mcap version it relies on change."""
+    library_file = _mcap_file_of(Writer)
+    assert len(make_reader(io.BytesIO(library_file)).get_summary().chunk_indexes) > 20
+    assert _mcap_file_of(McapWriter) == library_file
+
+
+def test_bag_reader_reads_what_rosbags_reads_of_a_bag_the_writer_wrote(written_bag):
+    """The chunk index path of BagReader against rosbags' own reading."""
+    path, _, _ = written_bag
+    with Reader(path) as reference:
+        expected = [
+            (connection.topic, connection.msgtype, time_ns, bytes(raw))
+            for connection, time_ns, raw in reference.messages()
+        ]
+    with BagReader(path) as reader:
+        read = [(m.topic, m.msgtype, m.log_time_ns, m.raw) for m in reader.messages()]
+    assert read == expected
 
 
 def test_chunk_compression_makes_the_bag_smaller(tmp_path):
@@ -496,3 +547,31 @@ def test_background_writer_keeps_what_it_is_given_while_its_process_starts(tmp_p
             writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS + k, Imu())
     with BagReader(path) as reader:
         assert [m.log_time_ns for m in reader.messages()] == [T0_NS + k for k in range(messages)]
+
+
+def test_every_name_of_the_package_comes_from_its_module():
+    """The package loads its names lazily: each one it lists resolves, to its module's object."""
+    import buoy_common.bag_io as bag_io
+
+    for name in bag_io.__all__:
+        module = importlib.import_module(f"buoy_common.bag_io.{bag_io._MODULE_OF[name]}")
+        assert getattr(bag_io, name) is getattr(module, name)
+    assert sorted(bag_io.__all__) == sorted(bag_io._MODULE_OF)
+
+
+def test_the_writing_process_starts_without_rosbags_or_numpy():
+    """What a tool's writing process imports (the module of its entry point): not the reader,
+    the type system or numpy, which would cost it a third of a second of CPU at every run."""
+    loaded = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys, buoy_common.bag_io.background; print(' '.join(sorted(sys.modules)))",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.split()
+    heavy = [m for m in loaded if m.split(".")[0] in ("rosbags", "numpy", "scipy", "tqdm")]
+    assert heavy == []
+    assert "mcap.writer" in loaded

@@ -67,7 +67,6 @@ from buoy_nav.fusion_messages import (
     solution_cdr,
     transform_cdr,
 )
-from buoy_nav.smoothed_solutions import FixedIntervalSmoother
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
 HEADING_TOPICS = (GNSS_HEADING_TOPIC, GNSS_BASELINE_TOPIC, MAGNETOMETER_TOPIC, AHRS_TOPIC)
@@ -140,9 +139,13 @@ class OfflineFusion:
         if smooth:
             config = dataclasses.replace(config, realtime_output=False)
         self.engine = FusionEngine(config)
-        self.smoother = (
-            FixedIntervalSmoother(self.engine, smoother_spill_parent) if smooth else None
-        )
+        self.smoother = None
+        if smooth:
+            # Imported for a smoothing run only: scipy's rotations, which the smoother needs,
+            # would cost every other run a tenth of a second of start-up.
+            from buoy_nav.smoothed_solutions import FixedIntervalSmoother
+
+            self.smoother = FixedIntervalSmoother(self.engine, smoother_spill_parent)
         self.stamps = StampBook()
         self.writer = writer
         self.rejections: Counter[str] = Counter()

@@ -53,7 +53,6 @@ from collections import deque
 from collections.abc import Iterable
 
 import numpy as np
-from scipy.linalg import block_diag
 
 from buoy_common.contract import Reason
 from buoy_nav import earth
@@ -67,6 +66,7 @@ from buoy_nav.error_state_filter import (
     ErrorStateFilter,
     ImuErrorModel,
     NavState,
+    block_diagonal,
     discrete_error_model,
     inject_error_state,
 )
@@ -76,7 +76,7 @@ from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
 from buoy_nav.prediction import RealtimePrediction
-from buoy_nav.sensor_sets import sensor_set
+from buoy_nav.sensor_sets import AidingRecency, sensor_set
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
 
 __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
@@ -156,10 +156,7 @@ class FusionEngine:
         self._counters = {kind: MeasurementCounters() for kind in (IMU, *kinds)}
         self._queue = MeasurementQueue(self.sources, self._counters)
         self._consecutive_rejections = dict.fromkeys(kinds, 0)
-        # Stamp of the latest accepted measurement per source kind (sensor set, coasting).
-        self._last_accepted = dict.fromkeys(kinds, -math.inf)
-        # Stamp of the latest accepted measurement per aided quantity (AIDED_QUANTITIES order).
-        self._last_aided = [-math.inf] * len(AIDED_QUANTITIES)
+        self._recency = AidingRecency(kinds, len(AIDED_QUANTITIES), config.coasting_timeout_s)
         self.innovation_log: list[InnovationRecord] | None = (
             [] if config.record_innovations else None
         )
@@ -210,7 +207,7 @@ class FusionEngine:
             (self._time, self._gyro, self._force),
             self._imu_buffer,
             sample,
-            self._coasting_flags(self._time),
+            self._recency.coasting_flags(self._time),
         )
 
     def catch_up(self) -> None:
@@ -298,14 +295,8 @@ class FusionEngine:
     def health(self) -> EngineHealth:
         """Counters, alignment and coasting state (a snapshot)."""
         self.catch_up()
-        coasting = self._coasting_flags(self._time)
-        timeout = self.config.coasting_timeout_s
-        active = {k for k, t in self._last_accepted.items() if self._time - t <= timeout}
-        lapsed = {
-            k
-            for k, t in self._last_accepted.items()
-            if math.isfinite(t) and self._time - t > timeout
-        }
+        coasting = self._recency.coasting_flags(self._time)
+        active, lapsed = self._recency.sources(self._time)
         return EngineHealth(
             alignment_state=AlignmentState.ALIGNED if self.aligned else self._aligner.state,
             aligned=self.aligned,
@@ -485,8 +476,7 @@ class FusionEngine:
                 counters.accepted += 1
                 counters.nis_sum += gate.nis
                 counters.nis_count += 1
-                self._last_aided[self._aided_index[source]] = t
-                self._last_accepted[kind] = t
+                self._recency.accepted(kind, self._aided_index[source], t)
                 self._consecutive_rejections[kind] = 0
                 accepted.append(model)
                 continue
@@ -500,7 +490,7 @@ class FusionEngine:
             correction = self._filter.update(
                 np.concatenate([m.innovation for m in accepted]),
                 np.vstack([m.jacobian for m in accepted]),
-                block_diag(*(m.covariance for m in accepted)),
+                block_diagonal([m.covariance for m in accepted]),
             )
             self._inject(point.state, correction)
         for source, measurement, model in persistent_rejections:
@@ -536,7 +526,7 @@ class FusionEngine:
         if not due:
             return
         state = self._integrator.nav_state()
-        fix_age = t - self._last_aided[AIDED_QUANTITIES.index("fix")]
+        fix_age = self._recency.age_s(AIDED_QUANTITIES.index("fix"), t)
         group = []
         for source in due:
             measurement = source.pseudo_measurement(t, state, fix_age)
@@ -559,7 +549,7 @@ class FusionEngine:
             return
         self._counters[source.kind].resets += 1
         self._consecutive_rejections[source.kind] = 0
-        self._last_aided[self._aided_index[source]] = t
+        self._recency.aided(self._aided_index[source], t)
         self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
         self._integrator.set_nav_state(reset.state)
         self._filter.reset_states(reset.indices, reset.variances)
@@ -590,7 +580,7 @@ class FusionEngine:
         self._solutions.distrust(None)
         for kind in self._consecutive_rejections:
             self._consecutive_rejections[kind] = 0
-        self._last_aided = [t] * len(AIDED_QUANTITIES)
+        self._recency.aligned(t)
         if self._solutions.map_plane is None:
             self._solutions.map_plane = earth.LocalTangentPlane(
                 state.latitude_rad, state.longitude_rad, state.altitude_m
@@ -601,16 +591,9 @@ class FusionEngine:
         self._prediction.drop()
 
     # ------------------------------------------------------------------ output
-    def _coasting_flags(self, t: float) -> tuple[bool, bool, bool]:
-        """(fix, velocity, heading): no source aiding that quantity accepted for longer than
-        ``coasting_timeout_s`` at stamp ``t``."""
-        timeout = self.config.coasting_timeout_s
-        fix, velocity, heading = self._last_aided[:3]
-        return t - fix > timeout, t - velocity > timeout, t - heading > timeout
-
     def _solution(self, integrator: StrapdownIntegrator, t: float, gyro, force) -> NavSolution:
         """The solution of ``integrator``'s state at stamp ``t`` (raw gyro and force there)."""
         # Coasting is judged where the filter is: measurements ahead of it are not yet used.
         return self._solutions.solution(
-            integrator, self._filter, t, gyro, force, self._coasting_flags(self._time)
+            integrator, self._filter, t, gyro, force, self._recency.coasting_flags(self._time)
         )

@@ -107,6 +107,20 @@ def _skew_array(vector: np.ndarray) -> np.ndarray:
     return np.array(((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0)))
 
 
+def block_diagonal(blocks) -> np.ndarray:
+    """The square matrix with the square ``blocks`` on its diagonal and zeros elsewhere: the
+    measurement covariance of a stacked update. (scipy.linalg.block_diag gives the same matrix
+    at some 20 times the cost, which showed at the aiding rate.)"""
+    size = sum(block.shape[0] for block in blocks)
+    matrix = np.zeros((size, size))
+    offset = 0
+    for block in blocks:
+        end = offset + block.shape[0]
+        matrix[offset:end, offset:end] = block
+        offset = end
+    return matrix
+
+
 @dataclass(frozen=True)
 class NavState:
     """Nominal navigation state (the filter's linearisation point).

@@ -6,10 +6,13 @@ attitude, with or without a magnetometer, no GNSS; (e) any of these through an o
 topic it had. The set is not configured: it follows from what was accepted within
 ``coasting_timeout_s`` (a source is *active*), and a source accepted before but not any more is
 *coasting*. A set change needs no restart and makes no jump: the filter simply stops or starts
-receiving a kind of measurement.
+receiving a kind of measurement. :class:`AidingRecency` keeps the stamps this is judged from.
 """
 
 from __future__ import annotations
+
+import math
+from collections.abc import Iterable
 
 DUAL_ANTENNA_KINDS = ("gnss_heading", "gnss_baseline")
 TERTIARY_ANTENNA_KIND = "gnss_baseline_tertiary"
@@ -39,3 +42,53 @@ def sensor_set(active: set[str], coasting: set[str]) -> str:
     if outage:
         label += f" (e: outage of {', '.join(outage)})"
     return label
+
+
+class AidingRecency:
+    """When each aiding source, and each aided quantity, last had a measurement accepted: what
+    the sensor set and the coasting flags follow from.
+
+    kinds: the aiding sources' kinds; quantity_count: the number of aided quantities (indexed as
+    :data:`buoy_nav.aiding.base.AIDED_QUANTITIES`, fix, velocity and heading first);
+    timeout_s: ``coasting_timeout_s``.
+    """
+
+    def __init__(self, kinds: Iterable[str], quantity_count: int, timeout_s: float):
+        self._timeout_s = timeout_s
+        self._last_accepted = dict.fromkeys(kinds, -math.inf)
+        self._last_aided = [-math.inf] * quantity_count
+
+    def accepted(self, kind: str, quantity: int, t_s: float) -> None:
+        """A measurement of source ``kind`` aiding quantity index ``quantity`` was accepted at
+        stamp ``t_s`` (s)."""
+        self._last_accepted[kind] = t_s
+        self._last_aided[quantity] = t_s
+
+    def aided(self, quantity: int, t_s: float) -> None:
+        """Quantity index ``quantity`` was set from a measurement at ``t_s`` (s): a reset."""
+        self._last_aided[quantity] = t_s
+
+    def aligned(self, t_s: float) -> None:
+        """The alignment completed at ``t_s`` (s): every quantity is known there."""
+        self._last_aided = [t_s] * len(self._last_aided)
+
+    def age_s(self, quantity: int, t_s: float) -> float:
+        """Time since quantity index ``quantity`` was last aided, at stamp ``t_s`` (s)."""
+        return t_s - self._last_aided[quantity]
+
+    def coasting_flags(self, t_s: float) -> tuple[bool, bool, bool]:
+        """(fix, velocity, heading): no source aiding that quantity accepted for longer than
+        the timeout at stamp ``t_s`` (s)."""
+        timeout = self._timeout_s
+        fix, velocity, heading = self._last_aided[:3]
+        return t_s - fix > timeout, t_s - velocity > timeout, t_s - heading > timeout
+
+    def sources(self, t_s: float) -> tuple[set[str], set[str]]:
+        """(active, coasting) source kinds at stamp ``t_s`` (s): accepted within the timeout,
+        and accepted before but not within it."""
+        timeout = self._timeout_s
+        active = {k for k, t in self._last_accepted.items() if t_s - t <= timeout}
+        lapsed = {
+            k for k, t in self._last_accepted.items() if math.isfinite(t) and t_s - t > timeout
+        }
+        return active, lapsed

@@ -19,12 +19,8 @@ from wind_comp.compensator import CorrectedBatch, SampleStatus
 from wind_comp.config import CompensatorConfig
 from wind_comp.flux_products import FluxAverager
 from wind_comp.netcdf_output import NetcdfContent, write_netcdf
-from wind_comp.netcdf_variables import (
-    FlowSeries,
-    NavigationSeries,
-    product_time_name,
-    product_variable_name,
-)
+from wind_comp.netcdf_variables import product_time_name, product_variable_name
+from wind_comp.output_series import FlowSeries, NavigationSeries
 from wind_comp.products import WindAverager
 
 START_S = 1_767_225_600  # 2026-01-01T00:00:00Z

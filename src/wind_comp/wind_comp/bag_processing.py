@@ -92,8 +92,7 @@ from wind_comp.compensation_messages import (
 )
 from wind_comp.config import CompensatorConfig, CurrentConfig
 from wind_comp.flux_products import FluxProduct
-from wind_comp.netcdf_output import NetcdfContent, check_netcdf_output, write_netcdf
-from wind_comp.netcdf_variables import FlowSeries, NavigationSeries
+from wind_comp.output_series import FlowSeries, NavigationSeries
 from wind_comp.pipeline import (
     CompensationOutput,
     CompensationPipeline,
@@ -389,7 +388,11 @@ def process_bag(
     extra_outputs = [] if netcdf_path is None else [netcdf_path]
     check_outputs_apart_from_inputs([in_bag], [out_bag, *csv_paths.values(), *extra_outputs])
     if netcdf_path is not None:
-        check_netcdf_output(netcdf_path, overwrite)
+        # Imported for a run that writes NetCDF only: xarray, pandas and the modules they bring
+        # cost every other run more than a second of CPU at start-up.
+        from wind_comp import netcdf_output
+
+        netcdf_output.check_netcdf_output(netcdf_path, overwrite)
     keep = netcdf_path is not None
     navigation = NavigationSeries() if keep else None
     view = view or TopicView()
@@ -476,7 +479,7 @@ def process_bag(
     if netcdf_path is not None:
         wind = corrections.get(stored_wind)
         current = corrections.get(stored_dvl)
-        content = NetcdfContent(
+        content = netcdf_output.NetcdfContent(
             source=str(in_bag),
             navigation=navigation,
             wind=None if wind is None else wind.series,
@@ -487,7 +490,7 @@ def process_bag(
             history=history,
             attributes=dict(netcdf_attributes or {}),
         )
-        write_netcdf(netcdf_path, content, overwrite)
+        netcdf_output.write_netcdf(netcdf_path, content, overwrite)
     return ProcessSummary(
         **summaries,
         topic_counts=writer.counts,

@@ -41,13 +41,12 @@ import xarray as xr
 from buoy_common.safe_output import OutputError, staging_path
 from wind_comp.flux_products import FluxProduct
 from wind_comp.netcdf_variables import (
-    FlowSeries,
-    NavigationSeries,
     TimeAxis,
     flow_variables,
     navigation_variables,
     product_variables,
 )
+from wind_comp.output_series import FlowSeries, NavigationSeries
 from wind_comp.products import CurrentProduct, WindProduct
 
 CONVENTIONS = "CF-1.10, ACDD-1.3"

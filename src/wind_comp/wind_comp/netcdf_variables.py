@@ -1,26 +1,26 @@
 """The variables of the NetCDF-CF file of ``process_bag`` (:mod:`wind_comp.netcdf_output`):
-the series kept for it while the bag is processed, its time coding, and the CF variables of the
-series, the navigation and the products, with their standard names, units, cell methods and
-flags.
+its time coding, and the CF variables of the series kept while the bag is processed
+(:mod:`wind_comp.output_series`), the navigation and the products, with their standard names,
+units, cell methods and flags.
 """
 
 from __future__ import annotations
 
 import datetime
-from array import array
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 
 from buoy_common.contract import QualityFlag, window_label
-from wind_comp.compensator import CorrectedBatch, SampleStatus
+from wind_comp.compensator import SampleStatus
 from wind_comp.flux_products import (
     MAX_SPIKE_SHARE,
     NON_STATIONARY_PERCENT,
     STATIONARY_PERCENT,
 )
+from wind_comp.output_series import NANOSECONDS, FlowSeries, NavigationSeries
 from wind_comp.products import (
     GOOD_COVERAGE,
     MIN_COVERAGE,
@@ -31,66 +31,6 @@ from wind_comp.report.attitude import rpy_rad_from_quaternions
 
 TIME_UNITS = "seconds"
 """Marks a product field that is a time: written in the file's time units."""
-_NANOSECONDS = 1_000_000_000
-_NAV_FIELDS = 10  # latitude, longitude, altitude, quaternion (4), ENU velocity (3)
-
-
-class FlowSeries:
-    """The corrected samples of one flow sensor, in output order: what ``wind/true`` or
-    ``current/velocity`` carry, and each sample's :class:`SampleStatus`."""
-
-    def __init__(self, reason: Callable[[SampleStatus], str]):
-        """reason: the contract's name of an invalid sample's status (the sensor's
-        :meth:`~wind_comp.compensator.FlowSensor.reason`, as ``diagnostics`` counts it)."""
-        self.reason = reason
-        self.stamps_ns = array("q")
-        self.flows_enu_mps = array("d")
-        self.status = array("b")
-
-    def add(self, secs: np.ndarray, nanosecs: np.ndarray, batch: CorrectedBatch) -> None:
-        """The header stamps (s, ns) of a batch's sensor messages and the batch."""
-        self.stamps_ns.extend((secs * _NANOSECONDS + nanosecs).astype(np.int64).tolist())
-        self.flows_enu_mps.extend(np.asarray(batch.flow_enu_mps, dtype=float).ravel().tolist())
-        self.status.extend(np.asarray(batch.status, dtype=np.int8).tolist())
-
-    def __len__(self) -> int:
-        return len(self.status)
-
-    def columns(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(N,) stamps ns, (N, 3) ENU vectors m/s, (N,) status codes."""
-        return (
-            np.frombuffer(self.stamps_ns, dtype=np.int64),
-            np.frombuffer(self.flows_enu_mps, dtype=float).reshape(-1, 3),
-            np.frombuffer(self.status, dtype=np.int8),
-        )
-
-
-class NavigationSeries:
-    """The navigation solutions handed to the corrections (``nav/odometry`` and ``nav/fix``)."""
-
-    def __init__(self):
-        self._stamps_ns = array("q")
-        self._values = array("d")
-
-    def add(self, solutions: Iterable) -> None:
-        """Solutions as :class:`buoy_nav.fusion_messages.NavValues`."""
-        values = self._values
-        for solution in solutions:
-            self._stamps_ns.append(solution.sec * _NANOSECONDS + solution.nanosec)
-            values.extend((solution.latitude_deg, solution.longitude_deg, solution.altitude_m))
-            values.extend(solution.attitude_xyzw)
-            values.extend(solution.velocity_enu_mps)
-
-    def __len__(self) -> int:
-        return len(self._stamps_ns)
-
-    def columns(self) -> tuple[np.ndarray, np.ndarray]:
-        """(M,) stamps ns and (M, 10): latitude, longitude, altitude, quaternion x y z w,
-        velocity E N U."""
-        return (
-            np.frombuffer(self._stamps_ns, dtype=np.int64),
-            np.frombuffer(self._values, dtype=float).reshape(-1, _NAV_FIELDS),
-        )
 
 
 @dataclass(frozen=True)
@@ -105,21 +45,21 @@ class TimeAxis:
 
     @classmethod
     def starting_on_the_day_of(cls, first_stamp_ns: int) -> TimeAxis:
-        day_ns = 86_400 * _NANOSECONDS
+        day_ns = 86_400 * NANOSECONDS
         return cls(first_stamp_ns // day_ns * day_ns)
 
     @property
     def units(self) -> str:
-        day = datetime.datetime.fromtimestamp(self.reference_ns // _NANOSECONDS, tz=datetime.UTC)
+        day = datetime.datetime.fromtimestamp(self.reference_ns // NANOSECONDS, tz=datetime.UTC)
         return f"seconds since {day:%Y-%m-%dT%H:%M:%S}Z"
 
     def from_ns(self, stamps_ns: np.ndarray) -> np.ndarray:
         """Integer nanoseconds since the epoch as the file's seconds."""
-        return (np.asarray(stamps_ns, dtype=np.int64) - self.reference_ns) / _NANOSECONDS
+        return (np.asarray(stamps_ns, dtype=np.int64) - self.reference_ns) / NANOSECONDS
 
     def from_s(self, t_s) -> np.ndarray:
         """Float seconds since the epoch as the file's seconds."""
-        return np.asarray(t_s, dtype=float) - self.reference_ns // _NANOSECONDS
+        return np.asarray(t_s, dtype=float) - self.reference_ns // NANOSECONDS
 
 
 def _time_attributes(axis: TimeAxis, long_name: str, bounds: str | None = None) -> dict:

@@ -9,8 +9,13 @@ import signal
 from collections import Counter
 from pathlib import Path
 
-from buoy_common.bag_io.common import BagError, jazzy_typestore, one_line
-from buoy_common.bag_io.conversion import serialize
+from buoy_common.bag_io.common import (
+    BagError,
+    TypeDescription,
+    jazzy_typestore,
+    one_line,
+    type_description,
+)
 from buoy_common.bag_io.writing import BagOutput, BagWriter, check_bag_destination
 
 # Messages handed to the writing process at a time: large enough that sending costs a fraction
@@ -30,15 +35,21 @@ class BackgroundBagWriter(BagOutput):
     ``path`` is checked at construction; the tool does not wait for the writing process to
     start (about a second of imports) but keeps the first batches until it is ready. The
     writing process ignores Ctrl-C: the tool decides whether the bag is finished or abandoned.
+
+    The tool describes each message type (definition, hash) to the writing process with the
+    first batch that holds it: the writing process imports neither rosbags nor numpy and starts
+    in a third of the time (about 0.3 s of CPU less per run).
     """
 
     def __init__(self, path: str | Path, overwrite: bool = False):
         self.path = Path(path)
         check_bag_destination(self.path, overwrite)
-        self._typestore = jazzy_typestore()
         self._counts: Counter[str] = Counter()
         self._batch: list[tuple[str, str, int, bytes]] = []
-        self._waiting_batches: list[list[tuple[str, str, int, bytes]]] = []
+        # Types described to the writing process, and those to describe with the next batch.
+        self._described: set[str] = set()
+        self._descriptions: dict[str, TypeDescription] = {}
+        self._waiting_batches: list[tuple[dict, list[tuple[str, str, int, bytes]]]] = []
         self._writer_ready = False
         # Spawned, not forked: the tools may run inside processes with middleware threads.
         context = multiprocessing.get_context("spawn")
@@ -66,6 +77,9 @@ class BackgroundBagWriter(BagOutput):
         """Append one CDR-serialised message with log time ``log_time_ns`` (ns since the epoch)."""
         if not self._open:
             raise BagError(f"bag {self.path} is closed")
+        if msgtype not in self._described:
+            self._descriptions[msgtype] = type_description(self.path, topic, msgtype)
+            self._described.add(msgtype)
         self._batch.append((topic, msgtype, log_time_ns, raw))
         self._counts[topic] += 1
         if len(self._batch) >= _BATCH_MESSAGES:
@@ -73,7 +87,10 @@ class BackgroundBagWriter(BagOutput):
 
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
         """Serialise ``message`` (a rosbags or an rclpy message of ``msgtype``) and append it."""
-        raw = serialize(self._typestore, self.path, topic, msgtype, message)
+        # Imported here, not with the module, which the writing process imports too.
+        from buoy_common.bag_io.conversion import serialize
+
+        raw = serialize(jazzy_typestore(), self.path, topic, msgtype, message)
         self.write_raw(topic, msgtype, log_time_ns, raw)
 
     def close(self) -> None:
@@ -96,8 +113,8 @@ class BackgroundBagWriter(BagOutput):
         """Hand the batch over, or keep it while the writing process is still starting (unless
         ``wait_for_writer``)."""
         if self._batch:
-            self._waiting_batches.append(self._batch)
-            self._batch = []
+            self._waiting_batches.append((self._descriptions, self._batch))
+            self._descriptions, self._batch = {}, []
         if not self._writer_ready:
             if not (wait_for_writer or self._connection.poll()):
                 return
@@ -170,7 +187,9 @@ def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
                 return
             if batch == "close":
                 break
-            for topic, msgtype, log_time_ns, raw in batch:
+            descriptions, records = batch
+            writer.describe(descriptions)
+            for topic, msgtype, log_time_ns, raw in records:
                 writer.write_raw(topic, msgtype, log_time_ns, raw)
         writer.close()
     except EOFError:

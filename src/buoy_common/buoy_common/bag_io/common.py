@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Iterable
+from pathlib import Path
 from typing import NamedTuple, Protocol
-
-from rosbags.typesys import Stores, get_typestore
 
 BAG_VERSION = 9
 METADATA_FILE = "metadata.yaml"
@@ -80,10 +79,41 @@ class Recovery(NamedTuple):
         )
 
 
+class TypeDescription(NamedTuple):
+    """What a bag records of a message type besides its name."""
+
+    definition: str
+    """The ``ros2msg`` definition with those of the types it uses, as the MCAP schema."""
+    hash: str
+    """The type's RIHS01 hash, as metadata.yaml lists it."""
+
+
 @functools.cache
 def jazzy_typestore():
     """The rosbags typestore of ROS 2 Jazzy's message types (shared, do not register into it)."""
+    # Imported on first use: the writing process of the offline tools, which is handed the
+    # descriptions of its types (type_description), starts without rosbags.
+    from rosbags.typesys import Stores, get_typestore
+
     return get_typestore(Stores.ROS2_JAZZY)
+
+
+def require_known_type(typestore, path: Path, topic: str, msgtype: str) -> None:
+    """BagError naming the bag and topic unless ``msgtype`` is one of the typestore's."""
+    if msgtype not in typestore.fielddefs:
+        raise BagError(
+            f"bag {path}: topic {topic}: unknown message type {msgtype!r} "
+            "(not a ROS 2 Jazzy type; expected 'package/msg/Type')"
+        )
+
+
+def type_description(path: Path, topic: str, msgtype: str) -> TypeDescription:
+    """The description of Jazzy type ``msgtype``; BagError naming bag ``path`` and ``topic``
+    for a type that is not one."""
+    typestore = jazzy_typestore()
+    require_known_type(typestore, path, topic, msgtype)
+    definition, _ = typestore.generate_msgdef(msgtype, ros_version=2)
+    return TypeDescription(definition, typestore.hash_rihs01(msgtype))
 
 
 def one_line(error: BaseException) -> str:

@@ -11,7 +11,7 @@ import numpy as np
 from rosbags.interfaces import Nodetype
 from rosbags.typesys.base import normalize_fieldname
 
-from buoy_common.bag_io.common import BagError, one_line
+from buoy_common.bag_io.common import BagError, one_line, require_known_type
 
 # numpy dtypes rosbags uses for arrays of each primitive type.
 _ARRAY_DTYPES = {
@@ -31,15 +31,6 @@ _ARRAY_DTYPES = {
 }
 _STRING_TYPES = {"string", "wstring"}
 _RCLPY_MESSAGE_MODULE = re.compile(r"^(?P<package>\w+)\.msg\._\w+$")
-
-
-def require_known_type(typestore, path: Path, topic: str, msgtype: str) -> None:
-    """BagError naming the bag and topic unless ``msgtype`` is one of the typestore's."""
-    if msgtype not in typestore.fielddefs:
-        raise BagError(
-            f"bag {path}: topic {topic}: unknown message type {msgtype!r} "
-            "(not a ROS 2 Jazzy type; expected 'package/msg/Type')"
-        )
 
 
 def serialize(typestore, path: Path, topic: str, msgtype: str, message) -> bytes:

@@ -1,8 +1,10 @@
 """Reading rosbag2 bags: through rosbags, and a damaged bag as far as it is readable.
 
 A bag is a directory holding ``metadata.yaml`` and its storage files; rosbags opens it, reads
-its messages in log-time order and decodes them. Two kinds of damage are read rather than
-refused, and :attr:`BagReader.recovery` tells the tool, which warns:
+its messages in log-time order and decodes them. The messages of a bag of one finished MCAP
+file are read through the file's chunk index instead (:mod:`buoy_common.bag_io.indexed`): the
+same messages in the same order at a third of the cost. Two kinds of damage are read rather
+than refused, and :attr:`BagReader.recovery` tells the tool, which warns:
 
 - an MCAP file without its index (the recorder was killed or lost power, or the file was cut):
   its complete chunks are read (:mod:`buoy_common.bag_io.recovery`), whatever metadata.yaml
@@ -35,6 +37,7 @@ from buoy_common.bag_io.common import (
     jazzy_typestore,
     one_line,
 )
+from buoy_common.bag_io.indexed import IndexedMcap
 from buoy_common.bag_io.recovery import RecoveredMcap
 
 
@@ -59,6 +62,23 @@ def _listed_message_count(path: Path) -> int | None:
         return None
 
 
+def _lists_only(path: Path, mcap_file: Path) -> bool:
+    """Whether metadata.yaml of bag ``path`` names ``mcap_file`` as its one MCAP storage file,
+    uncompressed as a file or per message (its chunks may be)."""
+    try:
+        information = yaml.safe_load((path / METADATA_FILE).read_text())
+        information = information["rosbag2_bagfile_information"]
+        files = [Path(name).name for name in information["relative_file_paths"]]
+        compression = str(information.get("compression_mode") or "").lower()
+        return (
+            information["storage_identifier"] == "mcap"
+            and files == [mcap_file.name]
+            and compression in ("", "none")
+        )
+    except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError):
+        return False
+
+
 class BagReader:
     """Read a rosbag2 bag directory; a context manager.
 
@@ -76,6 +96,7 @@ class BagReader:
         self.view = view
         self.recovery: Recovery | None = None
         self._reader: Reader | None = None
+        self._indexed: IndexedMcap | None = None
         self._recovered: RecoveredMcap | None = None
         try:
             self._open()
@@ -114,8 +135,11 @@ class BagReader:
             self._recover(unfinished[0], has_metadata)
         elif has_metadata:
             self._open_with_rosbags(self.path)
+            if len(mcap_files) == 1 and _lists_only(self.path, mcap_files[0]):
+                self._indexed = IndexedMcap.open(mcap_files[0], self.topics)
         elif len(mcap_files) == 1:
             self._open_with_rosbags(mcap_files[0])
+            self._indexed = IndexedMcap.open(mcap_files[0], self.topics)
             self.recovery = Recovery(
                 f"it has no {METADATA_FILE}; its {MCAP_SUFFIX} file was read alone",
                 truncated=False,
@@ -261,12 +285,17 @@ class BagReader:
     def _read(self, wanted: set[str]) -> Iterator[BagMessage]:
         view_of = {self._stored_of[name]: name for name in wanted}
         if self._recovered is not None:
-            for message in self._recovered.messages(set(view_of)):
-                yield message._replace(topic=view_of[message.topic])
-            return
+            return (
+                message._replace(topic=view_of[message.topic])
+                for message in self._recovered.messages(set(view_of))
+            )
+        if self._indexed is not None:
+            return self._indexed.messages(view_of)
         connections = [c for c in self._reader.connections if c.topic in view_of]
-        for connection, log_time_ns, raw in self._reader.messages(connections=connections):
-            yield BagMessage(view_of[connection.topic], connection.msgtype, log_time_ns, raw)
+        return (
+            BagMessage(view_of[connection.topic], connection.msgtype, log_time_ns, raw)
+            for connection, log_time_ns, raw in self._reader.messages(connections=connections)
+        )
 
     def decode(self, message: BagMessage):
         """The rosbags message object of ``message`` (fields named as in ROS, arrays as numpy)."""

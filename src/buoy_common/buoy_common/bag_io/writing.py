@@ -1,6 +1,7 @@
 """Writing rosbag2 bags: metadata.yaml (version 9) beside one MCAP file.
 
-The MCAP file is written by the ``mcap`` library with the ``ros2`` profile, as the rosbag2 MCAP
+The MCAP file is written by the ``mcap`` library (its messages packed by
+:mod:`~buoy_common.bag_io.mcap_writer`) with the ``ros2`` profile, as the rosbag2 MCAP
 storage plugin writes it: ``ros2msg`` schemas (definitions and RIHS01 hashes from rosbags'
 Jazzy typestore), ``cdr`` channels, zstd-compressed chunks of about 1 MiB with their CRCs and
 message indexes, the ``rosbag2`` metadata record and a summary. metadata.yaml then declares no
@@ -20,7 +21,6 @@ from pathlib import Path
 
 import yaml
 from mcap.writer import CompressionType
-from mcap.writer import Writer as McapWriter
 
 from buoy_common.bag_io.common import (
     BAG_VERSION,
@@ -28,10 +28,12 @@ from buoy_common.bag_io.common import (
     METADATA_FILE,
     ROS_DISTRO,
     BagError,
+    TypeDescription,
     jazzy_typestore,
     one_line,
+    type_description,
 )
-from buoy_common.bag_io.conversion import require_known_type, serialize
+from buoy_common.bag_io.mcap_writer import McapWriter
 from buoy_common.safe_output import OutputError, move_into_place, staging_path
 
 # Uncompressed bytes after which a chunk is closed: rosbag2's and mcap's default. Larger chunks
@@ -116,6 +118,10 @@ class BagWriter(BagOutput):
     ``in_place`` is for recorders: the bag is written under ``path`` itself (which must not
     exist), :meth:`flush` makes what was written so far readable should the process die, and
     ``abort()`` finishes the bag rather than deleting it.
+
+    Each message type's definition and hash come from rosbags' Jazzy typestore when the type is
+    first written, unless :meth:`describe` gave them (a writer that writes CDR bytes only then
+    does without the typestore).
     """
 
     def __init__(self, path: str | Path, overwrite: bool = False, *, in_place: bool = False):
@@ -124,7 +130,7 @@ class BagWriter(BagOutput):
         self._in_place = in_place
         check_bag_destination(self.path, overwrite and not in_place)
         self._directory = self.path if in_place else staging_path(self.path)
-        self._typestore = jazzy_typestore()
+        self._descriptions: dict[str, TypeDescription] = {}
         self._channels: dict[str, _Channel] = {}
         self._schema_ids: dict[str, int] = {}
         self._mcap_name = f"{self.path.name}{MCAP_SUFFIX}"
@@ -152,6 +158,11 @@ class BagWriter(BagOutput):
     def closed(self) -> bool:
         return self._writer is None
 
+    def describe(self, descriptions: dict[str, TypeDescription]) -> None:
+        """The definitions and hashes of message types to be written, by type name (as
+        :func:`~buoy_common.bag_io.common.type_description` gives them)."""
+        self._descriptions.update(descriptions)
+
     def _open_writer(self) -> McapWriter:
         if self._writer is None:
             raise BagError(f"bag {self.path} is closed")
@@ -166,12 +177,13 @@ class BagWriter(BagOutput):
                     f"cannot also write {msgtype}"
                 )
             return channel
-        require_known_type(self._typestore, self.path, topic, msgtype)
+        description = self._descriptions.get(msgtype)
+        if description is None:
+            description = self._descriptions[msgtype] = type_description(self.path, topic, msgtype)
         writer = self._open_writer()
         schema_id = self._schema_ids.get(msgtype)
         if schema_id is None:
-            definition, _ = self._typestore.generate_msgdef(msgtype, ros_version=2)
-            schema_id = writer.register_schema(msgtype, "ros2msg", definition.encode())
+            schema_id = writer.register_schema(msgtype, "ros2msg", description.definition.encode())
             self._schema_ids[msgtype] = schema_id
         channel_id = writer.register_channel(topic, "cdr", schema_id, {"offered_qos_profiles": ""})
         channel = self._channels[topic] = _Channel(channel_id, topic, msgtype)
@@ -195,8 +207,12 @@ class BagWriter(BagOutput):
 
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
         """Serialise ``message`` (a rosbags or an rclpy message of ``msgtype``) and append it."""
+        # Imported here: numpy and rosbags' message classes, which serialising needs, are no
+        # part of a writer that is handed CDR bytes (the offline tools' writing process).
+        from buoy_common.bag_io.conversion import serialize
+
         self._channel(topic, msgtype)
-        raw = serialize(self._typestore, self.path, topic, msgtype, message)
+        raw = serialize(jazzy_typestore(), self.path, topic, msgtype, message)
         self.write_raw(topic, msgtype, log_time_ns, raw)
 
     def flush(self) -> None:
@@ -223,7 +239,7 @@ class BagWriter(BagOutput):
                         "type": channel.msgtype,
                         "serialization_format": "cdr",
                         "offered_qos_profiles": [],
-                        "type_description_hash": self._typestore.hash_rihs01(channel.msgtype),
+                        "type_description_hash": self._descriptions[channel.msgtype].hash,
                     },
                     "message_count": channel.count,
                 }
