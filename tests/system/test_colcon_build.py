@@ -101,6 +101,7 @@ def test_installed_executable_runs_where_ros2_run_looks(install_base, tmp_path):
         assert (install_base / "sensor_sim/lib/sensor_sim" / node).exists(), node
 
 
+@pytest.mark.long
 def test_colcon_test_runs_the_unit_tests_of_a_package(workspace, tmp_path):
     # One package, the smallest: `make test` runs every package's unit tests through pytest
     # already (testpaths); this shows that colcon finds them too, as a ROS user runs them.

@@ -48,6 +48,9 @@ BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
 PLAYED_S = 60.0
 
 
+# Long runs: in `make test`, the fluxes' replay below holds the live navigation and wind equal
+# to process_bag's on the same minute of sea_state.
+@pytest.mark.long
 @pytest.mark.parametrize("name", ["sea_state", "off_axis"])
 def test_live_pipeline_equals_process_bag(nodes, tmp_path, name):
     parameter_files = CASES[name].parameter_files(tmp_path)

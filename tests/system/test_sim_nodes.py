@@ -103,7 +103,11 @@ def same_message(a, b) -> bool:
     return a == b
 
 
-@pytest.fixture(scope="module", params=BUOYS)
+# The off-axis buoy's live run is a long run (`make test-long`); the shipped geometry's is not.
+@pytest.fixture(
+    scope="module",
+    params=[pytest.param(name, marks=[pytest.mark.long] * (name != "shipped")) for name in BUOYS],
+)
 def live_bag(request, tmp_path_factory, module_ros_env):
     """A short sea_state run recorded from the live nodes, its offline twin and the parameter
     files of the buoy."""
