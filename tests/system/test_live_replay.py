@@ -122,6 +122,9 @@ def test_live_fluxes_equal_process_bag(nodes, tmp_path):
         fusion_config_from_files(parameter_files),
         compensator_config_from_files(parameter_files),
     )
+    assert_offline_run_is_near_the_truth(
+        "sea_state", played, offline, f"sea_state with temperature, first {PLAYED_S:g} s"
+    )
     offline_fluxes = flux_rows(offline)
     # windows of 20 s over a minute, the first before the fusion's alignment
     assert len(offline_fluxes) >= 3
