@@ -13,7 +13,8 @@ Runs ``run_scenario sea_state --fusion --compensation`` for ``--hours`` of simul
   message only to subscriptions already matched, so on a busy machine this listener, or the
   compensation node, may join a few samples after the simulation starts publishing.
 
-Prints a table and writes the figures as JSON (``--json``). ``make bench`` runs the full day
+Prints a table and writes the figures as JSON (``--json``); Ctrl-C stops the run and still
+reports what was measured up to then (marked ``interrupted``). ``make bench`` runs the full day
 (``tools/bench.py --only soak``); ``make test`` a few minutes of it (tests/system/test_soak.py).
 
     python tools/soak.py [--hours 24] [--rate-factor 2] [--json out/bench/soak.json]
@@ -26,6 +27,7 @@ import json
 import math
 import os
 import random
+import signal
 import subprocess
 import sys
 import tempfile
@@ -206,15 +208,20 @@ def soak(hours: float, rate_factor: float, rss_period_s: float, log_dir: Path) -
         )
         pids = child_pids(scenario.pid, NODES, FIND_PID_TIMEOUT_S)
         deadline_s = started_s + duration_s / rate_factor + RUN_MARGIN_S
-        while scenario.poll() is None and time.monotonic() < deadline_s:
-            elapsed_s = time.monotonic() - started_s
-            for name, pid in pids.items():
-                rss = rss_mib(pid)
-                if rss is not None:
-                    rss_samples[name].append((elapsed_s, rss))
-            time.sleep(rss_period_s)
+        try:
+            while scenario.poll() is None and time.monotonic() < deadline_s:
+                elapsed_s = time.monotonic() - started_s
+                for name, pid in pids.items():
+                    rss = rss_mib(pid)
+                    if rss is not None:
+                        rss_samples[name].append((elapsed_s, rss))
+                time.sleep(rss_period_s)
+        except KeyboardInterrupt:
+            # Hours of figures are worth keeping: stop the run and report what was measured.
+            print("soak: interrupted; stopping the run", file=sys.stderr, flush=True)
+            result["interrupted"] = True
         if scenario.poll() is None:
-            scenario.terminate()
+            scenario.send_signal(signal.SIGINT)
         output, _ = scenario.communicate(timeout=60)
         result["run_scenario_exit_code"] = scenario.returncode
         result["run_scenario_output"] = output.strip().splitlines()[-10:]
@@ -268,10 +275,11 @@ def rss_summary(samples: list[tuple[float, float]]) -> dict:
 
 
 def print_table(result: dict) -> None:
-    print(
-        f"soak: {result['simulated_hours']:g} h simulated at {result['rate_factor']:g}x "
-        f"in {result['wall_s'] / 60:.1f} min"
-    )
+    planned = f"{result['simulated_hours']:g} h simulated at {result['rate_factor']:g}x"
+    if result.get("interrupted"):
+        print(f"soak: {planned}, interrupted after {result['wall_s'] / 60:.1f} min")
+    else:
+        print(f"soak: {planned} in {result['wall_s'] / 60:.1f} min")
     for key, value in result["counts"].items():
         print(f"  {key:32s} {value:10d}")
     print("  latency anemometer/wind → wind/true per simulated hour, ms:")

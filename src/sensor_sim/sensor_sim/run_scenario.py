@@ -277,6 +277,11 @@ def run(arguments) -> int:
         print("run_scenario: interrupted, stopping the nodes", file=sys.stderr)
         run.interrupt(run.processes)
         return 130
+    except BaseException:
+        # A closed output pipe or any other way out: the nodes run in sessions of their own and
+        # would outlive this process.
+        run.interrupt(run.processes)
+        raise
     # Upstream first: each node publishes what it holds back when it stops, and the recorder,
     # stopped last, records that too.
     for process in sorted(long_running, key=lambda p: STOP_ORDER.index(p.name)):
