@@ -1,0 +1,71 @@
+"""run_scenario never leaves its nodes behind: they run in sessions of their own, so a terminal's
+Ctrl-C does not reach them, and run_scenario must stop them however it ends itself; here, when
+the reader of its output goes away (``run_scenario ... | head -1``)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+BIN = Path(sys.executable).parent
+BUOY_PARAMETERS = str(REPO / "src" / "buoy_common" / "config" / "buoy.yaml")
+# run_scenario writes a progress line every 10 s: the first one after the reader has gone fails.
+EXIT_TIMEOUT_S = 60.0
+
+pytestmark = pytest.mark.ros
+
+
+def node_pids(parent_pid: int) -> set[int]:
+    """The pids of the processes ``parent_pid`` started."""
+    found = subprocess.run(["pgrep", "-P", str(parent_pid)], capture_output=True, text=True)
+    return {int(pid) for pid in found.stdout.split()}
+
+
+def running(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_nodes_stop_when_the_reader_of_the_output_goes_away(nodes, tmp_path):
+    scenario = subprocess.Popen(
+        [
+            str(BIN / "run_scenario"),
+            "static",
+            "--set",
+            "duration_s=600",
+            "--fusion",
+            "--params-file",
+            BUOY_PARAMETERS,
+            "--log-dir",
+            str(tmp_path),
+        ],
+        env=nodes.env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    try:
+        first_line = scenario.stdout.readline()
+        assert first_line.startswith("run_scenario: 'static'"), first_line
+        started = node_pids(scenario.pid)
+        assert len(started) >= 4, started  # the clock, the sensors, the fusion
+        scenario.stdout.close()
+        scenario.wait(timeout=EXIT_TIMEOUT_S)
+    finally:
+        if scenario.poll() is None:
+            scenario.kill()
+    deadline = time.monotonic() + 30.0
+    while any(running(pid) for pid in started) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    left = [pid for pid in started if running(pid)]
+    for pid in left:
+        subprocess.run(["kill", "-9", str(pid)], check=False)
+    assert not left, f"run_scenario exited with {scenario.returncode} and left {left} running"
