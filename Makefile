@@ -20,7 +20,7 @@ all: help
 help:
 	@echo "make demo   - set up .venv and run the live demo (simulated buoy, fusion, wind correction)"
 	@echo "make test   - set up .venv, lint, and run the test suite (all but the long runs)"
-	@echo "make test-long - the long runs: live fault matrix, double signals, soak, archive, DVL replay"
+	@echo "make test-long - the long runs: live fault matrix, double signals, soak, archive, DVL replay, real record replay"
 	@echo "make bench  - accuracy and speed tables beside the paper's (prints them, writes out/bench/results.json)"
 	@echo "make mutants - flip signs and conventions of the core on a copy, report which tests catch each"
 	@echo "make bags   - re-record the committed bags in bags/ from the live simulation nodes"
@@ -45,7 +45,8 @@ format: venv
 	$(BIN)/ruff check --fix .
 
 # Long runs (marker `long`: the live fault matrix, double signals to every executable, the
-# soak, the archive on a Dask cluster, the DVL's live replay) belong to `make bench`.
+# soak, the archive on a Dask cluster, the DVL's and the real record's live replays) belong
+# to `make bench`.
 test: venv lint
 	$(BIN)/python -m pytest -n auto --dist loadgroup -m "not long"
 

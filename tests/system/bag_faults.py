@@ -24,7 +24,13 @@ from rclpy.serialization import deserialize_message, serialize_message
 from buoy_common.bag_io import BagReader, BagWriter
 from buoy_common.base_node import message_class
 from buoy_common.cdr import read_stamp
-from buoy_common.contract import NANOSECONDS_PER_SECOND, stamp_to_ns
+from buoy_common.contract import (
+    NANOSECONDS_PER_SECOND,
+    SONIC_TEMPERATURE_TOPIC,
+    TEMPERATURE_MSGTYPE,
+    WIND_RAW_TOPIC,
+    stamp_to_ns,
+)
 
 IMU_TOPIC = "/imu/data_raw"
 CLOCK_STEP_S = 5.0
@@ -67,6 +73,28 @@ def write_records(records: list[Record], out: Path) -> None:
     with BagWriter(out) as writer:
         for record in sorted(records, key=lambda r: r.log_time_ns):
             writer.write_raw(record.topic, record.msgtype, record.log_time_ns, record.raw)
+
+
+def with_sonic_temperature(records: list[Record]) -> list[Record]:
+    """``records`` and an ``anemometer/temperature`` for each ``anemometer/wind`` record, with
+    its stamp, logged just after it: a sonic's temperature, following its vertical wind."""
+    temperatures = []
+    for record in records:
+        if record.topic.lstrip("/") != WIND_RAW_TOPIC:
+            continue
+        wind = record.message()
+        temperature = message_class(TEMPERATURE_MSGTYPE)()
+        temperature.header = wind.header
+        temperature.temperature = 20.0 + 0.2 * wind.vector.z
+        temperatures.append(
+            Record(
+                "/" + SONIC_TEMPERATURE_TOPIC,
+                TEMPERATURE_MSGTYPE,
+                record.log_time_ns + 1000,
+                serialize_message(temperature),
+            )
+        )
+    return records + temperatures
 
 
 def write_faulty_bag(

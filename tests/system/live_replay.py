@@ -1,14 +1,14 @@
 """A bag replayed over DDS to ``fusion_node`` and a correction node (``compensation_node`` or
 ``current_node``), their outputs recorded.
 
-The one live replay of the system tests (the live-equals-offline tests and the live half of the
-fault matrix): ``bag_player`` plays the sensor topics at :data:`RATE` times their pace,
-``bag_recorder`` records ``nav/odometry`` and the correction's output (``wind/true`` or
-``current/velocity``), and the nodes are interrupted once the recorder has what ``process_bag``
-wrote for the same bag. The nodes decide on header stamps only, so message timing over DDS must
-not matter, given a latency budget the replay stays within; the correction node publishes the
-samples that still wait for navigation when it is interrupted, as ``process_bag`` does at the
-end of its data.
+The one live replay of the system tests (the live-equals-offline tests, the live half of the
+fault matrix and the real record's): ``bag_player`` plays the sensor topics at :data:`RATE`
+times their pace (or at the rate asked), ``bag_recorder`` records ``nav/odometry`` and the
+correction's output (``wind/true`` or ``current/velocity``), and the nodes are interrupted once
+the recorder has what ``process_bag`` wrote for the same bag. The nodes decide on header stamps
+only, so message timing over DDS must not matter, given a latency budget the replay stays
+within; the correction node publishes the samples that still wait for navigation when it is
+interrupted, as ``process_bag`` does at the end of its data.
 """
 
 from __future__ import annotations
@@ -154,12 +154,15 @@ def replay(
     topics: tuple[str, ...] = (),
     correction: Correction = WIND,
     also_recorded: tuple[str, ...] = (),
+    rate: float = RATE,
 ) -> str:
     """Replay ``played`` (its ``topics``, default all) to ``fusion_node`` and the
     ``correction``'s node started with ``parameter_files``, record their outputs to
     ``recorded``, and return a line of figures for the assertion messages. ``offline`` is
     ``process_bag``'s output for the same bag: the replay waits until the recorder holds as
-    many messages. ``also_recorded``: further output topics to record."""
+    many messages. ``also_recorded``: further output topics to record; ``rate``: the pace, in
+    times the bag's (a bag of fewer messages a second than the simulated ones can go faster).
+    """
     offline_nav_ns, _ = odometry_arrays(offline)
     offline_out_ns, _ = vector_arrays(offline, correction.output_topic)
     with BagReader(played) as reader:
@@ -198,11 +201,11 @@ def replay(
             "bag_player",
             str(played),
             "--rate",
-            str(RATE),
+            str(rate),
             *(("--topics", *topics) if topics else ()),
             "--wait-for-subscribers",
             "1",
-            timeout_s=STARTUP_TIMEOUT_S + duration_s / RATE * 3,
+            timeout_s=STARTUP_TIMEOUT_S + duration_s / rate * 3,
         )
         played_wall_s = time.monotonic() - started
         assert player.returncode == 0, player.stderr
@@ -230,7 +233,7 @@ def replay(
         if key.startswith("invalid[") and value != "0"
     }
     return (
-        f"played {duration_s:.0f} s at {RATE:g}x in {played_wall_s:.1f} s (drained: {drained}); "
+        f"played {duration_s:.0f} s at {rate:g}x in {played_wall_s:.1f} s (drained: {drained}); "
         f"{correction.node} before SIGINT: nav samples in "
         f"{compensation_before_interrupt.get('nav_samples_in')}, {live_invalid_reasons}; "
         f"offline: {offline_nav_ns.size} nav/odometry, {n_inputs} {correction.output_topic} of "

@@ -24,14 +24,11 @@ import pytest
 from live_replay import (
     CURRENT,
     SENSOR_TOPICS,
-    WIND,
     assert_offline_run_is_near_the_truth,
     differences_from_offline,
     replay,
     vector_arrays,
 )
-from rclpy.serialization import serialize_message
-from sensor_msgs.msg import Temperature
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import wind_fluxes_topic
@@ -75,28 +72,6 @@ def test_live_pipeline_equals_process_bag(nodes, tmp_path, name):
 FLUX_WINDOW_S = 20.0
 
 
-def with_sonic_temperature(records: list[bag_faults.Record]) -> list[bag_faults.Record]:
-    """``records`` and an ``anemometer/temperature`` for each ``anemometer/wind`` record, with
-    its stamp, logged just after it: a sonic's temperature, following its vertical wind."""
-    temperatures = []
-    for record in records:
-        if record.topic.lstrip("/") != WIND.input_topic:
-            continue
-        wind = record.message()
-        temperature = Temperature()
-        temperature.header = wind.header
-        temperature.temperature = 20.0 + 0.2 * wind.vector.z
-        temperatures.append(
-            bag_faults.Record(
-                "/anemometer/temperature",
-                "sensor_msgs/msg/Temperature",
-                record.log_time_ns + 1000,
-                serialize_message(temperature),
-            )
-        )
-    return records + temperatures
-
-
 def flux_rows(bag: Path) -> list[list[float]]:
     with BagReader(bag) as reader:
         return [
@@ -114,7 +89,7 @@ def test_live_fluxes_equal_process_bag(nodes, tmp_path):
     parameter_files = [*parameter_files, short_windows]
     played = tmp_path / "played"
     records = bag_faults.read_records(CASES["sea_state"].bag_path, SENSOR_TOPICS, PLAYED_S)
-    bag_faults.write_records(with_sonic_temperature(records), played)
+    bag_faults.write_records(bag_faults.with_sonic_temperature(records), played)
     offline = tmp_path / "offline"
     process_bag(
         played,

@@ -1,9 +1,11 @@
 """Report figures, tables and the saved report data; the report of a processed bag."""
 
 import dataclasses
+import math
 import re
 from pathlib import Path
 
+import bag_faults
 import numpy as np
 import pytest
 from matplotlib.image import imread
@@ -82,6 +84,9 @@ def test_report_with_truth_writes_all_figures_and_tables(tmp_path):
     assert table.count("| 60 |") == 3  # three 60 s windows in 130 s
     # Mean wind (6, -2) m/s toward ESE comes from 288.4°.
     assert "| 288.4 |" in table
+    # The first minute lacks 10 of its 600 samples: good; the last holds 100: bad, in bold.
+    assert table.count("| 0.9833 | 1 good |") == 1
+    assert table.count("| 0.1667 | **4 bad** |") == 1
 
 
 def test_report_without_truth_skips_the_attitude_error(tmp_path):
@@ -396,3 +401,149 @@ def test_directions_across_north_are_drawn_without_jumps():
     assert np.all(np.abs(steps) < 20.0)
     assert np.allclose(unwrapped[np.isfinite(unwrapped)] % 360.0, direction[np.isfinite(direction)])
     assert np.allclose(figures._near_deg([5.0, 355.0], 0.0), [5.0, -5.0])
+
+
+# Flux windows of 10 s over the 40 s of sea_state, with a sonic temperature added: several
+# windows, before and after the alignment, to show with their flags.
+FLUX_WINDOW_S = 10.0
+
+
+@pytest.fixture(scope="module")
+def fluxes_bag(tmp_path_factory):
+    """The default buoy's sea_state run processed again with a sonic temperature and flux
+    windows of :data:`FLUX_WINDOW_S`."""
+    sensors, _, _, parameter_files = sea_state_run(tmp_path_factory, "default")
+    folder = tmp_path_factory.mktemp("sea_state_fluxes")
+    with_temperature, processed = folder / "sensors", folder / "processed"
+    records = bag_faults.read_records(sensors, None, seconds=3600.0)
+    bag_faults.write_records(bag_faults.with_sonic_temperature(records), with_temperature)
+    flux_window = folder / "flux_window.yaml"
+    flux_window.write_text(
+        f"/**:\n  ros__parameters:\n    compensation:\n      flux_window_s: {FLUX_WINDOW_S}\n"
+    )
+    files = [*parameter_files, flux_window]
+    process_bag(
+        with_temperature,
+        processed,
+        fusion_config_from_files(files),
+        compensator_config_from_files(files),
+    )
+    return processed
+
+
+def published_windows(bag, prefix: str) -> list[dict[str, float]]:
+    """Every message of the ``prefix*`` topics as {label: value}, read straight from the bag,
+    ordered by window length and start."""
+    with BagReader(bag) as reader:
+        topics = [name for name in reader.topics if name.lstrip("/").startswith(prefix)]
+        rows = []
+        for message in reader.messages(topics):
+            decoded = reader.decode(message)
+            labels = [dimension.label for dimension in decoded.layout.dim]
+            rows.append(dict(zip(labels, decoded.data, strict=True)))
+    return sorted(
+        rows, key=lambda row: (row["window_end_s"] - row["window_start_s"], row["window_start_s"])
+    )
+
+
+def markdown_table(markdown: str, heading: str) -> list[dict[str, str]]:
+    """The rows of the table under ``## heading``, as {column header: cell}."""
+    section = markdown.split(f"## {heading}\n", 1)[1].split("\n## ", 1)[0]
+    lines = [line for line in section.splitlines() if line.startswith("|")]
+
+    def cells(line: str) -> list[str]:
+        return [cell.strip() for cell in line.strip().strip("|").split("|")]
+
+    header = cells(lines[0])
+    return [dict(zip(header, cells(line), strict=True)) for line in lines[2:]]
+
+
+def assert_printed(cell: str, value: float, *, decimals: int | None = None) -> None:
+    """``cell`` is ``value`` as printed: to ``decimals`` decimals, or to four significant
+    digits."""
+    if math.isnan(value):
+        assert cell == "nan", (cell, value)
+        return
+    tolerance = 0.5 * 10.0**-decimals if decimals is not None else 5e-4 * abs(value)
+    assert abs(float(cell) - value) <= tolerance * (1 + 1e-9), (cell, value)
+
+
+def assert_flag(cell: str, flag: float) -> None:
+    """A flag cell carries the window's flag, in bold unless good."""
+    assert int(cell.strip("*").split()[0]) == int(flag), (cell, flag)
+    assert cell.startswith("**") == (int(flag) != 1), cell
+
+
+def test_report_tables_are_the_bags_products_and_fluxes(fluxes_bag, tmp_path):
+    assert main([str(fluxes_bag), "--out", str(tmp_path)]) == 0
+    markdown = (tmp_path / "wind_products.md").read_text()
+
+    stats = published_windows(fluxes_bag, "wind/stats_")
+    products = markdown_table(markdown, "Averaged wind")
+    assert len(products) == len(stats) > 0
+    for row, published in zip(products, stats, strict=True):
+        assert float(row["length (s)"]) == published["window_end_s"] - published["window_start_s"]
+        assert int(row["valid"]) == published["n_valid"]
+        assert_printed(row["coverage"], published["coverage"], decimals=4)
+        assert_flag(row["flag"], published["quality_flag"])
+
+    published_fluxes = published_windows(fluxes_bag, "wind/fluxes_")
+    fluxes = markdown_table(markdown, "Eddy-covariance fluxes")
+    # 40 s in 10 s windows; those before the alignment have no corrected wind
+    assert len(fluxes) == len(published_fluxes) >= 4
+    for row, published in zip(fluxes, published_fluxes, strict=True):
+        assert float(row["length (s)"]) == FLUX_WINDOW_S
+        assert int(row["valid"]) == published["n_valid"]
+        for column, label in (
+            ("u* (m/s)", "friction_velocity_mps"),
+            ("u'w' (m²/s²)", "u_w_m2_s2"),
+            ("v'w' (m²/s²)", "v_w_m2_s2"),
+            ("w'Ts' (K m/s)", "w_ts_k_mps"),
+        ):
+            assert_printed(row[column], published[label])
+        assert_printed(row["tilt (deg)"], published["tilt_deg"], decimals=2)
+        assert row["spikes u/v/w/Ts"] == "/".join(
+            str(int(published[f"spikes_{c}"])) for c in ("u", "v", "w", "ts")
+        )
+        for column, label in (
+            ("non-stationarity u'w' (%)", "stationarity_u_w_percent"),
+            ("non-stationarity w'Ts' (%)", "stationarity_w_ts_percent"),
+        ):
+            assert_printed(row[column], published[label], decimals=1)
+        assert_printed(row["coverage"], published["coverage"], decimals=4)
+        assert_flag(row["flag"], published["quality_flag"])
+    # 10 s windows of a simulated minute: before the alignment missing, then non-stationary
+    assert {int(published["quality_flag"]) for published in published_fluxes} - {1}
+
+    summary = (tmp_path / "summary.md").read_text()
+    assert "](wind_fluxes.png)" in summary and "## Eddy-covariance fluxes" in summary
+    image = imread(tmp_path / "wind_fluxes.png")
+    assert len(np.unique(image.reshape(-1, image.shape[2]), axis=0)) > 50
+    flagged = sum(1 for published in published_fluxes if published["quality_flag"] != 1)
+    assert f"| {FLUX_WINDOW_S:g} s flux windows flagged other than good | {flagged} of " in summary
+
+    # the fluxes survive a saved report data file
+    data = report_data_from_bag(fluxes_bag)
+    loaded = load_report_data(save_report_data(data, tmp_path / "run.npz")).fluxes
+    # NaN fluxes of the missing windows included
+    np.testing.assert_equal(
+        [dataclasses.astuple(flux) for flux in loaded],
+        [dataclasses.astuple(flux) for flux in data.fluxes],
+    )
+
+
+def test_a_bag_without_fluxes_gets_no_flux_table(sea_state_bags, tmp_path):
+    _, processed, _ = sea_state_bags
+    without_fluxes = tmp_path / "without_fluxes"
+    with BagReader(processed) as reader, BagWriter(without_fluxes) as writer:
+        assert any(name.startswith("/wind/fluxes_") for name in reader.topics)
+        kept = [name for name in reader.topics if not name.startswith("/wind/fluxes_")]
+        for message in reader.messages(kept):
+            writer.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
+    out = tmp_path / "report"
+    assert main([str(without_fluxes), "--out", str(out)]) == 0
+    for name in ("wind_products.md", "summary.md"):
+        text = (out / name).read_text()
+        assert "Eddy-covariance fluxes" not in text and "flux windows" not in text
+        assert "| coverage | flag |" in text
+    assert not (out / "wind_fluxes.png").exists()

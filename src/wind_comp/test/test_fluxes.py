@@ -165,3 +165,81 @@ def test_stationarity_tells_a_steady_flux_from_one_carried_by_a_trend():
 def test_air_density_of_the_standard_atmosphere():
     assert math.isclose(air_density_kg_m3(15.0), 1.225, rel_tol=1e-3)
     assert air_density_kg_m3(math.nan) == air_density_kg_m3(15.0)
+
+
+def bounded_turbulence(seed: int):
+    """:func:`turbulence` with every fluctuation within 3 σ of its component, so that a window
+    of it holds no Vickers–Mahrt spike of its own (Gaussian data have 3.5-σ outliers)."""
+    t, streamwise, temperature = turbulence(seed)
+    sigma = np.sqrt(np.diag(COVARIANCE))
+    trend = np.column_stack([MEAN_SPEED_MPS + 1.5 * t / WINDOW_S, 0 * t, 0 * t])
+    streamwise = trend + np.clip(streamwise - trend, -3 * sigma[:3], 3 * sigma[:3])
+    mean_temperature = 20.0 - 0.5 * t / WINDOW_S
+    temperature = mean_temperature + np.clip(
+        temperature - mean_temperature, -3 * sigma[3], 3 * sigma[3]
+    )
+    return t, streamwise, temperature
+
+
+def with_spikes(streamwise, temperature, seed: int):
+    """The series with spikes a faulty sonic gives: 30 single samples and 5 pairs in which u
+    jumps up by 8 σu while w drops by 8 σw (a spike of the downward momentum flux), and Ts
+    jumps up by 10 σT at 20 of them; returns the spiked series and the samples spiked."""
+    rng = np.random.default_rng(seed)
+    starts = np.sort(rng.choice(np.arange(10, streamwise.shape[0] - 10, 20), 35, replace=False))
+    wind_spikes = np.concatenate([starts, starts[:5] + 1])
+    temperature_spikes = starts[5:25]
+    sigma = np.sqrt(np.diag(COVARIANCE))
+    spiked, spiked_temperature = streamwise.copy(), temperature.copy()
+    spiked[wind_spikes, 0] += 8 * sigma[0]
+    spiked[wind_spikes, 2] -= 8 * sigma[2]
+    spiked_temperature[temperature_spikes] += 10 * sigma[3]
+    return spiked, spiked_temperature, wind_spikes, temperature_spikes
+
+
+@pytest.mark.parametrize("seed", [11, 12])
+def test_despiking_takes_out_the_spikes_and_gives_back_the_clean_fluxes(seed):
+    t, clean, clean_temperature = bounded_turbulence(seed)
+    spiked, spiked_temperature, wind_spikes, temperature_spikes = with_spikes(
+        clean, clean_temperature, seed
+    )
+    reference = window_fluxes(t, clean, clean_temperature)
+    assert reference.spikes == (0, 0, 0, 0)
+    counted = window_fluxes(t, spiked, spiked_temperature)
+    despiked = window_fluxes(t, spiked, spiked_temperature, despike=True)
+    # every injected spike is found, in its own component, and nothing else
+    expected = (wind_spikes.size, 0, wind_spikes.size, temperature_spikes.size)
+    assert counted.spikes == despiked.spikes == expected
+    # 40 of 18 000 samples out: the clean window's fluxes within a few thousandths ...
+    assert abs(despiked.u_w_m2_s2 - reference.u_w_m2_s2) < 0.01 * abs(reference.u_w_m2_s2)
+    assert abs(despiked.v_w_m2_s2 - reference.v_w_m2_s2) < 0.005
+    assert abs(despiked.w_ts_k_mps - reference.w_ts_k_mps) < 0.02 * abs(reference.w_ts_k_mps)
+    assert math.isclose(despiked.tilt_deg, reference.tilt_deg, abs_tol=0.01)
+    # ... where the spikes left in bias u'w' and w'Ts' far beyond that
+    assert abs(counted.u_w_m2_s2 - reference.u_w_m2_s2) > 0.2 * abs(reference.u_w_m2_s2)
+    assert abs(counted.w_ts_k_mps - reference.w_ts_k_mps) > 0.5 * abs(reference.w_ts_k_mps)
+
+
+def test_despiking_a_window_without_spikes_changes_nothing():
+    t, clean, temperature = bounded_turbulence(13)
+    assert window_fluxes(t, clean, temperature, despike=True) == window_fluxes(
+        t, clean, temperature
+    )
+
+
+def test_the_averager_despikes_its_windows_when_asked():
+    t, clean, temperature = bounded_turbulence(14)
+    spiked, spiked_temperature, wind_spikes, _ = with_spikes(clean, temperature, 14)
+    stamps = t + 2 * WINDOW_S
+    windows = {}
+    for despike in (False, True):
+        averager = FluxAverager(WINDOW_S, despike=despike)
+        for stamp, value in zip(stamps, spiked_temperature, strict=True):
+            averager.add_temperature(stamp, value)
+        (windows[despike],) = averager.add_batch(stamps, spiked) + averager.flush()
+    direct = window_fluxes(
+        stamps, spiked, spiked_temperature, window_start_s=2 * WINDOW_S, despike=True
+    )
+    assert windows[True].u_w_m2_s2 == direct.u_w_m2_s2
+    assert windows[True].spikes_u == windows[False].spikes_u == wind_spikes.size
+    assert windows[True].u_w_m2_s2 != windows[False].u_w_m2_s2

@@ -4,6 +4,7 @@ it was not allowed to."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -237,3 +238,17 @@ def test_an_existing_file_is_replaced_only_when_asked(tmp_path):
     with pytest.raises(OutputError, match="not a file"):
         write_netcdf(directory, made, overwrite=True)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a_directory.nc", "out.nc"]
+
+
+def test_despiked_fluxes_say_so_on_their_spike_counts(written, tmp_path):
+    path, made, _, _, _ = written
+    despiked = write_netcdf(
+        tmp_path / "despiked.nc", dataclasses.replace(made, fluxes_despiked=True), False
+    )
+    for file, expected in ((path, False), (despiked, True)):
+        with xr.open_dataset(file, decode_times=False) as dataset:
+            for component in ("u", "v", "w", "ts"):
+                variable = dataset[product_variable_name("flux", 60.0, f"spikes_{component}")]
+                assert ("compensation.flux_despike" in variable.attrs.get("comment", "")) is (
+                    expected
+                )

@@ -486,6 +486,7 @@ def process_bag(
             current=None if current is None else current.series,
             wind_products=[] if wind is None else wind.products,
             fluxes=[] if wind is None else wind.fluxes,
+            fluxes_despiked=compensator_config.flux_despike,
             current_products=[] if current is None else current.products,
             history=history,
             attributes=dict(netcdf_attributes or {}),

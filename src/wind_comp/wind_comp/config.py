@@ -80,6 +80,10 @@ class CompensatorConfig:
             (the default): double rotation, window by window.
         air_pressure_pa: air pressure for the air density of the stress, Pa (the standard
             atmosphere by default: ±30 hPa of weather changes the stress by 3 %).
+        flux_despike: take the Vickers–Mahrt spikes out of the fluxes (each spike NaN in its
+            own component of the window's rotated wind or sonic temperature; the counts
+            ``spikes_*`` are then the samples taken out); False (the default): only count them.
+            The corrected wind and its products keep every sample either way.
     """
 
     anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
@@ -94,6 +98,7 @@ class CompensatorConfig:
     flux_window_s: float = DEFAULT_FLUX_WINDOW_S
     flux_planar_fit: tuple[float, float, float] = (math.nan, math.nan, math.nan)
     air_pressure_pa: float = STANDARD_PRESSURE_PA
+    flux_despike: bool = False
 
     def __post_init__(self):
         _check_and_coerce(

@@ -81,6 +81,8 @@ class FluxProduct:
     spikes_v: int
     spikes_w: int
     spikes_ts: int
+    """Vickers–Mahrt spikes of u, v, w (frame of the mean wind) and Ts: counted, and taken out
+    of the fluxes when the averager despikes."""
     invalid_share: float
     stationarity_u_w_percent: float
     stationarity_w_ts_percent: float
@@ -114,17 +116,21 @@ class FluxAverager:
         window_s: float = DEFAULT_FLUX_WINDOW_S,
         plane: PlanarFit | None = None,
         pressure_pa: float = STANDARD_PRESSURE_PA,
+        despike: bool = False,
     ):
         """Args:
         window_s: window length, s.
         plane: the planar fit to rotate with (Wilczak et al. 2001); None: double rotation.
         pressure_pa: air pressure for the air density of the stress, Pa.
+        despike: take the Vickers–Mahrt spikes each window counts out of its fluxes
+            (:func:`wind_comp.fluxes.window_fluxes`); False: count them only.
         """
         if not (math.isfinite(window_s) and window_s > 0):
             raise FluxError(f"flux window_s must be positive, got {window_s}")
         self.window_s = float(window_s)
         self.plane = plane
         self.pressure_pa = float(pressure_pa)
+        self.despike = bool(despike)
         self.n_rejected_stamps = 0
         self._stamps: list[float] = []
         self._winds: list[np.ndarray] = []
@@ -222,6 +228,7 @@ class FluxAverager:
             window_end_s=end,
             plane=self.plane,
             pressure_pa=self.pressure_pa,
+            despike=self.despike,
         )
         coverage = window_coverage(n_valid, interval_s, self.window_s)
         return FluxProduct(

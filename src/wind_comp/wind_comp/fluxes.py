@@ -16,7 +16,8 @@ sensor time, like the wind products):
    sonic temperature is given.
 4. Quality control: Vickers and Mahrt (1997) spike counts per component (samples further than
    3.5 σ of a moving 5-min window, in runs of at most 3, the threshold raised by 0.1 on each
-   pass until no new spike is found), the share of invalid samples, the Foken and Wichura (1996)
+   pass until no new spike is found; with ``despike``, the same spikes are taken out of the
+   window before steps 1–3), the share of invalid samples, the Foken and Wichura (1996)
    stationarity (the relative difference, %, between the mean covariance of six sub-windows and
    the covariance of the window; < 30 % is stationary), and the tilt of the rotation.
 
@@ -234,9 +235,15 @@ def window_fluxes(
     plane: PlanarFit | None = None,
     pressure_pa: float = STANDARD_PRESSURE_PA,
     spike_test: SpikeTest = SpikeTest(),
+    despike: bool = False,
 ) -> FluxWindow:
     """Fluxes and QC of the samples given as one window (stamps s, (N, 3) wind m/s, optional
-    sonic temperature °C). The window's bounds default to its first and last stamp."""
+    sonic temperature °C). The window's bounds default to its first and last stamp.
+
+    ``despike``: the Vickers–Mahrt spikes counted in ``spikes`` are taken out (NaN in their own
+    component: u, v, w of the rotated wind, Ts) before the rotation (taken again without the
+    samples that carry a spike), the detrending and the covariances. Off, they are only
+    counted."""
     t = np.asarray(time_s, dtype=float)
     wind = np.asarray(wind_mps, dtype=float).reshape(-1, 3)
     temperature = None
@@ -253,26 +260,30 @@ def window_fluxes(
             start, end, count, 1.0 - valid.mean() if count else 1.0, nan, nan, nan, nan, nan,
             nan, nan, nan, (0, 0, 0, 0), nan, nan,
         )  # fmt: skip
-    if plane is None:
-        rotation, tilt = rotation_into_mean_wind(wind[valid].mean(axis=0))
-        tilt_deg = math.degrees(tilt)
-        levelled = wind
-    else:
-        levelled = (wind - [0.0, 0.0, plane.offset_mps]) @ rotation_into_plane(plane).T
-        rotation, _ = rotation_into_mean_wind(levelled[valid].mean(axis=0) * [1.0, 1.0, 0.0])
-        tilt_deg = plane.tilt_deg
-    rotated = levelled @ rotation.T
-    u, v, w = (linear_detrend(t, rotated[:, axis]) for axis in range(3))
+    rotated, tilt_deg = _rotated(wind, valid, plane)
     series = [rotated[:, 0], rotated[:, 1], rotated[:, 2]]
+    if temperature is not None:
+        series.append(temperature)
+    spike_masks = [vickers_mahrt_spikes(x, rate_hz, spike_test) for x in series]
+    if despike:
+        # The spikes were found in the frame of the mean wind with them in it; the rotation
+        # is taken again without the samples that carry one, and each spike is then NaN in
+        # its own component (its sample still counts in the others).
+        wind_spike = np.any(spike_masks[:3], axis=0)
+        rotated, tilt_deg = _rotated(wind, valid & ~wind_spike, plane)
+        rotated[np.column_stack(spike_masks[:3])] = np.nan
+        if temperature is not None:
+            temperature = np.where(spike_masks[3], np.nan, temperature)
+    u, v, w = (linear_detrend(t, rotated[:, axis]) for axis in range(3))
     w_ts = stationarity_w_ts = nan
     mean_temperature = nan
     if temperature is not None:
         mean_temperature = float(np.nanmean(temperature))
         w_ts = _covariance(w, linear_detrend(t, temperature))
         stationarity_w_ts = stationarity_percent(rotated[:, 2], temperature)
-        series.append(temperature)
-    spikes = tuple(int(vickers_mahrt_spikes(x, rate_hz, spike_test).sum()) for x in series)
+    spikes = tuple(int(mask.sum()) for mask in spike_masks)
     u_w, v_w = _covariance(u, w), _covariance(v, w)
+    along = rotated[valid, 0]
     friction_velocity = (u_w * u_w + v_w * v_w) ** 0.25
     density = air_density_kg_m3(mean_temperature, pressure_pa)
     return FluxWindow(
@@ -280,7 +291,7 @@ def window_fluxes(
         window_end_s=end,
         samples=count,
         invalid_share=float(1.0 - valid.mean()),
-        mean_speed_mps=float(np.mean(rotated[valid, 0])),
+        mean_speed_mps=float(np.mean(along[np.isfinite(along)])),
         tilt_deg=tilt_deg,
         u_w_m2_s2=u_w,
         v_w_m2_s2=v_w,
@@ -292,3 +303,14 @@ def window_fluxes(
         stationarity_u_w_percent=stationarity_percent(rotated[:, 0], rotated[:, 2]),
         stationarity_w_ts_percent=stationarity_w_ts,
     )
+
+
+def _rotated(wind: np.ndarray, used: np.ndarray, plane: PlanarFit | None):
+    """(N, 3) ``wind`` (m/s) in the frame of the mean wind of the ``used`` samples (double
+    rotation, or the ``plane`` and a yaw), and the tilt of the rotation (deg)."""
+    if plane is None:
+        rotation, tilt = rotation_into_mean_wind(wind[used].mean(axis=0))
+        return wind @ rotation.T, math.degrees(tilt)
+    levelled = (wind - [0.0, 0.0, plane.offset_mps]) @ rotation_into_plane(plane).T
+    rotation, _ = rotation_into_mean_wind(levelled[used].mean(axis=0) * [1.0, 1.0, 0.0])
+    return levelled @ rotation.T, plane.tilt_deg

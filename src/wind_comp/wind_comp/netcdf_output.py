@@ -66,6 +66,8 @@ class NetcdfContent:
     wind_products: list[WindProduct] = field(default_factory=list)
     current_products: list[CurrentProduct] = field(default_factory=list)
     fluxes: list[FluxProduct] = field(default_factory=list)
+    fluxes_despiked: bool = False
+    """Whether the spikes the fluxes count were taken out of them (``flux_despike``)."""
     history: str = ""
     """The command that made the file."""
     attributes: dict[str, str] = field(default_factory=dict)
@@ -176,7 +178,7 @@ def netcdf_dataset(content: NetcdfContent) -> xr.Dataset:
     if content.wind is not None:
         variables.update(flow_variables(content.wind, True, axis))
         variables.update(product_variables("wind", content.wind_products, axis))
-        variables.update(product_variables("flux", content.fluxes, axis))
+        variables.update(product_variables("flux", content.fluxes, axis, content.fluxes_despiked))
     if content.current is not None:
         variables.update(flow_variables(content.current, False, axis))
         variables.update(product_variables("current", content.current_products, axis))

@@ -387,7 +387,11 @@ def product_time_name(what: str, window_s: float) -> str:
     return f"{what}_time_{window_label(window_s)}"
 
 
-def product_variables(what: str, products: list, axis: TimeAxis) -> dict[str, xr.DataArray]:
+def product_variables(
+    what: str, products: list, axis: TimeAxis, despiked: bool = False
+) -> dict[str, xr.DataArray]:
+    """The variables of the ``what`` products, per window length; ``despiked``: the spikes the
+    fluxes count were taken out of them (said on the spike counts)."""
     table = _TABLES[what]
     variables = {}
     for window_s in sorted({product.window_s for product in products}):
@@ -427,6 +431,11 @@ def product_variables(what: str, products: list, axis: TimeAxis) -> dict[str, xr
                 attributes["ancillary_variables"] = flag_name
             if spec.field.startswith(("n_", "spikes_")):
                 values = values.astype(np.int32)
+            if despiked and spec.field.startswith("spikes_"):
+                attributes["comment"] = (
+                    "these samples were taken out of the fluxes (NaN) before the rotation, "
+                    "the detrending and the covariances (compensation.flux_despike)"
+                )
             variables[f"{what}_{label}_{spec.name}"] = xr.DataArray(
                 values, dims=dimension, attrs=attributes
             )

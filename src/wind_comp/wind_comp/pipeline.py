@@ -313,7 +313,14 @@ def wind_pipeline(config: CompensatorConfig) -> CompensationPipeline:
         config.nav_history_s,
         config.max_attitude_sigma_deg,
         [WindAverager(window_s, config.gust_window_s) for window_s in config.product_windows_s],
-        [FluxAverager(config.flux_window_s, config.planar_fit(), config.air_pressure_pa)],
+        [
+            FluxAverager(
+                config.flux_window_s,
+                config.planar_fit(),
+                config.air_pressure_pa,
+                config.flux_despike,
+            )
+        ],
     )
 
 

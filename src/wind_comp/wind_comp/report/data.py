@@ -16,7 +16,7 @@ import math
 import sys
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import NamedTuple
+from typing import NamedTuple, get_type_hints
 
 import numpy as np
 
@@ -26,6 +26,7 @@ from buoy_common.contract import (
     NAV_ODOMETRY_TOPIC,
     TRUTH_ODOMETRY_TOPIC,
     TRUTH_WIND_TOPIC,
+    WIND_FLUXES_PREFIX,
     WIND_MEAN_PREFIX,
     WIND_RAW_TOPIC,
     WIND_STATS_PREFIX,
@@ -36,6 +37,7 @@ from buoy_common.contract import (
 from buoy_common.namespaces import TopicView
 from wind_comp.compensation_messages import stats_values
 from wind_comp.config import CompensatorConfig
+from wind_comp.flux_products import FluxProduct
 from wind_comp.products import WindAverager, WindProduct
 from wind_comp.report.attitude import interpolate_rpy_rad, rpy_rad_from_quaternions, rpy_sigma_rad
 
@@ -63,6 +65,8 @@ class ReportData:
         nav_rpy_sigma_rad: (M, 3) the filter's 1σ of the estimated roll, pitch and yaw, rad, or
             None (see :func:`rpy_sigma_rad`).
         products: averaged wind products.
+        fluxes: the eddy-covariance fluxes per window, as published (``wind/fluxes_<window>``;
+            empty when the source has none: the report does not compute them).
         title: figure title prefix, e.g. the scenario name.
         time_origin_s: stamp (s) that the time axes of the figures count from.
         products_source: where the products come from, stated under their table.
@@ -77,6 +81,7 @@ class ReportData:
     truth_rpy_rad: np.ndarray | None = None
     nav_rpy_sigma_rad: np.ndarray | None = None
     products: list[WindProduct] = field(default_factory=list)
+    fluxes: list[FluxProduct] = field(default_factory=list)
     title: str = ""
     time_origin_s: float = 0.0
     products_source: str = ""
@@ -127,6 +132,7 @@ _ARRAY_FIELDS = (
     "nav_rpy_sigma_rad",
 )
 _PRODUCT_PREFIX = "product_"
+_FLUX_PREFIX = "flux_"
 
 
 def save_report_data(data: ReportData, path) -> Path:
@@ -134,10 +140,11 @@ def save_report_data(data: ReportData, path) -> Path:
     arrays = {
         name: getattr(data, name) for name in _ARRAY_FIELDS if getattr(data, name) is not None
     }
-    for product_field in fields(WindProduct):
-        arrays[_PRODUCT_PREFIX + product_field.name] = np.array(
-            [getattr(product, product_field.name) for product in data.products], dtype=float
-        )
+    for prefix, windows in ((_PRODUCT_PREFIX, data.products), (_FLUX_PREFIX, data.fluxes)):
+        for window_field in fields(type(windows[0])) if windows else ():
+            arrays[prefix + window_field.name] = np.array(
+                [getattr(window, window_field.name) for window in windows], dtype=float
+            )
     path = Path(path)
     np.savez(
         path,
@@ -160,32 +167,45 @@ def load_report_data(path) -> ReportData:
         if missing:
             raise ReportDataError(f"{path}: missing array(s) {missing}")
         arrays = {name: stored[name] for name in _ARRAY_FIELDS if name in stored}
-        columns = {
-            product_field: stored[_PRODUCT_PREFIX + product_field.name]
-            for product_field in fields(WindProduct)
-            if _PRODUCT_PREFIX + product_field.name in stored
-        }
+        products = _stored_windows(stored, _PRODUCT_PREFIX, WindProduct)
+        fluxes = _stored_windows(stored, _FLUX_PREFIX, FluxProduct)
         title = str(stored["title"]) if "title" in stored else ""
         time_origin_s = float(stored["time_origin_s"]) if "time_origin_s" in stored else 0.0
         source = str(stored["products_source"]) if "products_source" in stored else ""
-    n_products = min((len(column) for column in columns.values()), default=0)
-    products = [
-        WindProduct(
-            **{
-                product_field.name: (
-                    int(column[i]) if product_field.type is int else float(column[i])
-                )
-                for product_field, column in columns.items()
-            }
-        )
-        for i in range(n_products)
-    ]
     return ReportData(
         **arrays,
         products=products,
+        fluxes=fluxes,
         title=title,
         time_origin_s=time_origin_s,
         products_source=source,
+    )
+
+
+def _stored_windows(stored, prefix: str, window_class) -> list:
+    """The windows (``window_class`` instances) stored as one column per field under
+    ``prefix``; none when the file has no such columns."""
+    columns = {
+        window_field.name: stored[prefix + window_field.name]
+        for window_field in fields(window_class)
+        if prefix + window_field.name in stored
+    }
+    count = min((len(column) for column in columns.values()), default=0)
+    return [
+        _window(window_class, {name: column[i] for name, column in columns.items()})
+        for i in range(count)
+    ]
+
+
+def _window(window_class, values: dict):
+    """A ``window_class`` (a product dataclass) of ``values`` (field name: number), its counts
+    and flags as integers."""
+    types = get_type_hints(window_class)
+    return window_class(
+        **{
+            name: int(value) if types[name] is int else float(value)
+            for name, value in values.items()
+        }
     )
 
 
@@ -310,6 +330,8 @@ def report_data_from_bag(
     - products: the ``wind/stats_<window>`` messages (mean vectors from ``wind/mean_<window>``)
       when the bag has them, otherwise recomputed from the corrected wind with the default
       windows of the compensation.
+    - fluxes: the ``wind/fluxes_<window>`` messages, when the bag has them (never recomputed:
+      their parameters, such as the planar fit, are the processing's, not the report's).
 
     Topics are read in ``view``'s namespace (the root when None).
 
@@ -352,6 +374,7 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
             truth = odometry_series(reader, TRUTH_ODOMETRY_TOPIC)
             truth_rpy = interpolate_rpy_rad(nav.stamps_ns, truth.stamps_ns, truth.quat_xyzw)
     products, products_source = _products(reader, t_s, corrected)
+    fluxes = published_fluxes(reader)
     minute_ns = _TIME_ORIGIN_STEP_S * NANOSECONDS_PER_SECOND
     return ReportData(
         t_s=t_s,
@@ -363,6 +386,7 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
         truth_rpy_rad=truth_rpy,
         nav_rpy_sigma_rad=nav_rpy_sigma,
         products=products,
+        fluxes=fluxes,
         title=title,
         time_origin_s=float(measured.stamps_ns[0] // minute_ns * _TIME_ORIGIN_STEP_S),
         products_source=products_source,
@@ -457,6 +481,27 @@ def _product_from_stats(values: dict[str, float], means: StampedVectors) -> Wind
         coverage=values.get("coverage", math.nan),
         quality_flag=int(values.get("quality_flag", QualityFlag.NOT_EVALUATED)),
     )
+
+
+def published_fluxes(reader: BagReader) -> list[FluxProduct]:
+    """The flux windows of every ``wind/fluxes_<window>`` topic of ``reader``'s bag, as
+    published (each message's values taken by their ``layout.dim`` labels), ordered by window
+    length and start; none when the bag has no such topic."""
+    topics = [name for name in reader.topics if name.lstrip("/").startswith(WIND_FLUXES_PREFIX)]
+    if not topics:
+        return []
+    names = [flux_field.name for flux_field in fields(FluxProduct)]
+    fluxes = []
+    for message in reader.messages(topics):
+        try:
+            values = stats_values(reader.decode(message))
+            fluxes.append(_window(FluxProduct, {name: values[name] for name in names}))
+        except (KeyError, ValueError) as error:
+            raise ReportDataError(
+                f"bag {reader.path}: {message.topic} message at log time {message.log_time_ns} "
+                f"ns is not a flux layout ({error})"
+            ) from error
+    return sorted(fluxes, key=lambda flux: (flux.window_s, flux.window_start_s))
 
 
 def wind_series(data: ReportData) -> list[tuple[str, np.ndarray, str]]:

@@ -12,6 +12,10 @@ global backend state are involved:
   bands so that they read as lines; the wave band (where the buoy's tilt has its energy)
   shaded; a −5/3 reference slope (the inertial subrange); and, below, the variance-preserving
   f·S(f), whose area shows where the variance lies;
+- ``wind_fluxes.png`` (bags with ``wind/fluxes_*``): the friction velocity u* (and the buoyancy
+  flux w'Ts' with a sonic temperature) of each flux window as published, drawn over the
+  window's span; windows whose QARTOD flag is not good drawn as open red markers labelled with
+  their flag;
 - ``current_time_series.png`` (bags with ``current/velocity``): the current's single samples,
   its window means and the truth;
 - ``current_averaging.png`` (with the simulator's truth): the error of the window means against
@@ -28,6 +32,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter
 from scipy.signal import welch
 
+from buoy_common.contract import QualityFlag
 from wind_comp.products import meteorological_direction_deg, oceanographic_direction_deg
 from wind_comp.report.attitude import attitude_errors_deg
 from wind_comp.report.current import CurrentData, error_by_window_length
@@ -47,6 +52,8 @@ def write_figures(data: ReportData, out_dir: Path) -> list[Path]:
     spectrum = _plot_vertical_wind_spectrum(data, out_dir / "vertical_wind_spectrum.png")
     if spectrum is not None:
         paths.append(spectrum)
+    if data.fluxes:
+        paths.append(_plot_fluxes(data, out_dir / "wind_fluxes.png"))
     return paths
 
 
@@ -115,6 +122,56 @@ def _plot_wind_time_series(data: ReportData, path: Path) -> Path:
         axis.grid(alpha=0.3)
     figure.tight_layout(rect=(0, 0, 1, 0.93))
     return _save(figure, path, layout_done=True)
+
+
+def _plot_fluxes(data: ReportData, path: Path) -> Path:
+    fluxes = data.fluxes
+    quantities = [("friction_velocity_mps", "u* (m/s)")]
+    if any(flux.n_temperature > 0 for flux in fluxes):
+        quantities.append(("w_ts_k_mps", "w'Ts' (K m/s)"))
+    figure = Figure(figsize=(11, 2.0 + 2.6 * len(quantities)))
+    axes = figure.subplots(len(quantities), 1, sharex=True, squeeze=False)[:, 0]
+    starts = np.array([flux.window_start_s for flux in fluxes]) - data.time_origin_s
+    ends = np.array([flux.window_end_s for flux in fluxes]) - data.time_origin_s
+    middles = 0.5 * (starts + ends)
+    flagged = np.array([flux.quality_flag != QualityFlag.GOOD for flux in fluxes], dtype=bool)
+    for axis, (name, label) in zip(axes, quantities, strict=True):
+        values = np.array([getattr(flux, name) for flux in fluxes])
+        for marked, colour, marker_face, legend in (
+            (~flagged, "tab:blue", "tab:blue", "flag 1 (good)"),
+            (flagged, "tab:red", "none", "flagged (2 not evaluated, 3 suspect, 4 bad)"),
+        ):
+            if not marked.any():
+                continue
+            axis.hlines(values[marked], starts[marked], ends[marked], colors=colour, alpha=0.5)
+            axis.plot(
+                middles[marked],
+                values[marked],
+                linestyle="none",
+                marker="o",
+                markersize=7,
+                color=colour,
+                markerfacecolor=marker_face,
+                label=legend,
+            )
+        for index in np.flatnonzero(flagged & np.isfinite(values)):
+            axis.annotate(
+                str(fluxes[index].quality_flag),
+                (middles[index], values[index]),
+                textcoords="offset points",
+                xytext=(6, 4),
+                color="tab:red",
+            )
+        if name == "w_ts_k_mps":
+            axis.axhline(0.0, color="grey", linewidth=0.8)
+        axis.set_ylabel(label)
+        axis.grid(alpha=0.3)
+    axes[0].legend(loc="best", frameon=False)
+    axes[-1].set_xlabel(_time_label(data))
+    missing = sum(1 for flux in fluxes if flux.quality_flag == QualityFlag.MISSING)
+    note = f" ({missing} missing window(s) without fluxes not drawn)" if missing else ""
+    figure.suptitle(titled(data, f"eddy-covariance fluxes per window{note}"))
+    return _save(figure, path)
 
 
 def _unwrapped_deg(direction_deg: np.ndarray) -> np.ndarray:

@@ -1,5 +1,6 @@
-"""The report's tables, as Markdown: the wind's error against the truth and the averaged wind
-products (``wind_products.md``), the current's error against the truth and the averaged current
+"""The report's tables, as Markdown: the wind's error against the truth, the averaged wind
+products and the eddy-covariance fluxes, each window with its coverage and quality flag
+(``wind_products.md``), the current's error against the truth and the averaged current
 (``current_products.md``), and the summary page (``summary.md``) with the figures, the quality
 control of the samples and the filter's health."""
 
@@ -8,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from buoy_common.contract import QualityFlag
+from wind_comp.flux_products import FluxProduct
 from wind_comp.products import WindProduct, meteorological_direction_deg
 from wind_comp.report.attitude import attitude_errors_deg
 from wind_comp.report.current import CurrentData, window_errors
@@ -26,7 +29,20 @@ def wind_products_markdown(data: ReportData) -> str:
     if data.true_wind_enu_mps is not None:
         lines += [*_accuracy_table(data), ""]
     lines += _products_table(data.products, data.products_source)
+    if data.fluxes:
+        lines += ["", *_fluxes_table(data.fluxes)]
     return "\n".join(lines) + "\n"
+
+
+def flag_text(flag: int) -> str:
+    """A QARTOD flag as the tables show it: its number and meaning, in bold unless good, so
+    that a flagged window stands out."""
+    try:
+        meaning = QualityFlag(flag).name.lower().replace("_", " ")
+    except ValueError:
+        meaning = "unknown"
+    text = f"{flag} {meaning}"
+    return text if flag == QualityFlag.GOOD else f"**{text}**"
 
 
 def _accuracy_table(data: ReportData) -> list[str]:
@@ -73,7 +89,9 @@ def _products_table(products: list[WindProduct], source: str) -> list[str]:
         "",
         "Direction: degrees clockwise from true North, where the wind blows from. "
         "Vectors ENU. Gust: maximum running mean of horizontal speed. The last window of each "
-        "length may be partial: it was closed at the end of the data.",
+        "length may be partial: it was closed at the end of the data. Coverage: the share of a "
+        "full window's samples the window holds valid; flag: IOOS QARTOD (1 good, 2 not "
+        "evaluated, 3 suspect, 4 bad, 9 missing), from the coverage.",
         "",
     ]
     if source:
@@ -83,8 +101,8 @@ def _products_table(products: list[WindProduct], source: str) -> list[str]:
     lines += [
         "| window start (UTC) | length (s) | valid | invalid | vector mean speed (m/s) "
         "| direction (deg) | scalar mean speed (m/s) | gust (m/s) | mean w (m/s) "
-        "| std u (m/s) | std v (m/s) | std w (m/s) |",
-        "|" + "---|" * 12,
+        "| std u (m/s) | std v (m/s) | std w (m/s) | coverage | flag |",
+        "|" + "---|" * 14,
     ]
     for product in products:
         lines.append(
@@ -92,8 +110,46 @@ def _products_table(products: list[WindProduct], source: str) -> list[str]:
             f"| {product.n_invalid} | {product.vector_mean_speed_mps:.2f} "
             f"| {product.vector_mean_direction_deg:.1f} | {product.scalar_mean_speed_mps:.2f} "
             f"| {product.gust_mps:.2f} | {product.mean_w_enu_mps:.3f} "
-            f"| {product.std_u_mps:.2f} | {product.std_v_mps:.2f} | {product.std_w_mps:.2f} |"
+            f"| {product.std_u_mps:.2f} | {product.std_v_mps:.2f} | {product.std_w_mps:.2f} "
+            f"| {product.coverage:.4f} | {flag_text(product.quality_flag)} |"
         )
+    return lines
+
+
+def _fluxes_table(fluxes: list[FluxProduct]) -> list[str]:
+    """The published eddy-covariance fluxes per window with their quality control; w'Ts' and
+    its tests only when a window has a sonic temperature."""
+    with_temperature = any(flux.n_temperature > 0 for flux in fluxes)
+    header = ["window start (UTC)", "length (s)", "valid", "u* (m/s)", "u'w' (m²/s²)"]
+    header += ["v'w' (m²/s²)"] + (["w'Ts' (K m/s)"] if with_temperature else [])
+    header += ["tilt (deg)", "spikes u/v/w" + ("/Ts" if with_temperature else "")]
+    header += ["non-stationarity u'w' (%)"]
+    header += ["non-stationarity w'Ts' (%)"] if with_temperature else []
+    header += ["coverage", "flag"]
+    lines = [
+        "## Eddy-covariance fluxes",
+        "",
+        "In the frame of the mean wind (u along it, w up), linearly detrended, as published on "
+        "wind/fluxes_*. Spikes: Vickers–Mahrt counts per component; non-stationarity: "
+        "Foken–Wichura (< 30 % stationary). Flag: from the coverage, then suspect for a "
+        "non-stationarity above 30 % or spikes above 1 % of a component's samples, bad above "
+        "100 %. Bold flags mark the windows not to trust as they are.",
+        "",
+        "| " + " | ".join(header) + " |",
+        "|" + "---|" * len(header),
+    ]
+    for flux in fluxes:
+        spikes = [flux.spikes_u, flux.spikes_v, flux.spikes_w]
+        spikes += [flux.spikes_ts] if with_temperature else []
+        cells = [utc_text(flux.window_start_s), f"{flux.window_s:.0f}", f"{flux.n_valid}"]
+        cells += [f"{flux.friction_velocity_mps:.4g}", f"{flux.u_w_m2_s2:.4g}"]
+        cells += [f"{flux.v_w_m2_s2:.4g}"]
+        cells += [f"{flux.w_ts_k_mps:.4g}"] if with_temperature else []
+        cells += [f"{flux.tilt_deg:.2f}", "/".join(str(count) for count in spikes)]
+        cells += [f"{flux.stationarity_u_w_percent:.1f}"]
+        cells += [f"{flux.stationarity_w_ts_percent:.1f}"] if with_temperature else []
+        cells += [f"{flux.coverage:.4f}", flag_text(flux.quality_flag)]
+        lines.append("| " + " | ".join(cells) + " |")
     return lines
 
 
@@ -223,7 +279,8 @@ def _current_quality_table(current: CurrentData) -> list[str]:
 
 
 def _quality_table(data: ReportData) -> list[str]:
-    """How many samples were corrected, and how many each product window lacked."""
+    """How many samples were corrected, how many windows of each length lacked samples, and
+    how many were flagged."""
     corrected = np.isfinite(data.corrected_wind_enu_mps).all(axis=1)
     total = max(corrected.size, 1)
     lines = [
@@ -243,6 +300,14 @@ def _quality_table(data: ReportData) -> list[str]:
             f"| {window_s:g} s windows with invalid samples | {incomplete} of {len(windows)} | "
             f"{100 * incomplete / len(windows):.0f} % |"
         )
+    for what, windows in (("", data.products), ("flux ", data.fluxes)):
+        for window_s in sorted({w.window_s for w in windows}):
+            of_length = [w for w in windows if w.window_s == window_s]
+            flagged = sum(1 for w in of_length if w.quality_flag != QualityFlag.GOOD)
+            lines.append(
+                f"| {window_s:g} s {what}windows flagged other than good | {flagged} of "
+                f"{len(of_length)} | {100 * flagged / len(of_length):.0f} % |"
+            )
     return lines
 
 
