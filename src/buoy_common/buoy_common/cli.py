@@ -1,4 +1,5 @@
-"""What every offline command does alike: stop cleanly on SIGINT, SIGTERM and a closed pipe.
+"""What every offline command does alike: stop cleanly on SIGINT, SIGTERM and a closed pipe, and
+keep the garbage collector off what the imports built.
 
 An interrupted command prints one line and exits with :data:`INTERRUPTED_EXIT_CODE`; its outputs
 are staged under temporary names (:mod:`buoy_common.safe_output`), so nothing half-written is
@@ -9,6 +10,7 @@ forwarding the signal twice cannot interrupt the clean-up of the first.
 from __future__ import annotations
 
 import functools
+import gc
 import os
 import signal
 import sys
@@ -41,13 +43,19 @@ class _Interruption:
 def interruptible(program: str) -> Callable:
     """Decorate a command's ``main``: SIGINT or SIGTERM end it with one line on stderr and
     exit code :data:`INTERRUPTED_EXIT_CODE`, a closed output pipe with
-    :data:`BROKEN_PIPE_EXIT_CODE`, both without a traceback."""
+    :data:`BROKEN_PIPE_EXIT_CODE`, both without a traceback.
+
+    What exists when the command starts (modules, classes, numpy, scipy: some 65 000 objects that
+    live as long as the process) is moved out of the cyclic garbage collector's reach
+    (``gc.freeze``): each full collection during a run over a bag would otherwise walk all of
+    it again, about a tenth of a second of CPU each time."""
 
     def decorate(main: Callable) -> Callable:
         @functools.wraps(main)
         def run(*args, **kwargs):
             if threading.current_thread() is not threading.main_thread():
                 return main(*args, **kwargs)
+            gc.freeze()
             interruption = _Interruption()
             for number in _STOP_SIGNALS:
                 signal.signal(number, interruption)
