@@ -9,6 +9,11 @@ real time). The figure of a tool is its fastest run: on a shared machine the oth
 the neighbours as much as the code (all runs are kept in the results). CPU time varies less
 than wall time with the machine's load and is the figure to compare versions of the code by.
 
+Start-up: each tool started as a command on the same bag, the wall time from starting the
+process to its first output message handed to the bag writer, cold (the project's bytecode
+caches removed, as after a change of the sources: Python compiles every module it imports) and
+warm (the caches written by the run before).
+
     python tools/bench_speed.py [BAG]     # default: bags/open_ocean (180 s of data)
     python tools/bench.py --only speed    # one hour of open_ocean, simulated and cached
 """
@@ -18,6 +23,9 @@ from __future__ import annotations
 import json
 import os
 import resource
+import shutil
+import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -36,6 +44,21 @@ from wind_comp.config import compensator_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"
 TOOLS = ("fuse_bag", "process_bag")
+TOOL_MODULES = {"fuse_bag": "buoy_nav.fuse_bag", "process_bag": "wind_comp.process_bag"}
+# The tool's command, with its first hand-over of an output message to the bag writer reported
+# on stderr as the system-wide monotonic clock (which the starting process reads too).
+_FIRST_OUTPUT_COMMAND = """
+import sys, time
+from buoy_common.bag_io import background
+write_raw = background.BackgroundBagWriter.write_raw
+def first_write_raw(self, *args):
+    background.BackgroundBagWriter.write_raw = write_raw
+    print(f"first output at {time.monotonic():.6f}", file=sys.stderr, flush=True)
+    write_raw(self, *args)
+background.BackgroundBagWriter.write_raw = first_write_raw
+from {module} import main
+main(sys.argv[1:])
+"""
 
 
 def _cpu_s() -> float:
@@ -107,6 +130,64 @@ def run_speed(in_bag: Path, work_dir: Path, log=lambda text: None) -> dict:
         "cpus": os.cpu_count(),
         **steps,
         "bag_io": run_bag_io(in_bag, work_dir / "bag_io"),
+        "startup": run_startup(in_bag, work_dir / "startup", log),
+    }
+
+
+def _remove_bytecode_caches() -> None:
+    """Delete the project's ``__pycache__`` directories (not those of the installed libraries)."""
+    for cache in (REPO / "src").glob("*/*/**/__pycache__"):
+        shutil.rmtree(cache, ignore_errors=True)
+
+
+def _first_output_s(tool: str, in_bag: Path, out_bag: Path, write_bytecode: bool) -> float:
+    """Wall time, s, from starting ``tool`` on ``in_bag`` to its first output message; the tool
+    is then interrupted (it leaves nothing under ``out_bag``)."""
+    environment = dict(os.environ)
+    environment.pop("PYTHONDONTWRITEBYTECODE", None)
+    if not write_bytecode:
+        environment["PYTHONDONTWRITEBYTECODE"] = "1"
+    params = [argument for path in PROCESSING_PARAMS for argument in ("--params-file", str(path))]
+    command = _FIRST_OUTPUT_COMMAND.replace("{module}", TOOL_MODULES[tool])
+    started_s = time.monotonic()
+    with subprocess.Popen(
+        [sys.executable, "-c", command, str(in_bag), str(out_bag), "--overwrite", *params],
+        env=environment,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    ) as process:
+        lines = []
+        for line in process.stderr:
+            if line.startswith("first output at "):
+                process.send_signal(signal.SIGINT)
+                process.communicate()
+                return float(line.split()[-1]) - started_s
+            lines.append(line)
+    raise RuntimeError(f"{tool} wrote no output: {''.join(lines[-5:])}")
+
+
+def run_startup(in_bag: Path, work_dir: Path, log=lambda text: None) -> dict:
+    """Start-up of each tool, cold and warm, SPEED_RUNS times each: wall s from the start of
+    the process to its first output message (best of the runs, and every run)."""
+    work_dir.mkdir(parents=True, exist_ok=True)
+    runs: dict[str, dict[str, list[float]]] = {tool: {"cold": [], "warm": []} for tool in TOOLS}
+    for run in range(1, SPEED_RUNS + 1):
+        for tool in TOOLS:
+            log(f"bench: start-up: {tool}, run {run} of {SPEED_RUNS}")
+            _remove_bytecode_caches()
+            out_bag = work_dir / tool
+            runs[tool]["cold"].append(_first_output_s(tool, in_bag, out_bag, False))
+            _first_output_s(tool, in_bag, out_bag, True)  # writes the caches
+            runs[tool]["warm"].append(_first_output_s(tool, in_bag, out_bag, True))
+    return {
+        tool: {
+            "cold_s": min(figures["cold"]),
+            "warm_s": min(figures["warm"]),
+            "runs_cold_s": figures["cold"],
+            "runs_warm_s": figures["warm"],
+        }
+        for tool, figures in runs.items()
     }
 
 
@@ -214,6 +295,17 @@ def print_speed(result: dict, quick: bool = False) -> None:
             f"{s['messages_in_per_s']:9.0f} {s['messages_out_per_s']:9.0f}   {runs}"
         )
     print_bag_io(result["bag_io"])
+    print_startup(result["startup"])
+
+
+def print_startup(result: dict) -> None:
+    print(
+        "\n  Start-up, wall s from starting the command to its first output message (best of "
+        "the runs; cold: the project's bytecode caches removed)"
+    )
+    for tool in TOOLS:
+        s = result[tool]
+        print(f"    {tool:12s} cold {s['cold_s']:5.2f}   warm {s['warm_s']:5.2f}")
 
 
 def print_to_stderr(text: str) -> None:
