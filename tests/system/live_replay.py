@@ -32,8 +32,11 @@ from against_truth import (
     odometry_errors,
 )
 from buoy_common.bag_io import BagReader
+from buoy_nav.config import fusion_config_from_files
 from processed_bags import CASES
 from ros_messages import stamp_ns, wait_for
+from wind_comp.bag_processing import process_bag
+from wind_comp.config import compensator_config_from_files, current_config_from_files
 
 # Twice the pace: the Python nodes, the player and the recorder then need about a core; at 4x
 # a busy 2-core machine starves them long enough for the 1000-deep reliable queues to overflow.
@@ -52,6 +55,27 @@ NAVIGATION_TOPICS = ("/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gnss/heading",
 # The navigation is judged against the truth from this long after its first solution: the
 # first seconds after the alignment carry its errors, which the limits are not about.
 SETTLING_S = 20.0
+
+
+def flux_window_parameters(folder: Path, window_s: float) -> Path:
+    """A parameter file in ``folder`` that sets the flux window to ``window_s`` seconds."""
+    path = folder / "flux_window.yaml"
+    path.write_text(
+        f"/**:\n  ros__parameters:\n    compensation:\n      flux_window_s: {window_s}\n"
+    )
+    return path
+
+
+def process_offline(played: Path, offline: Path, parameter_files, current: bool = False):
+    """``process_bag`` of ``played`` into ``offline`` with the parameters the live nodes get
+    (the current too, when ``current``); returns its summary."""
+    return process_bag(
+        played,
+        offline,
+        fusion_config_from_files(parameter_files),
+        compensator_config_from_files(parameter_files),
+        current_config=current_config_from_files(parameter_files) if current else None,
+    )
 
 
 @dataclass(frozen=True)

@@ -26,17 +26,16 @@ from live_replay import (
     SENSOR_TOPICS,
     assert_offline_run_is_near_the_truth,
     differences_from_offline,
+    flux_window_parameters,
+    process_offline,
     replay,
     vector_arrays,
 )
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import wind_fluxes_topic
-from buoy_nav.config import fusion_config_from_files
 from processed_bags import CASES
-from wind_comp.bag_processing import process_bag
 from wind_comp.compensation_messages import FLUX_FIELDS
-from wind_comp.config import compensator_config_from_files, current_config_from_files
 
 pytestmark = pytest.mark.ros
 
@@ -56,12 +55,7 @@ def test_live_pipeline_equals_process_bag(nodes, tmp_path, name):
         bag_faults.read_records(CASES[name].bag_path, SENSOR_TOPICS, PLAYED_S), played
     )
     offline = tmp_path / "offline"
-    process_bag(
-        played,
-        offline,
-        fusion_config_from_files(parameter_files),
-        compensator_config_from_files(parameter_files),
-    )
+    process_offline(played, offline, parameter_files)
     assert_offline_run_is_near_the_truth(name, played, offline, f"{name}, first {PLAYED_S:g} s")
     recorded = tmp_path / "live"
     figures = replay(nodes, played, parameter_files, offline, recorded)
@@ -82,21 +76,12 @@ def flux_rows(bag: Path) -> list[list[float]]:
 
 def test_live_fluxes_equal_process_bag(nodes, tmp_path):
     parameter_files = CASES["sea_state"].parameter_files(tmp_path)
-    short_windows = tmp_path / "flux_window.yaml"
-    short_windows.write_text(
-        f"/**:\n  ros__parameters:\n    compensation:\n      flux_window_s: {FLUX_WINDOW_S}\n"
-    )
-    parameter_files = [*parameter_files, short_windows]
+    parameter_files = [*parameter_files, flux_window_parameters(tmp_path, FLUX_WINDOW_S)]
     played = tmp_path / "played"
     records = bag_faults.read_records(CASES["sea_state"].bag_path, SENSOR_TOPICS, PLAYED_S)
     bag_faults.write_records(bag_faults.with_sonic_temperature(records), played)
     offline = tmp_path / "offline"
-    process_bag(
-        played,
-        offline,
-        fusion_config_from_files(parameter_files),
-        compensator_config_from_files(parameter_files),
-    )
+    process_offline(played, offline, parameter_files)
     assert_offline_run_is_near_the_truth(
         "sea_state", played, offline, f"sea_state with temperature, first {PLAYED_S:g} s"
     )
@@ -147,13 +132,7 @@ def test_live_current_equals_process_bag(nodes, tmp_path):
     bag_faults.write_records(bag_faults.read_records(simulated, topics, PLAYED_S), played)
     parameter_files = [BUOY_PARAMETERS]
     offline = tmp_path / "offline"
-    process_bag(
-        played,
-        offline,
-        fusion_config_from_files(parameter_files),
-        compensator_config_from_files(parameter_files),
-        current_config=current_config_from_files(parameter_files),
-    )
+    process_offline(played, offline, parameter_files, current=True)
     _, offline_current = vector_arrays(offline, CURRENT.output_topic)
     n_valid = int(np.count_nonzero(np.isfinite(offline_current).all(axis=1)))
     assert n_valid > 0.5 * len(offline_current), f"{n_valid} of {len(offline_current)} valid"

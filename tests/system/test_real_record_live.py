@@ -15,14 +15,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from live_replay import differences_from_offline, replay, vector_arrays
+from live_replay import (
+    differences_from_offline,
+    flux_window_parameters,
+    process_offline,
+    replay,
+    vector_arrays,
+)
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import IMU_RAW_TOPIC, wind_fluxes_topic
 from buoy_common.import_records import import_records
-from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import process_bag
-from wind_comp.config import compensator_config_from_files
 from wind_comp.motion_residual import motion_residual, vertical_acceleration_mps2
 
 pytestmark = pytest.mark.ros
@@ -48,18 +51,9 @@ def test_the_record_replayed_live_equals_process_bag(nodes, tmp_path):
     shortened.write_text("".join(record_rows))
     played = tmp_path / "played"
     import_records(shortened, COLUMN_MAP, played)
-    flux_windows = tmp_path / "flux_window.yaml"
-    flux_windows.write_text(
-        f"/**:\n  ros__parameters:\n    compensation:\n      flux_window_s: {FLUX_WINDOW_S}\n"
-    )
-    parameter_files = [PARAMS, flux_windows]
+    parameter_files = [PARAMS, flux_window_parameters(tmp_path, FLUX_WINDOW_S)]
     offline = tmp_path / "offline"
-    process_bag(
-        played,
-        offline,
-        fusion_config_from_files(parameter_files),
-        compensator_config_from_files(parameter_files),
-    )
+    process_offline(played, offline, parameter_files)
 
     _, measured = vector_arrays(offline, "anemometer/wind")
     _, corrected = vector_arrays(offline, "wind/true")
