@@ -8,6 +8,7 @@ import itertools
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -18,13 +19,14 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Image, Imu, NavSatFix
 from std_msgs.msg import Byte, ByteMultiArray, Char
 
 from buoy_common.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter
 from buoy_common.bag_io.mcap_writer import McapWriter
+from buoy_common.bag_io.recording import RecordingBagWriter
 
 T0_NS = 1_700_000_000_000_000_000
 IMU_PERIOD_NS = 10_000_000  # 100 Hz
@@ -547,6 +549,61 @@ def test_background_writer_keeps_what_it_is_given_while_its_process_starts(tmp_p
             writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS + k, Imu())
     with BagReader(path) as reader:
         assert [m.log_time_ns for m in reader.messages()] == [T0_NS + k for k in range(messages)]
+
+
+# -- a recorder's writer, fed from one thread and written by another ---------------------------
+
+IMU_TYPE = "sensor_msgs/msg/Imu"
+
+
+def test_recording_writer_writes_the_same_bag(written_bag, tmp_path):
+    path, _, counts = written_bag
+    copy = tmp_path / "copy"
+    writer = RecordingBagWriter(copy, flush_period_s=0.01)
+    with BagReader(path) as reader:
+        for message in reader.messages():
+            writer.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
+    writer.close()
+    assert writer.counts == counts and writer.backlog == 0
+    with BagReader(path) as original, BagReader(copy) as copied:
+        assert list(original.messages()) == list(copied.messages())
+        assert copied.recovery is None
+
+
+def test_recording_writer_flushes_while_it_records(tmp_path):
+    """What was handed over is on the disk, readable as a killed recorder leaves it, before the
+    bag is finished."""
+    bag = tmp_path / "recording"
+    writer = RecordingBagWriter(bag, flush_period_s=0.05)
+    for k in range(50):
+        writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS + k, serialize_message(Imu()))
+    copy = tmp_path / "what_a_killed_recorder_leaves"
+    deadline_s = time.monotonic() + 30.0
+    recovered = []
+    while len(recovered) < 50 and time.monotonic() < deadline_s:
+        time.sleep(0.05)
+        shutil.rmtree(copy, ignore_errors=True)
+        shutil.copytree(bag, copy)
+        with BagReader(copy) as reader:
+            recovered = [m.log_time_ns for m in reader.messages()]
+            assert reader.recovery is not None
+    assert recovered == [T0_NS + k for k in range(50)]
+    writer.close()
+
+
+def test_recording_writer_reports_a_failure_at_close_with_what_it_lost(tmp_path):
+    writer = RecordingBagWriter(tmp_path / "types", flush_period_s=1.0)
+    raw = serialize_message(Imu())
+    writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS, raw)
+    writer.write_raw("/imu/data_raw", "sensor_msgs/msg/NavSatFix", T0_NS + 1, b"\x00\x01")
+    writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS + 2, raw)
+    with pytest.raises(BagError, match=r"holds sensor_msgs/msg/Imu.*; 2 messages were not written"):
+        writer.close()
+    assert writer.closed and writer.lost == 2
+    with BagReader(tmp_path / "types") as reader:
+        assert [m.log_time_ns for m in reader.messages()] == [T0_NS]
+    with pytest.raises(BagError, match="is closed"):
+        writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS + 3, raw)
 
 
 def test_every_name_of_the_package_comes_from_its_module():

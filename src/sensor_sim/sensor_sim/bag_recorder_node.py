@@ -11,10 +11,11 @@ are stored fully qualified (``/imu/data_raw``, or ``/buoy1/imu/data_raw`` under 
 SIGINT, SIGTERM or the end of ``--duration-s`` (node-clock seconds) closes the bag properly and
 logs per-topic counts; exit code 0. An existing OUTPUT_BAG is never overwritten (exit code 2).
 
-The bag is written in place, and every second (wall time) the open chunk is closed and what was
-recorded is flushed to the disk. A recorder that is killed (SIGKILL, power lost) leaves a bag
-without metadata.yaml and without its MCAP index; the suite's tools read it up to the last flush
-and warn that it was cut short.
+The bag is written in place by a thread of its own, so that compressing and flushing never delay
+the reception (and with it the log times) of the messages; every second (wall time) the open
+chunk is closed and what was recorded is flushed to the disk. A recorder that is killed
+(SIGKILL, power lost) leaves a bag without metadata.yaml and without its MCAP index; the suite's
+tools read it up to the last flush and warn that it was cut short.
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ from collections import Counter
 from rclpy.clock import Clock, ClockType
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from buoy_common.bag_io import BagError, BagWriter, jazzy_typestore
+from buoy_common.bag_io import BagError, jazzy_typestore
+from buoy_common.bag_io.recording import RecordingBagWriter
 from buoy_common.base_node import (
     DATA_QOS,
     DiagnosticsPublisher,
@@ -108,17 +110,14 @@ class BagRecorder(SuiteNode):
         self._rate_counts: Counter[str] = Counter()
         self._rate_since_s = time.monotonic()
         self.close_failed = False
-        self.flush_failed = False
         try:
-            self._writer = BagWriter(output_bag, in_place=True)
+            self._writer = RecordingBagWriter(output_bag, FLUSH_PERIOD_S)
         except BagError as error:
             raise StartupError(str(error)) from error
         self._diagnostics = DiagnosticsPublisher(self, self._report)
-        # Discovery and flushing run on the steady clock: under use_sim_time they must not wait
-        # for /clock.
+        # Discovery runs on the steady clock: under use_sim_time it must not wait for /clock.
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover, clock=steady)
-        self._flush_timer = self.create_timer(FLUSH_PERIOD_S, self._flush, clock=steady)
         wanted = "every topic" if record_all else ", ".join(sorted(self._requested))
         self.get_logger().info(f"recording {wanted} into {output_bag}")
         self._discover()
@@ -186,16 +185,6 @@ class BagRecorder(SuiteNode):
             self._rate_counts[topic] += 1
         self._awaiting_clock.clear()
 
-    def _flush(self) -> None:
-        if self._writer.closed:
-            return
-        try:
-            self._writer.flush()
-        except (BagError, OSError) as error:
-            if not self.flush_failed:
-                self.get_logger().error(f"cannot flush bag {self._writer.path}: {error}")
-            self.flush_failed = True
-
     def _check_duration(self) -> None:
         if self._duration_ns is None:
             return
@@ -214,6 +203,7 @@ class BagRecorder(SuiteNode):
         counts = self._writer.counts
         values: dict[str, object] = {"bag": str(self._writer.path), "topics": len(counts)}
         values["messages"] = sum(counts.values())
+        values["backlog"] = self._writer.backlog
         for topic in sorted(self._recorded):
             values[f"count[{topic}]"] = counts.get(topic, 0)
             values[f"rate_hz[{topic}]"] = self._rate_counts[topic] / elapsed_s
@@ -224,9 +214,12 @@ class BagRecorder(SuiteNode):
         if self._unrecordable:
             level = "warn"
             message += f"; cannot record {', '.join(sorted(self._unrecordable))}"
-        if self.flush_failed:
+        if self._writer.failure is not None:
             level = "error"
-            message += "; cannot flush the bag to the disk"
+            message += f"; {self._writer.failure}"
+        elif self._writer.flush_failure is not None:
+            level = "error"
+            message += f"; cannot flush the bag to the disk: {self._writer.flush_failure}"
         return level, message, values
 
     def close_bag(self) -> None:
