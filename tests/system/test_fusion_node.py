@@ -6,7 +6,9 @@ bag order, paced at a multiple of real time, and listens to the four ``nav/*`` t
 conversion (:func:`buoy_nav.fusion_messages.feed_message`): the engine's results depend on header
 stamps only, so the live node must publish exactly the offline solutions; and these must be as
 close to the simulator's truth as the sensors allow, or a fault common to both would pass. The
-bags are ``sea_state`` (shipped geometry) and ``off_axis`` (its own buoy, stamps apart).
+bags are ``sea_state`` (shipped geometry) and ``off_axis`` (its own buoy, stamps apart); the
+sensor sets beyond RTK are fed straight from the simulator: a moored buoy with a magnetometer and
+a motion pack and no GNSS, and a single GNSS antenna with a magnetometer through an outage.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Imu, NavSatFix
+from test_nav_sensor_sets import HARD_IRON_UT, MAGNETOMETER, SOFT_IRON, euler_errors_deg
 
 from against_truth import Truth, assert_navigation_within_limits, odometry_errors
 from buoy_common.bag_io import BagReader
@@ -65,6 +68,9 @@ from buoy_nav.fusion_messages import (
 from buoy_nav.fusion_node import INPUT_CLASSES, OUTPUT_CLASSES
 from processed_bags import CASES
 from ros_messages import reports_publishers_on, stamp_ns, to_rclpy, wait_for
+from sensor_sim.scenario import load_scenario
+from sensor_sim.streams import STREAMS, merged_messages
+from sensor_sim.truth import TruthModel
 
 pytestmark = pytest.mark.ros
 
@@ -124,7 +130,12 @@ def parameter_arguments(name: str) -> list[str]:
 def node_config(name: str = "sea_state", **overrides) -> FusionConfig:
     """The configuration the node builds from the parameter files of the buoy that recorded
     bag ``name`` and ``overrides`` (parameter name → value, as ``-p`` gives them)."""
-    parameters = load_parameter_files(CASES[name].buoy_parameter_files, NODE) | overrides
+    return config_from_files(CASES[name].buoy_parameter_files, **overrides)
+
+
+def config_from_files(files, **overrides) -> FusionConfig:
+    """The configuration the node builds from the parameter ``files`` and ``overrides``."""
+    parameters = load_parameter_files(files, NODE) | overrides
     return build_config(
         FusionConfig,
         parameters,
@@ -598,3 +609,90 @@ def test_bad_parameter_stops_the_node_naming_it(nodes, override, parameter):
     assert result.returncode == 2, result.stdout + result.stderr
     assert parameter in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+
+
+# Sensor sets beyond RTK, simulated: (scenario, simulator overrides, fusion parameter lines).
+CALIBRATED_MAGNETOMETER = (
+    f"    fusion.magnetometer_hard_iron_t: {[h * 1e-6 for h in HARD_IRON_UT]}",
+    "    fusion.magnetometer_soft_iron: "
+    f"{np.linalg.inv(np.reshape(SOFT_IRON, (3, 3))).ravel().tolist()}",
+)
+LIVE_SENSOR_SETS = {
+    "moored_magnetometer_and_motion_pack": (
+        "moored_motion_pack",
+        (),
+        ("    fusion.moored: true", "    fusion.ahrs_lag_s: 0.2", *CALIBRATED_MAGNETOMETER),
+        "d: motion pack + magnetometer",
+    ),
+    "single_antenna_magnetometer_outage": (
+        "sea_state",
+        (
+            "sensors.gnss.receiver=single_antenna",
+            *MAGNETOMETER,
+            "sensors.gnss.fix_outages_s=[[25, 35]]",
+        ),
+        CALIBRATED_MAGNETOMETER,
+        "b: single-antenna GNSS + magnetometer",
+    ),
+}
+
+
+@pytest.mark.parametrize("set_name", LIVE_SENSOR_SETS)
+def test_live_sensor_sets_equal_offline_fusion(nodes, tmp_path, set_name):
+    """Fed only what the set carries (no heading topic; a magnetometer, a motion pack), the
+    node publishes exactly the offline solutions, names the set in its diagnostics and counts
+    what it accepted as the engine does; the solutions hold the attitude within 1° of the
+    truth."""
+    scenario_name, overrides, lines, final_set = LIVE_SENSOR_SETS[set_name]
+    scenario = load_scenario(scenario_name, [*overrides, f"duration_s={LIVE_EQUALS_OFFLINE_S}"])
+    truth = TruthModel(scenario)
+    streams = [STREAMS[kind].build(scenario, truth, {}) for kind in ("imu", "gnss")]
+    stream = [
+        (topic, message)
+        for topic, _, message in merged_messages(streams, LIVE_EQUALS_OFFLINE_S)
+        if topic in FUSION_INPUT_MSGTYPES
+    ]
+    parameters = tmp_path / "sensor_set.yaml"
+    site = (
+        f"    site.latitude_deg: {scenario.origin_latitude_deg}",
+        f"    site.longitude_deg: {scenario.origin_longitude_deg}",
+        "    ahrs.yaw_reference: magnetic_north",
+    )
+    parameters.write_text("/**:\n  ros__parameters:\n" + "\n".join([*site, *lines]) + "\n")
+    files = [*CASES["sea_state"].buoy_parameter_files, parameters]
+
+    engine = FusionEngine(config_from_files(files))
+    offline = {topic: [] for topic in NAV_MSGTYPES}
+    stamps = StampBook()
+    solutions = []
+    for topic, message in stream:
+        new = feed_message(engine, topic, message, stamps)[0]
+        solutions += new
+        nav_messages(new, offline, stamps)
+    times = np.array([s.t_s for s in solutions]) - scenario.start_time_ns * 1e-9
+    errors = euler_errors_deg(solutions, truth, times)
+    assert np.abs(errors[times >= 20.0]).max() < 1.0
+    assert engine.health().sensor_set == final_set
+
+    listener = Listener(nodes.env)
+    try:
+        arguments = [a for path in files for a in ("--params-file", str(path))]
+        process = nodes.start(NODE, "--ros-args", *arguments)
+        assert listener.wait_for_node(), nodes.log_of(process)
+        assert {topic for topic, _ in stream} <= set(listener.node_inputs())
+        listener.play([(stamp_ns(m), topic, m) for topic, m in stream])
+        n_solutions = len(offline[NAV_ODOMETRY_TOPIC])
+        wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
+        n_imu = sum(topic == IMU_RAW_TOPIC for topic, _ in stream)
+        final = listener.latest_diagnostics_where(
+            lambda values: values.get(f"messages_in[{IMU_RAW_TOPIC}]") == str(n_imu), 5.0
+        )
+        live = listener.received()
+        assert nodes.interrupt(process) == 0, nodes.log_of(process)
+    finally:
+        listener.close()
+    assert_same_messages(live, offline)
+    assert final is not None, nodes.log_of(process)
+    assert final["sensor_set"] == final_set
+    for kind, counters in engine.health().counters.items():
+        assert final[f"{kind}.accepted"] == str(counters.accepted), kind
