@@ -63,6 +63,8 @@ BANDS_HZ = ((0.0, 0.005), (0.005, 0.02), (0.02, 0.05), (0.05, 0.3), (0.3, 1.0), 
 """Frequency bands of the flux split: the low frequencies where a platform velocity drifts, the
 wave band, the turbulence above it."""
 SLOW_HZ = 0.05
+EDSON_HIGH_PASS_HZ = 1.0 / 12.0
+"""Corner of the high-pass Edson's processing applies to the integrated platform velocity."""
 ENU_FROM_NWU = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -126,8 +128,8 @@ def band_split(time_s, wind, temperature) -> dict:
     return split
 
 
-def slow_platform_velocity_std(processed: Path, time_s) -> list[float]:
-    """Standard deviation of ``nav/velocity`` (E, N, U; m/s) below :data:`SLOW_HZ`."""
+def platform_velocity_enu(processed: Path, time_s) -> np.ndarray:
+    """``nav/velocity`` (E, N, U; m/s) interpolated to ``time_s``."""
     with BagReader(processed) as reader:
         rows = []
         for message in reader.messages([NAV_VELOCITY_TOPIC]):
@@ -136,11 +138,14 @@ def slow_platform_velocity_std(processed: Path, time_s) -> list[float]:
             linear = decoded.twist.twist.linear
             rows.append((stamp.sec + stamp.nanosec * 1e-9, linear.x, linear.y, linear.z))
     rows = np.array(rows)
-    slow = signal.butter(2, SLOW_HZ, fs=RATE_HZ, output="sos")
-    return [
-        round(float(signal.sosfiltfilt(slow, np.interp(time_s, rows[:, 0], rows[:, i])).std()), 3)
-        for i in (1, 2, 3)
-    ]
+    return np.column_stack([np.interp(time_s, rows[:, 0], rows[:, i]) for i in (1, 2, 3)])
+
+
+def below(cutoff_hz: float, series: np.ndarray) -> np.ndarray:
+    """What of ``series`` (samples along axis 0, at RATE_HZ) lies below ``cutoff_hz``:
+    second-order Butterworth, forward and backward (no phase)."""
+    low_pass = signal.butter(2, cutoff_hz, fs=RATE_HZ, output="sos")
+    return signal.sosfiltfilt(low_pass, series, axis=0)
 
 
 def wind_statistics(wind_enu: np.ndarray) -> dict:
@@ -164,6 +169,9 @@ def compare(record: Path, ion_functions: str | None) -> dict:
     acceleration = vertical_acceleration_mps2(ours["specific_force"])[KEPT]
     temperature = ours["temperature_degc"][KEPT]
     corrected = ours["corrected"][KEPT]
+    velocity = platform_velocity_enu(processed, ours["time_s"])
+    # Our wind with the platform velocity high-passed as Edson's is: the slow part taken out.
+    high_passed = (ours["corrected"] - below(EDSON_HIGH_PASS_HZ, velocity))[KEPT]
     result = {
         "record": str(record),
         "samples": int(t.size),
@@ -175,7 +183,14 @@ def compare(record: Path, ion_functions: str | None) -> dict:
             "wind": wind_statistics(corrected),
             "fluxes": flux_figures(t, corrected, temperature),
             "flux_bands": band_split(t, corrected, temperature),
-            "slow_platform_velocity_std_enu_mps": slow_platform_velocity_std(processed, t),
+            "slow_platform_velocity_std_enu_mps": below(SLOW_HZ, velocity)[KEPT]
+            .std(axis=0)
+            .round(3)
+            .tolist(),
+        },
+        "ours_platform_velocity_high_passed": {
+            "fluxes": flux_figures(t, high_passed, temperature),
+            "flux_bands": band_split(t, high_passed, temperature),
         },
         "edson_published_fluxes": dict(
             zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), edson_fdchp.PUBLISHED_FLUXES, strict=True)
@@ -272,6 +287,15 @@ def print_comparison(result: dict) -> None:
         f"  our platform velocity below {SLOW_HZ} Hz, std E, N, U: "
         f"{ours['slow_platform_velocity_std_enu_mps']} m/s"
     )
+    high_passed = result["ours_platform_velocity_high_passed"]
+    f = high_passed["fluxes"]
+    print(
+        f"  ours with the platform velocity high-passed at {EDSON_HIGH_PASS_HZ:.3f} Hz as "
+        f"Edson's: u'w' {f['u_w_m2_s2']:.4f}, v'w' {f['v_w_m2_s2']:.4f}, w'Ts' "
+        f"{f['w_ts_k_mps']:.5f}, stationarity u'w' {f['stationarity_u_w_percent']:.0f} %"
+    )
+    for key in ("u_w", "w_w"):
+        print(f"    {key:5s} ours, high-passed {high_passed['flux_bands'][key]}")
     if "our_flux_core_on_his_wind" in edson:
         core = edson["our_flux_core_on_his_wind"]
         print(
