@@ -33,10 +33,12 @@ from pathlib import Path
 import edson_fdchp
 import numpy as np
 from scipy import signal
+from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import (
     IMU_RAW_TOPIC,
+    NAV_ODOMETRY_TOPIC,
     NAV_VELOCITY_TOPIC,
     SONIC_TEMPERATURE_TOPIC,
     WIND_RAW_TOPIC,
@@ -65,6 +67,9 @@ wave band, the turbulence above it."""
 SLOW_HZ = 0.05
 EDSON_HIGH_PASS_HZ = 1.0 / 12.0
 """Corner of the high-pass Edson's processing applies to the integrated platform velocity."""
+SLOW_TILT_HZ = EDSON_HIGH_PASS_HZ
+"""Below this Edson's processing takes the tilt from the accelerometers (above it from the
+gyros); so does the test of where the flux difference comes from."""
 ENU_FROM_NWU = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -148,6 +153,44 @@ def below(cutoff_hz: float, series: np.ndarray) -> np.ndarray:
     return signal.sosfiltfilt(low_pass, series, axis=0)
 
 
+def slow_tilt_from_accelerometers(
+    processed: Path, time_s, specific_force_body: np.ndarray
+) -> Rotation:
+    """The rotation (ENU) that takes our attitude's slow tilt to the accelerometers': what of
+    the direction of ``up`` in body axes lies below :data:`SLOW_TILT_HZ`, ours (``nav/odometry``
+    at ``time_s``) turned onto the low-passed specific force (m/s², body), the tilt Edson's
+    processing takes from the accelerometers."""
+    with BagReader(processed) as reader:
+        rows = []
+        for message in reader.messages([NAV_ODOMETRY_TOPIC]):
+            decoded = reader.decode(message)
+            stamp, q = decoded.header.stamp, decoded.pose.pose.orientation
+            rows.append((stamp.sec + stamp.nanosec * 1e-9, q.x, q.y, q.z, q.w))
+    rows = np.array(rows)
+    nearest = np.clip(np.searchsorted(rows[:, 0], time_s), 0, len(rows) - 1)
+    attitude = Rotation.from_quat(rows[nearest, 1:])
+    ours = below(SLOW_TILT_HZ, attitude.inv().apply((0.0, 0.0, 1.0)))
+    measured = below(SLOW_TILT_HZ, specific_force_body)
+    ours /= np.linalg.norm(ours, axis=1, keepdims=True)
+    measured /= np.linalg.norm(measured, axis=1, keepdims=True)
+    return Rotation.from_rotvec(attitude.apply(np.cross(measured, ours)))
+
+
+def direction_difference(ours_enu: np.ndarray, his_enu: np.ndarray) -> dict:
+    """Mean and standard deviation (°) of our horizontal wind direction less his, and of its
+    part below :data:`SLOW_TILT_HZ`."""
+    difference = np.degrees(
+        np.angle((ours_enu[:, 0] + 1j * ours_enu[:, 1]) / (his_enu[:, 0] + 1j * his_enu[:, 1]))
+    )
+    valid = np.isfinite(difference)
+    slow = below(SLOW_TILT_HZ, np.where(valid, difference, 0.0))[valid]
+    return {
+        "mean": round(float(difference[valid].mean()), 1),
+        "std": round(float(difference[valid].std()), 1),
+        "slow_std": round(float(slow.std()), 1),
+    }
+
+
 def wind_statistics(wind_enu: np.ndarray) -> dict:
     return {
         "mean_enu_mps": np.nanmean(wind_enu, axis=0).round(3).tolist(),
@@ -171,7 +214,12 @@ def compare(record: Path, ion_functions: str | None) -> dict:
     corrected = ours["corrected"][KEPT]
     velocity = platform_velocity_enu(processed, ours["time_s"])
     # Our wind with the platform velocity high-passed as Edson's is: the slow part taken out.
-    high_passed = (ours["corrected"] - below(EDSON_HIGH_PASS_HZ, velocity))[KEPT]
+    slow_velocity = below(EDSON_HIGH_PASS_HZ, velocity)
+    high_passed = (ours["corrected"] - slow_velocity)[KEPT]
+    # And with the slow tilt taken from the accelerometers too: the air relative to the buoy
+    # turned by the tilt difference.
+    tilt = slow_tilt_from_accelerometers(processed, ours["time_s"], ours["specific_force"])
+    as_edson = (tilt.apply(ours["corrected"] - velocity) + velocity - slow_velocity)[KEPT]
     result = {
         "record": str(record),
         "samples": int(t.size),
@@ -191,6 +239,10 @@ def compare(record: Path, ion_functions: str | None) -> dict:
         "ours_platform_velocity_high_passed": {
             "fluxes": flux_figures(t, high_passed, temperature),
             "flux_bands": band_split(t, high_passed, temperature),
+        },
+        "ours_high_passed_and_slow_tilt_from_accelerometers": {
+            "fluxes": flux_figures(t, as_edson, temperature),
+            "flux_bands": band_split(t, as_edson, temperature),
         },
         "edson_published_fluxes": dict(
             zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), edson_fdchp.PUBLISHED_FLUXES, strict=True)
@@ -213,6 +265,12 @@ def compare(record: Path, ion_functions: str | None) -> dict:
         "fluxes": dict(zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), run.fluxes, strict=True)),
         "our_flux_core_on_his_wind": flux_figures(t, edson_wind, temperature),
         "flux_bands": band_split(t, edson_wind, temperature),
+        # His horizontal wind with our vertical (platform velocity high-passed, slow tilt from
+        # the accelerometers, as his): what the horizontal wind alone makes of the difference.
+        "fluxes_his_horizontal_our_vertical": flux_figures(
+            t, np.column_stack((edson_wind[:, :2], as_edson[:, 2])), temperature
+        ),
+        "direction_difference_deg": direction_difference(as_edson, edson_wind),
     }
     return result
 
@@ -287,15 +345,33 @@ def print_comparison(result: dict) -> None:
         f"  our platform velocity below {SLOW_HZ} Hz, std E, N, U: "
         f"{ours['slow_platform_velocity_std_enu_mps']} m/s"
     )
-    high_passed = result["ours_platform_velocity_high_passed"]
-    f = high_passed["fluxes"]
-    print(
-        f"  ours with the platform velocity high-passed at {EDSON_HIGH_PASS_HZ:.3f} Hz as "
-        f"Edson's: u'w' {f['u_w_m2_s2']:.4f}, v'w' {f['v_w_m2_s2']:.4f}, w'Ts' "
-        f"{f['w_ts_k_mps']:.5f}, stationarity u'w' {f['stationarity_u_w_percent']:.0f} %"
-    )
-    for key in ("u_w", "w_w"):
-        print(f"    {key:5s} ours, high-passed {high_passed['flux_bands'][key]}")
+    for key, label in (
+        (
+            "ours_platform_velocity_high_passed",
+            f"platform velocity high-passed at {EDSON_HIGH_PASS_HZ:.3f} Hz",
+        ),
+        (
+            "ours_high_passed_and_slow_tilt_from_accelerometers",
+            f"the same and the tilt below {SLOW_TILT_HZ:.3f} Hz from the accelerometers",
+        ),
+    ):
+        variant = result[key]
+        f = variant["fluxes"]
+        print(
+            f"  ours, {label}: u'w' {f['u_w_m2_s2']:.4f}, v'w' {f['v_w_m2_s2']:.4f}, "
+            f"w'Ts' {f['w_ts_k_mps']:.5f}, stationarity u'w' {f['stationarity_u_w_percent']:.0f} %"
+        )
+        for band_key in ("u_w", "w_w"):
+            print(f"    {band_key:5s} {variant['flux_bands'][band_key]}")
+    if "fluxes_his_horizontal_our_vertical" in edson:
+        f = edson["fluxes_his_horizontal_our_vertical"]
+        d = edson["direction_difference_deg"]
+        print(
+            f"  his horizontal wind with our vertical (the variant above): u'w' "
+            f"{f['u_w_m2_s2']:.4f}, v'w' {f['v_w_m2_s2']:.4f}, w'Ts' {f['w_ts_k_mps']:.5f}; our "
+            f"wind direction less his: mean {d['mean']} deg, std {d['std']} deg (below "
+            f"{SLOW_TILT_HZ:.3f} Hz {d['slow_std']} deg)"
+        )
     if "our_flux_core_on_his_wind" in edson:
         core = edson["our_flux_core_on_his_wind"]
         print(
