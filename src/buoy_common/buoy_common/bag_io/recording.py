@@ -79,20 +79,23 @@ class RecordingBagWriter:
             raise self.failure
 
     def _write_from_queue(self) -> None:
-        next_flush_s = time.monotonic() + self._flush_period_s
-        while True:
-            try:
-                item = self._queue.get(timeout=max(next_flush_s - time.monotonic(), 0.0))
-            except queue.Empty:
-                item = ()
-            if item is _FINISH:
-                break
-            if item:
-                self._write(*item)
-            if time.monotonic() >= next_flush_s:
-                self._flush()
-                next_flush_s = time.monotonic() + self._flush_period_s
-        self._finish()
+        # The bag is finished whatever happens here, so that what was written stays readable.
+        try:
+            next_flush_s = time.monotonic() + self._flush_period_s
+            while True:
+                try:
+                    item = self._queue.get(timeout=max(next_flush_s - time.monotonic(), 0.0))
+                except queue.Empty:
+                    item = ()
+                if item is _FINISH:
+                    break
+                if item:
+                    self._write(*item)
+                if time.monotonic() >= next_flush_s:
+                    self._flush()
+                    next_flush_s = time.monotonic() + self._flush_period_s
+        finally:
+            self._finish()
 
     def _write(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
         if self.failure is not None:
@@ -100,7 +103,8 @@ class RecordingBagWriter:
             return
         try:
             self._writer.write_raw(topic, msgtype, log_time_ns, raw)
-        except (BagError, OSError) as error:
+        # Any failure: the thread must go on taking (and counting) what the recorder hands over.
+        except Exception as error:
             self.failure = BagError(f"bag {self.path}: writing stopped: {one_line(error)}")
             self.lost += 1
 
@@ -110,14 +114,18 @@ class RecordingBagWriter:
         try:
             self._writer.flush()
             self.flush_failure = None
-        except (BagError, OSError, ValueError) as error:
+        except Exception as error:
             self.flush_failure = one_line(error)
 
     def _finish(self) -> None:
         try:
             self._writer.close()
-        except BagError as error:
+        except Exception as error:
             if self.failure is None:
-                self.failure = error
+                self.failure = (
+                    error
+                    if isinstance(error, BagError)
+                    else BagError(f"bag {self.path}: failed to finish: {one_line(error)}")
+                )
         if self.lost and self.failure is not None:
             self.failure = BagError(f"{self.failure}; {self.lost} messages were not written")
