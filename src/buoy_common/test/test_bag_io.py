@@ -6,9 +6,6 @@ import importlib
 import io
 import itertools
 import shutil
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -19,14 +16,13 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
-from rclpy.serialization import deserialize_message, serialize_message
+from rclpy.serialization import deserialize_message
 from rosbags.rosbag2 import Reader
 from sensor_msgs.msg import Image, Imu, NavSatFix
 from std_msgs.msg import Byte, ByteMultiArray, Char
 
 from buoy_common.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter
 from buoy_common.bag_io.mcap_writer import McapWriter
-from buoy_common.bag_io.recording import RecordingBagWriter
 
 T0_NS = 1_700_000_000_000_000_000
 IMU_PERIOD_NS = 10_000_000  # 100 Hz
@@ -503,109 +499,6 @@ def test_empty_bag_is_valid(tmp_path):
         assert reader.duration_s == 0.0
 
 
-# -- the writer in a process of its own --------------------------------------------------------
-
-
-def test_background_writer_writes_the_same_bag(written_bag, tmp_path):
-    path, _, counts = written_bag
-    copy = tmp_path / "copy"
-    with BagReader(path) as reader, BackgroundBagWriter(copy) as writer:
-        for message in reader.messages():
-            writer.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
-    assert writer.counts == counts
-    with BagReader(path) as original, BagReader(copy) as copied:
-        assert list(original.messages()) == list(copied.messages())
-        assert copied.topics == original.topics
-
-
-def test_background_writer_reports_errors_of_the_writing_process(tmp_path):
-    with (
-        pytest.raises(BagError, match="holds sensor_msgs/msg/Imu"),
-        BackgroundBagWriter(tmp_path / "types") as writer,
-    ):
-        writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS, Imu())
-        writer.write_raw("/imu/data_raw", "sensor_msgs/msg/NavSatFix", T0_NS, b"\x00\x01")
-    assert list(tmp_path.iterdir()) == []
-
-
-def test_background_writer_that_cannot_create_its_bag_says_so(tmp_path):
-    # The writing process creates the bag while the tool goes on: its failure surfaces at the
-    # next hand-over or, as here, when the bag is closed; no message is taken for written.
-    (tmp_path / "a_file").write_text("not a directory")
-    path = tmp_path / "a_file" / "bag"
-    with (
-        pytest.raises(BagError, match=f"bag {path}: cannot create"),
-        BackgroundBagWriter(path) as writer,
-    ):
-        writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS, Imu())
-    assert writer.closed
-
-
-@pytest.mark.parametrize("messages", [0, 3, 5000])
-def test_background_writer_keeps_what_it_is_given_while_its_process_starts(tmp_path, messages):
-    path = tmp_path / "kept"
-    with BackgroundBagWriter(path) as writer:
-        for k in range(messages):
-            writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS + k, Imu())
-    with BagReader(path) as reader:
-        assert [m.log_time_ns for m in reader.messages()] == [T0_NS + k for k in range(messages)]
-
-
-# -- a recorder's writer, fed from one thread and written by another ---------------------------
-
-IMU_TYPE = "sensor_msgs/msg/Imu"
-
-
-def test_recording_writer_writes_the_same_bag(written_bag, tmp_path):
-    path, _, counts = written_bag
-    copy = tmp_path / "copy"
-    writer = RecordingBagWriter(copy, flush_period_s=0.01)
-    with BagReader(path) as reader:
-        for message in reader.messages():
-            writer.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
-    writer.close()
-    assert writer.counts == counts and writer.backlog == 0
-    with BagReader(path) as original, BagReader(copy) as copied:
-        assert list(original.messages()) == list(copied.messages())
-        assert copied.recovery is None
-
-
-def test_recording_writer_flushes_while_it_records(tmp_path):
-    """What was handed over is on the disk, readable as a killed recorder leaves it, before the
-    bag is finished."""
-    bag = tmp_path / "recording"
-    writer = RecordingBagWriter(bag, flush_period_s=0.05)
-    for k in range(50):
-        writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS + k, serialize_message(Imu()))
-    copy = tmp_path / "what_a_killed_recorder_leaves"
-    deadline_s = time.monotonic() + 30.0
-    recovered = []
-    while len(recovered) < 50 and time.monotonic() < deadline_s:
-        time.sleep(0.05)
-        shutil.rmtree(copy, ignore_errors=True)
-        shutil.copytree(bag, copy)
-        with BagReader(copy) as reader:
-            recovered = [m.log_time_ns for m in reader.messages()]
-            assert reader.recovery is not None
-    assert recovered == [T0_NS + k for k in range(50)]
-    writer.close()
-
-
-def test_recording_writer_reports_a_failure_at_close_with_what_it_lost(tmp_path):
-    writer = RecordingBagWriter(tmp_path / "types", flush_period_s=1.0)
-    raw = serialize_message(Imu())
-    writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS, raw)
-    writer.write_raw("/imu/data_raw", "sensor_msgs/msg/NavSatFix", T0_NS + 1, b"\x00\x01")
-    writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS + 2, raw)
-    with pytest.raises(BagError, match=r"holds sensor_msgs/msg/Imu.*; 2 messages were not written"):
-        writer.close()
-    assert writer.closed and writer.lost == 2
-    with BagReader(tmp_path / "types") as reader:
-        assert [m.log_time_ns for m in reader.messages()] == [T0_NS]
-    with pytest.raises(BagError, match="is closed"):
-        writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS + 3, raw)
-
-
 def test_every_name_of_the_package_comes_from_its_module():
     """The package loads its names lazily: each one it lists resolves, to its module's object."""
     import buoy_common.bag_io as bag_io
@@ -614,21 +507,3 @@ def test_every_name_of_the_package_comes_from_its_module():
         module = importlib.import_module(f"buoy_common.bag_io.{bag_io._MODULE_OF[name]}")
         assert getattr(bag_io, name) is getattr(module, name)
     assert sorted(bag_io.__all__) == sorted(bag_io._MODULE_OF)
-
-
-def test_the_writing_process_starts_without_rosbags_or_numpy():
-    """What a tool's writing process imports (the module of its entry point): not the reader,
-    the type system or numpy, which would cost it a third of a second of CPU at every run."""
-    loaded = subprocess.run(
-        [
-            sys.executable,
-            "-c",
-            "import sys, buoy_common.bag_io.background; print(' '.join(sorted(sys.modules)))",
-        ],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout.split()
-    heavy = [m for m in loaded if m.split(".")[0] in ("rosbags", "numpy", "scipy", "tqdm")]
-    assert heavy == []
-    assert "mcap.writer" in loaded
