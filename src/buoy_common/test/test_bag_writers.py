@@ -5,8 +5,10 @@ of its own, and the recorder's writer in a thread of its own. Each writes the ba
 from __future__ import annotations
 
 import shutil
+import struct
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -85,6 +87,23 @@ def test_background_writer_keeps_what_it_is_given_while_its_process_starts(tmp_p
             writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS + k, Imu())
     with BagReader(path) as reader:
         assert [m.log_time_ns for m in reader.messages()] == [T0_NS + k for k in range(messages)]
+
+
+def test_background_writer_aborts_after_a_batch_cut_off_mid_send(tmp_path):
+    """A signal can interrupt the tool while it sends a batch, leaving half of it in the pipe.
+    Abandoning the bag then still ends the writing process promptly and leaves nothing."""
+    path = tmp_path / "cut"
+    writer = BackgroundBagWriter(path)
+    writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS, serialize_message(Imu()))
+    writer._send_batch(wait_for_writer=True)
+    # What an interrupted send leaves: the length of a message and only the start of it.
+    writer._connection._send(struct.pack("!i", 100_000) + b"\x80\x05")
+    aborting = threading.Thread(target=writer.abort, daemon=True)
+    aborting.start()
+    aborting.join(timeout=30.0)
+    assert not aborting.is_alive(), "abort waited for a writing process that waits for bytes"
+    assert writer.closed
+    assert list(tmp_path.iterdir()) == []
 
 
 # -- a recorder's writer, fed from one thread and written by another ---------------------------

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import shutil
 import signal
 from collections import Counter
 from pathlib import Path
@@ -34,7 +35,8 @@ class BackgroundBagWriter(BagOutput):
     the death of the tool, deletes the partial bag, as :class:`BagWriter` does. What is at
     ``path`` is checked at construction; the tool does not wait for the writing process to
     start (about a second of imports) but keeps the first batches until it is ready. The
-    writing process ignores Ctrl-C: the tool decides whether the bag is finished or abandoned.
+    writing process ignores SIGINT and SIGTERM: the tool decides whether the bag is finished or
+    abandoned.
 
     The tool describes each message type (definition, hash) to the writing process with the
     first batch that holds it: the writing process imports neither rosbags nor numpy and starts
@@ -102,12 +104,23 @@ class BackgroundBagWriter(BagOutput):
 
     def abort(self) -> None:
         """Stop writing and delete the partial bag. Never raises: it runs while an error is
-        already on its way."""
-        if self._open:
-            self._batch.clear()
-            self._waiting_batches.clear()
-            with contextlib.suppress(BagError):
-                self._finish("abort")
+        already on its way.
+
+        The writing process is told by the end of the pipe, not by a command: the error may be
+        a signal that interrupted a send and left half a batch in the pipe, after which the
+        writing process would wait for the rest of it and never read a command."""
+        if not self._open:
+            return
+        self._open = False
+        self._batch.clear()
+        self._waiting_batches.clear()
+        self._connection.close()
+        self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join()
+            with contextlib.suppress(OSError):
+                shutil.rmtree(self.path.with_name(f"{self.path.name}.partial-{self._process.pid}"))
 
     def _send_batch(self, wait_for_writer: bool = False) -> None:
         """Hand the batch over, or keep it while the writing process is still starting (unless
@@ -169,22 +182,22 @@ class BackgroundBagWriter(BagOutput):
 
 
 def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
-    """The writing process: a BagWriter fed batches of records until "close" or "abort". If the
-    tool dies first (the pipe closes), the partial bag is deleted."""
+    """The writing process: a BagWriter fed batches of records until "close". If the tool closes
+    the pipe instead (it abandons the bag, or dies), the partial bag is deleted."""
+    # The tool decides: a signal to the whole process group (Ctrl-C, a service stop) reaches
+    # the tool, which finishes or abandons the bag; the end of the pipe ends this process.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     try:
         writer = BagWriter(path, overwrite=overwrite)
     except BagError as error:
-        connection.send(("error", str(error)))
+        with contextlib.suppress(OSError):
+            connection.send(("error", str(error)))
         return
-    connection.send(("ok",))
     try:
+        connection.send(("ok",))
         while True:
             batch = connection.recv()
-            if batch == "abort":
-                writer.abort()
-                connection.send(("aborted",))
-                return
             if batch == "close":
                 break
             descriptions, records = batch
@@ -192,11 +205,14 @@ def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
             for topic, msgtype, log_time_ns, raw in records:
                 writer.write_raw(topic, msgtype, log_time_ns, raw)
         writer.close()
-    except EOFError:
+    except (EOFError, BrokenPipeError, ConnectionResetError):
+        # The tool abandoned the bag (or died).
         writer.abort()
         return
     except Exception as error:  # reported to the tool, which raises it as a BagError
         writer.abort()
-        connection.send(("error", f"bag {path}: {type(error).__name__}: {one_line(error)}"))
+        with contextlib.suppress(OSError):
+            connection.send(("error", f"bag {path}: {type(error).__name__}: {one_line(error)}"))
         return
-    connection.send(("ok",))
+    with contextlib.suppress(OSError):
+        connection.send(("ok",))
