@@ -82,9 +82,9 @@ class WindPairs:
         self.wind_in = 0
         self.wind_out = 0
         self.wind_out_valid = 0
-        self.unpaired_out = 0
         self.first_paired_stamp: tuple[int, int] | None = None
-        self.out_before_first_pair = 0
+        # Stamps of outputs whose input this listener never saw.
+        self._unpaired_out: list[tuple[int, int]] = []
         self.node.create_subscription(
             Vector3Stamped, "anemometer/wind", self._on_wind, DATA_QOS, raw=True
         )
@@ -117,10 +117,7 @@ class WindPairs:
             self.wind_out_valid += valid
             sent_ns = self._open.pop(stamp, None)
             if sent_ns is None:
-                if self.first_paired_stamp is None:
-                    self.out_before_first_pair += 1
-                else:
-                    self.unpaired_out += 1
+                self._unpaired_out.append(stamp)
                 return
             if self.first_paired_stamp is None:
                 self.first_paired_stamp = stamp
@@ -133,11 +130,21 @@ class WindPairs:
     def open_pairs(self) -> tuple[int, int]:
         """Inputs still without output: (stamped before the first pair, after it)."""
         with self._lock:
-            first = self.first_paired_stamp
-            if first is None:
-                return len(self._open), 0
-            before = sum(stamp < first for stamp in self._open)
-            return before, len(self._open) - before
+            return self._split_at_first_pair(self._open)
+
+    def unpaired_outputs(self) -> tuple[int, int]:
+        """Outputs whose input this listener never saw: (stamped before the first pair, after
+        it). By stamp, not by arrival: an output published late (invalid at its latency budget)
+        may arrive after the first pair, its input before this listener was matched."""
+        with self._lock:
+            return self._split_at_first_pair(self._unpaired_out)
+
+    def _split_at_first_pair(self, stamps) -> tuple[int, int]:
+        first = self.first_paired_stamp
+        if first is None:
+            return len(stamps), 0
+        before = sum(stamp < first for stamp in stamps)
+        return before, len(stamps) - before
 
     def close(self) -> None:
         self.executor.shutdown()
@@ -232,13 +239,14 @@ def soak(hours: float, rate_factor: float, rss_period_s: float, log_dir: Path) -
     if scenario.returncode != 0:
         result["error"] = f"run_scenario exited with {scenario.returncode}"
     open_before_first_pair, open_after_first_pair = pairs.open_pairs()
+    out_before_first_pair, out_after_first_pair = pairs.unpaired_outputs()
     result["counts"] = {
         "anemometer/wind in": pairs.wind_in,
         "wind/true out": pairs.wind_out,
         "wind/true valid": pairs.wind_out_valid,
-        "wind/true without its input": pairs.unpaired_out,
+        "wind/true without its input": out_after_first_pair,
         "anemometer/wind without output": open_after_first_pair,
-        "before the first pair: wind/true alone": pairs.out_before_first_pair,
+        "before the first pair: wind/true alone": out_before_first_pair,
         "before the first pair: anemometer/wind alone": open_before_first_pair,
     }
     result["latency_s_by_simulated_hour"] = {
