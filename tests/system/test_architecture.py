@@ -21,6 +21,7 @@ STANDARD_LIBRARY = set(sys.stdlib_module_names)
 # Python distributions named differently from their package.xml keys.
 ROSDEP_KEYS = {
     "numpy": "python3-numpy",
+    "numba": "python3-numba",
     "scipy": "python3-scipy",
     "yaml": "python3-yaml",
     "rosbags": "python3-rosbags",

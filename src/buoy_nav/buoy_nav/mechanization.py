@@ -25,14 +25,16 @@ latitude/longitude with the WGS-84 radii of curvature.
 
 For the error-state filter the integrator also accumulates, over the steps since the last
 covariance propagation, the integrals the discrete error model needs (see
-:class:`PropagationSums`). The per-step path uses plain floats because at 100 Hz and more the
-call overhead of small numpy arrays would dominate.
+:class:`PropagationSums`). The step is compiled (numba, cached on disk): the integrator keeps its
+state in one array that the compiled step updates in place, because at twice the IMU rate the
+interpreter's per-operation cost would otherwise dominate the offline run.
 """
 
 import copy
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from buoy_nav import earth
@@ -42,7 +44,6 @@ from buoy_nav.rotations import (
     normalize_quaternion,
     quaternion_from_rotation_vector,
     rotation_matrix_elements,
-    rotation_matrix_from_quaternion,
 )
 
 _OMEGA = earth.EARTH_RATE_RAD_S
@@ -68,10 +69,35 @@ class PropagationSums:
     force_deviation_sq_integral_m2_s3: np.ndarray
 
 
+# Layout of the integrator's state vector (one float64 array, so that the compiled step reads and
+# writes it in place): the nominal state, the previous step for the curvature, coning and sculling
+# terms, and the propagation sums.
+_ATTITUDE = slice(0, 4)  # quaternion x, y, z, w of R_nb
+_ROTATION = slice(4, 13)  # R_nb, row-major
+_VELOCITY = slice(13, 16)  # ENU, m/s
+_LATITUDE, _LONGITUDE, _ALTITUDE = 16, 17, 18  # rad, rad, m
+_GYRO_BIAS = slice(19, 22)  # rad/s, body
+_ACCEL_BIAS = slice(22, 25)  # m/s², body
+_NAV_FRAME_RATE = slice(25, 28)  # ω_in, ENU, rad/s
+_PREVIOUS_DT = 28  # s; 0 when there is no previous step
+_PREVIOUS_DTHETA = slice(29, 32)  # body angle increment of the previous step (rad)
+_PREVIOUS_DVEL = slice(32, 35)  # body velocity increment of the previous step (m/s)
+_OLDER_GYRO = slice(35, 38)  # raw sample at the previous step's start (rad/s)
+_OLDER_FORCE = slice(38, 41)  # (m/s²)
+_DURATION = 41  # s integrated since the last take_propagation_sums
+_ROTATION_SUM = slice(42, 51)  # ∫ R_nb dt, row-major
+_FORCE_SUM = slice(51, 54)  # ∫ f^n dt
+_RATE_SQ_SUM = slice(54, 57)
+_FORCE_DEVIATION_SQ_SUM = slice(57, 60)
+_HISTORY = slice(_PREVIOUS_DT, _OLDER_FORCE.stop)
+_SUMS = slice(_DURATION, _FORCE_DEVIATION_SQ_SUM.stop)
+_STATE_SIZE = 60
+
+
 class StrapdownIntegrator:
     """Nominal navigation state integrated from consecutive IMU samples.
 
-    Attributes (plain floats; read them, and change them only through :meth:`set_state`):
+    Attributes (read them, and change the state only through :meth:`set_state`):
       attitude_xyzw: quaternion of R_nb (body FLU → ENU).
       rotation_elements: R_nb as a row-major 9-tuple.
       nav_frame_rate_enu_rad_s: ω_in = ω_ie + ω_en used by the last step (ENU, rad/s).
@@ -95,6 +121,8 @@ class StrapdownIntegrator:
     ):
         self.coning_correction = coning_correction
         self.sculling_correction = sculling_correction
+        # No previous step yet, and empty sums.
+        self._state = np.zeros(_STATE_SIZE)
         self.set_state(
             attitude_xyzw,
             velocity_enu_mps,
@@ -104,13 +132,6 @@ class StrapdownIntegrator:
             gyro_bias_rad_s,
             accel_bias_mps2,
         )
-        # The previous step (length, body-frame increments, raw samples at its start), for the
-        # curvature, coning and sculling terms; no previous step yet.
-        self._previous_dt = 0.0
-        self._previous_dtheta = (0.0, 0.0, 0.0)
-        self._previous_dvel = (0.0, 0.0, 0.0)
-        self._older_samples = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-        self._reset_sums()
 
     def set_state(
         self,
@@ -123,40 +144,87 @@ class StrapdownIntegrator:
         accel_bias_mps2,
     ):
         """Replace the nominal state (after a filter correction); increments history is kept."""
-        self.attitude_xyzw: Quaternion = normalize_quaternion(_floats(attitude_xyzw))
-        self.velocity_enu_mps = ve, vn, _ = _floats(velocity_enu_mps)
-        self.latitude_rad = lat = float(latitude_rad)
-        self.longitude_rad = float(longitude_rad)
-        self.altitude_m = alt = float(altitude_m)
-        self.gyro_bias_rad_s = _floats(gyro_bias_rad_s)
-        self.accel_bias_mps2 = _floats(accel_bias_mps2)
-        self.rotation_elements = rotation_matrix_elements(*self.attitude_xyzw)
+        state = self._state
+        attitude = normalize_quaternion(_floats(attitude_xyzw))
+        ve, vn, _ = velocity_enu_mps = _floats(velocity_enu_mps)
+        lat = float(latitude_rad)
+        alt = float(altitude_m)
+        state[_ATTITUDE] = attitude
+        state[_ROTATION] = rotation_matrix_elements(*attitude)
+        state[_VELOCITY] = velocity_enu_mps
+        state[_LATITUDE] = lat
+        state[_LONGITUDE] = float(longitude_rad)
+        state[_ALTITUDE] = alt
+        state[_GYRO_BIAS] = _floats(gyro_bias_rad_s)
+        state[_ACCEL_BIAS] = _floats(accel_bias_mps2)
         # earth.navigation_frame_rate_enu_rad_s (ω_ie + ω_en) in floats, the same arithmetic.
         meridian, prime_vertical = earth.radii_of_curvature_m(lat)
         east_radius = prime_vertical + alt
-        self.nav_frame_rate_enu_rad_s = (
+        state[_NAV_FRAME_RATE] = (
             0.0 + -vn / (meridian + alt),
             _OMEGA * math.cos(lat) + ve / east_radius,
             _OMEGA * math.sin(lat) + ve * math.tan(lat) / east_radius,
         )
 
+    @property
+    def attitude_xyzw(self) -> Quaternion:
+        return tuple(self._state[_ATTITUDE].tolist())
+
+    @property
+    def rotation_elements(self) -> tuple[float, ...]:
+        return tuple(self._state[_ROTATION].tolist())
+
+    @property
+    def velocity_enu_mps(self) -> tuple[float, float, float]:
+        return tuple(self._state[_VELOCITY].tolist())
+
+    @property
+    def latitude_rad(self) -> float:
+        return float(self._state[_LATITUDE])
+
+    @property
+    def longitude_rad(self) -> float:
+        return float(self._state[_LONGITUDE])
+
+    @property
+    def altitude_m(self) -> float:
+        return float(self._state[_ALTITUDE])
+
+    @property
+    def gyro_bias_rad_s(self) -> tuple[float, float, float]:
+        return tuple(self._state[_GYRO_BIAS].tolist())
+
+    @property
+    def accel_bias_mps2(self) -> tuple[float, float, float]:
+        return tuple(self._state[_ACCEL_BIAS].tolist())
+
+    @property
+    def nav_frame_rate_enu_rad_s(self) -> tuple[float, float, float]:
+        return tuple(self._state[_NAV_FRAME_RATE].tolist())
+
+    @property
+    def accumulated_duration_s(self) -> float:
+        return float(self._state[_DURATION])
+
     def fork(self) -> "StrapdownIntegrator":
         """An independent copy that integrates ahead without touching this one's propagation
         sums (its own sums start empty)."""
         twin = copy.copy(self)
-        twin._reset_sums()
+        twin._state = self._state.copy()
+        twin._state[_SUMS] = 0.0
         return twin
 
     def nav_state(self) -> NavState:
         """The nominal state as a :class:`NavState` (arrays are copies)."""
+        state = self._state
         return NavState(
             attitude_xyzw=self.attitude_xyzw,
-            velocity_enu_mps=np.array(self.velocity_enu_mps),
-            latitude_rad=self.latitude_rad,
-            longitude_rad=self.longitude_rad,
-            altitude_m=self.altitude_m,
-            gyro_bias_rad_s=np.array(self.gyro_bias_rad_s),
-            accel_bias_mps2=np.array(self.accel_bias_mps2),
+            velocity_enu_mps=state[_VELOCITY].copy(),
+            latitude_rad=float(state[_LATITUDE]),
+            longitude_rad=float(state[_LONGITUDE]),
+            altitude_m=float(state[_ALTITUDE]),
+            gyro_bias_rad_s=state[_GYRO_BIAS].copy(),
+            accel_bias_mps2=state[_ACCEL_BIAS].copy(),
         )
 
     def set_nav_state(self, state: NavState):
@@ -174,7 +242,7 @@ class StrapdownIntegrator:
     @property
     def rotation_nb(self) -> np.ndarray:
         """R_nb as a 3×3 array."""
-        return rotation_matrix_from_quaternion(self.attitude_xyzw)
+        return self._state[_ROTATION].reshape(3, 3).copy()
 
     def step(self, dt_s: float, gyro_start, gyro_end, force_start, force_end):
         """Advance the state by ``dt_s`` (s) between two raw IMU samples.
@@ -183,185 +251,219 @@ class StrapdownIntegrator:
         force_start, force_end: raw specific force at the start and end (body, m/s²).
         The bias estimates are removed here.
         """
-        bgx, bgy, bgz = self.gyro_bias_rad_s
-        bax, bay, baz = self.accel_bias_mps2
-        half_dt = 0.5 * dt_s
         g0x, g0y, g0z = gyro_start
         g1x, g1y, g1z = gyro_end
         f0x, f0y, f0z = force_start
         f1x, f1y, f1z = force_end
-        dthx = (g0x + g1x - 2.0 * bgx) * half_dt
-        dthy = (g0y + g1y - 2.0 * bgy) * half_dt
-        dthz = (g0z + g1z - 2.0 * bgz) * half_dt
-        dvx = (f0x + f1x - 2.0 * bax) * half_dt
-        dvy = (f0y + f1y - 2.0 * bay) * half_dt
-        dvz = (f0z + f1z - 2.0 * baz) * half_dt
-        previous_dt = self._previous_dt
-        if previous_dt > 0.0:
-            k = dt_s * dt_s / (6.0 * previous_dt * (previous_dt + dt_s))
-            # Curvature of the parabola through the older, start and end samples.
-            (ogx, ogy, ogz), (ofx, ofy, ofz) = self._older_samples
-            dthx -= k * ((g1x - g0x) * previous_dt + (ogx - g0x) * dt_s)
-            dthy -= k * ((g1y - g0y) * previous_dt + (ogy - g0y) * dt_s)
-            dthz -= k * ((g1z - g0z) * previous_dt + (ogz - g0z) * dt_s)
-            dvx -= k * ((f1x - f0x) * previous_dt + (ofx - f0x) * dt_s)
-            dvy -= k * ((f1y - f0y) * previous_dt + (ofy - f0y) * dt_s)
-            dvz -= k * ((f1z - f0z) * previous_dt + (ofz - f0z) * dt_s)
-
-        # Body rotation vector and velocity increment in the start-of-step body frame.
-        rvx, rvy, rvz = dthx, dthy, dthz
-        # Rotation of the body during the step: ½ Δθ × Δv + ⅙ Δθ × (Δθ × Δv), the series of
-        # ∫ Exp([ωt×]) f dt to third order (the third term matters for fast rolls).
-        cx = dthy * dvz - dthz * dvy
-        cy = dthz * dvx - dthx * dvz
-        cz = dthx * dvy - dthy * dvx
-        bvx = dvx + 0.5 * cx + (dthy * cz - dthz * cy) / 6.0
-        bvy = dvy + 0.5 * cy + (dthz * cx - dthx * cz) / 6.0
-        bvz = dvz + 0.5 * cz + (dthx * cy - dthy * cx) / 6.0
-        if previous_dt > 0.0:
-            px, py, pz = self._previous_dtheta
-            if self.coning_correction:
-                rvx += k * (py * dthz - pz * dthy)
-                rvy += k * (pz * dthx - px * dthz)
-                rvz += k * (px * dthy - py * dthx)
-            if self.sculling_correction:
-                ux, uy, uz = self._previous_dvel
-                bvx += k * (py * dvz - pz * dvy + uy * dthz - uz * dthy)
-                bvy += k * (pz * dvx - px * dvz + uz * dthx - ux * dthz)
-                bvz += k * (px * dvy - py * dvx + ux * dthy - uy * dthx)
-        self._previous_dt = dt_s
-        self._previous_dtheta = (dthx, dthy, dthz)
-        self._previous_dvel = (dvx, dvy, dvz)
-        self._older_samples = (gyro_start, force_start)
-
-        # Earth model at the start-of-step position.
-        lat = self.latitude_rad
-        alt = self.altitude_m
-        ve, vn, vu = self.velocity_enu_mps
-        sin_lat = math.sin(lat)
-        cos_lat = math.cos(lat)
-        w_sq = 1.0 - earth.ECCENTRICITY_SQ * sin_lat * sin_lat
-        prime_vertical = earth.SEMI_MAJOR_AXIS_M / math.sqrt(w_sq)
-        north_radius = prime_vertical * (1.0 - earth.ECCENTRICITY_SQ) / w_sq + alt
-        east_radius = prime_vertical + alt
-        gravity = earth.normal_gravity_mps2(lat, alt)
-        wie_n = _OMEGA * cos_lat
-        wie_u = _OMEGA * sin_lat
-        wen_e = -vn / north_radius
-        wen_n = ve / east_radius
-        wen_u = wen_n * sin_lat / cos_lat
-        win_e = wen_e
-        win_n = wie_n + wen_n
-        win_u = wie_u + wen_u
-        self.nav_frame_rate_enu_rad_s = (win_e, win_n, win_u)
-
-        # Specific-force velocity increment in ENU (start attitude, half the frame rotation).
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = self.rotation_elements
-        fne = r00 * bvx + r01 * bvy + r02 * bvz
-        fnn = r10 * bvx + r11 * bvy + r12 * bvz
-        fnu = r20 * bvx + r21 * bvy + r22 * bvz
-        fne, fnn, fnu = (
-            fne - half_dt * (win_n * fnu - win_u * fnn),
-            fnn - half_dt * (win_u * fne - win_e * fnu),
-            fnu - half_dt * (win_e * fnn - win_n * fne),
+        _strapdown_step(
+            self._state,
+            dt_s,
+            g0x,
+            g0y,
+            g0z,
+            g1x,
+            g1y,
+            g1z,
+            f0x,
+            f0y,
+            f0z,
+            f1x,
+            f1y,
+            f1z,
+            self.coning_correction,
+            self.sculling_correction,
         )
-        # Coriolis (2ω_ie + ω_en) × v and gravity (0, 0, −g).
-        ce = win_e
-        cn = wie_n + win_n
-        cu = wie_u + win_u
-        new_ve = ve + fne - (cn * vu - cu * vn) * dt_s
-        new_vn = vn + fnn - (cu * ve - ce * vu) * dt_s
-        new_vu = vu + fnu - (ce * vn - cn * ve + gravity) * dt_s
-
-        self.latitude_rad = lat + (vn + new_vn) * half_dt / north_radius
-        self.longitude_rad += (ve + new_ve) * half_dt / (east_radius * cos_lat)
-        self.altitude_m = alt + (vu + new_vu) * half_dt
-        self.velocity_enu_mps = (new_ve, new_vn, new_vu)
-
-        # R_nb(k) = Exp(−ω_in T) · R_nb(k−1) · Exp(φ_k), in quaternions. The arithmetic is that
-        # of rotations.quaternion_multiply / normalize_quaternion / rotation_matrix_elements
-        # written out, because at twice the IMU rate the calls cost as much as the arithmetic.
-        bx, by, bz, bw = quaternion_from_rotation_vector(rvx, rvy, rvz)
-        nx, ny, nz, nw = quaternion_from_rotation_vector(
-            -win_e * dt_s, -win_n * dt_s, -win_u * dt_s
-        )
-        ax, ay, az, aw = self.attitude_xyzw
-        ax, ay, az, aw = (
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        )
-        ax, ay, az, aw = (
-            nw * ax + nx * aw + ny * az - nz * ay,
-            nw * ay - nx * az + ny * aw + nz * ax,
-            nw * az + nx * ay - ny * ax + nz * aw,
-            nw * aw - nx * ax - ny * ay - nz * az,
-        )
-        norm = math.sqrt(ax * ax + ay * ay + az * az + aw * aw)
-        if aw < 0.0:
-            norm = -norm
-        x, y, z, w = ax / norm, ay / norm, az / norm, aw / norm
-        self.attitude_xyzw = (x, y, z, w)
-        xx, yy, zz = x * x, y * y, z * z
-        xy, xz, yz = x * y, x * z, y * z
-        wx, wy, wz = w * x, w * y, w * z
-        n00 = 1.0 - 2.0 * (yy + zz)
-        n01 = 2.0 * (xy - wz)
-        n02 = 2.0 * (xz + wy)
-        n10 = 2.0 * (xy + wz)
-        n11 = 1.0 - 2.0 * (xx + zz)
-        n12 = 2.0 * (yz - wx)
-        n20 = 2.0 * (xz - wy)
-        n21 = 2.0 * (yz + wx)
-        n22 = 1.0 - 2.0 * (xx + yy)
-        self.rotation_elements = (n00, n01, n02, n10, n11, n12, n20, n21, n22)
-
-        # Integrals for the covariance propagation (trapezoid in the attitude).
-        sums = self._rotation_sum
-        sums[0] += (r00 + n00) * half_dt
-        sums[1] += (r01 + n01) * half_dt
-        sums[2] += (r02 + n02) * half_dt
-        sums[3] += (r10 + n10) * half_dt
-        sums[4] += (r11 + n11) * half_dt
-        sums[5] += (r12 + n12) * half_dt
-        sums[6] += (r20 + n20) * half_dt
-        sums[7] += (r21 + n21) * half_dt
-        sums[8] += (r22 + n22) * half_dt
-        self.accumulated_duration_s += dt_s
-        force_sum = self._force_sum
-        force_sum[0] += fne
-        force_sum[1] += fnn
-        force_sum[2] += fnu
-        inverse_dt = 1.0 / dt_s
-        rate_sum = self._rate_sq_sum
-        rate_sum[0] += dthx * dthx * inverse_dt
-        rate_sum[1] += dthy * dthy * inverse_dt
-        rate_sum[2] += dthz * dthz * inverse_dt
-        deviation_sum = self._force_deviation_sq_sum
-        dvz_kinematic = dvz - gravity * dt_s
-        deviation_sum[0] += dvx * dvx * inverse_dt
-        deviation_sum[1] += dvy * dvy * inverse_dt
-        deviation_sum[2] += dvz_kinematic * dvz_kinematic * inverse_dt
 
     def take_propagation_sums(self) -> PropagationSums:
         """Return the integrals accumulated since the last call and restart them."""
+        state = self._state
         sums = PropagationSums(
-            duration_s=self.accumulated_duration_s,
-            rotation_integral_s=np.array(self._rotation_sum).reshape(3, 3),
-            specific_force_increment_enu_mps=np.array(self._force_sum),
-            gyro_rate_sq_integral_rad2_s=np.array(self._rate_sq_sum),
-            force_deviation_sq_integral_m2_s3=np.array(self._force_deviation_sq_sum),
+            duration_s=float(state[_DURATION]),
+            rotation_integral_s=state[_ROTATION_SUM].reshape(3, 3).copy(),
+            specific_force_increment_enu_mps=state[_FORCE_SUM].copy(),
+            gyro_rate_sq_integral_rad2_s=state[_RATE_SQ_SUM].copy(),
+            force_deviation_sq_integral_m2_s3=state[_FORCE_DEVIATION_SQ_SUM].copy(),
         )
-        self._reset_sums()
+        state[_SUMS] = 0.0
         return sums
 
-    def _reset_sums(self):
-        self.accumulated_duration_s = 0.0
-        self._rotation_sum = [0.0] * 9
-        self._force_sum = [0.0, 0.0, 0.0]
-        self._rate_sq_sum = [0.0, 0.0, 0.0]
-        self._force_deviation_sq_sum = [0.0, 0.0, 0.0]
+
+@numba.njit(cache=True)
+def _strapdown_step(
+    state,
+    dt_s,
+    g0x,
+    g0y,
+    g0z,
+    g1x,
+    g1y,
+    g1z,
+    f0x,
+    f0y,
+    f0z,
+    f1x,
+    f1y,
+    f1z,
+    coning_correction,
+    sculling_correction,
+):
+    """One step of :meth:`StrapdownIntegrator.step` on its state vector, in place (see the module
+    docstring for the algorithm; the layout is that of the ``_ATTITUDE`` … constants)."""
+    bgx, bgy, bgz = state[19], state[20], state[21]
+    bax, bay, baz = state[22], state[23], state[24]
+    half_dt = 0.5 * dt_s
+    dthx = (g0x + g1x - 2.0 * bgx) * half_dt
+    dthy = (g0y + g1y - 2.0 * bgy) * half_dt
+    dthz = (g0z + g1z - 2.0 * bgz) * half_dt
+    dvx = (f0x + f1x - 2.0 * bax) * half_dt
+    dvy = (f0y + f1y - 2.0 * bay) * half_dt
+    dvz = (f0z + f1z - 2.0 * baz) * half_dt
+    previous_dt = state[_PREVIOUS_DT]
+    k = 0.0
+    if previous_dt > 0.0:
+        k = dt_s * dt_s / (6.0 * previous_dt * (previous_dt + dt_s))
+        # Curvature of the parabola through the older, start and end samples.
+        ogx, ogy, ogz = state[35], state[36], state[37]
+        ofx, ofy, ofz = state[38], state[39], state[40]
+        dthx -= k * ((g1x - g0x) * previous_dt + (ogx - g0x) * dt_s)
+        dthy -= k * ((g1y - g0y) * previous_dt + (ogy - g0y) * dt_s)
+        dthz -= k * ((g1z - g0z) * previous_dt + (ogz - g0z) * dt_s)
+        dvx -= k * ((f1x - f0x) * previous_dt + (ofx - f0x) * dt_s)
+        dvy -= k * ((f1y - f0y) * previous_dt + (ofy - f0y) * dt_s)
+        dvz -= k * ((f1z - f0z) * previous_dt + (ofz - f0z) * dt_s)
+
+    # Body rotation vector and velocity increment in the start-of-step body frame.
+    rvx, rvy, rvz = dthx, dthy, dthz
+    # Rotation of the body during the step: ½ Δθ × Δv + ⅙ Δθ × (Δθ × Δv), the series of
+    # ∫ Exp([ωt×]) f dt to third order (the third term matters for fast rolls).
+    cx = dthy * dvz - dthz * dvy
+    cy = dthz * dvx - dthx * dvz
+    cz = dthx * dvy - dthy * dvx
+    bvx = dvx + 0.5 * cx + (dthy * cz - dthz * cy) / 6.0
+    bvy = dvy + 0.5 * cy + (dthz * cx - dthx * cz) / 6.0
+    bvz = dvz + 0.5 * cz + (dthx * cy - dthy * cx) / 6.0
+    if previous_dt > 0.0:
+        px, py, pz = state[29], state[30], state[31]
+        if coning_correction:
+            rvx += k * (py * dthz - pz * dthy)
+            rvy += k * (pz * dthx - px * dthz)
+            rvz += k * (px * dthy - py * dthx)
+        if sculling_correction:
+            ux, uy, uz = state[32], state[33], state[34]
+            bvx += k * (py * dvz - pz * dvy + uy * dthz - uz * dthy)
+            bvy += k * (pz * dvx - px * dvz + uz * dthx - ux * dthz)
+            bvz += k * (px * dvy - py * dvx + ux * dthy - uy * dthx)
+    state[_PREVIOUS_DT] = dt_s
+    state[29], state[30], state[31] = dthx, dthy, dthz
+    state[32], state[33], state[34] = dvx, dvy, dvz
+    state[35], state[36], state[37] = g0x, g0y, g0z
+    state[38], state[39], state[40] = f0x, f0y, f0z
+
+    # Earth model at the start-of-step position.
+    lat = state[_LATITUDE]
+    alt = state[_ALTITUDE]
+    ve, vn, vu = state[13], state[14], state[15]
+    sin_lat = math.sin(lat)
+    cos_lat = math.cos(lat)
+    w_sq = 1.0 - earth.ECCENTRICITY_SQ * sin_lat * sin_lat
+    prime_vertical = earth.SEMI_MAJOR_AXIS_M / math.sqrt(w_sq)
+    north_radius = prime_vertical * (1.0 - earth.ECCENTRICITY_SQ) / w_sq + alt
+    east_radius = prime_vertical + alt
+    gravity = earth.normal_gravity_mps2(lat, alt)
+    wie_n = _OMEGA * cos_lat
+    wie_u = _OMEGA * sin_lat
+    wen_e = -vn / north_radius
+    wen_n = ve / east_radius
+    wen_u = wen_n * sin_lat / cos_lat
+    win_e = wen_e
+    win_n = wie_n + wen_n
+    win_u = wie_u + wen_u
+    state[25], state[26], state[27] = win_e, win_n, win_u
+
+    # Specific-force velocity increment in ENU (start attitude, half the frame rotation).
+    r00, r01, r02 = state[4], state[5], state[6]
+    r10, r11, r12 = state[7], state[8], state[9]
+    r20, r21, r22 = state[10], state[11], state[12]
+    fne = r00 * bvx + r01 * bvy + r02 * bvz
+    fnn = r10 * bvx + r11 * bvy + r12 * bvz
+    fnu = r20 * bvx + r21 * bvy + r22 * bvz
+    fne, fnn, fnu = (
+        fne - half_dt * (win_n * fnu - win_u * fnn),
+        fnn - half_dt * (win_u * fne - win_e * fnu),
+        fnu - half_dt * (win_e * fnn - win_n * fne),
+    )
+    # Coriolis (2ω_ie + ω_en) × v and gravity (0, 0, −g).
+    ce = win_e
+    cn = wie_n + win_n
+    cu = wie_u + win_u
+    new_ve = ve + fne - (cn * vu - cu * vn) * dt_s
+    new_vn = vn + fnn - (cu * ve - ce * vu) * dt_s
+    new_vu = vu + fnu - (ce * vn - cn * ve + gravity) * dt_s
+
+    state[_LATITUDE] = lat + (vn + new_vn) * half_dt / north_radius
+    state[_LONGITUDE] += (ve + new_ve) * half_dt / (east_radius * cos_lat)
+    state[_ALTITUDE] = alt + (vu + new_vu) * half_dt
+    state[13], state[14], state[15] = new_ve, new_vn, new_vu
+
+    # R_nb(k) = Exp(−ω_in T) · R_nb(k−1) · Exp(φ_k), in quaternions.
+    bx, by, bz, bw = quaternion_from_rotation_vector(rvx, rvy, rvz)
+    nx, ny, nz, nw = quaternion_from_rotation_vector(-win_e * dt_s, -win_n * dt_s, -win_u * dt_s)
+    ax, ay, az, aw = state[0], state[1], state[2], state[3]
+    ax, ay, az, aw = (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
+    ax, ay, az, aw = (
+        nw * ax + nx * aw + ny * az - nz * ay,
+        nw * ay - nx * az + ny * aw + nz * ax,
+        nw * az + nx * ay - ny * ax + nz * aw,
+        nw * aw - nx * ax - ny * ay - nz * az,
+    )
+    norm = math.sqrt(ax * ax + ay * ay + az * az + aw * aw)
+    if aw < 0.0:
+        norm = -norm
+    x, y, z, w = ax / norm, ay / norm, az / norm, aw / norm
+    state[0], state[1], state[2], state[3] = x, y, z, w
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    n00 = 1.0 - 2.0 * (yy + zz)
+    n01 = 2.0 * (xy - wz)
+    n02 = 2.0 * (xz + wy)
+    n10 = 2.0 * (xy + wz)
+    n11 = 1.0 - 2.0 * (xx + zz)
+    n12 = 2.0 * (yz - wx)
+    n20 = 2.0 * (xz - wy)
+    n21 = 2.0 * (yz + wx)
+    n22 = 1.0 - 2.0 * (xx + yy)
+    state[4], state[5], state[6] = n00, n01, n02
+    state[7], state[8], state[9] = n10, n11, n12
+    state[10], state[11], state[12] = n20, n21, n22
+
+    # Integrals for the covariance propagation (trapezoid in the attitude).
+    state[42] += (r00 + n00) * half_dt
+    state[43] += (r01 + n01) * half_dt
+    state[44] += (r02 + n02) * half_dt
+    state[45] += (r10 + n10) * half_dt
+    state[46] += (r11 + n11) * half_dt
+    state[47] += (r12 + n12) * half_dt
+    state[48] += (r20 + n20) * half_dt
+    state[49] += (r21 + n21) * half_dt
+    state[50] += (r22 + n22) * half_dt
+    state[_DURATION] += dt_s
+    state[51] += fne
+    state[52] += fnn
+    state[53] += fnu
+    inverse_dt = 1.0 / dt_s
+    state[54] += dthx * dthx * inverse_dt
+    state[55] += dthy * dthy * inverse_dt
+    state[56] += dthz * dthz * inverse_dt
+    dvz_kinematic = dvz - gravity * dt_s
+    state[57] += dvx * dvx * inverse_dt
+    state[58] += dvy * dvy * inverse_dt
+    state[59] += dvz_kinematic * dvz_kinematic * inverse_dt
 
 
 def interpolate_sample(
