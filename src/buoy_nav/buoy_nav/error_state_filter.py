@@ -68,6 +68,7 @@ accelerometer-bias variance instead.
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy.linalg import lapack
 from scipy.special import gammaincinv
@@ -98,7 +99,6 @@ DEG = math.pi / 180.0
 SCALE_FACTOR_CORRELATION_TIME_S = 3.0
 # Smallest eigenvalue kept when a covariance has to be repaired, relative to the largest one.
 _EIGENVALUE_FLOOR_RELATIVE = 1e-15
-_IDENTITY = np.eye(_S.dim)
 _EYE3 = np.eye(3)
 
 
@@ -236,58 +236,114 @@ def discrete_error_model(
     """
     duration = sums.duration_s
     meridian, prime_vertical = earth.radii_of_curvature_m(latitude_rad)
-    north_radius = meridian + altitude_m
-    east_radius = prime_vertical + altitude_m
     earth_rate = earth.earth_rate_enu_rad_s(latitude_rad)
     transport_rate = earth.transport_rate_enu_rad_s(latitude_rad, altitude_m, velocity_enu_mps)
-    gravity = earth.normal_gravity_mps2(latitude_rad, altitude_m)
-    rotation_integral = sums.rotation_integral_s
+    transition = np.empty((_S.dim, _S.dim))
+    noise = np.zeros((_S.dim, _S.dim))
+    _fill_error_model(
+        transition,
+        noise,
+        duration,
+        earth_rate + transport_rate,
+        2.0 * earth_rate + transport_rate,
+        sums.specific_force_increment_enu_mps,
+        sums.rotation_integral_s,
+        meridian + altitude_m,
+        prime_vertical + altitude_m,
+        math.tan(latitude_rad),
+        earth.normal_gravity_mps2(latitude_rad, altitude_m),
+        imu.scale_factor**2 * SCALE_FACTOR_CORRELATION_TIME_S,
+        sums.gyro_rate_sq_integral_rad2_s,
+        sums.force_deviation_sq_integral_m2_s3,
+        imu.gyro_noise_psd_rad2_s * duration,
+        imu.accel_noise_psd_m2_s3 * duration,
+        2.0 * imu.gyro_markov_sigma_rad_s**2 * duration / imu.gyro_correlation_time_s,
+        2.0 * imu.accel_markov_sigma_mps2**2 * duration / imu.accel_correlation_time_s,
+        _S.attitude.start,
+        _S.velocity.start,
+        _S.position.start,
+        _S.gyro_bias.start,
+        _S.accel_bias.start,
+    )
+    return transition, noise
 
-    rate = earth_rate + transport_rate
-    coriolis = 2.0 * earth_rate + transport_rate
-    force = sums.specific_force_increment_enu_mps
 
-    attitude, velocity, position = _S.attitude, _S.velocity, _S.position
-    phi, dv, dp = attitude.start, velocity.start, position.start
-    a = np.zeros((_S.dim, _S.dim))
-    a[attitude, attitude] = _skew_array(-duration * rate)
+@numba.njit(cache=True)
+def _fill_error_model(
+    transition,
+    noise,
+    duration_s,
+    nav_frame_rate_enu_rad_s,
+    coriolis_rate_enu_rad_s,
+    force_increment_enu_mps,
+    rotation_integral_s,
+    north_radius_m,
+    east_radius_m,
+    tan_latitude,
+    gravity_mps2,
+    scale_sq_time_s,
+    gyro_rate_sq_integral_rad2_s,
+    force_deviation_sq_integral_m2_s3,
+    gyro_noise_rad2,
+    accel_noise_m2_s2,
+    gyro_drift_rad2_s2,
+    accel_drift_m2_s4,
+    phi,
+    dv,
+    dp,
+    gyro_bias,
+    accel_bias,
+):
+    """Φ = I + A + A²/2 and Q_d of :func:`discrete_error_model` into ``transition`` and
+    ``noise`` (zeros on entry); the blocks start at the indices ``phi`` … ``accel_bias``."""
+    dim = transition.shape[0]
+    a = np.zeros((dim, dim))
+    _set_skew(a, phi, phi, -duration_s * nav_frame_rate_enu_rad_s)
     # ∂ω_en/∂v: ω_en = (−v_N/(R_M+h), v_E/(R_N+h), v_E tan L/(R_N+h)).
-    a[phi + EAST, dv + NORTH] = duration / north_radius
-    a[phi + NORTH, dv + EAST] = -duration / east_radius
-    a[phi + UP, dv + EAST] = -duration * math.tan(latitude_rad) / east_radius
-    a[attitude, _S.gyro_bias] = -rotation_integral
-    a[velocity, attitude] = _skew_array(-force)
-    a[velocity, velocity] = _skew_array(-duration * coriolis)
-    a[dv + UP, dp + UP] = 2.0 * gravity / math.sqrt(north_radius * east_radius) * duration
-    a[velocity, _S.accel_bias] = -rotation_integral
-    for axis in (EAST, NORTH, UP):
-        a[dp + axis, dv + axis] = duration
+    a[phi + EAST, dv + NORTH] = duration_s / north_radius_m
+    a[phi + NORTH, dv + EAST] = -duration_s / east_radius_m
+    a[phi + UP, dv + EAST] = -duration_s * tan_latitude / east_radius_m
+    _set_skew(a, dv, phi, -force_increment_enu_mps)
+    _set_skew(a, dv, dv, -duration_s * coriolis_rate_enu_rad_s)
+    a[dv + UP, dp + UP] = (
+        2.0 * gravity_mps2 / math.sqrt(north_radius_m * east_radius_m) * duration_s
+    )
+    for row in range(3):
+        for column in range(3):
+            a[phi + row, gyro_bias + column] = -rotation_integral_s[row, column]
+            a[dv + row, accel_bias + column] = -rotation_integral_s[row, column]
+        a[dp + row, dv + row] = duration_s
 
-    transition = a @ a
+    transition[:, :] = a @ a
     transition *= 0.5
     transition += a
-    transition += _IDENTITY
+    for index in range(dim):
+        transition[index, index] += 1.0
 
-    mean_rotation = rotation_integral / duration
-    scale_sq_time = imu.scale_factor**2 * SCALE_FACTOR_CORRELATION_TIME_S
-    noise = np.zeros((_S.dim, _S.dim))
-    noise[attitude, attitude] = (
-        mean_rotation * (scale_sq_time * sums.gyro_rate_sq_integral_rad2_s)
+    mean_rotation = rotation_integral_s / duration_s
+    noise[phi : phi + 3, phi : phi + 3] = (
+        mean_rotation * (scale_sq_time_s * gyro_rate_sq_integral_rad2_s)
     ) @ mean_rotation.T
-    noise[velocity, velocity] = (
-        mean_rotation * (scale_sq_time * sums.force_deviation_sq_integral_m2_s3)
+    noise[dv : dv + 3, dv : dv + 3] = (
+        mean_rotation * (scale_sq_time_s * force_deviation_sq_integral_m2_s3)
     ) @ mean_rotation.T
-    gyro_noise = imu.gyro_noise_psd_rad2_s * duration
-    accel_noise = imu.accel_noise_psd_m2_s3 * duration
-    gyro_drift = 2.0 * imu.gyro_markov_sigma_rad_s**2 * duration / imu.gyro_correlation_time_s
-    accel_drift = 2.0 * imu.accel_markov_sigma_mps2**2 * duration / imu.accel_correlation_time_s
-    gyro_bias, accel_bias = _S.gyro_bias.start, _S.accel_bias.start
     for axis in range(3):
-        noise[phi + axis, phi + axis] += gyro_noise
-        noise[dv + axis, dv + axis] += accel_noise
-        noise[gyro_bias + axis, gyro_bias + axis] = gyro_drift
-        noise[accel_bias + axis, accel_bias + axis] = accel_drift
-    return transition, noise
+        noise[phi + axis, phi + axis] += gyro_noise_rad2
+        noise[dv + axis, dv + axis] += accel_noise_m2_s2
+        noise[gyro_bias + axis, gyro_bias + axis] = gyro_drift_rad2_s2
+        noise[accel_bias + axis, accel_bias + axis] = accel_drift_m2_s4
+
+
+@numba.njit(cache=True)
+def _set_skew(matrix, row, column, vector):
+    """The 3×3 block of ``matrix`` at (``row``, ``column``) to [vector×]."""
+    x, y, z = vector[0], vector[1], vector[2]
+    matrix[row, column + 1] = -z
+    matrix[row, column + 2] = y
+    matrix[row + 1, column] = z
+    matrix[row + 1, column + 2] = -x
+    matrix[row + 2, column] = -y
+    matrix[row + 2, column + 1] = x
 
 
 @dataclass(frozen=True)
