@@ -74,7 +74,7 @@ from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCoun
 from buoy_nav.imu_input import ImuInput
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
-from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
+from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample, load_compiled_kernels
 from buoy_nav.prediction import RealtimePrediction
 from buoy_nav.sensor_sets import AidingRecency, sensor_set
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
@@ -98,6 +98,7 @@ class FusionEngine:
     def __init__(
         self, config: FusionConfig, sources: Iterable[type[AidingSource]] = AIDING_SOURCES
     ):
+        load_compiled_kernels()  # here, not at the first IMU sample of a live stream
         self.config = config
         self.states = ERROR_STATES
         """Names of the error states (rows and columns of :attr:`covariance`)."""

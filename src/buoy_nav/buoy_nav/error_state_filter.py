@@ -314,19 +314,27 @@ def _fill_error_model(
             a[dv + row, accel_bias + column] = -rotation_integral_s[row, column]
         a[dp + row, dv + row] = duration_s
 
-    transition[:, :] = a @ a
-    transition *= 0.5
-    transition += a
-    for index in range(dim):
-        transition[index, index] += 1.0
+    # Products written as loops: numba's matrix product would add seconds to the first compile.
+    for row in range(dim):
+        for column in range(dim):
+            product = 0.0
+            for inner in range(dim):
+                product += a[row, inner] * a[inner, column]
+            transition[row, column] = 0.5 * product + a[row, column]
+        transition[row, row] += 1.0
 
-    mean_rotation = rotation_integral_s / duration_s
-    noise[phi : phi + 3, phi : phi + 3] = (
-        mean_rotation * (scale_sq_time_s * gyro_rate_sq_integral_rad2_s)
-    ) @ mean_rotation.T
-    noise[dv : dv + 3, dv : dv + 3] = (
-        mean_rotation * (scale_sq_time_s * force_deviation_sq_integral_m2_s3)
-    ) @ mean_rotation.T
+    # Scale-factor noise: M diag(s² τ ∫ω²) Mᵀ and M diag(s² τ ∫(f − g)²) Mᵀ with M = ∫R dt / T.
+    for row in range(3):
+        for column in range(3):
+            gyro_sum = 0.0
+            force_sum = 0.0
+            for axis in range(3):
+                both = rotation_integral_s[row, axis] * rotation_integral_s[column, axis]
+                gyro_sum += both * gyro_rate_sq_integral_rad2_s[axis]
+                force_sum += both * force_deviation_sq_integral_m2_s3[axis]
+            scale = scale_sq_time_s / (duration_s * duration_s)
+            noise[phi + row, phi + column] = scale * gyro_sum
+            noise[dv + row, dv + column] = scale * force_sum
     for axis in range(3):
         noise[phi + axis, phi + axis] += gyro_noise_rad2
         noise[dv + axis, dv + axis] += accel_noise_m2_s2

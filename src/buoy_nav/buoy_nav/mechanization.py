@@ -38,7 +38,8 @@ import numba
 import numpy as np
 
 from buoy_nav import earth
-from buoy_nav.error_state_filter import NavState
+from buoy_nav.config import FusionConfig
+from buoy_nav.error_state_filter import ImuErrorModel, NavState, discrete_error_model
 from buoy_nav.rotations import (
     Quaternion,
     normalize_quaternion,
@@ -464,6 +465,21 @@ def _strapdown_step(
     state[57] += dvx * dvx * inverse_dt
     state[58] += dvy * dvy * inverse_dt
     state[59] += dvz_kinematic * dvz_kinematic * inverse_dt
+
+
+def load_compiled_kernels() -> None:
+    """Compile the fusion's compiled functions, or load them from the cache, now: a node calls
+    this at start-up so that no sensor message ever waits for the compiler (up to 2 s on the
+    first run after an install or a change of their source)."""
+    integrator = StrapdownIntegrator((0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
+    integrator.step(0.01, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 9.8), (0.0, 0.0, 9.8))
+    discrete_error_model(
+        integrator.take_propagation_sums(),
+        0.0,
+        0.0,
+        (0.0, 0.0, 0.0),
+        ImuErrorModel.from_config(FusionConfig()),
+    )
 
 
 def interpolate_sample(
