@@ -237,10 +237,14 @@ def compare(record: Path, ion_functions: str | None) -> dict:
             .tolist(),
         },
         "ours_platform_velocity_high_passed": {
+            "motion": asdict(
+                motion_residual(uncorrected_w, high_passed[:, 2], acceleration, RATE_HZ)
+            ),
             "fluxes": flux_figures(t, high_passed, temperature),
             "flux_bands": band_split(t, high_passed, temperature),
         },
         "ours_high_passed_and_slow_tilt_from_accelerometers": {
+            "motion": asdict(motion_residual(uncorrected_w, as_edson[:, 2], acceleration, RATE_HZ)),
             "fluxes": flux_figures(t, as_edson, temperature),
             "flux_bands": band_split(t, as_edson, temperature),
         },
@@ -356,10 +360,11 @@ def print_comparison(result: dict) -> None:
         ),
     ):
         variant = result[key]
-        f = variant["fluxes"]
+        f, m = variant["fluxes"], variant["motion"]
         print(
             f"  ours, {label}: u'w' {f['u_w_m2_s2']:.4f}, v'w' {f['v_w_m2_s2']:.4f}, "
-            f"w'Ts' {f['w_ts_k_mps']:.5f}, stationarity u'w' {f['stationarity_u_w_percent']:.0f} %"
+            f"w'Ts' {f['w_ts_k_mps']:.5f}, stationarity u'w' {f['stationarity_u_w_percent']:.0f} %;"
+            f" wave band: share {m['variance_share']:.4f}, coherence {m['coherence_after']:.4f}"
         )
         for band_key in ("u_w", "w_w"):
             print(f"    {band_key:5s} {variant['flux_bands'][band_key]}")
