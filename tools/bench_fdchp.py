@@ -14,7 +14,7 @@ fluxes only, when no ion-functions checkout is at hand), and prints over the sam
 - the fluxes u'w', v'w', w'Ts', u*, with the flux QC, from ``wind_comp.fluxes`` for ours, and
   both Edson's own and ``wind_comp.fluxes`` applied to his corrected wind.
 
-    python tools/bench_fdchp.py [--record PATH] [--ion-functions DIR]
+    python tools/bench_fdchp.py [--record PATH] [--ion-functions DIR] [--params-file YAML ...]
 
 Results go to out/bench/fdchp.json.
 """
@@ -73,16 +73,18 @@ gyros); so does the test of where the flux difference comes from."""
 ENU_FROM_NWU = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 
-def process_record(record: Path, work: Path) -> Path:
-    """Import and process the record into ``work``; returns the processed bag."""
+def process_record(record: Path, work: Path, extra_parameter_files=()) -> Path:
+    """Import and process the record into ``work`` with the shipped parameters and then
+    ``extra_parameter_files`` (later files win); returns the processed bag."""
     imported, processed = work / "fdchp", work / "fdchp_processed"
     import_records(record, COLUMN_MAP, imported, overwrite=True)
+    files = [str(PARAMS), *map(str, extra_parameter_files)]
     with contextlib.redirect_stdout(io.StringIO()):
         process_bag(
             imported,
             processed,
-            fusion_config_from_files([str(PARAMS)]),
-            compensator_config_from_files([str(PARAMS)]),
+            fusion_config_from_files(files),
+            compensator_config_from_files(files),
             overwrite=True,
         )
     return processed
@@ -204,8 +206,8 @@ def flux_figures(time_s, wind, temperature) -> dict:
     return {k: v for k, v in asdict(window).items() if k not in ("window_start_s", "window_end_s")}
 
 
-def compare(record: Path, ion_functions: str | None) -> dict:
-    processed = process_record(record, OUT_DIR / "fdchp")
+def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -> dict:
+    processed = process_record(record, OUT_DIR / "fdchp", extra_parameter_files)
     ours = read_processed(processed)
     t = ours["time_s"][KEPT]
     uncorrected_w = ours["measured"][KEPT, 2]
@@ -392,13 +394,20 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(prog="bench_fdchp", description=__doc__.split("\n")[0])
     parser.add_argument("--record", default=str(RECORD), help="fdchp_test_dp.dat")
     parser.add_argument("--ion-functions", help="checkout of oceanobservatories/ion-functions")
+    parser.add_argument(
+        "--params-file",
+        action="append",
+        default=[],
+        help="ROS parameter YAML applied after ooi_fdchp_params.yaml (repeatable): our processing "
+        "with other parameters",
+    )
     arguments = parser.parse_args(argv)
     record = Path(arguments.record)
     if not record.is_file():
         print(f"bench_fdchp: no record at {record} (set FDCHP_RECORD)", file=sys.stderr)
         sys.exit(2)
     OUT_DIR.mkdir(parents=True, exist_ok=True)
-    result = compare(record, arguments.ion_functions)
+    result = compare(record, arguments.ion_functions, arguments.params_file)
     print_comparison(result)
     (OUT_DIR / "fdchp.json").write_text(json.dumps(result, indent=2, default=float))
 
