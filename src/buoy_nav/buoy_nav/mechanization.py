@@ -252,6 +252,8 @@ class StrapdownIntegrator:
         force_start, force_end: raw specific force at the start and end (body, m/s²).
         The bias estimates are removed here.
         """
+        # Handed over as scalars, so that tuples, lists and arrays alike run the one compiled
+        # specialisation (a sequence type of its own would compile again in the data path).
         g0x, g0y, g0z = gyro_start
         g1x, g1y, g1z = gyro_end
         f0x, f0y, f0z = force_start
