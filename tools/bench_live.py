@@ -43,6 +43,11 @@ NODES_UNDER_TEST = ("fusion_node", "compensation_node")
 LATENCY_TARGET_P99_MS = 5.0
 CPU_SAMPLE_PERIOD_S = 0.25
 FIND_PID_TIMEOUT_S = 30.0
+# The nodes whose CPU is measured: (the output that shows it works, the input that drives it).
+CPU_MEASURED = {
+    "fusion_node": ("nav/imu", "imu/data_raw"),
+    "compensation_node": ("wind/true", "anemometer/wind"),
+}
 # The simulated sensors and clock stand in for hardware and its drivers; on this machine they are
 # five Python processes sharing two cores with the nodes under test, so they run at a lower
 # priority, as a buoy computer would run its processing nodes above housekeeping.
@@ -296,14 +301,15 @@ def _run_live(
     }
     print(f"bench: live: {' '.join(command[1:])} (domain {domain})", file=sys.stderr, flush=True)
     listener = Listener()
-    sampler = None
+    samplers: dict[str, CpuSampler] = {}
     try:
         scenario = subprocess.Popen(
             command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=environment
         )
-        pid = child_pid(scenario.pid, "fusion_node", FIND_PID_TIMEOUT_S)
-        if pid is not None:
-            sampler = CpuSampler(pid)
+        for node in CPU_MEASURED:
+            pid = child_pid(scenario.pid, node, FIND_PID_TIMEOUT_S)
+            if pid is not None:
+                samplers[node] = CpuSampler(pid)
         result["simulator_niceness"] = lower_priority(scenario.pid, SIMULATOR_PROCESSES)
         try:
             output, _ = scenario.communicate(timeout=duration_s + RUN_MARGIN_S)
@@ -314,7 +320,7 @@ def _run_live(
         result["run_scenario_output"] = output.strip().splitlines()[-20:]
         time.sleep(0.5)
     finally:
-        if sampler is not None:
+        for sampler in samplers.values():
             sampler.stop()
         listener.close()
     if scenario.returncode != 0:
@@ -358,28 +364,40 @@ def _run_live(
     result["latency"]["corrected wind, part 2: imu/data_raw → wind/true"] = latency_stats(
         imu, corrected_in_service
     )
-    result["fusion_cpu"] = fusion_cpu(listener, sampler, received)
+    for node, (output, data) in CPU_MEASURED.items():
+        result[f"{node.removesuffix('_node')}_cpu"] = node_cpu(
+            node, samplers.get(node), listener, output, data, received
+        )
     return result
 
 
-def fusion_cpu(listener: Listener, sampler: CpuSampler | None, received: dict) -> dict:
-    """CPU share while IMU samples flow and the filter runs (first nav/imu to last IMU)."""
+def node_cpu(
+    node: str,
+    sampler: CpuSampler | None,
+    listener: Listener,
+    output_topic: str,
+    input_topic: str,
+    received: dict,
+) -> dict:
+    """CPU share of ``node`` while it works: from its first ``output_topic`` message to the
+    last ``input_topic`` message, with the rate of that input."""
     if sampler is None:
-        return {"share_of_one_core": None, "note": "fusion_node pid not found"}
-    start_ns = listener.first_callback_ns.get("nav/imu")
-    end_ns = listener.last_callback_ns.get("imu/data_raw")
+        return {"share_of_one_core": None, "note": f"{node} pid not found"}
+    start_ns = listener.first_callback_ns.get(output_topic)
+    end_ns = listener.last_callback_ns.get(input_topic)
     if start_ns is None or end_ns is None:
-        return {"share_of_one_core": None, "note": "no nav/imu or imu/data_raw received"}
+        return {"share_of_one_core": None, "note": f"no {output_topic} or {input_topic} received"}
     share = sampler.share_between(start_ns, end_ns)
     if share is None:
         return {"share_of_one_core": None, "note": "too few CPU samples in the window"}
-    stamps = sorted(received["imu/data_raw"])
+    stamps = sorted(received[input_topic])
     span_s = (stamps[-1][0] - stamps[0][0]) + (stamps[-1][1] - stamps[0][1]) * 1e-9
     return {
         "pid": sampler.pid,
         "share_of_one_core": share[0],
         "window_s": share[1],
-        "imu_rate_hz": (len(stamps) - 1) / span_s if span_s > 0 else float("nan"),
+        "input_topic": input_topic,
+        "input_rate_hz": (len(stamps) - 1) / span_s if span_s > 0 else float("nan"),
     }
 
 

@@ -295,13 +295,15 @@ def print_live(result: dict, title: str) -> None:
             f"{stats['p99_ms']:8.2f} {stats['max_ms']:8.2f} {mark(stats['p99_pass'])} "
             f"{stats['source_stamp_p99_ms']:8.2f}"
         )
-    cpu = result["fusion_cpu"]
-    fusion = "pass-through fusion_node" if result["passthrough"] else "fusion_node"
-    if cpu.get("share_of_one_core") is None:
-        print(f"  {fusion} CPU: not measured ({cpu.get('note', '')})")
-    else:
-        print(
-            f"  {fusion} CPU: {100 * cpu['share_of_one_core']:.1f} % of one core over "
-            f"{cpu['window_s']:.1f} s with imu/data_raw at {cpu['imu_rate_hz']:.1f} Hz"
-        )
+    for node in ("fusion_node", "compensation_node"):
+        cpu = result.get(f"{node.removesuffix('_node')}_cpu", {})
+        name = f"pass-through {node}" if result["passthrough"] else node
+        if cpu.get("share_of_one_core") is None:
+            print(f"  {name} CPU: not measured ({cpu.get('note', '')})")
+        else:
+            print(
+                f"  {name} CPU: {100 * cpu['share_of_one_core']:.1f} % of one core over "
+                f"{cpu['window_s']:.1f} s with {cpu['input_topic']} at "
+                f"{cpu['input_rate_hz']:.1f} Hz"
+            )
     print(f"  messages received: {result['received']}")
