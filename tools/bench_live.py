@@ -7,8 +7,9 @@ the input with the same header stamp (receive times from the middleware's recept
 it gives one), over all pairs and "in service" (without the first second of output, when a
 just-aligned filter releases its held-back solutions at once); the same difference of the
 publishers' source stamps is given beside it. The simulated sensors and clock run at niceness
-``SIMULATOR_NICENESS``, the nodes under test at the default. The CPU share of ``fusion_node``
-comes from /proc/<pid>/stat (utime + stime) while the IMU stream flows.
+``SIMULATOR_NICENESS``, the nodes under test at the default. The CPU shares of ``fusion_node``
+and ``compensation_node`` come from /proc/<pid>/stat (utime + stime) while their input streams
+flow.
 
 With ``--passthrough`` the two nodes are replaced by ``tools/passthrough_node.py``, stand-ins
 that compute nothing: the same run then measures the floor that the middleware, the Python
