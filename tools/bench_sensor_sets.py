@@ -184,7 +184,7 @@ def outage_split(out_bag: str, intervals, start_ns: int) -> dict:
             flag |= (t >= begin) & (t < end)
         return flag, t >= 120.0
 
-    result = {}
+    result = {"gnss_returns": gnss_return_steps(nav, truth, i_nav, i_truth, intervals, start_ns)}
     nav_in, nav_late = inside(common)
     wind_in, wind_late = inside(run.wind_stamp_ns)
     finite = np.all(np.isfinite(wind_error), axis=1)
@@ -205,6 +205,41 @@ def outage_split(out_bag: str, intervals, start_ns: int) -> dict:
             "wind_rms_mps": float(np.sqrt(np.mean(np.sum(wind_error[wind_mask] ** 2, axis=1)))),
         }
     return result
+
+
+def gnss_return_steps(nav, truth, i_nav, i_truth, intervals, start_ns: int) -> list[dict]:
+    """What the fusion does to its attitude when GNSS returns after each outage: the attitude
+    error (rotation vector of R_nav R_trueᵀ, deg) just before the return, the largest change of
+    that error from one solution to the next in the 5 s after it (the correction's step), and
+    the filter's own 1σ just before (root sum of the three attitude variances, deg)."""
+    stamps_ns = nav.stamps_ns[i_nav]
+    error_deg = np.degrees(
+        (
+            Rotation.from_quat(nav.quat_xyzw[i_nav])
+            * Rotation.from_quat(truth.quat_xyzw[i_truth]).inv()
+        ).as_rotvec()
+    )
+    sigma_deg = np.degrees(
+        np.sqrt(np.trace(nav.attitude_covariance_enu_rad2[i_nav], axis1=1, axis2=2))
+    )
+    returns = []
+    for _, end_s in intervals:
+        end_ns = start_ns + int(end_s * 1e9)
+        before = np.searchsorted(stamps_ns, end_ns) - 1
+        after = np.searchsorted(stamps_ns, end_ns + 5_000_000_000)
+        if before < 0 or after <= before + 1:
+            continue
+        changes = np.linalg.norm(np.diff(error_deg[before:after], axis=0), axis=1)
+        returns.append(
+            {
+                "return_s": float(end_s),
+                "error_before_deg": float(np.linalg.norm(error_deg[before])),
+                "largest_step_deg": float(changes.max()),
+                "sigma_before_deg": float(sigma_deg[before]),
+                "step_over_sigma": float(changes.max() / sigma_deg[before]),
+            }
+        )
+    return returns
 
 
 def ahrs_lag_cost(scenario_name: str, duration_s: float) -> dict:
