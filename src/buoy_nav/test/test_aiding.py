@@ -52,6 +52,14 @@ def make_source(source_class, config=CONFIG):
     return source_class(config, STATES)
 
 
+@pytest.fixture(autouse=True)
+def _same_draws_whatever_ran_before():
+    """Every test draws its states from a freshly seeded generator, so that its numbers do not
+    depend on which tests ran before it in the same process (pytest-xdist splits a module)."""
+    global RNG
+    RNG = np.random.default_rng(77)
+
+
 def random_state(roll_deg, pitch_deg, yaw_deg):
     rotation = rotation_matrix_from_euler(*np.radians((roll_deg, pitch_deg, yaw_deg)))
     return NavState(

@@ -1,0 +1,248 @@
+"""Fusion engine: a source registered from outside, steps of the IMU clock, IMU spikes and outages,
+the integrity monitor and what the smoother is told of it."""
+
+import math
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from engine_scenario import (
+    RockingBuoy,
+    attitude_errors_rad,
+    deliver,
+    engine_config,
+    make_events,
+    run,
+)
+from scipy.spatial.transform import Rotation
+
+from buoy_common.contract import Reason
+from buoy_nav.aiding import AIDING_SOURCES
+from buoy_nav.aiding.base import FIX, AidingSource, MeasurementModel, as_floats
+from buoy_nav.engine import FusionEngine
+from buoy_nav.fusion_messages import feed_message
+from buoy_nav.smoothed_solutions import FixedIntervalSmoother
+from buoy_nav.state_layout import UP
+
+
+@dataclass(frozen=True)
+class Altitude:
+    """A measurement the suite has no source for: the altitude of base_link (m) and its
+    variance (m²), as a pressure sensor or a radar gauge could give."""
+
+    altitude_m: float
+    variance_m2: float
+
+
+class AltitudeSource(AidingSource):
+    """A whole aiding source defined outside the package: message, validation, model."""
+
+    kind = "altitude"
+    topic = "test/altitude"
+    measurement_type = Altitude
+    aids = FIX
+
+    def measurement_from_message(self, message):
+        return Altitude(message.altitude, message.variance)
+
+    def validated(self, measurement):
+        values = as_floats(measurement.altitude_m, measurement.variance_m2)
+        if isinstance(values, Reason):
+            return values
+        return Altitude(*values) if values[1] > 0.0 else Reason.NON_POSITIVE_VARIANCE
+
+    def model(self, measurement, point):
+        jacobian = np.zeros((1, self.states.dim))
+        jacobian[0, self.states.index("position", UP)] = 1.0
+        predicted = np.array((point.state.altitude_m,))
+        return MeasurementModel(
+            predicted=predicted,
+            innovation=np.array((measurement.altitude_m,)) - predicted,
+            jacobian=jacobian,
+            covariance=np.array(((measurement.variance_m2,),)),
+        )
+
+    def align(self, aligner, t_s, measurement, raw_gyro_rad_s):
+        return None
+
+
+def test_a_source_registered_from_outside_runs_end_to_end():
+    """The altitude source joins the fusion by registration alone: its messages are converted
+    and validated by it, its model pulls the altitude off the (vertically vague) fixes."""
+    offset_m = 0.3
+    buoy = RockingBuoy()
+    vague_vertical = np.diag((4e-4, 4e-4, 100.0))
+    engine = FusionEngine(
+        engine_config(record_innovations=True), sources=(*AIDING_SOURCES, AltitudeSource)
+    )
+    solutions = []
+    for event in make_events(buoy, 40.0):
+        t, _, kind, args = event
+        if kind == "fix":
+            event = (t, 0, kind, (*args[:3], vague_vertical))
+        solutions += deliver(engine, event)
+        if kind == "heading":
+            message = SimpleNamespace(
+                header=SimpleNamespace(
+                    stamp=SimpleNamespace(sec=int(t), nanosec=round(t % 1 * 1e9))
+                ),
+                altitude=offset_m,
+                variance=1e-4,
+            )
+            assert feed_message(engine, "test/altitude", message) == ([], None)
+    bad = SimpleNamespace(header=message.header, altitude=0.0, variance=-1.0)
+    assert feed_message(engine, "test/altitude", bad) == ([], Reason.NON_POSITIVE_VARIANCE)
+    solutions += engine.flush()
+
+    counters = engine.health().counters["altitude"]
+    assert counters.used_for_alignment > 0
+    assert counters.accepted + counters.used_for_alignment == 400
+    assert counters.rejected == {"non_positive_variance": 1}
+    assert "altitude" in {record.kind for record in engine.innovation_log}
+    # Map origin: base_link at alignment, on the fix (truth altitude 0).
+    assert solutions[-1].position_map_m[2] == pytest.approx(offset_m, abs=0.02)
+    # The GNSS sources still do their work.
+    assert attitude_errors_rad(buoy, solutions).max() < math.radians(0.02)
+
+    # Unregistered, the same source's input is a programming error.
+    plain = FusionEngine(engine_config())
+    with pytest.raises(ValueError, match="input topic"):
+        feed_message(plain, "test/altitude", message)
+    with pytest.raises(TypeError, match="Altitude"):
+        plain.add_measurement(1.0, Altitude(0.0, 1.0))
+
+
+@pytest.mark.parametrize("step_s", [-5.0, 5.0])
+def test_a_step_of_the_imu_clock_is_undone(step_s):
+    """IMU stamps stepping back or ahead (the samples arriving as before, with the GNSS's in
+    between) are put back on the GNSS clock: the run is the one without the step, but for the
+    rounding of the re-stamped stamps (measurements then fall a few ulps off an IMU stamp, and
+    the integration steps are split there) and, for a step back, the first sample after it:
+    one stale sample is not a step, so it is rejected, and its successor confirms the step."""
+    buoy = RockingBuoy()
+    events = make_events(buoy, 50.0)
+    stepped = [
+        (e[0] + step_s, *e[1:]) if e[2] == "imu" and e[0] >= 30.0 - 1e-9 else e for e in events
+    ]
+    engine, solutions = run(stepped)
+    _, reference = run(events)
+    health = engine.health()
+    assert len(health.imu_clock_steps) == 1
+    stamp_s, measured_step_s = health.imu_clock_steps[0]
+    lost = 1 if step_s < 0 else 0
+    assert stamp_s == pytest.approx(30.0 + 0.01 * lost, abs=1e-9)
+    assert measured_step_s == pytest.approx(step_s, abs=1e-9)
+    assert health.counters["imu"].rejected == ({"stamp_not_increasing": 1} if lost else {})
+    assert health.imu_gaps == 0 and health.alignments == 1
+    if lost:
+        reference = [s for s in reference if abs(s.t_s - 30.0) > 1e-6]
+    assert len(solutions) == len(reference)
+    stamps, reference_stamps = (np.array([s.t_s for s in run]) for run in (solutions, reference))
+    np.testing.assert_allclose(stamps, reference_stamps, rtol=0.0, atol=1e-9)
+    attitudes, reference_attitudes = (
+        Rotation.from_quat(np.array([s.attitude_xyzw for s in run]))
+        for run in (solutions, reference)
+    )
+    assert (attitudes * reference_attitudes.inv()).magnitude().max() < 1e-4  # rad
+    velocity_difference = np.array(
+        [s.velocity_enu_mps - r.velocity_enu_mps for s, r in zip(solutions, reference, strict=True)]
+    )
+    assert np.abs(velocity_difference).max() < 1e-4
+    assert attitude_errors_rad(buoy, solutions).max() < math.radians(0.02)
+
+
+def test_an_imu_outage_is_not_taken_for_a_clock_step():
+    buoy = RockingBuoy()
+    events = [e for e in make_events(buoy, 40.0) if not (e[2] == "imu" and 20.0 < e[0] < 21.0)]
+    engine, _ = run(events)
+    health = engine.health()
+    assert health.imu_clock_steps == ()
+    assert health.imu_gaps == 1
+
+
+def test_an_imu_spike_inside_the_magnitude_limits_is_rejected_and_leaves_no_trace(rocking_run):
+    """Five gyro samples of 30 rad/s and one accelerometer sample of 100 m/s² (inside the
+    magnitude limits) change no solution beyond what losing those samples does."""
+    buoy, events, _, reference = rocking_run
+    spiked = []
+    for event in events:
+        t, order, kind, args = event
+        if kind == "imu" and 30.0 - 1e-9 <= t < 30.05 - 1e-9:
+            args = (np.array([30.0, 0.0, 0.0]), args[1])
+        elif kind == "imu" and 40.0 - 1e-9 <= t < 40.01 - 1e-9:
+            args = (args[0], np.array([0.0, 0.0, 100.0]))
+        spiked.append((t, order, kind, args))
+    engine, solutions = run(spiked)
+    assert engine.health().counters["imu"].rejected == {"implausible_change": 6}
+    assert len(solutions) == len(reference) - 6
+    assert attitude_errors_rad(buoy, solutions).max() < math.radians(0.02)
+    assert engine.health().trusted
+
+
+def gyro_fault_events(buoy):
+    """70 s of the rocking buoy with a gyro offset of 0.3 rad/s from 30 to 31 s."""
+    events = []
+    for t, order, kind, args in make_events(buoy, 70.0):
+        if kind == "imu" and 30.0 - 1e-9 <= t < 31.0 - 1e-9:
+            args = (args[0] + np.array([0.3, 0.0, 0.0]), args[1])
+        events.append((t, order, kind, args))
+    return events
+
+
+def test_a_filter_at_odds_with_its_aiding_says_so_and_realigns():
+    """A gyro offset of 0.3 rad/s for 1 s (each sample within the platform's limits) turns the
+    attitude 17° away: the gates reject the GNSS, the navigation is declared not trusted, its
+    attitude covariance grows past 1° at once, and a realignment brings the attitude back."""
+    buoy = RockingBuoy()
+    engine, solutions = run(gyro_fault_events(buoy))
+    health = engine.health()
+    assert health.counters["imu"].rejected == {}
+    assert len(health.integrity_events) >= 1
+    event = health.integrity_events[0]
+    assert 30.0 < event.start_s < 31.5
+    assert event.reason.startswith("gate_rejections:")
+    stamps = np.array([s.t_s for s in solutions])
+    errors = attitude_errors_rad(buoy, solutions)
+    sigma = np.sqrt([s.attitude_covariance_rad2.diagonal().max() for s in solutions])
+    # Every solution whose attitude is off by more than 1° says so by its covariance, except
+    # those emitted before the gates could see the error (processing lags by the measurement
+    # delay, and the trust ends at the third rejection).
+    detected_by_s = event.start_s + engine.config.max_measurement_delay_s + 0.01
+    wrong = (errors > math.radians(1.0)) & (stamps > detected_by_s)
+    assert np.all(sigma[wrong] > math.radians(1.0))
+    assert health.trusted
+    assert errors[stamps > 65.0].max() < math.radians(0.1)
+
+
+def test_the_smoother_is_told_of_the_integrity_monitors_inflation_and_realignment():
+    """The gyro fault smoothed: the inflation is process noise to the smoother, so the
+    corrections that pull the state back after it do not reach back to the sound stretch
+    before the fault; the smoothed solutions of the period of distrust keep the inflated
+    covariance (the wind refuses them alike); after the realignment the smoothed attitude is
+    on its truth."""
+    buoy = RockingBuoy()
+    engine = FusionEngine(engine_config(realtime_output=False))
+    with FixedIntervalSmoother(engine) as smoother:
+        for event in gyro_fault_events(buoy):
+            for solution in deliver(engine, event):
+                smoother.add(solution, 0, 0, 0)
+        for solution in engine.flush():
+            smoother.add(solution, 0, 0, 0)
+        pairs = list(smoother.smoothed())
+    event = engine.health().integrity_events[0]
+    forward = [pair.forward for pair in pairs]
+    smoothed = [pair.smoothed for pair in pairs]
+    stamps = np.array([s.t_s for s in smoothed])
+    errors = attitude_errors_rad(buoy, smoothed)
+    assert errors[(stamps > 10.0) & (stamps < 30.0)].max() < math.radians(0.1)
+    assert errors[stamps > 65.0].max() < math.radians(0.1)
+    distrusted = (stamps >= event.start_s) & (stamps < event.end_s)
+    assert distrusted.any()
+    for forward_solution, smoothed_solution in zip(
+        np.array(forward)[distrusted], np.array(smoothed)[distrusted], strict=True
+    ):
+        forward_sigma = np.sqrt(forward_solution.attitude_covariance_rad2.diagonal())
+        smoothed_sigma = np.sqrt(smoothed_solution.attitude_covariance_rad2.diagonal())
+        assert np.all(smoothed_sigma > math.radians(engine.config.integrity_attitude_sigma_deg))
+        assert np.all(forward_sigma > math.radians(engine.config.integrity_attitude_sigma_deg))
