@@ -11,7 +11,6 @@ the ``*_ecef`` / tangent-plane conversions accept numpy arrays (broadcasting) as
 import math
 
 import numpy as np
-from numba.extending import register_jitable
 
 SEMI_MAJOR_AXIS_M = 6378137.0
 FLATTENING = 1.0 / 298.257223563
@@ -38,7 +37,6 @@ def radii_of_curvature_m(latitude_rad: float) -> tuple[float, float]:
     return meridian, prime_vertical
 
 
-@register_jitable
 def normal_gravity_mps2(latitude_rad: float, altitude_m: float) -> float:
     """Magnitude of WGS-84 normal gravity (m/s², gravitation plus centrifugal) at a geodetic point.
 

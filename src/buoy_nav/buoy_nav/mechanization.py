@@ -291,6 +291,11 @@ class StrapdownIntegrator:
         return sums
 
 
+# The Earth-model and rotation functions the step calls, compiled from their one source.
+_normal_gravity_mps2 = numba.njit(cache=True)(earth.normal_gravity_mps2)
+_quaternion_from_rotation_vector = numba.njit(cache=True)(quaternion_from_rotation_vector)
+
+
 @numba.njit(cache=True)
 def _strapdown_step(
     state,
@@ -372,7 +377,7 @@ def _strapdown_step(
     prime_vertical = earth.SEMI_MAJOR_AXIS_M / math.sqrt(w_sq)
     north_radius = prime_vertical * (1.0 - earth.ECCENTRICITY_SQ) / w_sq + alt
     east_radius = prime_vertical + alt
-    gravity = earth.normal_gravity_mps2(lat, alt)
+    gravity = _normal_gravity_mps2(lat, alt)
     wie_n = _OMEGA * cos_lat
     wie_u = _OMEGA * sin_lat
     wen_e = -vn / north_radius
@@ -409,8 +414,8 @@ def _strapdown_step(
     state[13], state[14], state[15] = new_ve, new_vn, new_vu
 
     # R_nb(k) = Exp(−ω_in T) · R_nb(k−1) · Exp(φ_k), in quaternions.
-    bx, by, bz, bw = quaternion_from_rotation_vector(rvx, rvy, rvz)
-    nx, ny, nz, nw = quaternion_from_rotation_vector(-win_e * dt_s, -win_n * dt_s, -win_u * dt_s)
+    bx, by, bz, bw = _quaternion_from_rotation_vector(rvx, rvy, rvz)
+    nx, ny, nz, nw = _quaternion_from_rotation_vector(-win_e * dt_s, -win_n * dt_s, -win_u * dt_s)
     ax, ay, az, aw = state[0], state[1], state[2], state[3]
     ax, ay, az, aw = (
         aw * bx + ax * bw + ay * bz - az * by,

@@ -16,7 +16,6 @@ integrator calls them at the IMU rate, where a numpy call costs more than the ar
 import math
 
 import numpy as np
-from numba.extending import register_jitable
 
 Quaternion = tuple[float, float, float, float]
 
@@ -54,7 +53,6 @@ def quaternion_multiply(a: Quaternion, b: Quaternion) -> Quaternion:
     )
 
 
-@register_jitable
 def quaternion_from_rotation_vector(x: float, y: float, z: float) -> Quaternion:
     """Unit (x, y, z, w) quaternion of the rotation vector (x, y, z) (axis × angle, rad)."""
     angle_sq = x * x + y * y + z * z
