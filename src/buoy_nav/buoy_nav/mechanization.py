@@ -30,8 +30,11 @@ state in one array that the compiled step updates in place, because at twice the
 interpreter's per-operation cost would otherwise dominate the offline run.
 """
 
+import contextlib
 import copy
 import math
+import signal
+import threading
 from dataclasses import dataclass
 
 import numba
@@ -478,6 +481,37 @@ def load_compiled_kernels() -> None:
     """Compile the fusion's compiled functions, or load them from the cache, now: a node calls
     this at start-up so that no sensor message ever waits for the compiler (up to 2 s on the
     first run after an install or a change of their source)."""
+    with _stop_signals_held():
+        _run_compiled_kernels()
+
+
+@contextlib.contextmanager
+def _stop_signals_held():
+    """Hold SIGINT and SIGTERM until the block ends, then deliver them to the handlers they had.
+
+    An exception raised inside numba's compiler or cache loader (a tool's signal handler raises
+    KeyboardInterrupt) leaves its code library half-built: the process then fails on a later
+    call or crashes at exit instead of stopping cleanly. Python runs signal handlers in the main
+    thread only, so elsewhere there is nothing to hold."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = []
+    previous = {}
+    for number in (signal.SIGINT, signal.SIGTERM):
+        handler = signal.getsignal(number)
+        if handler is not None:  # None: installed outside Python, cannot be put back
+            previous[number] = signal.signal(number, lambda caught, _frame: held.append(caught))
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        for number in held:
+            signal.raise_signal(number)
+
+
+def _run_compiled_kernels() -> None:
     integrator = StrapdownIntegrator((0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
     integrator.step(0.01, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 9.8), (0.0, 0.0, 9.8))
     discrete_error_model(

@@ -1,12 +1,13 @@
 """Strapdown mechanization against analytic motions (no simulator)."""
 
 import math
+import signal
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from buoy_nav import earth
+from buoy_nav import earth, mechanization
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample
 from buoy_nav.rotations import rotation_matrix_from_euler
 
@@ -198,3 +199,30 @@ def test_constant_acceleration_and_gravity_are_integrated():
     meridian, _ = earth.radii_of_curvature_m(LATITUDE)
     north = (integrator.latitude_rad - LATITUDE) * (meridian + ALTITUDE)
     assert north == pytest.approx(0.5 * accel * (steps * dt) ** 2, rel=1e-3)
+
+
+def test_a_stop_signal_during_compilation_is_delivered_once_the_kernels_are_ready(monkeypatch):
+    # An exception raised inside numba's compiler leaves it half-built (the process then fails
+    # later or crashes at exit): a tool's handler, which raises, must run only afterwards.
+    delivered = []
+    seen_while_compiling = []
+
+    def compile_and_be_interrupted():
+        signal.raise_signal(signal.SIGINT)
+        signal.raise_signal(signal.SIGTERM)
+        seen_while_compiling.extend(delivered)
+
+    def record(caught, _frame):
+        delivered.append(caught)
+
+    previous = {number: signal.signal(number, record) for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        monkeypatch.setattr(mechanization, "_run_compiled_kernels", compile_and_be_interrupted)
+        mechanization.load_compiled_kernels()
+        handlers_after = [signal.getsignal(number) for number in previous]
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    assert seen_while_compiling == []
+    assert delivered == [signal.SIGINT, signal.SIGTERM]
+    assert handlers_after == [record, record]
