@@ -74,27 +74,26 @@ class PropagationSums:
 
 
 # Layout of the integrator's state vector (one float64 array, so that the compiled step reads and
-# writes it in place): the nominal state, the previous step for the curvature, coning and sculling
-# terms, and the propagation sums.
-_ATTITUDE = slice(0, 4)  # quaternion x, y, z, w of R_nb
-_ROTATION = slice(4, 13)  # R_nb, row-major
-_VELOCITY = slice(13, 16)  # ENU, m/s
+# writes it in place), by where each block starts and, after the colon, how long it is: the
+# nominal state, the previous step for the curvature, coning and sculling terms, and the
+# propagation sums.
+_ATTITUDE = 0  # 4: quaternion x, y, z, w of R_nb
+_ROTATION = 4  # 9: R_nb, row-major
+_VELOCITY = 13  # 3: ENU, m/s
 _LATITUDE, _LONGITUDE, _ALTITUDE = 16, 17, 18  # rad, rad, m
-_GYRO_BIAS = slice(19, 22)  # rad/s, body
-_ACCEL_BIAS = slice(22, 25)  # m/s², body
-_NAV_FRAME_RATE = slice(25, 28)  # ω_in, ENU, rad/s
+_GYRO_BIAS = 19  # 3: rad/s, body
+_ACCEL_BIAS = 22  # 3: m/s², body
+_NAV_FRAME_RATE = 25  # 3: ω_in, ENU, rad/s
 _PREVIOUS_DT = 28  # s; 0 when there is no previous step
-_PREVIOUS_DTHETA = slice(29, 32)  # body angle increment of the previous step (rad)
-_PREVIOUS_DVEL = slice(32, 35)  # body velocity increment of the previous step (m/s)
-_OLDER_GYRO = slice(35, 38)  # raw sample at the previous step's start (rad/s)
-_OLDER_FORCE = slice(38, 41)  # (m/s²)
-_DURATION = 41  # s integrated since the last take_propagation_sums
-_ROTATION_SUM = slice(42, 51)  # ∫ R_nb dt, row-major
-_FORCE_SUM = slice(51, 54)  # ∫ f^n dt
-_RATE_SQ_SUM = slice(54, 57)
-_FORCE_DEVIATION_SQ_SUM = slice(57, 60)
-_HISTORY = slice(_PREVIOUS_DT, _OLDER_FORCE.stop)
-_SUMS = slice(_DURATION, _FORCE_DEVIATION_SQ_SUM.stop)
+_PREVIOUS_DTHETA = 29  # 3: body angle increment of the previous step (rad)
+_PREVIOUS_DVEL = 32  # 3: body velocity increment of the previous step (m/s)
+_OLDER_GYRO = 35  # 3: raw sample at the previous step's start (rad/s)
+_OLDER_FORCE = 38  # 3: (m/s²)
+_DURATION = 41  # s integrated since the last take_propagation_sums; the sums follow it
+_ROTATION_SUM = 42  # 9: ∫ R_nb dt, row-major
+_FORCE_SUM = 51  # 3: ∫ f^n dt
+_RATE_SQ_SUM = 54  # 3
+_FORCE_DEVIATION_SQ_SUM = 57  # 3
 _STATE_SIZE = 60
 
 
@@ -153,18 +152,18 @@ class StrapdownIntegrator:
         ve, vn, _ = velocity_enu_mps = _floats(velocity_enu_mps)
         lat = float(latitude_rad)
         alt = float(altitude_m)
-        state[_ATTITUDE] = attitude
-        state[_ROTATION] = rotation_matrix_elements(*attitude)
-        state[_VELOCITY] = velocity_enu_mps
+        state[_ATTITUDE : _ATTITUDE + 4] = attitude
+        state[_ROTATION : _ROTATION + 9] = rotation_matrix_elements(*attitude)
+        state[_VELOCITY : _VELOCITY + 3] = velocity_enu_mps
         state[_LATITUDE] = lat
         state[_LONGITUDE] = float(longitude_rad)
         state[_ALTITUDE] = alt
-        state[_GYRO_BIAS] = _floats(gyro_bias_rad_s)
-        state[_ACCEL_BIAS] = _floats(accel_bias_mps2)
+        state[_GYRO_BIAS : _GYRO_BIAS + 3] = _floats(gyro_bias_rad_s)
+        state[_ACCEL_BIAS : _ACCEL_BIAS + 3] = _floats(accel_bias_mps2)
         # earth.navigation_frame_rate_enu_rad_s (ω_ie + ω_en) in floats, the same arithmetic.
         meridian, prime_vertical = earth.radii_of_curvature_m(lat)
         east_radius = prime_vertical + alt
-        state[_NAV_FRAME_RATE] = (
+        state[_NAV_FRAME_RATE : _NAV_FRAME_RATE + 3] = (
             0.0 + -vn / (meridian + alt),
             _OMEGA * math.cos(lat) + ve / east_radius,
             _OMEGA * math.sin(lat) + ve * math.tan(lat) / east_radius,
@@ -172,15 +171,15 @@ class StrapdownIntegrator:
 
     @property
     def attitude_xyzw(self) -> Quaternion:
-        return tuple(self._state[_ATTITUDE].tolist())
+        return tuple(self._state[_ATTITUDE : _ATTITUDE + 4].tolist())
 
     @property
     def rotation_elements(self) -> tuple[float, ...]:
-        return tuple(self._state[_ROTATION].tolist())
+        return tuple(self._state[_ROTATION : _ROTATION + 9].tolist())
 
     @property
     def velocity_enu_mps(self) -> tuple[float, float, float]:
-        return tuple(self._state[_VELOCITY].tolist())
+        return tuple(self._state[_VELOCITY : _VELOCITY + 3].tolist())
 
     @property
     def latitude_rad(self) -> float:
@@ -196,15 +195,15 @@ class StrapdownIntegrator:
 
     @property
     def gyro_bias_rad_s(self) -> tuple[float, float, float]:
-        return tuple(self._state[_GYRO_BIAS].tolist())
+        return tuple(self._state[_GYRO_BIAS : _GYRO_BIAS + 3].tolist())
 
     @property
     def accel_bias_mps2(self) -> tuple[float, float, float]:
-        return tuple(self._state[_ACCEL_BIAS].tolist())
+        return tuple(self._state[_ACCEL_BIAS : _ACCEL_BIAS + 3].tolist())
 
     @property
     def nav_frame_rate_enu_rad_s(self) -> tuple[float, float, float]:
-        return tuple(self._state[_NAV_FRAME_RATE].tolist())
+        return tuple(self._state[_NAV_FRAME_RATE : _NAV_FRAME_RATE + 3].tolist())
 
     @property
     def accumulated_duration_s(self) -> float:
@@ -215,7 +214,7 @@ class StrapdownIntegrator:
         sums (its own sums start empty)."""
         twin = copy.copy(self)
         twin._state = self._state.copy()
-        twin._state[_SUMS] = 0.0
+        twin._state[_DURATION:] = 0.0
         return twin
 
     def nav_state(self) -> NavState:
@@ -223,12 +222,12 @@ class StrapdownIntegrator:
         state = self._state
         return NavState(
             attitude_xyzw=self.attitude_xyzw,
-            velocity_enu_mps=state[_VELOCITY].copy(),
+            velocity_enu_mps=state[_VELOCITY : _VELOCITY + 3].copy(),
             latitude_rad=float(state[_LATITUDE]),
             longitude_rad=float(state[_LONGITUDE]),
             altitude_m=float(state[_ALTITUDE]),
-            gyro_bias_rad_s=state[_GYRO_BIAS].copy(),
-            accel_bias_mps2=state[_ACCEL_BIAS].copy(),
+            gyro_bias_rad_s=state[_GYRO_BIAS : _GYRO_BIAS + 3].copy(),
+            accel_bias_mps2=state[_ACCEL_BIAS : _ACCEL_BIAS + 3].copy(),
         )
 
     def set_nav_state(self, state: NavState):
@@ -246,7 +245,7 @@ class StrapdownIntegrator:
     @property
     def rotation_nb(self) -> np.ndarray:
         """R_nb as a 3×3 array."""
-        return self._state[_ROTATION].reshape(3, 3).copy()
+        return self._state[_ROTATION : _ROTATION + 9].reshape(3, 3).copy()
 
     def step(self, dt_s: float, gyro_start, gyro_end, force_start, force_end):
         """Advance the state by ``dt_s`` (s) between two raw IMU samples.
@@ -285,12 +284,14 @@ class StrapdownIntegrator:
         state = self._state
         sums = PropagationSums(
             duration_s=float(state[_DURATION]),
-            rotation_integral_s=state[_ROTATION_SUM].reshape(3, 3).copy(),
-            specific_force_increment_enu_mps=state[_FORCE_SUM].copy(),
-            gyro_rate_sq_integral_rad2_s=state[_RATE_SQ_SUM].copy(),
-            force_deviation_sq_integral_m2_s3=state[_FORCE_DEVIATION_SQ_SUM].copy(),
+            rotation_integral_s=state[_ROTATION_SUM : _ROTATION_SUM + 9].reshape(3, 3).copy(),
+            specific_force_increment_enu_mps=state[_FORCE_SUM : _FORCE_SUM + 3].copy(),
+            gyro_rate_sq_integral_rad2_s=state[_RATE_SQ_SUM : _RATE_SQ_SUM + 3].copy(),
+            force_deviation_sq_integral_m2_s3=state[
+                _FORCE_DEVIATION_SQ_SUM : _FORCE_DEVIATION_SQ_SUM + 3
+            ].copy(),
         )
-        state[_SUMS] = 0.0
+        state[_DURATION:] = 0.0
         return sums
 
 
@@ -320,8 +321,12 @@ def _strapdown_step(
 ):
     """One step of :meth:`StrapdownIntegrator.step` on its state vector, in place (see the module
     docstring for the algorithm; the layout is that of the ``_ATTITUDE`` … constants)."""
-    bgx, bgy, bgz = state[19], state[20], state[21]
-    bax, bay, baz = state[22], state[23], state[24]
+    bgx, bgy, bgz = state[_GYRO_BIAS], state[_GYRO_BIAS + 1], state[_GYRO_BIAS + 2]
+    bax, bay, baz = (
+        state[_ACCEL_BIAS],
+        state[_ACCEL_BIAS + 1],
+        state[_ACCEL_BIAS + 2],
+    )
     half_dt = 0.5 * dt_s
     dthx = (g0x + g1x - 2.0 * bgx) * half_dt
     dthy = (g0y + g1y - 2.0 * bgy) * half_dt
@@ -334,8 +339,16 @@ def _strapdown_step(
     if previous_dt > 0.0:
         k = dt_s * dt_s / (6.0 * previous_dt * (previous_dt + dt_s))
         # Curvature of the parabola through the older, start and end samples.
-        ogx, ogy, ogz = state[35], state[36], state[37]
-        ofx, ofy, ofz = state[38], state[39], state[40]
+        ogx, ogy, ogz = (
+            state[_OLDER_GYRO],
+            state[_OLDER_GYRO + 1],
+            state[_OLDER_GYRO + 2],
+        )
+        ofx, ofy, ofz = (
+            state[_OLDER_FORCE],
+            state[_OLDER_FORCE + 1],
+            state[_OLDER_FORCE + 2],
+        )
         dthx -= k * ((g1x - g0x) * previous_dt + (ogx - g0x) * dt_s)
         dthy -= k * ((g1y - g0y) * previous_dt + (ogy - g0y) * dt_s)
         dthz -= k * ((g1z - g0z) * previous_dt + (ogz - g0z) * dt_s)
@@ -354,26 +367,50 @@ def _strapdown_step(
     bvy = dvy + 0.5 * cy + (dthz * cx - dthx * cz) / 6.0
     bvz = dvz + 0.5 * cz + (dthx * cy - dthy * cx) / 6.0
     if previous_dt > 0.0:
-        px, py, pz = state[29], state[30], state[31]
+        px, py, pz = (
+            state[_PREVIOUS_DTHETA],
+            state[_PREVIOUS_DTHETA + 1],
+            state[_PREVIOUS_DTHETA + 2],
+        )
         if coning_correction:
             rvx += k * (py * dthz - pz * dthy)
             rvy += k * (pz * dthx - px * dthz)
             rvz += k * (px * dthy - py * dthx)
         if sculling_correction:
-            ux, uy, uz = state[32], state[33], state[34]
+            ux, uy, uz = (
+                state[_PREVIOUS_DVEL],
+                state[_PREVIOUS_DVEL + 1],
+                state[_PREVIOUS_DVEL + 2],
+            )
             bvx += k * (py * dvz - pz * dvy + uy * dthz - uz * dthy)
             bvy += k * (pz * dvx - px * dvz + uz * dthx - ux * dthz)
             bvz += k * (px * dvy - py * dvx + ux * dthy - uy * dthx)
     state[_PREVIOUS_DT] = dt_s
-    state[29], state[30], state[31] = dthx, dthy, dthz
-    state[32], state[33], state[34] = dvx, dvy, dvz
-    state[35], state[36], state[37] = g0x, g0y, g0z
-    state[38], state[39], state[40] = f0x, f0y, f0z
+    (
+        state[_PREVIOUS_DTHETA],
+        state[_PREVIOUS_DTHETA + 1],
+        state[_PREVIOUS_DTHETA + 2],
+    ) = dthx, dthy, dthz
+    (
+        state[_PREVIOUS_DVEL],
+        state[_PREVIOUS_DVEL + 1],
+        state[_PREVIOUS_DVEL + 2],
+    ) = dvx, dvy, dvz
+    state[_OLDER_GYRO], state[_OLDER_GYRO + 1], state[_OLDER_GYRO + 2] = (
+        g0x,
+        g0y,
+        g0z,
+    )
+    state[_OLDER_FORCE], state[_OLDER_FORCE + 1], state[_OLDER_FORCE + 2] = (
+        f0x,
+        f0y,
+        f0z,
+    )
 
     # Earth model at the start-of-step position.
     lat = state[_LATITUDE]
     alt = state[_ALTITUDE]
-    ve, vn, vu = state[13], state[14], state[15]
+    ve, vn, vu = state[_VELOCITY], state[_VELOCITY + 1], state[_VELOCITY + 2]
     sin_lat = math.sin(lat)
     cos_lat = math.cos(lat)
     w_sq = 1.0 - earth.ECCENTRICITY_SQ * sin_lat * sin_lat
@@ -389,12 +426,16 @@ def _strapdown_step(
     win_e = wen_e
     win_n = wie_n + wen_n
     win_u = wie_u + wen_u
-    state[25], state[26], state[27] = win_e, win_n, win_u
+    (
+        state[_NAV_FRAME_RATE],
+        state[_NAV_FRAME_RATE + 1],
+        state[_NAV_FRAME_RATE + 2],
+    ) = win_e, win_n, win_u
 
     # Specific-force velocity increment in ENU (start attitude, half the frame rotation).
-    r00, r01, r02 = state[4], state[5], state[6]
-    r10, r11, r12 = state[7], state[8], state[9]
-    r20, r21, r22 = state[10], state[11], state[12]
+    r00, r01, r02 = state[_ROTATION], state[_ROTATION + 1], state[_ROTATION + 2]
+    r10, r11, r12 = state[_ROTATION + 3], state[_ROTATION + 4], state[_ROTATION + 5]
+    r20, r21, r22 = state[_ROTATION + 6], state[_ROTATION + 7], state[_ROTATION + 8]
     fne = r00 * bvx + r01 * bvy + r02 * bvz
     fnn = r10 * bvx + r11 * bvy + r12 * bvz
     fnu = r20 * bvx + r21 * bvy + r22 * bvz
@@ -414,12 +455,21 @@ def _strapdown_step(
     state[_LATITUDE] = lat + (vn + new_vn) * half_dt / north_radius
     state[_LONGITUDE] += (ve + new_ve) * half_dt / (east_radius * cos_lat)
     state[_ALTITUDE] = alt + (vu + new_vu) * half_dt
-    state[13], state[14], state[15] = new_ve, new_vn, new_vu
+    state[_VELOCITY], state[_VELOCITY + 1], state[_VELOCITY + 2] = (
+        new_ve,
+        new_vn,
+        new_vu,
+    )
 
     # R_nb(k) = Exp(−ω_in T) · R_nb(k−1) · Exp(φ_k), in quaternions.
     bx, by, bz, bw = _quaternion_from_rotation_vector(rvx, rvy, rvz)
     nx, ny, nz, nw = _quaternion_from_rotation_vector(-win_e * dt_s, -win_n * dt_s, -win_u * dt_s)
-    ax, ay, az, aw = state[0], state[1], state[2], state[3]
+    ax, ay, az, aw = (
+        state[_ATTITUDE],
+        state[_ATTITUDE + 1],
+        state[_ATTITUDE + 2],
+        state[_ATTITUDE + 3],
+    )
     ax, ay, az, aw = (
         aw * bx + ax * bw + ay * bz - az * by,
         aw * by - ax * bz + ay * bw + az * bx,
@@ -436,7 +486,12 @@ def _strapdown_step(
     if aw < 0.0:
         norm = -norm
     x, y, z, w = ax / norm, ay / norm, az / norm, aw / norm
-    state[0], state[1], state[2], state[3] = x, y, z, w
+    (
+        state[_ATTITUDE],
+        state[_ATTITUDE + 1],
+        state[_ATTITUDE + 2],
+        state[_ATTITUDE + 3],
+    ) = x, y, z, w
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
@@ -449,32 +504,32 @@ def _strapdown_step(
     n20 = 2.0 * (xz - wy)
     n21 = 2.0 * (yz + wx)
     n22 = 1.0 - 2.0 * (xx + yy)
-    state[4], state[5], state[6] = n00, n01, n02
-    state[7], state[8], state[9] = n10, n11, n12
-    state[10], state[11], state[12] = n20, n21, n22
+    state[_ROTATION], state[_ROTATION + 1], state[_ROTATION + 2] = n00, n01, n02
+    state[_ROTATION + 3], state[_ROTATION + 4], state[_ROTATION + 5] = n10, n11, n12
+    state[_ROTATION + 6], state[_ROTATION + 7], state[_ROTATION + 8] = n20, n21, n22
 
     # Integrals for the covariance propagation (trapezoid in the attitude).
-    state[42] += (r00 + n00) * half_dt
-    state[43] += (r01 + n01) * half_dt
-    state[44] += (r02 + n02) * half_dt
-    state[45] += (r10 + n10) * half_dt
-    state[46] += (r11 + n11) * half_dt
-    state[47] += (r12 + n12) * half_dt
-    state[48] += (r20 + n20) * half_dt
-    state[49] += (r21 + n21) * half_dt
-    state[50] += (r22 + n22) * half_dt
+    state[_ROTATION_SUM] += (r00 + n00) * half_dt
+    state[_ROTATION_SUM + 1] += (r01 + n01) * half_dt
+    state[_ROTATION_SUM + 2] += (r02 + n02) * half_dt
+    state[_ROTATION_SUM + 3] += (r10 + n10) * half_dt
+    state[_ROTATION_SUM + 4] += (r11 + n11) * half_dt
+    state[_ROTATION_SUM + 5] += (r12 + n12) * half_dt
+    state[_ROTATION_SUM + 6] += (r20 + n20) * half_dt
+    state[_ROTATION_SUM + 7] += (r21 + n21) * half_dt
+    state[_ROTATION_SUM + 8] += (r22 + n22) * half_dt
     state[_DURATION] += dt_s
-    state[51] += fne
-    state[52] += fnn
-    state[53] += fnu
+    state[_FORCE_SUM] += fne
+    state[_FORCE_SUM + 1] += fnn
+    state[_FORCE_SUM + 2] += fnu
     inverse_dt = 1.0 / dt_s
-    state[54] += dthx * dthx * inverse_dt
-    state[55] += dthy * dthy * inverse_dt
-    state[56] += dthz * dthz * inverse_dt
+    state[_RATE_SQ_SUM] += dthx * dthx * inverse_dt
+    state[_RATE_SQ_SUM + 1] += dthy * dthy * inverse_dt
+    state[_RATE_SQ_SUM + 2] += dthz * dthz * inverse_dt
     dvz_kinematic = dvz - gravity * dt_s
-    state[57] += dvx * dvx * inverse_dt
-    state[58] += dvy * dvy * inverse_dt
-    state[59] += dvz_kinematic * dvz_kinematic * inverse_dt
+    state[_FORCE_DEVIATION_SQ_SUM] += dvx * dvx * inverse_dt
+    state[_FORCE_DEVIATION_SQ_SUM + 1] += dvy * dvy * inverse_dt
+    state[_FORCE_DEVIATION_SQ_SUM + 2] += dvz_kinematic * dvz_kinematic * inverse_dt
 
 
 def load_compiled_kernels() -> None:
