@@ -32,7 +32,8 @@ as constants and printed beside our figures:
     RSS of each node over time, latency percentiles per simulated hour, samples in and out
     (twelve hours of wall-clock time; ``--quick``: six simulated minutes).
 13. real_record: OOI's FDCHP flux-buoy record, ours beside Edson's processing
-    (tools/bench_fdchp.py).
+    (tools/bench_fdchp.py), and both on simulated FDCHP records against the truth
+    (tools/fdchp_simulated.py).
 14. archive: process_archive over a tree of the committed bags, one local worker against two
     (tools/bench_archive.py).
 15. current (paper 003): process_bag on ship_current and sea_state with its DVL, short runs;
@@ -451,10 +452,13 @@ def main(argv=None) -> None:
             )
             shutil.copy(OUT_DIR / "sensor_sets.json", OUT_DIR / f"sensor_sets_{scenario}.json")
     if "real_record" in sections:
-        # OOI's FDCHP record beside Edson's processing: its own tool, out/bench/fdchp.json.
+        # OOI's FDCHP record beside Edson's processing, and both on simulated FDCHP records held
+        # to the truth: their own tools, out/bench/fdchp.json and fdchp_simulated.json.
         import bench_fdchp
+        import fdchp_simulated
 
         bench_fdchp.main([])
+        fdchp_simulated.main([])
     if "attitude" in sections:
         attitude = {c.scenario: case_results[c.key] for c in cases if c.key.startswith("attitude/")}
         other_seeds = {

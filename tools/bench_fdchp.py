@@ -49,7 +49,11 @@ from buoy_nav.config import fusion_config_from_files
 from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files
 from wind_comp.fluxes import linear_detrend, rotation_into_mean_wind, window_fluxes
-from wind_comp.motion_residual import motion_residual, vertical_acceleration_mps2
+from wind_comp.motion_residual import (
+    motion_residual,
+    platform_velocity_left,
+    vertical_acceleration_mps2,
+)
 from wind_comp.report.data import stamped_vectors
 
 REPO = Path(__file__).resolve().parent.parent
@@ -70,6 +74,8 @@ EDSON_HIGH_PASS_HZ = 1.0 / 12.0
 SLOW_TILT_HZ = EDSON_HIGH_PASS_HZ
 """Below this Edson's processing takes the tilt from the accelerometers (above it from the
 gyros); so does the test of where the flux difference comes from."""
+UNDER_APPLIED_GAINS = (0.97, 0.9, 0.8)
+"""Shares of our platform velocity applied in the sweep that shows what the figures reward."""
 ENU_FROM_NWU = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 
@@ -222,6 +228,8 @@ def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -
     # turned by the tilt difference.
     tilt = slow_tilt_from_accelerometers(processed, ours["time_s"], ours["specific_force"])
     as_edson = (tilt.apply(ours["corrected"] - velocity) + velocity - slow_velocity)[KEPT]
+    band = motion_residual(uncorrected_w, corrected[:, 2], acceleration, RATE_HZ).band_hz
+    platform_up = velocity[KEPT, 2]
     result = {
         "record": str(record),
         "samples": int(t.size),
@@ -237,6 +245,23 @@ def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -
             .std(axis=0)
             .round(3)
             .tolist(),
+            "platform_velocity_left": _parts(
+                platform_velocity_left(corrected[:, 2], platform_up, RATE_HZ, band)
+            ),
+        },
+        # The figures reward a correction that applies less of the platform velocity than the
+        # sensors say, on a record whose corrected w keeps some of it in phase.
+        "ours_platform_velocity_under_applied": {
+            f"{gain:g}": asdict(
+                motion_residual(
+                    uncorrected_w,
+                    corrected[:, 2] - (1.0 - gain) * platform_up,
+                    acceleration,
+                    RATE_HZ,
+                    band,
+                )
+            )
+            for gain in UNDER_APPLIED_GAINS
         },
         "ours_platform_velocity_high_passed": {
             "motion": asdict(
@@ -262,12 +287,14 @@ def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -
     run = edson_fdchp.run_reference(edson_fdchp.load_record(record), module)
     edson_fdchp.check_published_fluxes(run)
     edson_wind = run.wind_nwu_mps @ ENU_FROM_NWU.T
-    band = tuple(result["ours"]["motion"]["band_hz"])
     result["edson"] = {
         "motion": asdict(
             motion_residual(uncorrected_w, edson_wind[:, 2], acceleration, RATE_HZ, band)
         ),
         "wind": wind_statistics(edson_wind),
+        "platform_velocity_left": _parts(
+            platform_velocity_left(edson_wind[:, 2], platform_up, RATE_HZ, band)
+        ),
         "fluxes": dict(zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), run.fluxes, strict=True)),
         "our_flux_core_on_his_wind": flux_figures(t, edson_wind, temperature),
         "flux_bands": band_split(t, edson_wind, temperature),
@@ -279,6 +306,10 @@ def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -
         "direction_difference_deg": direction_difference(as_edson, edson_wind),
     }
     return result
+
+
+def _parts(left: complex) -> dict:
+    return {"in_phase": left.real, "quadrature": left.imag}
 
 
 def _cell(value) -> str:
@@ -322,6 +353,27 @@ def print_comparison(result: dict) -> None:
             motion["coherence_after"],
         )
     )
+    print(
+        _row(
+            "platform w left, in phase",
+            "-",
+            edson.get("platform_velocity_left", {}).get("in_phase", "-"),
+            ours["platform_velocity_left"]["in_phase"],
+        )
+    )
+    print(
+        _row(
+            "  and a quarter period out",
+            "-",
+            edson.get("platform_velocity_left", {}).get("quadrature", "-"),
+            ours["platform_velocity_left"]["quadrature"],
+        )
+    )
+    sweep = ", ".join(
+        f"{gain}: {m['variance_share']:.3f} / {m['coherence_after']:.3f}"
+        for gain, m in result["ours_platform_velocity_under_applied"].items()
+    )
+    print(f"  ours with a share of the platform velocity applied (share / coherence): {sweep}")
     for key, label in (("mean_enu_mps", "mean E, N, U, m/s"), ("std_enu_mps", "std E, N, U, m/s")):
         print(_row(label, "Edson", edson.get("wind", {}).get(key, "-")))
         print(_row("", "ours", ours["wind"][key]))

@@ -97,6 +97,23 @@ def band_coherence(a, b, rate_hz: float, band_hz: tuple[float, float]) -> float:
     return float(np.mean(coherence[inside]))
 
 
+def platform_velocity_left(
+    corrected_w_mps, platform_up_velocity_mps, rate_hz: float, band_hz: tuple[float, float]
+) -> complex:
+    """How much of the platform's vertical velocity (m/s, ENU up) the corrected vertical wind
+    (m/s) still carries over ``band_hz``: the cross-spectrum over the platform's spectrum, summed
+    over the band. The real part is the share left in phase (a correction that applies a platform
+    velocity too small by 10 % leaves +0.1), the imaginary part the share a quarter period out of
+    phase (what a timing offset between the sensors leaves). Turbulence, uncorrelated with the
+    platform, adds only estimator noise, so a sound correction of sound sensors leaves about 0."""
+    x, y = _filled(platform_up_velocity_mps), _filled(corrected_w_mps)
+    segment = _segment(rate_hz, x.size)
+    frequency, cross = signal.csd(x, y, fs=rate_hz, nperseg=segment)
+    _, platform = signal.welch(x, fs=rate_hz, nperseg=segment)
+    inside = (frequency >= band_hz[0]) & (frequency <= band_hz[1])
+    return complex(np.sum(cross[inside]) / np.sum(platform[inside]))
+
+
 def motion_residual(
     uncorrected_w_mps, corrected_w_mps, vertical_acceleration, rate_hz: float, band_hz=None
 ) -> MotionResidual:
