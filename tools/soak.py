@@ -9,9 +9,10 @@ Runs ``run_scenario sea_state --fusion --compensation`` for ``--hours`` of simul
   the delay between their receptions, per simulated hour (percentiles; the pairs still open are
   the only state it keeps, so its own memory stays flat);
 - counts samples in and out: every ``anemometer/wind`` sample must come out on ``wind/true``.
-  Samples stamped before the first pair this process saw are counted apart: DDS delivers a
-  message only to subscriptions already matched, so on a busy machine this listener, or the
-  compensation node, may join a few samples after the simulation starts publishing.
+  Samples stamped before the first pair this process saw are counted apart. DDS delivers a
+  message only to subscriptions already matched, so the simulation waits for this listener's
+  and the compensation node's subscriptions to reach the anemometer before it starts
+  (``run_scenario --wait-for-subscription``); what is counted apart is what still slips through.
 
 Prints a table and writes the figures as JSON (``--json``); Ctrl-C stops the run and still
 reports what was measured up to then (marked ``interrupted``). ``make bench`` runs the full day
@@ -38,11 +39,13 @@ from pathlib import Path
 import numpy as np
 
 from buoy_common import cdr
+from buoy_common.contract import WIND_RAW_TOPIC, WIND_TRUE_TOPIC
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 PARAMS_FILE = REPO / "src/buoy_common/config/buoy.yaml"
 NODES = ("fusion_node", "compensation_node")
+LISTENER_NODE = "soak_listener"
 FIND_PID_TIMEOUT_S = 60.0
 RUN_MARGIN_S = 120.0
 SECONDS_PER_HOUR = 3600.0
@@ -74,7 +77,7 @@ class WindPairs:
         self._rclpy = rclpy
         self.context = Context()
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node("soak_listener", context=self.context)
+        self.node = rclpy.create_node(LISTENER_NODE, context=self.context)
         self._lock = threading.Lock()
         self._open: dict[tuple[int, int], int] = {}  # stamp → reception time, ns
         self.first_stamp_s: float | None = None
@@ -83,13 +86,13 @@ class WindPairs:
         self.wind_out = 0
         self.wind_out_valid = 0
         self.first_paired_stamp: tuple[int, int] | None = None
-        # Stamps of outputs whose input this listener never saw.
-        self._unpaired_out: list[tuple[int, int]] = []
+        # Outputs whose input this listener has not seen (yet): stamp → reception time, ns.
+        self._early_out: dict[tuple[int, int], int] = {}
         self.node.create_subscription(
-            Vector3Stamped, "anemometer/wind", self._on_wind, DATA_QOS, raw=True
+            Vector3Stamped, WIND_RAW_TOPIC, self._on_wind, DATA_QOS, raw=True
         )
         self.node.create_subscription(
-            Vector3Stamped, "wind/true", self._on_true_wind, DATA_QOS, raw=True
+            Vector3Stamped, WIND_TRUE_TOPIC, self._on_true_wind, DATA_QOS, raw=True
         )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -106,7 +109,13 @@ class WindPairs:
         stamp = cdr.read_stamp(message)
         with self._lock:
             self.wind_in += 1
-            self._open[stamp] = received_ns
+            # The two topics reach this listener by separate paths, and its callbacks may take
+            # an output before its input.
+            output_received_ns = self._early_out.pop(stamp, None)
+            if output_received_ns is None:
+                self._open[stamp] = received_ns
+            else:
+                self._pair(stamp, received_ns, output_received_ns)
 
     def _on_true_wind(self, message, info) -> None:
         received_ns = self._received_ns(info)
@@ -117,15 +126,19 @@ class WindPairs:
             self.wind_out_valid += valid
             sent_ns = self._open.pop(stamp, None)
             if sent_ns is None:
-                self._unpaired_out.append(stamp)
-                return
-            if self.first_paired_stamp is None:
-                self.first_paired_stamp = stamp
-            stamp_s = stamp[0] + stamp[1] * 1e-9
-            if self.first_stamp_s is None:
-                self.first_stamp_s = stamp_s
-            hour = int((stamp_s - self.first_stamp_s) // SECONDS_PER_HOUR)
-            self.delays_by_hour_s.setdefault(hour, []).append((received_ns - sent_ns) * 1e-9)
+                self._early_out[stamp] = received_ns
+            else:
+                self._pair(stamp, sent_ns, received_ns)
+
+    def _pair(self, stamp, input_received_ns: int, output_received_ns: int) -> None:
+        if self.first_paired_stamp is None:
+            self.first_paired_stamp = stamp
+        stamp_s = stamp[0] + stamp[1] * 1e-9
+        if self.first_stamp_s is None:
+            self.first_stamp_s = stamp_s
+        hour = int((stamp_s - self.first_stamp_s) // SECONDS_PER_HOUR)
+        delay_s = (output_received_ns - input_received_ns) * 1e-9
+        self.delays_by_hour_s.setdefault(hour, []).append(delay_s)
 
     def open_pairs(self) -> tuple[int, int]:
         """Inputs still without output: (stamped before the first pair, after it)."""
@@ -137,7 +150,7 @@ class WindPairs:
         it). By stamp, not by arrival: an output published late (invalid at its latency budget)
         may arrive after the first pair, its input before this listener was matched."""
         with self._lock:
-            return self._split_at_first_pair(self._unpaired_out)
+            return self._split_at_first_pair(self._early_out)
 
     def _split_at_first_pair(self, stamps) -> tuple[int, int]:
         first = self.first_paired_stamp
@@ -196,6 +209,9 @@ def soak(hours: float, rate_factor: float, rss_period_s: float, log_dir: Path) -
         "--compensation",
         "--params-file",
         str(PARAMS_FILE),
+        # The simulation starts once this listener's subscription has reached the anemometer.
+        "--wait-for-subscription",
+        f"{LISTENER_NODE}:{WIND_RAW_TOPIC}",
         "--log-dir",
         str(log_dir),
     ]

@@ -11,6 +11,11 @@ from pathlib import Path
 
 import pytest
 
+from buoy_common.bag_io import BagReader
+from buoy_common.contract import WIND_RAW_TOPIC
+from ros_messages import stamp_ns
+from sensor_sim.scenario import load_scenario
+
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
 BUOY_PARAMETERS = str(REPO / "src" / "buoy_common" / "config" / "buoy.yaml")
@@ -69,3 +74,59 @@ def test_nodes_stop_when_the_reader_of_the_output_goes_away(nodes, tmp_path):
     for pid in left:
         subprocess.run(["kill", "-9", str(pid)], check=False)
     assert not left, f"run_scenario exited with {scenario.returncode} and left {left} running"
+
+
+def test_the_simulation_waits_for_an_awaited_listener_and_it_misses_no_sample(nodes, tmp_path):
+    """A listener that subscribes seconds after run_scenario starts still receives the first
+    anemometer sample and every one after it: the sensors hold the clock until its subscription
+    has reached them. (Without the wait, a listener 3 s late misses the first seconds.)"""
+    duration_s, rate_hz = 4.0, 20.0
+    scenario = subprocess.Popen(
+        [
+            str(BIN / "run_scenario"),
+            "static",
+            "--set",
+            f"duration_s={duration_s:g}",
+            "--params-file",
+            BUOY_PARAMETERS,
+            "--wait-for-subscription",
+            f"late_listener:{WIND_RAW_TOPIC}",
+            "--log-dir",
+            str(tmp_path / "logs"),
+        ],
+        env=nodes.env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        time.sleep(3.0)
+        bag = tmp_path / "late"
+        nodes.start(
+            "bag_recorder",
+            str(bag),
+            "--topics",
+            WIND_RAW_TOPIC,
+            "--ros-args",
+            "-r",
+            "__node:=late_listener",
+        )
+        assert scenario.wait(timeout=EXIT_TIMEOUT_S) == 0
+    finally:
+        if scenario.poll() is None:
+            scenario.kill()
+    nodes.stop_all()
+    with BagReader(bag) as reader:
+        stamps = [stamp_ns(reader.decode(m)) for m in reader.messages([WIND_RAW_TOPIC])]
+    start_ns = load_scenario("static").start_time_ns
+    assert stamps[0] == start_ns
+    assert len(stamps) == round(duration_s * rate_hz) + 1
+
+
+def test_a_wait_that_cannot_be_met_is_refused_before_anything_starts(nodes):
+    for entry, complaint in (
+        ("late_listener", "expected NODE:TOPIC"),
+        ("late_listener:wind/true", "the simulation does not publish wind/true"),
+    ):
+        result = nodes.run("run_scenario", "static", "--wait-for-subscription", entry)
+        assert result.returncode == 2
+        assert complaint in result.stderr

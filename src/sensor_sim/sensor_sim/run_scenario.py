@@ -21,6 +21,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from buoy_common.cli import interruptible
+from buoy_common.contract import (
+    DVL_TOPIC,
+    IMU_RAW_TOPIC,
+    SENSOR_MSGTYPES,
+    TRUTH_MSGTYPES,
+    WIND_RAW_TOPIC,
+)
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS
 
@@ -32,6 +39,13 @@ SIM_TIME = {"use_sim_time": True}
 STOP_ORDER = ("fusion_node", "compensation_node", "current_node", "bag_recorder")
 PROGRESS_PERIOD_S = 10.0
 # The node whose log line announces its alignment, and the words that begin that line.
+FIRST_SUBSCRIPTIONS = {
+    "fusion_node": IMU_RAW_TOPIC,
+    "compensation_node": WIND_RAW_TOPIC,
+    "current_node": DVL_TOPIC,
+}
+"""The sensor topic each processing node must receive from the first sample on."""
+SIMULATED_TOPICS = (*SENSOR_MSGTYPES, *TRUTH_MSGTYPES)
 ALIGNMENT_LOGGERS = ("fusion_node",)
 ALIGNMENT_MARK = "aligned at stamp"
 
@@ -184,12 +198,39 @@ def parse_arguments(argv):
         action="store_true",
         help="also run current_node (implies --fusion; the scenario must carry a DVL)",
     )
+    parser.add_argument(
+        "--wait-for-subscription",
+        dest="awaited_subscriptions",
+        action="append",
+        default=[],
+        metavar="NODE:TOPIC",
+        help="start the simulation only once NODE subscribes to the sensor topic TOPIC, e.g. a "
+        "listener of your own (repeatable; the processing nodes started here are awaited anyway)",
+    )
     parser.add_argument("--namespace", help="put every node in this namespace, e.g. /buoy1")
     parser.add_argument("--log-dir", default=None, help="where node logs go (default: a temp dir)")
     return parser.parse_args(argv)
 
 
+def awaited_subscription_error(entry: str) -> str | None:
+    """What is wrong with a ``--wait-for-subscription`` entry, or None."""
+    node, separator, topic = entry.partition(":")
+    if not (separator and node and topic):
+        return f"--wait-for-subscription {entry!r}: expected NODE:TOPIC, e.g. me:{WIND_RAW_TOPIC}"
+    if topic.lstrip("/") not in SIMULATED_TOPICS:
+        return (
+            f"--wait-for-subscription {entry!r}: the simulation does not publish {topic}; it "
+            f"can wait for subscriptions to {', '.join(SIMULATED_TOPICS)}"
+        )
+    return None
+
+
 def run(arguments) -> int:
+    for entry in arguments.awaited_subscriptions:
+        error = awaited_subscription_error(entry)
+        if error:
+            print(f"run_scenario: {error}", file=sys.stderr)
+            return 2
     scenario = load_scenario(arguments.scenario, arguments.overrides, arguments.seed)
     if arguments.record and Path(arguments.record).exists():
         print(f"run_scenario: {arguments.record} exists; choose a new bag path", file=sys.stderr)
@@ -234,6 +275,14 @@ def run(arguments) -> int:
     sensor_values = scenario_values(arguments)
     if arguments.record:
         sensor_values["wait_for_subscriber_node"] = "bag_recorder"
+    # A node in the graph may not have subscribed yet, nor been matched by the sensors: each
+    # sensor holds the clock until the processing nodes' subscriptions to its topics reach it.
+    awaited = [
+        f"{node}:{topic}" for node, topic in FIRST_SUBSCRIPTIONS.items() if node in processing_nodes
+    ]
+    awaited += arguments.awaited_subscriptions
+    if awaited:
+        sensor_values["wait_for_subscriptions"] = json.dumps(awaited)
     for name in sensor_nodes:
         run.start(name, ros_arguments(arguments, sensor_values), True)
     clock_values = {

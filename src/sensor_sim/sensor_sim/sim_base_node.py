@@ -27,7 +27,7 @@ from sensor_sim.truth import TruthModel
 
 CLOCK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 ACK_TIMEOUT_S = 5.0
-# How often a sensor waiting for the recorder looks at its topics' subscriptions, s.
+# How often a sensor waiting for its subscribers looks at its topics' subscriptions, s.
 READINESS_POLL_PERIOD_S = 0.05
 
 
@@ -72,12 +72,20 @@ class SimulatedSensorNode(SuiteNode):
             topic: self.create_publisher(message_class(type_name), topic, DATA_QOS)
             for topic, type_name in self.stream.topics.items()
         }
+        self.awaited_subscriptions = self._awaited_subscriptions(
+            self.declare_string_list(
+                "wait_for_subscriptions",
+                "NODE:TOPIC entries: follow /clock only once each named node subscribes to the "
+                "named topic, for the topics this sensor publishes",
+            )
+        )
         self.published = 0
         self.sim_time_s = float("nan")
-        if self.wait_for_subscriber_node:
+        if self.awaited_subscriptions:
             # The clock holds time at the start until every sensor subscribes to it, so a
-            # sensor that subscribes only once the recorder takes each of its topics holds the
-            # whole simulation for the recorder: nothing is held back and sent in a burst later.
+            # sensor that subscribes only once the recorder (or a processing node, a listener)
+            # takes its topics holds the whole simulation for them: nothing is held back and
+            # sent in a burst later.
             self._readiness_timer = self.create_timer(
                 READINESS_POLL_PERIOD_S, self._subscribe_to_clock_when_ready
             )
@@ -89,15 +97,30 @@ class SimulatedSensorNode(SuiteNode):
             f"{', '.join(self.stream.topics)} at {self.stream.timing.rate_hz:g} Hz"
         )
 
+    def _awaited_subscriptions(self, entries: list[str]) -> list[tuple[str, str]]:
+        """(node, topic) pairs to see before following /clock: every topic of this sensor for
+        ``wait_for_subscriber_node``, and the entries of ``wait_for_subscriptions`` whose topic
+        this sensor publishes."""
+        awaited = [(self.wait_for_subscriber_node, t) for t in self.publishers_by_topic]
+        awaited = awaited if self.wait_for_subscriber_node else []
+        for entry in entries:
+            node, separator, topic = entry.partition(":")
+            if not (separator and node and topic):
+                raise StartupError(
+                    f"parameter 'wait_for_subscriptions': {entry!r} is not NODE:TOPIC "
+                    "(e.g. compensation_node:anemometer/wind)"
+                )
+            if topic.lstrip("/") in self.publishers_by_topic:
+                awaited.append((node, topic.lstrip("/")))
+        return awaited
+
     def subscribers_ready(self) -> bool:
-        """Every topic has a subscription of ``wait_for_subscriber_node``: a count would also be
-        met by another node's subscription, while the recorder's is still on its way."""
+        """Each awaited node subscribes to its topic, as this node's own graph shows it: so this
+        node's publisher has matched that subscription, and its first sample reaches it. A count
+        would also be met by another node's subscription while the awaited one is on its way."""
         return all(
-            any(
-                endpoint.node_name == self.wait_for_subscriber_node
-                for endpoint in self.get_subscriptions_info_by_topic(topic)
-            )
-            for topic in self.publishers_by_topic
+            any(endpoint.node_name == node for endpoint in self.get_subscriptions_info_by_topic(t))
+            for node, t in self.awaited_subscriptions
         )
 
     def _subscribe_to_clock_when_ready(self) -> None:
