@@ -79,12 +79,12 @@ UNDER_APPLIED_GAINS = (0.97, 0.9, 0.8)
 ENU_FROM_NWU = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 
 
-def process_record(record: Path, work: Path, extra_parameter_files=()) -> Path:
-    """Import and process the record into ``work`` with the shipped parameters and then
-    ``extra_parameter_files`` (later files win); returns the processed bag."""
+def import_and_process(record: Path, work: Path, parameter_files) -> Path:
+    """Import an FDCHP L0 record into ``work`` with the shipped column map and process it with
+    ``parameter_files`` (later files win); returns the processed bag."""
     imported, processed = work / "fdchp", work / "fdchp_processed"
     import_records(record, COLUMN_MAP, imported, overwrite=True)
-    files = [str(PARAMS), *map(str, extra_parameter_files)]
+    files = [str(path) for path in parameter_files]
     with contextlib.redirect_stdout(io.StringIO()):
         process_bag(
             imported,
@@ -94,6 +94,12 @@ def process_record(record: Path, work: Path, extra_parameter_files=()) -> Path:
             overwrite=True,
         )
     return processed
+
+
+def process_record(record: Path, work: Path, extra_parameter_files=()) -> Path:
+    """Import and process the record into ``work`` with the shipped parameters and then
+    ``extra_parameter_files``; returns the processed bag."""
+    return import_and_process(record, work, [PARAMS, *extra_parameter_files])
 
 
 def read_processed(processed: Path) -> dict[str, np.ndarray]:

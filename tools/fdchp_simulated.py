@@ -29,6 +29,7 @@ import json
 import sys
 from pathlib import Path
 
+import bench_fdchp
 import edson_fdchp
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -42,12 +43,8 @@ from buoy_common.contract import (
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
 )
-from buoy_common.import_records import import_records
 from buoy_common.records.column_map import STANDARD_GRAVITY_MPS2
-from buoy_nav.config import fusion_config_from_files
 from sensor_sim import simulate_bag
-from wind_comp.bag_processing import process_bag
-from wind_comp.config import compensator_config_from_files
 from wind_comp.motion_residual import (
     band_variance,
     motion_residual,
@@ -58,7 +55,6 @@ from wind_comp.report.data import stamped_vectors
 
 REPO = Path(__file__).resolve().parent.parent
 OUT_DIR = REPO / "out/bench"
-COLUMN_MAP = REPO / "src/buoy_common/config/records/ooi_fdchp.yaml"
 PARAMS = REPO / "tools/fdchp_simulated_params.yaml"
 """The FDCHP's geometry and rates for the simulator and our motion-pack set for the fusion."""
 BUOY_PARAMS = REPO / "src/buoy_common/config/buoy.yaml"
@@ -179,17 +175,7 @@ def fdchp_record(bag: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def ours_on(record_file: Path, work: Path, site: Path) -> tuple[np.ndarray, np.ndarray]:
     """Our corrected vertical wind and platform vertical velocity (m/s) at the record's rows."""
-    imported, processed = work / "imported", work / "processed"
-    import_records(record_file, COLUMN_MAP, imported, overwrite=True)
-    files = [str(BUOY_PARAMS), str(PARAMS), str(site)]
-    with contextlib.redirect_stdout(io.StringIO()):
-        process_bag(
-            imported,
-            processed,
-            fusion_config_from_files(files),
-            compensator_config_from_files(files),
-            overwrite=True,
-        )
+    processed = bench_fdchp.import_and_process(record_file, work, [BUOY_PARAMS, PARAMS, site])
     with BagReader(processed) as reader:
         corrected = stamped_vectors(reader, WIND_TRUE_TOPIC)
         velocity = []
