@@ -23,11 +23,10 @@ sculling-corrected, turned into ENU with the start attitude (plus half the navig
 rotation), then gravity and Coriolis. Position update: trapezoid on velocity, converted to
 latitude/longitude with the WGS-84 radii of curvature.
 
-For the error-state filter the integrator also accumulates, over the steps since the last
-covariance propagation, the integrals the discrete error model needs (see
-:class:`PropagationSums`). The step is compiled (numba, cached on disk): the integrator keeps its
-state in one array that the compiled step updates in place, because at twice the IMU rate the
-interpreter's per-operation cost would otherwise dominate the offline run.
+Over the steps since the last covariance propagation it also sums what the discrete error model
+needs (:class:`PropagationSums`). The step is compiled (numba, cached on disk) and updates in
+place the one array that holds the integrator's state: at twice the IMU rate the interpreter's
+cost per operation would otherwise dominate the offline run.
 """
 
 import contextlib
@@ -551,8 +550,7 @@ def _stop_signals_held():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    held = []
-    previous = {}
+    held, previous = [], {}
     for number in (signal.SIGINT, signal.SIGTERM):
         handler = signal.getsignal(number)
         if handler is not None:  # None: installed outside Python, cannot be put back
@@ -599,5 +597,4 @@ def interpolate_sample(
 
 
 def _floats(values) -> tuple[float, ...]:
-    """A sequence or array of numbers as a tuple of Python floats."""
-    return tuple(map(float, values))
+    return tuple(map(float, values))  # a sequence or array of numbers as Python floats
