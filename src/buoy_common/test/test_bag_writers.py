@@ -89,6 +89,17 @@ def test_background_writer_keeps_what_it_is_given_while_its_process_starts(tmp_p
         assert [m.log_time_ns for m in reader.messages()] == [T0_NS + k for k in range(messages)]
 
 
+def test_background_writer_whose_process_dies_says_how_it_ended(tmp_path):
+    """Killed (or failing before it could report, as a script without a main guard makes a
+    spawned process fail), the writing process leaves the tool an error with its exit code."""
+    writer = BackgroundBagWriter(tmp_path / "killed")
+    writer.write("/imu/data_raw", IMU_TYPE, T0_NS, Imu())
+    writer._send_batch(wait_for_writer=True)
+    writer._process.kill()
+    with pytest.raises(BagError, match="ended unexpectedly \\(exit code -9;"):
+        writer.close()
+
+
 def test_background_writer_aborts_after_a_batch_cut_off_mid_send(tmp_path):
     """A signal can interrupt the tool while it sends a batch, leaving half of it in the pipe.
     Abandoning the bag then still ends the writing process promptly and leaves nothing."""

@@ -173,7 +173,12 @@ class BackgroundBagWriter(BagOutput):
         try:
             return self._connection.recv()
         except (EOFError, ConnectionResetError):
-            return ("error", f"bag {self.path}: the writing process ended unexpectedly")
+            self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
+            return (
+                "error",
+                f"bag {self.path}: the writing process ended unexpectedly (exit code "
+                f"{self._process.exitcode}; what it printed is on standard error)",
+            )
 
     @staticmethod
     def _raise_if_failed(reply) -> None:
