@@ -16,7 +16,7 @@ fluxes only, when no ion-functions checkout is at hand), and prints over the sam
 
     python tools/bench_fdchp.py [--record PATH] [--ion-functions DIR] [--params-file YAML ...]
 
-Results go to out/bench/fdchp.json.
+Results go to out/bench/fdchp.json, the figure of the wave band to out/bench/fdchp_wave_band.png.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 import edson_fdchp
+import fdchp_figures
 import numpy as np
 from scipy import signal
 from scipy.spatial.transform import Rotation
@@ -62,6 +63,7 @@ CONFIG = REPO / "src/buoy_common/config/records"
 COLUMN_MAP = CONFIG / "ooi_fdchp.yaml"
 PARAMS = CONFIG / "ooi_fdchp_params.yaml"
 OUT_DIR = REPO / "out/bench"
+FIGURE = OUT_DIR / "fdchp_wave_band.png"
 RATE_HZ = 10.0
 KEPT = slice(300, 11700)
 """The samples Edson's fluxes use: the first 12 000 rows less 30 s at each end."""
@@ -289,6 +291,10 @@ def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -
         module = edson_fdchp.load_reference(edson_fdchp.ion_functions_dir(ion_functions))
     except edson_fdchp.ReferenceUnavailableError as error:
         result["edson"] = {"unavailable": str(error)}
+        vertical_winds = {"uncorrected": uncorrected_w, "ours": corrected[:, 2]}
+        fdchp_figures.draw_wave_band(
+            FIGURE, vertical_winds, acceleration, platform_up, band, RATE_HZ
+        )
         return result
     run = edson_fdchp.run_reference(edson_fdchp.load_record(record), module)
     edson_fdchp.check_published_fluxes(run)
@@ -311,6 +317,12 @@ def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -
         ),
         "direction_difference_deg": direction_difference(as_edson, edson_wind),
     }
+    vertical_winds = {
+        "uncorrected": uncorrected_w,
+        "Edson": edson_wind[:, 2],
+        "ours": corrected[:, 2],
+    }
+    fdchp_figures.draw_wave_band(FIGURE, vertical_winds, acceleration, platform_up, band, RATE_HZ)
     return result
 
 

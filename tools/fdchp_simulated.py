@@ -17,7 +17,7 @@ correction it prints:
 
     python tools/fdchp_simulated.py [--ion-functions DIR]
 
-Results go to out/bench/fdchp_simulated.json.
+Results go to out/bench/fdchp_simulated.json, the error spectra to out/bench/fdchp_simulated.png.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from pathlib import Path
 
 import bench_fdchp
 import edson_fdchp
+import fdchp_figures
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -55,6 +56,7 @@ from wind_comp.report.data import stamped_vectors
 
 REPO = Path(__file__).resolve().parent.parent
 OUT_DIR = REPO / "out/bench"
+FIGURE = OUT_DIR / "fdchp_simulated.png"
 PARAMS = REPO / "tools/fdchp_simulated_params.yaml"
 """The FDCHP's geometry and rates for the simulator and our motion-pack set for the fusion."""
 BUOY_PARAMS = REPO / "src/buoy_common/config/buoy.yaml"
@@ -207,8 +209,9 @@ def figures(name, corrected_w, true_w, uncorrected_w, heave, platform_up, band=N
     }
 
 
-def compare_sea(sea: str, module, work: Path) -> list[dict]:
-    """The truth's, Edson's (unless ``module`` is None) and our figures on one simulated sea."""
+def compare_sea(sea: str, module, work: Path) -> tuple[list[dict], dict]:
+    """The truth's, Edson's (unless ``module`` is None) and our figures on one simulated sea,
+    and the series of the figure: the wave band, the uncorrected w and each error of w (m/s)."""
     scenario, site_deg, overrides = SEAS[sea]
     bag = work / "simulated"
     simulate(bag, scenario, overrides)
@@ -218,22 +221,23 @@ def compare_sea(sea: str, module, work: Path) -> list[dict]:
     np.savetxt(record_file, rows, delimiter=",", fmt="%.10g")
     kept = slice(int(edson_fdchp.EDGE_S * RATE_HZ), PACKET_ROWS - int(edson_fdchp.EDGE_S * RATE_HZ))
     ours_w, platform_up = ours_on(record_file, work, site_params(work, site_deg))
-    platform_up = platform_up[kept]
-    uncorrected = rows[kept, 2] / 100.0
-    heave = vertical_acceleration_mps2(rows[kept, 7:10] * STANDARD_GRAVITY_MPS2)
-    truth = figures("truth", true_w[kept], true_w[kept], uncorrected, heave, platform_up)
-    band = tuple(truth["band_hz"])
-    entries = [truth]
+    corrected = {"ours": ours_w[kept]}
     if module is not None:
         run = edson_fdchp.run_reference(edson_fdchp.load_record(record_file), module)
-        edson_w = (run.wind_nwu_mps @ ENU_FROM_NWU.T)[:, 2]
-        entries.append(
-            figures("Edson", edson_w, true_w[kept], uncorrected, heave, platform_up, band)
-        )
-    entries.append(
-        figures("ours", ours_w[kept], true_w[kept], uncorrected, heave, platform_up, band)
-    )
-    return [{"sea": sea, **entry} for entry in entries]
+        corrected["Edson"] = (run.wind_nwu_mps @ ENU_FROM_NWU.T)[:, 2]
+    platform_up, true_w = platform_up[kept], true_w[kept]
+    uncorrected = rows[kept, 2] / 100.0
+    heave = vertical_acceleration_mps2(rows[kept, 7:10] * STANDARD_GRAVITY_MPS2)
+    truth = figures("truth", true_w, true_w, uncorrected, heave, platform_up)
+    band = tuple(truth["band_hz"])
+    entries = [truth] + [
+        figures(label, corrected[label], true_w, uncorrected, heave, platform_up, band)
+        for label in ("Edson", "ours")
+        if label in corrected
+    ]
+    series = {"band_hz": band, "uncorrected": uncorrected}
+    series |= {label: w - true_w for label, w in corrected.items()}
+    return [{"sea": sea, **entry} for entry in entries], series
 
 
 def print_table(rows: list[dict]) -> None:
@@ -271,11 +275,13 @@ def main(argv=None) -> None:
         module = None
     work = OUT_DIR / "fdchp_simulated"
     work.mkdir(parents=True, exist_ok=True)
-    rows = []
+    rows, series = [], {}
     for sea in SEAS:
         print(f"fdchp_simulated: {sea} ...", file=sys.stderr, flush=True)
-        rows += compare_sea(sea, module, work)
+        figures_of_sea, series[sea] = compare_sea(sea, module, work)
+        rows += figures_of_sea
     print_table(rows)
+    fdchp_figures.draw_simulated_errors(FIGURE, series, RATE_HZ)
     (OUT_DIR / "fdchp_simulated.json").write_text(json.dumps(rows, indent=2))
 
 

@@ -18,7 +18,7 @@ import fdchp_simulated  # noqa: E402  (a tool, found on the path set just above)
 @pytest.fixture(scope="module")
 def open_ocean_figures(tmp_path_factory):
     """Truth's and our figures on open_ocean's JONSWAP sea (Hs 3 m, Tp 9 s), 20 min."""
-    rows = fdchp_simulated.compare_sea("jonswap_tp_9_s", None, tmp_path_factory.mktemp("fdchp"))
+    rows, _ = fdchp_simulated.compare_sea("jonswap_tp_9_s", None, tmp_path_factory.mktemp("fdchp"))
     return {row["correction"]: row for row in rows}
 
 
