@@ -7,10 +7,13 @@ import dataclasses
 import os
 from pathlib import Path
 
+import pyarrow.parquet as pq
 import pytest
 
 from buoy_nav.config import FusionConfig
 from wind_comp.archive import (
+    BAG_COLUMN,
+    NAMESPACE_COLUMN,
     ArchiveError,
     BagJob,
     BagOutcome,
@@ -18,6 +21,8 @@ from wind_comp.archive import (
     completed_outcome,
     find_bags,
     parameters_digest,
+    suite_version,
+    write_combined_table,
     write_marker,
     write_products_fragment,
 )
@@ -120,3 +125,14 @@ def test_other_parameters_or_another_version_redo_the_bag(done_job):
 def test_a_missing_output_redoes_the_bag(done_job):
     done_job.out_bag.with_name("day1_wind_products.csv").unlink()
     assert completed_outcome(done_job) is None
+
+
+def test_the_combined_table_says_which_version_wrote_it_and_its_conventions(done_job):
+    """Read with pyarrow, as any reader of the file would: the suite's version and the
+    conventions of the columns travel in the file, for every bag's rows alike."""
+    table = pq.read_table(write_combined_table(Path(done_job.out), [done_job.relative]))
+    assert table.schema.metadata[b"wind_comp_version"].decode() == suite_version()
+    conventions = table.schema.metadata[b"conventions"].decode()
+    for stated in ("East, North, Up", "FROM, clockwise from true north", "QARTOD", "1970-01-01"):
+        assert stated in conventions
+    assert table.column_names[:2] == [BAG_COLUMN, NAMESPACE_COLUMN]

@@ -327,13 +327,27 @@ def _arrow_type(python_type) -> pa.DataType:
 
 
 PRODUCT_FIELDS = [f.name for f in dataclasses.fields(WindProduct)]
-PRODUCTS_SCHEMA = pa.schema(
-    [
-        pa.field(BAG_COLUMN, pa.string()),
-        pa.field(NAMESPACE_COLUMN, pa.string()),
-        *(pa.field(f.name, _arrow_type(f.type)) for f in dataclasses.fields(WindProduct)),
-    ]
+PRODUCTS_CONVENTIONS = (
+    "One row per averaging window of one bag (its path under the archive) and namespace. Units "
+    "are in the column names (_s seconds, _mps m/s, _deg degrees). Times are header stamps, "
+    "seconds since 1970-01-01 UTC. Wind components are East, North, Up (toward); directions "
+    "are where the wind comes FROM, clockwise from true north. coverage is the share of a full "
+    "window's samples held valid; quality_flag follows QARTOD (1 good, 2 not evaluated, "
+    "3 suspect, 4 bad, 9 missing)."
 )
+
+
+def products_schema() -> pa.Schema:
+    """The combined table's columns, with the version of the suite that wrote it and the
+    conventions of its columns as schema metadata, so that a file read years later says both."""
+    return pa.schema(
+        [
+            pa.field(BAG_COLUMN, pa.string()),
+            pa.field(NAMESPACE_COLUMN, pa.string()),
+            *(pa.field(f.name, _arrow_type(f.type)) for f in dataclasses.fields(WindProduct)),
+        ],
+        metadata={"wind_comp_version": suite_version(), "conventions": PRODUCTS_CONVENTIONS},
+    )
 
 
 def write_products_fragment(relative: str, rows: list[tuple[str, WindProduct]], path: Path) -> None:
@@ -345,7 +359,7 @@ def write_products_fragment(relative: str, rows: list[tuple[str, WindProduct]], 
     }
     for name in PRODUCT_FIELDS:
         columns[name] = [getattr(product, name) for _, product in rows]
-    table = pa.Table.from_pydict(columns, schema=PRODUCTS_SCHEMA)
+    table = pa.Table.from_pydict(columns, schema=products_schema())
     staged = path.with_name(f"{path.name}.partial-{os.getpid()}")
     try:
         pq.write_table(table, staged)
@@ -361,7 +375,7 @@ def write_combined_table(out: Path, relatives: list[str]) -> Path:
     final = out / COMBINED_TABLE
     staged = final.with_name(f"{final.name}.partial-{os.getpid()}")
     try:
-        with pq.ParquetWriter(staged, PRODUCTS_SCHEMA) as writer:
+        with pq.ParquetWriter(staged, products_schema()) as writer:
             for relative in relatives:
                 writer.write_table(pq.read_table(state_path(out, relative, FRAGMENT_SUFFIX)))
         staged.replace(final)
