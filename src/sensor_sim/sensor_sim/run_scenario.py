@@ -38,7 +38,6 @@ STOP_TIMEOUT_S = 20.0
 SIM_TIME = {"use_sim_time": True}
 STOP_ORDER = ("fusion_node", "compensation_node", "current_node", "bag_recorder")
 PROGRESS_PERIOD_S = 10.0
-# The node whose log line announces its alignment, and the words that begin that line.
 FIRST_SUBSCRIPTIONS = {
     "fusion_node": IMU_RAW_TOPIC,
     "compensation_node": WIND_RAW_TOPIC,
@@ -46,6 +45,7 @@ FIRST_SUBSCRIPTIONS = {
 }
 """The sensor topic each processing node must receive from the first sample on."""
 SIMULATED_TOPICS = (*SENSOR_MSGTYPES, *TRUTH_MSGTYPES)
+# The node whose log line announces its alignment, and the words that begin that line.
 ALIGNMENT_LOGGERS = ("fusion_node",)
 ALIGNMENT_MARK = "aligned at stamp"
 

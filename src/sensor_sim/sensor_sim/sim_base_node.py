@@ -101,8 +101,8 @@ class SimulatedSensorNode(SuiteNode):
         """(node, topic) pairs to see before following /clock: every topic of this sensor for
         ``wait_for_subscriber_node``, and the entries of ``wait_for_subscriptions`` whose topic
         this sensor publishes."""
-        awaited = [(self.wait_for_subscriber_node, t) for t in self.publishers_by_topic]
-        awaited = awaited if self.wait_for_subscriber_node else []
+        recorder = self.wait_for_subscriber_node
+        awaited = [(recorder, t) for t in self.publishers_by_topic] if recorder else []
         for entry in entries:
             node, separator, topic = entry.partition(":")
             if not (separator and node and topic):
