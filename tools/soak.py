@@ -16,7 +16,8 @@ Runs ``run_scenario sea_state --fusion --compensation`` for ``--hours`` of simul
 
 Prints a table and writes the figures as JSON (``--json``); Ctrl-C stops the run and still
 reports what was measured up to then (marked ``interrupted``). ``make bench`` runs the full day
-(``tools/bench.py --only soak``); ``make test`` a few minutes of it (tests/system/test_soak.py).
+(``tools/bench.py --only soak``); ``make test-long`` a few minutes of it
+(tests/system/test_soak.py).
 
     python tools/soak.py [--hours 24] [--rate-factor 2] [--json out/bench/soak.json]
 """
