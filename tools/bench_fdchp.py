@@ -236,16 +236,15 @@ def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -
     # turned by the tilt difference.
     tilt = slow_tilt_from_accelerometers(processed, ours["time_s"], ours["specific_force"])
     as_edson = (tilt.apply(ours["corrected"] - velocity) + velocity - slow_velocity)[KEPT]
-    band = motion_residual(uncorrected_w, corrected[:, 2], acceleration, RATE_HZ).band_hz
+    our_motion = motion_residual(uncorrected_w, corrected[:, 2], acceleration, RATE_HZ)
+    band = our_motion.band_hz
     platform_up = velocity[KEPT, 2]
     result = {
         "record": str(record),
         "samples": int(t.size),
         "invalid_corrected_samples": int(np.count_nonzero(~np.isfinite(corrected[:, 2]))),
         "ours": {
-            "motion": asdict(
-                motion_residual(uncorrected_w, corrected[:, 2], acceleration, RATE_HZ)
-            ),
+            "motion": asdict(our_motion),
             "wind": wind_statistics(corrected),
             "fluxes": flux_figures(t, corrected, temperature),
             "flux_bands": band_split(t, corrected, temperature),

@@ -17,28 +17,21 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from scipy import signal
 
-SEGMENT_S = 60.0
-"""Welch segments, as the wave-band figures use (``wind_comp.motion_residual``)."""
+from wind_comp.motion_residual import SEGMENT_S, gaps_filled
+
 HIGHEST_HZ = 2.0
 COLOURS = {"uncorrected": "tab:gray", "Edson": "tab:blue", "ours": "tab:red"}
-
-
-def _filled(values) -> np.ndarray:
-    values = np.asarray(values, dtype=float)
-    valid = np.isfinite(values)
-    index = np.arange(values.size)
-    return np.interp(index, index[valid], values[valid])
 
 
 def _spectra(series: dict, reference, rate_hz: float):
     """Per series: frequency, its density, its coherence with ``reference``, and the real part
     of its cross-spectrum with ``reference`` over the reference's spectrum."""
     segment = int(SEGMENT_S * rate_hz)
-    x = _filled(reference)
+    x = gaps_filled(reference)
     frequency, reference_density = signal.welch(x, fs=rate_hz, nperseg=segment)
     result = {}
     for label, values in series.items():
-        y = _filled(values)
+        y = gaps_filled(values)
         _, density = signal.welch(y, fs=rate_hz, nperseg=segment)
         _, coherence = signal.coherence(x, y, fs=rate_hz, nperseg=segment)
         _, cross = signal.csd(x, y, fs=rate_hz, nperseg=segment)
@@ -107,7 +100,7 @@ def draw_simulated_errors(path: Path, seas: dict, rate_hz: float) -> Path:
             if label not in series:
                 continue
             frequency, density = signal.welch(
-                _filled(series[label]), fs=rate_hz, nperseg=int(SEGMENT_S * rate_hz)
+                gaps_filled(series[label]), fs=rate_hz, nperseg=int(SEGMENT_S * rate_hz)
             )
             shown = (frequency > 0) & (frequency <= HIGHEST_HZ)
             name = "uncorrected w" if label == "uncorrected" else f"{label}: error of w"

@@ -43,6 +43,7 @@ from buoy_common.contract import (
     TRUTH_WIND_TOPIC,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
+    stamp_to_ns,
 )
 from buoy_common.records.column_map import STANDARD_GRAVITY_MPS2
 from sensor_sim import simulate_bag
@@ -118,10 +119,6 @@ def simulate(bag: Path, scenario: str, overrides: list[str]) -> None:
         simulate_bag.main(arguments)
 
 
-def _stamp_ns(header) -> int:
-    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
-
-
 def fdchp_record(bag: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The simulated bag as FDCHP L0 rows, their stamps (ns), and the true vertical wind (m/s)
     at them. Sonic u, v, w (cm/s, FLU) and speed of sound; the IMU sample of the same stamp in
@@ -135,14 +132,14 @@ def fdchp_record(bag: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         imu_stamps, rate, force = [], [], []
         for message in reader.messages([IMU_RAW_TOPIC]):
             sample = reader.decode(message)
-            imu_stamps.append(_stamp_ns(sample.header))
+            imu_stamps.append(stamp_to_ns(sample.header.stamp))
             w, f = sample.angular_velocity, sample.linear_acceleration
             rate.append((w.x, w.y, w.z))
             force.append((f.x, f.y, f.z))
         ahrs_stamps, quaternion = [], []
         for message in reader.messages([AHRS_TOPIC]):
             sample = reader.decode(message)
-            ahrs_stamps.append(_stamp_ns(sample.header))
+            ahrs_stamps.append(stamp_to_ns(sample.header.stamp))
             q = sample.orientation
             quaternion.append((q.x, q.y, q.z, q.w))
     stamps = sonic.stamps_ns
@@ -183,7 +180,7 @@ def ours_on(record_file: Path, work: Path, site: Path) -> tuple[np.ndarray, np.n
         velocity = []
         for message in reader.messages([NAV_VELOCITY_TOPIC]):
             sample = reader.decode(message)
-            velocity.append((_stamp_ns(sample.header), sample.twist.twist.linear.z))
+            velocity.append((stamp_to_ns(sample.header.stamp), sample.twist.twist.linear.z))
     velocity = np.array(velocity)
     up = np.interp(corrected.stamps_ns, velocity[:, 0], velocity[:, 1])
     return corrected.vectors[:, 2], up

@@ -40,7 +40,7 @@ class MotionResidual:
     coherence_after: float
 
 
-def _filled(values) -> np.ndarray:
+def gaps_filled(values) -> np.ndarray:
     """``values`` with NaN gaps filled by linear interpolation (spectra need every sample)."""
     values = np.asarray(values, dtype=float)
     valid = np.isfinite(values)
@@ -66,7 +66,7 @@ def _segment(rate_hz: float, count: int) -> int:
 def wave_band_hz(vertical_acceleration, rate_hz: float) -> tuple[float, float]:
     """The contiguous band around the spectral peak of the vertical acceleration where its
     spectrum exceeds :data:`BAND_FRACTION` of the peak, within the wave frequencies, Hz."""
-    x = _filled(vertical_acceleration)
+    x = gaps_filled(vertical_acceleration)
     frequency, density = signal.welch(x, fs=rate_hz, nperseg=_segment(rate_hz, x.size))
     low, high = WAVE_FREQUENCY_LIMITS_HZ
     inside = (frequency >= low) & (frequency <= high)
@@ -83,7 +83,7 @@ def wave_band_hz(vertical_acceleration, rate_hz: float) -> tuple[float, float]:
 
 def band_variance(values, rate_hz: float, band_hz: tuple[float, float]) -> float:
     """Variance of ``values`` within ``band_hz`` (Welch spectrum integrated over the band)."""
-    x = _filled(values)
+    x = gaps_filled(values)
     frequency, density = signal.welch(x, fs=rate_hz, nperseg=_segment(rate_hz, x.size))
     inside = (frequency >= band_hz[0]) & (frequency <= band_hz[1])
     return float(np.sum(density[inside]) * (frequency[1] - frequency[0]))
@@ -91,7 +91,7 @@ def band_variance(values, rate_hz: float, band_hz: tuple[float, float]) -> float
 
 def band_coherence(a, b, rate_hz: float, band_hz: tuple[float, float]) -> float:
     """Mean magnitude-squared coherence of ``a`` and ``b`` over ``band_hz``."""
-    x, y = _filled(a), _filled(b)
+    x, y = gaps_filled(a), gaps_filled(b)
     frequency, coherence = signal.coherence(x, y, fs=rate_hz, nperseg=_segment(rate_hz, x.size))
     inside = (frequency >= band_hz[0]) & (frequency <= band_hz[1])
     return float(np.mean(coherence[inside]))
@@ -106,7 +106,7 @@ def platform_velocity_left(
     velocity too small by 10 % leaves +0.1), the imaginary part the share a quarter period out of
     phase (what a timing offset between the sensors leaves). Turbulence, uncorrelated with the
     platform, adds only estimator noise, so a sound correction of sound sensors leaves about 0."""
-    x, y = _filled(platform_up_velocity_mps), _filled(corrected_w_mps)
+    x, y = gaps_filled(platform_up_velocity_mps), gaps_filled(corrected_w_mps)
     segment = _segment(rate_hz, x.size)
     frequency, cross = signal.csd(x, y, fs=rate_hz, nperseg=segment)
     _, platform = signal.welch(x, fs=rate_hz, nperseg=segment)
