@@ -1,0 +1,104 @@
+"""Uncertainty of a motion-corrected flow sample (the true wind, or the current).
+
+With the Miller correction V = R_nb·(R_bw·V_w + ω×B) + V_b (:mod:`wind_comp.miller`) and the
+navigation's errors defined as R_nb = (I + [δθ×])·R̂_nb (δθ a small rotation about the ENU
+axes), δV_b (ENU velocity) and δω (body rate), the first-order error of a corrected sample is
+
+    δV = −[a×]·δθ  +  δV_b  −  R̂_nb·[B×]·δω  +  R̂_nb·R_bw·δV_w,      a = R̂_nb·(R_bw·V_w + ω̂×B)
+
+The sensor's own noise δV_w is independent of the navigation, so its covariance adds. The three
+navigation terms are correlated through the filter (a tilt error and a velocity error grow
+together from the same specific force), and the navigation messages carry each block on its own
+(``nav/odometry``: the attitude block of the pose covariance, the body velocity and rate blocks
+of the twist covariance) but not their cross-covariances. Their sum is therefore bounded by the
+rule that holds for every correlation: for terms of covariance A_i and any weights w_i > 0 with
+Σ w_i = 1, Cov(Σ e_i) ≼ Σ A_i / w_i. The weights w_i ∝ √tr(A_i) make the bound's trace the
+smallest, (Σ √tr A_i)². When one term dominates, as on most sensor sets, the bound is that term;
+when k terms are equal it is at most k times their sum of variances, never less than the truth.
+"""
+
+import numpy as np
+
+_TRACE_FLOOR = 1e-300
+"""Below this a term's trace counts as zero (it gets no weight and adds nothing)."""
+
+
+def skew_matrices(vectors: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) cross-product matrices [v×] of (N, 3) vectors (so that [v×]·u = v × u)."""
+    x, y, z = np.moveaxis(np.asarray(vectors, dtype=float), -1, 0)
+    zero = np.zeros_like(x)
+    return np.stack(
+        (
+            np.stack((zero, -z, y), axis=-1),
+            np.stack((z, zero, -x), axis=-1),
+            np.stack((-y, x, zero), axis=-1),
+        ),
+        axis=-2,
+    )
+
+
+def sandwich(jacobians: np.ndarray, covariances: np.ndarray) -> np.ndarray:
+    """J·P·Jᵀ for (N, 3, 3) Jacobians and (N, 3, 3) or (3, 3) covariances."""
+    return jacobians @ covariances @ np.swapaxes(jacobians, -1, -2)
+
+
+def bound_of_correlated_sum(terms: list[np.ndarray]) -> np.ndarray:
+    """A covariance no smaller than that of a sum of errors whose covariances are ``terms``
+    ((N, 3, 3) each), whatever their cross-covariances: Σ A_i / w_i with w_i ∝ √tr(A_i)."""
+    roots = [np.sqrt(np.maximum(np.trace(term, axis1=-2, axis2=-1), 0.0)) for term in terms]
+    total_root = np.sum(roots, axis=0)
+    bound = np.zeros_like(terms[0])
+    for term, root in zip(terms, roots, strict=True):
+        # A_i / w_i = A_i · Σ√tr / √tr_i; a term of zero trace is the zero matrix.
+        scale = np.where(root > _TRACE_FLOOR, total_root / np.maximum(root, _TRACE_FLOOR), 0.0)
+        bound += term * scale[..., None, None]
+    return bound
+
+
+def corrected_flow_covariance_enu(
+    rotation_nb: np.ndarray,
+    mounting_rotation_bs: np.ndarray,
+    lever_arm_body_m: np.ndarray,
+    flow_sensor_mps: np.ndarray,
+    angular_rate_body_rad_s: np.ndarray,
+    attitude_covariance_enu_rad2: np.ndarray,
+    velocity_covariance_enu_m2s2: np.ndarray,
+    angular_rate_covariance_body_rad2s2: np.ndarray,
+    sensor_noise_covariance_m2s2: np.ndarray,
+) -> np.ndarray:
+    """(N, 3, 3) covariance (m²/s², ENU) of N motion-corrected flow samples.
+
+    Args:
+        rotation_nb: (N, 3, 3) estimated body→ENU rotations.
+        mounting_rotation_bs: (3, 3) sensor-axes→body rotation (R_bw, R_bd).
+        lever_arm_body_m: (3,) the sensor's measurement centre in ``base_link``, m.
+        flow_sensor_mps: (N, 3) the fluid's velocity relative to the sensor, its axes, m/s.
+        angular_rate_body_rad_s: (N, 3) estimated body rate, body axes, rad/s.
+        attitude_covariance_enu_rad2: (N, 3, 3) attitude error as a rotation about the ENU
+            axes, rad².
+        velocity_covariance_enu_m2s2: (N, 3, 3) ENU velocity error of the body origin, m²/s².
+        angular_rate_covariance_body_rad2s2: (N, 3, 3) body rate error, body axes, rad²/s².
+        sensor_noise_covariance_m2s2: (3, 3) the sensor's noise in its own axes, m²/s².
+    """
+    rotation_nb = np.asarray(rotation_nb, dtype=float)
+    mounting = np.asarray(mounting_rotation_bs, dtype=float)
+    lever_arm = np.asarray(lever_arm_body_m, dtype=float)
+    flow_body = np.asarray(flow_sensor_mps, dtype=float) @ mounting.T
+    rotation_velocity_body = np.cross(np.asarray(angular_rate_body_rad_s, dtype=float), lever_arm)
+    relative_enu = np.einsum("nij,nj->ni", rotation_nb, flow_body + rotation_velocity_body)
+    attitude_term = sandwich(skew_matrices(relative_enu), attitude_covariance_enu_rad2)
+    rate_jacobian = rotation_nb @ skew_matrices(np.broadcast_to(lever_arm, relative_enu.shape))
+    rate_term = sandwich(rate_jacobian, angular_rate_covariance_body_rad2s2)
+    navigation = bound_of_correlated_sum(
+        [attitude_term, np.asarray(velocity_covariance_enu_m2s2, dtype=float), rate_term]
+    )
+    sensor_jacobian = rotation_nb @ mounting
+    return navigation + sandwich(sensor_jacobian, sensor_noise_covariance_m2s2)
+
+
+def horizontal_and_vertical_sigma(covariance_enu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) 1σ of the horizontal vector error (√(σ_E² + σ_N²)) and of the vertical component,
+    from (N, 3, 3) ENU covariances in m²/s²: m/s."""
+    covariance_enu = np.asarray(covariance_enu, dtype=float)
+    horizontal = np.sqrt(covariance_enu[..., 0, 0] + covariance_enu[..., 1, 1])
+    return horizontal, np.sqrt(covariance_enu[..., 2, 2])
