@@ -1,0 +1,122 @@
+"""Whether an aiding source agrees with the filter, judged over its recent gate outcomes.
+
+A chi-square gate stops one bad measurement. A source that fails it again and again is evidence
+against the source (an uncalibrated magnetometer, a GNSS velocity off by a multipath bias, a
+motion pack whose covariance claims more than it delivers), not a reason to realign the filter:
+following it would pull the filter off, and rejecting it one sample at a time leaves the
+source free to pull whenever a sample slips through the gate (an uncalibrated magnetometer
+passes it at some headings and fails it at others). As PX4's EKF2 judges each source by its
+test ratios over a window, :class:`SourceHealth` keeps the last ``window`` outcomes of one
+source and
+
+- **suspends** the source when at least ``min_samples`` outcomes are known and the share that
+  failed the gate reaches ``suspend_share``: its measurements are still modelled and gated
+  against the filter, so that its agreement stays watched, but none is fused;
+- **resumes** it when, of the last ``min_samples`` outcomes, no more than ``resume_share``
+  failed: it agrees with the filter again.
+
+The filter's own errors do not suspend a good source first: a source that fails every sample
+resets the states it observes after ``gate_reset_count`` consecutive rejections
+(:meth:`buoy_nav.aiding.base.AidingSource.reset`), well before ``min_samples`` outcomes are in,
+and then agrees again. Suspension is for a source that keeps disagreeing *after* that.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from enum import Enum
+
+
+class HealthChange(Enum):
+    """What an outcome changed about a source."""
+
+    NONE = "none"
+    SUSPENDED = "suspended"
+    RESUMED = "resumed"
+
+
+@dataclass(frozen=True)
+class SourceHealthRule:
+    """When a source is suspended and resumed (see the module docstring).
+
+    window: number of recent gate outcomes judged. min_samples: outcomes needed before a source
+    is suspended, and the span judged for its resumption. suspend_share, resume_share: shares of
+    failed outcomes (0 to 1).
+    """
+
+    window: int = 200
+    min_samples: int = 100
+    suspend_share: float = 0.5
+    resume_share: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.min_samples <= self.window:
+            raise ValueError(
+                f"source health: min_samples must be 1 to window ({self.window}), "
+                f"got {self.min_samples}"
+            )
+        if not 0.0 <= self.resume_share < self.suspend_share <= 1.0:
+            raise ValueError(
+                "source health: shares must satisfy 0 <= resume_share < suspend_share <= 1, "
+                f"got {self.resume_share} and {self.suspend_share}"
+            )
+
+
+class SourceHealth:
+    """The recent gate outcomes of one aiding source and whether it is suspended."""
+
+    def __init__(self, rule: SourceHealthRule):
+        self.rule = rule
+        self._failed = deque(maxlen=rule.window)
+        self.suspended = False
+        self.suspensions = 0
+        """How often the source was suspended so far."""
+        self.reason = ""
+        """Why the source is suspended (empty while it is not), e.g. ``62 % of the last 200
+        samples failed the gate``."""
+
+    def record(self, failed_gate: bool) -> HealthChange:
+        """Add one gate outcome (True: the measurement failed the gate) and return what it
+        changed."""
+        self._failed.append(bool(failed_gate))
+        if self.suspended:
+            return self._maybe_resume()
+        return self._maybe_suspend()
+
+    def failed_share(self, last: int | None = None) -> float:
+        """Share of the last ``last`` outcomes (all kept ones when None) that failed the gate;
+        NaN before any outcome."""
+        outcomes = list(self._failed)[-last:] if last else list(self._failed)
+        if not outcomes:
+            return float("nan")
+        return sum(outcomes) / len(outcomes)
+
+    def forget(self) -> None:
+        """Drop the outcomes and resume (a new alignment starts the judgement again)."""
+        self._failed.clear()
+        self.suspended = False
+        self.reason = ""
+
+    def _maybe_suspend(self) -> HealthChange:
+        if len(self._failed) < self.rule.min_samples:
+            return HealthChange.NONE
+        share = self.failed_share()
+        if share < self.rule.suspend_share:
+            return HealthChange.NONE
+        self.suspended = True
+        self.suspensions += 1
+        self.reason = f"{share * 100:.0f} % of the last {len(self._failed)} samples failed the gate"
+        # Resumption is judged on outcomes seen while suspended only.
+        self._failed.clear()
+        return HealthChange.SUSPENDED
+
+    def _maybe_resume(self) -> HealthChange:
+        if len(self._failed) < self.rule.min_samples:
+            return HealthChange.NONE
+        if self.failed_share(self.rule.min_samples) > self.rule.resume_share:
+            return HealthChange.NONE
+        self.suspended = False
+        self.reason = ""
+        self._failed.clear()
+        return HealthChange.RESUMED

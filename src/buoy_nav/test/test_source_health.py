@@ -1,0 +1,76 @@
+"""Suspension and resumption of an aiding source from its gate outcomes."""
+
+import numpy as np
+import pytest
+
+from buoy_nav.source_health import HealthChange, SourceHealth, SourceHealthRule
+
+RULE = SourceHealthRule(window=200, min_samples=100, suspend_share=0.5, resume_share=0.05)
+
+
+def _feed(health, outcomes):
+    return [health.record(failed) for failed in outcomes]
+
+
+def test_a_source_that_agrees_is_never_suspended():
+    # A consistent source fails a 0.9999 gate about once in 10,000 samples; here far more often.
+    rng = np.random.default_rng(1)
+    health = SourceHealth(RULE)
+    changes = _feed(health, rng.random(20_000) < 0.02)
+    assert HealthChange.SUSPENDED not in changes
+    assert not health.suspended
+
+
+def test_a_source_that_keeps_disagreeing_is_suspended_with_its_share_named():
+    rng = np.random.default_rng(2)
+    health = SourceHealth(RULE)
+    changes = _feed(health, rng.random(400) < 0.62)
+    first = changes.index(HealthChange.SUSPENDED)
+    assert first == RULE.min_samples - 1
+    assert health.suspended and health.suspensions == 1
+    share = int(health.reason.split(" %")[0])
+    assert 50 <= share <= 75
+    assert health.reason.endswith(f"of the last {RULE.min_samples} samples failed the gate")
+
+
+def test_a_burst_shorter_than_the_judged_span_suspends_nothing():
+    # A filter fault that the source's reset mends: rejections in a row, then agreement.
+    health = SourceHealth(RULE)
+    changes = _feed(health, [True] * 49 + [False] * 1000)
+    assert HealthChange.SUSPENDED not in changes
+
+
+def test_a_suspended_source_resumes_once_it_agrees_again():
+    health = SourceHealth(RULE)
+    _feed(health, [True] * RULE.min_samples)
+    assert health.suspended
+    # Still failing now and then: held out.
+    rng = np.random.default_rng(3)
+    assert HealthChange.RESUMED not in _feed(health, rng.random(300) < 0.3)
+    changes = _feed(health, [False] * RULE.min_samples)
+    # Resumed once no more than 5 % of the last min_samples outcomes failed.
+    assert changes.count(HealthChange.RESUMED) == 1
+    assert changes.index(HealthChange.RESUMED) >= RULE.min_samples * (1 - RULE.resume_share) - 1
+    assert not health.suspended and health.reason == ""
+
+
+def test_forget_starts_the_judgement_again():
+    health = SourceHealth(RULE)
+    _feed(health, [True] * RULE.min_samples)
+    health.forget()
+    assert not health.suspended
+    assert np.isnan(health.failed_share())
+
+
+@pytest.mark.parametrize(
+    "fields",
+    [
+        {"window": 50, "min_samples": 100},
+        {"min_samples": 0},
+        {"suspend_share": 0.05, "resume_share": 0.05},
+        {"suspend_share": 1.5},
+    ],
+)
+def test_an_impossible_rule_is_refused(fields):
+    with pytest.raises(ValueError, match="source health"):
+        SourceHealthRule(**fields)
