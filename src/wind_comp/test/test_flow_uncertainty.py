@@ -7,10 +7,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from wind_comp.flow_uncertainty import (
+    FlowCovariance,
     bound_of_correlated_sum,
     corrected_flow_covariance_enu,
     horizontal_and_vertical_sigma,
     skew_matrices,
+    window_mean_covariance_enu,
 )
 from wind_comp.miller import miller_correction, mounting_rotation_from_rpy_deg
 
@@ -64,7 +66,7 @@ def _stated(joint_covariance):
         blocks[1],
         blocks[2],
         blocks[3][0],
-    )[0]
+    ).total[0]
 
 
 def _block_diagonal(*blocks):
@@ -137,7 +139,7 @@ def test_a_batch_gives_each_sample_what_it_gives_alone():
     noise = np.diag([0.05, 0.05, 0.03]) ** 2
     batch = corrected_flow_covariance_enu(
         rotations, MOUNTING.as_matrix(), LEVER_ARM_M, flows, rates, *covariances, noise
-    )
+    ).total
     for i in range(n):
         alone = corrected_flow_covariance_enu(
             rotations[i : i + 1],
@@ -147,7 +149,7 @@ def test_a_batch_gives_each_sample_what_it_gives_alone():
             rates[i : i + 1],
             *(c[i : i + 1] for c in covariances),
             noise,
-        )
+        ).total
         np.testing.assert_allclose(batch[i], alone[0], rtol=1e-14, atol=0)
 
 
@@ -162,3 +164,27 @@ def test_horizontal_and_vertical_sigma():
     horizontal, vertical = horizontal_and_vertical_sigma(covariance)
     assert horizontal[0] == pytest.approx(5.0)
     assert vertical[0] == pytest.approx(2.0)
+
+
+def test_a_window_mean_keeps_a_common_navigation_error_and_averages_the_noise():
+    """N samples sharing one velocity error (as through a GNSS outage) and each with its own
+    sensor noise: the mean's scatter is the shared error's plus the noise over N."""
+    rng = np.random.default_rng(8)
+    n, draws = 50, 20_000
+    shared = np.diag([0.2, 0.1, 0.02]) ** 2
+    noise = np.diag([0.3, 0.3, 0.2]) ** 2
+    common = rng.multivariate_normal(np.zeros(3), shared, size=draws)
+    own = rng.multivariate_normal(np.zeros(3), noise, size=(draws, n))
+    means = common + own.mean(axis=1)
+    stated = window_mean_covariance_enu(
+        FlowCovariance(np.broadcast_to(shared, (n, 3, 3)), np.broadcast_to(noise, (n, 3, 3)))
+    )
+    np.testing.assert_allclose(np.diag(np.cov(means.T)), np.diag(stated), rtol=0.05)
+    # Independent navigation errors would average down: the bound then overstates, never less.
+    independent = rng.multivariate_normal(np.zeros(3), shared, size=(draws, n)).mean(axis=1)
+    assert np.all(np.diag(np.cov(independent.T)) <= np.diag(stated))
+
+
+def test_an_empty_window_has_no_mean():
+    empty = FlowCovariance(np.empty((0, 3, 3)), np.empty((0, 3, 3)))
+    assert np.all(np.isnan(window_mean_covariance_enu(empty)))

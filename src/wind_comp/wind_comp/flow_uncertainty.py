@@ -17,6 +17,8 @@ smallest, (Σ √tr A_i)². When one term dominates, as on most sensor sets, the
 when k terms are equal it is at most k times their sum of variances, never less than the truth.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 _TRACE_FLOOR = 1e-300
@@ -42,17 +44,29 @@ def sandwich(jacobians: np.ndarray, covariances: np.ndarray) -> np.ndarray:
     return jacobians @ covariances @ np.swapaxes(jacobians, -1, -2)
 
 
-def bound_of_correlated_sum(terms: list[np.ndarray]) -> np.ndarray:
+def bound_of_correlated_sum(terms) -> np.ndarray:
     """A covariance no smaller than that of a sum of errors whose covariances are ``terms``
-    ((N, 3, 3) each), whatever their cross-covariances: Σ A_i / w_i with w_i ∝ √tr(A_i)."""
-    roots = [np.sqrt(np.maximum(np.trace(term, axis1=-2, axis2=-1), 0.0)) for term in terms]
+    (K of them along the first axis, (K, ..., 3, 3), or a list of K (..., 3, 3)), whatever
+    their cross-covariances: Σ A_i / w_i with w_i ∝ √tr(A_i)."""
+    terms = np.asarray(terms, dtype=float)
+    roots = np.sqrt(np.maximum(np.trace(terms, axis1=-2, axis2=-1), 0.0))
     total_root = np.sum(roots, axis=0)
-    bound = np.zeros_like(terms[0])
-    for term, root in zip(terms, roots, strict=True):
-        # A_i / w_i = A_i · Σ√tr / √tr_i; a term of zero trace is the zero matrix.
-        scale = np.where(root > _TRACE_FLOOR, total_root / np.maximum(root, _TRACE_FLOOR), 0.0)
-        bound += term * scale[..., None, None]
-    return bound
+    # A_i / w_i = A_i · Σ√tr / √tr_i; a term of zero trace is the zero matrix.
+    scale = np.where(roots > _TRACE_FLOOR, total_root / np.maximum(roots, _TRACE_FLOOR), 0.0)
+    return np.sum(terms * scale[..., None, None], axis=0)
+
+
+class FlowCovariance(NamedTuple):
+    """Covariance of corrected flow samples, ENU, m²/s², (N, 3, 3) each: the navigation's part
+    (correlated from sample to sample over the filter's time constants) and the sensor's
+    noise (independent from sample to sample)."""
+
+    navigation: np.ndarray
+    sensor: np.ndarray
+
+    @property
+    def total(self) -> np.ndarray:
+        return self.navigation + self.sensor
 
 
 def corrected_flow_covariance_enu(
@@ -65,8 +79,8 @@ def corrected_flow_covariance_enu(
     velocity_covariance_enu_m2s2: np.ndarray,
     angular_rate_covariance_body_rad2s2: np.ndarray,
     sensor_noise_covariance_m2s2: np.ndarray,
-) -> np.ndarray:
-    """(N, 3, 3) covariance (m²/s², ENU) of N motion-corrected flow samples.
+) -> FlowCovariance:
+    """Covariance (m²/s², ENU) of N motion-corrected flow samples.
 
     Args:
         rotation_nb: (N, 3, 3) estimated body→ENU rotations.
@@ -93,7 +107,22 @@ def corrected_flow_covariance_enu(
         [attitude_term, np.asarray(velocity_covariance_enu_m2s2, dtype=float), rate_term]
     )
     sensor_jacobian = rotation_nb @ mounting
-    return navigation + sandwich(sensor_jacobian, sensor_noise_covariance_m2s2)
+    return FlowCovariance(navigation, sandwich(sensor_jacobian, sensor_noise_covariance_m2s2))
+
+
+def window_mean_covariance_enu(covariance: FlowCovariance) -> np.ndarray:
+    """(3, 3) covariance (m²/s², ENU) of the mean of the N samples of ``covariance``.
+
+    Not the samples' covariance over N: the navigation's errors stay alike over the filter's
+    time constants (a heading error of minutes, a velocity error through a GNSS outage), so
+    its part is bounded as a sum of errors of unknown correlation; the sensor's noise averages
+    down as independent noise does.
+    """
+    n = covariance.navigation.shape[0]
+    if n == 0:
+        return np.full((3, 3), np.nan)
+    navigation = bound_of_correlated_sum(covariance.navigation) / n**2
+    return navigation + np.sum(covariance.sensor, axis=0) / n**2
 
 
 def horizontal_and_vertical_sigma(covariance_enu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
