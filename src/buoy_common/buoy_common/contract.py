@@ -37,6 +37,12 @@ NAV_IMU_TOPIC = "nav/imu"
 NAV_VELOCITY_TOPIC = "nav/velocity"
 NAV_FIX_TOPIC = "nav/fix"
 WIND_TRUE_TOPIC = "wind/true"
+WIND_TRUE_WITH_COVARIANCE_TOPIC = "wind/true_with_covariance"
+"""The corrected wind of ``wind/true`` with its covariance (TwistWithCovarianceStamped, ``map``):
+rows and columns 0–2 of ``twist.covariance`` in m²/s², the angular part unused (zeros, its
+diagonal −1)."""
+CURRENT_WITH_COVARIANCE_TOPIC = "current/velocity_with_covariance"
+"""The current of ``current/velocity`` with its covariance, as ``wind/true_with_covariance``."""
 WIND_MEAN_PREFIX = "wind/mean_"
 WIND_STATS_PREFIX = "wind/stats_"
 WIND_FLUXES_PREFIX = "wind/fluxes_"
@@ -226,6 +232,12 @@ class Reason(StrEnum):
     NAVIGATION_NOT_TRUSTED = "navigation_not_trusted"
     """The navigation's attitude is too uncertain to correct the wind with: the fusion has
     found itself inconsistent with its aiding, or has not converged yet."""
+    UNCERTAINTY_TOO_LARGE = "uncertainty_too_large"
+    """The corrected sample's own standard deviation (from the navigation's covariance and the
+    sensor's noise) exceeds its documented limit: horizontally or vertically."""
+    SUSPENDED = "suspended"
+    """The aiding source keeps failing its gate over a window and is taken out until it agrees
+    with the filter again."""
 
 
 # -- stamps ----------------------------------------------------------------------------------------
