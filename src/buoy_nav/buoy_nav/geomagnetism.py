@@ -1,7 +1,9 @@
-"""Magnetic declination: the ``magnetic.declination_deg`` parameter, or the World Magnetic Model
-at the position (package ``pygeomag``, the NOAA/BGS model that compasses and charts use).
+"""The Earth's magnetic field: the declination (the ``magnetic.declination_deg`` parameter, or
+the World Magnetic Model at the position) and the model's field vector, which a calibrated
+magnetometer must reproduce in strength and dip (package ``pygeomag``, the NOAA/BGS model that
+compasses and charts use).
 
-The declination changes by about 0.1° per 10 km and per year at mid latitudes, so it is
+The field changes by about 0.1° of declination per 10 km and per year at mid latitudes, so it is
 evaluated once per 0.05° cell of latitude and longitude and per tenth of a year, and kept.
 """
 
@@ -23,28 +25,45 @@ def _model() -> GeoMag:
     return GeoMag()
 
 
+NANOTESLA = 1e-9
+
+
 @lru_cache(maxsize=256)
-def _wmm_declination_cell_deg(latitude_cell: int, longitude_cell: int, year_step: int) -> float:
+def _wmm_cell(latitude_cell: int, longitude_cell: int, year_step: int):
     model = _model()
     year = min(max(year_step * _YEAR_STEP, model.life_span[0]), model.life_span[1] - 1e-3)
-    result = model.calculate(
+    return model.calculate(
         glat=latitude_cell * _CELL_DEG,
         glon=longitude_cell * _CELL_DEG,
         alt=0.0,
         time=year,
         allow_date_outside_lifespan=True,
     )
-    return float(result.d)
+
+
+def _wmm_at(latitude_rad: float, longitude_rad: float, t_s: float):
+    year = UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
+    return _wmm_cell(
+        round(math.degrees(latitude_rad) / _CELL_DEG),
+        round(math.degrees(longitude_rad) / _CELL_DEG),
+        round(year / _YEAR_STEP),
+    )
 
 
 def wmm_declination_deg(latitude_rad: float, longitude_rad: float, t_s: float) -> float:
     """Declination (deg, east positive) of the WMM at a position (rad) and a time (s since the
     Unix epoch), at sea level."""
-    year = UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
-    return _wmm_declination_cell_deg(
-        round(math.degrees(latitude_rad) / _CELL_DEG),
-        round(math.degrees(longitude_rad) / _CELL_DEG),
-        round(year / _YEAR_STEP),
+    return float(_wmm_at(latitude_rad, longitude_rad, t_s).d)
+
+
+def wmm_field_enu_t(latitude_rad: float, longitude_rad: float, t_s: float) -> tuple:
+    """The WMM's field vector (east, north, up; tesla) at a position (rad) and a time (s since
+    the Unix epoch), at sea level."""
+    result = _wmm_at(latitude_rad, longitude_rad, t_s)
+    return (
+        float(result.y) * NANOTESLA,
+        float(result.x) * NANOTESLA,
+        -float(result.z) * NANOTESLA,
     )
 
 

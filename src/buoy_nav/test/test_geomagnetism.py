@@ -1,0 +1,33 @@
+"""The fusion's geomagnetic model (WMM) against the simulator's (IGRF, an independent model and
+package): the two agree on the field to well within what a magnetometer check tolerates."""
+
+import datetime
+import math
+
+import numpy as np
+import ppigrf
+import pytest
+
+from buoy_nav.geomagnetism import wmm_declination_deg, wmm_field_enu_t
+
+PLACES_DEG = [(35.0, 120.0), (38.5, -70.0), (-45.0, 170.0), (60.0, -150.0), (0.0, 0.0)]
+DATE = datetime.datetime(2024, 6, 1)
+T_S = DATE.replace(tzinfo=datetime.UTC).timestamp()
+
+
+@pytest.mark.parametrize("latitude_deg, longitude_deg", PLACES_DEG)
+def test_the_field_vector_agrees_with_the_igrf(latitude_deg, longitude_deg):
+    wmm = np.array(wmm_field_enu_t(math.radians(latitude_deg), math.radians(longitude_deg), T_S))
+    east, north, up = ppigrf.igrf(longitude_deg, latitude_deg, 0.0, DATE)
+    igrf = np.array([float(np.squeeze(c)) for c in (east, north, up)]) * 1e-9
+    assert np.linalg.norm(wmm - igrf) < 0.01 * np.linalg.norm(igrf)
+
+
+@pytest.mark.parametrize("latitude_deg, longitude_deg", PLACES_DEG)
+def test_the_field_vector_points_along_the_declination(latitude_deg, longitude_deg):
+    latitude, longitude = math.radians(latitude_deg), math.radians(longitude_deg)
+    east, north, _ = wmm_field_enu_t(latitude, longitude, T_S)
+    azimuth_from_north_deg = math.degrees(math.atan2(east, north))
+    assert azimuth_from_north_deg == pytest.approx(
+        wmm_declination_deg(latitude, longitude, T_S), abs=1e-9
+    )
