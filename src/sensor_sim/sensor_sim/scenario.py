@@ -7,6 +7,17 @@ ScenarioError naming the file or override, the key and the value. A scenario plu
 fully defines a run: all random parts (phases, wave and turbulence components, sensor noise)
 are drawn from streams derived from the seed.
 
+The sensors of real flux buoys are not the data sheet's, and a run can say how: a motion pack
+whose attitude lags (``sensors.ahrs.lag_time_constant_s``) while its covariance claims the data
+sheet's σ (``sensors.ahrs.claimed_sigma_deg``); an uncalibrated magnetometer
+(``sensors.magnetometer.hard_iron_ut``, ``soft_iron``); a receiver stamping off the IMU grid
+(``sensors.rates.gnss_offset_s``) with its antenna where the buoy has it
+(``sensors.extrinsics``); GNSS outages in which no GNSS topic publishes
+(``sensors.gnss.silent_outages_s``); no GNSS at all (``sensors.gnss.receiver: none``). Every
+such option defaults to the perfect sensor. The shipped ``set_a_imperfect`` ...
+``set_e_imperfect`` give each sensor set of the suite the imperfections that apply to it, and
+``measured_moored_no_gnss`` / ``measured_moored_single_gnss`` are the measured moored buoys.
+
 Conventions: angles in parameters are degrees (names end in ``_deg``); ``yaw_deg`` is ENU
 yaw (0 = East, counter-clockwise); wind and wave directions are meteorological (where they come
 FROM, clockwise from true North); the current direction is oceanographic (where the water flows
