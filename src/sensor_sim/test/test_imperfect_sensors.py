@@ -10,6 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from sensor_sim.geodesy import geodetic_to_enu_m
+from sensor_sim.motion_pack import igrf_declination_deg
 from sensor_sim.scenario import load_scenario
 from sensor_sim.streams import STREAMS, merged_messages
 from sensor_sim.truth import TruthModel
@@ -54,8 +55,6 @@ def pack_attitude(messages, scenario):
 def declination_turn(scenario) -> Rotation:
     """The pack's yaw reference: magnetic north, the true yaw plus the declination (the
     simulator's IGRF; the pack's yaw is ENU, counter-clockwise)."""
-    from sensor_sim.motion_pack import igrf_declination_deg
-
     return Rotation.from_rotvec([0.0, 0.0, np.radians(igrf_declination_deg(scenario))])
 
 
