@@ -112,14 +112,21 @@ def live_bag(request, tmp_path_factory, module_ros_env):
     """A short sea_state run recorded from the live nodes, its offline twin and the parameter
     files of the buoy."""
     folder = tmp_path_factory.mktemp(f"sim_{request.param}")
-    bin_dir = Path(sys.executable).parent
     parameters = [a for path in BUOYS[request.param] for a in ("--params-file", str(path))]
     overrides = ["--set", f"duration_s={SCENARIO_S}", "--seed", "7", *parameters]
+    live, offline = record_live_and_offline(folder, "sea_state", overrides, module_ros_env)
+    return live, offline, BUOYS[request.param]
+
+
+def record_live_and_offline(folder: Path, scenario: str, arguments: list[str], env) -> tuple:
+    """The scenario recorded from the live nodes and written by simulate_bag, with the same
+    arguments: (live bag, offline bag)."""
+    bin_dir = Path(sys.executable).parent
     live = subprocess.run(
         [
             str(bin_dir / "run_scenario"),
-            "sea_state",
-            *overrides,
+            scenario,
+            *arguments,
             "--rate-factor",
             "4",
             "--record",
@@ -127,20 +134,64 @@ def live_bag(request, tmp_path_factory, module_ros_env):
             "--log-dir",
             str(folder / "logs"),
         ],
-        env=module_ros_env,
+        env=env,
         capture_output=True,
         text=True,
         timeout=120,
     )
     assert live.returncode == 0, live.stdout + live.stderr
     offline = subprocess.run(
-        [str(bin_dir / "simulate_bag"), "sea_state", str(folder / "offline"), *overrides],
+        [str(bin_dir / "simulate_bag"), scenario, str(folder / "offline"), *arguments],
         capture_output=True,
         text=True,
         timeout=120,
     )
     assert offline.returncode == 0, offline.stderr
-    return folder / "live", folder / "offline", BUOYS[request.param]
+    return folder / "live", folder / "offline"
+
+
+# The imperfections of real flux buoys' sensors: the lagging motion pack claiming a small σ and
+# the uncalibrated magnetometer; one GNSS antenna at 1 Hz off the IMU grid on a mast, silent
+# for 3 s.
+SILENCE_S = (4.0, 7.0)
+IMPERFECT = {
+    "measured_moored_no_gnss": [],
+    "set_e_imperfect": ["--set", f"sensors.gnss.silent_outages_s=[{list(SILENCE_S)}]"],
+}
+
+
+@pytest.fixture(scope="module", params=list(IMPERFECT))
+def imperfect_bags(request, tmp_path_factory, module_ros_env):
+    folder = tmp_path_factory.mktemp(f"sim_{request.param}")
+    arguments = ["--set", f"duration_s={SCENARIO_S}", *IMPERFECT[request.param]]
+    live, offline = record_live_and_offline(folder, request.param, arguments, module_ros_env)
+    return live, offline, load_scenario(request.param)
+
+
+def test_imperfect_sensors_live_equal_offline(imperfect_bags):
+    live, _ = messages_by_topic(imperfect_bags[0])
+    offline, _ = messages_by_topic(imperfect_bags[1])
+    scenario = imperfect_bags[2]
+    assert set(offline) <= set(live)
+    for topic in offline:
+        assert len(live[topic]) == len(offline[topic]), topic
+        for a, b in zip(live[topic], offline[topic], strict=True):
+            assert same_message(a, b), topic
+    gnss_topics = {topic for topic in live if topic.startswith("gnss/")}
+    if scenario.sensors.ahrs.fitted:
+        assert gnss_topics == set()
+        claimed = np.degrees(np.sqrt(live["imu/data"][0].orientation_covariance[0::4]))
+        assert claimed == pytest.approx(scenario.sensors.ahrs.claimed_sigma_deg)
+        assert len(live["imu/data"]) == len(live["imu/data_raw"])
+        return
+    assert gnss_topics == {"gnss/fix", "gnss/vel"}
+    for topic in gnss_topics:
+        seconds = [(stamp_ns(m) - START_NS) * 1e-9 for m in live[topic]]
+        # 1 Hz at 0.31 s past the second, none inside the silence.
+        offset_s = scenario.sensors.rates.gnss_offset_s
+        samples_s = [offset_s + k for k in range(int(SCENARIO_S))]
+        expected = [t for t in samples_s if not SILENCE_S[0] <= t < SILENCE_S[1]]
+        assert seconds == pytest.approx(expected, abs=1e-9), topic
 
 
 def test_live_nodes_publish_contract_topics_at_their_rates(live_bag):

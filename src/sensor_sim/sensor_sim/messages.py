@@ -171,10 +171,11 @@ def ahrs_messages(
     attitude: Rotation,
     gyro_rad_s: np.ndarray,
     specific_force_mps2: np.ndarray,
-    orientation_variance_rad2: float,
+    orientation_variance_rad2: float | np.ndarray,
 ) -> Iterator[Imu]:
     """``imu/data``: the motion pack's attitude (body→ENU of its yaw reference) with its
-    covariance (small rotation about the ENU axes, rad²), rates and specific force."""
+    covariance (small rotation about the ENU axes, rad²: one for all three, or x, y, z), rates
+    and specific force."""
     quaternions = attitude.as_quat()
     for time_ns, quaternion, gyro, force in zip(
         stamps_ns, quaternions, gyro_rad_s, specific_force_mps2, strict=True

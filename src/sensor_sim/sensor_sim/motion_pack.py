@@ -6,6 +6,12 @@ held constant over the run (a moored buoy moves metres; the field changes by nT 
 fusion computes declination with a different model (the WMM), so a sign or convention error in
 either shows up as a heading error instead of cancelling out.
 
+Both carry the imperfections of the packs on real flux buoys when the scenario gives them: the
+magnetometer its hard iron (the buoy's own magnetism, tens of µT) and soft iron (a matrix a few
+per cent off the identity), uncalibrated as the contract says; the AHRS a first-order lag of
+the attitude (``lag_time_constant_s``) while its ``orientation_covariance`` states the data
+sheet's σ (``claimed_sigma_deg``), far below the lag's error in waves.
+
 Both sensors draw from their own random streams (keys :data:`MAGNETOMETER_STREAM_KEY`,
 :data:`AHRS_STREAM_KEY`), one fixed block of draws per sample, so splitting the sample times
 into several ``measure`` calls gives the same output as one call.
@@ -148,7 +154,7 @@ class AhrsSimulator:
 
     def measure(self, t_s: ArrayLike):
         """(attitude Rotation body→ENU of the pack's reference (N), gyro rad/s (N, 3), specific
-        force m/s² (N, 3), orientation variance rad² per ENU axis)."""
+        force m/s² (N, 3), the orientation variances the pack states, rad² (3,): x, y, z)."""
         t = _times(t_s)
         normals = self._rng.standard_normal((t.size, 4, 3))
         config = self.config
@@ -190,8 +196,7 @@ class AhrsSimulator:
         gyro, force = ideal_imu(state)
         gyro = gyro + normals[:, 2] * 1e-3
         force = force + normals[:, 3] * 1e-2
-        variance = (config.error_deg * _DEG) ** 2 + (config.noise_deg * _DEG) ** 2
-        return output, gyro, force, variance
+        return output, gyro, force, config.claimed_orientation_variance_rad2()
 
 
 __all__ = [

@@ -225,56 +225,66 @@ def awaited_subscription_error(entry: str) -> str | None:
     return None
 
 
-def run(arguments) -> int:
+def argument_error(arguments) -> str | None:
+    """What is wrong with the arguments themselves, or None."""
     for entry in arguments.awaited_subscriptions:
         error = awaited_subscription_error(entry)
         if error:
-            print(f"run_scenario: {error}", file=sys.stderr)
-            return 2
-    scenario = load_scenario(arguments.scenario, arguments.overrides, arguments.seed)
+            return error
+    return None
+
+
+def scenario_run_error(arguments, scenario) -> str | None:
+    """Why the arguments cannot run this scenario, or None."""
     if arguments.record and Path(arguments.record).exists():
-        print(f"run_scenario: {arguments.record} exists; choose a new bag path", file=sys.stderr)
-        return 2
+        return f"{arguments.record} exists; choose a new bag path"
+    if arguments.current and not STREAMS["dvl"].carried(scenario):
+        return (
+            f"--current: scenario '{scenario.name}' carries no DVL "
+            "(add one with --set sensors.dvl={})"
+        )
+    return None
+
+
+def log_directory(arguments) -> Path:
+    """Where the node logs go: ``--log-dir`` (created), else a new temporary directory."""
     if arguments.log_dir:
         log_dir = Path(arguments.log_dir)
         log_dir.mkdir(parents=True, exist_ok=True)
-    else:
-        log_dir = Path(tempfile.mkdtemp(prefix="run_scenario-"))
-    run = Run(log_dir)
-    # Truth first, then the sensors the scenario's platform carries.
-    sensor_nodes = [
+        return log_dir
+    return Path(tempfile.mkdtemp(prefix="run_scenario-"))
+
+
+def sensor_node_names(scenario) -> list[str]:
+    """The truth node first, then the nodes of the sensors the scenario's platform carries."""
+    return [
         spec.node_name
         for kind, spec in sorted(STREAMS.items(), key=lambda item: item[0] != "truth")
         if spec.carried(scenario)
     ]
-    clock_subscribers = len(sensor_nodes)
-    if arguments.record:
-        run.start("bag_recorder", [arguments.record, *ros_arguments(arguments, SIM_TIME)], False)
-        clock_subscribers += 1
-    # The processing nodes run on header stamps and the wall clock, as on a buoy: on simulated
-    # time each would also take every /clock message, a callback per 5 ms for nothing.
-    processing_nodes = []
+
+
+def processing_node_names(arguments) -> list[str]:
+    """The fusion, compensation and current nodes the arguments ask for."""
+    names = []
     if arguments.fusion or arguments.compensation or arguments.current:
-        processing_nodes.append("fusion_node")
+        names.append("fusion_node")
     if arguments.compensation:
-        processing_nodes.append("compensation_node")
+        names.append("compensation_node")
     if arguments.current:
-        if not STREAMS["dvl"].carried(scenario):
-            print(
-                f"run_scenario: --current: scenario '{scenario.name}' carries no DVL "
-                "(add one with --set sensors.dvl={})",
-                file=sys.stderr,
-            )
-            return 2
-        processing_nodes.append("current_node")
-    for name in processing_nodes:
-        run.start(name, ros_arguments(arguments, {}), False)
+        names.append("current_node")
+    return names
+
+
+def sensor_node_values(arguments, processing_nodes: list[str]) -> dict[str, object]:
+    """The sensor nodes' parameters: the scenario, and whom they wait for before the clock
+    may start."""
     # A recording must start with the first sample of every topic; without a recorder some
     # topics (truth, baseline) may have no subscriber at all, and the clock's own wait for the
     # fusion and compensation nodes is what keeps them from missing the start.
-    sensor_values = scenario_values(arguments)
+    values = scenario_values(arguments)
     if arguments.record:
-        sensor_values["wait_for_subscriber_node"] = "bag_recorder"
+        values["wait_for_subscriber_node"] = "bag_recorder"
     # A node in the graph may not have subscribed yet, nor been matched by the sensors: each
     # sensor holds the clock until the processing nodes' subscriptions to its topics reach it.
     awaited = [
@@ -282,7 +292,22 @@ def run(arguments) -> int:
     ]
     awaited += arguments.awaited_subscriptions
     if awaited:
-        sensor_values["wait_for_subscriptions"] = json.dumps(awaited)
+        values["wait_for_subscriptions"] = json.dumps(awaited)
+    return values
+
+
+def start_nodes(run: Run, arguments, scenario, processing_nodes: list[str]) -> None:
+    """Start the recorder (if asked), the processing nodes, the sensors and the clock."""
+    sensor_nodes = sensor_node_names(scenario)
+    clock_subscribers = len(sensor_nodes)
+    if arguments.record:
+        run.start("bag_recorder", [arguments.record, *ros_arguments(arguments, SIM_TIME)], False)
+        clock_subscribers += 1
+    # The processing nodes run on header stamps and the wall clock, as on a buoy: on simulated
+    # time each would also take every /clock message, a callback per 5 ms for nothing.
+    for name in processing_nodes:
+        run.start(name, ros_arguments(arguments, {}), False)
+    sensor_values = sensor_node_values(arguments, processing_nodes)
     for name in sensor_nodes:
         run.start(name, ros_arguments(arguments, sensor_values), True)
     clock_values = {
@@ -293,14 +318,21 @@ def run(arguments) -> int:
     if processing_nodes:
         clock_values["wait_for_nodes"] = f"[{','.join(processing_nodes)}]"
     run.start("sim_clock_node", ros_arguments(arguments, clock_values), True)
+
+
+def report_failure(failure: Process) -> None:
     print(
-        f"run_scenario: '{scenario.name}' seed {scenario.seed}, {scenario.duration_s:g} s at "
-        f"{arguments.rate_factor:g}x; node logs in {log_dir}",
-        flush=True,
+        f"run_scenario: {failure.name} exited with code {failure.popen.returncode}:\n"
+        f"{failure.log_tail()}",
+        file=sys.stderr,
     )
+
+
+def play_out(run: Run, expected_wall_s: float) -> int | None:
+    """Wait until the self-stopping nodes (sensors, clock) have finished, then let the last
+    messages drain: None, or the exit code of a run that failed, overran or was interrupted
+    (every node then stopped)."""
     self_stopping = [p for p in run.processes if p.stops_by_itself]
-    long_running = [p for p in run.processes if not p.stops_by_itself]
-    expected_wall_s = scenario.duration_s / arguments.rate_factor
     started = time.monotonic()
     deadline = started + expected_wall_s + 60.0
     progress = Progress(started, expected_wall_s, run.processes)
@@ -309,11 +341,7 @@ def run(arguments) -> int:
             progress.report()
             failure = run.failed()
             if failure is not None:
-                print(
-                    f"run_scenario: {failure.name} exited with code "
-                    f"{failure.popen.returncode}:\n{failure.log_tail()}",
-                    file=sys.stderr,
-                )
+                report_failure(failure)
                 run.interrupt(run.processes)
                 return 1
             if time.monotonic() > deadline:
@@ -331,21 +359,47 @@ def run(arguments) -> int:
         # would outlive this process.
         run.interrupt(run.processes)
         raise
+    return None
+
+
+def stop_long_running(run: Run) -> int:
+    """Stop the processing nodes and the recorder; 0, or 1 when a node had failed."""
     # Upstream first: each node publishes what it holds back when it stops, and the recorder,
     # stopped last, records that too.
+    long_running = [p for p in run.processes if not p.stops_by_itself]
     for process in sorted(long_running, key=lambda p: STOP_ORDER.index(p.name)):
         run.interrupt([process])
     failure = run.failed()
     if failure is not None:
-        print(
-            f"run_scenario: {failure.name} exited with code {failure.popen.returncode}:\n"
-            f"{failure.log_tail()}",
-            file=sys.stderr,
-        )
+        report_failure(failure)
         return 1
-    if arguments.record:
-        print(f"run_scenario: recorded {arguments.record}")
     return 0
+
+
+def run(arguments) -> int:
+    error = argument_error(arguments)
+    if error is None:
+        scenario = load_scenario(arguments.scenario, arguments.overrides, arguments.seed)
+        error = scenario_run_error(arguments, scenario)
+    if error is not None:
+        print(f"run_scenario: {error}", file=sys.stderr)
+        return 2
+    log_dir = log_directory(arguments)
+    run = Run(log_dir)
+    processing_nodes = processing_node_names(arguments)
+    start_nodes(run, arguments, scenario, processing_nodes)
+    print(
+        f"run_scenario: '{scenario.name}' seed {scenario.seed}, {scenario.duration_s:g} s at "
+        f"{arguments.rate_factor:g}x; node logs in {log_dir}",
+        flush=True,
+    )
+    code = play_out(run, scenario.duration_s / arguments.rate_factor)
+    if code is not None:
+        return code
+    code = stop_long_running(run)
+    if code == 0 and arguments.record:
+        print(f"run_scenario: recorded {arguments.record}")
+    return code
 
 
 @interruptible("run_scenario")

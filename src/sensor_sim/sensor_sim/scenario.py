@@ -7,6 +7,17 @@ ScenarioError naming the file or override, the key and the value. A scenario plu
 fully defines a run: all random parts (phases, wave and turbulence components, sensor noise)
 are drawn from streams derived from the seed.
 
+The sensors of real flux buoys are not the data sheet's, and a run can say how: a motion pack
+whose attitude lags (``sensors.ahrs.lag_time_constant_s``) while its covariance claims the data
+sheet's σ (``sensors.ahrs.claimed_sigma_deg``); an uncalibrated magnetometer
+(``sensors.magnetometer.hard_iron_ut``, ``soft_iron``); a receiver stamping off the IMU grid
+(``sensors.rates.gnss_offset_s``) with its antenna where the buoy has it
+(``sensors.extrinsics``); GNSS outages in which no GNSS topic publishes
+(``sensors.gnss.silent_outages_s``); no GNSS at all (``sensors.gnss.receiver: none``). Every
+such option defaults to the perfect sensor. The shipped ``set_a_imperfect`` ...
+``set_e_imperfect`` give each sensor set of the suite the imperfections that apply to it, and
+``measured_moored_no_gnss`` / ``measured_moored_single_gnss`` are the measured moored buoys.
+
 Conventions: angles in parameters are degrees (names end in ``_deg``); ``yaw_deg`` is ENU
 yaw (0 = East, counter-clockwise); wind and wave directions are meteorological (where they come
 FROM, clockwise from true North); the current direction is oceanographic (where the water flows
@@ -30,6 +41,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike
 
+from sensor_sim.mounting import ScenarioExtrinsics
 from sensor_sim.sensor_errors import (
     AhrsErrorConfig,
     AnemometerErrorConfig,
@@ -296,23 +308,37 @@ class CurrentConfig:
 
 @dataclass(frozen=True)
 class SampleRates:
-    """Sample rates of the simulated sensors and the truth, Hz (a node's rate_hz overrides)."""
+    """Sample rates of the simulated sensors and the truth, Hz (a node's rate_hz overrides).
+
+    ``gnss_offset_s``: time of the receiver's first solution (s, in [0, 1/gnss_hz); a node's
+    time_offset_s overrides): a receiver stamps its solutions on its own second, not on the
+    IMU's sample grid (0.31 s puts a 1 Hz receiver between the samples of a 50 Hz IMU).
+    """
 
     imu_hz: float = 100.0
     gnss_hz: float = 10.0
     anemometer_hz: float = 20.0
     dvl_hz: float = 1.0
     truth_hz: float = 50.0
+    gnss_offset_s: float = 0.0
 
     def __post_init__(self) -> None:
         for key in ("imu_hz", "gnss_hz", "anemometer_hz", "dvl_hz", "truth_hz"):
             check_field(self, key, 0.0 < getattr(self, key) <= 2000.0, "must be in (0, 2000]")
+        check_field(
+            self,
+            "gnss_offset_s",
+            0.0 <= self.gnss_offset_s < 1.0 / self.gnss_hz,
+            "must be in [0, 1/gnss_hz) s",
+        )
 
 
 @dataclass(frozen=True)
 class SensorErrorConfigs:
-    """Error budgets of the simulated sensors and their sample rates. An anemometer or a DVL
-    set to null is not on the platform (the default: an anemometer, no DVL)."""
+    """Error budgets of the simulated sensors, their sample rates and where they sit. An
+    anemometer or a DVL set to null is not on the platform (the default: an anemometer, no
+    DVL). ``extrinsics`` (sensor_sim.mounting): the antennas', anemometer's and DVL's places
+    on the buoy; null (the default): the contract's defaults."""
 
     imu: ImuErrorConfig = field(default_factory=ImuErrorConfig)
     gnss: GnssErrorConfig = field(default_factory=GnssErrorConfig)
@@ -321,6 +347,7 @@ class SensorErrorConfigs:
     magnetometer: MagnetometerErrorConfig = field(default_factory=MagnetometerErrorConfig)
     ahrs: AhrsErrorConfig = field(default_factory=AhrsErrorConfig)
     rates: SampleRates = field(default_factory=SampleRates)
+    extrinsics: ScenarioExtrinsics | None = None
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ file or a parameter with an impossible value is refused with a message naming th
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -120,7 +121,9 @@ class GnssErrorConfig:
     then published with NaN values and ``status -1`` (as a receiver without a solution does). A
     receiver without a fix has no velocity, heading or baseline either, so fix outages blank
     every GNSS topic; heading outages blank the heading and the baseline (one carrier-phase
-    solution).
+    solution). ``silent_outages_s`` are [start, end) intervals in which the receiver publishes
+    nothing at all, on any of its topics (a receiver that lost power or its serial link): the
+    topics simply stop, as they do on a buoy whose GNSS is out for minutes.
     """
 
     position_noise_horizontal_m: float = 0.02
@@ -133,6 +136,7 @@ class GnssErrorConfig:
     fix_outages_s: tuple[tuple[float, float], ...] = ()
     velocity_outages_s: tuple[tuple[float, float], ...] = ()
     heading_outages_s: tuple[tuple[float, float], ...] = ()
+    silent_outages_s: tuple[tuple[float, float], ...] = ()
 
     def __post_init__(self) -> None:
         check_non_negative(
@@ -150,7 +154,9 @@ class GnssErrorConfig:
             self.receiver in ("dual_antenna", "single_antenna", "none"),
             "must be dual_antenna, single_antenna or none",
         )
-        check_intervals(self, "fix_outages_s", "velocity_outages_s", "heading_outages_s")
+        check_intervals(
+            self, "fix_outages_s", "velocity_outages_s", "heading_outages_s", "silent_outages_s"
+        )
 
 
 @dataclass(frozen=True)
@@ -266,6 +272,12 @@ class AhrsErrorConfig:
     noise white (``noise_deg``). Its yaw is referenced as ``ahrs.yaw_reference`` says; with
     ``magnetic_north`` the IGRF declination at the scenario's place is in it. ``fitted: false``:
     no motion pack. One sample every ``sample_every`` IMU samples.
+
+    ``claimed_sigma_deg``: the roll, pitch and yaw 1-σ the pack's ``orientation_covariance``
+    states (on its diagonal, x, y, z, as packs' drivers put them), whatever its real error; a
+    pack's data sheet figure (e.g. 0.1/0.1/0.5°) holds for slow motion and leaves out the lag's
+    error in waves. Three NaN (the default): the honest σ of the slow error and the noise,
+    sqrt(error_deg² + noise_deg²) on every axis, which also leaves the lag out.
     """
 
     fitted: bool = False
@@ -275,12 +287,28 @@ class AhrsErrorConfig:
     error_correlation_time_s: float = 120.0
     noise_deg: float = 0.05
     yaw_reference: str = shared_field("ahrs.yaw_reference")
+    claimed_sigma_deg: tuple[float, float, float] = (math.nan, math.nan, math.nan)
 
     def __post_init__(self) -> None:
         check_non_negative(self, "lag_time_constant_s", "error_deg", "noise_deg")
+        claimed = self.claimed_sigma_deg
+        check_field(
+            self,
+            "claimed_sigma_deg",
+            len(claimed) == 3
+            and (all(math.isnan(c) for c in claimed) or all(0.0 <= c < 180.0 for c in claimed)),
+            "must be three standard deviations in [0, 180) deg (roll, pitch, yaw), or three NaN",
+        )
         check_field(self, "sample_every", self.sample_every >= 1, "must be >= 1")
         check_positive(self, "error_correlation_time_s")
         try:
             check_shared_fields(self)
         except ValueError as error:
             raise InvalidConfigValueError("yaw_reference", self.yaw_reference, str(error)) from None
+
+    def claimed_orientation_variance_rad2(self) -> np.ndarray:
+        """The orientation variances (rad², x, y, z) the pack's messages state."""
+        if all(math.isnan(c) for c in self.claimed_sigma_deg):
+            honest = (self.error_deg * _DEG) ** 2 + (self.noise_deg * _DEG) ** 2
+            return np.full(3, honest)
+        return (np.asarray(self.claimed_sigma_deg) * _DEG) ** 2

@@ -279,61 +279,55 @@ class GnssSimulator:
             self.tertiary_antenna_body_m = _body_vector(tertiary_antenna_body_m, "tertiary_antenna")
         self._tertiary_rng = sensor_rng(seed, GNSS_TERTIARY_STREAM_KEY)
 
-    def measure(self, t_s: ArrayLike) -> GnssSample:
-        """Measurements at times t_s (s), one block of 9 normal draws per sample."""
-        t = _sample_times(t_s)
-        state = self.truth.evaluate(t)
-        normals = self._rng.standard_normal((t.size, 3, 3))
+    def noise_sigmas(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """1-sigma per ENU axis of the position (m), velocity (m/s) and baseline (m) noise."""
         config = self.config
-        attitude = state.attitude
-        lever_enu = attitude.apply(self.primary_antenna_body_m)
 
-        position_sigma = np.array(
-            [
-                config.position_noise_horizontal_m,
-                config.position_noise_horizontal_m,
-                config.position_noise_vertical_m,
-            ]
-        )
-        velocity_sigma = np.array(
-            [
-                config.velocity_noise_horizontal_mps,
-                config.velocity_noise_horizontal_mps,
-                config.velocity_noise_vertical_mps,
-            ]
-        )
-        baseline_sigma = np.array(
-            [
-                config.baseline_noise_horizontal_m,
-                config.baseline_noise_horizontal_m,
-                config.baseline_noise_vertical_m,
-            ]
-        )
-        latitude, longitude, altitude = offset_geodetic(
-            np.deg2rad(state.latitude_deg),
-            np.deg2rad(state.longitude_deg),
-            state.altitude_m,
-            lever_enu + normals[:, 0] * position_sigma,
-        )
-        lever_velocity_body = np.cross(state.angular_rate_body_rad_s, self.primary_antenna_body_m)
-        velocity = (
-            state.velocity_enu_mps
-            + attitude.apply(lever_velocity_body)
-            + normals[:, 1] * velocity_sigma
-        )
-        baseline = (
-            attitude.apply(self.secondary_antenna_body_m - self.primary_antenna_body_m)
-            + normals[:, 2] * baseline_sigma
-        )
-        heading = np.arctan2(baseline[:, 1], baseline[:, 0])
-        horizontal_length_sq = baseline[:, 0] ** 2 + baseline[:, 1] ** 2
-        heading_variance = config.baseline_noise_horizontal_m**2 / horizontal_length_sq
+        def horizontal_and_vertical(horizontal: float, vertical: float) -> np.ndarray:
+            return np.array([horizontal, horizontal, vertical])
 
+        return (
+            horizontal_and_vertical(
+                config.position_noise_horizontal_m, config.position_noise_vertical_m
+            ),
+            horizontal_and_vertical(
+                config.velocity_noise_horizontal_mps, config.velocity_noise_vertical_mps
+            ),
+            horizontal_and_vertical(
+                config.baseline_noise_horizontal_m, config.baseline_noise_vertical_m
+            ),
+        )
+
+    def validity(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(fix, velocity, heading) valid at scenario times t (s): outside their outages, and
+        a heading only from a dual-antenna receiver."""
+        config = self.config
         fix_valid = ~_in_intervals(t, config.fix_outages_s)
         velocity_valid = fix_valid & ~_in_intervals(t, config.velocity_outages_s)
         heading_valid = fix_valid & ~_in_intervals(t, config.heading_outages_s)
         if config.receiver != "dual_antenna":
             heading_valid[:] = False
+        return fix_valid, velocity_valid, heading_valid
+
+    def measure(self, t_s: ArrayLike) -> GnssSample:
+        """Measurements at times t_s (s), one block of 9 normal draws per sample."""
+        t = _sample_times(t_s)
+        state = self.truth.evaluate(t)
+        normals = self._rng.standard_normal((t.size, 3, 3))
+        position_sigma, velocity_sigma, baseline_sigma = self.noise_sigmas()
+        latitude, longitude, altitude = self._antenna_position(
+            state, normals[:, 0] * position_sigma
+        )
+        velocity = self._antenna_velocity(state, normals[:, 1] * velocity_sigma)
+        baseline = (
+            state.attitude.apply(self.secondary_antenna_body_m - self.primary_antenna_body_m)
+            + normals[:, 2] * baseline_sigma
+        )
+        heading = np.arctan2(baseline[:, 1], baseline[:, 0])
+        horizontal_length_sq = baseline[:, 0] ** 2 + baseline[:, 1] ** 2
+        heading_variance = self.config.baseline_noise_horizontal_m**2 / horizontal_length_sq
+
+        fix_valid, velocity_valid, heading_valid = self.validity(t)
         no_fix = ~fix_valid
         no_heading = ~heading_valid
         latitude_deg = np.where(no_fix, np.nan, np.rad2deg(latitude))
@@ -343,13 +337,6 @@ class GnssSimulator:
         baseline[no_heading] = np.nan
         heading = np.where(no_heading, np.nan, heading)
         heading_variance = np.where(no_heading, np.nan, heading_variance)
-        tertiary = None
-        if self.tertiary_antenna_body_m is not None:
-            tertiary = (
-                attitude.apply(self.tertiary_antenna_body_m - self.primary_antenna_body_m)
-                + self._tertiary_rng.standard_normal((t.size, 3)) * baseline_sigma
-            )
-            tertiary[no_heading] = np.nan
         return GnssSample(
             t_s=t,
             latitude_deg=latitude_deg,
@@ -368,8 +355,38 @@ class GnssSimulator:
             fix_valid=fix_valid,
             velocity_valid=velocity_valid,
             heading_valid=heading_valid,
-            tertiary_baseline_enu_m=tertiary,
+            tertiary_baseline_enu_m=self._tertiary_baseline(state, baseline_sigma, no_heading),
         )
+
+    def _antenna_position(self, state: TruthState, noise_enu_m: np.ndarray):
+        """(latitude rad, longitude rad, ellipsoidal height m) of the primary antenna, its
+        position moved by noise_enu_m (N, 3; ENU, m)."""
+        lever_enu = state.attitude.apply(self.primary_antenna_body_m)
+        return offset_geodetic(
+            np.deg2rad(state.latitude_deg),
+            np.deg2rad(state.longitude_deg),
+            state.altitude_m,
+            lever_enu + noise_enu_m,
+        )
+
+    def _antenna_velocity(self, state: TruthState, noise_enu_mps: np.ndarray) -> np.ndarray:
+        """Velocity over ground of the primary antenna (N, 3; ENU, m/s) plus noise_enu_mps."""
+        lever_velocity_body = np.cross(state.angular_rate_body_rad_s, self.primary_antenna_body_m)
+        return state.velocity_enu_mps + state.attitude.apply(lever_velocity_body) + noise_enu_mps
+
+    def _tertiary_baseline(
+        self, state: TruthState, baseline_sigma_m: np.ndarray, no_heading: np.ndarray
+    ) -> np.ndarray | None:
+        """Measured primary → tertiary vector (N, 3; ENU, m), NaN where there is no heading;
+        None without a third antenna."""
+        if self.tertiary_antenna_body_m is None:
+            return None
+        tertiary = (
+            state.attitude.apply(self.tertiary_antenna_body_m - self.primary_antenna_body_m)
+            + self._tertiary_rng.standard_normal((len(no_heading), 3)) * baseline_sigma_m
+        )
+        tertiary[no_heading] = np.nan
+        return tertiary
 
 
 class AnemometerSimulator:

@@ -20,7 +20,7 @@ from buoy_common.base_node import (
     main_for,
     message_class,
 )
-from buoy_common.parameters import ParameterError
+from buoy_common.parameters import ParameterError, to_ros_value
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS
 from sensor_sim.truth import TruthModel
@@ -55,8 +55,10 @@ class SimulatedSensorNode(SuiteNode):
                 f"give it a sensors.{self.spec.sensor} section (or the scenario_overrides "
                 f"entry 'sensors.{self.spec.sensor}={{}}' for the default one)"
             )
+        # build coerces the values itself: it gets them in the form ROS holds them (intervals
+        # as flat lists), which coercing twice would not keep.
         values = {
-            name: self.declare_value(name, default)
+            name: to_ros_value(self.declare_value(name, default))
             for name, default in self.spec.parameters(self.scenario)
         }
         try:

@@ -38,6 +38,7 @@ from buoy_common.parameters import build_config, config_parameters
 from sensor_sim import messages
 from sensor_sim.geodesy import geodetic_to_enu_m
 from sensor_sim.motion_pack import MICROTESLA, AhrsSimulator, MagnetometerSimulator
+from sensor_sim.mounting import Extrinsics
 from sensor_sim.scenario import Scenario
 from sensor_sim.sensor_errors import (
     AhrsErrorConfig,
@@ -60,22 +61,6 @@ SECONDS_PER_HOUR = 3600.0
 # Per-sensor keys for the seed: every sensor draws its own independent random stream.
 IMU_SEED_KEY, GNSS_SEED_KEY, ANEMOMETER_SEED_KEY = 1, 2, 3
 MAGNETOMETER_SEED_KEY, AHRS_SEED_KEY, DVL_SEED_KEY = 4, 5, 6
-
-
-@dataclass(frozen=True)
-class Extrinsics:
-    """Where the sensors sit on the buoy (shared parameters of the interface contract)."""
-
-    primary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.primary_antenna")
-    secondary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.secondary_antenna")
-    tertiary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.tertiary_antenna")
-    anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
-    anemometer_rpy_deg: tuple[float, float, float] = shared_field("anemometer.rpy_deg")
-    dvl_position_body_m: tuple[float, float, float] = shared_field("dvl.position")
-    dvl_rpy_deg: tuple[float, float, float] = shared_field("dvl.rpy_deg")
-
-    def __post_init__(self):
-        check_shared_fields(self)
 
 
 @dataclass(frozen=True)
@@ -271,7 +256,10 @@ class GnssStream(SensorStream):
     def _messages(self, times_s, stamps_ns):
         if not self.topics:
             return
+        # Measured through the silences too, so the noise of every other sample is the same
+        # with or without them.
         sample = self._simulator.measure(times_s)
+        silent = _in_any_interval(times_s, self.errors.silent_outages_s)
         per_topic = {
             GNSS_FIX_TOPIC: messages.gnss_fix_messages(stamps_ns, sample),
             GNSS_VELOCITY_TOPIC: messages.gnss_velocity_messages(stamps_ns, sample),
@@ -283,11 +271,21 @@ class GnssStream(SensorStream):
                 stamps_ns, sample
             )
         per_topic = {topic: rows for topic, rows in per_topic.items() if topic in self.topics}
-        rows = zip(stamps_ns, *per_topic.values(), strict=True)
-        for stamp, *row in rows:
+        rows = zip(stamps_ns, silent, *per_topic.values(), strict=True)
+        for stamp, is_silent, *row in rows:
+            if is_silent:
+                continue
             for topic, message in zip(per_topic, row, strict=True):
                 if message is not None:
                     yield topic, stamp, message
+
+
+def _in_any_interval(times_s: np.ndarray, intervals_s) -> np.ndarray:
+    """Whether each scenario time (s) lies inside one of the [start, end) intervals (s)."""
+    inside = np.zeros(len(times_s), dtype=bool)
+    for start, end in intervals_s:
+        inside |= (times_s >= start) & (times_s < end)
+    return inside
 
 
 @dataclass
@@ -449,13 +447,22 @@ class StreamSpec:
     def default_rate_hz(self, scenario: Scenario) -> float:
         return getattr(scenario.sensors.rates, self.rate_key)
 
+    def default_time_offset_s(self, scenario: Scenario) -> float:
+        """The scenario's time of this sensor's first sample (s; ``sensors.rates.*_offset_s``,
+        0 for a sensor it gives none): stamps off the other sensors' grids."""
+        offset_key = self.rate_key.removesuffix("_hz") + "_offset_s"
+        return getattr(scenario.sensors.rates, offset_key, 0.0)
+
     def parameters(self, scenario: Scenario) -> list[tuple[str, object]]:
         """(parameter name, default) of every parameter of this stream's node.
 
         Sample rates and sensor error defaults are the scenario's (``sensors.*`` in its file),
         so a scenario and a seed define a run; parameters override them.
         """
-        names = [("rate_hz", float(self.default_rate_hz(scenario))), ("time_offset_s", 0.0)]
+        names = [
+            ("rate_hz", float(self.default_rate_hz(scenario))),
+            ("time_offset_s", float(self.default_time_offset_s(scenario))),
+        ]
         for field_name, (config_type, prefix, renamed) in self.configs.items():
             base = self._scenario_default(scenario, field_name)
             names += [
@@ -470,9 +477,11 @@ class StreamSpec:
 
     def build(self, scenario: Scenario, truth: TruthModel, values: dict) -> SensorStream:
         """The stream configured by parameter ``values`` (absent ones: the scenario's values)."""
-        timing = build_config(
-            StreamTiming, {"rate_hz": self.default_rate_hz(scenario), **values}, renamed={}
-        )
+        defaults = {
+            "rate_hz": self.default_rate_hz(scenario),
+            "time_offset_s": self.default_time_offset_s(scenario),
+        }
+        timing = build_config(StreamTiming, {**defaults, **values}, renamed={})
         configs = {
             field_name: build_config(
                 config_type,

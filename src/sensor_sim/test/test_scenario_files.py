@@ -14,9 +14,16 @@ from sensor_sim.scenario import (
 )
 
 SHIPPED = [
+    "measured_moored_no_gnss",
+    "measured_moored_single_gnss",
     "moored_motion_pack",
     "open_ocean",
     "sea_state",
+    "set_a_imperfect",
+    "set_b_imperfect",
+    "set_c_imperfect",
+    "set_d_imperfect",
+    "set_e_imperfect",
     "ship_current",
     "six_position",
     "static",
@@ -192,3 +199,25 @@ def test_name_key_is_refused(tmp_path):
     path.write_text("name: other\n")
     with pytest.raises(ScenarioError, match="'name' is not allowed"):
         load_scenario(str(path))
+
+
+@pytest.mark.parametrize(
+    ("override", "named"),
+    [
+        ("sensors.rates.gnss_offset_s=0.1", "sensors.rates.gnss_offset_s"),
+        ("sensors.ahrs.claimed_sigma_deg=[0.1, -0.1, 0.5]", "sensors.ahrs.claimed_sigma_deg"),
+        ("sensors.extrinsics.primary_antenna_body_m=[0.7, 0, 1]", "gnss.secondary_antenna"),
+    ],
+)
+def test_imperfection_options_refuse_impossible_values(override, named):
+    # gnss_offset_s must stay within one period of the receiver (10 Hz: 0.1 s).
+    with pytest.raises(ScenarioError, match=named.replace(".", r"\.")):
+        load_scenario("sea_state", overrides=[override])
+
+
+def test_imperfection_options_default_to_the_perfect_sensors():
+    sensors = load_scenario("sea_state").sensors
+    assert sensors.rates.gnss_offset_s == 0.0
+    assert sensors.extrinsics is None
+    assert sensors.gnss.silent_outages_s == ()
+    assert np.isnan(sensors.ahrs.claimed_sigma_deg).all()
