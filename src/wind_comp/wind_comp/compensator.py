@@ -272,13 +272,14 @@ class FlowCompensator:
         """
         stamps, flows = _sample_arrays(sample_t_s, flow_sensor_mps)
         newest_before = self._newest_nav_s()
-        accepted = self.nav_track.extend(*nav)
         nav_t_s = np.asarray(nav[0], dtype=float)
-        # Newest accepted navigation stamp after each number of navigation arrivals.
-        newest_after = np.maximum.accumulate(
-            np.concatenate(([newest_before], np.where(accepted, nav_t_s, -np.inf)))
-        )
-        self._enqueue(stamps, flows, newest_after[np.asarray(nav_before_sample, dtype=np.intp)])
+        accepted = self.nav_track.extend(*nav) if nav_t_s.shape[0] else np.zeros(0, dtype=bool)
+        if stamps.shape[0]:
+            # Newest accepted navigation stamp after each number of navigation arrivals.
+            newest_after = np.maximum.accumulate(
+                np.concatenate(([newest_before], np.where(accepted, nav_t_s, -np.inf)))
+            )
+            self._enqueue(stamps, flows, newest_after[np.asarray(nav_before_sample, dtype=np.intp)])
         return int(np.count_nonzero(accepted))
 
     def ready(self) -> CorrectedBatch:

@@ -245,19 +245,9 @@ class CompensationPipeline:
         if not nav and not samples:
             return
         self._nav, self._samples, self._nav_before_sample = array("d"), array("d"), []
-        columns = np.frombuffer(nav, dtype=float).reshape(-1, _NAV_FIELDS)
-        quats, rates, velocities_body = columns[:, 1:5], columns[:, 5:8], columns[:, 8:11]
-        rates_nb = level_rate_components(rates.T, quats.T, columns[:, 11])
-        velocities_enu = rotate_by_quaternion_components(quats.T, velocities_body.T)
         flows = np.frombuffer(samples, dtype=float).reshape(-1, _SAMPLE_FIELDS)
         self.compensator.add_arrivals(
-            (
-                columns[:, 0],
-                quats,
-                np.stack(rates_nb, axis=-1),
-                np.stack(velocities_enu, axis=-1),
-                columns[:, 12] == 1.0,
-            ),
+            _navigation_columns(np.frombuffer(nav, dtype=float).reshape(-1, _NAV_FIELDS)),
             flows[:, 0],
             flows[:, 1:],
             nav_before_sample,
@@ -272,6 +262,24 @@ class CompensationPipeline:
         # closed by one sample share their last sample.
         products.sort(key=lambda product: product.last_sample_s)
         return CompensationOutput(corrected, products)
+
+
+def _navigation_columns(odometry: np.ndarray) -> tuple:
+    """What :meth:`FlowCompensator.add_arrivals` takes of the navigation, from (M, 13) rows
+    of stamp s, attitude xyzw, ω_ib rad/s (body), body velocity m/s, latitude deg and trusted
+    (1 or 0): stamps, attitudes, ω_nb (body, rad/s), ENU velocities (m/s), trusted."""
+    quats, rates, velocities_body = odometry[:, 1:5], odometry[:, 5:8], odometry[:, 8:11]
+    if not odometry.shape[0]:
+        return odometry[:, 0], quats, rates, velocities_body, odometry[:, 12] == 1.0
+    rates_nb = level_rate_components(rates.T, quats.T, odometry[:, 11])
+    velocities_enu = rotate_by_quaternion_components(quats.T, velocities_body.T)
+    return (
+        odometry[:, 0],
+        quats,
+        np.stack(rates_nb, axis=-1),
+        np.stack(velocities_enu, axis=-1),
+        odometry[:, 12] == 1.0,
+    )
 
 
 def wind_pipeline(config: CompensatorConfig) -> CompensationPipeline:
