@@ -310,11 +310,59 @@ class _NavSamples:
         self._end = n_kept
 
 
+# Acceptance of navigation samples: the same rules for one sample and many.
+
+
+def _validated_arrays(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps):
+    """Convert to float arrays of matching length N, raising on wrong shapes."""
+    stamps = _float_array("t_s", t_s)
+    quats = _float_array("quat_xyzw", quat_xyzw)
+    rates = _float_array("angular_rate_body_rad_s", angular_rate_body_rad_s)
+    velocities = _float_array("velocity_enu_mps", velocity_enu_mps)
+    if stamps.ndim != 1:
+        raise NavTrackError(f"navigation stamps must have shape (N,), got {stamps.shape}")
+    n_samples = stamps.shape[0]
+    for name, array, width in (
+        ("quat_xyzw", quats, 4),
+        ("angular_rate_body_rad_s", rates, 3),
+        ("velocity_enu_mps", velocities, 3),
+    ):
+        if array.shape != (n_samples, width):
+            raise NavTrackError(
+                f"{name} must have shape ({n_samples}, {width}) to match the stamps, "
+                f"got {array.shape}"
+            )
+    return stamps, quats, rates, velocities
+
+
+def _float_array(name: str, values) -> np.ndarray:
+    try:
+        return np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise NavTrackError(f"{name} must be numbers, got {values!r}") from error
+
+
+def _well_formed(stamps, quats, rates, velocities) -> np.ndarray:
+    """(N,) True where every value is finite and the quaternion is not zero."""
+    finite = (
+        np.isfinite(stamps)
+        & np.all(np.isfinite(quats), axis=1)
+        & np.all(np.isfinite(rates), axis=1)
+        & np.all(np.isfinite(velocities), axis=1)
+    )
+    return finite & (
+        quaternion_norm(*np.where(finite[:, None], quats, 0.0).T) > MIN_QUATERNION_NORM
+    )
+
+
 def _later_than_every_earlier(stamps_s: np.ndarray, newest_s: float) -> np.ndarray:
     """(N,) True where a stamp is later than ``newest_s`` and every earlier stamp (-inf
     stamps are never later)."""
     running_newest = np.maximum.accumulate(np.concatenate(([newest_s], stamps_s)))
     return stamps_s > running_newest[:-1]
+
+
+# Interpolation at query stamps, on columns of any length.
 
 
 def _first_usable(stamps_s: np.ndarray, horizon_s):
@@ -414,48 +462,6 @@ def slerp_components(start_xyzw, end_xyzw, fraction) -> tuple:
         np.cos(partial_half_angle),
     )
     return quaternion_multiply(start_xyzw, partial)
-
-
-def _validated_arrays(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps):
-    """Convert to float arrays of matching length N, raising on wrong shapes."""
-    stamps = _float_array("t_s", t_s)
-    quats = _float_array("quat_xyzw", quat_xyzw)
-    rates = _float_array("angular_rate_body_rad_s", angular_rate_body_rad_s)
-    velocities = _float_array("velocity_enu_mps", velocity_enu_mps)
-    if stamps.ndim != 1:
-        raise NavTrackError(f"navigation stamps must have shape (N,), got {stamps.shape}")
-    n_samples = stamps.shape[0]
-    for name, array, width in (
-        ("quat_xyzw", quats, 4),
-        ("angular_rate_body_rad_s", rates, 3),
-        ("velocity_enu_mps", velocities, 3),
-    ):
-        if array.shape != (n_samples, width):
-            raise NavTrackError(
-                f"{name} must have shape ({n_samples}, {width}) to match the stamps, "
-                f"got {array.shape}"
-            )
-    return stamps, quats, rates, velocities
-
-
-def _float_array(name: str, values) -> np.ndarray:
-    try:
-        return np.asarray(values, dtype=float)
-    except (TypeError, ValueError) as error:
-        raise NavTrackError(f"{name} must be numbers, got {values!r}") from error
-
-
-def _well_formed(stamps, quats, rates, velocities) -> np.ndarray:
-    """(N,) True where every value is finite and the quaternion is not zero."""
-    finite = (
-        np.isfinite(stamps)
-        & np.all(np.isfinite(quats), axis=1)
-        & np.all(np.isfinite(rates), axis=1)
-        & np.all(np.isfinite(velocities), axis=1)
-    )
-    return finite & (
-        quaternion_norm(*np.where(finite[:, None], quats, 0.0).T) > MIN_QUATERNION_NORM
-    )
 
 
 def quaternion_norm(x, y, z, w):
