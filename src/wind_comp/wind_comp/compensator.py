@@ -195,7 +195,7 @@ class _Corrector:
             self._mounting_elements,
             self._lever_arm_elements_body_m,
         )
-        return np.stack([np.stack(term, axis=-1) for term in terms])
+        return np.array(terms).transpose(0, 2, 1)
 
 
 _NOTHING_DECIDED = CorrectedBatch(
@@ -326,6 +326,9 @@ class FlowCompensator:
     def _decide(self) -> None:
         """Correct the pending samples that the navigation now brackets (or never will)."""
         first, tail = self._first_pending, self._tail
+        if first == tail:
+            self.nav_track.forget_old_samples()
+            return
         # A stamp after the newest navigation sample can only wait: no need to look it up.
         undecided = first + np.flatnonzero(
             (self._status[first:tail] == _PENDING) & (self._t_s[first:tail] <= self._newest_nav_s())

@@ -179,14 +179,13 @@ class NavTrack:
         self.n_rejected_invalid += int(np.count_nonzero(~well_formed))
         self.n_rejected_out_of_order += int(np.count_nonzero(well_formed)) - n_accepted
         self.n_accepted += n_accepted
-        if n_accepted:
-            self._samples.add(
-                stamps[accepted],
-                _normalised(quats[accepted]),
-                rates[accepted],
-                velocities[accepted],
-                np.broadcast_to(trusted, accepted.shape)[accepted],
+        trusted = np.broadcast_to(trusted, accepted.shape)
+        if n_accepted < accepted.shape[0]:
+            stamps, quats, rates, velocities, trusted = (
+                column[accepted] for column in (stamps, quats, rates, velocities, trusted)
             )
+        if n_accepted:
+            self._samples.add(stamps, _normalised(quats), rates, velocities, trusted)
         return accepted
 
     def forget_old_samples(self) -> None:
@@ -344,12 +343,7 @@ def _float_array(name: str, values) -> np.ndarray:
 
 def _well_formed(stamps, quats, rates, velocities) -> np.ndarray:
     """(N,) True where every value is finite and the quaternion is not zero."""
-    finite = (
-        np.isfinite(stamps)
-        & np.all(np.isfinite(quats), axis=1)
-        & np.all(np.isfinite(rates), axis=1)
-        & np.all(np.isfinite(velocities), axis=1)
-    )
+    finite = np.isfinite(np.column_stack((stamps, quats, rates, velocities))).all(axis=1)
     return finite & (
         quaternion_norm(*np.where(finite[:, None], quats, 0.0).T) > MIN_QUATERNION_NORM
     )
