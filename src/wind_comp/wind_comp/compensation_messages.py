@@ -226,6 +226,10 @@ def dvl_record(
     return dvl_sample(message, expected_frame_id), stamp.sec, stamp.nanosec
 
 
+ATTITUDE_VARIANCE_INDICES = (21, 28, 35)
+"""Where the roll, pitch and yaw variances sit in the 6x6 row-major pose covariance."""
+
+
 def odometry_fields(message) -> tuple[float, tuple, tuple, tuple, float]:
     """Stamp (s), attitude quaternion (x, y, z, w), body rate ω_ib and body velocity (tuples of
     floats) and the largest attitude error variance (rad², from the pose covariance; NaN counts
@@ -276,10 +280,6 @@ def largest_attitude_variance_rad2(variances) -> float:
     :data:`ATTITUDE_VARIANCE_INDICES`); NaN counts as unknown, i.e. infinite."""
     # max() would pass a NaN over: an unknown variance is an infinite one.
     return max(math.inf if math.isnan(v) else v for v in variances)
-
-
-ATTITUDE_VARIANCE_INDICES = (21, 28, 35)
-"""Where the roll, pitch and yaw variances sit in the 6x6 row-major pose covariance."""
 
 
 def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body, variances):

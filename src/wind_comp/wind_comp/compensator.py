@@ -164,7 +164,9 @@ _N_OUTPUTS = 4
 
 class _Corrector:
     """Navigation lookup plus Miller correction of samples that passed screening: the one
-    correction every path runs, on a batch of any length (one sample, live)."""
+    correction every path runs, on a batch of any length (one sample, live). A further output
+    of the correction (its covariance) belongs in :meth:`correct`, computed on the same valid
+    rows of the same interpolated navigation, and in the queue of :class:`FlowCompensator`."""
 
     def __init__(self, sensor: FlowSensor):
         mounting_matrix = mounting_rotation_from_rpy_deg(sensor.rpy_deg).as_matrix()
