@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import Vector3Stamped
+from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 from scipy.spatial.transform import Rotation
@@ -21,14 +21,18 @@ from buoy_nav.rotations import rotate_by_quaternion_components
 from wind_comp.compensation_messages import (
     STATS_FIELDS,
     MalformedMessageError,
+    anemometer_record,
     anemometer_sample,
     anemometer_sample_cdr,
+    dvl_record,
     fix_fields,
     fix_fields_cdr,
+    fix_record,
     flow_cdr,
     flows_cdr,
     odometry_fields,
     odometry_fields_cdr,
+    odometry_record,
     product_messages,
     stats_values,
 )
@@ -313,3 +317,66 @@ def test_nav_cdr_readers_decline_what_they_do_not_handle():
     for reader, raw in ((odometry_fields_cdr, odometry_raw), (fix_fields_cdr, fix_raw)):
         assert reader(b"\x01\x00" + raw[2:]) is None  # big-endian
         assert reader(raw[:14]) is None
+
+
+def decoded_as(message_type, calls: list):
+    """A decoder of ``message_type`` that notes each use in ``calls``."""
+
+    def decode(raw):
+        calls.append(raw)
+        return deserialize_message(raw, message_type)
+
+    return decode
+
+
+def test_records_read_the_bytes_where_they_can_and_decode_the_rest_alike():
+    """Live and offline read a message through the same record readers: from its CDR bytes,
+    or from the message decoded when the CDR reader declines them."""
+    calls = []
+    message = wind([3.0, -4.0, 0.5], sec=1_767_225_600, nanosec=123_456_789)
+    raw = serialize_message(message)
+    big_endian = b"\x01\x00" + raw[2:]  # what the CDR reader declines, decoded from `raw`
+    from_cdr = anemometer_record(raw, decoded_as(Vector3Stamped, calls))
+    assert calls == []
+    from_decoded = anemometer_record(big_endian, lambda _: message)
+    assert from_cdr == from_decoded == (anemometer_sample(message), 1_767_225_600, 123_456_789)
+
+    odometry_message = odometry([0.1, -0.2, 0.3, 0.9], [0.01, -0.02, 0.03], [1.5, -0.4, 0.2])
+    odometry_message.pose.covariance[28] = math.nan  # unknown: an infinite variance
+    odometry_raw = serialize_message(odometry_message)
+    read = odometry_record(odometry_raw, decoded_as(Odometry, calls))
+    assert calls == []
+    assert read == odometry_record(b"\x01\x00" + odometry_raw[2:], lambda _: odometry_message)
+    assert read[4] == math.inf
+
+    fix = NavSatFix()
+    fix.status.status, fix.latitude = NavSatStatus.STATUS_FIX, -33.5
+    fix_raw = serialize_message(fix)
+    assert fix_record(fix_raw, decoded_as(NavSatFix, calls)) == (0, -33.5)
+    assert calls == []
+    assert fix_record(b"\x01\x00" + fix_raw[2:], lambda _: fix) == (0, -33.5)
+
+
+@pytest.mark.parametrize(
+    ("velocity", "frame", "reason"),
+    [
+        ([0.5, -0.25, 0.125], "dvl_link", None),
+        ([math.nan, 0.0, 0.0], "dvl_link", "non_finite"),
+        ([0.5, -0.25, 0.125], "adcp_link", "wrong_frame"),
+    ],
+)
+def test_dvl_record_is_the_water_past_the_dvl_with_the_header_stamp(velocity, frame, reason):
+    message = TwistWithCovarianceStamped()
+    message.header.stamp.sec, message.header.stamp.nanosec = 42, 250_000_000
+    message.header.frame_id = frame
+    linear = message.twist.twist.linear
+    linear.x, linear.y, linear.z = velocity
+    calls = []
+    sample, sec, nanosec = dvl_record(
+        serialize_message(message), decoded_as(TwistWithCovarianceStamped, calls)
+    )
+    assert len(calls) == 1
+    assert (sample.t_s, sec, nanosec, sample.rejection) == (42.25, 42, 250_000_000, reason)
+    expected = [-v for v in velocity] if reason is None else [math.nan] * 3
+    np.testing.assert_array_equal(sample.flow_sensor_mps, expected)
+    assert sample.frame_id == (frame if reason == "wrong_frame" else "")

@@ -181,7 +181,7 @@ def test_extending_in_chunks_matches_appending_one_by_one_with_bounded_history()
         np.testing.assert_array_equal(a.velocity_enu_mps, b.velocity_enu_mps)
 
 
-def test_one_stamp_in_floats_is_interpolated_exactly_as_in_a_batch_for_every_outcome():
+def test_one_stamp_alone_is_interpolated_exactly_as_in_a_batch_for_every_outcome():
     rng = np.random.default_rng(24)
     stamps = np.cumsum(rng.uniform(0.005, 0.04, 300))
     stamps[270:] += 0.5  # a gap longer than max_gap_s, inside the kept history
@@ -203,12 +203,14 @@ def test_one_stamp_in_floats_is_interpolated_exactly_as_in_a_batch_for_every_out
     batch = track.interpolate(queries)
     assert set(batch.status.tolist()) == set(InterpolationStatus)
     for k, query in enumerate(queries.tolist()):
-        status, attitude, rate, velocity = track.interpolate_one(query)
-        assert status == batch.status[k]
-        np.testing.assert_array_equal(attitude, batch.attitude_xyzw[k])
-        np.testing.assert_array_equal(rate, batch.angular_rate_body_rad_s[k])
-        np.testing.assert_array_equal(velocity, batch.velocity_enu_mps[k])
-    assert NavTrack().interpolate_one(1.0)[0] == InterpolationStatus.AFTER_END
+        one = track.interpolate([query])
+        assert one.status[0] == batch.status[k]
+        np.testing.assert_array_equal(one.attitude_xyzw[0], batch.attitude_xyzw[k])
+        np.testing.assert_array_equal(
+            one.angular_rate_body_rad_s[0], batch.angular_rate_body_rad_s[k]
+        )
+        np.testing.assert_array_equal(one.velocity_enu_mps[0], batch.velocity_enu_mps[k])
+    assert NavTrack().interpolate([1.0]).status[0] == InterpolationStatus.AFTER_END
 
 
 def test_history_is_bounded_and_old_stamps_are_reported_evicted():
@@ -248,9 +250,9 @@ def test_queries_as_of_an_earlier_newest_stamp_are_answered_with_the_history_the
         expected = reference.interpolate(queries[k : k + 1])
         assert later.status[k] == expected.status[0]
         np.testing.assert_array_equal(later.velocity_enu_mps[k], expected.velocity_enu_mps[0])
-        one = whole.interpolate_one(queries[k], as_of_s)
-        assert one[0] == later.status[k]
-        np.testing.assert_array_equal(one[3], later.velocity_enu_mps[k])
+        one = whole.interpolate(queries[k : k + 1], as_of_s)
+        assert one.status[0] == later.status[k]
+        np.testing.assert_array_equal(one.velocity_enu_mps[0], later.velocity_enu_mps[k])
     assert {InterpolationStatus.EVICTED, InterpolationStatus.OK} <= set(later.status.tolist())
     # Asked before any sample arrived: nothing was forgotten.
     early = whole.interpolate(stamps[5:6] + 0.001, as_of_newest_s=-np.inf)

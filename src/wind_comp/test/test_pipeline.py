@@ -253,8 +253,8 @@ def test_earth_rate_is_kept_without_a_latitude():
     )
 
 
-def test_one_message_in_floats_converts_exactly_as_a_batch_of_messages():
-    # The node converts each nav/odometry in plain floats, process_bag whole columns.
+def test_one_message_converts_exactly_as_a_batch_of_messages():
+    # The node converts each nav/odometry as a column of one, process_bag whole columns.
     attitudes = Rotation.random(40, random_state=13).as_quat() * RNG.uniform(0.5, 2.0, (40, 1))
     rates = RNG.normal(0, 0.3, (40, 3))
     velocities_body = RNG.normal(0, 2.0, (40, 3))
@@ -265,11 +265,11 @@ def test_one_message_in_floats_converts_exactly_as_a_batch_of_messages():
         rotate_by_quaternion_components(attitudes.T, velocities_body.T), axis=-1
     )
     for k in range(40):
-        quat, rate = tuple(attitudes[k].tolist()), tuple(rates[k].tolist())
-        one_rate = level_rate_components(rate, quat, float(latitudes_deg[k]))
-        one_velocity = rotate_by_quaternion_components(quat, tuple(velocities_body[k].tolist()))
-        np.testing.assert_array_equal(np.array(one_rate, dtype=float), batch_rates[k])
-        np.testing.assert_array_equal(np.array(one_velocity, dtype=float), batch_velocities[k])
+        one = slice(k, k + 1)
+        one_rate = level_rate_components(rates[one].T, attitudes[one].T, latitudes_deg[one])
+        one_velocity = rotate_by_quaternion_components(attitudes[one].T, velocities_body[one].T)
+        np.testing.assert_array_equal(np.stack(one_rate, axis=-1)[0], batch_rates[k])
+        np.testing.assert_array_equal(np.stack(one_velocity, axis=-1)[0], batch_velocities[k])
     np.testing.assert_array_equal(batch_rates[[3, 17]], rates[[3, 17]])
 
 

@@ -148,7 +148,7 @@ def anemometer_sample(message, expected_frame_id: str = ANEMOMETER_FRAME) -> Flo
     Stamp order is checked by the compensation itself.
     """
     vector = message.vector
-    return _wind_sample(
+    return _flow_sample(
         stamp_to_seconds(message.header.stamp),
         message.header.frame_id,
         (float(vector.x), float(vector.y), float(vector.z)),
@@ -166,20 +166,22 @@ def anemometer_sample_cdr(
     if fields is None:
         return None
     sec, nanosec, frame_id, vector = fields
-    return _wind_sample(sec + nanosec * 1e-9, frame_id, vector, expected_frame_id), sec, nanosec
+    return _flow_sample(sec + nanosec * 1e-9, frame_id, vector, expected_frame_id), sec, nanosec
 
 
 _NAN_VECTOR = (math.nan, math.nan, math.nan)
 
 
-def _wind_sample(
-    t_s: float, frame_id: str, wind: tuple[float, float, float], expected_frame_id: str
+def _flow_sample(
+    t_s: float, frame_id: str, flow_sensor_mps: tuple[float, float, float], expected_frame_id: str
 ) -> FlowSample:
+    """A sensor sample (stamp s, the fluid's velocity past the sensor in its axes m/s), rejected
+    with NaN in another frame than ``expected_frame_id`` or when not finite."""
     if frame_id != expected_frame_id:
         return FlowSample(t_s, _NAN_VECTOR, Reason.WRONG_FRAME, frame_id)
-    if not all(math.isfinite(component) for component in wind):
+    if not all(math.isfinite(component) for component in flow_sensor_mps):
         return FlowSample(t_s, _NAN_VECTOR, Reason.NON_FINITE)
-    return FlowSample(t_s, wind, None)
+    return FlowSample(t_s, flow_sensor_mps, None)
 
 
 def dvl_sample(message, expected_frame_id: str = DVL_FRAME) -> FlowSample:
@@ -192,14 +194,40 @@ def dvl_sample(message, expected_frame_id: str = DVL_FRAME) -> FlowSample:
     (invalid) output for it, in order. Speed and stamp order are checked by the compensation.
     """
     linear = message.twist.twist.linear
-    t_s = stamp_to_seconds(message.header.stamp)
-    frame_id = message.header.frame_id
-    if frame_id != expected_frame_id:
-        return FlowSample(t_s, _NAN_VECTOR, Reason.WRONG_FRAME, frame_id)
-    velocity = (float(linear.x), float(linear.y), float(linear.z))
-    if not all(math.isfinite(component) for component in velocity):
-        return FlowSample(t_s, _NAN_VECTOR, Reason.NON_FINITE)
-    return FlowSample(t_s, (-velocity[0], -velocity[1], -velocity[2]), None)
+    return _flow_sample(
+        stamp_to_seconds(message.header.stamp),
+        message.header.frame_id,
+        (-float(linear.x), -float(linear.y), -float(linear.z)),
+        expected_frame_id,
+    )
+
+
+def anemometer_record(
+    raw: bytes, decode, expected_frame_id: str = ANEMOMETER_FRAME
+) -> tuple[FlowSample, int, int]:
+    """An ``anemometer/wind`` message's CDR bytes as (:func:`anemometer_sample`, header sec,
+    header nanosec): read straight from the bytes where the CDR reader handles them, else from
+    ``decode(raw)``, the decoded message (rclpy's or a bag reader's)."""
+    parsed = anemometer_sample_cdr(raw, expected_frame_id)
+    if parsed is None:
+        message = decode(raw)
+        stamp = message.header.stamp
+        parsed = anemometer_sample(message, expected_frame_id), stamp.sec, stamp.nanosec
+    return parsed
+
+
+def dvl_record(
+    raw: bytes, decode, expected_frame_id: str = DVL_FRAME
+) -> tuple[FlowSample, int, int]:
+    """A ``dvl/velocity`` message's CDR bytes as (:func:`dvl_sample`, header sec, header
+    nanosec), decoded by ``decode(raw)`` (one ping a second: no CDR reader of its own)."""
+    message = decode(raw)
+    stamp = message.header.stamp
+    return dvl_sample(message, expected_frame_id), stamp.sec, stamp.nanosec
+
+
+ATTITUDE_VARIANCE_INDICES = (21, 28, 35)
+"""Where the roll, pitch and yaw variances sit in the 6x6 row-major pose covariance."""
 
 
 def odometry_fields(message) -> tuple[float, tuple, tuple, tuple, float]:
@@ -217,7 +245,7 @@ def odometry_fields(message) -> tuple[float, tuple, tuple, tuple, float]:
         (float(orientation.x), float(orientation.y), float(orientation.z), float(orientation.w)),
         (float(angular.x), float(angular.y), float(angular.z)),
         (float(linear.x), float(linear.y), float(linear.z)),
-        (float(covariance[21]), float(covariance[28]), float(covariance[35])),
+        tuple(float(covariance[index]) for index in ATTITUDE_VARIANCE_INDICES),
     )
 
 
@@ -240,6 +268,20 @@ def odometry_fields_cdr(raw: bytes) -> tuple[float, tuple, tuple, tuple] | None:
     )
 
 
+def odometry_record(raw: bytes, decode) -> tuple[float, tuple, tuple, tuple, float]:
+    """:func:`odometry_fields` of a ``nav/odometry`` message's CDR bytes: read straight from
+    the bytes where the CDR reader handles them, else from ``decode(raw)``."""
+    fields = odometry_fields_cdr(raw)
+    return odometry_fields(decode(raw)) if fields is None else fields
+
+
+def largest_attitude_variance_rad2(variances) -> float:
+    """The largest of the attitude error variances (rad², the pose covariance's diagonal at
+    :data:`ATTITUDE_VARIANCE_INDICES`); NaN counts as unknown, i.e. infinite."""
+    # max() would pass a NaN over: an unknown variance is an infinite one.
+    return max(math.inf if math.isnan(v) else v for v in variances)
+
+
 def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body, variances):
     if frame_id != MAP_FRAME or child_frame_id != BODY_FRAME:
         raise MalformedMessageError(
@@ -251,9 +293,7 @@ def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body, 
         raise MalformedMessageError(Reason.NON_FINITE, "odometry orientation, rate or velocity")
     if quaternion_norm(*quat) < MIN_QUATERNION_NORM:
         raise MalformedMessageError(Reason.ZERO_QUATERNION, "odometry orientation has zero length")
-    # max() would pass a NaN over: an unknown variance is an infinite one.
-    largest_variance = max(math.inf if math.isnan(v) else v for v in variances)
-    return t_s, quat, rate, velocity_body, largest_variance
+    return t_s, quat, rate, velocity_body, largest_attitude_variance_rad2(variances)
 
 
 def fix_fields(message) -> tuple[int, float]:
@@ -268,6 +308,13 @@ def fix_fields_cdr(raw: bytes) -> tuple[int, float] | None:
     if fields is None:
         return None
     return fields[3], fields[5]
+
+
+def fix_record(raw: bytes, decode) -> tuple[int, float]:
+    """:func:`fix_fields` of a ``nav/fix`` message's CDR bytes: read straight from the bytes
+    where the CDR reader handles them, else from ``decode(raw)``."""
+    fields = fix_fields_cdr(raw)
+    return fix_fields(decode(raw)) if fields is None else fields
 
 
 _MAP_VECTOR_CDR = cdr.Vector3StampedWriter(MAP_FRAME)

@@ -59,6 +59,7 @@ counted and warned about (rate-limited). A rejected anemometer message still yie
 from __future__ import annotations
 
 import collections
+import functools
 import math
 import time
 
@@ -87,16 +88,12 @@ from buoy_common.contract import (
     wind_stats_topic,
 )
 from wind_comp.compensation_messages import (
-    FlowSample,
     MalformedMessageError,
-    anemometer_sample,
-    anemometer_sample_cdr,
-    fix_fields,
-    fix_fields_cdr,
+    anemometer_record,
+    fix_record,
     flow_cdr,
     flux_message,
-    odometry_fields,
-    odometry_fields_cdr,
+    odometry_record,
     product_messages,
     temperature_sample,
 )
@@ -120,6 +117,15 @@ WIND_NAV_TIMEOUT_S = 1.0
 DIAGNOSTICS_PERIOD_S = 1.0
 
 
+def _decoder(message_type: type):
+    """What decodes a message of ``message_type`` from its CDR bytes."""
+    return functools.partial(deserialize_message, message_type=message_type)
+
+
+_DECODE_ODOMETRY = _decoder(Odometry)
+_DECODE_FIX = _decoder(NavSatFix)
+
+
 class PendingStamp:
     """Header stamp and wall arrival time of a sensor sample awaiting its output."""
 
@@ -136,8 +142,7 @@ class CorrectionNode(FlushingNode):
     """What ``compensation_node`` and ``current_node`` share: the navigation (``nav/odometry``,
     ``nav/fix``) and one flow sensor's samples in, exactly one corrected sample per sensor
     sample out with the sensor sample's stamp, the products of the averaging windows, and
-    ``diagnostics``. A subclass names its topics and reads its sensor's messages
-    (:meth:`read_sample`)."""
+    ``diagnostics``. A subclass names its topics and how its sensor's messages are read."""
 
     def __init__(
         self,
@@ -147,6 +152,7 @@ class CorrectionNode(FlushingNode):
         make_pipeline,
         sensor_topic: str,
         sensor_message_type: type,
+        read_record,
         output_topic: str,
         product_topics,
         samples_name: str,
@@ -159,6 +165,9 @@ class CorrectionNode(FlushingNode):
         config_type, make_pipeline: the configuration dataclass, declared as parameters, and
             what makes the pipeline of such a configuration.
         sensor_topic, sensor_message_type: the flow sensor's input.
+        read_record: a sensor message's CDR bytes, a decoder of them and the frame expected as
+            (sample, header sec, header nanosec) (:func:`anemometer_record`,
+            :func:`dvl_record` of :mod:`wind_comp.compensation_messages`).
         output_topic: one corrected sample per input, frame ``map``.
         product_topics: (mean topic, statistics topic) of a window length (s).
         samples_name: what the diagnostics call the input samples (``wind``, ``dvl``).
@@ -180,6 +189,8 @@ class CorrectionNode(FlushingNode):
                 f"parameter '{nav_timeout_parameter}' must be positive, got {self.nav_timeout_s}"
             )
         self.sensor_topic = sensor_topic
+        self._read_record = read_record
+        self._decode_sample = _decoder(sensor_message_type)
         self.samples_name = samples_name
         self.expected_frame_id: str = getattr(self.config, frame_field)
         self._frame_parameter = parameter_prefix + frame_field
@@ -216,16 +227,11 @@ class CorrectionNode(FlushingNode):
             f"{[averager.window_s for averager in self.pipeline.averagers]} s"
         )
 
-    def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:
-        """A sensor message's CDR bytes as (sample, header sec, header nanosec), rejected
-        unless in frame :attr:`expected_frame_id`."""
-        raise NotImplementedError
-
     # -- inputs -----------------------------------------------------------------------------
 
     def on_sample(self, raw: bytes) -> None:
         self._counters["samples_in"] += 1
-        sample, sec, nanosec = self.read_sample(raw)
+        sample, sec, nanosec = self._read_record(raw, self._decode_sample, self.expected_frame_id)
         rejection = self.pipeline.add_sample(sample)
         if rejection is not None:
             self.reject(self.sensor_topic, rejection)
@@ -256,9 +262,7 @@ class CorrectionNode(FlushingNode):
     def on_odometry(self, raw: bytes) -> None:
         self._counters["nav_in"] += 1
         try:
-            fields = odometry_fields_cdr(raw)
-            if fields is None:
-                fields = odometry_fields(deserialize_message(raw, Odometry))
+            fields = odometry_record(raw, _DECODE_ODOMETRY)
         except MalformedMessageError as error:
             self.reject(NAV_ODOMETRY_TOPIC, error.reason)
             return
@@ -270,10 +274,7 @@ class CorrectionNode(FlushingNode):
 
     def on_fix(self, raw: bytes) -> None:
         self._counters["fix_in"] += 1
-        fields = fix_fields_cdr(raw)
-        if fields is None:
-            fields = fix_fields(deserialize_message(raw, NavSatFix))
-        rejection = self.pipeline.add_fix(*fields)
+        rejection = self.pipeline.add_fix(*fix_record(raw, _DECODE_FIX))
         if rejection is not None:
             self.reject(NAV_FIX_TOPIC, rejection)
 
@@ -368,6 +369,7 @@ class CompensationNode(CorrectionNode):
             wind_pipeline,
             WIND_RAW_TOPIC,
             Vector3Stamped,
+            anemometer_record,
             WIND_TRUE_TOPIC,
             (wind_mean_topic, wind_stats_topic),
             "wind",
@@ -409,14 +411,6 @@ class CompensationNode(CorrectionNode):
         level, text, values = super().report()
         values["temperature_messages_in"] = self._counters["temperature_in"]
         return level, text, values
-
-    def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:
-        parsed = anemometer_sample_cdr(raw, self.expected_frame_id)
-        if parsed is None:
-            message = deserialize_message(raw, Vector3Stamped)
-            stamp = message.header.stamp
-            parsed = anemometer_sample(message, self.expected_frame_id), stamp.sec, stamp.nanosec
-        return parsed
 
 
 main = main_for(CompensationNode)

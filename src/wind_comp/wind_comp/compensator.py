@@ -16,9 +16,9 @@ it), not on when messages happen to arrive, with two exceptions. The live-only
 :meth:`FlowCompensator.expire` gives up on samples whose navigation is late. And a sample that
 arrives lagging the newest navigation by more than ``nav_history_s`` finds its navigation
 forgotten. Both depend on the order of arrival only, never on how often the results are
-collected: samples may be added one at a time (the live nodes, in plain floats) or as stretches
-of interleaved arrivals (:meth:`FlowCompensator.add_arrivals`, offline, on columns), with
-bit-identical results.
+collected: samples may be added one at a time (the live nodes) or as stretches of interleaved
+arrivals (:meth:`FlowCompensator.add_arrivals`, offline), with bit-identical results: both run
+the same column arithmetic, on a batch of one sample or of many.
 """
 
 import math
@@ -30,7 +30,7 @@ import numpy as np
 from buoy_common.contract import Reason
 from buoy_nav.rotations import rotation_matrix_elements
 from wind_comp.miller import miller_components, mounting_rotation_from_rpy_deg
-from wind_comp.nav_interpolation import InterpolationStatus, NavTrack
+from wind_comp.nav_interpolation import InterpolatedNav, InterpolationStatus, NavTrack
 
 
 class CompensatorInputError(ValueError):
@@ -158,74 +158,48 @@ def _screen_samples(
     return status, float(running_latest[-1])
 
 
-def _screen_one_sample(
-    t_s: float, x: float, y: float, z: float, latest_stamp_s: float, max_speed_mps: float
-) -> tuple[int, float]:
-    """:func:`_screen_samples` of one sample in plain floats (the same decisions)."""
-    finite_stamp = math.isfinite(t_s)
-    stamp_ok = finite_stamp and t_s > latest_stamp_s
-    if finite_stamp:
-        latest_stamp_s = max(latest_stamp_s, t_s)
-    if not stamp_ok:
-        return SampleStatus.INVALID_STAMP, latest_stamp_s
-    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
-        return SampleStatus.INVALID_MEASUREMENT, latest_stamp_s
-    if math.sqrt(x * x + y * y + z * z) > max_speed_mps:
-        return SampleStatus.SPEED_OUT_OF_RANGE, latest_stamp_s
-    return _PENDING, latest_stamp_s
+_N_OUTPUTS = 4
+"""Output vectors per sample: the corrected flow and its three Miller terms."""
 
 
 class _Corrector:
-    """Navigation lookup plus Miller correction for samples that passed screening."""
+    """Navigation lookup plus Miller correction of samples that passed screening: the one
+    correction every path runs, on a batch of any length (one sample, live). A further output
+    of the correction (its covariance) belongs in :meth:`correct`, computed on the same valid
+    rows of the same interpolated navigation, and in the queue of :class:`FlowCompensator`."""
 
     def __init__(self, sensor: FlowSensor):
         mounting_matrix = mounting_rotation_from_rpy_deg(sensor.rpy_deg).as_matrix()
         self._mounting_elements = tuple(mounting_matrix.ravel().tolist())
         self._lever_arm_elements_body_m = tuple(float(c) for c in sensor.position_body_m)
 
-    def correct_one(self, track: NavTrack, t_s: float, flow_mps, as_of_newest_s: float):
-        """:meth:`correct` of one sample in plain floats (bit-identical): its status and its
-        flow and three Miller terms as tuples, NaN unless valid."""
-        code, attitude, rate, velocity = track.interpolate_one(t_s, as_of_newest_s)
-        status = _NAV_OUTCOME[code]
-        if status != SampleStatus.VALID:
-            return status, _NAN_TERMS
+    def correct(self, track: NavTrack, stamps_s, flows_mps, as_of_newest_s):
+        """Return (N,) statuses (``_PENDING`` while navigation may still bracket a stamp) and
+        a (4, N, 3) array of the flow and the three Miller terms, ENU m/s, NaN where not valid.
+
+        ``stamps_s``: (N,) s; ``flows_mps``: (N, 3) the fluid's velocity relative to the sensor,
+        sensor axes, m/s; ``as_of_newest_s``: the newest navigation stamp when each sample
+        arrived, s (see :meth:`NavTrack.interpolate`)."""
+        nav = track.interpolate(stamps_s, as_of_newest_s)
+        outputs = np.full((_N_OUTPUTS, stamps_s.shape[0], 3), np.nan)
+        if np.any(nav.valid):
+            outputs[:, nav.valid] = self._miller_terms(flows_mps[nav.valid], nav, nav.valid)
+        return _NAV_OUTCOME_BY_CODE[nav.status], outputs
+
+    def _miller_terms(self, flows_mps, nav: InterpolatedNav, rows) -> np.ndarray:
+        """(4, M, 3): the flow over ground and the tilt, rotation and translation terms, ENU
+        m/s, of (M, 3) flows in sensor axes with the navigation's ``rows``."""
         terms = miller_components(
-            tuple(flow_mps),
-            rotation_matrix_elements(*attitude),
-            rate,
-            velocity,
+            tuple(flows_mps.T),
+            rotation_matrix_elements(*nav.attitude_xyzw[rows].T),
+            tuple(nav.angular_rate_body_rad_s[rows].T),
+            tuple(nav.velocity_enu_mps[rows].T),
             self._mounting_elements,
             self._lever_arm_elements_body_m,
         )
-        return status, terms
-
-    def correct(self, track: NavTrack, stamps_s, flows_mps, as_of_newest_s):
-        """Return (N,) statuses (``_PENDING`` while navigation may still bracket a stamp) and
-        (N, 3) arrays of the flow and the three Miller terms, NaN where not valid.
-
-        ``as_of_newest_s``: the newest navigation stamp when each sample arrived (see
-        :meth:`NavTrack.interpolate`)."""
-        nav = track.interpolate(stamps_s, as_of_newest_s)
-        status = _NAV_OUTCOME_BY_CODE[nav.status]
-        outputs = [np.full((stamps_s.shape[0], 3), np.nan) for _ in range(4)]
-        valid = nav.valid
-        if np.any(valid):
-            # The arithmetic of correct_one, on the columns of the valid samples.
-            terms = miller_components(
-                tuple(flows_mps[valid].T),
-                rotation_matrix_elements(*nav.attitude_xyzw[valid].T),
-                tuple(nav.angular_rate_body_rad_s[valid].T),
-                tuple(nav.velocity_enu_mps[valid].T),
-                self._mounting_elements,
-                self._lever_arm_elements_body_m,
-            )
-            for output, term in zip(outputs, terms, strict=True):
-                output[valid] = np.stack(term, axis=-1)
-        return status, outputs
+        return np.array(terms).transpose(0, 2, 1)
 
 
-_NAN_TERMS = ((math.nan,) * 3,) * 4
 _NOTHING_DECIDED = CorrectedBatch(
     np.empty(0), np.empty(0, dtype=np.int8), *(np.empty((0, 3)) for _ in range(5))
 )
@@ -255,7 +229,7 @@ class FlowCompensator:
         self._flow_mps = np.empty((_INITIAL_CAPACITY, 3))
         self._as_of_nav_s = np.empty(_INITIAL_CAPACITY)
         self._status = np.empty(_INITIAL_CAPACITY, dtype=np.int8)
-        self._terms = np.empty((4, _INITIAL_CAPACITY, 3))
+        self._terms = np.empty((_N_OUTPUTS, _INITIAL_CAPACITY, 3))
         self._head = self._first_pending = self._tail = 0
 
     @property
@@ -280,27 +254,8 @@ class FlowCompensator:
 
     def add_sample(self, t_s, flow_sensor_mps) -> None:
         """Add one sensor sample: stamp s, the fluid's velocity relative to the sensor in its
-        axes m/s, (3,). In plain floats: the live path; :meth:`add_arrivals` takes stretches
-        of samples."""
-        try:
-            x, y, z = (float(component) for component in flow_sensor_mps)
-        except (TypeError, ValueError) as error:
-            raise CompensatorInputError(
-                f"flow_sensor_mps must be three numbers, got {flow_sensor_mps!r}"
-            ) from error
-        t_s = float(t_s)
-        status, self._latest_sample_stamp_s = _screen_one_sample(
-            t_s, x, y, z, self._latest_sample_stamp_s, self.sensor.max_speed_mps
-        )
-        self._reserve(1)
-        i = self._tail
-        self._t_s[i] = t_s
-        self._flow_mps[i] = x, y, z
-        self._as_of_nav_s[i] = self._newest_nav_s()
-        self._status[i] = status
-        self._terms[:, i] = math.nan
-        self._tail = i + 1
-        self._advance_first_pending()
+        axes m/s, (3,): :meth:`add_arrivals` of one sample after the navigation so far."""
+        self._enqueue(*_sample_arrays([t_s], [flow_sensor_mps]), self._newest_nav_s())
 
     def add_arrivals(self, nav, sample_t_s, flow_sensor_mps, nav_before_sample) -> int:
         """Navigation and sensor samples that arrived interleaved: exactly :meth:`add_nav`
@@ -319,13 +274,14 @@ class FlowCompensator:
         """
         stamps, flows = _sample_arrays(sample_t_s, flow_sensor_mps)
         newest_before = self._newest_nav_s()
-        accepted = self.nav_track.extend(*nav)
         nav_t_s = np.asarray(nav[0], dtype=float)
-        # Newest accepted navigation stamp after each number of navigation arrivals.
-        newest_after = np.maximum.accumulate(
-            np.concatenate(([newest_before], np.where(accepted, nav_t_s, -np.inf)))
-        )
-        self._enqueue(stamps, flows, newest_after[np.asarray(nav_before_sample, dtype=np.intp)])
+        accepted = self.nav_track.extend(*nav) if nav_t_s.shape[0] else np.zeros(0, dtype=bool)
+        if stamps.shape[0]:
+            # Newest accepted navigation stamp after each number of navigation arrivals.
+            newest_after = np.maximum.accumulate(
+                np.concatenate(([newest_before], np.where(accepted, nav_t_s, -np.inf)))
+            )
+            self._enqueue(stamps, flows, newest_after[np.asarray(nav_before_sample, dtype=np.intp)])
         return int(np.count_nonzero(accepted))
 
     def ready(self) -> CorrectedBatch:
@@ -353,7 +309,9 @@ class FlowCompensator:
     def _newest_nav_s(self) -> float:
         return self.nav_track.newest_stamp_s if len(self.nav_track) else -math.inf
 
-    def _enqueue(self, stamps: np.ndarray, flows: np.ndarray, as_of_nav_s: np.ndarray) -> None:
+    def _enqueue(self, stamps: np.ndarray, flows: np.ndarray, as_of_nav_s) -> None:
+        """Screen and queue (N,) stamps (s) and (N, 3) flows (m/s, sensor axes) that arrived
+        when the newest navigation stamp was ``as_of_nav_s`` (s, scalar or (N,))."""
         status, self._latest_sample_stamp_s = _screen_samples(
             stamps, flows, self._latest_sample_stamp_s, self.sensor.max_speed_mps
         )
@@ -370,35 +328,20 @@ class FlowCompensator:
     def _decide(self) -> None:
         """Correct the pending samples that the navigation now brackets (or never will)."""
         first, tail = self._first_pending, self._tail
-        newest_nav_s = self._newest_nav_s()
-        if tail - first == 1:
-            # The live case: only the newest sample waits (the one at _first_pending is).
-            undecided = [first] if self._t_s[first] <= newest_nav_s else []
-        else:
-            # A stamp after the newest navigation sample can only wait: no need to look it up.
-            undecided = first + np.flatnonzero(
-                (self._status[first:tail] == _PENDING) & (self._t_s[first:tail] <= newest_nav_s)
-            )
-        if len(undecided) == 1:
-            # One sample: in floats, bit-identical to the batch below.
-            i = int(undecided[0])
-            status, terms = self._corrector.correct_one(
-                self.nav_track,
-                float(self._t_s[i]),
-                self._flow_mps[i].tolist(),
-                float(self._as_of_nav_s[i]),
-            )
-            self._status[i] = status
-            self._terms[:, i] = terms
-        elif len(undecided):
-            status, terms = self._corrector.correct(
+        if first == tail:
+            self.nav_track.forget_old_samples()
+            return
+        # A stamp after the newest navigation sample can only wait: no need to look it up.
+        undecided = first + np.flatnonzero(
+            (self._status[first:tail] == _PENDING) & (self._t_s[first:tail] <= self._newest_nav_s())
+        )
+        if len(undecided):
+            self._status[undecided], self._terms[:, undecided] = self._corrector.correct(
                 self.nav_track,
                 self._t_s[undecided],
                 self._flow_mps[undecided],
                 self._as_of_nav_s[undecided],
             )
-            self._status[undecided] = status
-            self._terms[:, undecided] = terms
         self._advance_first_pending()
         # Every sample still pending is stamped after the newest navigation sample: the
         # samples around it stay held (see NavTrack.forget_old_samples).
@@ -454,7 +397,7 @@ class FlowCompensator:
             new = np.empty((new_capacity, *old.shape[1:]), dtype=old.dtype)
             new[:n_kept] = old[kept]
             setattr(self, name, new)
-        terms = np.empty((4, new_capacity, 3))
+        terms = np.empty((_N_OUTPUTS, new_capacity, 3))
         terms[:, :n_kept] = self._terms[:, kept]
         self._terms = terms
         self._first_pending -= self._head
@@ -464,11 +407,16 @@ class FlowCompensator:
 def _sample_arrays(t_s, flow_sensor_mps) -> tuple[np.ndarray, np.ndarray]:
     """(N,) stamps (s) and (N, 3) flows (m/s) as float arrays; CompensatorInputError if their
     shapes do not match."""
-    stamps = np.asarray(t_s, dtype=float)
-    flows = np.asarray(flow_sensor_mps, dtype=float)
+    try:
+        stamps = np.asarray(t_s, dtype=float)
+        flows = np.asarray(flow_sensor_mps, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise CompensatorInputError(
+            f"t_s and flow_sensor_mps must be numbers, got {t_s!r} and {flow_sensor_mps!r}"
+        ) from error
     if stamps.ndim != 1 or flows.shape != (stamps.shape[0], 3):
         raise CompensatorInputError(
-            f"stamps and flows must have shapes (N,) and (N, 3), got {stamps.shape} and "
-            f"{flows.shape}"
+            f"t_s and flow_sensor_mps must have shapes (N,) and (N, 3), got {stamps.shape} "
+            f"and {flows.shape}"
         )
     return stamps, flows

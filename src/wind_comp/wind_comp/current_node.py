@@ -48,7 +48,6 @@ exits with code 0.
 from __future__ import annotations
 
 from geometry_msgs.msg import TwistWithCovarianceStamped
-from rclpy.serialization import deserialize_message
 
 from buoy_common.base_node import main_for
 from buoy_common.contract import (
@@ -57,7 +56,7 @@ from buoy_common.contract import (
     current_mean_topic,
     current_stats_topic,
 )
-from wind_comp.compensation_messages import FlowSample, dvl_sample
+from wind_comp.compensation_messages import dvl_record
 from wind_comp.compensation_node import CorrectionNode
 from wind_comp.config import (
     CURRENT_NAV_TIMEOUT_PARAMETER,
@@ -81,6 +80,7 @@ class CurrentNode(CorrectionNode):
             current_pipeline,
             DVL_TOPIC,
             TwistWithCovarianceStamped,
+            dvl_record,
             CURRENT_TOPIC,
             (current_mean_topic, current_stats_topic),
             "dvl",
@@ -88,12 +88,6 @@ class CurrentNode(CorrectionNode):
             CURRENT_NAV_TIMEOUT_PARAMETER,
             CURRENT_NAV_TIMEOUT_S,
         )
-
-    def read_sample(self, raw: bytes) -> tuple[FlowSample, int, int]:
-        # One ping a second: decoding the message costs nothing worth a CDR reader of its own.
-        message = deserialize_message(raw, TwistWithCovarianceStamped)
-        stamp = message.header.stamp
-        return dvl_sample(message, self.expected_frame_id), stamp.sec, stamp.nanosec
 
 
 main = main_for(CurrentNode)

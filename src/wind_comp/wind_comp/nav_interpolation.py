@@ -8,7 +8,6 @@ whose bracketing samples include one the navigation does not vouch for (an attit
 uncertain to correct the wind with, see :class:`wind_comp.config.CompensatorConfig`).
 """
 
-import math
 from enum import IntEnum
 from typing import NamedTuple
 
@@ -85,6 +84,9 @@ class NavTrack:
     they would have been at the time, whenever they are evaluated. The samples themselves are
     dropped only by :meth:`forget_old_samples`, which frees what no query asked from then on
     needs.
+
+    One sample or many go through the same arithmetic: :meth:`append` is :meth:`extend` of
+    one sample, and a single query is :meth:`interpolate` of one stamp.
     """
 
     def __init__(self, max_gap_s: float = 0.1, history_s: float = np.inf):
@@ -100,14 +102,7 @@ class NavTrack:
             raise NavTrackError(f"history_s must be positive (s), got {history_s}")
         self.max_gap_s = float(max_gap_s)
         self.history_s = float(history_s)
-        self._stamps_s = np.empty(_INITIAL_CAPACITY)
-        self._quats_xyzw = np.empty((_INITIAL_CAPACITY, 4))
-        self._rates_body_rad_s = np.empty((_INITIAL_CAPACITY, 3))
-        self._velocities_enu_mps = np.empty((_INITIAL_CAPACITY, 3))
-        self._trusted = np.empty(_INITIAL_CAPACITY, dtype=bool)
-        self._start = 0
-        self._end = 0
-        self._first_stamp_s = np.nan
+        self._samples = _NavSamples()
         self.n_accepted = 0
         self.n_rejected_out_of_order = 0
         self.n_rejected_invalid = 0
@@ -133,56 +128,33 @@ class NavTrack:
         return track
 
     def __len__(self) -> int:
-        return self._end - self._start
+        return len(self._samples)
 
     @property
     def newest_stamp_s(self) -> float:
         """Stamp of the newest sample, s (NaN when empty)."""
-        return float(self._stamps_s[self._end - 1]) if len(self) else np.nan
+        return float(self._samples.stamps_s[-1]) if len(self) else np.nan
 
     @property
     def oldest_stamp_s(self) -> float:
         """Stamp of the oldest retained sample, s (NaN when empty)."""
-        return float(self._stamps_s[self._start]) if len(self) else np.nan
+        return float(self._samples.stamps_s[0]) if len(self) else np.nan
 
     def append(
         self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted: bool = True
     ) -> bool:
-        """Add one sample; return False (and count it) when it is rejected. Exactly
-        :meth:`extend` of one sample, in plain floats: the live path, one sample at a time.
+        """Add one sample; return False (and count it) when it is rejected: :meth:`extend`
+        of one sample.
 
         Args:
             t_s: stamp, s. quat_xyzw: 4 values, body→ENU attitude, any non-zero norm.
             angular_rate_body_rad_s: 3 values, body axes. velocity_enu_mps: 3 values, ENU.
             trusted: False for a sample no wind may be corrected with (UNTRUSTED).
         """
-        stamp = float(t_s)
-        quat = _floats("quat_xyzw", quat_xyzw, 4)
-        rate = _floats("angular_rate_body_rad_s", angular_rate_body_rad_s, 3)
-        velocity = _floats("velocity_enu_mps", velocity_enu_mps, 3)
-        norm = quaternion_norm(*quat)
-        if not (
-            math.isfinite(stamp)
-            and all(math.isfinite(value) for value in (*quat, *rate, *velocity))
-            and norm > MIN_QUATERNION_NORM
-        ):
-            self.n_rejected_invalid += 1
-            return False
-        if len(self) and not stamp > self._stamps_s[self._end - 1]:
-            self.n_rejected_out_of_order += 1
-            return False
-        self._reserve(1)
-        end = self._end
-        self._stamps_s[end] = stamp
-        self._quats_xyzw[end] = [component / norm for component in quat]
-        self._rates_body_rad_s[end] = rate
-        self._velocities_enu_mps[end] = velocity
-        self._trusted[end] = trusted
-        self._end = end + 1
-        if math.isnan(self._first_stamp_s):
-            self._first_stamp_s = stamp
-        self.n_accepted += 1
-        return True
+        accepted = self.extend(
+            [t_s], [quat_xyzw], [angular_rate_body_rad_s], [velocity_enu_mps], [trusted]
+        )
+        return bool(accepted[0])
 
     def extend(
         self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted=True
@@ -200,32 +172,27 @@ class NavTrack:
             t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps
         )
         well_formed = _well_formed(stamps, quats, rates, velocities)
-        newest = self.newest_stamp_s if len(self) else -np.inf
-        candidate_stamps = np.where(well_formed, stamps, -np.inf)
-        latest_before = np.maximum.accumulate(np.concatenate(([newest], candidate_stamps)))[:-1]
-        accepted = well_formed & (stamps > latest_before)
+        accepted = well_formed & _later_than_every_earlier(
+            np.where(well_formed, stamps, -np.inf), self._newest_or_minus_inf()
+        )
         n_accepted = int(np.count_nonzero(accepted))
         self.n_rejected_invalid += int(np.count_nonzero(~well_formed))
-        self.n_rejected_out_of_order += int(np.count_nonzero(well_formed & ~accepted))
-        if n_accepted == 0:
-            return accepted
-        self._reserve(n_accepted)
-        end = self._end + n_accepted
-        self._stamps_s[self._end : end] = stamps[accepted]
-        self._quats_xyzw[self._end : end] = _normalised(quats[accepted])
-        self._rates_body_rad_s[self._end : end] = rates[accepted]
-        self._velocities_enu_mps[self._end : end] = velocities[accepted]
-        self._trusted[self._end : end] = np.broadcast_to(trusted, accepted.shape)[accepted]
-        self._end = end
-        if np.isnan(self._first_stamp_s):
-            self._first_stamp_s = float(stamps[accepted][0])
+        self.n_rejected_out_of_order += int(np.count_nonzero(well_formed)) - n_accepted
         self.n_accepted += n_accepted
+        trusted = np.broadcast_to(trusted, accepted.shape)
+        if n_accepted < accepted.shape[0]:
+            stamps, quats, rates, velocities, trusted = (
+                column[accepted] for column in (stamps, quats, rates, velocities, trusted)
+            )
+        if n_accepted:
+            self._samples.add(stamps, _normalised(quats), rates, velocities, trusted)
         return accepted
 
     def forget_old_samples(self) -> None:
         """Drop the samples that no query asked as of the newest stamp or later needs."""
         if len(self):
-            self._discard_before(self._stamps_s[self._end - 1] - self.history_s)
+            stamps = self._samples.stamps_s
+            self._samples.drop_oldest(_first_usable(stamps, stamps[-1] - self.history_s))
 
     def interpolate(self, t_query_s, as_of_newest_s=None) -> InterpolatedNav:
         """Navigation state at the (N,) query stamps, s; see :class:`InterpolationStatus`.
@@ -241,118 +208,88 @@ class NavTrack:
         queries = np.asarray(t_query_s, dtype=float)
         if queries.ndim != 1:
             raise NavTrackError(f"t_query_s must have shape (N,), got {queries.shape}")
-        n_queries = queries.shape[0]
-        stamps = self._stamps_s[self._start : self._end]
-        n_samples = stamps.shape[0]
-        kept_from = self._kept_from(stamps, as_of_newest_s)
-
-        status = np.full(n_queries, InterpolationStatus.OK, dtype=np.int8)
-        lower = np.searchsorted(stamps, queries, side="right") - 1
-        finite = np.isfinite(queries)
-        lower_c = np.clip(lower, 0, max(n_samples - 1, 0))
-        exact = finite & (lower >= 0) & (n_samples > 0)
-        if n_samples:
-            exact &= stamps[lower_c] == queries
-        upper = np.where(exact, lower, lower + 1)
-        upper_c = np.clip(upper, 0, max(n_samples - 1, 0))
-
-        before_track = finite & (lower < kept_from) & (n_samples > 0)
-        never_received = queries < self._first_stamp_s
-        status[before_track & never_received] = InterpolationStatus.BEFORE_START
-        status[before_track & ~never_received] = InterpolationStatus.EVICTED
-        status[finite & ~before_track & (upper >= n_samples)] = InterpolationStatus.AFTER_END
-        bracketed = finite & ~before_track & (upper < n_samples)
-        if n_samples:
-            spacing = stamps[upper_c] - stamps[lower_c]
-            status[bracketed & (spacing > self.max_gap_s)] = InterpolationStatus.GAP
-            trusted = self._trusted[self._start : self._end]
-            untrusted = ~(trusted[lower_c] & trusted[upper_c])
-            status[bracketed & (spacing <= self.max_gap_s) & untrusted] = (
-                InterpolationStatus.UNTRUSTED
-            )
-        status[~finite] = InterpolationStatus.INVALID_STAMP
-        valid = status == InterpolationStatus.OK
-
-        rates = np.full((n_queries, 3), np.nan)
-        velocities = np.full((n_queries, 3), np.nan)
-        quats = np.tile([0.0, 0.0, 0.0, 1.0], (n_queries, 1))
-        if np.any(valid):
-            lo = lower_c[valid] + self._start
-            hi = upper_c[valid] + self._start
-            span = self._stamps_s[hi] - self._stamps_s[lo]
-            fraction = np.divide(
-                queries[valid] - self._stamps_s[lo],
-                span,
-                out=np.zeros_like(span),
-                where=span > 0,
-            )[:, None]
-            rates[valid] = self._rates_body_rad_s[lo] + fraction * (
-                self._rates_body_rad_s[hi] - self._rates_body_rad_s[lo]
-            )
-            velocities[valid] = self._velocities_enu_mps[lo] + fraction * (
-                self._velocities_enu_mps[hi] - self._velocities_enu_mps[lo]
-            )
-            quats[valid] = slerp(self._quats_xyzw[lo], self._quats_xyzw[hi], fraction[:, 0])
-        return InterpolatedNav(valid, status, quats, rates, velocities)
-
-    def interpolate_one(
-        self, t_query_s: float, as_of_newest_s: float | None = None
-    ) -> tuple[int, tuple, tuple, tuple]:
-        """:meth:`interpolate` at one stamp (s), in plain floats: (status code, attitude
-        (x, y, z, w), body rate (3,) rad/s, ENU velocity (3,) m/s), bit-identical to the
-        batch; the live path, where numpy's per-call cost would dominate."""
-        t_s = float(t_query_s)
-        if not math.isfinite(t_s):
-            return InterpolationStatus.INVALID_STAMP, *_INVALID_NAV
-        start, end = self._start, self._end
-        if start == end:
-            return InterpolationStatus.AFTER_END, *_INVALID_NAV
-        stamps = self._stamps_s
-        lower = int(np.searchsorted(stamps[start:end], t_s, side="right")) - 1 + start
-        if lower < start + self._kept_from(stamps[start:end], as_of_newest_s):
-            if t_s < self._first_stamp_s:
-                return InterpolationStatus.BEFORE_START, *_INVALID_NAV
-            return InterpolationStatus.EVICTED, *_INVALID_NAV
-        upper = lower if stamps[lower] == t_s else lower + 1
-        if upper >= end:
-            return InterpolationStatus.AFTER_END, *_INVALID_NAV
-        lower_stamp_s, upper_stamp_s = float(stamps[lower]), float(stamps[upper])
-        span_s = upper_stamp_s - lower_stamp_s
-        if span_s > self.max_gap_s:
-            return InterpolationStatus.GAP, *_INVALID_NAV
-        if not (self._trusted[lower] and self._trusted[upper]):
-            return InterpolationStatus.UNTRUSTED, *_INVALID_NAV
-        fraction = (t_s - lower_stamp_s) / span_s if span_s > 0 else 0.0
-        rates, velocities = self._rates_body_rad_s, self._velocities_enu_mps
-        rate = _lerp(rates[lower].tolist(), rates[upper].tolist(), fraction)
-        velocity = _lerp(velocities[lower].tolist(), velocities[upper].tolist(), fraction)
-        quats = self._quats_xyzw
-        attitude = slerp_components(quats[lower].tolist(), quats[upper].tolist(), fraction)
-        return InterpolationStatus.OK, tuple(map(float, attitude)), rate, velocity
-
-    def _kept_from(self, stamps: np.ndarray, as_of_newest_s):
-        """Index into ``stamps`` (the samples held) of the first sample that a query asked as of
-        ``as_of_newest_s`` (s, scalar or (N,); None: the newest now) may use."""
         if as_of_newest_s is None:
-            if not stamps.shape[0]:
-                return 0
-            as_of_newest_s = float(stamps[-1])
-        if isinstance(as_of_newest_s, float):
-            horizon_s = as_of_newest_s - self.history_s
-            # The common case, live: nothing held is older than the query may use.
-            if stamps.shape[0] < 2 or not horizon_s >= stamps[1]:
-                return 0
-            return int(np.searchsorted(stamps, horizon_s, side="right")) - 1
+            as_of_newest_s = self._newest_or_minus_inf()
+        samples = self._samples
         horizons_s = np.asarray(as_of_newest_s, dtype=float) - self.history_s
-        return np.maximum(np.searchsorted(stamps, horizons_s, side="right") - 1, 0)
+        lower, upper = _bracketing_indices(samples.stamps_s, queries)
+        status = _interpolation_status(
+            samples,
+            queries,
+            lower,
+            upper,
+            _first_usable(samples.stamps_s, horizons_s),
+            self.max_gap_s,
+        )
+        return _interpolated(samples, queries, lower, upper, status)
 
-    def _discard_before(self, horizon_s: float) -> None:
-        """Drop samples not needed to answer queries at or after ``horizon_s``: keep the last
-        sample at or before the horizon and everything after it."""
-        stamps = self._stamps_s[self._start : self._end]
-        keep_from = int(np.searchsorted(stamps, horizon_s, side="right")) - 1
-        if keep_from > 0:
-            self._start += keep_from
+    def _newest_or_minus_inf(self) -> float:
+        return float(self._samples.stamps_s[-1]) if len(self) else -np.inf
+
+
+class _NavSamples:
+    """The accepted navigation samples in growable columns, oldest kept first; the columns
+    are views of the samples held (index 0: the oldest still held)."""
+
+    _COLUMNS = ("_stamps_s", "_quats_xyzw", "_rates_body_rad_s", "_velocities_enu_mps", "_trusted")
+
+    def __init__(self):
+        self._stamps_s = np.empty(_INITIAL_CAPACITY)
+        self._quats_xyzw = np.empty((_INITIAL_CAPACITY, 4))
+        self._rates_body_rad_s = np.empty((_INITIAL_CAPACITY, 3))
+        self._velocities_enu_mps = np.empty((_INITIAL_CAPACITY, 3))
+        self._trusted = np.empty(_INITIAL_CAPACITY, dtype=bool)
+        self._start = 0
+        self._end = 0
+        self.first_stamp_s = np.nan
+        """Stamp of the first sample ever held, s (NaN before the first)."""
+
+    def __len__(self) -> int:
+        return self._end - self._start
+
+    @property
+    def stamps_s(self) -> np.ndarray:
+        """(N,) increasing stamps, s."""
+        return self._stamps_s[self._start : self._end]
+
+    @property
+    def quats_xyzw(self) -> np.ndarray:
+        """(N, 4) unit body→ENU quaternions."""
+        return self._quats_xyzw[self._start : self._end]
+
+    @property
+    def rates_body_rad_s(self) -> np.ndarray:
+        """(N, 3) body rates, body axes, rad/s."""
+        return self._rates_body_rad_s[self._start : self._end]
+
+    @property
+    def velocities_enu_mps(self) -> np.ndarray:
+        """(N, 3) ENU velocities, m/s."""
+        return self._velocities_enu_mps[self._start : self._end]
+
+    @property
+    def trusted(self) -> np.ndarray:
+        """(N,) bools: False where the navigation does not vouch for the attitude."""
+        return self._trusted[self._start : self._end]
+
+    def add(self, stamps_s, quats_xyzw, rates_body_rad_s, velocities_enu_mps, trusted) -> None:
+        """Hold accepted samples after the newest one (stamps later, quaternions unit)."""
+        n_new = stamps_s.shape[0]
+        self._reserve(n_new)
+        new = slice(self._end, self._end + n_new)
+        for name, values in zip(
+            self._COLUMNS,
+            (stamps_s, quats_xyzw, rates_body_rad_s, velocities_enu_mps, trusted),
+            strict=True,
+        ):
+            getattr(self, name)[new] = values
+        self._end = new.stop
+        if np.isnan(self.first_stamp_s):
+            self.first_stamp_s = float(stamps_s[0])
+
+    def drop_oldest(self, n_dropped: int) -> None:
+        """Stop holding the ``n_dropped`` oldest samples."""
+        self._start += int(n_dropped)
 
     def _reserve(self, n_more: int) -> None:
         """Make room for ``n_more`` samples after the newest one."""
@@ -363,13 +300,7 @@ class NavTrack:
         new_capacity = max(capacity, _INITIAL_CAPACITY)
         while n_kept + n_more > new_capacity // 2:
             new_capacity *= 2
-        for name in (
-            "_stamps_s",
-            "_quats_xyzw",
-            "_rates_body_rad_s",
-            "_velocities_enu_mps",
-            "_trusted",
-        ):
+        for name in self._COLUMNS:
             old = getattr(self, name)
             new = np.empty((new_capacity, *old.shape[1:]), dtype=old.dtype)
             new[:n_kept] = old[self._start : self._end]
@@ -378,9 +309,122 @@ class NavTrack:
         self._end = n_kept
 
 
-# The quaternion arithmetic below is written elementwise, component by component, on floats or
-# equally shaped arrays: a sample then gives bit-identical results whether it is interpolated
-# alone (floats, live) or in a batch (arrays, offline), and a single sample costs microseconds.
+# Acceptance of navigation samples: the same rules for one sample and many.
+
+
+def _validated_arrays(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps):
+    """Convert to float arrays of matching length N, raising on wrong shapes."""
+    stamps = _float_array("t_s", t_s)
+    quats = _float_array("quat_xyzw", quat_xyzw)
+    rates = _float_array("angular_rate_body_rad_s", angular_rate_body_rad_s)
+    velocities = _float_array("velocity_enu_mps", velocity_enu_mps)
+    if stamps.ndim != 1:
+        raise NavTrackError(f"navigation stamps must have shape (N,), got {stamps.shape}")
+    n_samples = stamps.shape[0]
+    for name, array, width in (
+        ("quat_xyzw", quats, 4),
+        ("angular_rate_body_rad_s", rates, 3),
+        ("velocity_enu_mps", velocities, 3),
+    ):
+        if array.shape != (n_samples, width):
+            raise NavTrackError(
+                f"{name} must have shape ({n_samples}, {width}) to match the stamps, "
+                f"got {array.shape}"
+            )
+    return stamps, quats, rates, velocities
+
+
+def _float_array(name: str, values) -> np.ndarray:
+    try:
+        return np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise NavTrackError(f"{name} must be numbers, got {values!r}") from error
+
+
+def _well_formed(stamps, quats, rates, velocities) -> np.ndarray:
+    """(N,) True where every value is finite and the quaternion is not zero."""
+    finite = np.isfinite(np.column_stack((stamps, quats, rates, velocities))).all(axis=1)
+    return finite & (
+        quaternion_norm(*np.where(finite[:, None], quats, 0.0).T) > MIN_QUATERNION_NORM
+    )
+
+
+def _later_than_every_earlier(stamps_s: np.ndarray, newest_s: float) -> np.ndarray:
+    """(N,) True where a stamp is later than ``newest_s`` and every earlier stamp (-inf
+    stamps are never later)."""
+    running_newest = np.maximum.accumulate(np.concatenate(([newest_s], stamps_s)))
+    return stamps_s > running_newest[:-1]
+
+
+# Interpolation at query stamps, on columns of any length.
+
+
+def _first_usable(stamps_s: np.ndarray, horizon_s):
+    """Index into ``stamps_s`` of the first sample a query with history horizon ``horizon_s``
+    (s, scalar or (N,)) may use: the last one at or before the horizon, else the first."""
+    return np.maximum(np.searchsorted(stamps_s, horizon_s, side="right") - 1, 0)
+
+
+def _bracketing_indices(stamps_s: np.ndarray, queries_s: np.ndarray):
+    """(N,) indices of the last sample at or before each query and of the sample after it
+    (the same sample for a query exactly on it); -1 and ``len(stamps_s)`` stand for none."""
+    lower = np.searchsorted(stamps_s, queries_s, side="right") - 1
+    exact = np.zeros(queries_s.shape, dtype=bool)
+    if stamps_s.shape[0]:
+        exact = (lower >= 0) & (stamps_s[np.maximum(lower, 0)] == queries_s)
+    return lower, np.where(exact, lower, lower + 1)
+
+
+def _interpolation_status(samples, queries_s, lower, upper, kept_from, max_gap_s):
+    """(N,) :class:`InterpolationStatus` codes of the queries bracketed by ``lower`` and
+    ``upper``; ``kept_from``: the first sample index each query may use."""
+    n_samples = len(samples)
+    status = np.full(queries_s.shape[0], InterpolationStatus.OK, dtype=np.int8)
+    finite = np.isfinite(queries_s)
+    before_track = finite & (lower < kept_from) & (n_samples > 0)
+    never_received = queries_s < samples.first_stamp_s
+    status[before_track & never_received] = InterpolationStatus.BEFORE_START
+    status[before_track & ~never_received] = InterpolationStatus.EVICTED
+    status[finite & ~before_track & (upper >= n_samples)] = InterpolationStatus.AFTER_END
+    bracketed = finite & ~before_track & (upper < n_samples)
+    if n_samples:
+        lower_c, upper_c = np.clip(lower, 0, n_samples - 1), np.clip(upper, 0, n_samples - 1)
+        too_far_apart = samples.stamps_s[upper_c] - samples.stamps_s[lower_c] > max_gap_s
+        untrusted = ~(samples.trusted[lower_c] & samples.trusted[upper_c])
+        status[bracketed & too_far_apart] = InterpolationStatus.GAP
+        status[bracketed & ~too_far_apart & untrusted] = InterpolationStatus.UNTRUSTED
+    status[~finite] = InterpolationStatus.INVALID_STAMP
+    return status
+
+
+def _interpolated(samples, queries_s, lower, upper, status) -> InterpolatedNav:
+    """The navigation at the queries whose ``status`` is OK, between the samples ``lower`` and
+    ``upper``; the identity attitude and NaN elsewhere."""
+    n_queries = queries_s.shape[0]
+    valid = status == InterpolationStatus.OK
+    rates = np.full((n_queries, 3), np.nan)
+    velocities = np.full((n_queries, 3), np.nan)
+    quats = np.tile([0.0, 0.0, 0.0, 1.0], (n_queries, 1))
+    if np.any(valid):
+        lo, hi = lower[valid], upper[valid]
+        stamps = samples.stamps_s
+        span = stamps[hi] - stamps[lo]
+        fraction = np.divide(
+            queries_s[valid] - stamps[lo], span, out=np.zeros_like(span), where=span > 0
+        )
+        rates[valid] = _lerp(samples.rates_body_rad_s, lo, hi, fraction)
+        velocities[valid] = _lerp(samples.velocities_enu_mps, lo, hi, fraction)
+        quats[valid] = slerp(samples.quats_xyzw[lo], samples.quats_xyzw[hi], fraction)
+    return InterpolatedNav(valid, status, quats, rates, velocities)
+
+
+def _lerp(values: np.ndarray, lower, upper, fraction: np.ndarray) -> np.ndarray:
+    """Rows ``lower`` of ``values`` moved ``fraction`` of the way to rows ``upper``."""
+    return values[lower] + fraction[:, None] * (values[upper] - values[lower])
+
+
+# Quaternion maths. Written elementwise, component by component, on floats or equally shaped
+# arrays: what a sample gives does not depend on the other samples of its batch.
 
 
 def slerp(start_xyzw: np.ndarray, end_xyzw: np.ndarray, fraction: np.ndarray) -> np.ndarray:
@@ -412,59 +456,6 @@ def slerp_components(start_xyzw, end_xyzw, fraction) -> tuple:
         np.cos(partial_half_angle),
     )
     return quaternion_multiply(start_xyzw, partial)
-
-
-_INVALID_NAV = ((0.0, 0.0, 0.0, 1.0), (math.nan,) * 3, (math.nan,) * 3)
-
-
-def _lerp(start: list[float], end: list[float], fraction: float) -> tuple[float, ...]:
-    return tuple(a + fraction * (b - a) for a, b in zip(start, end, strict=True))
-
-
-def _floats(name: str, values, length: int) -> tuple[float, ...]:
-    """``values`` as a tuple of ``length`` floats; NavTrackError naming ``name`` otherwise."""
-    try:
-        numbers = tuple(map(float, values))
-    except (TypeError, ValueError) as error:
-        raise NavTrackError(f"{name} must be {length} numbers, got {values!r}") from error
-    if len(numbers) != length:
-        raise NavTrackError(f"{name} must be {length} numbers, got {len(numbers)}")
-    return numbers
-
-
-def _validated_arrays(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps):
-    """Convert to float arrays of matching length N, raising on wrong shapes."""
-    stamps = np.asarray(t_s, dtype=float)
-    quats = np.asarray(quat_xyzw, dtype=float)
-    rates = np.asarray(angular_rate_body_rad_s, dtype=float)
-    velocities = np.asarray(velocity_enu_mps, dtype=float)
-    if stamps.ndim != 1:
-        raise NavTrackError(f"navigation stamps must have shape (N,), got {stamps.shape}")
-    n_samples = stamps.shape[0]
-    for name, array, width in (
-        ("quat_xyzw", quats, 4),
-        ("angular_rate_body_rad_s", rates, 3),
-        ("velocity_enu_mps", velocities, 3),
-    ):
-        if array.shape != (n_samples, width):
-            raise NavTrackError(
-                f"{name} must have shape ({n_samples}, {width}) to match the stamps, "
-                f"got {array.shape}"
-            )
-    return stamps, quats, rates, velocities
-
-
-def _well_formed(stamps, quats, rates, velocities) -> np.ndarray:
-    """(N,) True where every value is finite and the quaternion is not zero."""
-    finite = (
-        np.isfinite(stamps)
-        & np.all(np.isfinite(quats), axis=1)
-        & np.all(np.isfinite(rates), axis=1)
-        & np.all(np.isfinite(velocities), axis=1)
-    )
-    return finite & (
-        quaternion_norm(*np.where(finite[:, None], quats, 0.0).T) > MIN_QUATERNION_NORM
-    )
 
 
 def quaternion_norm(x, y, z, w):

@@ -22,10 +22,10 @@ first in first out.
 
 The arrivals wait in the pipeline until results are asked for (:meth:`ready`, :meth:`expire`,
 :meth:`flush`) and are then handed to the :class:`~wind_comp.compensator.FlowCompensator` in
-arrival order: one message at a time in plain floats (the live node asks after every message)
-or as columns of a whole stretch (offline processing asks every few hundred samples). The
-decisions and numbers are the same either way, by construction: the compensator decides each
-sample as of its arrival, and the float and column arithmetic is the same, elementwise.
+arrival order, as columns: of one message (the live node asks after every message) or of a
+whole stretch (offline processing asks every few hundred samples). The decisions and numbers
+are the same either way, by construction: the compensator decides each sample as of its
+arrival, and one column arithmetic, elementwise, runs on a batch of any length.
 """
 
 from __future__ import annotations
@@ -71,21 +71,13 @@ def level_rate_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> t
             received.
 
     Each component is a float or an array, all of one shape (elementwise: one sample alone and
-    a batch give bit-identical results). Returns ω_nb (x, y, z), body axes, rad/s.
+    a batch give bit-identical results). Returns ω_nb (x, y, z), body axes, rad/s, as arrays.
     """
     latitude_rad = np.radians(latitude_deg)
     x, y, z, w = quat_xyzw
     earth_rate_body = rotate_by_quaternion_components(
         (-x, -y, -z, w), earth_rate_enu_components(latitude_rad)
     )
-    if np.ndim(latitude_rad) == 0:
-        # One latitude: a branch, not numpy's per-call cost (the live node's path).
-        if not math.isfinite(latitude_rad):
-            return tuple(angular_rate_body_rad_s)
-        return tuple(
-            rate - earth
-            for rate, earth in zip(angular_rate_body_rad_s, earth_rate_body, strict=True)
-        )
     known = np.isfinite(latitude_rad)
     return tuple(
         np.where(known, rate - np.where(known, earth, 0.0), rate)
@@ -253,55 +245,41 @@ class CompensationPipeline:
         if not nav and not samples:
             return
         self._nav, self._samples, self._nav_before_sample = array("d"), array("d"), []
-        if len(nav) == _NAV_FIELDS and not samples:
-            # The live case: one solution, in plain floats.
-            t_s, *quat_rate_velocity, latitude_deg, trusted = nav
-            quat, rate = quat_rate_velocity[0:4], quat_rate_velocity[4:7]
-            self.compensator.add_nav(
-                t_s,
-                quat,
-                level_rate_components(rate, quat, latitude_deg),
-                rotate_by_quaternion_components(quat, quat_rate_velocity[7:10]),
-                trusted == 1.0,
-            )
-        elif len(samples) == _SAMPLE_FIELDS and not nav:
-            t_s, *flow_sensor_mps = samples
-            self.compensator.add_sample(t_s, flow_sensor_mps)
-        else:
-            columns = np.frombuffer(nav, dtype=float).reshape(-1, _NAV_FIELDS)
-            quats, rates, velocities_body = columns[:, 1:5], columns[:, 5:8], columns[:, 8:11]
-            rates_nb = level_rate_components(rates.T, quats.T, columns[:, 11])
-            velocities_enu = rotate_by_quaternion_components(quats.T, velocities_body.T)
-            flows = np.frombuffer(samples, dtype=float).reshape(-1, _SAMPLE_FIELDS)
-            self.compensator.add_arrivals(
-                (
-                    columns[:, 0],
-                    quats,
-                    np.stack(np.broadcast_arrays(*rates_nb), axis=-1),
-                    np.stack(np.broadcast_arrays(*velocities_enu), axis=-1),
-                    columns[:, 12] == 1.0,
-                ),
-                flows[:, 0],
-                flows[:, 1:],
-                nav_before_sample,
-            )
+        flows = np.frombuffer(samples, dtype=float).reshape(-1, _SAMPLE_FIELDS)
+        self.compensator.add_arrivals(
+            _navigation_columns(np.frombuffer(nav, dtype=float).reshape(-1, _NAV_FIELDS)),
+            flows[:, 0],
+            flows[:, 1:],
+            nav_before_sample,
+        )
 
     def _output(self, corrected: CorrectedBatch) -> CompensationOutput:
         products = []
-        if len(corrected) == 1:
-            # The live case: one sample, without numpy's per-call cost on one row.
-            for averager in self.averagers:
-                products += averager.add(float(corrected.t_s[0]), corrected.flow_enu_mps[0])
-        elif len(corrected):
-            for averager in self.averagers:
-                products += averager.add_batch(corrected.t_s, corrected.flow_enu_mps)
         if len(corrected):
-            for flux_averager in self.flux_averagers:
-                products += flux_averager.add_batch(corrected.t_s, corrected.flow_enu_mps)
+            for averager in (*self.averagers, *self.flux_averagers):
+                products += averager.add_batch(corrected.t_s, corrected.flow_enu_mps)
         # A sample closes the windows it is the first of, in averager order: the windows
         # closed by one sample share their last sample.
         products.sort(key=lambda product: product.last_sample_s)
         return CompensationOutput(corrected, products)
+
+
+def _navigation_columns(odometry: np.ndarray) -> tuple:
+    """What :meth:`FlowCompensator.add_arrivals` takes of the navigation, from (M, 13) rows
+    of stamp s, attitude xyzw, ω_ib rad/s (body), body velocity m/s, latitude deg and trusted
+    (1 or 0): stamps, attitudes, ω_nb (body, rad/s), ENU velocities (m/s), trusted."""
+    quats, rates, velocities_body = odometry[:, 1:5], odometry[:, 5:8], odometry[:, 8:11]
+    if not odometry.shape[0]:
+        return odometry[:, 0], quats, rates, velocities_body, odometry[:, 12] == 1.0
+    rates_nb = level_rate_components(rates.T, quats.T, odometry[:, 11])
+    velocities_enu = rotate_by_quaternion_components(quats.T, velocities_body.T)
+    return (
+        odometry[:, 0],
+        quats,
+        np.stack(rates_nb, axis=-1),
+        np.stack(velocities_enu, axis=-1),
+        odometry[:, 12] == 1.0,
+    )
 
 
 def wind_pipeline(config: CompensatorConfig) -> CompensationPipeline:

@@ -177,29 +177,17 @@ class WindowAverager:
         self._earlier_stamps = np.empty(0)
 
     def add(self, t_s: float, vector_enu_mps) -> list:
-        """Add one sample (stamp s, ENU vector m/s, NaN when invalid); return completed windows."""
+        """Add one sample (stamp s, ENU vector m/s, NaN when invalid); return completed windows:
+        :meth:`add_batch` of one sample."""
         vector = np.asarray(vector_enu_mps, dtype=float)
         if vector.shape != (3,):
             raise ProductsError(f"vector_enu_mps must have shape (3,), got {vector.shape}")
-        t_s = float(t_s)
-        if not (math.isfinite(t_s) and t_s > self._latest_stamp_s):
-            self.n_rejected_stamps += 1
-            return []
-        if math.isnan(self._first_stamp_s):
-            self._first_stamp_s = t_s
-        self._latest_stamp_s = t_s
-        index = math.floor(t_s / self.window_s)
-        completed = []
-        if self._window_index is not None and index != self._window_index:
-            completed.append(self._close_window())
-        self._window_index = index
-        self._stamps.append(t_s)
-        self._vectors.append(vector)
-        return completed
+        return self.add_batch([t_s], vector[None, :])
 
     def add_batch(self, t_s, vectors_enu_mps) -> list:
-        """Add (N,) stamps and (N, 3) vectors in order; identical to calling :meth:`add` on
-        each."""
+        """Add (N,) stamps (s) and (N, 3) ENU vectors (m/s, NaN when invalid) in order; return
+        the windows they complete. A stamp not later than every earlier one is rejected and
+        counted."""
         stamps = np.asarray(t_s, dtype=float)
         vectors = np.asarray(vectors_enu_mps, dtype=float)
         if stamps.ndim != 1 or vectors.shape != (stamps.shape[0], 3):
