@@ -185,77 +185,93 @@ def duration_overrides(scenario: str, quick: bool) -> tuple[str, ...]:
 def plan_cases(sections: set[str], quick: bool) -> list[Case]:
     cases = []
     if "attitude" in sections:
-        for scenario in ATTITUDE_SCENARIOS:
-            cases.append(
-                Case(
-                    f"attitude/{scenario}",
-                    scenario,
-                    duration_overrides(scenario, quick),
-                    "fuse",
-                    "attitude",
-                    scenario,
-                )
-            )
-        for scenario in SEED_SPREAD_SCENARIOS:
-            for seed in SEED_SPREAD:
-                cases.append(
-                    Case(
-                        f"attitude_seed/{scenario}/{seed}",
-                        scenario,
-                        (*duration_overrides(scenario, quick), f"seed={seed}"),
-                        "fuse",
-                        "attitude",
-                        f"{scenario} seed {seed}",
-                    )
-                )
+        cases += attitude_cases(quick)
     if "wind" in sections:
-        for speed in TUNNEL_SPEEDS_MPS:
-            base = (*duration_overrides("wind_tunnel", quick), f"wind.speed_mps={speed}")
-            cases.append(
-                Case(
-                    f"tunnel/{speed}/reference",
-                    "wind_tunnel",
-                    (*base, *STILL_LEVEL),
-                    "process",
-                    "tunnel",
-                    f"wind tunnel {speed} m/s, still level",
-                )
-            )
-            cases.append(
-                Case(
-                    f"tunnel/{speed}/motion",
-                    "wind_tunnel",
-                    base,
-                    "process",
-                    "tunnel",
-                    f"wind tunnel {speed} m/s, sway and rotation",
-                )
-            )
-        for speed in VERTICAL_SPEEDS_MPS:
-            cases.append(
-                Case(
-                    f"vertical/{speed}",
-                    "vertical_wind",
-                    (*duration_overrides("vertical_wind", quick), f"wind.speed_mps={speed}"),
-                    "process",
-                    "vertical",
-                    f"vertical wind {speed} m/s",
-                )
-            )
-        for scenario in SEA_SCENARIOS:
-            cases.append(
-                Case(
-                    f"sea/{scenario}",
-                    scenario,
-                    duration_overrides(scenario, quick),
-                    "process",
-                    "sea",
-                    scenario,
-                )
-            )
+        cases += wind_cases(quick)
     for section in ("current", "current_long"):
         if section in sections:
             cases += current_cases(section, quick, Case)
+    return cases
+
+
+def attitude_cases(quick: bool) -> list[Case]:
+    """fuse_bag on each attitude scenario (paper Table 1), then on the seed-spread scenarios
+    with other seeds (Table 1b)."""
+    cases = []
+    for scenario in ATTITUDE_SCENARIOS:
+        cases.append(
+            Case(
+                f"attitude/{scenario}",
+                scenario,
+                duration_overrides(scenario, quick),
+                "fuse",
+                "attitude",
+                scenario,
+            )
+        )
+    for scenario in SEED_SPREAD_SCENARIOS:
+        for seed in SEED_SPREAD:
+            cases.append(
+                Case(
+                    f"attitude_seed/{scenario}/{seed}",
+                    scenario,
+                    (*duration_overrides(scenario, quick), f"seed={seed}"),
+                    "fuse",
+                    "attitude",
+                    f"{scenario} seed {seed}",
+                )
+            )
+    return cases
+
+
+def wind_cases(quick: bool) -> list[Case]:
+    """process_bag on the wind tunnel still and moving at each speed (paper Table 2), on the
+    vertical wind (Table 3) and on the sea scenarios (Table 4)."""
+    cases = []
+    for speed in TUNNEL_SPEEDS_MPS:
+        base = (*duration_overrides("wind_tunnel", quick), f"wind.speed_mps={speed}")
+        cases.append(
+            Case(
+                f"tunnel/{speed}/reference",
+                "wind_tunnel",
+                (*base, *STILL_LEVEL),
+                "process",
+                "tunnel",
+                f"wind tunnel {speed} m/s, still level",
+            )
+        )
+        cases.append(
+            Case(
+                f"tunnel/{speed}/motion",
+                "wind_tunnel",
+                base,
+                "process",
+                "tunnel",
+                f"wind tunnel {speed} m/s, sway and rotation",
+            )
+        )
+    for speed in VERTICAL_SPEEDS_MPS:
+        cases.append(
+            Case(
+                f"vertical/{speed}",
+                "vertical_wind",
+                (*duration_overrides("vertical_wind", quick), f"wind.speed_mps={speed}"),
+                "process",
+                "vertical",
+                f"vertical wind {speed} m/s",
+            )
+        )
+    for scenario in SEA_SCENARIOS:
+        cases.append(
+            Case(
+                f"sea/{scenario}",
+                scenario,
+                duration_overrides(scenario, quick),
+                "process",
+                "sea",
+                scenario,
+            )
+        )
     return cases
 
 
