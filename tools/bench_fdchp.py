@@ -221,6 +221,8 @@ def flux_figures(time_s, wind, temperature) -> dict:
 
 
 def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -> dict:
+    """Our processing of ``record`` beside Edson's (when ion-functions is at hand); the figures
+    of fdchp.json, the wave-band figure drawn."""
     processed = process_record(record, OUT_DIR / "fdchp", extra_parameter_files)
     kept = kept_series(processed)
     result = {
@@ -266,7 +268,8 @@ def kept_series(processed: Path) -> dict:
     """Over the samples Edson keeps (:data:`KEPT`): time (s), our uncorrected vertical wind and
     corrected wind (E, N, U; m/s), the vertical acceleration (m/s²), the sonic temperature
     (°C), the platform's vertical velocity (m/s), our wind as Edson's processing would make it
-    (``high_passed``, ``as_edson``) and our wave-band motion figures (``motion``)."""
+    (``high_passed``, ``as_edson``) and our wave-band motion figures (``motion``); and the
+    platform velocity (``velocity``; E, N, U, m/s) over every sample."""
     ours = read_processed(processed)
     uncorrected_w = ours["measured"][KEPT, 2]
     acceleration = vertical_acceleration_mps2(ours["specific_force"])[KEPT]
