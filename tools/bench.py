@@ -185,77 +185,93 @@ def duration_overrides(scenario: str, quick: bool) -> tuple[str, ...]:
 def plan_cases(sections: set[str], quick: bool) -> list[Case]:
     cases = []
     if "attitude" in sections:
-        for scenario in ATTITUDE_SCENARIOS:
-            cases.append(
-                Case(
-                    f"attitude/{scenario}",
-                    scenario,
-                    duration_overrides(scenario, quick),
-                    "fuse",
-                    "attitude",
-                    scenario,
-                )
-            )
-        for scenario in SEED_SPREAD_SCENARIOS:
-            for seed in SEED_SPREAD:
-                cases.append(
-                    Case(
-                        f"attitude_seed/{scenario}/{seed}",
-                        scenario,
-                        (*duration_overrides(scenario, quick), f"seed={seed}"),
-                        "fuse",
-                        "attitude",
-                        f"{scenario} seed {seed}",
-                    )
-                )
+        cases += attitude_cases(quick)
     if "wind" in sections:
-        for speed in TUNNEL_SPEEDS_MPS:
-            base = (*duration_overrides("wind_tunnel", quick), f"wind.speed_mps={speed}")
-            cases.append(
-                Case(
-                    f"tunnel/{speed}/reference",
-                    "wind_tunnel",
-                    (*base, *STILL_LEVEL),
-                    "process",
-                    "tunnel",
-                    f"wind tunnel {speed} m/s, still level",
-                )
-            )
-            cases.append(
-                Case(
-                    f"tunnel/{speed}/motion",
-                    "wind_tunnel",
-                    base,
-                    "process",
-                    "tunnel",
-                    f"wind tunnel {speed} m/s, sway and rotation",
-                )
-            )
-        for speed in VERTICAL_SPEEDS_MPS:
-            cases.append(
-                Case(
-                    f"vertical/{speed}",
-                    "vertical_wind",
-                    (*duration_overrides("vertical_wind", quick), f"wind.speed_mps={speed}"),
-                    "process",
-                    "vertical",
-                    f"vertical wind {speed} m/s",
-                )
-            )
-        for scenario in SEA_SCENARIOS:
-            cases.append(
-                Case(
-                    f"sea/{scenario}",
-                    scenario,
-                    duration_overrides(scenario, quick),
-                    "process",
-                    "sea",
-                    scenario,
-                )
-            )
+        cases += wind_cases(quick)
     for section in ("current", "current_long"):
         if section in sections:
             cases += current_cases(section, quick, Case)
+    return cases
+
+
+def attitude_cases(quick: bool) -> list[Case]:
+    """fuse_bag on each attitude scenario (paper Table 1), then on the seed-spread scenarios
+    with other seeds (Table 1b)."""
+    cases = []
+    for scenario in ATTITUDE_SCENARIOS:
+        cases.append(
+            Case(
+                f"attitude/{scenario}",
+                scenario,
+                duration_overrides(scenario, quick),
+                "fuse",
+                "attitude",
+                scenario,
+            )
+        )
+    for scenario in SEED_SPREAD_SCENARIOS:
+        for seed in SEED_SPREAD:
+            cases.append(
+                Case(
+                    f"attitude_seed/{scenario}/{seed}",
+                    scenario,
+                    (*duration_overrides(scenario, quick), f"seed={seed}"),
+                    "fuse",
+                    "attitude",
+                    f"{scenario} seed {seed}",
+                )
+            )
+    return cases
+
+
+def wind_cases(quick: bool) -> list[Case]:
+    """process_bag on the wind tunnel still and moving at each speed (paper Table 2), on the
+    vertical wind (Table 3) and on the sea scenarios (Table 4)."""
+    cases = []
+    for speed in TUNNEL_SPEEDS_MPS:
+        base = (*duration_overrides("wind_tunnel", quick), f"wind.speed_mps={speed}")
+        cases.append(
+            Case(
+                f"tunnel/{speed}/reference",
+                "wind_tunnel",
+                (*base, *STILL_LEVEL),
+                "process",
+                "tunnel",
+                f"wind tunnel {speed} m/s, still level",
+            )
+        )
+        cases.append(
+            Case(
+                f"tunnel/{speed}/motion",
+                "wind_tunnel",
+                base,
+                "process",
+                "tunnel",
+                f"wind tunnel {speed} m/s, sway and rotation",
+            )
+        )
+    for speed in VERTICAL_SPEEDS_MPS:
+        cases.append(
+            Case(
+                f"vertical/{speed}",
+                "vertical_wind",
+                (*duration_overrides("vertical_wind", quick), f"wind.speed_mps={speed}"),
+                "process",
+                "vertical",
+                f"vertical wind {speed} m/s",
+            )
+        )
+    for scenario in SEA_SCENARIOS:
+        cases.append(
+            Case(
+                f"sea/{scenario}",
+                scenario,
+                duration_overrides(scenario, quick),
+                "process",
+                "sea",
+                scenario,
+            )
+        )
     return cases
 
 
@@ -408,66 +424,125 @@ def main(argv=None) -> None:
     OUT_DIR.mkdir(parents=True, exist_ok=True)
 
     cases = plan_cases(sections, quick)
+    smoothing_cases = bench_smoother.plan(sections, quick)
+    bags = plan_bags(sections, quick, cases, smoothing_cases)
+    simulation_walls = ensure_bags(bags.wanted)
+
+    results = {"meta": run_meta(sections, quick, simulation_walls)}
+    case_results = run_cases(cases, bags.bag_of) if cases else {}
+    run = BenchRun(sections, quick, cases, case_results, smoothing_cases, bags)
+    for section_results in SECTION_STEPS:
+        results.update(section_results(run))
+
+    results["meta"]["wall_s"] = time.monotonic() - started
+    with open(OUT_DIR / "results.json", "w") as stream:
+        json.dump(results, stream, indent=2, default=json_default)
+    print(
+        f"\nbench: {results['meta']['wall_s']:.0f} s wall; figures in "
+        f"{(OUT_DIR / 'results.json').relative_to(REPO)}"
+    )
+
+
+@dataclass
+class BagPlan:
+    """The simulated bags a run needs: what to simulate into each cache path, the bag of each
+    case key, and the bags of the speed sections (an hour of open_ocean) and of smoother_day."""
+
+    wanted: dict[Path, tuple[str, tuple[str, ...]]]
+    bag_of: dict[str, Path]
+    speed_bag: Path | None = None
+    day_bag: Path | None = None
+
+
+@dataclass(frozen=True)
+class BenchRun:
+    """What the sections of one run share: the sections asked for, the cases and their
+    results, the smoothing cases and the bags."""
+
+    sections: set[str]
+    quick: bool
+    cases: list[Case]
+    case_results: dict[str, dict]
+    smoothing_cases: list
+    bags: BagPlan
+
+
+def plan_bags(sections: set[str], quick: bool, cases: list[Case], smoothing_cases) -> BagPlan:
+    """The cached bags of ``cases`` and ``smoothing_cases`` and those the speed sections and
+    smoother_day simulate."""
     fingerprint = simulator_fingerprint()
-    wanted, bag_of = {}, {}
+    bags = BagPlan({}, {})
     for case in cases:
         path = cached_bag_path(case.scenario, case.overrides, fingerprint)
-        wanted[path] = (case.scenario, case.overrides)
-        bag_of[case.key] = path
+        bags.wanted[path] = (case.scenario, case.overrides)
+        bags.bag_of[case.key] = path
     if sections & {"speed", "smoother_speed"}:
-        speed_bag = cached_bag_path("open_ocean", speed_overrides(quick), fingerprint)
-        wanted[speed_bag] = ("open_ocean", speed_overrides(quick))
-    smoothing_cases = bench_smoother.plan(sections, quick)
+        bags.speed_bag = cached_bag_path("open_ocean", speed_overrides(quick), fingerprint)
+        bags.wanted[bags.speed_bag] = ("open_ocean", speed_overrides(quick))
     for case in smoothing_cases:
         path = cached_bag_path(case.scenario, case.overrides, fingerprint)
-        wanted[path] = (case.scenario, case.overrides)
-        bag_of[case.key] = path
+        bags.wanted[path] = (case.scenario, case.overrides)
+        bags.bag_of[case.key] = path
     if "smoother_day" in sections:
         day_overrides = (f"duration_s={SMOOTHER_DAY_S:g}",)
-        day_bag = cached_bag_path("open_ocean", day_overrides, fingerprint)
-        wanted[day_bag] = ("open_ocean", day_overrides)
-    simulation_walls = ensure_bags(wanted)
+        bags.day_bag = cached_bag_path("open_ocean", day_overrides, fingerprint)
+        bags.wanted[bags.day_bag] = ("open_ocean", day_overrides)
+    return bags
 
-    results = {
-        "meta": {
-            "quick": quick,
-            "sections": sorted(sections),
-            "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "cpus": os.cpu_count(),
-            "workers": WORKERS,
-            "processing_params_files": [str(Path(p).relative_to(REPO)) for p in PROCESSING_PARAMS],
-            "simulation_params_files": [str(Path(p).relative_to(REPO)) for p in SIMULATION_PARAMS],
-            "simulated_this_run_wall_s": simulation_walls,
-        }
+
+def run_meta(sections: set[str], quick: bool, simulation_walls: dict[str, float]) -> dict:
+    return {
+        "quick": quick,
+        "sections": sorted(sections),
+        "started_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "cpus": os.cpu_count(),
+        "workers": WORKERS,
+        "processing_params_files": [str(Path(p).relative_to(REPO)) for p in PROCESSING_PARAMS],
+        "simulation_params_files": [str(Path(p).relative_to(REPO)) for p in SIMULATION_PARAMS],
+        "simulated_this_run_wall_s": simulation_walls,
     }
-    case_results = run_cases(cases, bag_of) if cases else {}
-    if "sensor_sets" in sections:
-        # Sensor sets beyond RTK, the outage test and the motion pack's lag: their own tool,
-        # which writes out/bench/sensor_sets.json.
-        import bench_sensor_sets
 
-        for scenario in ("sea_state", "open_ocean"):
-            bench_sensor_sets.main(
-                ["--scenario", scenario, "--outages", *(["--quick"] if quick else [])]
-            )
-            shutil.copy(OUT_DIR / "sensor_sets.json", OUT_DIR / f"sensor_sets_{scenario}.json")
-    if "real_record" in sections:
-        # OOI's FDCHP record beside Edson's processing, and both on simulated FDCHP records held
-        # to the truth: their own tools, out/bench/fdchp.json and fdchp_simulated.json.
-        import bench_fdchp
-        import fdchp_simulated
 
-        bench_fdchp.main([])
-        fdchp_simulated.main([])
-    if "attitude" in sections:
-        attitude = {c.scenario: case_results[c.key] for c in cases if c.key.startswith("attitude/")}
-        other_seeds = {
-            scenario: {
-                seed: case_results[f"attitude_seed/{scenario}/{seed}"] for seed in SEED_SPREAD
-            }
-            for scenario in SEED_SPREAD_SCENARIOS
-        }
-        results["attitude"] = {
+def sensor_sets_section(run: BenchRun) -> dict:
+    """Sensor sets beyond RTK, the outage test and the motion pack's lag: their own tool,
+    which writes out/bench/sensor_sets.json."""
+    if "sensor_sets" not in run.sections:
+        return {}
+    import bench_sensor_sets
+
+    for scenario in ("sea_state", "open_ocean"):
+        bench_sensor_sets.main(
+            ["--scenario", scenario, "--outages", *(["--quick"] if run.quick else [])]
+        )
+        shutil.copy(OUT_DIR / "sensor_sets.json", OUT_DIR / f"sensor_sets_{scenario}.json")
+    return {}
+
+
+def real_record_section(run: BenchRun) -> dict:
+    """OOI's FDCHP record beside Edson's processing, and both on simulated FDCHP records held
+    to the truth: their own tools, out/bench/fdchp.json and fdchp_simulated.json."""
+    if "real_record" not in run.sections:
+        return {}
+    import bench_fdchp
+    import fdchp_simulated
+
+    bench_fdchp.main([])
+    fdchp_simulated.main([])
+    return {}
+
+
+def attitude_section(run: BenchRun) -> dict:
+    """Paper Table 1 and the other seeds (Table 1b)."""
+    if "attitude" not in run.sections:
+        return {}
+    case_results = run.case_results
+    attitude = {c.scenario: case_results[c.key] for c in run.cases if c.key.startswith("attitude/")}
+    other_seeds = {
+        scenario: {seed: case_results[f"attitude_seed/{scenario}/{seed}"] for seed in SEED_SPREAD}
+        for scenario in SEED_SPREAD_SCENARIOS
+    }
+    results = {
+        "attitude": {
             "targets": {
                 "max_abs_error_deg": ATTITUDE_MAX_ERROR_DEG,
                 "rms_deg": ATTITUDE_RMS_DEG,
@@ -477,33 +552,25 @@ def main(argv=None) -> None:
             "scenarios": attitude,
             "other_seeds": other_seeds,
         }
-        print_attitude(attitude, quick)
-        print_seed_spread(attitude, other_seeds)
-    if "wind" in sections:
-        tunnel = {k: v for k, v in case_results.items() if k.startswith("tunnel/")}
-        vertical = {k: v for k, v in case_results.items() if k.startswith("vertical/")}
-        sea = {k: v for k, v in case_results.items() if k.startswith("sea/")}
-        results["wind_tunnel"] = {
+    }
+    print_attitude(attitude, run.quick)
+    print_seed_spread(attitude, other_seeds)
+    return results
+
+
+def wind_section(run: BenchRun) -> dict:
+    """Paper Tables 2 and 3 (wind tunnel, vertical wind) and the sea (Table 4)."""
+    if "wind" not in run.sections:
+        return {}
+    tunnel = {k: v for k, v in run.case_results.items() if k.startswith("tunnel/")}
+    vertical = {k: v for k, v in run.case_results.items() if k.startswith("vertical/")}
+    sea = {k: v for k, v in run.case_results.items() if k.startswith("sea/")}
+    results = {
+        "wind_tunnel": {
             "paper_table2": {str(k): v for k, v in PAPER_TABLE2.items()},
-            "runs": {
-                f"{speed}_mps": {
-                    "reference": tunnel[f"tunnel/{speed}/reference"],
-                    "motion": tunnel[f"tunnel/{speed}/motion"],
-                    "speed_error_mps": tunnel[f"tunnel/{speed}/motion"]["corrected"][
-                        "mean_speed_mps"
-                    ]
-                    - tunnel[f"tunnel/{speed}/reference"]["corrected"]["mean_speed_mps"],
-                    "direction_error_deg": float(
-                        wrap_deg(
-                            tunnel[f"tunnel/{speed}/motion"]["corrected"]["direction_deg"]
-                            - tunnel[f"tunnel/{speed}/reference"]["corrected"]["direction_deg"]
-                        )
-                    ),
-                }
-                for speed in TUNNEL_SPEEDS_MPS
-            },
-        }
-        results["vertical_wind"] = {
+            "runs": {f"{speed}_mps": tunnel_run(tunnel, speed) for speed in TUNNEL_SPEEDS_MPS},
+        },
+        "vertical_wind": {
             "paper_table3": {str(k): v for k, v in PAPER_TABLE3.items()},
             "paper_residual_share": PAPER_RESIDUAL_SHARE,
             "targets": {
@@ -511,99 +578,176 @@ def main(argv=None) -> None:
                 "speed_error_fraction": VERTICAL_SPEED_ERROR_TARGET,
             },
             "runs": {f"{k.split('/')[1]}_mps": v for k, v in vertical.items()},
-        }
-        results["sea"] = {
+        },
+        "sea": {
             "targets": {
                 "mean_speed_error_mps": SEA_MEAN_SPEED_ERROR_MPS,
                 "mean_direction_error_deg": SEA_MEAN_DIRECTION_ERROR_DEG,
             },
             "scenarios": {k.split("/")[1]: v for k, v in sea.items()},
-        }
-        print_tunnel(tunnel)
-        print_vertical(vertical)
-        print_sea(sea)
-    if "speed" in sections:
-        results["speed"] = run_speed(speed_bag, RUNS_DIR / "speed", log)
-        print_speed(results["speed"], quick)
-    if "live" in sections:
-        import bench_live
+        },
+    }
+    print_tunnel(tunnel)
+    print_vertical(vertical)
+    print_sea(sea)
+    return results
 
-        live_duration_s = LIVE_DURATION_S["quick" if quick else "full"]
-        results["live"] = bench_live.run_live(live_duration_s, OUT_DIR / "live_logs")
-        print_live(
-            results["live"],
-            "Table 6 — live: run_scenario sea_state with fusion_node and compensation_node",
-        )
-        # The same run with stand-ins that compute nothing: what the middleware, the executor
-        # and this machine cost on the same path, to read Table 6 against.
-        results["live_passthrough"] = bench_live.run_live(
-            live_duration_s, OUT_DIR / "live_logs_passthrough", passthrough=True
-        )
-        print_live(
-            results["live_passthrough"],
-            "Table 6b — the floor: the same run with pass-through stand-ins for both nodes "
-            "(tools/passthrough_node.py)",
-        )
+
+def tunnel_run(tunnel: dict, speed_mps) -> dict:
+    """The still reference and the moving run at ``speed_mps`` (m/s), and the moving run's
+    corrected mean speed (m/s) and direction (°) less the reference's."""
+    reference = tunnel[f"tunnel/{speed_mps}/reference"]
+    motion = tunnel[f"tunnel/{speed_mps}/motion"]
+    return {
+        "reference": reference,
+        "motion": motion,
+        "speed_error_mps": motion["corrected"]["mean_speed_mps"]
+        - reference["corrected"]["mean_speed_mps"],
+        "direction_error_deg": float(
+            wrap_deg(motion["corrected"]["direction_deg"] - reference["corrected"]["direction_deg"])
+        ),
+    }
+
+
+def speed_section(run: BenchRun) -> dict:
+    if "speed" not in run.sections:
+        return {}
+    speed = run_speed(run.bags.speed_bag, RUNS_DIR / "speed", log)
+    print_speed(speed, run.quick)
+    return {"speed": speed}
+
+
+def live_section(run: BenchRun) -> dict:
+    """Table 6, the live nodes, and 6b, the same run with stand-ins that compute nothing: what
+    the middleware, the executor and this machine cost on the same path, to read 6 against."""
+    if "live" not in run.sections:
+        return {}
+    import bench_live
+
+    live_duration_s = LIVE_DURATION_S["quick" if run.quick else "full"]
+    live = bench_live.run_live(live_duration_s, OUT_DIR / "live_logs")
+    print_live(
+        live, "Table 6 — live: run_scenario sea_state with fusion_node and compensation_node"
+    )
+    passthrough = bench_live.run_live(
+        live_duration_s, OUT_DIR / "live_logs_passthrough", passthrough=True
+    )
+    print_live(
+        passthrough,
+        "Table 6b — the floor: the same run with pass-through stand-ins for both nodes "
+        "(tools/passthrough_node.py)",
+    )
+    return {"live": live, "live_passthrough": passthrough}
+
+
+def current_sections(run: BenchRun) -> dict:
+    results = {}
     for section in ("current", "current_long"):
-        if section in sections:
-            paper, buoys = current_results(section, case_results)
+        if section in run.sections:
+            paper, buoys = current_results(section, run.case_results)
             results[section] = {"paper_003": paper, "buoys": buoys}
-            print_current(section, paper, buoys, quick)
-    if "fluxes" in sections:
-        # The fluxes of the corrected wind against the truth: its own tool (tools/bench_fluxes.py),
-        # two 30-min windows of open_ocean with a surface layer (one 10-min window with --quick).
-        import bench_fluxes
+            print_current(section, paper, buoys, run.quick)
+    return results
 
-        window_s = 600.0 if quick else 1800.0
-        rows = bench_fluxes.run(2 * window_s, window_s)
-        results["fluxes"] = {"window_s": window_s, "windows": rows}
-        print(bench_fluxes.table(rows, window_s))
-    if "consistency" in sections:
-        import bias_consistency
 
-        results["consistency"] = bias_consistency.run_consistency(
-            CONSISTENCY_SEEDS["quick" if quick else "full"],
-            CONSISTENCY_DURATION_S,
-            CONSISTENCY_CHECKPOINTS_S,
-        )
-        bias_consistency.print_table(results["consistency"]["table"])
-    if "soak" in sections:
-        import soak
+def fluxes_section(run: BenchRun) -> dict:
+    """The fluxes of the corrected wind against the truth: its own tool (tools/bench_fluxes.py),
+    two 30-min windows of open_ocean with a surface layer (two 10-min windows with --quick)."""
+    if "fluxes" not in run.sections:
+        return {}
+    import bench_fluxes
 
-        results["soak"] = soak.soak(
-            SOAK_HOURS["quick" if quick else "full"],
-            SOAK_RATE_FACTOR,
-            rss_period_s=10.0,
-            log_dir=OUT_DIR / "soak_logs",
-        )
-        soak.print_table(results["soak"])
+    window_s = 600.0 if run.quick else 1800.0
+    rows = bench_fluxes.run(2 * window_s, window_s)
+    print(bench_fluxes.table(rows, window_s))
+    return {"fluxes": {"window_s": window_s, "windows": rows}}
 
-    if smoothing_cases:
-        runs = bench_smoother.run_cases(smoothing_cases, bag_of, RUNS_DIR, WORKERS)
-        results.update(bench_smoother.table1_results(sections, runs))
-    if "antennas" in sections:
-        results["antennas"] = bench_antennas.run_antennas(quick)
-        bench_antennas.print_antennas(results["antennas"])
+
+def consistency_section(run: BenchRun) -> dict:
+    if "consistency" not in run.sections:
+        return {}
+    import bias_consistency
+
+    consistency = bias_consistency.run_consistency(
+        CONSISTENCY_SEEDS["quick" if run.quick else "full"],
+        CONSISTENCY_DURATION_S,
+        CONSISTENCY_CHECKPOINTS_S,
+    )
+    bias_consistency.print_table(consistency["table"])
+    return {"consistency": consistency}
+
+
+def soak_section(run: BenchRun) -> dict:
+    if "soak" not in run.sections:
+        return {}
+    import soak
+
+    result = soak.soak(
+        SOAK_HOURS["quick" if run.quick else "full"],
+        SOAK_RATE_FACTOR,
+        rss_period_s=10.0,
+        log_dir=OUT_DIR / "soak_logs",
+    )
+    soak.print_table(result)
+    return {"soak": result}
+
+
+def smoother_sections(run: BenchRun) -> dict:
+    """Paper 002 Table 1: smoother and smoother_table1."""
+    if not run.smoothing_cases:
+        return {}
+    runs = bench_smoother.run_cases(run.smoothing_cases, run.bags.bag_of, RUNS_DIR, WORKERS)
+    return bench_smoother.table1_results(run.sections, runs)
+
+
+def antennas_section(run: BenchRun) -> dict:
+    if "antennas" not in run.sections:
+        return {}
+    antennas = bench_antennas.run_antennas(run.quick)
+    bench_antennas.print_antennas(antennas)
+    return {"antennas": antennas}
+
+
+def smoother_speed_sections(run: BenchRun) -> dict:
+    """smoother_speed (an hour of open_ocean) and smoother_day (24 hours)."""
+    results = {}
     for section, bags in (
-        ("smoother_speed", {"1 h": speed_bag} if "smoother_speed" in sections else {}),
-        ("smoother_day", {"24 h": day_bag} if "smoother_day" in sections else {}),
+        ("smoother_speed", {"1 h": run.bags.speed_bag} if "smoother_speed" in run.sections else {}),
+        ("smoother_day", {"24 h": run.bags.day_bag} if "smoother_day" in run.sections else {}),
     ):
         if bags:
             results[section] = bench_smoother.run_smoother_speed(bags, RUNS_DIR / section)
             bench_smoother.print_smoother_speed(results[section])
-    if "archive" in sections:
-        import bench_archive
+    return results
 
-        results["archive"] = bench_archive.run_archive_throughput(OUT_DIR / "archive")
-        bench_archive.print_archive(results["archive"])
 
-    results["meta"]["wall_s"] = time.monotonic() - started
-    with open(OUT_DIR / "results.json", "w") as stream:
-        json.dump(results, stream, indent=2, default=json_default)
-    print(
-        f"\nbench: {results['meta']['wall_s']:.0f} s wall; figures in "
-        f"{(OUT_DIR / 'results.json').relative_to(REPO)}"
-    )
+def archive_section(run: BenchRun) -> dict:
+    if "archive" not in run.sections:
+        return {}
+    import bench_archive
+
+    archive = bench_archive.run_archive_throughput(OUT_DIR / "archive")
+    bench_archive.print_archive(archive)
+    return {"archive": archive}
+
+
+SECTION_STEPS = (
+    sensor_sets_section,
+    real_record_section,
+    attitude_section,
+    wind_section,
+    speed_section,
+    live_section,
+    current_sections,
+    fluxes_section,
+    consistency_section,
+    soak_section,
+    smoother_sections,
+    antennas_section,
+    smoother_speed_sections,
+    archive_section,
+)
+"""The sections after the cases, in the order they run and print; each returns its results."""
 
 
 def json_default(value):

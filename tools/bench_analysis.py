@@ -346,8 +346,31 @@ def analyse_sea(out_bag: str, scenario_duration_s: float) -> dict:
     after = run.wind_stamp_ns >= run.aligned_ns
     valid = after & np.all(np.isfinite(run.corrected_enu_mps), axis=1)
     error = run.corrected_enu_mps[valid] - run.truth_enu_mps[valid]
+    windows, too_short = sea_mean_windows(run, valid)
+    terms = miller_term_figures(out_bag, run, valid, config)
+    return {
+        "scenario_duration_s": scenario_duration_s,
+        "aligned_s": (run.aligned_ns - run.start_ns) * 1e-9,
+        "samples": int(valid.sum()),
+        "nan_samples_after_alignment": int((after & ~valid).sum()),
+        "rms_error_enu_mps": {
+            axis: rms(error[:, k]) for k, axis in enumerate(("east", "north", "up"))
+        },
+        "rms_error_vector_mps": vector_rms(error),
+        "uncorrected_error_rms_vector_mps": terms["uncorrected_rms"],
+        "full_correction_error_rms_vector_mps": terms["full_rms"],
+        "mean_windows": windows,
+        "samples_in_windows_too_short_to_report": too_short,
+        "term_share_of_uncorrected_error": terms["shares"],
+        "term_rms_mps": terms["term_sizes"],
+        "recomputed_vs_bag_max_abs_mps": terms["recompute_difference"],
+    }
 
-    # Windows as the wind products align them: multiples of 600 s of the stamps.
+
+def sea_mean_windows(run, valid: np.ndarray) -> tuple[list[dict], list[int]]:
+    """The mean wind's error in each window of the ``valid`` samples long enough to report,
+    and the sample counts of those too short. Windows as the wind products align them:
+    multiples of 600 s of the stamps."""
     window_index = run.wind_stamp_ns // int(SEA_MEAN_WINDOW_S * 1e9)
     windows, too_short = [], []
     for index in np.unique(window_index[valid]):
@@ -356,30 +379,40 @@ def analyse_sea(out_bag: str, scenario_duration_s: float) -> dict:
         if (stamps[-1] - stamps[0]) * 1e-9 < MIN_MEAN_WINDOW_COVERAGE_S:
             too_short.append(int(in_window.sum()))
             continue
-        corrected = run.corrected_enu_mps[in_window].mean(axis=0)
-        truth = run.truth_enu_mps[in_window].mean(axis=0)
-        speed_error = float(np.hypot(*corrected[:2]) - np.hypot(*truth[:2]))
-        direction_error = float(
-            wrap_deg(
-                meteorological_direction_deg(*corrected[:2])
-                - meteorological_direction_deg(*truth[:2])
-            )
-        )
-        windows.append(
-            {
-                "start_s": (int(index) * SEA_MEAN_WINDOW_S * 1e9 - run.start_ns) * 1e-9,
-                "covered_s": (stamps[-1] - stamps[0]) * 1e-9,
-                "samples": int(in_window.sum()),
-                "truth_speed_mps": float(np.hypot(*truth[:2])),
-                "truth_direction_deg": float(meteorological_direction_deg(*truth[:2])),
-                "speed_error_mps": speed_error,
-                "direction_error_deg": direction_error,
-                "speed_pass": bool(abs(speed_error) <= SEA_MEAN_SPEED_ERROR_MPS),
-                "direction_pass": bool(abs(direction_error) <= SEA_MEAN_DIRECTION_ERROR_DEG),
-            }
-        )
+        windows.append(sea_mean_window(run, in_window, index))
+    return windows, too_short
 
-    # The Miller terms, recomputed from the output bag's navigation as process_bag feeds it.
+
+def sea_mean_window(run, in_window: np.ndarray, index) -> dict:
+    """Truth and error of the vector-mean wind speed (m/s) and meteorological direction (°)
+    over the samples ``in_window`` of window ``index`` (multiples of SEA_MEAN_WINDOW_S)."""
+    stamps = run.wind_stamp_ns[in_window]
+    corrected = run.corrected_enu_mps[in_window].mean(axis=0)
+    truth = run.truth_enu_mps[in_window].mean(axis=0)
+    speed_error = float(np.hypot(*corrected[:2]) - np.hypot(*truth[:2]))
+    direction_error = float(
+        wrap_deg(
+            meteorological_direction_deg(*corrected[:2]) - meteorological_direction_deg(*truth[:2])
+        )
+    )
+    return {
+        "start_s": (int(index) * SEA_MEAN_WINDOW_S * 1e9 - run.start_ns) * 1e-9,
+        "covered_s": (stamps[-1] - stamps[0]) * 1e-9,
+        "samples": int(in_window.sum()),
+        "truth_speed_mps": float(np.hypot(*truth[:2])),
+        "truth_direction_deg": float(meteorological_direction_deg(*truth[:2])),
+        "speed_error_mps": speed_error,
+        "direction_error_deg": direction_error,
+        "speed_pass": bool(abs(speed_error) <= SEA_MEAN_SPEED_ERROR_MPS),
+        "direction_pass": bool(abs(direction_error) <= SEA_MEAN_DIRECTION_ERROR_DEG),
+    }
+
+
+def miller_term_figures(out_bag: str, run, valid: np.ndarray, config) -> dict:
+    """The Miller terms, recomputed from the output bag's navigation as process_bag feeds it:
+    the RMS vector error (m/s) uncorrected and fully corrected, the share of the uncorrected
+    error each term removes, each term's RMS size (m/s), and how far the recomputed wind is
+    from the bag's (m/s)."""
     batch = recorrected_wind(out_bag, config)
     batch_valid = batch.status == SampleStatus.VALID
     recompute_difference = float(
@@ -406,31 +439,19 @@ def analyse_sea(out_bag: str, scenario_duration_s: float) -> dict:
         "rotation": tilt + translation,
         "translation": tilt + rotation,
     }
-    shares = {
-        term: (vector_rms(truth - wind) - full_rms) / uncorrected_rms
-        for term, wind in omitted.items()
-    }
-    term_sizes = {
-        "tilt_minus_heading_only": vector_rms(tilt - levelled),
-        "rotation": vector_rms(rotation),
-        "translation": vector_rms(translation),
-    }
     return {
-        "scenario_duration_s": scenario_duration_s,
-        "aligned_s": (run.aligned_ns - run.start_ns) * 1e-9,
-        "samples": int(valid.sum()),
-        "nan_samples_after_alignment": int((after & ~valid).sum()),
-        "rms_error_enu_mps": {
-            axis: rms(error[:, k]) for k, axis in enumerate(("east", "north", "up"))
+        "uncorrected_rms": uncorrected_rms,
+        "full_rms": full_rms,
+        "shares": {
+            term: (vector_rms(truth - wind) - full_rms) / uncorrected_rms
+            for term, wind in omitted.items()
         },
-        "rms_error_vector_mps": vector_rms(error),
-        "uncorrected_error_rms_vector_mps": uncorrected_rms,
-        "full_correction_error_rms_vector_mps": full_rms,
-        "mean_windows": windows,
-        "samples_in_windows_too_short_to_report": too_short,
-        "term_share_of_uncorrected_error": shares,
-        "term_rms_mps": term_sizes,
-        "recomputed_vs_bag_max_abs_mps": recompute_difference,
+        "term_sizes": {
+            "tilt_minus_heading_only": vector_rms(tilt - levelled),
+            "rotation": vector_rms(rotation),
+            "translation": vector_rms(translation),
+        },
+        "recompute_difference": recompute_difference,
     }
 
 

@@ -221,108 +221,152 @@ def flux_figures(time_s, wind, temperature) -> dict:
 
 
 def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -> dict:
+    """Our processing of ``record`` beside Edson's (when ion-functions is at hand); the figures
+    of fdchp.json, the wave-band figure drawn."""
     processed = process_record(record, OUT_DIR / "fdchp", extra_parameter_files)
-    ours = read_processed(processed)
-    t = ours["time_s"][KEPT]
-    uncorrected_w = ours["measured"][KEPT, 2]
-    acceleration = vertical_acceleration_mps2(ours["specific_force"])[KEPT]
-    temperature = ours["temperature_degc"][KEPT]
-    corrected = ours["corrected"][KEPT]
-    velocity = platform_velocity_enu(processed, ours["time_s"])
-    # Our wind with the platform velocity high-passed as Edson's is: the slow part taken out.
-    slow_velocity = below(EDSON_HIGH_PASS_HZ, velocity)
-    high_passed = (ours["corrected"] - slow_velocity)[KEPT]
-    # And with the slow tilt taken from the accelerometers too: the air relative to the buoy
-    # turned by the tilt difference.
-    tilt = slow_tilt_from_accelerometers(processed, ours["time_s"], ours["specific_force"])
-    as_edson = (tilt.apply(ours["corrected"] - velocity) + velocity - slow_velocity)[KEPT]
-    our_motion = motion_residual(uncorrected_w, corrected[:, 2], acceleration, RATE_HZ)
-    band = our_motion.band_hz
-    platform_up = velocity[KEPT, 2]
+    kept = kept_series(processed)
     result = {
         "record": str(record),
-        "samples": int(t.size),
-        "invalid_corrected_samples": int(np.count_nonzero(~np.isfinite(corrected[:, 2]))),
-        "ours": {
-            "motion": asdict(our_motion),
-            "wind": wind_statistics(corrected),
-            "fluxes": flux_figures(t, corrected, temperature),
-            "flux_bands": band_split(t, corrected, temperature),
-            "slow_platform_velocity_std_enu_mps": below(SLOW_HZ, velocity)[KEPT]
-            .std(axis=0)
-            .round(3)
-            .tolist(),
-            "platform_velocity_left": _parts(
-                platform_velocity_left(corrected[:, 2], platform_up, RATE_HZ, band)
-            ),
-        },
+        "samples": int(kept["time_s"].size),
+        "invalid_corrected_samples": int(np.count_nonzero(~np.isfinite(kept["corrected"][:, 2]))),
+        "ours": our_figures(kept),
         # The figures reward a correction that applies less of the platform velocity than the
         # sensors say, on a record whose corrected w keeps some of it in phase.
-        "ours_platform_velocity_under_applied": {
-            f"{gain:g}": asdict(
-                motion_residual(
-                    uncorrected_w,
-                    corrected[:, 2] - (1.0 - gain) * platform_up,
-                    acceleration,
-                    RATE_HZ,
-                    band,
-                )
-            )
-            for gain in UNDER_APPLIED_GAINS
-        },
-        "ours_platform_velocity_high_passed": {
-            "motion": asdict(
-                motion_residual(uncorrected_w, high_passed[:, 2], acceleration, RATE_HZ)
-            ),
-            "fluxes": flux_figures(t, high_passed, temperature),
-            "flux_bands": band_split(t, high_passed, temperature),
-        },
-        "ours_high_passed_and_slow_tilt_from_accelerometers": {
-            "motion": asdict(motion_residual(uncorrected_w, as_edson[:, 2], acceleration, RATE_HZ)),
-            "fluxes": flux_figures(t, as_edson, temperature),
-            "flux_bands": band_split(t, as_edson, temperature),
-        },
+        "ours_platform_velocity_under_applied": under_applied_sweep(kept),
+        "ours_platform_velocity_high_passed": variant_figures(kept, kept["high_passed"]),
+        "ours_high_passed_and_slow_tilt_from_accelerometers": variant_figures(
+            kept, kept["as_edson"]
+        ),
         "edson_published_fluxes": dict(
             zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), edson_fdchp.PUBLISHED_FLUXES, strict=True)
         ),
     }
+    vertical_winds = {"uncorrected": kept["uncorrected_w"]}
     try:
         module = edson_fdchp.load_reference(edson_fdchp.ion_functions_dir(ion_functions))
     except edson_fdchp.ReferenceUnavailableError as error:
         result["edson"] = {"unavailable": str(error)}
-        vertical_winds = {"uncorrected": uncorrected_w, "ours": corrected[:, 2]}
-        fdchp_figures.draw_wave_band(
-            FIGURE, vertical_winds, acceleration, platform_up, band, RATE_HZ
+    else:
+        run = edson_fdchp.run_reference(edson_fdchp.load_record(record), module)
+        edson_fdchp.check_published_fluxes(run)
+        edson_wind = run.wind_nwu_mps @ ENU_FROM_NWU.T
+        result["edson"] = edson_figures(kept, edson_wind, run.fluxes)
+        vertical_winds["Edson"] = edson_wind[:, 2]
+    vertical_winds["ours"] = kept["corrected"][:, 2]
+    fdchp_figures.draw_wave_band(
+        FIGURE,
+        vertical_winds,
+        kept["acceleration"],
+        kept["platform_up"],
+        kept["motion"].band_hz,
+        RATE_HZ,
+    )
+    return result
+
+
+def kept_series(processed: Path) -> dict:
+    """Over the samples Edson keeps (:data:`KEPT`): time (s), our uncorrected vertical wind and
+    corrected wind (E, N, U; m/s), the vertical acceleration (m/s²), the sonic temperature
+    (°C), the platform's vertical velocity (m/s), our wind as Edson's processing would make it
+    (``high_passed``, ``as_edson``) and our wave-band motion figures (``motion``); and the
+    platform velocity (``velocity``; E, N, U, m/s) over every sample."""
+    ours = read_processed(processed)
+    uncorrected_w = ours["measured"][KEPT, 2]
+    acceleration = vertical_acceleration_mps2(ours["specific_force"])[KEPT]
+    corrected = ours["corrected"][KEPT]
+    velocity = platform_velocity_enu(processed, ours["time_s"])
+    # Our wind with the platform velocity high-passed as Edson's is: the slow part taken out.
+    slow_velocity = below(EDSON_HIGH_PASS_HZ, velocity)
+    # And with the slow tilt taken from the accelerometers too: the air relative to the buoy
+    # turned by the tilt difference.
+    tilt = slow_tilt_from_accelerometers(processed, ours["time_s"], ours["specific_force"])
+    return {
+        "time_s": ours["time_s"][KEPT],
+        "uncorrected_w": uncorrected_w,
+        "acceleration": acceleration,
+        "temperature": ours["temperature_degc"][KEPT],
+        "corrected": corrected,
+        "velocity": velocity,
+        "platform_up": velocity[KEPT, 2],
+        "high_passed": (ours["corrected"] - slow_velocity)[KEPT],
+        "as_edson": (tilt.apply(ours["corrected"] - velocity) + velocity - slow_velocity)[KEPT],
+        "motion": motion_residual(uncorrected_w, corrected[:, 2], acceleration, RATE_HZ),
+    }
+
+
+def our_figures(kept: dict) -> dict:
+    """Wave-band motion, wind statistics, fluxes and their split by band of our corrected wind,
+    with the slow part of the platform velocity and what of it is left in the vertical wind."""
+    t, corrected, temperature = kept["time_s"], kept["corrected"], kept["temperature"]
+    return {
+        "motion": asdict(kept["motion"]),
+        "wind": wind_statistics(corrected),
+        "fluxes": flux_figures(t, corrected, temperature),
+        "flux_bands": band_split(t, corrected, temperature),
+        "slow_platform_velocity_std_enu_mps": below(SLOW_HZ, kept["velocity"])[KEPT]
+        .std(axis=0)
+        .round(3)
+        .tolist(),
+        "platform_velocity_left": _parts(
+            platform_velocity_left(
+                corrected[:, 2], kept["platform_up"], RATE_HZ, kept["motion"].band_hz
+            )
+        ),
+    }
+
+
+def under_applied_sweep(kept: dict) -> dict:
+    """Wave-band motion figures of our vertical wind with only a share of the platform
+    velocity applied, per share of :data:`UNDER_APPLIED_GAINS`."""
+    return {
+        f"{gain:g}": asdict(
+            motion_residual(
+                kept["uncorrected_w"],
+                kept["corrected"][:, 2] - (1.0 - gain) * kept["platform_up"],
+                kept["acceleration"],
+                RATE_HZ,
+                kept["motion"].band_hz,
+            )
         )
-        return result
-    run = edson_fdchp.run_reference(edson_fdchp.load_record(record), module)
-    edson_fdchp.check_published_fluxes(run)
-    edson_wind = run.wind_nwu_mps @ ENU_FROM_NWU.T
-    result["edson"] = {
+        for gain in UNDER_APPLIED_GAINS
+    }
+
+
+def variant_figures(kept: dict, wind_enu: np.ndarray) -> dict:
+    """Wave-band motion, fluxes and their split by band of a variant of our wind (E, N, U;
+    m/s), its wave band found afresh."""
+    return {
         "motion": asdict(
-            motion_residual(uncorrected_w, edson_wind[:, 2], acceleration, RATE_HZ, band)
+            motion_residual(kept["uncorrected_w"], wind_enu[:, 2], kept["acceleration"], RATE_HZ)
+        ),
+        "fluxes": flux_figures(kept["time_s"], wind_enu, kept["temperature"]),
+        "flux_bands": band_split(kept["time_s"], wind_enu, kept["temperature"]),
+    }
+
+
+def edson_figures(kept: dict, edson_wind: np.ndarray, edson_fluxes) -> dict:
+    """The figures of Edson's corrected wind (E, N, U; m/s) and fluxes beside ours."""
+    t, temperature, band = kept["time_s"], kept["temperature"], kept["motion"].band_hz
+    return {
+        "motion": asdict(
+            motion_residual(
+                kept["uncorrected_w"], edson_wind[:, 2], kept["acceleration"], RATE_HZ, band
+            )
         ),
         "wind": wind_statistics(edson_wind),
         "platform_velocity_left": _parts(
-            platform_velocity_left(edson_wind[:, 2], platform_up, RATE_HZ, band)
+            platform_velocity_left(edson_wind[:, 2], kept["platform_up"], RATE_HZ, band)
         ),
-        "fluxes": dict(zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), run.fluxes, strict=True)),
+        "fluxes": dict(zip(("u_w_m2_s2", "v_w_m2_s2", "w_ts_k_mps"), edson_fluxes, strict=True)),
         "our_flux_core_on_his_wind": flux_figures(t, edson_wind, temperature),
         "flux_bands": band_split(t, edson_wind, temperature),
         # His horizontal wind with our vertical (platform velocity high-passed, slow tilt from
         # the accelerometers, as his): what the horizontal wind alone makes of the difference.
         "fluxes_his_horizontal_our_vertical": flux_figures(
-            t, np.column_stack((edson_wind[:, :2], as_edson[:, 2])), temperature
+            t, np.column_stack((edson_wind[:, :2], kept["as_edson"][:, 2])), temperature
         ),
-        "direction_difference_deg": direction_difference(as_edson, edson_wind),
+        "direction_difference_deg": direction_difference(kept["as_edson"], edson_wind),
     }
-    vertical_winds = {
-        "uncorrected": uncorrected_w,
-        "Edson": edson_wind[:, 2],
-        "ours": corrected[:, 2],
-    }
-    fdchp_figures.draw_wave_band(FIGURE, vertical_winds, acceleration, platform_up, band, RATE_HZ)
-    return result
 
 
 def _parts(left: complex) -> dict:
@@ -343,8 +387,7 @@ def _row(label: str, *values) -> str:
 
 def print_comparison(result: dict) -> None:
     ours, edson = result["ours"], result.get("edson", {})
-    motion = ours["motion"]
-    low, high = motion["band_hz"]
+    low, high = ours["motion"]["band_hz"]
     print(
         f"\nReal record: OOI FDCHP, {result['samples']} samples at 10 Hz (those Edson keeps), "
         f"wave band {low:.3f}-{high:.3f} Hz, {result['invalid_corrected_samples']} of ours invalid"
@@ -352,7 +395,17 @@ def print_comparison(result: dict) -> None:
     if "unavailable" in edson:
         print(f"  Edson's processing not run: {edson['unavailable']}")
         edson = {}
-    theirs = edson.get("motion", {})
+    print_wave_band(ours, edson, result["ours_platform_velocity_under_applied"])
+    print_wind_and_fluxes(ours, edson, result["edson_published_fluxes"])
+    print_flux_bands(ours, edson)
+    print_high_passed_variants(ours, result)
+    print_his_wind_with_ours(edson)
+
+
+def print_wave_band(ours: dict, edson: dict, under_applied: dict) -> None:
+    """The wave-band variance and coherence of the vertical wind, and the platform velocity
+    left in it, uncorrected, Edson's and ours; and ours with a share of the platform velocity."""
+    motion, theirs = ours["motion"], edson.get("motion", {})
     print(_row("", "uncorrected", "Edson", "ours"))
     print(
         _row(
@@ -388,13 +441,17 @@ def print_comparison(result: dict) -> None:
     )
     sweep = ", ".join(
         f"{gain}: {m['variance_share']:.3f} / {m['coherence_after']:.3f}"
-        for gain, m in result["ours_platform_velocity_under_applied"].items()
+        for gain, m in under_applied.items()
     )
     print(f"  ours with a share of the platform velocity applied (share / coherence): {sweep}")
+
+
+def print_wind_and_fluxes(ours: dict, edson: dict, published: dict) -> None:
+    """Mean and spread of the wind, Edson's and ours; the fluxes published, of Edson's run and
+    ours, with our flux QC."""
     for key, label in (("mean_enu_mps", "mean E, N, U, m/s"), ("std_enu_mps", "std E, N, U, m/s")):
         print(_row(label, "Edson", edson.get("wind", {}).get(key, "-")))
         print(_row("", "ours", ours["wind"][key]))
-    published = result["edson_published_fluxes"]
     print(_row("", "published", "Edson (run)", "ours"))
     for key, label in (
         ("u_w_m2_s2", "u'w', m2/s2"),
@@ -410,12 +467,20 @@ def print_comparison(result: dict) -> None:
         f"spikes u, v, w, Ts {f['spikes']}, stationarity u'w' "
         f"{f['stationarity_u_w_percent']:.0f} %, w'Ts' {f['stationarity_w_ts_percent']:.0f} %"
     )
+
+
+def print_flux_bands(ours: dict, edson: dict) -> None:
     bands = ", ".join(f"{lo:g}-{hi:g}" for lo, hi in BANDS_HZ)
     print(f"  by band ({bands} Hz):")
     for key in ("u_w", "v_w", "w_ts", "w_w"):
         print(f"    {key:5s} ours  {ours['flux_bands'][key]}")
         if "flux_bands" in edson:
             print(f"    {key:5s} Edson {edson['flux_bands'][key]}")
+
+
+def print_high_passed_variants(ours: dict, result: dict) -> None:
+    """Our slow platform velocity, and our fluxes and wave band with the platform velocity
+    high-passed and the slow tilt taken from the accelerometers, as Edson's processing does."""
     print(
         f"  our platform velocity below {SLOW_HZ} Hz, std E, N, U: "
         f"{ours['slow_platform_velocity_std_enu_mps']} m/s"
@@ -439,6 +504,11 @@ def print_comparison(result: dict) -> None:
         )
         for band_key in ("u_w", "w_w"):
             print(f"    {band_key:5s} {variant['flux_bands'][band_key]}")
+
+
+def print_his_wind_with_ours(edson: dict) -> None:
+    """Fluxes of Edson's horizontal wind with our vertical, the difference of the wind
+    directions, and our flux core on his corrected wind (when his processing ran)."""
     if "fluxes_his_horizontal_our_vertical" in edson:
         f = edson["fluxes_his_horizontal_our_vertical"]
         d = edson["direction_difference_deg"]

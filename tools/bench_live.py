@@ -276,7 +276,44 @@ def _run_live(
     os.sync()
     load_before = os.getloadavg()[0]
     log_dir.mkdir(parents=True, exist_ok=True)
-    command = [
+    command = scenario_command(duration_s, log_dir)
+    result = {
+        "passthrough": passthrough,
+        "duration_s": duration_s,
+        "ros_domain_id": domain,
+        "command": command[1:],
+        "load_average_1min_before": load_before,
+        "cpus": os.cpu_count(),
+    }
+    print(f"bench: live: {' '.join(command[1:])} (domain {domain})", file=sys.stderr, flush=True)
+    listener = Listener()
+    run, samplers = run_scenario_sampled(command, environment, duration_s, listener)
+    result.update(run)
+    if run["run_scenario_exit_code"] != 0:
+        result["error"] = (
+            f"run_scenario exited with {run['run_scenario_exit_code']}: "
+            + " | ".join(run["run_scenario_output"][-5:])
+        )
+    received = listener.received
+    result["received"] = {topic: len(stamps) for topic, stamps in received.items()}
+    result["receive_time_source"] = (
+        "middleware reception stamps"
+        if listener.callback_stamps == 0
+        else f"callback times for {listener.callback_stamps} messages, "
+        f"middleware stamps for {listener.middleware_stamps}"
+    )
+    result["in_service_after_s"] = IN_SERVICE_AFTER_S
+    result["latency"] = stage_latencies(received, listener.valid_true_wind)
+    for node, (output, data) in CPU_MEASURED.items():
+        result[f"{node.removesuffix('_node')}_cpu"] = node_cpu(
+            node, samplers.get(node), listener, output, data, received
+        )
+    return result
+
+
+def scenario_command(duration_s: float, log_dir: Path) -> list[str]:
+    """run_scenario of sea_state for ``duration_s`` (s) with both nodes under test."""
+    return [
         str(BIN / "run_scenario"),
         "sea_state",
         "--set",
@@ -292,16 +329,15 @@ def _run_live(
         "--log-dir",
         str(log_dir),
     ]
-    result = {
-        "passthrough": passthrough,
-        "duration_s": duration_s,
-        "ros_domain_id": domain,
-        "command": command[1:],
-        "load_average_1min_before": load_before,
-        "cpus": os.cpu_count(),
-    }
-    print(f"bench: live: {' '.join(command[1:])} (domain {domain})", file=sys.stderr, flush=True)
-    listener = Listener()
+
+
+def run_scenario_sampled(
+    command: list[str], environment: dict, duration_s: float, listener: Listener
+) -> tuple[dict, dict[str, CpuSampler]]:
+    """Run ``command`` (a run of ``duration_s``, s) to its end with the simulator at low
+    priority and the CPU of the nodes under test sampled, then close ``listener``; returns the
+    run's niceness, exit code and last lines of output, and the samplers by node."""
+    run = {}
     samplers: dict[str, CpuSampler] = {}
     try:
         scenario = subprocess.Popen(
@@ -311,37 +347,30 @@ def _run_live(
             pid = child_pid(scenario.pid, node, FIND_PID_TIMEOUT_S)
             if pid is not None:
                 samplers[node] = CpuSampler(pid)
-        result["simulator_niceness"] = lower_priority(scenario.pid, SIMULATOR_PROCESSES)
+        run["simulator_niceness"] = lower_priority(scenario.pid, SIMULATOR_PROCESSES)
         try:
             output, _ = scenario.communicate(timeout=duration_s + RUN_MARGIN_S)
         except subprocess.TimeoutExpired:
             scenario.terminate()
             output, _ = scenario.communicate(timeout=30)
-        result["run_scenario_exit_code"] = scenario.returncode
-        result["run_scenario_output"] = output.strip().splitlines()[-20:]
+        run["run_scenario_exit_code"] = scenario.returncode
+        run["run_scenario_output"] = output.strip().splitlines()[-20:]
         time.sleep(0.5)
     finally:
         for sampler in samplers.values():
             sampler.stop()
         listener.close()
-    if scenario.returncode != 0:
-        result["error"] = f"run_scenario exited with {scenario.returncode}: " + " | ".join(
-            result["run_scenario_output"][-5:]
-        )
-    received = listener.received
-    result["received"] = {topic: len(stamps) for topic, stamps in received.items()}
-    result["receive_time_source"] = (
-        "middleware reception stamps"
-        if listener.callback_stamps == 0
-        else f"callback times for {listener.callback_stamps} messages, "
-        f"middleware stamps for {listener.middleware_stamps}"
-    )
+    return run, samplers
+
+
+def stage_latencies(received: dict, valid_true_wind: set) -> dict:
+    """Latency figures of each stage (:func:`latency_stats`) from the receive times per topic
+    and header stamp; ``valid_true_wind``: the stamps of the corrected (not NaN) true wind."""
     nav = received["nav/imu"]
     # Before the first navigation solution the wind samples can only be given up as NaN after
     # the node's navigation timeout; the corrected ones show the latency in service.
-    corrected = {s: t for s, t in received["wind/true"].items() if s in listener.valid_true_wind}
-    result["in_service_after_s"] = IN_SERVICE_AFTER_S
-    result["latency"] = {
+    corrected = {s: t for s, t in received["wind/true"].items() if s in valid_true_wind}
+    latency = {
         "imu/data_raw → nav/imu, all": latency_stats(received["imu/data_raw"], nav),
         "imu/data_raw → nav/imu, in service": latency_stats(
             received["imu/data_raw"], in_service(nav)
@@ -357,19 +386,13 @@ def _run_live(
     # instant (which the simulated sensors publish independently) and the pipeline after it.
     corrected_in_service = in_service(corrected)
     imu = received["imu/data_raw"]
-    result["latency"]["corrected wind, part 1: anemometer/wind → imu/data_raw, same stamp"] = (
-        latency_stats(
-            received["anemometer/wind"], {s: imu[s] for s in corrected_in_service if s in imu}
-        )
+    latency["corrected wind, part 1: anemometer/wind → imu/data_raw, same stamp"] = latency_stats(
+        received["anemometer/wind"], {s: imu[s] for s in corrected_in_service if s in imu}
     )
-    result["latency"]["corrected wind, part 2: imu/data_raw → wind/true"] = latency_stats(
+    latency["corrected wind, part 2: imu/data_raw → wind/true"] = latency_stats(
         imu, corrected_in_service
     )
-    for node, (output, data) in CPU_MEASURED.items():
-        result[f"{node.removesuffix('_node')}_cpu"] = node_cpu(
-            node, samplers.get(node), listener, output, data, received
-        )
-    return result
+    return latency
 
 
 def node_cpu(

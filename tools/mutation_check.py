@@ -377,67 +377,101 @@ def main(argv=None) -> int:
         )
         return 2
     if arguments.list:
-        for mutant in mutants:
-            print(f"{mutant.name}: {mutant.what}")
-            for edit in mutant.edits:
-                print(f"    {edit.path}: {edit.original.strip()!r} -> {edit.replacement.strip()!r}")
+        print_mutants(mutants)
         return 0
     out = Path(arguments.out)
     out.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="mutation_check-") as scratch:
         scratch = Path(scratch)
-        roots = {}
-        problems = []
-        for name in ["baseline", *(m.name for m in mutants)]:
-            roots[name] = scratch / name
-            copy_repository(roots[name])
-        for mutant in mutants:
-            try:
-                apply(mutant, roots[mutant.name])
-            except MutantDoesNotApplyError as error:
-                problems.append(str(error))
-                del roots[mutant.name]
-        for root in roots.values():
-            check_imports_from(root)
+        roots, problems = prepare_copies(scratch, mutants)
         runnable = [m for m in mutants if m.name in roots]
+        unit = run_unit_tests(roots, runnable, scratch, arguments.jobs)
+        system = run_system_tests(roots, runnable, scratch, arguments, started)
+    results, rows = tally(runnable, unit, system, arguments, problems)
+    (out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    print_report(rows, results, time.monotonic() - started, out / "results.json")
+    return 0 if all(row[-1] for row in rows) and not problems else 1
 
-        def unit_run(name):
-            return name, run_tests(
-                roots[name], UNIT_TESTS, scratch / f"{name}-unit.xml", UNIT_TIMEOUT_S
-            )
 
-        print(f"mutation_check: unit tests of the baseline and {len(runnable)} mutants", flush=True)
-        with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, arguments.jobs)) as pool:
-            unit = dict(pool.map(unit_run, ["baseline", *(m.name for m in runnable)]))
-        system = {}
-        system_tests = arguments.system_tests
-        live = ros_tests(roots["baseline"], system_tests)
-        parallel = ("-n", str(arguments.workers), "--dist", "loadgroup")
-        system_options = parallel if arguments.workers > 1 else ()
-        for name in ["baseline", *(m.name for m in runnable)]:
-            print(
-                f"mutation_check: system tests of {name} ({time.monotonic() - started:.0f} s)",
-                flush=True,
-            )
-            options = system_options
-            if name != "baseline" and arguments.first_catch:
-                deselected = (f"--deselect={test}" for test in sorted(system["baseline"].failed))
-                options = (*system_options, "-x", *deselected)
-            outcome = run_tests(
-                roots[name], system_tests, scratch / f"{name}-system.xml", SYSTEM_TIMEOUT_S, options
-            )
-            flaky_candidates = sorted(outcome.failed & live)
-            if name != "baseline" and flaky_candidates:
-                # A live test that fails on a busy machine is believed only when it fails twice.
-                again = run_tests(
-                    roots[name], flaky_candidates, scratch / f"{name}-rerun.xml", SYSTEM_TIMEOUT_S
-                )
-                outcome.failed -= again.passed
-            system[name] = outcome
+def print_mutants(mutants) -> None:
+    for mutant in mutants:
+        print(f"{mutant.name}: {mutant.what}")
+        for edit in mutant.edits:
+            print(f"    {edit.path}: {edit.original.strip()!r} -> {edit.replacement.strip()!r}")
 
+
+def prepare_copies(scratch: Path, mutants) -> tuple[dict[str, Path], list[str]]:
+    """A copy of the repository for the baseline and for each mutant, the mutant applied;
+    returns the copies by name (those of mutants that no longer apply left out) and why
+    each of those did not apply."""
+    roots = {}
+    problems = []
+    for name in ["baseline", *(m.name for m in mutants)]:
+        roots[name] = scratch / name
+        copy_repository(roots[name])
+    for mutant in mutants:
+        try:
+            apply(mutant, roots[mutant.name])
+        except MutantDoesNotApplyError as error:
+            problems.append(str(error))
+            del roots[mutant.name]
+    for root in roots.values():
+        check_imports_from(root)
+    return roots, problems
+
+
+def run_unit_tests(roots: dict[str, Path], runnable, scratch: Path, jobs: int) -> dict:
+    """Outcome of the unit tests of the baseline and of each mutant, ``jobs`` at a time."""
+
+    def unit_run(name):
+        return name, run_tests(
+            roots[name], UNIT_TESTS, scratch / f"{name}-unit.xml", UNIT_TIMEOUT_S
+        )
+
+    print(f"mutation_check: unit tests of the baseline and {len(runnable)} mutants", flush=True)
+    with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
+        return dict(pool.map(unit_run, ["baseline", *(m.name for m in runnable)]))
+
+
+def run_system_tests(
+    roots: dict[str, Path], runnable, scratch: Path, arguments, started_s: float
+) -> dict:
+    """Outcome of the system tests of the baseline and of each mutant, one copy at a time;
+    ``started_s`` (monotonic clock, s) dates the progress lines."""
+    system = {}
+    system_tests = arguments.system_tests
+    live = ros_tests(roots["baseline"], system_tests)
+    parallel = ("-n", str(arguments.workers), "--dist", "loadgroup")
+    system_options = parallel if arguments.workers > 1 else ()
+    for name in ["baseline", *(m.name for m in runnable)]:
+        print(
+            f"mutation_check: system tests of {name} ({time.monotonic() - started_s:.0f} s)",
+            flush=True,
+        )
+        options = system_options
+        if name != "baseline" and arguments.first_catch:
+            deselected = (f"--deselect={test}" for test in sorted(system["baseline"].failed))
+            options = (*system_options, "-x", *deselected)
+        outcome = run_tests(
+            roots[name], system_tests, scratch / f"{name}-system.xml", SYSTEM_TIMEOUT_S, options
+        )
+        flaky_candidates = sorted(outcome.failed & live)
+        if name != "baseline" and flaky_candidates:
+            # A live test that fails on a busy machine is believed only when it fails twice.
+            again = run_tests(
+                roots[name], flaky_candidates, scratch / f"{name}-rerun.xml", SYSTEM_TIMEOUT_S
+            )
+            outcome.failed -= again.passed
+        system[name] = outcome
+    return system
+
+
+def tally(runnable, unit: dict, system: dict, arguments, problems: list[str]):
+    """The results (for results.json) and one report row per mutant: the tests that catch it
+    and whether it is caught by both a unit and a system test."""
     results = {
-        "system_tests": system_tests,
+        "system_tests": arguments.system_tests,
         "first_catch_only": arguments.first_catch,
         "baseline_failures": {
             "unit": sorted(unit["baseline"].failed),
@@ -464,9 +498,7 @@ def main(argv=None) -> int:
             "caught": caught,
         }
         rows.append((mutant, unit_catch, system_catch, timeouts, caught))
-    (out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
-    print_report(rows, results, time.monotonic() - started, out / "results.json")
-    return 0 if all(row[-1] for row in rows) and not problems else 1
+    return results, rows
 
 
 def print_report(rows, results, elapsed_s: float, results_path: Path) -> None:
