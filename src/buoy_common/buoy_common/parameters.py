@@ -317,8 +317,9 @@ def _unknown_name(name: str, known: set[str]) -> str:
 def _unknown_group(name: str, groups: set[str]) -> str:
     group = parameter_group(name)
     closest = difflib.get_close_matches(group, sorted(groups), n=1, cutoff=0.6)
-    hint = f"did you mean '{closest[0]}'?" if closest else "no similar group is known"
-    return f"unknown parameter group '{group}' of '{name}': no node of the suite reads it ({hint})"
+    hint = f"did you mean '{closest[0]}'?" if closest else "no similar one is known"
+    what = f"parameter '{name}'" if group == name else f"parameter group '{group}' of '{name}'"
+    return f"unknown {what}: no node of the suite reads it ({hint})"
 
 
 def check_parameter_files(

@@ -94,3 +94,8 @@ def test_the_suite_groups_are_a_parameter():
     check_parameter_names(KNOWN, shared=["other.x"], suite_groups={"other"})
     with pytest.raises(ParameterError, match="group 'other'"):
         check_parameter_names(KNOWN, shared=["other.x"], suite_groups=set())
+
+
+def test_an_undotted_name_no_node_reads_is_refused_naming_the_closest():
+    with pytest.raises(ParameterError, match=r"unknown parameter 'sead': .*did you mean 'seed'"):
+        check_parameter_names(KNOWN, shared=["sead"])

@@ -108,8 +108,8 @@ def parameter_sets() -> ParameterSets:
     common = (SCENARIO, SCENARIO_OVERRIDES, SEED)
     streams = [(spec.node_name, stream_parameters(spec)) for spec in STREAMS.values()]
     nodes = [
-        NodeParameters(node, f"simulated {node.removesuffix('_node')}", (*common, *parameters))
-        for node, parameters in streams
+        NodeParameters(node, f"simulator node of the {kind} stream", (*common, *parameters))
+        for kind, (node, parameters) in zip(STREAMS, streams, strict=True)
     ]
     clock = (RATE_FACTOR, PUBLISH_RATE, WAIT_FOR_SUBSCRIBERS, WAIT_FOR_NODES, START_DELAY)
     nodes.append(NodeParameters(SIM_CLOCK_NODE_NAME, "simulation clock", (*common, *clock)))
