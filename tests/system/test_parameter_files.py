@@ -74,7 +74,8 @@ def _drift(parameter_file) -> list[str]:
 
 @pytest.mark.parametrize("parameter_file", FILES, ids=[f.path for f in FILES])
 def test_a_parameter_file_holds_each_declared_parameter_with_its_default(parameter_file):
-    assert _drift(parameter_file) == []
+    problems = _drift(parameter_file)
+    assert not problems, f"{parameter_file.path}: " + "; ".join(problems)
 
 
 def test_every_fusion_parameter_is_in_fusion_yaml():
