@@ -47,6 +47,8 @@ setup(
     description="Dual-antenna GNSS/SINS error-state Kalman filter for a buoy, live and from bags.",
     license="Apache-2.0",
     entry_points={
+        # Its parameters' declarations, for buoy_common.parameter_docs.
+        "buoy_common.parameter_sets": ["buoy_nav = buoy_nav.config:parameter_sets"],
         "console_scripts": [
             "fusion_node = buoy_nav.fusion_node:main",
             "fuse_bag = buoy_nav.fuse_bag:main",

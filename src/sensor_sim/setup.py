@@ -48,6 +48,8 @@ setup(
     description="Simulated buoy sensors, truth, simulation clock, bag recorder and player.",
     license="Apache-2.0",
     entry_points={
+        # Its parameters' declarations, for buoy_common.parameter_docs.
+        "buoy_common.parameter_sets": ["sensor_sim = sensor_sim.parameters:parameter_sets"],
         "console_scripts": [
             "sim_clock_node = sensor_sim.sim_clock_node:main",
             "imu_sim_node = sensor_sim.imu_sim_node:main",

@@ -47,6 +47,8 @@ setup(
     description="Miller motion correction of buoy anemometer wind, wind products and reports.",
     license="Apache-2.0",
     entry_points={
+        # Its parameters' declarations, for buoy_common.parameter_docs.
+        "buoy_common.parameter_sets": ["wind_comp = wind_comp.config:parameter_sets"],
         "console_scripts": [
             "calibrate_mounting = wind_comp.calibrate_mounting:main",
             "compensation_node = wind_comp.compensation_node:main",

@@ -33,16 +33,18 @@ PARAMETER_METADATA_KEY = "parameter"
 
 @dataclass(frozen=True)
 class SharedParameter:
-    """One shared parameter: its ROS name, default, meaning and validity rule.
+    """One shared parameter: its ROS name, default, unit, meaning and validity rule.
 
     ``check(value)`` returns None for a valid value, or the expectation it misses ("three
-    finite numbers within 100 m").
+    finite numbers within 100 m"); ``rule`` says the same for the reader.
     """
 
     name: str
     default: Any
     meaning: str
     check: Callable[[Any], str | None]
+    unit: str = ""
+    rule: str = ""
 
 
 def _position_in_body(value) -> str | None:
@@ -95,92 +97,124 @@ def _yaw_reference(value) -> str | None:
 
 _NAN = math.nan
 
+_WITHIN_LEVER_ARM = f"three finite numbers within {MAX_LEVER_ARM_M:g} m of base_link"
+_MOUNTING_ANGLES = "roll and yaw within ±180°, pitch within ±90°"
+
 SHARED_PARAMETERS: dict[str, SharedParameter] = {
     parameter.name: parameter
     for parameter in (
         SharedParameter(
             "gnss.primary_antenna",
             (-0.75, 0.0, 1.0),
-            "primary antenna phase centre in base_link, m",
+            "primary antenna phase centre in base_link",
             _position_in_body,
+            unit="m",
+            rule=_WITHIN_LEVER_ARM,
         ),
         SharedParameter(
             "gnss.secondary_antenna",
             (0.75, 0.0, 1.0),
-            "secondary antenna phase centre in base_link, m",
+            "secondary antenna phase centre in base_link",
             _position_in_body,
+            unit="m",
+            rule=_WITHIN_LEVER_ARM + f", at least {MIN_ANTENNA_SEPARATION_M:g} m from the primary",
         ),
         SharedParameter(
             "gnss.tertiary_antenna",
             (_NAN, _NAN, _NAN),
-            "third antenna phase centre in base_link, m (with gnss/baseline_tertiary); NaN: none",
+            "third antenna phase centre in base_link (with gnss/baseline_tertiary); NaN: none",
             _optional_position_in_body,
+            unit="m",
+            rule=_WITHIN_LEVER_ARM
+            + f", at least {MIN_ANTENNA_SEPARATION_M:g} m from the other two; or NaN",
         ),
         SharedParameter(
             "anemometer.position",
             (0.0, 0.0, 3.0),
-            "anemometer measurement centre in base_link, m (Miller's lever arm B)",
+            "anemometer measurement centre in base_link (Miller's lever arm B)",
             _position_in_body,
+            unit="m",
+            rule=_WITHIN_LEVER_ARM,
         ),
         SharedParameter(
             "anemometer.rpy_deg",
             (0.0, 0.0, 0.0),
-            "roll, pitch, yaw of anemometer_link in base_link, deg, R = Rz(yaw)·Ry(pitch)·Rx(roll)",
+            "roll, pitch, yaw of anemometer_link in base_link, R = Rz(yaw)·Ry(pitch)·Rx(roll)",
             _mounting_angles,
+            unit="deg",
+            rule=_MOUNTING_ANGLES,
         ),
         SharedParameter(
             "dvl.position",
             (0.0, 0.0, -2.0),
-            "DVL measurement centre in base_link, m",
+            "DVL measurement centre in base_link",
             _position_in_body,
+            unit="m",
+            rule=_WITHIN_LEVER_ARM,
         ),
         SharedParameter(
             "dvl.rpy_deg",
             (0.0, 0.0, 0.0),
-            "roll, pitch, yaw of dvl_link in base_link, deg, R = Rz(yaw)·Ry(pitch)·Rx(roll)",
+            "roll, pitch, yaw of dvl_link in base_link, R = Rz(yaw)·Ry(pitch)·Rx(roll)",
             _mounting_angles,
+            unit="deg",
+            rule=_MOUNTING_ANGLES,
         ),
         SharedParameter(
             "origin.latitude_deg",
             _NAN,
-            "latitude of the map origin, deg; NaN: first fix",
+            "latitude of the map origin; NaN: first fix",
             _latitude,
+            unit="deg",
+            rule="in (−90, 90) or NaN; the three origin.* all set or all NaN",
         ),
         SharedParameter(
             "origin.longitude_deg",
             _NAN,
-            "longitude of the map origin, deg; NaN: first fix",
+            "longitude of the map origin; NaN: first fix",
             _longitude,
+            unit="deg",
+            rule="in [−180, 180] or NaN",
         ),
         SharedParameter(
             "origin.altitude_m",
             _NAN,
-            "ellipsoidal altitude of the map origin, m; NaN: first fix",
+            "ellipsoidal altitude of the map origin; NaN: first fix",
             _altitude,
+            unit="m",
+            rule="within ±100 km or NaN",
         ),
         SharedParameter(
             "ahrs.yaw_reference",
             "true_north",
-            "what the yaw of imu/data is referenced to: true_north or magnetic_north",
+            "what the yaw of imu/data is referenced to",
             _yaw_reference,
+            unit="",
+            rule=f"one of {', '.join(YAW_REFERENCES)}",
         ),
         SharedParameter(
             "magnetic.declination_deg",
             _NAN,
-            "magnetic declination at the site, deg, east positive; NaN: geomagnetic model",
+            "magnetic declination at the site, east positive; NaN: geomagnetic model",
             _declination,
+            unit="deg",
+            rule="within ±180° or NaN",
         ),
         SharedParameter(
             "site.latitude_deg",
             _NAN,
-            "latitude of the site when there is no GNSS fix, deg; NaN: origin.latitude_deg",
+            "latitude of the site when there is no GNSS fix; NaN: origin.latitude_deg",
             _latitude,
+            unit="deg",
+            rule="in (−90, 90) or NaN; both site.* set or both NaN",
         ),
         SharedParameter(
             "site.longitude_deg",
             _NAN,
-            "longitude of the site when there is no GNSS fix, deg; NaN: origin.longitude_deg",
+            "longitude of the site when there is no GNSS fix; NaN: origin.longitude_deg",
             _longitude,
+            unit="deg",
+            rule="in [−180, 180] or NaN",
         ),
     )
 }

@@ -1,9 +1,11 @@
 """Typed parameters, the same for live nodes and offline tools.
 
 Every configurable core has a frozen dataclass of simple fields (float, int, bool, str, tuples
-of floats) with unit-suffixed names. A node declares one ROS parameter per field; an offline tool
-reads the same names from the same ROS parameter YAML files. Both go through ``build_config``,
-so a value is accepted or refused identically, with a message that names the parameter.
+of floats) with unit-suffixed names, each declared once with its default, unit, rule and meaning
+(:mod:`buoy_common.parameter_declarations`). A node declares one ROS parameter per field; an
+offline tool reads the same names from the same ROS parameter YAML files. Both go through
+``build_config``, so a value is accepted or refused identically, with a message that names the
+parameter.
 """
 
 from __future__ import annotations
@@ -224,6 +226,50 @@ def load_parameter_sections(
 
 ROS_BUILTIN_PARAMETERS = frozenset({"use_sim_time", "start_type_description_service"})
 """Parameters every ROS node declares by itself."""
+ROS_PARAMETER_GROUPS = frozenset({*ROS_BUILTIN_PARAMETERS, "qos_overrides"})
+"""Groups ROS itself reads (``qos_overrides./topic.publisher.depth``)."""
+
+SUITE_PARAMETER_GROUPS = frozenset(
+    {
+        # The shared parameters (buoy_common.extrinsics) and the processing nodes' own.
+        "gnss",
+        "anemometer",
+        "dvl",
+        "origin",
+        "site",
+        "magnetic",
+        "ahrs",
+        "fusion",
+        "compensation",
+        "current",
+        # The simulator nodes (sensor_sim.parameters).
+        "scenario",
+        "scenario_overrides",
+        "seed",
+        "rate_hz",
+        "time_offset_s",
+        "wait_for_subscriber_node",
+        "wait_for_subscriptions",
+        "imu",
+        "magnetometer",
+        "motion_pack",
+        "rate_factor",
+        "publish_rate_hz",
+        "wait_for_subscribers",
+        "wait_for_nodes",
+        "start_delay_s",
+        # bag_player and foxglove_bridge.
+        "wait_for_subscribers_timeout_s",
+        "drain_timeout_s",
+        "port",
+        "address",
+        "topics",
+    }
+)
+"""The parameter groups some node of the suite declares: a group outside them, in any section a
+node reads, is a mistake (a misspelt ``compenstion:``). A node cannot import the other packages'
+declarations (the simulator shares no code with the estimator), so the groups are listed here;
+a test holds this list to the declarations of every package."""
 
 
 def parameter_group(name: str) -> str:
@@ -233,7 +279,10 @@ def parameter_group(name: str) -> str:
 
 
 def check_parameter_names(
-    known: Iterable[str], shared: Iterable[str] = (), own: Iterable[str] = ()
+    known: Iterable[str],
+    shared: Iterable[str] = (),
+    own: Iterable[str] = (),
+    suite_groups: Iterable[str] = SUITE_PARAMETER_GROUPS,
 ) -> None:
     """Refuse parameters given to a node that it does not know, naming the closest known one.
 
@@ -243,20 +292,34 @@ def check_parameter_names(
     parameters of other nodes, so a name is refused only when its group (``anemometer`` of
     ``anemometer.position``) is one of this node's groups. A misspelt ``anemometer.postion``
     is thus refused by every node that uses the anemometer's parameters and ignored by the
-    others. Raises ParameterError.
+    others. A name in either whose group no node of the suite knows (``suite_groups``) is
+    refused as well, naming the closest known group. Raises ParameterError.
     """
     known = set(known) | ROS_BUILTIN_PARAMETERS
     groups = {parameter_group(name) for name in known}
-    unknown = {name for name in own if name not in known}
+    all_groups = groups | set(suite_groups) | ROS_PARAMETER_GROUPS
+    given = set(own) | set(shared)
+    stray = {name for name in given if parameter_group(name) not in all_groups}
+    unknown = {name for name in own if name not in known} - stray
     unknown |= {name for name in shared if name not in known and parameter_group(name) in groups}
-    if not unknown:
-        return
-    descriptions = []
-    for name in sorted(unknown):
-        closest = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.6)
-        hint = f"did you mean '{closest[0]}'?" if closest else "no similar parameter is known"
-        descriptions.append(f"unknown parameter '{name}' ({hint})")
-    raise ParameterError("; ".join(descriptions))
+    descriptions = [_unknown_group(name, all_groups) for name in sorted(stray)]
+    descriptions += [_unknown_name(name, known) for name in sorted(unknown)]
+    if descriptions:
+        raise ParameterError("; ".join(descriptions))
+
+
+def _unknown_name(name: str, known: set[str]) -> str:
+    closest = difflib.get_close_matches(name, sorted(known), n=1, cutoff=0.6)
+    hint = f"did you mean '{closest[0]}'?" if closest else "no similar parameter is known"
+    return f"unknown parameter '{name}' ({hint})"
+
+
+def _unknown_group(name: str, groups: set[str]) -> str:
+    group = parameter_group(name)
+    closest = difflib.get_close_matches(group, sorted(groups), n=1, cutoff=0.6)
+    hint = f"did you mean '{closest[0]}'?" if closest else "no similar one is known"
+    what = f"parameter '{name}'" if group == name else f"parameter group '{group}' of '{name}'"
+    return f"unknown {what}: no node of the suite reads it ({hint})"
 
 
 def check_parameter_files(

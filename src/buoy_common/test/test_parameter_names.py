@@ -67,3 +67,35 @@ def test_command_line_parameters_reads_every_ros_arguments_block():
     )
     assert files == ["a.yaml"]
     assert names == ["x.y", "z"]
+
+
+def test_a_group_no_node_of_the_suite_reads_is_refused_naming_the_closest_group():
+    # A misspelt group in a shared file would otherwise be ignored by every node.
+    with pytest.raises(ParameterError) as error:
+        check_parameter_names(KNOWN, shared=["compenstion.max_nav_gap_s"])
+    message = str(error.value)
+    assert "unknown parameter group 'compenstion'" in message
+    assert "did you mean 'compensation'?" in message
+
+
+def test_a_group_unknown_to_the_suite_is_refused_in_a_nodes_own_section():
+    with pytest.raises(ParameterError, match=r"group 'anemometr'.*did you mean 'anemometer'"):
+        check_parameter_names(KNOWN, own=["anemometr.position"])
+
+
+def test_groups_of_other_nodes_of_the_suite_and_of_ros_are_accepted_in_shared_sections():
+    check_parameter_names(
+        KNOWN,
+        shared=["fusion.moored", "imu.gyro_noise_deg_sqrt_h", "seed", "qos_overrides./a.depth"],
+    )
+
+
+def test_the_suite_groups_are_a_parameter():
+    check_parameter_names(KNOWN, shared=["other.x"], suite_groups={"other"})
+    with pytest.raises(ParameterError, match="group 'other'"):
+        check_parameter_names(KNOWN, shared=["other.x"], suite_groups=set())
+
+
+def test_an_undotted_name_no_node_reads_is_refused_naming_the_closest():
+    with pytest.raises(ParameterError, match=r"unknown parameter 'sead': .*did you mean 'seed'"):
+        check_parameter_names(KNOWN, shared=["sead"])

@@ -11,12 +11,24 @@ import math
 from dataclasses import dataclass
 
 from buoy_common.extrinsics import check_shared_fields, shared_field
-from buoy_common.parameters import (
-    build_config,
-    check_parameter_files,
-    config_parameters,
-    load_parameter_files,
+from buoy_common.parameter_declarations import (
+    NON_NEGATIVE,
+    POSITIVE,
+    WILDCARD_SECTION_COMMENT,
+    DeclaredParameter,
+    FileSection,
+    NodeParameters,
+    ParameterFile,
+    ParameterSets,
+    at_least,
+    broken_rules,
+    custom_rule,
+    declared_parameters,
+    half_open_interval,
+    open_interval,
+    parameter,
 )
+from buoy_common.parameters import build_config, check_parameter_files, load_parameter_files
 
 FUSION_NODE_NAME = "fusion_node"
 """Node name whose parameter-file sections configure the fusion (live and offline)."""
@@ -33,113 +45,13 @@ class ConfigError(ValueError):
 
 @dataclass(frozen=True)
 class FusionConfig:
-    """Configuration of :class:`buoy_nav.engine.FusionEngine` (defaults in brackets).
+    """Configuration of :class:`buoy_nav.engine.FusionEngine`.
 
-    Antennas and map origin
-      primary_antenna_body_m: primary antenna phase centre in ``base_link`` (m) [(−0.75, 0, 1)].
-      secondary_antenna_body_m: secondary antenna phase centre in ``base_link`` (m) [(0.75, 0, 1)].
-      tertiary_antenna_body_m: third antenna phase centre in ``base_link`` (m), whose baseline
-        ``gnss/baseline_tertiary`` fixes the rotation about the first baseline; NaN: none
-        [(NaN, NaN, NaN)].
-      origin_latitude_deg, origin_longitude_deg, origin_altitude_m: origin of the ``map`` ENU
-        frame (deg, deg, m ellipsoidal); all NaN = the ``base_link`` position at alignment [NaN].
-
-    IMU error model (same names as the simulator's IMU error configuration)
-      gyro_noise_deg_sqrt_h: gyro angle random walk (°/√h) [0.2].
-      gyro_turn_on_bias_deg_s: 1-σ gyro bias at switch-on, per axis (°/s) [0.02].
-      gyro_bias_instability_deg_h: 1-σ of the first-order Gauss-Markov gyro bias drift (°/h) [5].
-      gyro_bias_correlation_time_s: its correlation time (s) [300].
-      accel_noise_mps_sqrt_h: accelerometer velocity random walk (m/s/√h) [0.05].
-      accel_turn_on_bias_mg: 1-σ accelerometer bias at switch-on, per axis (mg) [5].
-      accel_bias_instability_mg: 1-σ of the Gauss-Markov accelerometer bias drift (mg) [0.1].
-      accel_bias_correlation_time_s: its correlation time (s) [600].
-      scale_factor_error_percent: 1-σ scale-factor error of gyros and accelerometers (%) [0.1];
-        not estimated, accounted for as extra process noise proportional to the motion.
-
-    Alignment
-      alignment_window_s: length of the levelling window of specific force (s) [10].
-      alignment_max_fix_age_s: oldest GNSS fix/velocity (relative to the heading that completes
-        the alignment) used to initialise position and velocity (s) [1].
-
-    Measurements
-      gate_probability: probability of the chi-square innovation gate [0.9999].
-      gate_reset_count: consecutive gate rejections of one kind after which the filter resets the
-        corresponding states to that measurement (attitude yaw, velocity or position) [50].
-      gnss_position_variance_floor_m2: smallest position variance used per ENU axis (m²) [1e-4].
-      gnss_velocity_variance_floor_m2s2: smallest velocity variance per ENU axis (m²/s²) [1e-4].
-      gnss_heading_variance_floor_rad2: smallest dual-antenna heading variance (rad²) [1e-6].
-      use_gnss_baseline: fuse the receiver's baseline vector (``gnss/baseline``), which observes
-        the baseline's tilt as well as its azimuth; a heading with the stamp of a baseline,
-        derived from the same vector, is then not fused [True].
-      gnss_baseline_sigma_horizontal_m, gnss_baseline_sigma_vertical_m: 1-σ error of the
-        baseline vector per horizontal ENU axis and vertically, from the receiver's data sheet
-        (m) [0.003, 0.006].
-      use_gnss_baseline_tertiary: fuse the primary → tertiary baseline vector
-        (``gnss/baseline_tertiary``) when a tertiary antenna is configured [True].
-      gnss_tertiary_length_tolerance_m: a tertiary baseline whose length differs from the
-        configured primary → tertiary distance by more than this is rejected
-        (``out_of_range``) (m) [0.05].
-      coasting_timeout_s: a measurement kind not accepted for this long is reported as coasting
-        (s) [1].
-
-    Integrity (:mod:`buoy_nav.integrity`)
-      integrity_rejection_count: consecutive gate rejections of one source after which the
-        navigation is not trusted [3].
-      integrity_attitude_sigma_deg, integrity_velocity_sigma_mps: 1σ added to each attitude
-        (deg) and velocity (m/s) error state when the trust is lost, and added to the published
-        covariance until it returns [5, 1].
-      integrity_realign_s: the alignment starts again when the gate still rejects this long
-        after the trust was lost (s) [5].
-      integrity_recovery_s: the trust returns after this long without a gate rejection (s) [2].
-
-    Timing and input validation
-      max_measurement_delay_s: how long measurements may arrive after the IMU sample of the same
-        stamp; processing lags the newest IMU stamp by this much (s) [0.3].
-      covariance_propagation_interval_s: longest span of IMU samples over which the covariance is
-        propagated in one step (s) [0.1].
-      max_imu_gap_s: an IMU gap longer than this restarts the alignment (s) [0.5].
-      max_angular_rate_rad_s: IMU samples with a larger rate magnitude are rejected (rad/s) [35].
-      max_specific_force_mps2: IMU samples with a larger specific force are rejected (m/s²) [160].
-      max_angular_acceleration_rad_s2: largest angular acceleration the platform can reach; an
-        IMU sample whose rate differs from the last accepted one by more than this times their
-        interval (plus the sensor's noise) is rejected as ``implausible_change`` (rad/s²) [50].
-      max_jerk_mps3: the same for the specific force: largest rate of change of the platform's
-        specific force (m/s³) [2000].
-
-    Sites without GNSS, magnetometer and motion pack (see the aiding sources for the models)
-      site_latitude_deg, site_longitude_deg: the site (deg) when there is no GNSS fix; NaN =
-        ``origin.*`` [NaN].
-      magnetic_declination_deg: declination (deg, east positive); NaN = the WMM at the
-        position [NaN].
-      ahrs_yaw_reference: what the yaw of ``imu/data`` is referenced to [``true_north``].
-      use_magnetometer: fuse ``imu/mag`` [True]. use_ahrs: fuse ``imu/data`` [True].
-      magnetometer_hard_iron_t: hard-iron offset subtracted from the raw field (T) [0, 0, 0].
-      magnetometer_soft_iron: row-major 3×3 matrix applied after it [identity].
-      magnetometer_heading_sigma_deg: 1-σ of the magnetic heading beyond the sensor noise:
-        residual calibration, unmodelled local fields (deg) [1].
-      magnetometer_full_scale_t: a component this large is a saturated sample (T) [8e-4].
-      ahrs_lag_s: the motion pack's own lag (s); its orientation is carried forward by it with
-        the gyro [0]. ahrs_lag_uncertainty_s: what is not known of that lag, added as noise
-        proportional to the body rate (s) [0.1]. ahrs_variance_floor_rad2: smallest attitude
-        variance used per axis (rad²) [1e-5]. ahrs_error_correlation_time_s: how long the
-        pack's attitude error stays alike (s): samples closer than this share one error, so
-        each is weighted as if it were one of a sample per this time [60].
-      moored: constrain a moored buoy's position to its slowly moving mean (zero mean velocity)
-        while no GNSS fix is accepted [False]. moored_position_sigma_horizontal_m,
-        moored_position_sigma_vertical_m: 1-σ of the wave excursion about that mean (m)
-        [3, 1]. moored_anchor_time_constant_s: time constant of the mean (s) [600].
-        moored_update_period_s: interval of the constraint (s) [1].
-      imu_gyro_bias_rad_s, imu_accel_bias_mps2, imu_accel_scale: calibration of the raw IMU
-        (``calibrate_imu``): f = (f_raw − b_a) / scale per axis, ω = ω_raw − b_g
-        [0, 0, (1, 1, 1)].
-
-    Output
-      realtime_output: emit each solution as soon as its IMU sample arrives, predicted by
-        strapdown integration from the filter state ``max_measurement_delay_s`` behind; False:
-        emit solutions ``max_measurement_delay_s`` late, with every measurement up to their
-        stamp applied [True].
-      output_rate_hz: rate of navigation solutions; 0 = one per IMU sample (Hz) [0].
-      record_innovations: keep every innovation in ``FusionEngine.innovation_log`` [False].
+    Each field is declared once, below, with its default, unit, rule and meaning; the parameter
+    files and the reference ``docs/parameters.md`` are generated from these declarations
+    (:mod:`buoy_common.parameter_docs`). The IMU error fields carry the names and meanings of
+    the simulator's IMU error configuration. Validation: the shared parameters' rules
+    (:func:`buoy_common.extrinsics.check_shared_fields`), then each field's declared rule.
     """
 
     primary_antenna_body_m: tuple[float, float, float] = shared_field("gnss.primary_antenna")
@@ -149,71 +61,303 @@ class FusionConfig:
     origin_longitude_deg: float = shared_field("origin.longitude_deg")
     origin_altitude_m: float = shared_field("origin.altitude_m")
 
-    gyro_noise_deg_sqrt_h: float = 0.2
-    gyro_turn_on_bias_deg_s: float = 0.02
-    gyro_bias_instability_deg_h: float = 5.0
-    gyro_bias_correlation_time_s: float = 300.0
-    accel_noise_mps_sqrt_h: float = 0.05
-    accel_turn_on_bias_mg: float = 5.0
-    accel_bias_instability_mg: float = 0.1
-    accel_bias_correlation_time_s: float = 600.0
-    scale_factor_error_percent: float = 0.1
+    gyro_noise_deg_sqrt_h: float = parameter(
+        0.2,
+        unit="deg/√h",
+        meaning="gyro angle random walk",
+        rule=NON_NEGATIVE,
+        heading="IMU error model (same names and meanings as the simulator's imu.* parameters)",
+    )
+    gyro_turn_on_bias_deg_s: float = parameter(
+        0.02, unit="deg/s", meaning="1σ gyro bias at switch-on, per axis", rule=NON_NEGATIVE
+    )
+    gyro_bias_instability_deg_h: float = parameter(
+        5.0,
+        unit="deg/h",
+        meaning="1σ of the first-order Gauss-Markov gyro bias drift",
+        rule=NON_NEGATIVE,
+    )
+    gyro_bias_correlation_time_s: float = parameter(
+        300.0, unit="s", meaning="correlation time of the gyro bias drift", rule=POSITIVE
+    )
+    accel_noise_mps_sqrt_h: float = parameter(
+        0.05, unit="m/s/√h", meaning="accelerometer velocity random walk", rule=NON_NEGATIVE
+    )
+    accel_turn_on_bias_mg: float = parameter(
+        5.0, unit="mg", meaning="1σ accelerometer bias at switch-on, per axis", rule=NON_NEGATIVE
+    )
+    accel_bias_instability_mg: float = parameter(
+        0.1,
+        unit="mg",
+        meaning="1σ of the first-order Gauss-Markov accelerometer bias drift",
+        rule=NON_NEGATIVE,
+    )
+    accel_bias_correlation_time_s: float = parameter(
+        600.0, unit="s", meaning="correlation time of the accelerometer bias drift", rule=POSITIVE
+    )
+    scale_factor_error_percent: float = parameter(
+        0.1,
+        unit="%",
+        meaning="1σ scale-factor error of gyros and accelerometers, not estimated: process "
+        "noise proportional to the motion",
+        rule=half_open_interval(0.0, 100.0),
+    )
 
-    alignment_window_s: float = 10.0
-    alignment_max_fix_age_s: float = 1.0
+    alignment_window_s: float = parameter(
+        10.0,
+        unit="s",
+        meaning="levelling window of averaged specific force (roll, pitch)",
+        rule=POSITIVE,
+        heading="Alignment",
+    )
+    alignment_max_fix_age_s: float = parameter(
+        1.0,
+        unit="s",
+        meaning="oldest fix and velocity, relative to the heading that completes the alignment, "
+        "used to initialise position and velocity",
+        rule=POSITIVE,
+    )
 
-    gate_probability: float = 0.9999
-    gate_reset_count: int = 50
-    gnss_position_variance_floor_m2: float = 1e-4
-    gnss_velocity_variance_floor_m2s2: float = 1e-4
-    gnss_heading_variance_floor_rad2: float = 1e-6
-    use_gnss_baseline: bool = True
-    gnss_baseline_sigma_horizontal_m: float = 0.003
-    gnss_baseline_sigma_vertical_m: float = 0.006
-    use_gnss_baseline_tertiary: bool = True
-    gnss_tertiary_length_tolerance_m: float = 0.05
-    coasting_timeout_s: float = 1.0
+    gate_probability: float = parameter(
+        0.9999,
+        meaning="probability of the chi-square innovation gate",
+        rule=open_interval(0.0, 1.0),
+        heading="Measurements",
+    )
+    gate_reset_count: int = parameter(
+        50,
+        meaning="consecutive gate rejections of one kind after which the filter resets the "
+        "corresponding states (yaw, velocity or position) to that measurement",
+        rule=at_least(1),
+    )
+    gnss_position_variance_floor_m2: float = parameter(
+        1e-4, unit="m²", meaning="smallest GNSS position variance used per ENU axis", rule=POSITIVE
+    )
+    gnss_velocity_variance_floor_m2s2: float = parameter(
+        1e-4,
+        unit="m²/s²",
+        meaning="smallest GNSS velocity variance used per ENU axis",
+        rule=POSITIVE,
+    )
+    gnss_heading_variance_floor_rad2: float = parameter(
+        1e-6, unit="rad²", meaning="smallest dual-antenna heading variance used", rule=POSITIVE
+    )
+    use_gnss_baseline: bool = parameter(
+        True,
+        meaning="fuse gnss/baseline (azimuth and tilt); a heading of the same stamp is then "
+        "superseded, not fused",
+    )
+    gnss_baseline_sigma_horizontal_m: float = parameter(
+        0.003,
+        unit="m",
+        meaning="1σ baseline vector error per horizontal ENU axis (receiver's data sheet)",
+        rule=POSITIVE,
+    )
+    gnss_baseline_sigma_vertical_m: float = parameter(
+        0.006,
+        unit="m",
+        meaning="1σ vertical baseline vector error (receiver's data sheet)",
+        rule=POSITIVE,
+    )
+    use_gnss_baseline_tertiary: bool = parameter(
+        True, meaning="fuse gnss/baseline_tertiary when gnss.tertiary_antenna is set"
+    )
+    gnss_tertiary_length_tolerance_m: float = parameter(
+        0.05,
+        unit="m",
+        meaning="a tertiary baseline whose length differs from the configured primary → "
+        "tertiary distance by more is rejected (out_of_range)",
+        rule=POSITIVE,
+    )
+    coasting_timeout_s: float = parameter(
+        1.0,
+        unit="s",
+        meaning="a measurement kind not accepted for this long is reported as coasting",
+        rule=POSITIVE,
+    )
 
-    integrity_rejection_count: int = 3
-    integrity_attitude_sigma_deg: float = 5.0
-    integrity_velocity_sigma_mps: float = 1.0
-    integrity_realign_s: float = 5.0
-    integrity_recovery_s: float = 2.0
+    integrity_rejection_count: int = parameter(
+        3,
+        meaning="consecutive gate rejections of one source after which the navigation is not "
+        "trusted",
+        rule=at_least(1),
+        heading="Integrity: when the filter stops agreeing with its aiding",
+    )
+    integrity_attitude_sigma_deg: float = parameter(
+        5.0,
+        unit="deg",
+        meaning="1σ added to each attitude error state, and to the published covariance, "
+        "while the trust is lost",
+        rule=POSITIVE,
+    )
+    integrity_velocity_sigma_mps: float = parameter(
+        1.0,
+        unit="m/s",
+        meaning="1σ added to each velocity error state, and to the published covariance, "
+        "while the trust is lost",
+        rule=POSITIVE,
+    )
+    integrity_realign_s: float = parameter(
+        5.0,
+        unit="s",
+        meaning="the alignment starts again when the gates still reject this long after the "
+        "trust was lost",
+        rule=POSITIVE,
+    )
+    integrity_recovery_s: float = parameter(
+        2.0,
+        unit="s",
+        meaning="the trust returns after this long without a gate rejection",
+        rule=POSITIVE,
+    )
 
-    max_measurement_delay_s: float = 0.3
-    covariance_propagation_interval_s: float = 0.1
-    max_imu_gap_s: float = 0.5
-    max_angular_rate_rad_s: float = 35.0
-    max_specific_force_mps2: float = 160.0
-    max_angular_acceleration_rad_s2: float = 50.0
-    max_jerk_mps3: float = 2000.0
+    max_measurement_delay_s: float = parameter(
+        0.3,
+        unit="s",
+        meaning="how late measurements may arrive after the IMU sample of their stamp; "
+        "processing lags the newest IMU stamp by this much",
+        rule=NON_NEGATIVE,
+        heading="Timing and input validation",
+    )
+    covariance_propagation_interval_s: float = parameter(
+        0.1,
+        unit="s",
+        meaning="longest span of IMU samples over which the covariance is propagated in one step",
+        rule=POSITIVE,
+    )
+    max_imu_gap_s: float = parameter(
+        0.5, unit="s", meaning="a longer IMU gap restarts the alignment", rule=POSITIVE
+    )
+    max_angular_rate_rad_s: float = parameter(
+        35.0,
+        unit="rad/s",
+        meaning="IMU samples with a larger rate magnitude are rejected",
+        rule=POSITIVE,
+    )
+    max_specific_force_mps2: float = parameter(
+        160.0,
+        unit="m/s²",
+        meaning="IMU samples with a larger specific force are rejected",
+        rule=POSITIVE,
+    )
+    max_angular_acceleration_rad_s2: float = parameter(
+        50.0,
+        unit="rad/s²",
+        meaning="largest angular acceleration of the platform: a larger rate change between "
+        "samples (plus the sensor noise) is rejected as implausible_change",
+        rule=POSITIVE,
+    )
+    max_jerk_mps3: float = parameter(
+        2000.0,
+        unit="m/s³",
+        meaning="largest rate of change of the platform's specific force: a larger change "
+        "between samples (plus the sensor noise) is rejected as implausible_change",
+        rule=POSITIVE,
+    )
 
     site_latitude_deg: float = shared_field("site.latitude_deg")
     site_longitude_deg: float = shared_field("site.longitude_deg")
     magnetic_declination_deg: float = shared_field("magnetic.declination_deg")
     ahrs_yaw_reference: str = shared_field("ahrs.yaw_reference")
-    use_magnetometer: bool = True
-    use_ahrs: bool = True
-    magnetometer_hard_iron_t: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    magnetometer_soft_iron: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
-    magnetometer_heading_sigma_deg: float = 1.0
-    magnetometer_full_scale_t: float = 8e-4
-    ahrs_lag_s: float = 0.0
-    ahrs_lag_uncertainty_s: float = 0.1
-    ahrs_variance_floor_rad2: float = 1e-5
-    ahrs_error_correlation_time_s: float = 60.0
-    moored: bool = False
-    moored_position_sigma_horizontal_m: float = 3.0
-    moored_position_sigma_vertical_m: float = 1.0
-    moored_anchor_time_constant_s: float = 600.0
-    moored_update_period_s: float = 1.0
-    imu_gyro_bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    imu_accel_bias_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    imu_accel_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    use_magnetometer: bool = parameter(
+        True,
+        meaning="fuse imu/mag when present",
+        heading="Sites without GNSS: magnetometer, motion pack, mooring, IMU calibration",
+    )
+    use_ahrs: bool = parameter(True, meaning="fuse imu/data when present")
+    magnetometer_hard_iron_t: tuple[float, float, float] = parameter(
+        (0.0, 0.0, 0.0),
+        unit="T",
+        meaning="hard-iron offset subtracted from the raw field (calibrate_magnetometer)",
+    )
+    magnetometer_soft_iron: tuple[float, ...] = parameter(
+        (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        meaning="row-major 3×3 matrix applied after the hard-iron offset (calibrate_magnetometer)",
+        rule=custom_rule("9 numbers", lambda matrix: len(matrix) == 9),
+    )
+    magnetometer_heading_sigma_deg: float = parameter(
+        1.0,
+        unit="deg",
+        meaning="1σ of the magnetic heading beyond the sensor noise: residual calibration, "
+        "local fields",
+        rule=POSITIVE,
+    )
+    magnetometer_full_scale_t: float = parameter(
+        8e-4, unit="T", meaning="a component this large is a saturated sample", rule=POSITIVE
+    )
+    ahrs_lag_s: float = parameter(
+        0.0,
+        unit="s",
+        meaning="the motion pack's own lag; its attitude is carried forward by it with the gyro",
+        rule=NON_NEGATIVE,
+    )
+    ahrs_lag_uncertainty_s: float = parameter(
+        0.1,
+        unit="s",
+        meaning="what is not known of that lag, added as noise proportional to the body rate",
+        rule=NON_NEGATIVE,
+    )
+    ahrs_variance_floor_rad2: float = parameter(
+        1e-5, unit="rad²", meaning="smallest motion-pack attitude variance per axis", rule=POSITIVE
+    )
+    ahrs_error_correlation_time_s: float = parameter(
+        60.0,
+        unit="s",
+        meaning="how long the pack's attitude error stays alike: closer samples share one error "
+        "and are weighted so",
+        rule=POSITIVE,
+    )
+    moored: bool = parameter(
+        False,
+        meaning="moored buoy: while no fix is accepted, hold the position to its slowly moving "
+        "mean (zero mean velocity)",
+    )
+    moored_position_sigma_horizontal_m: float = parameter(
+        3.0, unit="m", meaning="1σ horizontal wave excursion about that mean", rule=POSITIVE
+    )
+    moored_position_sigma_vertical_m: float = parameter(
+        1.0, unit="m", meaning="1σ vertical wave excursion about that mean", rule=POSITIVE
+    )
+    moored_anchor_time_constant_s: float = parameter(
+        600.0, unit="s", meaning="time constant of the moored mean position", rule=POSITIVE
+    )
+    moored_update_period_s: float = parameter(
+        1.0, unit="s", meaning="interval of the moored constraint", rule=POSITIVE
+    )
+    imu_gyro_bias_rad_s: tuple[float, float, float] = parameter(
+        (0.0, 0.0, 0.0),
+        unit="rad/s",
+        meaning="gyro bias of the raw IMU (calibrate_imu): ω = ω_raw − b_g",
+    )
+    imu_accel_bias_mps2: tuple[float, float, float] = parameter(
+        (0.0, 0.0, 0.0),
+        unit="m/s²",
+        meaning="accelerometer bias of the raw IMU (calibrate_imu): f = (f_raw − b_a) / scale",
+    )
+    imu_accel_scale: tuple[float, float, float] = parameter(
+        (1.0, 1.0, 1.0),
+        meaning="accelerometer scale of the raw IMU, per axis (calibrate_imu)",
+        rule=custom_rule(
+            "three scale factors in (0.5, 2)",
+            lambda scales: all(0.5 < scale < 2.0 for scale in scales),
+        ),
+    )
 
-    realtime_output: bool = True
-    output_rate_hz: float = 0.0
-    record_innovations: bool = False
+    realtime_output: bool = parameter(
+        True,
+        meaning="true: each solution with its IMU sample, predicted from the filter "
+        "max_measurement_delay_s behind; false: that late, every measurement applied",
+        heading="Output",
+    )
+    output_rate_hz: float = parameter(
+        0.0,
+        unit="Hz",
+        meaning="rate of navigation solutions; 0: one per IMU sample",
+        rule=NON_NEGATIVE,
+    )
+    record_innovations: bool = parameter(
+        False, meaning="keep every innovation in FusionEngine.innovation_log (analysis tools)"
+    )
 
     def __post_init__(self):
         for field in dataclasses.fields(self):
@@ -226,62 +370,8 @@ class FusionConfig:
             check_shared_fields(self)
         except ValueError as error:
             raise ConfigError(str(error)) from None
-        for name in (
-            "gyro_noise_deg_sqrt_h",
-            "gyro_turn_on_bias_deg_s",
-            "gyro_bias_instability_deg_h",
-            "accel_noise_mps_sqrt_h",
-            "accel_turn_on_bias_mg",
-            "accel_bias_instability_mg",
-            "scale_factor_error_percent",
-            "output_rate_hz",
-            "max_measurement_delay_s",
-        ):
-            _require(getattr(self, name) >= 0.0, name, "finite and ≥ 0")
-        for name in (
-            "gyro_bias_correlation_time_s",
-            "accel_bias_correlation_time_s",
-            "alignment_window_s",
-            "alignment_max_fix_age_s",
-            "gnss_position_variance_floor_m2",
-            "gnss_velocity_variance_floor_m2s2",
-            "gnss_heading_variance_floor_rad2",
-            "gnss_baseline_sigma_horizontal_m",
-            "gnss_baseline_sigma_vertical_m",
-            "gnss_tertiary_length_tolerance_m",
-            "coasting_timeout_s",
-            "covariance_propagation_interval_s",
-            "max_imu_gap_s",
-            "max_angular_rate_rad_s",
-            "max_specific_force_mps2",
-            "max_angular_acceleration_rad_s2",
-            "max_jerk_mps3",
-            "integrity_attitude_sigma_deg",
-            "integrity_velocity_sigma_mps",
-            "integrity_realign_s",
-            "integrity_recovery_s",
-            "magnetometer_heading_sigma_deg",
-            "magnetometer_full_scale_t",
-            "ahrs_variance_floor_rad2",
-            "ahrs_error_correlation_time_s",
-            "moored_position_sigma_horizontal_m",
-            "moored_position_sigma_vertical_m",
-            "moored_anchor_time_constant_s",
-            "moored_update_period_s",
-        ):
-            _require(getattr(self, name) > 0.0, name, "finite and > 0")
-        for name in ("ahrs_lag_s", "ahrs_lag_uncertainty_s"):
-            _require(getattr(self, name) >= 0.0, name, "finite and ≥ 0")
-        _require(len(self.magnetometer_soft_iron) == 9, "magnetometer_soft_iron", "9 numbers")
-        _require(
-            all(0.5 < scale < 2.0 for scale in self.imu_accel_scale),
-            "imu_accel_scale",
-            "three scale factors in (0.5, 2)",
-        )
-        _require(0.0 < self.gate_probability < 1.0, "gate_probability", "in (0, 1)")
-        _require(self.gate_reset_count >= 1, "gate_reset_count", "≥ 1")
-        _require(self.integrity_rejection_count >= 1, "integrity_rejection_count", "≥ 1")
-        _require(self.scale_factor_error_percent < 100.0, "scale_factor_error_percent", "< 100")
+        for name, broken in broken_rules(self):
+            raise ConfigError(f"{name} must be {broken}")
 
     @property
     def baseline_body_m(self) -> tuple[float, float, float]:
@@ -311,11 +401,6 @@ class FusionConfig:
     def has_origin(self) -> bool:
         """True when the ``map`` origin is configured (not taken from the first fix)."""
         return not math.isnan(self.origin_latitude_deg)
-
-
-def _require(condition: bool, name: str, expectation: str):
-    if not condition:
-        raise ConfigError(f"{name} must be {expectation}")
 
 
 def _coerce(name: str, annotation, value):
@@ -374,9 +459,46 @@ def fusion_config_from_files(paths) -> FusionConfig:
     )
 
 
-def fusion_parameter_names() -> list[str]:
-    """Every parameter ``fusion_node`` declares."""
-    names = config_parameters(
+def fusion_parameters() -> list[DeclaredParameter]:
+    """Every parameter ``fusion_node`` declares, shared ones included."""
+    return declared_parameters(
         FusionConfig, FUSION_PARAMETER_PREFIX, skip=FUSION_FIELDS_NOT_PARAMETERS
     )
-    return [parameter for _, parameter, _ in names]
+
+
+def fusion_parameter_names() -> list[str]:
+    """The names of :func:`fusion_parameters`."""
+    return [declared.name for declared in fusion_parameters()]
+
+
+FUSION_PARAMETER_FILE_HEADER = (
+    "Navigation fusion (fusion_node and offline fuse_bag): every fusion.* parameter with its "
+    "default.",
+    "Use together with the shared buoy file, which sets gnss.primary_antenna, "
+    "gnss.secondary_antenna",
+    "and, optionally, origin.latitude_deg, origin.longitude_deg, origin.altitude_m:",
+    "  fusion_node --ros-args --params-file buoy.yaml --params-file fusion.yaml",
+)
+
+
+def parameter_sets() -> ParameterSets:
+    """The fusion's parameters, for the generated parameter file and reference (entry point of
+    :data:`buoy_common.parameter_declarations.ENTRY_POINT_GROUP`)."""
+    parameters = tuple(fusion_parameters())
+    own = tuple(declared for declared in parameters if not declared.shared)
+    section = FileSection("/**", own, WILDCARD_SECTION_COMMENT)
+    return ParameterSets(
+        "buoy_nav",
+        nodes=(
+            NodeParameters(
+                FUSION_NODE_NAME,
+                "navigation fusion (fusion_node, offline fuse_bag and process_bag)",
+                parameters,
+            ),
+        ),
+        files=(
+            ParameterFile(
+                "src/buoy_nav/config/fusion.yaml", FUSION_PARAMETER_FILE_HEADER, (section,)
+            ),
+        ),
+    )

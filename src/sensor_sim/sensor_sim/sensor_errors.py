@@ -14,6 +14,17 @@ from typing import Literal
 import numpy as np
 
 from buoy_common.extrinsics import check_shared_fields, shared_field
+from buoy_common.parameter_declarations import (
+    NON_NEGATIVE,
+    POSITIVE,
+    at_least,
+    broken_rules,
+    closed_interval,
+    custom_rule,
+    half_open_interval,
+    one_of,
+    parameter,
+)
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 _DEG = np.pi / 180.0
@@ -42,6 +53,12 @@ def check_non_negative(config: object, *keys: str) -> None:
         check_field(config, key, getattr(config, key) >= 0.0, "must be >= 0")
 
 
+def check_declared_rules(config: object) -> None:
+    """Each parameter field of config must keep its declared rule."""
+    for key, broken in broken_rules(config):
+        raise InvalidConfigValueError(key, getattr(config, key), f"must be {broken}")
+
+
 def check_positive(config: object, *keys: str) -> None:
     """Each named field of config must be > 0."""
     for key in keys:
@@ -57,28 +74,45 @@ class ImuErrorConfig:
     deviations of first-order Gauss-Markov processes with the given correlation times.
     """
 
-    gyro_noise_deg_sqrt_h: float = 0.2
-    gyro_turn_on_bias_deg_s: float = 0.02
-    gyro_bias_instability_deg_h: float = 5.0
-    gyro_bias_correlation_time_s: float = 300.0
-    accel_noise_mps_sqrt_h: float = 0.05
-    accel_turn_on_bias_mg: float = 5.0
-    accel_bias_instability_mg: float = 0.1
-    accel_bias_correlation_time_s: float = 600.0
-    scale_factor_error_percent: float = 0.1
+    gyro_noise_deg_sqrt_h: float = parameter(
+        0.2, unit="deg/√h", meaning="gyro angle random walk", rule=NON_NEGATIVE
+    )
+    gyro_turn_on_bias_deg_s: float = parameter(
+        0.02, unit="deg/s", meaning="1σ gyro bias per axis, drawn at start", rule=NON_NEGATIVE
+    )
+    gyro_bias_instability_deg_h: float = parameter(
+        5.0,
+        unit="deg/h",
+        meaning="1σ of the first-order Gauss-Markov gyro bias drift",
+        rule=NON_NEGATIVE,
+    )
+    gyro_bias_correlation_time_s: float = parameter(
+        300.0, unit="s", meaning="correlation time of the gyro bias drift", rule=POSITIVE
+    )
+    accel_noise_mps_sqrt_h: float = parameter(
+        0.05, unit="m/s/√h", meaning="accelerometer velocity random walk", rule=NON_NEGATIVE
+    )
+    accel_turn_on_bias_mg: float = parameter(
+        5.0, unit="mg", meaning="1σ accelerometer bias per axis, drawn at start", rule=NON_NEGATIVE
+    )
+    accel_bias_instability_mg: float = parameter(
+        0.1,
+        unit="mg",
+        meaning="1σ of the first-order Gauss-Markov accelerometer bias drift",
+        rule=NON_NEGATIVE,
+    )
+    accel_bias_correlation_time_s: float = parameter(
+        600.0, unit="s", meaning="correlation time of the accelerometer bias drift", rule=POSITIVE
+    )
+    scale_factor_error_percent: float = parameter(
+        0.1,
+        unit="%",
+        meaning="1σ scale-factor error per axis of gyros and accelerometers, drawn at start",
+        rule=NON_NEGATIVE,
+    )
 
     def __post_init__(self) -> None:
-        check_non_negative(
-            self,
-            "gyro_noise_deg_sqrt_h",
-            "gyro_turn_on_bias_deg_s",
-            "gyro_bias_instability_deg_h",
-            "accel_noise_mps_sqrt_h",
-            "accel_turn_on_bias_mg",
-            "accel_bias_instability_mg",
-            "scale_factor_error_percent",
-        )
-        check_positive(self, "gyro_bias_correlation_time_s", "accel_bias_correlation_time_s")
+        check_declared_rules(self)
 
     @property
     def gyro_noise_density_rad_s_sqrt_hz(self) -> float:
@@ -101,14 +135,14 @@ class ImuErrorConfig:
         return self.accel_bias_instability_mg * 1e-3 * STANDARD_GRAVITY_MPS2
 
 
-def check_intervals(config: object, *keys: str) -> None:
-    """Each named field of config holds [start, end) intervals with start < end."""
-    for key in keys:
-        for start, end in getattr(config, key):
-            if not start < end:
-                raise InvalidConfigValueError(
-                    key, getattr(config, key), f"interval [{start}, {end}) must have start < end"
-                )
+INTERVALS = custom_rule(
+    "[start, end) intervals with start < end",
+    lambda intervals: all(start < end for start, end in intervals),
+)
+
+
+def _near_identity(matrix) -> bool:
+    return len(matrix) == 9 and abs(np.linalg.det(np.reshape(matrix, (3, 3)))) > 0.1
 
 
 @dataclass(frozen=True)
@@ -126,48 +160,69 @@ class GnssErrorConfig:
     topics simply stop, as they do on a buoy whose GNSS is out for minutes.
     """
 
-    position_noise_horizontal_m: float = 0.02
-    position_noise_vertical_m: float = 0.04
-    velocity_noise_horizontal_mps: float = 0.02
-    velocity_noise_vertical_mps: float = 0.04
-    baseline_noise_horizontal_m: float = 0.003
-    baseline_noise_vertical_m: float = 0.006
-    receiver: Literal["dual_antenna", "single_antenna", "none"] = "dual_antenna"
-    fix_outages_s: tuple[tuple[float, float], ...] = ()
-    velocity_outages_s: tuple[tuple[float, float], ...] = ()
-    heading_outages_s: tuple[tuple[float, float], ...] = ()
-    silent_outages_s: tuple[tuple[float, float], ...] = ()
+    position_noise_horizontal_m: float = parameter(
+        0.02, unit="m", meaning="1σ position noise per horizontal axis", rule=NON_NEGATIVE
+    )
+    position_noise_vertical_m: float = parameter(
+        0.04, unit="m", meaning="1σ vertical position noise", rule=NON_NEGATIVE
+    )
+    velocity_noise_horizontal_mps: float = parameter(
+        0.02, unit="m/s", meaning="1σ velocity noise per horizontal axis", rule=NON_NEGATIVE
+    )
+    velocity_noise_vertical_mps: float = parameter(
+        0.04, unit="m/s", meaning="1σ vertical velocity noise", rule=NON_NEGATIVE
+    )
+    baseline_noise_horizontal_m: float = parameter(
+        0.003,
+        unit="m",
+        meaning="1σ moving-baseline noise per horizontal axis; the heading follows from it",
+        rule=NON_NEGATIVE,
+    )
+    baseline_noise_vertical_m: float = parameter(
+        0.006, unit="m", meaning="1σ vertical moving-baseline noise", rule=NON_NEGATIVE
+    )
+    receiver: Literal["dual_antenna", "single_antenna", "none"] = parameter(
+        "dual_antenna",
+        meaning="dual_antenna: fix, velocity, heading, baseline; single_antenna: fix and "
+        "velocity; none: no GNSS topic",
+        rule=one_of("dual_antenna", "single_antenna", "none"),
+    )
+    fix_outages_s: tuple[tuple[float, float], ...] = parameter(
+        (),
+        unit="s",
+        meaning="scenario-time intervals without fix (then without any GNSS solution)",
+        rule=INTERVALS,
+    )
+    velocity_outages_s: tuple[tuple[float, float], ...] = parameter(
+        (), unit="s", meaning="scenario-time intervals without velocity", rule=INTERVALS
+    )
+    heading_outages_s: tuple[tuple[float, float], ...] = parameter(
+        (), unit="s", meaning="scenario-time intervals without heading and baseline", rule=INTERVALS
+    )
+    silent_outages_s: tuple[tuple[float, float], ...] = parameter(
+        (),
+        unit="s",
+        meaning="scenario-time intervals in which no GNSS topic publishes at all",
+        rule=INTERVALS,
+    )
 
     def __post_init__(self) -> None:
-        check_non_negative(
-            self,
-            "position_noise_horizontal_m",
-            "position_noise_vertical_m",
-            "velocity_noise_horizontal_mps",
-            "velocity_noise_vertical_mps",
-            "baseline_noise_horizontal_m",
-            "baseline_noise_vertical_m",
-        )
-        check_field(
-            self,
-            "receiver",
-            self.receiver in ("dual_antenna", "single_antenna", "none"),
-            "must be dual_antenna, single_antenna or none",
-        )
-        check_intervals(
-            self, "fix_outages_s", "velocity_outages_s", "heading_outages_s", "silent_outages_s"
-        )
+        check_declared_rules(self)
 
 
 @dataclass(frozen=True)
 class AnemometerErrorConfig:
     """Sonic anemometer white noise, m/s, 1-sigma per axis, and of its sonic temperature, K."""
 
-    noise_mps: float = 0.02
-    temperature_noise_k: float = 0.02
+    noise_mps: float = parameter(
+        0.02, unit="m/s", meaning="white noise of the wind, 1σ per axis", rule=NON_NEGATIVE
+    )
+    temperature_noise_k: float = parameter(
+        0.02, unit="K", meaning="white noise of the sonic temperature, 1σ", rule=NON_NEGATIVE
+    )
 
     def __post_init__(self) -> None:
-        check_non_negative(self, "noise_mps", "temperature_noise_k")
+        check_declared_rules(self)
 
 
 @dataclass(frozen=True)
@@ -187,38 +242,39 @@ class DvlErrorConfig:
     or at random with ``ping_loss_probability``.
     """
 
-    scale_factor_error_percent: float = 0.2
-    bias_mps: tuple[float, float, float] = (0.002, 0.002, 0.002)
-    noise_mps: float = 0.005
-    min_depth_m: float = 0.5
-    ping_loss_probability: float = 0.0
-    outages_s: tuple[tuple[float, float], ...] = ()
+    scale_factor_error_percent: float = parameter(
+        0.2,
+        unit="%",
+        meaning="scale error common to all axes, held for the run",
+        rule=closed_interval(-10.0, 10.0),
+    )
+    bias_mps: tuple[float, float, float] = parameter(
+        (0.002, 0.002, 0.002),
+        unit="m/s",
+        meaning="offset per DVL axis, held for the run",
+        rule=custom_rule(
+            "three offsets within [-1, 1] m/s",
+            lambda bias: len(bias) == 3 and all(abs(b) <= 1.0 for b in bias),
+        ),
+    )
+    noise_mps: float = parameter(
+        0.005, unit="m/s", meaning="white noise per axis and ping, 1σ", rule=NON_NEGATIVE
+    )
+    min_depth_m: float = parameter(
+        0.5,
+        unit="m",
+        meaning="pings are lost while the transducer is shallower than this (bubbles)",
+        rule=NON_NEGATIVE,
+    )
+    ping_loss_probability: float = parameter(
+        0.0, meaning="pings lost at random", rule=half_open_interval(0.0, 1.0)
+    )
+    outages_s: tuple[tuple[float, float], ...] = parameter(
+        (), unit="s", meaning="scenario-time intervals without valid pings", rule=INTERVALS
+    )
 
     def __post_init__(self) -> None:
-        check_non_negative(self, "noise_mps", "min_depth_m")
-        check_field(
-            self,
-            "scale_factor_error_percent",
-            abs(self.scale_factor_error_percent) <= 10.0,
-            "must be within [-10, 10] %",
-        )
-        check_field(
-            self,
-            "bias_mps",
-            len(self.bias_mps) == 3 and all(abs(b) <= 1.0 for b in self.bias_mps),
-            "must be three offsets within [-1, 1] m/s",
-        )
-        check_field(
-            self,
-            "ping_loss_probability",
-            0.0 <= self.ping_loss_probability < 1.0,
-            "must be in [0, 1)",
-        )
-        for start, end in self.outages_s:
-            if not start < end:
-                raise InvalidConfigValueError(
-                    "outages_s", self.outages_s, f"interval [{start}, {end}) must have start < end"
-                )
+        check_declared_rules(self)
 
 
 _IDENTITY_3X3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
@@ -237,28 +293,34 @@ class MagnetometerErrorConfig:
     it). ``fitted: false``: no magnetometer.
     """
 
-    fitted: bool = False
-    sample_every: int = 10
-    noise_ut: float = 0.1
-    hard_iron_ut: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    soft_iron: tuple[float, ...] = _IDENTITY_3X3
-    disturbances_s: tuple[tuple[float, float], ...] = ()
-    disturbance_heading_bias_deg: float = 30.0
+    fitted: bool = parameter(False, meaning="publish imu/mag")
+    sample_every: int = parameter(
+        10, meaning="one magnetometer sample every this many IMU samples", rule=at_least(1)
+    )
+    noise_ut: float = parameter(0.1, unit="µT", meaning="white noise, 1σ", rule=NON_NEGATIVE)
+    hard_iron_ut: tuple[float, float, float] = parameter(
+        (0.0, 0.0, 0.0),
+        unit="µT",
+        meaning="constant offset of the buoy's own permanent magnetism",
+        rule=custom_rule("3 numbers", lambda offset: len(offset) == 3),
+    )
+    soft_iron: tuple[float, ...] = parameter(
+        _IDENTITY_3X3,
+        meaning="row-major 3×3 matrix applied to the field in the body",
+        rule=custom_rule("9 numbers, an invertible matrix near the identity", _near_identity),
+    )
+    disturbances_s: tuple[tuple[float, float], ...] = parameter(
+        (),
+        unit="s",
+        meaning="scenario-time intervals in which a passing hull turns the field",
+        rule=INTERVALS,
+    )
+    disturbance_heading_bias_deg: float = parameter(
+        30.0, unit="deg", meaning="how far the disturbance turns the heading, clockwise"
+    )
 
     def __post_init__(self) -> None:
-        check_non_negative(self, "noise_ut")
-        check_field(self, "sample_every", self.sample_every >= 1, "must be >= 1")
-        check_field(
-            self, "soft_iron", len(self.soft_iron) == 9, "must be 9 numbers (3×3, row-major)"
-        )
-        check_field(
-            self,
-            "soft_iron",
-            abs(np.linalg.det(np.reshape(self.soft_iron, (3, 3)))) > 0.1,
-            "must be an invertible matrix near the identity (|det| > 0.1)",
-        )
-        check_field(self, "hard_iron_ut", len(self.hard_iron_ut) == 3, "must be 3 numbers")
-        check_intervals(self, "disturbances_s")
+        check_declared_rules(self)
 
 
 @dataclass(frozen=True)
@@ -280,27 +342,36 @@ class AhrsErrorConfig:
     sqrt(error_deg² + noise_deg²) on every axis, which also leaves the lag out.
     """
 
-    fitted: bool = False
-    sample_every: int = 10
-    lag_time_constant_s: float = 0.2
-    error_deg: float = 0.3
-    error_correlation_time_s: float = 120.0
-    noise_deg: float = 0.05
+    fitted: bool = parameter(False, meaning="publish imu/data, the motion pack's own attitude")
+    sample_every: int = parameter(
+        10, meaning="one attitude sample every this many IMU samples", rule=at_least(1)
+    )
+    lag_time_constant_s: float = parameter(
+        0.2, unit="s", meaning="time constant of the pack's first-order lag", rule=NON_NEGATIVE
+    )
+    error_deg: float = parameter(
+        0.3, unit="deg", meaning="1σ Gauss-Markov attitude error per axis", rule=NON_NEGATIVE
+    )
+    error_correlation_time_s: float = parameter(
+        120.0, unit="s", meaning="correlation time of the attitude error", rule=POSITIVE
+    )
+    noise_deg: float = parameter(0.05, unit="deg", meaning="white noise, 1σ", rule=NON_NEGATIVE)
     yaw_reference: str = shared_field("ahrs.yaw_reference")
-    claimed_sigma_deg: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    claimed_sigma_deg: tuple[float, float, float] = parameter(
+        (math.nan, math.nan, math.nan),
+        unit="deg",
+        meaning="roll, pitch, yaw 1σ the orientation_covariance claims; NaN: the true error's",
+        rule=custom_rule(
+            "three values in [0, 180), or three NaN",
+            lambda claimed: (
+                len(claimed) == 3
+                and (all(math.isnan(c) for c in claimed) or all(0.0 <= c < 180.0 for c in claimed))
+            ),
+        ),
+    )
 
     def __post_init__(self) -> None:
-        check_non_negative(self, "lag_time_constant_s", "error_deg", "noise_deg")
-        claimed = self.claimed_sigma_deg
-        check_field(
-            self,
-            "claimed_sigma_deg",
-            len(claimed) == 3
-            and (all(math.isnan(c) for c in claimed) or all(0.0 <= c < 180.0 for c in claimed)),
-            "must be three standard deviations in [0, 180) deg (roll, pitch, yaw), or three NaN",
-        )
-        check_field(self, "sample_every", self.sample_every >= 1, "must be >= 1")
-        check_positive(self, "error_correlation_time_s")
+        check_declared_rules(self)
         try:
             check_shared_fields(self)
         except ValueError as error:

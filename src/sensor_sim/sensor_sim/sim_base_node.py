@@ -21,6 +21,13 @@ from buoy_common.base_node import (
     message_class,
 )
 from buoy_common.parameters import ParameterError, to_ros_value
+from sensor_sim.parameters import (
+    SCENARIO,
+    SCENARIO_OVERRIDES,
+    SEED,
+    WAIT_FOR_SUBSCRIBER_NODE,
+    WAIT_FOR_SUBSCRIPTIONS,
+)
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS
 from sensor_sim.truth import TruthModel
@@ -33,9 +40,9 @@ READINESS_POLL_PERIOD_S = 0.05
 
 def declare_scenario(node: SuiteNode):
     """Declare ``scenario``, ``scenario_overrides`` and ``seed``; load the scenario."""
-    name = node.declare_value("scenario", "sea_state", "shipped scenario name or YAML path")
-    overrides = node.declare_string_list("scenario_overrides", "dotted.key=value overrides")
-    seed = node.declare_value("seed", -1, "random seed; -1 keeps the scenario's")
+    name = node.declare_value(SCENARIO.name, SCENARIO.default, SCENARIO.description)
+    overrides = node.declare_string_list(SCENARIO_OVERRIDES.name, SCENARIO_OVERRIDES.description)
+    seed = node.declare_value(SEED.name, SEED.default, SEED.description)
     try:
         return load_scenario(name, overrides, None if seed < 0 else seed)
     except ScenarioError as error:
@@ -66,9 +73,9 @@ class SimulatedSensorNode(SuiteNode):
         except ParameterError as error:
             raise StartupError(str(error)) from error
         self.wait_for_subscriber_node = self.declare_value(
-            "wait_for_subscriber_node",
-            "",
-            "follow /clock only once every topic has a subscription of this node (a recorder)",
+            WAIT_FOR_SUBSCRIBER_NODE.name,
+            WAIT_FOR_SUBSCRIBER_NODE.default,
+            WAIT_FOR_SUBSCRIBER_NODE.description,
         )
         self.publishers_by_topic = {
             topic: self.create_publisher(message_class(type_name), topic, DATA_QOS)
@@ -76,9 +83,7 @@ class SimulatedSensorNode(SuiteNode):
         }
         self.awaited_subscriptions = self._awaited_subscriptions(
             self.declare_string_list(
-                "wait_for_subscriptions",
-                "NODE:TOPIC entries: follow /clock only once each named node subscribes to the "
-                "named topic, for the topics this sensor publishes",
+                WAIT_FOR_SUBSCRIPTIONS.name, WAIT_FOR_SUBSCRIPTIONS.description
             )
         )
         self.published = 0

@@ -13,6 +13,14 @@ import time
 from rosgraph_msgs.msg import Clock
 
 from buoy_common.base_node import StartupError, SuiteNode, main_for
+from sensor_sim.parameters import (
+    PUBLISH_RATE,
+    RATE_FACTOR,
+    SIM_CLOCK_NODE_NAME,
+    START_DELAY,
+    WAIT_FOR_NODES,
+    WAIT_FOR_SUBSCRIBERS,
+)
 from sensor_sim.sim_base_node import CLOCK_QOS, declare_scenario
 
 END_LINGER_S = 1.0
@@ -20,22 +28,24 @@ END_LINGER_S = 1.0
 
 class SimClockNode(SuiteNode):
     def __init__(self):
-        super().__init__("sim_clock_node")
+        super().__init__(SIM_CLOCK_NODE_NAME)
         self.scenario = declare_scenario(self)
         self.rate_factor = self.declare_value(
-            "rate_factor", 1.0, "simulated seconds per wall-clock second"
+            RATE_FACTOR.name, RATE_FACTOR.default, RATE_FACTOR.description
         )
-        publish_rate_hz = self.declare_value("publish_rate_hz", 200.0, "wall-clock rate of /clock")
+        publish_rate_hz = self.declare_value(
+            PUBLISH_RATE.name, PUBLISH_RATE.default, PUBLISH_RATE.description
+        )
         self.wait_for_subscribers = self.declare_value(
-            "wait_for_subscribers", 0, "hold time at 0 until /clock has this many subscribers"
+            WAIT_FOR_SUBSCRIBERS.name,
+            WAIT_FOR_SUBSCRIBERS.default,
+            WAIT_FOR_SUBSCRIBERS.description,
         )
         self.wait_for_nodes = set(
-            self.declare_string_list(
-                "wait_for_nodes", "names of nodes not on simulated time to hold time at 0 for"
-            )
+            self.declare_string_list(WAIT_FOR_NODES.name, WAIT_FOR_NODES.description)
         )
         self.start_delay_s = self.declare_value(
-            "start_delay_s", 0.5, "wall-clock pause after the subscribers are there"
+            START_DELAY.name, START_DELAY.default, START_DELAY.description
         )
         if not (math.isfinite(self.rate_factor) and 0.0 < self.rate_factor <= 1000.0):
             raise StartupError("parameter 'rate_factor' must be in (0, 1000]")

@@ -34,6 +34,7 @@ from buoy_common.contract import (
     WIND_RAW_TOPIC,
 )
 from buoy_common.extrinsics import check_shared_fields, shared_field
+from buoy_common.parameter_declarations import broken_rules, custom_rule, parameter
 from buoy_common.parameters import build_config, config_parameters
 from sensor_sim import messages
 from sensor_sim.geodesy import geodetic_to_enu_m
@@ -82,15 +83,24 @@ class MapOrigin:
 class StreamTiming:
     """Sample rate (Hz) and time offset of the first sample (s) of one sensor."""
 
-    rate_hz: float = 10.0
-    time_offset_s: float = 0.0
+    rate_hz: float = parameter(
+        10.0,
+        unit="Hz",
+        meaning="sample rate; default: the scenario's sensors.rates",
+        rule=custom_rule("in (0, 2000]", lambda rate: math.isfinite(rate) and 0.0 < rate <= 2000),
+    )
+    time_offset_s: float = parameter(
+        0.0,
+        unit="s",
+        meaning="time of the first sample after the scenario start, so that sensors' stamps "
+        "disagree as real ones do",
+        rule=custom_rule("in [0, 1/rate_hz)", lambda offset: math.isfinite(offset)),
+    )
 
     def __post_init__(self):
-        if not (math.isfinite(self.rate_hz) and 0.0 < self.rate_hz <= 2000.0):
-            raise ValueError(f"rate_hz must be in (0, 2000] Hz, got {self.rate_hz}")
-        if not (
-            math.isfinite(self.time_offset_s) and 0.0 <= self.time_offset_s < 1.0 / self.rate_hz
-        ):
+        for name, broken in broken_rules(self):
+            raise ValueError(f"{name} must be {broken}, got {getattr(self, name)}")
+        if not 0.0 <= self.time_offset_s < 1.0 / self.rate_hz:
             raise ValueError(f"time_offset_s must be in [0, 1/rate_hz) s, got {self.time_offset_s}")
 
 

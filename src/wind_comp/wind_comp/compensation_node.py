@@ -87,6 +87,7 @@ from buoy_common.contract import (
     wind_mean_topic,
     wind_stats_topic,
 )
+from buoy_common.parameter_declarations import DeclaredParameter
 from wind_comp.compensation_messages import (
     MalformedMessageError,
     anemometer_record,
@@ -101,7 +102,7 @@ from wind_comp.compensator import SampleStatus
 from wind_comp.config import (
     COMPENSATION_NODE_NAME,
     COMPENSATION_PARAMETER_PREFIX,
-    NAV_TIMEOUT_PARAMETER,
+    NAV_TIMEOUT,
     CompensatorConfig,
 )
 from wind_comp.flux_products import FluxProduct
@@ -113,7 +114,6 @@ from wind_comp.pipeline import (
     wrong_frame_message,
 )
 
-WIND_NAV_TIMEOUT_S = 1.0
 DIAGNOSTICS_PERIOD_S = 1.0
 
 
@@ -157,8 +157,7 @@ class CorrectionNode(FlushingNode):
         product_topics,
         samples_name: str,
         frame_field: str,
-        nav_timeout_parameter: str,
-        default_nav_timeout_s: float,
+        nav_timeout: DeclaredParameter,
     ):
         """Args:
         node_name, parameter_prefix: the node's name and the prefix of its own parameters.
@@ -173,20 +172,16 @@ class CorrectionNode(FlushingNode):
         samples_name: what the diagnostics call the input samples (``wind``, ``dvl``).
         frame_field: the configuration field naming the sensor's ``frame_id`` (a message in
             another frame is rejected as ``wrong_frame``).
-        nav_timeout_parameter, default_nav_timeout_s: the live-only latency budget and its
-            default, s.
+        nav_timeout: the live-only latency budget's declaration (name, default, s).
         """
         super().__init__(node_name)
         self.config = self.declare_config(config_type, prefix=parameter_prefix)
         self.nav_timeout_s = self.declare_value(
-            nav_timeout_parameter,
-            default_nav_timeout_s,
-            "s: samples this much older than the newest sensor stamp, waiting this long in wall "
-            "time and still without navigation around them are published invalid",
+            nav_timeout.name, nav_timeout.default, nav_timeout.description
         )
         if not (math.isfinite(self.nav_timeout_s) and self.nav_timeout_s > 0):
             raise StartupError(
-                f"parameter '{nav_timeout_parameter}' must be positive, got {self.nav_timeout_s}"
+                f"parameter '{nav_timeout.name}' must be positive, got {self.nav_timeout_s}"
             )
         self.sensor_topic = sensor_topic
         self._read_record = read_record
@@ -374,8 +369,7 @@ class CompensationNode(CorrectionNode):
             (wind_mean_topic, wind_stats_topic),
             "wind",
             "anemometer_frame_id",
-            NAV_TIMEOUT_PARAMETER,
-            WIND_NAV_TIMEOUT_S,
+            NAV_TIMEOUT,
         )
         self._flux_publishers = {
             averager.window_s: self.create_publisher(

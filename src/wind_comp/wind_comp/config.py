@@ -9,17 +9,28 @@ configurations from the same parameter files (:func:`compensator_config_from_fil
 :func:`current_config_from_files`).
 """
 
+import dataclasses
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 from buoy_common.contract import ANEMOMETER_FRAME, DEFAULT_PRODUCT_WINDOWS_S, DVL_FRAME, Reason
-from buoy_common.extrinsics import check_shared_fields, shared_field
-from buoy_common.parameters import (
-    build_config,
-    check_parameter_files,
-    config_parameters,
-    load_parameter_files,
+from buoy_common.extrinsics import check_shared_fields, field_parameter, shared_field
+from buoy_common.parameter_declarations import (
+    DECLARATION_METADATA_KEY,
+    POSITIVE,
+    WILDCARD_SECTION_COMMENT,
+    Declaration,
+    DeclaredParameter,
+    FileSection,
+    NodeParameters,
+    ParameterFile,
+    ParameterSets,
+    custom_rule,
+    declared_parameters,
+    parameter,
 )
+from buoy_common.parameters import build_config, check_parameter_files, load_parameter_files
 from wind_comp.compensator import FlowSensor
 from wind_comp.flux_products import DEFAULT_FLUX_WINDOW_S
 from wind_comp.fluxes import STANDARD_PRESSURE_PA, PlanarFit
@@ -35,94 +46,140 @@ CURRENT_PARAMETER_PREFIX = "current."
 """ROS parameter of a :class:`CurrentConfig` field ``f``: ``current.f``, except the shared
 ones."""
 
-NAV_TIMEOUT_PARAMETER = COMPENSATION_PARAMETER_PREFIX + "nav_timeout_s"
-"""Latency budget of the live compensation (s); offline processing has no wall clock to wait
-on."""
-CURRENT_NAV_TIMEOUT_PARAMETER = CURRENT_PARAMETER_PREFIX + "nav_timeout_s"
-"""Latency budget of the live current estimate (s), live-only as the compensation's."""
+NAV_TIMEOUT = DeclaredParameter(
+    COMPENSATION_PARAMETER_PREFIX + "nav_timeout_s",
+    1.0,
+    "latency budget, live only: a sample still without navigation on both sides once the "
+    "newest sensor stamp is this much later, and that has waited this long in wall time, is "
+    "published invalid",
+    unit="s",
+    rule=str(POSITIVE),
+)
+"""Latency budget of the live compensation; offline processing has no wall clock to wait on."""
+NAV_TIMEOUT_PARAMETER = NAV_TIMEOUT.name
+CURRENT_NAV_TIMEOUT = dataclasses.replace(
+    NAV_TIMEOUT, name=CURRENT_PARAMETER_PREFIX + "nav_timeout_s", default=5.0
+)
+"""Latency budget of the live current estimate, live-only as the compensation's. A current is
+an average of minutes: waiting for late navigation costs nothing, giving a sample up costs a
+sample."""
+CURRENT_NAV_TIMEOUT_PARAMETER = CURRENT_NAV_TIMEOUT.name
 
 
 class ConfigError(ValueError):
     """A compensator setting is missing or malformed; the message names the field."""
 
 
+def _plane_or_unset(plane) -> bool:
+    finite = [math.isfinite(value) for value in plane]
+    return len(plane) == 3 and (all(finite) or not any(finite))
+
+
+PRODUCT_WINDOWS = custom_rule(
+    "positive window lengths", lambda windows: bool(windows) and min(windows) > 0
+)
+FRAME_NAME = custom_rule(
+    "a frame name", lambda frame_id: isinstance(frame_id, str) and bool(frame_id.strip())
+)
+PLANAR_FIT = custom_rule("three finite numbers or all NaN", _plane_or_unset)
+
+
 @dataclass(frozen=True)
 class CompensatorConfig:
-    """Settings of the wind compensation.
+    """Settings of the wind compensation, each field declared once with its default, unit,
+    rule and meaning (the parameter files and ``docs/parameters.md`` are generated from them).
 
-    Attributes:
-        anemometer_position_body_m: anemometer measurement centre in ``base_link``, m
-            (Miller's lever arm B; parameter ``anemometer.position``).
-        anemometer_rpy_deg: roll, pitch, yaw of ``anemometer_link`` relative to ``base_link``,
-            deg, applied as Rz(yaw)·Ry(pitch)·Rx(roll) (parameter ``anemometer.rpy_deg``).
-        max_nav_gap_s: largest spacing of the two navigation samples bracketing a wind stamp
-            for which the navigation is interpolated, s.
-        max_wind_speed_mps: measured wind speeds above this are rejected as absurd, m/s.
-        nav_history_s: how far behind the newest navigation sample a wind stamp may lag and
-            still be corrected in streaming use, s.
-        product_windows_s: lengths of the averaging windows of the wind products, s
-            (60 s and 600 s by default, WMO practice).
-        gust_window_s: length of the running mean whose maximum is the gust, s (WMO: 3 s).
-        anemometer_frame_id: the ``frame_id`` of ``anemometer/wind`` messages; a message in
-            another frame is rejected (``wrong_frame``) and its output is NaN. The contract's
-            ``anemometer_link`` unless a driver names its frame otherwise.
-        max_attitude_sigma_deg: a navigation sample whose attitude 1σ (the largest of the
-            three in its pose covariance) exceeds this corrects no wind: the samples it
-            brackets are invalid as ``navigation_not_trusted``, deg. The fusion publishes its
-            attitude 1σ at least ``fusion.integrity_attitude_sigma_deg`` (5°) while it finds
-            itself inconsistent with its aiding, so this is how an untrustworthy navigation
-            reaches the wind; the default lies between that and the 1σ a sound filter reports
-            in the first second after its alignment (up to about 3°).
-        flux_window_s: averaging window of the eddy-covariance fluxes, s (30 min by default).
-        flux_planar_fit: the plane w̄ = b0 + b1·ū + b2·v̄ (b0 m/s, b1 and b2 dimensionless)
-            to rotate the wind with for the fluxes (planar fit, Wilczak et al. 2001, fitted to
-            the mean winds of many windows with :func:`wind_comp.fluxes.fit_plane`); all NaN
-            (the default): double rotation, window by window.
-        air_pressure_pa: air pressure for the air density of the stress, Pa (the standard
-            atmosphere by default: ±30 hPa of weather changes the stress by 3 %).
-        flux_despike: take the Vickers–Mahrt spikes out of the fluxes (each spike NaN in its
-            own component of the window's rotated wind or sonic temperature; the counts
-            ``spikes_*`` are then the samples taken out); False (the default): only count them.
-            The corrected wind and its products keep every sample either way.
+    ``max_attitude_sigma_deg``: the fusion publishes its attitude 1σ at least
+    ``fusion.integrity_attitude_sigma_deg`` (5°) while it finds itself inconsistent with its
+    aiding, so this is how an untrustworthy navigation reaches the wind; the default lies
+    between that and the 1σ a sound filter reports in the first second after its alignment (up
+    to about 3°). ``flux_planar_fit`` is fitted to the mean winds of many windows with
+    :func:`wind_comp.fluxes.fit_plane` (Wilczak et al. 2001). ``air_pressure_pa``: ±30 hPa of
+    weather changes the stress by 3 %.
     """
 
     anemometer_position_body_m: tuple[float, float, float] = shared_field("anemometer.position")
     anemometer_rpy_deg: tuple[float, float, float] = shared_field("anemometer.rpy_deg")
-    max_nav_gap_s: float = 0.1
-    max_wind_speed_mps: float = 100.0
-    nav_history_s: float = 10.0
-    product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
-    gust_window_s: float = 3.0
-    anemometer_frame_id: str = ANEMOMETER_FRAME
-    max_attitude_sigma_deg: float = 4.0
-    flux_window_s: float = DEFAULT_FLUX_WINDOW_S
-    flux_planar_fit: tuple[float, float, float] = (math.nan, math.nan, math.nan)
-    air_pressure_pa: float = STANDARD_PRESSURE_PA
-    flux_despike: bool = False
+    max_nav_gap_s: float = parameter(
+        0.1,
+        unit="s",
+        meaning="largest spacing of the two navigation samples around a wind stamp for which "
+        "the navigation is interpolated; wider gaps make the sample invalid",
+        rule=POSITIVE,
+    )
+    max_wind_speed_mps: float = parameter(
+        100.0,
+        unit="m/s",
+        meaning="measured wind speeds above this are rejected as absurd",
+        rule=POSITIVE,
+    )
+    nav_history_s: float = parameter(
+        10.0,
+        unit="s",
+        meaning="how far a wind stamp may lag the newest navigation sample and still be "
+        "corrected (longer than max_nav_gap_s)",
+        rule=POSITIVE,
+    )
+    product_windows_s: tuple[float, ...] = parameter(
+        DEFAULT_PRODUCT_WINDOWS_S,
+        unit="s",
+        meaning="averaging windows of the wind products: wind/mean_1min, wind/stats_1min, ... "
+        "(other lengths W: wind/mean_<W>s)",
+        rule=PRODUCT_WINDOWS,
+    )
+    gust_window_s: float = parameter(
+        3.0,
+        unit="s",
+        meaning="running mean whose maximum over a window is the gust (WMO: 3 s), shorter than "
+        "every product window",
+        rule=POSITIVE,
+    )
+    anemometer_frame_id: str = parameter(
+        ANEMOMETER_FRAME,
+        meaning="frame_id of anemometer/wind messages (samples in another frame are rejected "
+        "as wrong_frame)",
+        rule=FRAME_NAME,
+    )
+    max_attitude_sigma_deg: float = parameter(
+        4.0,
+        unit="deg",
+        meaning="navigation samples whose attitude 1σ exceeds this correct no wind (the samples "
+        "they bracket are invalid, navigation_not_trusted)",
+        rule=POSITIVE,
+    )
+    flux_window_s: float = parameter(
+        DEFAULT_FLUX_WINDOW_S,
+        unit="s",
+        meaning="averaging window of the eddy-covariance fluxes: wind/fluxes_30min",
+        rule=POSITIVE,
+    )
+    flux_planar_fit: tuple[float, float, float] = parameter(
+        (math.nan, math.nan, math.nan),
+        meaning="[b0 (m/s), b1, b2] of the plane w = b0 + b1·u + b2·v the fluxes rotate into "
+        "(planar fit); NaN: double rotation, window by window",
+        rule=PLANAR_FIT,
+    )
+    air_pressure_pa: float = parameter(
+        STANDARD_PRESSURE_PA,
+        unit="Pa",
+        meaning="air pressure for the air density of the stress (standard atmosphere)",
+        rule=POSITIVE,
+    )
+    flux_despike: bool = parameter(
+        False,
+        meaning="take the Vickers-Mahrt spikes out of the fluxes (spikes_* then count the "
+        "samples taken out); false: only count them",
+    )
 
     def __post_init__(self):
-        _check_and_coerce(
-            self,
-            ("anemometer_position_body_m", "anemometer_rpy_deg"),
-            (
-                "max_nav_gap_s",
-                "max_wind_speed_mps",
-                "nav_history_s",
-                "gust_window_s",
-                "max_attitude_sigma_deg",
-                "flux_window_s",
-                "air_pressure_pa",
-            ),
-            "anemometer_frame_id",
-        )
+        _check_and_coerce(self)
         try:
             plane = tuple(float(value) for value in self.flux_planar_fit)
         except (TypeError, ValueError) as error:
             raise ConfigError(
                 f"flux_planar_fit must be three numbers, got {self.flux_planar_fit!r}"
             ) from error
-        finite = [math.isfinite(value) for value in plane]
-        if len(plane) != 3 or (any(finite) and not all(finite)):
+        if not PLANAR_FIT.holds(plane):
             raise ConfigError(
                 "flux_planar_fit must be three finite numbers (b0 m/s, b1, b2) or all NaN "
                 f"(double rotation), got {self.flux_planar_fit!r}"
@@ -153,46 +210,56 @@ class CompensatorConfig:
 
 @dataclass(frozen=True)
 class CurrentConfig:
-    """Settings of the current estimate from a DVL in water track.
-
-    Attributes:
-        dvl_position_body_m: DVL measurement centre in ``base_link``, m (parameter
-            ``dvl.position``).
-        dvl_rpy_deg: roll, pitch, yaw of ``dvl_link`` relative to ``base_link``, deg, applied as
-            Rz(yaw)·Ry(pitch)·Rx(roll) (parameter ``dvl.rpy_deg``).
-        max_nav_gap_s: largest spacing of the two navigation samples bracketing a DVL stamp for
-            which the navigation is interpolated, s.
-        max_dvl_speed_mps: DVL velocities faster than this are rejected as absurd, m/s (beyond
-            the velocity range of any DVL).
-        nav_history_s: how far behind the newest navigation sample a DVL stamp may lag and still
-            be corrected in streaming use, s.
-        product_windows_s: lengths of the averaging windows of the current products, s (60 s
-            and 600 s by default).
-        dvl_frame_id: the ``frame_id`` of ``dvl/velocity`` messages; a message in another frame
-            is rejected (``wrong_frame``) and its output is NaN. The contract's ``dvl_link``
-            unless a driver names its frame otherwise.
-        max_attitude_sigma_deg: a navigation sample whose attitude 1σ exceeds this corrects no
-            DVL sample (``navigation_not_trusted``), deg: as for the wind
-            (:class:`CompensatorConfig`); an attitude error of 4° turns a 5 m/s water track
-            by 0.35 m/s.
+    """Settings of the current estimate from a DVL in water track, each field declared once
+    with its default, unit, rule and meaning. ``max_attitude_sigma_deg`` as for the wind
+    (:class:`CompensatorConfig`): an attitude error of 4° turns a 5 m/s water track by 0.35 m/s.
     """
 
     dvl_position_body_m: tuple[float, float, float] = shared_field("dvl.position")
     dvl_rpy_deg: tuple[float, float, float] = shared_field("dvl.rpy_deg")
-    max_nav_gap_s: float = 0.1
-    max_dvl_speed_mps: float = 20.0
-    nav_history_s: float = 10.0
-    product_windows_s: tuple[float, ...] = DEFAULT_PRODUCT_WINDOWS_S
-    dvl_frame_id: str = DVL_FRAME
-    max_attitude_sigma_deg: float = 4.0
+    max_nav_gap_s: float = parameter(
+        0.1,
+        unit="s",
+        meaning="largest spacing of the two navigation samples around a DVL stamp for which "
+        "the navigation is interpolated; wider gaps make the sample invalid",
+        rule=POSITIVE,
+    )
+    max_dvl_speed_mps: float = parameter(
+        20.0,
+        unit="m/s",
+        meaning="DVL velocities faster than this are rejected as absurd (beyond any DVL's range)",
+        rule=POSITIVE,
+    )
+    nav_history_s: float = parameter(
+        10.0,
+        unit="s",
+        meaning="how far a DVL stamp may lag the newest navigation sample and still be used "
+        "(longer than max_nav_gap_s)",
+        rule=POSITIVE,
+    )
+    product_windows_s: tuple[float, ...] = parameter(
+        DEFAULT_PRODUCT_WINDOWS_S,
+        unit="s",
+        meaning="averaging windows of the current products: current/mean_1min, "
+        "current/stats_1min, ... (other lengths W: current/mean_<W>s)",
+        rule=PRODUCT_WINDOWS,
+    )
+    dvl_frame_id: str = parameter(
+        DVL_FRAME,
+        meaning="frame_id of dvl/velocity messages (samples in another frame are rejected as "
+        "wrong_frame)",
+        rule=FRAME_NAME,
+    )
+    max_attitude_sigma_deg: float = parameter(
+        4.0,
+        unit="deg",
+        meaning="navigation samples whose attitude 1σ exceeds this correct no DVL sample "
+        "(navigation_not_trusted)",
+        rule=POSITIVE,
+    )
 
     def __post_init__(self):
-        _check_and_coerce(
-            self,
-            ("dvl_position_body_m", "dvl_rpy_deg"),
-            ("max_nav_gap_s", "max_dvl_speed_mps", "nav_history_s", "max_attitude_sigma_deg"),
-            "dvl_frame_id",
-        )
+        _check_and_coerce(self)
 
     def flow_sensor(self) -> FlowSensor:
         """The DVL as the correction sees it. The correction takes the water's velocity past
@@ -207,27 +274,31 @@ class CurrentConfig:
         )
 
 
-def _check_and_coerce(
-    config, vector_fields: tuple[str, ...], positive_fields: tuple[str, ...], frame_field: str
-):
-    """The checks both configurations share: finite 3-vectors, the shared parameters' rules,
-    positive numbers, product windows, the sensor's frame name, and a navigation history
-    longer than the gap."""
-    for name in vector_fields:
-        object.__setattr__(config, name, _finite_tuple(name, getattr(config, name), length=3))
+def _check_and_coerce(config):
+    """The checks both configurations share: finite 3-vectors and the rules of the shared
+    parameters, then the declared rules (positive numbers, product windows, the sensor's frame
+    name), and a navigation history longer than the gap."""
+    fields = dataclasses.fields(config)
+    for field in fields:
+        if field_parameter(field) is not None:
+            value = _finite_tuple(field.name, getattr(config, field.name), length=3)
+            object.__setattr__(config, field.name, value)
     try:
         check_shared_fields(config)
     except ValueError as error:
         raise ConfigError(str(error)) from None
-    for name in positive_fields:
-        object.__setattr__(config, name, _positive_float(name, getattr(config, name)))
-    windows = _finite_tuple("product_windows_s", config.product_windows_s, length=None)
-    if not windows or min(windows) <= 0:
-        raise ConfigError(f"product_windows_s must be positive window lengths, got {windows}")
-    object.__setattr__(config, "product_windows_s", windows)
-    frame_id = getattr(config, frame_field)
-    if not isinstance(frame_id, str) or not frame_id.strip():
-        raise ConfigError(f"{frame_field} must be a frame name, got {frame_id!r}")
+    for field in fields:
+        declared_rule = field.metadata.get(DECLARATION_METADATA_KEY, Declaration("")).rule
+        name, value = field.name, getattr(config, field.name)
+        if declared_rule is POSITIVE:
+            object.__setattr__(config, name, _positive_float(name, value))
+        elif declared_rule is PRODUCT_WINDOWS:
+            windows = _finite_tuple(name, value, length=None)
+            if not PRODUCT_WINDOWS.holds(windows):
+                raise ConfigError(f"{name} must be {PRODUCT_WINDOWS}, got {windows}")
+            object.__setattr__(config, name, windows)
+        elif declared_rule is FRAME_NAME and not FRAME_NAME.holds(value):
+            raise ConfigError(f"{name} must be {FRAME_NAME}, got {value!r}")
     if config.nav_history_s <= config.max_nav_gap_s:
         raise ConfigError(
             f"nav_history_s ({config.nav_history_s}) must exceed max_nav_gap_s "
@@ -278,13 +349,69 @@ def current_config_from_files(paths) -> CurrentConfig:
     return build_config(CurrentConfig, values, prefix=CURRENT_PARAMETER_PREFIX)
 
 
-def compensation_parameter_names() -> list[str]:
+def compensation_parameters() -> list[DeclaredParameter]:
     """Every parameter ``compensation_node`` declares, the live-only one included."""
-    names = config_parameters(CompensatorConfig, COMPENSATION_PARAMETER_PREFIX)
-    return [parameter for _, parameter, _ in names] + [NAV_TIMEOUT_PARAMETER]
+    declared = declared_parameters(CompensatorConfig, COMPENSATION_PARAMETER_PREFIX)
+    return [*declared, NAV_TIMEOUT]
+
+
+def current_parameters() -> list[DeclaredParameter]:
+    """Every parameter ``current_node`` declares, the live-only one included."""
+    return [*declared_parameters(CurrentConfig, CURRENT_PARAMETER_PREFIX), CURRENT_NAV_TIMEOUT]
+
+
+def compensation_parameter_names() -> list[str]:
+    """The names of :func:`compensation_parameters`."""
+    return [declared.name for declared in compensation_parameters()]
 
 
 def current_parameter_names() -> list[str]:
-    """Every parameter ``current_node`` declares, the live-only one included."""
-    names = config_parameters(CurrentConfig, CURRENT_PARAMETER_PREFIX)
-    return [parameter for _, parameter, _ in names] + [CURRENT_NAV_TIMEOUT_PARAMETER]
+    """The names of :func:`current_parameters`."""
+    return [declared.name for declared in current_parameters()]
+
+
+def _node_file(path: str, node: str, what: str, shared: str, parameters) -> ParameterFile:
+    header = (
+        f"{what} ({node} and offline processing): every parameter with its default.",
+        f"Use together with the shared buoy file, which sets {shared}:",
+        f"  {node} --ros-args --params-file buoy.yaml --params-file {Path(path).name}",
+    )
+    own = tuple(declared for declared in parameters if not declared.shared)
+    return ParameterFile(path, header, (FileSection("/**", own, WILDCARD_SECTION_COMMENT),))
+
+
+def parameter_sets() -> ParameterSets:
+    """The compensation's and the current's parameters, for the generated parameter files and
+    reference (entry point of :data:`buoy_common.parameter_declarations.ENTRY_POINT_GROUP`)."""
+    compensation, current = tuple(compensation_parameters()), tuple(current_parameters())
+    return ParameterSets(
+        "wind_comp",
+        nodes=(
+            NodeParameters(
+                COMPENSATION_NODE_NAME,
+                "wind compensation (compensation_node, offline process_bag)",
+                compensation,
+            ),
+            NodeParameters(
+                CURRENT_NODE_NAME,
+                "current estimate from a DVL (current_node, offline process_bag)",
+                current,
+            ),
+        ),
+        files=(
+            _node_file(
+                "src/wind_comp/config/compensation.yaml",
+                COMPENSATION_NODE_NAME,
+                "Wind compensation",
+                "anemometer.position and anemometer.rpy_deg",
+                compensation,
+            ),
+            _node_file(
+                "src/wind_comp/config/current.yaml",
+                CURRENT_NODE_NAME,
+                "Current estimate from a DVL",
+                "dvl.position and dvl.rpy_deg",
+                current,
+            ),
+        ),
+    )

@@ -59,16 +59,12 @@ from buoy_common.contract import (
 from wind_comp.compensation_messages import dvl_record
 from wind_comp.compensation_node import CorrectionNode
 from wind_comp.config import (
-    CURRENT_NAV_TIMEOUT_PARAMETER,
+    CURRENT_NAV_TIMEOUT,
     CURRENT_NODE_NAME,
     CURRENT_PARAMETER_PREFIX,
     CurrentConfig,
 )
 from wind_comp.pipeline import current_pipeline
-
-CURRENT_NAV_TIMEOUT_S = 5.0
-"""A current is an average of minutes: waiting for late navigation costs nothing, giving a
-sample up costs a sample."""
 
 
 class CurrentNode(CorrectionNode):
@@ -85,8 +81,7 @@ class CurrentNode(CorrectionNode):
             (current_mean_topic, current_stats_topic),
             "dvl",
             "dvl_frame_id",
-            CURRENT_NAV_TIMEOUT_PARAMETER,
-            CURRENT_NAV_TIMEOUT_S,
+            CURRENT_NAV_TIMEOUT,
         )
 
 

@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from buoy_common.extrinsics import SHARED_PARAMETERS
+
 STANDARD_GRAVITY_MPS2 = 9.80665
 """The ``g`` of accelerometer data sheets (CGPM 1901), m/s²."""
 
@@ -67,7 +69,9 @@ R = Rz(heading)·Ry(pitch)·Rx(roll), heading clockwise from north (aerospace, m
 packs). ``enu_zyx``: roll, pitch, yaw of a forward-left-up body in East-North-Up, yaw
 counter-clockwise from east (REP-103)."""
 
-YAW_REFERENCES = ("true_north", "magnetic_north")
+YAW_REFERENCE = SHARED_PARAMETERS["ahrs.yaw_reference"]
+"""The map's ``ahrs.yaw_reference`` is the nodes' parameter of that name: the same choices and
+default (a map and the nodes given none agree)."""
 FORMATS = ("delimited", "binary")
 SPEED_OF_SOUND_TO_KELVIN_S2_M2 = 1.0 / 403.0
 """Sonic (virtual) temperature from the speed of sound c: T = c²/403 K (c in m/s; 403 m²/(s²K)
@@ -318,11 +322,9 @@ def load_column_map(path: str | Path) -> ColumnMap:
     convention = ahrs.get("convention", "ned_zyx")
     if convention not in AHRS_CONVENTIONS:
         raise MapError(f"ahrs.convention: one of {', '.join(AHRS_CONVENTIONS)}, got {convention!r}")
-    yaw_reference = ahrs.get("yaw_reference", "magnetic_north")
-    if yaw_reference not in YAW_REFERENCES:
-        raise MapError(
-            f"ahrs.yaw_reference: one of {', '.join(YAW_REFERENCES)}, got {yaw_reference!r}"
-        )
+    yaw_reference = ahrs.get("yaw_reference", YAW_REFERENCE.default)
+    if YAW_REFERENCE.check(yaw_reference) is not None:
+        raise MapError(f"ahrs.yaw_reference: {YAW_REFERENCE.rule}, got {yaw_reference!r}")
     sigma = ahrs.get("sigma_deg", [1.0, 1.0, 5.0])
     if not isinstance(sigma, list) or len(sigma) != 3:
         raise MapError(f"ahrs.sigma_deg: expected [roll, pitch, yaw] in deg, got {sigma!r}")
