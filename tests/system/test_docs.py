@@ -1,4 +1,4 @@
-"""The README and docs/ say what the code does: every link resolves, every command runs as written.
+"""The README, bags/README.md and docs/ say what the code does: links resolve, commands run.
 
 The documents follow three conventions (docs/development.md, "The documentation and its
 commands"):
@@ -34,7 +34,8 @@ from buoy_nav.aiding import AIDING_SOURCES
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
-DOCUMENTS = (REPO / "README.md", *sorted((REPO / "docs").glob("*.md")))
+DOCS = tuple(sorted((REPO / "docs").glob("*.md")))
+DOCUMENTS = (REPO / "README.md", REPO / "bags" / "README.md", *DOCS)
 COMMITTED_DIRECTORIES = {"src", "bags", "tests", "tools", "docs", "ros2_ws"}
 COMMAND_TIMEOUT_S = 300
 
@@ -408,7 +409,7 @@ def test_the_readme_links_every_document_of_docs():
     linked = {
         (REPO / link.partition("#")[0]).resolve() for link in relative_links(REPO / "README.md")
     }
-    assert [document_id(d) for d in DOCUMENTS[1:] if d.resolve() not in linked] == []
+    assert [document_id(d) for d in DOCS if d.resolve() not in linked] == []
 
 
 # --- Commands ---------------------------------------------------------------------------------
