@@ -1,11 +1,11 @@
 # Two commands matter: `make demo` and `make test`. Both create .venv when it is
-# missing and install every pinned dependency and the four packages into it.
+# missing and install every pinned dependency and the five packages into it.
 SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-PACKAGES := src/buoy_common src/sensor_sim src/buoy_nav src/wind_comp
+PACKAGES := src/buoy_common src/sensor_sim src/buoy_nav src/wind_comp src/buoy_processing
 PACKAGE_FILES := $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/setup.cfg $(p)/package.xml)
 # Every run gets its own DDS domain unless the caller chose one; traffic stays on loopback.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST

@@ -120,11 +120,11 @@ from bench_tables import (
     print_vertical,
 )
 
-from buoy_nav.bag_fusion import fuse_bag
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.offline_fusion import fuse_bag
 from sensor_sim.scenario import load_scenario
 from sensor_sim.simulate_bag import simulate
-from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files, current_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"

@@ -21,8 +21,8 @@ from pathlib import Path
 from bench_plan import PROCESSING_PARAMS, REPO
 
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.archive import plan_archive, run_archive
-from wind_comp.archive_pools import LocalPool
+from buoy_processing.archive import plan_archive, run_archive
+from buoy_processing.archive_pools import LocalPool
 from wind_comp.config import compensator_config_from_files
 
 ARCHIVE_BAGS = (

@@ -47,7 +47,8 @@ from buoy_common.contract import (
 )
 from buoy_common.import_records import import_records
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import process_bag
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.report.data import stamped_vectors
 from wind_comp.config import compensator_config_from_files
 from wind_comp.fluxes import linear_detrend, rotation_into_mean_wind, window_fluxes
 from wind_comp.motion_residual import (
@@ -55,7 +56,6 @@ from wind_comp.motion_residual import (
     platform_velocity_left,
     vertical_acceleration_mps2,
 )
-from wind_comp.report.data import stamped_vectors
 
 REPO = Path(__file__).resolve().parent.parent
 RECORD = Path(os.environ.get("FDCHP_RECORD", "/work/shared/data/ooi_fdchp/fdchp_test_dp.dat"))

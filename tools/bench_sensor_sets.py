@@ -34,10 +34,10 @@ from scipy.spatial.transform import Rotation
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import AHRS_TOPIC, NAV_ODOMETRY_TOPIC, TRUTH_ODOMETRY_TOPIC
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import process_bag
 from sensor_sim.scenario import load_scenario
 from sensor_sim.simulate_bag import parse_arguments as simulate_arguments
 from sensor_sim.simulate_bag import simulate
-from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parents[1]

@@ -37,14 +37,17 @@ from rosbags.rosbag2 import Reader
 from buoy_common.bag_io import BagReader
 from buoy_common.bag_io.mcap_writer import McapWriter
 from buoy_common.bag_io.writing import CHUNK_BYTES
-from buoy_nav.bag_fusion import fuse_bag
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import process_bag
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.offline_fusion import fuse_bag
 from wind_comp.config import compensator_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"
 TOOLS = ("fuse_bag", "process_bag")
-TOOL_MODULES = {"fuse_bag": "buoy_nav.fuse_bag", "process_bag": "wind_comp.process_bag"}
+TOOL_MODULES = {
+    "fuse_bag": "buoy_processing.fuse_bag",
+    "process_bag": "buoy_processing.process_bag",
+}
 # The tool's command, with its first hand-over of an output message to the bag writer reported
 # on stderr as the system-wide monotonic clock (which the starting process reads too).
 _FIRST_OUTPUT_COMMAND = """

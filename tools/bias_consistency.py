@@ -28,8 +28,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from buoy_common.bag_io import BagReader, BagWriter
-from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.offline_fusion import OfflineFusion, relative_topic, sensor_topics_of
 from sensor_sim.sensor_errors import ImuErrorConfig
 from sensor_sim.sensor_models import ImuSimulator
 from sensor_sim.simulate_bag import simulate

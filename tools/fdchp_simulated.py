@@ -46,6 +46,7 @@ from buoy_common.contract import (
     stamp_to_ns,
 )
 from buoy_common.records.column_map import STANDARD_GRAVITY_MPS2
+from buoy_processing.report.data import stamped_vectors
 from sensor_sim import simulate_bag
 from wind_comp.motion_residual import (
     band_variance,
@@ -53,7 +54,6 @@ from wind_comp.motion_residual import (
     platform_velocity_left,
     vertical_acceleration_mps2,
 )
-from wind_comp.report.data import stamped_vectors
 
 REPO = Path(__file__).resolve().parent.parent
 OUT_DIR = REPO / "out/bench"

@@ -19,8 +19,8 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import NAV_ODOMETRY_TOPIC, WIND_RAW_TOPIC, WIND_TRUE_TOPIC
+from buoy_processing.report.data import odometry_series, stamped_vectors, vectors_at_stamps
 from wind_comp.products import meteorological_direction_deg
-from wind_comp.report.data import odometry_series, stamped_vectors, vectors_at_stamps
 
 
 def main(bag: str) -> None:

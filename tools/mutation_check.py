@@ -43,7 +43,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp")
+PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp", "buoy_processing")
 UNIT_TESTS = tuple(f"src/{package}/test" for package in PACKAGES)
 SYSTEM_TESTS = (
     "tests/system/test_fuse_bag.py",

@@ -2,7 +2,7 @@
 nodes.
 
 :func:`process_bag` runs over the bag's sensor topics, in log-time order, the core of
-``fusion_node`` (:class:`buoy_nav.bag_fusion.OfflineFusion`) followed by the cores of
+``fusion_node`` (:class:`buoy_processing.offline_fusion.OfflineFusion`) followed by the cores of
 ``compensation_node`` (when the bag has ``anemometer/wind``) and ``current_node`` (when it has
 ``dvl/velocity``), :class:`wind_comp.pipeline.CompensationPipeline` both: each navigation
 solution passes to them as the numbers its ``nav/odometry`` and ``nav/fix`` carry, in the order
@@ -20,7 +20,7 @@ epochs and solutions are spilled to a temporary directory beside the output), th
 smoother's backward pass; a second read of the bag feeds the smoothed solutions and the
 anemometer and DVL samples, in log-time order, to the corrections, so the wind and the current
 are computed with the smoothed attitude and velocity
-(:func:`buoy_nav.bag_fusion.merged_with_smoothed`).
+(:func:`buoy_processing.offline_fusion.merged_with_smoothed`).
 
 The compensation runs in this process, on whole stretches of samples at a time; the process
 that writes the bag only writes.
@@ -69,7 +69,9 @@ from buoy_common.contract import (
 )
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
-from buoy_nav.bag_fusion import (
+from buoy_nav.config import FusionConfig
+from buoy_nav.fusion_messages import STATUS_FIX, NavValues
+from buoy_processing.offline_fusion import (
     OfflineFusion,
     forward_pass,
     merged_with_smoothed,
@@ -78,8 +80,7 @@ from buoy_nav.bag_fusion import (
     spill_parent_of,
     truth_topics_of,
 )
-from buoy_nav.config import FusionConfig
-from buoy_nav.fusion_messages import STATUS_FIX, NavValues
+from buoy_processing.output_series import FlowSeries, NavigationSeries
 from wind_comp.compensation_messages import (
     FlowSample,
     anemometer_sample,
@@ -92,7 +93,6 @@ from wind_comp.compensation_messages import (
 )
 from wind_comp.config import CompensatorConfig, CurrentConfig
 from wind_comp.flux_products import FluxProduct
-from wind_comp.output_series import FlowSeries, NavigationSeries
 from wind_comp.pipeline import (
     CompensationOutput,
     CompensationPipeline,
@@ -372,7 +372,7 @@ def process_bag(
     with bags of its own (``process_archive``).
 
     With ``netcdf_path`` the corrected series, the products and the navigation are also
-    written there as NetCDF-CF (:mod:`wind_comp.netcdf_output`; ``history`` is the command
+    written there as NetCDF-CF (:mod:`buoy_processing.netcdf_output`; ``history`` is the command
     that asked for it, ``netcdf_attributes`` global attributes of the user's); an existing
     file is replaced only with ``overwrite`` (OutputError before anything is read
     otherwise)."""
@@ -390,7 +390,7 @@ def process_bag(
     if netcdf_path is not None:
         # Imported for a run that writes NetCDF only: xarray, pandas and the modules they bring
         # cost every other run more than a second of CPU at start-up.
-        from wind_comp import netcdf_output
+        from buoy_processing import netcdf_output
 
         netcdf_output.check_netcdf_output(netcdf_path, overwrite)
     keep = netcdf_path is not None
