@@ -1,1 +1,1 @@
-"""Miller motion correction of buoy anemometer wind, the current from a DVL, and their live products."""
+"""Miller motion correction of buoy anemometer wind, the DVL current, and their live products."""
