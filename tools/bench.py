@@ -121,8 +121,8 @@ from bench_tables import (
 )
 
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_fusion import fuse_bag
 from buoy_processing.bag_processing import process_bag
-from buoy_processing.offline_fusion import fuse_bag
 from sensor_sim.scenario import load_scenario
 from sensor_sim.simulate_bag import simulate
 from wind_comp.config import compensator_config_from_files, current_config_from_files

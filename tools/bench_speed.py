@@ -38,8 +38,8 @@ from buoy_common.bag_io import BagReader
 from buoy_common.bag_io.mcap_writer import McapWriter
 from buoy_common.bag_io.writing import CHUNK_BYTES
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_fusion import fuse_bag
 from buoy_processing.bag_processing import process_bag
-from buoy_processing.offline_fusion import fuse_bag
 from wind_comp.config import compensator_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"

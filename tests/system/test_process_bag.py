@@ -20,9 +20,9 @@ from buoy_common.contract import (
     window_label,
 )
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_fusion import fuse_bag
 from buoy_processing.bag_processing import ISO_TIME_COLUMNS, products_csv_path
 from buoy_processing.netcdf_variables import product_time_name, product_variable_name
-from buoy_processing.offline_fusion import fuse_bag
 from error_budget import ANEMOMETER
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS, CASES, processed_bag, processed_netcdf
 from ros_messages import raw_stamp_ns
