@@ -47,7 +47,7 @@ Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
+    python -m tools.bench [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
                                             smoother|antennas|smoother_table1|smoother_speed|
                                             smoother_day|soak|real_record|archive|
                                             current|current_long|fluxes ...]
@@ -76,12 +76,17 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
-import bench_antennas
-import bench_smoother
 import numpy as np
-from bench_analysis import ANALYSES, wrap_deg
-from bench_current import CURRENT_ANALYSES, current_cases, current_results, print_current
-from bench_plan import (
+
+from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_fusion import fuse_bag
+from buoy_processing.bag_processing import process_bag
+from sensor_sim.scenario import load_scenario
+from sensor_sim.simulate_bag import simulate
+from tools import bench_antennas, bench_smoother
+from tools.bench_analysis import ANALYSES, wrap_deg
+from tools.bench_current import CURRENT_ANALYSES, current_cases, current_results, print_current
+from tools.bench_plan import (
     ATTITUDE_MAX_ERROR_DEG,
     ATTITUDE_RMS_DEG,
     ATTITUDE_SCENARIOS,
@@ -110,8 +115,8 @@ from bench_plan import (
     VERTICAL_SPEED_ERROR_TARGET,
     VERTICAL_SPEEDS_MPS,
 )
-from bench_speed import print_speed, run_speed
-from bench_tables import (
+from tools.bench_speed import print_speed, run_speed
+from tools.bench_tables import (
     print_attitude,
     print_live,
     print_sea,
@@ -119,12 +124,6 @@ from bench_tables import (
     print_tunnel,
     print_vertical,
 )
-
-from buoy_nav.config import fusion_config_from_files
-from buoy_processing.bag_fusion import fuse_bag
-from buoy_processing.bag_processing import process_bag
-from sensor_sim.scenario import load_scenario
-from sensor_sim.simulate_bag import simulate
 from wind_comp.config import compensator_config_from_files, current_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"
@@ -444,7 +443,7 @@ def main(argv=None) -> None:
     if "sensor_sets" in sections:
         # Sensor sets beyond RTK, the outage test and the motion pack's lag: their own tool,
         # which writes out/bench/sensor_sets.json.
-        import bench_sensor_sets
+        from tools import bench_sensor_sets
 
         for scenario in ("sea_state", "open_ocean"):
             bench_sensor_sets.main(
@@ -454,8 +453,7 @@ def main(argv=None) -> None:
     if "real_record" in sections:
         # OOI's FDCHP record beside Edson's processing, and both on simulated FDCHP records held
         # to the truth: their own tools, out/bench/fdchp.json and fdchp_simulated.json.
-        import bench_fdchp
-        import fdchp_simulated
+        from tools import bench_fdchp, fdchp_simulated
 
         bench_fdchp.main([])
         fdchp_simulated.main([])
@@ -526,7 +524,7 @@ def main(argv=None) -> None:
         results["speed"] = run_speed(speed_bag, RUNS_DIR / "speed", log)
         print_speed(results["speed"], quick)
     if "live" in sections:
-        import bench_live
+        from tools import bench_live
 
         live_duration_s = LIVE_DURATION_S["quick" if quick else "full"]
         results["live"] = bench_live.run_live(live_duration_s, OUT_DIR / "live_logs")
@@ -552,14 +550,14 @@ def main(argv=None) -> None:
     if "fluxes" in sections:
         # The fluxes of the corrected wind against the truth: its own tool (tools/bench_fluxes.py),
         # two 30-min windows of open_ocean with a surface layer (one 10-min window with --quick).
-        import bench_fluxes
+        from tools import bench_fluxes
 
         window_s = 600.0 if quick else 1800.0
         rows = bench_fluxes.run(2 * window_s, window_s)
         results["fluxes"] = {"window_s": window_s, "windows": rows}
         print(bench_fluxes.table(rows, window_s))
     if "consistency" in sections:
-        import bias_consistency
+        from tools import bias_consistency
 
         results["consistency"] = bias_consistency.run_consistency(
             CONSISTENCY_SEEDS["quick" if quick else "full"],
@@ -568,7 +566,7 @@ def main(argv=None) -> None:
         )
         bias_consistency.print_table(results["consistency"]["table"])
     if "soak" in sections:
-        import soak
+        from tools import soak
 
         results["soak"] = soak.soak(
             SOAK_HOURS["quick" if quick else "full"],
@@ -592,7 +590,7 @@ def main(argv=None) -> None:
             results[section] = bench_smoother.run_smoother_speed(bags, RUNS_DIR / section)
             bench_smoother.print_smoother_speed(results[section])
     if "archive" in sections:
-        import bench_archive
+        from tools import bench_archive
 
         results["archive"] = bench_archive.run_archive_throughput(OUT_DIR / "archive")
         bench_archive.print_archive(results["archive"])

@@ -7,18 +7,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from bench_plan import (
-    ATTITUDE_MAX_ERROR_DEG,
-    ATTITUDE_RMS_DEG,
-    CONVERGED_SIGMA_DEG,
-    MIN_MEAN_WINDOW_COVERAGE_S,
-    PROCESSING_PARAMS,
-    SEA_MEAN_DIRECTION_ERROR_DEG,
-    SEA_MEAN_SPEED_ERROR_MPS,
-    SEA_MEAN_WINDOW_S,
-    VERTICAL_RESIDUAL_SHARE_TARGET,
-    VERTICAL_SPEED_ERROR_TARGET,
-)
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
@@ -35,6 +23,18 @@ from buoy_processing.report.data import (
     interpolate_vectors,
     odometry_series,
     stamped_vectors,
+)
+from tools.bench_plan import (
+    ATTITUDE_MAX_ERROR_DEG,
+    ATTITUDE_RMS_DEG,
+    CONVERGED_SIGMA_DEG,
+    MIN_MEAN_WINDOW_COVERAGE_S,
+    PROCESSING_PARAMS,
+    SEA_MEAN_DIRECTION_ERROR_DEG,
+    SEA_MEAN_SPEED_ERROR_MPS,
+    SEA_MEAN_WINDOW_S,
+    VERTICAL_RESIDUAL_SHARE_TARGET,
+    VERTICAL_SPEED_ERROR_TARGET,
 )
 from wind_comp.compensation_messages import anemometer_sample, fix_fields, odometry_fields
 from wind_comp.compensator import CorrectedBatch, SampleStatus

@@ -10,7 +10,7 @@ For a consistent filter the mean of z² is 1 and the mean NEES 3; the filter sti
 default IMU noise, which this IMU does not have, so somewhat less is expected. The table gives
 the two-sided 95 % chi-square bounds of the means over the seeds.
 
-    python tools/bias_consistency.py [--seeds 2-201] [--duration-s 75] [--checkpoints 30 50 70]
+    python -m tools.bias_consistency [--seeds 2-201] [--duration-s 75] [--checkpoints 30 50 70]
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """How much each mounting error costs the corrected wind, computed on a processed bag.
 
-    python tools/mounting_sensitivity.py PROCESSED_BAG
+    python -m tools.mounting_sensitivity PROCESSED_BAG
 
 The Miller correction W = R_nb·(R_bw·u + ω×B) + V is linear in the mounting R_bw and the lever
 arm B, so an error of the mounting (δR) or of the lever arm (δB) changes every corrected sample
