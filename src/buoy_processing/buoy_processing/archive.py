@@ -73,7 +73,7 @@ class ArchiveError(Exception):
 
 def suite_version() -> str:
     """The installed version of the wind correction (what made the outputs)."""
-    return metadata.version("buoy_processing")
+    return metadata.version("wind_comp")
 
 
 def bag_identity(bag: Path) -> dict[str, list[int]]:

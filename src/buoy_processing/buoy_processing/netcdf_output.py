@@ -109,7 +109,7 @@ def _global_attributes(content: NetcdfContent, dataset: xr.Dataset, axis: TimeAx
         "source": f"process_bag of the rosbag2 recording {content.source}",
         "history": f"{now} {content.history}".strip(),
         "processing_level": "motion-corrected, quality-controlled (QARTOD flags from coverage)",
-        "product_version": metadata.version("buoy_processing"),
+        "product_version": metadata.version("wind_comp"),
         "date_created": now,
         "date_modified": now,
         "platform": "moored or drifting surface buoy",
