@@ -1,11 +1,11 @@
 # Two commands matter: `make demo` and `make test`. Both create .venv when it is
-# missing and install every pinned dependency and the four packages into it.
+# missing and install every pinned dependency and the five packages into it.
 SHELL := /bin/bash
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-PACKAGES := src/buoy_common src/sensor_sim src/buoy_nav src/wind_comp
+PACKAGES := src/buoy_common src/sensor_sim src/buoy_nav src/wind_comp src/buoy_processing
 PACKAGE_FILES := $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/setup.cfg $(p)/package.xml)
 # Every run gets its own DDS domain unless the caller chose one; traffic stays on loopback.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
@@ -34,6 +34,9 @@ $(STAMP): requirements.txt requirements-dev.txt $(PACKAGE_FILES)
 	$(BIN)/python -m pip install --quiet --upgrade "pip==25.3"
 	$(BIN)/python -m pip install --quiet -r requirements-dev.txt
 	$(BIN)/python -m pip install --quiet --no-build-isolation --no-deps $(foreach p,$(PACKAGES),-e $(p))
+	# The tools are the package `tools` of the repository's root: `python -m tools.bench` from
+	# the root; with the root on the venv's path, `.venv/bin/python tools/bench.py` too.
+	$(BIN)/python -c 'import pathlib, site; pathlib.Path(site.getsitepackages()[0], "buoy_wind_tools.pth").write_text("$(CURDIR)\n")'
 	@touch $(STAMP)
 
 lint: venv
@@ -54,17 +57,17 @@ test-long: venv
 	$(BIN)/python -m pytest -n auto --dist loadgroup -m long
 
 demo: venv
-	$(BIN)/python tools/demo.py
+	$(BIN)/python -m tools.demo
 
 bench: venv
-	$(BIN)/python tools/bench.py
+	$(BIN)/python -m tools.bench
 	$(MAKE) test-long
 
 mutants: venv
-	$(BIN)/python tools/mutation_check.py
+	$(BIN)/python -m tools.mutation_check
 
 bags: venv
-	$(BIN)/python tools/record_bags.py
+	$(BIN)/python -m tools.record_bags
 
 colcon: venv
 	# The venv is no colcon install space: without this, colcon warns that it lacks local_setup.

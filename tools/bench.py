@@ -47,7 +47,7 @@ Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
 go to stdout and out/bench/results.json, progress to stderr.
 
-    python tools/bench.py [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
+    python -m tools.bench [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
                                             smoother|antennas|smoother_table1|smoother_speed|
                                             smoother_day|soak|real_record|archive|
                                             current|current_long|fluxes ...]
@@ -76,12 +76,17 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
-import bench_antennas
-import bench_smoother
 import numpy as np
-from bench_analysis import ANALYSES, wrap_deg
-from bench_current import CURRENT_ANALYSES, current_cases, current_results, print_current
-from bench_plan import (
+
+from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_fusion import fuse_bag
+from buoy_processing.bag_processing import process_bag
+from sensor_sim.scenario import load_scenario
+from sensor_sim.simulate_bag import simulate
+from tools import bench_antennas, bench_smoother
+from tools.bench_analysis import ANALYSES, wrap_deg
+from tools.bench_current import CURRENT_ANALYSES, current_cases, current_results, print_current
+from tools.bench_plan import (
     ATTITUDE_MAX_ERROR_DEG,
     ATTITUDE_RMS_DEG,
     ATTITUDE_SCENARIOS,
@@ -110,8 +115,8 @@ from bench_plan import (
     VERTICAL_SPEED_ERROR_TARGET,
     VERTICAL_SPEEDS_MPS,
 )
-from bench_speed import print_speed, run_speed
-from bench_tables import (
+from tools.bench_speed import print_speed, run_speed
+from tools.bench_tables import (
     print_attitude,
     print_live,
     print_sea,
@@ -119,12 +124,6 @@ from bench_tables import (
     print_tunnel,
     print_vertical,
 )
-
-from buoy_nav.bag_fusion import fuse_bag
-from buoy_nav.config import fusion_config_from_files
-from sensor_sim.scenario import load_scenario
-from sensor_sim.simulate_bag import simulate
-from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files, current_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"
@@ -508,7 +507,7 @@ def sensor_sets_section(run: BenchRun) -> dict:
     which writes out/bench/sensor_sets.json."""
     if "sensor_sets" not in run.sections:
         return {}
-    import bench_sensor_sets
+    from tools import bench_sensor_sets
 
     for scenario in ("sea_state", "open_ocean"):
         bench_sensor_sets.main(
@@ -523,8 +522,7 @@ def real_record_section(run: BenchRun) -> dict:
     to the truth: their own tools, out/bench/fdchp.json and fdchp_simulated.json."""
     if "real_record" not in run.sections:
         return {}
-    import bench_fdchp
-    import fdchp_simulated
+    from tools import bench_fdchp, fdchp_simulated
 
     bench_fdchp.main([])
     fdchp_simulated.main([])
@@ -622,7 +620,7 @@ def live_section(run: BenchRun) -> dict:
     the middleware, the executor and this machine cost on the same path, to read 6 against."""
     if "live" not in run.sections:
         return {}
-    import bench_live
+    from tools import bench_live
 
     live_duration_s = LIVE_DURATION_S["quick" if run.quick else "full"]
     live = bench_live.run_live(live_duration_s, OUT_DIR / "live_logs")
@@ -655,7 +653,7 @@ def fluxes_section(run: BenchRun) -> dict:
     two 30-min windows of open_ocean with a surface layer (two 10-min windows with --quick)."""
     if "fluxes" not in run.sections:
         return {}
-    import bench_fluxes
+    from tools import bench_fluxes
 
     window_s = 600.0 if run.quick else 1800.0
     rows = bench_fluxes.run(2 * window_s, window_s)
@@ -666,7 +664,7 @@ def fluxes_section(run: BenchRun) -> dict:
 def consistency_section(run: BenchRun) -> dict:
     if "consistency" not in run.sections:
         return {}
-    import bias_consistency
+    from tools import bias_consistency
 
     consistency = bias_consistency.run_consistency(
         CONSISTENCY_SEEDS["quick" if run.quick else "full"],
@@ -680,7 +678,7 @@ def consistency_section(run: BenchRun) -> dict:
 def soak_section(run: BenchRun) -> dict:
     if "soak" not in run.sections:
         return {}
-    import soak
+    from tools import soak
 
     result = soak.soak(
         SOAK_HOURS["quick" if run.quick else "full"],
@@ -724,7 +722,7 @@ def smoother_speed_sections(run: BenchRun) -> dict:
 def archive_section(run: BenchRun) -> dict:
     if "archive" not in run.sections:
         return {}
-    import bench_archive
+    from tools import bench_archive
 
     archive = bench_archive.run_archive_throughput(OUT_DIR / "archive")
     bench_archive.print_archive(archive)

@@ -1,5 +1,5 @@
 """The analyses of ``make bench`` (tools/bench.py): each reads one processed bag, through the
-wind report's readers (:mod:`wind_comp.report.data`), into the figures of one table."""
+wind report's readers (:mod:`buoy_processing.report.data`), into the figures of one table."""
 
 from __future__ import annotations
 
@@ -7,18 +7,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from bench_plan import (
-    ATTITUDE_MAX_ERROR_DEG,
-    ATTITUDE_RMS_DEG,
-    CONVERGED_SIGMA_DEG,
-    MIN_MEAN_WINDOW_COVERAGE_S,
-    PROCESSING_PARAMS,
-    SEA_MEAN_DIRECTION_ERROR_DEG,
-    SEA_MEAN_SPEED_ERROR_MPS,
-    SEA_MEAN_WINDOW_S,
-    VERTICAL_RESIDUAL_SHARE_TARGET,
-    VERTICAL_SPEED_ERROR_TARGET,
-)
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
@@ -31,6 +19,23 @@ from buoy_common.contract import (
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
 )
+from buoy_processing.report.data import (
+    interpolate_vectors,
+    odometry_series,
+    stamped_vectors,
+)
+from tools.bench_plan import (
+    ATTITUDE_MAX_ERROR_DEG,
+    ATTITUDE_RMS_DEG,
+    CONVERGED_SIGMA_DEG,
+    MIN_MEAN_WINDOW_COVERAGE_S,
+    PROCESSING_PARAMS,
+    SEA_MEAN_DIRECTION_ERROR_DEG,
+    SEA_MEAN_SPEED_ERROR_MPS,
+    SEA_MEAN_WINDOW_S,
+    VERTICAL_RESIDUAL_SHARE_TARGET,
+    VERTICAL_SPEED_ERROR_TARGET,
+)
 from wind_comp.compensation_messages import anemometer_sample, fix_fields, odometry_fields
 from wind_comp.compensator import CorrectedBatch, SampleStatus
 from wind_comp.config import compensator_config_from_files
@@ -38,11 +43,6 @@ from wind_comp.miller import mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import NavTrack
 from wind_comp.pipeline import wind_pipeline
 from wind_comp.products import meteorological_direction_deg
-from wind_comp.report.data import (
-    interpolate_vectors,
-    odometry_series,
-    stamped_vectors,
-)
 
 # Truth and navigation stamps closer than this are the same instant (float rounding of stamps).
 STAMP_MATCH_NS = 1000

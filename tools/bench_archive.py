@@ -6,7 +6,7 @@ under two buoys, so that two workers finish close together); every run processes
 anew (``--redo``), from starting the pool to writing the combined table. The figure of each
 worker count is its fastest run: on a shared machine the others measure the neighbours too.
 
-    python tools/bench_archive.py      # or: python tools/bench.py --only archive
+    python -m tools.bench_archive      # or: python -m tools.bench --only archive
 """
 
 from __future__ import annotations
@@ -18,11 +18,10 @@ import sys
 import time
 from pathlib import Path
 
-from bench_plan import PROCESSING_PARAMS, REPO
-
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.archive import plan_archive, run_archive
-from wind_comp.archive_pools import LocalPool
+from buoy_processing.archive import plan_archive, run_archive
+from buoy_processing.archive_pools import LocalPool
+from tools.bench_plan import PROCESSING_PARAMS, REPO
 from wind_comp.config import compensator_config_from_files
 
 ARCHIVE_BAGS = (

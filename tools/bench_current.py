@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from buoy_common.bag_io import BagReader
-from wind_comp.report.current import (
+from buoy_processing.report.current import (
     CurrentData,
     current_data_from_bag,
     error_by_window_length,

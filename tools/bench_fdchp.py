@@ -14,7 +14,7 @@ fluxes only, when no ion-functions checkout is at hand), and prints over the sam
 - the fluxes u'w', v'w', w'Ts', u*, with the flux QC, from ``wind_comp.fluxes`` for ours, and
   both Edson's own and ``wind_comp.fluxes`` applied to his corrected wind.
 
-    python tools/bench_fdchp.py [--record PATH] [--ion-functions DIR] [--params-file YAML ...]
+    python -m tools.bench_fdchp [--record PATH] [--ion-functions DIR] [--params-file YAML ...]
 
 Results go to out/bench/fdchp.json, the figure of the wave band to out/bench/fdchp_wave_band.png.
 """
@@ -30,8 +30,6 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-import edson_fdchp
-import fdchp_figures
 import numpy as np
 from scipy import signal
 from scipy.spatial.transform import Rotation
@@ -47,7 +45,9 @@ from buoy_common.contract import (
 )
 from buoy_common.import_records import import_records
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import process_bag
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.report.data import stamped_vectors
+from tools import edson_fdchp, fdchp_figures
 from wind_comp.config import compensator_config_from_files
 from wind_comp.fluxes import linear_detrend, rotation_into_mean_wind, window_fluxes
 from wind_comp.motion_residual import (
@@ -55,7 +55,6 @@ from wind_comp.motion_residual import (
     platform_velocity_left,
     vertical_acceleration_mps2,
 )
-from wind_comp.report.data import stamped_vectors
 
 REPO = Path(__file__).resolve().parent.parent
 RECORD = Path(os.environ.get("FDCHP_RECORD", "/work/shared/data/ooi_fdchp/fdchp_test_dp.dat"))

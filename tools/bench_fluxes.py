@@ -12,7 +12,7 @@ window (coverage ≥ 0.9): u* and w'Ts' of each, and their relative difference, 
 error the motion correction leaves in the fluxes (the turbulence's own sampling error is common
 to both). Targets: u* within 5 %, w'T' within 10 %, over 30-min windows.
 
-    python tools/bench_fluxes.py [--duration-s 3600] [--window-s 1800] [--out DIR]
+    python -m tools.bench_fluxes [--duration-s 3600] [--window-s 1800] [--out DIR]
 """
 
 from __future__ import annotations

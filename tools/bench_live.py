@@ -15,7 +15,7 @@ With ``--passthrough`` the two nodes are replaced by ``tools/passthrough_node.py
 that compute nothing: the same run then measures the floor that the middleware, the Python
 executor and this machine set on the same path.
 
-    python tools/bench_live.py [--duration-s 40] [--passthrough]
+    python -m tools.bench_live [--duration-s 40] [--passthrough]
 """
 
 from __future__ import annotations
@@ -39,7 +39,6 @@ from buoy_common import cdr
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 PARAMS_FILE = REPO / "src/buoy_common/config/buoy.yaml"
-PASSTHROUGH_SCRIPT = REPO / "tools" / "passthrough_node.py"
 NODES_UNDER_TEST = ("fusion_node", "compensation_node")
 LATENCY_TARGET_P99_MS = 5.0
 CPU_SAMPLE_PERIOD_S = 0.25
@@ -252,7 +251,10 @@ def passthrough_path(shim_dir: Path) -> str:
     (run_scenario takes the suite's executables from PATH first)."""
     for name in NODES_UNDER_TEST:
         shim = shim_dir / name
-        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" "{PASSTHROUGH_SCRIPT}" {name} "$@"\n')
+        shim.write_text(
+            f'#!/bin/sh\nPYTHONPATH="{REPO}${{PYTHONPATH:+:$PYTHONPATH}}" '
+            f'exec "{sys.executable}" -m tools.passthrough_node {name} "$@"\n'
+        )
         shim.chmod(0o755)
     return f"{shim_dir}{os.pathsep}{os.environ.get('PATH', '')}"
 

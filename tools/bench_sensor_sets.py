@@ -1,7 +1,7 @@
 """Sensor sets beyond RTK: accuracy of each set on the sea scenarios, the outage test, the
 cost of a motion pack's lag.
 
-    python tools/bench_sensor_sets.py [--quick] [--only table|outages|lag] [--scenario NAME]
+    python -m tools.bench_sensor_sets [--quick] [--only table|outages|lag] [--scenario NAME]
 
 Every case simulates its bag (``simulate_bag`` with the set's sensors), runs ``process_bag``
 with the set's parameters and compares with the bag's truth, through the same analyses as
@@ -19,7 +19,16 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from bench_analysis import (
+from scipy.spatial.transform import Rotation
+
+from buoy_common.bag_io import BagReader
+from buoy_common.contract import AHRS_TOPIC, NAV_ODOMETRY_TOPIC, TRUTH_ODOMETRY_TOPIC
+from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import process_bag
+from sensor_sim.scenario import load_scenario
+from sensor_sim.simulate_bag import parse_arguments as simulate_arguments
+from sensor_sim.simulate_bag import simulate
+from tools.bench_analysis import (
     analyse_attitude,
     analyse_sea,
     heading_only_wind,
@@ -28,16 +37,7 @@ from bench_analysis import (
     read_wind_run,
     wrap_deg,
 )
-from bench_plan import PROCESSING_PARAMS, SIMULATION_PARAMS
-from scipy.spatial.transform import Rotation
-
-from buoy_common.bag_io import BagReader
-from buoy_common.contract import AHRS_TOPIC, NAV_ODOMETRY_TOPIC, TRUTH_ODOMETRY_TOPIC
-from buoy_nav.config import fusion_config_from_files
-from sensor_sim.scenario import load_scenario
-from sensor_sim.simulate_bag import parse_arguments as simulate_arguments
-from sensor_sim.simulate_bag import simulate
-from wind_comp.bag_processing import process_bag
+from tools.bench_plan import PROCESSING_PARAMS, SIMULATION_PARAMS
 from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parents[1]

@@ -30,8 +30,6 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
-from bench_analysis import matching_indices, rms, wrap_deg
-from bench_plan import PROCESSING_PARAMS
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
@@ -45,13 +43,15 @@ from buoy_common.contract import (
     WIND_TRUE_TOPIC,
 )
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.report.data import stamped_vectors
 from sensor_sim.geodesy import meridian_radius_m, prime_vertical_radius_m
 from sensor_sim.scenario import load_scenario
-from wind_comp.bag_processing import process_bag
+from tools.bench_analysis import matching_indices, rms, wrap_deg
+from tools.bench_plan import PROCESSING_PARAMS
 from wind_comp.compensation_messages import anemometer_sample, fix_fields, odometry_fields
 from wind_comp.config import compensator_config_from_files
 from wind_comp.pipeline import wind_pipeline
-from wind_comp.report.data import stamped_vectors
 
 # Section smoother_table1 runs the paper's 4000 s (a long section); the default section
 # smoother the same cases on 300 s, a few minutes in all.

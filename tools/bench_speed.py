@@ -14,8 +14,8 @@ process to its first output message handed to the bag writer, cold (the project'
 caches removed, as after a change of the sources: Python compiles every module it imports) and
 warm (the caches written by the run before).
 
-    python tools/bench_speed.py [BAG]     # default: bags/open_ocean (180 s of data)
-    python tools/bench.py --only speed    # one hour of open_ocean, simulated and cached
+    python -m tools.bench_speed [BAG]     # default: bags/open_ocean (180 s of data)
+    python -m tools.bench --only speed    # one hour of open_ocean, simulated and cached
 """
 
 from __future__ import annotations
@@ -30,21 +30,30 @@ import sys
 import time
 from pathlib import Path
 
-from bench_plan import PROCESSING_PARAMS, REPO, SPEED_DURATION_S, SPEED_RUNS, SPEED_TARGET_REAL_TIME
 from mcap.writer import CompressionType, Writer
 from rosbags.rosbag2 import Reader
 
 from buoy_common.bag_io import BagReader
 from buoy_common.bag_io.mcap_writer import McapWriter
 from buoy_common.bag_io.writing import CHUNK_BYTES
-from buoy_nav.bag_fusion import fuse_bag
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import process_bag
+from buoy_processing.bag_fusion import fuse_bag
+from buoy_processing.bag_processing import process_bag
+from tools.bench_plan import (
+    PROCESSING_PARAMS,
+    REPO,
+    SPEED_DURATION_S,
+    SPEED_RUNS,
+    SPEED_TARGET_REAL_TIME,
+)
 from wind_comp.config import compensator_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"
 TOOLS = ("fuse_bag", "process_bag")
-TOOL_MODULES = {"fuse_bag": "buoy_nav.fuse_bag", "process_bag": "wind_comp.process_bag"}
+TOOL_MODULES = {
+    "fuse_bag": "buoy_processing.fuse_bag",
+    "process_bag": "buoy_processing.process_bag",
+}
 # The tool's command, with its first hand-over of an output message to the bag writer reported
 # on stderr as the system-wide monotonic clock (which the starting process reads too).
 _FIRST_OUTPUT_COMMAND = """

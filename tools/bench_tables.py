@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import math
 
-from bench_analysis import wrap_deg
-from bench_plan import (
+from tools.bench_analysis import wrap_deg
+from tools.bench_plan import (
     NOT_CONVERGED_FALLBACK_S,
     PAPER_RESIDUAL_SHARE,
     PAPER_TABLE1_DEG,

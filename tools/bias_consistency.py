@@ -10,7 +10,7 @@ For a consistent filter the mean of z² is 1 and the mean NEES 3; the filter sti
 default IMU noise, which this IMU does not have, so somewhat less is expected. The table gives
 the two-sided 95 % chi-square bounds of the means over the seeds.
 
-    python tools/bias_consistency.py [--seeds 2-201] [--duration-s 75] [--checkpoints 30 50 70]
+    python -m tools.bias_consistency [--seeds 2-201] [--duration-s 75] [--checkpoints 30 50 70]
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from buoy_common.bag_io import BagReader, BagWriter
-from buoy_nav.bag_fusion import OfflineFusion, relative_topic, sensor_topics_of
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.offline_fusion import OfflineFusion, relative_topic, sensor_topics_of
 from sensor_sim.sensor_errors import ImuErrorConfig
 from sensor_sim.sensor_models import ImuSimulator
 from sensor_sim.simulate_bag import simulate

@@ -29,16 +29,16 @@ from buoy_common.contract import (
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
 )
-from wind_comp.config import compensator_config_from_files
-from wind_comp.miller import mounting_rotation_from_rpy_deg
-from wind_comp.products import WindAverager, meteorological_direction_deg
-from wind_comp.report.data import (
+from buoy_processing.report.data import (
     ReportData,
     ReportDataError,
     report_data_from_bag,
     stamped_vectors,
     utc_text,
 )
+from wind_comp.config import compensator_config_from_files
+from wind_comp.miller import mounting_rotation_from_rpy_deg
+from wind_comp.products import WindAverager, meteorological_direction_deg
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent

@@ -15,7 +15,7 @@ those same functions under the old names, nothing else. :func:`check_published_f
 result to the fluxes ion-functions' own test publishes for the record before anything is
 compared with it.
 
-    python tools/edson_fdchp.py RECORD [--ion-functions DIR]
+    python -m tools.edson_fdchp RECORD [--ion-functions DIR]
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ correction it prints:
 - the platform velocity the correction leaves in the vertical wind, in phase and a quarter period
   out of it (``wind_comp.motion_residual.platform_velocity_left``).
 
-    python tools/fdchp_simulated.py [--ion-functions DIR]
+    python -m tools.fdchp_simulated [--ion-functions DIR]
 
 Results go to out/bench/fdchp_simulated.json, the error spectra to out/bench/fdchp_simulated.png.
 """
@@ -29,9 +29,6 @@ import json
 import sys
 from pathlib import Path
 
-import bench_fdchp
-import edson_fdchp
-import fdchp_figures
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -46,14 +43,15 @@ from buoy_common.contract import (
     stamp_to_ns,
 )
 from buoy_common.records.column_map import STANDARD_GRAVITY_MPS2
+from buoy_processing.report.data import stamped_vectors
 from sensor_sim import simulate_bag
+from tools import bench_fdchp, edson_fdchp, fdchp_figures
 from wind_comp.motion_residual import (
     band_variance,
     motion_residual,
     platform_velocity_left,
     vertical_acceleration_mps2,
 )
-from wind_comp.report.data import stamped_vectors
 
 REPO = Path(__file__).resolve().parent.parent
 OUT_DIR = REPO / "out/bench"

@@ -1,6 +1,6 @@
 """How much each mounting error costs the corrected wind, computed on a processed bag.
 
-    python tools/mounting_sensitivity.py PROCESSED_BAG
+    python -m tools.mounting_sensitivity PROCESSED_BAG
 
 The Miller correction W = R_nb·(R_bw·u + ω×B) + V is linear in the mounting R_bw and the lever
 arm B, so an error of the mounting (δR) or of the lever arm (δB) changes every corrected sample
@@ -19,8 +19,8 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import NAV_ODOMETRY_TOPIC, WIND_RAW_TOPIC, WIND_TRUE_TOPIC
+from buoy_processing.report.data import odometry_series, stamped_vectors, vectors_at_stamps
 from wind_comp.products import meteorological_direction_deg
-from wind_comp.report.data import odometry_series, stamped_vectors, vectors_at_stamps
 
 
 def main(bag: str) -> None:

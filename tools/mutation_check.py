@@ -12,10 +12,10 @@ copy, and, if it talks to nodes over DDS, fails again when rerun alone. Every mu
 caught by at least one unit test and at least one system test; the script prints a table and
 exits with 1 otherwise (or when a mutant no longer applies because the code it edits moved).
 
-    python tools/mutation_check.py                 # every mutant (about an hour on two cores)
-    python tools/mutation_check.py --only gravity  # some of them
-    python tools/mutation_check.py --list          # the mutants and their edits
-    python tools/mutation_check.py --first-catch --workers 2   # quicker: see below
+    python -m tools.mutation_check                 # every mutant (about an hour on two cores)
+    python -m tools.mutation_check --only gravity  # some of them
+    python -m tools.mutation_check --list          # the mutants and their edits
+    python -m tools.mutation_check --first-catch --workers 2   # quicker: see below
 
 ``--first-catch`` stops each mutant's system run at its first catching test (pytest ``-x``,
 the unmutated copy's own failures deselected), so the table names one catching system test
@@ -43,7 +43,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp")
+PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp", "buoy_processing")
 UNIT_TESTS = tuple(f"src/{package}/test" for package in PACKAGES)
 SYSTEM_TESTS = (
     "tests/system/test_fuse_bag.py",

@@ -1,6 +1,6 @@
 """Pass-through stand-ins for fusion_node and compensation_node: the live benchmark's floor.
 
-    python tools/passthrough_node.py fusion_node|compensation_node [--ros-args ...]
+    python -m tools.passthrough_node fusion_node|compensation_node [--ros-args ...]
 
 They keep the suite's node names, processes, topics, QoS and executor, and compute nothing:
 

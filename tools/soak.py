@@ -19,7 +19,7 @@ reports what was measured up to then (marked ``interrupted``). ``make bench`` ru
 (``tools/bench.py --only soak``); ``make test-long`` a few minutes of it
 (tests/system/test_soak.py).
 
-    python tools/soak.py [--hours 24] [--rate-factor 2] [--json out/bench/soak.json]
+    python -m tools.soak [--hours 24] [--rate-factor 2] [--json out/bench/soak.json]
 """
 
 from __future__ import annotations

@@ -44,14 +44,13 @@ setup(
     zip_safe=False,
     maintainer="Buoy wind maintainers",
     maintainer_email="maintainers@buoy-wind.invalid",
-    description="Dual-antenna GNSS/SINS error-state Kalman filter for a buoy, live and from bags.",
+    description="Dual-antenna GNSS/SINS error-state Kalman filter for a buoy.",
     license="Apache-2.0",
     entry_points={
         # Its parameters' declarations, for buoy_common.parameter_docs.
         "buoy_common.parameter_sets": ["buoy_nav = buoy_nav.config:parameter_sets"],
         "console_scripts": [
             "fusion_node = buoy_nav.fusion_node:main",
-            "fuse_bag = buoy_nav.fuse_bag:main",
             "calibrate_imu = buoy_nav.calibrate_imu:main",
             "calibrate_magnetometer = buoy_nav.calibrate_magnetometer:main",
         ],

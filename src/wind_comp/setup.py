@@ -44,20 +44,16 @@ setup(
     zip_safe=False,
     maintainer="Buoy wind maintainers",
     maintainer_email="maintainers@buoy-wind.invalid",
-    description="Miller motion correction of buoy anemometer wind, wind products and reports.",
+    description="Miller motion correction of buoy anemometer wind; live wind and current products.",
     license="Apache-2.0",
     entry_points={
         # Its parameters' declarations, for buoy_common.parameter_docs.
         "buoy_common.parameter_sets": ["wind_comp = wind_comp.config:parameter_sets"],
         "console_scripts": [
-            "calibrate_mounting = wind_comp.calibrate_mounting:main",
             "compensation_node = wind_comp.compensation_node:main",
             "current_node = wind_comp.current_node:main",
             "foxglove_bridge = wind_comp.foxglove_bridge_node:main",
-            "process_archive = wind_comp.process_archive:main",
-            "process_bag = wind_comp.process_bag:main",
             "wind_echo = wind_comp.wind_echo_node:main",
-            "wind_report = wind_comp.wind_report:main",
         ],
     },
 )

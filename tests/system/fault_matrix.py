@@ -367,7 +367,7 @@ def bag_outcome(bag: Path, counted: Counter | None = None) -> Outcome:
 def run_offline(bag: Path, out: Path) -> Outcome:
     """``process_bag`` of ``bag`` with the shipped extrinsics."""
     from buoy_nav.config import fusion_config_from_files
-    from wind_comp.bag_processing import process_bag
+    from buoy_processing.bag_processing import process_bag
     from wind_comp.config import compensator_config_from_files
 
     summary = process_bag(

@@ -33,9 +33,9 @@ from against_truth import (
 )
 from buoy_common.bag_io import BagReader
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import process_bag
 from processed_bags import CASES
 from ros_messages import stamp_ns, wait_for
-from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files, current_config_from_files
 
 # Twice the pace: the Python nodes, the player and the recorder then need about a core; at 4x

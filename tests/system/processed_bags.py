@@ -18,8 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import process_bag
 from error_budget import NavigationLimits, navigation_limits
-from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parents[2]

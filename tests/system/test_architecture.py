@@ -1,11 +1,14 @@
 """The structure the design rests on, checked on the source tree.
 
 The simulator is the independent witness of the estimator, so it never imports it; rclpy lives
-in node modules only, so every algorithm runs offline unchanged; every package declares the
-packages it imports; and a shared parameter is refused or accepted alike everywhere.
+in node modules only, so every algorithm runs offline unchanged; the packages stand in layers,
+each importing only those below it, the offline application on top, so the live nodes carry
+none of its weight; every package declares the packages it imports; and a shared parameter is
+refused or accepted alike everywhere.
 """
 
 import ast
+import subprocess
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -16,7 +19,21 @@ from buoy_nav.config import ConfigError, FusionConfig
 from sensor_sim.streams import Extrinsics
 
 REPO = Path(__file__).resolve().parents[2]
-PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp")
+PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp", "buoy_processing")
+# A package imports only packages of a lower layer: the simulator and the estimator stand side
+# by side on the contract, blind to each other; the wind correction uses the estimator's
+# rotations; the offline application uses them all and nothing uses it.
+LAYERS = {"buoy_common": 0, "sensor_sim": 1, "buoy_nav": 1, "wind_comp": 2, "buoy_processing": 3}
+# What the offline application needs and a live node must not pay for at start-up.
+APPLICATION_ONLY_MODULES = (
+    "dask",
+    "distributed",
+    "pyarrow",
+    "xarray",
+    "netCDF4",
+    "matplotlib",
+    "tqdm",
+)
 STANDARD_LIBRARY = set(sys.stdlib_module_names)
 # Python distributions named differently from their package.xml keys.
 ROSDEP_KEYS = {
@@ -36,6 +53,8 @@ ROSDEP_KEYS = {
     "distributed": "python3-distributed-pip",
     "pyarrow": "python3-pyarrow-pip",
     "xarray": "python3-xarray",
+    "netCDF4": "python3-netcdf4",
+    "dask": "python3-dask",
 }
 
 
@@ -53,12 +72,60 @@ def _imported_top_levels(path: Path) -> set[str]:
     return names
 
 
-def test_the_simulator_never_imports_the_estimator_or_the_wind_core():
+def test_the_simulator_never_imports_the_estimator_the_wind_core_or_the_application():
+    forbidden = {"buoy_nav", "wind_comp", "buoy_processing"}
     offenders = {
-        str(path.relative_to(REPO)): sorted(_imported_top_levels(path) & {"buoy_nav", "wind_comp"})
+        str(path.relative_to(REPO)): sorted(_imported_top_levels(path) & forbidden)
         for path in _modules("sensor_sim")
     }
     assert {k: v for k, v in offenders.items() if v} == {}
+
+
+def test_no_package_imports_a_package_of_its_layer_or_above():
+    offenders = {
+        str(path.relative_to(REPO)): sorted(
+            name
+            for name in _imported_top_levels(path) & set(PACKAGES) - {package}
+            if LAYERS[name] >= LAYERS[package]
+        )
+        for package in PACKAGES
+        for path in _modules(package)
+    }
+    assert {k: v for k, v in offenders.items() if v} == {}
+
+
+def test_the_layers_are_the_packages():
+    assert set(LAYERS) == set(PACKAGES)
+    manifests = (REPO / "src").glob("*/package.xml")
+    assert sorted(path.parent.name for path in manifests) == sorted(PACKAGES)
+
+
+def test_the_wind_correction_runs_live_without_the_applications_dependencies():
+    # compensation_node on a buoy's computer needs numpy and scipy, not the NetCDF, Parquet,
+    # Dask and plotting stack of the offline application.
+    live_modules = sorted(
+        f"wind_comp.{path.stem}" for path in _modules("wind_comp") if path.stem != "__init__"
+    )
+    probe = (
+        "import importlib, json, sys\n"
+        f"for name in {live_modules!r}:\n"
+        "    importlib.import_module(name)\n"
+        f"print(json.dumps(sorted(m for m in {list(APPLICATION_ONLY_MODULES)!r} "
+        "if m in sys.modules)))\n"
+    )
+    completed = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
+    )
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    assert completed.stdout.strip() == "[]"
+    assert "wind_comp.compensation_node" in live_modules
+
+
+def test_the_wind_correction_declares_none_of_the_applications_dependencies():
+    manifest = ET.parse(REPO / "src" / "wind_comp" / "package.xml").getroot()
+    declared = {element.text for element in manifest if element.tag.endswith("depend")}
+    heavy = {ROSDEP_KEYS[name] for name in APPLICATION_ONLY_MODULES}
+    assert declared & heavy == set()
 
 
 def test_rclpy_is_imported_by_node_modules_only():

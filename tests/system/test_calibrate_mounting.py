@@ -16,11 +16,11 @@ import yaml
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import WIND_TRUE_TOPIC
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing import calibrate_mounting
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.report.data import stamped_vectors
 from sensor_sim import simulate_bag
-from wind_comp import calibrate_mounting
-from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files
-from wind_comp.report.data import stamped_vectors
 
 REPO = Path(__file__).resolve().parents[2]
 BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"

@@ -12,7 +12,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
-PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp")
+PACKAGES = ("buoy_common", "sensor_sim", "buoy_nav", "wind_comp", "buoy_processing")
 
 
 def colcon(
@@ -99,6 +99,20 @@ def test_installed_executable_runs_where_ros2_run_looks(install_base, tmp_path):
         "bag_player",
     ):
         assert (install_base / "sensor_sim/lib/sensor_sim" / node).exists(), node
+
+
+def test_the_offline_commands_are_the_applications(install_base):
+    # `ros2 run buoy_processing process_bag`: the offline commands belong to the application.
+    for command in (
+        "fuse_bag",
+        "process_bag",
+        "process_archive",
+        "wind_report",
+        "calibrate_mounting",
+    ):
+        assert (install_base / "buoy_processing/lib/buoy_processing" / command).exists(), command
+        for package in ("buoy_nav", "wind_comp"):
+            assert not (install_base / package / "lib" / package / command).exists(), command
 
 
 @pytest.mark.long

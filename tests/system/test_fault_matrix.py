@@ -19,7 +19,7 @@ import pytest
 from live_replay import differences_from_offline, replay
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagReader
-from wind_comp.process_bag import MOSTLY_INVALID_EXIT_CODE
+from buoy_processing.process_bag import MOSTLY_INVALID_EXIT_CODE
 
 BIN = Path(sys.executable).parent
 GROUP_PARAMETERS = [pytest.param(group, id=group.name.replace(" ", "_")) for group in matrix.GROUPS]

@@ -4,15 +4,9 @@ column map and processed with the motion-pack set. The real record has no truth;
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO / "tools"))
-
-import fdchp_simulated  # noqa: E402  (a tool, found on the path set just above)
+from tools import fdchp_simulated
 
 
 @pytest.fixture(scope="module")

@@ -27,7 +27,8 @@ def windows(tmp_path_factory) -> list[dict]:
     result = subprocess.run(
         [
             sys.executable,
-            str(REPO / "tools" / "bench_fluxes.py"),
+            "-m",
+            "tools.bench_fluxes",
             "--duration-s",
             str(DURATION_S),
             "--window-s",
@@ -39,6 +40,7 @@ def windows(tmp_path_factory) -> list[dict]:
         capture_output=True,
         text=True,
         timeout=900,
+        cwd=REPO,
     )
     assert result.returncode == 0, result.stderr
     return json.loads(result.stdout)

@@ -25,9 +25,9 @@ from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import process_bag
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.report.data import interpolate_vectors, odometry_series, stamped_vectors
 from wind_comp.config import compensator_config_from_files
-from wind_comp.report.data import interpolate_vectors, odometry_series, stamped_vectors
 
 REPO = Path(__file__).resolve().parents[2]
 SOURCE_BAG = REPO / "bags" / "sea_state"

@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from buoy_common.bag_io import BagReader, BagWriter
-from buoy_nav import fuse_bag as fuse_bag_command
-from wind_comp import process_bag as process_bag_command
-from wind_comp import wind_report as wind_report_command
+from buoy_processing import fuse_bag as fuse_bag_command
+from buoy_processing import process_bag as process_bag_command
+from buoy_processing import wind_report as wind_report_command
 
 REPO = Path(__file__).resolve().parents[2]
 BUOY_PARAMETERS = str(REPO / "src" / "buoy_common" / "config" / "buoy.yaml")

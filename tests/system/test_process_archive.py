@@ -20,11 +20,11 @@ import pytest
 
 from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.archive import BAG_COLUMN, COMBINED_TABLE, MARKER_SUFFIX, STATE_DIRECTORY
+from buoy_processing.bag_processing import ISO_TIME_COLUMNS, process_bag, products_csv_path
+from buoy_processing.process_archive import EXIT_FAILED_BAGS, main
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS
-from wind_comp.archive import BAG_COLUMN, COMBINED_TABLE, MARKER_SUFFIX, STATE_DIRECTORY
-from wind_comp.bag_processing import ISO_TIME_COLUMNS, process_bag, products_csv_path
 from wind_comp.config import compensator_config_from_files
-from wind_comp.process_archive import EXIT_FAILED_BAGS, main
 
 pytestmark = [pytest.mark.long, pytest.mark.xdist_group("process_archive")]
 

@@ -19,18 +19,18 @@ from buoy_common.bag_io import BagReader
 from buoy_common.contract import (
     window_label,
 )
-from buoy_nav.bag_fusion import fuse_bag
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_fusion import fuse_bag
+from buoy_processing.bag_processing import ISO_TIME_COLUMNS, products_csv_path
+from buoy_processing.netcdf_variables import product_time_name, product_variable_name
 from error_budget import ANEMOMETER
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS, CASES, processed_bag, processed_netcdf
 from ros_messages import raw_stamp_ns
-from wind_comp.bag_processing import ISO_TIME_COLUMNS, products_csv_path
 from wind_comp.compensation_messages import (
     STATS_FIELDS,
     stats_values,
 )
 from wind_comp.config import compensator_config_from_files
-from wind_comp.netcdf_variables import product_time_name, product_variable_name
 
 COMPENSATOR = compensator_config_from_files([BUOY_PARAMETERS])
 NAV_TOPICS = ("/nav/odometry", "/nav/imu", "/nav/velocity", "/nav/fix")

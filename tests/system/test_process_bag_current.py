@@ -19,13 +19,17 @@ from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import (
+    CURRENT_PRODUCTS_CSV_SUFFIX,
+    process_bag,
+    products_csv_path,
+)
+from buoy_processing.process_bag import main as process_bag_main
+from buoy_processing.wind_report import main as wind_report_main
 from ros_messages import stamp_ns
 from sensor_sim.geodesy import earth_rate_enu_rad_s
-from wind_comp.bag_processing import CURRENT_PRODUCTS_CSV_SUFFIX, process_bag, products_csv_path
 from wind_comp.compensation_messages import CURRENT_STATS_FIELDS, stats_values
 from wind_comp.config import compensator_config_from_files, current_config_from_files
-from wind_comp.process_bag import main as process_bag_main
-from wind_comp.wind_report import main as wind_report_main
 
 REPO = Path(__file__).resolve().parents[2]
 PARAMETER_FILES = [

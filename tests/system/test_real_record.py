@@ -20,11 +20,11 @@ from buoy_common.import_records import import_records
 from buoy_common.records.column_map import load_column_map
 from buoy_common.records.decoding import decode, plausibility_warnings, read_table
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import process_bag
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.report.data import stamped_vectors
 from wind_comp.config import compensator_config_from_files
 from wind_comp.fluxes import window_fluxes
 from wind_comp.motion_residual import motion_residual, vertical_acceleration_mps2
-from wind_comp.report.data import stamped_vectors
 
 REPO = Path(__file__).resolve().parents[2]
 DATA = REPO / "tests" / "data" / "ooi_fdchp"

@@ -18,9 +18,9 @@ from nav_msgs.msg import Odometry
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagReader, BagWriter
 from buoy_common.contract import QualityFlag
 from buoy_common.safe_output import OutputError
-from buoy_nav.bag_fusion import fuse_bag
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import process_bag
+from buoy_processing.bag_fusion import fuse_bag
+from buoy_processing.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parents[2]

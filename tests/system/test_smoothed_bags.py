@@ -10,9 +10,9 @@ from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import process_bag
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS, processed_bag
 from ros_messages import raw_stamp_ns
-from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files
 
 BAG = "sea_state"

@@ -32,7 +32,8 @@ def test_short_soak_loses_no_sample(tmp_path, ros_env):
     result = subprocess.run(
         [
             sys.executable,
-            str(REPO / "tools" / "soak.py"),
+            "-m",
+            "tools.soak",
             "--hours",
             str(SIMULATED_HOURS),
             "--rate-factor",
@@ -43,6 +44,7 @@ def test_short_soak_loses_no_sample(tmp_path, ros_env):
             str(figures),
         ],
         env=ros_env,
+        cwd=REPO,
         capture_output=True,
         text=True,
         timeout=600,

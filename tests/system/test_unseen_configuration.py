@@ -25,8 +25,8 @@ from against_truth import (
 )
 from buoy_common.bag_io import BagReader
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import process_bag
 from error_budget import navigation_limits
-from wind_comp.bag_processing import process_bag
 from wind_comp.config import compensator_config_from_files
 
 BIN = Path(sys.executable).parent

@@ -15,20 +15,24 @@ from scipy.spatial.transform import Rotation
 from against_truth import assert_wind_within_budget
 from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.config import fusion_config_from_files
-from sensor_sim.simulate_bag import parse_arguments, simulate
-from wind_comp.bag_processing import process_bag
-from wind_comp.config import compensator_config_from_files
-from wind_comp.products import WindAverager
-from wind_comp.report import figures, write_report
-from wind_comp.report.attitude import attitude_errors_deg, rpy_rad_from_quaternions, rpy_sigma_rad
-from wind_comp.report.data import (
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.report import figures, write_report
+from buoy_processing.report.attitude import (
+    attitude_errors_deg,
+    rpy_rad_from_quaternions,
+    rpy_sigma_rad,
+)
+from buoy_processing.report.data import (
     ReportData,
     ReportDataError,
     load_report_data,
     report_data_from_bag,
     save_report_data,
 )
-from wind_comp.wind_report import main
+from buoy_processing.wind_report import main
+from sensor_sim.simulate_bag import parse_arguments, simulate
+from wind_comp.config import compensator_config_from_files
+from wind_comp.products import WindAverager
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 REPO = Path(__file__).resolve().parents[2]

@@ -1,1 +1,1 @@
-"""Miller motion correction of buoy anemometer wind, wind products and reports."""
+"""Miller motion correction of buoy anemometer wind, the DVL current, and their live products."""

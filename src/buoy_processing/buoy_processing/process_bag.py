@@ -7,7 +7,7 @@ the nodes.
                 [--netcdf PATH [--netcdf-attribute NAME=VALUE ...]]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
-by ``compensation_node`` and ``current_node`` (:func:`wind_comp.bag_processing.process_bag`):
+by ``compensation_node`` and ``current_node`` (:func:`buoy_processing.bag_processing.process_bag`):
 every ``anemometer/wind`` sample yields exactly one ``wind/true``, every ``dvl/velocity`` sample
 one ``current/velocity`` (NaN when they cannot be computed). The bag needs the fusion's topics
 and at least one of the two. The new bag holds ``nav/*``, ``wind/true``, ``current/velocity``,
@@ -19,7 +19,7 @@ products are also written to ``<OUT_BAG>_wind_products.csv``,
 ``<OUT_BAG>_current_products.csv`` and ``<OUT_BAG>_wind_fluxes.csv`` (each window with its
 ISO 8601 bounds, coverage and QARTOD quality flag). With ``--netcdf PATH`` the corrected
 series, the products, the fluxes, the navigation and their quality flags are also written to
-PATH as NetCDF-CF (CF-1.10, ACDD-1.3; :mod:`wind_comp.netcdf_output`), with the global
+PATH as NetCDF-CF (CF-1.10, ACDD-1.3; :mod:`buoy_processing.netcdf_output`), with the global
 attributes given as ``--netcdf-attribute NAME=VALUE`` (``creator_name``, ``institution``,
 ``license``, ...); an existing PATH is replaced only with ``--overwrite``. For a bag of several
 buoys each namespace gets its own file, named after it (``out.nc`` → ``out_buoy1.nc``).
@@ -67,7 +67,7 @@ from buoy_common.namespaces import (
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import ProcessSummary, process_bag
+from buoy_processing.bag_processing import ProcessSummary, process_bag
 from wind_comp.config import (
     COMPENSATION_PARAMETER_PREFIX,
     CURRENT_PARAMETER_PREFIX,

@@ -35,11 +35,15 @@ from buoy_common.contract import (
     window_label,
 )
 from buoy_common.namespaces import TopicView
+from buoy_processing.report.attitude import (
+    interpolate_rpy_rad,
+    rpy_rad_from_quaternions,
+    rpy_sigma_rad,
+)
 from wind_comp.compensation_messages import stats_values
 from wind_comp.config import CompensatorConfig
 from wind_comp.flux_products import FluxProduct
 from wind_comp.products import WindAverager, WindProduct
-from wind_comp.report.attitude import interpolate_rpy_rad, rpy_rad_from_quaternions, rpy_sigma_rad
 
 # Plots count time from the start of the minute of the first sample, so simulated runs (which
 # start on a whole minute) show scenario time and the 1-minute windows start on round numbers.

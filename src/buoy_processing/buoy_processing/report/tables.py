@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 
 from buoy_common.contract import QualityFlag
+from buoy_processing.report.attitude import attitude_errors_deg
+from buoy_processing.report.current import CurrentData, window_errors
+from buoy_processing.report.data import ReportData, titled, utc_text, wind_series
 from wind_comp.flux_products import FluxProduct
 from wind_comp.products import WindProduct, meteorological_direction_deg
-from wind_comp.report.attitude import attitude_errors_deg
-from wind_comp.report.current import CurrentData, window_errors
-from wind_comp.report.data import ReportData, titled, utc_text, wind_series
 
 MIN_CURRENT_FOR_DIRECTION_MPS = 0.2
 """Windows whose true current is slower than this leave out of the direction error: the

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from wind_comp.mounting_calibration import MIN_DURATION_S, CalibrationError, estimate_mounting
+from buoy_processing.mounting_calibration import MIN_DURATION_S, CalibrationError, estimate_mounting
 
 RATE_HZ = 10.0
 

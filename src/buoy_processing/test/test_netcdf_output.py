@@ -16,12 +16,12 @@ from scipy.spatial.transform import Rotation
 
 from buoy_common.contract import QualityFlag
 from buoy_common.safe_output import OutputError
+from buoy_processing.netcdf_output import NetcdfContent, write_netcdf
+from buoy_processing.netcdf_variables import product_time_name, product_variable_name
+from buoy_processing.output_series import FlowSeries, NavigationSeries
 from wind_comp.compensator import CorrectedBatch, SampleStatus
 from wind_comp.config import CompensatorConfig
 from wind_comp.flux_products import FluxAverager
-from wind_comp.netcdf_output import NetcdfContent, write_netcdf
-from wind_comp.netcdf_variables import product_time_name, product_variable_name
-from wind_comp.output_series import FlowSeries, NavigationSeries
 from wind_comp.products import WindAverager
 
 START_S = 1_767_225_600  # 2026-01-01T00:00:00Z

@@ -10,7 +10,7 @@ whole archive go to ``OUT/wind_products.parquet``, one row per window, naming it
 on N local processes (default: one per core) or, with ``--scheduler``, on the workers of a Dask
 distributed scheduler. Bags done by an earlier run with the same parameters are skipped (all
 redone with ``--redo``); a bag that fails is listed at the end with its reason and the others go
-on. See :mod:`wind_comp.archive`.
+on. See :mod:`buoy_processing.archive`.
 
 Exit codes: 0 every bag done; 1 some bags failed (listed on stderr); 2 bad arguments,
 parameters, archive or scheduler (one line on stderr); 3 every bag done, but some were cut short
@@ -30,14 +30,14 @@ from buoy_common.namespaces import NamespaceError, add_namespace_arguments, pars
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.archive import (
+from buoy_processing.archive import (
     ArchiveError,
     ArchiveReport,
     BagOutcome,
     plan_archive,
     run_archive,
 )
-from wind_comp.archive_pools import DaskPool, LocalPool, default_workers
+from buoy_processing.archive_pools import DaskPool, LocalPool, default_workers
 from wind_comp.config import compensator_config_from_files
 
 EXIT_FAILED_BAGS = 1

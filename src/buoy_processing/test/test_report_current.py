@@ -5,7 +5,7 @@ are, and the two laws of averaging: white noise falls as 1/√T, the waves' orbi
 import numpy as np
 import pytest
 
-from wind_comp.report.current import CurrentData, error_by_window_length, window_errors
+from buoy_processing.report.current import CurrentData, error_by_window_length, window_errors
 
 RATE_HZ = 1.0
 

@@ -42,8 +42,8 @@ from buoy_common.namespaces import (
 )
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
-from buoy_nav.bag_fusion import FusedBag, fuse_bag
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_fusion import FusedBag, fuse_bag
 
 
 def parse_arguments(argv):

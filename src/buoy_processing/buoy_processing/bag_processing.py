@@ -2,9 +2,10 @@
 nodes.
 
 :func:`process_bag` runs over the bag's sensor topics, in log-time order, the core of
-``fusion_node`` (:class:`buoy_nav.bag_fusion.OfflineFusion`) followed by the cores of
-``compensation_node`` (when the bag has ``anemometer/wind``) and ``current_node`` (when it has
-``dvl/velocity``), :class:`wind_comp.pipeline.CompensationPipeline` both: each navigation
+``fusion_node`` (:func:`buoy_processing.offline_runner.run_fusion`, as ``fuse_bag`` does)
+followed by the cores of ``compensation_node`` (when the bag has ``anemometer/wind``) and
+``current_node`` (when it has ``dvl/velocity``),
+:class:`wind_comp.pipeline.CompensationPipeline` both (:class:`BagCorrections`): each navigation
 solution passes to them as the numbers its ``nav/odometry`` and ``nav/fix`` carry, in the order
 the nodes receive them, and every ``anemometer/wind`` sample yields exactly one ``wind/true``,
 every ``dvl/velocity`` sample one ``current/velocity`` (NaN when they cannot be computed). The
@@ -19,8 +20,7 @@ With ``smooth`` the fusion runs first over the sensor topics alone (a forward fi
 epochs and solutions are spilled to a temporary directory beside the output), then the
 smoother's backward pass; a second read of the bag feeds the smoothed solutions and the
 anemometer and DVL samples, in log-time order, to the corrections, so the wind and the current
-are computed with the smoothed attitude and velocity
-(:func:`buoy_nav.bag_fusion.merged_with_smoothed`).
+are computed with the smoothed attitude and velocity.
 
 The compensation runs in this process, on whole stretches of samples at a time; the process
 that writes the bag only writes.
@@ -34,20 +34,13 @@ import time
 from collections import Counter, deque
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from buoy_common.bag_io import (
-    BackgroundBagWriter,
-    BagError,
-    BagMessage,
-    BagProgress,
-    BagReader,
-    BagWriter,
-    Recovery,
-)
+from buoy_common.bag_io import BagError, BagMessage, BagReader, Recovery
 from buoy_common.contract import (
     CURRENT_TOPIC,
     DVL_TOPIC,
@@ -69,17 +62,11 @@ from buoy_common.contract import (
 )
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
-from buoy_nav.bag_fusion import (
-    OfflineFusion,
-    forward_pass,
-    merged_with_smoothed,
-    relative_topic,
-    sensor_topics_of,
-    spill_parent_of,
-    truth_topics_of,
-)
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
+from buoy_processing.offline_fusion import relative_topic, sensor_topics_of, truth_topics_of
+from buoy_processing.offline_runner import OfflineRun, run_fusion
+from buoy_processing.output_series import FlowSeries, NavigationSeries
 from wind_comp.compensation_messages import (
     FlowSample,
     anemometer_sample,
@@ -92,7 +79,6 @@ from wind_comp.compensation_messages import (
 )
 from wind_comp.config import CompensatorConfig, CurrentConfig
 from wind_comp.flux_products import FluxProduct
-from wind_comp.output_series import FlowSeries, NavigationSeries
 from wind_comp.pipeline import (
     CompensationOutput,
     CompensationPipeline,
@@ -104,7 +90,6 @@ from wind_comp.products import CurrentProduct, WindProduct
 WIND_PRODUCTS_CSV_SUFFIX = "_wind_products.csv"
 WIND_FLUXES_CSV_SUFFIX = "_wind_fluxes.csv"
 CURRENT_PRODUCTS_CSV_SUFFIX = "_current_products.csv"
-PROGRESS_EVERY_MESSAGES = 2000
 # Sensor samples handed to the compensation at a time: enough to pay numpy's per-call cost
 # once per stretch, few enough to keep the memory flat.
 SAMPLES_PER_STRETCH = 256
@@ -185,7 +170,7 @@ class OfflineCorrection:
     def __init__(
         self,
         pipeline: CompensationPipeline,
-        writer: BackgroundBagWriter | NamespacedWriter,
+        writer: NamespacedWriter,
         output_topic: str,
         product_topics,
         read_record,
@@ -344,6 +329,115 @@ def _stored_sensor(reader: BagReader, topic: str, msgtype: str) -> str | None:
     return stored
 
 
+class FlowTopics(NamedTuple):
+    """Stored names of a bag's flow sensor topics; None for those it lacks."""
+
+    wind: str | None
+    """``anemometer/wind``."""
+    dvl: str | None
+    """``dvl/velocity``."""
+    temperature: str | None
+    """``anemometer/temperature``, for the wind's fluxes."""
+
+
+def flow_topics_of(reader: BagReader, view: TopicView) -> FlowTopics:
+    """The flow sensors of ``reader``'s bag (read in ``view``'s namespace). Raises BagError when
+    it has neither ``anemometer/wind`` nor ``dvl/velocity``, or one of them holds another type."""
+    flows = FlowTopics(
+        _stored_sensor(reader, WIND_RAW_TOPIC, VECTOR3_MSGTYPE),
+        _stored_sensor(reader, DVL_TOPIC, TWIST_COVARIANCE_MSGTYPE),
+        _stored_sensor(reader, SONIC_TEMPERATURE_TOPIC, TEMPERATURE_MSGTYPE),
+    )
+    if flows.wind is None and flows.dvl is None:
+        where = f" in namespace {view.label}" if view.namespace else ""
+        raise BagError(
+            f"bag {reader.path} has neither {WIND_RAW_TOPIC} nor {DVL_TOPIC}{where}: "
+            "nothing to correct"
+        )
+    return flows
+
+
+class BagCorrections:
+    """The wind compensation and the current estimate of a bag, following its fusion (a
+    :class:`~buoy_processing.offline_runner.BagConsumer`): every solution to each correction,
+    every sensor record to the correction that takes it."""
+
+    def __init__(
+        self,
+        flows: FlowTopics,
+        compensator_config: CompensatorConfig,
+        current_config: CurrentConfig,
+        navigation: NavigationSeries | None = None,
+    ):
+        """navigation: when given, it keeps the solutions and the corrections keep their
+        corrected samples, for the NetCDF file."""
+        self.flows = flows
+        self.compensator_config = compensator_config
+        self.current_config = current_config
+        self.navigation = navigation
+        self.wind: OfflineCorrection | None = None
+        self.current: OfflineCorrection | None = None
+
+    @property
+    def topics(self) -> list[str]:
+        """Stored names of the topics the corrections read."""
+        flows = self.flows
+        topics = [topic for topic in (flows.wind, flows.dvl) if topic is not None]
+        if flows.wind is not None and flows.temperature is not None:
+            topics.append(flows.temperature)
+        return topics
+
+    def start(self, writer: NamespacedWriter) -> None:
+        """The corrections, writing to ``writer``."""
+        flows = self.flows
+        keep = self.navigation is not None
+        if flows.wind is not None:
+            self.wind = OfflineCorrection(
+                wind_pipeline(self.compensator_config),
+                writer,
+                WIND_TRUE_TOPIC,
+                (wind_mean_topic, wind_stats_topic),
+                _anemometer_record,
+                self.compensator_config.anemometer_frame_id,
+                keep,
+                flows.temperature,
+            )
+        if flows.dvl is not None:
+            self.current = OfflineCorrection(
+                current_pipeline(self.current_config),
+                writer,
+                CURRENT_TOPIC,
+                (current_mean_topic, current_stats_topic),
+                _dvl_record,
+                self.current_config.dvl_frame_id,
+                keep,
+            )
+
+    def _running(self) -> list[OfflineCorrection]:
+        return [c for c in (self.wind, self.current) if c is not None]
+
+    def add_navigation(self, solutions: list[NavValues]) -> None:
+        if self.navigation is not None:
+            self.navigation.add(solutions)
+        for correction in self._running():
+            correction.add_navigation(solutions)
+
+    def add_message(self, reader: BagReader, message: BagMessage) -> None:
+        """A flow sensor's sample to its correction, the sonic temperature to the wind's
+        fluxes; anything else (the truth) is only copied."""
+        topic = message.topic
+        if topic == self.flows.wind and self.wind is not None:
+            self.wind.add_sample(reader, message)
+        elif topic == self.flows.dvl and self.current is not None:
+            self.current.add_sample(reader, message)
+        elif topic == self.flows.temperature and self.wind is not None:
+            self.wind.add_temperature(reader, message)
+
+    def finish(self, log_time_ns: int) -> None:
+        for correction in self._running():
+            correction.finish(log_time_ns)
+
+
 def process_bag(
     in_bag,
     out_bag,
@@ -372,129 +466,42 @@ def process_bag(
     with bags of its own (``process_archive``).
 
     With ``netcdf_path`` the corrected series, the products and the navigation are also
-    written there as NetCDF-CF (:mod:`wind_comp.netcdf_output`; ``history`` is the command
-    that asked for it, ``netcdf_attributes`` global attributes of the user's); an existing
-    file is replaced only with ``overwrite`` (OutputError before anything is read
+    written there as NetCDF-CF (:mod:`buoy_processing.netcdf_output`; ``history`` is the
+    command that asked for it, ``netcdf_attributes`` global attributes of the user's); an
+    existing file is replaced only with ``overwrite`` (OutputError before anything is read
     otherwise)."""
     started = time.monotonic()
-    csv_paths = {
-        name: products_csv_path(out_bag, suffix)
-        for name, suffix in (
-            ("wind", WIND_PRODUCTS_CSV_SUFFIX),
-            ("current", CURRENT_PRODUCTS_CSV_SUFFIX),
-            ("fluxes", WIND_FLUXES_CSV_SUFFIX),
-        )
-    }
-    extra_outputs = [] if netcdf_path is None else [netcdf_path]
-    check_outputs_apart_from_inputs([in_bag], [out_bag, *csv_paths.values(), *extra_outputs])
-    if netcdf_path is not None:
-        # Imported for a run that writes NetCDF only: xarray, pandas and the modules they bring
-        # cost every other run more than a second of CPU at start-up.
-        from wind_comp import netcdf_output
-
-        netcdf_output.check_netcdf_output(netcdf_path, overwrite)
-    keep = netcdf_path is not None
-    navigation = NavigationSeries() if keep else None
+    csv_paths = products_csv_paths(out_bag)
+    _check_outputs(in_bag, [out_bag, *csv_paths.values()], netcdf_path, overwrite)
     view = view or TopicView()
-    current_config = current_config or CurrentConfig()
     with BagReader(in_bag, view) as reader:
         sensors = sensor_topics_of(reader, fusion_config)
-        stored_wind = _stored_sensor(reader, WIND_RAW_TOPIC, VECTOR3_MSGTYPE)
-        stored_dvl = _stored_sensor(reader, DVL_TOPIC, TWIST_COVARIANCE_MSGTYPE)
-        stored_temperature = _stored_sensor(reader, SONIC_TEMPERATURE_TOPIC, TEMPERATURE_MSGTYPE)
-        if stored_wind is None and stored_dvl is None:
-            where = f" in namespace {view.label}" if view.namespace else ""
-            raise BagError(
-                f"bag {reader.path} has neither {WIND_RAW_TOPIC} nor {DVL_TOPIC}{where}: "
-                "nothing to correct"
-            )
-        truth = truth_topics_of(reader)
-        relative_of = {stored: relative for relative, stored in sensors.items()}
-
-        def corrections_into(writer: NamespacedWriter) -> dict[str, OfflineCorrection]:
-            """The corrections of the bag's flow sensors, by stored topic."""
-            corrections = {}
-            if stored_wind is not None:
-                corrections[stored_wind] = OfflineCorrection(
-                    wind_pipeline(compensator_config),
-                    writer,
-                    WIND_TRUE_TOPIC,
-                    (wind_mean_topic, wind_stats_topic),
-                    _anemometer_record,
-                    compensator_config.anemometer_frame_id,
-                    keep,
-                    stored_temperature,
-                )
-            if stored_dvl is not None:
-                corrections[stored_dvl] = OfflineCorrection(
-                    current_pipeline(current_config),
-                    writer,
-                    CURRENT_TOPIC,
-                    (current_mean_topic, current_stats_topic),
-                    _dvl_record,
-                    current_config.dvl_frame_id,
-                    keep,
-                )
-            return corrections
-
-        writer_class = BackgroundBagWriter if write_in_background else BagWriter
-        if smooth:
-            fusion = OfflineFusion(fusion_config, None, spill_parent_of(out_bag), smooth=True)
-            try:
-                # The writing process starts during the forward pass: until it is ready the
-                # writer keeps what it is given, and the second pass produces fast.
-                with writer_class(out_bag, overwrite=overwrite) as bag_writer:
-                    writer = NamespacedWriter(bag_writer, view)
-                    forward_pass(reader, fusion, sensors, relative_of, f"process_bag {in_bag}")
-                    corrections = corrections_into(writer)
-                    smoothed_corrections(reader, fusion, corrections, writer, truth, navigation)
-            finally:
-                fusion.close()
-        else:
-            with (
-                BagProgress(reader, f"process_bag {in_bag}") as progress,
-                writer_class(out_bag, overwrite=overwrite) as bag_writer,
-            ):
-                writer = NamespacedWriter(bag_writer, view)
-                fusion = OfflineFusion(fusion_config, writer)
-                corrections = corrections_into(writer)
-                forward_corrections(
-                    reader, fusion, corrections, writer, relative_of, truth, progress, navigation
-                )
-        duration_s = reader.duration_s
-    summaries = {}
-    for stored, product_type, name in (
-        (stored_wind, WindProduct, "wind"),
-        (stored_dvl, CurrentProduct, "current"),
-    ):
-        if stored is None:
-            continue
-        correction = corrections[stored]
-        write_products_csv(correction.products, product_type, csv_paths[name])
-        if name == "wind":
-            write_products_csv(correction.fluxes, FluxProduct, csv_paths["fluxes"])
-            summaries[name] = correction.summary(csv_paths[name], csv_paths["fluxes"])
-        else:
-            summaries[name] = correction.summary(csv_paths[name])
-    if netcdf_path is not None:
-        wind = corrections.get(stored_wind)
-        current = corrections.get(stored_dvl)
-        content = netcdf_output.NetcdfContent(
-            source=str(in_bag),
-            navigation=navigation,
-            wind=None if wind is None else wind.series,
-            current=None if current is None else current.series,
-            wind_products=[] if wind is None else wind.products,
-            fluxes=[] if wind is None else wind.fluxes,
-            fluxes_despiked=compensator_config.flux_despike,
-            current_products=[] if current is None else current.products,
-            history=history,
-            attributes=dict(netcdf_attributes or {}),
+        corrections = BagCorrections(
+            flow_topics_of(reader, view),
+            compensator_config,
+            current_config or CurrentConfig(),
+            None if netcdf_path is None else NavigationSeries(),
         )
-        netcdf_output.write_netcdf(netcdf_path, content, overwrite)
+        run = OfflineRun(
+            reader,
+            out_bag,
+            fusion_config,
+            sensors,
+            f"process_bag {in_bag}",
+            view,
+            copied_topics=[*corrections.topics, *truth_topics_of(reader)],
+            smooth=smooth,
+            overwrite=overwrite,
+            write_in_background=write_in_background,
+        )
+        fusion, topic_counts = run_fusion(run, corrections)
+        duration_s = reader.duration_s
+    summaries = write_products_csvs(corrections, csv_paths)
+    if netcdf_path is not None:
+        _write_netcdf(netcdf_path, corrections, in_bag, history, netcdf_attributes, overwrite)
     return ProcessSummary(
         **summaries,
-        topic_counts=writer.counts,
+        topic_counts=topic_counts,
         fusion_lines=fusion.summary(),
         duration_s=duration_s,
         wall_s=time.monotonic() - started,
@@ -502,85 +509,70 @@ def process_bag(
     )
 
 
-def _temperature_topics(corrections: dict[str, OfflineCorrection]) -> list[str]:
-    return [c.temperature_topic for c in corrections.values() if c.temperature_topic]
+def products_csv_paths(out_bag) -> dict[str, Path]:
+    """The products CSVs beside ``out_bag``: the wind's, the current's and the fluxes'."""
+    return {
+        name: products_csv_path(out_bag, suffix)
+        for name, suffix in (
+            ("wind", WIND_PRODUCTS_CSV_SUFFIX),
+            ("current", CURRENT_PRODUCTS_CSV_SUFFIX),
+            ("fluxes", WIND_FLUXES_CSV_SUFFIX),
+        )
+    }
 
 
-def _route(corrections: dict[str, OfflineCorrection], reader: BagReader, message) -> None:
-    """A sensor record to the correction that takes it: a flow sensor's sample, or the sonic
-    temperature of the wind's fluxes."""
-    correction = corrections.get(message.topic)
-    if correction is not None:
-        correction.add_sample(reader, message)
-        return
-    for correction in corrections.values():
-        if message.topic == correction.temperature_topic:
-            correction.add_temperature(reader, message)
+def _check_outputs(in_bag, outputs: list, netcdf_path, overwrite: bool) -> None:
+    """OutputError, before anything is read, for an output that is, contains or lies inside
+    ``in_bag``, or a NetCDF file that exists without ``overwrite``."""
+    extra_outputs = [] if netcdf_path is None else [netcdf_path]
+    check_outputs_apart_from_inputs([in_bag], [*outputs, *extra_outputs])
+    if netcdf_path is not None:
+        # Imported for a run that writes NetCDF only: xarray, pandas and the modules they bring
+        # cost every other run more than a second of CPU at start-up.
+        from buoy_processing import netcdf_output
+
+        netcdf_output.check_netcdf_output(netcdf_path, overwrite)
 
 
-def smoothed_corrections(
-    reader: BagReader,
-    fusion: OfflineFusion,
-    corrections: dict[str, OfflineCorrection],
-    writer: NamespacedWriter,
-    truth: list[str],
-    navigation: NavigationSeries | None = None,
+def write_products_csvs(
+    corrections: BagCorrections, csv_paths: dict[str, Path]
+) -> dict[str, CorrectionSummary]:
+    """The products CSVs of the corrections that ran; their summaries by name (``wind``,
+    ``current``)."""
+    summaries = {}
+    wind, current = corrections.wind, corrections.current
+    if wind is not None:
+        write_products_csv(wind.products, WindProduct, csv_paths["wind"])
+        write_products_csv(wind.fluxes, FluxProduct, csv_paths["fluxes"])
+        summaries["wind"] = wind.summary(csv_paths["wind"], csv_paths["fluxes"])
+    if current is not None:
+        write_products_csv(current.products, CurrentProduct, csv_paths["current"])
+        summaries["current"] = current.summary(csv_paths["current"])
+    return summaries
+
+
+def _write_netcdf(
+    netcdf_path,
+    corrections: BagCorrections,
+    in_bag,
+    history: str,
+    attributes: dict[str, str] | None,
+    overwrite: bool,
 ) -> None:
-    """The corrections of a smoothing run, after ``fusion``'s forward pass: the smoothed
-    solutions and the sensor samples in log-time order, written to ``writer`` (the solutions
-    also kept in ``navigation`` when given)."""
-    fusion.writer = writer
-    log_time_ns = reader.start_ns
-    topics = [*corrections, *_temperature_topics(corrections), *truth]
-    for message, solution in merged_with_smoothed(reader, fusion, topics):
-        if message is None:
-            forward, smoothed, log_time_ns = solution
-            fusion.write_smoothed_values(forward, smoothed, log_time_ns)
-            if navigation is not None:
-                navigation.add([smoothed])
-            for correction in corrections.values():
-                correction.add_navigation([smoothed])
-            continue
-        log_time_ns = message.log_time_ns
-        writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-        _route(corrections, reader, message)
-    for correction in corrections.values():
-        correction.finish(log_time_ns)
+    """The corrected series, the products and the navigation of a run as NetCDF-CF."""
+    from buoy_processing import netcdf_output
 
-
-def forward_corrections(
-    reader: BagReader,
-    fusion: OfflineFusion,
-    corrections: dict[str, OfflineCorrection],
-    writer: NamespacedWriter,
-    relative_of: dict[str, str],
-    truth: list[str],
-    progress: BagProgress,
-    navigation: NavigationSeries | None = None,
-) -> None:
-    """Fusion and corrections in one pass over the bag: each solution to every correction as
-    it comes (and to ``navigation`` when given), each sensor sample to its correction."""
-    log_time_ns = reader.start_ns
-    topics = [*relative_of, *corrections, *_temperature_topics(corrections), *truth]
-    for index, message in enumerate(reader.messages(topics)):
-        log_time_ns = message.log_time_ns
-        topic = relative_of.get(message.topic)
-        if topic is not None:
-            solutions = fusion.add_message(reader, topic, message)
-            if solutions:
-                if navigation is not None:
-                    navigation.add(solutions)
-                for correction in corrections.values():
-                    correction.add_navigation(solutions)
-        else:
-            writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-            _route(corrections, reader, message)
-        if index % PROGRESS_EVERY_MESSAGES == 0:
-            progress.reached(log_time_ns)
-    solutions = fusion.finish()
-    if navigation is not None:
-        navigation.add(solutions)
-    for correction in corrections.values():
-        correction.add_navigation(solutions)
-        correction.finish(log_time_ns)
-    progress.done()
+    wind, current = corrections.wind, corrections.current
+    content = netcdf_output.NetcdfContent(
+        source=str(in_bag),
+        navigation=corrections.navigation,
+        wind=None if wind is None else wind.series,
+        current=None if current is None else current.series,
+        wind_products=[] if wind is None else wind.products,
+        fluxes=[] if wind is None else wind.fluxes,
+        fluxes_despiked=corrections.compensator_config.flux_despike,
+        current_products=[] if current is None else current.products,
+        history=history,
+        attributes=dict(attributes or {}),
+    )
+    netcdf_output.write_netcdf(netcdf_path, content, overwrite)

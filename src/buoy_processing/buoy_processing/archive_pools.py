@@ -1,7 +1,7 @@
 """Where the bags of an archive run: a local process pool, or the workers of a Dask scheduler.
 
-Both pools take :class:`~wind_comp.archive.BagJob` s and give back
-:class:`~wind_comp.archive.BagOutcome` s as the bags finish, and both turn a worker that died
+Both pools take :class:`~buoy_processing.archive.BagJob` s and give back
+:class:`~buoy_processing.archive.BagOutcome` s as the bags finish, and both turn a worker that died
 under a bag (killed, out of memory) into a ``failed`` outcome of that bag.
 
 - :class:`LocalPool`: ``concurrent.futures.ProcessPoolExecutor``, one bag per process at a
@@ -21,7 +21,7 @@ import os
 import signal
 from collections.abc import Callable, Iterator
 
-from wind_comp.archive import ArchiveError, BagJob, BagOutcome, prepare_pool_worker
+from buoy_processing.archive import ArchiveError, BagJob, BagOutcome, prepare_pool_worker
 
 # How long to wait for a Dask scheduler to answer before giving up (s).
 SCHEDULER_TIMEOUT_S = 30.0

@@ -39,14 +39,14 @@ import numpy as np
 import xarray as xr
 
 from buoy_common.safe_output import OutputError, staging_path
-from wind_comp.flux_products import FluxProduct
-from wind_comp.netcdf_variables import (
+from buoy_processing.netcdf_variables import (
     TimeAxis,
     flow_variables,
     navigation_variables,
     product_variables,
 )
-from wind_comp.output_series import FlowSeries, NavigationSeries
+from buoy_processing.output_series import FlowSeries, NavigationSeries
+from wind_comp.flux_products import FluxProduct
 from wind_comp.products import CurrentProduct, WindProduct
 
 CONVENTIONS = "CF-1.10, ACDD-1.3"

@@ -2,7 +2,7 @@
 
 Every bag found under the archive (a directory holding ``metadata.yaml`` or an MCAP file, as
 :class:`~buoy_common.bag_io.BagReader` reads it) is processed by
-:func:`wind_comp.bag_processing.process_bag` into the same relative place under the output
+:func:`buoy_processing.bag_processing.process_bag` into the same relative place under the output
 directory, exactly as ``process_bag ARCHIVE/REL OUT/REL`` would write it (the bag and its
 products CSV; one output per namespace for a bag of several buoys). The bags run in parallel,
 on a local process pool or on the workers of a Dask distributed scheduler.
@@ -48,7 +48,7 @@ from buoy_common.namespaces import NamespaceError, output_for, views_of_bag
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError, check_outputs_apart_from_inputs, staged_file
 from buoy_nav.config import FusionConfig
-from wind_comp.bag_processing import process_bag
+from buoy_processing.bag_processing import process_bag
 from wind_comp.config import CompensatorConfig
 from wind_comp.products import WindProduct
 
@@ -467,7 +467,7 @@ def completed_bags(plan: ArchivePlan, outcomes: list[BagOutcome]) -> list[str]:
 def run_archive(
     plan: ArchivePlan, pool, out: Path, on_outcome: Callable[[BagOutcome], None]
 ) -> ArchiveReport:
-    """Process the bags of ``plan`` still to do on ``pool`` (:mod:`wind_comp.archive_pools`),
+    """Process the bags of ``plan`` still to do on ``pool`` (:mod:`buoy_processing.archive_pools`),
     calling ``on_outcome`` as each finishes, then write the combined table of every completed
     bag. On Ctrl-C, the bags in flight are abandoned, the rest reported as not done, and the
     table is left as it was (the next run writes it)."""

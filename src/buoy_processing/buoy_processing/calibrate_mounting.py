@@ -6,8 +6,8 @@
 
 Runs ``process_bag`` over IN_BAG with the parameter files given (the mounting they hold is the
 starting point), then finds the mounting that makes the mean vertical wind zero and the
-corrected wind free of the buoy's motion (:mod:`wind_comp.mounting_calibration`), and writes it
-as a parameter file the nodes and tools take after the others::
+corrected wind free of the buoy's motion (:mod:`buoy_processing.mounting_calibration`), and
+writes it as a parameter file the nodes and tools take after the others::
 
     process_bag IN OUT --params-file buoy.yaml --params-file OUT_YAML
 
@@ -40,16 +40,16 @@ from buoy_common.namespaces import (
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError, check_outputs_apart_from_inputs, staged_file
 from buoy_nav.config import fusion_config_from_files
-from wind_comp.bag_processing import process_bag
-from wind_comp.config import compensator_config_from_files
-from wind_comp.mounting_calibration import (
+from buoy_processing.bag_processing import process_bag
+from buoy_processing.mounting_calibration import (
     DEFAULT_MAX_UNCERTAINTY_DEG,
     DEFAULT_WINDOW_S,
     CalibrationError,
     MountingEstimate,
     estimate_mounting,
 )
-from wind_comp.report.data import odometry_series, stamped_vectors, vectors_at_stamps
+from buoy_processing.report.data import odometry_series, stamped_vectors, vectors_at_stamps
+from wind_comp.config import compensator_config_from_files
 
 
 def parse_arguments(argv):

@@ -1,5 +1,4 @@
-"""Fusion over a recorded bag: the core of ``fusion_node`` fed from a bag, ``nav/*`` and ``tf``
-written to another.
+"""The core of ``fusion_node`` fed from a recorded bag, ``nav/*`` and ``tf`` written to another.
 
 The sensor topics ``imu/data_raw`` (required), one heading reference at least (``gnss/heading``,
 ``gnss/baseline``, ``imu/mag`` or ``imu/data``), and ``gnss/fix``, ``gnss/vel``, the others
@@ -8,35 +7,19 @@ conversion (:mod:`buoy_nav.fusion_messages`) and engine as in the live node. Eve
 ``nav/odometry``, ``nav/imu``, ``nav/velocity`` and ``nav/fix`` carry the log time of the IMU
 message that produced it, and so does its ``tf`` (``map`` → ``base_link``, for 3-D views in
 Foxglove or RViz). Truth topics (``truth/*``) are copied unchanged, so the output carries
-its own answer. ``fuse_bag`` is the command line of :func:`fuse_bag`; ``process_bag`` runs
-:class:`OfflineFusion` ahead of the wind compensation.
-
-With ``smooth`` the run takes two passes (:mod:`buoy_nav.smoothed_solutions`): the forward
-filter over the sensor topics, its epochs and solutions spilled to a temporary directory beside
-the output; then the smoother's backward pass, and a second read of the bag for the topics that
-are copied, merged in log-time order with the solutions: ``nav/*`` and ``tf`` carry the smoothed
-solution, ``nav/forward/odometry`` the forward filter's.
+its own answer. :mod:`buoy_processing.offline_runner` runs :class:`OfflineFusion` over a bag,
+alone (``fuse_bag``) or ahead of the wind and current corrections (``process_bag``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import NamedTuple
 
-from buoy_common.bag_io import (
-    BackgroundBagWriter,
-    BagError,
-    BagMessage,
-    BagProgress,
-    BagReader,
-    BagWriter,
-    Recovery,
-)
+from buoy_common.bag_io import BackgroundBagWriter, BagError, BagMessage, BagReader, BagWriter
 from buoy_common.contract import (
     AHRS_TOPIC,
     GNSS_BASELINE_TOPIC,
@@ -51,8 +34,7 @@ from buoy_common.contract import (
     TRUTH_PREFIX,
     bag_topic,
 )
-from buoy_common.namespaces import NamespacedWriter, TopicView
-from buoy_common.safe_output import check_outputs_apart_from_inputs
+from buoy_common.namespaces import NamespacedWriter
 from buoy_nav.aiding import disabled_topics
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine, NavSolution
@@ -72,7 +54,6 @@ REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
 HEADING_TOPICS = (GNSS_HEADING_TOPIC, GNSS_BASELINE_TOPIC, MAGNETOMETER_TOPIC, AHRS_TOPIC)
 """The fusion needs one of these at least: without a heading reference it cannot align."""
 OPTIONAL_TOPICS = tuple(topic for topic in FUSION_INPUT_MSGTYPES if topic not in REQUIRED_TOPICS)
-PROGRESS_EVERY_MESSAGES = 2000
 
 
 def relative_topic(name: str) -> str:
@@ -262,129 +243,3 @@ class OfflineFusion:
             if source.enabled and source.configuration_problem is not None:
                 lines.append(f"warning: {source.kind}: {source.configuration_problem}")
         return lines
-
-
-class FusedBag(NamedTuple):
-    """What :func:`fuse_bag` did."""
-
-    fusion: OfflineFusion
-    """The fusion that ran (its :meth:`OfflineFusion.summary` reports it)."""
-    topic_counts: dict[str, int]
-    """Messages written, per topic."""
-    wall_s: float
-    """Wall-clock time of the run, s."""
-    duration_s: float
-    """Span of the input bag's log times, s."""
-    recovery: Recovery | None
-    """What was wrong with the input bag and how much of it was read; None for a sound bag."""
-
-
-def fuse_bag(
-    in_bag,
-    out_bag,
-    config: FusionConfig,
-    overwrite: bool = False,
-    view: TopicView | None = None,
-    smooth: bool = False,
-) -> FusedBag:
-    """Run the fusion over ``in_bag`` into ``out_bag`` (a new bag; replaced with
-    ``overwrite``), over the topics of ``view``'s namespace (the root when None), writing into
-    the same namespace; with ``smooth`` the fixed-interval smoother's solution (see the module
-    docstring). Raises BagError for a missing or unreadable bag or one without the fusion's
-    required topics, and OutputError, before anything is read or written, if ``out_bag`` is,
-    contains or lies inside ``in_bag``."""
-    started = time.monotonic()
-    check_outputs_apart_from_inputs([in_bag], [out_bag])
-    view = view or TopicView()
-    with BagReader(in_bag, view) as reader:
-        sensors = sensor_topics_of(reader, config)
-        truth = truth_topics_of(reader)
-        relative_of = {stored: relative for relative, stored in sensors.items()}
-        if smooth:
-            fusion = OfflineFusion(config, None, spill_parent_of(out_bag), smooth=True)
-            try:
-                # The writing process starts during the forward pass: until it is ready the
-                # writer keeps what it is given, and the second pass produces fast.
-                with BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer:
-                    writer = NamespacedWriter(bag_writer, view)
-                    forward_pass(reader, fusion, sensors, relative_of, f"fuse_bag {in_bag}")
-                    fusion.writer = writer
-                    for message, values in merged_with_smoothed(reader, fusion, truth):
-                        if message is not None:
-                            writer.write_raw(
-                                message.topic, message.msgtype, message.log_time_ns, message.raw
-                            )
-                        else:
-                            fusion.write_smoothed_values(*values)
-            finally:
-                fusion.close()
-            counts = writer.counts
-            return FusedBag(
-                fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery
-            )
-        with (
-            BagProgress(reader, f"fuse_bag {in_bag}") as progress,
-            BackgroundBagWriter(out_bag, overwrite=overwrite) as bag_writer,
-        ):
-            writer = NamespacedWriter(bag_writer, view)
-            fusion = OfflineFusion(config, writer)
-            for index, message in enumerate(reader.messages([*sensors.values(), *truth])):
-                topic = relative_of.get(message.topic)
-                if topic is None:
-                    writer.write_raw(
-                        message.topic, message.msgtype, message.log_time_ns, message.raw
-                    )
-                else:
-                    fusion.add_message(reader, topic, message)
-                if index % PROGRESS_EVERY_MESSAGES == 0:
-                    progress.reached(message.log_time_ns)
-            fusion.finish()
-            progress.done()
-        counts = writer.counts
-    return FusedBag(fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery)
-
-
-def spill_parent_of(out_bag) -> Path:
-    """Where a smoothing run keeps its temporary records: beside the output bag, on the disk
-    the user chose for the output (a day of data needs gigabytes); the nearest existing folder
-    above it while the output's own folder (``OUT_BAG/buoy1`` of a fleet) is not made yet."""
-    parent = Path(out_bag).resolve().parent
-    while not parent.is_dir():
-        parent = parent.parent
-    return parent
-
-
-def forward_pass(
-    reader: BagReader,
-    fusion: OfflineFusion,
-    sensors: dict[str, str],
-    relative_of: dict[str, str],
-    label: str,
-) -> None:
-    """The forward filter of a smoothing run over the sensor topics of ``reader``'s bag."""
-    with BagProgress(reader, f"{label} (forward filter)") as progress:
-        for index, message in enumerate(reader.messages(list(sensors.values()))):
-            fusion.add_message(reader, relative_of[message.topic], message)
-            if index % PROGRESS_EVERY_MESSAGES == 0:
-                progress.reached(message.log_time_ns)
-        fusion.finish()
-        progress.done()
-
-
-def merged_with_smoothed(
-    reader: BagReader, fusion: OfflineFusion, topics: list[str]
-) -> Iterator[tuple[BagMessage | None, tuple | None]]:
-    """The messages of ``topics`` (stored names) of ``reader``'s bag and the smoothed
-    solutions of ``fusion`` (forward values, smoothed values, log time) in log-time order, as
-    ``(message, None)`` or ``(None, solution)``; a solution goes before the messages logged
-    after the IMU sample that produced it."""
-    solutions = fusion.smoothed_values()
-    pending = next(solutions, None)
-    for message in reader.messages(topics) if topics else ():
-        while pending is not None and pending[2] <= message.log_time_ns:
-            yield None, pending
-            pending = next(solutions, None)
-        yield message, None
-    while pending is not None:
-        yield None, pending
-        pending = next(solutions, None)

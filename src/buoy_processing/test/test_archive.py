@@ -11,7 +11,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from buoy_nav.config import FusionConfig
-from wind_comp.archive import (
+from buoy_processing.archive import (
     BAG_COLUMN,
     NAMESPACE_COLUMN,
     ArchiveError,

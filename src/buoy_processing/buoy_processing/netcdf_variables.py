@@ -1,6 +1,6 @@
-"""The variables of the NetCDF-CF file of ``process_bag`` (:mod:`wind_comp.netcdf_output`):
+"""The variables of the NetCDF-CF file of ``process_bag`` (:mod:`buoy_processing.netcdf_output`):
 its time coding, and the CF variables of the series kept while the bag is processed
-(:mod:`wind_comp.output_series`), the navigation and the products, with their standard names,
+(:mod:`buoy_processing.output_series`), the navigation and the products, with their standard names,
 units, cell methods and flags.
 """
 
@@ -14,20 +14,20 @@ import numpy as np
 import xarray as xr
 
 from buoy_common.contract import QualityFlag, window_label
+from buoy_processing.output_series import NANOSECONDS, FlowSeries, NavigationSeries
+from buoy_processing.report.attitude import rpy_rad_from_quaternions
 from wind_comp.compensator import SampleStatus
 from wind_comp.flux_products import (
     MAX_SPIKE_SHARE,
     NON_STATIONARY_PERCENT,
     STATIONARY_PERCENT,
 )
-from wind_comp.output_series import NANOSECONDS, FlowSeries, NavigationSeries
 from wind_comp.products import (
     GOOD_COVERAGE,
     MIN_COVERAGE,
     meteorological_direction_deg,
     oceanographic_direction_deg,
 )
-from wind_comp.report.attitude import rpy_rad_from_quaternions
 
 TIME_UNITS = "seconds"
 """Marks a product field that is a time: written in the file's time units."""

@@ -5,10 +5,10 @@
 SOURCE is a bag holding ``anemometer/wind`` and ``wind/true``, ``current/velocity``, or both
 (written by ``process_bag`` or recorded from the running nodes; its truth and navigation topics
 are shown when present), or a wind report data file (``.npz``) saved with
-:func:`wind_comp.report.data.save_report_data`. The report goes to FOLDER, by default
-``<SOURCE>_report``: see :mod:`wind_comp.report`. A bag recorded or processed under a namespace
-is read in it; a bag of several buoys gives one report per namespace, ``FOLDER/buoy1``,
-``FOLDER/buoy2`` (:mod:`buoy_common.namespaces`).
+:func:`buoy_processing.report.data.save_report_data`. The report goes to FOLDER, by default
+``<SOURCE>_report``: see :mod:`buoy_processing.report`. A bag recorded or processed under a
+namespace is read in it; a bag of several buoys gives one report per namespace,
+``FOLDER/buoy1``, ``FOLDER/buoy2`` (:mod:`buoy_common.namespaces`).
 """
 
 import argparse
@@ -24,9 +24,9 @@ from buoy_common.namespaces import (
     output_for,
     views_of_bag,
 )
-from wind_comp.report import write_report
-from wind_comp.report.current import CurrentData, current_report_data
-from wind_comp.report.data import (
+from buoy_processing.report import write_report
+from buoy_processing.report.current import CurrentData, current_report_data
+from buoy_processing.report.data import (
     ReportData,
     ReportDataError,
     has_messages,

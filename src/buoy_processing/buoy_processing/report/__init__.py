@@ -1,21 +1,22 @@
 """The report of a wind-correction run, and of a current estimate: figures and tables in a folder.
 
-- :mod:`wind_comp.report.data`: everything a report shows, as plain arrays (:class:`ReportData`),
-  gathered from a bag or a saved ``.npz`` file;
-- :mod:`wind_comp.report.attitude`: Euler angles, their 1σ and their errors;
-- :mod:`wind_comp.report.current`: the current of a bag (:class:`CurrentData`), its accuracy by
-  window and against the window length;
-- :mod:`wind_comp.report.figures` and :mod:`wind_comp.report.tables`: what is drawn and tabulated;
+- :mod:`buoy_processing.report.data`: everything a report shows, as plain arrays
+  (:class:`ReportData`), gathered from a bag or a saved ``.npz`` file;
+- :mod:`buoy_processing.report.attitude`: Euler angles, their 1σ and their errors;
+- :mod:`buoy_processing.report.current`: the current of a bag (:class:`CurrentData`), its
+  accuracy by window and against the window length;
+- :mod:`buoy_processing.report.figures` and :mod:`buoy_processing.report.tables`: what is drawn
+  and tabulated;
 - :func:`write_report`: all of it into one folder. The ``wind_report`` command
-  (:mod:`wind_comp.wind_report`) runs it on a bag or a saved file.
+  (:mod:`buoy_processing.wind_report`) runs it on a bag or a saved file.
 """
 
 from pathlib import Path
 
-from wind_comp.report.current import CurrentData
-from wind_comp.report.data import ReportData
-from wind_comp.report.figures import write_current_figures, write_figures
-from wind_comp.report.tables import current_markdown, summary_markdown, wind_products_markdown
+from buoy_processing.report.current import CurrentData
+from buoy_processing.report.data import ReportData
+from buoy_processing.report.figures import write_current_figures, write_figures
+from buoy_processing.report.tables import current_markdown, summary_markdown, wind_products_markdown
 
 
 def write_report(

@@ -30,15 +30,15 @@ from buoy_common.contract import (
     QualityFlag,
 )
 from buoy_common.namespaces import TopicView
-from wind_comp.compensation_messages import stats_values
-from wind_comp.products import CurrentProduct, oceanographic_direction_deg
-from wind_comp.report.data import (
+from buoy_processing.report.data import (
     ReportDataError,
     has_messages,
     interpolate_vectors,
     stamped_vectors,
     stored_topic,
 )
+from wind_comp.compensation_messages import stats_values
+from wind_comp.products import CurrentProduct, oceanographic_direction_deg
 
 WINDOW_LENGTHS_S = (10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1200.0)
 """Window lengths of :func:`error_by_window_length` by default, s."""

@@ -33,10 +33,10 @@ from matplotlib.ticker import FuncFormatter
 from scipy.signal import welch
 
 from buoy_common.contract import QualityFlag
+from buoy_processing.report.attitude import attitude_errors_deg
+from buoy_processing.report.current import CurrentData, error_by_window_length
+from buoy_processing.report.data import ReportData, titled, utc_text, wind_series
 from wind_comp.products import meteorological_direction_deg, oceanographic_direction_deg
-from wind_comp.report.attitude import attitude_errors_deg
-from wind_comp.report.current import CurrentData, error_by_window_length
-from wind_comp.report.data import ReportData, titled, utc_text, wind_series
 
 _MIN_SPECTRUM_SAMPLES = 32
 _MIN_SEGMENTS = 15

@@ -1,5 +1,5 @@
 """The outputs of ``process_bag`` kept in memory for its NetCDF file
-(:mod:`wind_comp.netcdf_output`), in plain arrays while the bag is processed: the corrected
+(:mod:`buoy_processing.netcdf_output`), in plain arrays while the bag is processed: the corrected
 series of each flow sensor and the navigation solutions handed to the corrections. Apart from
 the NetCDF code so that a run without NetCDF output does not import xarray.
 """

@@ -1,0 +1,1 @@
+"""The offline application: bags and archives processed, NetCDF files, reports and calibrations."""

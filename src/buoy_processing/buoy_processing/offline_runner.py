@@ -1,0 +1,216 @@
+"""One run of the fusion over a recorded bag, shared by ``fuse_bag`` and ``process_bag``.
+
+:func:`run_fusion` reads the bag's sensor topics in log-time order into an
+:class:`~buoy_processing.offline_fusion.OfflineFusion`, which writes ``nav/*`` and ``tf`` to the
+output bag; the other topics of the run (the truth, and for ``process_bag`` the anemometer's and
+the DVL's) are copied to the output unchanged. A :class:`BagConsumer` (``process_bag``'s
+corrections) receives every navigation solution and every copied message in the order the live
+nodes would: a solution as soon as the fusion has it, a message when it is read.
+
+Without ``smooth`` one pass does it all. With ``smooth`` the run takes two passes
+(:mod:`buoy_nav.smoothed_solutions`): the forward filter over the sensor topics, its epochs and
+solutions spilled to a temporary directory beside the output; then the smoother's backward pass,
+and a second read of the bag for the copied topics, merged in log-time order with the solutions:
+``nav/*`` and ``tf`` carry the smoothed solution, ``nav/forward/odometry`` the forward filter's,
+and the consumer receives the smoothed one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple, Protocol
+
+from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, BagWriter
+from buoy_common.namespaces import NamespacedWriter, TopicView
+from buoy_nav.config import FusionConfig
+from buoy_nav.fusion_messages import NavValues
+from buoy_processing.offline_fusion import OfflineFusion
+
+PROGRESS_EVERY_MESSAGES = 2000
+
+
+class BagConsumer(Protocol):
+    """What follows the fusion over a bag, fed as the live nodes downstream of it are."""
+
+    def start(self, writer: NamespacedWriter) -> None:
+        """The run's output is open: what the consumer writes goes to ``writer``."""
+
+    def add_navigation(self, solutions: list[NavValues]) -> None:
+        """New navigation solutions, in order (what ``nav/odometry`` and ``nav/fix`` carry)."""
+
+    def add_message(self, reader: BagReader, message: BagMessage) -> None:
+        """A message of a copied topic, already written to the output."""
+
+    def finish(self, log_time_ns: int) -> None:
+        """End of the data; ``log_time_ns`` is the log time of the last thing read, ns."""
+
+
+class NothingFollows:
+    """The consumer of a run of the fusion alone (``fuse_bag``)."""
+
+    def start(self, writer: NamespacedWriter) -> None:
+        pass
+
+    def add_navigation(self, solutions: list[NavValues]) -> None:
+        pass
+
+    def add_message(self, reader: BagReader, message: BagMessage) -> None:
+        pass
+
+    def finish(self, log_time_ns: int) -> None:
+        pass
+
+
+@dataclass
+class OfflineRun:
+    """What a run reads and writes, and how."""
+
+    reader: BagReader
+    out_bag: str | Path
+    """The bag directory to create."""
+    config: FusionConfig
+    sensors: dict[str, str]
+    """Relative → stored name of the fusion's input topics
+    (:func:`~buoy_processing.offline_fusion.sensor_topics_of`)."""
+    label: str
+    """Names the run in its progress lines (``fuse_bag IN_BAG``)."""
+    view: TopicView = field(default_factory=TopicView)
+    """The namespace read and written."""
+    copied_topics: list[str] = field(default_factory=list)
+    """Stored names of the topics copied to the output and handed to the consumer."""
+    smooth: bool = False
+    overwrite: bool = False
+    write_in_background: bool = True
+    """Write the bag from a process of its own, on a second core (False: in this process, for a
+    caller that keeps every core busy with bags of its own)."""
+
+    @property
+    def relative_of(self) -> dict[str, str]:
+        """Stored → relative name of the sensor topics."""
+        return {stored: relative for relative, stored in self.sensors.items()}
+
+    def open_writer(self) -> BackgroundBagWriter | BagWriter:
+        writer_class = BackgroundBagWriter if self.write_in_background else BagWriter
+        return writer_class(self.out_bag, overwrite=self.overwrite)
+
+
+class FusionRun(NamedTuple):
+    """What :func:`run_fusion` did."""
+
+    fusion: OfflineFusion
+    """The fusion that ran (its :meth:`OfflineFusion.summary` reports it)."""
+    topic_counts: dict[str, int]
+    """Messages written, per topic."""
+
+
+def run_fusion(run: OfflineRun, consumer: BagConsumer | None = None) -> FusionRun:
+    """The fusion over ``run``'s bag into its output, followed by ``consumer`` (see the module
+    docstring)."""
+    consumer = consumer or NothingFollows()
+    if run.smooth:
+        return _smoothed_run(run, consumer)
+    return _forward_run(run, consumer)
+
+
+def _forward_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
+    """Fusion, copies and consumer in one pass over the bag."""
+    reader = run.reader
+    relative_of = run.relative_of
+    with BagProgress(reader, run.label) as progress, run.open_writer() as bag_writer:
+        writer = NamespacedWriter(bag_writer, run.view)
+        fusion = OfflineFusion(run.config, writer)
+        consumer.start(writer)
+        log_time_ns = reader.start_ns
+        for index, message in enumerate(reader.messages([*relative_of, *run.copied_topics])):
+            log_time_ns = message.log_time_ns
+            topic = relative_of.get(message.topic)
+            if topic is not None:
+                solutions = fusion.add_message(reader, topic, message)
+                if solutions:
+                    consumer.add_navigation(solutions)
+            else:
+                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                consumer.add_message(reader, message)
+            if index % PROGRESS_EVERY_MESSAGES == 0:
+                progress.reached(log_time_ns)
+        consumer.add_navigation(fusion.finish())
+        consumer.finish(log_time_ns)
+        progress.done()
+    return FusionRun(fusion, writer.counts)
+
+
+def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
+    """The forward filter, the smoother's backward pass, then the smoothed solutions merged
+    with the copies, fed to the consumer."""
+    reader = run.reader
+    fusion = OfflineFusion(run.config, None, spill_parent_of(run.out_bag), smooth=True)
+    try:
+        # The writing process starts during the forward pass: until it is ready the writer
+        # keeps what it is given, and the second pass produces fast.
+        with run.open_writer() as bag_writer:
+            writer = NamespacedWriter(bag_writer, run.view)
+            forward_pass(reader, fusion, run.sensors, run.relative_of, run.label)
+            fusion.writer = writer
+            consumer.start(writer)
+            log_time_ns = reader.start_ns
+            for message, solution in merged_with_smoothed(reader, fusion, run.copied_topics):
+                if message is None:
+                    forward, smoothed, log_time_ns = solution
+                    fusion.write_smoothed_values(forward, smoothed, log_time_ns)
+                    consumer.add_navigation([smoothed])
+                    continue
+                log_time_ns = message.log_time_ns
+                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                consumer.add_message(reader, message)
+            consumer.finish(log_time_ns)
+    finally:
+        fusion.close()
+    return FusionRun(fusion, writer.counts)
+
+
+def spill_parent_of(out_bag) -> Path:
+    """Where a smoothing run keeps its temporary records: beside the output bag, on the disk
+    the user chose for the output (a day of data needs gigabytes); the nearest existing folder
+    above it while the output's own folder (``OUT_BAG/buoy1`` of a fleet) is not made yet."""
+    parent = Path(out_bag).resolve().parent
+    while not parent.is_dir():
+        parent = parent.parent
+    return parent
+
+
+def forward_pass(
+    reader: BagReader,
+    fusion: OfflineFusion,
+    sensors: dict[str, str],
+    relative_of: dict[str, str],
+    label: str,
+) -> None:
+    """The forward filter of a smoothing run over the sensor topics of ``reader``'s bag."""
+    with BagProgress(reader, f"{label} (forward filter)") as progress:
+        for index, message in enumerate(reader.messages(list(sensors.values()))):
+            fusion.add_message(reader, relative_of[message.topic], message)
+            if index % PROGRESS_EVERY_MESSAGES == 0:
+                progress.reached(message.log_time_ns)
+        fusion.finish()
+        progress.done()
+
+
+def merged_with_smoothed(
+    reader: BagReader, fusion: OfflineFusion, topics: list[str]
+) -> Iterator[tuple[BagMessage | None, tuple | None]]:
+    """The messages of ``topics`` (stored names) of ``reader``'s bag and the smoothed
+    solutions of ``fusion`` (forward values, smoothed values, log time) in log-time order, as
+    ``(message, None)`` or ``(None, solution)``; a solution goes before the messages logged
+    after the IMU sample that produced it."""
+    solutions = fusion.smoothed_values()
+    pending = next(solutions, None)
+    for message in reader.messages(topics) if topics else ():
+        while pending is not None and pending[2] <= message.log_time_ns:
+            yield None, pending
+            pending = next(solutions, None)
+        yield message, None
+    while pending is not None:
+        yield None, pending
+        pending = next(solutions, None)
