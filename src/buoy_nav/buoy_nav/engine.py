@@ -72,7 +72,7 @@ from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample, load_compiled_kernels
 from buoy_nav.prediction import RealtimePrediction
-from buoy_nav.sensor_sets import AidingRecency, sensor_set
+from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
 from buoy_nav.source_registry import SourceRegistry
 
@@ -134,6 +134,7 @@ class FusionEngine:
         self._counters = {kind: MeasurementCounters() for kind in (IMU, *kinds)}
         self._queue = MeasurementQueue(self.sources, self._counters)
         self._recency = AidingRecency(kinds, len(AIDED_QUANTITIES), config.coasting_timeout_s)
+        self._sensor_sets = SensorSets(self.sources)
         self._gates = AidingGates(
             self._counters, self._recency, self._registry.aided_index, self.innovation_log
         )
@@ -280,7 +281,7 @@ class FusionEngine:
             trusted=self._integrity.trusted,
             integrity_events=tuple(dataclasses.replace(e) for e in self._integrity.events),
             realignments=self._realignments,
-            sensor_set=sensor_set(active, lapsed) if self.aligned else "",
+            sensor_set=self._sensor_sets.label(active, lapsed) if self.aligned else "",
             coasting_sources=tuple(sorted(lapsed)),
         )
 

@@ -88,7 +88,7 @@ class EngineHealth:
     trusted: the filter agrees with its aiding (see :mod:`buoy_nav.integrity`).
     integrity_events: the periods in which it did not, oldest first.
     realignments: alignments started again because the filter stayed inconsistent.
-    sensor_set: the sensor set in use (:func:`buoy_nav.sensor_sets.sensor_set`).
+    sensor_set: the sensor set in use (:meth:`buoy_nav.sensor_sets.SensorSets.label`).
     coasting_sources: kinds of the aiding sources accepted before but not within
       ``coasting_timeout_s`` (their quantities are carried by the inertial solution).
     """
