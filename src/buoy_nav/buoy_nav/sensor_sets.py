@@ -25,6 +25,9 @@ from buoy_nav.aiding.base import (
     AidingSource,
 )
 
+_NAMED_SENSORS = frozenset((*GNSS_SENSORS, MAGNETOMETER, MOTION_PACK, None))
+"""The sensors the sets are named after (None: a source of no sensor, such as a constraint)."""
+
 
 class SensorSets:
     """The labels of the sensor sets over ``sources`` (aiding-source classes or instances),
@@ -46,7 +49,6 @@ class SensorSets:
     def label(self, active: set[str], coasting: set[str]) -> str:
         """The set's label (``a``…``d``, with ``+e`` during a GNSS outage) and its sensors, for
         the ``active`` and ``coasting`` source kinds."""
-
         used = {sensor for sensor, kinds in self._kinds.items() if active & kinds}
         if GNSS_ANTENNA_PAIR in used:
             label = "a: dual-antenna GNSS" + _also(used, GNSS_THIRD_ANTENNA, "third antenna")
@@ -56,6 +58,9 @@ class SensorSets:
             label = "d: motion pack" + _also(used, MAGNETOMETER, "magnetometer")
         elif MAGNETOMETER in used:
             label = "c: magnetometer, no GNSS"
+        elif used - _NAMED_SENSORS:
+            # A sensor none of the sets names (a source registered since): said as it is.
+            label = f"other: {', '.join(sorted(used - _NAMED_SENSORS))}"
         else:
             label = "inertial only"
         outage = sorted(coasting & self._gnss_kinds)
