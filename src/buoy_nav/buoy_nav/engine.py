@@ -70,8 +70,9 @@ from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCoun
 from buoy_nav.imu_input import ImuInput
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
-from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample, load_compiled_kernels
+from buoy_nav.mechanization import StrapdownIntegrator, load_compiled_kernels
 from buoy_nav.prediction import RealtimePrediction
+from buoy_nav.processing_point import ProcessingPoint
 from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
 from buoy_nav.source_registry import SourceRegistry
@@ -120,13 +121,7 @@ class FusionEngine:
 
         self._imu_buffer: deque = deque()
         self._imu_input = ImuInput(config)
-        # State of the processing: time and (raw) IMU sample the state refers to.
-        self._time = -math.inf
-        self._gyro: tuple[float, float, float] | None = None
-        self._force: tuple[float, float, float] | None = None
-        # The IMU sample before the current one (same run), for interpolation at stamps.
-        self._older_imu = None
-        self._last_processed_imu_stamp = -math.inf
+        self._point = ProcessingPoint(config.max_imu_gap_s)
         # Processing horizon that add_imu left for catch_up (None: nothing deferred).
         self._deferred_horizon: float | None = None
 
@@ -177,10 +172,10 @@ class FusionEngine:
         return self._prediction.predict(
             self._nav.kalman,
             self._nav.integrator,
-            (self._time, self._gyro, self._force),
+            (self._point.t_s, self._point.gyro, self._point.force),
             self._imu_buffer,
             sample,
-            self._recency.coasting_flags(self._time),
+            self._recency.coasting_flags(self._point.t_s),
         )
 
     def catch_up(self) -> None:
@@ -219,7 +214,7 @@ class FusionEngine:
         validated = source.validated(measurement)
         if isinstance(validated, Reason):
             return validated
-        if t <= self._last_processed_imu_stamp:
+        if t <= self._point.last_imu_stamp_s:
             return Reason.TOO_LATE
         self._imu_input.clock.aiding_stamp(t)
         refused = self._queue.push(source, t, validated)
@@ -263,8 +258,9 @@ class FusionEngine:
     def health(self) -> EngineHealth:
         """Counters, alignment and coasting state (a snapshot)."""
         self.catch_up()
-        coasting = self._recency.coasting_flags(self._time)
-        active, lapsed = self._recency.sources(self._time)
+        t_s = self._point.t_s
+        coasting = self._recency.coasting_flags(t_s)
+        active, lapsed = self._recency.sources(t_s)
         return EngineHealth(
             alignment_state=AlignmentState.ALIGNED if self.aligned else self._aligner.state,
             aligned=self.aligned,
@@ -275,7 +271,7 @@ class FusionEngine:
             covariance_repairs=self._nav.kalman.covariance_repairs if self._nav else 0,
             imu_gaps=self._imu_gaps,
             alignments=self._alignments,
-            time_s=self._time if math.isfinite(self._time) else math.nan,
+            time_s=t_s if math.isfinite(t_s) else math.nan,
             alignment=self._alignment,
             imu_clock_steps=tuple(self._imu_input.clock.steps),
             trusted=self._integrity.trusted,
@@ -312,7 +308,7 @@ class FusionEngine:
         buffer = self._imu_buffer
         while buffer and buffer[0][0] <= horizon:
             t, gyro, force = buffer.popleft()
-            if self._gyro is None or t - self._time > self.config.max_imu_gap_s:
+            if self._point.begins_run(t):
                 self._start_imu_run(t, gyro, force)
                 continue
             solution = self._process_sample(t, gyro, force)
@@ -323,47 +319,44 @@ class FusionEngine:
     def _start_imu_run(self, t: float, gyro, force) -> None:
         """Take the first sample of a run of IMU samples (the first of all, or after a gap,
         which starts the alignment again)."""
-        if self._gyro is not None:
+        if self._point.started:
             self._imu_gaps += 1
             self._restart_alignment()
         # Measurements up to the first sample of a run can only feed the alignment.
         queue = self._queue
         while queue.heap and queue.heap[0][0] <= t:
             self._handle_measurements(*queue.pop_stamp(), gyro)
-        self._time, self._gyro, self._force = t, gyro, force
-        self._older_imu = None
-        self._last_processed_imu_stamp = t
+        self._point.start_run(t, gyro, force)
 
     def _process_sample(self, t: float, gyro, force) -> NavSolution | None:
         """Integrate to the IMU sample at ``t``, applying the measurements stamped up to it at
         their own stamps; its solution when one is due from the filter."""
-        t0, gyro0, force0 = self._time, self._gyro, self._force
-        t_older, gyro_older, force_older = self._older_imu or (None, None, None)
+        point = self._point
+        point.begin_step()
         queue = self._queue
         while queue.heap and queue.heap[0][0] <= t:
             stamp, group = queue.pop_stamp()
-            gyro_m = interpolate_sample(stamp, t0, gyro0, t, gyro, t_older, gyro_older)
-            force_m = interpolate_sample(stamp, t0, force0, t, force, t_older, force_older)
+            gyro_m, force_m = point.samples_at(stamp, t, gyro, force)
             self._advance(stamp, gyro_m, force_m)
             self._handle_measurements(stamp, group, gyro_m)
         self._advance(t, gyro, force)
         if self._registry.pseudo and self._nav is not None:
             self._apply_pseudo_measurements(t, gyro)
-        self._older_imu = (t0, gyro0, force0)
-        self._last_processed_imu_stamp = t
-        if self.config.realtime_output or self._nav is None or not self._output.due(t, t - t0):
+        span = point.end_step()
+        if self.config.realtime_output or self._nav is None or not self._output.due(t, span):
             return None
-        return self._solution(self._nav.integrator, self._time, gyro, force)
+        return self._solution(self._nav.integrator, t, gyro, force)
 
     def _advance(self, t: float, gyro, force):
         """Integrate from the current state time to ``t`` (raw samples at both ends)."""
-        dt = t - self._time
+        point = self._point
+        dt = t - point.t_s
         if dt > 0.0:
             if self._nav is None:
-                self._aligner.add_motion(dt, self._gyro, gyro, self._force, force)
-            elif self._nav.integrate(t, dt, self._gyro, gyro, self._force, force):
+                self._aligner.add_motion(dt, point.gyro, gyro, point.force, force)
+            elif self._nav.integrate(t, dt, point.gyro, gyro, point.force, force):
                 self._solutions.covariance_changed()
-        self._time, self._gyro, self._force = t, gyro, force
+        point.moved_to(t, gyro, force)
 
     def _handle_measurements(self, t: float, group: list, gyro):
         """Apply the (source, measurement) pairs of stamp ``t`` (raw gyro rate ``gyro`` there):
@@ -382,7 +375,7 @@ class FusionEngine:
             correction = nav.correct(point.state, outcome.accepted)
             self._solutions.covariance_changed()
             self._solutions.biases_changed()
-            self._prediction.carry_over(self._time, point.state, correction)
+            self._prediction.carry_over(self._point.t_s, point.state, correction)
         for source, measurement, model in outcome.persistent_rejections:
             self._reset_to_measurement(source, t, measurement, gyro, model)
         self._judge_integrity(t, outcome.rejected_kinds)
@@ -475,7 +468,12 @@ class FusionEngine:
         """The solution of ``integrator``'s state at stamp ``t`` (raw gyro and force there)."""
         # Coasting is judged where the filter is: measurements ahead of it are not yet used.
         return self._solutions.solution(
-            integrator, self._nav.kalman, t, gyro, force, self._recency.coasting_flags(self._time)
+            integrator,
+            self._nav.kalman,
+            t,
+            gyro,
+            force,
+            self._recency.coasting_flags(self._point.t_s),
         )
 
 
