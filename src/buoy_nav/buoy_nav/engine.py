@@ -7,9 +7,8 @@ role in the alignment) and processes them strictly in stamp order,
 ``max_measurement_delay_s`` behind the newest IMU stamp, so measurements that arrive out of
 order within that delay give exactly the result of in-order arrival. A measurement whose stamp
 falls between two IMU samples is applied at its own stamp: the state is integrated to it with
-IMU samples interpolated on the parabola through the last three samples (the curve the strapdown
-integrator integrates, so splitting a step costs no accuracy), updated, and integrated on to the
-next sample. Measurements sharing a stamp are gated one by one and the accepted ones applied in
+IMU samples interpolated there (:mod:`buoy_nav.processing_point`), updated, and integrated on to
+the next sample. Measurements sharing a stamp are gated one by one and the accepted ones applied in
 one stacked update, in the order of the registry (:data:`buoy_nav.aiding.AIDING_SOURCES`).
 
 A source may be superseded by another (``superseded_by``): the dual antennas give either the
@@ -33,7 +32,8 @@ corrects it after every accepted measurement, its covariance propagated in batch
 that interval old. The engine's parts: :mod:`buoy_nav.source_registry` (the sources),
 :mod:`buoy_nav.measurement_queue` (their measurements in stamp order),
 :mod:`buoy_nav.aiding_gates` (the gate of each and its books), :mod:`buoy_nav.integrity`,
-:mod:`buoy_nav.solution` and :mod:`buoy_nav.prediction` (the solutions).
+:mod:`buoy_nav.sensor_sets` (what is in use), :mod:`buoy_nav.solution` and
+:mod:`buoy_nav.prediction` (the solutions).
 
 Invalid input (non-finite values, absurd magnitudes, non-positive variances, IMU stamps not
 increasing, duplicated measurement stamps, measurements older than what was already processed)
