@@ -83,6 +83,7 @@ class Mutant:
 MILLER = "src/wind_comp/wind_comp/miller.py"
 COMPENSATOR = "src/wind_comp/wind_comp/compensator.py"
 MECHANIZATION = "src/buoy_nav/buoy_nav/mechanization.py"
+STRAPDOWN_KERNEL = "src/buoy_nav/buoy_nav/strapdown_kernel.py"
 
 MUTANTS = (
     Mutant(
@@ -148,7 +149,7 @@ MUTANTS = (
         "gravity added to the vertical velocity instead of subtracted (mechanization)",
         (
             Edit(
-                MECHANIZATION,
+                STRAPDOWN_KERNEL,
                 "new_vu = vu + fnu - (ce * vn - cn * ve + gravity) * dt_s",
                 "new_vu = vu + fnu - (ce * vn - cn * ve - gravity) * dt_s",
             ),
@@ -168,7 +169,7 @@ MUTANTS = (
                 "            _OMEGA * math.cos(lat) + ve / east_radius,\n",
                 "            -_OMEGA * math.cos(lat) + ve / east_radius,\n",
             ),
-            Edit(MECHANIZATION, "wie_n = _OMEGA * cos_lat", "wie_n = -_OMEGA * cos_lat"),
+            Edit(STRAPDOWN_KERNEL, "wie_n = _OMEGA * cos_lat", "wie_n = -_OMEGA * cos_lat"),
         ),
     ),
     Mutant(

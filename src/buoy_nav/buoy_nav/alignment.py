@@ -33,6 +33,7 @@ the spread of the wave motion seen in the levelling window.
 import enum
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -102,6 +103,22 @@ class _Velocity:
     t_s: float
     velocity_enu_mps: np.ndarray
     covariance_m2s2: np.ndarray
+
+
+class _WindowSpread(NamedTuple):
+    """What the levelling window's specific force says of the alignment's uncertainty.
+
+    gravity_mps2: normal gravity at the fix. acceleration_variance_m2_s4: the window's
+    specific-force variance summed over the axes. motion_tilt_variance_rad2: tilt variance from
+    the motion and the gyro bias; tilt_variance_rad2: with the accelerometer bias, whose variance
+    is accel_bias_variance_m2_s4.
+    """
+
+    gravity_mps2: float
+    acceleration_variance_m2_s4: float
+    motion_tilt_variance_rad2: float
+    accel_bias_variance_m2_s4: float
+    tilt_variance_rad2: float
 
 
 class InMotionAligner:
@@ -199,16 +216,59 @@ class InMotionAligner:
         window is short, no recent fix exists (and no site is configured to stand for one), or
         the vector is too steep.
         """
-        config = self._config
         if self.state is not AlignmentState.WAITING_FOR_GNSS:
             return None
         body_vector = self._baseline if body_vector is None else np.asarray(body_vector, float)
+        fix = self._recent_fix(t_s)
+        if fix is None:
+            return None
+        rotation = self._window_attitude(fix, yaw_rad, body_vector)
+        if rotation is None:
+            return None
+        spread = self._window_spread(fix)
+        states = self._states
+        covariance = np.zeros((states.dim, states.dim))
+        attitude_bias_covariance = _attitude_and_accel_bias_covariance(
+            rotation,
+            rotation @ body_vector,
+            spread.motion_tilt_variance_rad2,
+            max(variance_rad2, 0.0),
+            spread.accel_bias_variance_m2_s4,
+            spread.gravity_mps2,
+        )
+        for row, rows in enumerate((states.attitude, states.accel_bias)):
+            for column, columns in enumerate((states.attitude, states.accel_bias)):
+                covariance[rows, columns] = attitude_bias_covariance[
+                    3 * row : 3 * row + 3, 3 * column : 3 * column + 3
+                ]
+        covariance[states.gyro_bias, states.gyro_bias] = (
+            np.eye(3) * self._imu.initial_gyro_bias_variance_rad2_s2
+        )
+        state = self._antenna_state(t_s, fix, rotation, gyro_rad_s, spread, covariance)
+        roll, pitch, yaw = euler_from_rotation_matrix(rotation)
+        return AlignmentResult(
+            t_s=t_s,
+            state=state,
+            covariance=covariance,
+            roll_rad=roll,
+            pitch_rad=pitch,
+            yaw_rad=yaw,
+            tilt_sigma_rad=math.sqrt(spread.tilt_variance_rad2),
+        )
+
+    def _recent_fix(self, t_s: float) -> _Fix | None:
+        """The fix the alignment at ``t_s`` (s) starts from: the latest, or the configured site
+        when there is none; None when it is older than ``alignment_max_fix_age_s``."""
         fix = self._fix
         if fix is None and self._site is not None:
             fix = self._site_fix(t_s)
-        if fix is None or t_s - fix.t_s > config.alignment_max_fix_age_s:
+        if fix is None or t_s - fix.t_s > self._config.alignment_max_fix_age_s:
             return None
+        return fix
 
+    def _window_attitude(self, fix: _Fix, yaw_rad: float, body_vector) -> np.ndarray | None:
+        """R_nb at the end of the window from its mean specific force and the azimuth
+        ``yaw_rad`` (ENU, rad) of ``body_vector`` (body); None if the vector is too steep."""
         duration = self._duration_s
         mean_start_frame = self._force_sum / duration
         relative = rotation_matrix_from_quaternion(self._relative)
@@ -220,11 +280,12 @@ class InMotionAligner:
         # The window's frame is inertial, so gravity turned with the Earth during it: the mean
         # lags the end-of-window direction by ω_ie × T/2. Correct with the first solution.
         mean_force = mean_force + np.cross(rotation.T @ earth_rate, mean_force) * (0.5 * duration)
-        rotation = self._level_and_head(mean_force, yaw_rad, body_vector)
-        if rotation is None:
-            return None
-        roll, pitch, yaw = euler_from_rotation_matrix(rotation)
+        return self._level_and_head(mean_force, yaw_rad, body_vector)
 
+    def _window_spread(self, fix: _Fix) -> _WindowSpread:
+        """The tilt uncertainty the window's motion and the IMU's biases leave, at ``fix``."""
+        duration = self._duration_s
+        mean_start_frame = self._force_sum / duration
         gravity = earth.normal_gravity_mps2(fix.latitude_rad, fix.altitude_m)
         variance = np.maximum(self._force_sq_sum / duration - mean_start_frame**2, 0.0)
         motion_tilt_variance = (
@@ -233,55 +294,43 @@ class InMotionAligner:
             + _TILT_SIGMA_FLOOR_RAD**2
         )
         accel_bias_variance = self._imu.initial_accel_bias_variance_m2_s4
-        tilt_variance = motion_tilt_variance + accel_bias_variance / gravity**2
-        states = self._states
-        covariance = np.zeros((states.dim, states.dim))
-        attitude_bias_covariance = _attitude_and_accel_bias_covariance(
-            rotation,
-            rotation @ body_vector,
-            motion_tilt_variance,
-            max(variance_rad2, 0.0),
-            accel_bias_variance,
-            gravity,
+        return _WindowSpread(
+            gravity_mps2=gravity,
+            acceleration_variance_m2_s4=float(np.sum(variance)),
+            motion_tilt_variance_rad2=motion_tilt_variance,
+            accel_bias_variance_m2_s4=accel_bias_variance,
+            tilt_variance_rad2=motion_tilt_variance + accel_bias_variance / gravity**2,
         )
-        for row, rows in enumerate((states.attitude, states.accel_bias)):
-            for column, columns in enumerate((states.attitude, states.accel_bias)):
-                covariance[rows, columns] = attitude_bias_covariance[
-                    3 * row : 3 * row + 3, 3 * column : 3 * column + 3
-                ]
 
-        # Position and velocity: the antenna measurements moved back along the lever arm. They
-        # may be up to alignment_max_fix_age_s old; the motion since then widens the variances
-        # (acceleration variance from the window for velocity, speed for position).
+    def _antenna_state(
+        self,
+        t_s: float,
+        fix: _Fix,
+        rotation: np.ndarray,
+        gyro_rad_s,
+        spread: _WindowSpread,
+        covariance: np.ndarray,
+    ) -> NavState:
+        """The state of ``base_link`` at ``t_s`` (s) with attitude ``rotation`` (R_nb): the
+        antenna measurements moved back along the lever arm (raw gyro ``gyro_rad_s`` there,
+        body rad/s). Their variances go to the velocity and position blocks of ``covariance``:
+        the measurements may be up to ``alignment_max_fix_age_s`` old, and the motion since
+        widens them (the window's acceleration for velocity, the speed for position), as does
+        the tilt's uncertainty over the lever arm."""
+        config = self._config
+        states = self._states
         lever_enu = rotation @ self._primary
-        acceleration_variance = float(np.sum(variance))
         latitude, longitude, altitude = earth.geodetic_offset(
             fix.latitude_rad, fix.longitude_rad, fix.altitude_m, -lever_enu
         )
-        velocity = np.zeros(3)
-        velocity_variance = np.full(3, _UNKNOWN_VELOCITY_SIGMA_MPS**2)
-        if self._fix is None:
-            # At a site without GNSS the buoy moves with the waves about a fixed mean: the
-            # window's acceleration spread over a wave's angular frequency bounds the speed.
-            velocity_variance = np.full(3, max(acceleration_variance, 0.01))
         rate = np.asarray(gyro_rad_s, dtype=float)
-        measured = self._velocity
-        if measured is not None and t_s - measured.t_s <= config.alignment_max_fix_age_s:
-            frame_rate = earth.navigation_frame_rate_enu_rad_s(
-                latitude, altitude, measured.velocity_enu_mps
-            )
-            velocity = (
-                measured.velocity_enu_mps
-                - rotation @ np.cross(rate, self._primary)
-                + np.cross(frame_rate, lever_enu)
-            )
-            velocity_variance = (
-                np.diag(measured.covariance_m2s2)
-                + acceleration_variance * (t_s - measured.t_s) ** 2
-            )
+        velocity, velocity_variance = self._lever_arm_velocity(
+            t_s, rotation, rate, latitude, altitude, spread.acceleration_variance_m2_s4
+        )
         speed_sq = float(velocity @ velocity + np.sum(velocity_variance))
         position_variance = np.diag(fix.covariance_enu_m2) + speed_sq * (t_s - fix.t_s) ** 2
         lever_sq = float(self._primary @ self._primary)
+        tilt_variance = spread.tilt_variance_rad2
         position_variance = position_variance + tilt_variance * lever_sq
         velocity_variance = velocity_variance + tilt_variance * float(rate @ rate) * lever_sq
         covariance[states.velocity, states.velocity] = np.diag(
@@ -290,10 +339,7 @@ class InMotionAligner:
         covariance[states.position, states.position] = np.diag(
             np.maximum(position_variance, config.gnss_position_variance_floor_m2)
         )
-        covariance[states.gyro_bias, states.gyro_bias] = (
-            np.eye(3) * self._imu.initial_gyro_bias_variance_rad2_s2
-        )
-        state = NavState(
+        return NavState(
             attitude_xyzw=quaternion_from_rotation_matrix(rotation),
             velocity_enu_mps=velocity,
             latitude_rad=latitude,
@@ -302,15 +348,41 @@ class InMotionAligner:
             gyro_bias_rad_s=np.zeros(3),
             accel_bias_mps2=np.zeros(3),
         )
-        return AlignmentResult(
-            t_s=t_s,
-            state=state,
-            covariance=covariance,
-            roll_rad=roll,
-            pitch_rad=pitch,
-            yaw_rad=yaw,
-            tilt_sigma_rad=math.sqrt(tilt_variance),
+
+    def _lever_arm_velocity(
+        self,
+        t_s: float,
+        rotation: np.ndarray,
+        rate: np.ndarray,
+        latitude_rad: float,
+        altitude_m: float,
+        acceleration_variance_m2_s4: float,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(velocity ENU m/s, its variances m²/s²) of ``base_link`` at ``t_s`` (s) from the
+        latest antenna velocity, less the lever-arm velocity of the body rate ``rate`` (rad/s);
+        without a recent one, zero with a wide variance."""
+        velocity = np.zeros(3)
+        velocity_variance = np.full(3, _UNKNOWN_VELOCITY_SIGMA_MPS**2)
+        if self._fix is None:
+            # At a site without GNSS the buoy moves with the waves about a fixed mean: the
+            # window's acceleration spread over a wave's angular frequency bounds the speed.
+            velocity_variance = np.full(3, max(acceleration_variance_m2_s4, 0.01))
+        measured = self._velocity
+        if measured is None or t_s - measured.t_s > self._config.alignment_max_fix_age_s:
+            return velocity, velocity_variance
+        frame_rate = earth.navigation_frame_rate_enu_rad_s(
+            latitude_rad, altitude_m, measured.velocity_enu_mps
         )
+        velocity = (
+            measured.velocity_enu_mps
+            - rotation @ np.cross(rate, self._primary)
+            + np.cross(frame_rate, rotation @ self._primary)
+        )
+        velocity_variance = (
+            np.diag(measured.covariance_m2s2)
+            + acceleration_variance_m2_s4 * (t_s - measured.t_s) ** 2
+        )
+        return velocity, velocity_variance
 
     def latest_position_rad(self) -> tuple[float, float] | None:
         """(latitude, longitude) in rad of the latest fix, else of the site; None: neither."""

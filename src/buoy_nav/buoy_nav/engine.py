@@ -7,9 +7,8 @@ role in the alignment) and processes them strictly in stamp order,
 ``max_measurement_delay_s`` behind the newest IMU stamp, so measurements that arrive out of
 order within that delay give exactly the result of in-order arrival. A measurement whose stamp
 falls between two IMU samples is applied at its own stamp: the state is integrated to it with
-IMU samples interpolated on the parabola through the last three samples (the curve the strapdown
-integrator integrates, so splitting a step costs no accuracy), updated, and integrated on to the
-next sample. Measurements sharing a stamp are gated one by one and the accepted ones applied in
+IMU samples interpolated there (:mod:`buoy_nav.processing_point`), updated, and integrated on to
+the next sample. Measurements sharing a stamp are gated one by one and the accepted ones applied in
 one stacked update, in the order of the registry (:data:`buoy_nav.aiding.AIDING_SOURCES`).
 
 A source may be superseded by another (``superseded_by``): the dual antennas give either the
@@ -27,11 +26,14 @@ propagation it triggers, and corrections reach the prediction one IMU sample lat
 covariances are the filter's, from up to ``max_measurement_delay_s`` earlier.
 
 Before alignment the IMU samples and the measurements feed :class:`InMotionAligner`; once
-aligned, the strapdown integrator carries the nominal state and the error-state filter corrects
-it after every accepted measurement. The covariance is propagated in batches of at most
-``covariance_propagation_interval_s`` and always up to a measurement stamp before an update (the
-batching is exact to first order, see :mod:`buoy_nav.error_state_filter`); the covariances in a
-:class:`NavSolution` are therefore at most that interval old.
+aligned, :class:`~buoy_nav.aided_navigation.AidedNavigation` carries the nominal state and
+corrects it after every accepted measurement, its covariance propagated in batches of at most
+``covariance_propagation_interval_s``: the covariances in a :class:`NavSolution` are at most
+that interval old. The engine's parts: :mod:`buoy_nav.source_registry` (the sources),
+:mod:`buoy_nav.measurement_queue` (their measurements in stamp order),
+:mod:`buoy_nav.aiding_gates` (the gate of each and its books), :mod:`buoy_nav.integrity`,
+:mod:`buoy_nav.sensor_sets` (what is in use), :mod:`buoy_nav.solution` and
+:mod:`buoy_nav.prediction` (the solutions).
 
 Invalid input (non-finite values, absurd magnitudes, non-positive variances, IMU stamps not
 increasing, duplicated measurement stamps, measurements older than what was already processed)
@@ -56,28 +58,24 @@ import numpy as np
 
 from buoy_common.contract import Reason
 from buoy_nav import earth
+from buoy_nav.aided_navigation import AidedNavigation
 from buoy_nav.aiding import AIDING_SOURCES
-from buoy_nav.aiding.base import AIDED_QUANTITIES, AidingSource, LinearisationPoint
+from buoy_nav.aiding.base import AIDED_QUANTITIES, FIX, AidingSource, as_floats
+from buoy_nav.aiding_gates import AidingGates
 from buoy_nav.alignment import AlignmentResult, AlignmentState, InMotionAligner
 from buoy_nav.config import FusionConfig
 from buoy_nav.epoch_recorder import EpochRecorder
-from buoy_nav.error_state_filter import (
-    ERROR_STATES,
-    ErrorStateFilter,
-    ImuErrorModel,
-    NavState,
-    block_diagonal,
-    discrete_error_model,
-    inject_error_state,
-)
+from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
 from buoy_nav.imu_input import ImuInput
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
-from buoy_nav.mechanization import StrapdownIntegrator, interpolate_sample, load_compiled_kernels
+from buoy_nav.mechanization import StrapdownIntegrator, load_compiled_kernels
 from buoy_nav.prediction import RealtimePrediction
-from buoy_nav.sensor_sets import AidingRecency, sensor_set
+from buoy_nav.processing_point import ProcessingPoint
+from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
+from buoy_nav.source_registry import SourceRegistry
 
 __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
 
@@ -102,41 +100,20 @@ class FusionEngine:
         self.config = config
         self.states = ERROR_STATES
         """Names of the error states (rows and columns of :attr:`covariance`)."""
-        self.sources: tuple[AidingSource, ...] = tuple(
-            source(config, self.states) for source in sources
-        )
+        self._registry = SourceRegistry(config, self.states, sources)
+        self.sources: tuple[AidingSource, ...] = self._registry.sources
         """The aiding sources, one instance per class, in the order of application."""
-        self._source_of_type = {source.measurement_type: source for source in self.sources}
-        self._source_of_topic = {
-            source.topic: source for source in self.sources if not source.pseudo
-        }
-        # Constraints that read no topic, asked for a measurement at IMU samples.
-        self._pseudo_sources = tuple(s for s in self.sources if s.pseudo and s.enabled)
-        kinds = [source.kind for source in self.sources]
-        if len(set(kinds)) != len(kinds) or IMU in kinds:
-            raise ValueError(f"aiding sources need distinct kinds other than '{IMU}': {kinds}")
-        topic_sources = sum(1 for source in self.sources if not source.pseudo)
-        if len(self._source_of_type) != len(kinds) or len(self._source_of_topic) != topic_sources:
-            raise ValueError("aiding sources need distinct measurement types and topics")
-        for source in self.sources:
-            if source.aids not in AIDED_QUANTITIES:
-                raise ValueError(
-                    f"{source.kind} aids '{source.aids}', not one of {AIDED_QUANTITIES}"
-                )
-        self._aided_index = {source: AIDED_QUANTITIES.index(source.aids) for source in self.sources}
-
         self.recorder = EpochRecorder()
         """Told of every covariance epoch, correction and reset (for a smoother)."""
-        self._imu_model = ImuErrorModel.from_config(config)
-        self._distrust_variances = distrust_variances(config)
-        self._integrity = IntegrityMonitor(
-            config.integrity_rejection_count,
-            config.integrity_realign_s,
-            config.integrity_recovery_s,
+        self.innovation_log: list[InnovationRecord] | None = (
+            [] if config.record_innovations else None
         )
+        self.last_input_rejection: str | None = None
+        """Why the latest input call rejected its input (None: accepted)."""
+
+        self._imu_model = ImuErrorModel.from_config(config)
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
-        self._integrator: StrapdownIntegrator | None = None
-        self._filter: ErrorStateFilter | None = None
+        self._nav: AidedNavigation | None = None
         self._alignment: AlignmentResult | None = None
         self._alignments = 0
         self._imu_gaps = 0
@@ -144,39 +121,29 @@ class FusionEngine:
 
         self._imu_buffer: deque = deque()
         self._imu_input = ImuInput(config)
-        # State of the processing: time and (raw) IMU sample the state refers to.
-        self._time = -math.inf
-        self._gyro: tuple[float, float, float] | None = None
-        self._force: tuple[float, float, float] | None = None
-        # The IMU sample before the current one (same run), for interpolation at stamps.
-        self._older_imu = None
-        self._last_processed_imu_stamp = -math.inf
+        self._point = ProcessingPoint(config.max_imu_gap_s)
         # Processing horizon that add_imu left for catch_up (None: nothing deferred).
         self._deferred_horizon: float | None = None
 
+        kinds = self._registry.kinds
         self._counters = {kind: MeasurementCounters() for kind in (IMU, *kinds)}
         self._queue = MeasurementQueue(self.sources, self._counters)
-        self._consecutive_rejections = dict.fromkeys(kinds, 0)
         self._recency = AidingRecency(kinds, len(AIDED_QUANTITIES), config.coasting_timeout_s)
-        self.innovation_log: list[InnovationRecord] | None = (
-            [] if config.record_innovations else None
+        self._sensor_sets = SensorSets(self.sources)
+        self._gates = AidingGates(
+            self._counters, self._recency, self._registry.aided_index, self.innovation_log
         )
-
-        self._solutions = SolutionBuilder(
-            earth.LocalTangentPlane(
-                math.radians(config.origin_latitude_deg),
-                math.radians(config.origin_longitude_deg),
-                config.origin_altitude_m,
-            )
-            if config.has_origin
-            else None
+        self._distrust_variances = distrust_variances(config)
+        self._integrity = IntegrityMonitor(
+            config.integrity_rejection_count,
+            config.integrity_realign_s,
+            config.integrity_recovery_s,
         )
+        self._solutions = SolutionBuilder(_configured_map_plane(config))
         self._output = OutputDecimation(config.output_rate_hz)
         self._prediction = RealtimePrediction(
             config.max_imu_gap_s, self.states, self._solutions, self._output
         )
-        self.last_input_rejection: str | None = None
-        """Why the latest input call rejected its input (None: accepted)."""
 
     # ------------------------------------------------------------------ input
     def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[NavSolution]:
@@ -200,15 +167,15 @@ class FusionEngine:
         if not config.realtime_output:
             return self._process(horizon)
         self._deferred_horizon = horizon
-        if self._filter is None:
+        if self._nav is None:
             return []
         return self._prediction.predict(
-            self._filter,
-            self._integrator,
-            (self._time, self._gyro, self._force),
+            self._nav.kalman,
+            self._nav.integrator,
+            (self._point.t_s, self._point.gyro, self._point.force),
             self._imu_buffer,
             sample,
-            self._recency.coasting_flags(self._time),
+            self._recency.coasting_flags(self._point.t_s),
         )
 
     def catch_up(self) -> None:
@@ -228,38 +195,36 @@ class FusionEngine:
 
         Raises TypeError for a measurement no registered source takes (a programming error).
         """
-        source = self._source_of_type.get(type(measurement))
-        if source is None:
-            raise TypeError(f"no aiding source of the fusion takes {type(measurement).__name__}")
+        source = self._registry.of_measurement(measurement)
         self.catch_up()
         self.last_input_rejection = None
+        refusal = self._queue_measurement(source, t_s, measurement)
+        if refusal is not None:
+            self.reject_input(source.kind, refusal)
+
+    def _queue_measurement(self, source: AidingSource, t_s: float, measurement) -> Reason | None:
+        """Validate ``measurement`` of ``source`` stamped ``t_s`` (s) and queue it; the reason
+        it is refused (None: queued)."""
         if not source.enabled:
-            self.reject_input(source.kind, Reason.DISABLED)
-            return
-        try:
-            t = float(t_s)
-        except (TypeError, ValueError):
-            self.reject_input(source.kind, Reason.MALFORMED)
-            return
-        if not math.isfinite(t):
-            self.reject_input(source.kind, Reason.NON_FINITE)
-            return
+            return Reason.DISABLED
+        stamp = as_floats(t_s)
+        if isinstance(stamp, Reason):
+            return stamp
+        (t,) = stamp
         validated = source.validated(measurement)
         if isinstance(validated, Reason):
-            self.reject_input(source.kind, validated)
-            return
-        if t <= self._last_processed_imu_stamp:
-            self.reject_input(source.kind, Reason.TOO_LATE)
-            return
+            return validated
+        if t <= self._point.last_imu_stamp_s:
+            return Reason.TOO_LATE
         self._imu_input.clock.aiding_stamp(t)
         refused = self._queue.push(source, t, validated)
         if refused is not None:
-            self.reject_input(source.kind, refused)
-            return
+            return refused
         latest_imu_stamp = self._imu_input.latest_stamp_s
         if t - latest_imu_stamp > MAX_MEASUREMENT_LEAD_S:
             # An IMU outage: only the last seconds can serve the realignment that follows.
             self._queue.give_up_between(latest_imu_stamp, t - MAX_MEASUREMENT_LEAD_S)
+        return None
 
     def reject_input(self, kind: str, reason: str) -> None:
         """Count an input of ``kind`` (``imu`` or a source's kind) rejected for ``reason``, also
@@ -269,10 +234,7 @@ class FusionEngine:
 
     def source_of_topic(self, topic: str) -> AidingSource:
         """The aiding source that reads ``topic`` (ValueError naming it when none does)."""
-        source = self._source_of_topic.get(topic)
-        if source is None:
-            raise ValueError(f"'{topic}' is not an input topic of the fusion")
-        return source
+        return self._registry.of_topic(topic)
 
     def flush(self) -> list[NavSolution]:
         """End of data: process every buffered IMU sample and every applicable measurement.
@@ -283,7 +245,7 @@ class FusionEngine:
         self.catch_up()
         solutions = self._process(math.inf)
         self._queue.give_up_all()
-        self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
+        self.recorder.end_segment(None if self._nav is None else self._nav.kalman.covariance)
         return solutions
 
     # ------------------------------------------------------------------ status
@@ -291,13 +253,14 @@ class FusionEngine:
     def aligned(self) -> bool:
         """True once the filter runs (after alignment)."""
         self.catch_up()
-        return self._filter is not None
+        return self._nav is not None
 
     def health(self) -> EngineHealth:
         """Counters, alignment and coasting state (a snapshot)."""
         self.catch_up()
-        coasting = self._recency.coasting_flags(self._time)
-        active, lapsed = self._recency.sources(self._time)
+        t_s = self._point.t_s
+        coasting = self._recency.coasting_flags(t_s)
+        active, lapsed = self._recency.sources(t_s)
         return EngineHealth(
             alignment_state=AlignmentState.ALIGNED if self.aligned else self._aligner.state,
             aligned=self.aligned,
@@ -305,16 +268,16 @@ class FusionEngine:
             coasting_velocity=coasting[1],
             coasting_heading=coasting[2],
             counters={kind: c.snapshot() for kind, c in self._counters.items()},
-            covariance_repairs=self._filter.covariance_repairs if self._filter else 0,
+            covariance_repairs=self._nav.kalman.covariance_repairs if self._nav else 0,
             imu_gaps=self._imu_gaps,
             alignments=self._alignments,
-            time_s=self._time if math.isfinite(self._time) else math.nan,
+            time_s=t_s if math.isfinite(t_s) else math.nan,
             alignment=self._alignment,
             imu_clock_steps=tuple(self._imu_input.clock.steps),
             trusted=self._integrity.trusted,
             integrity_events=tuple(dataclasses.replace(e) for e in self._integrity.events),
             realignments=self._realignments,
-            sensor_set=sensor_set(active, lapsed) if self.aligned else "",
+            sensor_set=self._sensor_sets.label(active, lapsed) if self.aligned else "",
             coasting_sources=tuple(sorted(lapsed)),
         )
 
@@ -323,13 +286,13 @@ class FusionEngine:
         """Current error-state covariance (a copy; states named by :attr:`states`), None before
         alignment."""
         self.catch_up()
-        return None if self._filter is None else self._filter.covariance.copy()
+        return None if self._nav is None else self._nav.kalman.covariance.copy()
 
     @property
     def nav_state(self) -> NavState | None:
         """Current nominal state, None before alignment."""
         self.catch_up()
-        return None if self._integrator is None else self._integrator.nav_state()
+        return None if self._nav is None else self._nav.integrator.nav_state()
 
     @property
     def map_plane(self) -> earth.LocalTangentPlane | None:
@@ -341,193 +304,115 @@ class FusionEngine:
     def _process(self, horizon: float) -> list[NavSolution]:
         """Filter the buffered data up to ``horizon``: the solutions of the processed IMU
         samples, unless ``realtime_output`` predicts them ahead instead."""
-        emit_solutions = not self.config.realtime_output
         solutions: list[NavSolution] = []
         buffer = self._imu_buffer
-        queue = self._queue
-        measurements = queue.heap
         while buffer and buffer[0][0] <= horizon:
             t, gyro, force = buffer.popleft()
-            if self._gyro is None or t - self._time > self.config.max_imu_gap_s:
-                if self._gyro is not None:
-                    self._imu_gaps += 1
-                    self._restart_alignment()
-                # Measurements up to the first sample of a run can only feed the alignment.
-                while measurements and measurements[0][0] <= t:
-                    self._handle_measurements(*queue.pop_stamp(), gyro)
-                self._time, self._gyro, self._force = t, gyro, force
-                self._older_imu = None
-                self._last_processed_imu_stamp = t
+            if self._point.begins_run(t):
+                self._start_imu_run(t, gyro, force)
                 continue
-            t0, gyro0, force0 = self._time, self._gyro, self._force
-            older = self._older_imu
-            t_older, gyro_older, force_older = older if older else (None, None, None)
-            span = t - t0
-            while measurements and measurements[0][0] <= t:
-                stamp, group = queue.pop_stamp()
-                gyro_m = interpolate_sample(stamp, t0, gyro0, t, gyro, t_older, gyro_older)
-                force_m = interpolate_sample(stamp, t0, force0, t, force, t_older, force_older)
-                self._advance(stamp, gyro_m, force_m)
-                self._handle_measurements(stamp, group, gyro_m)
-            self._advance(t, gyro, force)
-            if self._pseudo_sources and self._filter is not None:
-                self._apply_pseudo_measurements(t, gyro)
-            self._older_imu = (t0, gyro0, force0)
-            self._last_processed_imu_stamp = t
-            if emit_solutions and self._filter is not None and self._output.due(t, span):
-                solutions.append(self._solution(self._integrator, self._time, gyro, force))
+            solution = self._process_sample(t, gyro, force)
+            if solution is not None:
+                solutions.append(solution)
         return solutions
+
+    def _start_imu_run(self, t: float, gyro, force) -> None:
+        """Take the first sample of a run of IMU samples (the first of all, or after a gap,
+        which starts the alignment again)."""
+        if self._point.started:
+            self._imu_gaps += 1
+            self._restart_alignment()
+        # Measurements up to the first sample of a run can only feed the alignment.
+        queue = self._queue
+        while queue.heap and queue.heap[0][0] <= t:
+            self._handle_measurements(*queue.pop_stamp(), gyro)
+        self._point.start_run(t, gyro, force)
+
+    def _process_sample(self, t: float, gyro, force) -> NavSolution | None:
+        """Integrate to the IMU sample at ``t``, applying the measurements stamped up to it at
+        their own stamps; its solution when one is due from the filter."""
+        point = self._point
+        point.begin_step()
+        queue = self._queue
+        while queue.heap and queue.heap[0][0] <= t:
+            stamp, group = queue.pop_stamp()
+            gyro_m, force_m = point.samples_at(stamp, t, gyro, force)
+            self._advance(stamp, gyro_m, force_m)
+            self._handle_measurements(stamp, group, gyro_m)
+        self._advance(t, gyro, force)
+        if self._registry.pseudo and self._nav is not None:
+            self._apply_pseudo_measurements(t, gyro)
+        span = point.end_step()
+        if self.config.realtime_output or self._nav is None or not self._output.due(t, span):
+            return None
+        return self._solution(self._nav.integrator, t, gyro, force)
 
     def _advance(self, t: float, gyro, force):
         """Integrate from the current state time to ``t`` (raw samples at both ends)."""
-        dt = t - self._time
+        point = self._point
+        dt = t - point.t_s
         if dt > 0.0:
-            integrator = self._integrator
-            if integrator is None:
-                self._aligner.add_motion(dt, self._gyro, gyro, self._force, force)
-            else:
-                integrator.step(dt, self._gyro, gyro, self._force, force)
-                interval = self.config.covariance_propagation_interval_s
-                if integrator.accumulated_duration_s >= interval:
-                    self._propagate_covariance(t)
-        self._time, self._gyro, self._force = t, gyro, force
-
-    def _propagate_covariance(self, t: float):
-        """Propagate the covariance over the interval integrated so far, to stamp ``t``."""
-        integrator = self._integrator
-        if integrator.accumulated_duration_s <= 0.0:
-            return
-        sums = integrator.take_propagation_sums()
-        transition, noise = discrete_error_model(
-            sums,
-            integrator.latitude_rad,
-            integrator.altitude_m,
-            integrator.velocity_enu_mps,
-            self._imu_model,
-        )
-        posterior = self._filter.covariance
-        self._filter.propagate(transition, noise)
-        self.recorder.propagated(t, transition, self._filter.covariance, posterior)
-        self._solutions.covariance_changed()
-
-    def _restart_alignment(self):
-        self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
-        for source in self._pseudo_sources:
-            source.restart()
-        self._integrator = None
-        self._filter = None
-        self._aligner.restart()
-        self._solutions.covariance_changed()
-        self._solutions.biases_changed()
-        self._prediction.drop()
-
-    def _linearisation_point(self, gyro) -> LinearisationPoint:
-        """The nominal state now, for the models of measurements at the current stamp (raw gyro
-        sample ``gyro`` there)."""
-        integrator = self._integrator
-        state = integrator.nav_state()
-        return LinearisationPoint(
-            state, state.rotation_nb, gyro, integrator.nav_frame_rate_enu_rad_s
-        )
+            if self._nav is None:
+                self._aligner.add_motion(dt, point.gyro, gyro, point.force, force)
+            elif self._nav.integrate(t, dt, point.gyro, gyro, point.force, force):
+                self._solutions.covariance_changed()
+        point.moved_to(t, gyro, force)
 
     def _handle_measurements(self, t: float, group: list, gyro):
-        """Apply the (source, measurement) pairs of stamp ``t`` (raw gyro rate ``gyro`` there).
-
-        Each measurement is gated on its own against the predicted covariance; the accepted
-        ones are applied together in one stacked update, which equals applying them one after
-        the other (their noises are independent) at a third of the cost.
-        """
+        """Apply the (source, measurement) pairs of stamp ``t`` (raw gyro rate ``gyro`` there):
+        to the alignment, or gated one by one and the accepted ones in one stacked update."""
         if not group:
             return
-        if self._filter is None:
-            # Registry order puts the antenna attitude, which may complete the alignment, last.
-            for source, measurement in group:
-                self._counters[source.kind].used_for_alignment += 1
-                result = source.align(self._aligner, t, measurement, gyro)
-                if result is not None:
-                    self._start_filter(result, t)
+        nav = self._nav
+        if nav is None:
+            self._align_with(t, group, gyro)
             return
-        self._propagate_covariance(t)
-        point = self._linearisation_point(gyro)
-        accepted = []
-        persistent_rejections = []
-        rejected_kinds: dict[str, int] = {}
-        for source, measurement in group:
-            kind = source.kind
-            model = source.model(measurement, point)
-            counters = self._counters[kind]
-            if model is None:
-                counters.reject(Reason.GEOMETRY)
-                continue
-            gate = self._filter.gate(
-                model.innovation, model.jacobian, model.covariance, source.gate_probability
-            )
-            if self.innovation_log is not None:
-                self.innovation_log.append(
-                    InnovationRecord(
-                        t,
-                        kind,
-                        model.innovation,
-                        gate.innovation_covariance,
-                        gate.nis,
-                        gate.accepted,
-                    )
-                )
-            if gate.accepted:
-                counters.accepted += 1
-                counters.nis_sum += gate.nis
-                counters.nis_count += 1
-                self._recency.accepted(kind, self._aided_index[source], t)
-                self._consecutive_rejections[kind] = 0
-                accepted.append(model)
-                continue
-            counters.reject(Reason.GATE if math.isfinite(gate.nis) else Reason.SINGULAR)
-            self._consecutive_rejections[kind] += 1
-            if source.witnesses_integrity:
-                rejected_kinds[kind] = self._consecutive_rejections[kind]
-            if self._consecutive_rejections[kind] >= source.reset_after_rejections:
-                persistent_rejections.append((source, measurement, model))
-        if accepted:
-            correction = self._filter.update(
-                np.concatenate([m.innovation for m in accepted]),
-                np.vstack([m.jacobian for m in accepted]),
-                block_diagonal([m.covariance for m in accepted]),
-            )
-            self._inject(point.state, correction)
-        for source, measurement, model in persistent_rejections:
+        if nav.propagate_covariance(t):
+            self._solutions.covariance_changed()
+        point = nav.linearisation_point(gyro)
+        outcome = self._gates.gate(t, group, point, nav.kalman)
+        if outcome.accepted:
+            correction = nav.correct(point.state, outcome.accepted)
+            self._solutions.covariance_changed()
+            self._solutions.biases_changed()
+            self._prediction.carry_over(self._point.t_s, point.state, correction)
+        for source, measurement, model in outcome.persistent_rejections:
             self._reset_to_measurement(source, t, measurement, gyro, model)
+        self._judge_integrity(t, outcome.rejected_kinds)
+
+    def _align_with(self, t: float, group: list, gyro) -> None:
+        """Hand the (source, measurement) pairs of stamp ``t`` to the aligner; start the filter
+        when one completes the alignment."""
+        # Registry order puts the antenna attitude, which may complete the alignment, last.
+        for source, measurement in group:
+            self._counters[source.kind].used_for_alignment += 1
+            result = source.align(self._aligner, t, measurement, gyro)
+            if result is not None:
+                self._start_filter(result, t)
+
+    def _judge_integrity(self, t: float, rejected_kinds: dict[str, int]) -> None:
+        """Act on the integrity monitor's verdict on the gate outcomes of stamp ``t``.
+
+        Inflation widens the filter's attitude and velocity covariance; the filter's own
+        covariance may shrink again as the gate lets measurements through, even towards a
+        wrong state, so the published covariance keeps the inflation as long as the trust is
+        not back (:meth:`SolutionBuilder.distrust`)."""
         action = self._integrity.gate_outcomes(t, rejected_kinds)
         if action == "inflate":
-            self._inflate_covariance(t)
+            self._nav.inflate(t, self._distrust_variances)
+            self._solutions.covariance_changed()
         elif action == "realign":
             self._realignments += 1
             self._restart_alignment()
         self._solutions.distrust(None if self._integrity.trusted else self._distrust_variances)
 
-    def _inflate_covariance(self, t: float):
-        """Widen the attitude and velocity uncertainty: the filter has found itself wrong.
-
-        The filter's own covariance may shrink again as the gate lets measurements through,
-        even towards a wrong state, so the published covariance keeps the inflation as long as
-        the trust is not back (:meth:`SolutionBuilder.distrust`)."""
-        states = self.states
-        covariance = self._filter.covariance.copy()
-        attitude_variance, velocity_variance = self._distrust_variances
-        for index in states.indices("attitude"):
-            covariance[index, index] += attitude_variance
-        for index in states.indices("velocity"):
-            covariance[index, index] += velocity_variance
-        self.recorder.noise_added(t, self._filter.covariance, covariance)
-        self._filter.covariance = covariance
-        self._solutions.covariance_changed()
-
     def _apply_pseudo_measurements(self, t: float, gyro):
         """Ask the constraints that are due at IMU stamp ``t`` for their measurements."""
-        due = [source for source in self._pseudo_sources if t >= source.next_due_s]
+        due = [source for source in self._registry.pseudo if t >= source.next_due_s]
         if not due:
             return
-        state = self._integrator.nav_state()
-        fix_age = self._recency.age_s(AIDED_QUANTITIES.index("fix"), t)
+        state = self._nav.integrator.nav_state()
+        fix_age = self._recency.age_s(AIDED_QUANTITIES.index(FIX), t)
         group = []
         for source in due:
             measurement = source.pseudo_measurement(t, state, fix_age)
@@ -535,58 +420,45 @@ class FusionEngine:
                 group.append((source, measurement))
         self._handle_measurements(t, group, gyro)
 
-    def _inject(self, state: NavState, correction):
-        self._integrator.set_nav_state(inject_error_state(state, correction))
-        self._filter.reset_after_injection(correction)
-        self.recorder.corrected(correction)
-        self._solutions.covariance_changed()
-        self._solutions.biases_changed()
-        self._prediction.carry_over(self._time, state, correction)
-
     def _reset_to_measurement(self, source: AidingSource, t: float, measurement, gyro, model):
         """Re-initialise the states a persistently rejected source observes, as it says."""
-        reset = source.reset(measurement, self._linearisation_point(gyro), model)
+        nav = self._nav
+        reset = source.reset(measurement, nav.linearisation_point(gyro), model)
         if reset is None:
             return
-        self._counters[source.kind].resets += 1
-        self._consecutive_rejections[source.kind] = 0
-        self._recency.aided(self._aided_index[source], t)
-        self.recorder.end_segment(None if self._filter is None else self._filter.covariance)
-        self._integrator.set_nav_state(reset.state)
-        self._filter.reset_states(reset.indices, reset.variances)
-        self._filter.ensure_positive_definite()
-        self.recorder.begin_segment(t, self._filter.covariance)
+        self._gates.source_reset(source, t)
+        nav.reset(t, reset)
         self._solutions.covariance_changed()
         self._prediction.drop()
 
     def _start_filter(self, result: AlignmentResult, t: float):
         """Hand over from the aligner to the filter at stamp ``t``."""
-        state = result.state
-        self._integrator = StrapdownIntegrator(
-            state.attitude_xyzw,
-            state.velocity_enu_mps,
-            state.latitude_rad,
-            state.longitude_rad,
-            state.altitude_m,
-            state.gyro_bias_rad_s,
-            state.accel_bias_mps2,
+        self._nav = AidedNavigation(
+            result, t, self.config, self.states, self._imu_model, self.recorder
         )
-        self._filter = ErrorStateFilter(
-            result.covariance, self.config.gate_probability, self.states
-        )
-        self.recorder.begin_segment(t, self._filter.covariance)
         self._alignment = result
         self._alignments += 1
         self._integrity.realigned(t)
         self._solutions.distrust(None)
-        for kind in self._consecutive_rejections:
-            self._consecutive_rejections[kind] = 0
-        self._recency.aligned(t)
+        self._gates.aligned(t)
         if self._solutions.map_plane is None:
+            state = result.state
             self._solutions.map_plane = earth.LocalTangentPlane(
                 state.latitude_rad, state.longitude_rad, state.altitude_m
             )
         self._output.restart()
+        self._nav_state_replaced()
+
+    def _restart_alignment(self):
+        self.recorder.end_segment(None if self._nav is None else self._nav.kalman.covariance)
+        for source in self._registry.pseudo:
+            source.restart()
+        self._nav = None
+        self._aligner.restart()
+        self._nav_state_replaced()
+
+    def _nav_state_replaced(self) -> None:
+        """Solutions and the prediction ahead start afresh from the state the filter has now."""
         self._solutions.covariance_changed()
         self._solutions.biases_changed()
         self._prediction.drop()
@@ -596,5 +468,22 @@ class FusionEngine:
         """The solution of ``integrator``'s state at stamp ``t`` (raw gyro and force there)."""
         # Coasting is judged where the filter is: measurements ahead of it are not yet used.
         return self._solutions.solution(
-            integrator, self._filter, t, gyro, force, self._recency.coasting_flags(self._time)
+            integrator,
+            self._nav.kalman,
+            t,
+            gyro,
+            force,
+            self._recency.coasting_flags(self._point.t_s),
         )
+
+
+def _configured_map_plane(config: FusionConfig) -> earth.LocalTangentPlane | None:
+    """The ``map`` frame at the configured origin (None: none is configured, the frame is set
+    at the first alignment)."""
+    if not config.has_origin:
+        return None
+    return earth.LocalTangentPlane(
+        math.radians(config.origin_latitude_deg),
+        math.radians(config.origin_longitude_deg),
+        config.origin_altitude_m,
+    )

@@ -105,7 +105,7 @@ from buoy_nav.config import (
     FUSION_PARAMETER_PREFIX,
     FusionConfig,
 )
-from buoy_nav.engine import IMU, FusionEngine, NavSolution
+from buoy_nav.engine import FusionEngine, NavSolution
 from buoy_nav.error_state_filter import STANDARD_GRAVITY_MPS2
 from buoy_nav.fusion_messages import (
     FUSION_INPUT_MSGTYPES,
@@ -116,6 +116,7 @@ from buoy_nav.fusion_messages import (
     solution_cdr,
     transform_cdr,
 )
+from buoy_nav.health import diagnostic_values, health_status
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_quaternion
 
 OUTPUT_CLASSES = {
@@ -322,42 +323,7 @@ class FusionNode(FlushingNode):
         filtering, self._filtering_durations_s = self._filtering_durations_s, []
 
         health = self.engine.health()
-        values = {
-            "alignment_state": health.alignment_state.value,
-            "aligned": health.aligned,
-            "coasting_fix": health.coasting_fix,
-            "coasting_velocity": health.coasting_velocity,
-            "coasting_heading": health.coasting_heading,
-            "sensor_set": health.sensor_set,
-            "coasting_sources": ",".join(health.coasting_sources),
-        }
-        for kind, counters in health.counters.items():
-            values[f"{kind}.accepted"] = counters.accepted
-            for reason, count in sorted(counters.rejected.items()):
-                values[f"{kind}.rejected[{reason}]"] = count
-            if kind != IMU:  # alignment use, resets and NIS are of measurements only
-                values[f"{kind}.used_for_alignment"] = counters.used_for_alignment
-                values[f"{kind}.superseded"] = counters.superseded
-                values[f"{kind}.resets"] = counters.resets
-                values[f"{kind}.mean_nis"] = counters.mean_nis
-        values.update(
-            {
-                "covariance_repairs": health.covariance_repairs,
-                "imu_gaps": health.imu_gaps,
-                "alignments": health.alignments,
-                "navigation_trusted": health.trusted,
-                "integrity_events": len(health.integrity_events),
-                "realignments": health.realignments,
-                "untrusted_s": sum(
-                    (event.end_s if math.isfinite(event.end_s) else health.time_s) - event.start_s
-                    for event in health.integrity_events
-                ),
-                "imu_clock_steps": len(health.imu_clock_steps),
-                "imu_clock_correction_s": -sum(step for _, step in health.imu_clock_steps),
-                # Full precision: a stamp in seconds since the epoch.
-                "processed_up_to_s": f"{health.time_s:.6f}",
-            }
-        )
+        values = diagnostic_values(health)
         values.update(self._filter_estimates())
         for topic in self.input_topics:
             values[f"messages_in[{topic}]"] = self._messages_in[topic]
@@ -372,34 +338,10 @@ class FusionNode(FlushingNode):
                 "filtering_overdue": self.filtering_overdue,
             }
         )
-
-        if new[IMU_RAW_TOPIC] == 0:
-            return "warn", f"no {IMU_RAW_TOPIC} samples", values
-        if not health.aligned:
-            return "warn", f"aligning ({health.alignment_state.value})", values
-        coasting = [
-            kind
-            for kind, flag in (
-                ("fix", health.coasting_fix),
-                ("velocity", health.coasting_velocity),
-                ("heading", health.coasting_heading),
-            )
-            if flag
-        ]
-        if not health.trusted:
-            reason = health.integrity_events[-1].reason
-            return "warn", f"aligned, navigation not trusted ({reason})", values
-        if coasting:
-            return (
-                "warn",
-                f"aligned on {health.sensor_set}, coasting without GNSS {', '.join(coasting)}",
-                values,
-            )
-        return (
-            "ok",
-            f"aligned on {health.sensor_set}, {self.solutions_published} solutions published",
-            values,
+        level, message = health_status(
+            health, IMU_RAW_TOPIC, new[IMU_RAW_TOPIC], self.solutions_published
         )
+        return level, message, values
 
     def _filter_estimates(self) -> dict[str, float]:
         """The filter's 1σ of attitude (ENU error angles, deg) and velocity (ENU, m/s) and its

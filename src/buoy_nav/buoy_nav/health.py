@@ -88,7 +88,7 @@ class EngineHealth:
     trusted: the filter agrees with its aiding (see :mod:`buoy_nav.integrity`).
     integrity_events: the periods in which it did not, oldest first.
     realignments: alignments started again because the filter stayed inconsistent.
-    sensor_set: the sensor set in use (:func:`buoy_nav.sensor_sets.sensor_set`).
+    sensor_set: the sensor set in use (:meth:`buoy_nav.sensor_sets.SensorSets.label`).
     coasting_sources: kinds of the aiding sources accepted before but not within
       ``coasting_timeout_s`` (their quantities are carried by the inertial solution).
     """
@@ -110,3 +110,74 @@ class EngineHealth:
     realignments: int = 0
     sensor_set: str = ""
     coasting_sources: tuple[str, ...] = ()
+
+
+def diagnostic_values(health: EngineHealth) -> dict:
+    """The diagnostics' key-value pairs of ``health``: alignment and coasting, the counters of
+    each input, the filter's repairs and alignments, its integrity and the IMU clock's steps."""
+    values = {
+        "alignment_state": health.alignment_state.value,
+        "aligned": health.aligned,
+        "coasting_fix": health.coasting_fix,
+        "coasting_velocity": health.coasting_velocity,
+        "coasting_heading": health.coasting_heading,
+        "sensor_set": health.sensor_set,
+        "coasting_sources": ",".join(health.coasting_sources),
+    }
+    for kind, counters in health.counters.items():
+        values[f"{kind}.accepted"] = counters.accepted
+        for reason, count in sorted(counters.rejected.items()):
+            values[f"{kind}.rejected[{reason}]"] = count
+        if kind != IMU:  # alignment use, resets and NIS are of measurements only
+            values[f"{kind}.used_for_alignment"] = counters.used_for_alignment
+            values[f"{kind}.superseded"] = counters.superseded
+            values[f"{kind}.resets"] = counters.resets
+            values[f"{kind}.mean_nis"] = counters.mean_nis
+    values.update(
+        {
+            "covariance_repairs": health.covariance_repairs,
+            "imu_gaps": health.imu_gaps,
+            "alignments": health.alignments,
+            "navigation_trusted": health.trusted,
+            "integrity_events": len(health.integrity_events),
+            "realignments": health.realignments,
+            "untrusted_s": sum(
+                (event.end_s if math.isfinite(event.end_s) else health.time_s) - event.start_s
+                for event in health.integrity_events
+            ),
+            "imu_clock_steps": len(health.imu_clock_steps),
+            "imu_clock_correction_s": -sum(step for _, step in health.imu_clock_steps),
+            # Full precision: a stamp in seconds since the epoch.
+            "processed_up_to_s": f"{health.time_s:.6f}",
+        }
+    )
+    return values
+
+
+def health_status(
+    health: EngineHealth, imu_topic: str, imu_samples_since_report: int, solutions_published: int
+) -> tuple[str, str]:
+    """The diagnostics' level (``ok`` or ``warn``) and message: no IMU samples on ``imu_topic``
+    since the last report, aligning, not trusted, coasting, or the solutions published."""
+    if imu_samples_since_report == 0:
+        return "warn", f"no {imu_topic} samples"
+    if not health.aligned:
+        return "warn", f"aligning ({health.alignment_state.value})"
+    coasting = [
+        kind
+        for kind, flag in (
+            ("fix", health.coasting_fix),
+            ("velocity", health.coasting_velocity),
+            ("heading", health.coasting_heading),
+        )
+        if flag
+    ]
+    if not health.trusted:
+        reason = health.integrity_events[-1].reason
+        return "warn", f"aligned, navigation not trusted ({reason})"
+    if coasting:
+        return (
+            "warn",
+            f"aligned on {health.sensor_set}, coasting without GNSS {', '.join(coasting)}",
+        )
+    return "ok", f"aligned on {health.sensor_set}, {solutions_published} solutions published"

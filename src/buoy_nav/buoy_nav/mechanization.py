@@ -24,9 +24,8 @@ rotation), then gravity and Coriolis. Position update: trapezoid on velocity, co
 latitude/longitude with the WGS-84 radii of curvature.
 
 Over the steps since the last covariance propagation it also sums what the discrete error model
-needs (:class:`PropagationSums`). The step is compiled (numba, cached on disk) and updates in
-place the one array that holds the integrator's state: at twice the IMU rate the interpreter's
-cost per operation would otherwise dominate the offline run.
+needs (:class:`PropagationSums`). The step is compiled (:mod:`buoy_nav.strapdown_kernel`) and
+updates in place the one array that holds the integrator's state.
 """
 
 import contextlib
@@ -36,7 +35,6 @@ import signal
 import threading
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from buoy_nav import earth
@@ -45,8 +43,25 @@ from buoy_nav.error_state_filter import ImuErrorModel, NavState, discrete_error_
 from buoy_nav.rotations import (
     Quaternion,
     normalize_quaternion,
-    quaternion_from_rotation_vector,
     rotation_matrix_elements,
+)
+from buoy_nav.strapdown_kernel import (
+    ACCEL_BIAS,
+    ALTITUDE,
+    ATTITUDE,
+    DURATION,
+    FORCE_DEVIATION_SQ_SUM,
+    FORCE_SUM,
+    GYRO_BIAS,
+    LATITUDE,
+    LONGITUDE,
+    NAV_FRAME_RATE,
+    RATE_SQ_SUM,
+    ROTATION,
+    ROTATION_SUM,
+    STATE_SIZE,
+    VELOCITY,
+    strapdown_step,
 )
 
 _OMEGA = earth.EARTH_RATE_RAD_S
@@ -70,30 +85,6 @@ class PropagationSums:
     specific_force_increment_enu_mps: np.ndarray
     gyro_rate_sq_integral_rad2_s: np.ndarray
     force_deviation_sq_integral_m2_s3: np.ndarray
-
-
-# Layout of the integrator's state vector (one float64 array, so that the compiled step reads and
-# writes it in place), by where each block starts and, after the colon, how long it is: the
-# nominal state, the previous step for the curvature, coning and sculling terms, and the
-# propagation sums.
-_ATTITUDE = 0  # 4: quaternion x, y, z, w of R_nb
-_ROTATION = 4  # 9: R_nb, row-major
-_VELOCITY = 13  # 3: ENU, m/s
-_LATITUDE, _LONGITUDE, _ALTITUDE = 16, 17, 18  # rad, rad, m
-_GYRO_BIAS = 19  # 3: rad/s, body
-_ACCEL_BIAS = 22  # 3: m/s², body
-_NAV_FRAME_RATE = 25  # 3: ω_in, ENU, rad/s
-_PREVIOUS_DT = 28  # s; 0 when there is no previous step
-_PREVIOUS_DTHETA = 29  # 3: body angle increment of the previous step (rad)
-_PREVIOUS_DVEL = 32  # 3: body velocity increment of the previous step (m/s)
-_OLDER_GYRO = 35  # 3: raw sample at the previous step's start (rad/s)
-_OLDER_FORCE = 38  # 3: (m/s²)
-_DURATION = 41  # s integrated since the last take_propagation_sums; the sums follow it
-_ROTATION_SUM = 42  # 9: ∫ R_nb dt, row-major
-_FORCE_SUM = 51  # 3: ∫ f^n dt
-_RATE_SQ_SUM = 54  # 3
-_FORCE_DEVIATION_SQ_SUM = 57  # 3
-_STATE_SIZE = 60
 
 
 class StrapdownIntegrator:
@@ -124,7 +115,7 @@ class StrapdownIntegrator:
         self.coning_correction = coning_correction
         self.sculling_correction = sculling_correction
         # No previous step yet, and empty sums.
-        self._state = np.zeros(_STATE_SIZE)
+        self._state = np.zeros(STATE_SIZE)
         self.set_state(
             attitude_xyzw,
             velocity_enu_mps,
@@ -151,18 +142,18 @@ class StrapdownIntegrator:
         ve, vn, _ = velocity_enu_mps = _floats(velocity_enu_mps)
         lat = float(latitude_rad)
         alt = float(altitude_m)
-        state[_ATTITUDE : _ATTITUDE + 4] = attitude
-        state[_ROTATION : _ROTATION + 9] = rotation_matrix_elements(*attitude)
-        state[_VELOCITY : _VELOCITY + 3] = velocity_enu_mps
-        state[_LATITUDE] = lat
-        state[_LONGITUDE] = float(longitude_rad)
-        state[_ALTITUDE] = alt
-        state[_GYRO_BIAS : _GYRO_BIAS + 3] = _floats(gyro_bias_rad_s)
-        state[_ACCEL_BIAS : _ACCEL_BIAS + 3] = _floats(accel_bias_mps2)
+        state[ATTITUDE : ATTITUDE + 4] = attitude
+        state[ROTATION : ROTATION + 9] = rotation_matrix_elements(*attitude)
+        state[VELOCITY : VELOCITY + 3] = velocity_enu_mps
+        state[LATITUDE] = lat
+        state[LONGITUDE] = float(longitude_rad)
+        state[ALTITUDE] = alt
+        state[GYRO_BIAS : GYRO_BIAS + 3] = _floats(gyro_bias_rad_s)
+        state[ACCEL_BIAS : ACCEL_BIAS + 3] = _floats(accel_bias_mps2)
         # earth.navigation_frame_rate_enu_rad_s (ω_ie + ω_en) in floats, the same arithmetic.
         meridian, prime_vertical = earth.radii_of_curvature_m(lat)
         east_radius = prime_vertical + alt
-        state[_NAV_FRAME_RATE : _NAV_FRAME_RATE + 3] = (
+        state[NAV_FRAME_RATE : NAV_FRAME_RATE + 3] = (
             0.0 + -vn / (meridian + alt),
             _OMEGA * math.cos(lat) + ve / east_radius,
             _OMEGA * math.sin(lat) + ve * math.tan(lat) / east_radius,
@@ -170,50 +161,50 @@ class StrapdownIntegrator:
 
     @property
     def attitude_xyzw(self) -> Quaternion:
-        return tuple(self._state[_ATTITUDE : _ATTITUDE + 4].tolist())
+        return tuple(self._state[ATTITUDE : ATTITUDE + 4].tolist())
 
     @property
     def rotation_elements(self) -> tuple[float, ...]:
-        return tuple(self._state[_ROTATION : _ROTATION + 9].tolist())
+        return tuple(self._state[ROTATION : ROTATION + 9].tolist())
 
     @property
     def velocity_enu_mps(self) -> tuple[float, float, float]:
-        return tuple(self._state[_VELOCITY : _VELOCITY + 3].tolist())
+        return tuple(self._state[VELOCITY : VELOCITY + 3].tolist())
 
     @property
     def latitude_rad(self) -> float:
-        return float(self._state[_LATITUDE])
+        return float(self._state[LATITUDE])
 
     @property
     def longitude_rad(self) -> float:
-        return float(self._state[_LONGITUDE])
+        return float(self._state[LONGITUDE])
 
     @property
     def altitude_m(self) -> float:
-        return float(self._state[_ALTITUDE])
+        return float(self._state[ALTITUDE])
 
     @property
     def gyro_bias_rad_s(self) -> tuple[float, float, float]:
-        return tuple(self._state[_GYRO_BIAS : _GYRO_BIAS + 3].tolist())
+        return tuple(self._state[GYRO_BIAS : GYRO_BIAS + 3].tolist())
 
     @property
     def accel_bias_mps2(self) -> tuple[float, float, float]:
-        return tuple(self._state[_ACCEL_BIAS : _ACCEL_BIAS + 3].tolist())
+        return tuple(self._state[ACCEL_BIAS : ACCEL_BIAS + 3].tolist())
 
     @property
     def nav_frame_rate_enu_rad_s(self) -> tuple[float, float, float]:
-        return tuple(self._state[_NAV_FRAME_RATE : _NAV_FRAME_RATE + 3].tolist())
+        return tuple(self._state[NAV_FRAME_RATE : NAV_FRAME_RATE + 3].tolist())
 
     @property
     def accumulated_duration_s(self) -> float:
-        return float(self._state[_DURATION])
+        return float(self._state[DURATION])
 
     def fork(self) -> "StrapdownIntegrator":
         """An independent copy that integrates ahead without touching this one's propagation
         sums (its own sums start empty)."""
         twin = copy.copy(self)
         twin._state = self._state.copy()
-        twin._state[_DURATION:] = 0.0
+        twin._state[DURATION:] = 0.0
         return twin
 
     def nav_state(self) -> NavState:
@@ -221,12 +212,12 @@ class StrapdownIntegrator:
         state = self._state
         return NavState(
             attitude_xyzw=self.attitude_xyzw,
-            velocity_enu_mps=state[_VELOCITY : _VELOCITY + 3].copy(),
-            latitude_rad=float(state[_LATITUDE]),
-            longitude_rad=float(state[_LONGITUDE]),
-            altitude_m=float(state[_ALTITUDE]),
-            gyro_bias_rad_s=state[_GYRO_BIAS : _GYRO_BIAS + 3].copy(),
-            accel_bias_mps2=state[_ACCEL_BIAS : _ACCEL_BIAS + 3].copy(),
+            velocity_enu_mps=state[VELOCITY : VELOCITY + 3].copy(),
+            latitude_rad=float(state[LATITUDE]),
+            longitude_rad=float(state[LONGITUDE]),
+            altitude_m=float(state[ALTITUDE]),
+            gyro_bias_rad_s=state[GYRO_BIAS : GYRO_BIAS + 3].copy(),
+            accel_bias_mps2=state[ACCEL_BIAS : ACCEL_BIAS + 3].copy(),
         )
 
     def set_nav_state(self, state: NavState):
@@ -244,7 +235,7 @@ class StrapdownIntegrator:
     @property
     def rotation_nb(self) -> np.ndarray:
         """R_nb as a 3×3 array."""
-        return self._state[_ROTATION : _ROTATION + 9].reshape(3, 3).copy()
+        return self._state[ROTATION : ROTATION + 9].reshape(3, 3).copy()
 
     def step(self, dt_s: float, gyro_start, gyro_end, force_start, force_end):
         """Advance the state by ``dt_s`` (s) between two raw IMU samples.
@@ -259,7 +250,7 @@ class StrapdownIntegrator:
         g1x, g1y, g1z = gyro_end
         f0x, f0y, f0z = force_start
         f1x, f1y, f1z = force_end
-        _strapdown_step(
+        strapdown_step(
             self._state,
             dt_s,
             g0x,
@@ -282,253 +273,16 @@ class StrapdownIntegrator:
         """Return the integrals accumulated since the last call and restart them."""
         state = self._state
         sums = PropagationSums(
-            duration_s=float(state[_DURATION]),
-            rotation_integral_s=state[_ROTATION_SUM : _ROTATION_SUM + 9].reshape(3, 3).copy(),
-            specific_force_increment_enu_mps=state[_FORCE_SUM : _FORCE_SUM + 3].copy(),
-            gyro_rate_sq_integral_rad2_s=state[_RATE_SQ_SUM : _RATE_SQ_SUM + 3].copy(),
+            duration_s=float(state[DURATION]),
+            rotation_integral_s=state[ROTATION_SUM : ROTATION_SUM + 9].reshape(3, 3).copy(),
+            specific_force_increment_enu_mps=state[FORCE_SUM : FORCE_SUM + 3].copy(),
+            gyro_rate_sq_integral_rad2_s=state[RATE_SQ_SUM : RATE_SQ_SUM + 3].copy(),
             force_deviation_sq_integral_m2_s3=state[
-                _FORCE_DEVIATION_SQ_SUM : _FORCE_DEVIATION_SQ_SUM + 3
+                FORCE_DEVIATION_SQ_SUM : FORCE_DEVIATION_SQ_SUM + 3
             ].copy(),
         )
-        state[_DURATION:] = 0.0
+        state[DURATION:] = 0.0
         return sums
-
-
-# The Earth-model and rotation functions the step calls, compiled from their one source.
-_normal_gravity_mps2 = numba.njit(cache=True)(earth.normal_gravity_mps2)
-_quaternion_from_rotation_vector = numba.njit(cache=True)(quaternion_from_rotation_vector)
-
-
-@numba.njit(cache=True)
-def _strapdown_step(
-    state,
-    dt_s,
-    g0x,
-    g0y,
-    g0z,
-    g1x,
-    g1y,
-    g1z,
-    f0x,
-    f0y,
-    f0z,
-    f1x,
-    f1y,
-    f1z,
-    coning_correction,
-    sculling_correction,
-):
-    """One step of :meth:`StrapdownIntegrator.step` on its state vector, in place (see the module
-    docstring for the algorithm; the layout is that of the ``_ATTITUDE`` … constants)."""
-    bgx, bgy, bgz = state[_GYRO_BIAS], state[_GYRO_BIAS + 1], state[_GYRO_BIAS + 2]
-    bax, bay, baz = (
-        state[_ACCEL_BIAS],
-        state[_ACCEL_BIAS + 1],
-        state[_ACCEL_BIAS + 2],
-    )
-    half_dt = 0.5 * dt_s
-    dthx = (g0x + g1x - 2.0 * bgx) * half_dt
-    dthy = (g0y + g1y - 2.0 * bgy) * half_dt
-    dthz = (g0z + g1z - 2.0 * bgz) * half_dt
-    dvx = (f0x + f1x - 2.0 * bax) * half_dt
-    dvy = (f0y + f1y - 2.0 * bay) * half_dt
-    dvz = (f0z + f1z - 2.0 * baz) * half_dt
-    previous_dt = state[_PREVIOUS_DT]
-    k = 0.0
-    if previous_dt > 0.0:
-        k = dt_s * dt_s / (6.0 * previous_dt * (previous_dt + dt_s))
-        # Curvature of the parabola through the older, start and end samples.
-        ogx, ogy, ogz = (
-            state[_OLDER_GYRO],
-            state[_OLDER_GYRO + 1],
-            state[_OLDER_GYRO + 2],
-        )
-        ofx, ofy, ofz = (
-            state[_OLDER_FORCE],
-            state[_OLDER_FORCE + 1],
-            state[_OLDER_FORCE + 2],
-        )
-        dthx -= k * ((g1x - g0x) * previous_dt + (ogx - g0x) * dt_s)
-        dthy -= k * ((g1y - g0y) * previous_dt + (ogy - g0y) * dt_s)
-        dthz -= k * ((g1z - g0z) * previous_dt + (ogz - g0z) * dt_s)
-        dvx -= k * ((f1x - f0x) * previous_dt + (ofx - f0x) * dt_s)
-        dvy -= k * ((f1y - f0y) * previous_dt + (ofy - f0y) * dt_s)
-        dvz -= k * ((f1z - f0z) * previous_dt + (ofz - f0z) * dt_s)
-
-    # Body rotation vector and velocity increment in the start-of-step body frame.
-    rvx, rvy, rvz = dthx, dthy, dthz
-    # Rotation of the body during the step: ½ Δθ × Δv + ⅙ Δθ × (Δθ × Δv), the series of
-    # ∫ Exp([ωt×]) f dt to third order (the third term matters for fast rolls).
-    cx = dthy * dvz - dthz * dvy
-    cy = dthz * dvx - dthx * dvz
-    cz = dthx * dvy - dthy * dvx
-    bvx = dvx + 0.5 * cx + (dthy * cz - dthz * cy) / 6.0
-    bvy = dvy + 0.5 * cy + (dthz * cx - dthx * cz) / 6.0
-    bvz = dvz + 0.5 * cz + (dthx * cy - dthy * cx) / 6.0
-    if previous_dt > 0.0:
-        px, py, pz = (
-            state[_PREVIOUS_DTHETA],
-            state[_PREVIOUS_DTHETA + 1],
-            state[_PREVIOUS_DTHETA + 2],
-        )
-        if coning_correction:
-            rvx += k * (py * dthz - pz * dthy)
-            rvy += k * (pz * dthx - px * dthz)
-            rvz += k * (px * dthy - py * dthx)
-        if sculling_correction:
-            ux, uy, uz = (
-                state[_PREVIOUS_DVEL],
-                state[_PREVIOUS_DVEL + 1],
-                state[_PREVIOUS_DVEL + 2],
-            )
-            bvx += k * (py * dvz - pz * dvy + uy * dthz - uz * dthy)
-            bvy += k * (pz * dvx - px * dvz + uz * dthx - ux * dthz)
-            bvz += k * (px * dvy - py * dvx + ux * dthy - uy * dthx)
-    state[_PREVIOUS_DT] = dt_s
-    (
-        state[_PREVIOUS_DTHETA],
-        state[_PREVIOUS_DTHETA + 1],
-        state[_PREVIOUS_DTHETA + 2],
-    ) = dthx, dthy, dthz
-    (
-        state[_PREVIOUS_DVEL],
-        state[_PREVIOUS_DVEL + 1],
-        state[_PREVIOUS_DVEL + 2],
-    ) = dvx, dvy, dvz
-    state[_OLDER_GYRO], state[_OLDER_GYRO + 1], state[_OLDER_GYRO + 2] = (
-        g0x,
-        g0y,
-        g0z,
-    )
-    state[_OLDER_FORCE], state[_OLDER_FORCE + 1], state[_OLDER_FORCE + 2] = (
-        f0x,
-        f0y,
-        f0z,
-    )
-
-    # Earth model at the start-of-step position.
-    lat = state[_LATITUDE]
-    alt = state[_ALTITUDE]
-    ve, vn, vu = state[_VELOCITY], state[_VELOCITY + 1], state[_VELOCITY + 2]
-    sin_lat = math.sin(lat)
-    cos_lat = math.cos(lat)
-    w_sq = 1.0 - earth.ECCENTRICITY_SQ * sin_lat * sin_lat
-    prime_vertical = earth.SEMI_MAJOR_AXIS_M / math.sqrt(w_sq)
-    north_radius = prime_vertical * (1.0 - earth.ECCENTRICITY_SQ) / w_sq + alt
-    east_radius = prime_vertical + alt
-    gravity = _normal_gravity_mps2(lat, alt)
-    wie_n = _OMEGA * cos_lat
-    wie_u = _OMEGA * sin_lat
-    wen_e = -vn / north_radius
-    wen_n = ve / east_radius
-    wen_u = wen_n * sin_lat / cos_lat
-    win_e = wen_e
-    win_n = wie_n + wen_n
-    win_u = wie_u + wen_u
-    (
-        state[_NAV_FRAME_RATE],
-        state[_NAV_FRAME_RATE + 1],
-        state[_NAV_FRAME_RATE + 2],
-    ) = win_e, win_n, win_u
-
-    # Specific-force velocity increment in ENU (start attitude, half the frame rotation).
-    r00, r01, r02 = state[_ROTATION], state[_ROTATION + 1], state[_ROTATION + 2]
-    r10, r11, r12 = state[_ROTATION + 3], state[_ROTATION + 4], state[_ROTATION + 5]
-    r20, r21, r22 = state[_ROTATION + 6], state[_ROTATION + 7], state[_ROTATION + 8]
-    fne = r00 * bvx + r01 * bvy + r02 * bvz
-    fnn = r10 * bvx + r11 * bvy + r12 * bvz
-    fnu = r20 * bvx + r21 * bvy + r22 * bvz
-    fne, fnn, fnu = (
-        fne - half_dt * (win_n * fnu - win_u * fnn),
-        fnn - half_dt * (win_u * fne - win_e * fnu),
-        fnu - half_dt * (win_e * fnn - win_n * fne),
-    )
-    # Coriolis (2ω_ie + ω_en) × v and gravity (0, 0, −g).
-    ce = win_e
-    cn = wie_n + win_n
-    cu = wie_u + win_u
-    new_ve = ve + fne - (cn * vu - cu * vn) * dt_s
-    new_vn = vn + fnn - (cu * ve - ce * vu) * dt_s
-    new_vu = vu + fnu - (ce * vn - cn * ve + gravity) * dt_s
-
-    state[_LATITUDE] = lat + (vn + new_vn) * half_dt / north_radius
-    state[_LONGITUDE] += (ve + new_ve) * half_dt / (east_radius * cos_lat)
-    state[_ALTITUDE] = alt + (vu + new_vu) * half_dt
-    state[_VELOCITY], state[_VELOCITY + 1], state[_VELOCITY + 2] = (
-        new_ve,
-        new_vn,
-        new_vu,
-    )
-
-    # R_nb(k) = Exp(−ω_in T) · R_nb(k−1) · Exp(φ_k), in quaternions.
-    bx, by, bz, bw = _quaternion_from_rotation_vector(rvx, rvy, rvz)
-    nx, ny, nz, nw = _quaternion_from_rotation_vector(-win_e * dt_s, -win_n * dt_s, -win_u * dt_s)
-    ax, ay, az, aw = (
-        state[_ATTITUDE],
-        state[_ATTITUDE + 1],
-        state[_ATTITUDE + 2],
-        state[_ATTITUDE + 3],
-    )
-    ax, ay, az, aw = (
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    )
-    ax, ay, az, aw = (
-        nw * ax + nx * aw + ny * az - nz * ay,
-        nw * ay - nx * az + ny * aw + nz * ax,
-        nw * az + nx * ay - ny * ax + nz * aw,
-        nw * aw - nx * ax - ny * ay - nz * az,
-    )
-    norm = math.sqrt(ax * ax + ay * ay + az * az + aw * aw)
-    if aw < 0.0:
-        norm = -norm
-    x, y, z, w = ax / norm, ay / norm, az / norm, aw / norm
-    (
-        state[_ATTITUDE],
-        state[_ATTITUDE + 1],
-        state[_ATTITUDE + 2],
-        state[_ATTITUDE + 3],
-    ) = x, y, z, w
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    n00 = 1.0 - 2.0 * (yy + zz)
-    n01 = 2.0 * (xy - wz)
-    n02 = 2.0 * (xz + wy)
-    n10 = 2.0 * (xy + wz)
-    n11 = 1.0 - 2.0 * (xx + zz)
-    n12 = 2.0 * (yz - wx)
-    n20 = 2.0 * (xz - wy)
-    n21 = 2.0 * (yz + wx)
-    n22 = 1.0 - 2.0 * (xx + yy)
-    state[_ROTATION], state[_ROTATION + 1], state[_ROTATION + 2] = n00, n01, n02
-    state[_ROTATION + 3], state[_ROTATION + 4], state[_ROTATION + 5] = n10, n11, n12
-    state[_ROTATION + 6], state[_ROTATION + 7], state[_ROTATION + 8] = n20, n21, n22
-
-    # Integrals for the covariance propagation (trapezoid in the attitude).
-    state[_ROTATION_SUM] += (r00 + n00) * half_dt
-    state[_ROTATION_SUM + 1] += (r01 + n01) * half_dt
-    state[_ROTATION_SUM + 2] += (r02 + n02) * half_dt
-    state[_ROTATION_SUM + 3] += (r10 + n10) * half_dt
-    state[_ROTATION_SUM + 4] += (r11 + n11) * half_dt
-    state[_ROTATION_SUM + 5] += (r12 + n12) * half_dt
-    state[_ROTATION_SUM + 6] += (r20 + n20) * half_dt
-    state[_ROTATION_SUM + 7] += (r21 + n21) * half_dt
-    state[_ROTATION_SUM + 8] += (r22 + n22) * half_dt
-    state[_DURATION] += dt_s
-    state[_FORCE_SUM] += fne
-    state[_FORCE_SUM + 1] += fnn
-    state[_FORCE_SUM + 2] += fnu
-    inverse_dt = 1.0 / dt_s
-    state[_RATE_SQ_SUM] += dthx * dthx * inverse_dt
-    state[_RATE_SQ_SUM + 1] += dthy * dthy * inverse_dt
-    state[_RATE_SQ_SUM + 2] += dthz * dthz * inverse_dt
-    dvz_kinematic = dvz - gravity * dt_s
-    state[_FORCE_DEVIATION_SQ_SUM] += dvx * dvx * inverse_dt
-    state[_FORCE_DEVIATION_SQ_SUM + 1] += dvy * dvy * inverse_dt
-    state[_FORCE_DEVIATION_SQ_SUM + 2] += dvz_kinematic * dvz_kinematic * inverse_dt
 
 
 def load_compiled_kernels() -> None:

@@ -6,7 +6,8 @@ attitude, with or without a magnetometer, no GNSS; (e) any of these through an o
 topic it had. The set is not configured: it follows from what was accepted within
 ``coasting_timeout_s`` (a source is *active*), and a source accepted before but not any more is
 *coasting*. A set change needs no restart and makes no jump: the filter simply stops or starts
-receiving a kind of measurement. :class:`AidingRecency` keeps the stamps this is judged from.
+receiving a kind of measurement. :class:`AidingRecency` keeps the stamps this is judged from;
+:class:`SensorSets` names the set from the ``sensor`` each aiding source declares.
 """
 
 from __future__ import annotations
@@ -14,34 +15,63 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 
-DUAL_ANTENNA_KINDS = ("gnss_heading", "gnss_baseline")
-TERTIARY_ANTENNA_KIND = "gnss_baseline_tertiary"
-SINGLE_ANTENNA_KINDS = ("gnss_fix", "gnss_velocity")
-GNSS_KINDS = (*SINGLE_ANTENNA_KINDS, *DUAL_ANTENNA_KINDS, TERTIARY_ANTENNA_KIND)
-MAGNETOMETER_KIND = "magnetometer"
-AHRS_KIND = "ahrs"
+from buoy_nav.aiding.base import (
+    GNSS_ANTENNA_PAIR,
+    GNSS_RECEIVER,
+    GNSS_SENSORS,
+    GNSS_THIRD_ANTENNA,
+    MAGNETOMETER,
+    MOTION_PACK,
+    AidingSource,
+)
+
+_NAMED_SENSORS = frozenset((*GNSS_SENSORS, MAGNETOMETER, MOTION_PACK, None))
+"""The sensors the sets are named after (None: a source of no sensor, such as a constraint)."""
 
 
-def sensor_set(active: set[str], coasting: set[str]) -> str:
-    """The set's label (``a``…``d``, with ``+e`` during a GNSS outage) and its sensors."""
-    if active & set(DUAL_ANTENNA_KINDS):
-        label = "a: dual-antenna GNSS" + (
-            " + third antenna" if TERTIARY_ANTENNA_KIND in active else ""
-        )
-    elif active & set(SINGLE_ANTENNA_KINDS):
-        label = "b: single-antenna GNSS" + (
-            " + magnetometer" if MAGNETOMETER_KIND in active else ""
-        )
-    elif AHRS_KIND in active:
-        label = "d: motion pack" + (" + magnetometer" if MAGNETOMETER_KIND in active else "")
-    elif MAGNETOMETER_KIND in active:
-        label = "c: magnetometer, no GNSS"
-    else:
-        label = "inertial only"
-    outage = sorted(coasting & set(GNSS_KINDS))
-    if outage:
-        label += f" (e: outage of {', '.join(outage)})"
-    return label
+class SensorSets:
+    """The labels of the sensor sets over ``sources`` (aiding-source classes or instances),
+    from the ``sensor`` each declares: no list of kinds is written out here, so a source
+    registered for one of these sensors counts with it."""
+
+    def __init__(self, sources: Iterable[AidingSource | type[AidingSource]]):
+        sources = tuple(sources)
+        self._kinds = {
+            sensor: frozenset(source.kind for source in sources if source.sensor == sensor)
+            for sensor in {source.sensor for source in sources}
+        }
+        self._gnss_kinds = frozenset().union(*(self.kinds_of(sensor) for sensor in GNSS_SENSORS))
+
+    def kinds_of(self, sensor: str) -> frozenset[str]:
+        """The kinds of the sources whose measurements come from ``sensor``."""
+        return self._kinds.get(sensor, frozenset())
+
+    def label(self, active: set[str], coasting: set[str]) -> str:
+        """The set's label (``a``…``d``, with ``+e`` during a GNSS outage) and its sensors, for
+        the ``active`` and ``coasting`` source kinds."""
+        used = {sensor for sensor, kinds in self._kinds.items() if active & kinds}
+        if GNSS_ANTENNA_PAIR in used:
+            label = "a: dual-antenna GNSS" + _also(used, GNSS_THIRD_ANTENNA, "third antenna")
+        elif GNSS_RECEIVER in used:
+            label = "b: single-antenna GNSS" + _also(used, MAGNETOMETER, "magnetometer")
+        elif MOTION_PACK in used:
+            label = "d: motion pack" + _also(used, MAGNETOMETER, "magnetometer")
+        elif MAGNETOMETER in used:
+            label = "c: magnetometer, no GNSS"
+        elif used - _NAMED_SENSORS:
+            # A sensor none of the sets names (a source registered since): said as it is.
+            label = f"other: {', '.join(sorted(used - _NAMED_SENSORS))}"
+        else:
+            label = "inertial only"
+        outage = sorted(coasting & self._gnss_kinds)
+        if outage:
+            label += f" (e: outage of {', '.join(outage)})"
+        return label
+
+
+def _also(used: set[str], sensor: str, name: str) -> str:
+    """`` + name`` when ``sensor`` is among the ``used`` ones."""
+    return f" + {name}" if sensor in used else ""
 
 
 class AidingRecency:

@@ -101,16 +101,7 @@ class SolutionBuilder:
         """The solution of ``integrator``'s state at stamp ``t`` (raw gyro and force there),
         with the covariance of ``kalman`` and the (fix, velocity, heading) coasting flags."""
         if self._covariance_blocks is None:
-            covariance = kalman.covariance
-            states = kalman.states
-            blocks = [
-                covariance[block, block].copy()
-                for block in (states.attitude, states.velocity, states.position)
-            ]
-            if self._distrust_variances is not None:
-                for block, variance in zip(blocks, self._distrust_variances, strict=False):
-                    block[np.diag_indices(3)] += variance
-            self._covariance_blocks = tuple(_read_only(block) for block in blocks)
+            self._covariance_blocks = self._published_covariance_blocks(kalman)
         if self._bias_arrays is None:
             self._bias_arrays = (
                 _read_only(np.array(integrator.gyro_bias_rad_s)),
@@ -157,6 +148,20 @@ class SolutionBuilder:
             coasting_velocity=coasting[1],
             coasting_heading=coasting[2],
         )
+
+    def _published_covariance_blocks(self, kalman: ErrorStateFilter) -> tuple[np.ndarray, ...]:
+        """The attitude (rad²), velocity (m²/s²) and position (m²) blocks of ``kalman``'s
+        covariance, read-only, widened while the filter is distrusted."""
+        covariance = kalman.covariance
+        states = kalman.states
+        blocks = [
+            covariance[block, block].copy()
+            for block in (states.attitude, states.velocity, states.position)
+        ]
+        if self._distrust_variances is not None:
+            for block, variance in zip(blocks, self._distrust_variances, strict=False):
+                block[np.diag_indices(3)] += variance
+        return tuple(_read_only(block) for block in blocks)
 
 
 class OutputDecimation:

@@ -19,6 +19,7 @@ from buoy_common.contract import Reason
 from buoy_nav import earth
 from buoy_nav.aiding import (
     AIDING_SOURCES,
+    HEADING_REFERENCE_TOPICS,
     GnssBaseline,
     GnssBaselineSource,
     GnssFix,
@@ -27,13 +28,21 @@ from buoy_nav.aiding import (
     GnssHeadingSource,
     GnssVelocity,
     GnssVelocitySource,
+    topics_with_role,
 )
-from buoy_nav.aiding.base import LinearisationPoint, floored_covariance
+from buoy_nav.aiding.base import (
+    ATTITUDE_SOURCE,
+    POSITION_REFERENCE,
+    VELOCITY_REFERENCE,
+    LinearisationPoint,
+    floored_covariance,
+)
 from buoy_nav.aiding.gnss_velocity import predicted_antenna_velocity_enu_mps
 from buoy_nav.antenna_geometry import baseline_azimuth_rad, horizontal_fraction
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ERROR_STATES, NavState, inject_error_state
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_euler, wrap_angle
+from buoy_nav.sensor_sets import SensorSets
 from buoy_nav.state_layout import EAST, NORTH, UP, StateLayout
 
 RNG = np.random.default_rng(77)
@@ -417,6 +426,44 @@ def test_registry_applies_the_heading_references_last_and_the_baseline_before_th
     ]
     assert GnssHeadingSource.superseded_by == GnssBaselineSource.kind
     assert not GnssBaselineSource.enabled_by(FusionConfig(use_gnss_baseline=False))
+
+
+def test_the_heading_references_are_the_sources_that_can_complete_the_alignment():
+    """Computed from the roles the sources declare: the antennas, the magnetometer and the
+    motion pack, each of which hands the aligner a heading; not the third antenna, which the
+    alignment does not use, nor GNSS position and velocity."""
+    assert HEADING_REFERENCE_TOPICS == ("gnss/baseline", "gnss/heading", "imu/mag", "imu/data")
+    assert topics_with_role(ATTITUDE_SOURCE) == ("imu/data",)
+    assert topics_with_role(POSITION_REFERENCE) == ("gnss/fix",)
+    assert topics_with_role(VELOCITY_REFERENCE) == ("gnss/vel",)
+    with pytest.raises(ValueError, match="not one of the roles"):
+        topics_with_role("heading")
+
+
+@pytest.mark.parametrize(
+    ("active", "coasting", "label"),
+    [
+        ({"gnss_fix", "gnss_baseline"}, set(), "a: dual-antenna GNSS"),
+        (
+            {"gnss_heading", "gnss_baseline_tertiary"},
+            set(),
+            "a: dual-antenna GNSS + third antenna",
+        ),
+        ({"gnss_fix", "gnss_velocity"}, set(), "b: single-antenna GNSS"),
+        ({"gnss_velocity", "magnetometer"}, set(), "b: single-antenna GNSS + magnetometer"),
+        ({"magnetometer", "moored"}, set(), "c: magnetometer, no GNSS"),
+        ({"ahrs", "magnetometer"}, set(), "d: motion pack + magnetometer"),
+        ({"ahrs"}, set(), "d: motion pack"),
+        (
+            {"magnetometer"},
+            {"gnss_fix", "gnss_heading", "ahrs"},
+            "c: magnetometer, no GNSS (e: outage of gnss_fix, gnss_heading)",
+        ),
+        (set(), {"moored"}, "inertial only"),
+    ],
+)
+def test_sensor_sets_are_named_from_the_sensors_the_sources_declare(active, coasting, label):
+    assert SensorSets(AIDING_SOURCES).label(active, coasting) == label
 
 
 def test_state_layout_names_every_state_once():

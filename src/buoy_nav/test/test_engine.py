@@ -1,5 +1,6 @@
 """Fusion engine: ordering, interpolation at stamps, input validation, gating, outages."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -25,6 +26,7 @@ from buoy_nav.aiding import GnssHeading
 from buoy_nav.alignment import AlignmentState
 from buoy_nav.config import ConfigError, FusionConfig
 from buoy_nav.engine import MAX_MEASUREMENT_LEAD_S, FusionEngine
+from buoy_nav.health import diagnostic_values, health_status
 
 
 def test_exact_data_keeps_the_rocking_buoy_on_its_truth(rocking_run):
@@ -179,6 +181,25 @@ def test_gnss_outage_coasts_and_recovers():
     errors = attitude_errors_rad(buoy, solutions)
     assert errors.max() < math.radians(0.02)
     assert engine.health().counters["gnss_fix"].rejected == {}
+
+
+def test_diagnostics_say_the_set_the_counters_and_what_is_coasting(rocking_run):
+    _, _, engine, _ = rocking_run
+    health = engine.health()
+    values = diagnostic_values(health)
+    assert values["sensor_set"] == "a: dual-antenna GNSS"
+    assert values["gnss_heading.accepted"] == health.counters["gnss_heading"].accepted
+    assert values["gnss_fix.used_for_alignment"] > 0 and "imu.used_for_alignment" not in values
+    assert values["processed_up_to_s"] == "59.990000"
+    assert health_status(health, "imu/data_raw", 0, 5) == ("warn", "no imu/data_raw samples")
+    assert health_status(health, "imu/data_raw", 100, 5) == (
+        "ok",
+        "aligned on a: dual-antenna GNSS, 5 solutions published",
+    )
+    coasting = dataclasses.replace(health, coasting_fix=True, coasting_heading=True)
+    assert health_status(coasting, "imu/data_raw", 100, 5)[1].endswith(
+        "coasting without GNSS fix, heading"
+    )
 
 
 def test_output_rate_decimates_solutions():

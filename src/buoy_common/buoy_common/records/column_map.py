@@ -260,6 +260,32 @@ def _layout(spec) -> np.dtype:
 def load_column_map(path: str | Path) -> ColumnMap:
     """Read and check a column map (YAML); MapError naming the key of the first problem."""
     path = Path(path)
+    document = _read_document(path)
+    file_format, layout, column_count = _record_format(document)
+    binary = file_format == "binary"
+    anemometer = _anemometer_fields(document, binary)
+    imu = _imu_fields(document, binary)
+    ahrs = _ahrs_fields(document, binary)
+    checks = _require_mapping(document.get("checks", {}), "checks")
+    column_map = ColumnMap(
+        path=path,
+        format=file_format,
+        delimiter=document.get("delimiter"),
+        skip_lines=int(document.get("skip_lines", 0)),
+        column_count=column_count,
+        record_layout=layout,
+        time=_time(document.get("time"), binary),
+        **anemometer,
+        **imu,
+        **ahrs,
+        **_check_limits(checks),
+    )
+    _check_consistency(column_map)
+    return column_map
+
+
+def _read_document(path: Path) -> dict:
+    """The column map's YAML document, with no key the map does not know."""
     try:
         document = yaml.safe_load(path.read_text("utf8"))
     except OSError as error:
@@ -272,15 +298,24 @@ def load_column_map(path: str | Path) -> ColumnMap:
     unknown = sorted(set(document) - known)
     if unknown:
         raise MapError(f"column map {path}: unknown keys {', '.join(unknown)}")
+    return document
+
+
+def _record_format(document: dict) -> tuple[str, np.dtype | None, int | None]:
+    """(format, binary record layout or None, number of columns of every row or None)."""
     file_format = document.get("format", "delimited")
     if file_format not in FORMATS:
         raise MapError(f"format: one of {', '.join(FORMATS)}, got {file_format!r}")
-    binary = file_format == "binary"
-    layout = _layout(document.get("record_layout")) if binary else None
+    layout = _layout(document.get("record_layout")) if file_format == "binary" else None
     column_count = document.get("columns")
     if column_count is not None and (not isinstance(column_count, int) or column_count < 1):
         raise MapError(f"columns: the number of columns of every row, got {column_count!r}")
+    return file_format, layout, column_count
 
+
+def _anemometer_fields(document: dict, binary: bool) -> dict:
+    """The anemometer's fields of :class:`ColumnMap`: wind, its axes, sonic temperature or
+    speed of sound."""
     anemometer = _require_mapping(document.get("anemometer", {}), "anemometer")
     wind = None
     if "u" in anemometer:
@@ -298,7 +333,16 @@ def load_column_map(path: str | Path) -> ColumnMap:
         speed_of_sound = _field(
             anemometer["speed_of_sound"], "anemometer.speed_of_sound", "velocity", binary
         )
+    return {
+        "wind": wind,
+        "wind_axes": wind_axes,
+        "sonic_temperature": temperature,
+        "speed_of_sound": speed_of_sound,
+    }
 
+
+def _imu_fields(document: dict, binary: bool) -> dict:
+    """The IMU's fields of :class:`ColumnMap`: angular rate, specific force, their axes."""
     imu = _require_mapping(document.get("imu", {}), "imu")
     rate = (
         _vector(imu["angular_rate"], "imu.angular_rate", "angular_rate", binary)
@@ -312,7 +356,12 @@ def load_column_map(path: str | Path) -> ColumnMap:
     )
     imu_axes = imu.get("axes", "FLU")
     axes_to_body(imu_axes, "imu.axes")
+    return {"angular_rate": rate, "specific_force": force, "imu_axes": imu_axes}
 
+
+def _ahrs_fields(document: dict, binary: bool) -> dict:
+    """The motion pack's fields of :class:`ColumnMap`: its angles, their convention and yaw
+    reference, and their standard deviations (rad)."""
     ahrs = _require_mapping(document.get("ahrs", {}), "ahrs")
     angles = None
     if "roll" in ahrs:
@@ -331,45 +380,39 @@ def load_column_map(path: str | Path) -> ColumnMap:
     sigma_rad = tuple(math.radians(_number(s, "ahrs.sigma_deg")) for s in sigma)
     if not all(s > 0 for s in sigma_rad):
         raise MapError(f"ahrs.sigma_deg: must be positive, got {sigma!r}")
+    return {
+        "ahrs_angles": angles,
+        "ahrs_convention": convention,
+        "ahrs_yaw_reference": yaw_reference,
+        "ahrs_sigma_rad": sigma_rad,
+    }
 
-    checks = _require_mapping(document.get("checks", {}), "checks")
-    column_map = ColumnMap(
-        path=path,
-        format=file_format,
-        delimiter=document.get("delimiter"),
-        skip_lines=int(document.get("skip_lines", 0)),
-        column_count=column_count,
-        record_layout=layout,
-        time=_time(document.get("time"), binary),
-        wind=wind,
-        wind_axes=wind_axes,
-        sonic_temperature=temperature,
-        speed_of_sound=speed_of_sound,
-        angular_rate=rate,
-        specific_force=force,
-        imu_axes=imu_axes,
-        ahrs_angles=angles,
-        ahrs_convention=convention,
-        ahrs_yaw_reference=yaw_reference,
-        ahrs_sigma_rad=sigma_rad,
-        gravity_tolerance_mps2=_number(
+
+def _check_limits(checks: dict) -> dict:
+    """The limits of the record's checks, of :class:`ColumnMap` (SI units)."""
+    return {
+        "gravity_tolerance_mps2": _number(
             checks.get("gravity_tolerance_mps2", 0.5), "checks.gravity_tolerance_mps2"
         ),
-        max_gyro_bias_rad_s=math.radians(
+        "max_gyro_bias_rad_s": math.radians(
             _number(checks.get("max_gyro_bias_deg_s", 1.0), "checks.max_gyro_bias_deg_s")
         ),
-    )
+    }
+
+
+def _check_consistency(column_map: ColumnMap) -> None:
+    """MapError when the map's parts do not go together."""
+    wind, rate = column_map.wind, column_map.angular_rate
     if wind is None and rate is None:
-        raise MapError(f"column map {path}: maps neither the anemometer nor the IMU")
-    if (rate is None) != (force is None):
+        raise MapError(f"column map {column_map.path}: maps neither the anemometer nor the IMU")
+    if (rate is None) != (column_map.specific_force is None):
         raise MapError("imu: give both angular_rate and specific_force")
-    if angles is not None and rate is None:
+    if column_map.ahrs_angles is not None and rate is None:
         raise MapError("ahrs: the motion pack's attitude needs imu.angular_rate and specific_force")
-    if temperature is not None and speed_of_sound is not None:
+    if column_map.sonic_temperature is not None and column_map.speed_of_sound is not None:
         raise MapError("anemometer: give temperature or speed_of_sound, not both")
-    if binary:
-        names = set(layout.names)
+    if column_map.record_layout is not None:
+        names = set(column_map.record_layout.names)
         for field in column_map.fields():
             if isinstance(field.column, str) and field.column not in names:
                 raise MapError(f"{field.name}: field {field.column!r} is not in record_layout")
-    return column_map

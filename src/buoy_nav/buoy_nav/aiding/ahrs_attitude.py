@@ -32,7 +32,10 @@ import numpy as np
 
 from buoy_common.contract import AHRS_TOPIC, Reason, header_seconds
 from buoy_nav.aiding.base import (
+    ATTITUDE_SOURCE,
     HEADING,
+    HEADING_REFERENCE,
+    MOTION_PACK,
     AidingSource,
     LinearisationPoint,
     MeasurementModel,
@@ -70,6 +73,8 @@ class AhrsAttitudeSource(AidingSource):
     topic = AHRS_TOPIC
     measurement_type = AhrsAttitude
     aids = HEADING
+    sensor = MOTION_PACK
+    roles = frozenset((HEADING_REFERENCE, ATTITUDE_SOURCE))
 
     def __init__(self, config, states):
         super().__init__(config, states)

@@ -59,6 +59,31 @@ MOORING = "mooring"
 """The zero-mean-velocity constraint of a moored buoy: it clears no GNSS coasting flag."""
 AIDED_QUANTITIES = (FIX, VELOCITY, HEADING, MOORING)
 
+# The sensor a source's measurements come from (``sensor``): the sensor sets are named after the
+# sensors whose sources are accepted (:mod:`buoy_nav.sensor_sets`).
+GNSS_RECEIVER = "gnss_receiver"
+"""Position and velocity of the primary antenna."""
+GNSS_ANTENNA_PAIR = "gnss_antenna_pair"
+"""The primary and secondary antennas: their baseline, or its azimuth."""
+GNSS_THIRD_ANTENNA = "gnss_third_antenna"
+MAGNETOMETER = "magnetometer"
+MOTION_PACK = "motion_pack"
+"""An attitude and heading reference system's own attitude solution."""
+GNSS_SENSORS = (GNSS_RECEIVER, GNSS_ANTENNA_PAIR, GNSS_THIRD_ANTENNA)
+"""The sensors whose lapse is a GNSS outage (sensor set e)."""
+
+# The roles a source plays (``roles``): the tools' lists of topics are computed from them over
+# the registry (:func:`buoy_nav.aiding.topics_with_role`).
+HEADING_REFERENCE = "heading_reference"
+"""It can give the alignment its heading: a run needs one at least."""
+POSITION_REFERENCE = "position_reference"
+"""It measures the position: the alignment takes it (a configured site stands in for one)."""
+VELOCITY_REFERENCE = "velocity_reference"
+"""It measures the velocity over ground."""
+ATTITUDE_SOURCE = "attitude_source"
+"""It measures the whole attitude (roll, pitch and yaw)."""
+ROLES = (HEADING_REFERENCE, POSITION_REFERENCE, VELOCITY_REFERENCE, ATTITUDE_SOURCE)
+
 
 @dataclass(frozen=True)
 class MeasurementModel:
@@ -137,7 +162,12 @@ class AidingSource(abc.ABC):
       topic: the contract topic it reads (from :mod:`buoy_common.contract`).
       measurement_type: the class of its measurements; :meth:`FusionEngine.add_measurement`
         finds the source by it.
-      aids: which coasting flag its accepted measurements clear (:data:`AIDED_QUANTITIES`).
+      aids: what it observes, as the coasting flag its accepted measurements clear
+        (:data:`AIDED_QUANTITIES`).
+      sensor: the sensor its measurements come from (``GNSS_RECEIVER`` …, None: none of the
+        sensor sets'), which names the sensor set while it is accepted.
+      roles: what it can stand for (:data:`ROLES`), e.g. ``HEADING_REFERENCE``: one at least
+        is needed to align.
       superseded_by: kind of a source whose measurement of the same stamp carries this one's
         information and more (None: none); such a measurement is set aside and counted as
         superseded, so one observation is not fused twice.
@@ -153,6 +183,8 @@ class AidingSource(abc.ABC):
     topic: ClassVar[str]
     measurement_type: ClassVar[type]
     aids: ClassVar[str]
+    sensor: ClassVar[str | None] = None
+    roles: ClassVar[frozenset[str]] = frozenset()
     superseded_by: ClassVar[str | None] = None
     pseudo: ClassVar[bool] = False
     witnesses_integrity: ClassVar[bool] = True

@@ -26,7 +26,9 @@ import numpy as np
 
 from buoy_common.contract import GNSS_BASELINE_TOPIC, Reason
 from buoy_nav.aiding.base import (
+    GNSS_ANTENNA_PAIR,
     HEADING,
+    HEADING_REFERENCE,
     LinearisationPoint,
     MeasurementModel,
     as_float_array,
@@ -54,6 +56,8 @@ class GnssBaselineSource(DualAntennaSource):
     topic = GNSS_BASELINE_TOPIC
     measurement_type = GnssBaseline
     aids = HEADING
+    sensor = GNSS_ANTENNA_PAIR
+    roles = frozenset((HEADING_REFERENCE,))
 
     def __init__(self, config, states):
         super().__init__(config, states)

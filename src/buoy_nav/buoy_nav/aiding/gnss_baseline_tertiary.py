@@ -37,6 +37,7 @@ import numpy as np
 from buoy_common.contract import GNSS_BASELINE_TERTIARY_TOPIC, Reason
 from buoy_common.extrinsics import MIN_TERTIARY_BASELINE_ANGLE_DEG, tertiary_baseline_angle_deg
 from buoy_nav.aiding.base import (
+    GNSS_THIRD_ANTENNA,
     HEADING,
     LinearisationPoint,
     MeasurementModel,
@@ -61,6 +62,7 @@ class GnssBaselineTertiarySource(DualAntennaSource):
     topic = GNSS_BASELINE_TERTIARY_TOPIC
     measurement_type = GnssBaselineTertiary
     aids = HEADING
+    sensor = GNSS_THIRD_ANTENNA
     # A carrier-phase vector like the first baseline: its own faults (a wrong fix, a wrong
     # antenna) are stopped by the length check before the gate, so persistent gate rejections
     # of a valid vector mean the filter's attitude is wrong.

@@ -22,6 +22,8 @@ from buoy_common.contract import GNSS_FIX_TOPIC, Reason
 from buoy_nav import earth
 from buoy_nav.aiding.base import (
     FIX,
+    GNSS_RECEIVER,
+    POSITION_REFERENCE,
     AidingSource,
     LinearisationPoint,
     MeasurementModel,
@@ -65,6 +67,8 @@ class GnssFixSource(AidingSource):
     topic = GNSS_FIX_TOPIC
     measurement_type = GnssFix
     aids = FIX
+    sensor = GNSS_RECEIVER
+    roles = frozenset((POSITION_REFERENCE,))
 
     def __init__(self, config, states):
         super().__init__(config, states)

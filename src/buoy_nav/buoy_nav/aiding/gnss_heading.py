@@ -28,7 +28,9 @@ import numpy as np
 
 from buoy_common.contract import GNSS_HEADING_TOPIC, Reason
 from buoy_nav.aiding.base import (
+    GNSS_ANTENNA_PAIR,
     HEADING,
+    HEADING_REFERENCE,
     LinearisationPoint,
     MeasurementModel,
     as_floats,
@@ -68,6 +70,8 @@ class GnssHeadingSource(DualAntennaSource):
     topic = GNSS_HEADING_TOPIC
     measurement_type = GnssHeading
     aids = HEADING
+    sensor = GNSS_ANTENNA_PAIR
+    roles = frozenset((HEADING_REFERENCE,))
     superseded_by = GnssBaselineSource.kind
 
     def measurement_from_message(self, message) -> GnssHeading | Reason:

@@ -29,7 +29,9 @@ import numpy as np
 
 from buoy_common.contract import GNSS_VELOCITY_TOPIC, Reason
 from buoy_nav.aiding.base import (
+    GNSS_RECEIVER,
     VELOCITY,
+    VELOCITY_REFERENCE,
     AidingSource,
     LinearisationPoint,
     MeasurementModel,
@@ -78,6 +80,8 @@ class GnssVelocitySource(AidingSource):
     topic = GNSS_VELOCITY_TOPIC
     measurement_type = GnssVelocity
     aids = VELOCITY
+    sensor = GNSS_RECEIVER
+    roles = frozenset((VELOCITY_REFERENCE,))
 
     def __init__(self, config, states):
         super().__init__(config, states)

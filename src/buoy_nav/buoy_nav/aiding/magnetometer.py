@@ -40,6 +40,8 @@ import numpy as np
 from buoy_common.contract import MAGNETOMETER_TOPIC, Reason, header_seconds
 from buoy_nav.aiding.base import (
     HEADING,
+    HEADING_REFERENCE,
+    MAGNETOMETER,
     AidingSource,
     LinearisationPoint,
     MeasurementModel,
@@ -74,6 +76,8 @@ class MagnetometerSource(AidingSource):
     topic = MAGNETOMETER_TOPIC
     measurement_type = MagneticField
     aids = HEADING
+    sensor = MAGNETOMETER
+    roles = frozenset((HEADING_REFERENCE,))
     # A steel hull or a winch disturbs the field for tens of seconds: the gate stops it, and the
     # filter is not to be distrusted for it.
     witnesses_integrity = False

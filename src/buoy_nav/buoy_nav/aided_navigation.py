@@ -1,0 +1,130 @@
+"""The aided navigation between two alignments: the strapdown integrator that carries the
+nominal state, the error-state filter that corrects it, and the recorder told of every change
+of the filter (:mod:`buoy_nav.epoch_recorder`).
+
+The covariance is propagated in batches of at most ``covariance_propagation_interval_s`` and
+always up to a measurement stamp before an update (the batching is exact to first order, see
+:mod:`buoy_nav.error_state_filter`).
+"""
+
+import numpy as np
+
+from buoy_nav.aiding.base import LinearisationPoint, MeasurementModel, StateReset
+from buoy_nav.alignment import AlignmentResult
+from buoy_nav.config import FusionConfig
+from buoy_nav.epoch_recorder import EpochRecorder
+from buoy_nav.error_state_filter import (
+    ErrorStateFilter,
+    ImuErrorModel,
+    NavState,
+    block_diagonal,
+    discrete_error_model,
+    inject_error_state,
+)
+from buoy_nav.mechanization import StrapdownIntegrator
+from buoy_nav.state_layout import StateLayout
+
+
+class AidedNavigation:
+    """The filter started from the alignment ``result`` at stamp ``t_s`` (s), over the error
+    states ``states``, with the IMU's error model ``imu_model``; tells ``recorder`` of each
+    epoch, correction and reset."""
+
+    def __init__(
+        self,
+        result: AlignmentResult,
+        t_s: float,
+        config: FusionConfig,
+        states: StateLayout,
+        imu_model: ImuErrorModel,
+        recorder: EpochRecorder,
+    ):
+        state = result.state
+        self.integrator = StrapdownIntegrator(
+            state.attitude_xyzw,
+            state.velocity_enu_mps,
+            state.latitude_rad,
+            state.longitude_rad,
+            state.altitude_m,
+            state.gyro_bias_rad_s,
+            state.accel_bias_mps2,
+        )
+        self.kalman = ErrorStateFilter(result.covariance, config.gate_probability, states)
+        self._propagation_interval_s = config.covariance_propagation_interval_s
+        self._imu_model = imu_model
+        self._recorder = recorder
+        recorder.begin_segment(t_s, self.kalman.covariance)
+
+    def integrate(self, t_s: float, dt_s: float, gyro_start, gyro_end, force_start, force_end):
+        """Integrate the ``dt_s`` (s) up to stamp ``t_s`` (s) between two raw IMU samples (body:
+        rad/s, m/s²), and propagate the covariance when a batch is full. Returns whether it
+        was propagated."""
+        integrator = self.integrator
+        integrator.step(dt_s, gyro_start, gyro_end, force_start, force_end)
+        if integrator.accumulated_duration_s >= self._propagation_interval_s:
+            return self.propagate_covariance(t_s)
+        return False
+
+    def propagate_covariance(self, t_s: float) -> bool:
+        """Propagate the covariance over the interval integrated so far, to stamp ``t_s`` (s).
+        Returns whether there was an interval to propagate over."""
+        integrator = self.integrator
+        if integrator.accumulated_duration_s <= 0.0:
+            return False
+        sums = integrator.take_propagation_sums()
+        transition, noise = discrete_error_model(
+            sums,
+            integrator.latitude_rad,
+            integrator.altitude_m,
+            integrator.velocity_enu_mps,
+            self._imu_model,
+        )
+        posterior = self.kalman.covariance
+        self.kalman.propagate(transition, noise)
+        self._recorder.propagated(t_s, transition, self.kalman.covariance, posterior)
+        return True
+
+    def linearisation_point(self, raw_gyro_rad_s) -> LinearisationPoint:
+        """The nominal state now, for the models of measurements at the current stamp (raw gyro
+        sample there, body rad/s)."""
+        integrator = self.integrator
+        state = integrator.nav_state()
+        return LinearisationPoint(
+            state, state.rotation_nb, raw_gyro_rad_s, integrator.nav_frame_rate_enu_rad_s
+        )
+
+    def correct(self, state: NavState, models: list[MeasurementModel]) -> np.ndarray:
+        """Apply the accepted ``models`` of one stamp in one stacked update, which equals
+        applying them one after the other (their noises are independent) at a fraction of the
+        cost, and inject the correction into the nominal ``state``. Returns the correction."""
+        correction = self.kalman.update(
+            np.concatenate([m.innovation for m in models]),
+            np.vstack([m.jacobian for m in models]),
+            block_diagonal([m.covariance for m in models]),
+        )
+        self.integrator.set_nav_state(inject_error_state(state, correction))
+        self.kalman.reset_after_injection(correction)
+        self._recorder.corrected(correction)
+        return correction
+
+    def reset(self, t_s: float, reset: StateReset) -> None:
+        """Re-initialise the states of ``reset`` at stamp ``t_s`` (s): a new segment for the
+        recorder, since the nominal state is set other than by a correction."""
+        self._recorder.end_segment(self.kalman.covariance)
+        self.integrator.set_nav_state(reset.state)
+        self.kalman.reset_states(reset.indices, reset.variances)
+        self.kalman.ensure_positive_definite()
+        self._recorder.begin_segment(t_s, self.kalman.covariance)
+
+    def inflate(self, t_s: float, variances: tuple[float, float]) -> None:
+        """Widen the attitude and velocity uncertainty at stamp ``t_s`` (s) by ``variances``
+        (attitude rad², velocity m²/s², per axis): the filter has found itself wrong."""
+        states = self.kalman.states
+        covariance = self.kalman.covariance.copy()
+        attitude_variance, velocity_variance = variances
+        for index in states.indices("attitude"):
+            covariance[index, index] += attitude_variance
+        for index in states.indices("velocity"):
+            covariance[index, index] += velocity_variance
+        self._recorder.noise_added(t_s, self.kalman.covariance, covariance)
+        self.kalman.covariance = covariance

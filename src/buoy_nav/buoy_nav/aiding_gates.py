@@ -1,0 +1,124 @@
+"""The innovation gate of each aiding measurement, and the books kept of its outcomes.
+
+Each measurement of a stamp is gated on its own against the predicted covariance (the
+chi-square test at its source's ``gate_probability``). What the gate decides is counted by source
+and reason, logged (``record_innovations``), kept as the stamp each source and aided quantity was
+last accepted (:class:`~buoy_nav.sensor_sets.AidingRecency`, for the sensor set and the coasting
+flags) and as each source's run of consecutive rejections: the run that asks the source for a
+reset, and that the integrity monitor (:mod:`buoy_nav.integrity`) judges the filter by.
+"""
+
+import math
+from typing import NamedTuple
+
+from buoy_common.contract import Reason
+from buoy_nav.aiding.base import AidingSource, LinearisationPoint, MeasurementModel
+from buoy_nav.error_state_filter import ErrorStateFilter
+from buoy_nav.health import InnovationRecord, MeasurementCounters
+from buoy_nav.sensor_sets import AidingRecency
+
+
+class GateOutcome(NamedTuple):
+    """What the gates made of the measurements of one stamp.
+
+    accepted: the models of the accepted measurements, in the order of the group.
+    persistent_rejections: (source, measurement, model) of each rejected measurement whose
+      source has now been rejected ``reset_after_rejections`` times in a row.
+    rejected_kinds: each source rejected there that witnesses the integrity, with its run of
+      consecutive rejections.
+    """
+
+    accepted: list[MeasurementModel]
+    persistent_rejections: list[tuple[AidingSource, object, MeasurementModel]]
+    rejected_kinds: dict[str, int]
+
+
+class AidingGates:
+    """Gates measurements and keeps their books: ``counters`` (by kind), ``recency`` (quantities
+    indexed by ``aided_index`` of each source) and, unless None, ``innovation_log``."""
+
+    def __init__(
+        self,
+        counters: dict[str, MeasurementCounters],
+        recency: AidingRecency,
+        aided_index: dict[AidingSource, int],
+        innovation_log: list[InnovationRecord] | None,
+    ):
+        self._counters = counters
+        self._recency = recency
+        self._aided_index = aided_index
+        self._innovation_log = innovation_log
+        self._consecutive_rejections = dict.fromkeys((source.kind for source in aided_index), 0)
+
+    def gate(
+        self,
+        t_s: float,
+        group: list[tuple[AidingSource, object]],
+        point: LinearisationPoint,
+        kalman: ErrorStateFilter,
+    ) -> GateOutcome:
+        """Gate each (source, measurement) pair of stamp ``t_s`` (s) linearised at ``point``
+        against the covariance of ``kalman``, and book the outcomes."""
+        outcome = GateOutcome([], [], {})
+        for source, measurement in group:
+            model = source.model(measurement, point)
+            if model is None:
+                self._counters[source.kind].reject(Reason.GEOMETRY)
+                continue
+            gate = kalman.gate(
+                model.innovation, model.jacobian, model.covariance, source.gate_probability
+            )
+            if self._innovation_log is not None:
+                self._innovation_log.append(
+                    InnovationRecord(
+                        t_s,
+                        source.kind,
+                        model.innovation,
+                        gate.innovation_covariance,
+                        gate.nis,
+                        gate.accepted,
+                    )
+                )
+            if gate.accepted:
+                self._book_acceptance(source, t_s, gate.nis)
+                outcome.accepted.append(model)
+            else:
+                self._book_rejection(source, measurement, model, gate.nis, outcome)
+        return outcome
+
+    def _book_acceptance(self, source: AidingSource, t_s: float, nis: float) -> None:
+        counters = self._counters[source.kind]
+        counters.accepted += 1
+        counters.nis_sum += nis
+        counters.nis_count += 1
+        self._recency.accepted(source.kind, self._aided_index[source], t_s)
+        self._consecutive_rejections[source.kind] = 0
+
+    def _book_rejection(
+        self,
+        source: AidingSource,
+        measurement,
+        model: MeasurementModel,
+        nis: float,
+        outcome: GateOutcome,
+    ) -> None:
+        kind = source.kind
+        self._counters[kind].reject(Reason.GATE if math.isfinite(nis) else Reason.SINGULAR)
+        self._consecutive_rejections[kind] += 1
+        run = self._consecutive_rejections[kind]
+        if source.witnesses_integrity:
+            outcome.rejected_kinds[kind] = run
+        if run >= source.reset_after_rejections:
+            outcome.persistent_rejections.append((source, measurement, model))
+
+    def source_reset(self, source: AidingSource, t_s: float) -> None:
+        """The states ``source`` observes were reset from its measurement at ``t_s`` (s)."""
+        self._counters[source.kind].resets += 1
+        self._consecutive_rejections[source.kind] = 0
+        self._recency.aided(self._aided_index[source], t_s)
+
+    def aligned(self, t_s: float) -> None:
+        """A new alignment completed at ``t_s`` (s): every run of rejections ends."""
+        for kind in self._consecutive_rejections:
+            self._consecutive_rejections[kind] = 0
+        self._recency.aligned(t_s)
