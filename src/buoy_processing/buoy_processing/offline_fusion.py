@@ -21,11 +21,7 @@ from pathlib import Path
 
 from buoy_common.bag_io import BackgroundBagWriter, BagError, BagMessage, BagReader, BagWriter
 from buoy_common.contract import (
-    AHRS_TOPIC,
-    GNSS_BASELINE_TOPIC,
-    GNSS_HEADING_TOPIC,
     IMU_RAW_TOPIC,
-    MAGNETOMETER_TOPIC,
     NAV_FORWARD_ODOMETRY_TOPIC,
     NAV_MSGTYPES,
     ODOMETRY_MSGTYPE,
@@ -35,7 +31,7 @@ from buoy_common.contract import (
     bag_topic,
 )
 from buoy_common.namespaces import NamespacedWriter
-from buoy_nav.aiding import disabled_topics
+from buoy_nav.aiding import HEADING_REFERENCE_TOPICS, disabled_topics
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine, NavSolution
 from buoy_nav.fusion_messages import (
@@ -51,7 +47,6 @@ from buoy_nav.fusion_messages import (
 )
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
-HEADING_TOPICS = (GNSS_HEADING_TOPIC, GNSS_BASELINE_TOPIC, MAGNETOMETER_TOPIC, AHRS_TOPIC)
 """The fusion needs one of these at least: without a heading reference it cannot align."""
 OPTIONAL_TOPICS = tuple(topic for topic in FUSION_INPUT_MSGTYPES if topic not in REQUIRED_TOPICS)
 
@@ -79,11 +74,11 @@ def sensor_topics_of(
     stored = {relative_topic(name): name for name in reader.topics}
     found = {}
     disabled = disabled_topics(config)
-    usable_headings = [t for t in HEADING_TOPICS if t in stored and t not in disabled]
+    usable_headings = [t for t in HEADING_REFERENCE_TOPICS if t in stored and t not in disabled]
     if not usable_headings:
         raise BagError(
             f"bag {reader.path}: no heading reference to align with: it needs one of "
-            f"{', '.join(HEADING_TOPICS)} (not switched off by a parameter)"
+            f"{', '.join(HEADING_REFERENCE_TOPICS)} (not switched off by a parameter)"
         )
     for topic in (*REQUIRED_TOPICS, *OPTIONAL_TOPICS):
         if topic not in stored or topic in disabled:
