@@ -50,7 +50,9 @@ CURRENT_TOPIC = "current/velocity"
 CURRENT_MEAN_PREFIX = "current/mean_"
 CURRENT_STATS_PREFIX = "current/stats_"
 DIAGNOSTICS_TOPIC = "diagnostics"
-CLOCK_TOPIC = "clock"
+CLOCK_TOPIC = "/clock"
+"""The simulation clock: the one absolute topic, since ROS's ``use_sim_time`` reads ``/clock``
+whatever a node's namespace (a whole fleet shares one simulated time)."""
 TF_TOPIC = "tf"
 """``map`` → ``base_link`` of each navigation solution. Relative, like every topic here, so each
 buoy of a fleet has its own tree under its namespace (tf2 listeners take ``-r /tf:=tf``)."""

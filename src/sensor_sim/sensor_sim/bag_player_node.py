@@ -45,10 +45,10 @@ from buoy_common.base_node import (
     message_class,
     take_stop_signals,
 )
+from buoy_common.contract import CLOCK_TOPIC
 from sensor_sim.bag_recorder_node import split_ros_arguments
 
 PROGRAM = "bag_player"
-CLOCK_TOPIC = "/clock"
 CLOCK_PERIOD_NS = 10_000_000
 PROGRESS_PERIOD_S = 3.0
 WAIT_REPORT_PERIOD_S = 5.0

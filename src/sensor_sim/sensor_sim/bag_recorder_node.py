@@ -40,6 +40,7 @@ from buoy_common.base_node import (
     run_node,
 )
 from buoy_common.contract import (
+    CLOCK_TOPIC,
     CURRENT_TOPIC,
     DEFAULT_PRODUCT_WINDOWS_S,
     NAV_MSGTYPES,
@@ -66,7 +67,7 @@ DEFAULT_TOPICS = (
     *(current_stats_topic(window_s) for window_s in DEFAULT_PRODUCT_WINDOWS_S),
 )
 # ROS infrastructure that --all leaves out; /clock is recorded only when listed in --topics.
-EXCLUDED_FROM_ALL = frozenset({"/rosout", "/parameter_events", "/clock"})
+EXCLUDED_FROM_ALL = frozenset({"/rosout", "/parameter_events", CLOCK_TOPIC})
 DISCOVERY_PERIOD_S = 0.5
 # Wall-clock period of closing the open chunk and flushing the bag to the disk: what a killed
 # recorder can lose at most.

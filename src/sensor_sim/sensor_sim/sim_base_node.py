@@ -20,6 +20,7 @@ from buoy_common.base_node import (
     main_for,
     message_class,
 )
+from buoy_common.contract import CLOCK_TOPIC
 from buoy_common.parameters import ParameterError, to_ros_value
 from sensor_sim.parameters import (
     SCENARIO,
@@ -136,7 +137,7 @@ class SimulatedSensorNode(SuiteNode):
             self._subscribe_to_clock()
 
     def _subscribe_to_clock(self) -> None:
-        self.create_subscription(Clock, "/clock", self.on_clock, CLOCK_QOS)
+        self.create_subscription(Clock, CLOCK_TOPIC, self.on_clock, CLOCK_QOS)
 
     def on_clock(self, clock: Clock) -> None:
         clock_ns = clock.clock.sec * 1_000_000_000 + clock.clock.nanosec

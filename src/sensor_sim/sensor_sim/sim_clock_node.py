@@ -13,6 +13,7 @@ import time
 from rosgraph_msgs.msg import Clock
 
 from buoy_common.base_node import StartupError, SuiteNode, main_for
+from buoy_common.contract import CLOCK_TOPIC
 from sensor_sim.parameters import (
     PUBLISH_RATE,
     RATE_FACTOR,
@@ -51,7 +52,7 @@ class SimClockNode(SuiteNode):
             raise StartupError("parameter 'rate_factor' must be in (0, 1000]")
         if not (math.isfinite(publish_rate_hz) and 1.0 <= publish_rate_hz <= 2000.0):
             raise StartupError("parameter 'publish_rate_hz' must be in [1, 2000] Hz")
-        self.publisher = self.create_publisher(Clock, "/clock", CLOCK_QOS)
+        self.publisher = self.create_publisher(Clock, CLOCK_TOPIC, CLOCK_QOS)
         self.wall_start_s: float | None = None
         self.ready_since_s: float | None = None
         self.ended_at_s: float | None = None
