@@ -7,7 +7,8 @@ arm B, so an error of the mounting (δR) or of the lever arm (δB) changes every
 by exactly R_nb·δR·u or R_nb·(ω×δB). This script applies 1° about each sonic axis and 1 cm along
 each body axis to the bag's own measured wind, attitude and body rate, and prints, per error,
 the bias of the mean vertical wind, the error of the record's mean speed and direction, and the
-RMS of the per-sample change (what enters turbulent fluxes). The README's table comes from here.
+RMS of the per-sample change (what enters turbulent fluxes). The table of docs/mounting.md comes
+from here.
 """
 
 from __future__ import annotations

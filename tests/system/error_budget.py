@@ -49,7 +49,8 @@ ANEMOMETER = AnemometerErrorConfig()
 IMU_RATE_HZ = 100.0  # of every committed bag and simulator default
 STANDARD_GRAVITY_MPS2 = 9.80665
 
-# The accuracy targets of the attitude, RMS once converged (README, benchmark table).
+# The accuracy targets of the attitude, RMS once converged (docs/benchmarks.md, the navigation
+# table).
 ROLL_TARGET_RMS_DEG = 0.05
 PITCH_TARGET_RMS_DEG = 0.05
 HEADING_TARGET_RMS_DEG = 0.08

@@ -8,17 +8,26 @@ commands"):
   document run in order, as a reader following it runs them;
 - a ```text block holds usage synopses, with placeholders (``IN_BAG``, ``[--overwrite]``);
 - inline code that starts with a command the suite ships (``process_bag ...``, ``make bench``,
-  ``python tools/bench.py --only fluxes``) is a command too.
+  ``python -m tools.bench --only fluxes``) is a command too;
+- a tool runs as a module of the package ``tools`` (``python -m tools.bench``), never as a
+  script path; ``ros2 run PACKAGE EXECUTABLE`` names a console script of that package.
 
 The quick console commands (the offline tools on the committed bags and records, ``python -c``)
 run for real in a copy of the repository root whose ``out/`` is a temporary directory. Every
 other command, and every synopsis and inline command, is checked instead: the executable, the
 ``make`` target, the script or the launch file exists, every repository file it names exists,
 and every option it uses is in its ``--help`` (a launch argument: declared by the launch file).
+
+What the prose names is checked too: every repository path in backticks exists
+(``src/...``, ``tests/...``, a package's ``wind_comp/pipeline.py``, a file name such as
+``fusion.yaml``), every dotted name of a package (``buoy_nav.aiding.AIDING_SOURCES``) imports,
+the executables tables name each executable with the package that installs it, and the module
+table of docs/development.md names each module where it is.
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import re
@@ -35,7 +44,12 @@ from buoy_nav.aiding import AIDING_SOURCES
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
 DOCS = tuple(sorted((REPO / "docs").glob("*.md")))
-DOCUMENTS = (REPO / "README.md", REPO / "bags" / "README.md", *DOCS)
+DOCUMENTS = (
+    REPO / "README.md",
+    REPO / "bags" / "README.md",
+    REPO / "tests" / "data" / "ooi_fdchp" / "README.md",
+    *DOCS,
+)
 COMMITTED_DIRECTORIES = {"src", "bags", "tests", "tools", "docs", "ros2_ws"}
 COMMAND_TIMEOUT_S = 300
 
@@ -47,16 +61,20 @@ OPTION_TERMINATORS = {"--ros-args", "|", "||", "&&", ";", ">", "2>", ">>"}
 PLACEHOLDER = re.compile(r"^[A-Z][A-Z0-9_]*$")
 
 
-def console_scripts() -> dict[str, Path]:
-    """The suite's console scripts: name -> the source file of their entry point."""
-    scripts = {}
-    for setup in REPO.glob("src/*/setup.py"):
-        for name, module in re.findall(r'"(\w+) = ([\w.]+):main"', setup.read_text()):
-            scripts[name] = setup.parent / (module.replace(".", "/") + ".py")
-    return scripts
+PACKAGES = tuple(sorted(setup.parent.name for setup in REPO.glob("src/*/setup.py")))
 
 
-SCRIPTS = console_scripts()
+def console_scripts_of(package: str) -> dict[str, Path]:
+    """A package's console scripts: name -> the source file of their entry point."""
+    setup = REPO / "src" / package / "setup.py"
+    return {
+        name: setup.parent / (module.replace(".", "/") + ".py")
+        for name, module in re.findall(r'"(\w+) = ([\w.]+):main"', setup.read_text())
+    }
+
+
+PACKAGE_SCRIPTS = {package: console_scripts_of(package) for package in PACKAGES}
+SCRIPTS = {name: path for scripts in PACKAGE_SCRIPTS.values() for name, path in scripts.items()}
 
 
 # --- Reading the documents --------------------------------------------------------------------
@@ -116,8 +134,8 @@ class Command:
     document: Path
     line: str
     tokens: tuple[str, ...]
-    kind: str  # script, make, tool, module, code, launch, pip
-    target: str  # the script, tool path, module or launch file it runs
+    kind: str  # script, make, module, code, launch, pip
+    target: str  # the script, module or launch file it runs
     in_console_block: bool
 
 
@@ -133,9 +151,7 @@ def recognised(document: Path, line: str, in_console_block: bool) -> Command | N
     elif first == "make":
         kind_target = ("make", "make")
     elif first in ("python", "python3") and rest:
-        if rest[0].startswith("tools/") and rest[0].endswith(".py"):
-            kind_target = ("tool", rest[0])
-        elif rest[0] == "-m" and len(rest) > 1:
+        if rest[0] == "-m" and len(rest) > 1:
             kind_target = ("module", rest[1])
         elif rest[0] == "-c":
             kind_target = ("code", "-c")
@@ -179,11 +195,9 @@ def uses_argparse(source: Path) -> bool:
 
 
 def help_target(command: Command) -> str | None:
-    """What to ask for its --help: "script:NAME", "tool:PATH" or "module:NAME"; None if none."""
+    """What to ask for its --help: "script:NAME" or "module:NAME"; None if none."""
     if command.kind == "script" and uses_argparse(SCRIPTS[command.target]):
         return f"script:{command.target}"
-    if command.kind == "tool" and uses_argparse(REPO / command.target):
-        return f"tool:{command.target}"
     module_file = module_source(command.target) if command.kind == "module" else None
     if module_file is not None and uses_argparse(module_file):
         return f"module:{command.target}"
@@ -218,9 +232,6 @@ for target in sys.argv[1:]:
         try:
             if kind == "script":
                 scripts[name].load()()
-            elif kind == "tool":
-                sys.path.insert(0, name.rsplit("/", 1)[0])
-                runpy.run_path(name, run_name="__main__")
             else:
                 runpy.run_module(name, run_name="__main__", alter_sys=True)
         except SystemExit as stop:
@@ -232,7 +243,7 @@ print(json.dumps(texts))
 
 @pytest.fixture(scope="module")
 def help_texts() -> dict[str, dict]:
-    """The --help of every script, tool and module the documents use, from one process (the
+    """The --help of every script and module the documents use, from one process (the
     imports they share are made once)."""
     targets = {target for command in ALL_COMMANDS if (target := help_target(command))}
     targets |= {f"script:{name}" for name in NAMED_SCRIPTS if uses_argparse(SCRIPTS[name])}
@@ -282,7 +293,6 @@ def problems_of(command: Command, help_texts: dict[str, dict]) -> list[str]:
     checks = {
         "script": script_problems,
         "make": make_problems,
-        "tool": tool_problems,
         "module": module_problems,
         "launch": launch_problems,
         "pip": pip_problems,
@@ -330,16 +340,12 @@ def make_problems(command, help_texts):
     ]
 
 
-def tool_problems(command, help_texts):
-    if not (REPO / command.target).is_file():
-        return [f"{command.target} does not exist"]
-    return option_problems(command, help_texts, skip=2)  # python tools/X.py
-
-
 def module_problems(command, help_texts):
     top = command.target.split(".")[0]
     if top != "tools" and not (REPO / "src" / top).is_dir():
         return []  # a module of a dependency (pytest, ...)
+    if any(PLACEHOLDER.match(part) for part in command.target.split(".")):
+        return []  # a synopsis: python -m tools.NAME
     if module_source(command.target) is None:
         return [f"module {command.target} does not exist"]
     return option_problems(command, help_texts, skip=3)  # python -m MODULE
@@ -410,6 +416,162 @@ def test_the_readme_links_every_document_of_docs():
         (REPO / link.partition("#")[0]).resolve() for link in relative_links(REPO / "README.md")
     }
     assert [document_id(d) for d in DOCS if d.resolve() not in linked] == []
+
+
+# --- What the prose names ---------------------------------------------------------------------
+
+# A name in backticks with one of these endings and no directory is a file of the repository
+# (``.md`` and ``.csv`` are also the names of outputs).
+FILE_SUFFIXES = (".py", ".yaml", ".json", ".dat", ".npy", ".toml", ".cfg", ".xml")
+# The files of the example sensor of docs/adding-a-sensor.md, which its reader writes.
+EXAMPLE_FILES = {
+    "src/buoy_nav/buoy_nav/aiding/gyrocompass.py",
+    "src/buoy_nav/test/test_gyrocompass.py",
+    "test_gyrocompass.py",
+}
+# A segment of a path that stands for a name of the reader's (``OUT_BAG_wind_products.csv``,
+# ``DIR/buoy1/``, ``NAME.py``); README is a name of its own.
+PATH_PLACEHOLDER = re.compile(r"(^|/)(?!README\b)[A-Z][A-Z0-9_]*(?=[/._]|$)")
+# Directories a walk of the repository does not enter: made by builds, runs and the venv.
+NOT_COMMITTED = {"out", "build", "install", "log", "__pycache__", "ros2_ws"}
+
+
+def repository_file_names() -> set[str]:
+    names = set()
+    for _, directories, files in os.walk(REPO):
+        directories[:] = [
+            d
+            for d in directories
+            if not d.startswith(".") and d not in NOT_COMMITTED and not d.endswith(".egg-info")
+        ]
+        names.update(files)
+    return names
+
+
+FILE_NAMES = repository_file_names()
+
+
+def path_problem(name: str) -> str | None:
+    """Why a name in backticks that reads as a repository path names nothing, None when it
+    names something or is no such path (a topic, a placeholder, a file outside the repository).
+
+    ``src/...``, ``bags/...`` (a committed directory) are paths from the repository root; a path
+    that starts with a package (``wind_comp/pipeline.py``, ``buoy_nav/config/fusion.yaml``) lies
+    in ``src/``, in the package's directory or in its Python package; a bare file name
+    (``fusion.yaml``) is the name of some file of the repository."""
+    if re.search(r"[\s<>*{}\[\]$=:]|\.\.\.", name) or PATH_PLACEHOLDER.search(name):
+        return None
+    if name in EXAMPLE_FILES:
+        return None
+    top = name.split("/")[0]
+    if "/" in name and top in COMMITTED_DIRECTORIES:
+        candidates = [REPO / name]
+    elif "/" in name and top in PACKAGES:
+        candidates = [REPO / "src" / name, REPO / "src" / top / name]
+    elif "/" not in name and name.endswith(FILE_SUFFIXES):
+        return None if name in FILE_NAMES else f"{name}: no file of that name"
+    else:
+        return None
+    return None if any(path.exists() for path in candidates) else f"{name} does not exist"
+
+
+def dotted_name_problem(name: str) -> str | None:
+    """Why ``package.module.attribute`` (a call's arguments aside) does not import, None when
+    it does or names no package of the suite."""
+    name = re.sub(r"\(.*\)$", "", name)
+    parts = name.split(".")
+    if not re.fullmatch(r"\w+(\.\w+)+", name) or parts[0] not in (*PACKAGES, "tools"):
+        return None
+    for length in range(len(parts), 0, -1):
+        module_name = ".".join(parts[:length])
+        try:
+            found = importlib.import_module(module_name)
+        except ModuleNotFoundError as error:
+            if error.name is not None and not module_name.startswith(error.name):
+                return f"{name}: importing {module_name} fails: {error}"
+            continue
+        for attribute in parts[length:]:
+            if not hasattr(found, attribute):
+                return f"{name}: {module_name} has no {'.'.join(parts[length:])}"
+            found = getattr(found, attribute)
+        return None
+    return f"{name}: no such module"
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=document_id)
+def test_every_repository_path_and_module_named_exists(document):
+    _, prose = split_fences(document.read_text())
+    problems = set()
+    for code in inline_code(prose):
+        problem = path_problem(code) or dotted_name_problem(code)
+        if problem:
+            problems.add(problem)
+    assert sorted(problems) == [], "\n".join(sorted(problems))
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=document_id)
+def test_tools_are_run_as_modules_of_the_package_tools(document):
+    """``python -m tools.X`` runs from the repository root whatever the venv's path holds."""
+    script_forms = re.findall(r"\bpython3?\s+(tools/[\w/]+)\.py", document.read_text())
+    wrong = [f"{form}.py: write python -m {form.replace('/', '.')}" for form in script_forms]
+    assert wrong == [], "\n".join(wrong)
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=document_id)
+def test_ros2_run_names_an_executable_of_the_package(document):
+    wrong = []
+    for package, executable in re.findall(r"ros2 run +([\w.]+) +(\w+)", document.read_text()):
+        if PLACEHOLDER.match(package) or package == "...":
+            continue
+        if executable not in PACKAGE_SCRIPTS.get(package, {}):
+            wrong.append(f"ros2 run {package} {executable}")
+    assert wrong == [], "\n".join(wrong)
+
+
+EXECUTABLES_TABLES = (
+    ("README.md", "## Running the nodes"),
+    ("docs/running-the-nodes.md", "## Executables"),
+)
+
+
+@pytest.mark.parametrize("document, heading", EXECUTABLES_TABLES)
+def test_the_executables_tables_name_the_package_of_each_executable(document, heading):
+    rows = table_rows_after(REPO / document, heading)
+    misplaced, named = [], set()
+    for row in rows:
+        package, executables = row[0], re.findall(r"`(\w+)`", row[1])
+        named.update(executables)
+        misplaced += [
+            f"{executable} is not an executable of {package}"
+            for executable in executables
+            if executable not in PACKAGE_SCRIPTS.get(package, {})
+        ]
+    assert misplaced == [], "\n".join(misplaced)
+    if document == "README.md":
+        assert sorted(set(SCRIPTS) - named) == [], "executables the README's table misses"
+
+
+def test_the_module_table_names_each_module_where_it_is():
+    """A bare file name after a path (``wind_comp/compensator.py``, ``miller.py``) lies in
+    that path's directory."""
+    rows = table_rows_after(REPO / "docs" / "development.md", "## Modules")
+    missing = []
+    for row in rows:
+        directory = None
+        for name in re.findall(r"`([^`]+)`", row[0]):
+            if "/" in name.rstrip("/"):
+                directory = name.rstrip("/").rsplit("/", 1)[0]
+            relative = name if "/" in name.rstrip("/") else f"{directory}/{name}"
+            package = relative.split("/")[0]
+            if not (REPO / "src" / package / relative).exists():
+                missing.append(f"{name} ({relative})")
+    assert missing == [], "\n".join(missing)
+
+
+def test_the_layout_names_every_package():
+    rows = table_rows_after(REPO / "docs" / "development.md", "## Layout")
+    listed = {name for row in rows for name in re.findall(r"`src/(\w+)`", row[0])}
+    assert sorted(set(PACKAGES) - listed) == []
 
 
 # --- Commands ---------------------------------------------------------------------------------

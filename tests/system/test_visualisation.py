@@ -33,8 +33,8 @@ from processed_bags import processed_bag
 
 REPO = Path(__file__).resolve().parents[2]
 LAYOUT = REPO / "src" / "buoy_common" / "config" / "foxglove_layout.json"
-# The attitude error the fusion achieves on sea_state (README: 0.06° roll max after the filter's
-# 1σ settles); the 3-D view need not be better, but must be that good.
+# The attitude error the fusion achieves on sea_state (docs/benchmarks.md: 0.06° roll max after
+# the filter's 1σ settles); the 3-D view need not be better, but must be that good.
 ATTITUDE_TOLERANCE_DEG = 0.3
 SETTLING_S = 30.0
 CHECKED_S = 60.0

@@ -1,6 +1,6 @@
 """``import_records``: a logger's record file → a contract bag, driven by a column map.
 
-The column map (YAML, see the README's "Importing logger records") says which column holds
+The column map (YAML, see docs/real-records.md, "Importing logger records") says which column holds
 which quantity, in which unit and axes, how the samples are timed and which values mark an
 invalid sample. The bag carries the contract's sensor topics: ``anemometer/wind`` and
 ``anemometer/temperature`` (frame ``anemometer_link``), ``imu/data_raw`` and, when the map gives
@@ -48,7 +48,7 @@ IDENTITY_XYZW = (0.0, 0.0, 0.0, 1.0)
 def parse_arguments(argv):
     parser = argparse.ArgumentParser(prog="import_records", description=__doc__.split("\n")[0])
     parser.add_argument("record", help="the logger's record file (delimited text or binary)")
-    parser.add_argument("column_map", help="column map YAML (see the README)")
+    parser.add_argument("column_map", help="column map YAML (see docs/real-records.md)")
     parser.add_argument("output", help="bag directory to create")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing bag")
     return parser.parse_args(argv)

@@ -1,6 +1,6 @@
 """Which sensor set the fusion is running on, from the aiding sources it is using now.
 
-The sets (README, "Sensor sets"): (a) IMU + dual-antenna RTK; (b) IMU + single-antenna GNSS
+The sets (docs/sensor-sets.md): (a) IMU + dual-antenna RTK; (b) IMU + single-antenna GNSS
 (+ magnetometer); (c) IMU + magnetometer, no GNSS (a moored buoy); (d) IMU + a motion pack's
 attitude, with or without a magnetometer, no GNSS; (e) any of these through an outage of a GNSS
 topic it had. The set is not configured: it follows from what was accepted within

@@ -5,7 +5,7 @@
         [buoy_params:=/path/to/buoy.yaml] [current:=true]
 
 Each node takes the shared buoy file (lever arms, antennas, anemometer mounting) and its own
-parameter file, as the README's hand-started commands do.
+parameter file, as the commands that start them by hand do (README, "Running the nodes").
 
 Arguments:
 - ``namespace``: namespace of both nodes and so of every topic (default: none).

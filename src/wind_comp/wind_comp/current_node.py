@@ -28,8 +28,8 @@ Publishes:
   the same windows in the order of :data:`wind_comp.compensation_messages.CURRENT_STATS_FIELDS`
   (speed_mps, direction_deg (oceanographic, TOWARD), std_u_mps, std_v_mps, std_w_mps, n_valid,
   n_invalid, window_start_s, window_end_s, first_sample_s, last_sample_s). A single DVL sample
-  carries the waves' orbital velocity at the DVL's depth; the means average it away (see the
-  README), the standard deviations keep it.
+  carries the waves' orbital velocity at the DVL's depth; the means average it away (see
+  docs/benchmarks.md, "Current"), the standard deviations keep it.
 - ``diagnostics``: DVL samples in and out, valid and invalid by reason, navigation samples seen,
   input rates, latency, rejected messages by reason.
 

@@ -33,7 +33,7 @@ from buoy_common.contract import (
     wind_stats_topic,
 )
 
-try:  # optional: pip install foxglove-sdk (see the README)
+try:  # optional: pip install foxglove-sdk (see docs/shore.md)
     import foxglove
 except ImportError:
     foxglove = None
@@ -74,8 +74,8 @@ class FoxgloveBridge(SuiteNode):
         super().__init__(NODE_NAME)
         if foxglove is None:
             raise StartupError(
-                "foxglove-sdk is not installed: pip install foxglove-sdk==0.30.3 (see README, "
-                "Watching from shore)"
+                "foxglove-sdk is not installed: pip install foxglove-sdk==0.30.3 (see "
+                "docs/shore.md, Without ROS on shore)"
             )
         port = self.declare_value("port", DEFAULT_PORT, "WebSocket port")
         address = self.declare_value("address", DEFAULT_ADDRESS, "interface to listen on")

@@ -37,7 +37,8 @@ from buoy_common.bag_io.mcap_writer import McapWriter
 from buoy_common.safe_output import OutputError, move_into_place, staging_path
 
 # Uncompressed bytes after which a chunk is closed: rosbag2's and mcap's default. Larger chunks
-# compress no better and cost more to hold; smaller ones add index records (measured, README).
+# compress no better and cost more to hold; smaller ones add index records (measured; the bag
+# format: docs/bags.md).
 CHUNK_BYTES = 1 << 20
 _ROSBAG2_METADATA_NAME = "rosbag2"
 _LIBRARY = f"buoy_common ({ROS_DISTRO})"
