@@ -1,0 +1,294 @@
+"""Is every corrected wind sample's stated uncertainty honest, on every sensor set?
+
+    python -m tools.bench_uncertainty [--quick] [--only CASE ...] [--duration-s S]
+
+Each case simulates a scenario (``simulate_bag``) with the sensors of one set and their
+imperfections, processes it (``process_bag``) with the set's parameters, and holds every valid
+sample of ``wind/true_with_covariance`` against the bag's truth: the share of samples whose error
+exceeds three of their standard deviations and the number beyond five, per ENU axis; the share
+of samples valid; the fused roll and pitch error beside the motion pack's own (the best other
+attitude source present); and the sources the fusion suspended. The contract's promise is at
+most about 1 % beyond 3σ and none beyond 5σ. Prints a table and writes
+out/bench/uncertainty.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import math
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from buoy_common.bag_io import BagReader
+from buoy_common.contract import (
+    AHRS_TOPIC,
+    NAV_ODOMETRY_TOPIC,
+    TRUTH_ODOMETRY_TOPIC,
+    TRUTH_WIND_TOPIC,
+    WIND_TRUE_WITH_COVARIANCE_TOPIC,
+    stamp_to_ns,
+)
+from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_processing import process_bag
+from sensor_sim.scenario import load_scenario
+from sensor_sim.simulate_bag import parse_arguments as simulate_arguments
+from sensor_sim.simulate_bag import simulate
+from tools.bench_plan import PROCESSING_PARAMS, REPO, SIMULATION_PARAMS
+from wind_comp.config import compensator_config_from_files
+
+OUT = REPO / "out" / "bench"
+WORK = OUT / "uncertainty"
+SETTLING_S = 120.0
+"""Judged after this much of a run: the alignment and the first convergence are behind."""
+STAMP_MATCH_NS = 1000
+MOORED = "fusion.moored: true"
+
+
+@dataclass(frozen=True)
+class Case:
+    """One sensor set on one scenario: simulation overrides and fusion parameter lines."""
+
+    scenario: str
+    description: str
+    overrides: tuple[str, ...] = ()
+    fusion_lines: tuple[str, ...] = ()
+
+
+CASES = {
+    "a_rtk": Case("sea_state", "(a) dual-antenna RTK, 10 Hz", ("current=null",)),
+    "a_imperfect": Case("set_a_imperfect", "(a) dual antenna at 1 Hz, 0.31 s off the IMU grid"),
+    "b_imperfect": Case(
+        "set_b_imperfect", "(b) one antenna at 1 Hz + uncalibrated magnetometer", (), (MOORED,)
+    ),
+    "c_imperfect": Case(
+        "set_c_imperfect", "(c) uncalibrated magnetometer, no GNSS, moored", (), (MOORED,)
+    ),
+    "d_imperfect": Case(
+        "set_d_imperfect", "(d) lagging motion pack + magnetometer, no GNSS, moored", (), (MOORED,)
+    ),
+    "d_not_moored": Case(
+        "set_d_imperfect", "(d) as above, fusion.moored false: no velocity reference"
+    ),
+    "e_imperfect": Case(
+        "set_e_imperfect", "(e) one antenna through 60 s silent outages", (), (MOORED,)
+    ),
+    "moored_single_gnss": Case(
+        "measured_moored_single_gnss",
+        "measured: moored, one antenna at 1 Hz, uncalibrated magnetometer",
+        (),
+        (MOORED,),
+    ),
+    "moored_no_gnss": Case(
+        "measured_moored_no_gnss",
+        "measured: moored, lagging pack, uncalibrated magnetometer, no GNSS",
+        (),
+        (MOORED,),
+    ),
+}
+
+
+def parameter_lines(scenario) -> list[str]:
+    """The processing parameters a scenario's buoy implies: its site, the motion pack's yaw
+    reference and the sensors' places the scenario gives."""
+    lines = [
+        f"    site.latitude_deg: {scenario.origin_latitude_deg}",
+        f"    site.longitude_deg: {scenario.origin_longitude_deg}",
+    ]
+    ahrs = scenario.sensors.ahrs
+    if ahrs.fitted:
+        lines.append(f"    ahrs.yaw_reference: {ahrs.yaw_reference}")
+    extrinsics = scenario.sensors.extrinsics
+    if extrinsics is not None:
+        places = {
+            "gnss.primary_antenna": extrinsics.primary_antenna_body_m,
+            "gnss.secondary_antenna": extrinsics.secondary_antenna_body_m,
+            "anemometer.position": extrinsics.anemometer_position_body_m,
+            "anemometer.rpy_deg": extrinsics.anemometer_rpy_deg,
+        }
+        lines += [f"    {name}: {list(map(float, value))}" for name, value in places.items()]
+    return lines
+
+
+def write_parameters(directory: Path, scenario, case: Case) -> str:
+    path = directory / "params.yaml"
+    lines = [*parameter_lines(scenario), *(f"    {line}" for line in case.fusion_lines)]
+    path.write_text("/**:\n  ros__parameters:\n" + "\n".join(lines) + "\n")
+    return str(path)
+
+
+def run_case(key: str, duration_s: float) -> dict:
+    """Simulate, process and judge one case (in a worker)."""
+    case = CASES[key]
+    directory = WORK / key
+    directory.mkdir(parents=True, exist_ok=True)
+    overrides = (*case.overrides, f"duration_s={duration_s}")
+    scenario = load_scenario(case.scenario, list(overrides), None)
+    in_bag, out_bag = directory / "in", directory / "out"
+    arguments = [case.scenario, str(in_bag), "--overwrite"]
+    for override in overrides:
+        arguments += ["--set", override]
+    # A scenario that places the sensors itself is simulated as it says (parameter files would
+    # override its places); the others as the shipped buoy, which processing assumes.
+    if scenario.sensors.extrinsics is None:
+        for params in SIMULATION_PARAMS:
+            arguments += ["--params-file", params]
+    log = io.StringIO()
+    with contextlib.redirect_stderr(log), contextlib.redirect_stdout(log):
+        simulate(simulate_arguments(arguments))
+        params = [*PROCESSING_PARAMS, write_parameters(directory, scenario, case)]
+        process_bag(
+            str(in_bag),
+            str(out_bag),
+            fusion_config_from_files(params),
+            compensator_config_from_files(params),
+            overwrite=True,
+        )
+    (directory / "process.log").write_text(log.getvalue())
+    return {
+        "description": case.description,
+        "duration_s": duration_s,
+        "wind": judge_wind(out_bag),
+        "attitude": judge_attitude(out_bag),
+        "suspended": suspensions_in(log.getvalue()),
+    }
+
+
+def _vector(v) -> list[float]:
+    return [v.x, v.y, v.z]
+
+
+def judge_wind(out_bag: Path) -> dict:
+    """Normalised errors of the valid corrected wind samples against the truth of the same
+    stamp, after the settling time."""
+    with BagReader(out_bag) as reader:
+        wind = [reader.decode(r) for r in reader.messages([WIND_TRUE_WITH_COVARIANCE_TOPIC])]
+        truth = [reader.decode(r) for r in reader.messages([TRUTH_WIND_TOPIC])]
+    stamps = np.array([stamp_to_ns(m.header.stamp) for m in wind])
+    values = np.array([_vector(m.twist.twist.linear) for m in wind])
+    variances = np.array([np.asarray(m.twist.covariance)[[0, 7, 14]] for m in wind])
+    truth_ns = np.array([stamp_to_ns(m.header.stamp) for m in truth])
+    truth_values = np.array([_vector(m.vector) for m in truth])
+    judged = stamps >= stamps[0] + int(SETTLING_S * 1e9)
+    valid = judged & np.all(np.isfinite(values), axis=1)
+    nearest = np.clip(np.searchsorted(truth_ns, stamps), 0, truth_ns.size - 1)
+    matched = valid & (np.abs(truth_ns[nearest] - stamps) < STAMP_MATCH_NS)
+    error = values[matched] - truth_values[nearest[matched]]
+    sigma = np.sqrt(variances[matched])
+    normalised = np.abs(error) / sigma
+    return {
+        "judged": int(judged.sum()),
+        "valid_share": float(valid.sum() / max(judged.sum(), 1)),
+        "matched": int(matched.sum()),
+        "beyond_3_sigma_share": (normalised > 3).mean(axis=0).tolist() if error.size else None,
+        "beyond_5_sigma": (normalised > 5).sum(axis=0).tolist() if error.size else None,
+        "rms_error_mps": np.sqrt((error**2).mean(axis=0)).tolist() if error.size else None,
+        "max_error_mps": np.abs(error).max(axis=0).tolist() if error.size else None,
+        "median_sigma_mps": np.median(sigma, axis=0).tolist() if error.size else None,
+    }
+
+
+def _roll_pitch_rms_deg(reader, topic: str, truth) -> list[float] | None:
+    messages = (
+        [reader.decode(r) for r in reader.messages([topic])] if topic in reader.topics else []
+    )
+    if not messages:
+        return None
+    stamps = np.array([stamp_to_ns(m.header.stamp) for m in messages])
+    quats = np.array([_quaternion(_q(m)) for m in messages])
+    truth_ns, truth_attitude = truth
+    keep = (stamps >= truth_ns[0] + int(SETTLING_S * 1e9)) & (stamps <= truth_ns[-1])
+    if not np.any(keep):
+        return None
+    true = Slerp((truth_ns - truth_ns[0]) * 1e-9, truth_attitude)(
+        (stamps[keep] - truth_ns[0]) * 1e-9
+    )
+    estimate = Rotation.from_quat(quats[keep])
+    error = (estimate * true.inv()).as_euler("ZYX", degrees=True)
+    return np.sqrt((error[:, [2, 1]] ** 2).mean(axis=0)).tolist()
+
+
+def _q(message):
+    """The orientation of an Odometry or an Imu message."""
+    return message.pose.pose.orientation if hasattr(message, "pose") else message.orientation
+
+
+def judge_attitude(out_bag: Path) -> dict:
+    """RMS roll and pitch errors (deg) of the fusion and of the motion pack's own attitude."""
+    with BagReader(out_bag) as reader:
+        truth_messages = [reader.decode(r) for r in reader.messages([TRUTH_ODOMETRY_TOPIC])]
+        truth = (
+            np.array([stamp_to_ns(m.header.stamp) for m in truth_messages]),
+            Rotation.from_quat([_quaternion(_q(m)) for m in truth_messages]),
+        )
+        return {
+            "fused_roll_pitch_rms_deg": _roll_pitch_rms_deg(reader, NAV_ODOMETRY_TOPIC, truth),
+            "motion_pack_roll_pitch_rms_deg": _roll_pitch_rms_deg(reader, AHRS_TOPIC, truth),
+        }
+
+
+def _quaternion(q) -> tuple[float, float, float, float]:
+    return q.x, q.y, q.z, q.w
+
+
+def suspensions_in(log: str) -> list[str]:
+    """The lines of the processing log that say a source was suspended."""
+    return [line.strip() for line in log.splitlines() if " suspended" in line]
+
+
+def _figure(values, digits: int = 3) -> str:
+    if values is None:
+        return "–"
+    return "/".join(f"{v:.{digits}f}" if isinstance(v, float) else str(v) for v in values)
+
+
+def print_table(results: dict) -> None:
+    print(
+        "| case | valid | beyond 3σ (E/N/U) | beyond 5σ | RMS error m/s | max error m/s | "
+        "median σ m/s | roll/pitch RMS deg: fused, pack | suspended |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for key, result in results.items():
+        wind, attitude = result["wind"], result["attitude"]
+        print(
+            f"| {key}: {result['description']} | {wind['valid_share']:.0%} | "
+            f"{_figure(wind['beyond_3_sigma_share'])} | {_figure(wind['beyond_5_sigma'])} | "
+            f"{_figure(wind['rms_error_mps'], 2)} | {_figure(wind['max_error_mps'], 2)} | "
+            f"{_figure(wind['median_sigma_mps'], 2)} | "
+            f"{_figure(attitude['fused_roll_pitch_rms_deg'], 2)}, "
+            f"{_figure(attitude['motion_pack_roll_pitch_rms_deg'], 2)} | "
+            f"{'; '.join(result['suspended']) or '–'} |"
+        )
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="5-minute runs instead of 15")
+    parser.add_argument("--only", nargs="+", choices=sorted(CASES), help="run these cases")
+    parser.add_argument("--duration-s", type=float, help="length of every run, s")
+    args = parser.parse_args(argv)
+    duration_s = args.duration_s or (300.0 if args.quick else 900.0)
+    keys = args.only or list(CASES)
+    WORK.mkdir(parents=True, exist_ok=True)
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        futures = {key: pool.submit(run_case, key, duration_s) for key in keys}
+        results = {key: future.result() for key, future in futures.items()}
+    print_table(results)
+    (OUT / "uncertainty.json").write_text(json.dumps(results, indent=1, default=float))
+    print(f"figures in {(OUT / 'uncertainty.json').relative_to(REPO)}", file=sys.stderr)
+    worst = max(
+        (max(r["wind"]["beyond_3_sigma_share"] or [0.0]) for r in results.values()),
+        default=math.nan,
+    )
+    print(f"largest share beyond 3σ on any axis: {worst:.2%}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
