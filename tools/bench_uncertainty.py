@@ -165,9 +165,39 @@ def _vector(v) -> list[float]:
     return [v.x, v.y, v.z]
 
 
-def judge_wind(out_bag: Path) -> dict:
-    """Normalised errors of the valid corrected wind samples against the truth of the same
-    stamp, after the settling time."""
+@dataclass(frozen=True)
+class WindErrors:
+    """The corrected wind samples of a processed bag against its truth: (N,) stamps (ns) and
+    validity of every sample, and for the valid ones with a truth sample of the same stamp their
+    stamps, (M, 3) errors (m/s, ENU) and stated standard deviations (m/s)."""
+
+    stamps_ns: np.ndarray
+    valid: np.ndarray
+    matched_ns: np.ndarray
+    error_mps: np.ndarray
+    sigma_mps: np.ndarray
+
+    def summary(self, from_ns: int, to_ns: int) -> dict:
+        """Shares beyond 3σ, counts beyond 5σ (per ENU axis) and the like over [from, to)."""
+        judged = (self.stamps_ns >= from_ns) & (self.stamps_ns < to_ns)
+        chosen = (self.matched_ns >= from_ns) & (self.matched_ns < to_ns)
+        error, sigma = self.error_mps[chosen], self.sigma_mps[chosen]
+        normalised = np.abs(error) / sigma
+        empty = not error.size
+        return {
+            "judged": int(judged.sum()),
+            "valid_share": float(self.valid[judged].sum() / max(judged.sum(), 1)),
+            "matched": int(chosen.sum()),
+            "beyond_3_sigma_share": None if empty else (normalised > 3).mean(axis=0).tolist(),
+            "beyond_5_sigma": None if empty else (normalised > 5).sum(axis=0).tolist(),
+            "rms_error_mps": None if empty else np.sqrt((error**2).mean(axis=0)).tolist(),
+            "max_error_mps": None if empty else np.abs(error).max(axis=0).tolist(),
+            "median_sigma_mps": None if empty else np.median(sigma, axis=0).tolist(),
+        }
+
+
+def wind_errors(out_bag: Path) -> WindErrors:
+    """:class:`WindErrors` of ``wind/true_with_covariance`` in ``out_bag``."""
     with BagReader(out_bag) as reader:
         wind = [reader.decode(r) for r in reader.messages([WIND_TRUE_WITH_COVARIANCE_TOPIC])]
         truth = [reader.decode(r) for r in reader.messages([TRUTH_WIND_TOPIC])]
@@ -176,23 +206,23 @@ def judge_wind(out_bag: Path) -> dict:
     variances = np.array([np.asarray(m.twist.covariance)[[0, 7, 14]] for m in wind])
     truth_ns = np.array([stamp_to_ns(m.header.stamp) for m in truth])
     truth_values = np.array([_vector(m.vector) for m in truth])
-    judged = stamps >= stamps[0] + int(SETTLING_S * 1e9)
-    valid = judged & np.all(np.isfinite(values), axis=1)
+    valid = np.all(np.isfinite(values), axis=1)
     nearest = np.clip(np.searchsorted(truth_ns, stamps), 0, truth_ns.size - 1)
     matched = valid & (np.abs(truth_ns[nearest] - stamps) < STAMP_MATCH_NS)
-    error = values[matched] - truth_values[nearest[matched]]
-    sigma = np.sqrt(variances[matched])
-    normalised = np.abs(error) / sigma
-    return {
-        "judged": int(judged.sum()),
-        "valid_share": float(valid.sum() / max(judged.sum(), 1)),
-        "matched": int(matched.sum()),
-        "beyond_3_sigma_share": (normalised > 3).mean(axis=0).tolist() if error.size else None,
-        "beyond_5_sigma": (normalised > 5).sum(axis=0).tolist() if error.size else None,
-        "rms_error_mps": np.sqrt((error**2).mean(axis=0)).tolist() if error.size else None,
-        "max_error_mps": np.abs(error).max(axis=0).tolist() if error.size else None,
-        "median_sigma_mps": np.median(sigma, axis=0).tolist() if error.size else None,
-    }
+    return WindErrors(
+        stamps,
+        valid,
+        stamps[matched],
+        values[matched] - truth_values[nearest[matched]],
+        np.sqrt(variances[matched]),
+    )
+
+
+def judge_wind(out_bag: Path) -> dict:
+    """:meth:`WindErrors.summary` of the whole run after the settling time."""
+    errors = wind_errors(out_bag)
+    start = int(errors.stamps_ns[0] + SETTLING_S * 1e9)
+    return errors.summary(start, int(errors.stamps_ns[-1]) + 1)
 
 
 def _roll_pitch_rms_deg(reader, topic: str, truth) -> list[float] | None:
