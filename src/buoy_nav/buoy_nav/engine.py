@@ -46,7 +46,9 @@ change from the last accepted one no platform can make is rejected as ``implausi
 samples. When the gates keep rejecting the aiding, the filter no longer agrees with it: the
 integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
 published inflated while the trust is not back, and the alignment started again if that does
-not bring the aiding back into the gates.
+not bring the aiding back into the gates. When one source keeps failing its gate while the
+others agree, the source is wrong, not the filter: it is suspended
+(:mod:`buoy_nav.source_health`), its measurements gated but not fused, until it agrees again.
 """
 
 import dataclasses
@@ -75,6 +77,7 @@ from buoy_nav.prediction import RealtimePrediction
 from buoy_nav.processing_point import ProcessingPoint
 from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
+from buoy_nav.source_health import HealthTransition
 from buoy_nav.source_registry import SourceRegistry
 
 __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
@@ -131,8 +134,13 @@ class FusionEngine:
         self._recency = AidingRecency(kinds, len(AIDED_QUANTITIES), config.coasting_timeout_s)
         self._sensor_sets = SensorSets(self.sources)
         self._gates = AidingGates(
-            self._counters, self._recency, self._registry.aided_index, self.innovation_log
+            self._counters,
+            self._recency,
+            self._registry.aided_index,
+            self.innovation_log,
+            config.source_health_rule,
         )
+        self._source_transitions: list[HealthTransition] = []
         self._distrust_variances = distrust_variances(config)
         self._integrity = IntegrityMonitor(
             config.integrity_rejection_count,
@@ -232,6 +240,13 @@ class FusionEngine:
         self._counters[kind].reject(reason)
         self.last_input_rejection = reason
 
+    def take_source_transitions(self) -> list[HealthTransition]:
+        """The sources suspended or resumed since the last call, oldest first (for the node's
+        log and the offline summary)."""
+        self.catch_up()
+        transitions, self._source_transitions = self._source_transitions, []
+        return transitions
+
     def source_of_topic(self, topic: str) -> AidingSource:
         """The aiding source that reads ``topic`` (ValueError naming it when none does)."""
         return self._registry.of_topic(topic)
@@ -279,6 +294,7 @@ class FusionEngine:
             realignments=self._realignments,
             sensor_set=self._sensor_sets.label(active, lapsed) if self.aligned else "",
             coasting_sources=tuple(sorted(lapsed)),
+            source_health=self._gates.status(),
         )
 
     @property
@@ -378,6 +394,7 @@ class FusionEngine:
             self._prediction.carry_over(self._point.t_s, point.state, correction)
         for source, measurement, model in outcome.persistent_rejections:
             self._reset_to_measurement(source, t, measurement, gyro, model)
+        self._source_transitions.extend(outcome.transitions)
         self._judge_integrity(t, outcome.rejected_kinds)
 
     def _align_with(self, t: float, group: list, gyro) -> None:

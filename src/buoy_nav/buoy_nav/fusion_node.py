@@ -322,6 +322,8 @@ class FusionNode(FlushingNode):
         durations, self._imu_callback_durations_s = self._imu_callback_durations_s, []
         filtering, self._filtering_durations_s = self._filtering_durations_s, []
 
+        for transition in self.engine.take_source_transitions():
+            self.get_logger().warning(f"stamp {transition.t_s:.3f} s: {transition.message}")
         health = self.engine.health()
         values = diagnostic_values(health)
         values.update(self._filter_estimates())
