@@ -68,6 +68,10 @@ class AidingGates:
         self._consecutive_rejections = dict.fromkeys((source.kind for source in aided_index), 0)
         self._health = {source.kind: SourceHealth(health_rule) for source in aided_index}
 
+    def suspended(self, kind: str) -> bool:
+        """Whether the source of ``kind`` is suspended."""
+        return self._health[kind].suspended
+
     def status(self) -> dict[str, SourceStatus]:
         """The health of each source, by kind."""
         return {
@@ -167,11 +171,12 @@ class AidingGates:
         self._consecutive_rejections[source.kind] = 0
         self._recency.aided(self._aided_index[source], t_s)
 
-    def aligned(self, t_s: float) -> None:
-        """A new alignment completed at ``t_s`` (s): every run of rejections ends and the
-        sources' health is judged afresh."""
+    def aligned(self, t_s: float, forget_health: bool = True) -> None:
+        """A new alignment completed at ``t_s`` (s): every run of rejections ends and, with
+        ``forget_health``, the sources' health is judged afresh."""
         for kind in self._consecutive_rejections:
             self._consecutive_rejections[kind] = 0
-        for health in self._health.values():
-            health.forget()
+        if forget_health:
+            for health in self._health.values():
+                health.forget()
         self._recency.aligned(t_s)

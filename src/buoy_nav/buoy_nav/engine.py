@@ -121,6 +121,7 @@ class FusionEngine:
         self._alignments = 0
         self._imu_gaps = 0
         self._realignments = 0
+        self._keep_source_health = False
 
         self._imu_buffer: deque = deque()
         self._imu_input = ImuInput(config)
@@ -399,9 +400,13 @@ class FusionEngine:
 
     def _align_with(self, t: float, group: list, gyro) -> None:
         """Hand the (source, measurement) pairs of stamp ``t`` to the aligner; start the filter
-        when one completes the alignment."""
+        when one completes the alignment. A source suspended before a realignment stays out of
+        it: the new alignment would follow the sensor that disagreed with the filter."""
         # Registry order puts the antenna attitude, which may complete the alignment, last.
         for source, measurement in group:
+            if self._gates.suspended(source.kind):
+                self._counters[source.kind].reject(Reason.SUSPENDED)
+                continue
             self._counters[source.kind].used_for_alignment += 1
             result = source.align(self._aligner, t, measurement, gyro)
             if result is not None:
@@ -421,6 +426,10 @@ class FusionEngine:
         elif action == "realign":
             self._realignments += 1
             self._restart_alignment()
+            # The sources' health is evidence about the sources, not about the filter that is
+            # replaced: forgetting it would let the alignment follow the source that made the
+            # filter wrong, again and again.
+            self._keep_source_health = True
         self._solutions.distrust(None if self._integrity.trusted else self._distrust_variances)
 
     def _apply_pseudo_measurements(self, t: float, gyro):
@@ -457,7 +466,8 @@ class FusionEngine:
         self._alignments += 1
         self._integrity.realigned(t)
         self._solutions.distrust(None)
-        self._gates.aligned(t)
+        self._gates.aligned(t, forget_health=not self._keep_source_health)
+        self._keep_source_health = False
         if self._solutions.map_plane is None:
             state = result.state
             self._solutions.map_plane = earth.LocalTangentPlane(
