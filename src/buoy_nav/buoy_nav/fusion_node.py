@@ -117,6 +117,7 @@ from buoy_nav.fusion_messages import (
     transform_cdr,
 )
 from buoy_nav.health import diagnostic_values, health_status
+from buoy_nav.observability import unobserved_quantities
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_quaternion
 
 OUTPUT_CLASSES = {
@@ -198,6 +199,8 @@ class FusionNode(FlushingNode):
         for source in self.engine.sources:
             if source.enabled and source.configuration_problem is not None:
                 self.get_logger().warning(f"{source.kind}: {source.configuration_problem}")
+        for sentence in unobserved_quantities(self.config):
+            self.get_logger().warning(sentence)
 
     def _declare_fusion_config(self) -> FusionConfig:
         return self.declare_config(
