@@ -662,6 +662,14 @@ LIVE_SENSOR_SETS = {
         CALIBRATED_MAGNETOMETER,
         "b: single-antenna GNSS + magnetometer",
     ),
+    # A steel hull beside the moored buoy from 12 s on: the magnetometer keeps failing its gate
+    # and is suspended; the heading is carried by the gyros.
+    "moored_magnetometer_suspended": (
+        "moored_motion_pack",
+        ("sensors.magnetometer.disturbances_s=[[12, 40]]", "sensors.ahrs.fitted=false"),
+        ("    fusion.moored: true", *CALIBRATED_MAGNETOMETER),
+        "inertial only",
+    ),
 }
 
 
@@ -669,8 +677,8 @@ LIVE_SENSOR_SETS = {
 def test_live_sensor_sets_equal_offline_fusion(nodes, tmp_path, set_name):
     """Fed only what the set carries (no heading topic; a magnetometer, a motion pack), the
     node publishes exactly the offline solutions, names the set in its diagnostics and counts
-    what it accepted as the engine does; the solutions hold the attitude within 1° of the
-    truth."""
+    what it accepted and suspended as the engine does; the solutions hold the attitude within
+    1° of the truth."""
     scenario_name, overrides, lines, final_set = LIVE_SENSOR_SETS[set_name]
     scenario = load_scenario(scenario_name, [*overrides, f"duration_s={LIVE_EQUALS_OFFLINE_S}"])
     truth = TruthModel(scenario)
@@ -724,3 +732,9 @@ def test_live_sensor_sets_equal_offline_fusion(nodes, tmp_path, set_name):
     assert final["sensor_set"] == final_set
     for kind, counters in engine.health().counters.items():
         assert final[f"{kind}.accepted"] == str(counters.accepted), kind
+    for kind, status in engine.health().source_health.items():
+        assert final[f"{kind}.suspended"] == str(status.suspended), kind
+        assert final[f"{kind}.suspensions"] == str(status.suspensions), kind
+    if set_name == "moored_magnetometer_suspended":
+        assert final["magnetometer.suspended"] == "True"
+        assert "failed the gate" in final["magnetometer.suspension_reason"]

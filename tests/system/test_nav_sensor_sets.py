@@ -154,7 +154,11 @@ def test_a_passing_hull_is_rejected_by_the_gate_and_counted():
     )
     engine, solutions, times, _ = fuse(moored_config(), messages, scenario)
     disturbed_samples = 20.0 * 10.0  # 10 Hz magnetometer
-    rejected = engine.health().counters["magnetometer"].rejected.get(Reason.GATE, 0)
+    # A disturbance this long suspends the magnetometer until it agrees again.
+    rejected = sum(
+        engine.health().counters["magnetometer"].rejected.get(reason, 0)
+        for reason in (Reason.GATE, Reason.SUSPENDED)
+    )
     assert rejected >= 0.9 * disturbed_samples
     assert engine.health().counters["magnetometer"].resets == 0
     during = (times >= 100.0) & (times < 125.0)

@@ -240,6 +240,10 @@ class Reason(StrEnum):
     SUSPENDED = "suspended"
     """The aiding source keeps failing its gate over a window and is taken out until it agrees
     with the filter again."""
+    MAGNETIC_FIELD_INCONSISTENT = "magnetic_field_inconsistent"
+    """The calibrated magnetic field differs from the Earth's (the World Magnetic Model at the
+    position) in strength or dip by more than the fusion tolerates: an uncalibrated or disturbed
+    magnetometer, whose heading would be wrong."""
 
 
 # -- stamps ----------------------------------------------------------------------------------------

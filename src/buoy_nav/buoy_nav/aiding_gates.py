@@ -6,6 +6,12 @@ and reason, logged (``record_innovations``), kept as the stamp each source and a
 last accepted (:class:`~buoy_nav.sensor_sets.AidingRecency`, for the sensor set and the coasting
 flags) and as each source's run of consecutive rejections: the run that asks the source for a
 reset, and that the integrity monitor (:mod:`buoy_nav.integrity`) judges the filter by.
+
+Every outcome also goes to the source's :class:`~buoy_nav.source_health.SourceHealth`: a
+source that keeps failing is suspended. Its measurements are still modelled and gated, so its
+agreement stays watched, but they are not fused (counted as ``suspended``), do not reset states
+and do not witness the integrity: a sensor that is wrong is taken out, not followed, and does
+not make the filter realign to it.
 """
 
 import math
@@ -16,6 +22,13 @@ from buoy_nav.aiding.base import AidingSource, LinearisationPoint, MeasurementMo
 from buoy_nav.error_state_filter import ErrorStateFilter
 from buoy_nav.health import InnovationRecord, MeasurementCounters
 from buoy_nav.sensor_sets import AidingRecency
+from buoy_nav.source_health import (
+    HealthChange,
+    HealthTransition,
+    SourceHealth,
+    SourceHealthRule,
+    SourceStatus,
+)
 
 
 class GateOutcome(NamedTuple):
@@ -26,16 +39,19 @@ class GateOutcome(NamedTuple):
       source has now been rejected ``reset_after_rejections`` times in a row.
     rejected_kinds: each source rejected there that witnesses the integrity, with its run of
       consecutive rejections.
+    transitions: the sources suspended or resumed by these outcomes.
     """
 
     accepted: list[MeasurementModel]
     persistent_rejections: list[tuple[AidingSource, object, MeasurementModel]]
     rejected_kinds: dict[str, int]
+    transitions: list[HealthTransition]
 
 
 class AidingGates:
     """Gates measurements and keeps their books: ``counters`` (by kind), ``recency`` (quantities
-    indexed by ``aided_index`` of each source) and, unless None, ``innovation_log``."""
+    indexed by ``aided_index`` of each source), each source's health judged by
+    ``health_rule`` and, unless None, ``innovation_log``."""
 
     def __init__(
         self,
@@ -43,12 +59,25 @@ class AidingGates:
         recency: AidingRecency,
         aided_index: dict[AidingSource, int],
         innovation_log: list[InnovationRecord] | None,
+        health_rule: SourceHealthRule,
     ):
         self._counters = counters
         self._recency = recency
         self._aided_index = aided_index
         self._innovation_log = innovation_log
         self._consecutive_rejections = dict.fromkeys((source.kind for source in aided_index), 0)
+        self._health = {source.kind: SourceHealth(health_rule) for source in aided_index}
+
+    def suspended(self, kind: str) -> bool:
+        """Whether the source of ``kind`` is suspended."""
+        return self._health[kind].suspended
+
+    def status(self) -> dict[str, SourceStatus]:
+        """The health of each source, by kind."""
+        return {
+            kind: SourceStatus(health.suspended, health.reason, health.suspensions)
+            for kind, health in self._health.items()
+        }
 
     def gate(
         self,
@@ -59,11 +88,15 @@ class AidingGates:
     ) -> GateOutcome:
         """Gate each (source, measurement) pair of stamp ``t_s`` (s) linearised at ``point``
         against the covariance of ``kalman``, and book the outcomes."""
-        outcome = GateOutcome([], [], {})
+        outcome = GateOutcome([], [], {}, [])
         for source, measurement in group:
             model = source.model(measurement, point)
             if model is None:
                 self._counters[source.kind].reject(Reason.GEOMETRY)
+                continue
+            if isinstance(model, Reason):
+                self._counters[source.kind].reject(model)
+                self._judge(source, t_s, True, outcome)
                 continue
             gate = kalman.gate(
                 model.innovation, model.jacobian, model.covariance, source.gate_probability
@@ -79,12 +112,33 @@ class AidingGates:
                         gate.accepted,
                     )
                 )
-            if gate.accepted:
+            if self._judge(source, t_s, not gate.accepted, outcome):
+                self._counters[source.kind].reject(Reason.SUSPENDED)
+            elif gate.accepted:
                 self._book_acceptance(source, t_s, gate.nis)
                 outcome.accepted.append(model)
             else:
                 self._book_rejection(source, measurement, model, gate.nis, outcome)
         return outcome
+
+    def _judge(self, source: AidingSource, t_s: float, failed: bool, outcome: GateOutcome) -> bool:
+        """Record one outcome of ``source`` at stamp ``t_s`` (s) in its health; returns whether
+        the source is suspended now."""
+        health = self._health[source.kind]
+        change = health.record(failed)
+        if change is HealthChange.SUSPENDED:
+            # Its run of rejections is over: a suspended source asks for no reset.
+            self._consecutive_rejections[source.kind] = 0
+            message = f"{source.kind} suspended: {health.reason}; {source.suspension_hint}"
+            outcome.transitions.append(HealthTransition(t_s, source.kind, change, message))
+        elif change is HealthChange.RESUMED:
+            message = (
+                f"{source.kind} resumed: no more than "
+                f"{health.rule.resume_share * 100:.0f} % of its last "
+                f"{health.rule.min_samples} samples failed the gate"
+            )
+            outcome.transitions.append(HealthTransition(t_s, source.kind, change, message))
+        return health.suspended
 
     def _book_acceptance(self, source: AidingSource, t_s: float, nis: float) -> None:
         counters = self._counters[source.kind]
@@ -117,8 +171,12 @@ class AidingGates:
         self._consecutive_rejections[source.kind] = 0
         self._recency.aided(self._aided_index[source], t_s)
 
-    def aligned(self, t_s: float) -> None:
-        """A new alignment completed at ``t_s`` (s): every run of rejections ends."""
+    def aligned(self, t_s: float, forget_health: bool = True) -> None:
+        """A new alignment completed at ``t_s`` (s): every run of rejections ends and, with
+        ``forget_health``, the sources' health is judged afresh."""
         for kind in self._consecutive_rejections:
             self._consecutive_rejections[kind] = 0
+        if forget_health:
+            for health in self._health.values():
+                health.forget()
         self._recency.aligned(t_s)

@@ -187,11 +187,19 @@ class InMotionAligner:
             t_s, np.array(velocity_enu_mps, dtype=float), np.array(covariance_m2s2, dtype=float)
         )
 
+    def levelled_rotation(self) -> np.ndarray | None:
+        """R_nb at the end of the levelling window with the yaw left at 0 (what a heading
+        reference's vertical component is judged with); None before the window is full."""
+        if self.state is not AlignmentState.WAITING_FOR_GNSS:
+            return None
+        mean_start_frame = self._force_sum / self._duration_s
+        mean_force = rotation_matrix_from_quaternion(self._relative).T @ mean_start_frame
+        return rotation_matrix_from_euler(*_roll_pitch(mean_force), 0.0)
+
     def _level_and_head(self, mean_force, yaw_rad: float, body_vector) -> np.ndarray | None:
         """R_nb from the mean specific force (body) and the azimuth of ``body_vector``; None if
         the vector is too steep."""
-        roll = math.atan2(mean_force[1], mean_force[2])
-        pitch = math.atan2(-mean_force[0], math.hypot(mean_force[1], mean_force[2]))
+        roll, pitch = _roll_pitch(mean_force)
         levelled = rotation_matrix_from_euler(roll, pitch, 0.0)
         if horizontal_fraction(levelled, body_vector) < MIN_HORIZONTAL_BASELINE_FRACTION:
             return None
@@ -400,6 +408,12 @@ class InMotionAligner:
             0.0,
             np.eye(3) * _SITE_POSITION_SIGMA_M**2,
         )
+
+
+def _roll_pitch(mean_force_body_mps2) -> tuple[float, float]:
+    """Roll and pitch (rad) that put the mean specific force (body, m/s²) up."""
+    force = mean_force_body_mps2
+    return math.atan2(force[1], force[2]), math.atan2(-force[0], math.hypot(force[1], force[2]))
 
 
 def _site_of(config: FusionConfig) -> tuple[float, float] | None:

@@ -29,6 +29,7 @@ from buoy_common.parameter_declarations import (
     parameter,
 )
 from buoy_common.parameters import build_config, check_parameter_files, load_parameter_files
+from buoy_nav.source_health import SourceHealthRule
 
 FUSION_NODE_NAME = "fusion_node"
 """Node name whose parameter-file sections configure the fusion (live and offline)."""
@@ -211,6 +212,30 @@ class FusionConfig:
         rule=POSITIVE,
     )
 
+    source_health_window: int = parameter(
+        200,
+        meaning="recent gate outcomes of one aiding source judged for its health",
+        rule=at_least(1),
+        heading="Source health: a source that keeps disagreeing is suspended, not followed",
+    )
+    source_health_min_samples: int = parameter(
+        100,
+        meaning="outcomes needed before a source is suspended, and the span judged for its "
+        "resumption (at most source_health_window)",
+        rule=at_least(1),
+    )
+    source_health_suspend_share: float = parameter(
+        0.5,
+        meaning="share of failed outcomes in the window that suspends a source",
+        rule=custom_rule("in (0, 1]", lambda share: 0.0 < share <= 1.0),
+    )
+    source_health_resume_share: float = parameter(
+        0.05,
+        meaning="a suspended source resumes when no larger share of its last "
+        "source_health_min_samples outcomes failed (below source_health_suspend_share)",
+        rule=half_open_interval(0.0, 1.0),
+    )
+
     max_measurement_delay_s: float = parameter(
         0.3,
         unit="s",
@@ -284,6 +309,19 @@ class FusionConfig:
     )
     magnetometer_full_scale_t: float = parameter(
         8e-4, unit="T", meaning="a component this large is a saturated sample", rule=POSITIVE
+    )
+    magnetometer_strength_tolerance: float = parameter(
+        0.2,
+        meaning="a calibrated field whose strength differs from the World Magnetic Model's by "
+        "more than this share is refused (magnetic_field_inconsistent)",
+        rule=POSITIVE,
+    )
+    magnetometer_dip_tolerance_deg: float = parameter(
+        10.0,
+        unit="deg",
+        meaning="a calibrated field whose dip (from the nominal attitude) differs from the World "
+        "Magnetic Model's by more is refused (magnetic_field_inconsistent)",
+        rule=POSITIVE,
     )
     ahrs_lag_s: float = parameter(
         0.0,
@@ -372,6 +410,20 @@ class FusionConfig:
             raise ConfigError(str(error)) from None
         for name, broken in broken_rules(self):
             raise ConfigError(f"{name} must be {broken}")
+        try:
+            self.source_health_rule  # noqa: B018 (the rule checks its fields together)
+        except ValueError as error:
+            raise ConfigError(str(error)) from None
+
+    @property
+    def source_health_rule(self) -> SourceHealthRule:
+        """When an aiding source is suspended and resumed (:mod:`buoy_nav.source_health`)."""
+        return SourceHealthRule(
+            self.source_health_window,
+            self.source_health_min_samples,
+            self.source_health_suspend_share,
+            self.source_health_resume_share,
+        )
 
     @property
     def baseline_body_m(self) -> tuple[float, float, float]:

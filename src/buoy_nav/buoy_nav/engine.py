@@ -46,7 +46,9 @@ change from the last accepted one no platform can make is rejected as ``implausi
 samples. When the gates keep rejecting the aiding, the filter no longer agrees with it: the
 integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
 published inflated while the trust is not back, and the alignment started again if that does
-not bring the aiding back into the gates.
+not bring the aiding back into the gates. When one source keeps failing its gate while the
+others agree, the source is wrong, not the filter: it is suspended
+(:mod:`buoy_nav.source_health`), its measurements gated but not fused, until it agrees again.
 """
 
 import dataclasses
@@ -75,6 +77,7 @@ from buoy_nav.prediction import RealtimePrediction
 from buoy_nav.processing_point import ProcessingPoint
 from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
+from buoy_nav.source_health import HealthTransition
 from buoy_nav.source_registry import SourceRegistry
 
 __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
@@ -118,6 +121,7 @@ class FusionEngine:
         self._alignments = 0
         self._imu_gaps = 0
         self._realignments = 0
+        self._keep_source_health = False
 
         self._imu_buffer: deque = deque()
         self._imu_input = ImuInput(config)
@@ -131,8 +135,13 @@ class FusionEngine:
         self._recency = AidingRecency(kinds, len(AIDED_QUANTITIES), config.coasting_timeout_s)
         self._sensor_sets = SensorSets(self.sources)
         self._gates = AidingGates(
-            self._counters, self._recency, self._registry.aided_index, self.innovation_log
+            self._counters,
+            self._recency,
+            self._registry.aided_index,
+            self.innovation_log,
+            config.source_health_rule,
         )
+        self._source_transitions: list[HealthTransition] = []
         self._distrust_variances = distrust_variances(config)
         self._integrity = IntegrityMonitor(
             config.integrity_rejection_count,
@@ -232,6 +241,13 @@ class FusionEngine:
         self._counters[kind].reject(reason)
         self.last_input_rejection = reason
 
+    def take_source_transitions(self) -> list[HealthTransition]:
+        """The sources suspended or resumed since the last call, oldest first (for the node's
+        log and the offline summary)."""
+        self.catch_up()
+        transitions, self._source_transitions = self._source_transitions, []
+        return transitions
+
     def source_of_topic(self, topic: str) -> AidingSource:
         """The aiding source that reads ``topic`` (ValueError naming it when none does)."""
         return self._registry.of_topic(topic)
@@ -279,6 +295,7 @@ class FusionEngine:
             realignments=self._realignments,
             sensor_set=self._sensor_sets.label(active, lapsed) if self.aligned else "",
             coasting_sources=tuple(sorted(lapsed)),
+            source_health=self._gates.status(),
         )
 
     @property
@@ -378,13 +395,18 @@ class FusionEngine:
             self._prediction.carry_over(self._point.t_s, point.state, correction)
         for source, measurement, model in outcome.persistent_rejections:
             self._reset_to_measurement(source, t, measurement, gyro, model)
+        self._source_transitions.extend(outcome.transitions)
         self._judge_integrity(t, outcome.rejected_kinds)
 
     def _align_with(self, t: float, group: list, gyro) -> None:
         """Hand the (source, measurement) pairs of stamp ``t`` to the aligner; start the filter
-        when one completes the alignment."""
+        when one completes the alignment. A source suspended before a realignment stays out of
+        it: the new alignment would follow the sensor that disagreed with the filter."""
         # Registry order puts the antenna attitude, which may complete the alignment, last.
         for source, measurement in group:
+            if self._gates.suspended(source.kind):
+                self._counters[source.kind].reject(Reason.SUSPENDED)
+                continue
             self._counters[source.kind].used_for_alignment += 1
             result = source.align(self._aligner, t, measurement, gyro)
             if result is not None:
@@ -404,6 +426,10 @@ class FusionEngine:
         elif action == "realign":
             self._realignments += 1
             self._restart_alignment()
+            # The sources' health is evidence about the sources, not about the filter that is
+            # replaced: forgetting it would let the alignment follow the source that made the
+            # filter wrong, again and again.
+            self._keep_source_health = True
         self._solutions.distrust(None if self._integrity.trusted else self._distrust_variances)
 
     def _apply_pseudo_measurements(self, t: float, gyro):
@@ -440,7 +466,8 @@ class FusionEngine:
         self._alignments += 1
         self._integrity.realigned(t)
         self._solutions.distrust(None)
-        self._gates.aligned(t)
+        self._gates.aligned(t, forget_health=not self._keep_source_health)
+        self._keep_source_health = False
         if self._solutions.map_plane is None:
             state = result.state
             self._solutions.map_plane = earth.LocalTangentPlane(

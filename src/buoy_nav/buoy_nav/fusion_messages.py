@@ -27,14 +27,14 @@ Outputs (one set per navigation solution, all with the solution's stamp):
 - ``nav/odometry`` (nav_msgs/Odometry, ``map`` → ``base_link``): position in ``map`` (m),
   attitude body→ENU, 6×6 pose covariance (position, then attitude as rotation-vector error in
   ENU, rad²); twist in ``base_link``: linear = R_nbᵀ·v_ENU with covariance R_nbᵀ·P_v·R_nb,
-  angular = bias-corrected body rate ω_ib.
+  angular = bias-corrected body rate ω_ib with the gyro bias estimate's covariance (rad²/s²).
 - ``nav/imu`` (sensor_msgs/Imu, ``base_link``): attitude with its covariance, bias-corrected
-  ω_ib and specific force.
+  ω_ib with the gyro bias estimate's covariance, and specific force.
 - ``nav/velocity`` (geometry_msgs/TwistWithCovarianceStamped, ``map``): ENU velocity of the
   ``base_link`` origin with covariance.
 
-Covariances not estimated (the rates, the specific force, the angular part of the twists) are
-all zeros, the ROS convention for "unknown".
+Covariances not estimated (the specific force, the angular part of ``nav/velocity``) are all
+zeros, the ROS convention for "unknown".
 - ``nav/fix`` (sensor_msgs/NavSatFix, ``base_link``): WGS-84 position of the ``base_link``
   origin, ENU covariance (known), status FIX, service GPS.
 - ``tf`` (tf2_msgs/TFMessage): the transform ``map`` → ``base_link`` (position in ``map``, m;
@@ -180,6 +180,7 @@ class NavValues(NamedTuple):
     angular_rate_body_rad_s: tuple
     body_twist_covariance: tuple
     attitude_covariance_rad2: tuple
+    gyro_bias_covariance_rad2_s2: tuple
     specific_force_body_mps2: tuple
     velocity_enu_mps: tuple
     enu_twist_covariance: tuple
@@ -232,6 +233,7 @@ class _CovarianceFields(NamedTuple):
     attitude_covariance_rad2: tuple
     enu_twist_covariance: tuple
     position_covariance_m2: tuple
+    gyro_bias_covariance_rad2_s2: tuple
 
 
 class _CovarianceFieldCache:
@@ -245,15 +247,16 @@ class _CovarianceFieldCache:
     def __init__(self):
         self._latest: tuple | None = None
 
-    def fields(self, attitude, velocity, position) -> _CovarianceFields:
+    def fields(self, attitude, velocity, position, gyro_bias) -> _CovarianceFields:
         latest = self._latest  # one read: the blocks and their fields stay a consistent pair
         if (
             latest is not None
             and latest[0] is attitude
             and latest[1] is velocity
             and latest[2] is position
+            and latest[3] is gyro_bias
         ):
-            return latest[3]
+            return latest[4]
         attitude_flat = attitude.ravel().tolist()
         position_flat = position.ravel().tolist()
         fields = _CovarianceFields(
@@ -261,9 +264,11 @@ class _CovarianceFieldCache:
             attitude_covariance_rad2=tuple(attitude_flat),
             enu_twist_covariance=_upper_block_6x6(velocity.ravel().tolist()),
             position_covariance_m2=tuple(position_flat),
+            gyro_bias_covariance_rad2_s2=tuple(gyro_bias.ravel().tolist()),
         )
-        if not (attitude.flags.writeable or velocity.flags.writeable or position.flags.writeable):
-            self._latest = (attitude, velocity, position, fields)
+        blocks = (attitude, velocity, position, gyro_bias)
+        if not any(block.flags.writeable for block in blocks):
+            self._latest = (*blocks, fields)
         return fields
 
 
@@ -281,7 +286,10 @@ def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavVal
     rotation_nb = np.array(rotation_elements).reshape(3, 3)
     velocity_covariance = solution.velocity_covariance_m2s2
     covariances = _COVARIANCE_FIELDS.fields(
-        solution.attitude_covariance_rad2, velocity_covariance, solution.position_covariance_m2
+        solution.attitude_covariance_rad2,
+        velocity_covariance,
+        solution.position_covariance_m2,
+        solution.gyro_bias_covariance_rad2_s2,
     )
     ve, vn, vu = velocity_enu = solution.velocity_enu_mps.tolist()
     return NavValues(
@@ -298,10 +306,12 @@ def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavVal
             r02 * ve + r12 * vn + r22 * vu,
         ),
         angular_rate_body_rad_s=tuple(solution.angular_rate_body_rad_s.tolist()),
-        body_twist_covariance=_upper_block_6x6(
-            (rotation_nb.T @ velocity_covariance @ rotation_nb).ravel().tolist()
+        body_twist_covariance=_block_diagonal_6x6(
+            (rotation_nb.T @ velocity_covariance @ rotation_nb).ravel().tolist(),
+            covariances.gyro_bias_covariance_rad2_s2,
         ),
         attitude_covariance_rad2=covariances.attitude_covariance_rad2,
+        gyro_bias_covariance_rad2_s2=covariances.gyro_bias_covariance_rad2_s2,
         specific_force_body_mps2=tuple(solution.specific_force_body_mps2.tolist()),
         velocity_enu_mps=tuple(velocity_enu),
         enu_twist_covariance=covariances.enu_twist_covariance,
@@ -360,6 +370,7 @@ def solution_messages(
     _set_quaternion(imu.orientation, values.attitude_xyzw)
     imu.orientation_covariance = values.attitude_covariance_rad2
     _set_vector(imu.angular_velocity, values.angular_rate_body_rad_s)
+    imu.angular_velocity_covariance = values.gyro_bias_covariance_rad2_s2
     _set_vector(imu.linear_acceleration, values.specific_force_body_mps2)
 
     velocity = classes.twist_with_covariance_stamped()
@@ -423,7 +434,7 @@ def solution_cdr(v: NavValues) -> dict[str, bytes]:
             v.attitude_xyzw,
             v.attitude_covariance_rad2,
             v.angular_rate_body_rad_s,
-            _ZEROS9,
+            v.gyro_bias_covariance_rad2_s2,
             v.specific_force_body_mps2,
             _ZEROS9,
         ),

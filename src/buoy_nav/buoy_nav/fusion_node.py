@@ -117,6 +117,7 @@ from buoy_nav.fusion_messages import (
     transform_cdr,
 )
 from buoy_nav.health import diagnostic_values, health_status
+from buoy_nav.observability import unobserved_quantities
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_quaternion
 
 OUTPUT_CLASSES = {
@@ -198,6 +199,8 @@ class FusionNode(FlushingNode):
         for source in self.engine.sources:
             if source.enabled and source.configuration_problem is not None:
                 self.get_logger().warning(f"{source.kind}: {source.configuration_problem}")
+        for sentence in unobserved_quantities(self.config):
+            self.get_logger().warning(sentence)
 
     def _declare_fusion_config(self) -> FusionConfig:
         return self.declare_config(
@@ -322,6 +325,8 @@ class FusionNode(FlushingNode):
         durations, self._imu_callback_durations_s = self._imu_callback_durations_s, []
         filtering, self._filtering_durations_s = self._filtering_durations_s, []
 
+        for transition in self.engine.take_source_transitions():
+            self.get_logger().warning(f"stamp {transition.t_s:.3f} s: {transition.message}")
         health = self.engine.health()
         values = diagnostic_values(health)
         values.update(self._filter_estimates())

@@ -7,6 +7,7 @@ import numpy as np
 
 from buoy_nav.alignment import AlignmentResult, AlignmentState
 from buoy_nav.integrity import IntegrityEvent
+from buoy_nav.source_health import SourceStatus
 
 IMU = "imu"
 """Counter name of the IMU samples (the aiding sources count under their ``kind``)."""
@@ -91,6 +92,8 @@ class EngineHealth:
     sensor_set: the sensor set in use (:meth:`buoy_nav.sensor_sets.SensorSets.label`).
     coasting_sources: kinds of the aiding sources accepted before but not within
       ``coasting_timeout_s`` (their quantities are carried by the inertial solution).
+    source_health: per aiding source's kind, whether it is suspended, why, and how often it
+      was (:mod:`buoy_nav.source_health`).
     """
 
     alignment_state: AlignmentState
@@ -110,6 +113,7 @@ class EngineHealth:
     realignments: int = 0
     sensor_set: str = ""
     coasting_sources: tuple[str, ...] = ()
+    source_health: dict[str, SourceStatus] = field(default_factory=dict)
 
 
 def diagnostic_values(health: EngineHealth) -> dict:
@@ -133,6 +137,11 @@ def diagnostic_values(health: EngineHealth) -> dict:
             values[f"{kind}.superseded"] = counters.superseded
             values[f"{kind}.resets"] = counters.resets
             values[f"{kind}.mean_nis"] = counters.mean_nis
+            status = health.source_health.get(kind)
+            if status is not None:
+                values[f"{kind}.suspended"] = status.suspended
+                values[f"{kind}.suspension_reason"] = status.reason
+                values[f"{kind}.suspensions"] = status.suspensions
     values.update(
         {
             "covariance_repairs": health.covariance_repairs,
@@ -158,7 +167,8 @@ def health_status(
     health: EngineHealth, imu_topic: str, imu_samples_since_report: int, solutions_published: int
 ) -> tuple[str, str]:
     """The diagnostics' level (``ok`` or ``warn``) and message: no IMU samples on ``imu_topic``
-    since the last report, aligning, not trusted, coasting, or the solutions published."""
+    since the last report, aligning, not trusted, a source suspended, coasting, or the solutions
+    published."""
     if imu_samples_since_report == 0:
         return "warn", f"no {imu_topic} samples"
     if not health.aligned:
@@ -175,6 +185,9 @@ def health_status(
     if not health.trusted:
         reason = health.integrity_events[-1].reason
         return "warn", f"aligned, navigation not trusted ({reason})"
+    suspended = [kind for kind, status in health.source_health.items() if status.suspended]
+    if suspended:
+        return "warn", f"aligned on {health.sensor_set}, suspended: {', '.join(suspended)}"
     if coasting:
         return (
             "warn",

@@ -46,6 +46,7 @@ SOLUTION_DTYPE = np.dtype(
         ("attitude_covariance_rad2", "f8", (3, 3)),
         ("velocity_covariance_m2s2", "f8", (3, 3)),
         ("position_covariance_m2", "f8", (3, 3)),
+        ("gyro_bias_covariance_rad2_s2", "f8", (3, 3)),
         ("gyro_bias_rad_s", "f8", (3,)),
         ("accel_bias_mps2", "f8", (3,)),
         ("coasting", "?", (3,)),
@@ -61,6 +62,7 @@ _ARRAY_FIELDS = (
     "attitude_covariance_rad2",
     "velocity_covariance_m2s2",
     "position_covariance_m2",
+    "gyro_bias_covariance_rad2_s2",
     "gyro_bias_rad_s",
     "accel_bias_mps2",
 )
@@ -189,6 +191,7 @@ def smoothed_rows(
     out["attitude_covariance_rad2"] = covariance[:, states.attitude, states.attitude]
     out["velocity_covariance_m2s2"] = covariance[:, states.velocity, states.velocity]
     out["position_covariance_m2"] = covariance[:, states.position, states.position]
+    out["gyro_bias_covariance_rad2_s2"] = covariance[:, states.gyro_bias, states.gyro_bias]
     return out
 
 

@@ -25,6 +25,8 @@ class NavSolution:
     attitude_covariance_rad2: covariance of the attitude error φ (ENU, 3×3, rad²), where
       R_true = Exp([φ×]) R_estimated.
     velocity_covariance_m2s2, position_covariance_m2: ENU 3×3 covariances.
+    gyro_bias_covariance_rad2_s2: covariance of the gyro bias estimate (body, 3×3, rad²/s²):
+      the uncertainty of the bias-corrected angular rates.
     gyro_bias_rad_s, accel_bias_mps2: bias estimates (body).
     The covariance and bias arrays are read-only: consecutive solutions share them until the
     filter changes them.
@@ -47,6 +49,7 @@ class NavSolution:
     attitude_covariance_rad2: np.ndarray
     velocity_covariance_m2s2: np.ndarray
     position_covariance_m2: np.ndarray
+    gyro_bias_covariance_rad2_s2: np.ndarray
     gyro_bias_rad_s: np.ndarray
     accel_bias_mps2: np.ndarray
     aligned: bool
@@ -117,7 +120,7 @@ class SolutionBuilder:
         latitude = integrator.latitude_rad
         longitude = integrator.longitude_rad
         altitude = integrator.altitude_m
-        attitude_cov, velocity_cov, position_cov = self._covariance_blocks
+        attitude_cov, velocity_cov, position_cov, gyro_bias_cov = self._covariance_blocks
         gyro_bias, accel_bias = self._bias_arrays
         return NavSolution(
             t_s=t,
@@ -141,6 +144,7 @@ class SolutionBuilder:
             attitude_covariance_rad2=attitude_cov,
             velocity_covariance_m2s2=velocity_cov,
             position_covariance_m2=position_cov,
+            gyro_bias_covariance_rad2_s2=gyro_bias_cov,
             gyro_bias_rad_s=gyro_bias,
             accel_bias_mps2=accel_bias,
             aligned=True,
@@ -150,13 +154,14 @@ class SolutionBuilder:
         )
 
     def _published_covariance_blocks(self, kalman: ErrorStateFilter) -> tuple[np.ndarray, ...]:
-        """The attitude (rad²), velocity (m²/s²) and position (m²) blocks of ``kalman``'s
-        covariance, read-only, widened while the filter is distrusted."""
+        """The attitude (rad²), velocity (m²/s²), position (m²) and gyro bias (rad²/s²)
+        blocks of ``kalman``'s covariance, read-only, the first two widened while the filter is
+        distrusted."""
         covariance = kalman.covariance
         states = kalman.states
         blocks = [
             covariance[block, block].copy()
-            for block in (states.attitude, states.velocity, states.position)
+            for block in (states.attitude, states.velocity, states.position, states.gyro_bias)
         ]
         if self._distrust_variances is not None:
             for block, variance in zip(blocks, self._distrust_variances, strict=False):

@@ -26,6 +26,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 from enum import Enum
+from typing import NamedTuple
 
 
 class HealthChange(Enum):
@@ -34,6 +35,25 @@ class HealthChange(Enum):
     NONE = "none"
     SUSPENDED = "suspended"
     RESUMED = "resumed"
+
+
+class HealthTransition(NamedTuple):
+    """A source suspended or resumed at stamp ``t_s`` (s); ``message`` says why, and what to
+    check."""
+
+    t_s: float
+    kind: str
+    change: HealthChange
+    message: str
+
+
+class SourceStatus(NamedTuple):
+    """The health of one source: suspended or not, why (empty when not), and how often it was
+    suspended so far."""
+
+    suspended: bool
+    reason: str
+    suspensions: int
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,8 @@ from buoy_nav.aiding import (
     GnssHeadingSource,
     GnssVelocity,
     GnssVelocitySource,
+    MagneticField,
+    MagnetometerSource,
     topics_with_role,
 )
 from buoy_nav.aiding.base import (
@@ -41,6 +43,7 @@ from buoy_nav.aiding.gnss_velocity import predicted_antenna_velocity_enu_mps
 from buoy_nav.antenna_geometry import baseline_azimuth_rad, horizontal_fraction
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ERROR_STATES, NavState, inject_error_state
+from buoy_nav.geomagnetism import wmm_field_enu_t
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_euler, wrap_angle
 from buoy_nav.sensor_sets import SensorSets
 from buoy_nav.state_layout import EAST, NORTH, UP, StateLayout
@@ -486,3 +489,55 @@ def test_state_layout_names_every_state_once():
         StateLayout(("attitude", 3), ("attitude", 3))
     with pytest.raises(ValueError, match="dim"):
         StateLayout(("dim", 1))
+
+
+def _magnetometer_at(yaw_deg: float, field_body_t):
+    """The magnetometer's model of a field (body, T) on a level buoy at 35° N, 120° E whose
+    yaw is ``yaw_deg`` (ENU)."""
+    source = MagnetometerSource(FusionConfig(), ERROR_STATES)
+    rotation = Rotation.from_euler("z", yaw_deg, degrees=True)
+    state = NavState(
+        tuple(rotation.as_quat()),
+        (0.0, 0.0, 0.0),
+        math.radians(35.0),
+        math.radians(120.0),
+        0.0,
+        (0.0, 0.0, 0.0),
+        (0.0, 0.0, 0.0),
+    )
+    point = LinearisationPoint(state, rotation.as_matrix(), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    return source.model(MagneticField(np.asarray(field_body_t), 0.0, T_2026_S), point)
+
+
+T_2026_S = 1767225600.0
+
+
+@pytest.mark.parametrize(
+    ("scale", "tilt_deg", "agrees"),
+    [
+        (1.0, 0.0, True),
+        (1.15, 0.0, True),
+        (1.3, 0.0, False),
+        (0.75, 0.0, False),
+        (1.0, 7.0, True),
+        (1.0, 14.0, False),
+    ],
+)
+def test_the_magnetometer_refuses_a_field_unlike_the_earths(scale, tilt_deg, agrees):
+    """The Earth's field (WMM) seen from the buoy is modelled; one 30 % too strong or weak, or
+    whose dip is 14° off, is refused as magnetic_field_inconsistent (tolerances 20 % and 10°)."""
+    yaw_deg = 40.0
+    field_enu = np.array(wmm_field_enu_t(math.radians(35.0), math.radians(120.0), T_2026_S))
+    # Turn the field about the horizontal axis normal to it: its dip changes by tilt_deg.
+    axis = np.cross(field_enu, (0.0, 0.0, 1.0))
+    turned = Rotation.from_rotvec(math.radians(tilt_deg) * axis / np.linalg.norm(axis))
+    field_body = (
+        Rotation.from_euler("z", yaw_deg, degrees=True).inv().apply(scale * turned.apply(field_enu))
+    )
+    model = _magnetometer_at(yaw_deg, field_body)
+    if agrees:
+        assert not isinstance(model, Reason)
+        # Scaled or turned in its vertical plane, the field still points to magnetic north.
+        assert abs(model.innovation[0]) < 1e-6
+    else:
+        assert model == Reason.MAGNETIC_FIELD_INCONSISTENT

@@ -264,7 +264,16 @@ def test_frames_and_conventions_of_the_four_messages(produced):
             rtol=0,
             atol=1e-15,
         )
-        assert not twist_covariance[3:, :].any() and not twist_covariance[:, 3:].any()
+        # The rate is the raw gyro less the bias estimate: its error is the bias estimate's.
+        np.testing.assert_array_equal(
+            twist_covariance[3:, 3:], solution.gyro_bias_covariance_rad2_s2
+        )
+        assert np.all(np.diag(solution.gyro_bias_covariance_rad2_s2) > 0.0)
+        assert not twist_covariance[3:, :3].any() and not twist_covariance[:3, 3:].any()
+        np.testing.assert_array_equal(
+            np.array(imu.angular_velocity_covariance).reshape(3, 3),
+            solution.gyro_bias_covariance_rad2_s2,
+        )
         enu_twist_covariance = np.array(velocity.twist.covariance).reshape(6, 6)
         np.testing.assert_array_equal(
             enu_twist_covariance[:3, :3], solution.velocity_covariance_m2s2

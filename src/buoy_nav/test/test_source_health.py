@@ -1,9 +1,14 @@
 """Suspension and resumption of an aiding source from its gate outcomes."""
 
+import dataclasses
+
 import numpy as np
 import pytest
+from engine_scenario import RockingBuoy, engine_config, make_events, run
 
-from buoy_nav.source_health import HealthChange, SourceHealth, SourceHealthRule
+from buoy_nav.config import ConfigError, FusionConfig
+from buoy_nav.health import diagnostic_values, health_status
+from buoy_nav.source_health import HealthChange, SourceHealth, SourceHealthRule, SourceStatus
 
 RULE = SourceHealthRule(window=200, min_samples=100, suspend_share=0.5, resume_share=0.05)
 
@@ -74,3 +79,29 @@ def test_forget_starts_the_judgement_again():
 def test_an_impossible_rule_is_refused(fields):
     with pytest.raises(ValueError, match="source health"):
         SourceHealthRule(**fields)
+
+
+def test_the_fusion_parameters_give_the_rule_and_are_checked_together():
+    assert FusionConfig().source_health_rule == RULE
+    with pytest.raises(ConfigError, match="min_samples"):
+        FusionConfig(source_health_window=50)
+    with pytest.raises(ConfigError, match="shares"):
+        FusionConfig(source_health_resume_share=0.6)
+
+
+def test_the_diagnostics_say_per_source_whether_it_is_suspended_and_why():
+    engine, _ = run(make_events(RockingBuoy(), 20.0), engine_config())
+    health = engine.health()
+    values = diagnostic_values(health)
+    assert values["gnss_velocity.suspended"] is False
+    assert values["gnss_velocity.suspensions"] == 0
+    assert values["gnss_velocity.suspension_reason"] == ""
+    suspended = SourceStatus(True, "62 % of the last 200 samples failed the gate", 1)
+    health = dataclasses.replace(
+        health, source_health={**health.source_health, "gnss_velocity": suspended}
+    )
+    values = diagnostic_values(health)
+    assert values["gnss_velocity.suspended"] is True
+    assert values["gnss_velocity.suspension_reason"].startswith("62 %")
+    level, message = health_status(health, "imu/data_raw", 100, 10)
+    assert level == "warn" and "suspended: gnss_velocity" in message

@@ -45,6 +45,7 @@ from buoy_nav.fusion_messages import (
     solution_cdr,
     transform_cdr,
 )
+from buoy_nav.source_health import HealthTransition, SourceStatus
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
 """The fusion needs one of these at least: without a heading reference it cannot align."""
@@ -127,6 +128,8 @@ class OfflineFusion:
         self.rejections: Counter[str] = Counter()
         self.first_solution_s: float | None = None
         self.last_log_time_ns = 0
+        self.source_transitions: list[HealthTransition] = []
+        """The sources suspended and resumed, oldest first."""
 
     def add(self, topic: str, message, log_time_ns: int) -> list[NavValues]:
         """One decoded sensor message of relative ``topic``; returns the values of the new
@@ -148,12 +151,15 @@ class OfflineFusion:
         solutions, rejection = fed
         if rejection is not None:
             self.rejections[f"{topic}: {rejection}"] += 1
+        self.source_transitions.extend(self.engine.take_source_transitions())
         self.last_log_time_ns = log_time_ns
         return self._write(solutions, log_time_ns)
 
     def finish(self) -> list[NavValues]:
         """End of the data: the solutions still held back by the engine (written too)."""
-        return self._write(self.engine.flush(), self.last_log_time_ns)
+        written = self._write(self.engine.flush(), self.last_log_time_ns)
+        self.source_transitions.extend(self.engine.take_source_transitions())
+        return written
 
     def _write(self, solutions: list[NavSolution], log_time_ns: int) -> list[NavValues]:
         written = []
@@ -216,7 +222,10 @@ class OfflineFusion:
                 f"alignment {counters.used_for_alignment:4d}  "
                 f"superseded {counters.superseded:6d}  resets {counters.resets:3d}  "
                 f"mean NIS {counters.mean_nis:6.2f}  rejected: {rejected or 'none'}"
+                + _suspension_note(health.source_health.get(kind))
             )
+        for transition in self.source_transitions:
+            lines.append(f"stamp {transition.t_s:.3f} s: {transition.message}")
         for event in health.integrity_events:
             ended = (
                 "still at the end"
@@ -238,3 +247,11 @@ class OfflineFusion:
             if source.enabled and source.configuration_problem is not None:
                 lines.append(f"warning: {source.kind}: {source.configuration_problem}")
         return lines
+
+
+def _suspension_note(status: SourceStatus | None) -> str:
+    """What a source's summary line says of its health (nothing for one never suspended)."""
+    if status is None or not status.suspensions:
+        return ""
+    state = f"suspended ({status.reason})" if status.suspended else "not suspended at the end"
+    return f"  suspensions {status.suspensions}: {state}"

@@ -17,6 +17,7 @@ and the consumer receives the smoothed one.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +27,7 @@ from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, Bag
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import NavValues
+from buoy_nav.observability import unobserved_quantities
 from buoy_processing.offline_fusion import OfflineFusion
 
 PROGRESS_EVERY_MESSAGES = 2000
@@ -109,6 +111,9 @@ def run_fusion(run: OfflineRun, consumer: BagConsumer | None = None) -> FusionRu
     """The fusion over ``run``'s bag into its output, followed by ``consumer`` (see the module
     docstring)."""
     consumer = consumer or NothingFollows()
+    # Said before the long pass over the bag, from the topics it holds.
+    for sentence in unobserved_quantities(run.config, run.sensors):
+        print(f"{run.label}: warning: {sentence}", file=sys.stderr)
     if run.smooth:
         return _smoothed_run(run, consumer)
     return _forward_run(run, consumer)

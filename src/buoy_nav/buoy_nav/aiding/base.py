@@ -15,12 +15,19 @@ engine (:class:`buoy_nav.engine.FusionEngine`) is the clock that runs them. A me
 4. **update**: :meth:`AidingSource.model` linearises the measurement at the nominal state
    (:class:`LinearisationPoint`) into a :class:`MeasurementModel` (predicted h, innovation,
    Jacobian H over the error states, noise R), or None when its geometry carries no
-   information (counted as ``geometry``); the engine gates it with the chi-square test at
-   :attr:`~AidingSource.gate_probability` and applies the accepted measurements of one stamp in
-   one stacked update;
+   information (counted as ``geometry``), or the :class:`Reason` the measurement contradicts
+   what is known of the world at that state (an Earth's field of the wrong strength: counted
+   under that reason and as a failed outcome for the source's health); the engine gates a model
+   with the chi-square test at :attr:`~AidingSource.gate_probability` and applies the accepted
+   measurements of one stamp in one stacked update;
 5. **reset**: after :attr:`~AidingSource.reset_after_rejections` consecutive gate rejections,
    :meth:`AidingSource.reset` re-initialises the states the measurement observes
-   (:class:`StateReset`), so that a filter that has lost its way follows the sensor again.
+   (:class:`StateReset`), so that a filter that has lost its way follows the sensor again;
+6. **health**: every gate outcome is kept by the source's
+   :class:`~buoy_nav.source_health.SourceHealth`; a source that keeps failing is suspended: its
+   measurements are still modelled and gated but not fused (counted as ``suspended``), they
+   neither reset states nor witness the integrity, until it agrees again
+   (:attr:`AidingSource.suspension_hint` says what to check).
 
 Jacobians follow the error-injection convention of
 :func:`buoy_nav.error_state_filter.inject_error_state` and address the error states by name
@@ -83,6 +90,15 @@ VELOCITY_REFERENCE = "velocity_reference"
 ATTITUDE_SOURCE = "attitude_source"
 """It measures the whole attitude (roll, pitch and yaw)."""
 ROLES = (HEADING_REFERENCE, POSITION_REFERENCE, VELOCITY_REFERENCE, ATTITUDE_SOURCE)
+
+SUSPENSION_HINTS = {
+    GNSS_RECEIVER: "check the antenna lever arm and the receiver",
+    GNSS_ANTENNA_PAIR: "check the antenna lever arms and the receiver",
+    GNSS_THIRD_ANTENNA: "check the antenna lever arms and the receiver",
+    MAGNETOMETER: "run calibrate_magnetometer",
+    MOTION_PACK: "check its lag and covariance",
+}
+"""What to check when a source of a sensor is suspended, by sensor."""
 
 
 @dataclass(frozen=True)
@@ -206,6 +222,11 @@ class AidingSource(abc.ABC):
         measurements are then rejected, not fused), for the tools and the node to report; None
         when it can."""
 
+    @property
+    def suspension_hint(self) -> str:
+        """What to check when this source is suspended (by its sensor)."""
+        return SUSPENSION_HINTS.get(self.sensor, "check its configuration")
+
     @classmethod
     def enabled_by(cls, config: FusionConfig) -> bool:
         """Whether ``config`` lets the fusion use this source (its measurements are otherwise
@@ -229,9 +250,10 @@ class AidingSource(abc.ABC):
         it cannot be used (never raises for bad values)."""
 
     @abc.abstractmethod
-    def model(self, measurement, point: LinearisationPoint) -> MeasurementModel | None:
+    def model(self, measurement, point: LinearisationPoint) -> MeasurementModel | Reason | None:
         """The validated ``measurement`` linearised at ``point``; None when its geometry carries
-        no information there."""
+        no information there; the :class:`Reason` it contradicts the world known at ``point``
+        (a failed outcome for the source's health, never fused)."""
 
     def reset(
         self, measurement, point: LinearisationPoint, model: MeasurementModel

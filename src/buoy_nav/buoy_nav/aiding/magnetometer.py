@@ -22,6 +22,16 @@ Noise: the sensor's own (``magnetic_field_covariance``, over ρ²) plus
 horizontal part is under :data:`MIN_HORIZONTAL_FIELD_FRACTION` of its length (near the magnetic
 poles, or a steep tilt) carries no heading (``geometry``).
 
+**The field checked against the Earth's.** A calibrated magnetometer reproduces the World
+Magnetic Model's field (:func:`buoy_nav.geomagnetism.wmm_field_enu_t`): its strength within
+``magnetometer_strength_tolerance`` (a share) and its dip, the angle under the horizon seen with
+the nominal attitude, within ``magnetometer_dip_tolerance_deg``. A field that does not (an
+uncalibrated sensor, hard iron near it, a passing hull) would give a wrong heading whatever its
+noise: its sample is refused as ``magnetic_field_inconsistent``, counted as a failed outcome for
+the source's health (an uncalibrated magnetometer is soon suspended), and never gives the
+alignment its heading (there judged with the levelled attitude). PX4's EKF2 checks its
+magnetometer the same way (field strength and inclination).
+
 Bad input: a non-finite component (``non_finite``), a component at full scale
 (``magnetometer_full_scale_t``: saturated, ``out_of_range``), a field below
 :data:`MIN_FIELD_T` after calibration (``out_of_range``). Disturbances (a steel hull passing, a
@@ -49,7 +59,7 @@ from buoy_nav.aiding.base import (
     vector_of,
     yaw_reset,
 )
-from buoy_nav.geomagnetism import declination_rad
+from buoy_nav.geomagnetism import declination_rad, wmm_field_enu_t
 from buoy_nav.rotations import (
     wrap_angle,
 )
@@ -89,6 +99,8 @@ class MagnetometerSource(AidingSource):
         self._heading_variance_rad2 = math.radians(config.magnetometer_heading_sigma_deg) ** 2
         self._full_scale_t = config.magnetometer_full_scale_t
         self._declination_deg = config.magnetic_declination_deg
+        self._strength_tolerance = config.magnetometer_strength_tolerance
+        self._dip_tolerance_rad = math.radians(config.magnetometer_dip_tolerance_deg)
         self.reset_after_rejections = config.gate_reset_count * RESET_AFTER_GATE_RESETS
 
     @classmethod
@@ -126,6 +138,22 @@ class MagnetometerSource(AidingSource):
             0.5 * math.pi - declination_rad(self._declination_deg, latitude_rad, longitude_rad, t_s)
         )
 
+    def field_refusal(
+        self, field_enu_t, latitude_rad: float, longitude_rad: float, t_s: float
+    ) -> Reason | None:
+        """``magnetic_field_inconsistent`` when a calibrated field (ENU, T) differs from the
+        Earth's at a place (rad) and time (s since the Unix epoch) in strength or dip beyond
+        the tolerances; None when it agrees."""
+        expected = np.asarray(wmm_field_enu_t(latitude_rad, longitude_rad, t_s))
+        field = np.asarray(field_enu_t, dtype=float)
+        expected_strength = float(np.linalg.norm(expected))
+        strength = float(np.linalg.norm(field))
+        if abs(strength - expected_strength) > self._strength_tolerance * expected_strength:
+            return Reason.MAGNETIC_FIELD_INCONSISTENT
+        if abs(_dip_rad(field) - _dip_rad(expected)) > self._dip_tolerance_rad:
+            return Reason.MAGNETIC_FIELD_INCONSISTENT
+        return None
+
     def _field_geometry(self, rotation_nb, field_body_t):
         field = np.asarray(rotation_nb) @ field_body_t
         horizontal_sq = field[0] * field[0] + field[1] * field[1]
@@ -137,11 +165,19 @@ class MagnetometerSource(AidingSource):
         return self._heading_variance_rad2 + measurement.noise_variance_t2 / horizontal_sq
 
     def model(self, measurement: MagneticField, point: LinearisationPoint):
+        state = point.state
+        refusal = self.field_refusal(
+            np.asarray(point.rotation_nb) @ measurement.field_body_t,
+            state.latitude_rad,
+            state.longitude_rad,
+            measurement.t_s,
+        )
+        if refusal is not None:
+            return refusal
         geometry = self._field_geometry(point.rotation_nb, measurement.field_body_t)
         if geometry is None:
             return None
         (east, north, up), horizontal_sq = geometry
-        state = point.state
         target = self.magnetic_north_azimuth_rad(
             state.latitude_rad, state.longitude_rad, measurement.t_s
         )
@@ -176,9 +212,13 @@ class MagnetometerSource(AidingSource):
 
     def align(self, aligner, t_s: float, measurement: MagneticField, raw_gyro_rad_s):
         """The azimuth of the field's horizontal part (magnetic north) completes the alignment
-        at a known place (a fix, or the configured site)."""
+        at a known place (a fix, or the configured site), when the field agrees with the
+        Earth's there (judged with the levelled attitude)."""
         place = aligner.latest_position_rad()
-        if place is None:
+        levelled = aligner.levelled_rotation()
+        if place is None or levelled is None:
+            return None
+        if self.field_refusal(levelled @ measurement.field_body_t, *place, measurement.t_s):
             return None
         target = self.magnetic_north_azimuth_rad(*place, measurement.t_s)
         field = measurement.field_body_t
@@ -186,3 +226,9 @@ class MagnetometerSource(AidingSource):
             field @ field
         )
         return aligner.add_heading(t_s, target, variance, raw_gyro_rad_s, body_vector=field)
+
+
+def _dip_rad(field_enu) -> float:
+    """Angle (rad) of a field (ENU) under the horizontal: positive pointing down."""
+    east, north, up = field_enu
+    return math.atan2(-up, math.hypot(east, north))
