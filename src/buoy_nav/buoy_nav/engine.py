@@ -407,8 +407,11 @@ class FusionEngine:
             if self._gates.suspended(source.kind):
                 self._counters[source.kind].reject(Reason.SUSPENDED)
                 continue
-            self._counters[source.kind].used_for_alignment += 1
             result = source.align(self._aligner, t, measurement, gyro)
+            if isinstance(result, Reason):
+                self._counters[source.kind].reject(result)
+                continue
+            self._counters[source.kind].used_for_alignment += 1
             if result is not None:
                 self._start_filter(result, t)
 

@@ -265,9 +265,10 @@ class AidingSource(abc.ABC):
     @abc.abstractmethod
     def align(
         self, aligner: InMotionAligner, t_s: float, measurement, raw_gyro_rad_s
-    ) -> AlignmentResult | None:
+    ) -> AlignmentResult | Reason | None:
         """Give the validated ``measurement`` (stamp ``t_s``; raw gyro sample there, body
-        rad/s) to the aligner; the alignment result when it completes the alignment."""
+        rad/s) to the aligner; the alignment result when it completes the alignment, or the
+        :class:`Reason` the source refuses it for the alignment (counted as a rejection)."""
 
 
 # -- validation helpers ----------------------------------------------------------------------

@@ -43,6 +43,7 @@ rejections, since a compass that disagrees for seconds is disturbed, not right.
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import NamedTuple
 
 import numpy as np
@@ -102,6 +103,12 @@ class MagnetometerSource(AidingSource):
         self._strength_tolerance = config.magnetometer_strength_tolerance
         self._dip_tolerance_rad = math.radians(config.magnetometer_dip_tolerance_deg)
         self.reset_after_rejections = config.gate_reset_count * RESET_AFTER_GATE_RESETS
+        rule = config.source_health_rule
+        self._alignment_resume_share = rule.resume_share
+        self._alignment_field_checks: deque[bool] = deque(maxlen=rule.min_samples)
+        """Whether each of the recent fields offered to the alignment disagreed with the
+        Earth's: the alignment trusts the magnetometer only as a suspended source would be
+        resumed, after ``min_samples`` fields of which no more than ``resume_share`` disagreed."""
 
     @classmethod
     def enabled_by(cls, config) -> bool:
@@ -139,18 +146,23 @@ class MagnetometerSource(AidingSource):
         )
 
     def field_refusal(
-        self, field_enu_t, latitude_rad: float, longitude_rad: float, t_s: float
+        self,
+        field_enu_t,
+        latitude_rad: float,
+        longitude_rad: float,
+        t_s: float,
+        judge_dip: bool = True,
     ) -> Reason | None:
         """``magnetic_field_inconsistent`` when a calibrated field (ENU, T) differs from the
-        Earth's at a place (rad) and time (s since the Unix epoch) in strength or dip beyond
-        the tolerances; None when it agrees."""
+        Earth's at a place (rad) and time (s since the Unix epoch) in strength or (with
+        ``judge_dip``) dip beyond the tolerances; None when it agrees."""
         expected = np.asarray(wmm_field_enu_t(latitude_rad, longitude_rad, t_s))
         field = np.asarray(field_enu_t, dtype=float)
         expected_strength = float(np.linalg.norm(expected))
         strength = float(np.linalg.norm(field))
         if abs(strength - expected_strength) > self._strength_tolerance * expected_strength:
             return Reason.MAGNETIC_FIELD_INCONSISTENT
-        if abs(_dip_rad(field) - _dip_rad(expected)) > self._dip_tolerance_rad:
+        if judge_dip and abs(_dip_rad(field) - _dip_rad(expected)) > self._dip_tolerance_rad:
             return Reason.MAGNETIC_FIELD_INCONSISTENT
         return None
 
@@ -213,12 +225,23 @@ class MagnetometerSource(AidingSource):
     def align(self, aligner, t_s: float, measurement: MagneticField, raw_gyro_rad_s):
         """The azimuth of the field's horizontal part (magnetic north) completes the alignment
         at a known place (a fix, or the configured site), when the field agrees with the
-        Earth's there (judged with the levelled attitude)."""
+        Earth's there (judged with the levelled attitude) and has agreed over the recent samples
+        (:meth:`_field_agreed_long_enough`); a field that disagrees is refused as
+        ``magnetic_field_inconsistent``."""
         place = aligner.latest_position_rad()
-        levelled = aligner.levelled_rotation()
-        if place is None or levelled is None:
+        if place is None:
             return None
-        if self.field_refusal(levelled @ measurement.field_body_t, *place, measurement.t_s):
+        levelled = aligner.levelled_rotation()
+        # Until the levelling is done, the field's strength alone is judged (it needs no
+        # attitude), so that the evidence is in when the alignment could complete.
+        field = (
+            measurement.field_body_t if levelled is None else levelled @ measurement.field_body_t
+        )
+        refusal = self.field_refusal(field, *place, measurement.t_s, judge_dip=levelled is not None)
+        self._alignment_field_checks.append(refusal is not None)
+        if refusal is not None:
+            return refusal
+        if levelled is None or not self._field_agreed_long_enough():
             return None
         target = self.magnetic_north_azimuth_rad(*place, measurement.t_s)
         field = measurement.field_body_t
@@ -226,6 +249,15 @@ class MagnetometerSource(AidingSource):
             field @ field
         )
         return aligner.add_heading(t_s, target, variance, raw_gyro_rad_s, body_vector=field)
+
+    def _field_agreed_long_enough(self) -> bool:
+        """Whether the recent fields offered to the alignment agree with the Earth's as a
+        suspended source's outcomes must to resume (an uncalibrated magnetometer passes now and
+        then, at some headings, and one such field must not give the filter its heading)."""
+        checks = self._alignment_field_checks
+        if len(checks) < checks.maxlen:
+            return False
+        return sum(checks) <= self._alignment_resume_share * len(checks)
 
 
 def _dip_rad(field_enu) -> float:
