@@ -4,15 +4,22 @@ once, to subscribers that come later too, where tf2_msgs is installed."""
 from __future__ import annotations
 
 import importlib
+import subprocess
 import sys
 import time
 import types
+from pathlib import Path
 
+import numpy as np
 import pytest
 import rclpy
+import yaml
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy
+from scipy.spatial.transform import Rotation
 from std_msgs.msg import ByteMultiArray
 
 from buoy_common.bag_io import jazzy_typestore
@@ -30,10 +37,12 @@ from buoy_common.contract import (
 from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav import fusion_node
 from buoy_nav.config import FusionConfig
+from processed_bags import BAGS_DIR, BUOY_PARAMETERS
 from wind_comp import compensation_node
 from wind_comp.config import CompensatorConfig, CurrentConfig
 
 RECEIVE_TIMEOUT_S = 10.0
+BIN = Path(sys.executable).parent
 
 
 def test_each_node_places_the_frames_of_the_parameters_it_reads():
@@ -115,3 +124,71 @@ def test_without_tf2_msgs_nothing_is_published(context):
     node.broadcast_static_transforms(None, sensor_transforms(shared_values(CurrentConfig())))
     assert node.static_transforms_publisher is None
     assert node.count_publishers(TF_STATIC_TOPIC) == 0
+
+
+# -- offline ---------------------------------------------------------------------------------------
+
+
+def buoy_geometry(parameter_files: list[Path]) -> dict[str, dict[str, list[float]]]:
+    """Section → key → value of the ``/**`` parameters of ``parameter_files``, later files
+    winning: read with plain YAML, not with the suite's parameter loader."""
+    geometry: dict[str, dict[str, list[float]]] = {}
+    for path in parameter_files:
+        parameters = yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
+        for section in ("gnss", "anemometer", "dvl"):
+            geometry.setdefault(section, {}).update(parameters.get(section, {}))
+    return geometry
+
+
+def static_messages(bag: Path) -> tuple[list, int]:
+    """The decoded ``/tf_static`` messages of ``bag`` with their log times, and the bag's first
+    log time, read by mcap + mcap-ros2-support."""
+    (mcap_file,) = bag.glob("*.mcap")
+    found, first_ns = [], None
+    with open(mcap_file, "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, message, decoded in reader.iter_decoded_messages(log_time_order=True):
+            first_ns = message.log_time if first_ns is None else first_ns
+            if channel.topic == "/" + TF_STATIC_TOPIC:
+                found.append((message.log_time, decoded))
+    return found, first_ns
+
+
+@pytest.mark.parametrize("tool", ["process_bag", "fuse_bag"])
+def test_a_processed_bag_places_the_sensors_of_its_buoy(tmp_path, tool):
+    parameter_files = [BUOY_PARAMETERS, BAGS_DIR / "off_axis.yaml"]
+    out_bag = tmp_path / "out"
+    arguments = [str(BAGS_DIR / "off_axis"), str(out_bag)]
+    for path in parameter_files:
+        arguments += ["--params-file", str(path)]
+    completed = subprocess.run(
+        [str(BIN / tool), *arguments], capture_output=True, text=True, timeout=300
+    )
+    assert completed.returncode == 0, completed.stderr
+
+    found, first_ns = static_messages(out_bag)
+    assert len(found) == 1
+    log_time_ns, message = found[0]
+    assert log_time_ns == first_ns  # before every other message of the bag
+    geometry = buoy_geometry(parameter_files)
+    expected = {
+        IMU_FRAME: ([0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+        GNSS_PRIMARY_FRAME: (geometry["gnss"]["primary_antenna"], [0.0, 0.0, 0.0]),
+        GNSS_SECONDARY_FRAME: (geometry["gnss"]["secondary_antenna"], [0.0, 0.0, 0.0]),
+    }
+    if tool == "process_bag":
+        for frame, section in ((ANEMOMETER_FRAME, "anemometer"), (DVL_FRAME, "dvl")):
+            expected[frame] = (geometry[section]["position"], geometry[section]["rpy_deg"])
+    assert [t.child_frame_id for t in message.transforms] == list(expected)
+    assert geometry["anemometer"]["rpy_deg"] == [4.0, -3.0, 150.0]  # off_axis's own mounting
+    for stamped in message.transforms:
+        assert stamped.header.frame_id == BODY_FRAME
+        stamp = stamped.header.stamp
+        assert stamp.sec * 1_000_000_000 + stamp.nanosec == log_time_ns
+        position, (roll, pitch, yaw) = expected[stamped.child_frame_id]
+        t, q = stamped.transform.translation, stamped.transform.rotation
+        assert [t.x, t.y, t.z] == position
+        mounting = Rotation.from_euler("ZYX", [yaw, pitch, roll], degrees=True)
+        np.testing.assert_allclose(
+            Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(), mounting.as_matrix(), atol=1e-14
+        )
