@@ -206,7 +206,7 @@ def test_cli_writes_one_nav_set_per_imu_sample_after_alignment(cli_run):
         truth_topics = {n: i for n, i in source.topics.items() if n.startswith("/truth/")}
         truth_raw = {n: [r.raw for r in source.messages([n])] for n in truth_topics}
     with BagReader(out) as fused:
-        assert set(fused.topics) == set(NAV_TOPICS) | {"/tf"} | set(truth_topics)
+        assert set(fused.topics) == set(NAV_TOPICS) | {"/tf", "/tf_static"} | set(truth_topics)
         assert fused.topics["/tf"].msgtype == "tf2_msgs/msg/TFMessage"
         assert fused.topics["/tf"].count == fused.topics["/nav/odometry"].count
         assert fused.topics["/nav/odometry"].msgtype == "nav_msgs/msg/Odometry"

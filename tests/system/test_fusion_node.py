@@ -388,7 +388,10 @@ def test_live_solutions_equal_offline_fusion(nodes, name):
     assert f"aligned at stamp {first.sec + first.nanosec * 1e-9:.3f} s: roll " in log
     tf_line = "broadcasting map -> base_link on tf"
     assert (tf_line in log) == (fusion_node.TFMessage is not None), log
-    assert (tf_line not in log) == ("tf2_msgs is not installed" in log)
+    assert (tf_line not in log) == ("tf2_msgs is not installed: map -> base_link" in log)
+    static_line = "base_link -> imu_link, gnss_primary, gnss_secondary"
+    assert (f"broadcasting {static_line} on tf_static" in log) == (tf_line in log), log
+    assert (f"{static_line} is not broadcast on tf_static" in log) == (tf_line not in log), log
 
     largest_relative_difference = assert_same_messages(live, offline)
     print(f"{n_solutions} solutions, largest relative difference {largest_relative_difference:g}")

@@ -28,6 +28,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from buoy_common.contract import BODY_FRAME, TF_STATIC_TOPIC
 from buoy_common.parameters import (
     ParameterError,
     build_config,
@@ -38,6 +39,7 @@ from buoy_common.parameters import (
     load_parameter_sections,
     to_ros_value,
 )
+from buoy_common.transform_messages import FrameTransform, tf_cdr
 
 # Reliable with a deep queue: a recorder or a slow subscriber must not lose sensor samples.
 DATA_QOS = QoSProfile(
@@ -45,6 +47,15 @@ DATA_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
+)
+
+# tf2_ros's static broadcaster profile: a subscriber that comes later still receives the one
+# message, as tf2 listeners expect of ``tf_static``.
+TF_STATIC_QOS = QoSProfile(
+    depth=1,
+    history=HistoryPolicy.KEEP_LAST,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 
 REJECTION_LOG_PERIOD_S = 5.0
@@ -71,6 +82,7 @@ class SuiteNode(Node):
         self.rejections: Counter[str] = Counter()
         # Monotonic time (s) at which the spin loop calls run_deferred_work; None: nothing due.
         self.deferred_work_due_s: float | None = None
+        self.static_transforms_publisher = None
 
     def run_deferred_work(self) -> None:
         """Work a callback put off (see :func:`run_node`); clears ``deferred_work_due_s``."""
@@ -89,6 +101,25 @@ class SuiteNode(Node):
             f"rejected {key} (total {self.rejections[key]})",
             throttle_duration_sec=REJECTION_LOG_PERIOD_S,
         )
+
+    def broadcast_static_transforms(
+        self, tf_message_class: type | None, transforms: list[FrameTransform]
+    ) -> None:
+        """Publish ``transforms`` (the sensor frames in ``base_link``) once on ``tf_static``
+        and keep the publisher, which hands them to every later subscriber; where tf2_msgs is
+        not installed (``tf_message_class`` None) the log says they are not broadcast."""
+        frames = f"{BODY_FRAME} -> {', '.join(t.child_frame for t in transforms)}"
+        if tf_message_class is None:
+            self.get_logger().info(
+                f"tf2_msgs is not installed: {frames} is not broadcast on {TF_STATIC_TOPIC}"
+            )
+            return
+        self.static_transforms_publisher = self.create_publisher(
+            tf_message_class, TF_STATIC_TOPIC, TF_STATIC_QOS
+        )
+        sec, nanosec = self.get_clock().now().seconds_nanoseconds()
+        self.static_transforms_publisher.publish(tf_cdr(sec, nanosec, transforms))
+        self.get_logger().info(f"broadcasting {frames} on {TF_STATIC_TOPIC}")
 
     # -- parameters -------------------------------------------------------------------------
 

@@ -56,6 +56,9 @@ whatever a node's namespace (a whole fleet shares one simulated time)."""
 TF_TOPIC = "tf"
 """``map`` → ``base_link`` of each navigation solution. Relative, like every topic here, so each
 buoy of a fleet has its own tree under its namespace (tf2 listeners take ``-r /tf:=tf``)."""
+TF_STATIC_TOPIC = "tf_static"
+"""``base_link`` → each sensor frame, from the shared extrinsics, published once (transient
+local). Relative, as :data:`TF_TOPIC` (tf2 listeners take ``-r /tf_static:=tf_static``)."""
 
 # -- message types -------------------------------------------------------------------------------
 IMU_MSGTYPE = "sensor_msgs/msg/Imu"
@@ -69,6 +72,7 @@ FLOAT64_ARRAY_MSGTYPE = "std_msgs/msg/Float64MultiArray"
 DIAGNOSTICS_MSGTYPE = "diagnostic_msgs/msg/DiagnosticArray"
 CLOCK_MSGTYPE = "rosgraph_msgs/msg/Clock"
 TF_MSGTYPE = "tf2_msgs/msg/TFMessage"
+TF_STATIC_MSGTYPE = TF_MSGTYPE
 
 SENSOR_MSGTYPES = {
     IMU_RAW_TOPIC: IMU_MSGTYPE,
@@ -107,6 +111,7 @@ OUTPUT_MSGTYPES = {
     CURRENT_TOPIC: VECTOR3_MSGTYPE,
     DIAGNOSTICS_TOPIC: DIAGNOSTICS_MSGTYPE,
     TF_TOPIC: TF_MSGTYPE,
+    TF_STATIC_TOPIC: TF_STATIC_MSGTYPE,
 }
 """Every fixed-name output topic (the wind and current products are named per window, see
 :func:`wind_mean_topic`, :func:`wind_stats_topic`, :func:`wind_fluxes_topic`,
@@ -120,6 +125,9 @@ BODY_FRAME = "base_link"
 IMU_FRAME = "imu_link"
 """Coincides with ``base_link``: the IMU defines the body frame."""
 GNSS_PRIMARY_FRAME = "gnss_primary"
+GNSS_SECONDARY_FRAME = "gnss_secondary"
+GNSS_TERTIARY_FRAME = "gnss_tertiary"
+"""The third antenna's frame: only where ``gnss.tertiary_antenna`` is configured."""
 ANEMOMETER_FRAME = "anemometer_link"
 DVL_FRAME = "dvl_link"
 

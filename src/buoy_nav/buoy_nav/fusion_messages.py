@@ -66,6 +66,7 @@ from buoy_common.contract import (
     header_seconds,
     seconds_to_stamp,
 )
+from buoy_common.transform_messages import FrameTransform, tf_message
 from buoy_nav.aiding import TOPIC_SOURCES
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.aiding.gnss_fix import STATUS_FIX
@@ -459,21 +460,8 @@ def transform_message(sec: int, nanosec: int, position_map_m, attitude_xyzw):
     """The ``tf`` message of one solution as a rosbags message object: the transform ``map`` →
     ``base_link`` at stamp (sec, nanosec), translation ``position_map_m`` (m, in ``map``),
     rotation ``attitude_xyzw`` (body→ENU)."""
-    types = jazzy_typestore().types
-    x, y, z = position_map_m
-    qx, qy, qz, qw = attitude_xyzw
-    transform = types["geometry_msgs/msg/TransformStamped"](
-        header=types["std_msgs/msg/Header"](
-            stamp=types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec),
-            frame_id=MAP_FRAME,
-        ),
-        child_frame_id=BODY_FRAME,
-        transform=types["geometry_msgs/msg/Transform"](
-            translation=types["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
-            rotation=types["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=qw),
-        ),
-    )
-    return types[TF_MSGTYPE](transforms=[transform])
+    pose = FrameTransform(MAP_FRAME, BODY_FRAME, tuple(position_map_m), tuple(attitude_xyzw))
+    return tf_message(sec, nanosec, [pose])
 
 
 # One transform of fixed frame ids has a fixed layout: rosbags serialises it once, and each

@@ -20,6 +20,9 @@ Publishes, once aligned, one set per navigation solution, all with the solution'
 - ``tf`` (tf2_msgs/TFMessage, ``map`` → ``base_link``) where tf2_msgs is installed (a full ROS
   install; the PyPI wheels lack it, and the node then says so at start-up and goes without);
   the bytes ``fuse_bag`` writes to its bags
+- ``tf_static`` (tf2_msgs/TFMessage, transient local), once at start where tf2_msgs is
+  installed: ``base_link`` → ``imu_link`` and the antennas' frames from the shared parameters
+  (:mod:`buoy_common.sensor_frames`)
 - ``diagnostics`` (1 s): alignment state, coasting flags, the sensor set in use
   (``sensor_set``, :mod:`buoy_nav.sensor_sets`) and the sources that coast (``coasting_sources``:
   accepted before, not now), per input kind the accepted, aligning,
@@ -98,6 +101,7 @@ from buoy_common.contract import (
     TF_TOPIC,
     Reason,
 )
+from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.aiding import disabled_topics
 from buoy_nav.config import (
     FUSION_FIELDS_NOT_PARAMETERS,
@@ -174,6 +178,9 @@ class FusionNode(FlushingNode):
             )
         self._tf_publisher = (
             None if TFMessage is None else self.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
+        )
+        self.broadcast_static_transforms(
+            TFMessage, sensor_transforms(shared_values(self.config), imu_link=True)
         )
         self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
         config = self.config

@@ -11,6 +11,7 @@ from typing import NamedTuple
 from buoy_common.bag_io import BagReader, Recovery
 from buoy_common.namespaces import TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs
+from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.config import FusionConfig
 from buoy_processing.offline_fusion import OfflineFusion, sensor_topics_of, truth_topics_of
 from buoy_processing.offline_runner import OfflineRun, run_fusion
@@ -59,6 +60,7 @@ def fuse_bag(
             copied_topics=truth_topics_of(reader),
             smooth=smooth,
             overwrite=overwrite,
+            static_transforms=sensor_transforms(shared_values(config), imu_link=True),
         )
         fusion, counts = run_fusion(run)
     return FusedBag(fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery)

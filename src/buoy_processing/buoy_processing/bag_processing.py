@@ -62,6 +62,7 @@ from buoy_common.contract import (
 )
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
+from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
 from buoy_processing.offline_fusion import relative_topic, sensor_topics_of, truth_topics_of
@@ -476,10 +477,11 @@ def process_bag(
     view = view or TopicView()
     with BagReader(in_bag, view) as reader:
         sensors = sensor_topics_of(reader, fusion_config)
+        current_config = current_config or CurrentConfig()
         corrections = BagCorrections(
             flow_topics_of(reader, view),
             compensator_config,
-            current_config or CurrentConfig(),
+            current_config,
             None if netcdf_path is None else NavigationSeries(),
         )
         run = OfflineRun(
@@ -493,6 +495,9 @@ def process_bag(
             smooth=smooth,
             overwrite=overwrite,
             write_in_background=write_in_background,
+            static_transforms=sensor_transforms(
+                shared_values(fusion_config, compensator_config, current_config), imu_link=True
+            ),
         )
         fusion, topic_counts = run_fusion(run, corrections)
         duration_s = reader.duration_s

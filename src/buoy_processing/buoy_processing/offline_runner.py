@@ -24,13 +24,16 @@ from pathlib import Path
 from typing import NamedTuple, Protocol
 
 from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, BagWriter
+from buoy_common.contract import TF_STATIC_MSGTYPE, TF_STATIC_TOPIC, bag_topic, ns_to_stamp
 from buoy_common.namespaces import NamespacedWriter, TopicView
+from buoy_common.transform_messages import FrameTransform, tf_cdr
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import NavValues
 from buoy_nav.observability import unobserved_quantities
 from buoy_processing.offline_fusion import OfflineFusion
 
 PROGRESS_EVERY_MESSAGES = 2000
+TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
 
 
 class BagConsumer(Protocol):
@@ -87,6 +90,9 @@ class OfflineRun:
     write_in_background: bool = True
     """Write the bag from a process of its own, on a second core (False: in this process, for a
     caller that keeps every core busy with bags of its own)."""
+    static_transforms: list[FrameTransform] = field(default_factory=list)
+    """``base_link`` → the sensor frames, written once on ``tf_static`` at the input bag's first
+    log time, before every other output (:mod:`buoy_common.sensor_frames`)."""
 
     @property
     def relative_of(self) -> dict[str, str]:
@@ -96,6 +102,15 @@ class OfflineRun:
     def open_writer(self) -> BackgroundBagWriter | BagWriter:
         writer_class = BackgroundBagWriter if self.write_in_background else BagWriter
         return writer_class(self.out_bag, overwrite=self.overwrite)
+
+    def write_static_transforms(self, writer: NamespacedWriter) -> None:
+        """The one ``tf_static`` message of :attr:`static_transforms`, stamped and logged at the
+        input bag's first log time (nothing without transforms)."""
+        if not self.static_transforms:
+            return
+        start_ns = self.reader.start_ns
+        raw = tf_cdr(*ns_to_stamp(start_ns), self.static_transforms)
+        writer.write_raw(TF_STATIC_BAG_TOPIC, TF_STATIC_MSGTYPE, start_ns, raw)
 
 
 class FusionRun(NamedTuple):
@@ -125,6 +140,7 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
     relative_of = run.relative_of
     with BagProgress(reader, run.label) as progress, run.open_writer() as bag_writer:
         writer = NamespacedWriter(bag_writer, run.view)
+        run.write_static_transforms(writer)
         fusion = OfflineFusion(run.config, writer)
         consumer.start(writer)
         log_time_ns = reader.start_ns
@@ -156,6 +172,7 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
         # keeps what it is given, and the second pass produces fast.
         with run.open_writer() as bag_writer:
             writer = NamespacedWriter(bag_writer, run.view)
+            run.write_static_transforms(writer)
             forward_pass(reader, fusion, run.sensors, run.relative_of, run.label)
             fusion.writer = writer
             consumer.start(writer)

@@ -36,6 +36,9 @@ Publishes:
   order of :data:`wind_comp.compensation_messages.FLUX_FIELDS`.
 - ``diagnostics``: samples in and out, valid and invalid by reason, navigation samples seen,
   input rates, processing latency, rejected messages by reason.
+- ``tf_static`` (tf2_msgs/TFMessage, transient local), once at start where tf2_msgs is
+  installed: ``base_link`` → ``anemometer_link`` from the shared parameters (``current_node``:
+  ``dvl_link``).
 
 Parameters: ``anemometer.position`` (double[3], m, default [0, 0, 3]) and
 ``anemometer.rpy_deg`` (double[3], deg, default [0, 0, 0]) of the shared buoy file; every
@@ -69,6 +72,11 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix, Temperature
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+try:  # tf2_msgs comes with a full ROS install, not with the PyPI wheels
+    from tf2_msgs.msg import TFMessage
+except ImportError:
+    TFMessage = None
+
 from buoy_common.base_node import (
     DATA_QOS,
     DiagnosticsPublisher,
@@ -88,6 +96,7 @@ from buoy_common.contract import (
     wind_stats_topic,
 )
 from buoy_common.parameter_declarations import DeclaredParameter
+from buoy_common.sensor_frames import sensor_transforms, shared_values
 from wind_comp.compensation_messages import (
     MalformedMessageError,
     anemometer_record,
@@ -214,6 +223,7 @@ class CorrectionNode(FlushingNode):
         # Raw: 100 Hz each, read straight from CDR as process_bag reads them.
         self.create_subscription(Odometry, NAV_ODOMETRY_TOPIC, self.on_odometry, DATA_QOS, raw=True)
         self.create_subscription(NavSatFix, NAV_FIX_TOPIC, self.on_fix, DATA_QOS, raw=True)
+        self.broadcast_static_transforms(TFMessage, sensor_transforms(shared_values(self.config)))
         self._diagnostics = DiagnosticsPublisher(self, self.report, DIAGNOSTICS_PERIOD_S)
         sensor = self.pipeline.sensor
         self.get_logger().info(
