@@ -213,6 +213,8 @@ class OfflineCorrection:
                     values.pose_covariance[28],
                     values.pose_covariance[35],
                 ),
+                values.attitude_covariance_rad2,
+                values.body_twist_covariance,
             )
             pipeline.add_fix(STATUS_FIX, values.latitude_deg)
 

@@ -97,7 +97,9 @@ def corrected_flow_covariance_enu(
     rotation_nb = np.asarray(rotation_nb, dtype=float)
     mounting = np.asarray(mounting_rotation_bs, dtype=float)
     lever_arm = np.asarray(lever_arm_body_m, dtype=float)
-    flow_body = np.asarray(flow_sensor_mps, dtype=float) @ mounting.T
+    # Not flows @ mountingᵀ: a matrix product of (N, 3) rows may sum in another order for
+    # N = 1 than for a batch, and the live node corrects one sample at a time.
+    flow_body = np.einsum("ij,nj->ni", mounting, np.asarray(flow_sensor_mps, dtype=float))
     rotation_velocity_body = np.cross(np.asarray(angular_rate_body_rad_s, dtype=float), lever_arm)
     relative_enu = np.einsum("nij,nj->ni", rotation_nb, flow_body + rotation_velocity_body)
     attitude_term = sandwich(skew_matrices(relative_enu), attitude_covariance_enu_rad2)
