@@ -354,3 +354,34 @@ def test_config_takes_lists_and_keeps_the_wmo_windows_by_default():
     cfg = CompensatorConfig(anemometer_position_body_m=[0, 0, 3], anemometer_rpy_deg=[0, 0, 0])
     assert cfg.anemometer_position_body_m == (0.0, 0.0, 3.0)
     assert cfg.product_windows_s == (60.0, 600.0)
+
+
+@pytest.mark.parametrize(
+    ("attitude_sigma_deg", "vertical_sigma_mps", "refused"),
+    [(0.5, 0.01, False), (6.0, 0.01, True), (0.5, 0.3, True)],
+    ids=["within", "heading_too_uncertain", "vertical_too_uncertain"],
+)
+def test_the_sigma_gate_refuses_a_sample_beyond_its_limits(
+    attitude_sigma_deg, vertical_sigma_mps, refused
+):
+    """A 5.9 m/s relative wind turned by a yaw error of σ rad moves by about 5.9σ m/s: 6° is
+    0.6 m/s, beyond the 0.5 m/s horizontal limit; 0.5° is 0.05 m/s, within. A vertical velocity
+    σ of 0.3 m/s is beyond the 0.25 m/s vertical limit."""
+    cfg = config(max_attitude_sigma_deg=10.0)
+    compensator = compensator_of(cfg)
+    nav_t, quats, rates, velocities, wind_t, wind = scenario()
+    covariances = np.zeros((nav_t.size, 3, 3, 3))
+    covariances[:, 0] = np.diag(np.radians([0.2, 0.2, attitude_sigma_deg]) ** 2)
+    covariances[:, 1] = np.diag([0.01, 0.01, vertical_sigma_mps]) ** 2
+    compensator.add_arrivals(
+        (nav_t, quats, rates, velocities, True, covariances),
+        wind_t[60:70],
+        wind[60:70],
+        np.full(10, nav_t.size),
+    )
+    batch = compensator.flush()
+    expected = SampleStatus.UNCERTAINTY_TOO_LARGE if refused else SampleStatus.VALID
+    assert set(batch.status.tolist()) == {expected}
+    assert np.isnan(batch.flow_enu_mps).all() == refused
+    assert np.isnan(batch.covariance.total).all() == refused
+    assert cfg.flow_sensor().reason(SampleStatus.UNCERTAINTY_TOO_LARGE) == "uncertainty_too_large"
