@@ -422,7 +422,7 @@ def _ancillary_variables(what: str, window_s: float, spec: _ProductVariable) -> 
     mean component its standard error."""
     flag_name = product_variable_name(what, window_s, "quality_flag")
     error_field = spec.field.replace("_enu_mps", "_standard_error_mps")
-    if spec.field.startswith("mean_") and any(s.field == error_field for s in _TABLES[what]):
+    if spec.field.endswith("_enu_mps") and any(s.field == error_field for s in _TABLES[what]):
         return f"{flag_name} {product_variable_name(what, window_s, error_field)}"
     return flag_name
 

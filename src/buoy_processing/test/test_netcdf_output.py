@@ -191,12 +191,18 @@ def test_the_file_holds_the_series_the_products_and_the_navigation(written):
                 dataset[error_name].values, [p.mean_u_standard_error_mps for p in products]
             )
             assert dataset[error_name].attrs["standard_name"] == "eastward_wind standard_error"
+            speed_name = product_variable_name("wind", window_s, "vector_mean_speed_mps")
+            flag_name = product_variable_name("wind", window_s, "quality_flag")
+            assert dataset[speed_name].attrs["ancillary_variables"] == flag_name
         for field in ("friction_velocity_mps", "w_ts_k_mps", "stationarity_u_w_percent"):
             np.testing.assert_array_equal(
                 dataset[product_variable_name("flux", 60.0, field)].values,
                 [getattr(p, field) for p in made.fluxes],
             )
         assert dataset["flux_1min_n_temperature"].values.tolist() == [1200, 1200, 600]
+        assert dataset["flux_1min_mean_wind_speed"].attrs["ancillary_variables"] == (
+            "flux_1min_quality_flag"
+        )
     # Full 1-min windows hold 95 % of their samples valid; the trailing 30 s of the 150 s are
     # a partial one, and the 10-min window a quarter full: flagged, not passed off as full.
     one_minute = [p for p in made.wind_products if p.window_s == 60.0]
