@@ -32,6 +32,7 @@ arrival, and one column arithmetic, elementwise, runs on a batch of any length.
 from __future__ import annotations
 
 import math
+import operator
 from array import array
 from typing import NamedTuple
 
@@ -93,10 +94,10 @@ _NAV_FIELDS = 40
 _SAMPLE_FIELDS = 13  # stamp, flow (3), noise covariance (9, row-major)
 _ZEROS9 = (0.0,) * 9
 _ZEROS36 = (0.0,) * 36
-_LINEAR_BLOCK = (0, 1, 2, 6, 7, 8, 12, 13, 14)
-"""Where the 3×3 linear block sits in a row-major 6×6 twist covariance."""
-_ANGULAR_BLOCK = (21, 22, 23, 27, 28, 29, 33, 34, 35)
-"""Where the 3×3 angular block sits in a row-major 6×6 covariance."""
+_LINEAR_BLOCK = operator.itemgetter(0, 1, 2, 6, 7, 8, 12, 13, 14)
+"""The 3×3 linear block of a row-major 6×6 twist covariance."""
+_ANGULAR_BLOCK = operator.itemgetter(21, 22, 23, 27, 28, 29, 33, 34, 35)
+"""The 3×3 angular block of a row-major 6×6 covariance."""
 
 
 VALID = "valid"
@@ -199,6 +200,8 @@ class CompensationPipeline:
         previous one), None when taken; ValueError for vectors of the wrong length."""
         if not t_s > self._nav_order.latest_s:
             return Reason.STAMP_NOT_INCREASING
+        if len(twist_covariance) != 36:
+            raise ValueError("odometry needs a twist covariance of 36 values")
         nav, start = self._nav, len(self._nav)
         nav.append(t_s)
         nav.extend(quat_xyzw)
@@ -207,13 +210,13 @@ class CompensationPipeline:
         nav.append(self.latitude_deg)
         nav.append(float(attitude_variance_rad2 <= self._max_attitude_variance_rad2))
         nav.extend(attitude_covariance_rad2)
-        nav.extend(twist_covariance[index] for index in _LINEAR_BLOCK)
-        nav.extend(twist_covariance[index] for index in _ANGULAR_BLOCK)
+        nav.extend(_LINEAR_BLOCK(twist_covariance))
+        nav.extend(_ANGULAR_BLOCK(twist_covariance))
         if len(nav) - start != _NAV_FIELDS:
             del nav[start:]
             raise ValueError(
-                "odometry needs a quaternion of 4 values, vectors of 3, an attitude covariance "
-                "of 9 and a twist covariance of 36"
+                "odometry needs a quaternion of 4 values, vectors of 3 and an attitude "
+                "covariance of 9"
             )
         self._nav_order.advance(t_s)
         return None
