@@ -3,7 +3,9 @@
 The test process publishes ``nav/fix``, ``nav/odometry`` (the simulator's true attitude, body
 velocity and body rate, with the Earth's rotation added as a gyro would sense it) and the
 simulated ``anemometer/wind``, a few of them deliberately malformed, and listens to
-``wind/true``, the 1-minute products and ``diagnostics``. The buoy is ``off_axis``'s (an
+``wind/true``, ``wind/true_with_covariance``, the 1-minute products and ``diagnostics``. The
+odometry states covariances that change from message to message, so that the covariance the
+node publishes depends on each one. The buoy is ``off_axis``'s (an
 anemometer off the mast axis and turned about all three axes, stamped apart from the IMU), so
 each term of the correction and the mounting rotation matter; with a perfect navigation the
 corrected wind is the true wind plus the anemometer's noise.
@@ -25,7 +27,7 @@ import numpy as np
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Vector3Stamped
+from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -110,6 +112,8 @@ def scenario(tmp_path_factory):
         ).inv().apply(earth_rate_enu)
         rate.x, rate.y, rate.z = sensed.tolist()
         odometry.child_frame_id = "base_link"
+    for k, odometry in enumerate(odometries):
+        odometry.pose.covariance, odometry.twist.covariance = stated_covariances(k)
 
     end_ns = stamp_ns(winds[-1])
     odometries = [o for o in odometries if stamp_ns(o) <= end_ns - NAV_MISSING_AT_END_S * 1e9]
@@ -133,6 +137,21 @@ def scenario(tmp_path_factory):
     return winds, odometries, fix, truth_wind
 
 
+def stated_covariances(k: int) -> tuple[list, list]:
+    """Pose and twist covariances (36 row-major each) of the k-th odometry: attitude 1σ of
+    0.2–0.6° (rad²), body velocity 1σ of 1–3 cm/s (m²/s²) and body rate 1σ of 0.01–0.03 °/s."""
+    scale = 2.0 + math.sin(0.1 * k)
+    pose, twist = [0.0] * 36, [0.0] * 36
+    for index in (21, 28, 35):
+        pose[index] = (math.radians(0.2) * scale) ** 2
+    pose[22] = pose[27] = 0.3 * pose[21]
+    for index in (0, 7, 14):
+        twist[index] = (0.01 * scale) ** 2
+    for index in (21, 28, 35):
+        twist[index] = (math.radians(0.01) * scale) ** 2
+    return pose, twist
+
+
 class Listener:
     """An in-process DDS participant in the test's isolated domain."""
 
@@ -142,10 +161,16 @@ class Listener:
         self.context = Context()
         rclpy.init(context=self.context)
         self.node = rclpy.create_node("compensation_test", context=self.context)
-        self.received = {"wind/true": [], "wind/mean_1min": [], "wind/stats_1min": []}
+        self.received = {
+            "wind/true": [],
+            "wind/true_with_covariance": [],
+            "wind/mean_1min": [],
+            "wind/stats_1min": [],
+        }
         self.diagnostics = []
         for topic, message_type in (
             ("wind/true", Vector3Stamped),
+            ("wind/true_with_covariance", TwistWithCovarianceStamped),
             ("wind/mean_1min", Vector3Stamped),
             ("wind/stats_1min", Float64MultiArray),
         ):
@@ -246,6 +271,7 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
         wait_for(
             lambda: (
                 len(listener.received["wind/true"]) >= len(winds)
+                and len(listener.received["wind/true_with_covariance"]) >= len(winds)
                 and listener.received["wind/stats_1min"]
             ),
             5.0,
@@ -367,6 +393,29 @@ def test_live_output_equals_the_pipeline_run_offline(scenario, live_run):
     batch = pipeline.flush().samples
     live = vectors(live_run["wind/true"])
     np.testing.assert_array_equal(live, batch.flow_enu_mps)
+    # The same samples with their covariances, bit for bit, one per wind sample with its stamp.
+    with_covariance = live_run["wind/true_with_covariance"]
+    assert [stamp_ns(m) for m in with_covariance] == [stamp_ns(m) for m in winds]
+    assert {m.header.frame_id for m in with_covariance} == {"map"}
+    np.testing.assert_array_equal(
+        [[m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.linear.z]
+         for m in with_covariance],
+        batch.flow_enu_mps,
+    )  # fmt: skip
+    covariances = np.array([np.reshape(m.twist.covariance, (6, 6)) for m in with_covariance])
+    np.testing.assert_array_equal(covariances[:, :3, :3], batch.covariance.total)
+    np.testing.assert_array_equal(
+        covariances[:, 3:, 3:], np.broadcast_to(-np.eye(3), (len(winds), 3, 3))
+    )
+    np.testing.assert_array_equal(covariances[:, :3, 3:], 0.0)
+    valid = batch.valid
+    assert (
+        np.isfinite(covariances[valid, :3, :3]).all()
+        and np.isnan(covariances[~valid, :3, :3]).all()
+    )
+    # The navigation's stated errors reach the wind: more than the anemometer's noise alone.
+    noise_variances = np.square(COMPENSATOR.anemometer_noise_sigma_mps)
+    assert np.all(np.trace(covariances[valid, :3, :3], axis1=1, axis2=2) > noise_variances.sum())
     counts = batch.counts()
     assert counts[SampleStatus.INVALID_MEASUREMENT] == 2
     assert counts[SampleStatus.NO_NAVIGATION] == live_run["n_held"]

@@ -15,6 +15,7 @@ from buoy_common.parameters import (
     SUITE_PARAMETER_GROUPS,
     ParameterError,
     coerce_parameter,
+    load_parameter_files,
     load_parameter_sections,
     parameter_group,
 )
@@ -103,3 +104,46 @@ def test_offline_tools_refuse_a_misspelt_group_of_a_shared_file(from_files, tmp_
     path.write_text("/**:\n  ros__parameters:\n    compenstion:\n      max_nav_gap_s: 0.2\n")
     with pytest.raises(ParameterError, match=r"group 'compenstion'.*did you mean 'compensation'"):
         from_files([path])
+
+
+SIGMA_LIMITS = {
+    "compensation_node": (
+        "compensation.max_attitude_sigma_deg",
+        "compensation.max_wind_sigma_horizontal_mps",
+        "compensation.max_wind_sigma_vertical_mps",
+    ),
+    "current_node": (
+        "current.max_attitude_sigma_deg",
+        "current.max_current_sigma_horizontal_mps",
+        "current.max_current_sigma_vertical_mps",
+    ),
+}
+SHIPPED_PARAMETER_FILES = sorted(
+    path.relative_to(REPO)
+    for pattern in ("src/*/config/**/*.yaml", "bags/*.yaml", "tools/*.yaml")
+    for path in REPO.glob(pattern)
+    if "ros__parameters" in path.read_text()
+)
+
+
+def test_the_shipped_parameter_files_are_found():
+    assert Path("src/buoy_common/config/records/ooi_fdchp_params.yaml") in SHIPPED_PARAMETER_FILES
+    assert len(SHIPPED_PARAMETER_FILES) >= 8
+
+
+@pytest.mark.parametrize("path", SHIPPED_PARAMETER_FILES, ids=str)
+def test_no_shipped_parameter_file_widens_a_sigma_limit(path):
+    """A sample is valid only while its uncertainty is within the limits: a shipped file may
+    tighten them, never widen them past their defaults."""
+    defaults = {
+        declared.name: declared.default
+        for sets in SUITE
+        for node in sets.nodes
+        for declared in node.parameters
+    }
+    for node, names in SIGMA_LIMITS.items():
+        values = load_parameter_files([REPO / path], node)
+        for name in names:
+            assert float(values.get(name, defaults[name])) <= defaults[name], (
+                f"{path} sets {name} to {values[name]}, above its default {defaults[name]}"
+            )

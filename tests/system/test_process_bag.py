@@ -30,11 +30,14 @@ from wind_comp.compensation_messages import (
     STATS_FIELDS,
     stats_values,
 )
+from wind_comp.compensator import SampleStatus
 from wind_comp.config import compensator_config_from_files
 
 COMPENSATOR = compensator_config_from_files([BUOY_PARAMETERS])
 NAV_TOPICS = ("/nav/odometry", "/nav/imu", "/nav/velocity", "/nav/fix")
 NANOSECONDS_PER_SECOND = 1_000_000_000
+SETTLING_S = 2.0
+"""How long after its first solution the navigation may still be too uncertain for the wind."""
 # CSV values carry 6 decimals; epoch stamps in float64 add 2.4e-7 s.
 CSV_TOLERANCE = 1e-6
 
@@ -93,10 +96,19 @@ def test_one_true_wind_per_anemometer_sample_with_its_stamp(runs, name):
 
 
 @pytest.mark.parametrize("name", CASES)
-def test_wind_is_nan_only_before_the_first_navigation_solution(runs, name):
+def test_wind_is_nan_only_before_the_first_navigation_solution(runs, tmp_path_factory, name):
+    """Or while the navigation's covariance, just after the alignment, still makes the wind's
+    σ too large: those samples are refused for their uncertainty."""
     run = runs[name]
     invalid = np.isnan(run.true_wind_enu_mps)
     assert np.array_equal(invalid.any(axis=1), invalid.all(axis=1)), "NaN vectors, not parts"
+    with xr.open_dataset(processed_netcdf(tmp_path_factory, name)) as dataset:
+        status = dataset["wind_status"].values
+    too_uncertain = status == SampleStatus.UNCERTAINTY_TOO_LARGE
+    assert np.all(invalid[too_uncertain])
+    settled = run.anemometer_ns < run.first_nav_ns + SETTLING_S * NANOSECONDS_PER_SECOND
+    assert np.all(settled[too_uncertain]), f"{name}: refused for its σ after {SETTLING_S} s"
+    invalid[too_uncertain] = False
     nan_stamps = run.true_wind_ns[invalid.any(axis=1)]
     before_navigation = run.anemometer_ns < run.first_nav_ns
     last_allowed_ns = run.first_nav_ns + COMPENSATOR.max_nav_gap_s * NANOSECONDS_PER_SECOND

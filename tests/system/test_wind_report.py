@@ -32,6 +32,7 @@ from buoy_processing.report.data import (
 from buoy_processing.wind_report import main
 from sensor_sim.simulate_bag import parse_arguments, simulate
 from wind_comp.config import compensator_config_from_files
+from wind_comp.flow_uncertainty import FlowCovariance
 from wind_comp.products import WindAverager
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -50,8 +51,12 @@ def sample_data(with_truth: bool) -> ReportData:
     measured = true_wind + np.column_stack((np.zeros_like(t_s), sway, sway))
     corrected = true_wind + rng.normal(scale=0.05, size=true_wind.shape)
     corrected[100:110] = np.nan
+    covariance = FlowCovariance(
+        np.broadcast_to(np.diag([0.03, 0.03, 0.01]) ** 2, (t_s.size, 3, 3)),
+        np.broadcast_to(np.diag([0.05, 0.05, 0.05]) ** 2, (t_s.size, 3, 3)),
+    )
     averager = WindAverager(window_s=60.0)
-    products = averager.add_batch(t_s, corrected) + averager.flush()
+    products = averager.add_batch(t_s, corrected, covariance) + averager.flush()
     truth_rpy = np.column_stack((sway * 0.2, sway * 0.1, np.full_like(t_s, np.radians(179.9))))
     nav_rpy = truth_rpy + np.radians([0.1, -0.2, 0.3])
     nav_rpy[:, 2] = (nav_rpy[:, 2] + np.pi) % (2 * np.pi) - np.pi  # yaw wraps past 180°

@@ -30,13 +30,13 @@ _STAMP_AND_FRAME_LENGTH = struct.Struct("<iII")
 _U32 = struct.Struct("<I")
 _I8 = struct.Struct("<b")
 _U16 = struct.Struct("<H")
-_F64 = struct.Struct("<d")
 _VECTOR3 = struct.Struct("<3d")
 # geometry_msgs/Pose: position (3), orientation (4); Twist: linear (3), angular (3). Each
 # *WithCovariance follows its fields with a 6×6 float64 covariance.
 _POSE = struct.Struct("<7d")
 _TWIST = struct.Struct("<6d")
-_POSE_WITH_COVARIANCE_SIZE = _POSE.size + 36 * 8
+_COVARIANCE = struct.Struct("<36d")
+_POSE_WITH_COVARIANCE_SIZE = _POSE.size + _COVARIANCE.size
 # sensor_msgs/Imu after its header, up to what the reader returns: orientation (4), its
 # covariance (9), angular velocity (3), its covariance (9), linear acceleration (3).
 _IMU_FIELDS = struct.Struct("<4d9d3d9d3d")
@@ -97,11 +97,11 @@ def read_imu_rate_and_acceleration(
     return sec, nanosec, values[13:16], values[25:28]
 
 
-def read_odometry(raw: bytes) -> tuple[int, int, str, str, tuple, tuple, tuple] | None:
-    """(sec, nanosec, frame_id, child_frame_id, pose, twist, attitude_variances) of a
-    nav_msgs/Odometry: ``pose`` = position (x, y, z) then orientation (x, y, z, w), ``twist`` =
-    linear (x, y, z) then angular (x, y, z), ``attitude_variances`` = the diagonal of the pose
-    covariance's rotation block (its elements 21, 28, 35); the other covariances are skipped."""
+def read_odometry(raw: bytes) -> tuple[int, int, str, str, tuple, tuple, tuple, tuple] | None:
+    """(sec, nanosec, frame_id, child_frame_id, pose, twist, pose_covariance, twist_covariance)
+    of a nav_msgs/Odometry: ``pose`` = position (x, y, z) then orientation (x, y, z, w),
+    ``twist`` = linear (x, y, z) then angular (x, y, z), the covariances 36 row-major values
+    each."""
     if raw[:2] != _LITTLE_ENDIAN:
         return None
     try:
@@ -110,13 +110,13 @@ def read_odometry(raw: bytes) -> tuple[int, int, str, str, tuple, tuple, tuple] 
         child_frame_id, position = _string_at(raw, position)
         position = _aligned(position, 8)
         pose = _POSE.unpack_from(raw, position)
-        attitude_variances = tuple(
-            _F64.unpack_from(raw, position + _POSE.size + 8 * index)[0] for index in (21, 28, 35)
-        )
-        twist = _TWIST.unpack_from(raw, position + _POSE_WITH_COVARIANCE_SIZE)
+        pose_covariance = _COVARIANCE.unpack_from(raw, position + _POSE.size)
+        position += _POSE_WITH_COVARIANCE_SIZE
+        twist = _TWIST.unpack_from(raw, position)
+        twist_covariance = _COVARIANCE.unpack_from(raw, position + _TWIST.size)
     except (struct.error, ValueError):
         return None
-    return sec, nanosec, frame_id, child_frame_id, pose, twist, attitude_variances
+    return sec, nanosec, frame_id, child_frame_id, pose, twist, pose_covariance, twist_covariance
 
 
 def read_nav_sat_fix(

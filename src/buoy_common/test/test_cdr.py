@@ -128,7 +128,8 @@ def test_odometry(frame_id, child_frame_id):
         child_frame_id,
         (*xyz(pose.position), *xyzw(pose.orientation)),
         (*xyz(twist.linear), *xyz(twist.angular)),
-        tuple(float(message.pose.covariance[i]) for i in (21, 28, 35)),
+        tuple(float(value) for value in message.pose.covariance),
+        tuple(float(value) for value in message.twist.covariance),
     )
     written = cdr.OdometryWriter(frame_id, child_frame_id).write(
         *STAMPS[0],

@@ -43,6 +43,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from buoy_common.bag_io import BagError, BagMessage, BagReader, Recovery
 from buoy_common.contract import (
     CURRENT_TOPIC,
+    CURRENT_WITH_COVARIANCE_TOPIC,
     DVL_TOPIC,
     FLOAT64_ARRAY_MSGTYPE,
     SONIC_TEMPERATURE_TOPIC,
@@ -51,6 +52,7 @@ from buoy_common.contract import (
     VECTOR3_MSGTYPE,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
+    WIND_TRUE_WITH_COVARIANCE_TOPIC,
     Reason,
     bag_topic,
     current_mean_topic,
@@ -74,6 +76,7 @@ from wind_comp.compensation_messages import (
     anemometer_sample_cdr,
     dvl_sample,
     flows_cdr,
+    flows_with_covariance_cdr,
     flux_message,
     product_messages,
     temperature_sample,
@@ -173,13 +176,15 @@ class OfflineCorrection:
         pipeline: CompensationPipeline,
         writer: NamespacedWriter,
         output_topic: str,
+        covariance_topic: str,
         product_topics,
         read_record,
         expected_frame_id: str,
         keep_series: bool = False,
         temperature_topic: str | None = None,
     ):
-        """pipeline: the node's pipeline; output_topic: one vector per sample; product_topics:
+        """pipeline: the node's pipeline; output_topic: one vector per sample; covariance_topic:
+        the same with its covariance; product_topics:
         (mean topic, statistics topic) of a window length, s; read_record: a sensor record and
         the frame expected of it as (sample, header sec, header nanosec); keep_series: keep the
         corrected samples (:attr:`series`) for the NetCDF file; temperature_topic: the stored
@@ -194,6 +199,7 @@ class OfflineCorrection:
         self.temperature_topic = temperature_topic
         self.rejected_temperatures: Counter[str] = Counter()
         self._output_topic = bag_topic(output_topic)
+        self._covariance_topic = bag_topic(covariance_topic)
         self._product_topics = product_topics
         self._read_record = read_record
         self.series = FlowSeries(pipeline.sensor.reason) if keep_series else None
@@ -214,6 +220,8 @@ class OfflineCorrection:
                     values.pose_covariance[28],
                     values.pose_covariance[35],
                 ),
+                values.attitude_covariance_rad2,
+                values.body_twist_covariance,
             )
             pipeline.add_fix(STATUS_FIX, values.latitude_deg)
 
@@ -259,8 +267,18 @@ class OfflineCorrection:
         stamps = [self._stamps.popleft() for _ in range(len(output.samples))]
         secs = np.array([sec for sec, _ in stamps], dtype=np.int64)
         nanosecs = np.array([nanosec for _, nanosec in stamps], dtype=np.int64)
-        for raw in flows_cdr(secs, nanosecs, output.samples.flow_enu_mps):
+        samples = output.samples
+        for raw, with_covariance in zip(
+            flows_cdr(secs, nanosecs, samples.flow_enu_mps),
+            flows_with_covariance_cdr(
+                secs, nanosecs, samples.flow_enu_mps, samples.covariance.total
+            ),
+            strict=True,
+        ):
             self.writer.write_raw(self._output_topic, VECTOR3_MSGTYPE, log_time_ns, raw)
+            self.writer.write_raw(
+                self._covariance_topic, TWIST_COVARIANCE_MSGTYPE, log_time_ns, with_covariance
+            )
         if self.series is not None:
             self.series.add(secs, nanosecs, output.samples)
         self._write_products(output.products, log_time_ns)
@@ -397,6 +415,7 @@ class BagCorrections:
                 wind_pipeline(self.compensator_config),
                 writer,
                 WIND_TRUE_TOPIC,
+                WIND_TRUE_WITH_COVARIANCE_TOPIC,
                 (wind_mean_topic, wind_stats_topic),
                 _anemometer_record,
                 self.compensator_config.anemometer_frame_id,
@@ -408,6 +427,7 @@ class BagCorrections:
                 current_pipeline(self.current_config),
                 writer,
                 CURRENT_TOPIC,
+                CURRENT_WITH_COVARIANCE_TOPIC,
                 (current_mean_topic, current_stats_topic),
                 _dvl_record,
                 self.current_config.dvl_frame_id,

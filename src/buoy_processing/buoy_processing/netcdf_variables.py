@@ -140,6 +140,8 @@ def flow_variables(series: FlowSeries, wind: bool, axis: TimeAxis) -> dict[str, 
             "sea_water_velocity_to_direction",
         )
         direction_comment = "oceanographic: where the water flows TOWARD, clockwise from North"
+    prefix = "" if wind else "current_"
+    error_names = tuple(f"{prefix}{axis}_standard_error" for axis in "uvw")
     common = {"ancillary_variables": status_name, "coverage_content_type": "physicalMeasurement"}
     variables = {
         dimension: xr.DataArray(
@@ -148,15 +150,30 @@ def flow_variables(series: FlowSeries, wind: bool, axis: TimeAxis) -> dict[str, 
             attrs=_time_attributes(axis, f"header stamp of each {what} sample"),
         )
     }
+    standard_errors = series.standard_errors()
     for column, (name, standard_name) in enumerate(zip(names, standard_names, strict=False)):
+        axis_name = ("east", "north", "up")[column]
         variables[name] = xr.DataArray(
             flows[:, column],
             dims=dimension,
             attrs={
                 "standard_name": standard_name,
-                "long_name": f"motion-corrected {what}, {('east', 'north', 'up')[column]}",
+                "long_name": f"motion-corrected {what}, {axis_name}",
                 "units": "m s-1",
                 **common,
+                "ancillary_variables": f"{status_name} {error_names[column]}",
+            },
+        )
+        variables[error_names[column]] = xr.DataArray(
+            standard_errors[:, column],
+            dims=dimension,
+            attrs={
+                "standard_name": f"{standard_name} standard_error",
+                "long_name": f"1 sigma of the motion-corrected {what}, {axis_name}",
+                "units": "m s-1",
+                "comment": "from the navigation's covariances and the sensor's noise; NaN "
+                "where the sample is",
+                "coverage_content_type": "qualityInformation",
             },
         )
     variables[speed_name] = xr.DataArray(
@@ -301,6 +318,15 @@ _WIND_PRODUCT_VARIABLES = (
                      "standard_deviation", "standard deviation of the north wind"),
     _ProductVariable("std_w_mps", "std_upward_air_velocity", "upward_air_velocity", "m s-1",
                      "standard_deviation", "standard deviation of the vertical wind"),
+    _ProductVariable("mean_u_standard_error_mps", "mean_eastward_wind_standard_error",
+                     "eastward_wind standard_error", "m s-1", None,
+                     "1 sigma of the vector-mean wind, east"),
+    _ProductVariable("mean_v_standard_error_mps", "mean_northward_wind_standard_error",
+                     "northward_wind standard_error", "m s-1", None,
+                     "1 sigma of the vector-mean wind, north"),
+    _ProductVariable("mean_w_standard_error_mps", "mean_upward_air_velocity_standard_error",
+                     "upward_air_velocity standard_error", "m s-1", None,
+                     "1 sigma of the vector-mean wind, up"),
     *_SHARED_PRODUCT_VARIABLES,
 )  # fmt: skip
 
@@ -322,6 +348,15 @@ _CURRENT_PRODUCT_VARIABLES = (
                      "m s-1", "standard_deviation", "standard deviation of the north current"),
     _ProductVariable("std_w_mps", "std_upward_current", "upward_sea_water_velocity", "m s-1",
                      "standard_deviation", "standard deviation of the vertical current"),
+    _ProductVariable("mean_u_standard_error_mps", "mean_eastward_current_standard_error",
+                     "eastward_sea_water_velocity standard_error", "m s-1", None,
+                     "1 sigma of the vector-mean current, east"),
+    _ProductVariable("mean_v_standard_error_mps", "mean_northward_current_standard_error",
+                     "northward_sea_water_velocity standard_error", "m s-1", None,
+                     "1 sigma of the vector-mean current, north"),
+    _ProductVariable("mean_w_standard_error_mps", "mean_upward_current_standard_error",
+                     "upward_sea_water_velocity standard_error", "m s-1", None,
+                     "1 sigma of the vector-mean current, up"),
     *_SHARED_PRODUCT_VARIABLES,
 )  # fmt: skip
 
@@ -382,6 +417,16 @@ def product_variable_name(what: str, window_s: float, field_name: str) -> str:
     return f"{what}_{window_label(window_s)}_{spec.name}"
 
 
+def _ancillary_variables(what: str, window_s: float, spec: _ProductVariable) -> str:
+    """The ``ancillary_variables`` of a product variable: the window's quality flag, and for a
+    mean component its standard error."""
+    flag_name = product_variable_name(what, window_s, "quality_flag")
+    error_field = spec.field.replace("_enu_mps", "_standard_error_mps")
+    if spec.field.endswith("_enu_mps") and any(s.field == error_field for s in _TABLES[what]):
+        return f"{flag_name} {product_variable_name(what, window_s, error_field)}"
+    return flag_name
+
+
 def product_time_name(what: str, window_s: float) -> str:
     """The time dimension (and coordinate) of the ``what`` products of ``window_s`` s."""
     return f"{what}_time_{window_label(window_s)}"
@@ -426,9 +471,11 @@ def product_variables(
                 attributes["gust_window_s"] = windows[0].gust_window_s
             if spec.field.startswith(("n_", "first", "last", "spikes_", "stationarity_")):
                 attributes["coverage_content_type"] = "auxiliaryInformation"
+            elif spec.field.endswith("_standard_error_mps"):
+                attributes["coverage_content_type"] = "qualityInformation"
             else:
                 attributes["coverage_content_type"] = "physicalMeasurement"
-                attributes["ancillary_variables"] = flag_name
+                attributes["ancillary_variables"] = _ancillary_variables(what, window_s, spec)
             if spec.field.startswith(("n_", "spikes_")):
                 values = values.astype(np.int32)
             if despiked and spec.field.startswith("spikes_"):

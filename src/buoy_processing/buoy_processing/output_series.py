@@ -19,7 +19,8 @@ _NAV_FIELDS = 10  # latitude, longitude, altitude, quaternion (4), ENU velocity 
 
 class FlowSeries:
     """The corrected samples of one flow sensor, in output order: what ``wind/true`` or
-    ``current/velocity`` carry, and each sample's :class:`SampleStatus`."""
+    ``current/velocity`` carry, each sample's standard errors (the square roots of the
+    diagonal of its covariance, ``*_with_covariance``) and its :class:`SampleStatus`."""
 
     def __init__(self, reason: Callable[[SampleStatus], str]):
         """reason: the contract's name of an invalid sample's status (the sensor's
@@ -27,12 +28,15 @@ class FlowSeries:
         self.reason = reason
         self.stamps_ns = array("q")
         self.flows_enu_mps = array("d")
+        self.standard_errors_enu_mps = array("d")
         self.status = array("b")
 
     def add(self, secs: np.ndarray, nanosecs: np.ndarray, batch: CorrectedBatch) -> None:
         """The header stamps (s, ns) of a batch's sensor messages and the batch."""
         self.stamps_ns.extend((secs * NANOSECONDS + nanosecs).astype(np.int64).tolist())
         self.flows_enu_mps.extend(np.asarray(batch.flow_enu_mps, dtype=float).ravel().tolist())
+        variances = np.diagonal(batch.covariance.total, axis1=1, axis2=2)
+        self.standard_errors_enu_mps.extend(np.sqrt(variances).ravel().tolist())
         self.status.extend(np.asarray(batch.status, dtype=np.int8).tolist())
 
     def __len__(self) -> int:
@@ -45,6 +49,10 @@ class FlowSeries:
             np.frombuffer(self.flows_enu_mps, dtype=float).reshape(-1, 3),
             np.frombuffer(self.status, dtype=np.int8),
         )
+
+    def standard_errors(self) -> np.ndarray:
+        """(N, 3) 1σ of the ENU components of each sample, m/s (NaN where invalid)."""
+        return np.frombuffer(self.standard_errors_enu_mps, dtype=float).reshape(-1, 3)
 
 
 class NavigationSeries:

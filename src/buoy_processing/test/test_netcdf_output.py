@@ -21,6 +21,7 @@ from buoy_processing.netcdf_variables import product_time_name, product_variable
 from buoy_processing.output_series import FlowSeries, NavigationSeries
 from wind_comp.compensator import CorrectedBatch, SampleStatus
 from wind_comp.config import CompensatorConfig
+from wind_comp.flow_uncertainty import FlowCovariance
 from wind_comp.flux_products import FluxAverager
 from wind_comp.products import WindAverager
 
@@ -34,7 +35,7 @@ LATITUDE_DEG, LONGITUDE_DEG, ALTITUDE_M = 41.5, -70.7, 3.0
 RNG = np.random.default_rng(5)
 
 
-def wind_series(valid: bool = True) -> tuple[FlowSeries, np.ndarray, np.ndarray, np.ndarray]:
+def wind_series(valid: bool = True) -> tuple:
     """A wind series of 150 s at 20 Hz: random wind, every 20th sample invalid (or all)."""
     n = DURATION_S * WIND_RATE_HZ
     nanosecs = (np.arange(n) % WIND_RATE_HZ) * (1_000_000_000 // WIND_RATE_HZ)
@@ -46,8 +47,19 @@ def wind_series(valid: bool = True) -> tuple[FlowSeries, np.ndarray, np.ndarray,
         status[:] = SampleStatus.INVALID_MEASUREMENT
     flows[status != 0] = np.nan
     zeros = np.zeros((n, 3))
+    navigation_part = np.diag([0.04, 0.05, 0.01]) ** 2 * RNG.uniform(0.5, 2.0, size=(n, 1, 1))
+    sensor_part = np.broadcast_to(np.diag([0.05, 0.05, 0.03]) ** 2, (n, 3, 3)).copy()
+    navigation_part[status != 0] = sensor_part[status != 0] = np.nan
+    covariance = FlowCovariance(navigation_part, sensor_part)
     batch = CorrectedBatch(
-        secs + nanosecs * 1e-9, status, flows, zeros, zeros, zeros, np.full((n, 3), 5.0)
+        secs + nanosecs * 1e-9,
+        status,
+        flows,
+        zeros,
+        zeros,
+        zeros,
+        np.full((n, 3), 5.0),
+        covariance,
     )
     series = FlowSeries(CompensatorConfig().flow_sensor().reason)
     # in two pieces, as process_bag hands them over
@@ -63,9 +75,10 @@ def wind_series(valid: bool = True) -> tuple[FlowSeries, np.ndarray, np.ndarray,
                 zeros[part],
                 zeros[part],
                 zeros[part],
+                FlowCovariance(navigation_part[part], sensor_part[part]),
             ),
         )
-    return series, secs * 1_000_000_000 + nanosecs, flows, status
+    return series, secs * 1_000_000_000 + nanosecs, flows, status, covariance
 
 
 def navigation() -> NavigationSeries:
@@ -88,11 +101,11 @@ def navigation() -> NavigationSeries:
 
 
 def content(valid: bool = True) -> tuple[NetcdfContent, np.ndarray, np.ndarray, np.ndarray]:
-    series, stamps_ns, flows, status = wind_series(valid)
+    series, stamps_ns, flows, status, covariance = wind_series(valid)
     products = []
     for window_s in (60.0, 600.0):
         averager = WindAverager(window_s)
-        products += averager.add_batch(stamps_ns * 1e-9, flows) + averager.flush()
+        products += averager.add_batch(stamps_ns * 1e-9, flows, covariance) + averager.flush()
     fluxes = FluxAverager(60.0)
     for stamp_ns in stamps_ns:
         fluxes.add_temperature(stamp_ns * 1e-9, 20.0 + RNG.normal(0.0, 0.2))
@@ -129,6 +142,14 @@ def test_the_file_holds_the_series_the_products_and_the_navigation(written):
         for axis, name in enumerate(("eastward_wind", "northward_wind", "upward_air_velocity")):
             np.testing.assert_array_equal(dataset[name].values, flows[:, axis])
         np.testing.assert_array_equal(dataset["wind_status"].values, status)
+        # Each component links its standard error, the square root of the sample's variance.
+        total = made.wind.standard_errors()
+        for axis, name in enumerate(("eastward_wind", "northward_wind", "upward_air_velocity")):
+            error_name = f"{'uvw'[axis]}_standard_error"
+            assert dataset[name].attrs["ancillary_variables"] == f"wind_status {error_name}"
+            assert dataset[error_name].attrs["standard_name"] == f"{name} standard_error"
+            np.testing.assert_array_equal(dataset[error_name].values, total[:, axis])
+        assert np.isnan(total[status != 0]).all() and np.isfinite(total[status == 0]).all()
         meanings = dataset["wind_status"].attrs["flag_meanings"].split()
         assert meanings[SampleStatus.NAV_GAP] == "nav_gap"
         assert meanings[SampleStatus.INVALID_MEASUREMENT] == "invalid_wind"
@@ -163,12 +184,25 @@ def test_the_file_holds_the_series_the_products_and_the_navigation(written):
                 )
             flags = dataset[product_variable_name("wind", window_s, "quality_flag")].values
             assert flags.tolist() == [p.quality_flag for p in products]
+            mean_name = product_variable_name("wind", window_s, "mean_u_enu_mps")
+            error_name = product_variable_name("wind", window_s, "mean_u_standard_error_mps")
+            assert error_name in dataset[mean_name].attrs["ancillary_variables"].split()
+            np.testing.assert_array_equal(
+                dataset[error_name].values, [p.mean_u_standard_error_mps for p in products]
+            )
+            assert dataset[error_name].attrs["standard_name"] == "eastward_wind standard_error"
+            speed_name = product_variable_name("wind", window_s, "vector_mean_speed_mps")
+            flag_name = product_variable_name("wind", window_s, "quality_flag")
+            assert dataset[speed_name].attrs["ancillary_variables"] == flag_name
         for field in ("friction_velocity_mps", "w_ts_k_mps", "stationarity_u_w_percent"):
             np.testing.assert_array_equal(
                 dataset[product_variable_name("flux", 60.0, field)].values,
                 [getattr(p, field) for p in made.fluxes],
             )
         assert dataset["flux_1min_n_temperature"].values.tolist() == [1200, 1200, 600]
+        assert dataset["flux_1min_mean_wind_speed"].attrs["ancillary_variables"] == (
+            "flux_1min_quality_flag"
+        )
     # Full 1-min windows hold 95 % of their samples valid; the trailing 30 s of the 150 s are
     # a partial one, and the 10-min window a quarter full: flagged, not passed off as full.
     one_minute = [p for p in made.wind_products if p.window_s == 60.0]

@@ -12,6 +12,7 @@ from wind_comp.compensator import (
     SampleStatus,
 )
 from wind_comp.config import CompensatorConfig, ConfigError
+from wind_comp.flow_uncertainty import FlowCovariance
 
 LEVER_ARM_M = (0.3, -0.1, 3.2)
 MOUNTING_RPY_DEG = (2.0, -1.5, 90.0)
@@ -36,6 +37,16 @@ def nav_truth(t_s):
     rates = np.tile(RATE_BODY_RAD_S, (len(t_s), 1))
     velocities = np.array([0.5, 1.0, 0.0]) + np.outer(t_s, [0.2, -0.1, 0.05])
     return attitude, rates, velocities
+
+
+def nav_covariances(t_s):
+    """(N, 3, 3, 3) attitude, velocity and rate covariances that change from sample to sample
+    (rad², m²/s², rad²/s²), as a filter's do."""
+    scale = 1.0 + 0.5 * np.sin(np.asarray(t_s))[:, None, None]
+    attitude = np.diag(np.radians([0.3, 0.3, 1.0]) ** 2) * scale
+    velocity = np.diag([0.02, 0.02, 0.01]) ** 2 * scale
+    rate = np.diag(np.radians([0.05, 0.05, 0.05]) ** 2) * scale
+    return np.stack((attitude, velocity, rate), axis=1)
 
 
 def anemometer_readings(t_s):
@@ -80,7 +91,10 @@ def joined(batches) -> CorrectedBatch:
             "flow_sensor_mps",
         )
     ]
-    return CorrectedBatch(*columns)
+    covariance = FlowCovariance(
+        *(np.concatenate([batch.covariance[part] for batch in batches]) for part in (0, 1))
+    )
+    return CorrectedBatch(*columns, covariance)
 
 
 def rows(batch: CorrectedBatch) -> list[tuple[float, SampleStatus]]:
@@ -93,7 +107,12 @@ def correct_at_once(cfg, nav_t, quats, rates, velocities, wind_t, wind) -> Corre
     navigation up to its stamp, and flushed: the offline path."""
     compensator = compensator_of(cfg)
     nav_before_wind = np.searchsorted(nav_t, np.maximum.accumulate(wind_t), side="right")
-    compensator.add_arrivals((nav_t, quats, rates, velocities), wind_t, wind, nav_before_wind)
+    compensator.add_arrivals(
+        (nav_t, quats, rates, velocities, True, nav_covariances(nav_t)),
+        wind_t,
+        wind,
+        nav_before_wind,
+    )
     return compensator.flush()
 
 
@@ -106,9 +125,10 @@ def stream(nav_t, quats, rates, velocities, wind_t, wind, nav_latency_s, cfg=Non
     arrivals += [(t, 1, i) for i, t in enumerate(wind_arrival)]
     arrivals.sort()
     outputs = []
+    covariances = nav_covariances(nav_t)
     for _, kind, i in arrivals:
         if kind == 0:
-            compensator.add_nav(nav_t[i], quats[i], rates[i], velocities[i])
+            compensator.add_nav(nav_t[i], quats[i], rates[i], velocities[i], True, covariances[i])
         else:
             compensator.add_sample(wind_t[i], wind[i])
         outputs.append(compensator.ready())
@@ -141,8 +161,15 @@ def test_streaming_equals_batch_whatever_the_arrival_order():
             "translation_term_enu_mps",
         ):
             np.testing.assert_array_equal(getattr(outputs, name), getattr(batch, name))
+        np.testing.assert_array_equal(outputs.covariance.total, batch.covariance.total)
+        np.testing.assert_array_equal(outputs.covariance.sensor, batch.covariance.sensor)
         assert compensator.counts == batch.counts()
         assert compensator.n_pending == 0
+    # Every valid sample states its covariance, every invalid one none.
+    valid = batch.valid
+    assert np.all(np.isfinite(batch.covariance.total[valid]))
+    assert np.all(np.isnan(batch.covariance.total[~valid]))
+    assert np.all(np.trace(batch.covariance.navigation[valid], axis1=1, axis2=2) > 0)
 
 
 def test_wind_added_in_batches_equals_wind_added_one_by_one():
@@ -327,3 +354,34 @@ def test_config_takes_lists_and_keeps_the_wmo_windows_by_default():
     cfg = CompensatorConfig(anemometer_position_body_m=[0, 0, 3], anemometer_rpy_deg=[0, 0, 0])
     assert cfg.anemometer_position_body_m == (0.0, 0.0, 3.0)
     assert cfg.product_windows_s == (60.0, 600.0)
+
+
+@pytest.mark.parametrize(
+    ("attitude_sigma_deg", "vertical_sigma_mps", "refused"),
+    [(0.5, 0.01, False), (6.0, 0.01, True), (0.5, 0.3, True)],
+    ids=["within", "heading_too_uncertain", "vertical_too_uncertain"],
+)
+def test_the_sigma_gate_refuses_a_sample_beyond_its_limits(
+    attitude_sigma_deg, vertical_sigma_mps, refused
+):
+    """A 5.9 m/s relative wind turned by a yaw error of σ rad moves by about 5.9σ m/s: 6° is
+    0.6 m/s, beyond the 0.5 m/s horizontal limit; 0.5° is 0.05 m/s, within. A vertical velocity
+    σ of 0.3 m/s is beyond the 0.25 m/s vertical limit."""
+    cfg = config(max_attitude_sigma_deg=10.0)
+    compensator = compensator_of(cfg)
+    nav_t, quats, rates, velocities, wind_t, wind = scenario()
+    covariances = np.zeros((nav_t.size, 3, 3, 3))
+    covariances[:, 0] = np.diag(np.radians([0.2, 0.2, attitude_sigma_deg]) ** 2)
+    covariances[:, 1] = np.diag([0.01, 0.01, vertical_sigma_mps]) ** 2
+    compensator.add_arrivals(
+        (nav_t, quats, rates, velocities, True, covariances),
+        wind_t[60:70],
+        wind[60:70],
+        np.full(10, nav_t.size),
+    )
+    batch = compensator.flush()
+    expected = SampleStatus.UNCERTAINTY_TOO_LARGE if refused else SampleStatus.VALID
+    assert set(batch.status.tolist()) == {expected}
+    assert np.isnan(batch.flow_enu_mps).all() == refused
+    assert np.isnan(batch.covariance.total).all() == refused
+    assert cfg.flow_sensor().reason(SampleStatus.UNCERTAINTY_TOO_LARGE) == "uncertainty_too_large"

@@ -24,6 +24,9 @@ Outputs:
 
 - ``wind/true`` (geometry_msgs/Vector3Stamped, frame ``map``): corrected ENU wind, m/s, with the
   anemometer sample's own header stamp; NaN components when the sample could not be corrected.
+- ``wind/true_with_covariance`` (geometry_msgs/TwistWithCovarianceStamped, frame ``map``): the
+  same wind in ``twist.linear`` and its ENU covariance (m²/s²) in rows and columns 0–2 of
+  ``covariance``; the angular part unused (zeros, its diagonal −1); NaN where ``wind/true`` is.
 - ``wind/mean_<window>`` (geometry_msgs/Vector3Stamped, frame ``map``): vector mean of the ENU
   wind over one averaging window, stamped with the window end.
 - ``wind/stats_<window>`` (std_msgs/Float64MultiArray): the statistics of the same window,
@@ -34,6 +37,7 @@ Outputs:
 - ``current/velocity`` (geometry_msgs/Vector3Stamped, frame ``map``): the current, ENU, m/s
   (where the water flows TOWARD), with the DVL sample's own header stamp; NaN components when
   it could not be computed.
+- ``current/velocity_with_covariance``: the current with its covariance, as the wind's.
 - ``current/mean_<window>``, ``current/stats_<window>``: as the wind's, the statistics in the
   order of :data:`CURRENT_STATS_FIELDS`.
 
@@ -46,6 +50,8 @@ from __future__ import annotations
 import dataclasses
 import math
 from typing import NamedTuple
+
+import numpy as np
 
 from buoy_common import cdr
 from buoy_common.contract import (
@@ -77,12 +83,17 @@ STATS_FIELDS = (
     "last_sample_s",
     "coverage",
     "quality_flag",
+    "mean_u_standard_error_mps",
+    "mean_v_standard_error_mps",
+    "mean_w_standard_error_mps",
 )
 """Layout of ``wind/stats_<window>``: speeds m/s (horizontal), direction meteorological deg
 (blowing FROM, clockwise from true North), standard deviations of the ENU components m/s,
 sample counts, window bounds and first/last sample stamps in s since the epoch (a window closed
 at shutdown may end before ``window_end_s``), the coverage (share of a full window's samples
-held valid) and the QARTOD quality flag (1 good, 2 not evaluated, 3 suspect, 4 bad, 9 missing).
+held valid), the QARTOD quality flag (1 good, 2 not evaluated, 3 suspect, 4 bad, 9 missing) and
+the standard errors (1σ, m/s) of the ENU components of the window's vector mean, from the
+samples' covariances (not σ/√N: the navigation's errors stay alike over minutes).
 Conventions: :mod:`wind_comp.products`. New fields are only ever appended: a reader takes the
 fields by their labels."""
 
@@ -100,12 +111,15 @@ CURRENT_STATS_FIELDS = (
     "last_sample_s",
     "coverage",
     "quality_flag",
+    "mean_u_standard_error_mps",
+    "mean_v_standard_error_mps",
+    "mean_w_standard_error_mps",
 )
 """Layout of ``current/stats_<window>``: horizontal speed of the vector mean m/s, its direction
 oceanographic deg (flowing TOWARD, clockwise from true North), standard deviations of the ENU
 components m/s (over a window of wave periods, mostly the waves' orbital motion), sample counts,
-window bounds and first/last sample stamps, coverage and quality flag as in
-:data:`STATS_FIELDS`."""
+window bounds and first/last sample stamps, coverage, quality flag and the standard errors of
+the mean as in :data:`STATS_FIELDS`."""
 
 
 FLUX_FIELDS = tuple(field.name for field in dataclasses.fields(FluxProduct))
@@ -137,6 +151,9 @@ class FlowSample(NamedTuple):
     frame_id: str = ""
     """The frame of a message rejected for its frame (which the rejection reports); empty
     otherwise."""
+    noise_covariance_m2s2: tuple | None = None
+    """The sample's own noise covariance in the sensor's axes, m²/s², 9 row-major values (a
+    DVL states it); None: the sensor's configured noise."""
 
 
 def anemometer_sample(message, expected_frame_id: str = ANEMOMETER_FRAME) -> FlowSample:
@@ -194,12 +211,23 @@ def dvl_sample(message, expected_frame_id: str = DVL_FRAME) -> FlowSample:
     (invalid) output for it, in order. Speed and stamp order are checked by the compensation.
     """
     linear = message.twist.twist.linear
-    return _flow_sample(
+    sample = _flow_sample(
         stamp_to_seconds(message.header.stamp),
         message.header.frame_id,
         (-float(linear.x), -float(linear.y), -float(linear.z)),
         expected_frame_id,
     )
+    return sample._replace(noise_covariance_m2s2=dvl_noise_covariance(message.twist.covariance))
+
+
+def dvl_noise_covariance(twist_covariance) -> tuple:
+    """A ``dvl/velocity`` message's noise covariance, DVL axes, m²/s², 9 row-major values: the
+    linear block of its twist covariance (negating the reading leaves it as it is). A negative
+    variance is ROS's "not known": then NaN, and no sample is valid with it."""
+    block = tuple(float(twist_covariance[index]) for index in _LINEAR_BLOCK)
+    if min(block[0], block[4], block[8]) < 0.0:
+        return (math.nan,) * 9
+    return block
 
 
 def anemometer_record(
@@ -228,16 +256,20 @@ def dvl_record(
 
 ATTITUDE_VARIANCE_INDICES = (21, 28, 35)
 """Where the roll, pitch and yaw variances sit in the 6x6 row-major pose covariance."""
+_ATTITUDE_BLOCK = (21, 22, 23, 27, 28, 29, 33, 34, 35)
+"""Where the 3×3 attitude block sits in the 6x6 row-major pose covariance."""
+_LINEAR_BLOCK = (0, 1, 2, 6, 7, 8, 12, 13, 14)
+"""Where the 3×3 linear block sits in a 6x6 row-major twist covariance."""
 
 
-def odometry_fields(message) -> tuple[float, tuple, tuple, tuple, float]:
+def odometry_fields(message) -> tuple:
     """Stamp (s), attitude quaternion (x, y, z, w), body rate ω_ib and body velocity (tuples of
-    floats) and the largest attitude error variance (rad², from the pose covariance; NaN counts
-    as unknown, i.e. infinite) of an Odometry, after the frame, finiteness and quaternion checks
-    (raises :class:`MalformedMessageError`)."""
+    floats), the largest attitude error variance (rad², from the pose covariance; NaN counts
+    as unknown, i.e. infinite), the attitude covariance (9 row-major, rad²) and the twist
+    covariance (36 row-major: body velocity m²/s², body rate rad²/s²) of an Odometry, after
+    the frame, finiteness and quaternion checks (raises :class:`MalformedMessageError`)."""
     orientation = message.pose.pose.orientation
     angular, linear = message.twist.twist.angular, message.twist.twist.linear
-    covariance = message.pose.covariance
     return _checked_odometry(
         stamp_to_seconds(message.header.stamp),
         message.header.frame_id,
@@ -245,18 +277,19 @@ def odometry_fields(message) -> tuple[float, tuple, tuple, tuple, float]:
         (float(orientation.x), float(orientation.y), float(orientation.z), float(orientation.w)),
         (float(angular.x), float(angular.y), float(angular.z)),
         (float(linear.x), float(linear.y), float(linear.z)),
-        tuple(float(covariance[index]) for index in ATTITUDE_VARIANCE_INDICES),
+        tuple(float(value) for value in message.pose.covariance),
+        tuple(float(value) for value in message.twist.covariance),
     )
 
 
-def odometry_fields_cdr(raw: bytes) -> tuple[float, tuple, tuple, tuple] | None:
+def odometry_fields_cdr(raw: bytes) -> tuple | None:
     """:func:`odometry_fields` of a ``nav/odometry`` message straight from its CDR bytes,
     checked as :func:`odometry_fields` checks them. None for bytes the CDR reader does not
     handle: decode the message instead."""
     fields = cdr.read_odometry(raw)
     if fields is None:
         return None
-    sec, nanosec, frame_id, child_frame_id, pose, twist, attitude_variances = fields
+    sec, nanosec, frame_id, child_frame_id, pose, twist, pose_covariance, twist_covariance = fields
     return _checked_odometry(
         sec + nanosec * 1e-9,
         frame_id,
@@ -264,11 +297,12 @@ def odometry_fields_cdr(raw: bytes) -> tuple[float, tuple, tuple, tuple] | None:
         pose[3:7],
         twist[3:6],
         twist[0:3],
-        attitude_variances,
+        pose_covariance,
+        twist_covariance,
     )
 
 
-def odometry_record(raw: bytes, decode) -> tuple[float, tuple, tuple, tuple, float]:
+def odometry_record(raw: bytes, decode) -> tuple:
     """:func:`odometry_fields` of a ``nav/odometry`` message's CDR bytes: read straight from
     the bytes where the CDR reader handles them, else from ``decode(raw)``."""
     fields = odometry_fields_cdr(raw)
@@ -282,7 +316,9 @@ def largest_attitude_variance_rad2(variances) -> float:
     return max(math.inf if math.isnan(v) else v for v in variances)
 
 
-def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body, variances):
+def _checked_odometry(
+    t_s, frame_id, child_frame_id, quat, rate, velocity_body, pose_covariance, twist_covariance
+):
     if frame_id != MAP_FRAME or child_frame_id != BODY_FRAME:
         raise MalformedMessageError(
             Reason.WRONG_FRAME,
@@ -293,7 +329,16 @@ def _checked_odometry(t_s, frame_id, child_frame_id, quat, rate, velocity_body, 
         raise MalformedMessageError(Reason.NON_FINITE, "odometry orientation, rate or velocity")
     if quaternion_norm(*quat) < MIN_QUATERNION_NORM:
         raise MalformedMessageError(Reason.ZERO_QUATERNION, "odometry orientation has zero length")
-    return t_s, quat, rate, velocity_body, largest_attitude_variance_rad2(variances)
+    variances = tuple(pose_covariance[index] for index in ATTITUDE_VARIANCE_INDICES)
+    return (
+        t_s,
+        quat,
+        rate,
+        velocity_body,
+        largest_attitude_variance_rad2(variances),
+        tuple(pose_covariance[index] for index in _ATTITUDE_BLOCK),
+        twist_covariance,
+    )
 
 
 def fix_fields(message) -> tuple[int, float]:
@@ -330,6 +375,38 @@ def flow_cdr(sec: int, nanosec: int, flow_enu_mps) -> bytes:
 def flows_cdr(sec, nanosec, flows_enu_mps) -> list[bytes]:
     """:func:`flow_cdr` of (N,) stamps and (N, 3) vectors at once."""
     return _MAP_VECTOR_CDR.write_many(sec, nanosec, flows_enu_mps)
+
+
+_MAP_TWIST_CDR = cdr.TwistWithCovarianceStampedWriter(MAP_FRAME)
+_NO_ANGULAR = (0.0, 0.0, 0.0)
+_UNUSED_ANGULAR_COVARIANCE = (-1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
+
+
+def flows_with_covariance_cdr(sec, nanosec, flows_enu_mps, covariances_enu_m2s2) -> list[bytes]:
+    """``wind/true_with_covariance`` or ``current/velocity_with_covariance`` as CDR bytes, one
+    per sample of (N,) stamps (sec, nanosec), (N, 3) ENU vectors (m/s) and (N, 3, 3) ENU
+    covariances (m²/s²), NaN where invalid: the covariance in rows and columns 0–2, the
+    angular part unused (zeros, its diagonal −1)."""
+    messages = []
+    for s, n, flow, covariance in zip(
+        np.asarray(sec).tolist(),
+        np.asarray(nanosec).tolist(),
+        np.asarray(flows_enu_mps).tolist(),
+        np.asarray(covariances_enu_m2s2).tolist(),
+        strict=True,
+    ):
+        (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = covariance
+        u00, u01, u02, u10, u11, u12, u20, u21, u22 = _UNUSED_ANGULAR_COVARIANCE
+        covariance_6x6 = (
+            c00, c01, c02, 0.0, 0.0, 0.0,
+            c10, c11, c12, 0.0, 0.0, 0.0,
+            c20, c21, c22, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, u00, u01, u02,
+            0.0, 0.0, 0.0, u10, u11, u12,
+            0.0, 0.0, 0.0, u20, u21, u22,
+        )  # fmt: skip
+        messages.append(_MAP_TWIST_CDR.write(int(s), int(n), flow, _NO_ANGULAR, covariance_6x6))
+    return messages
 
 
 def _set_header(header, sec: int, nanosec: int, frame_id: str) -> None:

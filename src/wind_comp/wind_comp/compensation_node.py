@@ -18,7 +18,13 @@ Publishes:
 - ``wind/true`` (geometry_msgs/Vector3Stamped, frame ``map``): the corrected ENU wind, m/s,
   exactly one message per ``anemometer/wind`` message, with the same header stamp, in arrival
   order. A sample that cannot be corrected (malformed, out of range, no navigation around its
-  stamp) is published with NaN components, never dropped.
+  stamp, an uncertainty beyond ``compensation.max_wind_sigma_*_mps``) is published with NaN
+  components, never dropped.
+- ``wind/true_with_covariance`` (geometry_msgs/TwistWithCovarianceStamped, frame ``map``): the
+  same wind, one per ``wind/true``, with its ENU covariance (m²/s², from the navigation's
+  covariances and ``compensation.anemometer_noise_sigma_mps``) in rows and columns 0–2 of
+  ``twist.covariance``; the angular part unused (zeros, its diagonal −1); NaN where
+  ``wind/true`` is.
 - ``wind/mean_1min``, ``wind/mean_10min`` (geometry_msgs/Vector3Stamped, frame ``map``): vector
   mean of the ENU wind over each window, stamped with the window end.
 - ``wind/stats_1min``, ``wind/stats_10min`` (std_msgs/Float64MultiArray): statistics of the same
@@ -27,7 +33,8 @@ Publishes:
   vector_mean_speed_mps, vector_mean_direction_deg (meteorological, FROM), gust_mps, std_u_mps,
   std_v_mps, std_w_mps, n_valid, n_invalid, window_start_s, window_end_s, first_sample_s,
   last_sample_s, coverage, quality_flag: the share of a full window's samples held valid and
-  its QARTOD flag, :mod:`wind_comp.products`).
+  its QARTOD flag, :mod:`wind_comp.products`; mean_u_standard_error_mps,
+  mean_v_standard_error_mps, mean_w_standard_error_mps: the 1σ of the window's vector mean).
   Windows come from ``compensation.product_windows_s`` (60 and 600 s by default; a window of
   other length W is named ``W s``, e.g. ``wind/mean_30s``). A window is published when the
   first sample of the next one is corrected, and the partial windows at shutdown.
@@ -66,7 +73,7 @@ import functools
 import math
 import time
 
-from geometry_msgs.msg import Vector3Stamped
+from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import NavSatFix, Temperature
@@ -90,6 +97,7 @@ from buoy_common.contract import (
     SONIC_TEMPERATURE_TOPIC,
     WIND_RAW_TOPIC,
     WIND_TRUE_TOPIC,
+    WIND_TRUE_WITH_COVARIANCE_TOPIC,
     Reason,
     wind_fluxes_topic,
     wind_mean_topic,
@@ -102,6 +110,7 @@ from wind_comp.compensation_messages import (
     anemometer_record,
     fix_record,
     flow_cdr,
+    flows_with_covariance_cdr,
     flux_message,
     odometry_record,
     product_messages,
@@ -163,6 +172,7 @@ class CorrectionNode(FlushingNode):
         sensor_message_type: type,
         read_record,
         output_topic: str,
+        covariance_topic: str,
         product_topics,
         samples_name: str,
         frame_field: str,
@@ -177,6 +187,7 @@ class CorrectionNode(FlushingNode):
             (sample, header sec, header nanosec) (:func:`anemometer_record`,
             :func:`dvl_record` of :mod:`wind_comp.compensation_messages`).
         output_topic: one corrected sample per input, frame ``map``.
+        covariance_topic: the same sample with its covariance.
         product_topics: (mean topic, statistics topic) of a window length (s).
         samples_name: what the diagnostics call the input samples (``wind``, ``dvl``).
         frame_field: the configuration field naming the sensor's ``frame_id`` (a message in
@@ -207,6 +218,9 @@ class CorrectionNode(FlushingNode):
         self._wrong_frames: set[str] = set()
 
         self._output_publisher = self.create_publisher(Vector3Stamped, output_topic, DATA_QOS)
+        self._covariance_publisher = self.create_publisher(
+            TwistWithCovarianceStamped, covariance_topic, DATA_QOS
+        )
         mean_topic, stats_topic = product_topics
         self._product_publishers = {
             window_s: (
@@ -289,9 +303,19 @@ class CorrectionNode(FlushingNode):
         """Publish decided samples in order, each with the stamp of its sensor message, and
         the averaging windows they closed."""
         now_s = time.monotonic()
-        for flow in output.samples.flow_enu_mps.tolist():
-            pending = self._pending.popleft()
+        samples = output.samples
+        stamps = [self._pending.popleft() for _ in range(len(samples))]
+        with_covariance = flows_with_covariance_cdr(
+            [pending.sec for pending in stamps],
+            [pending.nanosec for pending in stamps],
+            samples.flow_enu_mps,
+            samples.covariance.total,
+        )
+        for pending, flow, raw in zip(
+            stamps, samples.flow_enu_mps.tolist(), with_covariance, strict=True
+        ):
             self._output_publisher.publish(flow_cdr(pending.sec, pending.nanosec, flow))
+            self._covariance_publisher.publish(raw)
             self._counters["samples_out"] += 1
             self._latencies_s.append(now_s - pending.arrival_s)
         for product in output.products:
@@ -312,7 +336,7 @@ class CorrectionNode(FlushingNode):
         warning = mostly_invalid_warning(self.pipeline.status_counts(), self.samples_name)
         if warning is not None:
             self.get_logger().error(warning)
-        publishers = [self._output_publisher]
+        publishers = [self._output_publisher, self._covariance_publisher]
         for pair in self._product_publishers.values():
             publishers.extend(pair)
         return publishers
@@ -376,6 +400,7 @@ class CompensationNode(CorrectionNode):
             Vector3Stamped,
             anemometer_record,
             WIND_TRUE_TOPIC,
+            WIND_TRUE_WITH_COVARIANCE_TOPIC,
             (wind_mean_topic, wind_stats_topic),
             "wind",
             "anemometer_frame_id",

@@ -24,11 +24,17 @@ the same column arithmetic, on a batch of one sample or of many.
 import math
 from dataclasses import dataclass
 from enum import IntEnum
+from typing import NamedTuple
 
 import numpy as np
 
 from buoy_common.contract import Reason
 from buoy_nav.rotations import rotation_matrix_elements
+from wind_comp.flow_uncertainty import (
+    FlowCovariance,
+    corrected_flow_covariance_enu,
+    horizontal_and_vertical_sigma,
+)
 from wind_comp.miller import miller_components, mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import InterpolatedNav, InterpolationStatus, NavTrack
 
@@ -58,6 +64,27 @@ class SampleStatus(IntEnum):
     NAVIGATION_NOT_TRUSTED = 8
     """A bracketing navigation sample's attitude is more uncertain than
     ``max_attitude_sigma_deg`` (the navigation marks itself untrustworthy by its covariance)."""
+    UNCERTAINTY_TOO_LARGE = 9
+    """The corrected sample's own 1σ (from the navigation's covariance and the sensor's noise)
+    exceeds the sensor's :class:`SigmaLimits`, horizontally or vertically."""
+
+
+class SigmaLimits(NamedTuple):
+    """Largest 1σ of a corrected sample that is still valid, m/s."""
+
+    horizontal_mps: float
+    """Of the horizontal vector error, √(σ_E² + σ_N²)."""
+    vertical_mps: float
+    """Of the vertical component."""
+
+    def exceeded(self, covariance_enu_m2s2: np.ndarray) -> np.ndarray:
+        """(N,) True where an (N, 3, 3) ENU covariance (m²/s²) is beyond the limits, or not
+        known (NaN)."""
+        horizontal, vertical = horizontal_and_vertical_sigma(covariance_enu_m2s2)
+        return ~((horizontal <= self.horizontal_mps) & (vertical <= self.vertical_mps))
+
+
+NO_SIGMA_LIMITS = SigmaLimits(math.inf, math.inf)
 
 
 @dataclass(frozen=True)
@@ -71,6 +98,9 @@ class FlowSensor:
         max_speed_mps: measured speeds above this are absurd and rejected, m/s.
         invalid_reason, speed_reason: the contract's words for INVALID_MEASUREMENT and
             SPEED_OUT_OF_RANGE of this sensor (``invalid_wind``, ``invalid_dvl``, ...).
+        sigma_limits: a corrected sample beyond them is UNCERTAINTY_TOO_LARGE.
+        noise_variances_m2s2: variances of one sample's noise along the sensor's x, y, z
+            axes, m²/s²: of a sample that does not state its own noise.
     """
 
     position_body_m: tuple[float, float, float]
@@ -78,6 +108,15 @@ class FlowSensor:
     max_speed_mps: float
     invalid_reason: Reason
     speed_reason: Reason
+    sigma_limits: SigmaLimits = NO_SIGMA_LIMITS
+    noise_variances_m2s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def noise_covariance_m2s2(self) -> tuple:
+        """The noise of a sample that states none, sensor axes, m²/s², 9 row-major values:
+        independent along the axes, of ``noise_variances_m2s2``."""
+        x, y, z = self.noise_variances_m2s2
+        return (x, 0.0, 0.0, 0.0, y, 0.0, 0.0, 0.0, z)
 
     def reason(self, status: SampleStatus) -> Reason:
         """Why a sample of this sensor is invalid, in the contract's words (not for VALID)."""
@@ -108,7 +147,7 @@ _NAV_OUTCOME_BY_CODE = np.array(
 class CorrectedBatch:
     """N sensor samples after correction, in input order.
 
-    The (N, 3) ENU vectors (m/s) are NaN where ``status`` is not VALID;
+    The (N, 3) ENU vectors (m/s) and the covariances are NaN where ``status`` is not VALID;
     ``flow_enu_mps = tilt_term_enu_mps + rotation_term_enu_mps + translation_term_enu_mps``
     (see :mod:`wind_comp.miller`).
     """
@@ -124,6 +163,9 @@ class CorrectedBatch:
     translation_term_enu_mps: np.ndarray
     flow_sensor_mps: np.ndarray
     """(N, 3) the inputs: the fluid's velocity relative to the sensor, sensor axes, m/s."""
+    covariance: FlowCovariance
+    """(N, 3, 3) ENU covariances of ``flow_enu_mps``, m²/s²: the navigation's part and the
+    sensor noise's (:mod:`wind_comp.flow_uncertainty`)."""
 
     def __len__(self) -> int:
         return self.t_s.shape[0]
@@ -160,31 +202,64 @@ def _screen_samples(
 
 _N_OUTPUTS = 4
 """Output vectors per sample: the corrected flow and its three Miller terms."""
+_N_COVARIANCES = 2
+"""Output covariances per sample: the navigation's part and the sensor noise's."""
 
 
 class _Corrector:
-    """Navigation lookup plus Miller correction of samples that passed screening: the one
-    correction every path runs, on a batch of any length (one sample, live). A further output
-    of the correction (its covariance) belongs in :meth:`correct`, computed on the same valid
-    rows of the same interpolated navigation, and in the queue of :class:`FlowCompensator`."""
+    """Navigation lookup plus Miller correction of samples that passed screening, with the
+    covariance of each corrected sample and its test against the sensor's limits: the one
+    correction every path runs, on a batch of any length (one sample, live)."""
 
     def __init__(self, sensor: FlowSensor):
         mounting_matrix = mounting_rotation_from_rpy_deg(sensor.rpy_deg).as_matrix()
+        self._mounting_matrix = mounting_matrix
         self._mounting_elements = tuple(mounting_matrix.ravel().tolist())
         self._lever_arm_elements_body_m = tuple(float(c) for c in sensor.position_body_m)
+        self._lever_arm_body_m = np.array(self._lever_arm_elements_body_m)
+        self._sigma_limits = sensor.sigma_limits
 
-    def correct(self, track: NavTrack, stamps_s, flows_mps, as_of_newest_s):
-        """Return (N,) statuses (``_PENDING`` while navigation may still bracket a stamp) and
-        a (4, N, 3) array of the flow and the three Miller terms, ENU m/s, NaN where not valid.
+    def correct(self, track: NavTrack, stamps_s, flows_mps, noises_m2s2, as_of_newest_s):
+        """Return (N,) statuses (``_PENDING`` while navigation may still bracket a stamp), a
+        (4, N, 3) array of the flow and the three Miller terms, ENU m/s, and a (2, N, 3, 3)
+        array of the flow's covariance, navigation and sensor parts, ENU m²/s², both NaN where
+        not valid.
 
         ``stamps_s``: (N,) s; ``flows_mps``: (N, 3) the fluid's velocity relative to the sensor,
-        sensor axes, m/s; ``as_of_newest_s``: the newest navigation stamp when each sample
-        arrived, s (see :meth:`NavTrack.interpolate`)."""
+        sensor axes, m/s; ``noises_m2s2``: (N, 3, 3) their noise covariances, sensor axes,
+        m²/s²; ``as_of_newest_s``: the newest navigation stamp when each sample arrived, s (see
+        :meth:`NavTrack.interpolate`)."""
         nav = track.interpolate(stamps_s, as_of_newest_s)
+        status = _NAV_OUTCOME_BY_CODE[nav.status]
         outputs = np.full((_N_OUTPUTS, stamps_s.shape[0], 3), np.nan)
+        covariances = np.full((_N_COVARIANCES, stamps_s.shape[0], 3, 3), np.nan)
         if np.any(nav.valid):
-            outputs[:, nav.valid] = self._miller_terms(flows_mps[nav.valid], nav, nav.valid)
-        return _NAV_OUTCOME_BY_CODE[nav.status], outputs
+            rows = nav.valid
+            covariance = self._covariance(flows_mps[rows], noises_m2s2[rows], nav, rows)
+            beyond = self._sigma_limits.exceeded(covariance.total)
+            kept = np.flatnonzero(rows)[~beyond]
+            status[np.flatnonzero(rows)[beyond]] = SampleStatus.UNCERTAINTY_TOO_LARGE
+            outputs[:, kept] = self._miller_terms(flows_mps[kept], nav, kept)
+            covariances[:, kept] = np.stack(covariance)[:, ~beyond]
+        return status, outputs, covariances
+
+    def _covariance(self, flows_mps, noises_m2s2, nav: InterpolatedNav, rows) -> FlowCovariance:
+        """The ENU covariance (m²/s²) of (M, 3) flows in sensor axes with noise covariances
+        (M, 3, 3) (sensor axes, m²/s²), corrected with the navigation's ``rows``."""
+        rotation_nb = np.stack(
+            rotation_matrix_elements(*nav.attitude_xyzw[rows].T), axis=-1
+        ).reshape(-1, 3, 3)
+        return corrected_flow_covariance_enu(
+            rotation_nb,
+            self._mounting_matrix,
+            self._lever_arm_body_m,
+            flows_mps,
+            nav.angular_rate_body_rad_s[rows],
+            nav.attitude_covariance_enu_rad2[rows],
+            nav.velocity_covariance_enu_m2s2[rows],
+            nav.angular_rate_covariance_body_rad2s2[rows],
+            noises_m2s2,
+        )
 
     def _miller_terms(self, flows_mps, nav: InterpolatedNav, rows) -> np.ndarray:
         """(4, M, 3): the flow over ground and the tilt, rotation and translation terms, ENU
@@ -201,7 +276,10 @@ class _Corrector:
 
 
 _NOTHING_DECIDED = CorrectedBatch(
-    np.empty(0), np.empty(0, dtype=np.int8), *(np.empty((0, 3)) for _ in range(5))
+    np.empty(0),
+    np.empty(0, dtype=np.int8),
+    *(np.empty((0, 3)) for _ in range(5)),
+    FlowCovariance(np.empty((0, 3, 3)), np.empty((0, 3, 3))),
 )
 _INITIAL_CAPACITY = 64
 
@@ -210,10 +288,10 @@ class FlowCompensator:
     """Streaming motion correction of one flow sensor: one output per sensor sample, in input
     order.
 
-    The sensor samples wait in a queue of columns: stamp, measured flow, the newest
-    navigation stamp when the sample arrived, status (``_PENDING`` until decided) and the four
-    output vectors. Samples before ``_first_pending`` are decided, those from ``_head`` on not
-    yet returned.
+    The sensor samples wait in a queue of columns: stamp, measured flow, its noise covariance,
+    the newest navigation stamp when the sample arrived, status (``_PENDING`` until decided),
+    the four output vectors and the two parts of the output's covariance. Samples before
+    ``_first_pending`` are decided, those from ``_head`` on not yet returned.
     """
 
     def __init__(self, sensor: FlowSensor, max_nav_gap_s: float, nav_history_s: float):
@@ -227,9 +305,12 @@ class FlowCompensator:
         self._counts = dict.fromkeys(SampleStatus, 0)
         self._t_s = np.empty(_INITIAL_CAPACITY)
         self._flow_mps = np.empty((_INITIAL_CAPACITY, 3))
+        self._noise_m2s2 = np.empty((_INITIAL_CAPACITY, 3, 3))
         self._as_of_nav_s = np.empty(_INITIAL_CAPACITY)
         self._status = np.empty(_INITIAL_CAPACITY, dtype=np.int8)
         self._terms = np.empty((_N_OUTPUTS, _INITIAL_CAPACITY, 3))
+        self._covariances = np.empty((_N_COVARIANCES, _INITIAL_CAPACITY, 3, 3))
+        self._default_noise_m2s2 = np.reshape(sensor.noise_covariance_m2s2, (3, 3))
         self._head = self._first_pending = self._tail = 0
 
     @property
@@ -243,32 +324,47 @@ class FlowCompensator:
         return self._tail - self._head
 
     def add_nav(
-        self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted: bool = True
+        self,
+        t_s,
+        quat_xyzw,
+        angular_rate_body_rad_s,
+        velocity_enu_mps,
+        trusted: bool = True,
+        covariances=None,
     ) -> bool:
         """Add one navigation sample (stamp s, body→ENU quaternion xyzw, body rate rad/s,
-        ENU velocity m/s; ``trusted`` False: no sample is corrected with it). Returns False when
-        the track rejects it (counted there)."""
+        ENU velocity m/s; ``trusted`` False: no sample is corrected with it; ``covariances``
+        as :meth:`NavTrack.append` takes them). Returns False when the track rejects it
+        (counted there)."""
         return self.nav_track.append(
-            t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted
+            t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted, covariances
         )
 
-    def add_sample(self, t_s, flow_sensor_mps) -> None:
+    def add_sample(self, t_s, flow_sensor_mps, noise_covariance_m2s2=None) -> None:
         """Add one sensor sample: stamp s, the fluid's velocity relative to the sensor in its
-        axes m/s, (3,): :meth:`add_arrivals` of one sample after the navigation so far."""
-        self._enqueue(*_sample_arrays([t_s], [flow_sensor_mps]), self._newest_nav_s())
+        axes m/s, (3,), and its noise covariance in those axes, m²/s², (3, 3) (None: the
+        sensor's): :meth:`add_arrivals` of one sample after the navigation so far."""
+        noises = None if noise_covariance_m2s2 is None else [noise_covariance_m2s2]
+        self._enqueue(
+            *_sample_arrays([t_s], [flow_sensor_mps]), self._newest_nav_s(), self._noises(noises, 1)
+        )
 
-    def add_arrivals(self, nav, sample_t_s, flow_sensor_mps, nav_before_sample) -> int:
+    def add_arrivals(
+        self, nav, sample_t_s, flow_sensor_mps, nav_before_sample, noise_covariances_m2s2=None
+    ) -> int:
         """Navigation and sensor samples that arrived interleaved: exactly :meth:`add_nav`
         of each navigation sample in order, with :meth:`add_sample` of sensor sample ``i``
         right after the first ``nav_before_sample[i]`` of them.
 
         Args:
-            nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps[, trusted]) of M
-                navigation samples: (M,) stamps, s, (M, 4), (M, 3), (M, 3) arrays and (M,)
-                bools of what :meth:`add_nav` takes.
+            nav: (t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps[, trusted[,
+                covariances]]) of M navigation samples: (M,) stamps, s, (M, 4), (M, 3), (M, 3)
+                arrays, (M,) bools and (M, 3, 3, 3) covariances of what :meth:`add_nav` takes.
             sample_t_s, flow_sensor_mps: (N,) stamps and (N, 3) flows, as
                 :meth:`add_sample` takes them one by one.
             nav_before_sample: (N,) non-decreasing counts, 0 to M.
+            noise_covariances_m2s2: (N, 3, 3) as :meth:`add_sample` takes them (None: the
+                sensor's for all).
 
         Returns the number of navigation samples accepted.
         """
@@ -281,7 +377,12 @@ class FlowCompensator:
             newest_after = np.maximum.accumulate(
                 np.concatenate(([newest_before], np.where(accepted, nav_t_s, -np.inf)))
             )
-            self._enqueue(stamps, flows, newest_after[np.asarray(nav_before_sample, dtype=np.intp)])
+            self._enqueue(
+                stamps,
+                flows,
+                newest_after[np.asarray(nav_before_sample, dtype=np.intp)],
+                self._noises(noise_covariances_m2s2, stamps.shape[0]),
+            )
         return int(np.count_nonzero(accepted))
 
     def ready(self) -> CorrectedBatch:
@@ -309,9 +410,21 @@ class FlowCompensator:
     def _newest_nav_s(self) -> float:
         return self.nav_track.newest_stamp_s if len(self.nav_track) else -math.inf
 
-    def _enqueue(self, stamps: np.ndarray, flows: np.ndarray, as_of_nav_s) -> None:
-        """Screen and queue (N,) stamps (s) and (N, 3) flows (m/s, sensor axes) that arrived
-        when the newest navigation stamp was ``as_of_nav_s`` (s, scalar or (N,))."""
+    def _noises(self, noise_covariances_m2s2, n_samples: int) -> np.ndarray:
+        """(N, 3, 3) noise covariances of N samples, the sensor's where None."""
+        if noise_covariances_m2s2 is None:
+            return np.broadcast_to(self._default_noise_m2s2, (n_samples, 3, 3))
+        noises = np.asarray(noise_covariances_m2s2, dtype=float)
+        if noises.shape != (n_samples, 3, 3):
+            raise CompensatorInputError(
+                f"noise covariances must have shape ({n_samples}, 3, 3), got {noises.shape}"
+            )
+        return noises
+
+    def _enqueue(self, stamps: np.ndarray, flows: np.ndarray, as_of_nav_s, noises) -> None:
+        """Screen and queue (N,) stamps (s), (N, 3) flows (m/s, sensor axes) and their (N, 3, 3)
+        noise covariances (m²/s², sensor axes) that arrived when the newest navigation stamp
+        was ``as_of_nav_s`` (s, scalar or (N,))."""
         status, self._latest_sample_stamp_s = _screen_samples(
             stamps, flows, self._latest_sample_stamp_s, self.sensor.max_speed_mps
         )
@@ -319,9 +432,11 @@ class FlowCompensator:
         new = slice(self._tail, self._tail + stamps.shape[0])
         self._t_s[new] = stamps
         self._flow_mps[new] = flows
+        self._noise_m2s2[new] = noises
         self._as_of_nav_s[new] = as_of_nav_s
         self._status[new] = status
         self._terms[:, new] = np.nan
+        self._covariances[:, new] = np.nan
         self._tail = new.stop
         self._advance_first_pending()
 
@@ -336,10 +451,15 @@ class FlowCompensator:
             (self._status[first:tail] == _PENDING) & (self._t_s[first:tail] <= self._newest_nav_s())
         )
         if len(undecided):
-            self._status[undecided], self._terms[:, undecided] = self._corrector.correct(
+            (
+                self._status[undecided],
+                self._terms[:, undecided],
+                self._covariances[:, undecided],
+            ) = self._corrector.correct(
                 self.nav_track,
                 self._t_s[undecided],
                 self._flow_mps[undecided],
+                self._noise_m2s2[undecided],
                 self._as_of_nav_s[undecided],
             )
         self._advance_first_pending()
@@ -380,6 +500,7 @@ class FlowCompensator:
             rotation,
             translation,
             self._flow_mps[done].copy(),
+            FlowCovariance(*self._covariances[:, done].copy()),
         )
 
     def _reserve(self, n_more: int) -> None:
@@ -392,14 +513,16 @@ class FlowCompensator:
         new_capacity = max(capacity, _INITIAL_CAPACITY)
         while n_kept + n_more > new_capacity // 2:
             new_capacity *= 2
-        for name in ("_t_s", "_flow_mps", "_as_of_nav_s", "_status"):
+        for name in ("_t_s", "_flow_mps", "_noise_m2s2", "_as_of_nav_s", "_status"):
             old = getattr(self, name)
             new = np.empty((new_capacity, *old.shape[1:]), dtype=old.dtype)
             new[:n_kept] = old[kept]
             setattr(self, name, new)
-        terms = np.empty((_N_OUTPUTS, new_capacity, 3))
-        terms[:, :n_kept] = self._terms[:, kept]
-        self._terms = terms
+        for name in ("_terms", "_covariances"):
+            old = getattr(self, name)
+            new = np.empty((old.shape[0], new_capacity, *old.shape[2:]))
+            new[:, :n_kept] = old[:, kept]
+            setattr(self, name, new)
         self._first_pending -= self._head
         self._head, self._tail = 0, n_kept
 

@@ -31,7 +31,7 @@ from buoy_common.parameter_declarations import (
     parameter,
 )
 from buoy_common.parameters import build_config, check_parameter_files, load_parameter_files
-from wind_comp.compensator import FlowSensor
+from wind_comp.compensator import FlowSensor, SigmaLimits
 from wind_comp.flux_products import DEFAULT_FLUX_WINDOW_S
 from wind_comp.fluxes import STANDARD_PRESSURE_PA, PlanarFit
 
@@ -82,6 +82,10 @@ FRAME_NAME = custom_rule(
     "a frame name", lambda frame_id: isinstance(frame_id, str) and bool(frame_id.strip())
 )
 PLANAR_FIT = custom_rule("three finite numbers or all NaN", _plane_or_unset)
+NOISE_SIGMAS = custom_rule(
+    "three positive numbers",
+    lambda sigmas: len(sigmas) == 3 and all(math.isfinite(s) and s > 0 for s in sigmas),
+)
 
 
 @dataclass(frozen=True)
@@ -170,6 +174,27 @@ class CompensatorConfig:
         meaning="take the Vickers-Mahrt spikes out of the fluxes (spikes_* then count the "
         "samples taken out); false: only count them",
     )
+    anemometer_noise_sigma_mps: tuple[float, float, float] = parameter(
+        (0.05, 0.05, 0.03),
+        unit="m/s",
+        meaning="1σ noise of one anemometer sample along its x, y, z axes (a sonic's data "
+        "sheet: Gill WindMaster 1.5 % of the speed, 0.01–0.05 m/s)",
+        rule=NOISE_SIGMAS,
+    )
+    max_wind_sigma_horizontal_mps: float = parameter(
+        0.5,
+        unit="m/s",
+        meaning="a corrected wind sample whose horizontal 1σ, √(σ_E²+σ_N²), exceeds this is "
+        "invalid, uncertainty_too_large (WMO-No. 8: 0.5 m/s)",
+        rule=POSITIVE,
+    )
+    max_wind_sigma_vertical_mps: float = parameter(
+        0.25,
+        unit="m/s",
+        meaning="a corrected wind sample whose vertical 1σ exceeds this is invalid, "
+        "uncertainty_too_large",
+        rule=POSITIVE,
+    )
 
     def __post_init__(self):
         _check_and_coerce(self)
@@ -205,6 +230,8 @@ class CompensatorConfig:
             self.max_wind_speed_mps,
             Reason.INVALID_WIND,
             Reason.WIND_SPEED_OUT_OF_RANGE,
+            SigmaLimits(self.max_wind_sigma_horizontal_mps, self.max_wind_sigma_vertical_mps),
+            tuple(sigma * sigma for sigma in self.anemometer_noise_sigma_mps),
         )
 
 
@@ -257,6 +284,19 @@ class CurrentConfig:
         "(navigation_not_trusted)",
         rule=POSITIVE,
     )
+    max_current_sigma_horizontal_mps: float = parameter(
+        0.1,
+        unit="m/s",
+        meaning="a current sample whose horizontal 1σ, √(σ_E²+σ_N²), exceeds this is invalid, "
+        "uncertainty_too_large (a tenth of a typical 1 m/s tidal current)",
+        rule=POSITIVE,
+    )
+    max_current_sigma_vertical_mps: float = parameter(
+        0.05,
+        unit="m/s",
+        meaning="a current sample whose vertical 1σ exceeds this is invalid, uncertainty_too_large",
+        rule=POSITIVE,
+    )
 
     def __post_init__(self):
         _check_and_coerce(self)
@@ -271,6 +311,7 @@ class CurrentConfig:
             self.max_dvl_speed_mps,
             Reason.INVALID_DVL,
             Reason.DVL_SPEED_OUT_OF_RANGE,
+            SigmaLimits(self.max_current_sigma_horizontal_mps, self.max_current_sigma_vertical_mps),
         )
 
 
@@ -297,6 +338,11 @@ def _check_and_coerce(config):
             if not PRODUCT_WINDOWS.holds(windows):
                 raise ConfigError(f"{name} must be {PRODUCT_WINDOWS}, got {windows}")
             object.__setattr__(config, name, windows)
+        elif declared_rule is NOISE_SIGMAS:
+            sigmas = _finite_tuple(name, value, length=3)
+            if not NOISE_SIGMAS.holds(sigmas):
+                raise ConfigError(f"{name} must be {NOISE_SIGMAS}, got {sigmas}")
+            object.__setattr__(config, name, sigmas)
         elif declared_rule is FRAME_NAME and not FRAME_NAME.holds(value):
             raise ConfigError(f"{name} must be {FRAME_NAME}, got {value!r}")
     if config.nav_history_s <= config.max_nav_gap_s:

@@ -21,15 +21,20 @@ Publishes:
   computed (a ping flagged invalid, a velocity beyond ``current.max_dvl_speed_mps``, another
   frame than ``current.dvl_frame_id`` (``dvl_link`` by default), a stamp not after the previous
   one, no navigation around its stamp) is published with NaN components, never dropped, and
-  counted by reason.
+  counted by reason; so is a sample whose 1σ exceeds ``current.max_current_sigma_*_mps``.
+- ``current/velocity_with_covariance`` (geometry_msgs/TwistWithCovarianceStamped, frame
+  ``map``): the same current with its ENU covariance (m²/s², from the navigation's
+  covariances and the DVL message's own), as ``wind/true_with_covariance``.
 - ``current/mean_1min``, ``current/mean_10min`` (geometry_msgs/Vector3Stamped, frame ``map``):
   vector mean of the current over each window, stamped with the window end.
 - ``current/stats_1min``, ``current/stats_10min`` (std_msgs/Float64MultiArray): statistics of
   the same windows in the order of :data:`wind_comp.compensation_messages.CURRENT_STATS_FIELDS`
   (speed_mps, direction_deg (oceanographic, TOWARD), std_u_mps, std_v_mps, std_w_mps, n_valid,
-  n_invalid, window_start_s, window_end_s, first_sample_s, last_sample_s). A single DVL sample
-  carries the waves' orbital velocity at the DVL's depth; the means average it away (see
-  docs/benchmarks.md, "Current"), the standard deviations keep it.
+  n_invalid, window_start_s, window_end_s, first_sample_s, last_sample_s, coverage,
+  quality_flag, mean_u_standard_error_mps, mean_v_standard_error_mps,
+  mean_w_standard_error_mps). A single DVL sample carries the waves' orbital velocity at the
+  DVL's depth; the means average it away (see docs/benchmarks.md, "Current"), the standard
+  deviations keep it.
 - ``diagnostics``: DVL samples in and out, valid and invalid by reason, navigation samples seen,
   input rates, latency, rejected messages by reason.
 
@@ -52,6 +57,7 @@ from geometry_msgs.msg import TwistWithCovarianceStamped
 from buoy_common.base_node import main_for
 from buoy_common.contract import (
     CURRENT_TOPIC,
+    CURRENT_WITH_COVARIANCE_TOPIC,
     DVL_TOPIC,
     current_mean_topic,
     current_stats_topic,
@@ -78,6 +84,7 @@ class CurrentNode(CorrectionNode):
             TwistWithCovarianceStamped,
             dvl_record,
             CURRENT_TOPIC,
+            CURRENT_WITH_COVARIANCE_TOPIC,
             (current_mean_topic, current_stats_topic),
             "dvl",
             "dvl_frame_id",

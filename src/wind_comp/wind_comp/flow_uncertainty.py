@@ -27,16 +27,13 @@ _TRACE_FLOOR = 1e-300
 
 def skew_matrices(vectors: np.ndarray) -> np.ndarray:
     """(N, 3, 3) cross-product matrices [v×] of (N, 3) vectors (so that [v×]·u = v × u)."""
-    x, y, z = np.moveaxis(np.asarray(vectors, dtype=float), -1, 0)
-    zero = np.zeros_like(x)
-    return np.stack(
-        (
-            np.stack((zero, -z, y), axis=-1),
-            np.stack((z, zero, -x), axis=-1),
-            np.stack((-y, x, zero), axis=-1),
-        ),
-        axis=-2,
-    )
+    # Element by element: a few microseconds for the one sample the live node corrects.
+    v = np.asarray(vectors, dtype=float)
+    skew = np.zeros((*v.shape[:-1], 3, 3))
+    skew[..., 0, 1], skew[..., 0, 2] = -v[..., 2], v[..., 1]
+    skew[..., 1, 0], skew[..., 1, 2] = v[..., 2], -v[..., 0]
+    skew[..., 2, 0], skew[..., 2, 1] = -v[..., 1], v[..., 0]
+    return skew
 
 
 def sandwich(jacobians: np.ndarray, covariances: np.ndarray) -> np.ndarray:
@@ -97,8 +94,12 @@ def corrected_flow_covariance_enu(
     rotation_nb = np.asarray(rotation_nb, dtype=float)
     mounting = np.asarray(mounting_rotation_bs, dtype=float)
     lever_arm = np.asarray(lever_arm_body_m, dtype=float)
-    flow_body = np.asarray(flow_sensor_mps, dtype=float) @ mounting.T
-    rotation_velocity_body = np.cross(np.asarray(angular_rate_body_rad_s, dtype=float), lever_arm)
+    # Not flows @ mountingᵀ: a matrix product of (N, 3) rows may sum in another order for
+    # N = 1 than for a batch, and the live node corrects one sample at a time.
+    flow_body = np.einsum("ij,nj->ni", mounting, np.asarray(flow_sensor_mps, dtype=float))
+    rotation_velocity_body = np.einsum(
+        "nij,j->ni", skew_matrices(angular_rate_body_rad_s), lever_arm
+    )  # ω × B
     relative_enu = np.einsum("nij,nj->ni", rotation_nb, flow_body + rotation_velocity_body)
     attitude_term = sandwich(skew_matrices(relative_enu), attitude_covariance_enu_rad2)
     rate_jacobian = rotation_nb @ skew_matrices(np.broadcast_to(lever_arm, relative_enu.shape))

@@ -2,10 +2,12 @@
 
 A wind sample is corrected with the navigation state interpolated at its own stamp: attitude
 by spherical linear interpolation between the two bracketing navigation samples, angular rate
-and velocity linearly. Nothing is extrapolated: a stamp that is not bracketed, or whose
-bracketing samples are too far apart, is reported invalid with a reason, and so is a stamp
-whose bracketing samples include one the navigation does not vouch for (an attitude too
-uncertain to correct the wind with, see :class:`wind_comp.config.CompensatorConfig`).
+and velocity linearly, and so the covariances of the attitude, the velocity and the rate (a
+convex combination of covariances is one). Nothing is extrapolated: a stamp that is not
+bracketed, or whose bracketing samples are too far apart, is reported invalid with a reason,
+and so is a stamp whose bracketing samples include one the navigation does not vouch for (an
+attitude too uncertain to correct the wind with, see
+:class:`wind_comp.config.CompensatorConfig`).
 """
 
 from enum import IntEnum
@@ -44,7 +46,7 @@ class InterpolationStatus(IntEnum):
 class InterpolatedNav(NamedTuple):
     """Navigation state at N query stamps.
 
-    Invalid entries hold the identity attitude and NaN rate and velocity.
+    Invalid entries hold the identity attitude and NaN rate, velocity and covariances.
     """
 
     valid: np.ndarray
@@ -57,6 +59,12 @@ class InterpolatedNav(NamedTuple):
     """(N, 3) body rate, body axes, rad/s."""
     velocity_enu_mps: np.ndarray
     """(N, 3) ENU velocity of the body origin, m/s."""
+    attitude_covariance_enu_rad2: np.ndarray
+    """(N, 3, 3) attitude error as a small rotation about the ENU axes, rad²."""
+    velocity_covariance_enu_m2s2: np.ndarray
+    """(N, 3, 3) ENU velocity error, m²/s²."""
+    angular_rate_covariance_body_rad2s2: np.ndarray
+    """(N, 3, 3) body rate error, body axes, rad²/s²."""
 
     @property
     def attitude_nb(self) -> Rotation:
@@ -141,7 +149,13 @@ class NavTrack:
         return float(self._samples.stamps_s[0]) if len(self) else np.nan
 
     def append(
-        self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted: bool = True
+        self,
+        t_s,
+        quat_xyzw,
+        angular_rate_body_rad_s,
+        velocity_enu_mps,
+        trusted: bool = True,
+        covariances=None,
     ) -> bool:
         """Add one sample; return False (and count it) when it is rejected: :meth:`extend`
         of one sample.
@@ -150,14 +164,26 @@ class NavTrack:
             t_s: stamp, s. quat_xyzw: 4 values, body→ENU attitude, any non-zero norm.
             angular_rate_body_rad_s: 3 values, body axes. velocity_enu_mps: 3 values, ENU.
             trusted: False for a sample no wind may be corrected with (UNTRUSTED).
+            covariances: (3, 3, 3) as :meth:`extend` takes them for one sample, or None.
         """
         accepted = self.extend(
-            [t_s], [quat_xyzw], [angular_rate_body_rad_s], [velocity_enu_mps], [trusted]
+            [t_s],
+            [quat_xyzw],
+            [angular_rate_body_rad_s],
+            [velocity_enu_mps],
+            [trusted],
+            None if covariances is None else [covariances],
         )
         return bool(accepted[0])
 
     def extend(
-        self, t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps, trusted=True
+        self,
+        t_s,
+        quat_xyzw,
+        angular_rate_body_rad_s,
+        velocity_enu_mps,
+        trusted=True,
+        covariances=None,
     ) -> np.ndarray:
         """Add samples in array order, exactly as appending them one by one would (a sample is
         rejected and counted when malformed or not later than the newest accepted one); returns
@@ -167,10 +193,14 @@ class NavTrack:
             t_s: (N,) stamps, s. quat_xyzw: (N, 4) body→ENU attitude.
             angular_rate_body_rad_s: (N, 3). velocity_enu_mps: (N, 3).
             trusted: (N,) bools or one for all, as :meth:`append` takes it.
+            covariances: (N, 3, 3, 3): each sample's attitude error covariance (a rotation
+                about the ENU axes, rad²), ENU velocity covariance (m²/s²) and body rate
+                covariance (body axes, rad²/s²); None: zeros, no error known.
         """
         stamps, quats, rates, velocities = _validated_arrays(
             t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps
         )
+        covariances = _covariance_array(covariances, stamps.shape[0])
         well_formed = _well_formed(stamps, quats, rates, velocities)
         accepted = well_formed & _later_than_every_earlier(
             np.where(well_formed, stamps, -np.inf), self._newest_or_minus_inf()
@@ -180,12 +210,12 @@ class NavTrack:
         self.n_rejected_out_of_order += int(np.count_nonzero(well_formed)) - n_accepted
         self.n_accepted += n_accepted
         trusted = np.broadcast_to(trusted, accepted.shape)
+        columns = (stamps, quats, rates, velocities, trusted, covariances)
         if n_accepted < accepted.shape[0]:
-            stamps, quats, rates, velocities, trusted = (
-                column[accepted] for column in (stamps, quats, rates, velocities, trusted)
-            )
+            columns = tuple(column[accepted] for column in columns)
         if n_accepted:
-            self._samples.add(stamps, _normalised(quats), rates, velocities, trusted)
+            stamps, quats, *others = columns
+            self._samples.add(stamps, _normalised(quats), *others)
         return accepted
 
     def forget_old_samples(self) -> None:
@@ -231,7 +261,14 @@ class _NavSamples:
     """The accepted navigation samples in growable columns, oldest kept first; the columns
     are views of the samples held (index 0: the oldest still held)."""
 
-    _COLUMNS = ("_stamps_s", "_quats_xyzw", "_rates_body_rad_s", "_velocities_enu_mps", "_trusted")
+    _COLUMNS = (
+        "_stamps_s",
+        "_quats_xyzw",
+        "_rates_body_rad_s",
+        "_velocities_enu_mps",
+        "_trusted",
+        "_covariances",
+    )
 
     def __init__(self):
         self._stamps_s = np.empty(_INITIAL_CAPACITY)
@@ -239,6 +276,7 @@ class _NavSamples:
         self._rates_body_rad_s = np.empty((_INITIAL_CAPACITY, 3))
         self._velocities_enu_mps = np.empty((_INITIAL_CAPACITY, 3))
         self._trusted = np.empty(_INITIAL_CAPACITY, dtype=bool)
+        self._covariances = np.empty((_INITIAL_CAPACITY, 3, 3, 3))
         self._start = 0
         self._end = 0
         self.first_stamp_s = np.nan
@@ -272,14 +310,22 @@ class _NavSamples:
         """(N,) bools: False where the navigation does not vouch for the attitude."""
         return self._trusted[self._start : self._end]
 
-    def add(self, stamps_s, quats_xyzw, rates_body_rad_s, velocities_enu_mps, trusted) -> None:
+    @property
+    def covariances(self) -> np.ndarray:
+        """(N, 3, 3, 3) covariances of the attitude (ENU, rad²), the ENU velocity (m²/s²) and
+        the body rate (rad²/s²)."""
+        return self._covariances[self._start : self._end]
+
+    def add(
+        self, stamps_s, quats_xyzw, rates_body_rad_s, velocities_enu_mps, trusted, covariances
+    ) -> None:
         """Hold accepted samples after the newest one (stamps later, quaternions unit)."""
         n_new = stamps_s.shape[0]
         self._reserve(n_new)
         new = slice(self._end, self._end + n_new)
         for name, values in zip(
             self._COLUMNS,
-            (stamps_s, quats_xyzw, rates_body_rad_s, velocities_enu_mps, trusted),
+            (stamps_s, quats_xyzw, rates_body_rad_s, velocities_enu_mps, trusted, covariances),
             strict=True,
         ):
             getattr(self, name)[new] = values
@@ -332,6 +378,19 @@ def _validated_arrays(t_s, quat_xyzw, angular_rate_body_rad_s, velocity_enu_mps)
                 f"got {array.shape}"
             )
     return stamps, quats, rates, velocities
+
+
+def _covariance_array(covariances, n_samples: int) -> np.ndarray:
+    """(N, 3, 3, 3) float covariances of N samples, zeros for None; raises on a wrong shape."""
+    if covariances is None:
+        return np.zeros((n_samples, 3, 3, 3))
+    covariances = _float_array("covariances", covariances)
+    if covariances.shape != (n_samples, 3, 3, 3):
+        raise NavTrackError(
+            f"covariances must have shape ({n_samples}, 3, 3, 3) to match the stamps, "
+            f"got {covariances.shape}"
+        )
+    return covariances
 
 
 def _float_array(name: str, values) -> np.ndarray:
@@ -404,6 +463,7 @@ def _interpolated(samples, queries_s, lower, upper, status) -> InterpolatedNav:
     valid = status == InterpolationStatus.OK
     rates = np.full((n_queries, 3), np.nan)
     velocities = np.full((n_queries, 3), np.nan)
+    covariances = np.full((n_queries, 3, 3, 3), np.nan)
     quats = np.tile([0.0, 0.0, 0.0, 1.0], (n_queries, 1))
     if np.any(valid):
         lo, hi = lower[valid], upper[valid]
@@ -414,13 +474,15 @@ def _interpolated(samples, queries_s, lower, upper, status) -> InterpolatedNav:
         )
         rates[valid] = _lerp(samples.rates_body_rad_s, lo, hi, fraction)
         velocities[valid] = _lerp(samples.velocities_enu_mps, lo, hi, fraction)
+        covariances[valid] = _lerp(samples.covariances, lo, hi, fraction)
         quats[valid] = slerp(samples.quats_xyzw[lo], samples.quats_xyzw[hi], fraction)
-    return InterpolatedNav(valid, status, quats, rates, velocities)
+    return InterpolatedNav(valid, status, quats, rates, velocities, *covariances.swapaxes(0, 1))
 
 
 def _lerp(values: np.ndarray, lower, upper, fraction: np.ndarray) -> np.ndarray:
     """Rows ``lower`` of ``values`` moved ``fraction`` of the way to rows ``upper``."""
-    return values[lower] + fraction[:, None] * (values[upper] - values[lower])
+    weights = fraction.reshape(-1, *(1,) * (values.ndim - 1))
+    return values[lower] + weights * (values[upper] - values[lower])
 
 
 # Quaternion maths. Written elementwise, component by component, on floats or equally shaped

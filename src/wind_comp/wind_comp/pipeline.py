@@ -7,18 +7,19 @@ to, in the order it arrives, as the values :mod:`wind_comp.compensation_messages
 the messages:
 
 - ``nav/odometry``: stamp, attitude R_nb, body rate ω_ib relative to inertial space and body
-  velocity. Each solution is converted with the latitude of the latest ``nav/fix`` before it:
-  ω_nb = ω_ib − R_nbᵀ·ω_ie (the Earth's rotation, :mod:`buoy_nav.earth`, removed; until the
-  first fix the rate is kept as received, an error below 3e-4 m/s at a 3 m lever arm)
-  and v_ENU = R_nb·v_body. The transport rate of a buoy (< 1e-7 rad/s) is neglected.
+  velocity, and their covariances. Each solution is converted with the latitude of the latest
+  ``nav/fix`` before it: ω_nb = ω_ib − R_nbᵀ·ω_ie (the Earth's rotation, :mod:`buoy_nav.earth`,
+  removed; until the first fix the rate is kept as received, an error below 3e-4 m/s at a 3 m
+  lever arm), v_ENU = R_nb·v_body and its covariance R_nb·P_body·R_nbᵀ. The transport rate of
+  a buoy (< 1e-7 rad/s) is neglected.
 - ``nav/fix``: status and latitude; the latest valid latitude is kept while the fix is lost.
 - ``anemometer/wind`` or ``dvl/velocity``: one
   :class:`~wind_comp.compensation_messages.FlowSample` each.
 
-and returns, in the order of the sensor samples, one corrected sample per sensor sample
-(:class:`~wind_comp.compensator.CorrectedBatch`) and the products of the averaging windows it
-closes. The caller pairs the corrected samples with the header stamps of its sensor messages,
-first in first out.
+and returns, in the order of the sensor samples, one corrected sample per sensor sample with
+its covariance (:class:`~wind_comp.compensator.CorrectedBatch`) and the products of the
+averaging windows it closes. The caller pairs the corrected samples with the header stamps of
+its sensor messages, first in first out.
 
 The arrivals wait in the pipeline until results are asked for (:meth:`ready`, :meth:`expire`,
 :meth:`flush`) and are then handed to the :class:`~wind_comp.compensator.FlowCompensator` in
@@ -31,6 +32,7 @@ arrival, and one column arithmetic, elementwise, runs on a batch of any length.
 from __future__ import annotations
 
 import math
+import operator
 from array import array
 from typing import NamedTuple
 
@@ -38,11 +40,12 @@ import numpy as np
 
 from buoy_common.contract import Reason
 from buoy_nav.earth import earth_rate_enu_components
-from buoy_nav.rotations import rotate_by_quaternion_components
+from buoy_nav.rotations import rotate_by_quaternion_components, rotation_matrix_elements
 from wind_comp.compensation_messages import FlowSample
 from wind_comp.compensator import CorrectedBatch, FlowCompensator, FlowSensor, SampleStatus
 from wind_comp.config import CompensatorConfig, CurrentConfig
 from wind_comp.flux_products import FluxAverager, FluxProduct
+from wind_comp.nav_interpolation import quaternion_norm
 from wind_comp.products import CurrentAverager, WindAverager, WindowAverager
 
 
@@ -85,8 +88,16 @@ def level_rate_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> t
     )
 
 
-_NAV_FIELDS = 13  # stamp, quaternion (4), rate (3), body velocity (3), latitude, trusted
-_SAMPLE_FIELDS = 4  # stamp, flow (3)
+# stamp, quaternion (4), rate (3), body velocity (3), latitude, trusted, then the covariances
+# (9 each, row-major) of the attitude (ENU), the body velocity and the body rate
+_NAV_FIELDS = 40
+_SAMPLE_FIELDS = 13  # stamp, flow (3), noise covariance (9, row-major)
+_ZEROS9 = (0.0,) * 9
+_ZEROS36 = (0.0,) * 36
+_LINEAR_BLOCK = operator.itemgetter(0, 1, 2, 6, 7, 8, 12, 13, 14)
+"""The 3×3 linear block of a row-major 6×6 twist covariance."""
+_ANGULAR_BLOCK = operator.itemgetter(21, 22, 23, 27, 28, 29, 33, 34, 35)
+"""The 3×3 angular block of a row-major 6×6 covariance."""
 
 
 VALID = "valid"
@@ -128,9 +139,9 @@ class CompensationPipeline:
         self._max_attitude_variance_rad2 = math.radians(max_attitude_sigma_deg) ** 2
         self._sample_order = StampOrder()
         # Arrivals not yet handed to the compensator: the navigation samples' numbers in a row
-        # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude, trusted),
-        # the sensor samples', and for each sensor sample the number of navigation samples
-        # before it.
+        # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude, trusted,
+        # covariances), the sensor samples', and for each sensor sample the number of
+        # navigation samples before it.
         self._nav = array("d")
         self._samples = array("d")
         self._nav_before_sample: list[int] = []
@@ -177,15 +188,20 @@ class CompensationPipeline:
         angular_rate_body_rad_s,
         velocity_body_mps,
         attitude_variance_rad2: float = 0.0,
+        attitude_covariance_rad2=_ZEROS9,
+        twist_covariance=_ZEROS36,
     ):
         """One ``nav/odometry`` (stamp s, attitude (x, y, z, w), ω_ib (3,) rad/s, body velocity
-        (3,) m/s, largest attitude error variance rad²), as
-        :func:`~wind_comp.compensation_messages.odometry_fields` reads it. A sample whose
-        attitude variance exceeds ``max_attitude_sigma_deg``² corrects no sample
+        (3,) m/s, largest attitude error variance rad², the attitude covariance (9 row-major,
+        ENU axes, rad²) and the twist covariance (36 row-major: body velocity m²/s², body rate
+        rad²/s²)), as :func:`~wind_comp.compensation_messages.odometry_fields` reads it. A
+        sample whose attitude variance exceeds ``max_attitude_sigma_deg``² corrects no sample
         (NAVIGATION_NOT_TRUSTED). Returns why it is rejected (a stamp not later than the
         previous one), None when taken; ValueError for vectors of the wrong length."""
         if not t_s > self._nav_order.latest_s:
             return Reason.STAMP_NOT_INCREASING
+        if len(twist_covariance) != 36:
+            raise ValueError("odometry needs a twist covariance of 36 values")
         nav, start = self._nav, len(self._nav)
         nav.append(t_s)
         nav.extend(quat_xyzw)
@@ -193,9 +209,15 @@ class CompensationPipeline:
         nav.extend(velocity_body_mps)
         nav.append(self.latitude_deg)
         nav.append(float(attitude_variance_rad2 <= self._max_attitude_variance_rad2))
+        nav.extend(attitude_covariance_rad2)
+        nav.extend(_LINEAR_BLOCK(twist_covariance))
+        nav.extend(_ANGULAR_BLOCK(twist_covariance))
         if len(nav) - start != _NAV_FIELDS:
             del nav[start:]
-            raise ValueError("odometry needs a quaternion of 4 values and vectors of 3")
+            raise ValueError(
+                "odometry needs a quaternion of 4 values, vectors of 3 and an attitude "
+                "covariance of 9"
+            )
         self._nav_order.advance(t_s)
         return None
 
@@ -214,6 +236,8 @@ class CompensationPipeline:
         x, y, z = sample.flow_sensor_mps
         stamp_increases = self._sample_order.advance(sample.t_s)
         self._samples.extend((sample.t_s, x, y, z))
+        noise = sample.noise_covariance_m2s2
+        self._samples.extend(self.sensor.noise_covariance_m2s2 if noise is None else noise)
         self._nav_before_sample.append(len(self._nav) // _NAV_FIELDS)
         if sample.rejection is not None:
             return sample.rejection
@@ -249,14 +273,19 @@ class CompensationPipeline:
         self.compensator.add_arrivals(
             _navigation_columns(np.frombuffer(nav, dtype=float).reshape(-1, _NAV_FIELDS)),
             flows[:, 0],
-            flows[:, 1:],
+            flows[:, 1:4],
             nav_before_sample,
+            flows[:, 4:].reshape(-1, 3, 3),
         )
 
     def _output(self, corrected: CorrectedBatch) -> CompensationOutput:
         products = []
         if len(corrected):
-            for averager in (*self.averagers, *self.flux_averagers):
+            for averager in self.averagers:
+                products += averager.add_batch(
+                    corrected.t_s, corrected.flow_enu_mps, corrected.covariance
+                )
+            for averager in self.flux_averagers:
                 products += averager.add_batch(corrected.t_s, corrected.flow_enu_mps)
         # A sample closes the windows it is the first of, in averager order: the windows
         # closed by one sample share their last sample.
@@ -265,20 +294,28 @@ class CompensationPipeline:
 
 
 def _navigation_columns(odometry: np.ndarray) -> tuple:
-    """What :meth:`FlowCompensator.add_arrivals` takes of the navigation, from (M, 13) rows
-    of stamp s, attitude xyzw, ω_ib rad/s (body), body velocity m/s, latitude deg and trusted
-    (1 or 0): stamps, attitudes, ω_nb (body, rad/s), ENU velocities (m/s), trusted."""
+    """What :meth:`FlowCompensator.add_arrivals` takes of the navigation, from (M, 40) rows
+    of stamp s, attitude xyzw, ω_ib rad/s (body), body velocity m/s, latitude deg, trusted
+    (1 or 0) and the covariances of the attitude (ENU, rad²), the body velocity (m²/s²) and
+    the body rate (rad²/s²): stamps, attitudes, ω_nb (body, rad/s), ENU velocities (m/s),
+    trusted, and the (M, 3, 3, 3) covariances with the velocity's turned to ENU."""
     quats, rates, velocities_body = odometry[:, 1:5], odometry[:, 5:8], odometry[:, 8:11]
+    covariances = odometry[:, 13:40].reshape(-1, 3, 3, 3).copy()
+    trusted = odometry[:, 12] == 1.0
     if not odometry.shape[0]:
-        return odometry[:, 0], quats, rates, velocities_body, odometry[:, 12] == 1.0
+        return odometry[:, 0], quats, rates, velocities_body, trusted, covariances
     rates_nb = level_rate_components(rates.T, quats.T, odometry[:, 11])
     velocities_enu = rotate_by_quaternion_components(quats.T, velocities_body.T)
+    unit_quats = quats / quaternion_norm(*quats.T)[:, None]
+    rotation_nb = np.stack(rotation_matrix_elements(*unit_quats.T), axis=-1).reshape(-1, 3, 3)
+    covariances[:, 1] = rotation_nb @ covariances[:, 1] @ np.swapaxes(rotation_nb, -1, -2)
     return (
         odometry[:, 0],
         quats,
         np.stack(rates_nb, axis=-1),
         np.stack(velocities_enu, axis=-1),
-        odometry[:, 12] == 1.0,
+        trusted,
+        covariances,
     )
 
 

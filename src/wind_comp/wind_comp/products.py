@@ -34,6 +34,11 @@ Conventions:
   interval is not known yet: fewer than :data:`MIN_RATE_INTERVALS` intervals seen).
 - Standard deviations need two valid samples (NaN with fewer): one sample has no spread to
   report, and a standard deviation of 0 would read as a steady wind.
+- Standard errors of the mean: the 1σ of each component of the vector mean, from the valid
+  samples' covariances (:func:`wind_comp.flow_uncertainty.window_mean_covariance_enu`): the
+  navigation's part of the samples' errors is alike from sample to sample over the filter's
+  time constants and does not average down as σ/√N would; the sensor's noise does. NaN
+  without valid samples or where the samples came without covariances.
 - The current has no gust and no scalar mean speed: its products are the vector mean, its speed
   and direction and the standard deviations, which over a window of several wave periods hold
   the waves' orbital motion the mean has averaged away.
@@ -47,6 +52,7 @@ from typing import NamedTuple
 import numpy as np
 
 from buoy_common.contract import QualityFlag
+from wind_comp.flow_uncertainty import FlowCovariance, window_mean_covariance_enu
 
 _MIN_GUST_VALID_FRACTION = 0.5
 _STAMP_TOLERANCE_S = 1e-6
@@ -154,6 +160,28 @@ class WindProduct:
     quality_flag: int
     """:class:`QualityFlag` of the window (1 good, 2 not evaluated, 3 suspect, 4 bad,
     9 missing)."""
+    mean_u_standard_error_mps: float
+    """1σ of ``mean_u_enu_mps``, m/s (see the module docstring)."""
+    mean_v_standard_error_mps: float
+    """1σ of ``mean_v_enu_mps``, m/s."""
+    mean_w_standard_error_mps: float
+    """1σ of ``mean_w_enu_mps``, m/s."""
+
+
+def _standard_errors(covariances: np.ndarray, valid: np.ndarray) -> dict[str, float]:
+    """The product fields of the standard errors of a window's mean (m/s), from its samples'
+    (n, 2, 3, 3) covariances (navigation part, sensor part; ENU m²/s²) and (n,) valid mask."""
+    if not np.any(valid):
+        sigmas = np.full(3, np.nan)
+    else:
+        kept = covariances[valid]
+        mean = window_mean_covariance_enu(FlowCovariance(kept[:, 0], kept[:, 1]))
+        sigmas = np.sqrt(np.diagonal(mean))
+    # math.nan itself where not known: products compare equal field by field, NaN included.
+    return {
+        f"mean_{axis}_standard_error_mps": float(sigma) if np.isfinite(sigma) else math.nan
+        for axis, sigma in zip("uvw", sigmas, strict=True)
+    }
 
 
 class WindowAverager:
@@ -172,6 +200,7 @@ class WindowAverager:
         self._window_index: int | None = None
         self._stamps: list[float] = []
         self._vectors: list[np.ndarray] = []
+        self._covariances: list[np.ndarray] = []
         # The latest stamps before the open window: with its own, they give the sampling
         # interval of its coverage.
         self._earlier_stamps = np.empty(0)
@@ -184,10 +213,10 @@ class WindowAverager:
             raise ProductsError(f"vector_enu_mps must have shape (3,), got {vector.shape}")
         return self.add_batch([t_s], vector[None, :])
 
-    def add_batch(self, t_s, vectors_enu_mps) -> list:
-        """Add (N,) stamps (s) and (N, 3) ENU vectors (m/s, NaN when invalid) in order; return
-        the windows they complete. A stamp not later than every earlier one is rejected and
-        counted."""
+    def add_batch(self, t_s, vectors_enu_mps, covariance: FlowCovariance | None = None) -> list:
+        """Add (N,) stamps (s) and (N, 3) ENU vectors (m/s, NaN when invalid) in order, with
+        their (N, 3, 3) covariances (None: not known); return the windows they complete. A
+        stamp not later than every earlier one is rejected and counted."""
         stamps = np.asarray(t_s, dtype=float)
         vectors = np.asarray(vectors_enu_mps, dtype=float)
         if stamps.ndim != 1 or vectors.shape != (stamps.shape[0], 3):
@@ -201,7 +230,11 @@ class WindowAverager:
         )[:-1]
         accepted = finite & (stamps > latest_before)
         self.n_rejected_stamps += int(np.count_nonzero(~accepted))
-        stamps, vectors = stamps[accepted], vectors[accepted]
+        if covariance is None:
+            covariances = np.full((stamps.shape[0], 2, 3, 3), np.nan)
+        else:
+            covariances = np.stack((covariance.navigation, covariance.sensor), axis=1)
+        stamps, vectors, covariances = stamps[accepted], vectors[accepted], covariances[accepted]
         if not stamps.shape[0]:
             return []
         if math.isnan(self._first_stamp_s):
@@ -217,6 +250,7 @@ class WindowAverager:
             self._window_index = index
             self._stamps.extend(stamps[start:stop].tolist())
             self._vectors.extend(vectors[start:stop])
+            self._covariances.append(covariances[start:stop])
         return completed
 
     def flush(self) -> list:
@@ -230,20 +264,29 @@ class WindowAverager:
     def _close_window(self):
         stamps = np.array(self._stamps)
         vectors = np.array(self._vectors)
-        self._stamps, self._vectors = [], []
+        covariances = np.concatenate(self._covariances)
+        self._stamps, self._vectors, self._covariances = [], [], []
         recent = np.concatenate((self._earlier_stamps, stamps))[-(RATE_MEMORY_INTERVALS + 1) :]
         self._earlier_stamps = recent
         intervals = np.diff(recent)
         interval_s = (
             float(np.median(intervals)) if intervals.size >= MIN_RATE_INTERVALS else math.nan
         )
-        return self._summarise(self._window_index * self.window_s, stamps, vectors, interval_s)
+        return self._summarise(
+            self._window_index * self.window_s, stamps, vectors, covariances, interval_s
+        )
 
     def _summarise(
-        self, window_start_s: float, stamps: np.ndarray, vectors: np.ndarray, interval_s: float
+        self,
+        window_start_s: float,
+        stamps: np.ndarray,
+        vectors: np.ndarray,
+        covariances: np.ndarray,
+        interval_s: float,
     ):
-        """The product of one window: its start (s), its (n,) stamps and (n, 3) vectors, and
-        the sensor's sampling interval (s, NaN when unknown)."""
+        """The product of one window: its start (s), its (n,) stamps, (n, 3) vectors and
+        (n, 2, 3, 3) covariances (navigation part, sensor part), and the sensor's sampling
+        interval (s, NaN when unknown)."""
         raise NotImplementedError
 
     def _coverage(self, n_valid: int, interval_s: float) -> tuple[float, int]:
@@ -290,7 +333,12 @@ class WindAverager(WindowAverager):
         self._tail_valid = np.empty(0, dtype=bool)
 
     def _summarise(
-        self, window_start_s: float, stamps: np.ndarray, winds: np.ndarray, interval_s: float
+        self,
+        window_start_s: float,
+        stamps: np.ndarray,
+        winds: np.ndarray,
+        covariances: np.ndarray,
+        interval_s: float,
     ):
         statistics = _statistics(winds)
         valid = statistics.valid
@@ -327,6 +375,7 @@ class WindAverager(WindowAverager):
             std_w_mps=float(std[2]),
             coverage=coverage,
             quality_flag=flag,
+            **_standard_errors(covariances, valid),
         )
 
     def _gust(self, stamps: np.ndarray, speeds: np.ndarray, valid: np.ndarray) -> float:
@@ -380,13 +429,22 @@ class CurrentProduct:
     """As :attr:`WindProduct.coverage`."""
     quality_flag: int
     """As :attr:`WindProduct.quality_flag`."""
+    mean_u_standard_error_mps: float
+    """As :attr:`WindProduct.mean_u_standard_error_mps`."""
+    mean_v_standard_error_mps: float
+    mean_w_standard_error_mps: float
 
 
 class CurrentAverager(WindowAverager):
     """The current products (:class:`CurrentProduct`) of one window length."""
 
     def _summarise(
-        self, window_start_s: float, stamps: np.ndarray, currents: np.ndarray, interval_s: float
+        self,
+        window_start_s: float,
+        stamps: np.ndarray,
+        currents: np.ndarray,
+        covariances: np.ndarray,
+        interval_s: float,
     ):
         statistics = _statistics(currents)
         mean, std = statistics.mean, statistics.std
@@ -409,4 +467,5 @@ class CurrentAverager(WindowAverager):
             std_w_mps=float(std[2]),
             coverage=coverage,
             quality_flag=flag,
+            **_standard_errors(covariances, statistics.valid),
         )

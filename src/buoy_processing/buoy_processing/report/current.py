@@ -130,6 +130,10 @@ def _stored_products(reader: BagReader) -> list[CurrentProduct]:
                     # Bags written before coverage was published carry neither: not evaluated.
                     coverage=values.get("coverage", math.nan),
                     quality_flag=int(values.get("quality_flag", QualityFlag.NOT_EVALUATED)),
+                    # Bags written before the standard errors were published carry none: unknown.
+                    mean_u_standard_error_mps=values.get("mean_u_standard_error_mps", math.nan),
+                    mean_v_standard_error_mps=values.get("mean_v_standard_error_mps", math.nan),
+                    mean_w_standard_error_mps=values.get("mean_w_standard_error_mps", math.nan),
                 )
             )
     return sorted(products, key=lambda product: (product.window_s, product.window_start_s))
