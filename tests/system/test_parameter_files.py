@@ -15,11 +15,17 @@ from buoy_common.parameters import (
     SUITE_PARAMETER_GROUPS,
     ParameterError,
     coerce_parameter,
+    config_parameters,
     load_parameter_files,
     load_parameter_sections,
     parameter_group,
 )
-from buoy_nav.config import fusion_config_from_files
+from buoy_nav.config import (
+    FUSION_FIELDS_NOT_PARAMETERS,
+    FUSION_PARAMETER_PREFIX,
+    FusionConfig,
+    fusion_config_from_files,
+)
 from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parents[2]
@@ -84,7 +90,15 @@ def test_every_fusion_parameter_is_in_fusion_yaml():
     values = _section_values(REPO / fusion.path, "/**")
     (node,) = [n for sets in SUITE for n in sets.nodes if n.node == "fusion_node"]
     own = {p.name for p in node.parameters if p.name not in SHARED_PARAMETERS}
-    assert len(own) == 54
+    fields = {
+        name
+        for _, name, _ in config_parameters(
+            FusionConfig, FUSION_PARAMETER_PREFIX, skip=FUSION_FIELDS_NOT_PARAMETERS
+        )
+        if name not in SHARED_PARAMETERS
+    }
+    # The node declares a parameter for every configuration field, and the file lists them all.
+    assert own == fields
     assert set(values) == own
 
 
