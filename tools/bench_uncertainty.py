@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from buoy_common.bag_io import BagReader
+from buoy_common.bag_io import BagError, BagReader
 from buoy_common.contract import (
     AHRS_TOPIC,
     NAV_ODOMETRY_TOPIC,
@@ -50,6 +50,15 @@ SETTLING_S = 120.0
 """Judged after this much of a run: the alignment and the first convergence are behind."""
 STAMP_MATCH_NS = 1000
 MOORED = "fusion.moored: true"
+HARD_IRON_T = (18e-6, -27.5e-6, 12e-6)
+SOFT_IRON = (1.08, 0.05, -0.03, 0.05, 0.93, 0.07, -0.03, 0.07, 1.02)
+"""The uncalibrated magnetometer of the imperfect scenarios."""
+CALIBRATED = (
+    f"fusion.magnetometer_hard_iron_t: {list(HARD_IRON_T)}",
+    "fusion.magnetometer_soft_iron: "
+    f"{np.linalg.inv(np.reshape(SOFT_IRON, (3, 3))).ravel().round(12).tolist()}",
+)
+"""That magnetometer calibrated: what calibrate_magnetometer estimates from a turning run."""
 
 
 @dataclass(frozen=True)
@@ -66,7 +75,7 @@ CASES = {
     "a_rtk": Case("sea_state", "(a) dual-antenna RTK, 10 Hz", ("current=null",)),
     "a_imperfect": Case("set_a_imperfect", "(a) dual antenna at 1 Hz, 0.31 s off the IMU grid"),
     "b_imperfect": Case(
-        "set_b_imperfect", "(b) one antenna at 1 Hz + uncalibrated magnetometer", (), (MOORED,)
+        "set_b_imperfect", "(b) one antenna at 1 Hz + uncalibrated magnetometer, drifting"
     ),
     "c_imperfect": Case(
         "set_c_imperfect", "(c) uncalibrated magnetometer, no GNSS, moored", (), (MOORED,)
@@ -77,8 +86,30 @@ CASES = {
     "d_not_moored": Case(
         "set_d_imperfect", "(d) as above, fusion.moored false: no velocity reference"
     ),
-    "e_imperfect": Case(
-        "set_e_imperfect", "(e) one antenna through 60 s silent outages", (), (MOORED,)
+    "b_calibrated": Case(
+        "set_b_imperfect",
+        "(b) one antenna + the magnetometer calibrated, drifting",
+        (),
+        CALIBRATED,
+    ),
+    "c_calibrated": Case(
+        "set_c_imperfect",
+        "(c) the magnetometer calibrated, no GNSS, moored",
+        (),
+        (MOORED, *CALIBRATED),
+    ),
+    "e_calibrated": Case(
+        "set_e_imperfect",
+        "(e) as (b) calibrated, through 60 s silent outages",
+        (),
+        CALIBRATED,
+    ),
+    "e_imperfect": Case("set_e_imperfect", "(e) as (b) uncalibrated, through 60 s silent outages"),
+    "e_moored_wrongly": Case(
+        "set_e_imperfect",
+        "(e) calibrated, fusion.moored set on this drifting buoy: a wrong constraint",
+        (),
+        (MOORED, *CALIBRATED),
     ),
     "moored_single_gnss": Case(
         "measured_moored_single_gnss",
@@ -144,20 +175,21 @@ def run_case(key: str, duration_s: float) -> dict:
     with contextlib.redirect_stderr(log), contextlib.redirect_stdout(log):
         simulate(simulate_arguments(arguments))
         params = [*PROCESSING_PARAMS, write_parameters(directory, scenario, case)]
-        process_bag(
+        summary = process_bag(
             str(in_bag),
             str(out_bag),
             fusion_config_from_files(params),
             compensator_config_from_files(params),
             overwrite=True,
         )
-    (directory / "process.log").write_text(log.getvalue())
+    (directory / "process.log").write_text(log.getvalue() + "\n".join(summary.fusion_lines))
     return {
         "description": case.description,
         "duration_s": duration_s,
         "wind": judge_wind(out_bag),
-        "attitude": judge_attitude(out_bag),
-        "suspended": suspensions_in(log.getvalue()),
+        "attitude": judge_attitude(in_bag, out_bag),
+        "suspended": suspensions_in(summary.fusion_lines),
+        "aligned": not any("never aligned" in line for line in summary.fusion_lines),
     }
 
 
@@ -225,10 +257,14 @@ def judge_wind(out_bag: Path) -> dict:
     return errors.summary(start, int(errors.stamps_ns[-1]) + 1)
 
 
-def _roll_pitch_rms_deg(reader, topic: str, truth) -> list[float] | None:
-    messages = (
-        [reader.decode(r) for r in reader.messages([topic])] if topic in reader.topics else []
-    )
+def _roll_pitch_rms_deg(bag: Path, topic: str, truth) -> list[float] | None:
+    """RMS roll and pitch error (deg) of the orientations on ``topic`` of ``bag`` against the
+    truth, after the settling time; None when the bag has none."""
+    with BagReader(bag) as reader:
+        try:
+            messages = [reader.decode(r) for r in reader.messages([topic])]
+        except BagError:
+            return None
     if not messages:
         return None
     stamps = np.array([stamp_to_ns(m.header.stamp) for m in messages])
@@ -237,11 +273,9 @@ def _roll_pitch_rms_deg(reader, topic: str, truth) -> list[float] | None:
     keep = (stamps >= truth_ns[0] + int(SETTLING_S * 1e9)) & (stamps <= truth_ns[-1])
     if not np.any(keep):
         return None
-    true = Slerp((truth_ns - truth_ns[0]) * 1e-9, truth_attitude)(
-        (stamps[keep] - truth_ns[0]) * 1e-9
-    )
-    estimate = Rotation.from_quat(quats[keep])
-    error = (estimate * true.inv()).as_euler("ZYX", degrees=True)
+    seconds = (truth_ns - truth_ns[0]) * 1e-9
+    true = Slerp(seconds, truth_attitude)((stamps[keep] - truth_ns[0]) * 1e-9)
+    error = (Rotation.from_quat(quats[keep]) * true.inv()).as_euler("ZYX", degrees=True)
     return np.sqrt((error[:, [2, 1]] ** 2).mean(axis=0)).tolist()
 
 
@@ -250,27 +284,27 @@ def _q(message):
     return message.pose.pose.orientation if hasattr(message, "pose") else message.orientation
 
 
-def judge_attitude(out_bag: Path) -> dict:
+def judge_attitude(in_bag: Path, out_bag: Path) -> dict:
     """RMS roll and pitch errors (deg) of the fusion and of the motion pack's own attitude."""
-    with BagReader(out_bag) as reader:
+    with BagReader(in_bag) as reader:
         truth_messages = [reader.decode(r) for r in reader.messages([TRUTH_ODOMETRY_TOPIC])]
-        truth = (
-            np.array([stamp_to_ns(m.header.stamp) for m in truth_messages]),
-            Rotation.from_quat([_quaternion(_q(m)) for m in truth_messages]),
-        )
-        return {
-            "fused_roll_pitch_rms_deg": _roll_pitch_rms_deg(reader, NAV_ODOMETRY_TOPIC, truth),
-            "motion_pack_roll_pitch_rms_deg": _roll_pitch_rms_deg(reader, AHRS_TOPIC, truth),
-        }
+    truth = (
+        np.array([stamp_to_ns(m.header.stamp) for m in truth_messages]),
+        Rotation.from_quat([_quaternion(_q(m)) for m in truth_messages]),
+    )
+    return {
+        "fused_roll_pitch_rms_deg": _roll_pitch_rms_deg(out_bag, NAV_ODOMETRY_TOPIC, truth),
+        "motion_pack_roll_pitch_rms_deg": _roll_pitch_rms_deg(in_bag, AHRS_TOPIC, truth),
+    }
 
 
 def _quaternion(q) -> tuple[float, float, float, float]:
     return q.x, q.y, q.z, q.w
 
 
-def suspensions_in(log: str) -> list[str]:
-    """The lines of the processing log that say a source was suspended."""
-    return [line.strip() for line in log.splitlines() if " suspended" in line]
+def suspensions_in(lines: list[str]) -> list[str]:
+    """The fusion summary's lines that say a source was suspended."""
+    return [line.strip() for line in lines if " suspended:" in line]
 
 
 def _figure(values, digits: int = 3) -> str:
@@ -282,9 +316,9 @@ def _figure(values, digits: int = 3) -> str:
 def print_table(results: dict) -> None:
     print(
         "| case | valid | beyond 3σ (E/N/U) | beyond 5σ | RMS error m/s | max error m/s | "
-        "median σ m/s | roll/pitch RMS deg: fused, pack | suspended |"
+        "median σ m/s | roll/pitch RMS deg: fused, pack | aligned | suspended |"
     )
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for key, result in results.items():
         wind, attitude = result["wind"], result["attitude"]
         print(
@@ -294,6 +328,7 @@ def print_table(results: dict) -> None:
             f"{_figure(wind['median_sigma_mps'], 2)} | "
             f"{_figure(attitude['fused_roll_pitch_rms_deg'], 2)}, "
             f"{_figure(attitude['motion_pack_roll_pitch_rms_deg'], 2)} | "
+            f"{'yes' if result['aligned'] else 'never'} | "
             f"{'; '.join(result['suspended']) or '–'} |"
         )
 
