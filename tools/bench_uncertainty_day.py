@@ -3,12 +3,13 @@ suspends, memory flat, the stated uncertainty honest hour after hour.
 
     python -m tools.bench_uncertainty_day [--hours H] [--outage-every-s S] [--outage-s S]
 
-Simulates ``set_e_imperfect`` (one antenna at 1 Hz off the IMU grid, an uncalibrated
-magnetometer, a moored buoy) for ``hours`` with a silent GNSS outage of ``outage_s`` every
-``outage_every_s``, runs the ``process_bag`` command on it while sampling the process's resident
-memory (``/proc``), and judges the valid corrected wind against the truth hour by hour (the
-share beyond 3σ, the count beyond 5σ). Prints the hourly table and the memory at the first hour
-and at the end; writes out/bench/uncertainty_day.json. A day takes about an hour here: half
+Simulates ``set_e_imperfect`` moored (no current) with a lagging motion pack beside its one
+antenna at 1 Hz off the IMU grid and its uncalibrated magnetometer, for ``hours`` with a silent
+GNSS outage of ``outage_s`` every ``outage_every_s``; runs the ``process_bag`` command on it
+while sampling the process's resident memory (``/proc``), and judges the valid corrected wind
+against the truth hour by hour (the share beyond 3σ, the count beyond 5σ). Prints the hourly
+table and the memory after the first hour and at the end; writes
+out/bench/uncertainty_day.json. A day takes about an hour here: half
 simulating, half processing.
 """
 
@@ -28,6 +29,16 @@ from tools.bench_uncertainty import MOORED, Case, wind_errors, write_parameters
 OUT = REPO / "out" / "bench"
 WORK = OUT / "uncertainty_day"
 SCENARIO = "set_e_imperfect"
+SCENARIO_OVERRIDES = (
+    "current=null",
+    "sensors.ahrs.fitted=true",
+    "sensors.ahrs.sample_every=1",
+    "sensors.ahrs.lag_time_constant_s=0.3",
+    "sensors.ahrs.claimed_sigma_deg=[0.1, 0.1, 0.5]",
+    "sensors.ahrs.yaw_reference=magnetic_north",
+)
+"""A moored buoy whose motion pack gives the heading while its magnetometer, uncalibrated, is
+suspended."""
 MEMORY_SAMPLE_S = 5.0
 NANOSECONDS_PER_HOUR = 3_600_000_000_000
 
@@ -39,15 +50,13 @@ def outages(duration_s: float, every_s: float, length_s: float) -> list[list[flo
 
 
 def simulate_day(in_bag: Path, duration_s: float, outage_list) -> None:
-    overrides = [f"duration_s={duration_s}", f"sensors.gnss.silent_outages_s={outage_list}"]
-    command = [
-        sys.executable,
-        "-m",
-        "sensor_sim.simulate_bag",
-        SCENARIO,
-        str(in_bag),
-        "--overwrite",
+    overrides = [
+        *SCENARIO_OVERRIDES,
+        f"duration_s={duration_s}",
+        f"sensors.gnss.silent_outages_s={outage_list}",
     ]
+    command = [str(Path(sys.executable).parent / "simulate_bag"), SCENARIO, str(in_bag)]
+    command.append("--overwrite")
     for override in overrides:
         command += ["--set", override]
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
@@ -120,7 +129,7 @@ def main(argv=None) -> None:
     started = time.monotonic()
     simulate_day(in_bag, duration_s, outages(duration_s, args.outage_every_s, args.outage_s))
     simulated_s = time.monotonic() - started
-    scenario = load_scenario(SCENARIO, [f"duration_s={duration_s}"], None)
+    scenario = load_scenario(SCENARIO, [*SCENARIO_OVERRIDES, f"duration_s={duration_s}"], None)
     case = Case(SCENARIO, "a day", (), (MOORED,))
     params = [*PROCESSING_PARAMS, write_parameters(WORK, scenario, case)]
     memory = memory_figures(process_with_memory(in_bag, out_bag, params), args.hours)
