@@ -150,8 +150,17 @@ SECTIONS = (
     "current",
     "current_long",
     "fluxes",
+    "uncertainty",
+    "uncertainty_day",
 )
-LONG_SECTIONS = ("smoother_table1", "smoother_speed", "smoother_day", "soak", "current_long")
+LONG_SECTIONS = (
+    "smoother_table1",
+    "smoother_speed",
+    "smoother_day",
+    "soak",
+    "current_long",
+    "uncertainty_day",
+)
 """Sections of long runs (simulated and processed only when named with --only)."""
 DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in LONG_SECTIONS)
 SMOOTHER_DAY_S = 86400.0
@@ -729,6 +738,25 @@ def archive_section(run: BenchRun) -> dict:
     return {"archive": archive}
 
 
+def uncertainty_sections(run: BenchRun) -> dict:
+    """Every sensor set's valid wind against its stated uncertainty (tools/bench_uncertainty.py,
+    15-min runs, 5 with --quick; about 3 min on two cores), and with --only uncertainty_day a
+    simulated day through process_bag with its memory (tools/bench_uncertainty_day.py, about
+    45 min; 2 h with --quick). Their own tools write out/bench/uncertainty*.json."""
+    results = {}
+    if "uncertainty" in run.sections:
+        from tools import bench_uncertainty
+
+        bench_uncertainty.main(["--quick"] if run.quick else [])
+        results["uncertainty"] = json.loads((OUT_DIR / "uncertainty.json").read_text())
+    if "uncertainty_day" in run.sections:
+        from tools import bench_uncertainty_day
+
+        bench_uncertainty_day.main(["--hours", "2" if run.quick else "24"])
+        results["uncertainty_day"] = json.loads((OUT_DIR / "uncertainty_day.json").read_text())
+    return results
+
+
 SECTION_STEPS = (
     sensor_sets_section,
     real_record_section,
@@ -738,6 +766,7 @@ SECTION_STEPS = (
     live_section,
     current_sections,
     fluxes_section,
+    uncertainty_sections,
     consistency_section,
     soak_section,
     smoother_sections,
