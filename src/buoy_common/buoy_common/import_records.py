@@ -5,7 +5,9 @@ which quantity, in which unit and axes, how the samples are timed and which valu
 invalid sample. The bag carries the contract's sensor topics: ``anemometer/wind`` and
 ``anemometer/temperature`` (frame ``anemometer_link``), ``imu/data_raw`` and, when the map gives
 the motion pack's attitude, ``imu/data`` (frame ``imu_link``); every row is one sample of each,
-invalid samples as NaN, log time = header stamp.
+invalid samples as NaN, log time = header stamp. What the map and the command line know besides
+the samples (the pack's north reference, the site, the sensors, the start and who gave it, how
+each field was screened) is stored in the bag as well (:mod:`buoy_common.record_facts`).
 """
 
 from __future__ import annotations
@@ -34,7 +36,13 @@ from buoy_common.contract import (
     ns_to_stamp,
     seconds_to_iso8601,
 )
-from buoy_common.record_facts import RECORD_METADATA_NAME, RECORD_SENSORS, ImportedRecord
+from buoy_common.record_facts import (
+    RECORD_METADATA_NAME,
+    RECORD_SENSORS,
+    SITE_FROM_COMMAND_LINE,
+    SITE_FROM_MAP,
+    ImportedRecord,
+)
 from buoy_common.records.column_map import (
     START_FROM_COMMAND_LINE,
     START_FROM_MAP,
@@ -230,7 +238,7 @@ def record_sensors(samples: ContractSamples) -> tuple[str, ...]:
 def record_facts_of(record, column_map: ColumnMap, samples, site_deg) -> ImportedRecord:
     """The facts of an imported record: the map's, the command line's (``site_deg`` None: the
     map's site, if any) and the screening of its samples."""
-    site_source = "command line" if site_deg is not None else "column map"
+    site_source = SITE_FROM_COMMAND_LINE if site_deg is not None else SITE_FROM_MAP
     site_deg = site_deg if site_deg is not None else column_map.site_deg
     return ImportedRecord(
         record=Path(record).name,

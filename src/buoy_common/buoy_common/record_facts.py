@@ -39,8 +39,12 @@ from buoy_common.records.screening import FieldCounts
 RECORD_METADATA_NAME = "buoy_record"
 """Name of the MCAP metadata record holding an imported record's facts."""
 RECORD_METADATA_VERSION = "1"
+SITE_FROM_MAP = "column map"
+SITE_FROM_COMMAND_LINE = "command line"
+"""Where an imported record's site came from (:attr:`ImportedRecord.site_source`)."""
 SITE_FROM_RECORD = "record"
 SITE_FROM_PARAMETERS = "parameters"
+"""Where a run's site came from (:attr:`RecordFacts.site_source`)."""
 RECORD_SENSORS = ("sonic", "sonic_temperature", "imu", "ahrs")
 """The sensors a record may have, as ``sensors`` names them: the sonic's wind and temperature,
 the motion pack's (or IMU's) rates and specific force, the motion pack's own attitude."""

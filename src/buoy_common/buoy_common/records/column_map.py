@@ -76,7 +76,6 @@ default (a map and the nodes given none agree)."""
 START_FROM_MAP = "column map"
 START_FROM_COMMAND_LINE = "command line"
 START_FROM_TIME_COLUMN = "time column"
-START_SOURCES = (START_FROM_MAP, START_FROM_COMMAND_LINE, START_FROM_TIME_COLUMN)
 """Where a record's start came from: the map's ``time.start`` or ``time.epoch``, ``--start``,
 or a time column of absolute (Unix) stamps."""
 FORMATS = ("delimited", "binary")
@@ -130,7 +129,8 @@ class TimeSpec:
     whose map gives no start needs one on the command line)."""
     rate_hz: float
     start_source: str = START_FROM_MAP
-    """Who said when the record starts: one of :data:`START_SOURCES`."""
+    """Who said when the record starts: ``START_FROM_MAP``, ``START_FROM_COMMAND_LINE`` or
+    ``START_FROM_TIME_COLUMN``."""
 
 
 @dataclass(frozen=True)
