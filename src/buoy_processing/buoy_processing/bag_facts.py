@@ -47,7 +47,7 @@ def record_defaults_lines(
         if name in given and given[name] != value:
             lines.append(f"{name}={given[name]} from the parameters, over the record's {value}")
         elif name not in given:
-            lines.append(f"{name}={value} from the record ({record.column_map})")
+            lines.append(f"{name}={value} from the record")
     return lines
 
 
