@@ -63,10 +63,12 @@ from buoy_common.contract import (
     wind_stats_topic,
 )
 from buoy_common.namespaces import NamespacedWriter, TopicView
+from buoy_common.record_facts import RecordFacts
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
+from buoy_processing.bag_facts import facts_of_run
 from buoy_processing.offline_fusion import relative_topic, sensor_topics_of, truth_topics_of
 from buoy_processing.offline_runner import OfflineRun, run_fusion
 from buoy_processing.output_series import FlowSeries, NavigationSeries
@@ -141,6 +143,9 @@ class ProcessSummary:
     wall_s: float = 0.0
     recovery: Recovery | None = None
     """How much of a cut input bag was recovered; None for a complete bag."""
+    record_facts: RecordFacts | None = None
+    """What the outputs say about the data: north reference, declination, site, sensors,
+    coverage, and an imported record's own facts (:mod:`buoy_processing.bag_facts`)."""
 
 
 def _anemometer_record(
@@ -521,6 +526,8 @@ def process_bag(
         )
         fusion, topic_counts = run_fusion(run, corrections)
         duration_s = reader.duration_s
+        facts = facts_of_run(reader, fusion_config, [*sensors.values(), *corrections.topics])
+    # The writers below state what `facts` says of the data (north reference, site, sensors).
     summaries = write_products_csvs(corrections, csv_paths)
     if netcdf_path is not None:
         _write_netcdf(netcdf_path, corrections, in_bag, history, netcdf_attributes, overwrite)
@@ -531,6 +538,7 @@ def process_bag(
         duration_s=duration_s,
         wall_s=time.monotonic() - started,
         recovery=reader.recovery,
+        record_facts=facts,
     )
 
 
