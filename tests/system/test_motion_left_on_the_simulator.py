@@ -127,7 +127,7 @@ def test_the_correct_correction_leaves_what_the_true_wind_holds_and_passes(run):
         )
         assert floor.share < NOISE_SHARE, floor
         assert window.motion_left_share < floor.share + NOISE_SHARE, (window, floor)
-        assert window.motion_left_coherence < DEFAULT_THRESHOLDS.min_coherence, window
+        assert window.motion_left_coherence < window.motion_left_coherence_threshold, window
         assert window.motion_left_flag == QualityFlag.GOOD
 
 

@@ -406,6 +406,10 @@ _FLUX_VARIABLES = (
     _ProductVariable("motion_left_coherence", "motion_left_coherence", None, "1", None,
                      "mean coherence of the corrected upward air velocity with the platform's "
                      "vertical velocity over the wave band"),
+    _ProductVariable("motion_left_coherence_threshold", "motion_left_coherence_threshold", None,
+                     "1", None,
+                     "coherence over the wave band that unrelated series would not exceed "
+                     "(compensation.motion_left_coherence_sigmas above their mean)"),
     _ProductVariable("motion_left_share", "motion_left_share", None, "1", None,
                      "share of the platform's vertical velocity left in the corrected upward "
                      "air velocity over the wave band"),
@@ -530,9 +534,9 @@ def _motion_left_flag_variable(windows: list, dimension: str) -> xr.DataArray:
             "flag_meanings": " ".join(flag.name.lower() for flag in QualityFlag),
             "comment": (
                 "pass (good): little of the platform's vertical velocity left in w over the "
-                "wave band, or none coherent; suspect, fail (bad): motion_left_share beyond "
+                "wave band, or none coherent; suspect, fail (bad): motion_left_share at least "
                 "compensation.motion_left_suspect_share, motion_left_fail_share with "
-                "motion_left_coherence at least compensation.motion_left_min_coherence; "
+                "motion_left_coherence above motion_left_coherence_threshold; "
                 "not_evaluated: a window too short or gappy for its spectra"
             ),
             "coverage_content_type": "qualityInformation",

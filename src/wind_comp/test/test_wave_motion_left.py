@@ -17,6 +17,7 @@ from wind_comp.wave_motion_left import (
     MIN_SEGMENTS,
     SEGMENT_S,
     MotionLeftThresholds,
+    coherence_threshold,
     motion_left_flag,
     platform_wave_band_hz,
     valid_runs,
@@ -126,13 +127,31 @@ def test_too_short_unknown_or_still_windows_are_not_evaluated():
 
 
 def test_the_flag_follows_the_thresholds():
-    thresholds = MotionLeftThresholds(suspect_share=0.1, fail_share=0.3, min_coherence=0.1)
-    assert motion_left_flag(0.05, 0.5, thresholds) == QualityFlag.GOOD
-    assert motion_left_flag(0.1, 0.5, thresholds) == QualityFlag.SUSPECT
-    assert motion_left_flag(0.3, 0.5, thresholds) == QualityFlag.BAD
+    thresholds = MotionLeftThresholds(suspect_share=0.1, fail_share=0.3, coherence_sigmas=3.0)
+    assert motion_left_flag(0.05, 0.5, 0.1, thresholds) == QualityFlag.GOOD
+    assert motion_left_flag(0.1, 0.5, 0.1, thresholds) == QualityFlag.SUSPECT
+    assert motion_left_flag(0.3, 0.5, 0.1, thresholds) == QualityFlag.BAD
     # a share the heave does not carry coherently is noise over a band the air dominates
-    assert motion_left_flag(0.6, 0.05, thresholds) == QualityFlag.GOOD
-    assert motion_left_flag(math.nan, 0.5, thresholds) == QualityFlag.NOT_EVALUATED
+    assert motion_left_flag(0.6, 0.05, 0.1, thresholds) == QualityFlag.GOOD
+    assert motion_left_flag(math.nan, 0.5, 0.1, thresholds) == QualityFlag.NOT_EVALUATED
+
+
+@pytest.mark.parametrize(("segments", "frequencies"), [(22, 2), (25, 23), (119, 4)])
+def test_unrelated_series_rarely_exceed_the_coherence_threshold(segments, frequencies):
+    # The mean coherence over a band of unrelated white noise, window after window, sits at 1/K
+    # and lies above the 3σ threshold in a few windows of a thousand at most.
+    rng = np.random.default_rng(segments)
+    segment = round(SEGMENT_S * RATE_HZ)
+    samples = segment // 2 * (segments + 1)
+    means = []
+    for _ in range(300):
+        _, coherence = signal.coherence(
+            rng.normal(size=samples), rng.normal(size=samples), fs=RATE_HZ, nperseg=segment
+        )
+        means.append(coherence[5 : 5 + frequencies].mean())
+    threshold = coherence_threshold(segments, frequencies, 3.0)
+    assert np.count_nonzero(np.array(means) > threshold) <= 3
+    assert np.mean(means) == pytest.approx(1.0 / segments, rel=0.1)
 
 
 def test_a_records_wave_band_is_its_heaves():

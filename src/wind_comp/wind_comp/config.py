@@ -28,7 +28,6 @@ from buoy_common.parameter_declarations import (
     ParameterSets,
     custom_rule,
     declared_parameters,
-    open_interval,
     parameter,
 )
 from buoy_common.parameters import build_config, check_parameter_files, load_parameter_files
@@ -179,7 +178,7 @@ class CompensatorConfig:
     motion_left_suspect_share: float = parameter(
         DEFAULT_THRESHOLDS.suspect_share,
         meaning='"motion left" flux test: suspect where the corrected w keeps this share of '
-        "the platform's vertical velocity over the wave band (with min_coherence)",
+        "the platform's vertical velocity over the wave band, with a coherence beyond noise",
         rule=POSITIVE,
     )
     motion_left_fail_share: float = parameter(
@@ -188,12 +187,12 @@ class CompensatorConfig:
         "motion_left_suspect_share)",
         rule=POSITIVE,
     )
-    motion_left_min_coherence: float = parameter(
-        DEFAULT_THRESHOLDS.min_coherence,
-        meaning='"motion left" flux test: a share with less coherence of w with the '
-        "platform's vertical velocity over the wave band passes (estimator noise: about 0.05 "
-        "over 20 spectral segments)",
-        rule=open_interval(0.0, 1.0),
+    motion_left_coherence_sigmas: float = parameter(
+        DEFAULT_THRESHOLDS.coherence_sigmas,
+        meaning='"motion left" flux test: the share counts where the coherence of w with the '
+        "platform's vertical velocity over the wave band lies this many standard deviations "
+        "above that of unrelated series (motion_left_coherence_threshold)",
+        rule=POSITIVE,
     )
     anemometer_noise_sigma_mps: tuple[float, float, float] = parameter(
         (0.05, 0.05, 0.03),
@@ -253,7 +252,7 @@ class CompensatorConfig:
         return MotionLeftThresholds(
             self.motion_left_suspect_share,
             self.motion_left_fail_share,
-            self.motion_left_min_coherence,
+            self.motion_left_coherence_sigmas,
         )
 
     def flow_sensor(self) -> FlowSensor:

@@ -104,6 +104,8 @@ class FluxProduct:
     (:mod:`wind_comp.wave_motion_left`)."""
     motion_left_coherence: float = math.nan
     """Mean coherence of the corrected w with the platform vertical velocity over the band."""
+    motion_left_coherence_threshold: float = math.nan
+    """The coherence unrelated series would not exceed, above which the share counts."""
     motion_left_share: float = math.nan
     """Share of the platform vertical velocity left in the corrected w over the band."""
     motion_left_flag: int = int(QualityFlag.NOT_EVALUATED)
@@ -307,6 +309,7 @@ class FluxAverager:
             wave_band_low_hz=motion_left.band_low_hz,
             wave_band_high_hz=motion_left.band_high_hz,
             motion_left_coherence=motion_left.coherence,
+            motion_left_coherence_threshold=motion_left.coherence_threshold,
             motion_left_share=motion_left.share,
             motion_left_flag=int(motion_left.flag),
         )

@@ -8,7 +8,8 @@ Per window, from the window's own samples:
   (:func:`wind_comp.motion_residual.band_around_peak_hz`);
 - the mean magnitude-squared coherence of the corrected vertical wind with the platform's
   vertical velocity over that band: the air's turbulence is not coherent with the buoy's
-  heave, so what is coherent is motion left in w;
+  heave, so what is coherent is motion left in w; and the coherence that unrelated series
+  would not exceed (:func:`coherence_threshold`);
 - the share of the platform's vertical velocity left in w: the magnitude of their
   cross-spectrum over the platform velocity's spectrum, summed over the band (as
   :func:`wind_comp.motion_residual.platform_velocity_left`; a correction that applies 80 % of
@@ -24,11 +25,10 @@ lie wholly within runs of valid, evenly spaced samples: an invalid sample or a m
 A window needs :data:`MIN_SEGMENTS` such segments; with fewer, or with an unknown sampling
 interval or a platform that does not move, the test is not evaluated (its figures NaN).
 
-The test (IOOS QARTOD flags): fail where the share reaches
-:attr:`MotionLeftThresholds.fail_share` and the coherence
-:attr:`MotionLeftThresholds.min_coherence`, suspect where the share reaches
-:attr:`MotionLeftThresholds.suspect_share` with that coherence, pass otherwise (a share
-carried by no coherence is the estimator's noise over a band where the air dominates).
+The test (IOOS QARTOD flags): where the coherence exceeds its threshold, fail where the share
+reaches :attr:`MotionLeftThresholds.fail_share` and suspect where it reaches
+:attr:`MotionLeftThresholds.suspect_share`; pass otherwise (a share that no coherence carries
+is the estimator's noise over a band where the air dominates the buoy's heave).
 """
 
 from __future__ import annotations
@@ -48,8 +48,11 @@ SEGMENT_S = 30.0
 broken by invalid stretches still holds whole segments."""
 MIN_SEGMENTS = 20
 """Fewest segments a window needs (5.25 min of valid samples in one run): the mean coherence of
-two unrelated series over K segments is about 1/K, so 20 keep that noise floor near 0.05,
-below the default ``compensation.motion_left_min_coherence``."""
+two unrelated series over K segments is about 1/K, so 20 keep that noise floor near 0.05."""
+NULL_COHERENCE_SPREAD = 1.2
+"""Standard deviation of the mean coherence of unrelated series over M frequencies of K
+segments, in units of 1/(K·√M): 1.15–1.17 measured on white noise for K of 22 to 119 and M of
+2 to 23 (half-overlapping Hann segments correlate neighbouring frequencies), rounded up."""
 RUN_BREAK_INTERVALS = 1.5
 """A stamp step longer than this many sampling intervals (a missing sample) ends a run."""
 
@@ -61,13 +64,16 @@ class MotionLeftThresholds:
 
     suspect_share: float
     fail_share: float
-    min_coherence: float
+    coherence_sigmas: float
+    """How many standard deviations of unrelated series' coherence above its mean the coherence
+    must lie for the share to count."""
 
 
-DEFAULT_THRESHOLDS = MotionLeftThresholds(suspect_share=0.1, fail_share=0.3, min_coherence=0.1)
+DEFAULT_THRESHOLDS = MotionLeftThresholds(suspect_share=0.1, fail_share=0.3, coherence_sigmas=3.0)
 """The parameters' defaults: a sound correction of sound sensors leaves a few hundredths of the
 platform's vertical velocity in w (the estimator's noise), so a tenth is suspect and three
-tenths fail; a coherence of twice the estimator's noise floor counts."""
+tenths fail; unrelated series exceed a coherence 3σ above their mean in about one window of a
+thousand."""
 
 
 @dataclass(frozen=True)
@@ -78,6 +84,8 @@ class WaveMotionLeft:
     band_high_hz: float
     coherence: float
     """Mean coherence of the corrected w with the platform's vertical velocity over the band."""
+    coherence_threshold: float
+    """The coherence above which the share counts (:func:`coherence_threshold`)."""
     share: float
     """Share of the platform's vertical velocity left in the corrected w over the band."""
     flag: QualityFlag
@@ -85,17 +93,28 @@ class WaveMotionLeft:
     """Welch segments the figures average."""
 
 
-NOT_EVALUATED = WaveMotionLeft(math.nan, math.nan, math.nan, math.nan, QualityFlag.NOT_EVALUATED)
+NOT_EVALUATED = WaveMotionLeft(
+    math.nan, math.nan, math.nan, math.nan, math.nan, QualityFlag.NOT_EVALUATED
+)
+
+
+def coherence_threshold(n_segments: int, n_frequencies: int, sigmas: float) -> float:
+    """The mean coherence over ``n_frequencies`` of ``n_segments`` Welch segments that unrelated
+    series exceed with the chance of ``sigmas`` standard deviations: their mean 1/K plus
+    ``sigmas`` times :data:`NULL_COHERENCE_SPREAD`/(K·√M)."""
+    spread = NULL_COHERENCE_SPREAD / math.sqrt(n_frequencies)
+    return (1.0 + sigmas * spread) / n_segments
 
 
 def motion_left_flag(
-    share: float, coherence: float, thresholds: MotionLeftThresholds
+    share: float, coherence: float, threshold: float, thresholds: MotionLeftThresholds
 ) -> QualityFlag:
     """The QARTOD flag of the "motion left" test for a ``share`` of the platform's vertical
-    velocity left in w with mean ``coherence`` (both dimensionless) over the wave band."""
+    velocity left in w with mean ``coherence`` over the wave band, which counts above
+    ``threshold`` (all dimensionless)."""
     if not (math.isfinite(share) and math.isfinite(coherence)):
         return QualityFlag.NOT_EVALUATED
-    if coherence < thresholds.min_coherence:
+    if coherence <= threshold:
         return QualityFlag.GOOD
     if share >= thresholds.fail_share:
         return QualityFlag.BAD
@@ -212,5 +231,8 @@ def wave_motion_left(
         )
     if not math.isfinite(coherence):
         return NOT_EVALUATED
-    flag = motion_left_flag(share, coherence, thresholds)
-    return WaveMotionLeft(low, high, coherence, share, flag, spectra.n_segments)
+    threshold = coherence_threshold(
+        spectra.n_segments, int(np.count_nonzero(band)), thresholds.coherence_sigmas
+    )
+    flag = motion_left_flag(share, coherence, threshold, thresholds)
+    return WaveMotionLeft(low, high, coherence, threshold, share, flag, spectra.n_segments)

@@ -192,8 +192,9 @@ _MOTION_LEFT_STYLE = {
 def wave_motion_left_figure(data: ReportData) -> Figure:
     """Per flux window, at its middle: the share of the platform's vertical velocity left in
     the corrected w and the coherence of w with it over the window's wave band, marked by the
-    "motion left" flag, against the test's default thresholds (the parameters
-    ``compensation.motion_left_*``); the windows it could not evaluate counted in the title."""
+    "motion left" flag, against the test's default share thresholds (the parameters
+    ``compensation.motion_left_*``) and each window's coherence threshold; the windows it
+    could not evaluate counted in the title."""
     fluxes = data.fluxes
     middles = np.array([0.5 * (f.window_start_s + f.window_end_s) for f in fluxes])
     middles -= data.time_origin_s
@@ -227,11 +228,15 @@ def wave_motion_left_figure(data: ReportData) -> Figure:
         share_axis.axhline(
             share, color=colour, linestyle="--", label=f"{meaning} from {share:g} (default)"
         )
-    coherence_axis.axhline(
-        thresholds.min_coherence,
+    coherence_axis.plot(
+        middles,
+        [flux.motion_left_coherence_threshold for flux in fluxes],
+        linestyle="none",
+        marker="_",
+        markersize=30,
         color="grey",
-        linestyle="--",
-        label=f"counts from {thresholds.min_coherence:g} (default; below: the air's)",
+        label="counts above (unrelated series' coherence + "
+        f"{thresholds.coherence_sigmas:g}σ, default)",
     )
     share_axis.set_ylabel("platform w left in w (share)")
     coherence_axis.set_ylabel("coherence of w with platform w")
