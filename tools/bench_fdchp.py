@@ -271,7 +271,8 @@ def flux_windows_motion_left(processed: Path) -> list[dict]:
     with BagReader(processed) as reader:
         windows = published_fluxes(reader)
     names = ("window_start_s", "window_end_s", "n_valid", "n_invalid", "wave_band_low_hz")
-    names += ("wave_band_high_hz", "motion_left_coherence", "motion_left_share")
+    names += ("wave_band_high_hz", "motion_left_coherence", "motion_left_coherence_threshold")
+    names += ("motion_left_share",)
     names += ("motion_left_flag", "quality_flag")
     return [{name: getattr(window, name) for name in names} for window in windows]
 
@@ -467,7 +468,8 @@ def print_flux_windows_motion_left(windows: list[dict]) -> None:
             f"  flux window of {length_s:g} s ({window['n_valid']} valid, {window['n_invalid']} "
             f"invalid samples): wave band {window['wave_band_low_hz']:.3f}-"
             f"{window['wave_band_high_hz']:.3f} Hz, coherence {window['motion_left_coherence']:.3f}"
-            f", platform w left {window['motion_left_share']:.3f}, motion left flag "
+            f" (counts above {window['motion_left_coherence_threshold']:.3f}), platform w left "
+            f"{window['motion_left_share']:.3f}, motion left flag "
             f"{window['motion_left_flag']} (window flag {window['quality_flag']})"
         )
 
