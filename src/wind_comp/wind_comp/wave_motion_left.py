@@ -51,7 +51,7 @@ MIN_SEGMENTS = 20
 two unrelated series over K segments is about 1/K, so 20 keep that noise floor near 0.05."""
 NULL_COHERENCE_SPREAD = 1.2
 """Standard deviation of the mean coherence of unrelated series over M frequencies of K
-segments, in units of 1/(K·√M): 1.15–1.17 measured on white noise for K of 22 to 119 and M of
+segments, in units of 1/(K·√M): 1.0 to 1.17 measured on white noise for K of 22 to 119 and M of
 2 to 23 (half-overlapping Hann segments correlate neighbouring frequencies), rounded up."""
 RUN_BREAK_INTERVALS = 1.5
 """A stamp step longer than this many sampling intervals (a missing sample) ends a run."""
@@ -72,8 +72,8 @@ class MotionLeftThresholds:
 DEFAULT_THRESHOLDS = MotionLeftThresholds(suspect_share=0.1, fail_share=0.3, coherence_sigmas=3.0)
 """The parameters' defaults: a sound correction of sound sensors leaves a few hundredths of the
 platform's vertical velocity in w (the estimator's noise), so a tenth is suspect and three
-tenths fail; unrelated series exceed a coherence 3σ above their mean in about one window of a
-thousand."""
+tenths fail; unrelated series exceed a coherence 3σ above their mean in a few windows of a
+thousand at most (the distribution is skewed)."""
 
 
 @dataclass(frozen=True)
