@@ -384,9 +384,8 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
         attitude_t_s = nav.stamps_ns / NANOSECONDS_PER_SECOND
         nav_rpy = rpy_rad_from_quaternions(nav.quat_xyzw)
         nav_rpy_sigma = rpy_sigma_rad(nav_rpy, nav.attitude_covariance_enu_rad2)
-        nav_up_velocity = rotate_by_quaternion_components(nav.quat_xyzw.T, nav.velocity_body_mps.T)[
-            2
-        ]
+        velocity_enu = rotate_by_quaternion_components(nav.quat_xyzw.T, nav.velocity_body_mps.T)
+        nav_up_velocity = velocity_enu[2]
         if has_messages(reader, TRUTH_ODOMETRY_TOPIC):
             truth = odometry_series(reader, TRUTH_ODOMETRY_TOPIC)
             truth_rpy = interpolate_rpy_rad(nav.stamps_ns, truth.stamps_ns, truth.quat_xyzw)
