@@ -12,7 +12,9 @@ fluxes only, when no ion-functions checkout is at hand), and prints over the sam
 - mean and standard deviation of the corrected wind (East, North, Up; referenced to magnetic
   north on both sides);
 - the fluxes u'w', v'w', w'Ts', u*, with the flux QC, from ``wind_comp.fluxes`` for ours, and
-  both Edson's own and ``wind_comp.fluxes`` applied to his corrected wind.
+  both Edson's own and ``wind_comp.fluxes`` applied to his corrected wind;
+- the wave motion left that ``process_bag`` publishes for each flux window of the record
+  (``wind/fluxes_<window>``: wave band, coherence, share left, "motion left" flag).
 
     python -m tools.bench_fdchp [--record PATH] [--ion-functions DIR] [--params-file YAML ...]
 
@@ -46,7 +48,7 @@ from buoy_common.contract import (
 from buoy_common.import_records import import_records
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_processing import process_bag
-from buoy_processing.report.data import stamped_vectors
+from buoy_processing.report.data import published_fluxes, stamped_vectors
 from tools import edson_fdchp, fdchp_figures
 from wind_comp.config import compensator_config_from_files
 from wind_comp.fluxes import linear_detrend, rotation_into_mean_wind, window_fluxes
@@ -226,6 +228,7 @@ def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -
     kept = kept_series(processed)
     result = {
         "record": str(record),
+        "flux_windows_motion_left": flux_windows_motion_left(processed),
         "samples": int(kept["time_s"].size),
         "invalid_corrected_samples": int(np.count_nonzero(~np.isfinite(kept["corrected"][:, 2]))),
         "ours": our_figures(kept),
@@ -261,6 +264,17 @@ def compare(record: Path, ion_functions: str | None, extra_parameter_files=()) -
         RATE_HZ,
     )
     return result
+
+
+def flux_windows_motion_left(processed: Path) -> list[dict]:
+    """The wave motion left of each flux window as ``process_bag`` published it."""
+    with BagReader(processed) as reader:
+        windows = published_fluxes(reader)
+    names = ("window_start_s", "window_end_s", "n_valid", "n_invalid", "wave_band_low_hz")
+    names += ("wave_band_high_hz", "motion_left_coherence", "motion_left_coherence_threshold")
+    names += ("motion_left_share",)
+    names += ("motion_left_flag", "quality_flag")
+    return [{name: getattr(window, name) for name in names} for window in windows]
 
 
 def kept_series(processed: Path) -> dict:
@@ -395,6 +409,7 @@ def print_comparison(result: dict) -> None:
         print(f"  Edson's processing not run: {edson['unavailable']}")
         edson = {}
     print_wave_band(ours, edson, result["ours_platform_velocity_under_applied"])
+    print_flux_windows_motion_left(result["flux_windows_motion_left"])
     print_wind_and_fluxes(ours, edson, result["edson_published_fluxes"])
     print_flux_bands(ours, edson)
     print_high_passed_variants(ours, result)
@@ -443,6 +458,20 @@ def print_wave_band(ours: dict, edson: dict, under_applied: dict) -> None:
         for gain, m in under_applied.items()
     )
     print(f"  ours with a share of the platform velocity applied (share / coherence): {sweep}")
+
+
+def print_flux_windows_motion_left(windows: list[dict]) -> None:
+    """Each published flux window's wave band, coherence, share left and flag."""
+    for window in windows:
+        length_s = window["window_end_s"] - window["window_start_s"]
+        print(
+            f"  flux window of {length_s:g} s ({window['n_valid']} valid, {window['n_invalid']} "
+            f"invalid samples): wave band {window['wave_band_low_hz']:.3f}-"
+            f"{window['wave_band_high_hz']:.3f} Hz, coherence {window['motion_left_coherence']:.3f}"
+            f" (counts above {window['motion_left_coherence_threshold']:.3f}), platform w left "
+            f"{window['motion_left_share']:.3f}, motion left flag "
+            f"{window['motion_left_flag']} (window flag {window['quality_flag']})"
+        )
 
 
 def print_wind_and_fluxes(ours: dict, edson: dict, published: dict) -> None:

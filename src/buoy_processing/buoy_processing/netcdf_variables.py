@@ -98,7 +98,8 @@ def _quality_flag_attributes(what: str) -> dict:
         comment += (
             f"; then suspect above {STATIONARY_PERCENT:g} % non-stationarity of u'w' or "
             f"{100 * MAX_SPIKE_SHARE:g} % spikes in a component, bad above "
-            f"{NON_STATIONARY_PERCENT:g} % non-stationarity"
+            f"{NON_STATIONARY_PERCENT:g} % non-stationarity; and lowered to the flag of the "
+            "motion left test (motion_left_flag) where that is worse"
         )
     return {
         "standard_name": "quality_flag",
@@ -397,6 +398,21 @@ _FLUX_VARIABLES = (
     _ProductVariable("n_temperature", "n_temperature", None, "1", None,
                      "wind samples paired with a sonic temperature"),
     *_SHARED_PRODUCT_VARIABLES,
+    _ProductVariable("wave_band_low_hz", "wave_band_low_frequency", None, "Hz", None,
+                     "lower edge of the wave band, where the spectrum of the platform's "
+                     "vertical acceleration exceeds a tenth of its peak"),
+    _ProductVariable("wave_band_high_hz", "wave_band_high_frequency", None, "Hz", None,
+                     "upper edge of the wave band"),
+    _ProductVariable("motion_left_coherence", "motion_left_coherence", None, "1", None,
+                     "mean coherence of the corrected upward air velocity with the platform's "
+                     "vertical velocity over the wave band"),
+    _ProductVariable("motion_left_coherence_threshold", "motion_left_coherence_threshold", None,
+                     "1", None,
+                     "coherence over the wave band that unrelated series would not exceed "
+                     "(compensation.motion_left_coherence_sigmas above their mean)"),
+    _ProductVariable("motion_left_share", "motion_left_share", None, "1", None,
+                     "share of the platform's vertical velocity left in the corrected upward "
+                     "air velocity over the wave band"),
 )  # fmt: skip
 _TABLES = {
     "wind": _WIND_PRODUCT_VARIABLES,
@@ -469,10 +485,15 @@ def product_variables(
                 attributes["cell_methods"] = f"{dimension}: {spec.cell_method}"
             if spec.field == "gust_mps":
                 attributes["gust_window_s"] = windows[0].gust_window_s
-            if spec.field.startswith(("n_", "first", "last", "spikes_", "stationarity_")):
+            if spec.field.startswith(
+                ("n_", "first", "last", "spikes_", "stationarity_", "wave_band_")
+            ):
                 attributes["coverage_content_type"] = "auxiliaryInformation"
             elif spec.field.endswith("_standard_error_mps"):
                 attributes["coverage_content_type"] = "qualityInformation"
+            elif spec.field.startswith("motion_left_"):
+                attributes["coverage_content_type"] = "qualityInformation"
+                attributes["ancillary_variables"] = f"{what}_{label}_motion_left_flag"
             else:
                 attributes["coverage_content_type"] = "physicalMeasurement"
                 attributes["ancillary_variables"] = _ancillary_variables(what, window_s, spec)
@@ -494,4 +515,30 @@ def product_variables(
                 "coverage_content_type": "qualityInformation",
             },
         )
+        if what == "flux":
+            variables[f"{what}_{label}_motion_left_flag"] = _motion_left_flag_variable(
+                windows, dimension
+            )
     return variables
+
+
+def _motion_left_flag_variable(windows: list, dimension: str) -> xr.DataArray:
+    """The QARTOD flag of each flux window's "motion left" test."""
+    return xr.DataArray(
+        np.array([window.motion_left_flag for window in windows], dtype=np.int8),
+        dims=dimension,
+        attrs={
+            "standard_name": "quality_flag",
+            "long_name": 'QARTOD flag of the "motion left" test of each flux window',
+            "flag_values": np.array([flag.value for flag in QualityFlag], dtype=np.int8),
+            "flag_meanings": " ".join(flag.name.lower() for flag in QualityFlag),
+            "comment": (
+                "pass (good): little of the platform's vertical velocity left in w over the "
+                "wave band, or none coherent; suspect, fail (bad): motion_left_share at least "
+                "compensation.motion_left_suspect_share, motion_left_fail_share with "
+                "motion_left_coherence above motion_left_coherence_threshold; "
+                "not_evaluated: a window too short or gappy for its spectra"
+            ),
+            "coverage_content_type": "qualityInformation",
+        },
+    )

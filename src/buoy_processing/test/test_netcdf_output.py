@@ -240,6 +240,9 @@ def test_the_file_is_cf_compliant_and_acdd_complete(written):
     no_cf_name = ("_bounds", "_coverage", "_n_invalid", "_n_temperature", "_invalid_share")
     no_cf_name += ("_tilt", "_u_w", "_v_w", "_w_ts", "_spikes_u", "_spikes_v", "_spikes_w")
     no_cf_name += ("_spikes_ts", "_stationarity_u_w", "_stationarity_w_ts")
+    no_cf_name += ("_wave_band_low_frequency", "_wave_band_high_frequency")
+    no_cf_name += ("_motion_left_coherence", "_motion_left_coherence_threshold")
+    no_cf_name += ("_motion_left_share",)
     assert all(name.endswith(no_cf_name) for name in without), without
     assert any(name.startswith("flux_1min_") for name in without)
     assert all(r.msgs == ["standard_name"] for r in high_failures), high_failures
@@ -286,3 +289,48 @@ def test_despiked_fluxes_say_so_on_their_spike_counts(written, tmp_path):
                 assert ("compensation.flux_despike" in variable.attrs.get("comment", "")) is (
                     expected
                 )
+
+
+def test_the_wave_motion_left_of_each_flux_window_is_there_with_its_flag(written, tmp_path):
+    _, made, _, _, _ = written
+    # The example's 1-min windows are too short for the test: give them figures of their own.
+    nan = math.nan
+    figures = [
+        (0.1, 0.3, 0.05, 0.07, 0.02, 1),
+        (0.1, 0.4, 0.6, 0.07, 0.5, 4),
+        (nan, nan, nan, nan, nan, 2),
+    ]
+    fluxes = [
+        dataclasses.replace(
+            window,
+            wave_band_low_hz=low,
+            wave_band_high_hz=high,
+            motion_left_coherence=coherence,
+            motion_left_coherence_threshold=threshold,
+            motion_left_share=share,
+            motion_left_flag=flag,
+        )
+        for window, (low, high, coherence, threshold, share, flag) in zip(
+            made.fluxes, figures, strict=True
+        )
+    ]
+    path = write_netcdf(tmp_path / "motion.nc", dataclasses.replace(made, fluxes=fluxes), False)
+    with xr.open_dataset(path, decode_times=False) as dataset:
+        for field, column in (
+            ("wave_band_low_hz", 0),
+            ("wave_band_high_hz", 1),
+            ("motion_left_coherence", 2),
+            ("motion_left_coherence_threshold", 3),
+            ("motion_left_share", 4),
+        ):
+            variable = dataset[product_variable_name("flux", 60.0, field)]
+            np.testing.assert_array_equal(variable.values, [row[column] for row in figures])
+            assert variable.attrs["units"] == ("Hz" if field.startswith("wave") else "1")
+            assert "wave band" in variable.attrs["long_name"]
+        share = dataset["flux_1min_motion_left_share"]
+        assert share.attrs["ancillary_variables"] == "flux_1min_motion_left_flag"
+        flag = dataset["flux_1min_motion_left_flag"]
+        assert flag.dtype == np.int8
+        assert flag.values.tolist() == [1, 4, 2]
+        assert flag.attrs["flag_values"].tolist() == [f.value for f in QualityFlag]
+        assert "motion left" in flag.attrs["long_name"]

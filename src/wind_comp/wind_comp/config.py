@@ -34,6 +34,7 @@ from buoy_common.parameters import build_config, check_parameter_files, load_par
 from wind_comp.compensator import FlowSensor, SigmaLimits
 from wind_comp.flux_products import DEFAULT_FLUX_WINDOW_S
 from wind_comp.fluxes import STANDARD_PRESSURE_PA, PlanarFit
+from wind_comp.wave_motion_left import DEFAULT_THRESHOLDS, MotionLeftThresholds
 
 COMPENSATION_NODE_NAME = "compensation_node"
 """Node name whose parameter-file sections configure the compensation (live and offline)."""
@@ -174,6 +175,25 @@ class CompensatorConfig:
         meaning="take the Vickers-Mahrt spikes out of the fluxes (spikes_* then count the "
         "samples taken out); false: only count them",
     )
+    motion_left_suspect_share: float = parameter(
+        DEFAULT_THRESHOLDS.suspect_share,
+        meaning='"motion left" flux test: suspect where the corrected w keeps this share of '
+        "the platform's vertical velocity over the wave band, with a coherence beyond noise",
+        rule=POSITIVE,
+    )
+    motion_left_fail_share: float = parameter(
+        DEFAULT_THRESHOLDS.fail_share,
+        meaning='"motion left" flux test: fail from this share on (at least '
+        "motion_left_suspect_share)",
+        rule=POSITIVE,
+    )
+    motion_left_coherence_sigmas: float = parameter(
+        DEFAULT_THRESHOLDS.coherence_sigmas,
+        meaning='"motion left" flux test: the share counts where the coherence of w with the '
+        "platform's vertical velocity over the wave band lies this many standard deviations "
+        "above that of unrelated series (motion_left_coherence_threshold)",
+        rule=POSITIVE,
+    )
     anemometer_noise_sigma_mps: tuple[float, float, float] = parameter(
         (0.05, 0.05, 0.03),
         unit="m/s",
@@ -210,6 +230,11 @@ class CompensatorConfig:
                 f"(double rotation), got {self.flux_planar_fit!r}"
             )
         object.__setattr__(self, "flux_planar_fit", plane)
+        if self.motion_left_fail_share < self.motion_left_suspect_share:
+            raise ConfigError(
+                f"motion_left_fail_share ({self.motion_left_fail_share}) must be at least "
+                f"motion_left_suspect_share ({self.motion_left_suspect_share})"
+            )
         if self.gust_window_s >= min(self.product_windows_s):
             raise ConfigError(
                 f"gust_window_s ({self.gust_window_s}) must be shorter than every product window "
@@ -221,6 +246,14 @@ class CompensatorConfig:
         if math.isnan(self.flux_planar_fit[0]):
             return None
         return PlanarFit(*self.flux_planar_fit)
+
+    def motion_left_thresholds(self) -> MotionLeftThresholds:
+        """Where the fluxes' "motion left" test turns suspect and fail."""
+        return MotionLeftThresholds(
+            self.motion_left_suspect_share,
+            self.motion_left_fail_share,
+            self.motion_left_coherence_sigmas,
+        )
 
     def flow_sensor(self) -> FlowSensor:
         """The anemometer as the correction sees it."""

@@ -19,7 +19,10 @@ Quality flag (IOOS QARTOD, :class:`buoy_common.contract.QualityFlag`): from the 
 coverage as for the wind products, then lowered by the flux tests: suspect when the
 Foken–Wichura non-stationarity of u'w' exceeds :data:`STATIONARY_PERCENT` or spikes exceed
 :data:`MAX_SPIKE_SHARE` of the samples of a component, bad when the non-stationarity exceeds
-:data:`NON_STATIONARY_PERCENT` (Foken et al. 2004: classes 1–3 below 30 %, class 9 above 100 %).
+:data:`NON_STATIONARY_PERCENT` (Foken et al. 2004: classes 1–3 below 30 %, class 9 above 100 %);
+and by the "motion left" test (:mod:`wind_comp.wave_motion_left`) on the platform vertical
+velocity each corrected sample was corrected with, whose figures and own flag the window
+carries too.
 """
 
 from __future__ import annotations
@@ -42,6 +45,12 @@ from wind_comp.products import (
     RATE_MEMORY_INTERVALS,
     quality_flag,
     window_coverage,
+)
+from wind_comp.wave_motion_left import (
+    DEFAULT_THRESHOLDS,
+    MotionLeftThresholds,
+    WaveMotionLeft,
+    wave_motion_left,
 )
 
 DEFAULT_FLUX_WINDOW_S = 1800.0
@@ -88,6 +97,19 @@ class FluxProduct:
     stationarity_w_ts_percent: float
     coverage: float
     quality_flag: int
+    """The worst of the flux tests' flags and the "motion left" flag (not evaluated aside)."""
+    wave_band_low_hz: float = math.nan
+    wave_band_high_hz: float = math.nan
+    """The window's wave band, Hz, from its platform vertical velocity
+    (:mod:`wind_comp.wave_motion_left`)."""
+    motion_left_coherence: float = math.nan
+    """Mean coherence of the corrected w with the platform vertical velocity over the band."""
+    motion_left_coherence_threshold: float = math.nan
+    """The coherence unrelated series would not exceed, above which the share counts."""
+    motion_left_share: float = math.nan
+    """Share of the platform vertical velocity left in the corrected w over the band."""
+    motion_left_flag: int = int(QualityFlag.NOT_EVALUATED)
+    """QARTOD flag of the "motion left" test: 1 pass, 3 suspect, 4 fail, 2 not evaluated."""
 
 
 def flux_quality_flag(coverage: float, n_valid: int, fluxes) -> QualityFlag:
@@ -107,6 +129,16 @@ def flux_quality_flag(coverage: float, n_valid: int, fluxes) -> QualityFlag:
     return flag
 
 
+def with_motion_left(flag: QualityFlag, motion_left: WaveMotionLeft) -> QualityFlag:
+    """A window's ``flag`` lowered by its "motion left" test (not evaluated leaves it, and a
+    window already missing stays missing)."""
+    if flag == QualityFlag.MISSING or motion_left.flag == QualityFlag.NOT_EVALUATED:
+        return flag
+    if flag == QualityFlag.NOT_EVALUATED:
+        return motion_left.flag
+    return max(flag, motion_left.flag)
+
+
 class FluxAverager:
     """The flux products of one window length, from the corrected wind (ENU, m/s) and the sonic
     temperature (°C), as they come."""
@@ -117,6 +149,7 @@ class FluxAverager:
         plane: PlanarFit | None = None,
         pressure_pa: float = STANDARD_PRESSURE_PA,
         despike: bool = False,
+        motion_left_thresholds: MotionLeftThresholds = DEFAULT_THRESHOLDS,
     ):
         """Args:
         window_s: window length, s.
@@ -124,6 +157,7 @@ class FluxAverager:
         pressure_pa: air pressure for the air density of the stress, Pa.
         despike: take the Vickers–Mahrt spikes each window counts out of its fluxes
             (:func:`wind_comp.fluxes.window_fluxes`); False: count them only.
+        motion_left_thresholds: where the "motion left" test turns suspect and fail.
         """
         if not (math.isfinite(window_s) and window_s > 0):
             raise FluxError(f"flux window_s must be positive, got {window_s}")
@@ -131,22 +165,31 @@ class FluxAverager:
         self.plane = plane
         self.pressure_pa = float(pressure_pa)
         self.despike = bool(despike)
+        self.motion_left_thresholds = motion_left_thresholds
         self.n_rejected_stamps = 0
         self._stamps: list[float] = []
         self._winds: list[np.ndarray] = []
+        self._platform_up_mps: list[float] = []
         self._temperature_stamps: list[float] = []
         self._temperatures: list[float] = []
         self._latest_wind_s = -math.inf
         self._latest_temperature_s = -math.inf
         self._interval_stamps = np.empty(0)
 
-    def add_batch(self, t_s, winds_enu_mps) -> list[FluxProduct]:
-        """(N,) stamps (s) and (N, 3) corrected winds (NaN when invalid), in output order;
-        returns the windows they close."""
+    def add_batch(self, t_s, winds_enu_mps, platform_up_velocity_mps=None) -> list[FluxProduct]:
+        """(N,) stamps (s) and (N, 3) corrected winds (ENU m/s, NaN when invalid), in output
+        order, with the (N,) platform vertical velocity (ENU up, m/s) each was corrected with
+        (None: not known, the "motion left" test is not evaluated); returns the windows they
+        close."""
         stamps = np.asarray(t_s, dtype=float)
         winds = np.asarray(winds_enu_mps, dtype=float).reshape(-1, 3)
+        platform = (
+            np.full(stamps.shape, np.nan)
+            if platform_up_velocity_mps is None
+            else np.asarray(platform_up_velocity_mps, dtype=float)
+        )
         closed = []
-        for t, wind in zip(stamps.tolist(), winds, strict=True):
+        for t, wind, up in zip(stamps.tolist(), winds, platform.tolist(), strict=True):
             if not (math.isfinite(t) and t > self._latest_wind_s):
                 self.n_rejected_stamps += 1
                 continue
@@ -154,6 +197,7 @@ class FluxAverager:
             self._latest_wind_s = t
             self._stamps.append(t)
             self._winds.append(wind)
+            self._platform_up_mps.append(up)
         return closed
 
     def add_temperature(self, t_s: float, temperature_degc: float) -> list[FluxProduct]:
@@ -201,7 +245,8 @@ class FluxAverager:
         count = bisect.bisect_left(self._stamps, end)
         stamps = np.array(self._stamps[:count])
         winds = np.array(self._winds[:count])
-        del self._stamps[:count], self._winds[:count]
+        platform_up_mps = np.array(self._platform_up_mps[:count])
+        del self._stamps[:count], self._winds[:count], self._platform_up_mps[:count]
         temperature_stamps = np.array(self._temperature_stamps)
         temperatures = np.array(self._temperatures)
         keep = temperature_stamps >= end
@@ -231,6 +276,10 @@ class FluxAverager:
             despike=self.despike,
         )
         coverage = window_coverage(n_valid, interval_s, self.window_s)
+        motion_left = wave_motion_left(
+            stamps, winds[:, 2], platform_up_mps, interval_s, self.motion_left_thresholds
+        )
+        flag = with_motion_left(flux_quality_flag(coverage, n_valid, fluxes), motion_left)
         return FluxProduct(
             window_s=self.window_s,
             window_start_s=start,
@@ -256,7 +305,13 @@ class FluxAverager:
             stationarity_u_w_percent=fluxes.stationarity_u_w_percent,
             stationarity_w_ts_percent=fluxes.stationarity_w_ts_percent,
             coverage=coverage,
-            quality_flag=int(flux_quality_flag(coverage, n_valid, fluxes)),
+            quality_flag=int(flag),
+            wave_band_low_hz=motion_left.band_low_hz,
+            wave_band_high_hz=motion_left.band_high_hz,
+            motion_left_coherence=motion_left.coherence,
+            motion_left_coherence_threshold=motion_left.coherence_threshold,
+            motion_left_share=motion_left.share,
+            motion_left_flag=int(motion_left.flag),
         )
 
 

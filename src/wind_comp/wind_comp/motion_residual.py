@@ -68,8 +68,18 @@ def wave_band_hz(vertical_acceleration, rate_hz: float) -> tuple[float, float]:
     spectrum exceeds :data:`BAND_FRACTION` of the peak, within the wave frequencies, Hz."""
     x = gaps_filled(vertical_acceleration)
     frequency, density = signal.welch(x, fs=rate_hz, nperseg=_segment(rate_hz, x.size))
+    return band_around_peak_hz(frequency, density)
+
+
+def band_around_peak_hz(frequency_hz: np.ndarray, density: np.ndarray) -> tuple[float, float]:
+    """The contiguous band (Hz) around the peak of the spectrum ``density`` of a vertical
+    acceleration at ``frequency_hz`` where it exceeds :data:`BAND_FRACTION` of the peak, within
+    the wave frequencies (ValueError when the spectrum holds none of them)."""
+    frequency = frequency_hz
     low, high = WAVE_FREQUENCY_LIMITS_HZ
     inside = (frequency >= low) & (frequency <= high)
+    if not inside.any():
+        raise ValueError(f"a spectrum up to {frequency[-1]:g} Hz holds no wave frequency")
     peak = np.flatnonzero(inside)[np.argmax(density[inside])]
     above = inside & (density >= BAND_FRACTION * density[peak])
     start = peak

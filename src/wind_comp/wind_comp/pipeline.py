@@ -285,8 +285,13 @@ class CompensationPipeline:
                 products += averager.add_batch(
                     corrected.t_s, corrected.flow_enu_mps, corrected.covariance
                 )
+            # The translation term is the platform velocity each sample was corrected with:
+            # what the fluxes' "motion left" test looks for in the corrected w.
+            platform_up_mps = corrected.translation_term_enu_mps[:, 2]
             for averager in self.flux_averagers:
-                products += averager.add_batch(corrected.t_s, corrected.flow_enu_mps)
+                products += averager.add_batch(
+                    corrected.t_s, corrected.flow_enu_mps, platform_up_mps
+                )
         # A sample closes the windows it is the first of, in averager order: the windows
         # closed by one sample share their last sample.
         products.sort(key=lambda product: product.last_sample_s)
@@ -334,6 +339,7 @@ def wind_pipeline(config: CompensatorConfig) -> CompensationPipeline:
                 config.planar_fit(),
                 config.air_pressure_pa,
                 config.flux_despike,
+                config.motion_left_thresholds(),
             )
         ],
     )

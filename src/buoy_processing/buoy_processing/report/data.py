@@ -14,7 +14,7 @@ bags with them too.
 import datetime
 import math
 import sys
-from dataclasses import dataclass, field, fields
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import NamedTuple, get_type_hints
 
@@ -35,6 +35,7 @@ from buoy_common.contract import (
     window_label,
 )
 from buoy_common.namespaces import TopicView
+from buoy_nav.rotations import rotate_by_quaternion_components
 from buoy_processing.report.attitude import (
     interpolate_rpy_rad,
     rpy_rad_from_quaternions,
@@ -68,6 +69,9 @@ class ReportData:
         truth_rpy_rad: (M, 3) true roll, pitch, yaw at ``attitude_t_s``, rad, or None.
         nav_rpy_sigma_rad: (M, 3) the filter's 1σ of the estimated roll, pitch and yaw, rad, or
             None (see :func:`rpy_sigma_rad`).
+        nav_up_velocity_mps: (M,) the navigation's vertical velocity of the body origin (ENU
+            up, m/s) at ``attitude_t_s``, or None: the platform motion whose spectrum gives the
+            record's wave band.
         products: averaged wind products.
         fluxes: the eddy-covariance fluxes per window, as published (``wind/fluxes_<window>``;
             empty when the source has none: the report does not compute them).
@@ -84,6 +88,7 @@ class ReportData:
     nav_rpy_rad: np.ndarray | None = None
     truth_rpy_rad: np.ndarray | None = None
     nav_rpy_sigma_rad: np.ndarray | None = None
+    nav_up_velocity_mps: np.ndarray | None = None
     products: list[WindProduct] = field(default_factory=list)
     fluxes: list[FluxProduct] = field(default_factory=list)
     title: str = ""
@@ -101,7 +106,7 @@ class ReportData:
             )
         if (self.nav_rpy_rad is None) != (self.attitude_t_s is None):
             raise ReportDataError("attitude_t_s and nav_rpy_rad must be given together")
-        for name in ("truth_rpy_rad", "nav_rpy_sigma_rad"):
+        for name in ("truth_rpy_rad", "nav_rpy_sigma_rad", "nav_up_velocity_mps"):
             if getattr(self, name) is not None and self.nav_rpy_rad is None:
                 raise ReportDataError(f"{name} needs attitude_t_s and nav_rpy_rad")
         if self.attitude_t_s is not None:
@@ -110,6 +115,10 @@ class ReportData:
             for name in ("nav_rpy_rad", "truth_rpy_rad", "nav_rpy_sigma_rad"):
                 if getattr(self, name) is not None:
                     setattr(self, name, _array(name, getattr(self, name), (n_attitudes, 3)))
+            if self.nav_up_velocity_mps is not None:
+                self.nav_up_velocity_mps = _array(
+                    "nav_up_velocity_mps", self.nav_up_velocity_mps, (n_attitudes,)
+                )
 
 
 def _array(name: str, values, shape: tuple) -> np.ndarray:
@@ -134,6 +143,7 @@ _ARRAY_FIELDS = (
     "nav_rpy_rad",
     "truth_rpy_rad",
     "nav_rpy_sigma_rad",
+    "nav_up_velocity_mps",
 )
 _PRODUCT_PREFIX = "product_"
 _FLUX_PREFIX = "flux_"
@@ -368,12 +378,14 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
         true_wind = interpolate_vectors(
             measured.stamps_ns, stamped_vectors(reader, TRUTH_WIND_TOPIC)
         )
-    attitude_t_s = nav_rpy = truth_rpy = nav_rpy_sigma = None
+    attitude_t_s = nav_rpy = truth_rpy = nav_rpy_sigma = nav_up_velocity = None
     if has_messages(reader, NAV_ODOMETRY_TOPIC):
         nav = odometry_series(reader, NAV_ODOMETRY_TOPIC)
         attitude_t_s = nav.stamps_ns / NANOSECONDS_PER_SECOND
         nav_rpy = rpy_rad_from_quaternions(nav.quat_xyzw)
         nav_rpy_sigma = rpy_sigma_rad(nav_rpy, nav.attitude_covariance_enu_rad2)
+        velocity_enu = rotate_by_quaternion_components(nav.quat_xyzw.T, nav.velocity_body_mps.T)
+        nav_up_velocity = velocity_enu[2]
         if has_messages(reader, TRUTH_ODOMETRY_TOPIC):
             truth = odometry_series(reader, TRUTH_ODOMETRY_TOPIC)
             truth_rpy = interpolate_rpy_rad(nav.stamps_ns, truth.stamps_ns, truth.quat_xyzw)
@@ -389,6 +401,7 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
         nav_rpy_rad=nav_rpy,
         truth_rpy_rad=truth_rpy,
         nav_rpy_sigma_rad=nav_rpy_sigma,
+        nav_up_velocity_mps=nav_up_velocity,
         products=products,
         fluxes=fluxes,
         title=title,
@@ -498,12 +511,17 @@ def published_fluxes(reader: BagReader) -> list[FluxProduct]:
     topics = [name for name in reader.topics if name.lstrip("/").startswith(WIND_FLUXES_PREFIX)]
     if not topics:
         return []
-    names = [flux_field.name for flux_field in fields(FluxProduct)]
+    # Bags written before the wave motion left was published lack those fields: their
+    # defaults (NaN, not evaluated) stand in.
+    required = [f.name for f in fields(FluxProduct) if f.default is MISSING]
+    optional = [f.name for f in fields(FluxProduct) if f.default is not MISSING]
     fluxes = []
     for message in reader.messages(topics):
         try:
             values = stats_values(reader.decode(message))
-            fluxes.append(_window(FluxProduct, {name: values[name] for name in names}))
+            published = {name: values[name] for name in required}
+            published.update({name: values[name] for name in optional if name in values})
+            fluxes.append(_window(FluxProduct, published))
         except (KeyError, ValueError) as error:
             raise ReportDataError(
                 f"bag {reader.path}: {message.topic} message at log time {message.log_time_ns} "

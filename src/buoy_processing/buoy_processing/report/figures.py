@@ -9,13 +9,18 @@ global backend state are involved:
   within the filter's own ±3σ when the navigation carries its covariance;
 - ``vertical_wind_spectrum.png``: Welch power spectra of the vertical wind before and after
   correction (and of the truth), averaged over segments and then over log-spaced frequency
-  bands so that they read as lines; the wave band (where the buoy's tilt has its energy)
+  bands so that they read as lines; the record's wave band (from the spectrum of the
+  platform's vertical motion, as each flux window's: :mod:`wind_comp.wave_motion_left`)
   shaded; a −5/3 reference slope (the inertial subrange); and, below, the variance-preserving
   f·S(f), whose area shows where the variance lies;
 - ``wind_fluxes.png`` (bags with ``wind/fluxes_*``): the friction velocity u* (and the buoyancy
   flux w'Ts' with a sonic temperature) of each flux window as published, drawn over the
   window's span; windows whose QARTOD flag is not good drawn as open red markers labelled with
   their flag;
+- ``wave_motion_left.png`` (bags with ``wind/fluxes_*``): per flux window, the share of the
+  platform's vertical velocity left in the corrected w and its coherence with w over the
+  window's wave band, against the "motion left" test's default thresholds, each window marked
+  with that test's flag;
 - ``current_time_series.png`` (bags with ``current/velocity``): the current's single samples,
   its window means and the truth;
 - ``current_averaging.png`` (with the simulator's truth): the error of the window means against
@@ -37,6 +42,7 @@ from buoy_processing.report.attitude import attitude_errors_deg
 from buoy_processing.report.current import CurrentData, error_by_window_length
 from buoy_processing.report.data import ReportData, titled, utc_text, wind_series
 from wind_comp.products import meteorological_direction_deg, oceanographic_direction_deg
+from wind_comp.wave_motion_left import DEFAULT_THRESHOLDS, platform_wave_band_hz
 
 _MIN_SPECTRUM_SAMPLES = 32
 _MIN_SEGMENTS = 15
@@ -54,6 +60,7 @@ def write_figures(data: ReportData, out_dir: Path) -> list[Path]:
         paths.append(spectrum)
     if data.fluxes:
         paths.append(_plot_fluxes(data, out_dir / "wind_fluxes.png"))
+        paths.append(_save(wave_motion_left_figure(data), out_dir / "wave_motion_left.png"))
     return paths
 
 
@@ -174,6 +181,74 @@ def _plot_fluxes(data: ReportData, path: Path) -> Path:
     return _save(figure, path)
 
 
+_MOTION_LEFT_STYLE = {
+    QualityFlag.GOOD: ("tab:blue", "o", "pass"),
+    QualityFlag.SUSPECT: ("tab:orange", "s", "suspect"),
+    QualityFlag.BAD: ("tab:red", "X", "fail"),
+}
+"""Colour, marker and name of each flag of the "motion left" test."""
+
+
+def wave_motion_left_figure(data: ReportData) -> Figure:
+    """Per flux window, at its middle: the share of the platform's vertical velocity left in
+    the corrected w and the coherence of w with it over the window's wave band, marked by the
+    "motion left" flag, against the test's default share thresholds (the parameters
+    ``compensation.motion_left_*``) and each window's coherence threshold; the windows it
+    could not evaluate counted in the title."""
+    fluxes = data.fluxes
+    middles = np.array([0.5 * (f.window_start_s + f.window_end_s) for f in fluxes])
+    middles -= data.time_origin_s
+    flags = np.array([flux.motion_left_flag for flux in fluxes])
+    figure = Figure(figsize=(11, 6.5))
+    share_axis, coherence_axis = figure.subplots(2, 1, sharex=True)
+    for axis, name in (
+        (share_axis, "motion_left_share"),
+        (coherence_axis, "motion_left_coherence"),
+    ):
+        values = np.array([getattr(flux, name) for flux in fluxes])
+        for flag, (colour, marker, meaning) in _MOTION_LEFT_STYLE.items():
+            marked = flags == flag
+            if marked.any():
+                axis.plot(
+                    middles[marked],
+                    values[marked],
+                    linestyle="none",
+                    marker=marker,
+                    markersize=8,
+                    color=colour,
+                    label=f"flag {int(flag)} ({meaning})",
+                )
+        axis.set_ylim(bottom=0.0)
+        axis.grid(alpha=0.3)
+    thresholds = DEFAULT_THRESHOLDS
+    for share, colour, meaning in (
+        (thresholds.suspect_share, "tab:orange", "suspect"),
+        (thresholds.fail_share, "tab:red", "fail"),
+    ):
+        share_axis.axhline(
+            share, color=colour, linestyle="--", label=f"{meaning} from {share:g} (default)"
+        )
+    coherence_axis.plot(
+        middles,
+        [flux.motion_left_coherence_threshold for flux in fluxes],
+        linestyle="none",
+        marker="_",
+        markersize=30,
+        color="grey",
+        label="counts above (unrelated series' coherence + "
+        f"{thresholds.coherence_sigmas:g}σ, default)",
+    )
+    share_axis.set_ylabel("platform w left in w (share)")
+    coherence_axis.set_ylabel("coherence of w with platform w")
+    coherence_axis.set_xlabel(_time_label(data))
+    for axis in (share_axis, coherence_axis):
+        axis.legend(loc="upper right", fontsize="small")
+    unjudged = int(np.count_nonzero(flags == QualityFlag.NOT_EVALUATED))
+    note = f" ({unjudged} window(s) too short or broken to judge)" if unjudged else ""
+    figure.suptitle(titled(data, f"wave motion left in the corrected w per flux window{note}"))
+    return figure
+
+
 def _unwrapped_deg(direction_deg: np.ndarray) -> np.ndarray:
     """A direction series without its jumps at 360/0 (NaN samples kept NaN)."""
     unwrapped = np.full_like(direction_deg, np.nan)
@@ -247,7 +322,7 @@ def _plot_vertical_wind_spectrum(data: ReportData, path: Path) -> Path | None:
                 color="tab:orange",
                 alpha=0.12,
                 zorder=0,
-                label="wave band (buoy tilt)" if axis is density_axis else None,
+                label="wave band (platform heave)" if axis is density_axis else None,
             )
     density_axis.set_ylabel("S(f) of w (m²/s² per Hz)")
     preserving_axis.set_ylabel("f·S(f) (m²/s²)")
@@ -305,20 +380,12 @@ def _draw_five_thirds(axis, frequency_hz: np.ndarray, density: np.ndarray) -> No
 
 
 def _wave_band_hz(data: ReportData) -> tuple[float, float] | None:
-    """The frequencies where the estimated tilt (roll and pitch) holds its energy: where its
-    spectrum exceeds a tenth of its peak; None without attitude."""
-    if data.attitude_t_s is None or data.attitude_t_s.size < 4 * _MIN_SPECTRUM_SAMPLES:
+    """The record's wave band, Hz, from the navigation's vertical velocity as each flux
+    window's (:func:`wind_comp.wave_motion_left.platform_wave_band_hz`); None without it."""
+    if data.nav_up_velocity_mps is None or data.attitude_t_s.size < 2:
         return None
-    rate_hz = 1.0 / float(np.median(np.diff(data.attitude_t_s)))
-    tilt = data.nav_rpy_rad[:, :2]
-    if not np.isfinite(tilt).all():
-        return None
-    segment = _segment_samples(tilt.shape[0], rate_hz)
-    frequency_hz, density = welch(tilt, fs=rate_hz, nperseg=segment, axis=0)
-    total = density.sum(axis=1)[1:]
-    frequency_hz = frequency_hz[1:]
-    strong = frequency_hz[total >= 0.1 * total.max()]
-    return float(strong.min()), float(strong.max())
+    interval_s = float(np.median(np.diff(data.attitude_t_s)))
+    return platform_wave_band_hz(data.attitude_t_s, data.nav_up_velocity_mps, interval_s)
 
 
 def _longest_true_run(mask: np.ndarray) -> slice:
