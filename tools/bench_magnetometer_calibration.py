@@ -21,6 +21,7 @@ import argparse
 import contextlib
 import io
 import json
+import re
 import subprocess
 import sys
 from concurrent.futures import ProcessPoolExecutor
@@ -113,7 +114,7 @@ def run_command(in_bag: Path, out_yaml: Path) -> tuple[int, str]:
     command += [str(in_bag), str(out_yaml), "--overwrite"]
     done = subprocess.run(command, capture_output=True, text=True)
     lines = done.stderr.strip().splitlines()
-    return done.returncode, (lines[-1] if lines else "")
+    return done.returncode, (lines[-1].removeprefix("calibrate_magnetometer: ") if lines else "")
 
 
 def heading_errors_deg(out_bag: Path) -> dict:
@@ -160,7 +161,7 @@ def fuse_with(directory: Path, in_bag: Path, calibration_yaml: Path, scenario) -
 def run_case(key: str) -> dict:
     """Simulate, calibrate, judge and (when written) fuse one motion (in a worker)."""
     overrides = CASES[key]
-    directory = WORK / key.replace(" | ", "_").replace(" ", "_").replace("/", "-")
+    directory = WORK / re.sub(r"[^A-Za-z0-9.]+", "_", key).strip("_")
     directory.mkdir(parents=True, exist_ok=True)
     in_bag, calibration_yaml = directory / "in", directory / "magnetometer.yaml"
     arguments = [SCENARIO, str(in_bag), "--overwrite"]
