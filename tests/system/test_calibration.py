@@ -10,11 +10,14 @@ refused, where the fit it would write is wrong.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
 from buoy_common.contract import IMU_RAW_TOPIC, MAGNETOMETER_TOPIC, header_seconds
 from buoy_nav import earth
+from buoy_nav.calibrate_magnetometer import main as calibrate_magnetometer_command
 from buoy_nav.calibration import (
     CalibrationError,
     calibrate_imu,
@@ -24,6 +27,8 @@ from buoy_nav.calibration import (
 )
 from sensor_sim.scenario import load_scenario
 from sensor_sim.sensor_models import ImuSimulator
+from sensor_sim.simulate_bag import parse_arguments as simulate_arguments
+from sensor_sim.simulate_bag import simulate
 from sensor_sim.streams import IMU_SEED_KEY, STREAMS, merged_messages
 from sensor_sim.truth import TruthModel
 
@@ -200,3 +205,20 @@ def test_the_record_motion_is_the_truth_s_heading_swing_and_tilt(moored_full_tur
     swing_deg = np.degrees(np.ptp(euler[:, 2]))
     assert abs(motion.heading_swing_deg - swing_deg) < drift_deg + 2.0
     assert motion.tilt_deg > 15.0
+
+
+def test_the_command_refuses_a_moored_record_saying_how_the_buoy_moved(tmp_path, capsys):
+    """``calibrate_magnetometer`` on a bag: exit code 2, one line naming the heading swing it
+    read from the bag's IMU, and no parameter file."""
+    bag, output = tmp_path / "moored", tmp_path / "magnetometer.yaml"
+    arguments = [MOORED, str(bag), "--no-truth", "--set", "duration_s=120"]
+    for override in (*MOORED_SEA, "motion.mooring_yaw_amplitude_deg=0"):
+        arguments += ["--set", override]
+    simulate(simulate_arguments(arguments))
+    with pytest.raises(SystemExit) as exit_info:
+        calibrate_magnetometer_command([str(bag), str(output)])
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1
+    assert re.search(r"heading swung over about \d+°.*record the buoy through a full turn", error)
+    assert not output.exists()
