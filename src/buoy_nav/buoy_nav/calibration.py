@@ -47,19 +47,17 @@ SOFT_IRON_ELEMENTS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 """The free elements of the symmetric soft-iron matrix, in the order the fit's Jacobian has
 them."""
 IRON_PARTS = {
-    "horizontal": (
-        (0, 1),
-        ((0, 0), (1, 1), (0, 1)),
-        "the heading must swing further: record a full turn",
-    ),
-    "vertical": ((2,), ((2, 2), (0, 2), (1, 2)), "the buoy must tilt more: record it rocking"),
+    "horizontal": ((0, 1), ((0, 0), (1, 1), (0, 1)), "the heading's swing determines it"),
+    "vertical": ((2,), ((2, 2), (0, 2), (1, 2)), "the tilt and the swing together determine it"),
 }
 """The hard-iron axes and soft-iron elements a moored buoy's heading swing determines (the
-body x-y plane, nearly level) and those its tilt determines, with the motion each needs."""
+body x-y plane, nearly level) and those that also need its tilt, with what determines each."""
 SINGULAR_INFORMATION_RATIO = 1e-12
 """An information matrix whose eigenvalues span more than this leaves a direction free."""
 MAX_RESIDUAL_OVER_NOISE = 2.0
 """A right ellipsoid leaves the sensor's noise in the magnitude; twice that is a wrong one."""
+LEVELLING_TIME_S = 30.0
+"""Time constant with which record_motion's vertical follows the specific force's."""
 FULL_TURN_DEG = 360.0
 WANTED_TILT_DEG = 10.0
 """What to ask of a new record after a refusal: the motions under which the bench
@@ -198,10 +196,10 @@ class MagnetometerCalibration:
 
 @dataclass(frozen=True)
 class RecordMotion:
-    """How a record moved the buoy, from its IMU: heading_swing_deg, the range of the heading
-    (the Euler heading rate integrated, roll and pitch from the specific force; the gyro's bias
-    adds up to about 15° over ten minutes), and tilt_deg, the 95th percentile of the angle
-    between the specific force and the vertical (wave accelerations included)."""
+    """How a record moved the buoy, from its IMU: heading_swing_deg, the range of the heading,
+    and tilt_deg, the 95th percentile of the tilt, both of the attitude the gyro integrates,
+    levelled slowly by the specific force (the gyro's turn-on bias adds up to about 15° of
+    heading over ten minutes)."""
 
     heading_swing_deg: float
     tilt_deg: float
@@ -222,23 +220,43 @@ class RecordMotion:
         return f"record the buoy {' and '.join(wanted)}" if wanted else ""
 
 
+def _rotation_of(vector_rad: np.ndarray) -> np.ndarray:
+    """The rotation matrix of a rotation vector (rad), Rodrigues' formula."""
+    angle = float(np.linalg.norm(vector_rad))
+    if angle < 1e-12:
+        return np.eye(3)
+    axis = vector_rad / angle
+    cross = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * cross + (1.0 - math.cos(angle)) * cross @ cross
+
+
 def record_motion(t_s, gyro_rad_s, force_mps2) -> RecordMotion:
     """The heading swing and tilt of a record (see RecordMotion) from body-frame gyro rates
-    (rad/s) and specific forces (m/s²) at times t_s (s). The heading rate is the Euler one,
-    (ω_y sin φ + ω_z cos φ) / cos θ: the body z rate alone would also count the coning of a
-    buoy rolling and pitching at one period, which turns it without changing its heading."""
+    (rad/s) and specific forces (m/s²) at times t_s (s).
+
+    The attitude R_nb is integrated from the gyro, so a buoy rolling and pitching at one period
+    (coning: a steady body-z rate without any change of heading) does not count as turning; its
+    vertical is pulled toward the specific force's with LEVELLING_TIME_S, over which the waves'
+    accelerations average out."""
     t = np.asarray(t_s, dtype=float)
     gyro = np.asarray(gyro_rad_s, dtype=float).reshape(-1, 3)
     force = np.asarray(force_mps2, dtype=float).reshape(-1, 3)
-    roll = np.arctan2(force[:, 1], force[:, 2])
-    pitch = np.arctan2(-force[:, 0], np.hypot(force[:, 1], force[:, 2]))
-    heading_rate = (gyro[:, 1] * np.sin(roll) + gyro[:, 2] * np.cos(roll)) / np.cos(pitch)
-    steps = 0.5 * (heading_rate[1:] + heading_rate[:-1]) * np.diff(t)
-    heading = np.concatenate([[0.0], np.cumsum(steps)])
-    tilt = np.degrees(np.arccos(np.clip(force[:, 2] / np.linalg.norm(force, axis=1), -1.0, 1.0)))
+    up_measured = force / np.linalg.norm(force, axis=1)[:, None]
+    roll = math.atan2(up_measured[0, 1], up_measured[0, 2])
+    pitch = math.asin(-float(np.clip(up_measured[0, 0], -1.0, 1.0)))
+    attitude = _rotation_of(np.array([0.0, pitch, 0.0])) @ _rotation_of(np.array([roll, 0.0, 0.0]))
+    heading = np.empty(t.size)
+    tilt = np.empty(t.size)
+    for k in range(t.size):
+        if k:
+            dt = t[k] - t[k - 1]
+            levelling = np.cross(up_measured[k], attitude[2]) * dt / LEVELLING_TIME_S
+            attitude = attitude @ _rotation_of(gyro[k] * dt + levelling)
+        heading[k] = math.atan2(attitude[1, 0], attitude[0, 0])
+        tilt[k] = math.acos(float(np.clip(attitude[2, 2], -1.0, 1.0)))
     return RecordMotion(
-        heading_swing_deg=float(np.degrees(np.ptp(heading))),
-        tilt_deg=float(np.percentile(tilt, 95.0)),
+        heading_swing_deg=float(np.degrees(np.ptp(np.unwrap(heading)))),
+        tilt_deg=float(np.degrees(np.percentile(tilt, 95.0))),
     )
 
 
@@ -365,14 +383,14 @@ def undetermined_iron(calibration: MagnetometerCalibration) -> list[str]:
         )
         return problems
     hard_limit = MAX_HARD_IRON_SIGMA_FIELD_SHARE * calibration.field_t
-    for part, (axes, elements, motion) in IRON_PARTS.items():
+    for part, (axes, elements, determined_by) in IRON_PARTS.items():
         hard_sigma = float(np.max(calibration.hard_iron_sigma_t[list(axes)]))
         soft_sigma = max(float(calibration.soft_iron_sigma[j, k]) for j, k in elements)
         if hard_sigma > hard_limit or soft_sigma > MAX_SOFT_IRON_SIGMA:
             problems.append(
                 f"the {part} hard iron (±{hard_sigma * 1e6:.2g} µT 1σ, at most "
                 f"{hard_limit * 1e6:.2g}) or soft iron (±{soft_sigma:.2g}, at most "
-                f"{MAX_SOFT_IRON_SIGMA:g}) is not determined; {motion}"
+                f"{MAX_SOFT_IRON_SIGMA:g}) is not determined ({determined_by})"
             )
     return problems
 
@@ -388,7 +406,12 @@ def calibrate_magnetometer(field_t, motion: RecordMotion | None = None) -> Magne
     except CalibrationError as error:
         problems = [str(error)]
     if problems:
-        if motion is not None:
+        if motion is None:
+            problems.append(
+                f"record the buoy through a full turn while it tilts by {WANTED_TILT_DEG:.0f}° "
+                "or more"
+            )
+        else:
             problems = [motion.describe(), *problems, motion.advice()]
         raise CalibrationError("; ".join(p for p in problems if p))
     return calibration
