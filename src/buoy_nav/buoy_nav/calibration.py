@@ -198,8 +198,8 @@ class MagnetometerCalibration:
 class RecordMotion:
     """How a record moved the buoy, from its IMU: heading_swing_deg, the range of the heading,
     and tilt_deg, the 95th percentile of the tilt, both of the attitude the gyro integrates,
-    levelled slowly by the specific force (the gyro's turn-on bias adds up to about 15° of
-    heading over ten minutes)."""
+    levelled slowly by the specific force (a gyro bias of 0.02°/s adds 12° of heading over ten
+    minutes: the swing is an upper bound)."""
 
     heading_swing_deg: float
     tilt_deg: float
