@@ -222,3 +222,11 @@ def test_the_command_refuses_a_moored_record_saying_how_the_buoy_moved(tmp_path,
     assert len(error.splitlines()) == 1
     assert re.search(r"heading swung over about \d+°.*record the buoy through a full turn", error)
     assert not output.exists()
+
+
+def test_a_stuck_magnetometer_axis_is_refused_by_name(moored_full_turn):
+    _, _, field, _, _, _ = moored_full_turn
+    stuck = field.copy()
+    stuck[:, 1] = stuck[0, 1]
+    with pytest.raises(CalibrationError, match="reads the same value throughout"):
+        calibrate_magnetometer(stuck)

@@ -56,6 +56,9 @@ SINGULAR_INFORMATION_RATIO = 1e-12
 """An information matrix whose eigenvalues span more than this leaves a direction free."""
 MAX_RESIDUAL_OVER_NOISE = 2.0
 """A right ellipsoid leaves the sensor's noise in the magnitude; twice that is a wrong one."""
+NOISE_FLOOR_T = 1e-12
+"""The noise a record is credited with at least: a noise-free (simulated) field still leaves
+rounding in the magnitude."""
 LEVELLING_TIME_S = 30.0
 """Time constant with which record_motion's vertical follows the specific force's."""
 FULL_TURN_DEG = 360.0
@@ -181,7 +184,8 @@ class MagnetometerCalibration:
     mean; min_max_residual_t: the same with the min/max centre and per-axis scales only.
     field_t: mean calibrated magnitude. noise_t: the sensor's per-axis noise the record shows
     (third differences). hard_iron_sigma_t (3,), soft_iron_sigma (3×3): the fit's 1σ from that
-    noise and the directions the record's field took (infinite when undetermined)."""
+    noise (or the residual, when larger) and the directions the record's field took (infinite
+    when undetermined)."""
 
     hard_iron_t: np.ndarray
     soft_iron: np.ndarray
@@ -333,6 +337,11 @@ def fit_magnetometer(field_t) -> MagnetometerCalibration:
     field = field[np.all(np.isfinite(field), axis=1)]
     if len(field) < 50:
         raise CalibrationError(f"{len(field)} finite magnetometer samples: at least 50 needed")
+    if np.any(np.ptp(field, axis=0) == 0.0):
+        raise CalibrationError(
+            "a magnetometer axis reads the same value throughout: a stuck sensor, or a record "
+            "in which nothing moved"
+        )
     low, high = field.min(axis=0), field.max(axis=0)
     min_max_centre = 0.5 * (high + low)
     half_ranges = 0.5 * (high - low)
@@ -361,15 +370,16 @@ def undetermined_iron(calibration: MagnetometerCalibration) -> list[str]:
     """What the record leaves undetermined, as sentences: a magnitude that still varies beyond
     the sensor's noise (a wrong ellipsoid through too few directions), a hard or soft iron
     whose 1σ exceeds the limits, in the horizontal part (which the heading swing determines)
-    or the vertical one (which tilt determines), a field strength the Earth never has. The
+    or the vertical one (which needs tilt too), a field strength the Earth never has. The
     σ are those of the linearised fit: a wrong ellipsoid through a partial arc can look precise,
     which the magnitude and strength checks catch first."""
     problems = []
-    if calibration.residual_t > MAX_RESIDUAL_OVER_NOISE * calibration.noise_t:
+    noise_t = max(calibration.noise_t, NOISE_FLOOR_T)
+    if calibration.residual_t > MAX_RESIDUAL_OVER_NOISE * noise_t:
         problems.append(
             f"the calibrated field's magnitude still varies by "
             f"{calibration.residual_t * 1e9:.0f} nT RMS, "
-            f"{calibration.residual_t / calibration.noise_t:.0f} times the sensor's noise "
+            f"{calibration.residual_t / noise_t:.0f} times the sensor's noise "
             f"({calibration.noise_t * 1e9:.0f} nT): the ellipsoid through these few directions "
             "is a wrong one, the iron is not determined"
         )
