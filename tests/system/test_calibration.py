@@ -117,6 +117,12 @@ def test_the_turn_is_found_within_the_sigma_it_states(turning):
     assert np.all(np.abs(error_t) < 4.0 * calibration.hard_iron_sigma_t)
 
 
+def test_half_of_the_turn_is_refused(turning):
+    _, field = turning
+    with pytest.raises(CalibrationError, match="is not determined"):
+        calibrate_magnetometer(field[:300])  # 30 s at 10 Hz: 180° of turning
+
+
 MOORED = "measured_moored_no_gnss"
 MOORED_SEA = ("sensors.ahrs.fitted=false",)
 """The moored buoy's sea (roll 9°, pitch 7.5°, ±3° wobble at 6.5 s), the magnetometer alone."""
