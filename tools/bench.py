@@ -42,6 +42,10 @@ as constants and printed beside our figures:
 16. fluxes: u* and w'Ts' of the corrected wind against those of the truth over two 30-min
     windows of open_ocean with a surface layer carrying fluxes (tools/bench_fluxes.py; about
     fifteen minutes; ``--quick``: two 10-min windows).
+17. magnetometer_calibration: which motions of a moored buoy let calibrate_magnetometer
+    recover the hard and soft iron from the record, and the fused heading with what it writes
+    (tools/bench_magnetometer_calibration.py; twelve 12-min records; ``--quick``: the four of
+    the scenario's own sea).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -50,7 +54,8 @@ go to stdout and out/bench/results.json, progress to stderr.
     python -m tools.bench [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
                                             smoother|antennas|smoother_table1|smoother_speed|
                                             smoother_day|soak|real_record|archive|
-                                            current|current_long|fluxes ...]
+                                            current|current_long|fluxes|
+                                            magnetometer_calibration ...]
 
 Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
 runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 24
@@ -152,6 +157,7 @@ SECTIONS = (
     "fluxes",
     "uncertainty",
     "uncertainty_day",
+    "magnetometer_calibration",
 )
 LONG_SECTIONS = (
     "smoother_table1",
@@ -757,6 +763,22 @@ def uncertainty_sections(run: BenchRun) -> dict:
     return results
 
 
+def magnetometer_calibration_section(run: BenchRun) -> dict:
+    """calibrate_magnetometer on moored records of every motion, and the heading it gives
+    (tools/bench_magnetometer_calibration.py, which writes
+    out/bench/magnetometer_calibration.json)."""
+    if "magnetometer_calibration" not in run.sections:
+        return {}
+    from tools import bench_magnetometer_calibration
+
+    bench_magnetometer_calibration.main(["--quick"] if run.quick else [])
+    return {
+        "magnetometer_calibration": json.loads(
+            (OUT_DIR / "magnetometer_calibration.json").read_text()
+        )
+    }
+
+
 SECTION_STEPS = (
     sensor_sets_section,
     real_record_section,
@@ -767,6 +789,7 @@ SECTION_STEPS = (
     current_sections,
     fluxes_section,
     uncertainty_sections,
+    magnetometer_calibration_section,
     consistency_section,
     soak_section,
     smoother_sections,
