@@ -81,9 +81,9 @@ class OutputFacts:
     def clockwise_from(self) -> str:
         """``clockwise from true north``, or from magnetic north with the declination not
         applied, for direction texts."""
-        if self.north == MAGNETIC_NORTH:
-            return "clockwise from magnetic north (no declination applied)"
-        return f"clockwise from {self.north}"
+        if self.north == UNKNOWN_NORTH:
+            return f"clockwise from {UNKNOWN_NORTH}"
+        return clockwise_from_north_text(self.north_token)
 
     def north_sentence(self) -> str:
         """One sentence naming the north of every direction and how it was obtained."""
@@ -98,6 +98,33 @@ class OutputFacts:
     def sensor_text(self) -> str:
         """The sensors used, as one comma-separated phrase."""
         return ", ".join(self.sensors)
+
+
+_NORTH_TOKENS = {"true_north": TRUE_NORTH, "magnetic_north": MAGNETIC_NORTH}
+
+
+def clockwise_from_north_text(north_token: str) -> str:
+    """The words of a direction's reference from :attr:`OutputFacts.north_token` (``""``: not
+    known to the caller, which says so)."""
+    if north_token == "magnetic_north":
+        return "clockwise from magnetic north (no declination applied)"
+    if north_token in _NORTH_TOKENS:
+        return f"clockwise from {_NORTH_TOKENS[north_token]}"
+    return "clockwise from north; which north is not recorded with these data"
+
+
+def north_token_of_csv(path) -> str:
+    """The north a products CSV's direction columns name (``true_north``, ...), ``""`` when
+    there is no such file or column."""
+    try:
+        with open(path, encoding="utf8") as stream:
+            header = stream.readline().strip().split(",")
+    except OSError:
+        return ""
+    for column in header:
+        if "direction_" in column and column.endswith("_north_deg"):
+            return column.removesuffix("_deg").split("direction_", 1)[1]
+    return ""
 
 
 def output_facts(
