@@ -10,7 +10,6 @@ invalid samples as NaN, log time = header stamp.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -18,6 +17,7 @@ import numpy as np
 
 from buoy_common.bag_io import BagError, BagWriter, jazzy_typestore
 from buoy_common.cdr import ImuWriter, Vector3StampedWriter
+from buoy_common.cli import BAD_INPUT, DONE, command_parser
 from buoy_common.contract import (
     AHRS_TOPIC,
     ANEMOMETER_FRAME,
@@ -45,8 +45,11 @@ NO_ORIENTATION_COVARIANCE = (-1.0,) + (0.0,) * 8
 IDENTITY_XYZW = (0.0, 0.0, 0.0, 1.0)
 
 
+EXIT_CODES = (DONE, BAD_INPUT)
+
+
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="import_records", description=__doc__.split("\n")[0])
+    parser = command_parser("import_records", __doc__, EXIT_CODES)
     parser.add_argument("record", help="the logger's record file (delimited text or binary)")
     parser.add_argument("column_map", help="column map YAML (see docs/real-records.md)")
     parser.add_argument("output", help="bag directory to create")

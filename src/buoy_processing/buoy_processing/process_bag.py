@@ -49,7 +49,13 @@ import sys
 from pathlib import Path
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
-from buoy_common.cli import interruptible
+from buoy_common.cli import (
+    INTERRUPTIBLE_EXIT_CODES,
+    RECOVERED_BAG,
+    ExitCode,
+    command_parser,
+    interruptible,
+)
 from buoy_common.contract import (
     DVL_TOPIC,
     SONIC_TEMPERATURE_TOPIC,
@@ -68,6 +74,7 @@ from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_processing import ProcessSummary, process_bag
+from buoy_processing.offline_fusion import FUSION_TOPICS_HELP
 from wind_comp.config import (
     COMPENSATION_PARAMETER_PREFIX,
     CURRENT_PARAMETER_PREFIX,
@@ -79,14 +86,23 @@ from wind_comp.products import CurrentProduct, QualityFlag, WindProduct
 
 MOSTLY_INVALID_EXIT_CODE = 4
 """Exit code of a run that completed but whose wind or DVL samples came out mostly invalid."""
+EXIT_CODES = (
+    *INTERRUPTIBLE_EXIT_CODES,
+    RECOVERED_BAG,
+    ExitCode(
+        MOSTLY_INVALID_EXIT_CODE,
+        "done, but most wind samples or most DVL samples came out invalid; a warning names the "
+        "main reason, such as a wrong frame",
+    ),
+)
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="process_bag", description=__doc__.split("\n")[0])
+    parser = command_parser("process_bag", __doc__, EXIT_CODES)
     parser.add_argument(
         "in_bag",
-        help="bag with imu/data_raw, gnss/fix, gnss/heading[, gnss/vel, gnss/baseline] and "
-        "anemometer/wind, dvl/velocity or both",
+        help=f"bag with {FUSION_TOPICS_HELP}, and anemometer/wind (with "
+        "anemometer/temperature for the buoyancy flux), dvl/velocity or both",
     )
     parser.add_argument("out_bag", help="bag directory to create")
     parser.add_argument(
