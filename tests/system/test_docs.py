@@ -191,7 +191,11 @@ NAMED_SCRIPTS = {
 
 
 def uses_argparse(source: Path) -> bool:
-    return source.is_file() and "argparse" in source.read_text()
+    """Whether the script parses a command line (argparse, or buoy_common.cli's parser)."""
+    if not source.is_file():
+        return False
+    text = source.read_text()
+    return "argparse" in text or "command_parser(" in text
 
 
 def help_target(command: Command) -> str | None:
