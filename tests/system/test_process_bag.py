@@ -21,7 +21,11 @@ from buoy_common.contract import (
 )
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_fusion import fuse_bag
-from buoy_processing.bag_processing import ISO_TIME_COLUMNS, products_csv_path
+from buoy_processing.bag_processing import (
+    ISO_TIME_COLUMNS,
+    product_field_of_csv_column,
+    products_csv_path,
+)
 from buoy_processing.netcdf_variables import product_time_name, product_variable_name
 from error_budget import ANEMOMETER
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS, CASES, processed_bag, processed_netcdf
@@ -152,7 +156,7 @@ def read_products_csv(path: Path) -> list[dict[str, float]]:
             directions = [key for key in row if "direction" in key]
             assert all(key.endswith("_true_north_deg") for key in directions), directions
             numbers = {
-                key.replace("_true_north_deg", "_deg"): float(value)
+                product_field_of_csv_column(key): float(value)
                 for key, value in row.items()
                 if key not in ISO_TIME_COLUMNS
             }

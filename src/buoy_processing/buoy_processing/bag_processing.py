@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field, fields
@@ -347,6 +348,13 @@ def csv_column_name(field_name: str, facts: OutputFacts | None) -> str:
         return field_name
     stem = field_name.removesuffix("_deg")
     return f"{stem}_{facts.north_token}_deg"
+
+
+def product_field_of_csv_column(column: str) -> str:
+    """The product field a products CSV column holds: the inverse of :func:`csv_column_name`
+    (``vector_mean_direction_magnetic_north_deg`` → ``vector_mean_direction_deg``)."""
+    named = re.fullmatch(r"(\w*direction)_[a-z]+_north_deg", column)
+    return f"{named.group(1)}_deg" if named else column
 
 
 def _csv_value(value) -> str:

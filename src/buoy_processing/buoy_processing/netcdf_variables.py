@@ -218,6 +218,9 @@ def flow_variables(series: FlowSeries, wind: bool, axis: TimeAxis) -> dict[str, 
     return variables
 
 
+_POSITION_STANDARD_NAMES = ("latitude", "longitude", "height_above_reference_ellipsoid")
+
+
 def navigation_variables(navigation: NavigationSeries, axis: TimeAxis) -> dict[str, xr.DataArray]:
     stamps_ns, columns = navigation.columns()
     dimension = "nav_time"
@@ -228,6 +231,9 @@ def navigation_variables(navigation: NavigationSeries, axis: TimeAxis) -> dict[s
     common = {"coverage_content_type": "referenceInformation"}
 
     def variable(values, standard_name, long_name, units, **extra):
+        # Where each solution was: the position variables are its auxiliary coordinates.
+        if standard_name not in _POSITION_STANDARD_NAMES:
+            extra = {"coordinates": "latitude longitude altitude", **extra}
         attributes = {"long_name": long_name, "units": units, **common, **extra}
         if standard_name:
             attributes["standard_name"] = standard_name
@@ -251,6 +257,7 @@ def navigation_variables(navigation: NavigationSeries, axis: TimeAxis) -> dict[s
             "ellipsoidal height of the IMU (WGS-84)",
             "m",
             positive="up",
+            axis="Z",
         ),
         "roll": variable(
             rpy_deg[:, 0],
