@@ -339,6 +339,14 @@ def test_report_of_a_processed_bag(tmp_path_factory, geometry, tmp_path, capsys)
     published = [dataclasses.replace(p, gust_window_s=3.0) for p in data.products]
     assert published == sorted(summary.wind.products, key=lambda p: (p.window_s, p.window_start_s))
     assert "published on wind/stats_1min, wind/stats_10min" in markdown
+    # The simulated buoy's heading is its GNSS antennas': the process_bag run says true north
+    # beside the bag, and the report takes it from there.
+    assert summary.facts.north == "true north"
+    assert data.north == "true_north"
+    assert (
+        "Wind directions in degrees clockwise from true north."
+        in (tmp_path / "summary.md").read_text()
+    )
 
 
 def test_products_are_recomputed_when_the_bag_has_none(sea_state_bags, tmp_path):

@@ -68,7 +68,12 @@ from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
-from buoy_processing.offline_fusion import relative_topic, sensor_topics_of, truth_topics_of
+from buoy_processing.offline_fusion import (
+    OfflineFusion,
+    relative_topic,
+    sensor_topics_of,
+    truth_topics_of,
+)
 from buoy_processing.offline_runner import OfflineRun, run_fusion
 from buoy_processing.output_facts import OutputFacts, output_facts, source_use_of
 from buoy_processing.output_series import NANOSECONDS, FlowSeries, NavigationSeries
@@ -566,7 +571,10 @@ def process_bag(
 
 
 def _facts_of_run(
-    fusion_config: FusionConfig, sensors: dict[str, str], corrections: BagCorrections, fusion
+    fusion_config: FusionConfig,
+    sensors: dict[str, str],
+    corrections: BagCorrections,
+    fusion: OfflineFusion,
 ) -> OutputFacts:
     """The facts the outputs state, from the parameters, the topics read, what the fusion
     used and the stamps of the samples."""

@@ -69,6 +69,8 @@ class NetcdfContent:
     source: str
     """The input bag, as the user named it (``source`` and ``history`` attributes)."""
     navigation: NavigationSeries
+    facts: OutputFacts
+    """North reference, sensors, site and span of the run: what the file says about it."""
     wind: FlowSeries | None = None
     current: FlowSeries | None = None
     wind_products: list[WindProduct] = field(default_factory=list)
@@ -81,9 +83,6 @@ class NetcdfContent:
     attributes: dict[str, str] = field(default_factory=dict)
     """Global attributes given by the user (``creator_name``, ``institution``, ``license``,
     ``project``, ...), over the ones this module sets."""
-    facts: OutputFacts | None = None
-    """North reference, sensors, site and span of the run; None: the file states none of them
-    and takes its time coverage from its sample series."""
 
 
 # -- the file ---------------------------------------------------------------------------------
@@ -94,18 +93,22 @@ def _iso(t_s: float) -> str:
     return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
-def _global_attributes(content: NetcdfContent, dataset: xr.Dataset, axis: TimeAxis) -> dict:
+def _global_attributes(content: NetcdfContent, dataset: xr.Dataset) -> dict:
     now = _iso(datetime.datetime.now(tz=datetime.UTC).timestamp())
     facts = content.facts
-    sensors = "sensors not stated" if facts is None else facts.sensor_text()
+    sensors = facts.sensor_text()
+    current = (
+        " The surface current from the DVL's water track, corrected the same way."
+        if content.current is not None
+        else ""
+    )
     attributes = {
         "Conventions": CONVENTIONS,
         "title": "Motion-corrected wind and current from a moving ocean buoy",
         "summary": (
             "Wind measured by an anemometer on a moving buoy, corrected for the buoy's motion "
             "(Miller et al. 2008) with the attitude and velocity of an error-state Kalman "
-            f"filter; sensors used: {sensors}. Where a DVL is fitted, the surface current from "
-            "its water track corrected the same way. Per-sample series with their correction "
+            f"filter; sensors used: {sensors}.{current} Per-sample series with their correction "
             "status, window-averaged products (vector and scalar means, gust, standard "
             "deviations) with coverage and QARTOD quality flags, and the navigation solution."
         ),
@@ -129,53 +132,23 @@ def _global_attributes(content: NetcdfContent, dataset: xr.Dataset, axis: TimeAx
         "cdm_data_type": "Trajectory",
         "comment": (
             "Vectors are ENU (east, north, up). Wind direction is where the wind blows FROM, "
-            "current direction where the water flows TOWARD. "
-            + _north_sentence(facts)
-            + " Invalid samples are NaN and keep their stamp; the *_status variables say why."
+            f"current direction where the water flows TOWARD. {facts.north_sentence()}"
+            " Invalid samples are NaN and keep their stamp; the *_status variables say why."
         ),
+        "north_reference": facts.north,
     }
-    if facts is not None:
-        attributes["north_reference"] = facts.north
-    attributes.update(_time_coverage(content, dataset, axis))
-    if _position_known(content) and np.isfinite(dataset["latitude"].values).any():
+    attributes.update(_time_coverage(facts, dataset))
+    if facts.position_known and np.isfinite(dataset["latitude"].values).any():
         attributes.update(_geospatial_attributes(dataset))
     attributes.update(content.attributes)
     return attributes
 
 
-def _clockwise_from(facts: OutputFacts | None) -> str:
-    if facts is None:
-        return "clockwise from north (reference not stated)"
-    return facts.clockwise_from()
-
-
-def _north_sentence(facts: OutputFacts | None) -> str:
-    if facts is None:
-        return "Directions are clockwise from north; which north was not stated."
-    return facts.north_sentence()
-
-
-def _position_known(content: NetcdfContent) -> bool:
-    """Whether the navigation's latitude and longitude are a measured or a given place."""
-    return content.facts is None or content.facts.position_known
-
-
-def _time_coverage(content: NetcdfContent, dataset: xr.Dataset, axis: TimeAxis) -> dict:
+def _time_coverage(facts: OutputFacts, dataset: xr.Dataset) -> dict:
     """The span of the data: from its first to its last sample (never a window's bounds)."""
-    facts = content.facts
-    if facts is not None and facts.first_sample_s is not None:
-        start, end = facts.first_sample_s, facts.last_sample_s
-    else:
-        samples = [
-            dataset[name].values
-            for name in ("time", "current_time", "nav_time")
-            if name in dataset.coords and dataset[name].size
-        ]
-        if not samples:
-            return {}
-        reference_s = axis.reference_ns // _NANOSECONDS
-        start = reference_s + float(min(values.min() for values in samples))
-        end = reference_s + float(max(values.max() for values in samples))
+    if facts.first_sample_s is None:
+        return {}
+    start, end = facts.first_sample_s, facts.last_sample_s
     attributes = {
         "time_coverage_start": _iso(start),
         "time_coverage_end": _iso(end),
@@ -205,11 +178,11 @@ def _geospatial_attributes(dataset: xr.Dataset) -> dict:
     }
 
 
-def _state_the_north(dataset: xr.Dataset, facts: OutputFacts | None) -> None:
+def _state_the_north(dataset: xr.Dataset, facts: OutputFacts) -> None:
     """Put the run's north into the texts of the directions and headings; with magnetic north,
     take away the CF standard names that mean true north and say what the axes are."""
-    clockwise = _clockwise_from(facts)
-    magnetic = facts is not None and facts.north == MAGNETIC_NORTH
+    clockwise = facts.clockwise_from()
+    magnetic = facts.north == MAGNETIC_NORTH
     for variable in dataset.variables.values():
         attributes = variable.attrs
         for key, value in attributes.items():
@@ -256,10 +229,10 @@ def netcdf_dataset(content: NetcdfContent) -> xr.Dataset:
     dataset = xr.Dataset(data, coords=coordinates)
     _state_the_north(dataset, content.facts)
     facts = content.facts
-    if facts is not None and facts.site_deg is not None and not facts.position_from_gnss:
+    if facts.site_deg is not None and not facts.position_from_gnss:
         for name in ("latitude", "longitude", "altitude"):
             dataset[name].attrs["comment"] = _GIVEN_SITE_COMMENT
-    dataset.attrs = _global_attributes(content, dataset, axis)
+    dataset.attrs = _global_attributes(content, dataset)
     return dataset
 
 

@@ -181,8 +181,9 @@ def _site_parameter_deg(config: FusionConfig) -> tuple[float, float] | None:
 
 
 def _north_of(config: FusionConfig, used: Mapping[str, SourceUse]) -> tuple[str, str]:
-    """The north of the headings the fusion used, and how it was obtained. Several headings
-    fused together share the north of the first that is true: the filter holds one heading."""
+    """The north of the headings the fusion used, and how it was obtained. Headings of
+    different norths fused together (a true one beside a magnetic one without declination) give
+    true north, with the warning that the declination biases the result."""
     norths = []
     for kind in used:
         source = _SOURCES_BY_KIND.get(kind)
@@ -195,7 +196,10 @@ def _north_of(config: FusionConfig, used: Mapping[str, SourceUse]) -> tuple[str,
     basis = "; ".join(dict.fromkeys(basis for _, basis in norths))
     if len(references) == 1:
         return norths[0][0], basis
-    return TRUE_NORTH, f"{basis} (fused together; the true-north headings dominate)"
+    return TRUE_NORTH, (
+        f"{basis}; fused together, so the heading is biased toward magnetic north by up to the "
+        "declination"
+    )
 
 
 def _north_of_heading(config: FusionConfig, sensor: str) -> tuple[str, str]:

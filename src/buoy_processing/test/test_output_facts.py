@@ -87,3 +87,11 @@ def test_a_run_without_any_heading_states_no_north():
     facts = output_facts(FusionConfig(), GNSS_TOPICS, {"gnss_heading": SourceUse(0)}, [])
     assert facts.north == UNKNOWN_NORTH
     assert facts.north_token == "unknown_north"
+
+
+def test_a_true_and_an_uncorrected_magnetic_heading_fused_together_are_said_to_be_biased():
+    config = _config(ahrs_yaw_reference="magnetic_north", magnetic_declination_deg=0.0)
+    uses = {"gnss_fix": SourceUse(600), "gnss_heading": SourceUse(600), "ahrs": SourceUse(6000)}
+    facts = output_facts(config, (*GNSS_TOPICS, "imu/data"), uses, [])
+    assert facts.north == TRUE_NORTH
+    assert "biased toward magnetic north" in facts.north_basis

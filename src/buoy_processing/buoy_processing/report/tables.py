@@ -163,10 +163,9 @@ def current_markdown(current: CurrentData, title: str) -> str:
     lines += [
         "## Averaged current",
         "",
-        f"Direction: degrees {clockwise_from_north_text('')}, where the water flows toward. "
-        "Vectors "
-        "ENU. The standard deviations of a window hold the waves' orbital motion its mean "
-        "averaged away. The last window of each length may be partial.",
+        f"Direction: degrees {clockwise_from_north_text(current.north)}, where the water "
+        "flows toward. Vectors ENU. The standard deviations of a window hold the waves' orbital "
+        "motion its mean averaged away. The last window of each length may be partial.",
         "",
     ]
     if not current.products:
