@@ -87,6 +87,25 @@ def command_parser(
     )
 
 
+def asks_for_help(argv: list[str]) -> bool:
+    """Whether a node's command line (``sys.argv``) asks for its help, ``-h`` or ``--help``
+    before any ROS arguments, rather than for the node to run."""
+    ours = argv[1:]
+    if "--ros-args" in ours:
+        ours = ours[: ours.index("--ros-args")]
+    return any(argument in ("-h", "--help") for argument in ours)
+
+
+def node_help(program: str, docstring: str) -> str:
+    """The help of a node that takes ROS arguments only: what it does (the first paragraph of
+    its module's ``docstring``), how to give it parameters, and its exit codes."""
+    description = f"{first_paragraph(docstring)} {ROS_ARGUMENTS_NOTE}"
+    return (
+        f"usage: {program} [-h] [--ros-args ...]\n\n{_fill(description)}\n\n"
+        f"{exit_codes_text(NODE_EXIT_CODES)}"
+    )
+
+
 def first_paragraph(docstring: str) -> str:
     """The first paragraph of a docstring as plain text on one line."""
     paragraph = textwrap.dedent(docstring).strip().split("\n\n", 1)[0]
