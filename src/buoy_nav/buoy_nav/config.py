@@ -8,7 +8,9 @@ filter can be tuned to a sensor by copying its data sheet (or the simulator's se
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from buoy_common.extrinsics import check_shared_fields, shared_field
 from buoy_common.parameter_declarations import (
@@ -500,12 +502,13 @@ def _to_float(name: str, value) -> float:
     return number
 
 
-def fusion_config_from_files(paths) -> FusionConfig:
+def fusion_config_from_files(paths, defaults: Mapping[str, Any] | None = None) -> FusionConfig:
     """The :class:`FusionConfig` ``fusion_node`` would build from these ROS parameter files
-    (sections ``/**`` and ``fusion_node``, later files winning). Raises
+    (sections ``/**`` and ``fusion_node``, later files winning), over ``defaults`` (parameter
+    values by name, such as an imported record's facts; a file's value wins). Raises
     :class:`buoy_common.parameters.ParameterError` naming a bad file or value."""
     check_parameter_files(paths, FUSION_NODE_NAME, fusion_parameter_names())
-    values = load_parameter_files(paths, FUSION_NODE_NAME)
+    values = {**(defaults or {}), **load_parameter_files(paths, FUSION_NODE_NAME)}
     return build_config(
         FusionConfig, values, FUSION_PARAMETER_PREFIX, skip=FUSION_FIELDS_NOT_PARAMETERS
     )

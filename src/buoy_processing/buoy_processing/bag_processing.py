@@ -64,10 +64,12 @@ from buoy_common.contract import (
     wind_stats_topic,
 )
 from buoy_common.namespaces import NamespacedWriter, TopicView
+from buoy_common.record_facts import RecordFacts
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
+from buoy_processing.bag_facts import facts_of_run
 from buoy_processing.offline_fusion import (
     OfflineFusion,
     relative_topic,
@@ -149,7 +151,11 @@ class ProcessSummary:
     recovery: Recovery | None = None
     """How much of a cut input bag was recovered; None for a complete bag."""
     facts: OutputFacts | None = None
-    """What the outputs say about the run: north reference, sensors used, site, data span."""
+    """What the outputs say about the run: north reference, sensors used, site, data span
+    (:mod:`buoy_processing.output_facts`)."""
+    record_facts: RecordFacts | None = None
+    """The facts of the input as its parameters and topics give them, and an imported record's
+    own facts (:mod:`buoy_processing.bag_facts`)."""
 
 
 def _anemometer_record(
@@ -553,6 +559,7 @@ def process_bag(
         )
         fusion, topic_counts = run_fusion(run, corrections)
         duration_s = reader.duration_s
+        record_facts = facts_of_run(reader, fusion_config, [*sensors.values(), *corrections.topics])
     facts = _facts_of_run(fusion_config, sensors, corrections, fusion)
     summaries = write_products_csvs(corrections, csv_paths, facts)
     if netcdf_path is not None:
@@ -567,6 +574,7 @@ def process_bag(
         wall_s=time.monotonic() - started,
         recovery=reader.recovery,
         facts=facts,
+        record_facts=record_facts,
     )
 
 

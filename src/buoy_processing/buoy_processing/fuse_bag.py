@@ -42,7 +42,7 @@ from buoy_common.namespaces import (
 )
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
-from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_facts import fusion_config_for_bag
 from buoy_processing.bag_fusion import FusedBag, fuse_bag
 from buoy_processing.offline_fusion import FUSION_TOPICS_HELP
 
@@ -75,7 +75,9 @@ def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     truncated = False
     try:
-        config = fusion_config_from_files(arguments.params_file)
+        config, record_lines = fusion_config_for_bag(arguments.in_bag, arguments.params_file)
+        for line in record_lines:
+            print(f"record: {line}")
         print(f"extrinsics: {describe_shared_fields(config)}")
         views = views_of_bag(arguments, arguments.in_bag, IMU_RAW_TOPIC)
         for view in views:

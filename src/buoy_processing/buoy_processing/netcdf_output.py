@@ -58,7 +58,8 @@ CONVENTIONS = "CF-1.10, ACDD-1.3"
 STANDARD_NAME_VOCABULARY = "CF Standard Name Table v93"
 _NANOSECONDS = 1_000_000_000
 _GIVEN_SITE_COMMENT = (
-    "the site given as a parameter (site.* or origin.*), not measured: the run had no GNSS fix"
+    "the site the run was given (site.* or origin.*, from the parameters or the imported "
+    "record), not measured: the run had no GNSS fix"
 )
 
 

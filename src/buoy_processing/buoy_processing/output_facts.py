@@ -64,8 +64,9 @@ class OutputFacts:
     sensors: tuple[str, ...]
     """The sensors whose data the outputs rest on, in words, IMU first."""
     site_deg: tuple[float, float] | None
-    """(latitude, longitude) in degrees of the site given as a parameter, None when the run had
-    no site parameter (the position, if any, then comes from a GNSS fix)."""
+    """(latitude, longitude) in degrees of the site the run was given (``site.*``, else
+    ``origin.*``, from the parameter files or an imported record's facts), None when it had none
+    (the position, if any, then comes from a GNSS fix)."""
     position_from_gnss: bool
     """Whether the fusion accepted GNSS fixes: the navigation's position is measured."""
     first_sample_s: float | None

@@ -72,7 +72,7 @@ from buoy_common.namespaces import (
 )
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
-from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_facts import fusion_config_for_bag
 from buoy_processing.bag_processing import ProcessSummary, process_bag
 from buoy_processing.offline_fusion import FUSION_TOPICS_HELP
 from buoy_processing.output_facts import OutputFacts
@@ -213,7 +213,7 @@ def _site_text(facts: OutputFacts) -> str:
         return "position from GNSS fixes"
     if facts.site_deg is not None:
         latitude, longitude = facts.site_deg
-        return f"position the site given as a parameter, {latitude:.5f}, {longitude:.5f} deg"
+        return f"position the site given, {latitude:.5f}, {longitude:.5f} deg (not measured)"
     return "position unknown"
 
 
@@ -240,7 +240,9 @@ def main(argv=None) -> None:
     arguments = parse_arguments(argv)
     truncated = mostly_invalid = False
     try:
-        fusion_config = fusion_config_from_files(arguments.params_file)
+        fusion_config, record_lines = fusion_config_for_bag(arguments.in_bag, arguments.params_file)
+        for line in record_lines:
+            print(f"record: {line}")
         compensator_config = compensator_config_from_files(arguments.params_file)
         current_config = current_config_from_files(arguments.params_file)
         print(f"extrinsics: {describe_shared_fields(fusion_config)}")

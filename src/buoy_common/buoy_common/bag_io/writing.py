@@ -137,6 +137,7 @@ class BagWriter(BagOutput):
         self._mcap_name = f"{self.path.name}{MCAP_SUFFIX}"
         self._start_ns = 2**63 - 1
         self._end_ns = 0
+        self._metadata_records: list[tuple[str, dict[str, str]]] = []
         try:
             self._directory.mkdir(mode=0o755, parents=True)
             self._stream = (self._directory / self._mcap_name).open("xb")
@@ -216,6 +217,12 @@ class BagWriter(BagOutput):
         raw = serialize(jazzy_typestore(), self.path, topic, msgtype, message)
         self.write_raw(topic, msgtype, log_time_ns, raw)
 
+    def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
+        """An MCAP metadata record ``name`` (a map of strings), written when the bag is
+        finished, beside rosbag2's own: what every MCAP reader lists besides the messages."""
+        self._open_writer()
+        self._metadata_records.append((name, dict(metadata)))
+
     def flush(self) -> None:
         """Close the open chunk and hand everything written so far to the disk (fsync): a
         reader recovers it even if this process is killed or the machine loses power."""
@@ -263,6 +270,8 @@ class BagWriter(BagOutput):
         try:
             information = self._metadata()
             writer.flush()
+            for name, metadata in self._metadata_records:
+                writer.add_metadata(name, metadata)
             writer.add_metadata(
                 _ROSBAG2_METADATA_NAME,
                 {

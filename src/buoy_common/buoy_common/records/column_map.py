@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from buoy_common.extrinsics import SHARED_PARAMETERS
+from buoy_common.records.screening import Screening, screen
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 """The ``g`` of accelerometer data sheets (CGPM 1901), m/s²."""
@@ -72,7 +73,14 @@ counter-clockwise from east (REP-103)."""
 YAW_REFERENCE = SHARED_PARAMETERS["ahrs.yaw_reference"]
 """The map's ``ahrs.yaw_reference`` is the nodes' parameter of that name: the same choices and
 default (a map and the nodes given none agree)."""
+START_FROM_MAP = "column map"
+START_FROM_COMMAND_LINE = "command line"
+START_FROM_TIME_COLUMN = "time column"
+"""Where a record's start came from: the map's ``time.start`` or ``time.epoch``, ``--start``,
+or a time column of absolute (Unix) stamps."""
 FORMATS = ("delimited", "binary")
+FIELD_KEYS = frozenset({"column", "columns", "unit", "invalid", "fill", "valid_range"})
+"""What a field's (or three fields') entry of a map may say."""
 SPEED_OF_SOUND_TO_KELVIN_S2_M2 = 1.0 / 403.0
 """Sonic (virtual) temperature from the speed of sound c: T = c²/403 K (c in m/s; 403 m²/(s²K)
 is γ·R_d of dry air, the constant sonic anemometers use)."""
@@ -85,7 +93,9 @@ class MapError(ValueError):
 @dataclass(frozen=True)
 class Field:
     """One scalar quantity of the record: where it is (1-based column number, or a field name
-    of a binary layout), its unit as written, and the values that mark it invalid."""
+    of a binary layout), its unit as written, and the values that mark it missing (fill
+    codes), flagged (invalid codes) or implausible (outside the valid range), all three in the
+    record's own unit (:mod:`.screening`)."""
 
     name: str
     column: int | str
@@ -93,17 +103,19 @@ class Field:
     unit: str
     invalid_values: tuple[float, ...] = ()
     valid_range: tuple[float, float] = (-math.inf, math.inf)
+    fill_values: tuple[float, ...] = ()
+
+    def screen(self, values: np.ndarray) -> Screening:
+        """Which of ``values`` (record units) are not data, and why."""
+        return screen(values, self.fill_values, self.invalid_values, self.valid_range)
 
     def to_si(self, values: np.ndarray) -> np.ndarray:
-        """``values`` in the SI unit of the field's kind, invalid codes and values outside the
-        valid range (both in the record's own unit) as NaN."""
+        """``values`` in the SI unit of the field's kind; fill codes, invalid codes and values
+        outside the valid range as NaN."""
         values = np.asarray(values, dtype=float)
-        invalid = ~np.isfinite(values) | (values < self.valid_range[0])
-        invalid |= values > self.valid_range[1]
-        for code in self.invalid_values:
-            invalid |= values == code
         scale, offset = UNITS[self.kind][self.unit]
-        return np.where(invalid, np.nan, values * scale + offset)
+        with np.errstate(invalid="ignore"):
+            return np.where(self.screen(values).rejected, np.nan, values * scale + offset)
 
 
 @dataclass(frozen=True)
@@ -111,8 +123,14 @@ class TimeSpec:
     """Sample times: a stamp column (unit, epoch) or a start time and a rate."""
 
     stamp: Field | None
-    epoch_ns: int
+    epoch_ns: int | None
+    """What the record's time zero stands for, ns since the Unix epoch: the stamp column's
+    epoch, or the first sample's time; None: not known yet (a record numbered by its rate
+    whose map gives no start needs one on the command line)."""
     rate_hz: float
+    start_source: str = START_FROM_MAP
+    """Who said when the record starts: ``START_FROM_MAP``, ``START_FROM_COMMAND_LINE`` or
+    ``START_FROM_TIME_COLUMN``."""
 
 
 @dataclass(frozen=True)
@@ -137,6 +155,9 @@ class ColumnMap:
     ahrs_sigma_rad: tuple[float, float, float]
     gravity_tolerance_mps2: float
     max_gyro_bias_rad_s: float
+    site_deg: tuple[float, float] | None = None
+    """(latitude, longitude) of the buoy, deg, when the map knows it."""
+    description: str = ""
 
     def fields(self) -> list[Field]:
         groups = (self.wind, self.angular_rate, self.specific_force, self.ahrs_angles)
@@ -189,23 +210,37 @@ def _field(spec, key: str, kind: str, binary: bool, column=None) -> Field:
             f"{key}: unit {unit!r} is not a unit of {kind.replace('_', ' ')} this map reader knows "
             f"(one of {', '.join(UNITS[kind])})"
         )
-    invalid = spec.get("invalid", [])
-    if not isinstance(invalid, list):
-        invalid = [invalid]
-    valid_range = spec.get("valid_range", [-math.inf, math.inf])
-    if not isinstance(valid_range, list) or len(valid_range) != 2:
-        raise MapError(f"{key}.valid_range: expected [low, high], got {valid_range!r}")
+    if kind != "time":
+        unknown = sorted(set(spec) - FIELD_KEYS)
+        if unknown:
+            raise MapError(f"{key}: unknown keys {', '.join(map(str, unknown))}")
     return Field(
         name=key,
         column=_column(spec.get("column") if column is None else column, f"{key}.column", binary),
         kind=kind,
         unit=unit,
-        invalid_values=tuple(_number(v, f"{key}.invalid") for v in invalid),
-        valid_range=(
-            _number(valid_range[0], f"{key}.valid_range"),
-            _number(valid_range[1], f"{key}.valid_range"),
-        ),
+        invalid_values=_codes(spec, "invalid", key),
+        fill_values=_codes(spec, "fill", key),
+        valid_range=_valid_range(spec, key),
     )
+
+
+def _valid_range(spec: dict, key: str) -> tuple[float, float]:
+    valid_range = spec.get("valid_range", [-math.inf, math.inf])
+    if not isinstance(valid_range, list) or len(valid_range) != 2:
+        raise MapError(f"{key}.valid_range: expected [low, high], got {valid_range!r}")
+    low, high = (_number(bound, f"{key}.valid_range") for bound in valid_range)
+    if not low < high:
+        raise MapError(f"{key}.valid_range: low must be below high, got {valid_range!r}")
+    return low, high
+
+
+def _codes(spec: dict, name: str, key: str) -> tuple[float, ...]:
+    """The codes (numbers, record units) under ``name`` of a field's spec: a list or one."""
+    codes = spec.get(name, [])
+    if not isinstance(codes, list):
+        codes = [codes]
+    return tuple(_number(code, f"{key}.{name}") for code in codes)
 
 
 def _vector(spec, key: str, kind: str, binary: bool, labels=("x", "y", "z")) -> tuple:
@@ -219,7 +254,7 @@ def _vector(spec, key: str, kind: str, binary: bool, labels=("x", "y", "z")) -> 
     )
 
 
-def _epoch_ns(value, key: str) -> int:
+def iso8601_ns(value, key: str) -> int:
     """An ISO 8601 time (UTC unless it says otherwise) as nanoseconds since the Unix epoch."""
     if isinstance(value, dt.datetime):
         when = value
@@ -238,14 +273,34 @@ def _time(spec, binary: bool) -> TimeSpec:
     spec = _require_mapping(spec, "time")
     if "column" in spec:
         stamp = _field(spec, "time", "time", binary)
-        epoch = _epoch_ns(spec.get("epoch", "1970-01-01T00:00:00Z"), "time.epoch")
-        return TimeSpec(stamp=stamp, epoch_ns=epoch, rate_hz=math.nan)
-    if "start" not in spec or "rate_hz" not in spec:
-        raise MapError("time: give either column (with unit and epoch) or start and rate_hz")
+        if "epoch" not in spec:
+            return TimeSpec(stamp, 0, math.nan, START_FROM_TIME_COLUMN)
+        return TimeSpec(stamp, iso8601_ns(spec["epoch"], "time.epoch"), math.nan, START_FROM_MAP)
+    if "rate_hz" not in spec:
+        raise MapError("time: give either column (with unit and epoch) or rate_hz (and start)")
     rate_hz = _number(spec["rate_hz"], "time.rate_hz")
     if not rate_hz > 0:
         raise MapError(f"time.rate_hz: must be positive, got {rate_hz}")
-    return TimeSpec(stamp=None, epoch_ns=_epoch_ns(spec["start"], "time.start"), rate_hz=rate_hz)
+    start = iso8601_ns(spec["start"], "time.start") if "start" in spec else None
+    return TimeSpec(stamp=None, epoch_ns=start, rate_hz=rate_hz)
+
+
+def site_of(spec, key: str) -> tuple[float, float] | None:
+    """(latitude, longitude), deg, of a ``{latitude_deg, longitude_deg}`` mapping, held to the
+    rules of the nodes' ``site.*`` parameters; None for None. MapError naming ``key``."""
+    if spec is None:
+        return None
+    spec = _require_mapping(spec, key)
+    if set(spec) != {"latitude_deg", "longitude_deg"}:
+        raise MapError(f"{key}: give latitude_deg and longitude_deg, got {sorted(spec)}")
+    site = []
+    for name in ("latitude_deg", "longitude_deg"):
+        value = _number(spec[name], f"{key}.{name}")
+        rule = SHARED_PARAMETERS[f"site.{name}"]
+        if math.isnan(value) or rule.check(value) is not None:
+            raise MapError(f"{key}.{name}: {rule.rule.split(' or NaN')[0]}, got {value!r}")
+        site.append(value)
+    return site[0], site[1]
 
 
 def _layout(spec) -> np.dtype:
@@ -279,6 +334,8 @@ def load_column_map(path: str | Path) -> ColumnMap:
         **imu,
         **ahrs,
         **_check_limits(checks),
+        site_deg=site_of(document.get("site"), "site"),
+        description=str(document.get("description", "")),
     )
     _check_consistency(column_map)
     return column_map
@@ -294,7 +351,7 @@ def _read_document(path: Path) -> dict:
         raise MapError(f"column map {path}: not YAML: {str(error).splitlines()[0]}") from error
     document = _require_mapping(document, f"column map {path}")
     known = {"format", "delimiter", "skip_lines", "columns", "record_layout", "time"}
-    known |= {"anemometer", "imu", "ahrs", "checks", "description"}
+    known |= {"anemometer", "imu", "ahrs", "checks", "description", "site"}
     unknown = sorted(set(document) - known)
     if unknown:
         raise MapError(f"column map {path}: unknown keys {', '.join(unknown)}")

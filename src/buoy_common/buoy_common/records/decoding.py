@@ -9,7 +9,7 @@ axis in the map.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,7 @@ from buoy_common.records.column_map import (
     MapError,
     axes_to_body,
 )
+from buoy_common.records.screening import FieldCounts
 
 ENU_FROM_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 FRD_FROM_FLU = np.diag([1.0, -1.0, -1.0])
@@ -47,6 +48,10 @@ class ContractSamples:
     orientation_xyzw: np.ndarray | None
     orientation_sigma_rad: tuple[float, float, float]
     yaw_reference: str
+    field_counts: dict[str, FieldCounts] = field(default_factory=dict)
+    """How each field of the map was screened (:mod:`.screening`), by field name."""
+    temperatures_without_wind: int = 0
+    """Sonic temperatures set invalid because their sample's wind is invalid."""
 
     def __len__(self) -> int:
         return self.time_ns.size
@@ -163,6 +168,11 @@ def sample_times_ns(table, column_map: ColumnMap, count: int) -> np.ndarray:
     """Nanoseconds since the Unix epoch of each sample (integers: float seconds since 1970
     resolve only a quarter of a microsecond)."""
     spec = column_map.time
+    if spec.epoch_ns is None:
+        raise MapError(
+            "time: the record carries no time and the map gives no start: give the record's "
+            "start, e.g. --start 2014-12-18T00:00:00Z"
+        )
     if spec.stamp is not None:
         offsets_s = spec.stamp.to_si(table[spec.stamp.name])
     else:
@@ -177,16 +187,17 @@ def sample_times_ns(table, column_map: ColumnMap, count: int) -> np.ndarray:
 def decode(table: dict[str, np.ndarray], column_map: ColumnMap) -> ContractSamples:
     """Units, axes, conventions and invalid codes applied: the record as the contract has it."""
     count = len(next(iter(table.values())))
-    wind = temperature = rate = force = orientation = None
+    wind = rate = force = orientation = None
     if column_map.wind is not None:
         wind = _vector_si(table, column_map.wind, column_map.wind_axes, "anemometer.axes")
-    if column_map.sonic_temperature is not None:
-        field = column_map.sonic_temperature
-        temperature = field.to_si(table[field.name])
-    elif column_map.speed_of_sound is not None:
-        field = column_map.speed_of_sound
-        speed_mps = field.to_si(table[field.name])
-        temperature = speed_mps**2 * SPEED_OF_SOUND_TO_KELVIN_S2_M2 - 273.15
+    temperature = sonic_temperature_degc(table, column_map)
+    temperatures_without_wind = 0
+    if temperature is not None and wind is not None:
+        # One sonic measurement gives both from the same transit times: a sample whose wind
+        # the sonic did not deliver has no temperature either.
+        without_wind = np.isnan(wind[:, 0]) & np.isfinite(temperature)
+        temperatures_without_wind = int(np.count_nonzero(without_wind))
+        temperature[without_wind] = np.nan
     if column_map.angular_rate is not None:
         rate = _vector_si(table, column_map.angular_rate, column_map.imu_axes, "imu.axes")
         force = _vector_si(table, column_map.specific_force, column_map.imu_axes, "imu.axes")
@@ -205,7 +216,22 @@ def decode(table: dict[str, np.ndarray], column_map: ColumnMap) -> ContractSampl
         orientation_xyzw=orientation,
         orientation_sigma_rad=column_map.ahrs_sigma_rad,
         yaw_reference=column_map.ahrs_yaw_reference,
+        field_counts={f.name: f.screen(table[f.name]).counts() for f in column_map.fields()},
+        temperatures_without_wind=temperatures_without_wind,
     )
+
+
+def sonic_temperature_degc(table, column_map: ColumnMap) -> np.ndarray | None:
+    """The sonic temperature, °C, from the map's temperature or speed-of-sound field (None when
+    it maps neither)."""
+    if column_map.sonic_temperature is not None:
+        temperature_field = column_map.sonic_temperature
+        return temperature_field.to_si(table[temperature_field.name])
+    if column_map.speed_of_sound is not None:
+        speed_field = column_map.speed_of_sound
+        speed_mps = speed_field.to_si(table[speed_field.name])
+        return speed_mps**2 * SPEED_OF_SOUND_TO_KELVIN_S2_M2 - 273.15
+    return None
 
 
 def plausibility_warnings(samples: ContractSamples, column_map: ColumnMap) -> list[str]:
