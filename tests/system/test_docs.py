@@ -32,8 +32,10 @@ import json
 import os
 import re
 import shlex
+import signal
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -191,7 +193,11 @@ NAMED_SCRIPTS = {
 
 
 def uses_argparse(source: Path) -> bool:
-    return source.is_file() and "argparse" in source.read_text()
+    """Whether the script parses a command line (argparse, or buoy_common.cli's parser)."""
+    if not source.is_file():
+        return False
+    text = source.read_text()
+    return "argparse" in text or "command_parser(" in text
 
 
 def help_target(command: Command) -> str | None:
@@ -695,3 +701,95 @@ def test_the_readme_says_why_of_every_pinned_dependency():
     rows = table_rows_after(REPO / "README.md", "## Dependencies")
     explained = " ".join(row[0] for row in rows if len(row) > 1 and row[1]).lower()
     assert [name for name in sorted(pinned_distributions()) if name.lower() not in explained] == []
+
+
+FINITE_LIVE_COMMANDS = {"bag_player", "run_scenario"}
+"""Live commands of the README that end by themselves: a bag played out, a scenario run."""
+LIVE_START_TIMEOUT_S = 120.0
+"""How long the README's endless nodes, started together on a busy machine, may take to say
+their first line (a node logs its configuration once built; wind_echo prints the wind)."""
+
+
+def readme_live_lines() -> list[tuple[str, str]]:
+    """(executable, line) of the README's console commands that talk DDS, in order."""
+    lines = []
+    for line in console_lines(REPO / "README.md"):
+        command = recognised(REPO / "README.md", line, True)
+        if command.kind == "script" and command.target not in RUN_FOR_REAL:
+            lines.append((command.target, line))
+    return lines
+
+
+def run_finite(line: str, cwd: Path, environment: dict[str, str]) -> str | None:
+    """Run a console line to its end; what went wrong, None when it exits with code 0."""
+    completed = subprocess.run(
+        ["bash", "-c", line],
+        cwd=cwd,
+        env=environment,
+        capture_output=True,
+        text=True,
+        timeout=COMMAND_TIMEOUT_S,
+    )
+    return None if completed.returncode == 0 else completed.stderr[-1000:]
+
+
+def run_until_interrupted(lines: list[str], cwd: Path, environment: dict[str, str]) -> dict:
+    """Start the console lines together; once each has said something, Ctrl-C them all;
+    what went wrong with each that did not run and stop with exit code 0."""
+    logs = [cwd / "out" / f"live_{index}.log" for index in range(len(lines))]
+    processes = []
+    for line, log in zip(lines, logs, strict=True):
+        with open(log, "w") as stream:
+            processes.append(
+                subprocess.Popen(
+                    ["bash", "-c", f"exec {line}"],
+                    cwd=cwd,
+                    env=environment,
+                    stdout=stream,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                )
+            )
+    failures = {}
+    try:
+        deadline = time.monotonic() + LIVE_START_TIMEOUT_S
+        while time.monotonic() < deadline and not all(
+            log.stat().st_size or process.poll() is not None
+            for log, process in zip(logs, processes, strict=True)
+        ):
+            time.sleep(0.5)
+        running = [
+            process.poll() is None and log.stat().st_size
+            for log, process in zip(logs, processes, strict=True)
+        ]
+        for process in processes:
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        for line, log, process, was_running in zip(lines, logs, processes, running, strict=True):
+            code = process.wait(timeout=30)
+            if not was_running or code != 0:
+                failures[line] = f"exit {code}: {log.read_text()[-800:]}"
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+    return failures
+
+
+@pytest.mark.long
+def test_the_readme_live_examples_run_as_written(repository_copy, ros_env):
+    """The README's live commands, pasted at the repository root in an isolated DDS domain:
+    those that end by themselves end with exit code 0; the endless nodes, started together as
+    the README's terminals would, run until Ctrl-C and then stop with exit code 0."""
+    environment = {**ros_env, "PATH": f"{BIN}:{os.environ['PATH']}"}
+    live = readme_live_lines()
+    assert {"run_scenario", "bag_player", "fusion_node", "wind_echo"} <= {e for e, _ in live}
+    failures = {
+        line: problem
+        for executable, line in live
+        if executable in FINITE_LIVE_COMMANDS
+        and (problem := run_finite(line, repository_copy, environment))
+    }
+    endless = [line for executable, line in live if executable not in FINITE_LIVE_COMMANDS]
+    failures.update(run_until_interrupted(endless, repository_copy, environment))
+    assert failures == {}, "\n\n".join(f"{line}\n{error}" for line, error in failures.items())

@@ -21,7 +21,12 @@ import pytest
 from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.archive import BAG_COLUMN, COMBINED_TABLE, MARKER_SUFFIX, STATE_DIRECTORY
-from buoy_processing.bag_processing import ISO_TIME_COLUMNS, process_bag, products_csv_path
+from buoy_processing.bag_processing import (
+    ISO_TIME_COLUMNS,
+    process_bag,
+    product_field_of_csv_column,
+    products_csv_path,
+)
 from buoy_processing.process_archive import EXIT_FAILED_BAGS, main
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS
 from wind_comp.config import compensator_config_from_files
@@ -223,9 +228,10 @@ def test_combined_table_holds_every_product_of_every_bag(archive_runs):
         assert len(bag_rows) == len(expected) > 0
         for row, csv_row in zip(bag_rows, expected, strict=True):
             assert row["namespace"] == "/"
-            for name, text in csv_row.items():
-                if name in ISO_TIME_COLUMNS:
+            for column, text in csv_row.items():
+                if column in ISO_TIME_COLUMNS:
                     continue
+                name = product_field_of_csv_column(column)
                 value = float(text)
                 if math.isnan(value):
                     assert math.isnan(row[name])

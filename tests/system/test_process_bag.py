@@ -21,7 +21,11 @@ from buoy_common.contract import (
 )
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_fusion import fuse_bag
-from buoy_processing.bag_processing import ISO_TIME_COLUMNS, products_csv_path
+from buoy_processing.bag_processing import (
+    ISO_TIME_COLUMNS,
+    product_field_of_csv_column,
+    products_csv_path,
+)
 from buoy_processing.netcdf_variables import product_time_name, product_variable_name
 from error_budget import ANEMOMETER
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS, CASES, processed_bag, processed_netcdf
@@ -143,13 +147,18 @@ def test_corrected_wind_matches_the_truth_within_the_error_budget(runs, name):
 
 
 def read_products_csv(path: Path) -> list[dict[str, float]]:
-    """The rows of a products CSV as numbers; the ISO 8601 bounds are checked against the
-    numeric ones and left out."""
+    """The rows of a products CSV as numbers, keyed by product field; the ISO 8601 bounds are
+    checked against the numeric ones and left out. The simulated buoys carry GNSS headings, so
+    every direction column names true north."""
     rows = []
     with open(path, newline="") as stream:
         for row in csv.DictReader(stream):
+            directions = [key for key in row if "direction" in key]
+            assert all(key.endswith("_true_north_deg") for key in directions), directions
             numbers = {
-                key: float(value) for key, value in row.items() if key not in ISO_TIME_COLUMNS
+                product_field_of_csv_column(key): float(value)
+                for key, value in row.items()
+                if key not in ISO_TIME_COLUMNS
             }
             for iso_column, seconds_column in zip(
                 ISO_TIME_COLUMNS, ("window_start_s", "window_end_s"), strict=True
@@ -253,6 +262,16 @@ def test_netcdf_holds_the_bag_outputs_value_for_value(runs, tmp_path_factory, na
         np.testing.assert_allclose(dataset["pitch"].values, yaw_pitch_roll[:, 1], atol=1e-9)
         heading_error = (dataset["heading"].values - (90.0 - yaw_pitch_roll[:, 0]) + 180) % 360
         np.testing.assert_allclose(heading_error - 180, 0.0, atol=1e-9)
+        # The simulated buoy's GNSS heading and fixes: true north, a measured position, and
+        # the file's span is that of its samples.
+        assert dataset.attrs["north_reference"] == "true north"
+        assert "GNSS" in dataset.attrs["instrument"]
+        assert "comment" not in dataset["latitude"].attrs
+        first_s = min(float(dataset[n].values.min()) for n in ("time", "nav_time"))
+        last_s = max(float(dataset[n].values.max()) for n in ("time", "nav_time"))
+        for attribute, seconds in (("time_coverage_start", first_s), ("time_coverage_end", last_s)):
+            moment = datetime.datetime.fromisoformat(dataset.attrs[attribute])
+            assert abs(moment.timestamp() - (reference_s + seconds)) < 1e-3, attribute
 
 
 def test_navigation_is_fuse_bags_byte_for_byte(tmp_path_factory, tmp_path):

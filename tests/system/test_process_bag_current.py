@@ -22,6 +22,7 @@ from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_processing import (
     CURRENT_PRODUCTS_CSV_SUFFIX,
     process_bag,
+    product_field_of_csv_column,
     products_csv_path,
 )
 from buoy_processing.process_bag import main as process_bag_main
@@ -160,6 +161,9 @@ def test_current_products_are_in_the_bag_and_the_csv(open_ocean):
     assert summary.current.csv_path == csv_path
     with open(csv_path, newline="") as stream:
         rows = list(csv.DictReader(stream))
+    # The simulated ship's GNSS heading: the direction column names true north.
+    assert "direction_true_north_deg" in rows[0]
+    rows = [{product_field_of_csv_column(k): v for k, v in row.items()} for row in rows]
     stats = [stats_values(m) for m in messages(out, "current/stats_1min")]
     means = vectors(messages(out, "current/mean_1min"))
     one_minute = [row for row in rows if float(row["window_s"]) == 60.0]

@@ -8,6 +8,7 @@ from pathlib import Path
 import bag_faults
 import numpy as np
 import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.image import imread
 from scipy.signal import welch
 from scipy.spatial.transform import Rotation
@@ -33,6 +34,7 @@ from buoy_processing.wind_report import main
 from sensor_sim.simulate_bag import parse_arguments, simulate
 from wind_comp.config import compensator_config_from_files
 from wind_comp.flow_uncertainty import FlowCovariance
+from wind_comp.flux_products import FluxAverager
 from wind_comp.products import WindAverager
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -339,6 +341,14 @@ def test_report_of_a_processed_bag(tmp_path_factory, geometry, tmp_path, capsys)
     published = [dataclasses.replace(p, gust_window_s=3.0) for p in data.products]
     assert published == sorted(summary.wind.products, key=lambda p: (p.window_s, p.window_start_s))
     assert "published on wind/stats_1min, wind/stats_10min" in markdown
+    # The simulated buoy's heading is its GNSS antennas': the process_bag run says true north
+    # beside the bag, and the report takes it from there.
+    assert summary.facts.north == "true north"
+    assert data.north == "true_north"
+    assert (
+        "Wind directions in degrees clockwise from true north."
+        in (tmp_path / "summary.md").read_text()
+    )
 
 
 def test_products_are_recomputed_when_the_bag_has_none(sea_state_bags, tmp_path):
@@ -558,3 +568,123 @@ def test_a_bag_without_fluxes_gets_no_flux_table(sea_state_bags, tmp_path):
         assert "Eddy-covariance fluxes" not in text and "flux windows" not in text
         assert "| coverage | flag |" in text
     assert not (out / "wind_fluxes.png").exists()
+
+
+def _turning_wind_data(north: str = "") -> ReportData:
+    """20 minutes at 10 Hz of a 6 m/s wind whose direction turns from 300° through north to
+    120° and back, the sensor axes turning with a buoy that swings about its mooring."""
+    t_s = np.arange(0.0, 1201.0, 0.1)
+    from_deg = 300.0 + 180.0 * np.sin(np.pi * t_s / t_s[-1])
+    toward_rad = np.radians(from_deg + 180.0)
+    corrected = np.column_stack(
+        (6.0 * np.sin(toward_rad), 6.0 * np.cos(toward_rad), np.zeros_like(t_s))
+    )
+    corrected[3000:3100] = np.nan
+    swing_rad = np.radians(200.0 * np.sin(2 * np.pi * t_s / 700.0))
+    measured = np.column_stack(
+        (6.0 * np.sin(toward_rad), 6.0 * np.cos(toward_rad), np.zeros_like(t_s))
+    )
+    measured[:, 0] = np.cos(swing_rad) * corrected[:, 0] - np.sin(swing_rad) * corrected[:, 1]
+    measured[:, 1] = np.sin(swing_rad) * corrected[:, 0] + np.cos(swing_rad) * corrected[:, 1]
+    return ReportData(
+        t_s=t_s,
+        measured_wind_sensor_mps=measured,
+        corrected_wind_enu_mps=corrected,
+        title="turning wind",
+        north=north,
+    )
+
+
+def _direction_lines(figure) -> dict[str, np.ndarray]:
+    direction_axis = figure.axes[1]
+    return {line.get_label(): np.asarray(line.get_ydata()) for line in direction_axis.get_lines()}
+
+
+def test_directions_are_drawn_continuous_and_true_to_the_wind_modulo_a_turn():
+    data = _turning_wind_data()
+    figure = figures.wind_time_series_figure(data)
+    lines = _direction_lines(figure)
+    for label, wind in (
+        ("corrected", data.corrected_wind_enu_mps),
+        ("measured (sensor axes)", data.measured_wind_sensor_mps),
+    ):
+        drawn = lines[label]
+        finite = np.isfinite(drawn)
+        # No step of a turn between neighbouring samples: the directions turn by less than a
+        # degree from one to the next.
+        assert np.nanmax(np.abs(np.diff(drawn))) < 1.0, label
+        expected = np.degrees(np.arctan2(-wind[:, 0], -wind[:, 1])) % 360.0
+        wrapped_error = (drawn[finite] - expected[finite] + 180.0) % 360.0 - 180.0
+        assert np.abs(wrapped_error).max() < 1e-9, label
+    # The corrected wind's 180° turn through north is one continuous line.
+    corrected = lines["corrected"][np.isfinite(lines["corrected"])]
+    assert 179.0 < np.ptp(corrected) < 181.0
+
+
+def test_direction_ticks_are_quarters_labelled_within_a_turn():
+    figure = figures.wind_time_series_figure(_turning_wind_data())
+    direction_axis = figure.axes[1]
+    FigureCanvasAgg(figure).draw()
+    low, high = direction_axis.get_ylim()
+    ticks = [t for t in direction_axis.get_yticks() if low <= t <= high]
+    assert len(ticks) >= 3
+    assert all(t % 90.0 == 0.0 for t in ticks), ticks
+    labels = [label.get_text() for label in direction_axis.get_yticklabels() if label.get_text()]
+    assert set(labels) <= {"0", "90", "180", "270", "360"}, labels
+    assert [figures._direction_label(v) for v in (-90, 0, 90, 360, 450, 720)] == [
+        "270",
+        "0",
+        "90",
+        "360",
+        "90",
+        "360",
+    ]
+
+
+def test_the_direction_panel_names_the_north_of_the_data():
+    for north, words in (
+        ("magnetic_north", "clockwise from magnetic north (no declination applied)"),
+        ("true_north", "clockwise from true north"),
+        ("", "which north is not recorded"),
+    ):
+        figure = figures.wind_time_series_figure(_turning_wind_data(north))
+        assert words in figure.axes[1].get_title(loc="left")
+
+
+def test_the_five_thirds_line_lies_on_an_inertial_spectrum():
+    # Vertical wind with a −5/3 spectrum: white noise shaped in frequency.
+    rate_hz, n = 10.0, 12_000
+    rng = np.random.default_rng(11)
+    frequency_hz = np.fft.rfftfreq(n, 1.0 / rate_hz)
+    shape = np.zeros_like(frequency_hz)
+    shape[1:] = frequency_hz[1:] ** (-5.0 / 6.0)
+    w = np.fft.irfft(np.fft.rfft(rng.normal(size=n)) * shape, n)
+    w *= 0.5 / w.std()
+    t_s = np.arange(n) / rate_hz
+    wind = np.column_stack((np.full(n, 5.0), np.zeros(n), w))
+    data = ReportData(t_s=t_s, measured_wind_sensor_mps=wind, corrected_wind_enu_mps=wind)
+    figure = figures.vertical_wind_spectrum_figure(data)
+    density_axis = figure.axes[0]
+    lines = {line.get_label(): line for line in density_axis.get_lines()}
+    reference = lines["f^(−5/3)"]
+    spectrum_f, spectrum_s = (np.asarray(v) for v in lines["corrected"].get_data())
+    line_f, line_s = (np.asarray(v) for v in reference.get_data())
+    # Drawn over the spectrum's upper decade, and on it there: within 30 % at every band.
+    assert line_f[0] >= spectrum_f[-1] / 10.0 - 1e-12 and line_f[-1] == spectrum_f[-1]
+    on_line = np.isin(spectrum_f, line_f)
+    ratio = line_s / spectrum_s[on_line]
+    assert np.all((ratio > 0.7) & (ratio < 1.3)), ratio
+    np.testing.assert_allclose(line_s * line_f ** (5.0 / 3.0), line_s[0] * line_f[0] ** (5 / 3))
+
+
+def test_a_flux_window_longer_than_the_record_is_drawn_over_the_data():
+    data = _turning_wind_data()
+    averager = FluxAverager(1800.0)
+    fluxes = averager.add_batch(data.t_s, data.corrected_wind_enu_mps) + averager.flush()
+    data = dataclasses.replace(data, fluxes=fluxes, time_origin_s=0.0)
+    assert fluxes[0].window_end_s - fluxes[0].window_start_s == 1800.0
+    figure = figures.fluxes_figure(data)
+    segments = np.concatenate([c.get_segments() for c in figure.axes[0].collections])
+    drawn_s = segments[:, :, 0]
+    assert drawn_s.min() >= data.t_s[0] and drawn_s.max() <= data.t_s[-1]
+    assert drawn_s.max() - drawn_s.min() > 0.99 * (data.t_s[-1] - data.t_s[0])

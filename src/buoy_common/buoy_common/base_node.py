@@ -28,6 +28,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
+from buoy_common.cli import asks_for_help, node_help
 from buoy_common.contract import BODY_FRAME, TF_STATIC_TOPIC
 from buoy_common.parameters import (
     ParameterError,
@@ -366,10 +367,15 @@ def run_node(node_factory: Callable[[], SuiteNode], args: list[str] | None = Non
         ignore_stop_signals()
 
 
-def main_for(node_factory: Callable[[], SuiteNode]) -> Callable[[], None]:
-    """A console-script entry point that runs ``node_factory`` and exits with its code."""
+def main_for(node_factory: Callable[[], SuiteNode], docstring: str) -> Callable[[], None]:
+    """A console-script entry point that runs ``node_factory`` and exits with its code, or,
+    asked for ``--help``, prints what the node does (from its module's ``docstring``) and its
+    exit codes."""
 
     def main() -> None:
+        if asks_for_help(sys.argv):
+            print(node_help(sys.argv[0].rsplit("/", 1)[-1], docstring))
+            sys.exit(0)
         sys.exit(run_node(node_factory))
 
     return main

@@ -1,5 +1,6 @@
-"""What every offline command does alike: stop cleanly on SIGINT, SIGTERM and a closed pipe, and
-keep the garbage collector off what the imports built.
+"""What every offline command does alike: stop cleanly on SIGINT, SIGTERM and a closed pipe,
+keep the garbage collector off what the imports built, and say in ``--help`` what it does and
+every exit code it can return (:class:`ExitCode`, :func:`command_parser`).
 
 An interrupted command prints one line and exits with :data:`INTERRUPTED_EXIT_CODE`; its outputs
 are staged under temporary names (:mod:`buoy_common.safe_output`), so nothing half-written is
@@ -9,13 +10,19 @@ forwarding the signal twice cannot interrupt the clean-up of the first.
 
 from __future__ import annotations
 
+import argparse
 import functools
 import gc
 import os
+import re
 import signal
 import sys
+import textwrap
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+from buoy_common.bag_io.common import RECOVERED_BAG_EXIT_CODE
 
 INTERRUPTED_EXIT_CODE = 130
 """Exit code of a command stopped by SIGINT or SIGTERM (the shell's 128 + SIGINT)."""
@@ -24,6 +31,108 @@ BROKEN_PIPE_EXIT_CODE = 141
 """Exit code of a command whose output pipe was closed (the shell's 128 + SIGPIPE)."""
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@dataclass(frozen=True)
+class ExitCode:
+    """One exit code of a command and what it means, as ``--help`` lists it."""
+
+    code: int
+    meaning: str
+
+
+DONE = ExitCode(0, "done")
+BAD_INPUT = ExitCode(
+    2, "bad arguments, parameters or input files: one line on stderr names the problem"
+)
+INTERRUPTED = ExitCode(
+    INTERRUPTED_EXIT_CODE,
+    "interrupted (SIGINT or SIGTERM): one line on stderr, nothing half-written left behind",
+)
+BROKEN_PIPE = ExitCode(
+    BROKEN_PIPE_EXIT_CODE, "the reader of the output went away (a closed pipe, as with | head)"
+)
+RECOVERED_BAG = ExitCode(
+    RECOVERED_BAG_EXIT_CODE,
+    "done, but the input bag was cut short (a recorder killed or out of power) and was read up "
+    "to its last complete chunk; a warning says how much",
+)
+INTERRUPTIBLE_EXIT_CODES = (DONE, BAD_INPUT, INTERRUPTED, BROKEN_PIPE)
+"""What every command decorated with :func:`interruptible` can return besides its own codes."""
+NODE_EXIT_CODES = (
+    ExitCode(0, "stopped by SIGINT or SIGTERM"),
+    ExitCode(2, "bad arguments or parameters, or rclpy could not start: one line on stderr"),
+)
+"""What a node run by :func:`buoy_common.base_node.run_node` returns."""
+
+_HELP_WIDTH = 78
+
+
+ROS_ARGUMENTS_NOTE = "ROS arguments (parameters, remappings) follow --ros-args."
+"""What the help of a command that is also a ROS node adds to its description."""
+
+
+def command_parser(
+    program: str, docstring: str, exit_codes: Iterable[ExitCode], note: str = ""
+) -> argparse.ArgumentParser:
+    """The argument parser of a command: its description the first paragraph of the module's
+    ``docstring`` (whole sentences, without reStructuredText markup) and ``note``, its epilog
+    every one of ``exit_codes`` with its meaning."""
+    description = " ".join(filter(None, (first_paragraph(docstring), note)))
+    return argparse.ArgumentParser(
+        prog=program,
+        description=_fill(description),
+        epilog=exit_codes_text(exit_codes),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
+def asks_for_help(argv: list[str]) -> bool:
+    """Whether a node's command line (``sys.argv``) asks for its help, ``-h`` or ``--help``
+    before any ROS arguments, rather than for the node to run."""
+    ours = argv[1:]
+    if "--ros-args" in ours:
+        ours = ours[: ours.index("--ros-args")]
+    return any(argument in ("-h", "--help") for argument in ours)
+
+
+def node_help(program: str, docstring: str) -> str:
+    """The help of a node that takes ROS arguments only: what it does (the first paragraph of
+    its module's ``docstring``), how to give it parameters, and its exit codes."""
+    description = f"{first_paragraph(docstring)} {ROS_ARGUMENTS_NOTE}"
+    return (
+        f"usage: {program} [-h] [--ros-args ...]\n\n{_fill(description)}\n\n"
+        f"{exit_codes_text(NODE_EXIT_CODES)}"
+    )
+
+
+def first_paragraph(docstring: str) -> str:
+    """The first paragraph of a docstring as plain text on one line."""
+    paragraph = textwrap.dedent(docstring).strip().split("\n\n", 1)[0]
+    return plain_text(" ".join(paragraph.split()))
+
+
+def plain_text(text: str) -> str:
+    """``text`` without reStructuredText roles and literals (:mod:`x` and ``x`` become x)."""
+    text = re.sub(r":[a-z]+:`~?([^`]+)`", r"\1", text)
+    return text.replace("``", "")
+
+
+def exit_codes_text(exit_codes: Iterable[ExitCode]) -> str:
+    """The ``Exit codes:`` section of a command's help, one code a line, in order."""
+    lines = ["exit codes:"]
+    for exit_code in sorted(exit_codes, key=lambda e: e.code):
+        lines += textwrap.wrap(
+            exit_code.meaning + ".",
+            _HELP_WIDTH,
+            initial_indent=f"  {exit_code.code:<5d}",
+            subsequent_indent=" " * 7,
+        )
+    return "\n".join(lines)
+
+
+def _fill(text: str) -> str:
+    return textwrap.fill(text, _HELP_WIDTH)
 
 
 class _Interruption:

@@ -22,6 +22,7 @@ import numpy as np
 
 from buoy_common.bag_io import BagError, BagWriter, jazzy_typestore
 from buoy_common.cdr import ImuWriter, Vector3StampedWriter
+from buoy_common.cli import BAD_INPUT, DONE, ExitCode, command_parser
 from buoy_common.contract import (
     AHRS_TOPIC,
     ANEMOMETER_FRAME,
@@ -67,6 +68,15 @@ IDENTITY_XYZW = (0.0, 0.0, 0.0, 1.0)
 
 WIND_ALL_INVALID_EXIT_CODE = 5
 """Exit code of a record refused because not one of its wind samples is valid."""
+EXIT_CODES = (
+    DONE,
+    BAD_INPUT,
+    ExitCode(
+        WIND_ALL_INVALID_EXIT_CODE,
+        "refused: every wind sample of the record is invalid (nothing written; "
+        "--allow-invalid-wind imports it)",
+    ),
+)
 
 
 class AllWindInvalidError(ValueError):
@@ -103,13 +113,7 @@ def _site_argument(text: str) -> tuple[float, float]:
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(
-        prog="import_records",
-        description=__doc__.split("\n")[0],
-        epilog=f"Exit codes: 0 written; 2 a bad map, record, argument or output (one line); "
-        f"{WIND_ALL_INVALID_EXIT_CODE} refused: every wind sample of the record is invalid "
-        "(nothing written; --allow-invalid-wind imports it).",
-    )
+    parser = command_parser("import_records", __doc__, EXIT_CODES)
     parser.add_argument("record", help="the logger's record file (delimited text or binary)")
     parser.add_argument("column_map", help="column map YAML (see docs/real-records.md)")
     parser.add_argument("output", help="bag directory to create")

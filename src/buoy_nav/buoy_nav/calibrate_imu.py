@@ -15,7 +15,6 @@ on stderr); 130 interrupted (SIGINT or SIGTERM), nothing written.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
@@ -23,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from buoy_common.bag_io import BagError, BagReader
-from buoy_common.cli import interruptible
+from buoy_common.cli import INTERRUPTIBLE_EXIT_CODES, command_parser, interruptible
 from buoy_common.contract import IMU_RAW_TOPIC, header_seconds
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import staged_file
@@ -36,6 +35,9 @@ DEFAULT_LATITUDE_DEG = 45.0
 MIN_CALIBRATED_BIAS_MG = 0.5
 """Smallest bias 1-σ written: six positions fix six unknowns exactly, so the fit cannot show
 its own error; the positions' noise and the drift until deployment leave about this much."""
+
+
+EXIT_CODES = INTERRUPTIBLE_EXIT_CODES
 
 
 def site_latitude_deg(config: FusionConfig) -> float:
@@ -61,7 +63,7 @@ def read_imu(bag: str):
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="calibrate_imu", description=__doc__.split("\n")[0])
+    parser = command_parser("calibrate_imu", __doc__, EXIT_CODES)
     parser.add_argument("in_bag", help="bag with imu/data_raw of the still positions")
     parser.add_argument("out_yaml", help="parameter file to write")
     parser.add_argument("--params-file", action="append", default=[], help="site parameters")

@@ -15,14 +15,13 @@ or SIGTERM), nothing written.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from buoy_common.bag_io import BagError, BagReader
-from buoy_common.cli import interruptible
+from buoy_common.cli import INTERRUPTIBLE_EXIT_CODES, command_parser, interruptible
 from buoy_common.contract import IMU_RAW_TOPIC, MAGNETOMETER_TOPIC, header_seconds
 from buoy_common.safe_output import staged_file
 from buoy_nav.calibration import (
@@ -33,6 +32,8 @@ from buoy_nav.calibration import (
     parameter_yaml,
     record_motion,
 )
+
+EXIT_CODES = INTERRUPTIBLE_EXIT_CODES
 
 
 def read_field(bag: str) -> np.ndarray:
@@ -81,9 +82,7 @@ def summary_lines(bag: str, calibration: MagnetometerCalibration) -> list[str]:
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(
-        prog="calibrate_magnetometer", description=__doc__.split("\n")[0]
-    )
+    parser = command_parser("calibrate_magnetometer", __doc__, EXIT_CODES)
     parser.add_argument("in_bag", help="bag with imu/mag of the buoy turning and tilting")
     parser.add_argument("out_yaml", help="parameter file to write")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing OUT_YAML")

@@ -1,4 +1,5 @@
-"""fusion_node: dual-antenna GNSS / strapdown INS fusion, live.
+"""fusion_node: the strapdown INS fused with its aiding sensors (GNSS, magnetometer, motion
+pack, mooring), live.
 
     fusion_node [--ros-args --params-file buoy.yaml --params-file fusion.yaml ...]
 
@@ -387,4 +388,4 @@ def _decoded(raw: bytes, message_class):
         return None
 
 
-main = main_for(FusionNode)
+main = main_for(FusionNode, __doc__)

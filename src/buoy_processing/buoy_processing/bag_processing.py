@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field, fields
@@ -69,9 +70,15 @@ from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
 from buoy_processing.bag_facts import facts_of_run
-from buoy_processing.offline_fusion import relative_topic, sensor_topics_of, truth_topics_of
+from buoy_processing.offline_fusion import (
+    OfflineFusion,
+    relative_topic,
+    sensor_topics_of,
+    truth_topics_of,
+)
 from buoy_processing.offline_runner import OfflineRun, run_fusion
-from buoy_processing.output_series import FlowSeries, NavigationSeries
+from buoy_processing.output_facts import OutputFacts, output_facts, source_use_of
+from buoy_processing.output_series import NANOSECONDS, FlowSeries, NavigationSeries
 from wind_comp.compensation_messages import (
     FlowSample,
     anemometer_sample,
@@ -143,9 +150,12 @@ class ProcessSummary:
     wall_s: float = 0.0
     recovery: Recovery | None = None
     """How much of a cut input bag was recovered; None for a complete bag."""
+    facts: OutputFacts | None = None
+    """What the outputs say about the run: north reference, sensors used, site, data span
+    (:mod:`buoy_processing.output_facts`)."""
     record_facts: RecordFacts | None = None
-    """What the outputs say about the data: north reference, declination, site, sensors,
-    coverage, and an imported record's own facts (:mod:`buoy_processing.bag_facts`)."""
+    """The facts of the input as its parameters and topics give them, and an imported record's
+    own facts (:mod:`buoy_processing.bag_facts`)."""
 
 
 def _anemometer_record(
@@ -312,19 +322,25 @@ class OfflineCorrection:
             )
 
 
+DIRECTION_FIELD_SUFFIX = "direction_deg"
+"""The product fields that are directions: their CSV columns name their north."""
+
 ISO_TIME_COLUMNS = ("window_start_utc", "window_end_utc")
 """The first columns of a products CSV: the window's bounds as ISO 8601 UTC times
 (``window_start_s`` and ``window_end_s`` as text a spreadsheet or pandas reads as time)."""
 
 
-def write_products_csv(products: list, product_type: type, path: Path) -> None:
+def write_products_csv(
+    products: list, product_type: type, path: Path, facts: OutputFacts | None = None
+) -> None:
     """One row per closed averaging window: the window's bounds in ISO 8601 UTC
     (:data:`ISO_TIME_COLUMNS`), then the ``WindProduct`` or ``CurrentProduct`` fields, columns
-    named with their units. The file appears only once complete."""
+    named with their units, a direction's with its north (:func:`csv_column_name`). The file
+    appears only once complete."""
     names = [f.name for f in fields(product_type)]
     with staged_file(path) as stream:
         writer = csv.writer(stream)
-        writer.writerow([*ISO_TIME_COLUMNS, *names])
+        writer.writerow([*ISO_TIME_COLUMNS, *(csv_column_name(name, facts) for name in names)])
         for product in products:
             writer.writerow(
                 [
@@ -333,6 +349,23 @@ def write_products_csv(products: list, product_type: type, path: Path) -> None:
                     *(_csv_value(getattr(product, name)) for name in names),
                 ]
             )
+
+
+def csv_column_name(field_name: str, facts: OutputFacts | None) -> str:
+    """The CSV column of a product field: its name, a direction's with the north it is
+    referenced to before its unit (``vector_mean_direction_true_north_deg``,
+    ``direction_magnetic_north_deg``); unchanged without ``facts``."""
+    if facts is None or not field_name.endswith(DIRECTION_FIELD_SUFFIX):
+        return field_name
+    stem = field_name.removesuffix("_deg")
+    return f"{stem}_{facts.north_token}_deg"
+
+
+def product_field_of_csv_column(column: str) -> str:
+    """The product field a products CSV column holds: the inverse of :func:`csv_column_name`
+    (``vector_mean_direction_magnetic_north_deg`` → ``vector_mean_direction_deg``)."""
+    named = re.fullmatch(r"(\w*direction)_[a-z]+_north_deg", column)
+    return f"{named.group(1)}_deg" if named else column
 
 
 def _csv_value(value) -> str:
@@ -526,11 +559,13 @@ def process_bag(
         )
         fusion, topic_counts = run_fusion(run, corrections)
         duration_s = reader.duration_s
-        facts = facts_of_run(reader, fusion_config, [*sensors.values(), *corrections.topics])
-    # The writers below state what `facts` says of the data (north reference, site, sensors).
-    summaries = write_products_csvs(corrections, csv_paths)
+        record_facts = facts_of_run(reader, fusion_config, [*sensors.values(), *corrections.topics])
+    facts = _facts_of_run(fusion_config, sensors, corrections, fusion)
+    summaries = write_products_csvs(corrections, csv_paths, facts)
     if netcdf_path is not None:
-        _write_netcdf(netcdf_path, corrections, in_bag, history, netcdf_attributes, overwrite)
+        _write_netcdf(
+            netcdf_path, corrections, facts, in_bag, history, netcdf_attributes, overwrite
+        )
     return ProcessSummary(
         **summaries,
         topic_counts=topic_counts,
@@ -538,8 +573,55 @@ def process_bag(
         duration_s=duration_s,
         wall_s=time.monotonic() - started,
         recovery=reader.recovery,
-        record_facts=facts,
+        facts=facts,
+        record_facts=record_facts,
     )
+
+
+def _facts_of_run(
+    fusion_config: FusionConfig,
+    sensors: dict[str, str],
+    corrections: BagCorrections,
+    fusion: OfflineFusion,
+) -> OutputFacts:
+    """The facts the outputs state, from the parameters, the topics read, what the fusion
+    used and the stamps of the samples."""
+    flows = corrections.flows
+    flow_topics = {
+        WIND_RAW_TOPIC: flows.wind,
+        DVL_TOPIC: flows.dvl,
+        SONIC_TEMPERATURE_TOPIC: flows.temperature,
+    }
+    topics = [*sensors, *(topic for topic, stored in flow_topics.items() if stored is not None)]
+    return output_facts(
+        fusion_config,
+        topics,
+        source_use_of(fusion.engine.health()),
+        _sample_spans_s(corrections),
+    )
+
+
+def _sample_spans_s(corrections: BagCorrections) -> list[tuple[float, float]]:
+    """(first, last) stamp in s of each output series: of the kept series when there are, else
+    of the samples the products' windows hold."""
+    spans = []
+    for correction in (corrections.wind, corrections.current):
+        if correction is None:
+            continue
+        if correction.series is not None and len(correction.series):
+            stamps_ns = correction.series.columns()[0]
+            spans.append((stamps_ns[0] / NANOSECONDS, stamps_ns[-1] / NANOSECONDS))
+        elif correction.products:
+            spans.append(
+                (
+                    min(product.first_sample_s for product in correction.products),
+                    max(product.last_sample_s for product in correction.products),
+                )
+            )
+    if corrections.navigation is not None and len(corrections.navigation):
+        stamps_ns = corrections.navigation.columns()[0]
+        spans.append((stamps_ns[0] / NANOSECONDS, stamps_ns[-1] / NANOSECONDS))
+    return spans
 
 
 def products_csv_paths(out_bag) -> dict[str, Path]:
@@ -568,18 +650,18 @@ def _check_outputs(in_bag, outputs: list, netcdf_path, overwrite: bool) -> None:
 
 
 def write_products_csvs(
-    corrections: BagCorrections, csv_paths: dict[str, Path]
+    corrections: BagCorrections, csv_paths: dict[str, Path], facts: OutputFacts | None = None
 ) -> dict[str, CorrectionSummary]:
-    """The products CSVs of the corrections that ran; their summaries by name (``wind``,
-    ``current``)."""
+    """The products CSVs of the corrections that ran, their direction columns named after the
+    north of ``facts``; their summaries by name (``wind``, ``current``)."""
     summaries = {}
     wind, current = corrections.wind, corrections.current
     if wind is not None:
-        write_products_csv(wind.products, WindProduct, csv_paths["wind"])
-        write_products_csv(wind.fluxes, FluxProduct, csv_paths["fluxes"])
+        write_products_csv(wind.products, WindProduct, csv_paths["wind"], facts)
+        write_products_csv(wind.fluxes, FluxProduct, csv_paths["fluxes"], facts)
         summaries["wind"] = wind.summary(csv_paths["wind"], csv_paths["fluxes"])
     if current is not None:
-        write_products_csv(current.products, CurrentProduct, csv_paths["current"])
+        write_products_csv(current.products, CurrentProduct, csv_paths["current"], facts)
         summaries["current"] = current.summary(csv_paths["current"])
     return summaries
 
@@ -587,6 +669,7 @@ def write_products_csvs(
 def _write_netcdf(
     netcdf_path,
     corrections: BagCorrections,
+    facts: OutputFacts,
     in_bag,
     history: str,
     attributes: dict[str, str] | None,
@@ -607,5 +690,6 @@ def _write_netcdf(
         current_products=[] if current is None else current.products,
         history=history,
         attributes=dict(attributes or {}),
+        facts=facts,
     )
     netcdf_output.write_netcdf(netcdf_path, content, overwrite)

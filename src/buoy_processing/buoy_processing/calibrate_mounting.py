@@ -19,7 +19,6 @@ arguments, parameters or bag, or data that do not determine the mounting; 130 in
 
 from __future__ import annotations
 
-import argparse
 import sys
 import tempfile
 from pathlib import Path
@@ -28,7 +27,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from buoy_common.bag_io import BagError, BagReader
-from buoy_common.cli import interruptible
+from buoy_common.cli import INTERRUPTIBLE_EXIT_CODES, command_parser, interruptible
 from buoy_common.contract import NAV_ODOMETRY_TOPIC, WIND_RAW_TOPIC, WIND_TRUE_TOPIC
 from buoy_common.extrinsics import describe_shared_fields
 from buoy_common.namespaces import (
@@ -51,9 +50,11 @@ from buoy_processing.mounting_calibration import (
 from buoy_processing.report.data import odometry_series, stamped_vectors, vectors_at_stamps
 from wind_comp.config import compensator_config_from_files
 
+EXIT_CODES = INTERRUPTIBLE_EXIT_CODES
+
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="calibrate_mounting", description=__doc__.split("\n")[0])
+    parser = command_parser("calibrate_mounting", __doc__, EXIT_CODES)
     parser.add_argument("in_bag", help="bag with the sensor topics process_bag needs")
     parser.add_argument("out_yaml", help="parameter file to write (anemometer.rpy_deg)")
     parser.add_argument(

@@ -3,8 +3,9 @@
     fuse_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file fusion.yaml] [--overwrite]
              [--namespace NS] [--remap FROM:=TO ...] [--smooth]
 
-Reads the sensor topics ``imu/data_raw``, ``gnss/fix``, ``gnss/heading`` (required),
-``gnss/vel`` and ``gnss/baseline`` (used when present) in log-time order, feeds them through the
+Reads the sensor topics (``imu/data_raw`` and at least one heading reference: a GNSS heading or
+baseline, ``imu/mag`` or a motion pack's ``imu/data``; GNSS fixes and velocities when present,
+which a moored buoy does without) in log-time order, feeds them through the
 same conversion and engine as the live node, and writes ``nav/odometry``, ``nav/imu``,
 ``nav/velocity`` and ``nav/fix`` to a new bag, each with the log time of the IMU message that
 produced it. Truth topics (``truth/*``) are copied unchanged, so the output carries its own
@@ -27,11 +28,10 @@ was processed up to its last complete chunk (a warning says how much was read).
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
-from buoy_common.cli import interruptible
+from buoy_common.cli import INTERRUPTIBLE_EXIT_CODES, RECOVERED_BAG, command_parser, interruptible
 from buoy_common.contract import IMU_RAW_TOPIC
 from buoy_common.extrinsics import describe_shared_fields
 from buoy_common.namespaces import (
@@ -44,13 +44,14 @@ from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_processing.bag_facts import fusion_config_for_bag
 from buoy_processing.bag_fusion import FusedBag, fuse_bag
+from buoy_processing.offline_fusion import FUSION_TOPICS_HELP
+
+EXIT_CODES = (*INTERRUPTIBLE_EXIT_CODES, RECOVERED_BAG)
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="fuse_bag", description=__doc__.split("\n")[0])
-    parser.add_argument(
-        "in_bag", help="bag with imu/data_raw, gnss/fix, gnss/heading[, gnss/vel, gnss/baseline]"
-    )
+    parser = command_parser("fuse_bag", __doc__, EXIT_CODES)
+    parser.add_argument("in_bag", help=f"bag with {FUSION_TOPICS_HELP}")
     parser.add_argument("out_bag", help="bag directory to create with the nav/* topics")
     parser.add_argument(
         "--params-file",

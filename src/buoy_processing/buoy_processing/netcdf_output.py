@@ -20,8 +20,10 @@ CF reader sees every variable):
 Every time coordinate is float64 seconds since midnight UTC of the day the data start
 (:class:`TimeAxis`), which gives the stamps back to within a nanosecond. Values are the ones
 ``process_bag`` writes to its bag and CSVs, to their float64 bits (a test holds them equal).
-Direction conventions as on the topics: wind FROM, current TOWARD, clockwise from true
-North; vectors ENU.
+Direction conventions as on the topics: wind FROM, current TOWARD, clockwise from the north the
+run's heading was referenced to; vectors ENU. What the file says about the run (that north, the
+sensors used, the site, the span of the data) comes from its :class:`OutputFacts`
+(:mod:`buoy_processing.output_facts`).
 
 The series are kept in memory until the file is written: 33 bytes per wind or DVL sample and
 88 per navigation solution (0.76 GB for a day of 100 Hz navigation).
@@ -40,11 +42,14 @@ import xarray as xr
 
 from buoy_common.safe_output import OutputError, staging_path
 from buoy_processing.netcdf_variables import (
+    CLOCKWISE_FROM_NORTH,
+    GEOGRAPHIC_STANDARD_NAMES,
     TimeAxis,
     flow_variables,
     navigation_variables,
     product_variables,
 )
+from buoy_processing.output_facts import MAGNETIC_NORTH, OutputFacts
 from buoy_processing.output_series import FlowSeries, NavigationSeries
 from wind_comp.flux_products import FluxProduct
 from wind_comp.products import CurrentProduct, WindProduct
@@ -52,6 +57,10 @@ from wind_comp.products import CurrentProduct, WindProduct
 CONVENTIONS = "CF-1.10, ACDD-1.3"
 STANDARD_NAME_VOCABULARY = "CF Standard Name Table v93"
 _NANOSECONDS = 1_000_000_000
+_GIVEN_SITE_COMMENT = (
+    "the site the run was given (site.* or origin.*, from the parameters or the imported "
+    "record), not measured: the run had no GNSS fix"
+)
 
 
 @dataclass
@@ -61,6 +70,8 @@ class NetcdfContent:
     source: str
     """The input bag, as the user named it (``source`` and ``history`` attributes)."""
     navigation: NavigationSeries
+    facts: OutputFacts
+    """North reference, sensors, site and span of the run: what the file says about it."""
     wind: FlowSeries | None = None
     current: FlowSeries | None = None
     wind_products: list[WindProduct] = field(default_factory=list)
@@ -83,19 +94,24 @@ def _iso(t_s: float) -> str:
     return moment.isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
-def _global_attributes(content: NetcdfContent, dataset: xr.Dataset, axis: TimeAxis) -> dict:
+def _global_attributes(content: NetcdfContent, dataset: xr.Dataset) -> dict:
     now = _iso(datetime.datetime.now(tz=datetime.UTC).timestamp())
+    facts = content.facts
+    sensors = facts.sensor_text()
+    current = (
+        " The surface current from the DVL's water track, corrected the same way."
+        if content.current is not None
+        else ""
+    )
     attributes = {
         "Conventions": CONVENTIONS,
         "title": "Motion-corrected wind and current from a moving ocean buoy",
         "summary": (
             "Wind measured by an anemometer on a moving buoy, corrected for the buoy's motion "
             "(Miller et al. 2008) with the attitude and velocity of an error-state Kalman "
-            "filter fusing IMU and dual-antenna GNSS; where a DVL is fitted, the surface "
-            "current from its water track corrected the same way. Per-sample series with "
-            "their correction status, window-averaged products (vector and scalar means, "
-            "gust, standard deviations) with coverage and QARTOD quality flags, and the "
-            "navigation solution."
+            f"filter; sensors used: {sensors}.{current} Per-sample series with their correction "
+            "status, window-averaged products (vector and scalar means, gust, standard "
+            "deviations) with coverage and QARTOD quality flags, and the navigation solution."
         ),
         "keywords": (
             "EARTH SCIENCE > ATMOSPHERE > ATMOSPHERIC WINDS > SURFACE WINDS, "
@@ -113,49 +129,76 @@ def _global_attributes(content: NetcdfContent, dataset: xr.Dataset, axis: TimeAx
         "date_created": now,
         "date_modified": now,
         "platform": "moored or drifting surface buoy",
-        "instrument": "sonic anemometer; IMU; dual-antenna GNSS; DVL where fitted",
+        "instrument": sensors,
         "cdm_data_type": "Trajectory",
         "comment": (
             "Vectors are ENU (east, north, up). Wind direction is where the wind blows FROM, "
-            "current direction where the water flows TOWARD, both clockwise from true North. "
-            "Invalid samples are NaN and keep their stamp; the *_status variables say why."
+            f"current direction where the water flows TOWARD. {facts.north_sentence()}"
+            " Invalid samples are NaN and keep their stamp; the *_status variables say why."
         ),
+        "north_reference": facts.north,
     }
-    times = [
-        dataset[name].values
-        for name in dataset.coords
-        if dataset[name].attrs.get("standard_name") == "time" and dataset[name].size
-    ]
-    if times:
-        reference_s = axis.reference_ns // _NANOSECONDS
-        start = reference_s + float(min(values.min() for values in times))
-        end = reference_s + float(max(values.max() for values in times))
-        attributes.update(
-            time_coverage_start=_iso(start),
-            time_coverage_end=_iso(end),
-            time_coverage_duration=f"PT{end - start:.3f}S",
-        )
+    attributes.update(_time_coverage(facts, dataset))
+    if facts.position_known and np.isfinite(dataset["latitude"].values).any():
+        attributes.update(_geospatial_attributes(dataset))
+    attributes.update(content.attributes)
+    return attributes
+
+
+def _time_coverage(facts: OutputFacts, dataset: xr.Dataset) -> dict:
+    """The span of the data: from its first to its last sample (never a window's bounds)."""
+    if facts.first_sample_s is None:
+        return {}
+    start, end = facts.first_sample_s, facts.last_sample_s
+    attributes = {
+        "time_coverage_start": _iso(start),
+        "time_coverage_end": _iso(end),
+        "time_coverage_duration": f"PT{end - start:.3f}S",
+    }
     if "time" in dataset.coords and dataset["time"].size > 1:
         interval_s = float(np.median(np.diff(dataset["time"].values)))
         attributes["time_coverage_resolution"] = f"PT{interval_s:.6g}S"
-    if "latitude" in dataset and np.isfinite(dataset["latitude"].values).any():
-        latitudes = dataset["latitude"].values
-        longitudes = dataset["longitude"].values
-        heights = dataset["altitude"].values
-        attributes.update(
-            geospatial_lat_min=float(np.nanmin(latitudes)),
-            geospatial_lat_max=float(np.nanmax(latitudes)),
-            geospatial_lat_units="degrees_north",
-            geospatial_lon_min=float(np.nanmin(longitudes)),
-            geospatial_lon_max=float(np.nanmax(longitudes)),
-            geospatial_lon_units="degrees_east",
-            geospatial_vertical_min=float(np.nanmin(heights)),
-            geospatial_vertical_max=float(np.nanmax(heights)),
-            geospatial_vertical_units="m",
-            geospatial_vertical_positive="up",
-        )
-    attributes.update(content.attributes)
     return attributes
+
+
+def _geospatial_attributes(dataset: xr.Dataset) -> dict:
+    latitudes = dataset["latitude"].values
+    longitudes = dataset["longitude"].values
+    heights = dataset["altitude"].values
+    return {
+        "geospatial_lat_min": float(np.nanmin(latitudes)),
+        "geospatial_lat_max": float(np.nanmax(latitudes)),
+        "geospatial_lat_units": "degrees_north",
+        "geospatial_lon_min": float(np.nanmin(longitudes)),
+        "geospatial_lon_max": float(np.nanmax(longitudes)),
+        "geospatial_lon_units": "degrees_east",
+        "geospatial_vertical_min": float(np.nanmin(heights)),
+        "geospatial_vertical_max": float(np.nanmax(heights)),
+        "geospatial_vertical_units": "m",
+        "geospatial_vertical_positive": "up",
+    }
+
+
+def _state_the_north(dataset: xr.Dataset, facts: OutputFacts) -> None:
+    """Put the run's north into the texts of the directions and headings; with magnetic north,
+    take away the CF standard names that mean true north and say what the axes are."""
+    clockwise = facts.clockwise_from()
+    magnetic = facts.north == MAGNETIC_NORTH
+    for variable in dataset.variables.values():
+        attributes = variable.attrs
+        for key, value in attributes.items():
+            if isinstance(value, str) and CLOCKWISE_FROM_NORTH in value:
+                attributes[key] = value.replace(CLOCKWISE_FROM_NORTH, clockwise)
+        if magnetic and attributes.get("standard_name", "").startswith(GEOGRAPHIC_STANDARD_NAMES):
+            del attributes["standard_name"]
+            comment = attributes.get("comment", "").rstrip(".")
+            attributes["comment"] = f"{comment}. {_MAGNETIC_AXES_COMMENT}".lstrip(". ")
+
+
+_MAGNETIC_AXES_COMMENT = (
+    "East and north here are magnetic east and north (no declination applied), so this is not "
+    "the CF quantity of true east or north and carries no standard_name."
+)
 
 
 def time_axis(content: NetcdfContent) -> TimeAxis:
@@ -185,7 +228,12 @@ def netcdf_dataset(content: NetcdfContent) -> xr.Dataset:
     coordinates = {name: array for name, array in variables.items() if name == array.dims[0]}
     data = {name: array for name, array in variables.items() if name not in coordinates}
     dataset = xr.Dataset(data, coords=coordinates)
-    dataset.attrs = _global_attributes(content, dataset, axis)
+    _state_the_north(dataset, content.facts)
+    facts = content.facts
+    if facts.site_deg is not None and not facts.position_from_gnss:
+        for name in ("latitude", "longitude", "altitude"):
+            dataset[name].attrs["comment"] = _GIVEN_SITE_COMMENT
+    dataset.attrs = _global_attributes(content, dataset)
     return dataset
 
 

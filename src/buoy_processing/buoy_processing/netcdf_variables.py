@@ -32,6 +32,21 @@ from wind_comp.products import (
 TIME_UNITS = "seconds"
 """Marks a product field that is a time: written in the file's time units."""
 
+CLOCKWISE_FROM_NORTH = "{clockwise from north}"
+"""Stands in the texts of the directions and headings for the north the run's heading was
+referenced to, which :mod:`buoy_processing.netcdf_output` puts in its place."""
+
+GEOGRAPHIC_STANDARD_NAMES = (
+    "eastward_",
+    "northward_",
+    "wind_from_direction",
+    "sea_water_velocity_to_direction",
+    "platform_orientation",
+    "platform_course",
+)
+"""Beginnings of the CF standard names whose axes are true east and true north: not the
+names of quantities referenced to magnetic north."""
+
 
 @dataclass(frozen=True)
 class TimeAxis:
@@ -124,7 +139,7 @@ def flow_variables(series: FlowSeries, wind: bool, axis: TimeAxis) -> dict[str, 
             "wind_status",
         )
         standard_names = (*names, "wind_speed", "wind_from_direction")
-        direction_comment = "meteorological: where the wind blows FROM, clockwise from North"
+        direction_comment = "meteorological: where the wind blows FROM, " + CLOCKWISE_FROM_NORTH
     else:
         names = ("eastward_current", "northward_current", "upward_current")
         what, direction = "current", oceanographic_direction_deg(flows[:, 0], flows[:, 1])
@@ -140,7 +155,7 @@ def flow_variables(series: FlowSeries, wind: bool, axis: TimeAxis) -> dict[str, 
             "sea_water_speed",
             "sea_water_velocity_to_direction",
         )
-        direction_comment = "oceanographic: where the water flows TOWARD, clockwise from North"
+        direction_comment = "oceanographic: where the water flows TOWARD, " + CLOCKWISE_FROM_NORTH
     prefix = "" if wind else "current_"
     error_names = tuple(f"{prefix}{axis}_standard_error" for axis in "uvw")
     common = {"ancillary_variables": status_name, "coverage_content_type": "physicalMeasurement"}
@@ -204,6 +219,9 @@ def flow_variables(series: FlowSeries, wind: bool, axis: TimeAxis) -> dict[str, 
     return variables
 
 
+_POSITION_STANDARD_NAMES = ("latitude", "longitude", "height_above_reference_ellipsoid")
+
+
 def navigation_variables(navigation: NavigationSeries, axis: TimeAxis) -> dict[str, xr.DataArray]:
     stamps_ns, columns = navigation.columns()
     dimension = "nav_time"
@@ -214,6 +232,9 @@ def navigation_variables(navigation: NavigationSeries, axis: TimeAxis) -> dict[s
     common = {"coverage_content_type": "referenceInformation"}
 
     def variable(values, standard_name, long_name, units, **extra):
+        # Where each solution was: the position variables are its auxiliary coordinates.
+        if standard_name not in _POSITION_STANDARD_NAMES:
+            extra = {"coordinates": "latitude longitude altitude", **extra}
         attributes = {"long_name": long_name, "units": units, **common, **extra}
         if standard_name:
             attributes["standard_name"] = standard_name
@@ -237,6 +258,7 @@ def navigation_variables(navigation: NavigationSeries, axis: TimeAxis) -> dict[s
             "ellipsoidal height of the IMU (WGS-84)",
             "m",
             positive="up",
+            axis="Z",
         ),
         "roll": variable(
             rpy_deg[:, 0],
@@ -253,7 +275,7 @@ def navigation_variables(navigation: NavigationSeries, axis: TimeAxis) -> dict[s
         "heading": variable(
             heading_deg,
             "platform_orientation",
-            "heading of the buoy's forward (x) axis, clockwise from true North",
+            "heading of the buoy's forward (x) axis, " + CLOCKWISE_FROM_NORTH,
             "degree",
         ),
         "speed_over_ground": variable(
@@ -265,7 +287,7 @@ def navigation_variables(navigation: NavigationSeries, axis: TimeAxis) -> dict[s
         "course_over_ground": variable(
             oceanographic_direction_deg(columns[:, 7], columns[:, 8]),
             "platform_course",
-            "direction the IMU moves over ground, clockwise from true North",
+            "direction the IMU moves over ground, " + CLOCKWISE_FROM_NORTH,
             "degree",
         ),
         "heave_rate": variable(
@@ -308,7 +330,7 @@ _WIND_PRODUCT_VARIABLES = (
                      "mean", "horizontal speed of the vector-mean wind"),
     _ProductVariable("vector_mean_direction_deg", "vector_mean_wind_from_direction",
                      "wind_from_direction", "degree", "mean",
-                     "direction of the vector-mean wind (FROM, clockwise from true North)"),
+                     "direction of the vector-mean wind (FROM, " + CLOCKWISE_FROM_NORTH + ")"),
     _ProductVariable("scalar_mean_speed_mps", "scalar_mean_wind_speed", "wind_speed", "m s-1",
                      "mean", "mean of the horizontal speeds"),
     _ProductVariable("gust_mps", "gust", "wind_speed_of_gust", "m s-1", "maximum",
@@ -342,7 +364,7 @@ _CURRENT_PRODUCT_VARIABLES = (
                      "horizontal speed of the vector-mean current"),
     _ProductVariable("direction_deg", "current_to_direction", "sea_water_velocity_to_direction",
                      "degree", "mean",
-                     "direction of the vector-mean current (TOWARD, clockwise from true North)"),
+                     "direction of the vector-mean current (TOWARD, " + CLOCKWISE_FROM_NORTH + ")"),
     _ProductVariable("std_u_mps", "std_eastward_current", "eastward_sea_water_velocity",
                      "m s-1", "standard_deviation", "standard deviation of the east current"),
     _ProductVariable("std_v_mps", "std_northward_current", "northward_sea_water_velocity",

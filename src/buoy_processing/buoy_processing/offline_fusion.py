@@ -50,6 +50,13 @@ from buoy_nav.source_health import HealthTransition, SourceStatus
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
 """The fusion needs one of these at least: without a heading reference it cannot align."""
 OPTIONAL_TOPICS = tuple(topic for topic in FUSION_INPUT_MSGTYPES if topic not in REQUIRED_TOPICS)
+FUSION_TOPICS_HELP = (
+    f"{' and '.join(REQUIRED_TOPICS)} (required), at least one heading reference of "
+    f"{', '.join(HEADING_REFERENCE_TOPICS)}, and whichever of "
+    f"{', '.join(t for t in OPTIONAL_TOPICS if t not in HEADING_REFERENCE_TOPICS)} it has "
+    "(GNSS is optional: a moored buoy needs none)"
+)
+"""The fusion's input topics as the commands' help states them, from the registry."""
 
 
 def relative_topic(name: str) -> str:

@@ -20,12 +20,12 @@ bags in flight abandoned, the next run goes on from there.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 from tqdm import tqdm
 
+from buoy_common.cli import ExitCode, command_parser
 from buoy_common.namespaces import NamespaceError, add_namespace_arguments, parse_remap
 from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
@@ -44,10 +44,24 @@ EXIT_FAILED_BAGS = 1
 EXIT_USAGE = 2
 EXIT_TRUNCATED_BAGS = 3
 EXIT_INTERRUPTED = 130
+EXIT_CODES = (
+    ExitCode(0, "every bag done"),
+    ExitCode(EXIT_FAILED_BAGS, "some bags failed: they are listed on stderr with their reasons"),
+    ExitCode(EXIT_USAGE, "bad arguments, parameters, archive or scheduler: one line on stderr"),
+    ExitCode(
+        EXIT_TRUNCATED_BAGS,
+        "every bag done, but some were cut short and processed up to their last complete "
+        "chunk (as process_bag)",
+    ),
+    ExitCode(
+        EXIT_INTERRUPTED,
+        "interrupted (Ctrl-C): the bags in flight abandoned; the next run goes on from there",
+    ),
+)
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="process_archive", description=__doc__.split("\n")[0])
+    parser = command_parser("process_archive", __doc__, EXIT_CODES)
     parser.add_argument("archive", help="directory tree holding the bags")
     parser.add_argument("out", help="output directory (created; mirrors ARCHIVE)")
     parser.add_argument(

@@ -49,7 +49,13 @@ import sys
 from pathlib import Path
 
 from buoy_common.bag_io import RECOVERED_BAG_EXIT_CODE, BagError
-from buoy_common.cli import interruptible
+from buoy_common.cli import (
+    INTERRUPTIBLE_EXIT_CODES,
+    RECOVERED_BAG,
+    ExitCode,
+    command_parser,
+    interruptible,
+)
 from buoy_common.contract import (
     DVL_TOPIC,
     SONIC_TEMPERATURE_TOPIC,
@@ -68,6 +74,8 @@ from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_processing.bag_facts import fusion_config_for_bag
 from buoy_processing.bag_processing import ProcessSummary, process_bag
+from buoy_processing.offline_fusion import FUSION_TOPICS_HELP
+from buoy_processing.output_facts import OutputFacts
 from wind_comp.config import (
     COMPENSATION_PARAMETER_PREFIX,
     CURRENT_PARAMETER_PREFIX,
@@ -79,14 +87,23 @@ from wind_comp.products import CurrentProduct, QualityFlag, WindProduct
 
 MOSTLY_INVALID_EXIT_CODE = 4
 """Exit code of a run that completed but whose wind or DVL samples came out mostly invalid."""
+EXIT_CODES = (
+    *INTERRUPTIBLE_EXIT_CODES,
+    RECOVERED_BAG,
+    ExitCode(
+        MOSTLY_INVALID_EXIT_CODE,
+        "done, but most wind samples or most DVL samples came out invalid; a warning names the "
+        "main reason, such as a wrong frame",
+    ),
+)
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="process_bag", description=__doc__.split("\n")[0])
+    parser = command_parser("process_bag", __doc__, EXIT_CODES)
     parser.add_argument(
         "in_bag",
-        help="bag with imu/data_raw, gnss/fix, gnss/heading[, gnss/vel, gnss/baseline] and "
-        "anemometer/wind, dvl/velocity or both",
+        help=f"bag with {FUSION_TOPICS_HELP}, and anemometer/wind (with "
+        "anemometer/temperature for the buoyancy flux), dvl/velocity or both",
     )
     parser.add_argument("out_bag", help="bag directory to create")
     parser.add_argument(
@@ -141,6 +158,10 @@ def netcdf_output_for(netcdf_path: str, view, several: bool) -> Path:
 def print_summary(summary: ProcessSummary, out_bag: str, netcdf_path: Path | None) -> None:
     for line in summary.fusion_lines:
         print(line)
+    if summary.facts is not None:
+        print(f"outputs: {summary.facts.north_sentence()}")
+        print(f"outputs: sensors used: {summary.facts.sensor_text()}")
+        print(f"outputs: {_site_text(summary.facts)}")
     written = [str(out_bag)]
     for name, topic, correction in (
         ("wind", WIND_RAW_TOPIC, summary.wind),
@@ -185,6 +206,15 @@ def print_summary(summary: ProcessSummary, out_bag: str, netcdf_path: Path | Non
         f"{summary.duration_s:.1f} s of data in {summary.wall_s:.1f} s "
         f"({summary.duration_s / max(summary.wall_s, 1e-9):.0f}x real time)"
     )
+
+
+def _site_text(facts: OutputFacts) -> str:
+    if facts.position_from_gnss:
+        return "position from GNSS fixes"
+    if facts.site_deg is not None:
+        latitude, longitude = facts.site_deg
+        return f"position the site given, {latitude:.5f}, {longitude:.5f} deg (not measured)"
+    return "position unknown"
 
 
 def _product_text(product: WindProduct | CurrentProduct) -> str:

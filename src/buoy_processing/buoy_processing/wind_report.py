@@ -11,11 +11,10 @@ namespace is read in it; a bag of several buoys gives one report per namespace,
 ``FOLDER/buoy1``, ``FOLDER/buoy2`` (:mod:`buoy_common.namespaces`).
 """
 
-import argparse
 from pathlib import Path
 
 from buoy_common.bag_io import BagError, BagReader
-from buoy_common.cli import interruptible
+from buoy_common.cli import INTERRUPTIBLE_EXIT_CODES, command_parser, interruptible
 from buoy_common.contract import CURRENT_TOPIC, WIND_RAW_TOPIC, WIND_TRUE_TOPIC
 from buoy_common.namespaces import (
     NamespaceError,
@@ -34,13 +33,13 @@ from buoy_processing.report.data import (
     report_data_from_bag,
 )
 
+EXIT_CODES = INTERRUPTIBLE_EXIT_CODES
+
 
 @interruptible("wind_report")
 def main(argv=None) -> int:
     """Command line: draw the report of a bag, or of a run saved with :func:`save_report_data`."""
-    parser = argparse.ArgumentParser(
-        prog="wind_report", description="Draw wind-correction and current figures and tables."
-    )
+    parser = command_parser("wind_report", __doc__, EXIT_CODES)
     parser.add_argument(
         "source",
         type=Path,

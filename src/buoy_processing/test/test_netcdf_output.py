@@ -16,8 +16,10 @@ from scipy.spatial.transform import Rotation
 
 from buoy_common.contract import QualityFlag
 from buoy_common.safe_output import OutputError
+from buoy_nav.config import FusionConfig
 from buoy_processing.netcdf_output import NetcdfContent, write_netcdf
 from buoy_processing.netcdf_variables import product_time_name, product_variable_name
+from buoy_processing.output_facts import SourceUse, output_facts
 from buoy_processing.output_series import FlowSeries, NavigationSeries
 from wind_comp.compensator import CorrectedBatch, SampleStatus
 from wind_comp.config import CompensatorConfig
@@ -100,6 +102,23 @@ def navigation() -> NavigationSeries:
     return series
 
 
+GNSS_RUN = (
+    ("imu/data_raw", "gnss/fix", "gnss/vel", "gnss/heading", "anemometer/wind"),
+    {"gnss_fix": SourceUse(150), "gnss_velocity": SourceUse(150), "gnss_heading": SourceUse(150)},
+)
+MAGNETIC_MOTION_PACK_RUN = (
+    ("imu/data_raw", "imu/data", "anemometer/wind"),
+    {"ahrs": SourceUse(3000), "moored": SourceUse(150)},
+)
+
+
+def facts_of(run, stamps_ns: np.ndarray, **parameters):
+    """The facts of a run with the topics and source use of ``run``, over ``stamps_ns``."""
+    topics, uses = run
+    config = dataclasses.replace(FusionConfig(), **parameters)
+    return output_facts(config, topics, uses, [(stamps_ns[0] * 1e-9, stamps_ns[-1] * 1e-9)])
+
+
 def content(valid: bool = True) -> tuple[NetcdfContent, np.ndarray, np.ndarray, np.ndarray]:
     series, stamps_ns, flows, status, covariance = wind_series(valid)
     products = []
@@ -119,6 +138,7 @@ def content(valid: bool = True) -> tuple[NetcdfContent, np.ndarray, np.ndarray, 
             fluxes=flux_products,
             history="process_bag bags/example out --netcdf out.nc",
             attributes={"license": "CC-BY-4.0"},
+            facts=facts_of(GNSS_RUN, stamps_ns),
         ),
         stamps_ns,
         flows,
@@ -334,3 +354,54 @@ def test_the_wave_motion_left_of_each_flux_window_is_there_with_its_flag(written
         assert flag.values.tolist() == [1, 4, 2]
         assert flag.attrs["flag_values"].tolist() == [f.value for f in QualityFlag]
         assert "motion left" in flag.attrs["long_name"]
+
+
+def test_the_file_states_the_north_the_sensors_and_the_span_of_the_samples(written):
+    path, _, stamps_ns, _, _ = written
+    with xr.open_dataset(path, decode_times=False) as dataset:
+        assert dataset.attrs["north_reference"] == "true north"
+        assert "clockwise from true north" in dataset.attrs["comment"]
+        assert "dual-antenna GNSS" in dataset.attrs["instrument"]
+        assert "DVL" not in dataset.attrs["instrument"]
+        assert "clockwise from true north" in dataset["heading"].attrs["long_name"]
+        assert dataset["wind_from_direction"].attrs["standard_name"] == "wind_from_direction"
+        # The data end with their last sample, not with the middle of the 10-min window that
+        # the 150 s of samples only begin.
+        assert dataset.attrs["time_coverage_end"] == "2026-01-01T00:02:29.950Z"
+        assert stamps_ns[-1] - START_S * 10**9 == 149_950_000_000
+        assert dataset.attrs["time_coverage_duration"] == "PT149.950S"
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # the checker's own, of its plugins
+def test_a_magnetic_heading_without_declination_is_said_and_stays_cf_compliant(tmp_path):
+    made, stamps_ns, _, _ = content()
+    facts = facts_of(
+        MAGNETIC_MOTION_PACK_RUN,
+        stamps_ns,
+        ahrs_yaw_reference="magnetic_north",
+        magnetic_declination_deg=0.0,
+        site_latitude_deg=LATITUDE_DEG,
+        site_longitude_deg=LONGITUDE_DEG,
+    )
+    path = write_netcdf(tmp_path / "magnetic.nc", dataclasses.replace(made, facts=facts), False)
+    with xr.open_dataset(path, decode_times=False) as dataset:
+        assert dataset.attrs["north_reference"] == "magnetic north"
+        assert "magnetic north (no declination applied)" in dataset.attrs["comment"]
+        assert "GNSS" not in dataset.attrs["instrument"] + dataset.attrs["summary"]
+        assert "motion pack" in dataset.attrs["instrument"]
+        for name in ("heading", "wind_from_direction", "eastward_wind", "u_standard_error"):
+            assert "standard_name" not in dataset[name].attrs, name
+            assert "magnetic" in dataset[name].attrs["comment"], name
+        assert dataset["upward_air_velocity"].attrs["standard_name"] == "upward_air_velocity"
+        assert "not measured" in dataset["latitude"].attrs["comment"]
+        assert dataset.attrs["geospatial_lat_min"] == LATITUDE_DEG
+    suite = CheckSuite()
+    suite.load_all_available_checkers()
+    results, errors = suite.run_all(suite.load_dataset(str(path)), ["cf:1.10"], [])["cf:1.10"]
+    assert not errors
+    assert [r.name for r in results if _failed(r)] == []
+
+
+def _failed(result) -> bool:
+    value = result.value
+    return value[0] < value[1] if isinstance(value, tuple) else not value

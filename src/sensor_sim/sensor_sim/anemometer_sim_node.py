@@ -2,4 +2,4 @@
 
 from sensor_sim.sim_base_node import main_for_stream
 
-main = main_for_stream("anemometer")
+main = main_for_stream("anemometer", __doc__)

@@ -45,6 +45,7 @@ from buoy_common.base_node import (
     message_class,
     take_stop_signals,
 )
+from buoy_common.cli import BAD_INPUT, RECOVERED_BAG, ROS_ARGUMENTS_NOTE, ExitCode, command_parser
 from buoy_common.contract import CLOCK_TOPIC
 from sensor_sim.bag_recorder_node import split_ros_arguments
 
@@ -55,6 +56,14 @@ WAIT_REPORT_PERIOD_S = 5.0
 # Longest single sleep, so that a shutdown requested meanwhile is noticed promptly.
 MAX_SLEEP_S = 0.1
 CLOCK_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+
+EXIT_CODES = (
+    ExitCode(0, "the end of the bag reached, or stopped by SIGINT or SIGTERM"),
+    ExitCode(1, "the subscribers did not appear in time"),
+    BAD_INPUT,
+    RECOVERED_BAG,
+)
 
 
 class PlaybackError(Exception):
@@ -204,10 +213,7 @@ class BagPlayer:
 
 
 def parse_arguments(arguments: list[str]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        prog=PROGRAM,
-        description="Replay a rosbag2 bag at its recorded pace. ROS arguments follow --ros-args.",
-    )
+    parser = command_parser(PROGRAM, __doc__, EXIT_CODES, ROS_ARGUMENTS_NOTE)
     parser.add_argument("input_bag", help="bag directory to play")
     parser.add_argument(
         "--rate", type=float, default=1.0, metavar="R", help="speed factor, > 1 plays faster"

@@ -39,6 +39,7 @@ from buoy_common.base_node import (
     message_class,
     run_node,
 )
+from buoy_common.cli import BAD_INPUT, ROS_ARGUMENTS_NOTE, ExitCode, command_parser
 from buoy_common.contract import (
     CLOCK_TOPIC,
     CURRENT_TOPIC,
@@ -78,6 +79,13 @@ BEST_EFFORT_DATA_QOS = QoSProfile(
     history=DATA_QOS.history,
     reliability=ReliabilityPolicy.BEST_EFFORT,
     durability=DATA_QOS.durability,
+)
+
+
+EXIT_CODES = (
+    ExitCode(0, "the bag closed properly after SIGINT, SIGTERM or the end of --duration-s"),
+    ExitCode(1, "the bag could not be closed properly"),
+    BAD_INPUT,
 )
 
 
@@ -259,10 +267,7 @@ class BagRecorder(SuiteNode):
 
 
 def parse_arguments(arguments: list[str]) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(
-        prog="bag_recorder",
-        description="Record topics into a rosbag2 bag (MCAP). ROS arguments follow --ros-args.",
-    )
+    parser = command_parser("bag_recorder", __doc__, EXIT_CODES, ROS_ARGUMENTS_NOTE)
     parser.add_argument("output_bag", help="bag directory to create (must not exist)")
     parser.add_argument(
         "--topics",

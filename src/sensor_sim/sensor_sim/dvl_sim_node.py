@@ -3,4 +3,4 @@ default), for scenarios whose platform carries one (``sensors.dvl``)."""
 
 from sensor_sim.sim_base_node import main_for_stream
 
-main = main_for_stream("dvl")
+main = main_for_stream("dvl", __doc__)

@@ -3,4 +3,4 @@
 
 from sensor_sim.sim_base_node import main_for_stream
 
-main = main_for_stream("gnss")
+main = main_for_stream("gnss", __doc__)

@@ -2,4 +2,4 @@
 
 from sensor_sim.sim_base_node import main_for_stream
 
-main = main_for_stream("imu")
+main = main_for_stream("imu", __doc__)

@@ -9,7 +9,6 @@ It plays the role ``ros2 launch`` would on a full ROS install.
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
 import signal
@@ -20,7 +19,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from buoy_common.cli import interruptible
+from buoy_common.cli import INTERRUPTIBLE_EXIT_CODES, ExitCode, command_parser, interruptible
 from buoy_common.contract import (
     DVL_TOPIC,
     IMU_RAW_TOPIC,
@@ -165,7 +164,7 @@ def scenario_values(arguments) -> dict[str, object]:
 
 
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="run_scenario", description=__doc__.split("\n")[0])
+    parser = command_parser("run_scenario", __doc__, EXIT_CODES)
     parser.add_argument("scenario", help="shipped scenario name or path to a scenario YAML file")
     parser.add_argument(
         "--set",
@@ -400,6 +399,12 @@ def run(arguments) -> int:
     if code == 0 and arguments.record:
         print(f"run_scenario: recorded {arguments.record}")
     return code
+
+
+EXIT_CODES = (
+    *INTERRUPTIBLE_EXIT_CODES,
+    ExitCode(1, "a node failed (its log is named on stderr) or the run did not finish in time"),
+)
 
 
 @interruptible("run_scenario")

@@ -158,6 +158,7 @@ class SimulatedSensorNode(SuiteNode):
         return level, message, {"sim_time_s": self.sim_time_s, "published": self.published}
 
 
-def main_for_stream(kind: str):
-    """Console-script entry point of the node that publishes stream ``kind``."""
-    return main_for(lambda: SimulatedSensorNode(kind))
+def main_for_stream(kind: str, docstring: str):
+    """Console-script entry point of the node that publishes stream ``kind``; ``docstring``
+    (its module's) says what it does in ``--help``."""
+    return main_for(lambda: SimulatedSensorNode(kind), docstring)

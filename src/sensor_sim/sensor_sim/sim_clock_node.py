@@ -94,4 +94,4 @@ class SimClockNode(SuiteNode):
         self.publish_time(sim_time_s)
 
 
-main = main_for(SimClockNode)
+main = main_for(SimClockNode, __doc__)

@@ -7,14 +7,13 @@ the fast way to make long runs for benchmarks; the committed bags are recorded l
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 
 from tqdm import tqdm
 
 from buoy_common.bag_io import BagError, BagWriter
-from buoy_common.cli import interruptible
+from buoy_common.cli import INTERRUPTIBLE_EXIT_CODES, command_parser, interruptible
 from buoy_common.parameters import ParameterError, load_parameter_files
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS, merged_messages
@@ -23,8 +22,11 @@ from sensor_sim.truth import TruthModel
 CHUNK_S = 10.0
 
 
+EXIT_CODES = INTERRUPTIBLE_EXIT_CODES
+
+
 def parse_arguments(argv):
-    parser = argparse.ArgumentParser(prog="simulate_bag", description=__doc__.split("\n")[0])
+    parser = command_parser("simulate_bag", __doc__, EXIT_CODES)
     parser.add_argument("scenario", help="shipped scenario name or path to a scenario YAML file")
     parser.add_argument("output", help="bag directory to create")
     parser.add_argument(

@@ -3,4 +3,4 @@ scenario has a current, ``truth/current`` (50 Hz by default)."""
 
 from sensor_sim.sim_base_node import main_for_stream
 
-main = main_for_stream("truth")
+main = main_for_stream("truth", __doc__)

@@ -442,4 +442,4 @@ class CompensationNode(CorrectionNode):
         return level, text, values
 
 
-main = main_for(CompensationNode)
+main = main_for(CompensationNode, __doc__)

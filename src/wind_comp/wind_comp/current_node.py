@@ -92,4 +92,4 @@ class CurrentNode(CorrectionNode):
         )
 
 
-main = main_for(CurrentNode)
+main = main_for(CurrentNode, __doc__)

@@ -116,4 +116,4 @@ class FoxgloveBridge(SuiteNode):
         super().destroy_node()
 
 
-main = main_for(FoxgloveBridge)
+main = main_for(FoxgloveBridge, __doc__)

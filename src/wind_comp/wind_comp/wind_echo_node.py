@@ -24,6 +24,7 @@ from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Float64MultiArray
 
 from buoy_common.base_node import DATA_QOS, SuiteNode, run_node
+from buoy_common.cli import NODE_EXIT_CODES, ROS_ARGUMENTS_NOTE, command_parser
 from buoy_common.contract import (
     WIND_TRUE_TOPIC,
     Reason,
@@ -38,6 +39,9 @@ from wind_comp.compensation_messages import (
 from wind_comp.products import meteorological_direction_deg
 
 PROGRAM = "wind_echo"
+
+
+EXIT_CODES = NODE_EXIT_CODES
 
 
 def wind_line(t_s: float, u_east_mps: float, v_north_mps: float, w_up_mps: float) -> str:
@@ -107,7 +111,7 @@ def positive_int(text: str) -> int:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(prog=PROGRAM, description=__doc__.split("\n")[0])
+    parser = command_parser(PROGRAM, __doc__, EXIT_CODES, ROS_ARGUMENTS_NOTE)
     parser.add_argument(
         "--every", type=positive_int, default=1, metavar="N", help="print every N-th sample"
     )

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -30,6 +31,8 @@ from buoy_common.contract import (
     QualityFlag,
 )
 from buoy_common.namespaces import TopicView
+from buoy_processing.bag_processing import CURRENT_PRODUCTS_CSV_SUFFIX
+from buoy_processing.output_facts import north_token_of_csv
 from buoy_processing.report.data import (
     ReportDataError,
     has_messages,
@@ -57,6 +60,9 @@ class CurrentData:
         products: the averaged products stored in the bag (``current/stats_<window>``).
         truth_current_enu_mps: (N, 3) ``truth/current`` at the stamps, or None.
         truth_water_enu_mps: (N, 3) ``truth/water_velocity`` at the stamps, or None.
+        north: the north the directions are referenced to, as
+            :attr:`~buoy_processing.output_facts.OutputFacts.north_token`; empty when the bag
+            does not record it.
     """
 
     t_s: np.ndarray
@@ -64,6 +70,7 @@ class CurrentData:
     products: list[CurrentProduct]
     truth_current_enu_mps: np.ndarray | None = None
     truth_water_enu_mps: np.ndarray | None = None
+    north: str = ""
 
 
 def current_report_data(bag, view: TopicView | None = None) -> CurrentData | None:
@@ -92,7 +99,10 @@ def current_data_from_bag(reader: BagReader) -> CurrentData | None:
             truths.append(None)
             continue
         truths.append(interpolate_vectors(current.stamps_ns, stamped_vectors(reader, stored)))
-    return CurrentData(t_s, current.vectors, _stored_products(reader), *truths)
+    north = north_token_of_csv(
+        Path(reader.path).with_name(Path(reader.path).name + CURRENT_PRODUCTS_CSV_SUFFIX)
+    )
+    return CurrentData(t_s, current.vectors, _stored_products(reader), *truths, north=north)
 
 
 def _stored_products(reader: BagReader) -> list[CurrentProduct]:

@@ -36,6 +36,8 @@ from buoy_common.contract import (
 )
 from buoy_common.namespaces import TopicView
 from buoy_nav.rotations import rotate_by_quaternion_components
+from buoy_processing.bag_processing import WIND_PRODUCTS_CSV_SUFFIX
+from buoy_processing.output_facts import clockwise_from_north_text, north_token_of_csv
 from buoy_processing.report.attitude import (
     interpolate_rpy_rad,
     rpy_rad_from_quaternions,
@@ -78,6 +80,9 @@ class ReportData:
         title: figure title prefix, e.g. the scenario name.
         time_origin_s: stamp (s) that the time axes of the figures count from.
         products_source: where the products come from, stated under their table.
+        north: the north the directions are referenced to, as
+            :attr:`~buoy_processing.output_facts.OutputFacts.north_token` (``true_north``,
+            ``magnetic_north``); empty when the source does not record it.
     """
 
     t_s: np.ndarray
@@ -94,6 +99,12 @@ class ReportData:
     title: str = ""
     time_origin_s: float = 0.0
     products_source: str = ""
+    north: str = ""
+
+    @property
+    def north_text(self) -> str:
+        """``clockwise from true north`` (or the north the data have), for labels."""
+        return clockwise_from_north_text(self.north)
 
     def __post_init__(self):
         self.t_s = _array("t_s", self.t_s, (None,))
@@ -165,6 +176,7 @@ def save_report_data(data: ReportData, path) -> Path:
         title=np.array(data.title),
         time_origin_s=np.array(data.time_origin_s),
         products_source=np.array(data.products_source),
+        north=np.array(data.north),
         **arrays,
     )
     return path
@@ -186,6 +198,7 @@ def load_report_data(path) -> ReportData:
         title = str(stored["title"]) if "title" in stored else ""
         time_origin_s = float(stored["time_origin_s"]) if "time_origin_s" in stored else 0.0
         source = str(stored["products_source"]) if "products_source" in stored else ""
+        north = str(stored["north"]) if "north" in stored else ""
     return ReportData(
         **arrays,
         products=products,
@@ -193,6 +206,7 @@ def load_report_data(path) -> ReportData:
         title=title,
         time_origin_s=time_origin_s,
         products_source=source,
+        north=north,
     )
 
 
@@ -407,7 +421,14 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
         title=title,
         time_origin_s=float(measured.stamps_ns[0] // minute_ns * _TIME_ORIGIN_STEP_S),
         products_source=products_source,
+        north=_north_beside(Path(reader.path)),
     )
+
+
+def _north_beside(bag: Path) -> str:
+    """The north named by the products CSV ``process_bag`` wrote beside ``bag`` (``""``
+    without one: a bag recorded from the nodes does not say)."""
+    return north_token_of_csv(bag.with_name(bag.name + WIND_PRODUCTS_CSV_SUFFIX))
 
 
 def _products(

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import FuncFormatter
+from matplotlib.ticker import FuncFormatter, MultipleLocator
 from scipy.signal import welch
 
 from buoy_common.contract import QualityFlag
@@ -75,6 +75,11 @@ _MEAN_STYLE = {60.0: ("1-min mean", "--", 1.2), 600.0: ("10-min mean", "-", 2.2)
 
 
 def _plot_wind_time_series(data: ReportData, path: Path) -> Path:
+    return _save(wind_time_series_figure(data), path, layout_done=True)
+
+
+def wind_time_series_figure(data: ReportData) -> Figure:
+    """The figure of ``wind_time_series.png`` (see the module docstring)."""
     figure = Figure(figsize=(11, 9))
     speed_axis, direction_axis, vertical_axis = figure.subplots(3, 1, sharex=True)
     t_s = data.t_s - data.time_origin_s
@@ -85,8 +90,7 @@ def _plot_wind_time_series(data: ReportData, path: Path) -> Path:
         direction = _unwrapped_deg(meteorological_direction_deg(wind[:, 0], wind[:, 1]))
         if label != "measured (sensor axes)":
             reference_direction_deg = reference_direction_deg or _level_deg(direction)
-            direction = _near_deg(direction, reference_direction_deg)
-        direction_axis.plot(t_s, direction, color=color, **style)
+        direction_axis.plot(t_s, direction, color=color, label=label, **style)
         vertical_axis.plot(t_s, wind[:, 2], color=color, **style)
     for window_s, (label, linestyle, width) in _MEAN_STYLE.items():
         products = [p for p in data.products if p.window_s == window_s]
@@ -110,9 +114,13 @@ def _plot_wind_time_series(data: ReportData, path: Path) -> Path:
                 zorder=4,
                 label=label if axis is speed_axis else None,
             )
+    _shift_lines_near(direction_axis, reference_direction_deg)
     speed_axis.set_ylabel("horizontal speed (m/s)")
     direction_axis.set_ylabel("direction from (deg)")
-    direction_axis.yaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value % 360:.0f}"))
+    direction_axis.set_title(
+        f"where the wind blows from, degrees {data.north_text}", loc="left", fontsize="small"
+    )
+    _set_direction_ticks(direction_axis)
     vertical_axis.set_ylabel("vertical wind w (m/s)")
     vertical_axis.set_xlabel(_time_label(data))
     figure.suptitle(titled(data, "wind before and after motion correction"))
@@ -128,18 +136,22 @@ def _plot_wind_time_series(data: ReportData, path: Path) -> Path:
     for axis in (speed_axis, direction_axis, vertical_axis):
         axis.grid(alpha=0.3)
     figure.tight_layout(rect=(0, 0, 1, 0.93))
-    return _save(figure, path, layout_done=True)
+    return figure
 
 
 def _plot_fluxes(data: ReportData, path: Path) -> Path:
+    return _save(fluxes_figure(data), path)
+
+
+def fluxes_figure(data: ReportData) -> Figure:
+    """The figure of ``wind_fluxes.png`` (see the module docstring)."""
     fluxes = data.fluxes
     quantities = [("friction_velocity_mps", "u* (m/s)")]
     if any(flux.n_temperature > 0 for flux in fluxes):
         quantities.append(("w_ts_k_mps", "w'Ts' (K m/s)"))
     figure = Figure(figsize=(11, 2.0 + 2.6 * len(quantities)))
     axes = figure.subplots(len(quantities), 1, sharex=True, squeeze=False)[:, 0]
-    starts = np.array([flux.window_start_s for flux in fluxes]) - data.time_origin_s
-    ends = np.array([flux.window_end_s for flux in fluxes]) - data.time_origin_s
+    starts, ends = _flux_spans_s(data)
     middles = 0.5 * (starts + ends)
     flagged = np.array([flux.quality_flag != QualityFlag.GOOD for flux in fluxes], dtype=bool)
     for axis, (name, label) in zip(axes, quantities, strict=True):
@@ -178,7 +190,58 @@ def _plot_fluxes(data: ReportData, path: Path) -> Path:
     missing = sum(1 for flux in fluxes if flux.quality_flag == QualityFlag.MISSING)
     note = f" ({missing} missing window(s) without fluxes not drawn)" if missing else ""
     figure.suptitle(titled(data, f"eddy-covariance fluxes per window{note}"))
-    return _save(figure, path)
+    return figure
+
+
+def _flux_spans_s(data: ReportData) -> tuple[np.ndarray, np.ndarray]:
+    """Where each flux window is drawn, s from the time origin: over the samples it holds (a
+    window the record cuts short is drawn short), its bounds clipped to the data's span when
+    the product does not say which samples it holds."""
+    first_s = np.array([flux.first_sample_s for flux in data.fluxes])
+    last_s = np.array([flux.last_sample_s for flux in data.fluxes])
+    data_span_s = (data.t_s[0], data.t_s[-1]) if data.t_s.size else (-np.inf, np.inf)
+    bounds_start_s = np.maximum([flux.window_start_s for flux in data.fluxes], data_span_s[0])
+    bounds_end_s = np.minimum([flux.window_end_s for flux in data.fluxes], data_span_s[1])
+    starts = np.where(np.isfinite(first_s), first_s, bounds_start_s)
+    ends = np.where(np.isfinite(last_s), last_s, bounds_end_s)
+    return starts - data.time_origin_s, ends - data.time_origin_s
+
+
+def _shift_lines_near(axis, reference_deg: float | None) -> None:
+    """Shift each direction line drawn on ``axis`` by whole turns, as one piece, so that its
+    median lies within ±180° of ``reference_deg`` (the corrected wind's): every line stays
+    continuous, and the sensor-axes direction is drawn beside the corrected one."""
+    if reference_deg is None:
+        return
+    for line in axis.get_lines():
+        values = np.asarray(line.get_ydata(), dtype=float)
+        if not np.isfinite(values).any():
+            continue
+        median = float(np.nanmedian(values))
+        line.set_ydata(values + (_near_deg(median, reference_deg) - median))
+
+
+_DIRECTION_TICK_STEPS_DEG = (90.0, 45.0, 30.0, 15.0, 10.0, 5.0, 1.0)
+"""Tick spacings of a direction axis: divisors of 360, so a label read modulo 360 repeats
+the same ticks on every turn."""
+
+
+def _set_direction_ticks(axis) -> None:
+    """Ticks at multiples of the largest divisor of 360 that gives three or more within the
+    drawn range, labelled in [0, 360] (a turn shows 0, 90, 180, 270, 360)."""
+    low, high = axis.get_ylim()
+    step = next(
+        (s for s in _DIRECTION_TICK_STEPS_DEG if np.floor(high / s) - np.ceil(low / s) >= 2),
+        _DIRECTION_TICK_STEPS_DEG[-1],
+    )
+    axis.yaxis.set_major_locator(MultipleLocator(step))
+    axis.yaxis.set_major_formatter(FuncFormatter(_direction_label))
+
+
+def _direction_label(value_deg: float, _position=None) -> str:
+    """A direction tick's label in [0, 360]: north is 0 at the turn's start, 360 at its end."""
+    wrapped = round(value_deg) % 360
+    return "360" if wrapped == 0 and round(value_deg) > 0 else f"{wrapped:.0f}"
 
 
 _MOTION_LEFT_STYLE = {
@@ -294,6 +357,13 @@ def _plot_attitude_error(data: ReportData, path: Path) -> Path:
 
 
 def _plot_vertical_wind_spectrum(data: ReportData, path: Path) -> Path | None:
+    figure = vertical_wind_spectrum_figure(data)
+    return None if figure is None else _save(figure, path)
+
+
+def vertical_wind_spectrum_figure(data: ReportData) -> Figure | None:
+    """The figure of ``vertical_wind_spectrum.png`` (see the module docstring); None when the
+    record holds no run of samples long enough."""
     series = wind_series(data)
     finite = np.all([np.isfinite(wind[:, 2]) for _, wind, _ in series], axis=0)
     run = _longest_true_run(finite)
@@ -337,7 +407,7 @@ def _plot_vertical_wind_spectrum(data: ReportData, path: Path) -> Path | None:
     for axis in (density_axis, preserving_axis):
         axis.grid(alpha=0.3, which="both")
     density_axis.legend(loc="lower left", fontsize="small")
-    return _save(figure, path)
+    return figure
 
 
 def _segment_samples(samples: int, sample_rate_hz: float) -> int:
@@ -364,19 +434,22 @@ def _log_band_average(frequency_hz: np.ndarray, density: np.ndarray):
 
 
 def _draw_five_thirds(axis, frequency_hz: np.ndarray, density: np.ndarray) -> None:
-    """A f^(−5/3) line through the corrected spectrum at 1 Hz (or its middle frequency)."""
-    anchor = float(np.clip(1.0, frequency_hz[0], frequency_hz[-1]))
-    level = float(np.interp(np.log10(anchor), np.log10(frequency_hz), density))
-    span = frequency_hz[(frequency_hz >= anchor / 5) & (frequency_hz <= anchor * 5)]
-    if span.size >= 2:
-        axis.loglog(
-            span,
-            3.0 * level * (span / anchor) ** (-5.0 / 3.0),
-            color="black",
-            linestyle=":",
-            linewidth=1.2,
-            label="f^(−5/3)",
-        )
+    """A f^(−5/3) line over the corrected spectrum's upper decade, where a sonic at sea sees
+    the inertial subrange, through the median of S(f)·f^(5/3) there: it lies on the spectrum
+    where the spectrum follows the slope."""
+    upper = (frequency_hz >= frequency_hz[-1] / 10.0) & np.isfinite(density) & (density > 0)
+    if np.count_nonzero(upper) < 2:
+        return
+    span = frequency_hz[upper]
+    level = float(np.median(density[upper] * span ** (5.0 / 3.0)))
+    axis.loglog(
+        span,
+        level * span ** (-5.0 / 3.0),
+        color="black",
+        linestyle=":",
+        linewidth=1.2,
+        label="f^(−5/3)",
+    )
 
 
 def _wave_band_hz(data: ReportData) -> tuple[float, float] | None:

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from buoy_common.contract import QualityFlag
+from buoy_processing.output_facts import clockwise_from_north_text
 from buoy_processing.report.attitude import attitude_errors_deg
 from buoy_processing.report.current import CurrentData, window_errors
 from buoy_processing.report.data import ReportData, titled, utc_text, wind_series
@@ -28,7 +29,7 @@ def wind_products_markdown(data: ReportData) -> str:
     lines = [f"# {titled(data, 'wind products')}", ""]
     if data.true_wind_enu_mps is not None:
         lines += [*_accuracy_table(data), ""]
-    lines += _products_table(data.products, data.products_source)
+    lines += _products_table(data.products, data.products_source, data.north_text)
     if data.fluxes:
         lines += ["", *_fluxes_table(data.fluxes)]
     return "\n".join(lines) + "\n"
@@ -83,11 +84,11 @@ def _accuracy_table(data: ReportData) -> list[str]:
     return lines
 
 
-def _products_table(products: list[WindProduct], source: str) -> list[str]:
+def _products_table(products: list[WindProduct], source: str, north_text: str) -> list[str]:
     lines = [
         "## Averaged wind",
         "",
-        "Direction: degrees clockwise from true North, where the wind blows from. "
+        f"Direction: degrees {north_text}, where the wind blows from. "
         "Vectors ENU. Gust: maximum running mean of horizontal speed. The last window of each "
         "length may be partial: it was closed at the end of the data. Coverage: the share of a "
         "full window's samples the window holds valid; flag: IOOS QARTOD (1 good, 2 not "
@@ -162,9 +163,9 @@ def current_markdown(current: CurrentData, title: str) -> str:
     lines += [
         "## Averaged current",
         "",
-        "Direction: degrees clockwise from true North, where the water flows toward. Vectors "
-        "ENU. The standard deviations of a window hold the waves' orbital motion its mean "
-        "averaged away. The last window of each length may be partial.",
+        f"Direction: degrees {clockwise_from_north_text(current.north)}, where the water "
+        "flows toward. Vectors ENU. The standard deviations of a window hold the waves' orbital "
+        "motion its mean averaged away. The last window of each length may be partial.",
         "",
     ]
     if not current.products:
@@ -252,6 +253,8 @@ def summary_markdown(
                 f"{utc_text(float(series.t_s[-1]))} ({series.t_s[-1] - series.t_s[0]:.0f} s).",
                 "",
             ]
+    if data is not None:
+        lines += [f"Wind directions in degrees {data.north_text}.", ""]
     lines += [f"![{Path(name).stem.replace('_', ' ')}]({name})" for name in figures]
     if data is not None:
         lines += ["", *_quality_table(data), "", *_filter_health_table(data), ""]
