@@ -6,7 +6,6 @@ truth is the simulator's, never the fusion's."""
 import math
 
 import numpy as np
-import pytest
 from test_nav_sensor_sets import (
     attitude_sigma_deg,
     euler_errors_deg,
@@ -84,12 +83,6 @@ def biased_velocity(messages, from_s: float, start_ns: int, bias_east_mps: float
         yield topic, stamp_ns, message
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the integrity monitor realigns 5 s after the velocity starts failing, before its "
-    "health has 100 outcomes; the realignment starts from the biased velocity, which the filter "
-    "then follows, and the position fix is suspended instead",
-)
 def test_a_biased_gnss_velocity_is_suspended_while_the_antennas_hold_the_heading():
     """Sea state with dual antennas; from 60 s the receiver's velocity is 1 m/s off to the
     East: the velocity is suspended with its reason, and the heading stays within its 3σ."""

@@ -14,7 +14,11 @@ declares the navigation **not trusted** and the engine
 2. if the gate still rejects after ``integrity_realign_s``, starts the alignment again from the
    aiding (levelling from specific force, heading from the antennas, position and velocity from
    GNSS): no solution is emitted until it completes, and the new filter starts from the
-   alignment's covariance.
+   alignment's covariance. A velocity source whose failures started the distrust while the
+   fixes agreed with the filter is first set against the fixes directly
+   (:mod:`buoy_nav.contradictions`): when they contradict it, it is the source that is wrong,
+   and it is suspended and left out of the new alignment instead of being adopted by it, so
+   that one bad source cannot drive the filter from one realignment to the next.
 
 Trust returns once no measurement has failed the gate for ``integrity_recovery_s``, or with a
 new alignment. Each period of distrust is kept as an :class:`IntegrityEvent` (when, why, how it
@@ -33,12 +37,14 @@ class IntegrityEvent:
 
     start_s, end_s: stamps (s) of its start and end (NaN while it lasts). reason: what
     started it (``gate_rejections:<source kind>``). realigned: it ended with a new alignment.
+    kinds: the sources whose rejections started it.
     """
 
     start_s: float
     reason: str
     end_s: float = math.nan
     realigned: bool = False
+    kinds: tuple[str, ...] = ()
 
     @property
     def duration_s(self) -> float:
@@ -98,7 +104,11 @@ class IntegrityMonitor:
             )
             if not persistent:
                 return None
-            self.events.append(IntegrityEvent(t_s, f"gate_rejections:{'+'.join(persistent)}"))
+            self.events.append(
+                IntegrityEvent(
+                    t_s, f"gate_rejections:{'+'.join(persistent)}", kinds=tuple(persistent)
+                )
+            )
             return "inflate"
         event = self.events[-1]
         if t_s - self._last_rejection_s >= self._recovery_s:

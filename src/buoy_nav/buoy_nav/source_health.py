@@ -19,6 +19,14 @@ The filter's own errors do not suspend a good source first: a source that fails 
 resets the states it observes after ``gate_reset_count`` consecutive rejections
 (:meth:`buoy_nav.aiding.base.AidingSource.reset`), well before ``min_samples`` outcomes are in,
 and then agrees again. Suspension is for a source that keeps disagreeing *after* that.
+
+Two kinds of evidence from outside the gate suspend a source too
+(:mod:`buoy_nav.contradictions`): measurements of other sources that contradict it directly,
+without the filter in between (:meth:`SourceHealth.suspend`: it resumes like any suspended
+source, once its gate outcomes agree again), and an assumption that the measurements show to be
+wrong, such as a mooring on a buoy the GNSS sees drifting (:meth:`SourceHealth.contradict`: a
+constraint that is wrong can still pass its gate, so only the evidence that suspended it can
+lift the suspension, :meth:`SourceHealth.no_longer_contradicted`).
 """
 
 from __future__ import annotations
@@ -89,20 +97,53 @@ class SourceHealth:
     def __init__(self, rule: SourceHealthRule):
         self.rule = rule
         self._failed = deque(maxlen=rule.window)
-        self.suspended = False
+        self._gate_suspended = False
+        self._gate_reason = ""
+        self._contradiction = ""
         self.suspensions = 0
         """How often the source was suspended so far."""
-        self.reason = ""
+
+    @property
+    def suspended(self) -> bool:
+        """Whether the source is suspended, by its gate outcomes or by a contradiction."""
+        return self._gate_suspended or bool(self._contradiction)
+
+    @property
+    def reason(self) -> str:
         """Why the source is suspended (empty while it is not), e.g. ``62 % of the last 200
-        samples failed the gate``."""
+        samples failed the gate``; a contradiction first."""
+        return self._contradiction or (self._gate_reason if self._gate_suspended else "")
 
     def record(self, failed_gate: bool) -> HealthChange:
         """Add one gate outcome (True: the measurement failed the gate) and return what it
         changed."""
+        was_suspended = self.suspended
         self._failed.append(bool(failed_gate))
-        if self.suspended:
-            return self._maybe_resume()
-        return self._maybe_suspend()
+        if self._gate_suspended:
+            self._maybe_resume()
+        else:
+            self._maybe_suspend()
+        return self._change_since(was_suspended)
+
+    def suspend(self, reason: str) -> HealthChange:
+        """Suspend the source now for ``reason`` (other sources' measurements contradict it);
+        it resumes as one suspended by its gate outcomes does."""
+        was_suspended = self.suspended
+        self._start_gate_suspension(reason)
+        return self._change_since(was_suspended)
+
+    def contradict(self, reason: str) -> HealthChange:
+        """Suspend the source for ``reason``, whatever its gate outcomes, until
+        :meth:`no_longer_contradicted`."""
+        was_suspended = self.suspended
+        self._contradiction = reason
+        return self._change_since(was_suspended)
+
+    def no_longer_contradicted(self) -> HealthChange:
+        """The evidence behind :meth:`contradict` is gone; its gate outcomes judge it again."""
+        was_suspended = self.suspended
+        self._contradiction = ""
+        return self._change_since(was_suspended)
 
     def failed_share(self, last: int | None = None) -> float:
         """Share of the last ``last`` outcomes (all kept ones when None) that failed the gate;
@@ -113,30 +154,41 @@ class SourceHealth:
         return sum(outcomes) / len(outcomes)
 
     def forget(self) -> None:
-        """Drop the outcomes and resume (a new alignment starts the judgement again)."""
+        """Drop the outcomes and resume (a new alignment starts the judgement again); a
+        contradiction stays, since it was not judged against the filter."""
         self._failed.clear()
-        self.suspended = False
-        self.reason = ""
+        self._gate_suspended = False
+        self._gate_reason = ""
 
-    def _maybe_suspend(self) -> HealthChange:
-        if len(self._failed) < self.rule.min_samples:
+    def _change_since(self, was_suspended: bool) -> HealthChange:
+        if self.suspended == was_suspended:
             return HealthChange.NONE
-        share = self.failed_share()
-        if share < self.rule.suspend_share:
-            return HealthChange.NONE
-        self.suspended = True
-        self.suspensions += 1
-        self.reason = f"{share * 100:.0f} % of the last {len(self._failed)} samples failed the gate"
+        if self.suspended:
+            self.suspensions += 1
+            return HealthChange.SUSPENDED
+        return HealthChange.RESUMED
+
+    def _start_gate_suspension(self, reason: str) -> None:
+        self._gate_suspended = True
+        self._gate_reason = reason
         # Resumption is judged on outcomes seen while suspended only.
         self._failed.clear()
-        return HealthChange.SUSPENDED
 
-    def _maybe_resume(self) -> HealthChange:
+    def _maybe_suspend(self) -> None:
         if len(self._failed) < self.rule.min_samples:
-            return HealthChange.NONE
+            return
+        share = self.failed_share()
+        if share < self.rule.suspend_share:
+            return
+        self._start_gate_suspension(
+            f"{share * 100:.0f} % of the last {len(self._failed)} samples failed the gate"
+        )
+
+    def _maybe_resume(self) -> None:
+        if len(self._failed) < self.rule.min_samples:
+            return
         if self.failed_share(self.rule.min_samples) > self.rule.resume_share:
-            return HealthChange.NONE
-        self.suspended = False
-        self.reason = ""
+            return
+        self._gate_suspended = False
+        self._gate_reason = ""
         self._failed.clear()
-        return HealthChange.RESUMED

@@ -1,0 +1,81 @@
+"""Sources and assumptions that the GNSS's own measurements contradict, judged without the filter.
+
+The gate judges each measurement against the filter, so it cannot tell a filter that has lost
+its way from a source that has pulled the filter along. What the receiver measured of the
+buoy's motion (:class:`~buoy_nav.gnss_motion.GnssMotion`) can, since it does not pass through
+the filter:
+
+- **a velocity that disagrees with the fixes.** When the integrity monitor is about to realign
+  (or a source to reset the velocity to its measurement) because a velocity source failed its
+  gate while the fixes agreed with the filter, the velocities integrated over that time are set
+  against the displacement between the fixes. A difference beyond the chi-square quantile of
+  ``gate_probability`` (three degrees of freedom) against the noise of both says the velocity
+  is wrong, not the filter: it is suspended instead of followed
+  (:meth:`~buoy_nav.source_health.SourceHealth.suspend`), and the new alignment goes without it.
+  A position source is not judged so: a fix that jumps is followed (reset), as before.
+- **an assumption the motion disproves**: a constraint judges itself against the mean velocity
+  the receiver measured (:meth:`~buoy_nav.aiding.base.AidingSource.judged_by`), such as the
+  mooring's zero mean velocity on a buoy that drifts
+  (:meth:`~buoy_nav.source_health.SourceHealth.contradict`).
+
+Only sources that are not suspended feed the motion.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.special import gammaincinv
+
+from buoy_nav.aiding.base import AidingSource
+from buoy_nav.config import FusionConfig
+from buoy_nav.gnss_motion import GnssMotion
+
+VELOCITY_CHECK_SPAN_S = 60.0
+"""Longest span (s) over which a velocity is set against the fixes: the time it has failed."""
+
+
+def chi_square_quantile(dimension: int, probability: float) -> float:
+    """The chi-square quantile of ``probability`` with ``dimension`` degrees of freedom (as
+    scipy.stats.chi2.ppf, without importing scipy.stats)."""
+    return float(2.0 * gammaincinv(0.5 * dimension, probability))
+
+
+class Contradictions:
+    """The receiver's motion of the last minutes and what it contradicts (see the module
+    docstring), for ``config``'s gate probability and the constraints' windows."""
+
+    def __init__(self, config: FusionConfig):
+        keep_s = max(VELOCITY_CHECK_SPAN_S, config.moored_check_window_s if config.moored else 0.0)
+        self.motion = GnssMotion(
+            keep_s, config.gnss_position_variance_floor_m2, config.gnss_velocity_variance_floor_m2s2
+        )
+        """What the receiver measured of the buoy's motion."""
+        self._velocity_threshold = chi_square_quantile(3, config.gate_probability)
+
+    def observe(self, t_s: float, measurement) -> None:
+        """A validated measurement stamped ``t_s`` (s) of a source that is not suspended."""
+        self.motion.add(t_s, measurement)
+
+    def velocity_contradiction(self, from_s: float, to_s: float) -> str | None:
+        """Why the velocities of [``from_s``, ``to_s``] (s) are wrong, when the fixes of that
+        time contradict them; None when they agree, or when too few measurements say."""
+        from_s = max(from_s, to_s - VELOCITY_CHECK_SPAN_S)
+        difference = self.motion.velocity_against_fixes(from_s, to_s)
+        if difference is None:
+            return None
+        vector = difference.velocity_enu_mps
+        normalised_squared = float(vector @ np.linalg.solve(difference.covariance_m2s2, vector))
+        if normalised_squared <= self._velocity_threshold:
+            return None
+        return (
+            f"its velocity differs from the fixes' displacement by "
+            f"{np.linalg.norm(vector):.2f} m/s over {difference.span_s:.1f} s "
+            f"({math.sqrt(normalised_squared):.0f}σ) while the filter agreed with the fixes"
+        )
+
+    def judge(self, source: AidingSource):
+        """What the receiver's motion says of ``source``'s assumption
+        (:meth:`AidingSource.judged_by`)."""
+        return source.judged_by(self.motion)
