@@ -169,3 +169,31 @@ def test_a_moored_buoy_keeps_its_mooring():
     outage = (times >= 150.0) & (times < 210.0)
     normalised = horizontal_velocity_normalised_errors(solutions, truth, times)[outage]
     assert np.mean(normalised <= 3.0, axis=0).min() >= 0.99
+
+
+def test_a_biased_velocity_beside_noisy_fixes_does_not_drive_a_loop_of_realignments():
+    """As above with fixes good to 2 m only: a realignment is due before the fixes can tell a
+    metre per second of bias, and the filter realigned to the biased velocity drifts from the
+    fixes, which fail next. The periods of distrust that keep coming back are judged together,
+    so the velocity is suspended at the first or second realignment and stays suspended,
+    rather than the filter being realigned to it again and again."""
+    scenario, truth, messages = scenario_messages(
+        "sea_state",
+        240.0,
+        (
+            "sensors.gnss.position_noise_horizontal_m=2.0",
+            "sensors.gnss.position_noise_vertical_m=4.0",
+        ),
+    )
+    faulty = list(biased_velocity(messages, 60.0, scenario.start_time_ns, 1.0))
+    engine, solutions, times, _ = fuse(FusionConfig(), faulty, scenario)
+    health = engine.health()
+    assert health.realignments <= 2
+    velocity = health.source_health["gnss_velocity"]
+    assert velocity.suspended and velocity.suspensions == 1
+    assert "differs from the fixes' displacement" in velocity.reason
+    assert not health.source_health["gnss_fix"].suspended
+    after = times > 180.0
+    errors = euler_errors_deg(solutions, truth, times)[after]
+    sigma = attitude_sigma_deg(solutions)[after]
+    assert np.mean(np.abs(errors[:, 2]) <= 3.0 * sigma[:, 2]) >= 0.99

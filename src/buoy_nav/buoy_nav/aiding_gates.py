@@ -12,8 +12,7 @@ source that keeps failing is suspended. Its measurements are still modelled and 
 agreement stays watched, but they are not fused (counted as ``suspended``), do not reset states
 and do not witness the integrity: a sensor that is wrong is taken out, not followed, and does
 not make the filter realign to it. Evidence from outside the gate
-(:mod:`buoy_nav.contradictions`) suspends a source through :meth:`AidingGates.suspend` and
-:meth:`AidingGates.judged`.
+(:mod:`buoy_nav.contradictions`) suspends a source through :meth:`AidingGates.judged`.
 """
 
 import math
@@ -79,16 +78,6 @@ class AidingGates:
         """Stamp (s) of the first of the current run of gate rejections of ``kind``."""
         return self._run_start_s[kind]
 
-    def suspend(self, source: AidingSource, t_s: float, reason: str) -> list[HealthTransition]:
-        """Suspend ``source`` at stamp ``t_s`` (s) for ``reason``: other sources' measurements
-        contradict it. It resumes once its gate outcomes agree again. The transition, if any."""
-        change = self._health[source.kind].suspend(reason)
-        if change is not HealthChange.SUSPENDED:
-            return []
-        self._consecutive_rejections[source.kind] = 0
-        message = f"{source.kind} suspended: {reason}; {source.suspension_hint}"
-        return [HealthTransition(t_s, source.kind, change, message)]
-
     def judged(self, source: AidingSource, t_s: float, verdict: Verdict) -> list[HealthTransition]:
         """Suspend ``source`` at stamp ``t_s`` (s) while ``verdict`` contradicts its
         assumption, and lift that when it no longer does. The transition, if any."""
@@ -101,7 +90,13 @@ class AidingGates:
             return []
         self._consecutive_rejections[source.kind] = 0
         message = f"{source.kind} {change.value}: {verdict.reason}"
+        if change is HealthChange.SUSPENDED:
+            message += f"; {source.suspension_hint}"
         return [HealthTransition(t_s, source.kind, change, message)]
+
+    def contradicted(self, kind: str) -> bool:
+        """Whether a contradiction suspends the source of ``kind`` (:meth:`judged`)."""
+        return self._health[kind].contradicted
 
     def status(self) -> dict[str, SourceStatus]:
         """The health of each source, by kind."""

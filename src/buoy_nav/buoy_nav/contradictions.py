@@ -11,14 +11,19 @@ the filter:
   against the displacement between the fixes. A difference beyond the chi-square quantile of
   ``gate_probability`` (three degrees of freedom) against the noise of both says the velocity
   is wrong, not the filter: it is suspended instead of followed
-  (:meth:`~buoy_nav.source_health.SourceHealth.suspend`), and the new alignment goes without it.
-  A position source is not judged so: a fix that jumps is followed (reset), as before.
+  (:meth:`~buoy_nav.source_health.SourceHealth.contradict`), and the new alignment goes without
+  it. Its gate cannot lift that (a filter just realigned without it has a velocity σ wide
+  enough to let a biased velocity pass): it is judged against the fixes again every second,
+  over the last :data:`VELOCITY_CHECK_SPAN_S`, and resumes once the difference is below the
+  quantile of :data:`AGREEMENT_PROBABILITY`. A position source is not judged so: a fix that
+  jumps is followed (reset), as before.
 - **an assumption the motion disproves**: a constraint judges itself against the mean velocity
   the receiver measured (:meth:`~buoy_nav.aiding.base.AidingSource.judged_by`), such as the
   mooring's zero mean velocity on a buoy that drifts
   (:meth:`~buoy_nav.source_health.SourceHealth.contradict`).
 
-Only sources that are not suspended feed the motion.
+Every validated fix and velocity feeds the motion, suspended or not: a suspended velocity must
+be seen to agree again.
 """
 
 from __future__ import annotations
@@ -28,12 +33,15 @@ import math
 import numpy as np
 from scipy.special import gammaincinv
 
-from buoy_nav.aiding.base import AidingSource
+from buoy_nav.aiding.base import AidingSource, Verdict
 from buoy_nav.config import FusionConfig
 from buoy_nav.gnss_motion import GnssMotion
 
 VELOCITY_CHECK_SPAN_S = 60.0
 """Longest span (s) over which a velocity is set against the fixes: the time it has failed."""
+AGREEMENT_PROBABILITY = 0.99
+"""A contradiction is lifted once the evidence is below this chi-square quantile: a source
+whose evidence hovers about the contradiction's quantile does not flap in and out."""
 
 
 def chi_square_quantile(dimension: int, probability: float) -> float:
@@ -52,28 +60,38 @@ class Contradictions:
             keep_s, config.gnss_position_variance_floor_m2, config.gnss_velocity_variance_floor_m2s2
         )
         """What the receiver measured of the buoy's motion."""
-        self._velocity_threshold = chi_square_quantile(3, config.gate_probability)
+        self._velocity_contradiction = chi_square_quantile(3, config.gate_probability)
+        self._velocity_agreement = chi_square_quantile(3, AGREEMENT_PROBABILITY)
 
     def observe(self, t_s: float, measurement) -> None:
         """A validated measurement stamped ``t_s`` (s) of a source that is not suspended."""
         self.motion.add(t_s, measurement)
 
-    def velocity_contradiction(self, from_s: float, to_s: float) -> str | None:
-        """Why the velocities of [``from_s``, ``to_s``] (s) are wrong, when the fixes of that
-        time contradict them; None when they agree, or when too few measurements say."""
+    def velocity_verdict(self, from_s: float, to_s: float) -> Verdict | None:
+        """The velocities of [``from_s``, ``to_s``] (s, at most the last
+        :data:`VELOCITY_CHECK_SPAN_S` of it) against the fixes of that time; None when too few
+        measurements say, or the difference is between the two quantiles."""
         from_s = max(from_s, to_s - VELOCITY_CHECK_SPAN_S)
         difference = self.motion.velocity_against_fixes(from_s, to_s)
         if difference is None:
             return None
         vector = difference.velocity_enu_mps
         normalised_squared = float(vector @ np.linalg.solve(difference.covariance_m2s2, vector))
-        if normalised_squared <= self._velocity_threshold:
-            return None
-        return (
-            f"its velocity differs from the fixes' displacement by "
+        difference_text = (
             f"{np.linalg.norm(vector):.2f} m/s over {difference.span_s:.1f} s "
-            f"({math.sqrt(normalised_squared):.0f}σ) while the filter agreed with the fixes"
+            f"({math.sqrt(normalised_squared):.1f}σ)"
         )
+        if normalised_squared > self._velocity_contradiction:
+            return Verdict(
+                True,
+                f"its velocity differs from the fixes' displacement by {difference_text}; it "
+                "began to fail while the fixes agreed with the filter",
+            )
+        if normalised_squared < self._velocity_agreement:
+            return Verdict(
+                False, f"its velocity agrees with the fixes' displacement to {difference_text}"
+            )
+        return None
 
     def judge(self, source: AidingSource):
         """What the receiver's motion says of ``source``'s assumption

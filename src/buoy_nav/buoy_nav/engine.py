@@ -77,7 +77,7 @@ from buoy_nav.aiding.base import (
 from buoy_nav.aiding_gates import AidingGates
 from buoy_nav.alignment import AlignmentResult, AlignmentState, InMotionAligner
 from buoy_nav.config import FusionConfig
-from buoy_nav.contradictions import Contradictions
+from buoy_nav.contradictions import VELOCITY_CHECK_SPAN_S, Contradictions
 from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
@@ -155,6 +155,7 @@ class FusionEngine:
         )
         self._source_transitions: list[HealthTransition] = []
         self._contradictions = Contradictions(config)
+        self._next_velocity_judgement_s = -math.inf
         self._distrust_variances = distrust_variances(config)
         self._integrity = IntegrityMonitor(
             config.integrity_rejection_count,
@@ -393,9 +394,9 @@ class FusionEngine:
         to the alignment, or gated one by one and the accepted ones in one stacked update."""
         if not group:
             return
-        for source, measurement in group:
-            if not self._gates.suspended(source.kind):
-                self._contradictions.observe(t, measurement)
+        for _, measurement in group:
+            self._contradictions.observe(t, measurement)
+        self._rejudge_contradicted_velocities(t, group)
         nav = self._nav
         if nav is None:
             self._align_with(t, group, gyro)
@@ -454,9 +455,12 @@ class FusionEngine:
 
     def _suspend_velocity_the_fixes_contradict(self, t: float) -> None:
         """Before a realignment at stamp ``t``: suspend the velocity sources whose failures
-        started the distrust while no position source failed, when the fixes of that time
-        contradict them (:mod:`buoy_nav.contradictions`), so the alignment goes without them."""
-        event = self._integrity.events[-1]
+        started the episode of distrust while no position source failed, when the fixes of
+        that time contradict them (:mod:`buoy_nav.contradictions`), so the alignment goes
+        without them. The episode, not the last period alone: with fixes too noisy to tell a
+        velocity's bias within one period, the filter realigned to the biased velocity drifts
+        from the fixes, which start the next periods, and the evidence grows with each."""
+        event = self._integrity.episode(VELOCITY_CHECK_SPAN_S)[0]
         kinds = set(event.kinds)
         if any(POSITION_REFERENCE in s.roles for s in self.sources if s.kind in kinds):
             return
@@ -467,10 +471,22 @@ class FusionEngine:
     def _suspend_if_contradicted(self, source: AidingSource, from_s: float, t: float) -> bool:
         """Suspend the velocity ``source`` when the fixes of [``from_s``, ``t``] (s) contradict
         it; whether it is suspended."""
-        reason = self._contradictions.velocity_contradiction(from_s, t)
-        if reason is not None:
-            self._source_transitions.extend(self._gates.suspend(source, t, reason))
+        verdict = self._contradictions.velocity_verdict(from_s, t)
+        if verdict is not None and verdict.contradicted:
+            self._source_transitions.extend(self._gates.judged(source, t, verdict))
         return self._gates.suspended(source.kind)
+
+    def _rejudge_contradicted_velocities(self, t: float, group: list) -> None:
+        """Once a second, lift the contradiction of a velocity source of ``group`` (stamp
+        ``t``) that agrees with the fixes again."""
+        if t < self._next_velocity_judgement_s:
+            return
+        for source, _ in group:
+            if self._gates.contradicted(source.kind) and VELOCITY_REFERENCE in source.roles:
+                self._next_velocity_judgement_s = t + 1.0
+                verdict = self._contradictions.velocity_verdict(-math.inf, t)
+                if verdict is not None and not verdict.contradicted:
+                    self._source_transitions.extend(self._gates.judged(source, t, verdict))
 
     def _apply_pseudo_measurements(self, t: float, gyro):
         """Ask the constraints that are due at IMU stamp ``t`` for their measurements."""

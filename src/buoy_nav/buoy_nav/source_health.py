@@ -20,13 +20,13 @@ resets the states it observes after ``gate_reset_count`` consecutive rejections
 (:meth:`buoy_nav.aiding.base.AidingSource.reset`), well before ``min_samples`` outcomes are in,
 and then agrees again. Suspension is for a source that keeps disagreeing *after* that.
 
-Two kinds of evidence from outside the gate suspend a source too
-(:mod:`buoy_nav.contradictions`): measurements of other sources that contradict it directly,
-without the filter in between (:meth:`SourceHealth.suspend`: it resumes like any suspended
-source, once its gate outcomes agree again), and an assumption that the measurements show to be
-wrong, such as a mooring on a buoy the GNSS sees drifting (:meth:`SourceHealth.contradict`: a
-constraint that is wrong can still pass its gate, so only the evidence that suspended it can
-lift the suspension, :meth:`SourceHealth.no_longer_contradicted`).
+Evidence from outside the gate suspends a source too (:mod:`buoy_nav.contradictions`):
+measurements of other sources that contradict it without the filter in between (a GNSS velocity
+against the fixes), or an assumption that the measurements show to be wrong (a mooring on a buoy
+the GNSS sees drifting): :meth:`SourceHealth.contradict`. A source that is wrong can still pass
+its gate (a constraint the filter follows, a velocity after a realignment that left it out), so
+only the evidence that suspended it lifts the suspension
+(:meth:`SourceHealth.no_longer_contradicted`).
 """
 
 from __future__ import annotations
@@ -109,6 +109,11 @@ class SourceHealth:
         return self._gate_suspended or bool(self._contradiction)
 
     @property
+    def contradicted(self) -> bool:
+        """Whether a contradiction suspends the source (:meth:`contradict`)."""
+        return bool(self._contradiction)
+
+    @property
     def reason(self) -> str:
         """Why the source is suspended (empty while it is not), e.g. ``62 % of the last 200
         samples failed the gate``; a contradiction first."""
@@ -123,13 +128,6 @@ class SourceHealth:
             self._maybe_resume()
         else:
             self._maybe_suspend()
-        return self._change_since(was_suspended)
-
-    def suspend(self, reason: str) -> HealthChange:
-        """Suspend the source now for ``reason`` (other sources' measurements contradict it);
-        it resumes as one suspended by its gate outcomes does."""
-        was_suspended = self.suspended
-        self._start_gate_suspension(reason)
         return self._change_since(was_suspended)
 
     def contradict(self, reason: str) -> HealthChange:
@@ -168,21 +166,18 @@ class SourceHealth:
             return HealthChange.SUSPENDED
         return HealthChange.RESUMED
 
-    def _start_gate_suspension(self, reason: str) -> None:
-        self._gate_suspended = True
-        self._gate_reason = reason
-        # Resumption is judged on outcomes seen while suspended only.
-        self._failed.clear()
-
     def _maybe_suspend(self) -> None:
         if len(self._failed) < self.rule.min_samples:
             return
         share = self.failed_share()
         if share < self.rule.suspend_share:
             return
-        self._start_gate_suspension(
+        self._gate_suspended = True
+        self._gate_reason = (
             f"{share * 100:.0f} % of the last {len(self._failed)} samples failed the gate"
         )
+        # Resumption is judged on outcomes seen while suspended only.
+        self._failed.clear()
 
     def _maybe_resume(self) -> None:
         if len(self._failed) < self.rule.min_samples:

@@ -104,7 +104,10 @@ class MooredSource(AidingSource):
 
     @property
     def suspension_hint(self) -> str:
-        return "check fusion.moored and fusion.moored_position_sigma_horizontal_m"
+        return (
+            "fusion.moored is wrong for this buoy, or fusion.moored_position_sigma_horizontal_m "
+            "too small"
+        )
 
     def judged_by(self, motion: GnssMotion) -> Verdict | None:
         """The receiver's mean horizontal velocity against the mooring's zero mean (see the
@@ -124,7 +127,7 @@ class MooredSource(AidingSource):
             f"moored_position_sigma_horizontal_m)"
         )
         if normalised_squared > self._contradiction_quantile:
-            return Verdict(True, f"{said}; fusion.moored is wrong for this buoy")
+            return Verdict(True, said)
         if normalised_squared < self._agreement_quantile:
             return Verdict(False, said)
         return None
