@@ -64,7 +64,8 @@ class Contradictions:
         self._velocity_agreement = chi_square_quantile(3, AGREEMENT_PROBABILITY)
 
     def observe(self, t_s: float, measurement) -> None:
-        """A validated measurement stamped ``t_s`` (s) of a source that is not suspended."""
+        """A validated measurement stamped ``t_s`` (s) of any source, suspended or not (only
+        fixes and velocities are kept)."""
         self.motion.add(t_s, measurement)
 
     def velocity_verdict(self, from_s: float, to_s: float) -> Verdict | None:
@@ -93,7 +94,7 @@ class Contradictions:
             )
         return None
 
-    def judge(self, source: AidingSource):
+    def judge(self, source: AidingSource) -> Verdict | None:
         """What the receiver's motion says of ``source``'s assumption
         (:meth:`AidingSource.judged_by`)."""
         return source.judged_by(self.motion)

@@ -29,8 +29,9 @@ fifth of it) the mean horizontal velocity from the fixes' displacement (or the v
 is held against what the mooring says of it, zero with the covariance of the wave excursion at
 both ends, ``2 σ_h² / T² I`` over a span T, plus the receiver's own noise. Beyond the
 chi-square quantile of ``gate_probability`` (two degrees of freedom) the mooring is
-contradicted and suspended; below the quantile of :data:`AGREEMENT_PROBABILITY` it is not (in
-between the verdict stands). Without a receiver it cannot be judged; the start-up statement
+contradicted and suspended; below the quantile of
+:data:`~buoy_nav.contradictions.AGREEMENT_PROBABILITY` it is not (in between the verdict
+stands). Without a receiver it cannot be judged; the start-up statement
 (:mod:`buoy_nav.observability`) says so.
 """
 
@@ -50,12 +51,9 @@ from buoy_nav.aiding.base import (
     MeasurementModel,
     Verdict,
 )
-from buoy_nav.contradictions import chi_square_quantile
+from buoy_nav.contradictions import AGREEMENT_PROBABILITY, chi_square_quantile
 from buoy_nav.gnss_motion import GnssMotion
 
-AGREEMENT_PROBABILITY = 0.99
-"""A contradicted mooring is lifted once the drift is below this chi-square quantile: a buoy
-whose drift hovers about the contradiction's quantile does not flap in and out."""
 MIN_SPAN_OF_WINDOW = 0.2
 """Share of ``moored_check_window_s`` the measurements must span before the mooring is judged."""
 
