@@ -197,3 +197,22 @@ def test_a_biased_velocity_beside_noisy_fixes_does_not_drive_a_loop_of_realignme
     errors = euler_errors_deg(solutions, truth, times)[after]
     sigma = attitude_sigma_deg(solutions)[after]
     assert np.mean(np.abs(errors[:, 2]) <= 3.0 * sigma[:, 2]) >= 0.99
+
+
+def test_a_biased_gnss_velocity_is_suspended_rather_than_reset_to():
+    """The same bias with the integrity monitor out of the way (it would realign first): after
+    ``gate_reset_count`` rejections in a row the velocity is set against the fixes instead of
+    the filter's velocity being reset to it, and suspended; the horizontal velocity stays within
+    its σ."""
+    scenario, truth, messages = scenario_messages("sea_state", 120.0)
+    faulty = list(biased_velocity(messages, 60.0, scenario.start_time_ns, 1.0))
+    engine, solutions, times, _ = fuse(
+        FusionConfig(integrity_rejection_count=1000), faulty, scenario
+    )
+    health = engine.health()
+    assert health.counters["gnss_velocity"].resets == 0
+    assert health.source_health["gnss_velocity"].suspended
+    assert "differs from the fixes' displacement" in health.source_health["gnss_velocity"].reason
+    after = times > 70.0
+    normalised = horizontal_velocity_normalised_errors(solutions, truth, times)[after]
+    assert np.mean(normalised <= 3.0, axis=0).min() >= 0.99
