@@ -11,14 +11,15 @@ Every outcome also goes to the source's :class:`~buoy_nav.source_health.SourceHe
 source that keeps failing is suspended. Its measurements are still modelled and gated, so its
 agreement stays watched, but they are not fused (counted as ``suspended``), do not reset states
 and do not witness the integrity: a sensor that is wrong is taken out, not followed, and does
-not make the filter realign to it.
+not make the filter realign to it. Evidence from outside the gate
+(:mod:`buoy_nav.contradictions`) suspends a source through :meth:`AidingGates.judged`.
 """
 
 import math
 from typing import NamedTuple
 
 from buoy_common.contract import Reason
-from buoy_nav.aiding.base import AidingSource, LinearisationPoint, MeasurementModel
+from buoy_nav.aiding.base import AidingSource, LinearisationPoint, MeasurementModel, Verdict
 from buoy_nav.error_state_filter import ErrorStateFilter
 from buoy_nav.health import InnovationRecord, MeasurementCounters
 from buoy_nav.sensor_sets import AidingRecency
@@ -66,11 +67,36 @@ class AidingGates:
         self._aided_index = aided_index
         self._innovation_log = innovation_log
         self._consecutive_rejections = dict.fromkeys((source.kind for source in aided_index), 0)
+        self._run_start_s = dict.fromkeys((source.kind for source in aided_index), math.nan)
         self._health = {source.kind: SourceHealth(health_rule) for source in aided_index}
 
     def suspended(self, kind: str) -> bool:
         """Whether the source of ``kind`` is suspended."""
         return self._health[kind].suspended
+
+    def run_start_s(self, kind: str) -> float:
+        """Stamp (s) of the first of the current run of gate rejections of ``kind``."""
+        return self._run_start_s[kind]
+
+    def judged(self, source: AidingSource, t_s: float, verdict: Verdict) -> list[HealthTransition]:
+        """Suspend ``source`` at stamp ``t_s`` (s) while ``verdict`` contradicts its
+        assumption, and lift that when it no longer does. The transition, if any."""
+        health = self._health[source.kind]
+        if verdict.contradicted:
+            change = health.contradict(verdict.reason)
+        else:
+            change = health.no_longer_contradicted()
+        if change is HealthChange.NONE:
+            return []
+        self._consecutive_rejections[source.kind] = 0
+        message = f"{source.kind} {change.value}: {verdict.reason}"
+        if change is HealthChange.SUSPENDED:
+            message += f"; {source.suspension_hint}"
+        return [HealthTransition(t_s, source.kind, change, message)]
+
+    def contradicted(self, kind: str) -> bool:
+        """Whether a contradiction suspends the source of ``kind`` (:meth:`judged`)."""
+        return self._health[kind].contradicted
 
     def status(self) -> dict[str, SourceStatus]:
         """The health of each source, by kind."""
@@ -118,7 +144,7 @@ class AidingGates:
                 self._book_acceptance(source, t_s, gate.nis)
                 outcome.accepted.append(model)
             else:
-                self._book_rejection(source, measurement, model, gate.nis, outcome)
+                self._book_rejection(source, t_s, measurement, model, gate.nis, outcome)
         return outcome
 
     def _judge(self, source: AidingSource, t_s: float, failed: bool, outcome: GateOutcome) -> bool:
@@ -151,6 +177,7 @@ class AidingGates:
     def _book_rejection(
         self,
         source: AidingSource,
+        t_s: float,
         measurement,
         model: MeasurementModel,
         nis: float,
@@ -160,6 +187,8 @@ class AidingGates:
         self._counters[kind].reject(Reason.GATE if math.isfinite(nis) else Reason.SINGULAR)
         self._consecutive_rejections[kind] += 1
         run = self._consecutive_rejections[kind]
+        if run == 1:
+            self._run_start_s[kind] = t_s
         if source.witnesses_integrity:
             outcome.rejected_kinds[kind] = run
         if run >= source.reset_after_rejections:

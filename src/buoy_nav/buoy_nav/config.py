@@ -364,6 +364,14 @@ class FusionConfig:
     moored_update_period_s: float = parameter(
         1.0, unit="s", meaning="interval of the moored constraint", rule=POSITIVE
     )
+    moored_check_window_s: float = parameter(
+        300.0,
+        unit="s",
+        meaning="the GNSS's mean velocity over this long (once it spans a fifth of it) is held "
+        "against the mooring's zero mean: a buoy that drifts has its mooring constraint "
+        "suspended",
+        rule=POSITIVE,
+    )
     imu_gyro_bias_rad_s: tuple[float, float, float] = parameter(
         (0.0, 0.0, 0.0),
         unit="rad/s",

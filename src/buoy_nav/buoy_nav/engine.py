@@ -49,6 +49,10 @@ published inflated while the trust is not back, and the alignment started again 
 not bring the aiding back into the gates. When one source keeps failing its gate while the
 others agree, the source is wrong, not the filter: it is suspended
 (:mod:`buoy_nav.source_health`), its measurements gated but not fused, until it agrees again.
+What the GNSS receiver measured of the buoy's motion is also set against the sources directly,
+without the filter (:mod:`buoy_nav.contradictions`): a velocity that the fixes contradict is
+suspended rather than adopted by a realignment or a reset, and a constraint whose assumption
+the measurements disprove (a mooring on a buoy that drifts) is suspended while they do.
 """
 
 import dataclasses
@@ -62,10 +66,18 @@ from buoy_common.contract import Reason
 from buoy_nav import earth
 from buoy_nav.aided_navigation import AidedNavigation
 from buoy_nav.aiding import AIDING_SOURCES
-from buoy_nav.aiding.base import AIDED_QUANTITIES, FIX, AidingSource, as_floats
+from buoy_nav.aiding.base import (
+    AIDED_QUANTITIES,
+    FIX,
+    POSITION_REFERENCE,
+    VELOCITY_REFERENCE,
+    AidingSource,
+    as_floats,
+)
 from buoy_nav.aiding_gates import AidingGates
 from buoy_nav.alignment import AlignmentResult, AlignmentState, InMotionAligner
 from buoy_nav.config import FusionConfig
+from buoy_nav.contradictions import VELOCITY_CHECK_SPAN_S, Contradictions
 from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
@@ -142,6 +154,8 @@ class FusionEngine:
             config.source_health_rule,
         )
         self._source_transitions: list[HealthTransition] = []
+        self._contradictions = Contradictions(config)
+        self._next_velocity_judgement_s = -math.inf
         self._distrust_variances = distrust_variances(config)
         self._integrity = IntegrityMonitor(
             config.integrity_rejection_count,
@@ -380,6 +394,9 @@ class FusionEngine:
         to the alignment, or gated one by one and the accepted ones in one stacked update."""
         if not group:
             return
+        for _, measurement in group:
+            self._contradictions.observe(t, measurement)
+        self._rejudge_contradicted_velocities(t, group)
         nav = self._nav
         if nav is None:
             self._align_with(t, group, gyro)
@@ -427,6 +444,7 @@ class FusionEngine:
             self._nav.inflate(t, self._distrust_variances)
             self._solutions.covariance_changed()
         elif action == "realign":
+            self._suspend_velocity_the_fixes_contradict(t)
             self._realignments += 1
             self._restart_alignment()
             # The sources' health is evidence about the sources, not about the filter that is
@@ -434,6 +452,41 @@ class FusionEngine:
             # filter wrong, again and again.
             self._keep_source_health = True
         self._solutions.distrust(None if self._integrity.trusted else self._distrust_variances)
+
+    def _suspend_velocity_the_fixes_contradict(self, t: float) -> None:
+        """Before a realignment at stamp ``t``: suspend the velocity sources whose failures
+        started the episode of distrust while no position source failed, when the fixes of
+        that time contradict them (:mod:`buoy_nav.contradictions`), so the alignment goes
+        without them. The episode, not the last period alone: with fixes too noisy to tell a
+        velocity's bias within one period, the filter realigned to the biased velocity drifts
+        from the fixes, which start the next periods, and the evidence grows with each."""
+        event = self._integrity.episode(VELOCITY_CHECK_SPAN_S)[0]
+        kinds = set(event.kinds)
+        if any(POSITION_REFERENCE in s.roles for s in self.sources if s.kind in kinds):
+            return
+        for source in self.sources:
+            if source.kind in kinds and VELOCITY_REFERENCE in source.roles:
+                self._suspend_if_contradicted(source, event.start_s, t)
+
+    def _suspend_if_contradicted(self, source: AidingSource, from_s: float, t: float) -> bool:
+        """Suspend the velocity ``source`` when the fixes of [``from_s``, ``t``] (s) contradict
+        it; whether it is suspended."""
+        verdict = self._contradictions.velocity_verdict(from_s, t)
+        if verdict is not None and verdict.contradicted:
+            self._source_transitions.extend(self._gates.judged(source, t, verdict))
+        return self._gates.suspended(source.kind)
+
+    def _rejudge_contradicted_velocities(self, t: float, group: list) -> None:
+        """Once a second, lift the contradiction of a velocity source of ``group`` (stamp
+        ``t``) that agrees with the fixes again."""
+        if t < self._next_velocity_judgement_s:
+            return
+        for source, _ in group:
+            if self._gates.contradicted(source.kind) and VELOCITY_REFERENCE in source.roles:
+                self._next_velocity_judgement_s = t + 1.0
+                verdict = self._contradictions.velocity_verdict(-math.inf, t)
+                if verdict is not None and not verdict.contradicted:
+                    self._source_transitions.extend(self._gates.judged(source, t, verdict))
 
     def _apply_pseudo_measurements(self, t: float, gyro):
         """Ask the constraints that are due at IMU stamp ``t`` for their measurements."""
@@ -444,13 +497,21 @@ class FusionEngine:
         fix_age = self._recency.age_s(AIDED_QUANTITIES.index(FIX), t)
         group = []
         for source in due:
+            verdict = self._contradictions.judge(source)
+            if verdict is not None:
+                self._source_transitions.extend(self._gates.judged(source, t, verdict))
             measurement = source.pseudo_measurement(t, state, fix_age)
             if measurement is not None:
                 group.append((source, measurement))
         self._handle_measurements(t, group, gyro)
 
     def _reset_to_measurement(self, source: AidingSource, t: float, measurement, gyro, model):
-        """Re-initialise the states a persistently rejected source observes, as it says."""
+        """Re-initialise the states a persistently rejected source observes, as it says,
+        unless it is a velocity that the fixes contradict: that one is suspended instead."""
+        if VELOCITY_REFERENCE in source.roles and self._suspend_if_contradicted(
+            source, self._gates.run_start_s(source.kind), t
+        ):
+            return
         nav = self._nav
         reset = source.reset(measurement, nav.linearisation_point(gyro), model)
         if reset is None:

@@ -14,7 +14,12 @@ declares the navigation **not trusted** and the engine
 2. if the gate still rejects after ``integrity_realign_s``, starts the alignment again from the
    aiding (levelling from specific force, heading from the antennas, position and velocity from
    GNSS): no solution is emitted until it completes, and the new filter starts from the
-   alignment's covariance.
+   alignment's covariance. A velocity source whose failures started the distrust (or the
+   episode of distrust that keeps coming back, :meth:`IntegrityMonitor.episode`) while the
+   fixes agreed with the filter is first set against the fixes directly
+   (:mod:`buoy_nav.contradictions`): when they contradict it, it is the source that is wrong,
+   and it is suspended and left out of the new alignment instead of being adopted by it, so
+   that one bad source cannot drive the filter from one realignment to the next.
 
 Trust returns once no measurement has failed the gate for ``integrity_recovery_s``, or with a
 new alignment. Each period of distrust is kept as an :class:`IntegrityEvent` (when, why, how it
@@ -33,12 +38,14 @@ class IntegrityEvent:
 
     start_s, end_s: stamps (s) of its start and end (NaN while it lasts). reason: what
     started it (``gate_rejections:<source kind>``). realigned: it ended with a new alignment.
+    kinds: the sources whose rejections started it.
     """
 
     start_s: float
     reason: str
     end_s: float = math.nan
     realigned: bool = False
+    kinds: tuple[str, ...] = ()
 
     @property
     def duration_s(self) -> float:
@@ -98,7 +105,11 @@ class IntegrityMonitor:
             )
             if not persistent:
                 return None
-            self.events.append(IntegrityEvent(t_s, f"gate_rejections:{'+'.join(persistent)}"))
+            self.events.append(
+                IntegrityEvent(
+                    t_s, f"gate_rejections:{'+'.join(persistent)}", kinds=tuple(persistent)
+                )
+            )
             return "inflate"
         event = self.events[-1]
         if t_s - self._last_rejection_s >= self._recovery_s:
@@ -107,6 +118,17 @@ class IntegrityMonitor:
         if rejected_kinds and t_s - event.start_s >= self._realign_after_s:
             return "realign"
         return None
+
+    def episode(self, gap_s: float) -> list[IntegrityEvent]:
+        """The current period of distrust and those before it that each ended at most
+        ``gap_s`` (s) before the next began, oldest first: distrust that keeps coming back,
+        as when one bad source drives the filter from one realignment to the next."""
+        episode = [self.events[-1]]
+        for event in reversed(self.events[:-1]):
+            if episode[0].start_s - event.end_s > gap_s:
+                break
+            episode.insert(0, event)
+        return episode
 
     def realigned(self, t_s: float) -> None:
         """A new alignment completed at ``t_s`` (s): it ends the distrust."""

@@ -11,6 +11,11 @@ the quantities the wind correction needs are
   does the corrected wind's horizontal σ: its samples are invalid;
 - the **position**: only a GNSS fix observes it. Without one the position is the configured
   site's and drifts with the velocity; the wind does not depend on it.
+
+An assumption is said too when nothing present can check it: the mooring's zero mean velocity
+is judged against a GNSS fix or velocity (:mod:`buoy_nav.aiding.moored`); without either it is
+unverified, and a buoy that in fact drifts would have its velocity held near zero and its
+wind's σ too small.
 """
 
 from collections.abc import Collection, Iterable
@@ -60,6 +65,14 @@ _OBSERVERS = (
 )
 
 
+_MOORING_JUDGES = (VELOCITY, FIX)
+"""What the GNSS measures of the motion, which the mooring is judged against."""
+_UNVERIFIED_MOORING = (
+    "mooring unverified: no GNSS fix or velocity to judge fusion.moored against — if the buoy "
+    "drifts, its velocity is held near zero and the wind's σ is too small"
+)
+
+
 def unobserved_quantities(
     config: FusionConfig,
     present_topics: Collection[str] | None = None,
@@ -68,7 +81,8 @@ def unobserved_quantities(
     """One sentence per quantity that none of the ``sources`` that ``config`` enables and whose
     topic is in ``present_topics`` observes (None: every topic is taken as present, as for a
     live node before any message), e.g. ``no velocity reference: no GNSS or moored constraint
-    (switched off) — …``; empty when everything the wind needs is observed."""
+    (switched off) — …``, and one for a mooring nothing present can judge (``mooring
+    unverified: …``); empty when everything the wind needs is observed and checked."""
     sources = list(sources)
     usable = [
         source
@@ -82,6 +96,10 @@ def unobserved_quantities(
             continue
         missing = _names(config, (source for source in sources if source.aids in aids))
         sentences.append(f"no {quantity} reference: no {missing} — {consequence}")
+    if any(source.aids == MOORING for source in usable) and not any(
+        source.aids in _MOORING_JUDGES for source in usable
+    ):
+        sentences.append(_UNVERIFIED_MOORING)
     return sentences
 
 

@@ -19,6 +19,14 @@ The filter's own errors do not suspend a good source first: a source that fails 
 resets the states it observes after ``gate_reset_count`` consecutive rejections
 (:meth:`buoy_nav.aiding.base.AidingSource.reset`), well before ``min_samples`` outcomes are in,
 and then agrees again. Suspension is for a source that keeps disagreeing *after* that.
+
+Evidence from outside the gate suspends a source too (:mod:`buoy_nav.contradictions`):
+measurements of other sources that contradict it without the filter in between (a GNSS velocity
+against the fixes), or an assumption that the measurements show to be wrong (a mooring on a buoy
+the GNSS sees drifting): :meth:`SourceHealth.contradict`. A source that is wrong can still pass
+its gate (a constraint the filter follows, a velocity after a realignment that left it out), so
+only the evidence that suspended it lifts the suspension
+(:meth:`SourceHealth.no_longer_contradicted`).
 """
 
 from __future__ import annotations
@@ -89,20 +97,51 @@ class SourceHealth:
     def __init__(self, rule: SourceHealthRule):
         self.rule = rule
         self._failed = deque(maxlen=rule.window)
-        self.suspended = False
+        self._gate_suspended = False
+        self._gate_reason = ""
+        self._contradiction = ""
         self.suspensions = 0
         """How often the source was suspended so far."""
-        self.reason = ""
+
+    @property
+    def suspended(self) -> bool:
+        """Whether the source is suspended, by its gate outcomes or by a contradiction."""
+        return self._gate_suspended or bool(self._contradiction)
+
+    @property
+    def contradicted(self) -> bool:
+        """Whether a contradiction suspends the source (:meth:`contradict`)."""
+        return bool(self._contradiction)
+
+    @property
+    def reason(self) -> str:
         """Why the source is suspended (empty while it is not), e.g. ``62 % of the last 200
-        samples failed the gate``."""
+        samples failed the gate``; a contradiction first."""
+        return self._contradiction or (self._gate_reason if self._gate_suspended else "")
 
     def record(self, failed_gate: bool) -> HealthChange:
         """Add one gate outcome (True: the measurement failed the gate) and return what it
         changed."""
+        was_suspended = self.suspended
         self._failed.append(bool(failed_gate))
-        if self.suspended:
-            return self._maybe_resume()
-        return self._maybe_suspend()
+        if self._gate_suspended:
+            self._maybe_resume()
+        else:
+            self._maybe_suspend()
+        return self._change_since(was_suspended)
+
+    def contradict(self, reason: str) -> HealthChange:
+        """Suspend the source for ``reason``, whatever its gate outcomes, until
+        :meth:`no_longer_contradicted`."""
+        was_suspended = self.suspended
+        self._contradiction = reason
+        return self._change_since(was_suspended)
+
+    def no_longer_contradicted(self) -> HealthChange:
+        """The evidence behind :meth:`contradict` is gone; its gate outcomes judge it again."""
+        was_suspended = self.suspended
+        self._contradiction = ""
+        return self._change_since(was_suspended)
 
     def failed_share(self, last: int | None = None) -> float:
         """Share of the last ``last`` outcomes (all kept ones when None) that failed the gate;
@@ -113,30 +152,38 @@ class SourceHealth:
         return sum(outcomes) / len(outcomes)
 
     def forget(self) -> None:
-        """Drop the outcomes and resume (a new alignment starts the judgement again)."""
+        """Drop the outcomes and resume (a new alignment starts the judgement again); a
+        contradiction stays, since it was not judged against the filter."""
         self._failed.clear()
-        self.suspended = False
-        self.reason = ""
+        self._gate_suspended = False
+        self._gate_reason = ""
 
-    def _maybe_suspend(self) -> HealthChange:
-        if len(self._failed) < self.rule.min_samples:
+    def _change_since(self, was_suspended: bool) -> HealthChange:
+        if self.suspended == was_suspended:
             return HealthChange.NONE
+        if self.suspended:
+            self.suspensions += 1
+            return HealthChange.SUSPENDED
+        return HealthChange.RESUMED
+
+    def _maybe_suspend(self) -> None:
+        if len(self._failed) < self.rule.min_samples:
+            return
         share = self.failed_share()
         if share < self.rule.suspend_share:
-            return HealthChange.NONE
-        self.suspended = True
-        self.suspensions += 1
-        self.reason = f"{share * 100:.0f} % of the last {len(self._failed)} samples failed the gate"
+            return
+        self._gate_suspended = True
+        self._gate_reason = (
+            f"{share * 100:.0f} % of the last {len(self._failed)} samples failed the gate"
+        )
         # Resumption is judged on outcomes seen while suspended only.
         self._failed.clear()
-        return HealthChange.SUSPENDED
 
-    def _maybe_resume(self) -> HealthChange:
+    def _maybe_resume(self) -> None:
         if len(self._failed) < self.rule.min_samples:
-            return HealthChange.NONE
+            return
         if self.failed_share(self.rule.min_samples) > self.rule.resume_share:
-            return HealthChange.NONE
-        self.suspended = False
-        self.reason = ""
+            return
+        self._gate_suspended = False
+        self._gate_reason = ""
         self._failed.clear()
-        return HealthChange.RESUMED

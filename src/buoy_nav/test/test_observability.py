@@ -34,15 +34,30 @@ def test_a_magnetometer_without_gnss_or_mooring_leaves_the_velocity_unobserved()
     assert "grow without bound" in velocity
     assert position.startswith("no position reference: no GNSS")
     moored = unobserved_quantities(FusionConfig(moored=True), (MAGNETOMETER_TOPIC,))
-    assert [s.split(":")[0] for s in moored] == ["no position reference"]
+    assert [s.split(":")[0] for s in moored] == ["no position reference", "mooring unverified"]
+
+
+def test_a_mooring_is_unverified_only_without_a_gnss_fix_or_velocity():
+    """The mooring is judged against what the receiver measures of the motion: a fix or a
+    velocity is enough; with neither the statement says the assumption is unchecked."""
+    config = FusionConfig(moored=True)
+    (unverified,) = [
+        s for s in unobserved_quantities(config, (MAGNETOMETER_TOPIC,)) if "mooring" in s
+    ]
+    assert "fusion.moored" in unverified and "σ is too small" in unverified
+    for present in ((GNSS_FIX_TOPIC,), (GNSS_VELOCITY_TOPIC,)):
+        sentences = unobserved_quantities(config, (MAGNETOMETER_TOPIC, *present))
+        assert not any("mooring" in s for s in sentences)
+    assert not any("mooring" in s for s in unobserved_quantities(FusionConfig(), ()))
 
 
 def test_a_switched_off_source_does_not_count_and_is_named_so():
     config = FusionConfig(use_magnetometer=False, moored=True)
-    heading, position = unobserved_quantities(config, (MAGNETOMETER_TOPIC,))
+    heading, position, mooring = unobserved_quantities(config, (MAGNETOMETER_TOPIC,))
     assert heading.startswith("no heading reference")
     assert "magnetometer (switched off)" in heading
     assert position.startswith("no position reference")
+    assert mooring.startswith("mooring unverified")
 
 
 def test_the_sentences_follow_the_registry_it_is_given():

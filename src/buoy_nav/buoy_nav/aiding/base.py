@@ -27,7 +27,11 @@ engine (:class:`buoy_nav.engine.FusionEngine`) is the clock that runs them. A me
    :class:`~buoy_nav.source_health.SourceHealth`; a source that keeps failing is suspended: its
    measurements are still modelled and gated but not fused (counted as ``suspended``), they
    neither reset states nor witness the integrity, until it agrees again
-   (:attr:`AidingSource.suspension_hint` says what to check).
+   (:attr:`AidingSource.suspension_hint` says what to check);
+7. **assumption**: a constraint that states something of the buoy's motion (a mooring's zero
+   mean velocity) is judged against what the GNSS receiver measured of it, without the filter
+   (:meth:`AidingSource.judged_by`, :mod:`buoy_nav.contradictions`): a constraint the
+   measurements disprove is suspended until they no longer do.
 
 Jacobians follow the error-injection convention of
 :func:`buoy_nav.error_state_filter.inject_error_state` and address the error states by name
@@ -56,6 +60,7 @@ from buoy_nav.state_layout import UP, StateLayout
 
 if TYPE_CHECKING:
     from buoy_nav.alignment import AlignmentResult, InMotionAligner
+    from buoy_nav.gnss_motion import GnssMotion
 
 # What a source aids, for the solutions' coasting flags (``coasting_fix``, ...): a flag is raised
 # when no source that aids its quantity was accepted for ``coasting_timeout_s``.
@@ -99,6 +104,14 @@ SUSPENSION_HINTS = {
     MOTION_PACK: "check its lag and covariance",
 }
 """What to check when a source of a sensor is suspended, by sensor."""
+
+
+class Verdict(NamedTuple):
+    """What the receiver's measurements say of a source's assumption: ``contradicted`` or
+    not, and why (a sentence for the log and the summary)."""
+
+    contradicted: bool
+    reason: str
 
 
 @dataclass(frozen=True)
@@ -260,6 +273,12 @@ class AidingSource(abc.ABC):
     ) -> StateReset | None:
         """The states to re-initialise from a persistently rejected ``measurement`` (``model``:
         its model at ``point``); None: no reset. The default resets nothing."""
+        return None
+
+    def judged_by(self, motion: GnssMotion) -> Verdict | None:
+        """What the receiver's own measurements of the buoy's motion (``motion``) say of the
+        assumption this source makes, without the filter; None when they say nothing either
+        way. The default: a sensor makes no assumption."""
         return None
 
     @abc.abstractmethod

@@ -20,6 +20,19 @@ over minutes.
 It runs only while no GNSS fix has been accepted for ``coasting_timeout_s`` and only with
 ``moored: true`` (a drifting buoy has no zero mean velocity). It aids its own quantity,
 :data:`~buoy_nav.aiding.base.MOORING`, so the fix is still reported as coasting.
+
+A mooring set on a buoy that drifts would pass its gate (the filter's velocity follows it
+through every outage) and hold the velocity near zero: the wind's σ would be far too small.
+While a GNSS receiver measures the motion, the mooring is judged against it
+(:meth:`MooredSource.judged_by`): over ``moored_check_window_s`` (once the measurements span a
+fifth of it) the mean horizontal velocity from the fixes' displacement (or the velocities' mean)
+is held against what the mooring says of it, zero with the covariance of the wave excursion at
+both ends, ``2 σ_h² / T² I`` over a span T, plus the receiver's own noise. Beyond the
+chi-square quantile of ``gate_probability`` (two degrees of freedom) the mooring is
+contradicted and suspended; below the quantile of
+:data:`~buoy_nav.contradictions.AGREEMENT_PROBABILITY` it is not (in between the verdict
+stands). Without a receiver it cannot be judged; the start-up statement
+(:mod:`buoy_nav.observability`) says so.
 """
 
 from __future__ import annotations
@@ -31,7 +44,18 @@ import numpy as np
 
 from buoy_common.contract import Reason
 from buoy_nav import earth
-from buoy_nav.aiding.base import MOORING, AidingSource, LinearisationPoint, MeasurementModel
+from buoy_nav.aiding.base import (
+    MOORING,
+    AidingSource,
+    LinearisationPoint,
+    MeasurementModel,
+    Verdict,
+)
+from buoy_nav.contradictions import AGREEMENT_PROBABILITY, chi_square_quantile
+from buoy_nav.gnss_motion import GnssMotion
+
+MIN_SPAN_OF_WINDOW = 0.2
+"""Share of ``moored_check_window_s`` the measurements must span before the mooring is judged."""
 
 
 class MooringAnchor(NamedTuple):
@@ -63,6 +87,10 @@ class MooredSource(AidingSource):
             )
         )
         self._gnss_timeout_s = config.coasting_timeout_s
+        self._excursion_sigma_m = config.moored_position_sigma_horizontal_m
+        self._min_span_s = MIN_SPAN_OF_WINDOW * config.moored_check_window_s
+        self._contradiction_quantile = chi_square_quantile(2, config.gate_probability)
+        self._agreement_quantile = chi_square_quantile(2, AGREEMENT_PROBABILITY)
         self._anchor: np.ndarray | None = None
         self._anchor_t_s = -math.inf
         self.next_due_s = -math.inf
@@ -71,6 +99,36 @@ class MooredSource(AidingSource):
     @classmethod
     def enabled_by(cls, config) -> bool:
         return config.moored
+
+    @property
+    def suspension_hint(self) -> str:
+        return (
+            "fusion.moored is wrong for this buoy, or fusion.moored_position_sigma_horizontal_m "
+            "too small"
+        )
+
+    def judged_by(self, motion: GnssMotion) -> Verdict | None:
+        """The receiver's mean horizontal velocity against the mooring's zero mean (see the
+        module docstring); None before the measurements span enough or while the drift is
+        between the two quantiles."""
+        mean = motion.mean_velocity(self._min_span_s)
+        if mean is None:
+            return None
+        drift = mean.velocity_enu_mps[:2]
+        stated_variance = 2.0 * self._excursion_sigma_m**2 / mean.span_s**2
+        covariance = mean.covariance_m2s2[:2, :2] + stated_variance * np.eye(2)
+        normalised_squared = float(drift @ np.linalg.solve(covariance, drift))
+        said = (
+            f"GNSS ({mean.measured_by}) shows a mean drift of {np.linalg.norm(drift):.2f} m/s "
+            f"over {mean.span_s:.0f} s, {math.sqrt(normalised_squared):.1f}σ from a mooring's "
+            f"zero (σ {math.sqrt(stated_variance):.3f} m/s from "
+            f"moored_position_sigma_horizontal_m)"
+        )
+        if normalised_squared > self._contradiction_quantile:
+            return Verdict(True, said)
+        if normalised_squared < self._agreement_quantile:
+            return Verdict(False, said)
+        return None
 
     def restart(self) -> None:
         """Forget the anchor (after a realignment)."""
