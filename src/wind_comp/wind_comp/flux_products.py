@@ -15,22 +15,28 @@ stamps, not on arrival, so that the live node, which hands over every message at
 ``process_bag``, which hands over stretches of a few hundred, close the same windows on the same
 samples.
 
-Quality flag (IOOS QARTOD, :class:`buoy_common.contract.QualityFlag`): from the window's
-coverage as for the wind products, then lowered by the flux tests: suspect when the
-Foken–Wichura non-stationarity of u'w' exceeds :data:`STATIONARY_PERCENT` or spikes exceed
-:data:`MAX_SPIKE_SHARE` of the samples of a component, bad when the non-stationarity exceeds
-:data:`NON_STATIONARY_PERCENT` (Foken et al. 2004: classes 1–3 below 30 %, class 9 above 100 %).
+Quality flags (IOOS QARTOD, :class:`buoy_common.contract.QualityFlag`): each window gets the
+named tests of :data:`wind_comp.flux_quality.FLUX_FLAG_TESTS` (coverage, spikes, stationarity,
+integral turbulence characteristics, drag coefficient, cross-wind stress, buoyancy flux), each
+in its own ``<name>_flag`` field, and ``quality_flag``, the worst of them.
 """
 
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from buoy_common.contract import QualityFlag
+from wind_comp.flux_quality import (
+    FluxEvidence,
+    FluxQualityLimits,
+    flux_diagnostics,
+    flux_flags,
+    worst_flag,
+)
 from wind_comp.fluxes import (
     STANDARD_PRESSURE_PA,
     FluxError,
@@ -40,19 +46,16 @@ from wind_comp.fluxes import (
 from wind_comp.products import (
     MIN_RATE_INTERVALS,
     RATE_MEMORY_INTERVALS,
-    quality_flag,
     window_coverage,
 )
 
 DEFAULT_FLUX_WINDOW_S = 1800.0
 """Averaging window of the fluxes unless configured otherwise, s (30 min: long enough for the
 largest eddies of the marine surface layer, short enough to stay stationary)."""
+DEFAULT_QUALITY_LIMITS = FluxQualityLimits()
 TEMPERATURE_WAIT_S = 10.0
 """How far the wind may pass a window's end before the window closes without waiting for a
 temperature that has stopped coming, s."""
-STATIONARY_PERCENT = 30.0
-NON_STATIONARY_PERCENT = 100.0
-MAX_SPIKE_SHARE = 0.01
 
 
 @dataclass(frozen=True)
@@ -88,23 +91,28 @@ class FluxProduct:
     stationarity_w_ts_percent: float
     coverage: float
     quality_flag: int
-
-
-def flux_quality_flag(coverage: float, n_valid: int, fluxes) -> QualityFlag:
-    """The flag of a window of ``coverage`` and ``n_valid`` valid samples whose fluxes are
-    ``fluxes`` (:class:`wind_comp.fluxes.FluxWindow`)."""
-    flag = quality_flag(coverage, n_valid)
-    if flag == QualityFlag.MISSING or not math.isfinite(fluxes.friction_velocity_mps):
-        return QualityFlag.MISSING
-    stationarity = fluxes.stationarity_u_w_percent
-    if stationarity > NON_STATIONARY_PERCENT:
-        return QualityFlag.BAD
-    spikes = max(fluxes.spikes) / max(fluxes.samples, 1)
-    if flag == QualityFlag.GOOD and (
-        not stationarity <= STATIONARY_PERCENT or spikes > MAX_SPIKE_SHARE
-    ):
-        return QualityFlag.SUSPECT
-    return flag
+    """The worst of the ``*_flag`` fields below (:func:`wind_comp.flux_quality.worst_flag`)."""
+    stress_along_n_m2: float
+    stress_cross_n_m2: float
+    """The stress along and across the mean wind, −ρ·u'w' and −ρ·v'w', N/m²."""
+    sigma_w_mps: float
+    sigma_ts_k: float
+    obukhov_stability: float
+    itc_w_deviation_percent: float
+    drag_coefficient: float
+    drag_coefficient_neutral_10m: float
+    cross_wind_stress_ratio: float
+    w_ts_correlation: float
+    temperature_scale_k: float
+    """The values the flux tests judge (:class:`wind_comp.flux_quality.FluxDiagnostics`)."""
+    coverage_flag: int
+    spikes_flag: int
+    stationarity_flag: int
+    itc_flag: int
+    drag_coefficient_flag: int
+    cross_wind_stress_flag: int
+    buoyancy_flux_flag: int
+    """One per test of :data:`wind_comp.flux_quality.FLUX_FLAG_TESTS`, in its order."""
 
 
 class FluxAverager:
@@ -117,6 +125,7 @@ class FluxAverager:
         plane: PlanarFit | None = None,
         pressure_pa: float = STANDARD_PRESSURE_PA,
         despike: bool = False,
+        quality_limits: FluxQualityLimits = DEFAULT_QUALITY_LIMITS,
     ):
         """Args:
         window_s: window length, s.
@@ -124,6 +133,7 @@ class FluxAverager:
         pressure_pa: air pressure for the air density of the stress, Pa.
         despike: take the Vickers–Mahrt spikes each window counts out of its fluxes
             (:func:`wind_comp.fluxes.window_fluxes`); False: count them only.
+        quality_limits: the thresholds of the flux tests (:mod:`wind_comp.flux_quality`).
         """
         if not (math.isfinite(window_s) and window_s > 0):
             raise FluxError(f"flux window_s must be positive, got {window_s}")
@@ -131,6 +141,7 @@ class FluxAverager:
         self.plane = plane
         self.pressure_pa = float(pressure_pa)
         self.despike = bool(despike)
+        self.quality_limits = quality_limits
         self.n_rejected_stamps = 0
         self._stamps: list[float] = []
         self._winds: list[np.ndarray] = []
@@ -231,6 +242,10 @@ class FluxAverager:
             despike=self.despike,
         )
         coverage = window_coverage(n_valid, interval_s, self.window_s)
+        diagnostics = flux_diagnostics(fluxes, self.quality_limits)
+        flags = flux_flags(
+            FluxEvidence(fluxes, diagnostics, coverage, n_valid), self.quality_limits
+        )
         return FluxProduct(
             window_s=self.window_s,
             window_start_s=start,
@@ -256,7 +271,9 @@ class FluxAverager:
             stationarity_u_w_percent=fluxes.stationarity_u_w_percent,
             stationarity_w_ts_percent=fluxes.stationarity_w_ts_percent,
             coverage=coverage,
-            quality_flag=int(flux_quality_flag(coverage, n_valid, fluxes)),
+            quality_flag=int(worst_flag(flags.values())),
+            **dataclasses.asdict(diagnostics),
+            **{name: int(flag) for name, flag in flags.items()},
         )
 
 

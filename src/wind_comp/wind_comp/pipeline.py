@@ -334,6 +334,7 @@ def wind_pipeline(config: CompensatorConfig) -> CompensationPipeline:
                 config.planar_fit(),
                 config.air_pressure_pa,
                 config.flux_despike,
+                config.flux_quality_limits(),
             )
         ],
     )

@@ -499,10 +499,16 @@ def published_fluxes(reader: BagReader) -> list[FluxProduct]:
     if not topics:
         return []
     names = [flux_field.name for flux_field in fields(FluxProduct)]
+    # Bags written before the named flux tests carry none of the fields appended with them:
+    # their values unknown, their tests not evaluated.
+    appended = names[names.index("quality_flag") + 1 :]
+    absent = {
+        name: QualityFlag.NOT_EVALUATED if name.endswith("_flag") else math.nan for name in appended
+    }
     fluxes = []
     for message in reader.messages(topics):
         try:
-            values = stats_values(reader.decode(message))
+            values = {**absent, **stats_values(reader.decode(message))}
             fluxes.append(_window(FluxProduct, {name: values[name] for name in names}))
         except (KeyError, ValueError) as error:
             raise ReportDataError(
