@@ -136,7 +136,7 @@ def test_a_stress_beyond_ten_times_the_bulk_relation_fails_the_drag_coefficient(
     assert result["drag_coefficient"] == QualityFlag.BAD
     assert result["itc"] == QualityFlag.GOOD  # 0.95 against 1.25: within 30 %
     assert product.quality_flag == QualityFlag.BAD
-    # three times the bulk stress: suspect
+    # four times the bulk stress: suspect
     layer = dataclasses.replace(
         layer, friction_velocity_mps=math.sqrt(4.0) * bulk.friction_velocity_mps
     )
