@@ -127,7 +127,11 @@ FLUX_FIELDS = tuple(field.name for field in dataclasses.fields(FluxProduct))
 :class:`~wind_comp.flux_products.FluxProduct` in order: window bounds and sample stamps s since
 the epoch, counts, mean speed m/s, tilt deg, u'w' and v'w' m²/s² (frame of the mean wind),
 u* m/s, stress N/m², air density kg/m³, w'Ts' K·m/s, Vickers–Mahrt spike counts, invalid share,
-Foken–Wichura non-stationarity %, coverage and QARTOD quality flag."""
+Foken–Wichura non-stationarity %, coverage and QARTOD quality flag (the worst of the named
+tests); then the stress along and across the mean wind N/m², σw m/s, σT K, z/L, the ITC
+deviation %, the drag coefficient and its COARE 3.5 reference, |v'w'|/|u'w'|, r_wT, T* K, and
+the flag of each test of :data:`wind_comp.flux_quality.FLUX_FLAG_TESTS`. Fields are only ever
+appended."""
 
 
 class MalformedMessageError(ValueError):
