@@ -154,7 +154,7 @@ def table(rows: list[dict], window_s: float) -> str:
             f"| {row['case']} | {row['window_start_s']:.0f} | {row['mean_speed_mps']:.2f} | "
             f"{row['friction_velocity_mps']:.3f} | {row['drag_ratio']:.2f} | "
             f"{row['sigma_w_over_u_star']:.2f} | {row['cross_wind_stress_ratio']:.2f} | "
-            f"{row['w_ts_correlation']:.2f} | {row['stationarity_u_w_percent']:.0f} | {flags} | "
+            f"{row['w_ts_correlation']:.2f} | {row['stationarity_u_w_percent']:.1f} | {flags} | "
             f"{row['quality_flag']} |"
         )
     return "\n".join(lines)
