@@ -12,6 +12,7 @@ from scipy import signal
 
 from buoy_common.contract import QualityFlag
 from wind_comp.flux_products import FluxAverager
+from wind_comp.flux_quality import FLUX_FLAG_TESTS, worst_flag
 from wind_comp.wave_motion_left import (
     DEFAULT_THRESHOLDS,
     MIN_SEGMENTS,
@@ -193,4 +194,6 @@ def test_without_a_platform_velocity_the_test_is_not_evaluated():
     (window,) = averager.add_batch(t_s, wind) + averager.flush()
     assert window.motion_left_flag == QualityFlag.NOT_EVALUATED
     assert math.isnan(window.motion_left_share)
-    assert window.quality_flag == QualityFlag.GOOD
+    # a test not evaluated does not count in the window's flag
+    others = [getattr(window, test.field) for test in FLUX_FLAG_TESTS if test.name != "motion_left"]
+    assert window.quality_flag == worst_flag(others) == QualityFlag.BAD
