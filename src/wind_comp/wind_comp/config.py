@@ -201,6 +201,14 @@ class CompensatorConfig:
         "above that of unrelated series (motion_left_coherence_threshold)",
         rule=POSITIVE,
     )
+    motion_left_max_share_standard_error: float = parameter(
+        DEFAULT_THRESHOLDS.max_share_standard_error,
+        meaning='"motion left" flux test: not evaluated (its figures still published) where '
+        "the share's standard error, from the coherence, the band powers of w and of the "
+        "platform's vertical velocity and the segment count, exceeds this (a buoy that barely "
+        "heaves, at the noise of the navigation's vertical velocity)",
+        rule=POSITIVE,
+    )
     flux_measurement_height_m: float = parameter(
         FLUX_QUALITY_DEFAULTS.measurement_height_m,
         unit="m",
@@ -389,6 +397,7 @@ class CompensatorConfig:
             self.motion_left_suspect_share,
             self.motion_left_fail_share,
             self.motion_left_coherence_sigmas,
+            self.motion_left_max_share_standard_error,
         )
 
     def flow_sensor(self) -> FlowSensor:
