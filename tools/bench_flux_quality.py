@@ -76,9 +76,10 @@ def _about_window_means_scaled(
     return scaled
 
 
-def case_winds(processed: Path, window_s: float) -> tuple[np.ndarray, dict, list]:
-    """Stamps (s), the wind (ENU, m/s) of each case of :data:`CASES`, and the sonic
-    temperatures (stamp s, °C) of the processed bag."""
+def case_winds(processed: Path, window_s: float) -> tuple[np.ndarray, dict, list, np.ndarray]:
+    """Stamps (s), the wind (ENU, m/s) of each case of :data:`CASES`, the sonic temperatures
+    (stamp s, °C) of the processed bag, and the platform's vertical velocity (ENU up, m/s) at
+    the stamps, for the motion-left test."""
     with BagReader(processed) as reader:
         corrected = stamped_vectors(reader, WIND_TRUE_TOPIC)
         truth = stamped_vectors(reader, TRUTH_WIND_TOPIC)
@@ -100,21 +101,25 @@ def case_winds(processed: Path, window_s: float) -> tuple[np.ndarray, dict, list
         "tenfold_stress": _about_window_means_scaled(t_s, wind, window_s, math.sqrt(STRESS_FACTOR)),
         "motion_left": wind - MOTION_LEFT_SHARE * platform,
     }
-    return t_s, winds, temperatures
+    return t_s, winds, temperatures, platform[:, 2]
 
 
-def case_windows(t_s, wind_mps, temperatures, window_s: float) -> list[FluxProduct]:
+def case_windows(
+    t_s, wind_mps, temperatures, platform_up_mps, window_s: float
+) -> list[FluxProduct]:
     averager = FluxAverager(window_s)
     for stamp, value in temperatures:
         averager.add_temperature(stamp, value)
-    return averager.add_batch(t_s, wind_mps) + averager.flush()
+    return averager.add_batch(t_s, wind_mps, platform_up_mps) + averager.flush()
 
 
 def quality_rows(processed: Path, window_s: float) -> list[dict]:
     """Per complete window (coverage ≥ :data:`MIN_COVERAGE` in the corrected wind) and case:
     u*, the values the tests judge and every test's flag."""
-    t_s, winds, temperatures = case_winds(processed, window_s)
-    windows = {case: case_windows(t_s, winds[case], temperatures, window_s) for case in CASES}
+    t_s, winds, temperatures, platform_up = case_winds(processed, window_s)
+    windows = {
+        case: case_windows(t_s, winds[case], temperatures, platform_up, window_s) for case in CASES
+    }
     complete = {p.window_start_s for p in windows["corrected"] if p.coverage >= MIN_COVERAGE}
     rows = []
     for case in CASES:
