@@ -2,7 +2,8 @@
 bench`` runs the same over 30-min windows): twenty minutes of ``open_ocean`` with a surface layer
 carrying u* 0.31 m/s in a 10 m/s wind, in two 10-min windows. The true and the corrected wind pass
 every test; a tenfold stress over the same mean wind fails the drag coefficient and nothing else;
-half the buoy's motion left in the wind raises σw/u* past the integral turbulence test's 30 %.
+half the buoy's motion left in the wind raises σw/u* past the integral turbulence test's 30 %,
+and the motion-left test, which sees the buoy's heave in w, fails it.
 """
 
 from __future__ import annotations
@@ -47,9 +48,11 @@ def test_a_tenfold_stress_fails_the_drag_coefficient_alone(cases):
         assert stressed["quality_flag"] == QualityFlag.BAD
 
 
-def test_motion_left_in_the_wind_is_suspect_by_its_turbulence(cases):
+def test_motion_left_in_the_wind_is_suspect_by_its_turbulence_and_fails_the_motion_left(cases):
     for left, corrected in zip(cases["motion_left"], cases["corrected"], strict=True):
         # the buoy's heave adds variance to w, hardly any covariance to u'w'
         assert left["sigma_w_over_u_star"] > corrected["sigma_w_over_u_star"] + 0.3, left
         assert left["itc"] == QualityFlag.SUSPECT, left
-        assert left["quality_flag"] == QualityFlag.SUSPECT
+        # half the platform's vertical velocity left in w, coherent with it
+        assert left["motion_left"] == QualityFlag.BAD, left
+        assert left["quality_flag"] == QualityFlag.BAD
