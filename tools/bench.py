@@ -41,7 +41,9 @@ as constants and printed beside our figures:
     (tools/bench_current.py).
 16. fluxes: u* and w'Ts' of the corrected wind against those of the truth over two 30-min
     windows of open_ocean with a surface layer carrying fluxes (tools/bench_fluxes.py; about
-    fifteen minutes; ``--quick``: two 10-min windows).
+    fifteen minutes; ``--quick``: two 10-min windows), and the named flux tests of the same
+    windows for the truth, the corrected wind, a tenfold stress and motion left in
+    (tools/bench_flux_quality.py).
 17. magnetometer_calibration: which motions of a moored buoy let calibrate_magnetometer
     recover the hard and soft iron from the record, and the fused heading with what it writes
     (tools/bench_magnetometer_calibration.py; twelve 12-min records; ``--quick``: the four of
@@ -664,16 +666,21 @@ def current_sections(run: BenchRun) -> dict:
 
 
 def fluxes_section(run: BenchRun) -> dict:
-    """The fluxes of the corrected wind against the truth: its own tool (tools/bench_fluxes.py),
-    two 30-min windows of open_ocean with a surface layer (two 10-min windows with --quick)."""
+    """The fluxes of the corrected wind against the truth (tools/bench_fluxes.py) and the named
+    flux tests of the same windows (tools/bench_flux_quality.py): two 30-min windows of
+    open_ocean with a surface layer (two 10-min windows with --quick), simulated once."""
     if "fluxes" not in run.sections:
         return {}
-    from tools import bench_fluxes
+    from tools import bench_flux_quality, bench_fluxes
 
     window_s = 600.0 if run.quick else 1800.0
-    rows = bench_fluxes.run(2 * window_s, window_s)
-    print(bench_fluxes.table(rows, window_s))
-    return {"fluxes": {"window_s": window_s, "windows": rows}}
+    results = bench_flux_quality.run(2 * window_s, window_s)
+    print(bench_fluxes.table(results["fluxes"], window_s))
+    print(bench_flux_quality.table(results["flux_quality"], window_s))
+    return {
+        "fluxes": {"window_s": window_s, "windows": results["fluxes"]},
+        "flux_quality": {"window_s": window_s, "windows": results["flux_quality"]},
+    }
 
 
 def consistency_section(run: BenchRun) -> dict:

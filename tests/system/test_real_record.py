@@ -6,6 +6,7 @@ against Edson's published processing of the same record (``tests/data/ooi_fdchp/
 from __future__ import annotations
 
 import contextlib
+import csv
 import dataclasses
 import io
 from pathlib import Path
@@ -16,14 +17,16 @@ from scipy import signal
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
-from buoy_common.contract import IMU_RAW_TOPIC, WIND_RAW_TOPIC, WIND_TRUE_TOPIC
+from buoy_common.contract import IMU_RAW_TOPIC, WIND_RAW_TOPIC, WIND_TRUE_TOPIC, QualityFlag
 from buoy_common.import_records import import_records
 from buoy_common.records.column_map import load_column_map
 from buoy_common.records.decoding import decode, plausibility_warnings, read_table
 from buoy_nav.config import fusion_config_from_files
-from buoy_processing.bag_processing import process_bag
+from buoy_processing.bag_processing import WIND_FLUXES_CSV_SUFFIX as FLUXES_CSV
+from buoy_processing.bag_processing import process_bag, products_csv_path
 from buoy_processing.report.data import stamped_vectors
 from wind_comp.config import compensator_config_from_files
+from wind_comp.flux_quality import FLUX_FLAG_TESTS, worst_flag
 from wind_comp.fluxes import window_fluxes
 from wind_comp.motion_residual import motion_residual, vertical_acceleration_mps2
 
@@ -125,11 +128,11 @@ def processed_record(tmp_path_factory):
                 for m in reader.messages([IMU_RAW_TOPIC])
             ]
         )
-    return measured.vectors, corrected.vectors, force
+    return measured.vectors, corrected.vectors, force, products_csv_path(processed, FLUXES_CSV)
 
 
 def test_the_motion_pack_correction_removes_the_buoys_motion_as_edsons_does(processed_record):
-    measured, corrected, force = processed_record
+    measured, corrected, force, _ = processed_record
     kept = slice(EDGE, PROCESSED_ROWS - EDGE)
     assert np.isfinite(corrected[kept]).all(axis=1).mean() > 0.98
     heave = vertical_acceleration_mps2(force)[kept]
@@ -149,3 +152,19 @@ def test_the_motion_pack_correction_removes_the_buoys_motion_as_edsons_does(proc
     # ... as far as Edson's processing does, within what 10 min of spectra resolve
     assert ours.coherence_after < edson.coherence_after + 0.05
     assert ours.variance_share < edson.variance_share + 0.05
+
+
+def test_the_records_stress_is_flagged_implausible_for_its_wind(processed_record):
+    # u* of about 0.5 m/s in a 5-6 m/s wind: C_D = u*²/U² near 1e-2, against COARE 3.5's
+    # 1e-3 at that speed (Edson's own corrected wind gives 12x). Whatever else the window's
+    # tests say, the drag coefficient test must not pass it, nor the overall flag.
+    *_, fluxes_csv = processed_record
+    with open(fluxes_csv, newline="") as stream:
+        (window,) = list(csv.DictReader(stream))
+    values = {name: float(value) for name, value in window.items() if not name.endswith("_utc")}
+    drag = values["friction_velocity_mps"] ** 2 / values["mean_speed_mps"] ** 2
+    assert values["drag_coefficient"] == pytest.approx(drag, rel=1e-4)
+    assert values["drag_coefficient"] > 3 * values["drag_coefficient_neutral_10m"]
+    assert values["drag_coefficient_flag"] in (QualityFlag.SUSPECT, QualityFlag.BAD)
+    flags = [QualityFlag(int(values[test.field])) for test in FLUX_FLAG_TESTS]
+    assert values["quality_flag"] == worst_flag(flags) >= QualityFlag.SUSPECT

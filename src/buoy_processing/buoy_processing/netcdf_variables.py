@@ -17,11 +17,7 @@ from buoy_common.contract import QualityFlag, window_label
 from buoy_processing.output_series import NANOSECONDS, FlowSeries, NavigationSeries
 from buoy_processing.report.attitude import rpy_rad_from_quaternions
 from wind_comp.compensator import SampleStatus
-from wind_comp.flux_products import (
-    MAX_SPIKE_SHARE,
-    NON_STATIONARY_PERCENT,
-    STATIONARY_PERCENT,
-)
+from wind_comp.flux_quality import FLUX_FLAG_TESTS
 from wind_comp.products import (
     GOOD_COVERAGE,
     MIN_COVERAGE,
@@ -103,25 +99,55 @@ def _status_attributes(what: str, reason: Callable[[SampleStatus], str]) -> dict
     }
 
 
-def _quality_flag_attributes(what: str) -> dict:
-    comment = (
-        f"good: coverage >= {GOOD_COVERAGE}; suspect: coverage >= {MIN_COVERAGE}; bad: "
-        "lower coverage; missing: no valid sample; not_evaluated: the sampling interval "
-        "was not yet known (IOOS QARTOD flags)"
-    )
-    if what == "flux":
-        comment += (
-            f"; then suspect above {STATIONARY_PERCENT:g} % non-stationarity of u'w' or "
-            f"{100 * MAX_SPIKE_SHARE:g} % spikes in a component, bad above "
-            f"{NON_STATIONARY_PERCENT:g} % non-stationarity; and lowered to the flag of the "
-            "motion left test (motion_left_flag) where that is worse"
-        )
+def _flag_attributes(long_name: str, comment: str) -> dict:
+    """CF flag attributes of an IOOS QARTOD flag variable."""
     return {
         "standard_name": "quality_flag",
-        "long_name": f"QARTOD quality flag of each {what} window",
+        "long_name": long_name,
         "flag_values": np.array([flag.value for flag in QualityFlag], dtype=np.int8),
         "flag_meanings": " ".join(flag.name.lower() for flag in QualityFlag),
         "comment": comment,
+        "coverage_content_type": "qualityInformation",
+    }
+
+
+COVERAGE_FLAG_COMMENT = (
+    f"good: coverage >= {GOOD_COVERAGE}; suspect: coverage >= {MIN_COVERAGE}; bad: "
+    "lower coverage; missing: no valid sample; not_evaluated: the sampling interval "
+    "was not yet known (IOOS QARTOD flags)"
+)
+
+
+def _quality_flag_attributes(what: str) -> dict:
+    long_name = f"QARTOD quality flag of each {what} window"
+    if what == "flux":
+        tests = " ".join(f"{test.name}_flag" for test in FLUX_FLAG_TESTS)
+        comment = (
+            "the worst of the named flux tests (fail over suspect over good over "
+            f"not_evaluated): {tests}"
+        )
+        return _flag_attributes(long_name, comment)
+    return _flag_attributes(long_name, COVERAGE_FLAG_COMMENT)
+
+
+def _flux_test_flag_variables(what: str, window_s: float, windows, dimension: str) -> dict:
+    """One QARTOD flag variable per named flux test (``flux_30min_drag_coefficient_flag``,
+    ...); none for other products."""
+    if what != "flux":
+        return {}
+    flag_name = product_variable_name(what, window_s, "quality_flag")
+    return {
+        f"{what}_{window_label(window_s)}_{test.field}": xr.DataArray(
+            np.array([getattr(window, test.field) for window in windows], dtype=np.int8),
+            dims=dimension,
+            attrs={
+                **_flag_attributes(
+                    f"QARTOD flag of the {test.name} test of each flux window: {test.meaning}",
+                    f"one of the tests whose worst is {flag_name} (wind_comp.flux_quality)",
+                ),
+            },
+        )
+        for test in FLUX_FLAG_TESTS
     }
 
 
@@ -419,6 +445,34 @@ _FLUX_VARIABLES = (
                      "Foken-Wichura non-stationarity of w'Ts'"),
     _ProductVariable("n_temperature", "n_temperature", None, "1", None,
                      "wind samples paired with a sonic temperature"),
+    _ProductVariable("stress_along_n_m2", "stress_along_wind", None, "N m-2", None,
+                     "stress along the mean wind, -rho u'w' (positive: momentum carried down)"),
+    _ProductVariable("stress_cross_n_m2", "stress_across_wind", None, "N m-2", None,
+                     "stress across the mean wind (toward its left), -rho v'w'"),
+    _ProductVariable("sigma_w_mps", "std_upward_air_velocity", "upward_air_velocity", "m s-1",
+                     "standard_deviation",
+                     "standard deviation of the detrended vertical wind (frame of the mean "
+                     "wind)"),
+    _ProductVariable("sigma_ts_k", "std_sonic_temperature", None, "K", "standard_deviation",
+                     "standard deviation of the detrended sonic temperature; NaN without one"),
+    _ProductVariable("obukhov_stability", "obukhov_stability", None, "1", None,
+                     "stability z/L from the measurement height, u* and w'Ts'; NaN when "
+                     "either is unknown"),
+    _ProductVariable("itc_w_deviation_percent", "itc_w_deviation", None, "percent", None,
+                     "deviation of sigma_w/u* from 1.3(1+2|z/L|)^(1/3), 1.25 without z/L "
+                     "(integral turbulence characteristics, Foken et al. 2004)"),
+    _ProductVariable("drag_coefficient", "drag_coefficient",
+                     "surface_drag_coefficient_for_momentum_in_air", "1", None,
+                     "u*^2/U^2 at the sonic's height"),
+    _ProductVariable("drag_coefficient_neutral_10m", "drag_coefficient_neutral_10m", None, "1",
+                     None, "COARE 3.5 neutral 10-m drag coefficient at the mean speed "
+                     "(Edson et al. 2013), the drag coefficient test's reference"),
+    _ProductVariable("cross_wind_stress_ratio", "cross_wind_stress_ratio", None, "1", None,
+                     "|v'w'| / |u'w'| in the frame of the mean wind"),
+    _ProductVariable("w_ts_correlation", "w_ts_correlation", None, "1", None,
+                     "correlation w'Ts' / (sigma_w sigma_T); NaN without a sonic temperature"),
+    _ProductVariable("temperature_scale_k", "temperature_scale", None, "K", None,
+                     "temperature scale T* = -w'Ts'/u*; NaN without a sonic temperature"),
     *_SHARED_PRODUCT_VARIABLES,
     _ProductVariable("wave_band_low_hz", "wave_band_low_frequency", None, "Hz", None,
                      "lower edge of the wave band, where the spectrum of the platform's "
@@ -436,6 +490,11 @@ _FLUX_VARIABLES = (
                      "share of the platform's vertical velocity left in the corrected upward "
                      "air velocity over the wave band"),
 )  # fmt: skip
+AUXILIARY_FIELD_PREFIXES = (
+    "n_", "first", "last", "spikes_", "stationarity_", "itc_", "cross_wind_",
+    "drag_coefficient_neutral", "wave_band_",
+)  # fmt: skip
+"""Product fields that describe a window's sampling or its tests rather than the air."""
 _TABLES = {
     "wind": _WIND_PRODUCT_VARIABLES,
     "current": _CURRENT_PRODUCT_VARIABLES,
@@ -507,9 +566,7 @@ def product_variables(
                 attributes["cell_methods"] = f"{dimension}: {spec.cell_method}"
             if spec.field == "gust_mps":
                 attributes["gust_window_s"] = windows[0].gust_window_s
-            if spec.field.startswith(
-                ("n_", "first", "last", "spikes_", "stationarity_", "wave_band_")
-            ):
+            if spec.field.startswith(AUXILIARY_FIELD_PREFIXES):
                 attributes["coverage_content_type"] = "auxiliaryInformation"
             elif spec.field.endswith("_standard_error_mps"):
                 attributes["coverage_content_type"] = "qualityInformation"
@@ -532,35 +589,7 @@ def product_variables(
         variables[flag_name] = xr.DataArray(
             np.array([product.quality_flag for product in windows], dtype=np.int8),
             dims=dimension,
-            attrs={
-                **_quality_flag_attributes(what),
-                "coverage_content_type": "qualityInformation",
-            },
+            attrs=_quality_flag_attributes(what),
         )
-        if what == "flux":
-            variables[f"{what}_{label}_motion_left_flag"] = _motion_left_flag_variable(
-                windows, dimension
-            )
+        variables.update(_flux_test_flag_variables(what, window_s, windows, dimension))
     return variables
-
-
-def _motion_left_flag_variable(windows: list, dimension: str) -> xr.DataArray:
-    """The QARTOD flag of each flux window's "motion left" test."""
-    return xr.DataArray(
-        np.array([window.motion_left_flag for window in windows], dtype=np.int8),
-        dims=dimension,
-        attrs={
-            "standard_name": "quality_flag",
-            "long_name": 'QARTOD flag of the "motion left" test of each flux window',
-            "flag_values": np.array([flag.value for flag in QualityFlag], dtype=np.int8),
-            "flag_meanings": " ".join(flag.name.lower() for flag in QualityFlag),
-            "comment": (
-                "pass (good): little of the platform's vertical velocity left in w over the "
-                "wave band, or none coherent; suspect, fail (bad): motion_left_share at least "
-                "compensation.motion_left_suspect_share, motion_left_fail_share with "
-                "motion_left_coherence above motion_left_coherence_threshold; "
-                "not_evaluated: a window too short or gappy for its spectra"
-            ),
-            "coverage_content_type": "qualityInformation",
-        },
-    )

@@ -82,6 +82,7 @@ from wind_comp.config import (
     compensator_config_from_files,
     current_config_from_files,
 )
+from wind_comp.flux_quality import FLUX_FLAG_TESTS
 from wind_comp.pipeline import mostly_invalid_warning, wrong_frame_message
 from wind_comp.products import CurrentProduct, QualityFlag, WindProduct
 
@@ -193,6 +194,7 @@ def print_summary(summary: ProcessSummary, out_bag: str, netcdf_path: Path | Non
                 f"m/s, w'Ts' {flux.w_ts_k_mps:.4f} K m/s, tilt {flux.tilt_deg:.1f} deg, "
                 f"stationarity {flux.stationarity_u_w_percent:.0f} %, coverage "
                 f"{100 * flux.coverage:.0f} %, {QualityFlag(flux.quality_flag).name.lower()}"
+                f"{_raised_flux_tests_text(flux)}"
             )
         written.append(str(correction.csv_path))
         if correction.fluxes_csv_path is not None:
@@ -215,6 +217,16 @@ def _site_text(facts: OutputFacts) -> str:
         latitude, longitude = facts.site_deg
         return f"position the site given, {latitude:.5f}, {longitude:.5f} deg (not measured)"
     return "position unknown"
+
+
+def _raised_flux_tests_text(flux) -> str:
+    """The flux tests a window is suspect or bad by, as " (drag_coefficient bad, ...)"."""
+    raised = [
+        f"{test.name} {QualityFlag(getattr(flux, test.field)).name.lower()}"
+        for test in FLUX_FLAG_TESTS
+        if getattr(flux, test.field) in (QualityFlag.SUSPECT, QualityFlag.BAD)
+    ]
+    return f" ({', '.join(raised)})" if raised else ""
 
 
 def _product_text(product: WindProduct | CurrentProduct) -> str:

@@ -25,6 +25,7 @@ from wind_comp.compensator import CorrectedBatch, SampleStatus
 from wind_comp.config import CompensatorConfig
 from wind_comp.flow_uncertainty import FlowCovariance
 from wind_comp.flux_products import FluxAverager
+from wind_comp.flux_quality import FLUX_FLAG_TESTS
 from wind_comp.products import WindAverager
 
 START_S = 1_767_225_600  # 2026-01-01T00:00:00Z
@@ -223,6 +224,14 @@ def test_the_file_holds_the_series_the_products_and_the_navigation(written):
         assert dataset["flux_1min_mean_wind_speed"].attrs["ancillary_variables"] == (
             "flux_1min_quality_flag"
         )
+        # each named flux test in a CF flag variable of its own
+        for test in FLUX_FLAG_TESTS:
+            variable = dataset[f"flux_1min_{test.field}"]
+            assert variable.values.tolist() == [getattr(p, test.field) for p in made.fluxes]
+            assert variable.attrs["flag_values"].tolist() == [1, 2, 3, 4, 9]
+            assert variable.attrs["flag_meanings"].split()[3] == "bad"
+        overall = dataset["flux_1min_quality_flag"]
+        assert all(test.field in overall.attrs["comment"] for test in FLUX_FLAG_TESTS)
     # Full 1-min windows hold 95 % of their samples valid; the trailing 30 s of the 150 s are
     # a partial one, and the 10-min window a quarter full: flagged, not passed off as full.
     one_minute = [p for p in made.wind_products if p.window_s == 60.0]
@@ -263,6 +272,9 @@ def test_the_file_is_cf_compliant_and_acdd_complete(written):
     no_cf_name += ("_wave_band_low_frequency", "_wave_band_high_frequency")
     no_cf_name += ("_motion_left_coherence", "_motion_left_coherence_threshold")
     no_cf_name += ("_motion_left_share",)
+    no_cf_name += ("_stress_along_wind", "_stress_across_wind", "_std_sonic_temperature")
+    no_cf_name += ("_obukhov_stability", "_itc_w_deviation", "_drag_coefficient_neutral_10m")
+    no_cf_name += ("_cross_wind_stress_ratio", "_w_ts_correlation", "_temperature_scale")
     assert all(name.endswith(no_cf_name) for name in without), without
     assert any(name.startswith("flux_1min_") for name in without)
     assert all(r.msgs == ["standard_name"] for r in high_failures), high_failures
@@ -353,7 +365,7 @@ def test_the_wave_motion_left_of_each_flux_window_is_there_with_its_flag(written
         assert flag.dtype == np.int8
         assert flag.values.tolist() == [1, 4, 2]
         assert flag.attrs["flag_values"].tolist() == [f.value for f in QualityFlag]
-        assert "motion left" in flag.attrs["long_name"]
+        assert "motion_left test" in flag.attrs["long_name"]
 
 
 def test_the_file_states_the_north_the_sensors_and_the_span_of_the_samples(written):

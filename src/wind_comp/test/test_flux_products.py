@@ -26,7 +26,8 @@ COVARIANCE = np.array(
         [0.02, 0.00, -0.012, 0.04],
     ]
 )
-MEAN_SPEED_MPS = 8.0
+MEAN_SPEED_MPS = 16.0
+"""The wind whose drag the stress of COVARIANCE is (u*² = 0.32 m²/s², C_D = 1.2e-3)."""
 
 
 def turbulence(seed: int, windows: int = 2):

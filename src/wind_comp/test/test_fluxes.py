@@ -72,6 +72,29 @@ def test_double_rotation_recovers_the_covariances_of_a_tilted_yawed_sonic(seed):
     assert window.invalid_share == 0.0 and max(window.spikes) < 0.01 * n
 
 
+def test_friction_velocity_carries_the_cross_wind_stress():
+    # A stress turned 45° off the mean wind (swell from the side): |v'w'| = |u'w'|, so the
+    # along-wind stress alone would give u* too small by 2^(1/4) - 1 = 19 %.
+    covariance = np.array([[1.0, 0.0, -0.2], [0.0, 0.8, 0.2], [-0.2, 0.2, 0.36]])
+    rng = np.random.default_rng(21)
+    samples = int(WINDOW_S * RATE_HZ)
+    streamwise = rng.multivariate_normal(np.zeros(3), covariance, size=samples)
+    streamwise[:, 0] += 7.0
+    wind = Rotation.from_euler("Z", 250.0, degrees=True).apply(streamwise)
+    window = window_fluxes(np.arange(samples) / RATE_HZ, wind)
+    sigma = math.sqrt((covariance[0, 0] * covariance[2, 2] + covariance[0, 2] ** 2) / samples)
+    assert abs(window.u_w_m2_s2 - covariance[0, 2]) < 4 * sigma
+    assert abs(window.v_w_m2_s2 - covariance[1, 2]) < 4 * sigma
+    expected = (covariance[0, 2] ** 2 + covariance[1, 2] ** 2) ** 0.25
+    along_wind_only = math.sqrt(abs(covariance[0, 2]))
+    assert math.isclose(window.friction_velocity_mps, expected, rel_tol=0.04)
+    assert not math.isclose(window.friction_velocity_mps, along_wind_only, rel_tol=0.1)
+    assert math.isclose(
+        window.stress_n_m2,
+        window.air_density_kg_m3 * math.hypot(window.u_w_m2_s2, window.v_w_m2_s2),
+    )
+
+
 def test_without_the_rotation_the_tilt_would_bias_the_momentum_flux():
     # The test above is not passing by luck: the same data unrotated give another u'w'.
     t, streamwise, temperature = turbulence(3)
@@ -153,13 +176,31 @@ def test_vickers_mahrt_counts_short_spikes_and_keeps_long_excursions():
 
 
 def test_stationarity_tells_a_steady_flux_from_one_carried_by_a_trend():
-    # Foken–Wichura compares the sub-window covariances with the window's: a slow change of
-    # both series (weather passing) adds to the latter only.
+    # Foken–Wichura compares the 5-min sub-window covariances with the window's: a slow change
+    # of both series (weather passing) adds to the latter only.
     rng = np.random.default_rng(8)
     u, w = rng.multivariate_normal([0, 0], [[1.0, -0.3], [-0.3, 0.4]], size=18000).T
-    assert stationarity_percent(u, w) < 30.0
+    t = np.arange(u.size) / RATE_HZ
+    assert stationarity_percent(t, u, w, 0.0, WINDOW_S) < 30.0
     drift = np.linspace(-1.0, 1.0, u.size)
-    assert stationarity_percent(u + drift, w + 0.5 * drift) > 30.0
+    assert stationarity_percent(t, u + drift, w + 0.5 * drift, 0.0, WINDOW_S) > 30.0
+
+
+def test_stationarity_takes_five_minute_sub_windows_of_any_window():
+    # A 20-min window (a FDCHP record) is four 5-min sub-windows, not six of 3 min 20 s.
+    rng = np.random.default_rng(9)
+    samples = int(1200 * RATE_HZ)
+    t = np.arange(samples) / RATE_HZ
+    u, w = rng.multivariate_normal([0, 0], [[1.0, -0.3], [-0.3, 0.4]], size=samples).T
+    # a swing of u and w in phase, of 10-min period: each sub-window holds half of a swing
+    swing = np.sin(2 * np.pi * t / 600.0)
+    u, w = u + swing, w + 0.5 * swing
+    whole = np.cov(u, w, bias=True)[0, 1]
+    percent = stationarity_percent(t, u, w, 0.0, 1200.0)
+    parts = [np.cov(u[k], w[k], bias=True)[0, 1] for k in np.array_split(np.arange(samples), 4)]
+    assert math.isclose(percent, 100 * abs(np.mean(parts) - whole) / abs(whole), rel_tol=1e-9)
+    # shorter than two sub-windows: no steady-state test
+    assert math.isnan(stationarity_percent(t[:3000], u[:3000], w[:3000], 0.0, 300.0))
 
 
 def test_air_density_of_the_standard_atmosphere():

@@ -12,6 +12,7 @@ from scipy import signal
 
 from buoy_common.contract import QualityFlag
 from wind_comp.flux_products import FluxAverager
+from wind_comp.flux_quality import FLUX_FLAG_TESTS, worst_flag
 from wind_comp.wave_motion_left import (
     DEFAULT_THRESHOLDS,
     MIN_SEGMENTS,
@@ -126,14 +127,50 @@ def test_too_short_unknown_or_still_windows_are_not_evaluated():
     assert left(t_s, np.full_like(heave, np.nan), heave).flag == QualityFlag.NOT_EVALUATED
 
 
+@pytest.mark.parametrize(
+    ("applied", "heave_std_mps"), [(0.5, 0.5), (1.0, 0.5), (0.5, 0.1), (1.0, 0.03)]
+)
+def test_the_shares_standard_error_bounds_its_error_over_many_windows(applied, heave_std_mps):
+    # 40 windows of 400 s (25 segments): the RMS error of the share against the share the
+    # correction left lies below its stated standard error, by no more than a factor of 3
+    errors, stated = [], []
+    for seed in range(40):
+        t_s, heave, turbulence = heaving_buoy(seed, duration_s=400.0)
+        heave *= heave_std_mps / HEAVE_STD_MPS
+        result = left(t_s, turbulence - heave + applied * heave, heave)
+        errors.append(result.share - (1.0 - applied))
+        stated.append(result.share_standard_error)
+    ratio = math.sqrt(np.mean(np.square(errors))) / np.mean(stated)
+    assert 1.0 / 3.0 < ratio < 1.0, ratio
+
+
+def test_a_buoy_that_barely_heaves_is_not_evaluated_but_its_figures_are_given():
+    # heave of 0.014 m/s (the sea_state buoy's) under 0.3 m/s of turbulence: the share is the
+    # estimator's noise, with a standard error far above the limit
+    t_s, heave, turbulence = heaving_buoy(seed=6)
+    heave *= 0.014 / HEAVE_STD_MPS
+    still = left(t_s, turbulence, heave)
+    assert still.share_standard_error > DEFAULT_THRESHOLDS.max_share_standard_error
+    assert still.flag == QualityFlag.NOT_EVALUATED
+    assert math.isfinite(still.share) and math.isfinite(still.coherence)
+    heaving = left(t_s, turbulence, heave * HEAVE_STD_MPS / 0.014)
+    assert heaving.share_standard_error < DEFAULT_THRESHOLDS.max_share_standard_error
+    assert heaving.flag == QualityFlag.GOOD
+
+
 def test_the_flag_follows_the_thresholds():
-    thresholds = MotionLeftThresholds(suspect_share=0.1, fail_share=0.3, coherence_sigmas=3.0)
+    thresholds = MotionLeftThresholds(
+        suspect_share=0.1, fail_share=0.3, coherence_sigmas=3.0, max_share_standard_error=0.1
+    )
     assert motion_left_flag(0.05, 0.5, 0.1, thresholds) == QualityFlag.GOOD
     assert motion_left_flag(0.1, 0.5, 0.1, thresholds) == QualityFlag.SUSPECT
     assert motion_left_flag(0.3, 0.5, 0.1, thresholds) == QualityFlag.BAD
     # a share the heave does not carry coherently is noise over a band the air dominates
     assert motion_left_flag(0.6, 0.05, 0.1, thresholds) == QualityFlag.GOOD
     assert motion_left_flag(math.nan, 0.5, 0.1, thresholds) == QualityFlag.NOT_EVALUATED
+    # a share known no better than its limit is not evaluated, however coherent
+    assert motion_left_flag(0.3, 0.5, 0.1, thresholds, 0.1) == QualityFlag.BAD
+    assert motion_left_flag(0.3, 0.5, 0.1, thresholds, 0.11) == QualityFlag.NOT_EVALUATED
 
 
 @pytest.mark.parametrize(("segments", "frequencies"), [(22, 2), (25, 23), (119, 4)])
@@ -193,4 +230,6 @@ def test_without_a_platform_velocity_the_test_is_not_evaluated():
     (window,) = averager.add_batch(t_s, wind) + averager.flush()
     assert window.motion_left_flag == QualityFlag.NOT_EVALUATED
     assert math.isnan(window.motion_left_share)
-    assert window.quality_flag == QualityFlag.GOOD
+    # a test not evaluated does not count in the window's flag
+    others = [getattr(window, test.field) for test in FLUX_FLAG_TESTS if test.name != "motion_left"]
+    assert window.quality_flag == worst_flag(others) == QualityFlag.BAD

@@ -127,11 +127,14 @@ FLUX_FIELDS = tuple(field.name for field in dataclasses.fields(FluxProduct))
 :class:`~wind_comp.flux_products.FluxProduct` in order: window bounds and sample stamps s since
 the epoch, counts, mean speed m/s, tilt deg, u'w' and v'w' m²/s² (frame of the mean wind),
 u* m/s, stress N/m², air density kg/m³, w'Ts' K·m/s, Vickers–Mahrt spike counts, invalid share,
-Foken–Wichura non-stationarity %, coverage and QARTOD quality flag; then the wave motion left in
-the corrected w (:mod:`wind_comp.wave_motion_left`): the window's wave band (low, high) Hz, the
-coherence of w with the platform's vertical velocity over the band and the coherence above
-which it counts, the share of that velocity left in w over the band, and the QARTOD flag of
-the "motion left" test. New fields are only ever appended."""
+Foken–Wichura non-stationarity %, coverage and QARTOD quality flag (the worst of the named
+tests); then the wave motion left in the corrected w (:mod:`wind_comp.wave_motion_left`): the
+window's wave band (low, high) Hz, the coherence of w with the platform's vertical velocity
+over the band and the coherence above which it counts, the share of that velocity left in w
+over the band, and the QARTOD flag of the "motion left" test; then the stress along and across
+the mean wind N/m², σw m/s, σT K, z/L, the ITC deviation %, the drag coefficient and its COARE
+3.5 reference, |v'w'|/|u'w'|, r_wT, T* K, and the flag of each other test of
+:data:`wind_comp.flux_quality.FLUX_FLAG_TESTS`. Fields are only ever appended."""
 
 
 class MalformedMessageError(ValueError):

@@ -33,7 +33,8 @@ from buoy_common.parameter_declarations import (
 from buoy_common.parameters import build_config, check_parameter_files, load_parameter_files
 from wind_comp.compensator import FlowSensor, SigmaLimits
 from wind_comp.flux_products import DEFAULT_FLUX_WINDOW_S
-from wind_comp.fluxes import STANDARD_PRESSURE_PA, PlanarFit
+from wind_comp.flux_quality import FluxQualityLimits
+from wind_comp.fluxes import STANDARD_PRESSURE_PA, FluxError, PlanarFit
 from wind_comp.wave_motion_left import DEFAULT_THRESHOLDS, MotionLeftThresholds
 
 COMPENSATION_NODE_NAME = "compensation_node"
@@ -83,6 +84,12 @@ FRAME_NAME = custom_rule(
     "a frame name", lambda frame_id: isinstance(frame_id, str) and bool(frame_id.strip())
 )
 PLANAR_FIT = custom_rule("three finite numbers or all NaN", _plane_or_unset)
+FLUX_QUALITY_DEFAULTS = FluxQualityLimits()
+"""The flux tests' thresholds are declared here, their defaults are the core's."""
+HEIGHT_OR_UNSET = custom_rule(
+    "> 0, or NaN (unknown)",
+    lambda height: isinstance(height, float) and (math.isnan(height) or height > 0.0),
+)
 NOISE_SIGMAS = custom_rule(
     "three positive numbers",
     lambda sigmas: len(sigmas) == 3 and all(math.isfinite(s) and s > 0 for s in sigmas),
@@ -194,6 +201,125 @@ class CompensatorConfig:
         "above that of unrelated series (motion_left_coherence_threshold)",
         rule=POSITIVE,
     )
+    motion_left_max_share_standard_error: float = parameter(
+        DEFAULT_THRESHOLDS.max_share_standard_error,
+        meaning='"motion left" flux test: not evaluated (its figures still published) where '
+        "the share's standard error, from the coherence, the band powers of w and of the "
+        "platform's vertical velocity and the segment count, exceeds this (a buoy that barely "
+        "heaves, at the noise of the navigation's vertical velocity)",
+        rule=POSITIVE,
+    )
+    flux_measurement_height_m: float = parameter(
+        FLUX_QUALITY_DEFAULTS.measurement_height_m,
+        unit="m",
+        meaning="height of the sonic above the sea, for the stability z/L of the flux tests; "
+        "NaN: unknown (the integral-turbulence test takes the neutral model)",
+        rule=HEIGHT_OR_UNSET,
+        heading="flux quality control: named QARTOD tests per flux window (wind_comp.flux_quality)",
+    )
+    flux_qc_max_spike_share: float = parameter(
+        FLUX_QUALITY_DEFAULTS.max_spike_share,
+        meaning="spikes test: suspect when the Vickers-Mahrt spikes of a component exceed this "
+        "share of the window's samples (Vickers and Mahrt 1997)",
+        rule=POSITIVE,
+    )
+    flux_qc_stationarity_suspect_percent: float = parameter(
+        FLUX_QUALITY_DEFAULTS.stationarity_suspect_percent,
+        unit="%",
+        meaning="stationarity test (Foken and Wichura 1996, 5-min sub-windows): suspect above "
+        "this non-stationarity of u'w' (Foken et al. 2004: classes 1-3 below 30 %)",
+        rule=POSITIVE,
+    )
+    flux_qc_stationarity_fail_percent: float = parameter(
+        FLUX_QUALITY_DEFAULTS.stationarity_fail_percent,
+        unit="%",
+        meaning="stationarity test: fail above this non-stationarity of u'w' (Foken et al. "
+        "2004: classes 7-9 above 100 %)",
+        rule=POSITIVE,
+    )
+    flux_qc_itc_suspect_percent: float = parameter(
+        FLUX_QUALITY_DEFAULTS.itc_suspect_percent,
+        unit="%",
+        meaning="integral turbulence characteristics test: suspect above this deviation of "
+        "sigma_w/u* from 1.3(1+2|z/L|)^(1/3), 1.25 when z/L is unknown (Foken et al. 2004)",
+        rule=POSITIVE,
+    )
+    flux_qc_itc_fail_percent: float = parameter(
+        FLUX_QUALITY_DEFAULTS.itc_fail_percent,
+        unit="%",
+        meaning="integral turbulence characteristics test: fail above this deviation "
+        "(Foken et al. 2004)",
+        rule=POSITIVE,
+    )
+    flux_qc_drag_min_speed_mps: float = parameter(
+        FLUX_QUALITY_DEFAULTS.drag_min_speed_mps,
+        unit="m/s",
+        meaning="drag coefficient test: not evaluated below this mean speed (u*^2/U^2 then "
+        "follows the noise and free convection, not the wind)",
+        rule=POSITIVE,
+    )
+    flux_qc_drag_suspect_below_factor: float = parameter(
+        FLUX_QUALITY_DEFAULTS.drag_suspect_below_factor,
+        meaning="drag coefficient test: suspect below this multiple of the COARE 3.5 neutral "
+        "10-m drag coefficient at the mean speed (Edson et al. 2013); never fail below",
+        rule=POSITIVE,
+    )
+    flux_qc_drag_suspect_above_factor: float = parameter(
+        FLUX_QUALITY_DEFAULTS.drag_suspect_above_factor,
+        meaning="drag coefficient test: suspect above this multiple of the COARE 3.5 neutral "
+        "10-m drag coefficient (30-min values scatter by about 2x around it, Edson et al. 2013)",
+        rule=POSITIVE,
+    )
+    flux_qc_drag_fail_above_factor: float = parameter(
+        FLUX_QUALITY_DEFAULTS.drag_fail_above_factor,
+        meaning="drag coefficient test: fail above this multiple of the COARE 3.5 neutral "
+        "10-m drag coefficient (beyond the scatter of real windows; a tenfold stress error over "
+        "a sea whose drag is 0.7x the bulk relation's still exceeds it)",
+        rule=POSITIVE,
+    )
+    flux_qc_min_friction_velocity_mps: float = parameter(
+        FLUX_QUALITY_DEFAULTS.min_friction_velocity_mps,
+        unit="m/s",
+        meaning="cross-wind stress test and T*: not evaluated below this u*, where the stress "
+        "is its own sampling noise",
+        rule=POSITIVE,
+    )
+    flux_qc_cross_wind_suspect_ratio: float = parameter(
+        FLUX_QUALITY_DEFAULTS.cross_wind_suspect_ratio,
+        meaning="cross-wind stress test: suspect when |v'w'| exceeds this multiple of |u'w'| "
+        "(stress more than 45 deg off the mean wind)",
+        rule=POSITIVE,
+    )
+    flux_qc_cross_wind_fail_ratio: float = parameter(
+        FLUX_QUALITY_DEFAULTS.cross_wind_fail_ratio,
+        meaning="cross-wind stress test: fail when |v'w'| exceeds this multiple of |u'w'| "
+        "(more than 63 deg off the mean wind)",
+        rule=POSITIVE,
+    )
+    flux_qc_w_ts_correlation_suspect: float = parameter(
+        FLUX_QUALITY_DEFAULTS.w_ts_correlation_suspect,
+        meaning="buoyancy flux test: suspect when |w'Ts'|/(sigma_w sigma_T) exceeds this "
+        "(surface-layer correlations stay below about 0.6)",
+        rule=POSITIVE,
+    )
+    flux_qc_w_ts_correlation_fail: float = parameter(
+        FLUX_QUALITY_DEFAULTS.w_ts_correlation_fail,
+        meaning="buoyancy flux test: fail when |w'Ts'|/(sigma_w sigma_T) exceeds this",
+        rule=POSITIVE,
+    )
+    flux_qc_temperature_scale_suspect_k: float = parameter(
+        FLUX_QUALITY_DEFAULTS.temperature_scale_suspect_k,
+        unit="K",
+        meaning="buoyancy flux test: suspect when |T*| = |w'Ts'|/u* exceeds this (marine "
+        "surface layers: tenths of a kelvin at most)",
+        rule=POSITIVE,
+    )
+    flux_qc_temperature_scale_fail_k: float = parameter(
+        FLUX_QUALITY_DEFAULTS.temperature_scale_fail_k,
+        unit="K",
+        meaning="buoyancy flux test: fail when |T*| exceeds this",
+        rule=POSITIVE,
+    )
     anemometer_noise_sigma_mps: tuple[float, float, float] = parameter(
         (0.05, 0.05, 0.03),
         unit="m/s",
@@ -235,11 +361,29 @@ class CompensatorConfig:
                 f"motion_left_fail_share ({self.motion_left_fail_share}) must be at least "
                 f"motion_left_suspect_share ({self.motion_left_suspect_share})"
             )
+        height = _finite_or_nan("flux_measurement_height_m", self.flux_measurement_height_m)
+        if not HEIGHT_OR_UNSET.holds(height):
+            raise ConfigError(f"flux_measurement_height_m must be {HEIGHT_OR_UNSET}, got {height}")
+        object.__setattr__(self, "flux_measurement_height_m", height)
+        try:
+            self.flux_quality_limits()
+        except FluxError as error:
+            raise ConfigError(str(error)) from None
         if self.gust_window_s >= min(self.product_windows_s):
             raise ConfigError(
                 f"gust_window_s ({self.gust_window_s}) must be shorter than every product window "
                 f"{self.product_windows_s}"
             )
+
+    def flux_quality_limits(self) -> FluxQualityLimits:
+        """The thresholds of the flux tests (:mod:`wind_comp.flux_quality`)."""
+        prefix = "flux_qc_"
+        limits = {
+            field.name.removeprefix(prefix): getattr(self, field.name)
+            for field in dataclasses.fields(self)
+            if field.name.startswith(prefix)
+        }
+        return FluxQualityLimits(measurement_height_m=self.flux_measurement_height_m, **limits)
 
     def planar_fit(self) -> PlanarFit | None:
         """The plane of :attr:`flux_planar_fit`; None for double rotation."""
@@ -253,6 +397,7 @@ class CompensatorConfig:
             self.motion_left_suspect_share,
             self.motion_left_fail_share,
             self.motion_left_coherence_sigmas,
+            self.motion_left_max_share_standard_error,
         )
 
     def flow_sensor(self) -> FlowSensor:
@@ -395,6 +540,16 @@ def _finite_tuple(name: str, value, length: int | None) -> tuple[float, ...]:
     if not all(math.isfinite(number) for number in numbers):
         raise ConfigError(f"{name} must be finite, got {value!r}")
     return numbers
+
+
+def _finite_or_nan(name: str, value) -> float:
+    """A number, NaN allowed (unset); ConfigError for anything else."""
+    if isinstance(value, bool):
+        raise ConfigError(f"{name} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError) as error:
+        raise ConfigError(f"{name} must be a number, got {value!r}") from error
 
 
 def _positive_float(name: str, value) -> float:

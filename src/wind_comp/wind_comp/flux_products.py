@@ -15,25 +15,30 @@ stamps, not on arrival, so that the live node, which hands over every message at
 ``process_bag``, which hands over stretches of a few hundred, close the same windows on the same
 samples.
 
-Quality flag (IOOS QARTOD, :class:`buoy_common.contract.QualityFlag`): from the window's
-coverage as for the wind products, then lowered by the flux tests: suspect when the
-Foken–Wichura non-stationarity of u'w' exceeds :data:`STATIONARY_PERCENT` or spikes exceed
-:data:`MAX_SPIKE_SHARE` of the samples of a component, bad when the non-stationarity exceeds
-:data:`NON_STATIONARY_PERCENT` (Foken et al. 2004: classes 1–3 below 30 %, class 9 above 100 %);
-and by the "motion left" test (:mod:`wind_comp.wave_motion_left`) on the platform vertical
-velocity each corrected sample was corrected with, whose figures and own flag the window
-carries too.
+Quality flags (IOOS QARTOD, :class:`buoy_common.contract.QualityFlag`): each window gets the
+named tests of :data:`wind_comp.flux_quality.FLUX_FLAG_TESTS` (coverage, spikes, stationarity,
+integral turbulence characteristics, drag coefficient, cross-wind stress, buoyancy flux and
+the "motion left" test of :mod:`wind_comp.wave_motion_left` on the platform vertical velocity
+each corrected sample was corrected with), each in its own ``<name>_flag`` field, and
+``quality_flag``, the worst of them.
 """
 
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from buoy_common.contract import QualityFlag
+from wind_comp.flux_quality import (
+    FluxEvidence,
+    FluxQualityLimits,
+    flux_diagnostics,
+    flux_flags,
+    worst_flag,
+)
 from wind_comp.fluxes import (
     STANDARD_PRESSURE_PA,
     FluxError,
@@ -43,25 +48,21 @@ from wind_comp.fluxes import (
 from wind_comp.products import (
     MIN_RATE_INTERVALS,
     RATE_MEMORY_INTERVALS,
-    quality_flag,
     window_coverage,
 )
 from wind_comp.wave_motion_left import (
     DEFAULT_THRESHOLDS,
     MotionLeftThresholds,
-    WaveMotionLeft,
     wave_motion_left,
 )
 
 DEFAULT_FLUX_WINDOW_S = 1800.0
 """Averaging window of the fluxes unless configured otherwise, s (30 min: long enough for the
 largest eddies of the marine surface layer, short enough to stay stationary)."""
+DEFAULT_QUALITY_LIMITS = FluxQualityLimits()
 TEMPERATURE_WAIT_S = 10.0
 """How far the wind may pass a window's end before the window closes without waiting for a
 temperature that has stopped coming, s."""
-STATIONARY_PERCENT = 30.0
-NON_STATIONARY_PERCENT = 100.0
-MAX_SPIKE_SHARE = 0.01
 
 
 @dataclass(frozen=True)
@@ -97,46 +98,42 @@ class FluxProduct:
     stationarity_w_ts_percent: float
     coverage: float
     quality_flag: int
-    """The worst of the flux tests' flags and the "motion left" flag (not evaluated aside)."""
-    wave_band_low_hz: float = math.nan
-    wave_band_high_hz: float = math.nan
+    """The worst of the ``*_flag`` fields below (:func:`wind_comp.flux_quality.worst_flag`)."""
+    wave_band_low_hz: float
+    wave_band_high_hz: float
     """The window's wave band, Hz, from its platform vertical velocity
     (:mod:`wind_comp.wave_motion_left`)."""
-    motion_left_coherence: float = math.nan
+    motion_left_coherence: float
     """Mean coherence of the corrected w with the platform vertical velocity over the band."""
-    motion_left_coherence_threshold: float = math.nan
+    motion_left_coherence_threshold: float
     """The coherence unrelated series would not exceed, above which the share counts."""
-    motion_left_share: float = math.nan
+    motion_left_share: float
     """Share of the platform vertical velocity left in the corrected w over the band."""
-    motion_left_flag: int = int(QualityFlag.NOT_EVALUATED)
-    """QARTOD flag of the "motion left" test: 1 pass, 3 suspect, 4 fail, 2 not evaluated."""
-
-
-def flux_quality_flag(coverage: float, n_valid: int, fluxes) -> QualityFlag:
-    """The flag of a window of ``coverage`` and ``n_valid`` valid samples whose fluxes are
-    ``fluxes`` (:class:`wind_comp.fluxes.FluxWindow`)."""
-    flag = quality_flag(coverage, n_valid)
-    if flag == QualityFlag.MISSING or not math.isfinite(fluxes.friction_velocity_mps):
-        return QualityFlag.MISSING
-    stationarity = fluxes.stationarity_u_w_percent
-    if stationarity > NON_STATIONARY_PERCENT:
-        return QualityFlag.BAD
-    spikes = max(fluxes.spikes) / max(fluxes.samples, 1)
-    if flag == QualityFlag.GOOD and (
-        not stationarity <= STATIONARY_PERCENT or spikes > MAX_SPIKE_SHARE
-    ):
-        return QualityFlag.SUSPECT
-    return flag
-
-
-def with_motion_left(flag: QualityFlag, motion_left: WaveMotionLeft) -> QualityFlag:
-    """A window's ``flag`` lowered by its "motion left" test (not evaluated leaves it, and a
-    window already missing stays missing)."""
-    if flag == QualityFlag.MISSING or motion_left.flag == QualityFlag.NOT_EVALUATED:
-        return flag
-    if flag == QualityFlag.NOT_EVALUATED:
-        return motion_left.flag
-    return max(flag, motion_left.flag)
+    motion_left_flag: int
+    """QARTOD flag of the "motion left" test (a test of
+    :data:`wind_comp.flux_quality.FLUX_FLAG_TESTS`, published with its figures)."""
+    stress_along_n_m2: float
+    stress_cross_n_m2: float
+    """The stress along and across the mean wind, −ρ·u'w' and −ρ·v'w', N/m²."""
+    sigma_w_mps: float
+    sigma_ts_k: float
+    obukhov_stability: float
+    itc_w_deviation_percent: float
+    drag_coefficient: float
+    drag_coefficient_neutral_10m: float
+    cross_wind_stress_ratio: float
+    w_ts_correlation: float
+    temperature_scale_k: float
+    """The values the flux tests judge (:class:`wind_comp.flux_quality.FluxDiagnostics`)."""
+    coverage_flag: int
+    spikes_flag: int
+    stationarity_flag: int
+    itc_flag: int
+    drag_coefficient_flag: int
+    cross_wind_stress_flag: int
+    buoyancy_flux_flag: int
+    """With ``motion_left_flag`` above, one per test of
+    :data:`wind_comp.flux_quality.FLUX_FLAG_TESTS`, in its order."""
 
 
 class FluxAverager:
@@ -150,6 +147,7 @@ class FluxAverager:
         pressure_pa: float = STANDARD_PRESSURE_PA,
         despike: bool = False,
         motion_left_thresholds: MotionLeftThresholds = DEFAULT_THRESHOLDS,
+        quality_limits: FluxQualityLimits = DEFAULT_QUALITY_LIMITS,
     ):
         """Args:
         window_s: window length, s.
@@ -158,6 +156,7 @@ class FluxAverager:
         despike: take the Vickers–Mahrt spikes each window counts out of its fluxes
             (:func:`wind_comp.fluxes.window_fluxes`); False: count them only.
         motion_left_thresholds: where the "motion left" test turns suspect and fail.
+        quality_limits: the thresholds of the flux tests (:mod:`wind_comp.flux_quality`).
         """
         if not (math.isfinite(window_s) and window_s > 0):
             raise FluxError(f"flux window_s must be positive, got {window_s}")
@@ -166,6 +165,7 @@ class FluxAverager:
         self.pressure_pa = float(pressure_pa)
         self.despike = bool(despike)
         self.motion_left_thresholds = motion_left_thresholds
+        self.quality_limits = quality_limits
         self.n_rejected_stamps = 0
         self._stamps: list[float] = []
         self._winds: list[np.ndarray] = []
@@ -279,7 +279,10 @@ class FluxAverager:
         motion_left = wave_motion_left(
             stamps, winds[:, 2], platform_up_mps, interval_s, self.motion_left_thresholds
         )
-        flag = with_motion_left(flux_quality_flag(coverage, n_valid, fluxes), motion_left)
+        diagnostics = flux_diagnostics(fluxes, self.quality_limits)
+        flags = flux_flags(
+            FluxEvidence(fluxes, diagnostics, coverage, n_valid, motion_left), self.quality_limits
+        )
         return FluxProduct(
             window_s=self.window_s,
             window_start_s=start,
@@ -305,13 +308,14 @@ class FluxAverager:
             stationarity_u_w_percent=fluxes.stationarity_u_w_percent,
             stationarity_w_ts_percent=fluxes.stationarity_w_ts_percent,
             coverage=coverage,
-            quality_flag=int(flag),
+            quality_flag=int(worst_flag(flags.values())),
             wave_band_low_hz=motion_left.band_low_hz,
             wave_band_high_hz=motion_left.band_high_hz,
             motion_left_coherence=motion_left.coherence,
             motion_left_coherence_threshold=motion_left.coherence_threshold,
             motion_left_share=motion_left.share,
-            motion_left_flag=int(motion_left.flag),
+            **dataclasses.asdict(diagnostics),
+            **{name: int(flag) for name, flag in flags.items()},
         )
 
 

@@ -18,8 +18,10 @@ sensor time, like the wind products):
    3.5 σ of a moving 5-min window, in runs of at most 3, the threshold raised by 0.1 on each
    pass until no new spike is found; with ``despike``, the same spikes are taken out of the
    window before steps 1–3), the share of invalid samples, the Foken and Wichura (1996)
-   stationarity (the relative difference, %, between the mean covariance of six sub-windows and
-   the covariance of the window; < 30 % is stationary), and the tilt of the rotation.
+   stationarity (the relative difference, %, between the mean covariance of the window's 5-min
+   sub-windows and the covariance of the window; < 30 % is stationary; NaN for a window shorter
+   than two sub-windows), the standard deviations of w and Ts, and the tilt of the rotation.
+   The tests that judge these are :mod:`wind_comp.flux_quality`'s.
 
 Air density for the stress: ρ = p / (R_d·T_v), with the sonic temperature taken as the virtual
 temperature (they differ by ~0.1 K, a sonic measures T(1 + 0.51 q) to within its crosswind
@@ -41,8 +43,10 @@ from scipy.ndimage import uniform_filter1d
 DRY_AIR_GAS_CONSTANT_J_KG_K = 287.05
 STANDARD_PRESSURE_PA = 101_325.0
 STANDARD_TEMPERATURE_DEGC = 15.0
-STATIONARITY_SUBWINDOWS = 6
-"""Foken and Wichura (1996): a 30-min window in six 5-min sub-windows."""
+STATIONARITY_SUBWINDOW_S = 300.0
+"""Foken and Wichura (1996): the sub-windows of the steady-state test last 5 min."""
+MIN_WINDOW_SAMPLES = 12
+"""Fewer valid samples give no fluxes."""
 
 
 class FluxError(ValueError):
@@ -103,6 +107,12 @@ class FluxWindow:
     """Vickers–Mahrt spikes in u, v, w, Ts (Ts: 0 without a temperature)."""
     stationarity_u_w_percent: float
     stationarity_w_ts_percent: float
+    sigma_w_mps: float
+    """Standard deviation of the detrended vertical wind (frame of the mean wind)."""
+    sigma_ts_k: float
+    """Standard deviation of the detrended sonic temperature; NaN without one."""
+    mean_sonic_temperature_degc: float
+    """NaN without a sonic temperature."""
 
 
 def rotation_into_mean_wind(mean_wind_mps) -> tuple[np.ndarray, float]:
@@ -203,16 +213,20 @@ def _covariance(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean((a[valid] - a[valid].mean()) * (b[valid] - b[valid].mean())))
 
 
-def stationarity_percent(a, b, subwindows: int = STATIONARITY_SUBWINDOWS) -> float:
-    """Foken–Wichura non-stationarity of the covariance of ``a`` and ``b``: |mean of the
-    sub-window covariances − the whole window's| / |the whole window's|, %."""
+def stationarity_percent(time_s, a, b, start_s: float, end_s: float) -> float:
+    """Foken–Wichura non-stationarity of the covariance of ``a`` and ``b`` sampled at
+    ``time_s`` (s) over the window [``start_s``, ``end_s``): |mean of the covariances of its
+    sub-windows of about :data:`STATIONARITY_SUBWINDOW_S` − the whole window's| / |the whole
+    window's|, %; NaN for a window shorter than two sub-windows."""
+    t = np.asarray(time_s, dtype=float)
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    subwindows = round((end_s - start_s) / STATIONARITY_SUBWINDOW_S)
     whole = _covariance(a, b)
-    parts = [
-        _covariance(x, y)
-        for x, y in zip(np.array_split(a, subwindows), np.array_split(b, subwindows), strict=True)
-    ]
-    if not math.isfinite(whole) or whole == 0.0 or not np.isfinite(parts).all():
+    if subwindows < 2 or not math.isfinite(whole) or whole == 0.0:
+        return math.nan
+    index = np.clip(((t - start_s) * subwindows / (end_s - start_s)).astype(int), 0, subwindows - 1)
+    parts = [_covariance(a[index == k], b[index == k]) for k in range(subwindows)]
+    if not np.isfinite(parts).all():
         return math.nan
     return 100.0 * abs(float(np.mean(parts)) - whole) / abs(whole)
 
@@ -255,10 +269,10 @@ def window_fluxes(
     start = float(t[0]) if window_start_s is None and count else window_start_s
     end = float(t[-1]) if window_end_s is None and count else window_end_s
     nan = math.nan
-    if valid.sum() < 2 * STATIONARITY_SUBWINDOWS:
+    if valid.sum() < MIN_WINDOW_SAMPLES:
         return FluxWindow(
             start, end, count, 1.0 - valid.mean() if count else 1.0, nan, nan, nan, nan, nan,
-            nan, nan, nan, (0, 0, 0, 0), nan, nan,
+            nan, nan, nan, (0, 0, 0, 0), nan, nan, nan, nan, nan,
         )  # fmt: skip
     rotated, tilt_deg = _rotated(wind, valid, plane)
     series = [rotated[:, 0], rotated[:, 1], rotated[:, 2]]
@@ -275,12 +289,14 @@ def window_fluxes(
         if temperature is not None:
             temperature = np.where(spike_masks[3], np.nan, temperature)
     u, v, w = (linear_detrend(t, rotated[:, axis]) for axis in range(3))
-    w_ts = stationarity_w_ts = nan
+    w_ts = stationarity_w_ts = sigma_ts = nan
     mean_temperature = nan
     if temperature is not None:
         mean_temperature = float(np.nanmean(temperature))
-        w_ts = _covariance(w, linear_detrend(t, temperature))
-        stationarity_w_ts = stationarity_percent(rotated[:, 2], temperature)
+        temperature_detrended = linear_detrend(t, temperature)
+        w_ts = _covariance(w, temperature_detrended)
+        sigma_ts = math.sqrt(_covariance(temperature_detrended, temperature_detrended))
+        stationarity_w_ts = stationarity_percent(t, rotated[:, 2], temperature, start, end)
     spikes = tuple(int(mask.sum()) for mask in spike_masks)
     u_w, v_w = _covariance(u, w), _covariance(v, w)
     along = rotated[valid, 0]
@@ -300,8 +316,11 @@ def window_fluxes(
         air_density_kg_m3=density,
         w_ts_k_mps=w_ts,
         spikes=(*spikes, 0) if len(spikes) == 3 else spikes,
-        stationarity_u_w_percent=stationarity_percent(rotated[:, 0], rotated[:, 2]),
+        stationarity_u_w_percent=stationarity_percent(t, rotated[:, 0], rotated[:, 2], start, end),
         stationarity_w_ts_percent=stationarity_w_ts,
+        sigma_w_mps=math.sqrt(_covariance(w, w)),
+        sigma_ts_k=sigma_ts,
+        mean_sonic_temperature_degc=mean_temperature,
     )
 
 

@@ -340,6 +340,7 @@ def wind_pipeline(config: CompensatorConfig) -> CompensationPipeline:
                 config.air_pressure_pa,
                 config.flux_despike,
                 config.motion_left_thresholds(),
+                config.flux_quality_limits(),
             )
         ],
     )

@@ -28,7 +28,12 @@ interval or a platform that does not move, the test is not evaluated (its figure
 The test (IOOS QARTOD flags): where the coherence exceeds its threshold, fail where the share
 reaches :attr:`MotionLeftThresholds.fail_share` and suspect where it reaches
 :attr:`MotionLeftThresholds.suspect_share`; pass otherwise (a share that no coherence carries
-is the estimator's noise over a band where the air dominates the buoy's heave).
+is the estimator's noise over a band where the air dominates the buoy's heave). Not evaluated,
+the figures still given, where the share's own standard error
+(:func:`share_standard_error`) exceeds :attr:`MotionLeftThresholds.max_share_standard_error`:
+a buoy that barely heaves (a few cm/s, the noise of the navigation's vertical velocity) under
+the air's turbulence gives shares above 1 and coherences past their threshold that say nothing
+about the correction, whether of the corrected wind or of the true one.
 """
 
 from __future__ import annotations
@@ -67,13 +72,19 @@ class MotionLeftThresholds:
     coherence_sigmas: float
     """How many standard deviations of unrelated series' coherence above its mean the coherence
     must lie for the share to count."""
+    max_share_standard_error: float
+    """The largest standard error of the share (:func:`share_standard_error`) at which the test
+    is evaluated."""
 
 
-DEFAULT_THRESHOLDS = MotionLeftThresholds(suspect_share=0.1, fail_share=0.3, coherence_sigmas=3.0)
+DEFAULT_THRESHOLDS = MotionLeftThresholds(
+    suspect_share=0.1, fail_share=0.3, coherence_sigmas=3.0, max_share_standard_error=0.1
+)
 """The parameters' defaults: a sound correction of sound sensors leaves a few hundredths of the
 platform's vertical velocity in w (the estimator's noise), so a tenth is suspect and three
 tenths fail; unrelated series exceed a coherence 3σ above their mean in a few windows of a
-thousand at most (the distribution is skewed)."""
+thousand at most (the distribution is skewed); a share known to within a tenth keeps a failing
+share (0.3) two standard errors above a suspect one (0.1)."""
 
 
 @dataclass(frozen=True)
@@ -91,6 +102,8 @@ class WaveMotionLeft:
     flag: QualityFlag
     n_segments: int = 0
     """Welch segments the figures average."""
+    share_standard_error: float = math.nan
+    """Standard error of the share (:func:`share_standard_error`)."""
 
 
 NOT_EVALUATED = WaveMotionLeft(
@@ -106,13 +119,33 @@ def coherence_threshold(n_segments: int, n_frequencies: int, sigmas: float) -> f
     return (1.0 + sigmas * spread) / n_segments
 
 
+def share_standard_error(
+    coherence: float, wind_power: float, platform_power: float, n_segments: int
+) -> float:
+    """Standard error of the share of the platform's vertical velocity left in w, from the mean
+    ``coherence`` over the band, the band powers of w and of the platform velocity (same units)
+    and the ``n_segments`` averaged: the random error of a transfer function's gain |H|,
+    |H|·√(1−γ²)/(|γ|·√(2K)) (Bendat and Piersol 2010, Random Data, eq. 9.90), with |H|/|γ| =
+    √(Gww/Gpp), of the band's summed powers. An upper estimate: the band's several frequencies
+    average the error down, which it leaves out (on white turbulence over bands of 4 or 5
+    frequencies it is 1.3 to 2.2 times the share's RMS error, the bias of a share near zero
+    included)."""
+    return math.sqrt(max(1.0 - coherence, 0.0) * wind_power / (2 * n_segments * platform_power))
+
+
 def motion_left_flag(
-    share: float, coherence: float, threshold: float, thresholds: MotionLeftThresholds
+    share: float,
+    coherence: float,
+    threshold: float,
+    thresholds: MotionLeftThresholds,
+    standard_error: float = 0.0,
 ) -> QualityFlag:
     """The QARTOD flag of the "motion left" test for a ``share`` of the platform's vertical
-    velocity left in w with mean ``coherence`` over the wave band, which counts above
-    ``threshold`` (all dimensionless)."""
+    velocity left in w, known to ``standard_error``, with mean ``coherence`` over the wave band,
+    which counts above ``threshold`` (all dimensionless)."""
     if not (math.isfinite(share) and math.isfinite(coherence)):
+        return QualityFlag.NOT_EVALUATED
+    if not standard_error <= thresholds.max_share_standard_error:
         return QualityFlag.NOT_EVALUATED
     if coherence <= threshold:
         return QualityFlag.GOOD
@@ -234,5 +267,8 @@ def wave_motion_left(
     threshold = coherence_threshold(
         spectra.n_segments, int(np.count_nonzero(band)), thresholds.coherence_sigmas
     )
-    flag = motion_left_flag(share, coherence, threshold, thresholds)
-    return WaveMotionLeft(low, high, coherence, threshold, share, flag, spectra.n_segments)
+    error = share_standard_error(
+        coherence, float(np.sum(spectra.wind[band])), platform_power, spectra.n_segments
+    )
+    flag = motion_left_flag(share, coherence, threshold, thresholds, error)
+    return WaveMotionLeft(low, high, coherence, threshold, share, flag, spectra.n_segments, error)

@@ -14,7 +14,7 @@ bags with them too.
 import datetime
 import math
 import sys
-from dataclasses import MISSING, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import NamedTuple, get_type_hints
 
@@ -532,17 +532,18 @@ def published_fluxes(reader: BagReader) -> list[FluxProduct]:
     topics = [name for name in reader.topics if name.lstrip("/").startswith(WIND_FLUXES_PREFIX)]
     if not topics:
         return []
-    # Bags written before the wave motion left was published lack those fields: their
-    # defaults (NaN, not evaluated) stand in.
-    required = [f.name for f in fields(FluxProduct) if f.default is MISSING]
-    optional = [f.name for f in fields(FluxProduct) if f.default is not MISSING]
+    names = [flux_field.name for flux_field in fields(FluxProduct)]
+    # Bags written before the wave motion left or the named flux tests were published lack the
+    # fields appended with them: their values unknown, their tests not evaluated.
+    appended = names[names.index("quality_flag") + 1 :]
+    absent = {
+        name: QualityFlag.NOT_EVALUATED if name.endswith("_flag") else math.nan for name in appended
+    }
     fluxes = []
     for message in reader.messages(topics):
         try:
-            values = stats_values(reader.decode(message))
-            published = {name: values[name] for name in required}
-            published.update({name: values[name] for name in optional if name in values})
-            fluxes.append(_window(FluxProduct, published))
+            values = {**absent, **stats_values(reader.decode(message))}
+            fluxes.append(_window(FluxProduct, {name: values[name] for name in names}))
         except (KeyError, ValueError) as error:
             raise ReportDataError(
                 f"bag {reader.path}: {message.topic} message at log time {message.log_time_ns} "
