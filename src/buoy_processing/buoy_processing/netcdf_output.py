@@ -62,6 +62,12 @@ _GIVEN_SITE_COMMENT = (
     "record), not measured: the run had no GNSS fix"
 )
 
+_LATITUDE_ONLY_COMMENT = (
+    "position unknown: the run was given a latitude (site.latitude_deg) for gravity and the "
+    "Earth's rate, and no longitude; the navigation carries that latitude and a nominal "
+    "longitude of 0, which are not the buoy's position"
+)
+
 
 @dataclass
 class NetcdfContent:
@@ -248,6 +254,9 @@ def netcdf_dataset(content: NetcdfContent) -> xr.Dataset:
     if facts.site_deg is not None and not facts.position_from_gnss:
         for name in ("latitude", "longitude", "altitude"):
             dataset[name].attrs["comment"] = _GIVEN_SITE_COMMENT
+    elif facts.latitude_only_deg is not None and not facts.position_from_gnss:
+        for name in ("latitude", "longitude", "altitude"):
+            dataset[name].attrs["comment"] = _LATITUDE_ONLY_COMMENT
     dataset.attrs = _global_attributes(content, dataset)
     return dataset
 

@@ -306,14 +306,14 @@ def output_facts(
     used = {kind: use for kind, use in source_use.items() if use.accepted > 0}
     north, basis = _north_of(config, used)
     spans = [span for span in sample_stamps_s if all(math.isfinite(t) for t in span)]
-    site = _site_parameter_deg(config)
+    site = config.site_position_deg
     return OutputFacts(
         north=north,
         north_basis=basis,
         sensors=_sensors_of(topics, used),
         site_deg=site,
         site_source=_site_source(site, record),
-        latitude_only_deg=_latitude_only_deg(config) if site is None else None,
+        latitude_only_deg=config.site_latitude_only_deg,
         declination_deg=_declination_applied_deg(config, used),
         record=record,
         position_from_gnss=any(
@@ -339,17 +339,6 @@ def source_use_of(health) -> dict[str, SourceUse]:
     return uses
 
 
-def _site_parameter_deg(config: FusionConfig) -> tuple[float, float] | None:
-    """The site the parameters give (``site.*``, else ``origin.*``); NaN means not given."""
-    for latitude, longitude in (
-        (config.site_latitude_deg, config.site_longitude_deg),
-        (config.origin_latitude_deg, config.origin_longitude_deg),
-    ):
-        if math.isfinite(latitude) and math.isfinite(longitude):
-            return float(latitude), float(longitude)
-    return None
-
-
 def _site_source(site_deg, record: ImportedRecord | None) -> str | None:
     """Whether the run's site is the imported record's or the parameters' own."""
     if site_deg is None:
@@ -357,12 +346,6 @@ def _site_source(site_deg, record: ImportedRecord | None) -> str | None:
     if record is not None and record.site_deg == site_deg:
         return SITE_FROM_RECORD
     return SITE_FROM_PARAMETERS
-
-
-def _latitude_only_deg(config: FusionConfig) -> float | None:
-    """``site.latitude_deg`` given without its longitude (for gravity and the Earth's rate)."""
-    latitude = config.site_latitude_deg
-    return float(latitude) if math.isfinite(latitude) else None
 
 
 def _declination_applied_deg(config: FusionConfig, used: Mapping[str, SourceUse]) -> float | None:
