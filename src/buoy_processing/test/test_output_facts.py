@@ -12,7 +12,7 @@ import pytest
 
 from buoy_common.record_facts import ImportedRecord
 from buoy_common.records.screening import FieldCounts
-from buoy_nav.config import FusionConfig
+from buoy_nav.config import ConfigError, FusionConfig
 from buoy_processing.output_facts import (
     MAGNETIC_NORTH,
     SITE_FROM_PARAMETERS,
@@ -180,3 +180,28 @@ def test_the_facts_survive_their_strings(with_record):
     metadata = facts.to_metadata()
     assert all(isinstance(value, str) for value in metadata.values())
     assert OutputFacts.from_metadata(metadata, record) == facts
+
+
+def test_a_latitude_alone_serves_gravity_and_is_no_position():
+    config = _config(
+        ahrs_yaw_reference="magnetic_north", magnetic_declination_deg=0.0, site_latitude_deg=38.5
+    )
+    facts = output_facts(config, MOTION_PACK_TOPICS, {"ahrs": SourceUse(10)}, [])
+    assert (facts.site_deg, facts.latitude_only_deg) == (None, 38.5)
+    assert not facts.position_known
+    assert facts.site_text() == "latitude 38.50000 deg given for gravity; position unknown"
+
+
+def test_a_latitude_alone_with_the_declination_from_the_model_is_refused_by_name():
+    with pytest.raises(ConfigError, match=r"'site\.longitude_deg'.*magnetic\.declination_deg"):
+        _config(site_latitude_deg=38.5)
+    with pytest.raises(ConfigError, match=r"'site\.latitude_deg'"):
+        _config(site_longitude_deg=-70.0, magnetic_declination_deg=0.0)
+    # the map origin's longitude completes the site
+    config = _config(
+        site_latitude_deg=38.5,
+        origin_latitude_deg=38.0,
+        origin_longitude_deg=-70.0,
+        origin_altitude_m=0.0,
+    )
+    assert config.site_position_deg == (38.5, -70.0)
