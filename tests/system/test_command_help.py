@@ -3,7 +3,8 @@ can return, each in complete sentences. The codes are the command's ``EXIT_CODES
 once, in its module, from :mod:`buoy_common.cli`; a node that takes only ROS arguments has those
 of every node); the codes its source hands to ``sys.exit`` or ``parser.exit``, and those of
 :func:`buoy_common.cli.interruptible`, must be among them. Asked for help, a node prints it and
-exits instead of starting."""
+exits instead of starting; whoever reads it may stop early (``--help | head -1``) without a
+traceback."""
 
 from __future__ import annotations
 
@@ -12,9 +13,12 @@ import contextlib
 import importlib
 import inspect
 import io
+import os
 import re
+import subprocess
 import sys
 from importlib.metadata import entry_points
+from pathlib import Path
 
 import pytest
 
@@ -98,3 +102,53 @@ def test_help_names_every_exit_code_in_whole_sentences(name, module_name):
         assert words, name
         assert words[-1].rstrip(".").lower() not in UNFINISHED_ENDINGS, (name, paragraph)
         assert not words[-1].endswith((",", ";", ":")) or words[-1] == "codes:", (name, paragraph)
+
+
+BIN = Path(sys.executable).parent
+
+
+# One command and one node in the quick suite; every console script (about two minutes on a
+# busy machine) in the long one.
+QUICK_HELP_SCRIPTS = ("import_records", "fusion_node")
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param(name, marks=[pytest.mark.long] * (name not in QUICK_HELP_SCRIPTS))
+        for name, _ in SCRIPTS
+    ],
+)
+def test_help_to_a_reader_that_went_away_ends_quietly(name):
+    # The reader's end is closed before the command writes a byte: every write of the help
+    # meets a closed pipe, the hardest case of ``--help | head -1``.
+    # Buffered, as in a user's shell: the help then meets the closed pipe at the last flush.
+    environment = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        process = subprocess.Popen(
+            [str(BIN / name), "--help"],
+            stdout=write_end,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=environment,
+        )
+    finally:
+        os.close(write_end)
+    _, stderr = process.communicate(timeout=120)
+    assert stderr == "", (name, stderr)
+    assert process.returncode == 0, name
+
+
+def test_the_first_line_of_help_through_head():
+    completed = subprocess.run(
+        f"'{BIN / 'process_bag'}' --help | head -1",
+        shell=True,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert completed.stdout.startswith("usage: process_bag")
+    assert len(completed.stdout.splitlines()) == 1
+    assert completed.stderr == ""

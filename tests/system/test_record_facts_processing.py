@@ -1,7 +1,8 @@
 """process_bag takes an imported record's facts as defaults under the parameter files: the
 yaw reference stated in the column map gives the same output as the same yaw reference given as
-a parameter, a parameter file overrides the map, and the run's RecordFacts say what the output
-is referenced to. A misspelt parameter group is refused all the same."""
+a parameter, a parameter file overrides the map, and the run's OutputFacts say what the output
+is referenced to and which record it came from. A misspelt parameter group is refused all the
+same."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import yaml
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import NAV_ODOMETRY_TOPIC, WIND_TRUE_TOPIC
 from buoy_common.import_records import import_records
+from buoy_common.record_facts import read_imported_record
 from buoy_processing.bag_facts import fusion_config_for_bag
 from buoy_processing.bag_processing import process_bag
 from buoy_processing.process_bag import main as process_bag_main
@@ -151,23 +153,24 @@ def test_the_run_says_where_the_yaw_reference_came_from(tmp_path, capsys):
     assert (config.ahrs_yaw_reference, lines) == ("true_north", [])
 
 
-def test_the_runs_record_facts_say_what_the_output_is_referenced_to(tmp_path):
+def test_the_runs_facts_say_what_the_output_is_referenced_to(tmp_path):
     bag = imported(tmp_path, "magnetic_north")
     files = [str(parameters(tmp_path, "plain"))]
     config, _ = fusion_config_for_bag(bag, files)
     with BagReader(bag) as reader:
-        first_ns, last_ns = reader.start_ns, reader.end_ns
+        first_s, last_s = reader.start_ns / 1e9, reader.end_ns / 1e9
     summary = process_bag(bag, tmp_path / "out", config, compensator_config_from_files(files))
-    facts = summary.record_facts
-    assert facts.north_reference == "true_north"  # the magnetic pack turned by 10°
-    assert facts.declination_applied and facts.declination_deg == DECLINATION_DEG
-    # the OOI parameters' site (for gravity); the record itself does not know one
+    facts = summary.facts
+    assert facts.north == "true north"  # the magnetic pack turned by 10°
+    assert facts.declination_deg == DECLINATION_DEG
+    # the OOI parameters give a latitude for gravity, no position; the record knows none
     assert facts.record.site_deg is None
-    assert (facts.site_deg, facts.site_source) == ((38.5, 0.0), "parameters")
-    assert {"imu/data_raw", "imu/data", "anemometer/wind"} <= set(facts.sensor_topics)
-    assert not facts.has_gnss
-    assert (facts.coverage_start_ns, facts.coverage_end_ns) == (first_ns, last_ns)
+    assert facts.site_deg is None and facts.latitude_only_deg == 38.5
+    assert "motion pack" in facts.sensor_text() and "GNSS" not in facts.sensor_text()
+    assert not facts.position_known
+    assert first_s <= facts.first_sample_s < facts.last_sample_s <= last_s
     assert facts.record.start_source == "column map"
+    assert facts.record == read_imported_record(bag)
 
 
 def test_a_misspelt_group_is_refused_with_the_record_facts(tmp_path, capsys):

@@ -3,6 +3,7 @@ process what is left of a bag that was cut short, saying so with exit code 3."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import signal
 import subprocess
@@ -224,3 +225,30 @@ def test_all_invalid_wind_still_gives_the_navigation_and_says_why(tmp_path, inpu
         assert np.isfinite(dataset["latitude"].values).all() and dataset["latitude"].size > 0
         flags = dataset["wind_1min_quality_flag"].values
         assert (flags == QualityFlag.MISSING).all() and flags.size > 0
+
+
+RECORD = REPO / "tests" / "data" / "ooi_fdchp" / "fdchp_test_dp.dat"
+COLUMN_MAP = REPO / "src" / "buoy_common" / "config" / "records" / "ooi_fdchp.yaml"
+RECORD_COPIES = 8
+"""Copies of the 20-minute record in one file: long enough to be interrupted while its bag is
+written (the samples are numbered, so the copies follow one another in time)."""
+
+
+def test_an_interrupted_import_exits_130_with_one_line_and_writes_nothing(tmp_path):
+    record = tmp_path / "long.dat"
+    record.write_text(RECORD.read_text() * RECORD_COPIES)
+    out = tmp_path / "out"
+    process = subprocess.Popen(
+        [str(BIN / "import_records"), str(record), str(COLUMN_MAP), str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    # The screening table is printed once the record is read, just before its bag is written.
+    assert process.stdout.readline().startswith("field")
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert "wrote" not in stdout, "the import finished before the signal: make the record longer"
+    assert (process.returncode, stderr) == (130, "import_records: interrupted\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.dat"]

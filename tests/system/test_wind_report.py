@@ -1,8 +1,10 @@
 """Report figures, tables and the saved report data; the report of a processed bag."""
 
 import dataclasses
+import json
 import math
 import re
+import shutil
 from pathlib import Path
 
 import bag_faults
@@ -10,6 +12,7 @@ import numpy as np
 import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.image import imread
+from mcap.reader import make_reader
 from scipy.signal import welch
 from scipy.spatial.transform import Rotation
 
@@ -349,6 +352,54 @@ def test_report_of_a_processed_bag(tmp_path_factory, geometry, tmp_path, capsys)
         "Wind directions in degrees clockwise from true north."
         in (tmp_path / "summary.md").read_text()
     )
+
+
+def copy_of(bag: Path, destination: Path) -> Path:
+    """The messages of ``bag`` in a new bag without its metadata records: a bag processed
+    before process_bag stored its outputs' facts."""
+    with BagReader(bag) as reader, BagWriter(destination) as writer:
+        for message in reader.messages(list(reader.topics)):
+            writer.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
+    return destination
+
+
+def test_the_processed_bag_states_its_north_and_sensors_and_the_report_reads_them(
+    sea_state_bags, tmp_path
+):
+    _, processed, summary = sea_state_bags
+    # read with the mcap library alone, not the suite's own reader
+    with open(next(Path(processed).glob("*.mcap")), "rb") as stream:
+        records = {m.name: dict(m.metadata) for m in make_reader(stream).iter_metadata()}
+    stored = records["buoy_outputs"]
+    assert stored["north"] == summary.facts.north == "true north"
+    assert json.loads(stored["sensors"]) == list(summary.facts.sensors)
+    assert json.loads(stored["position_from_gnss"]) is True
+    assert "buoy_record" not in records  # a simulated bag, not an imported record
+
+    # the bag alone, without the products CSV beside it, still says its north and sensors
+    alone = tmp_path / "alone" / "processed"
+    shutil.copytree(processed, alone)
+    data = report_data_from_bag(alone)
+    assert (data.north, data.sensors) == ("true_north", summary.facts.sensor_text())
+    assert "Sensors used: IMU, GNSS receiver" in data.sensors_sentence
+
+
+def test_a_bag_without_its_outputs_facts_falls_back_to_the_csv_or_says_it_does_not_know(
+    sea_state_bags, tmp_path
+):
+    _, processed, _ = sea_state_bags
+    earlier = copy_of(processed, tmp_path / "earlier")
+    csv_name = "_wind_products.csv"
+    shutil.copy(str(processed) + csv_name, str(earlier) + csv_name)
+    data = report_data_from_bag(earlier)
+    assert (data.north, data.sensors) == ("true_north", "")
+    assert "not recorded with these data" in data.sensors_sentence
+    # recorded from the nodes: no facts, no CSV
+    recorded = copy_of(processed, tmp_path / "recorded")
+    write_report(report_data_from_bag(recorded), tmp_path / "report")
+    page = (tmp_path / "report" / "summary.md").read_text()
+    assert "which north is not recorded with these data" in page
+    assert "The sensors used are not recorded with these data" in page
 
 
 def test_products_are_recomputed_when_the_bag_has_none(sea_state_bags, tmp_path):

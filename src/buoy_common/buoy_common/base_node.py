@@ -28,7 +28,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-from buoy_common.cli import asks_for_help, node_help
+from buoy_common.cli import asks_for_help, node_help, write_help
 from buoy_common.contract import BODY_FRAME, TF_STATIC_TOPIC
 from buoy_common.parameters import (
     ParameterError,
@@ -374,7 +374,7 @@ def main_for(node_factory: Callable[[], SuiteNode], docstring: str) -> Callable[
 
     def main() -> None:
         if asks_for_help(sys.argv):
-            print(node_help(sys.argv[0].rsplit("/", 1)[-1], docstring))
+            write_help(node_help(sys.argv[0].rsplit("/", 1)[-1], docstring) + "\n")
             sys.exit(0)
         sys.exit(run_node(node_factory))
 

@@ -79,12 +79,31 @@ def command_parser(
     ``docstring`` (whole sentences, without reStructuredText markup) and ``note``, its epilog
     every one of ``exit_codes`` with its meaning."""
     description = " ".join(filter(None, (first_paragraph(docstring), note)))
-    return argparse.ArgumentParser(
+    return _CommandParser(
         prog=program,
         description=_fill(description),
         epilog=exit_codes_text(exit_codes),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+
+
+class _CommandParser(argparse.ArgumentParser):
+    """An argument parser whose help survives a reader that stops early (``--help | head``)."""
+
+    def print_help(self, file=None) -> None:
+        write_help(self.format_help(), file)
+
+
+def write_help(text: str, stream=None) -> None:
+    """Write a help text to ``stream`` (standard output when None). A reader that went away
+    after the lines it wanted (``--help | head -1``) ends the writing quietly: help is not an
+    error, and the interpreter's last flush of a dead pipe would print a traceback."""
+    stream = stream or sys.stdout
+    try:
+        stream.write(text)
+        stream.flush()
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
 
 
 def asks_for_help(argv: list[str]) -> bool:

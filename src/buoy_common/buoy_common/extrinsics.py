@@ -203,15 +203,18 @@ SHARED_PARAMETERS: dict[str, SharedParameter] = {
         SharedParameter(
             "site.latitude_deg",
             _NAN,
-            "latitude of the site when there is no GNSS fix; NaN: origin.latitude_deg",
+            "latitude of the site when there is no GNSS fix (gravity, Earth rate, declination); "
+            "NaN: origin.latitude_deg",
             _latitude,
             unit="deg",
-            rule="in (−90, 90) or NaN; both site.* set or both NaN",
+            rule="in (−90, 90) or NaN; set whenever site.longitude_deg is",
         ),
         SharedParameter(
             "site.longitude_deg",
             _NAN,
-            "longitude of the site when there is no GNSS fix; NaN: origin.longitude_deg",
+            "longitude of the site when there is no GNSS fix; NaN: origin.longitude_deg, else "
+            "unknown (site.latitude_deg alone serves gravity and Earth rate, and then "
+            "magnetic.declination_deg must be a number)",
             _longitude,
             unit="deg",
             rule="in [−180, 180] or NaN",
@@ -320,10 +323,11 @@ def _check_origin_complete(values: dict[str, Any]) -> None:
 
 
 def _check_site_complete(values: dict[str, Any]) -> None:
-    given = [name for name in SITE_PARAMETERS if name in values]
-    unset = [name for name in given if math.isnan(values[name])]
-    if unset and len(unset) != len(given):
+    """A site's latitude alone is a fact (gravity and Earth rate need no more); its longitude
+    alone is none."""
+    latitude, longitude = (values.get(name, math.nan) for name in SITE_PARAMETERS)
+    if math.isnan(latitude) and not math.isnan(longitude):
         raise ValueError(
-            f"parameter '{unset[0]}': site.latitude_deg and site.longitude_deg must be both set "
-            "or both NaN"
+            "parameter 'site.latitude_deg': NaN while site.longitude_deg is set; a site's "
+            "longitude needs its latitude"
         )

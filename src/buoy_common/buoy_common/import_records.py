@@ -22,7 +22,7 @@ import numpy as np
 
 from buoy_common.bag_io import BagError, BagWriter, jazzy_typestore
 from buoy_common.cdr import ImuWriter, Vector3StampedWriter
-from buoy_common.cli import BAD_INPUT, DONE, ExitCode, command_parser
+from buoy_common.cli import INTERRUPTIBLE_EXIT_CODES, ExitCode, command_parser, interruptible
 from buoy_common.contract import (
     AHRS_TOPIC,
     ANEMOMETER_FRAME,
@@ -69,8 +69,7 @@ IDENTITY_XYZW = (0.0, 0.0, 0.0, 1.0)
 WIND_ALL_INVALID_EXIT_CODE = 5
 """Exit code of a record refused because not one of its wind samples is valid."""
 EXIT_CODES = (
-    DONE,
-    BAD_INPUT,
+    *INTERRUPTIBLE_EXIT_CODES,
     ExitCode(
         WIND_ALL_INVALID_EXIT_CODE,
         "refused: every wind sample of the record is invalid (nothing written; "
@@ -315,6 +314,7 @@ def print_screening(facts: ImportedRecord) -> None:
     print(f"start {seconds_to_iso8601(facts.start_ns / 1e9)} (from the {source})")
 
 
+@interruptible("import_records")
 def main(argv=None) -> None:
     arguments = parse_arguments(sys.argv[1:] if argv is None else argv)
     try:

@@ -1,5 +1,5 @@
-"""What is known about a bag's data beyond its samples: the facts of an imported record, carried
-in the bag, and the facts of a processed bag that the output writers state.
+"""What is known about an imported bag's data beyond its samples: the facts of the record it was
+imported from, carried in the bag.
 
 :class:`ImportedRecord` is what ``import_records`` knows from the column map and its command
 line: the north reference of the motion pack's heading, the site, the sensors the record has,
@@ -12,28 +12,19 @@ The offline tools take its parameter facts (:meth:`ImportedRecord.parameter_defa
 defaults under the user's parameter files: a value given in a file wins, and nothing the map
 said has to be said again.
 
-:class:`RecordFacts` is what a processed bag's outputs say about their data (north reference,
-declination, site, sensors, coverage); ``process_bag`` computes it with :func:`record_facts`
-for every bag, imported or not.
+What a processed bag's outputs say about the run (north, sensors, site, span, and this record)
+is :class:`buoy_processing.output_facts.OutputFacts`.
 """
 
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from buoy_common.bag_io import BagError
-from buoy_common.contract import (
-    AHRS_TOPIC,
-    GNSS_BASELINE_TOPIC,
-    GNSS_FIX_TOPIC,
-    GNSS_HEADING_TOPIC,
-    MAGNETOMETER_TOPIC,
-    seconds_to_iso8601,
-)
+from buoy_common.contract import seconds_to_iso8601
 from buoy_common.records.screening import FieldCounts
 
 RECORD_METADATA_NAME = "buoy_record"
@@ -42,9 +33,6 @@ RECORD_METADATA_VERSION = "1"
 SITE_FROM_MAP = "column map"
 SITE_FROM_COMMAND_LINE = "command line"
 """Where an imported record's site came from (:attr:`ImportedRecord.site_source`)."""
-SITE_FROM_RECORD = "record"
-SITE_FROM_PARAMETERS = "parameters"
-"""Where a run's site came from (:attr:`RecordFacts.site_source`)."""
 RECORD_SENSORS = ("sonic", "sonic_temperature", "imu", "ahrs")
 """The sensors a record may have, as ``sensors`` names them: the sonic's wind and temperature,
 the motion pack's (or IMU's) rates and specific force, the motion pack's own attitude."""
@@ -145,19 +133,27 @@ def read_imported_record(bag: str | Path) -> ImportedRecord | None:
     """The imported record's facts stored in ``bag`` (a bag directory or its MCAP file), None
     for a bag that holds none (a simulated or recorded one). BagError for facts that are there
     but unreadable."""
-    # Imported here: a tool that never reads an imported bag does without the MCAP reader.
+    metadata = read_metadata_record(bag, RECORD_METADATA_NAME)
+    if metadata is None:
+        return None
+    try:
+        return ImportedRecord.from_metadata(metadata)
+    except (KeyError, ValueError, TypeError) as error:
+        raise BagError(
+            f"bag {bag}: the imported record's facts ({RECORD_METADATA_NAME}) are "
+            f"unreadable: {error}"
+        ) from error
+
+
+def read_metadata_record(bag: str | Path, name: str) -> dict[str, str] | None:
+    """The last MCAP metadata record called ``name`` in ``bag`` (a bag directory or its MCAP
+    file), None when it holds none."""
     bag = Path(bag)
     files = sorted(bag.glob("*.mcap")) if bag.is_dir() else [bag]
     for mcap_file in files:
-        records = [m for m in _indexed_metadata(mcap_file) if m.name == RECORD_METADATA_NAME]
+        records = [m for m in _indexed_metadata(mcap_file) if m.name == name]
         if records:
-            try:
-                return ImportedRecord.from_metadata(dict(records[-1].metadata))
-            except (KeyError, ValueError, TypeError) as error:
-                raise BagError(
-                    f"bag {bag}: the imported record's facts ({RECORD_METADATA_NAME}) are "
-                    f"unreadable: {error}"
-                ) from error
+            return dict(records[-1].metadata)
     return None
 
 
@@ -177,89 +173,3 @@ def _indexed_metadata(mcap_file: Path) -> list:
             return list(reader.iter_metadata())
     except (OSError, McapError, EOFError, ValueError):
         return []
-
-
-@dataclass(frozen=True)
-class RecordFacts:
-    """What the outputs of a processed bag say about its data: NetCDF attributes, CSV headers,
-    the summary. Computed by :func:`record_facts`."""
-
-    north_reference: str
-    """``true_north`` or ``magnetic_north``: what the output's directions (the wind's and the
-    current's ENU axes, meteorological directions) are referenced to."""
-    declination_applied: bool
-    """Whether a magnetic heading was turned to true north by a declination."""
-    declination_deg: float | None
-    """The declination applied, deg east, when given as a number (``magnetic.declination_deg``);
-    None when it came from the geomagnetic model (it varies with time and place) or none was
-    applied."""
-    site_deg: tuple[float, float] | None
-    """(latitude, longitude), deg, of the buoy when known without GNSS; None: unknown (a GNSS
-    buoy's positions are in ``nav/fix``)."""
-    site_source: str | None
-    """``record`` (the imported record's facts) or ``parameters`` (``site.*`` or ``origin.*``);
-    None when unknown."""
-    sensor_topics: tuple[str, ...]
-    """The contract's sensor topics the run read (``imu/data_raw``, ``imu/data``,
-    ``anemometer/wind``, ...)."""
-    coverage_start_ns: int
-    """Log time of the bag's first message, ns since the Unix epoch."""
-    coverage_end_ns: int
-    """Log time of its last message."""
-    record: ImportedRecord | None
-    """The imported record's facts (start and its source, field screening); None for a bag
-    that was not imported."""
-
-    @property
-    def site_known(self) -> bool:
-        return self.site_deg is not None
-
-    @property
-    def has_gnss(self) -> bool:
-        return GNSS_FIX_TOPIC in self.sensor_topics
-
-
-def _magnetic_and_true_headings(sensor_topics, yaw_reference: str) -> tuple[bool, bool]:
-    """(any heading reference measured against magnetic north, any against true north)."""
-    pack_is_magnetic = yaw_reference == "magnetic_north"
-    has_pack = AHRS_TOPIC in sensor_topics
-    magnetic = MAGNETOMETER_TOPIC in sensor_topics or (has_pack and pack_is_magnetic)
-    antennas = GNSS_BASELINE_TOPIC in sensor_topics or GNSS_HEADING_TOPIC in sensor_topics
-    return magnetic, antennas or (has_pack and not pack_is_magnetic)
-
-
-def record_facts(
-    record: ImportedRecord | None,
-    sensor_topics: tuple[str, ...],
-    yaw_reference: str,
-    declination_deg: float,
-    parameter_site_deg: tuple[float, float],
-    coverage_ns: tuple[int, int],
-) -> RecordFacts:
-    """The facts of a run over a bag: ``sensor_topics`` the contract topics it read,
-    ``yaw_reference`` and ``declination_deg`` (deg, NaN: the geomagnetic model) the parameters
-    it ran with, ``parameter_site_deg`` the site they give (``site.*``, else ``origin.*``; NaN:
-    none; the record's site is among them as a default), ``coverage_ns`` the bag's first and
-    last log times.
-
-    A declination of exactly 0 given as a parameter leaves a magnetic heading magnetic (as
-    OOI's products of its FDCHP record are): the output is then referenced to magnetic north
-    unless a true-north heading (GNSS antennas, a true-north motion pack) is also fused."""
-    magnetic, true = _magnetic_and_true_headings(sensor_topics, yaw_reference)
-    applied = magnetic and declination_deg != 0.0
-    site, site_source = None, None
-    if all(math.isfinite(c) for c in parameter_site_deg):
-        site = tuple(parameter_site_deg)
-        from_record = record is not None and record.site_deg == site
-        site_source = SITE_FROM_RECORD if from_record else SITE_FROM_PARAMETERS
-    return RecordFacts(
-        north_reference="magnetic_north" if magnetic and not true and not applied else "true_north",
-        declination_applied=applied,
-        declination_deg=declination_deg if applied and math.isfinite(declination_deg) else None,
-        site_deg=site,
-        site_source=site_source,
-        sensor_topics=tuple(sensor_topics),
-        coverage_start_ns=coverage_ns[0],
-        coverage_end_ns=coverage_ns[1],
-        record=record,
-    )

@@ -12,6 +12,7 @@ import threading
 import time
 
 import pytest
+from mcap.reader import make_reader
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Imu, NavSatFix
 
@@ -54,6 +55,18 @@ def test_background_writer_writes_the_same_bag(written_bag, tmp_path):
     with BagReader(path) as original, BagReader(copy) as copied:
         assert list(original.messages()) == list(copied.messages())
         assert copied.topics == original.topics
+
+
+def test_background_writer_stores_metadata_records_as_the_bag_writer_does(tmp_path):
+    facts = {"north": "true north", "sensors": '["IMU"]'}
+    for writer_class in (BagWriter, BackgroundBagWriter):
+        path = tmp_path / writer_class.__name__
+        with writer_class(path) as writer:
+            writer.write_raw("/imu/data_raw", IMU_TYPE, T0_NS, serialize_message(Imu()))
+            writer.add_metadata("buoy_outputs", facts)
+        with open(next(path.glob("*.mcap")), "rb") as stream:
+            records = {m.name: dict(m.metadata) for m in make_reader(stream).iter_metadata()}
+        assert records["buoy_outputs"] == facts, writer_class.__name__
 
 
 def test_background_writer_reports_errors_of_the_writing_process(tmp_path):

@@ -418,11 +418,14 @@ def _roll_pitch(mean_force_body_mps2) -> tuple[float, float]:
 
 def _site_of(config: FusionConfig) -> tuple[float, float] | None:
     """(latitude, longitude) in rad of the site (``site.*``, else ``origin.*``); None when
-    neither is configured."""
-    latitude, longitude = config.site_latitude_deg, config.site_longitude_deg
-    if math.isnan(latitude):
-        latitude, longitude = config.origin_latitude_deg, config.origin_longitude_deg
-    if math.isnan(latitude):
+    neither is configured. A latitude given alone stands at longitude 0: the navigation needs
+    a longitude, and without GNSS it enters nothing once the declination is a number (the
+    configuration requires it); the outputs do not present it as a position."""
+    if config.site_position_deg is not None:
+        latitude, longitude = config.site_position_deg
+    elif config.site_latitude_only_deg is not None:
+        latitude, longitude = config.site_latitude_only_deg, 0.0
+    else:
         return None
     return math.radians(latitude), math.radians(longitude)
 

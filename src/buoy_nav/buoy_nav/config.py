@@ -424,6 +424,35 @@ class FusionConfig:
             self.source_health_rule  # noqa: B018 (the rule checks its fields together)
         except ValueError as error:
             raise ConfigError(str(error)) from None
+        if self.site_latitude_only_deg is not None and math.isnan(self.magnetic_declination_deg):
+            raise ConfigError(
+                "parameter 'site.longitude_deg': NaN (and no origin.longitude_deg) while "
+                "magnetic.declination_deg is NaN too: the World Magnetic Model gives the "
+                "declination at the site only with its longitude; give site.longitude_deg, "
+                "or magnetic.declination_deg as a number"
+            )
+
+    @property
+    def site_position_deg(self) -> tuple[float, float] | None:
+        """(latitude, longitude), deg, of the site the parameters give: ``site.*``, a
+        coordinate not given there taken from ``origin.*``; None when a coordinate is known
+        from neither (GNSS fixes then give the position, or nothing does)."""
+        latitude, longitude = self.site_latitude_deg, self.site_longitude_deg
+        if math.isnan(latitude):
+            latitude = self.origin_latitude_deg
+        if math.isnan(longitude):
+            longitude = self.origin_longitude_deg
+        if math.isnan(latitude) or math.isnan(longitude):
+            return None
+        return float(latitude), float(longitude)
+
+    @property
+    def site_latitude_only_deg(self) -> float | None:
+        """``site.latitude_deg`` when it is given without any longitude (gravity and Earth
+        rate, not a position); None otherwise."""
+        if self.site_position_deg is None and math.isfinite(self.site_latitude_deg):
+            return float(self.site_latitude_deg)
+        return None
 
     @property
     def source_health_rule(self) -> SourceHealthRule:

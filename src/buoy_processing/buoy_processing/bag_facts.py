@@ -1,6 +1,4 @@
-"""An input bag's facts in an offline run: an imported record's facts as defaults under the
-user's parameters, and the :class:`~buoy_common.record_facts.RecordFacts` of the run for the
-output writers.
+"""An imported record's facts in an offline run: defaults under the user's parameters.
 
 An imported bag says what its column map knew (``ahrs.yaw_reference``, the site;
 :mod:`buoy_common.record_facts`): the run takes those values unless a parameter file gives
@@ -10,21 +8,13 @@ seen.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from pathlib import Path
 
-from buoy_common.bag_io import BagReader
 from buoy_common.contract import seconds_to_iso8601
 from buoy_common.parameters import load_parameter_files
-from buoy_common.record_facts import (
-    ImportedRecord,
-    RecordFacts,
-    read_imported_record,
-    record_facts,
-)
+from buoy_common.record_facts import ImportedRecord, read_imported_record
 from buoy_nav.config import FUSION_NODE_NAME, FusionConfig, fusion_config_from_files
-from buoy_processing.offline_fusion import relative_topic
 
 
 def describe_record(record: ImportedRecord) -> str:
@@ -62,26 +52,3 @@ def fusion_config_for_bag(
         return fusion_config_from_files(parameter_files), []
     config = fusion_config_from_files(parameter_files, record.parameter_defaults())
     return config, [describe_record(record), *record_defaults_lines(record, parameter_files)]
-
-
-def site_parameters_deg(config: FusionConfig) -> tuple[float, float]:
-    """The site the run's parameters give: ``site.*``, else ``origin.*`` (NaN: none)."""
-    site = (config.site_latitude_deg, config.site_longitude_deg)
-    if all(math.isfinite(c) for c in site):
-        return site
-    return config.origin_latitude_deg, config.origin_longitude_deg
-
-
-def facts_of_run(
-    reader: BagReader, config: FusionConfig, read_topics: Iterable[str]
-) -> RecordFacts:
-    """The :class:`RecordFacts` of a run over ``reader``'s bag with ``config``, which read
-    ``read_topics`` (stored names)."""
-    return record_facts(
-        read_imported_record(reader.path),
-        tuple(sorted({relative_topic(topic) for topic in read_topics})),
-        config.ahrs_yaw_reference,
-        config.magnetic_declination_deg,
-        site_parameters_deg(config),
-        (reader.start_ns, reader.end_ns),
-    )

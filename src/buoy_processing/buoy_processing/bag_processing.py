@@ -64,12 +64,11 @@ from buoy_common.contract import (
     wind_stats_topic,
 )
 from buoy_common.namespaces import NamespacedWriter, TopicView
-from buoy_common.record_facts import RecordFacts
+from buoy_common.record_facts import ImportedRecord, read_imported_record
 from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
-from buoy_processing.bag_facts import facts_of_run
 from buoy_processing.offline_fusion import (
     OfflineFusion,
     relative_topic,
@@ -153,9 +152,6 @@ class ProcessSummary:
     facts: OutputFacts | None = None
     """What the outputs say about the run: north reference, sensors used, site, data span
     (:mod:`buoy_processing.output_facts`)."""
-    record_facts: RecordFacts | None = None
-    """The facts of the input as its parameters and topics give them, and an imported record's
-    own facts (:mod:`buoy_processing.bag_facts`)."""
 
 
 def _anemometer_record(
@@ -542,6 +538,9 @@ def process_bag(
             current_config,
             None if netcdf_path is None else NavigationSeries(),
         )
+        facts_of_run = _FactsOfRun(
+            fusion_config, sensors, corrections, read_imported_record(reader.path)
+        )
         run = OfflineRun(
             reader,
             out_bag,
@@ -556,11 +555,11 @@ def process_bag(
             static_transforms=sensor_transforms(
                 shared_values(fusion_config, compensator_config, current_config), imu_link=True
             ),
+            closing_metadata=facts_of_run,
         )
         fusion, topic_counts = run_fusion(run, corrections)
         duration_s = reader.duration_s
-        record_facts = facts_of_run(reader, fusion_config, [*sensors.values(), *corrections.topics])
-    facts = _facts_of_run(fusion_config, sensors, corrections, fusion)
+    facts = facts_of_run.facts
     summaries = write_products_csvs(corrections, csv_paths, facts)
     if netcdf_path is not None:
         _write_netcdf(
@@ -574,31 +573,38 @@ def process_bag(
         wall_s=time.monotonic() - started,
         recovery=reader.recovery,
         facts=facts,
-        record_facts=record_facts,
     )
 
 
-def _facts_of_run(
-    fusion_config: FusionConfig,
-    sensors: dict[str, str],
-    corrections: BagCorrections,
-    fusion: OfflineFusion,
-) -> OutputFacts:
-    """The facts the outputs state, from the parameters, the topics read, what the fusion
-    used and the stamps of the samples."""
-    flows = corrections.flows
-    flow_topics = {
-        WIND_RAW_TOPIC: flows.wind,
-        DVL_TOPIC: flows.dvl,
-        SONIC_TEMPERATURE_TOPIC: flows.temperature,
-    }
-    topics = [*sensors, *(topic for topic, stored in flow_topics.items() if stored is not None)]
-    return output_facts(
-        fusion_config,
-        topics,
-        source_use_of(fusion.engine.health()),
-        _sample_spans_s(corrections),
-    )
+@dataclass
+class _FactsOfRun:
+    """The facts the outputs state, from the parameters, the topics read, what the fusion used,
+    the stamps of the samples and the imported record; made once every message is written, for
+    the output bag's metadata (:attr:`OfflineRun.closing_metadata`) and then every other
+    writer."""
+
+    fusion_config: FusionConfig
+    sensors: dict[str, str]
+    corrections: BagCorrections
+    record: ImportedRecord | None
+    facts: OutputFacts | None = None
+
+    def __call__(self, fusion: OfflineFusion) -> dict[str, dict[str, str]]:
+        flows = self.corrections.flows
+        flow_topics = {
+            WIND_RAW_TOPIC: flows.wind,
+            DVL_TOPIC: flows.dvl,
+            SONIC_TEMPERATURE_TOPIC: flows.temperature,
+        }
+        topics = [*self.sensors, *(t for t, stored in flow_topics.items() if stored is not None)]
+        self.facts = output_facts(
+            self.fusion_config,
+            topics,
+            source_use_of(fusion.engine.health()),
+            _sample_spans_s(self.corrections),
+            self.record,
+        )
+        return self.facts.metadata_records()
 
 
 def _sample_spans_s(corrections: BagCorrections) -> list[tuple[float, float]]:

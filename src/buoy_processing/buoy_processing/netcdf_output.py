@@ -62,6 +62,12 @@ _GIVEN_SITE_COMMENT = (
     "record), not measured: the run had no GNSS fix"
 )
 
+_LATITUDE_ONLY_COMMENT = (
+    "position unknown: the run was given a latitude (site.latitude_deg) for gravity and the "
+    "Earth's rate, and no longitude; the navigation carries that latitude and a nominal "
+    "longitude of 0, which are not the buoy's position"
+)
+
 
 @dataclass
 class NetcdfContent:
@@ -122,7 +128,8 @@ def _global_attributes(content: NetcdfContent, dataset: xr.Dataset) -> dict:
         "standard_name_vocabulary": STANDARD_NAME_VOCABULARY,
         "id": Path(content.source).name,
         "naming_authority": "buoy_wind",
-        "source": f"process_bag of the rosbag2 recording {content.source}",
+        "source": f"process_bag of the rosbag2 recording {content.source}"
+        + (f". {facts.record_text()}" if facts.record is not None else ""),
         "history": f"{now} {content.history}".strip(),
         "processing_level": "motion-corrected, quality-controlled (QARTOD flags from coverage)",
         "product_version": metadata.version("wind_comp"),
@@ -135,6 +142,7 @@ def _global_attributes(content: NetcdfContent, dataset: xr.Dataset) -> dict:
             "Vectors are ENU (east, north, up). Wind direction is where the wind blows FROM, "
             f"current direction where the water flows TOWARD. {facts.north_sentence()}"
             " Invalid samples are NaN and keep their stamp; the *_status variables say why."
+            f"{_position_sentence(facts)}{_with_space(facts.screening_text())}"
         ),
         "north_reference": facts.north,
     }
@@ -143,6 +151,19 @@ def _global_attributes(content: NetcdfContent, dataset: xr.Dataset) -> dict:
         attributes.update(_geospatial_attributes(dataset))
     attributes.update(content.attributes)
     return attributes
+
+
+def _position_sentence(facts: OutputFacts) -> str:
+    """Where the data were taken when no GNSS fix says it (the variables do then), with a
+    leading space; ``""`` with fixes."""
+    if facts.position_from_gnss:
+        return ""
+    text = facts.site_text()
+    return f" {text[0].upper()}{text[1:]}."
+
+
+def _with_space(sentence: str) -> str:
+    return f" {sentence}" if sentence else ""
 
 
 def _time_coverage(facts: OutputFacts, dataset: xr.Dataset) -> dict:
@@ -233,6 +254,9 @@ def netcdf_dataset(content: NetcdfContent) -> xr.Dataset:
     if facts.site_deg is not None and not facts.position_from_gnss:
         for name in ("latitude", "longitude", "altitude"):
             dataset[name].attrs["comment"] = _GIVEN_SITE_COMMENT
+    elif facts.latitude_only_deg is not None and not facts.position_from_gnss:
+        for name in ("latitude", "longitude", "altitude"):
+            dataset[name].attrs["comment"] = _LATITUDE_ONLY_COMMENT
     dataset.attrs = _global_attributes(content, dataset)
     return dataset
 

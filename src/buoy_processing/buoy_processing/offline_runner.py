@@ -18,7 +18,7 @@ and the consumer receives the smoothed one.
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple, Protocol
@@ -93,6 +93,9 @@ class OfflineRun:
     static_transforms: list[FrameTransform] = field(default_factory=list)
     """``base_link`` → the sensor frames, written once on ``tf_static`` at the input bag's first
     log time, before every other output (:mod:`buoy_common.sensor_frames`)."""
+    closing_metadata: Callable[[OfflineFusion], dict[str, dict[str, str]]] | None = None
+    """The MCAP metadata records (name → map of strings) to store in the output bag, made from
+    the fusion once every message is written (what the run's outputs say of it)."""
 
     @property
     def relative_of(self) -> dict[str, str]:
@@ -102,6 +105,15 @@ class OfflineRun:
     def open_writer(self) -> BackgroundBagWriter | BagWriter:
         writer_class = BackgroundBagWriter if self.write_in_background else BagWriter
         return writer_class(self.out_bag, overwrite=self.overwrite)
+
+    def store_closing_metadata(
+        self, writer: BackgroundBagWriter | BagWriter, fusion: OfflineFusion
+    ) -> None:
+        """The records of :attr:`closing_metadata` into ``writer``'s bag, before it closes."""
+        if self.closing_metadata is None:
+            return
+        for name, metadata in self.closing_metadata(fusion).items():
+            writer.add_metadata(name, metadata)
 
     def write_static_transforms(self, writer: NamespacedWriter) -> None:
         """The one ``tf_static`` message of :attr:`static_transforms`, stamped and logged at the
@@ -158,6 +170,7 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
                 progress.reached(log_time_ns)
         consumer.add_navigation(fusion.finish())
         consumer.finish(log_time_ns)
+        run.store_closing_metadata(bag_writer, fusion)
         progress.done()
     return FusionRun(fusion, writer.counts)
 
@@ -187,6 +200,7 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
                 writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
                 consumer.add_message(reader, message)
             consumer.finish(log_time_ns)
+            run.store_closing_metadata(bag_writer, fusion)
     finally:
         fusion.close()
     return FusionRun(fusion, writer.counts)

@@ -1,21 +1,41 @@
 """What the outputs of a processed bag may say about how it was made: the north its directions
-are referenced to, the sensors that were actually used, the site (only when it is known) and the
-span of the data. Every writer (NetCDF, CSV, the printed summary, the report) takes these words
-from :class:`OutputFacts`, so that none of them claims a sensor, a reference or a place that the
-run did not have.
+are referenced to, the sensors that were actually used, the site (only when it is known), the
+span of the data and, for a bag made by ``import_records``, the record it came from (its start
+and who gave it, how each field was screened). Every writer (NetCDF, CSV, the printed summary,
+the report) takes these words from :class:`OutputFacts`, so that none of them claims a sensor, a
+reference or a place that the run did not have.
 
 The facts are derived from the effective parameters (the parameter files and what an imported
 record contributed), the topics the input bag holds, what the fusion accepted and suspended, and
 the stamps of the samples; nothing is assumed from the sensor set the suite was designed for.
+
+The processed bag carries them too, as the MCAP metadata record :data:`OUTPUTS_METADATA_NAME`
+(beside the imported record's own, :data:`~buoy_common.record_facts.RECORD_METADATA_NAME`), so
+that a report of the bag alone states the same north and sensors; :func:`read_output_facts`
+reads them back.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 
-from buoy_common.contract import DVL_TOPIC, SONIC_TEMPERATURE_TOPIC, WIND_RAW_TOPIC
+from buoy_common.bag_io import BagError
+from buoy_common.contract import (
+    DVL_TOPIC,
+    SONIC_TEMPERATURE_TOPIC,
+    WIND_RAW_TOPIC,
+    seconds_to_iso8601,
+)
+from buoy_common.record_facts import (
+    RECORD_METADATA_NAME,
+    ImportedRecord,
+    read_imported_record,
+    read_metadata_record,
+)
 from buoy_nav.aiding import AIDING_SOURCES
 from buoy_nav.aiding.base import (
     GNSS_ANTENNA_PAIR,
@@ -32,6 +52,12 @@ TRUE_NORTH = "true north"
 MAGNETIC_NORTH = "magnetic north"
 UNKNOWN_NORTH = "an unknown north"
 """The run gave no heading (the fusion never aligned): its directions are NaN."""
+SITE_FROM_RECORD = "the imported record"
+SITE_FROM_PARAMETERS = "the parameters"
+"""Where a run's site came from (:attr:`OutputFacts.site_source`)."""
+OUTPUTS_METADATA_NAME = "buoy_outputs"
+"""Name of the MCAP metadata record holding a processed bag's :class:`OutputFacts`."""
+OUTPUTS_METADATA_VERSION = "1"
 
 _SENSOR_WORDS = {
     GNSS_RECEIVER: "GNSS receiver (position, velocity)",
@@ -66,13 +92,25 @@ class OutputFacts:
     site_deg: tuple[float, float] | None
     """(latitude, longitude) in degrees of the site the run was given (``site.*``, else
     ``origin.*``, from the parameter files or an imported record's facts), None when it had none
-    (the position, if any, then comes from a GNSS fix)."""
+    or only its latitude (the position, if any, then comes from a GNSS fix)."""
     position_from_gnss: bool
     """Whether the fusion accepted GNSS fixes: the navigation's position is measured."""
     first_sample_s: float | None
     """Stamp (s since the epoch, UTC) of the first sample of the outputs; None without any."""
     last_sample_s: float | None
     """Stamp (s since the epoch, UTC) of the last sample of the outputs; None without any."""
+    declination_deg: float | None = None
+    """The declination (deg, east positive) that turned a magnetic heading to true north, when
+    given as a number (``magnetic.declination_deg``); None when none was applied or it came from
+    the World Magnetic Model (it varies with time and place; :attr:`north_basis` says which)."""
+    site_source: str | None = None
+    """:data:`SITE_FROM_RECORD` or :data:`SITE_FROM_PARAMETERS`; None without a site."""
+    latitude_only_deg: float | None = None
+    """The latitude (deg) the run was given without a longitude: for gravity and the Earth's
+    rate, not a position."""
+    record: ImportedRecord | None = None
+    """The facts of the record the input bag was imported from (its start and who gave it, the
+    screening of each field); None for a bag that was not imported."""
 
     @property
     def position_known(self) -> bool:
@@ -100,6 +138,112 @@ class OutputFacts:
         """The sensors used, as one comma-separated phrase."""
         return ", ".join(self.sensors)
 
+    def site_text(self) -> str:
+        """Where the data were taken, as far as the run knows it, in words."""
+        if self.position_from_gnss:
+            return "position from GNSS fixes"
+        if self.site_deg is not None:
+            latitude, longitude = self.site_deg
+            return (
+                f"position the site given by {self.site_source}, {latitude:.5f}, "
+                f"{longitude:.5f} deg (not measured)"
+            )
+        if self.latitude_only_deg is not None:
+            return f"latitude {self.latitude_only_deg:.5f} deg given for gravity; position unknown"
+        return "position unknown"
+
+    def record_text(self) -> str:
+        """The imported record, its start and who gave it, in one sentence; ``""`` for a bag
+        that was not imported."""
+        record = self.record
+        if record is None:
+            return ""
+        start = seconds_to_iso8601(record.start_ns / 1e9)
+        return (
+            f"Imported by import_records from the record {record.record} with the column map "
+            f"{record.column_map}; the record starts {start} (start from the "
+            f"{record.start_source})."
+        )
+
+    def screening_text(self) -> str:
+        """How the imported record's fields were screened, in one sentence (``""`` for a bag
+        that was not imported)."""
+        record = self.record
+        if record is None or not record.field_counts:
+            return ""
+        fields = "; ".join(
+            f"{name} {counts.read}/{counts.filled}/{counts.invalid}/{counts.out_of_range}"
+            for name, counts in record.field_counts.items()
+        )
+        return (
+            "Screening of the record's samples by import_records (read/filled/invalid/out of "
+            f"range): {fields}."
+        )
+
+    def to_metadata(self) -> dict[str, str]:
+        """The facts as the strings of an MCAP metadata record (the record's own facts are
+        stored beside them, by :meth:`ImportedRecord.to_metadata`)."""
+        return {
+            "version": OUTPUTS_METADATA_VERSION,
+            "north": self.north,
+            "north_token": self.north_token,
+            "north_basis": self.north_basis,
+            "sensors": json.dumps(list(self.sensors)),
+            "site_deg": json.dumps(self.site_deg),
+            "site_source": json.dumps(self.site_source),
+            "latitude_only_deg": json.dumps(self.latitude_only_deg),
+            "position_from_gnss": json.dumps(self.position_from_gnss),
+            "first_sample_s": json.dumps(self.first_sample_s),
+            "last_sample_s": json.dumps(self.last_sample_s),
+            "declination_deg": json.dumps(self.declination_deg),
+        }
+
+    def metadata_records(self) -> dict[str, dict[str, str]]:
+        """The MCAP metadata records a processed bag stores: these facts and, for an imported
+        bag, the record's own."""
+        records = {OUTPUTS_METADATA_NAME: self.to_metadata()}
+        if self.record is not None:
+            records[RECORD_METADATA_NAME] = self.record.to_metadata()
+        return records
+
+    @classmethod
+    def from_metadata(
+        cls, metadata: Mapping[str, str], record: ImportedRecord | None = None
+    ) -> OutputFacts:
+        """The facts of a metadata record written by :meth:`to_metadata`, with the imported
+        ``record`` stored beside it; KeyError or ValueError when it is not one."""
+        if metadata["version"] != OUTPUTS_METADATA_VERSION:
+            raise ValueError(f"version {metadata['version']!r}, this reader reads version 1")
+        site = json.loads(metadata["site_deg"])
+        return cls(
+            north=metadata["north"],
+            north_basis=metadata["north_basis"],
+            sensors=tuple(json.loads(metadata["sensors"])),
+            site_deg=None if site is None else (float(site[0]), float(site[1])),
+            position_from_gnss=bool(json.loads(metadata["position_from_gnss"])),
+            first_sample_s=json.loads(metadata["first_sample_s"]),
+            last_sample_s=json.loads(metadata["last_sample_s"]),
+            declination_deg=json.loads(metadata["declination_deg"]),
+            site_source=json.loads(metadata["site_source"]),
+            latitude_only_deg=json.loads(metadata["latitude_only_deg"]),
+            record=record,
+        )
+
+
+def read_output_facts(bag: str | Path) -> OutputFacts | None:
+    """The :class:`OutputFacts` ``process_bag`` stored in ``bag`` (a bag directory or its MCAP
+    file); None for a bag without them (recorded from the nodes, or processed before the outputs'
+    facts were stored). BagError for facts that are there but unreadable."""
+    metadata = read_metadata_record(bag, OUTPUTS_METADATA_NAME)
+    if metadata is None:
+        return None
+    try:
+        return OutputFacts.from_metadata(metadata, read_imported_record(bag))
+    except (KeyError, ValueError, TypeError, IndexError) as error:
+        raise BagError(
+            f"bag {bag}: the outputs' facts ({OUTPUTS_METADATA_NAME}) are unreadable: {error}"
+        ) from error
+
 
 _NORTH_TOKENS = {"true_north": TRUE_NORTH, "magnetic_north": MAGNETIC_NORTH}
 
@@ -112,6 +256,24 @@ def clockwise_from_north_text(north_token: str) -> str:
     if north_token in _NORTH_TOKENS:
         return f"clockwise from {_NORTH_TOKENS[north_token]}"
     return "clockwise from north; which north is not recorded with these data"
+
+
+def north_token_of_bag(bag, products_csv_suffix: str) -> str:
+    """The north of a processed bag's directions: from the facts stored in the bag, else (a bag
+    processed before they were stored) from the products CSV named ``bag`` +
+    ``products_csv_suffix`` beside it; ``""`` when neither says (a bag recorded from the nodes)."""
+    facts = read_output_facts(bag)
+    if facts is not None:
+        return facts.north_token
+    bag = Path(bag)
+    return north_token_of_csv(bag.with_name(bag.name + products_csv_suffix))
+
+
+def sensor_text_of_bag(bag) -> str:
+    """The sensors a processed bag's outputs rest on, as :meth:`OutputFacts.sensor_text` stored
+    them in the bag; ``""`` for a bag without its outputs' facts."""
+    facts = read_output_facts(bag)
+    return "" if facts is None else facts.sensor_text()
 
 
 def north_token_of_csv(path) -> str:
@@ -133,20 +295,27 @@ def output_facts(
     input_topics: Iterable[str],
     source_use: Mapping[str, SourceUse],
     sample_stamps_s: Iterable[tuple[float, float]],
+    record: ImportedRecord | None = None,
 ) -> OutputFacts:
     """The facts of a run: ``config`` its effective fusion parameters, ``input_topics`` the
     relative names of the input bag's topics, ``source_use`` what the fusion made of each
     aiding source (by kind), ``sample_stamps_s`` the (first, last) stamp in s of each output
-    series that holds samples."""
+    series that holds samples, ``record`` the facts of the record the bag was imported from
+    (None: not imported)."""
     topics = frozenset(input_topics)
     used = {kind: use for kind, use in source_use.items() if use.accepted > 0}
     north, basis = _north_of(config, used)
     spans = [span for span in sample_stamps_s if all(math.isfinite(t) for t in span)]
+    site = config.site_position_deg
     return OutputFacts(
         north=north,
         north_basis=basis,
         sensors=_sensors_of(topics, used),
-        site_deg=_site_parameter_deg(config),
+        site_deg=site,
+        site_source=_site_source(site, record),
+        latitude_only_deg=config.site_latitude_only_deg,
+        declination_deg=_declination_applied_deg(config, used),
+        record=record,
         position_from_gnss=any(
             POSITION_REFERENCE in _SOURCES_BY_KIND[kind].roles
             for kind in used
@@ -170,14 +339,27 @@ def source_use_of(health) -> dict[str, SourceUse]:
     return uses
 
 
-def _site_parameter_deg(config: FusionConfig) -> tuple[float, float] | None:
-    """The site the parameters give (``site.*``, else ``origin.*``); NaN means not given."""
-    for latitude, longitude in (
-        (config.site_latitude_deg, config.site_longitude_deg),
-        (config.origin_latitude_deg, config.origin_longitude_deg),
-    ):
-        if math.isfinite(latitude) and math.isfinite(longitude):
-            return float(latitude), float(longitude)
+def _site_source(site_deg, record: ImportedRecord | None) -> str | None:
+    """Whether the run's site is the imported record's or the parameters' own."""
+    if site_deg is None:
+        return None
+    if record is not None and record.site_deg == site_deg:
+        return SITE_FROM_RECORD
+    return SITE_FROM_PARAMETERS
+
+
+def _declination_applied_deg(config: FusionConfig, used: Mapping[str, SourceUse]) -> float | None:
+    """The declination given as a number that turned a heading the fusion used from magnetic
+    to true north; None when none did (a declination of 0 turns nothing)."""
+    declination_deg = config.magnetic_declination_deg
+    if not math.isfinite(declination_deg) or declination_deg == 0.0:
+        return None
+    magnetic_sensors = {MAGNETOMETER}
+    if config.ahrs_yaw_reference != "true_north":
+        magnetic_sensors.add(MOTION_PACK)
+    headings = (_SOURCES_BY_KIND.get(kind) for kind in used)
+    if any(h and HEADING_REFERENCE in h.roles and h.sensor in magnetic_sensors for h in headings):
+        return float(declination_deg)
     return None
 
 

@@ -75,7 +75,6 @@ from buoy_common.safe_output import OutputError
 from buoy_processing.bag_facts import fusion_config_for_bag
 from buoy_processing.bag_processing import ProcessSummary, process_bag
 from buoy_processing.offline_fusion import FUSION_TOPICS_HELP
-from buoy_processing.output_facts import OutputFacts
 from wind_comp.config import (
     COMPENSATION_PARAMETER_PREFIX,
     CURRENT_PARAMETER_PREFIX,
@@ -162,7 +161,7 @@ def print_summary(summary: ProcessSummary, out_bag: str, netcdf_path: Path | Non
     if summary.facts is not None:
         print(f"outputs: {summary.facts.north_sentence()}")
         print(f"outputs: sensors used: {summary.facts.sensor_text()}")
-        print(f"outputs: {_site_text(summary.facts)}")
+        print(f"outputs: {summary.facts.site_text()}")
     written = [str(out_bag)]
     for name, topic, correction in (
         ("wind", WIND_RAW_TOPIC, summary.wind),
@@ -208,15 +207,6 @@ def print_summary(summary: ProcessSummary, out_bag: str, netcdf_path: Path | Non
         f"{summary.duration_s:.1f} s of data in {summary.wall_s:.1f} s "
         f"({summary.duration_s / max(summary.wall_s, 1e-9):.0f}x real time)"
     )
-
-
-def _site_text(facts: OutputFacts) -> str:
-    if facts.position_from_gnss:
-        return "position from GNSS fixes"
-    if facts.site_deg is not None:
-        latitude, longitude = facts.site_deg
-        return f"position the site given, {latitude:.5f}, {longitude:.5f} deg (not measured)"
-    return "position unknown"
 
 
 def _raised_flux_tests_text(flux) -> str:

@@ -15,6 +15,8 @@ from compliance_checker.runner import CheckSuite
 from scipy.spatial.transform import Rotation
 
 from buoy_common.contract import QualityFlag
+from buoy_common.record_facts import ImportedRecord
+from buoy_common.records.screening import FieldCounts
 from buoy_common.safe_output import OutputError
 from buoy_nav.config import FusionConfig
 from buoy_processing.netcdf_output import NetcdfContent, write_netcdf
@@ -417,3 +419,33 @@ def test_a_magnetic_heading_without_declination_is_said_and_stays_cf_compliant(t
 def _failed(result) -> bool:
     value = result.value
     return value[0] < value[1] if isinstance(value, tuple) else not value
+
+
+def test_a_latitude_alone_is_no_position_and_the_record_is_stated(tmp_path):
+    made, stamps_ns, _, _ = content()
+    record = ImportedRecord(
+        record="day.dat",
+        column_map="map.yaml",
+        description="a sonic and a motion pack",
+        start_ns=stamps_ns[0],
+        start_source="time column",
+        sensors=("sonic", "imu", "ahrs"),
+        field_counts={"anemometer.w": FieldCounts(read=20, filled=2, invalid=1, out_of_range=0)},
+    )
+    facts = facts_of(
+        MAGNETIC_MOTION_PACK_RUN,
+        stamps_ns,
+        ahrs_yaw_reference="magnetic_north",
+        magnetic_declination_deg=0.0,
+        site_latitude_deg=LATITUDE_DEG,
+    )
+    facts = dataclasses.replace(facts, record=record)
+    path = write_netcdf(tmp_path / "latitude.nc", dataclasses.replace(made, facts=facts), False)
+    with xr.open_dataset(path, decode_times=False) as dataset:
+        assert not any(key.startswith("geospatial_lat") for key in dataset.attrs)
+        assert not any(key.startswith("geospatial_lon") for key in dataset.attrs)
+        assert "given for gravity; position unknown" in dataset.attrs["comment"]
+        assert "anemometer.w 20/2/1/0" in dataset.attrs["comment"]
+        assert "day.dat" in dataset.attrs["source"]
+        assert "(start from the time column)" in dataset.attrs["source"]
+        assert "position unknown" in dataset["longitude"].attrs["comment"]

@@ -1,6 +1,7 @@
 """What the outputs say about a run follows from what the run had: the north of the heading the
 fusion used and the declination actually applied, the sensors it accepted (a suspended one said
-so), a site only when one was given or measured, and the span of the samples."""
+so), a site only when one was given or measured (and where it came from), the span of the
+samples and the imported record; the facts survive the MCAP metadata record's strings."""
 
 from __future__ import annotations
 
@@ -9,11 +10,16 @@ import math
 
 import pytest
 
-from buoy_nav.config import FusionConfig
+from buoy_common.record_facts import ImportedRecord
+from buoy_common.records.screening import FieldCounts
+from buoy_nav.config import ConfigError, FusionConfig
 from buoy_processing.output_facts import (
     MAGNETIC_NORTH,
+    SITE_FROM_PARAMETERS,
+    SITE_FROM_RECORD,
     TRUE_NORTH,
     UNKNOWN_NORTH,
+    OutputFacts,
     SourceUse,
     output_facts,
 )
@@ -95,3 +101,107 @@ def test_a_true_and_an_uncorrected_magnetic_heading_fused_together_are_said_to_b
     facts = output_facts(config, (*GNSS_TOPICS, "imu/data"), uses, [])
     assert facts.north == TRUE_NORTH
     assert "biased toward magnetic north" in facts.north_basis
+
+
+RECORD = ImportedRecord(
+    record="day.dat",
+    column_map="map.yaml",
+    description="a sonic and a motion pack",
+    start_ns=1418884200 * 10**9,
+    start_source="command line",
+    sensors=("sonic", "imu", "ahrs"),
+    yaw_reference="magnetic_north",
+    site_deg=(44.64, -124.3),
+    site_source="column map",
+    field_counts={"anemometer.u": FieldCounts(read=10, filled=3, invalid=1, out_of_range=2)},
+)
+
+
+@pytest.mark.parametrize(
+    ("sources", "yaw_reference", "declination_deg", "north", "applied_deg"),
+    [
+        # a magnetic pack: the declination turns it true; only a number is stated as one
+        ({"ahrs": SourceUse(10)}, "magnetic_north", 12.5, TRUE_NORTH, 12.5),
+        ({"ahrs": SourceUse(10)}, "magnetic_north", math.nan, TRUE_NORTH, None),
+        # 0 given: left magnetic, as OOI's products of its FDCHP record
+        ({"ahrs": SourceUse(10)}, "magnetic_north", 0.0, MAGNETIC_NORTH, None),
+        # a true-north pack turns nothing, whatever the declination
+        ({"ahrs": SourceUse(10)}, "true_north", 7.0, TRUE_NORTH, None),
+        ({"magnetometer": SourceUse(10)}, "true_north", -3.0, TRUE_NORTH, -3.0),
+        # antennas alone: the declination enters nothing
+        ({"gnss_heading": SourceUse(10)}, "magnetic_north", 5.0, TRUE_NORTH, None),
+    ],
+)
+def test_the_declination_is_stated_only_when_it_turned_a_magnetic_heading(
+    sources, yaw_reference, declination_deg, north, applied_deg
+):
+    config = _config(ahrs_yaw_reference=yaw_reference, magnetic_declination_deg=declination_deg)
+    facts = output_facts(config, MOTION_PACK_TOPICS, sources, [])
+    assert (facts.north, facts.declination_deg) == (north, applied_deg)
+
+
+def test_the_site_says_whether_it_is_the_records_or_the_parameters():
+    pack = {"ahrs": SourceUse(10)}
+    record_site = _config(site_latitude_deg=44.64, site_longitude_deg=-124.3)
+    facts = output_facts(record_site, MOTION_PACK_TOPICS, pack, [], RECORD)
+    assert (facts.site_deg, facts.site_source) == ((44.64, -124.3), SITE_FROM_RECORD)
+    other_site = _config(site_latitude_deg=45.0, site_longitude_deg=-124.0)
+    facts = output_facts(other_site, MOTION_PACK_TOPICS, pack, [], RECORD)
+    assert (facts.site_deg, facts.site_source) == ((45.0, -124.0), SITE_FROM_PARAMETERS)
+    assert "the parameters, 45.00000, -124.00000 deg (not measured)" in facts.site_text()
+    facts = output_facts(FusionConfig(), MOTION_PACK_TOPICS, pack, [], RECORD)
+    assert (facts.site_deg, facts.site_source, facts.site_text()) == (
+        None,
+        None,
+        "position unknown",
+    )
+
+
+def test_the_record_its_start_and_its_screening_are_stated():
+    facts = output_facts(FusionConfig(), MOTION_PACK_TOPICS, {"ahrs": SourceUse(1)}, [], RECORD)
+    assert "day.dat" in facts.record_text() and "map.yaml" in facts.record_text()
+    assert "2014-12-18T06:30:00.000Z (start from the command line)" in facts.record_text()
+    assert "anemometer.u 10/3/1/2" in facts.screening_text()
+    plain = output_facts(FusionConfig(), MOTION_PACK_TOPICS, {"ahrs": SourceUse(1)}, [])
+    assert (plain.record_text(), plain.screening_text()) == ("", "")
+
+
+@pytest.mark.parametrize("with_record", [False, True])
+def test_the_facts_survive_their_strings(with_record):
+    config = _config(
+        ahrs_yaw_reference="magnetic_north",
+        magnetic_declination_deg=-12.5,
+        site_latitude_deg=41.5,
+        site_longitude_deg=-70.7,
+    )
+    uses = {"ahrs": SourceUse(10), "magnetometer": SourceUse(3, suspended_at_end=True)}
+    record = RECORD if with_record else None
+    facts = output_facts(config, MOTION_PACK_TOPICS, uses, [(100.25, 1300.5)], record)
+    metadata = facts.to_metadata()
+    assert all(isinstance(value, str) for value in metadata.values())
+    assert OutputFacts.from_metadata(metadata, record) == facts
+
+
+def test_a_latitude_alone_serves_gravity_and_is_no_position():
+    config = _config(
+        ahrs_yaw_reference="magnetic_north", magnetic_declination_deg=0.0, site_latitude_deg=38.5
+    )
+    facts = output_facts(config, MOTION_PACK_TOPICS, {"ahrs": SourceUse(10)}, [])
+    assert (facts.site_deg, facts.latitude_only_deg) == (None, 38.5)
+    assert not facts.position_known
+    assert facts.site_text() == "latitude 38.50000 deg given for gravity; position unknown"
+
+
+def test_a_latitude_alone_with_the_declination_from_the_model_is_refused_by_name():
+    with pytest.raises(ConfigError, match=r"'site\.longitude_deg'.*magnetic\.declination_deg"):
+        _config(site_latitude_deg=38.5)
+    with pytest.raises(ConfigError, match=r"'site\.latitude_deg'"):
+        _config(site_longitude_deg=-70.0, magnetic_declination_deg=0.0)
+    # the map origin's longitude completes the site
+    config = _config(
+        site_latitude_deg=38.5,
+        origin_latitude_deg=38.0,
+        origin_longitude_deg=-70.0,
+        origin_altitude_m=0.0,
+    )
+    assert config.site_position_deg == (38.5, -70.0)

@@ -26,6 +26,10 @@ _BATCH_MESSAGES = 2048
 _WRITER_EXIT_TIMEOUT_S = 60.0
 
 
+_CLOSE = "close"
+"""The command that ends the writing process's batches: finish the bag."""
+
+
 class BackgroundBagWriter(BagOutput):
     """A :class:`BagWriter` in a process of its own, for the offline tools.
 
@@ -52,6 +56,7 @@ class BackgroundBagWriter(BagOutput):
         self._described: set[str] = set()
         self._descriptions: dict[str, TypeDescription] = {}
         self._waiting_batches: list[tuple[dict, list[tuple[str, str, int, bytes]]]] = []
+        self._metadata_records: list[tuple[str, dict[str, str]]] = []
         self._writer_ready = False
         # Spawned, not forked: the tools may run inside processes with middleware threads.
         context = multiprocessing.get_context("spawn")
@@ -95,12 +100,19 @@ class BackgroundBagWriter(BagOutput):
         raw = serialize(jazzy_typestore(), self.path, topic, msgtype, message)
         self.write_raw(topic, msgtype, log_time_ns, raw)
 
+    def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
+        """An MCAP metadata record ``name`` (a map of strings), handed over with the close, as
+        :meth:`BagWriter.add_metadata` writes it when the bag is finished."""
+        if not self._open:
+            raise BagError(f"bag {self.path} is closed")
+        self._metadata_records.append((name, dict(metadata)))
+
     def close(self) -> None:
         """Finish the bag, move it into place and wait for the writing process."""
         if not self._open:
             return
         self._send_batch(wait_for_writer=True)
-        self._finish("close")
+        self._finish((_CLOSE, self._metadata_records))
 
     def abort(self) -> None:
         """Stop writing and delete the partial bag. Never raises: it runs while an error is
@@ -141,7 +153,7 @@ class BackgroundBagWriter(BagOutput):
             raise BagError(f"bag {self.path}: the writing process stopped") from None
         self._waiting_batches.clear()
 
-    def _finish(self, command: str) -> None:
+    def _finish(self, command: tuple) -> None:
         """Send ``command`` and raise what the writing process reports, if it failed."""
         self._open = False
         if not self._writer_ready:
@@ -187,8 +199,9 @@ class BackgroundBagWriter(BagOutput):
 
 
 def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
-    """The writing process: a BagWriter fed batches of records until "close". If the tool closes
-    the pipe instead (it abandons the bag, or dies), the partial bag is deleted."""
+    """The writing process: a BagWriter fed batches of records until the close, which brings the
+    bag's metadata records. If the tool closes the pipe instead (it abandons the bag, or dies),
+    the partial bag is deleted."""
     # The tool decides: a signal to the whole process group (Ctrl-C, a service stop) reaches
     # the tool, which finishes or abandons the bag; the end of the pipe ends this process.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -203,7 +216,9 @@ def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
         connection.send(("ok",))
         while True:
             batch = connection.recv()
-            if batch == "close":
+            if batch[0] == _CLOSE:
+                for name, metadata in batch[1]:
+                    writer.add_metadata(name, metadata)
                 break
             descriptions, records = batch
             writer.describe(descriptions)

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -32,7 +31,7 @@ from buoy_common.contract import (
 )
 from buoy_common.namespaces import TopicView
 from buoy_processing.bag_processing import CURRENT_PRODUCTS_CSV_SUFFIX
-from buoy_processing.output_facts import north_token_of_csv
+from buoy_processing.output_facts import north_token_of_bag
 from buoy_processing.report.data import (
     ReportDataError,
     has_messages,
@@ -99,9 +98,7 @@ def current_data_from_bag(reader: BagReader) -> CurrentData | None:
             truths.append(None)
             continue
         truths.append(interpolate_vectors(current.stamps_ns, stamped_vectors(reader, stored)))
-    north = north_token_of_csv(
-        Path(reader.path).with_name(Path(reader.path).name + CURRENT_PRODUCTS_CSV_SUFFIX)
-    )
+    north = north_token_of_bag(reader.path, CURRENT_PRODUCTS_CSV_SUFFIX)
     return CurrentData(t_s, current.vectors, _stored_products(reader), *truths, north=north)
 
 

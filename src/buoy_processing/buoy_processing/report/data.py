@@ -37,7 +37,11 @@ from buoy_common.contract import (
 from buoy_common.namespaces import TopicView
 from buoy_nav.rotations import rotate_by_quaternion_components
 from buoy_processing.bag_processing import WIND_PRODUCTS_CSV_SUFFIX
-from buoy_processing.output_facts import clockwise_from_north_text, north_token_of_csv
+from buoy_processing.output_facts import (
+    clockwise_from_north_text,
+    north_token_of_bag,
+    sensor_text_of_bag,
+)
 from buoy_processing.report.attitude import (
     interpolate_rpy_rad,
     rpy_rad_from_quaternions,
@@ -83,6 +87,9 @@ class ReportData:
         north: the north the directions are referenced to, as
             :attr:`~buoy_processing.output_facts.OutputFacts.north_token` (``true_north``,
             ``magnetic_north``); empty when the source does not record it.
+        sensors: the sensors the outputs rest on, in words
+            (:meth:`~buoy_processing.output_facts.OutputFacts.sensor_text`); empty when the
+            source does not record them.
     """
 
     t_s: np.ndarray
@@ -100,6 +107,17 @@ class ReportData:
     time_origin_s: float = 0.0
     products_source: str = ""
     north: str = ""
+    sensors: str = ""
+
+    @property
+    def sensors_sentence(self) -> str:
+        """Which sensors the outputs rest on, or that the source does not say."""
+        if self.sensors:
+            return f"Sensors used: {self.sensors}."
+        return (
+            "The sensors used are not recorded with these data (a bag recorded from the nodes, "
+            "or processed before process_bag stored its outputs' facts in the bag)."
+        )
 
     @property
     def north_text(self) -> str:
@@ -177,6 +195,7 @@ def save_report_data(data: ReportData, path) -> Path:
         time_origin_s=np.array(data.time_origin_s),
         products_source=np.array(data.products_source),
         north=np.array(data.north),
+        sensors=np.array(data.sensors),
         **arrays,
     )
     return path
@@ -199,6 +218,7 @@ def load_report_data(path) -> ReportData:
         time_origin_s = float(stored["time_origin_s"]) if "time_origin_s" in stored else 0.0
         source = str(stored["products_source"]) if "products_source" in stored else ""
         north = str(stored["north"]) if "north" in stored else ""
+        sensors = str(stored["sensors"]) if "sensors" in stored else ""
     return ReportData(
         **arrays,
         products=products,
@@ -207,6 +227,7 @@ def load_report_data(path) -> ReportData:
         time_origin_s=time_origin_s,
         products_source=source,
         north=north,
+        sensors=sensors,
     )
 
 
@@ -421,14 +442,9 @@ def _report_data(reader: BagReader, title: str) -> ReportData:
         title=title,
         time_origin_s=float(measured.stamps_ns[0] // minute_ns * _TIME_ORIGIN_STEP_S),
         products_source=products_source,
-        north=_north_beside(Path(reader.path)),
+        north=north_token_of_bag(reader.path, WIND_PRODUCTS_CSV_SUFFIX),
+        sensors=sensor_text_of_bag(reader.path),
     )
-
-
-def _north_beside(bag: Path) -> str:
-    """The north named by the products CSV ``process_bag`` wrote beside ``bag`` (``""``
-    without one: a bag recorded from the nodes does not say)."""
-    return north_token_of_csv(bag.with_name(bag.name + WIND_PRODUCTS_CSV_SUFFIX))
 
 
 def _products(

@@ -254,7 +254,7 @@ def summary_markdown(
                 "",
             ]
     if data is not None:
-        lines += [f"Wind directions in degrees {data.north_text}.", ""]
+        lines += [f"Wind directions in degrees {data.north_text}. {data.sensors_sentence}", ""]
     lines += [f"![{Path(name).stem.replace('_', ' ')}]({name})" for name in figures]
     if data is not None:
         lines += ["", *_quality_table(data), "", *_filter_health_table(data), ""]
