@@ -330,17 +330,18 @@ def soak(
     print(f"soak: {' '.join(command[1:])} (domain {domain})", file=sys.stderr, flush=True)
     triples = WindTriples()
     started_s = time.monotonic()
+    # To a file, not a pipe: hours of progress lines would fill a pipe nobody reads meanwhile.
+    output_path = log_dir / "run_scenario.log"
     try:
-        scenario = subprocess.Popen(
-            command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
-        )
-        deadline_s = started_s + duration_s / rate_factor + RUN_MARGIN_S
-        rss_samples = sample_while_running(scenario, triples, deadline_s, rss_period_s, result)
-        if scenario.poll() is None:
-            scenario.send_signal(signal.SIGINT)
-        output, _ = scenario.communicate(timeout=60)
+        with output_path.open("w") as output:
+            scenario = subprocess.Popen(command, stdout=output, stderr=subprocess.STDOUT)
+            deadline_s = started_s + duration_s / rate_factor + RUN_MARGIN_S
+            rss_samples = sample_while_running(scenario, triples, deadline_s, rss_period_s, result)
+            if scenario.poll() is None:
+                scenario.send_signal(signal.SIGINT)
+            scenario.wait(timeout=60)
         result["run_scenario_exit_code"] = scenario.returncode
-        result["run_scenario_output"] = output.strip().splitlines()[-10:]
+        result["run_scenario_output"] = output_path.read_text().strip().splitlines()[-10:]
         time.sleep(1.0)
     finally:
         triples.close()
