@@ -75,6 +75,7 @@ PERCENTILES = (50.0, 99.0, 100.0)
 FLAT_MEMORY_SHARE = 0.10
 """Memory is flat when the RSS at the end is within this share of its value after hour 1."""
 TRANSITION = re.compile(r"stamp ([-\d.]+) s: (\S+) (suspended|resumed):")
+REJECTION = re.compile(r"rejected (\S+): (\S+) \(total (\d+)\)")
 ALIGNMENT_MARK = "aligned at stamp"
 
 
@@ -380,7 +381,8 @@ def sample_counts(triples: WindTriples) -> dict[str, int]:
 
 def fusion_events(log_path: Path) -> dict:
     """The fusion node's alignment line, every source suspended or resumed (stamp s, source,
-    what), and the sources suspended at the end."""
+    what), the sources suspended at the end, and its rejected inputs by topic and reason (the
+    last running count its rate-limited log gave: at least that many)."""
     try:
         lines = log_path.read_text(errors="replace").splitlines()
     except OSError:
@@ -396,7 +398,12 @@ def fusion_events(log_path: Path) -> dict:
     state: dict[str, str] = {}
     for _, source, change in transitions:
         state[source] = change
+    rejections: dict[str, int] = {}
+    for match in (REJECTION.search(line) for line in lines):
+        if match is not None:
+            rejections[f"{match[1]}: {match[2]}"] = int(match[3])
     return {
+        "rejected_at_least": rejections,
         "aligned": aligned,
         "transitions": transitions,
         "suspended_at_end": sorted(
@@ -519,6 +526,8 @@ def print_fusion(fusion: dict, first_sample_stamp_s: float) -> None:
     )
     for stamp_s, source, change in fusion.get("transitions", [])[:10]:
         print(f"    at {stamp_s - first_sample_stamp_s:.1f} s: {source} {change}")
+    for key, count in fusion.get("rejected_at_least", {}).items():
+        print(f"  fusion rejected {key}: at least {count}")
 
 
 def main(argv=None) -> int:
