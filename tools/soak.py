@@ -40,6 +40,7 @@ few seconds of it (tests/system/test_soak.py).
 from __future__ import annotations
 
 import argparse
+import collections
 import json
 import math
 import os
@@ -58,6 +59,7 @@ import numpy as np
 
 from buoy_common import cdr
 from buoy_common.contract import WIND_RAW_TOPIC, WIND_TRUE_TOPIC, WIND_TRUE_WITH_COVARIANCE_TOPIC
+from sensor_sim.run_scenario import sensor_node_names
 from sensor_sim.scenario import load_scenario
 from tools.bench_plan import PROCESSING_PARAMS
 from tools.bench_uncertainty import MOORED, Case, write_parameters
@@ -77,6 +79,12 @@ FLAT_MEMORY_SHARE = 0.10
 TRANSITION = re.compile(r"stamp ([-\d.]+) s: (\S+) (suspended|resumed):")
 REJECTION = re.compile(r"rejected (\S+): (\S+) \(total (\d+)\)")
 ALIGNMENT_MARK = "aligned at stamp"
+SOAK_DOMAINS = range(201, 231)
+"""ROS domains for the soak: the suite's tests, benchmarks and make targets take 1-200, and a
+run of theirs in the soak's domain would mix its samples into the soak's counts."""
+DOMAIN_TRIES = 5
+DISCOVERY_S = 2.0
+"""How long the listener waits to see whether its new domain holds other nodes."""
 
 
 @dataclass(frozen=True)
@@ -119,8 +127,9 @@ DEFAULT_SETUP = "moored_outages"
 
 
 def isolate_ros_domain() -> int:
-    """A random domain in 100-200, discovery on loopback only, for this process and children."""
-    domain = random.randint(100, 200)
+    """A random domain of SOAK_DOMAINS, discovery on loopback only, for this process and its
+    children."""
+    domain = random.choice(SOAK_DOMAINS)
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.pop("ROS_LOCALHOST_ONLY", None)
@@ -233,6 +242,12 @@ class WindTriples:
                     counts[side][topic] += at is None
             return counts
 
+    def intruders(self, own_names: set[str]) -> list[str]:
+        """Nodes in this domain that are not the soak's own: other names, and own names held
+        by more than one node (another buoy's simulation)."""
+        names = collections.Counter(self.node.get_node_names())
+        return sorted(name for name, n in names.items() if name not in own_names or n > 1)
+
     def close(self) -> None:
         self.executor.shutdown()
         self.node.destroy_node()
@@ -286,9 +301,33 @@ def scenario_command(setup: Setup, duration_s: float, rate_factor: float, log_di
     return command
 
 
-def sample_while_running(scenario, triples, deadline_s: float, rss_period_s: float, result):
-    """RSS samples (wall s, simulated s or None, MiB) of each node until ``run_scenario`` ends
-    or overruns ``deadline_s`` (monotonic); Ctrl-C stops sampling and marks the result."""
+def listener_in_a_quiet_domain() -> tuple[WindTriples, int]:
+    """The listener, in a domain where it saw no other node (after DOMAIN_TRIES, the last
+    domain tried; the run then reports the intruders), and that domain."""
+    for _ in range(DOMAIN_TRIES):
+        domain = isolate_ros_domain()
+        triples = WindTriples()
+        time.sleep(DISCOVERY_S)
+        if not triples.intruders({LISTENER_NODE}):
+            return triples, domain
+        print(f"soak: ROS domain {domain} is in use; trying another", file=sys.stderr)
+        triples.close()
+    return WindTriples(), domain
+
+
+def own_node_names(setup: Setup, duration_s: float) -> set[str]:
+    """The nodes of the soak's own run: the scenario's sensors, clock, processing, listener."""
+    scenario = load_scenario(setup.case.scenario, setup.overrides(duration_s), None)
+    return {*sensor_node_names(scenario), "sim_clock_node", *NODES, LISTENER_NODE}
+
+
+def sample_while_running(scenario, triples, own_names, deadline_and_period_s, result):
+    """RSS samples (wall s, simulated s or None, MiB) of each node every period (s) until
+    ``run_scenario`` ends or overruns the deadline (monotonic s); meanwhile, the nodes of
+    another run that join the domain, with the wall second each was first seen, into
+    ``result["intruders"]``. Ctrl-C stops sampling and marks the result."""
+    deadline_s, rss_period_s = deadline_and_period_s
+    result["intruders"] = {}
     started_s = time.monotonic()
     pids = child_pids(scenario.pid, NODES, FIND_PID_TIMEOUT_S)
     samples: dict[str, list[tuple[float, float | None, float]]] = {name: [] for name in NODES}
@@ -300,6 +339,8 @@ def sample_while_running(scenario, triples, deadline_s: float, rss_period_s: flo
                 rss = rss_mib(pid)
                 if rss is not None:
                     samples[name].append((elapsed_s, simulated_s, rss))
+            for name in triples.intruders(own_names):
+                result["intruders"].setdefault(name, elapsed_s)
             time.sleep(rss_period_s)
     except KeyboardInterrupt:
         # Hours of figures are worth keeping: stop the run and report what was measured.
@@ -316,10 +357,11 @@ def soak(
     setup_name: str = DEFAULT_SETUP,
 ) -> dict:
     """Run the soak; returns its figures (``error`` says what failed, if anything did)."""
-    domain = isolate_ros_domain()
+    triples, domain = listener_in_a_quiet_domain()
     duration_s = hours * SECONDS_PER_HOUR
     log_dir.mkdir(parents=True, exist_ok=True)
     command = scenario_command(SETUPS[setup_name], duration_s, rate_factor, log_dir)
+    own_names = own_node_names(SETUPS[setup_name], duration_s)
     result: dict = {
         "simulated_hours": hours,
         "rate_factor": rate_factor,
@@ -329,7 +371,6 @@ def soak(
         "command": command[1:],
     }
     print(f"soak: {' '.join(command[1:])} (domain {domain})", file=sys.stderr, flush=True)
-    triples = WindTriples()
     started_s = time.monotonic()
     # To a file, not a pipe: hours of progress lines would fill a pipe nobody reads meanwhile.
     output_path = log_dir / "run_scenario.log"
@@ -337,7 +378,9 @@ def soak(
         with output_path.open("w") as output:
             scenario = subprocess.Popen(command, stdout=output, stderr=subprocess.STDOUT)
             deadline_s = started_s + duration_s / rate_factor + RUN_MARGIN_S
-            rss_samples = sample_while_running(scenario, triples, deadline_s, rss_period_s, result)
+            rss_samples = sample_while_running(
+                scenario, triples, own_names, (deadline_s, rss_period_s), result
+            )
             if scenario.poll() is None:
                 scenario.send_signal(signal.SIGINT)
             scenario.wait(timeout=60)
@@ -349,6 +392,12 @@ def soak(
     result["wall_s"] = time.monotonic() - started_s
     if scenario.returncode != 0:
         result["error"] = f"run_scenario exited with {scenario.returncode}"
+    elif result["intruders"]:
+        first = ", ".join(f"{name} at {t:.0f} s" for name, t in result["intruders"].items())
+        result["error"] = (
+            f"nodes of another run joined ROS domain {domain} ({first}, wall clock): the "
+            "counts, latencies and the fusion's state are not this run's alone"
+        )
     result["counts"] = sample_counts(triples)
     result["latency_s_by_simulated_hour"] = {
         str(hour): {
