@@ -14,12 +14,21 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from sensor_sim.scenario import load_scenario
-from tools.soak import DEFAULT_SETUP, OUTPUT_TOPICS, SETUPS, TOPICS
+from tools.soak import (
+    DEFAULT_SETUP,
+    DISCOVERY_S,
+    LISTENER_NODE,
+    OUTPUT_TOPICS,
+    SETUPS,
+    TOPICS,
+    listener_in_a_quiet_domain,
+)
 
 pytestmark = [pytest.mark.ros, pytest.mark.long]
 
@@ -80,3 +89,31 @@ def test_short_soak_loses_no_sample(tmp_path, ros_env):
     # samples one of them missed before the first complete one).
     valid = [counts[f"{topic} valid"] for topic in OUTPUT_TOPICS]
     assert abs(valid[0] - valid[1]) <= max(before_first), counts
+
+
+def test_nodes_of_another_run_in_the_soak_domain_are_seen(monkeypatch):
+    """Another buoy's simulation in the soak's domain would mix its samples into the counts:
+    its nodes, and a second node of one of the soak's own names, are reported."""
+    import rclpy
+    from rclpy.context import Context
+
+    # The soak sets its domain in this process's environment: given back after the test.
+    for name in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOCALHOST_ONLY"):
+        monkeypatch.delenv(name, raising=False)
+    listener, _ = listener_in_a_quiet_domain()
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        assert listener.intruders({LISTENER_NODE}) == []
+        nodes = [
+            rclpy.create_node(name, context=context)
+            for name in ("anemometer_sim_node", "anemometer_sim_node", "other_buoy")
+        ]
+        time.sleep(DISCOVERY_S)
+        own = {LISTENER_NODE, "anemometer_sim_node"}
+        assert listener.intruders(own) == ["anemometer_sim_node", "other_buoy"]
+        for node in nodes:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+        listener.close()
