@@ -194,10 +194,11 @@ def _aligned(position, size: int):
 
 
 @functools.cache
-def _dtype(msgtype: str, string_sizes: tuple[int, ...]) -> np.dtype:
+def _dtype(msgtype: str, string_sizes: tuple[int, ...], message_size: int = 0) -> np.dtype:
     """The structured dtype of a ``msgtype`` message whose strings take ``string_sizes`` bytes
-    each (their NULs included): string ``s`` is the fields ``s.length``, ``s`` (its text, absent
-    when empty) and ``s.nul``."""
+    each (their NULs included), ``message_size`` bytes long with the padding after its last
+    field (0: none): string ``s`` is the fields ``s.length``, ``s`` (its text, absent when
+    empty) and ``s.nul``."""
     names, formats, offsets = ["encapsulation"], [("u1", (4,))], [0]
     position, sizes = _DATA_START, iter(string_sizes)
 
@@ -218,7 +219,14 @@ def _dtype(msgtype: str, string_sizes: tuple[int, ...]) -> np.dtype:
         else:
             add(item.name, (item.kind, item.shape) if item.shape else item.kind, position)
             position += item.item_size * item.count
-    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": position})
+    return np.dtype(
+        {
+            "names": names,
+            "formats": formats,
+            "offsets": offsets,
+            "itemsize": max(position, message_size),
+        }
+    )
 
 
 # -- decoding --------------------------------------------------------------------------------------
@@ -280,7 +288,9 @@ def _walk(layout: tuple[_Field, ...], buffer: np.ndarray, starts, lengths) -> _W
             position = position + 4 + value
         else:
             position = position + item.item_size * item.count
-    fits &= position == lengths
+    # Some writers pad a message's end to 4 bytes (the padding is no field: rosbags and
+    # rclpy ignore it).
+    fits &= (position <= lengths) & (lengths < position + 4)
     string_sizes = np.stack(sizes, axis=1) if sizes else np.zeros((count, 0), dtype=np.int64)
     return _Walk(fits, string_sizes)
 
@@ -302,7 +312,7 @@ def decode(msgtype: str, raws: Sequence[bytes]) -> MessageColumns:
     indices = np.flatnonzero(walk.fits)
     for key, members in _groups_by_layout(keys, indices):
         data = joined if len(members) == count else b"".join([raws[i] for i in members])
-        dtype = _dtype(msgtype, tuple(int(size) for size in key[1:]))
+        dtype = _dtype(msgtype, tuple(int(size) for size in key[1:]), int(key[0]))
         leftovers.append(_fill(result, layout, members, np.frombuffer(data, dtype=dtype)))
     for index in np.sort(np.concatenate(leftovers)):
         _decode_alone(result, layout, int(index), raws[index])
