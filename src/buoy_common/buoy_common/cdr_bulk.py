@@ -34,6 +34,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from buoy_common.bag_io.common import jazzy_typestore, one_line
+
 _DATA_START = 4
 _LITTLE_ENDIAN_HEADER = (0, 1, 0, 0)
 _STRING = "string"
@@ -372,8 +374,6 @@ def _texts(records: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
 
 def _decode_alone(result: MessageColumns, layout, index: int, raw: bytes) -> None:
     """Message ``index`` decoded by rosbags, or marked invalid with the reason."""
-    from buoy_common.bag_io.common import jazzy_typestore, one_line
-
     try:
         message = jazzy_typestore().deserialize_cdr(raw, result.msgtype)
         values = {item.name: _value_of(message, item) for item in layout if item.constant is None}

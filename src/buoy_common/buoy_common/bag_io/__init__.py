@@ -8,8 +8,8 @@ kept as CDR bytes; log times are integer nanoseconds. Bags are read through rosb
 :mod:`~buoy_common.bag_io.recovery`) and written through the ``mcap`` writer
 (:mod:`~buoy_common.bag_io.writing`), in a process of its own for the offline tools
 (:mod:`~buoy_common.bag_io.background`). A chunk of messages at a time can be decoded by
-topic into numpy columns (:mod:`~buoy_common.bag_io.columns`). No module here imports rclpy: bags are used offline as
-well as by the recorder and player nodes.
+topic into numpy columns (:mod:`~buoy_common.bag_io.columns`). No module here imports rclpy:
+bags are used offline as well as by the recorder and player nodes.
 
 The names below are imported from their modules when first used (PEP 562), so that a process
 that needs one module, such as the offline tools' writing process, imports only that one and
