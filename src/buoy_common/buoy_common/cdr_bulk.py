@@ -422,13 +422,8 @@ def encode(msgtype: str, columns: dict[str, object]) -> list[bytes]:
     layout = _layout(msgtype)
     columns = _with_stamp_parts(columns)
     count = _row_count(layout, columns)
-    texts = {
-        item.name: _encoded_texts(item.name, columns[item.name], count)
-        for item in layout
-        if item.kind == _STRING
-    }
     messages: list[bytes] = [b""] * count
-    for key, members in _groups_by_text(texts, count).items():
+    for key, members in _groups_by_text(layout, columns, count).items():
         dtype = _dtype(msgtype, tuple(len(text) + 1 for text in key))
         records = np.zeros(len(members), dtype=dtype)
         records["encapsulation"] = _LITTLE_ENDIAN_HEADER
@@ -462,26 +457,38 @@ def _row_count(layout, columns: dict[str, object]) -> int:
     return len(np.atleast_1d(np.asarray(columns["sec"])))
 
 
-def _encoded_texts(name: str, values, count: int) -> list[bytes]:
-    values = [values] * count if isinstance(values, str) else list(values)
-    if len(values) != count:
-        raise ValueError(f"column {name} holds {len(values)} values for {count} messages")
-    try:
-        return [value.encode() for value in values]
-    except (AttributeError, UnicodeEncodeError) as error:
-        raise ValueError(f"column {name}: not UTF-8 text: {error}") from error
-
-
-def _groups_by_text(texts: dict[str, list[bytes]], count: int) -> dict[tuple, np.ndarray]:
-    """Message indices by their tuple of string values (in field order)."""
-    keys = list(zip(*texts.values(), strict=True)) if texts else [()] * count
+def _groups_by_text(layout, columns: dict[str, object], count: int) -> dict[tuple, np.ndarray]:
+    """Message indices by the UTF-8 bytes of their string fields (in field order)."""
+    names = [item.name for item in layout if item.kind == _STRING]
+    given = [columns[name] for name in names]
+    if all(isinstance(value, str) for value in given):
+        return {_encoded(names, tuple(given)): np.arange(count)}
+    per_message = [[value] * count if isinstance(value, str) else list(value) for value in given]
+    for name, values in zip(names, per_message, strict=True):
+        if len(values) != count:
+            raise ValueError(f"column {name} holds {len(values)} values for {count} messages")
+    keys = list(zip(*per_message, strict=True))
     distinct = dict.fromkeys(keys)
     if len(distinct) == 1:
-        return {next(iter(distinct)): np.arange(count)}
+        return {_encoded(names, keys[0]): np.arange(count)}
     members: dict[tuple, list[int]] = {key: [] for key in distinct}
     for index, key in enumerate(keys):
         members[key].append(index)
-    return {key: np.asarray(indices) for key, indices in members.items()}
+    return {_encoded(names, key): np.asarray(indices) for key, indices in members.items()}
+
+
+def _encoded(names: list[str], texts: tuple) -> tuple[bytes, ...]:
+    """``texts`` (the values of string fields ``names``) as UTF-8; ValueError naming the field
+    of one that is not text."""
+    encoded = []
+    for name, text in zip(names, texts, strict=True):
+        if not isinstance(text, str):
+            raise ValueError(f"column {name}: {text!r} is not text")
+        try:
+            encoded.append(text.encode())
+        except UnicodeEncodeError as error:
+            raise ValueError(f"column {name}: not UTF-8 text: {error}") from error
+    return tuple(encoded)
 
 
 def _column_values(item: _Field, columns: dict[str, object], members: np.ndarray):
