@@ -154,17 +154,20 @@ def test_the_motion_pack_correction_removes_the_buoys_motion_as_edsons_does(proc
     assert ours.variance_share < edson.variance_share + 0.05
 
 
-def test_the_records_stress_is_flagged_implausible_for_its_wind(processed_record):
-    # u* of about 0.5 m/s in a 5-6 m/s wind: C_D = u*²/U² near 1e-2, against COARE 3.5's
-    # 1e-3 at that speed (Edson's own corrected wind gives 12x). Whatever else the window's
-    # tests say, the drag coefficient test must not pass it, nor the overall flag.
+def test_the_records_stress_is_plausible_for_its_wind(processed_record):
+    # With the motion pack's gyro and the record's sea stated as measured, no slow platform
+    # velocity is left in the wind: C_D = u*²/U² lies within the scatter of real windows about
+    # COARE 3.5's neutral value (0.3-3x), where the slow velocity of a mooring held to 3 m and a
+    # gyro taken for 5 deg/h made it about ten times that. The drag test passes it.
     *_, fluxes_csv = processed_record
     with open(fluxes_csv, newline="") as stream:
         (window,) = list(csv.DictReader(stream))
     values = {name: float(value) for name, value in window.items() if not name.endswith("_utc")}
     drag = values["friction_velocity_mps"] ** 2 / values["mean_speed_mps"] ** 2
-    assert values["drag_coefficient"] == pytest.approx(drag, rel=1e-4)
-    assert values["drag_coefficient"] > 3 * values["drag_coefficient_neutral_10m"]
-    assert values["drag_coefficient_flag"] in (QualityFlag.SUSPECT, QualityFlag.BAD)
+    # the CSV gives each figure to its printed digits
+    assert values["drag_coefficient"] == pytest.approx(drag, rel=1e-3)
+    ratio = values["drag_coefficient"] / values["drag_coefficient_neutral_10m"]
+    assert 0.3 < ratio < 3.0
+    assert values["drag_coefficient_flag"] == QualityFlag.GOOD
     flags = [QualityFlag(int(values[test.field])) for test in FLUX_FLAG_TESTS]
-    assert values["quality_flag"] == worst_flag(flags) >= QualityFlag.SUSPECT
+    assert values["quality_flag"] == worst_flag(flags)

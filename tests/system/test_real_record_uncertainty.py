@@ -73,15 +73,6 @@ def edsons_largest_speed_change_mps() -> float:
     return float(np.max(np.abs(horizontal_speed_mps(edson) - horizontal_speed_mps(measured))))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=AssertionError,
-    reason="without GNSS the fusion's horizontal velocity on this record wanders about 1.2 m/s "
-    "(median) while it states 0.14 m/s: the mooring constraint cannot see velocity errors at "
-    "wave periods, and the pack's compass, which wanders over 220°, is followed with its stated "
-    "2°; in the first 10 min 52 of 2,392 valid samples change the speed by more than Edson's "
-    "largest change plus 3σ, the worst by 0.72 m/s",
-)
 def test_no_valid_sample_changes_the_speed_beyond_the_plausible_platform_motion(processed):
     measured, corrected, sigma = processed
     valid = np.isfinite(corrected).all(axis=1)
