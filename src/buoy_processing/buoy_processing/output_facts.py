@@ -111,6 +111,9 @@ class OutputFacts:
     record: ImportedRecord | None = None
     """The facts of the record the input bag was imported from (its start and who gave it, the
     screening of each field); None for a bag that was not imported."""
+    nav_rate_hz: float = 0.0
+    """Rate of the written navigation (``nav/*``, ``tf``, the NetCDF file's), Hz, a subset of
+    the solutions the corrections used (``--nav-rate-hz``); 0: every solution."""
 
     @property
     def position_known(self) -> bool:
@@ -196,6 +199,7 @@ class OutputFacts:
             "first_sample_s": json.dumps(self.first_sample_s),
             "last_sample_s": json.dumps(self.last_sample_s),
             "declination_deg": json.dumps(self.declination_deg),
+            "nav_rate_hz": json.dumps(self.nav_rate_hz),
         }
 
     def metadata_records(self) -> dict[str, dict[str, str]]:
@@ -227,6 +231,8 @@ class OutputFacts:
             site_source=json.loads(metadata["site_source"]),
             latitude_only_deg=json.loads(metadata["latitude_only_deg"]),
             record=record,
+            # Stored since the rate could be lowered: a bag processed before has every solution.
+            nav_rate_hz=float(json.loads(metadata.get("nav_rate_hz", "0"))),
         )
 
 
@@ -296,12 +302,14 @@ def output_facts(
     source_use: Mapping[str, SourceUse],
     sample_stamps_s: Iterable[tuple[float, float]],
     record: ImportedRecord | None = None,
+    nav_rate_hz: float = 0.0,
 ) -> OutputFacts:
     """The facts of a run: ``config`` its effective fusion parameters, ``input_topics`` the
     relative names of the input bag's topics, ``source_use`` what the fusion made of each
     aiding source (by kind), ``sample_stamps_s`` the (first, last) stamp in s of each output
     series that holds samples, ``record`` the facts of the record the bag was imported from
-    (None: not imported)."""
+    (None: not imported), ``nav_rate_hz`` the rate of the written navigation, Hz (0: every
+    solution)."""
     topics = frozenset(input_topics)
     used = {kind: use for kind, use in source_use.items() if use.accepted > 0}
     north, basis = _north_of(config, used)
@@ -323,6 +331,7 @@ def output_facts(
         ),
         first_sample_s=min((span[0] for span in spans), default=None),
         last_sample_s=max((span[1] for span in spans), default=None),
+        nav_rate_hz=float(nav_rate_hz),
     )
 
 
