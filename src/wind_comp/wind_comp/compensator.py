@@ -29,13 +29,9 @@ from typing import NamedTuple
 import numpy as np
 
 from buoy_common.contract import Reason
-from buoy_nav.rotations import rotation_matrix_elements
-from wind_comp.flow_uncertainty import (
-    FlowCovariance,
-    corrected_flow_covariance_enu,
-    horizontal_and_vertical_sigma,
-)
-from wind_comp.miller import miller_components, mounting_rotation_from_rpy_deg
+from wind_comp.correction_kernel import correct_samples
+from wind_comp.flow_uncertainty import FlowCovariance, horizontal_and_vertical_sigma
+from wind_comp.miller import mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import InterpolatedNav, InterpolationStatus, NavTrack
 
 
@@ -216,7 +212,6 @@ class _Corrector:
         self._mounting_matrix = mounting_matrix
         self._mounting_elements = tuple(mounting_matrix.ravel().tolist())
         self._lever_arm_elements_body_m = tuple(float(c) for c in sensor.position_body_m)
-        self._lever_arm_body_m = np.array(self._lever_arm_elements_body_m)
         self._sigma_limits = sensor.sigma_limits
 
     def correct(self, track: NavTrack, stamps_s, flows_mps, noises_m2s2, as_of_newest_s):
@@ -234,45 +229,38 @@ class _Corrector:
         outputs = np.full((_N_OUTPUTS, stamps_s.shape[0], 3), np.nan)
         covariances = np.full((_N_COVARIANCES, stamps_s.shape[0], 3, 3), np.nan)
         if np.any(nav.valid):
-            rows = nav.valid
-            covariance = self._covariance(flows_mps[rows], noises_m2s2[rows], nav, rows)
-            beyond = self._sigma_limits.exceeded(covariance.total)
-            kept = np.flatnonzero(rows)[~beyond]
-            status[np.flatnonzero(rows)[beyond]] = SampleStatus.UNCERTAINTY_TOO_LARGE
-            outputs[:, kept] = self._miller_terms(flows_mps[kept], nav, kept)
-            covariances[:, kept] = np.stack(covariance)[:, ~beyond]
+            rows = np.flatnonzero(nav.valid)
+            terms, covariance = self._corrected(flows_mps[rows], noises_m2s2[rows], nav, rows)
+            beyond = self._sigma_limits.exceeded(covariance[0] + covariance[1])
+            status[rows[beyond]] = SampleStatus.UNCERTAINTY_TOO_LARGE
+            kept = rows[~beyond]
+            outputs[:, kept] = terms[:, ~beyond]
+            covariances[:, kept] = covariance[:, ~beyond]
         return status, outputs, covariances
 
-    def _covariance(self, flows_mps, noises_m2s2, nav: InterpolatedNav, rows) -> FlowCovariance:
-        """The ENU covariance (m²/s²) of (M, 3) flows in sensor axes with noise covariances
-        (M, 3, 3) (sensor axes, m²/s²), corrected with the navigation's ``rows``."""
-        rotation_nb = np.stack(
-            rotation_matrix_elements(*nav.attitude_xyzw[rows].T), axis=-1
-        ).reshape(-1, 3, 3)
-        return corrected_flow_covariance_enu(
-            rotation_nb,
-            self._mounting_matrix,
-            self._lever_arm_body_m,
-            flows_mps,
+    def _corrected(self, flows_mps, noises_m2s2, nav: InterpolatedNav, rows):
+        """The Miller terms (4, M, 3: the flow over ground and the tilt, rotation and
+        translation terms, ENU m/s) and the covariance (2, M, 3, 3: navigation and sensor parts,
+        ENU m²/s²) of (M, 3) flows in sensor axes with noise covariances (M, 3, 3, sensor axes,
+        m²/s²), corrected with the navigation's ``rows`` (:mod:`wind_comp.correction_kernel`)."""
+        terms = np.empty((_N_OUTPUTS, rows.shape[0], 3))
+        covariance = np.empty((_N_COVARIANCES, rows.shape[0], 3, 3))
+        correct_samples(
+            nav.attitude_xyzw[rows],
             nav.angular_rate_body_rad_s[rows],
+            nav.velocity_enu_mps[rows],
             nav.attitude_covariance_enu_rad2[rows],
             nav.velocity_covariance_enu_m2s2[rows],
             nav.angular_rate_covariance_body_rad2s2[rows],
-            noises_m2s2,
-        )
-
-    def _miller_terms(self, flows_mps, nav: InterpolatedNav, rows) -> np.ndarray:
-        """(4, M, 3): the flow over ground and the tilt, rotation and translation terms, ENU
-        m/s, of (M, 3) flows in sensor axes with the navigation's ``rows``."""
-        terms = miller_components(
-            tuple(flows_mps.T),
-            rotation_matrix_elements(*nav.attitude_xyzw[rows].T),
-            tuple(nav.angular_rate_body_rad_s[rows].T),
-            tuple(nav.velocity_enu_mps[rows].T),
+            flows_mps,
+            np.ascontiguousarray(noises_m2s2),
+            self._mounting_matrix,
             self._mounting_elements,
             self._lever_arm_elements_body_m,
+            terms,
+            covariance,
         )
-        return np.array(terms).transpose(0, 2, 1)
+        return terms, covariance
 
 
 _NOTHING_DECIDED = CorrectedBatch(

@@ -105,6 +105,65 @@ def _weight(root, total_root):
     return total_root / max(root, TRACE_FLOOR) if root > TRACE_FLOOR else 0.0
 
 
+@numba.njit(cache=True, inline="always")
+def sample_covariance(
+    rotation,
+    mounting_bs,
+    lever_arm_body_m,
+    flow_sensor_mps,
+    rate_body_rad_s,
+    attitude_covariance_enu_rad2,
+    velocity_covariance_enu_m2s2,
+    rate_covariance_body_rad2s2,
+    noise_covariance_m2s2,
+    scratch,
+    navigation_out,
+    sensor_out,
+):
+    """The navigation's and the sensor noise's parts of one corrected sample's ENU covariance
+    (m²/s²), into the 3×3 ``navigation_out`` and ``sensor_out``: R_nb (3×3) and the arguments of
+    :func:`wind_comp.flow_uncertainty.corrected_flow_covariance_enu` for one sample; ``scratch``
+    a (6, 3, 3) work array."""
+    skew, jacobian, product = scratch[0], scratch[1], scratch[2]
+    attitude_term, rate_term = scratch[3], scratch[4]
+    flow_body, lever_velocity, relative_enu = scratch[5, 0], scratch[5, 1], scratch[5, 2]
+    bx, by, bz = lever_arm_body_m[0], lever_arm_body_m[1], lever_arm_body_m[2]
+    flow, rate = flow_sensor_mps, rate_body_rad_s
+    # a = R_nb·(R_bw·V_w + ω × B), the fluid's velocity relative to the sensor, ENU.
+    _rotated(mounting_bs, flow[0], flow[1], flow[2], flow_body)
+    _skew(rate[0], rate[1], rate[2], skew)
+    _rotated(skew, bx, by, bz, lever_velocity)
+    _rotated(
+        rotation,
+        flow_body[0] + lever_velocity[0],
+        flow_body[1] + lever_velocity[1],
+        flow_body[2] + lever_velocity[2],
+        relative_enu,
+    )
+    _skew(relative_enu[0], relative_enu[1], relative_enu[2], skew)
+    _sandwich(skew, attitude_covariance_enu_rad2, product, attitude_term)
+    _skew(bx, by, bz, skew)
+    _product(rotation, skew, jacobian)
+    _sandwich(jacobian, rate_covariance_body_rad2s2, product, rate_term)
+    velocity_term = velocity_covariance_enu_m2s2
+    root_attitude = _root_of_trace(attitude_term)
+    root_velocity = _root_of_trace(velocity_term)
+    root_rate = _root_of_trace(rate_term)
+    total_root = root_attitude + root_velocity + root_rate
+    scale_attitude = _weight(root_attitude, total_root)
+    scale_velocity = _weight(root_velocity, total_root)
+    scale_rate = _weight(root_rate, total_root)
+    for i in range(3):
+        for j in range(3):
+            navigation_out[i, j] = (
+                attitude_term[i, j] * scale_attitude
+                + velocity_term[i, j] * scale_velocity
+                + rate_term[i, j] * scale_rate
+            )
+    _product(rotation, mounting_bs, jacobian)
+    _sandwich(jacobian, noise_covariance_m2s2, product, sensor_out)
+
+
 @numba.njit(cache=True)
 def flow_covariances_enu(
     rotations_nb,
@@ -119,54 +178,21 @@ def flow_covariances_enu(
     navigation_out,
     sensor_out,
 ):
-    """The navigation's and the sensor noise's parts of the ENU covariance (m²/s²) of N
-    corrected samples, into ``navigation_out`` and ``sensor_out`` (N, 3, 3); the arguments
-    are those of :func:`wind_comp.flow_uncertainty.corrected_flow_covariance_enu`, every
-    per-sample one with N rows (the noise too)."""
-    bx, by, bz = lever_arm_body_m[0], lever_arm_body_m[1], lever_arm_body_m[2]
-    skew = np.empty((3, 3))
-    jacobian = np.empty((3, 3))
-    scratch = np.empty((3, 3))
-    attitude_term = np.empty((3, 3))
-    rate_term = np.empty((3, 3))
-    flow_body = np.empty(3)
-    lever_velocity = np.empty(3)
-    relative_enu = np.empty(3)
+    """:func:`sample_covariance` of N samples, into ``navigation_out`` and ``sensor_out``
+    (N, 3, 3): every per-sample argument with N rows (the noise too)."""
+    scratch = np.empty((6, 3, 3))
     for n in range(rotations_nb.shape[0]):
-        rotation = rotations_nb[n]
-        flow, rate = flows_sensor_mps[n], rates_body_rad_s[n]
-        # a = R_nb·(R_bw·V_w + ω × B), the fluid's velocity relative to the sensor, ENU.
-        _rotated(mounting_bs, flow[0], flow[1], flow[2], flow_body)
-        _skew(rate[0], rate[1], rate[2], skew)
-        _rotated(skew, bx, by, bz, lever_velocity)
-        _rotated(
-            rotation,
-            flow_body[0] + lever_velocity[0],
-            flow_body[1] + lever_velocity[1],
-            flow_body[2] + lever_velocity[2],
-            relative_enu,
+        sample_covariance(
+            rotations_nb[n],
+            mounting_bs,
+            lever_arm_body_m,
+            flows_sensor_mps[n],
+            rates_body_rad_s[n],
+            attitude_covariances_enu_rad2[n],
+            velocity_covariances_enu_m2s2[n],
+            rate_covariances_body_rad2s2[n],
+            noise_covariances_m2s2[n],
+            scratch,
+            navigation_out[n],
+            sensor_out[n],
         )
-        _skew(relative_enu[0], relative_enu[1], relative_enu[2], skew)
-        _sandwich(skew, attitude_covariances_enu_rad2[n], scratch, attitude_term)
-        _skew(bx, by, bz, skew)
-        _product(rotation, skew, jacobian)
-        _sandwich(jacobian, rate_covariances_body_rad2s2[n], scratch, rate_term)
-        velocity_term = velocity_covariances_enu_m2s2[n]
-        roots = (
-            _root_of_trace(attitude_term),
-            _root_of_trace(velocity_term),
-            _root_of_trace(rate_term),
-        )
-        total_root = roots[0] + roots[1] + roots[2]
-        scale_attitude = _weight(roots[0], total_root)
-        scale_velocity = _weight(roots[1], total_root)
-        scale_rate = _weight(roots[2], total_root)
-        for i in range(3):
-            for j in range(3):
-                navigation_out[n, i, j] = (
-                    attitude_term[i, j] * scale_attitude
-                    + velocity_term[i, j] * scale_velocity
-                    + rate_term[i, j] * scale_rate
-                )
-        _product(rotation, mounting_bs, jacobian)
-        _sandwich(jacobian, noise_covariances_m2s2[n], scratch, sensor_out[n])
