@@ -263,12 +263,13 @@ class _Corrector:
         return terms, covariance
 
 
-_NOTHING_DECIDED = CorrectedBatch(
+NOTHING_DECIDED = CorrectedBatch(
     np.empty(0),
     np.empty(0, dtype=np.int8),
     *(np.empty((0, 3)) for _ in range(5)),
     FlowCovariance(np.empty((0, 3, 3)), np.empty((0, 3, 3))),
 )
+"""The batch of no samples."""
 _INITIAL_CAPACITY = 64
 
 
@@ -310,6 +311,14 @@ class FlowCompensator:
     def n_pending(self) -> int:
         """Sensor samples received but not yet returned."""
         return self._tail - self._head
+
+    @property
+    def first_undecided_stamp_s(self) -> float:
+        """Stamp (s) of the oldest sample still waiting for navigation (inf when none waits):
+        navigation stamped before it can decide nothing that could be returned."""
+        if self._first_pending == self._tail:
+            return math.inf
+        return float(self._t_s[self._first_pending])
 
     def add_nav(
         self,
@@ -473,7 +482,7 @@ class FlowCompensator:
 
     def _pop_decided(self) -> CorrectedBatch:
         if self._head == self._first_pending:
-            return _NOTHING_DECIDED
+            return NOTHING_DECIDED
         done = slice(self._head, self._first_pending)
         self._head = self._first_pending
         status = self._status[done].copy()
