@@ -16,7 +16,6 @@ integrator calls them at the IMU rate, where a numpy call costs more than the ar
 import math
 
 import numpy as np
-from numba.extending import register_jitable
 
 Quaternion = tuple[float, float, float, float]
 
@@ -77,7 +76,6 @@ def normalize_quaternion(q: Quaternion) -> Quaternion:
     return (x / norm, y / norm, z / norm, w / norm)
 
 
-@register_jitable
 def rotation_matrix_elements(x, y, z, w) -> tuple:
     """Row-major elements (r00, r01, r02, r10, ..., r22) of the rotation matrix of the unit
     quaternion (x, y, z, w). The components may be floats or equally shaped arrays: the
@@ -99,7 +97,6 @@ def rotation_matrix_elements(x, y, z, w) -> tuple:
     )
 
 
-@register_jitable
 def cross_components(a, b) -> tuple:
     """a × b of two 3-vectors given by components (floats or equally shaped arrays)."""
     a0, a1, a2 = a

@@ -200,6 +200,9 @@ _N_OUTPUTS = 4
 """Output vectors per sample: the corrected flow and its three Miller terms."""
 _N_COVARIANCES = 2
 """Output covariances per sample: the navigation's part and the sensor noise's."""
+_ROW_SHAPES = ((4,), (3,), (3,), (3, 3), (3, 3), (3, 3), (3,), (3, 3))
+"""Shape of one row of each per-sample argument of the compiled correction: attitude, rate,
+velocity, their three covariances, the flow and its noise covariance."""
 
 
 class _Corrector:
@@ -213,6 +216,9 @@ class _Corrector:
         self._mounting_elements = tuple(mounting_matrix.ravel().tolist())
         self._lever_arm_elements_body_m = tuple(float(c) for c in sensor.position_body_m)
         self._sigma_limits = sensor.sigma_limits
+        # The compiled correction is built (or loaded from numba's cache) now, when a node
+        # starts, so that no sample waits for the compiler.
+        self._correct_rows(*(np.empty((0, *shape)) for shape in _ROW_SHAPES))
 
     def correct(self, track: NavTrack, stamps_s, flows_mps, noises_m2s2, as_of_newest_s):
         """Return (N,) statuses (``_PENDING`` while navigation may still bracket a stamp), a
@@ -243,9 +249,7 @@ class _Corrector:
         translation terms, ENU m/s) and the covariance (2, M, 3, 3: navigation and sensor parts,
         ENU m²/s²) of (M, 3) flows in sensor axes with noise covariances (M, 3, 3, sensor axes,
         m²/s²), corrected with the navigation's ``rows`` (:mod:`wind_comp.correction_kernel`)."""
-        terms = np.empty((_N_OUTPUTS, rows.shape[0], 3))
-        covariance = np.empty((_N_COVARIANCES, rows.shape[0], 3, 3))
-        correct_samples(
+        return self._correct_rows(
             nav.attitude_xyzw[rows],
             nav.angular_rate_body_rad_s[rows],
             nav.velocity_enu_mps[rows],
@@ -254,6 +258,17 @@ class _Corrector:
             nav.angular_rate_covariance_body_rad2s2[rows],
             flows_mps,
             np.ascontiguousarray(noises_m2s2),
+        )
+
+    def _correct_rows(self, *rows) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`~wind_comp.correction_kernel.correct_samples` of M rows of each per-sample
+        argument (in its order, shapes :data:`_ROW_SHAPES`) with this sensor's mounting and
+        lever arm: the terms (4, M, 3) and the covariances (2, M, 3, 3)."""
+        n_rows = rows[0].shape[0]
+        terms = np.empty((_N_OUTPUTS, n_rows, 3))
+        covariance = np.empty((_N_COVARIANCES, n_rows, 3, 3))
+        correct_samples(
+            *rows,
             self._mounting_matrix,
             self._mounting_elements,
             self._lever_arm_elements_body_m,

@@ -10,10 +10,18 @@ code, so one sample alone, a batch, and the figures before this was compiled agr
 
 import numba
 import numpy as np
+from numba.extending import register_jitable
 
-from buoy_nav.rotations import rotation_matrix_elements
+from buoy_nav.rotations import cross_components, rotation_matrix_elements
 from wind_comp.flow_covariance_kernel import sample_covariance
-from wind_comp.miller import miller_components
+from wind_comp.miller import miller_components, rotate_components
+
+# The component-wise routines, callable from compiled code as they are; registered here so that
+# only what imports this module imports numba. numba's cache of a compiled function follows its
+# own file only: a change of a routine it calls from another file needs the cache (*.nbi, *.nbc
+# in __pycache__) removed.
+for _routine in (rotation_matrix_elements, cross_components, rotate_components, miller_components):
+    register_jitable(_routine)
 
 FLOW, TILT, ROTATION, TRANSLATION = range(4)
 """Rows of the terms array: the corrected flow and its three Miller terms."""

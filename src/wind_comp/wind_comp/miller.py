@@ -22,13 +22,12 @@ at V_w = −v_DVL, and with the DVL's mounting R_bd and position l in place of R
 
 One component-wise routine, :func:`miller_components`, corrects one sample (floats, live) or a
 whole recording (arrays, offline), with bit-identical results; the compensator runs it compiled
-(numba), sample by sample, on the same floats.
+(numba, :mod:`wind_comp.correction_kernel`), sample by sample, on the same floats.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
-from numba.extending import register_jitable
 from scipy.spatial.transform import Rotation
 
 from buoy_nav.rotations import cross_components
@@ -113,7 +112,6 @@ def _mounting_matrix(mounting_rotation_bw) -> np.ndarray:
     return matrix
 
 
-@register_jitable
 def rotate_components(matrix_elements, vector) -> tuple:
     """Matrix × vector written out: ``matrix_elements`` are the nine row-major elements,
     ``vector`` the three components; each a float or an array, all of one shape (or floats).
@@ -218,7 +216,6 @@ def miller_terms(
     return MillerTerms(*(np.stack(term, axis=-1) for term in terms))
 
 
-@register_jitable
 def miller_components(
     flow_sensor_mps,
     attitude_elements_nb,
