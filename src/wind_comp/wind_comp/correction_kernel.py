@@ -5,7 +5,7 @@
 One compiled loop over the samples (numba, cached on disk): the live node corrects one sample
 per message, where numpy's cost per call on a row of three values, not the arithmetic, was the
 cost. The arithmetic is the same operations on the same floats as the component-wise numpy
-code, so one sample alone, a batch, and the figures before this was compiled agree to the bit.
+code, so one sample alone, a batch, and that code agree to the bit.
 """
 
 import numba

@@ -2,13 +2,13 @@
 :mod:`wind_comp.flow_uncertainty`).
 
 Compiled (numba, cached on disk) and written out element by element: the live node corrects
-one sample per message, and numpy's cost per call on 3×3 arrays (about 20 array operations a
-sample) made the covariance 40 % of that message's cost. One loop over the samples serves a
+one sample per message, and numpy's cost per call on 3×3 arrays (dozens of calls a sample) made
+the covariance a third of the cost of correcting it. One loop over the samples serves a
 batch of one (live) and of many (offline) with the same arithmetic in the same order, so each
 sample's covariance does not depend on its batch.
 
-The arithmetic is numpy's, operation for operation, so that the figures are those numpy gave
-before the covariance was compiled, to the bit: a 3×3 matrix product (numpy's ``@``, which calls
+The arithmetic is that of the formula written with numpy, operation for operation, so that both
+give the same figures to the bit: a 3×3 matrix product (numpy's ``@``, which calls
 OpenBLAS) as a chain of fused multiply-adds over k = 0, 1, 2, as OpenBLAS's kernels compute it
 on processors with FMA (LLVM's ``llvm.fma``, exact on any processor); a matrix times a vector
 (numpy's ``einsum``) as (p₀ + p₂) + p₁ of its three products, rounded one by one.
