@@ -47,9 +47,9 @@ class NavOutputRate:
 
 
 NAV_RATE_HELP = (
-    "write the nav/* topics and tf (and the NetCDF file's navigation) at this rate, Hz, a "
-    "subset of the solutions; the corrections still use every solution (default 0: every "
-    "solution)"
+    "write the navigation (nav/* and tf; with process_bag --netcdf, the file's navigation too) "
+    "at this rate, Hz: a subset of the solutions, with their stamps and bytes; the corrections "
+    "still use every solution (default 0: every solution)"
 )
 
 
