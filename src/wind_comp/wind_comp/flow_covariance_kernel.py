@@ -48,13 +48,13 @@ else:
     _fused_multiply_add = _llvm_fma
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _dot(a0, a1, a2, b0, b1, b2):
     """a·b of 3-vectors as a chain of fused multiply-adds (an element of numpy's ``@``)."""
     return _fused_multiply_add(a2, b2, _fused_multiply_add(a1, b1, a0 * b0))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _product(a, b, out):
     """out = a·b of 3×3 matrices, as numpy's ``@``."""
     for i in range(3):
@@ -62,7 +62,7 @@ def _product(a, b, out):
             out[i, j] = _dot(a[i, 0], a[i, 1], a[i, 2], b[0, j], b[1, j], b[2, j])
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _sandwich(jacobian, covariance, scratch, out):
     """out = (J·P)·Jᵀ of 3×3 matrices, as numpy's ``@`` (``scratch`` holds J·P)."""
     _product(jacobian, covariance, scratch)
@@ -78,14 +78,14 @@ def _sandwich(jacobian, covariance, scratch, out):
             )
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _rotated(matrix, x, y, z, out):
     """out = M·v of a 3×3 matrix and v = (x, y, z), as numpy's ``einsum``."""
     for i in range(3):
         out[i] = (matrix[i, 0] * x + matrix[i, 2] * z) + matrix[i, 1] * y
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _skew(x, y, z, out):
     """out = [v×] of v = (x, y, z), so that [v×]·u = v × u."""
     out[0, 0], out[0, 1], out[0, 2] = 0.0, -z, y
@@ -93,19 +93,19 @@ def _skew(x, y, z, out):
     out[2, 0], out[2, 1], out[2, 2] = -y, x, 0.0
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _root_of_trace(a):
     """√tr(A), 0 for a negative trace."""
     return np.sqrt(max(a[0, 0] + a[1, 1] + a[2, 2], 0.0))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def _weight(root, total_root):
     """1 / w_i of a term with √tr = ``root`` (w_i = root / Σ√tr); 0 for a term of no trace."""
     return total_root / max(root, TRACE_FLOOR) if root > TRACE_FLOOR else 0.0
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True)
 def sample_covariance(
     rotation,
     mounting_bs,
