@@ -50,6 +50,9 @@ as constants and printed beside our figures:
     recover the hard and soft iron from the record, and the fused heading with what it writes
     (tools/bench_magnetometer_calibration.py; twelve 12-min records; ``--quick``: the four of
     the scenario's own sea).
+18. io_floor (long): the I/O floor on one hour of open_ocean: the suite's reader reading and
+    decoding every input message, its writer writing process_bag's output messages, and
+    process_bag against their sum (tools/bench_io_floor.py; about ten minutes).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -59,12 +62,13 @@ go to stdout and out/bench/results.json, progress to stderr.
                                             smoother|antennas|smoother_table1|smoother_speed|
                                             smoother_day|soak|real_record|archive|
                                             current|current_long|fluxes|
-                                            magnetometer_calibration ...]
+                                            magnetometer_calibration|io_floor ...]
 
 Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
 runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 2
 simulated hours through the live nodes, an hour of wall time; current_long, an hour of paper
-003's ship and of each buoy with its DVL, tens of minutes), which run only when named.
+003's ship and of each buoy with its DVL, tens of minutes; io_floor, process_bag and the
+suite's bag reading and writing three times each on one hour), which run only when named.
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -162,6 +166,7 @@ SECTIONS = (
     "uncertainty",
     "uncertainty_day",
     "magnetometer_calibration",
+    "io_floor",
 )
 LONG_SECTIONS = (
     "smoother_table1",
@@ -170,6 +175,7 @@ LONG_SECTIONS = (
     "soak",
     "current_long",
     "uncertainty_day",
+    "io_floor",
 )
 """Sections of long runs (simulated and processed only when named with --only)."""
 DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in LONG_SECTIONS)
@@ -494,7 +500,7 @@ def plan_bags(sections: set[str], quick: bool, cases: list[Case], smoothing_case
         path = cached_bag_path(case.scenario, case.overrides, fingerprint)
         bags.wanted[path] = (case.scenario, case.overrides)
         bags.bag_of[case.key] = path
-    if sections & {"speed", "smoother_speed"}:
+    if sections & {"speed", "smoother_speed", "io_floor"}:
         bags.speed_bag = cached_bag_path("open_ocean", speed_overrides(quick), fingerprint)
         bags.wanted[bags.speed_bag] = ("open_ocean", speed_overrides(quick))
     for case in smoothing_cases:
@@ -772,6 +778,19 @@ def uncertainty_sections(run: BenchRun) -> dict:
     return results
 
 
+def io_floor_section(run: BenchRun) -> dict:
+    """The I/O floor against process_bag on the speed section's hour of open_ocean (its own
+    tool, which writes out/bench/io_floor.json)."""
+    if "io_floor" not in run.sections:
+        return {}
+    from tools import bench_io_floor
+
+    result = bench_io_floor.run_io_floor(run.bags.speed_bag, RUNS_DIR / "io_floor", log=log)
+    bench_io_floor.print_io_floor(result)
+    (OUT_DIR / "io_floor.json").write_text(json.dumps(result, indent=2))
+    return {"io_floor": result}
+
+
 def magnetometer_calibration_section(run: BenchRun) -> dict:
     """calibrate_magnetometer on moored records of every motion, and the heading it gives
     (tools/bench_magnetometer_calibration.py, which writes
@@ -805,6 +824,7 @@ SECTION_STEPS = (
     antennas_section,
     smoother_speed_sections,
     archive_section,
+    io_floor_section,
 )
 """The sections after the cases, in the order they run and print; each returns its results."""
 

@@ -203,12 +203,17 @@ class OfflineCorrection:
         self.pipeline = pipeline
         self.writer = writer
         self.rejected: Counter[str] = Counter()
+        self.valid_samples = 0
+        """Sensor records that passed the input checks (the others are counted by reason in
+        :attr:`rejected`)."""
         self.wrong_frames: Counter[str] = Counter()
         self._expected_frame_id = expected_frame_id
         self.products: list = []
         self.fluxes: list[FluxProduct] = []
         self.temperature_topic = temperature_topic
         self.rejected_temperatures: Counter[str] = Counter()
+        self.valid_temperatures = 0
+        """``anemometer/temperature`` records handed to the fluxes."""
         self._output_topic = bag_topic(output_topic)
         self._covariance_topic = bag_topic(covariance_topic)
         self._product_topics = product_topics
@@ -240,7 +245,9 @@ class OfflineCorrection:
         """One sensor record; every few hundred, the decided samples are written."""
         sample, sec, nanosec = self._read_record(reader, message, self._expected_frame_id)
         rejection = self.pipeline.add_sample(sample)
-        if rejection is not None:
+        if rejection is None:
+            self.valid_samples += 1
+        else:
             self.rejected[rejection] += 1
             if rejection == Reason.WRONG_FRAME:
                 self.wrong_frames[sample.frame_id] += 1
@@ -256,6 +263,7 @@ class OfflineCorrection:
         if isinstance(sample, str):
             self.rejected_temperatures[sample] += 1
             return
+        self.valid_temperatures += 1
         self._write_products(self.pipeline.add_temperature(*sample), message.log_time_ns)
 
     def finish(self, log_time_ns: int) -> None:
@@ -544,7 +552,7 @@ def process_bag(
             None if netcdf_path is None else NavigationSeries(nav_rate_hz),
         )
         facts_of_run = _FactsOfRun(
-            fusion_config, sensors, corrections, read_imported_record(reader.path), nav_rate_hz
+            fusion_config, corrections, read_imported_record(reader.path), nav_rate_hz
         )
         run = OfflineRun(
             reader,
@@ -584,35 +592,42 @@ def process_bag(
 
 @dataclass
 class _FactsOfRun:
-    """The facts the outputs state, from the parameters, the topics read, what the fusion used,
-    the stamps of the samples and the imported record; made once every message is written, for
-    the output bag's metadata (:attr:`OfflineRun.closing_metadata`) and then every other
-    writer."""
+    """The facts the outputs state, from the parameters, the valid samples of the flow
+    sensors, what the fusion used, the stamps of the samples and the imported record; made once
+    every message is written, for the output bag's metadata
+    (:attr:`OfflineRun.closing_metadata`) and then every other writer."""
 
     fusion_config: FusionConfig
-    sensors: dict[str, str]
     corrections: BagCorrections
     record: ImportedRecord | None
     nav_rate_hz: float = 0.0
     facts: OutputFacts | None = None
 
     def __call__(self, fusion: OfflineFusion) -> dict[str, dict[str, str]]:
-        flows = self.corrections.flows
-        flow_topics = {
-            WIND_RAW_TOPIC: flows.wind,
-            DVL_TOPIC: flows.dvl,
-            SONIC_TEMPERATURE_TOPIC: flows.temperature,
-        }
-        topics = [*self.sensors, *(t for t, stored in flow_topics.items() if stored is not None)]
+        health = fusion.engine.health()
         self.facts = output_facts(
             self.fusion_config,
-            topics,
-            source_use_of(fusion.engine.health()),
+            _valid_flow_samples(self.corrections),
+            source_use_of(health),
             _sample_spans_s(self.corrections),
             self.record,
-            self.nav_rate_hz,
+            aligned=health.alignments > 0,
+            nav_rate_hz=self.nav_rate_hz,
         )
         return self.facts.metadata_records()
+
+
+def _valid_flow_samples(corrections: BagCorrections) -> dict[str, int]:
+    """The valid samples of each flow sensor topic the corrections read, by relative name."""
+    wind, current = corrections.wind, corrections.current
+    valid = {}
+    if wind is not None:
+        valid[WIND_RAW_TOPIC] = wind.valid_samples
+        if wind.temperature_topic is not None:
+            valid[SONIC_TEMPERATURE_TOPIC] = wind.valid_temperatures
+    if current is not None:
+        valid[DVL_TOPIC] = current.valid_samples
+    return valid
 
 
 def _sample_spans_s(corrections: BagCorrections) -> list[tuple[float, float]]:

@@ -51,6 +51,7 @@ from buoy_processing.netcdf_variables import (
 )
 from buoy_processing.output_facts import MAGNETIC_NORTH, OutputFacts
 from buoy_processing.output_series import FlowSeries, NavigationSeries
+from wind_comp.compensator import SampleStatus
 from wind_comp.flux_products import FluxProduct
 from wind_comp.products import CurrentProduct, WindProduct
 
@@ -118,6 +119,7 @@ def _global_attributes(content: NetcdfContent, dataset: xr.Dataset) -> dict:
             f"filter; sensors used: {sensors}.{current} Per-sample series with their correction "
             "status, window-averaged products (vector and scalar means, gust, standard "
             "deviations) with coverage and QARTOD quality flags, and the navigation solution."
+            f"{_emptiness_sentence(content)}"
         ),
         "keywords": (
             "EARTH SCIENCE > ATMOSPHERE > ATMOSPHERIC WINDS > SURFACE WINDS, "
@@ -151,6 +153,22 @@ def _global_attributes(content: NetcdfContent, dataset: xr.Dataset) -> dict:
         attributes.update(_geospatial_attributes(dataset))
     attributes.update(content.attributes)
     return attributes
+
+
+def _emptiness_sentence(content: NetcdfContent) -> str:
+    """What the file lacks although its summary names it, with a leading space: a series
+    without one valid sample, a run without a navigation solution; ``""`` when nothing."""
+    lacking = [
+        f"none of the {len(series)} {name} samples is valid"
+        for name, series in (("wind", content.wind), ("current", content.current))
+        if series is not None and not np.any(series.columns()[2] == SampleStatus.VALID)
+    ]
+    if not len(content.navigation):
+        lacking.append("the navigation holds no solution")
+    if not lacking:
+        return ""
+    text = "; ".join(lacking)
+    return f" In this file {text}."
 
 
 def _position_sentence(facts: OutputFacts) -> str:

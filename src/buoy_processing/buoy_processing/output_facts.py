@@ -6,8 +6,12 @@ the report) takes these words from :class:`OutputFacts`, so that none of them cl
 reference or a place that the run did not have.
 
 The facts are derived from the effective parameters (the parameter files and what an imported
-record contributed), the topics the input bag holds, what the fusion accepted and suspended, and
-the stamps of the samples; nothing is assumed from the sensor set the suite was designed for.
+record contributed), the valid samples each flow sensor delivered, whether the fusion aligned and
+what it accepted and suspended, and the stamps of the samples; nothing is assumed from the sensor
+set the suite was designed for. A sensor is named only when its samples entered the outputs: the
+navigation's only once the fusion aligned (samples that fed an alignment that never completed
+entered nothing), a flow sensor's with a mark when it delivered no valid sample, the sonic
+temperature only when it delivered valid samples.
 
 The processed bag carries them too, as the MCAP metadata record :data:`OUTPUTS_METADATA_NAME`
 (beside the imported record's own, :data:`~buoy_common.record_facts.RECORD_METADATA_NAME`), so
@@ -51,7 +55,9 @@ from buoy_nav.config import FusionConfig
 TRUE_NORTH = "true north"
 MAGNETIC_NORTH = "magnetic north"
 UNKNOWN_NORTH = "an unknown north"
-"""The run gave no heading (the fusion never aligned): its directions are NaN."""
+"""The run gave no heading (the fusion never aligned, or used none): its directions are NaN."""
+NO_NAVIGATION_BASIS = "no valid navigation (the fusion never aligned)"
+"""The :attr:`OutputFacts.north_basis` of a run whose fusion never aligned."""
 SITE_FROM_RECORD = "the imported record"
 SITE_FROM_PARAMETERS = "the parameters"
 """Where a run's site came from (:attr:`OutputFacts.site_source`)."""
@@ -88,7 +94,9 @@ class OutputFacts:
     north_basis: str
     """How the north was obtained, in words (which heading, which declination)."""
     sensors: tuple[str, ...]
-    """The sensors whose data the outputs rest on, in words, IMU first."""
+    """The sensors whose data the outputs rest on, in words: the IMU first when the fusion
+    aligned (none of the navigation's otherwise), a flow sensor that delivered no valid sample
+    marked so."""
     site_deg: tuple[float, float] | None
     """(latitude, longitude) in degrees of the site the run was given (``site.*``, else
     ``origin.*``, from the parameter files or an imported record's facts), None when it had none
@@ -123,12 +131,13 @@ class OutputFacts:
     def clockwise_from(self) -> str:
         """``clockwise from true north``, or from magnetic north with the declination not
         applied, for direction texts."""
-        if self.north == UNKNOWN_NORTH:
-            return f"clockwise from {UNKNOWN_NORTH}"
         return clockwise_from_north_text(self.north_token)
 
     def north_sentence(self) -> str:
-        """One sentence naming the north of every direction and how it was obtained."""
+        """One sentence naming the north of every direction and how it was obtained, or why
+        there is none."""
+        if self.north == UNKNOWN_NORTH:
+            return f"No heading, so no direction: {self.north_basis}."
         return f"Directions and headings are {self.clockwise_from()}: {self.north_basis}."
 
     @property
@@ -251,7 +260,11 @@ def read_output_facts(bag: str | Path) -> OutputFacts | None:
         ) from error
 
 
-_NORTH_TOKENS = {"true_north": TRUE_NORTH, "magnetic_north": MAGNETIC_NORTH}
+_NORTH_TOKENS = {
+    "true_north": TRUE_NORTH,
+    "magnetic_north": MAGNETIC_NORTH,
+    "unknown_north": UNKNOWN_NORTH,
+}
 
 
 def clockwise_from_north_text(north_token: str) -> str:
@@ -259,6 +272,8 @@ def clockwise_from_north_text(north_token: str) -> str:
     known to the caller, which says so)."""
     if north_token == "magnetic_north":
         return "clockwise from magnetic north (no declination applied)"
+    if north_token == "unknown_north":
+        return f"clockwise from {UNKNOWN_NORTH} (no heading: every direction is NaN)"
     if north_token in _NORTH_TOKENS:
         return f"clockwise from {_NORTH_TOKENS[north_token]}"
     return "clockwise from north; which north is not recorded with these data"
@@ -298,37 +313,43 @@ def north_token_of_csv(path) -> str:
 
 def output_facts(
     config: FusionConfig,
-    input_topics: Iterable[str],
+    valid_flow_samples: Mapping[str, int],
     source_use: Mapping[str, SourceUse],
     sample_stamps_s: Iterable[tuple[float, float]],
     record: ImportedRecord | None = None,
+    aligned: bool = True,
     nav_rate_hz: float = 0.0,
 ) -> OutputFacts:
-    """The facts of a run: ``config`` its effective fusion parameters, ``input_topics`` the
-    relative names of the input bag's topics, ``source_use`` what the fusion made of each
-    aiding source (by kind), ``sample_stamps_s`` the (first, last) stamp in s of each output
-    series that holds samples, ``record`` the facts of the record the bag was imported from
-    (None: not imported), ``nav_rate_hz`` the rate of the written navigation, Hz (0: every
-    solution)."""
-    topics = frozenset(input_topics)
-    used = {kind: use for kind, use in source_use.items() if use.accepted > 0}
-    north, basis = _north_of(config, used)
-    spans = [span for span in sample_stamps_s if all(math.isfinite(t) for t in span)]
+    """The facts of a run: ``config`` its effective fusion parameters, ``valid_flow_samples``
+    the number of valid samples each flow sensor topic of the input bag delivered, by relative
+    name (``anemometer/wind``, ``anemometer/temperature``, ``dvl/velocity``; a topic the bag
+    lacks is absent), ``source_use`` what the fusion made of each aiding source (by kind),
+    ``sample_stamps_s`` the (first, last) stamp in s of each output series that holds samples,
+    ``record`` the facts of the record the bag was imported from (None: not imported),
+    ``aligned`` whether the fusion completed an alignment (without one no navigation sensor
+    entered the outputs, whatever its samples fed), ``nav_rate_hz`` the rate of the written
+    navigation, Hz (0: every solution)."""
+    used = {kind: use for kind, use in source_use.items() if aligned and use.accepted > 0}
+    position_from_gnss = any(
+        POSITION_REFERENCE in _SOURCES_BY_KIND[kind].roles
+        for kind in used
+        if kind in _SOURCES_BY_KIND
+    )
     site = config.site_position_deg
+    site_source = _site_source(site, record)
+    wmm_position = _wmm_position_text(position_from_gnss, site, site_source)
+    north, basis = _north_of(config, used, aligned, wmm_position)
+    spans = [span for span in sample_stamps_s if all(math.isfinite(t) for t in span)]
     return OutputFacts(
         north=north,
         north_basis=basis,
-        sensors=_sensors_of(topics, used),
+        sensors=_sensors_of(valid_flow_samples, used, aligned),
         site_deg=site,
-        site_source=_site_source(site, record),
+        site_source=site_source,
         latitude_only_deg=config.site_latitude_only_deg,
         declination_deg=_declination_applied_deg(config, used),
         record=record,
-        position_from_gnss=any(
-            POSITION_REFERENCE in _SOURCES_BY_KIND[kind].roles
-            for kind in used
-            if kind in _SOURCES_BY_KIND
-        ),
+        position_from_gnss=position_from_gnss,
         first_sample_s=min((span[0] for span in spans), default=None),
         last_sample_s=max((span[1] for span in spans), default=None),
         nav_rate_hz=float(nav_rate_hz),
@@ -372,18 +393,36 @@ def _declination_applied_deg(config: FusionConfig, used: Mapping[str, SourceUse]
     return None
 
 
-def _north_of(config: FusionConfig, used: Mapping[str, SourceUse]) -> tuple[str, str]:
-    """The north of the headings the fusion used, and how it was obtained. Headings of
-    different norths fused together (a true one beside a magnetic one without declination) give
-    true north, with the warning that the declination biases the result."""
+def _wmm_position_text(
+    position_from_gnss: bool, site_deg: tuple[float, float] | None, site_source: str | None
+) -> str:
+    """Where the World Magnetic Model's declination was taken (deg for the site)."""
+    if position_from_gnss:
+        return "the positions of the GNSS fixes"
+    if site_deg is not None:
+        latitude, longitude = site_deg
+        return f"{latitude:.5f}, {longitude:.5f} deg (the site given by {site_source})"
+    # Unreached by a run that aligned: the alignment needs a GNSS fix or a site.
+    return "the navigation's position"
+
+
+def _north_of(
+    config: FusionConfig, used: Mapping[str, SourceUse], aligned: bool, wmm_position: str
+) -> tuple[str, str]:
+    """The north of the headings the fusion used, and how it was obtained (``wmm_position``:
+    where a declination from the World Magnetic Model was taken). Headings of different norths
+    fused together (a true one beside a magnetic one without declination) give true north, with
+    the warning that the declination biases the result."""
+    if not aligned:
+        return UNKNOWN_NORTH, NO_NAVIGATION_BASIS
     norths = []
     for kind in used:
         source = _SOURCES_BY_KIND.get(kind)
         if source is None or HEADING_REFERENCE not in source.roles:
             continue
-        norths.append(_north_of_heading(config, source.sensor))
+        norths.append(_north_of_heading(config, source.sensor, wmm_position))
     if not norths:
-        return UNKNOWN_NORTH, "the fusion used no heading, so no direction could be computed"
+        return UNKNOWN_NORTH, "the fusion aligned but used no heading source"
     references = {north for north, _ in norths}
     basis = "; ".join(dict.fromkeys(basis for _, basis in norths))
     if len(references) == 1:
@@ -394,7 +433,7 @@ def _north_of(config: FusionConfig, used: Mapping[str, SourceUse]) -> tuple[str,
     )
 
 
-def _north_of_heading(config: FusionConfig, sensor: str) -> tuple[str, str]:
+def _north_of_heading(config: FusionConfig, sensor: str, wmm_position: str) -> tuple[str, str]:
     if sensor == GNSS_ANTENNA_PAIR:
         return TRUE_NORTH, "the heading of the dual-antenna GNSS"
     if sensor == MOTION_PACK and config.ahrs_yaw_reference == "true_north":
@@ -402,7 +441,9 @@ def _north_of_heading(config: FusionConfig, sensor: str) -> tuple[str, str]:
     what = "the magnetometer's heading" if sensor == MAGNETOMETER else "the motion pack's heading"
     declination_deg = config.magnetic_declination_deg
     if math.isnan(declination_deg):
-        return TRUE_NORTH, f"{what}, corrected by the World Magnetic Model's declination"
+        return TRUE_NORTH, (
+            f"{what}, corrected by the declination of the World Magnetic Model at {wmm_position}"
+        )
     if declination_deg == 0.0:
         return MAGNETIC_NORTH, f"{what}, magnetic; magnetic.declination_deg is 0"
     return TRUE_NORTH, (
@@ -410,8 +451,10 @@ def _north_of_heading(config: FusionConfig, sensor: str) -> tuple[str, str]:
     )
 
 
-def _sensors_of(topics: frozenset[str], used: Mapping[str, SourceUse]) -> tuple[str, ...]:
-    sensors = ["IMU"]
+def _sensors_of(
+    valid_flow_samples: Mapping[str, int], used: Mapping[str, SourceUse], aligned: bool
+) -> tuple[str, ...]:
+    sensors = ["IMU"] if aligned else []
     for kind, use in used.items():
         source = _SOURCES_BY_KIND.get(kind)
         if source is None or source.sensor is None:
@@ -423,9 +466,17 @@ def _sensors_of(topics: frozenset[str], used: Mapping[str, SourceUse]) -> tuple[
             words += ", suspended by the end"
         if words not in sensors:
             sensors.append(words)
-    if WIND_RAW_TOPIC in topics:
-        with_temperature = SONIC_TEMPERATURE_TOPIC in topics
-        sensors.append("sonic anemometer" + (" with temperature" if with_temperature else ""))
-    if DVL_TOPIC in topics:
-        sensors.append("DVL")
+    if WIND_RAW_TOPIC in valid_flow_samples:
+        sensors.append(_sonic_words(valid_flow_samples))
+    if DVL_TOPIC in valid_flow_samples:
+        sensors.append("DVL" if valid_flow_samples[DVL_TOPIC] else "DVL (no valid sample)")
     return tuple(sensors)
+
+
+def _sonic_words(valid_flow_samples: Mapping[str, int]) -> str:
+    """The sonic anemometer, with its temperature only when that delivered valid samples."""
+    if not valid_flow_samples[WIND_RAW_TOPIC]:
+        return "sonic anemometer (no valid wind sample)"
+    if valid_flow_samples.get(SONIC_TEMPERATURE_TOPIC, 0) > 0:
+        return "sonic anemometer with temperature"
+    return "sonic anemometer"

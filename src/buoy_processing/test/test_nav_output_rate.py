@@ -81,9 +81,9 @@ def test_the_commands_write_every_solution_unless_asked(command):
 
 
 def test_the_facts_carry_the_rate_and_read_it_as_every_solution_when_absent():
-    topics = ("imu/data_raw", "gnss/fix", "gnss/heading", "anemometer/wind")
+    valid_flow_samples = {"anemometer/wind": 100}
     uses = {"gnss_heading": SourceUse(10)}
-    facts = output_facts(FusionConfig(), topics, uses, [(1.0, 2.0)], nav_rate_hz=5.0)
+    facts = output_facts(FusionConfig(), valid_flow_samples, uses, [(1.0, 2.0)], nav_rate_hz=5.0)
     metadata = facts.to_metadata()
     assert OutputFacts.from_metadata(metadata) == facts
     written_before = {name: value for name, value in metadata.items() if name != "nav_rate_hz"}

@@ -106,20 +106,23 @@ def navigation() -> NavigationSeries:
 
 
 GNSS_RUN = (
-    ("imu/data_raw", "gnss/fix", "gnss/vel", "gnss/heading", "anemometer/wind"),
+    {"anemometer/wind": 3000},
     {"gnss_fix": SourceUse(150), "gnss_velocity": SourceUse(150), "gnss_heading": SourceUse(150)},
 )
 MAGNETIC_MOTION_PACK_RUN = (
-    ("imu/data_raw", "imu/data", "anemometer/wind"),
+    {"anemometer/wind": 3000},
     {"ahrs": SourceUse(3000), "moored": SourceUse(150)},
 )
 
 
 def facts_of(run, stamps_ns: np.ndarray, **parameters):
-    """The facts of a run with the topics and source use of ``run``, over ``stamps_ns``."""
-    topics, uses = run
+    """The facts of a run with the valid flow samples and source use of ``run``, over
+    ``stamps_ns``."""
+    valid_flow_samples, uses = run
     config = dataclasses.replace(FusionConfig(), **parameters)
-    return output_facts(config, topics, uses, [(stamps_ns[0] * 1e-9, stamps_ns[-1] * 1e-9)])
+    return output_facts(
+        config, valid_flow_samples, uses, [(stamps_ns[0] * 1e-9, stamps_ns[-1] * 1e-9)]
+    )
 
 
 def content(valid: bool = True) -> tuple[NetcdfContent, np.ndarray, np.ndarray, np.ndarray]:

@@ -24,8 +24,9 @@ from buoy_processing.output_facts import (
     output_facts,
 )
 
-MOTION_PACK_TOPICS = ("imu/data_raw", "imu/data", "anemometer/wind", "anemometer/temperature")
-GNSS_TOPICS = ("imu/data_raw", "gnss/fix", "gnss/vel", "gnss/heading", "anemometer/wind")
+# Valid samples of the flow sensors' topics
+MOTION_PACK_TOPICS = {"anemometer/wind": 12_000, "anemometer/temperature": 12_000}
+GNSS_TOPICS = {"anemometer/wind": 600}
 
 
 def _config(**changes) -> FusionConfig:
@@ -48,7 +49,7 @@ def test_a_magnetic_motion_pack_without_declination_gives_magnetic_north():
 
 @pytest.mark.parametrize(
     ("declination_deg", "basis"),
-    [(math.nan, "World Magnetic Model"), (-12.5, "-12.5 deg")],
+    [(math.nan, "World Magnetic Model at 41.50000, -70.70000 deg"), (-12.5, "-12.5 deg")],
 )
 def test_a_magnetic_heading_with_a_declination_applied_gives_true_north(declination_deg, basis):
     config = _config(
@@ -89,6 +90,53 @@ def test_a_suspended_source_is_named_as_suspended():
     assert "magnetometer (heading), suspended by the end" in facts.sensors
 
 
+def test_the_models_declination_is_said_to_be_taken_at_the_gnss_fixes():
+    config = _config(ahrs_yaw_reference="magnetic_north")
+    uses = {"gnss_fix": SourceUse(600), "ahrs": SourceUse(6000)}
+    facts = output_facts(config, GNSS_TOPICS, uses, [])
+    assert facts.north == TRUE_NORTH
+    assert "World Magnetic Model at the positions of the GNSS fixes" in facts.north_basis
+
+
+def test_a_fusion_that_never_aligned_states_no_heading_and_no_navigation_sensor():
+    config = _config(ahrs_yaw_reference="magnetic_north")
+    # the motion pack's samples fed an alignment that never completed
+    uses = {"imu": SourceUse(3000), "ahrs": SourceUse(3000)}
+    facts = output_facts(config, MOTION_PACK_TOPICS, uses, [], aligned=False)
+    assert facts.north == UNKNOWN_NORTH
+    assert "never aligned" in facts.north_sentence()
+    assert "World Magnetic Model" not in facts.north_sentence()
+    assert "true north" not in facts.north_sentence()
+    assert facts.sensors == ("sonic anemometer with temperature",)
+    assert facts.declination_deg is None and not facts.position_known
+
+
+@pytest.mark.parametrize(
+    ("valid_flow_samples", "words"),
+    [
+        (
+            {"anemometer/wind": 0, "anemometer/temperature": 0},
+            "sonic anemometer (no valid wind sample)",
+        ),
+        (
+            {"anemometer/wind": 0, "anemometer/temperature": 50},
+            "sonic anemometer (no valid wind sample)",
+        ),
+        ({"anemometer/wind": 50, "anemometer/temperature": 0}, "sonic anemometer"),
+        ({"anemometer/wind": 50}, "sonic anemometer"),
+        (
+            {"anemometer/wind": 50, "anemometer/temperature": 50},
+            "sonic anemometer with temperature",
+        ),
+        ({"dvl/velocity": 0}, "DVL (no valid sample)"),
+        ({"dvl/velocity": 10}, "DVL"),
+    ],
+)
+def test_a_flow_sensor_is_named_with_what_it_delivered(valid_flow_samples, words):
+    facts = output_facts(FusionConfig(), valid_flow_samples, {"gnss_heading": SourceUse(9)}, [])
+    assert facts.sensors[-1] == words
+
+
 def test_a_run_without_any_heading_states_no_north():
     facts = output_facts(FusionConfig(), GNSS_TOPICS, {"gnss_heading": SourceUse(0)}, [])
     assert facts.north == UNKNOWN_NORTH
@@ -98,7 +146,7 @@ def test_a_run_without_any_heading_states_no_north():
 def test_a_true_and_an_uncorrected_magnetic_heading_fused_together_are_said_to_be_biased():
     config = _config(ahrs_yaw_reference="magnetic_north", magnetic_declination_deg=0.0)
     uses = {"gnss_fix": SourceUse(600), "gnss_heading": SourceUse(600), "ahrs": SourceUse(6000)}
-    facts = output_facts(config, (*GNSS_TOPICS, "imu/data"), uses, [])
+    facts = output_facts(config, GNSS_TOPICS, uses, [])
     assert facts.north == TRUE_NORTH
     assert "biased toward magnetic north" in facts.north_basis
 

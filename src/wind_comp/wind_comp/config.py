@@ -97,6 +97,176 @@ NOISE_SIGMAS = custom_rule(
 
 
 @dataclass(frozen=True)
+class _Threshold:
+    """A threshold of a flux test, declared as a parameter of the compensation: its default is
+    the core's (the attribute ``name`` of the core's defaults), its rule positive."""
+
+    name: str
+    meaning: str
+    unit: str = ""
+
+
+MOTION_LEFT_THRESHOLDS = (
+    _Threshold(
+        "suspect_share",
+        '"motion left" flux test: suspect where the corrected w keeps this share of '
+        "the platform's vertical velocity over the wave band, with a coherence beyond noise",
+    ),
+    _Threshold(
+        "fail_share",
+        '"motion left" flux test: fail from this share on (at least motion_left_suspect_share)',
+    ),
+    _Threshold(
+        "coherence_sigmas",
+        '"motion left" flux test: the share counts where the coherence of w with the '
+        "platform's vertical velocity over the wave band lies this many standard deviations "
+        "above that of unrelated series (motion_left_coherence_threshold)",
+    ),
+    _Threshold(
+        "max_share_standard_error",
+        '"motion left" flux test: not evaluated (its figures still published) where '
+        "the share's standard error, from the coherence, the band powers of w and of the "
+        "platform's vertical velocity and the segment count, exceeds this (a buoy that barely "
+        "heaves, at the noise of the navigation's vertical velocity)",
+    ),
+)
+"""``compensation.motion_left_<name>``: the thresholds of the "motion left" test
+(:class:`wind_comp.wave_motion_left.MotionLeftThresholds`)."""
+FLUX_QC_THRESHOLDS = (
+    _Threshold(
+        "max_spike_share",
+        "spikes test: suspect when the Vickers-Mahrt spikes of a component exceed this "
+        "share of the window's samples (Vickers and Mahrt 1997)",
+    ),
+    _Threshold(
+        "stationarity_suspect_percent",
+        "stationarity test (Foken and Wichura 1996, 5-min sub-windows): suspect above "
+        "this non-stationarity of u'w' (Foken et al. 2004: classes 1-3 below 30 %)",
+        unit="%",
+    ),
+    _Threshold(
+        "stationarity_fail_percent",
+        "stationarity test: fail above this non-stationarity of u'w' (Foken et al. "
+        "2004: classes 7-9 above 100 %)",
+        unit="%",
+    ),
+    _Threshold(
+        "itc_suspect_percent",
+        "integral turbulence characteristics test: suspect above this deviation of "
+        "sigma_w/u* from 1.3(1+2|z/L|)^(1/3), 1.25 when z/L is unknown (Foken et al. 2004)",
+        unit="%",
+    ),
+    _Threshold(
+        "itc_fail_percent",
+        "integral turbulence characteristics test: fail above this deviation (Foken et al. 2004)",
+        unit="%",
+    ),
+    _Threshold(
+        "drag_min_speed_mps",
+        "drag coefficient test: not evaluated below this mean speed (u*^2/U^2 then "
+        "follows the noise and free convection, not the wind)",
+        unit="m/s",
+    ),
+    _Threshold(
+        "drag_suspect_below_factor",
+        "drag coefficient test: suspect below this multiple of the COARE 3.5 neutral "
+        "10-m drag coefficient at the mean speed (Edson et al. 2013); never fail below",
+    ),
+    _Threshold(
+        "drag_suspect_above_factor",
+        "drag coefficient test: suspect above this multiple of the COARE 3.5 neutral "
+        "10-m drag coefficient (30-min values scatter by about 2x around it, Edson et al. 2013)",
+    ),
+    _Threshold(
+        "drag_fail_above_factor",
+        "drag coefficient test: fail above this multiple of the COARE 3.5 neutral "
+        "10-m drag coefficient (beyond the scatter of real windows; a tenfold stress error over "
+        "a sea whose drag is 0.7x the bulk relation's still exceeds it)",
+    ),
+    _Threshold(
+        "min_friction_velocity_mps",
+        "cross-wind stress test and T*: not evaluated below this u*, where the stress "
+        "is its own sampling noise",
+        unit="m/s",
+    ),
+    _Threshold(
+        "cross_wind_suspect_ratio",
+        "cross-wind stress test: suspect when |v'w'| exceeds this multiple of |u'w'| "
+        "(stress more than 45 deg off the mean wind)",
+    ),
+    _Threshold(
+        "cross_wind_fail_ratio",
+        "cross-wind stress test: fail when |v'w'| exceeds this multiple of |u'w'| "
+        "(more than 63 deg off the mean wind)",
+    ),
+    _Threshold(
+        "w_ts_correlation_suspect",
+        "buoyancy flux test: suspect when |w'Ts'|/(sigma_w sigma_T) exceeds this "
+        "(surface-layer correlations stay below about 0.6)",
+    ),
+    _Threshold(
+        "w_ts_correlation_fail",
+        "buoyancy flux test: fail when |w'Ts'|/(sigma_w sigma_T) exceeds this",
+    ),
+    _Threshold(
+        "temperature_scale_suspect_k",
+        "buoyancy flux test: suspect when |T*| = |w'Ts'|/u* exceeds this (marine "
+        "surface layers: tenths of a kelvin at most)",
+        unit="K",
+    ),
+    _Threshold(
+        "temperature_scale_fail_k",
+        "buoyancy flux test: fail when |T*| exceeds this",
+        unit="K",
+    ),
+)
+"""``compensation.flux_qc_<name>``: the thresholds of the other flux tests
+(:class:`wind_comp.flux_quality.FluxQualityLimits`)."""
+
+
+def _threshold_fields(prefix: str, core_defaults, thresholds) -> dict[str, dataclasses.Field]:
+    """The configuration fields of ``thresholds``, named ``prefix`` + name, each defaulting to
+    the attribute of that name of ``core_defaults``."""
+    return {
+        prefix + threshold.name: parameter(
+            getattr(core_defaults, threshold.name),
+            unit=threshold.unit,
+            meaning=threshold.meaning,
+            rule=POSITIVE,
+        )
+        for threshold in thresholds
+    }
+
+
+def _declared_after(anchor: str, fields: dict[str, dataclasses.Field]):
+    """A class decorator applied before ``dataclass``: the float ``fields`` become fields of
+    the class right after its field ``anchor``, in their order (the order of the parameter files
+    and of ``docs/parameters.md``)."""
+
+    def declare(cls):
+        if anchor not in cls.__annotations__:
+            raise TypeError(f"{cls.__name__} has no field {anchor} to declare fields after")
+        annotations = {}
+        for name, annotation in cls.__annotations__.items():
+            annotations[name] = annotation
+            if name == anchor:
+                annotations.update(dict.fromkeys(fields, float))
+        cls.__annotations__ = annotations
+        for name, field in fields.items():
+            setattr(cls, name, field)
+        return cls
+
+    return declare
+
+
+@dataclass(frozen=True)
+@_declared_after(
+    "flux_measurement_height_m",
+    _threshold_fields("flux_qc_", FLUX_QUALITY_DEFAULTS, FLUX_QC_THRESHOLDS),
+)
+@_declared_after(
+    "flux_despike", _threshold_fields("motion_left_", DEFAULT_THRESHOLDS, MOTION_LEFT_THRESHOLDS)
+)
 class CompensatorConfig:
     """Settings of the wind compensation, each field declared once with its default, unit,
     rule and meaning (the parameter files and ``docs/parameters.md`` are generated from them).
@@ -182,33 +352,6 @@ class CompensatorConfig:
         meaning="take the Vickers-Mahrt spikes out of the fluxes (spikes_* then count the "
         "samples taken out); false: only count them",
     )
-    motion_left_suspect_share: float = parameter(
-        DEFAULT_THRESHOLDS.suspect_share,
-        meaning='"motion left" flux test: suspect where the corrected w keeps this share of '
-        "the platform's vertical velocity over the wave band, with a coherence beyond noise",
-        rule=POSITIVE,
-    )
-    motion_left_fail_share: float = parameter(
-        DEFAULT_THRESHOLDS.fail_share,
-        meaning='"motion left" flux test: fail from this share on (at least '
-        "motion_left_suspect_share)",
-        rule=POSITIVE,
-    )
-    motion_left_coherence_sigmas: float = parameter(
-        DEFAULT_THRESHOLDS.coherence_sigmas,
-        meaning='"motion left" flux test: the share counts where the coherence of w with the '
-        "platform's vertical velocity over the wave band lies this many standard deviations "
-        "above that of unrelated series (motion_left_coherence_threshold)",
-        rule=POSITIVE,
-    )
-    motion_left_max_share_standard_error: float = parameter(
-        DEFAULT_THRESHOLDS.max_share_standard_error,
-        meaning='"motion left" flux test: not evaluated (its figures still published) where '
-        "the share's standard error, from the coherence, the band powers of w and of the "
-        "platform's vertical velocity and the segment count, exceeds this (a buoy that barely "
-        "heaves, at the noise of the navigation's vertical velocity)",
-        rule=POSITIVE,
-    )
     flux_measurement_height_m: float = parameter(
         FLUX_QUALITY_DEFAULTS.measurement_height_m,
         unit="m",
@@ -216,109 +359,6 @@ class CompensatorConfig:
         "NaN: unknown (the integral-turbulence test takes the neutral model)",
         rule=HEIGHT_OR_UNSET,
         heading="flux quality control: named QARTOD tests per flux window (wind_comp.flux_quality)",
-    )
-    flux_qc_max_spike_share: float = parameter(
-        FLUX_QUALITY_DEFAULTS.max_spike_share,
-        meaning="spikes test: suspect when the Vickers-Mahrt spikes of a component exceed this "
-        "share of the window's samples (Vickers and Mahrt 1997)",
-        rule=POSITIVE,
-    )
-    flux_qc_stationarity_suspect_percent: float = parameter(
-        FLUX_QUALITY_DEFAULTS.stationarity_suspect_percent,
-        unit="%",
-        meaning="stationarity test (Foken and Wichura 1996, 5-min sub-windows): suspect above "
-        "this non-stationarity of u'w' (Foken et al. 2004: classes 1-3 below 30 %)",
-        rule=POSITIVE,
-    )
-    flux_qc_stationarity_fail_percent: float = parameter(
-        FLUX_QUALITY_DEFAULTS.stationarity_fail_percent,
-        unit="%",
-        meaning="stationarity test: fail above this non-stationarity of u'w' (Foken et al. "
-        "2004: classes 7-9 above 100 %)",
-        rule=POSITIVE,
-    )
-    flux_qc_itc_suspect_percent: float = parameter(
-        FLUX_QUALITY_DEFAULTS.itc_suspect_percent,
-        unit="%",
-        meaning="integral turbulence characteristics test: suspect above this deviation of "
-        "sigma_w/u* from 1.3(1+2|z/L|)^(1/3), 1.25 when z/L is unknown (Foken et al. 2004)",
-        rule=POSITIVE,
-    )
-    flux_qc_itc_fail_percent: float = parameter(
-        FLUX_QUALITY_DEFAULTS.itc_fail_percent,
-        unit="%",
-        meaning="integral turbulence characteristics test: fail above this deviation "
-        "(Foken et al. 2004)",
-        rule=POSITIVE,
-    )
-    flux_qc_drag_min_speed_mps: float = parameter(
-        FLUX_QUALITY_DEFAULTS.drag_min_speed_mps,
-        unit="m/s",
-        meaning="drag coefficient test: not evaluated below this mean speed (u*^2/U^2 then "
-        "follows the noise and free convection, not the wind)",
-        rule=POSITIVE,
-    )
-    flux_qc_drag_suspect_below_factor: float = parameter(
-        FLUX_QUALITY_DEFAULTS.drag_suspect_below_factor,
-        meaning="drag coefficient test: suspect below this multiple of the COARE 3.5 neutral "
-        "10-m drag coefficient at the mean speed (Edson et al. 2013); never fail below",
-        rule=POSITIVE,
-    )
-    flux_qc_drag_suspect_above_factor: float = parameter(
-        FLUX_QUALITY_DEFAULTS.drag_suspect_above_factor,
-        meaning="drag coefficient test: suspect above this multiple of the COARE 3.5 neutral "
-        "10-m drag coefficient (30-min values scatter by about 2x around it, Edson et al. 2013)",
-        rule=POSITIVE,
-    )
-    flux_qc_drag_fail_above_factor: float = parameter(
-        FLUX_QUALITY_DEFAULTS.drag_fail_above_factor,
-        meaning="drag coefficient test: fail above this multiple of the COARE 3.5 neutral "
-        "10-m drag coefficient (beyond the scatter of real windows; a tenfold stress error over "
-        "a sea whose drag is 0.7x the bulk relation's still exceeds it)",
-        rule=POSITIVE,
-    )
-    flux_qc_min_friction_velocity_mps: float = parameter(
-        FLUX_QUALITY_DEFAULTS.min_friction_velocity_mps,
-        unit="m/s",
-        meaning="cross-wind stress test and T*: not evaluated below this u*, where the stress "
-        "is its own sampling noise",
-        rule=POSITIVE,
-    )
-    flux_qc_cross_wind_suspect_ratio: float = parameter(
-        FLUX_QUALITY_DEFAULTS.cross_wind_suspect_ratio,
-        meaning="cross-wind stress test: suspect when |v'w'| exceeds this multiple of |u'w'| "
-        "(stress more than 45 deg off the mean wind)",
-        rule=POSITIVE,
-    )
-    flux_qc_cross_wind_fail_ratio: float = parameter(
-        FLUX_QUALITY_DEFAULTS.cross_wind_fail_ratio,
-        meaning="cross-wind stress test: fail when |v'w'| exceeds this multiple of |u'w'| "
-        "(more than 63 deg off the mean wind)",
-        rule=POSITIVE,
-    )
-    flux_qc_w_ts_correlation_suspect: float = parameter(
-        FLUX_QUALITY_DEFAULTS.w_ts_correlation_suspect,
-        meaning="buoyancy flux test: suspect when |w'Ts'|/(sigma_w sigma_T) exceeds this "
-        "(surface-layer correlations stay below about 0.6)",
-        rule=POSITIVE,
-    )
-    flux_qc_w_ts_correlation_fail: float = parameter(
-        FLUX_QUALITY_DEFAULTS.w_ts_correlation_fail,
-        meaning="buoyancy flux test: fail when |w'Ts'|/(sigma_w sigma_T) exceeds this",
-        rule=POSITIVE,
-    )
-    flux_qc_temperature_scale_suspect_k: float = parameter(
-        FLUX_QUALITY_DEFAULTS.temperature_scale_suspect_k,
-        unit="K",
-        meaning="buoyancy flux test: suspect when |T*| = |w'Ts'|/u* exceeds this (marine "
-        "surface layers: tenths of a kelvin at most)",
-        rule=POSITIVE,
-    )
-    flux_qc_temperature_scale_fail_k: float = parameter(
-        FLUX_QUALITY_DEFAULTS.temperature_scale_fail_k,
-        unit="K",
-        meaning="buoyancy flux test: fail when |T*| exceeds this",
-        rule=POSITIVE,
     )
     anemometer_noise_sigma_mps: tuple[float, float, float] = parameter(
         (0.05, 0.05, 0.03),

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wind_comp.flux_quality import (
+    FluxDiagnostics,
     FluxEvidence,
     FluxQualityLimits,
     flux_diagnostics,
@@ -66,9 +67,10 @@ temperature that has stopped coming, s."""
 
 
 @dataclass(frozen=True)
-class FluxProduct:
-    """Fluxes and quality control of one window (:class:`wind_comp.fluxes.FluxWindow`, with the
-    window's bookkeeping). Fluxes are in the frame of the mean wind: u along it, w up."""
+class _FluxWindowFigures:
+    """The first fields of a :class:`FluxProduct`: the window's bookkeeping, its fluxes (in the
+    frame of the mean wind: u along it, w up), its overall flag and the "motion left" test's
+    figures and flag."""
 
     window_s: float
     window_start_s: float
@@ -98,7 +100,7 @@ class FluxProduct:
     stationarity_w_ts_percent: float
     coverage: float
     quality_flag: int
-    """The worst of the ``*_flag`` fields below (:func:`wind_comp.flux_quality.worst_flag`)."""
+    """The worst of the ``*_flag`` fields (:func:`wind_comp.flux_quality.worst_flag`)."""
     wave_band_low_hz: float
     wave_band_high_hz: float
     """The window's wave band, Hz, from its platform vertical velocity
@@ -112,19 +114,13 @@ class FluxProduct:
     motion_left_flag: int
     """QARTOD flag of the "motion left" test (a test of
     :data:`wind_comp.flux_quality.FLUX_FLAG_TESTS`, published with its figures)."""
-    stress_along_n_m2: float
-    stress_cross_n_m2: float
-    """The stress along and across the mean wind, −ρ·u'w' and −ρ·v'w', N/m²."""
-    sigma_w_mps: float
-    sigma_ts_k: float
-    obukhov_stability: float
-    itc_w_deviation_percent: float
-    drag_coefficient: float
-    drag_coefficient_neutral_10m: float
-    cross_wind_stress_ratio: float
-    w_ts_correlation: float
-    temperature_scale_k: float
-    """The values the flux tests judge (:class:`wind_comp.flux_quality.FluxDiagnostics`)."""
+
+
+@dataclass(frozen=True)
+class _FluxTestFlags:
+    """The last fields of a :class:`FluxProduct`: with ``motion_left_flag``, one per test of
+    :data:`wind_comp.flux_quality.FLUX_FLAG_TESTS`, in its order."""
+
     coverage_flag: int
     spikes_flag: int
     stationarity_flag: int
@@ -132,8 +128,17 @@ class FluxProduct:
     drag_coefficient_flag: int
     cross_wind_stress_flag: int
     buoyancy_flux_flag: int
-    """With ``motion_left_flag`` above, one per test of
-    :data:`wind_comp.flux_quality.FLUX_FLAG_TESTS`, in its order."""
+
+
+# A dataclass takes its bases' fields in reverse order of its MRO: these bases, listed last to
+# first, give the published order: the window's figures, the values the flux tests judge
+# (FluxDiagnostics, declared once in wind_comp.flux_quality), the tests' flags.
+@dataclass(frozen=True)
+class FluxProduct(_FluxTestFlags, FluxDiagnostics, _FluxWindowFigures):
+    """Fluxes and quality control of one window (:class:`wind_comp.fluxes.FluxWindow`, with the
+    window's bookkeeping): the fields of its figures, then those of
+    :class:`~wind_comp.flux_quality.FluxDiagnostics`, then the tests' flags, the order of the
+    published messages, CSV columns and NetCDF variables."""
 
 
 class FluxAverager:

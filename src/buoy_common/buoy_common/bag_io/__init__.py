@@ -7,8 +7,9 @@ kept as CDR bytes; log times are integer nanoseconds. Bags are read through rosb
 :mod:`~buoy_common.bag_io.indexed`, damaged ones through the ``mcap`` stream reader,
 :mod:`~buoy_common.bag_io.recovery`) and written through the ``mcap`` writer
 (:mod:`~buoy_common.bag_io.writing`), in a process of its own for the offline tools
-(:mod:`~buoy_common.bag_io.background`). No module here imports rclpy: bags are used offline as
-well as by the recorder and player nodes.
+(:mod:`~buoy_common.bag_io.background`). A chunk of messages at a time can be decoded by
+topic into numpy columns (:mod:`~buoy_common.bag_io.columns`). No module here imports rclpy:
+bags are used offline as well as by the recorder and player nodes.
 
 The names below are imported from their modules when first used (PEP 562), so that a process
 that needs one module, such as the offline tools' writing process, imports only that one and
@@ -22,6 +23,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from buoy_common.bag_io.background import BackgroundBagWriter
+    from buoy_common.bag_io.columns import TopicColumns, batch_columns
     from buoy_common.bag_io.common import (
         RECOVERED_BAG_EXIT_CODE,
         BagError,
@@ -42,6 +44,8 @@ _MODULE_OF = {
     "BagProgress": "progress",
     "BagReader": "reading",
     "BagWriter": "writing",
+    "TopicColumns": "columns",
+    "batch_columns": "columns",
     "Recovery": "common",
     "TopicInfo": "common",
     "jazzy_typestore": "common",
@@ -56,7 +60,9 @@ __all__ = [
     "BagReader",
     "BagWriter",
     "Recovery",
+    "TopicColumns",
     "TopicInfo",
+    "batch_columns",
     "jazzy_typestore",
 ]
 

@@ -98,6 +98,12 @@ class IndexedMcap:
     def messages(self, names: dict[str, str]) -> Iterator[BagMessage]:
         """The messages of the stored topics in ``names`` in log-time order, each under the
         name ``names`` gives its stored topic."""
+        for batch in self.batches(names):
+            yield from batch
+
+    def batches(self, names: dict[str, str]) -> Iterator[list[BagMessage]]:
+        """:meth:`messages` a list at a time: those of a chunk, or of a run of chunks whose
+        log times overlap."""
         channels = {
             channel_id: (names[topic], msgtype)
             for channel_id, (topic, msgtype) in self._channels.items()
@@ -124,7 +130,7 @@ class IndexedMcap:
                     run_last_offset = max(run_last_offset, chunks[index].offset)
                     index += 1
                 if len(run) == 1:
-                    yield from _chunk_messages(_chunk_records(stream, run[0]), channels)
+                    yield _chunk_messages(_chunk_records(stream, run[0]), channels)
                     continue
                 entries = [
                     [
@@ -135,8 +141,7 @@ class IndexedMcap:
                     ]
                     for chunk in run
                 ]
-                for *_, message in heapq.merge(*entries):
-                    yield message
+                yield [message for *_, message in heapq.merge(*entries)]
 
 
 def _span(index: ChunkIndex) -> _ChunkSpan:

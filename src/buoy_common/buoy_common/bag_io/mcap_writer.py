@@ -9,13 +9,18 @@ compression, CRCs, message indexes, statistics, summary) to the library: the fil
 byte for byte, as the library writes it (``test_bag_io`` holds the two equal).
 
 It updates the writer's statistics and chunk builder as ``add_message`` does, so it depends on
-the internals of the pinned ``mcap`` version; the test above fails if they change.
+the internals of the pinned ``mcap`` version; the test above fails if they change. When a chunk
+is closed, each channel's message index is written with its entries packed in one ``struct``
+call too: the library writes two records a message there, a quarter of the writing process's
+time (the same bytes; the same test).
 """
 
 from __future__ import annotations
 
+import itertools
 import struct
 
+from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.records import MessageIndex
 from mcap.writer import Writer
@@ -25,6 +30,20 @@ from mcap.writer import Writer
 _MESSAGE_RECORD = struct.Struct("<BQHIQQ")
 _MESSAGE_FIELDS_SIZE = _MESSAGE_RECORD.size - 9
 _OPCODE_MESSAGE = int(Opcode.MESSAGE)
+
+
+class _PackedMessageIndex(MessageIndex):
+    """A chunk's index of one channel's messages (log time, offset in the chunk), written as
+    the library writes it, its entries packed in one call."""
+
+    def write(self, stream: RecordBuilder) -> None:
+        stream.start_record(Opcode.MESSAGE_INDEX)
+        stream.write2(self.channel_id)
+        stream.write4(len(self.records) * 16)
+        stream.write(
+            struct.pack(f"<{2 * len(self.records)}Q", *itertools.chain.from_iterable(self.records))
+        )
+        stream.finish_record()
 
 
 class McapWriter(Writer):
@@ -53,7 +72,7 @@ class McapWriter(Writer):
         offset = buffer.tell()
         index = chunk.message_indices.get(channel_id)
         if index is None:
-            index = chunk.message_indices[channel_id] = MessageIndex(channel_id, [])
+            index = chunk.message_indices[channel_id] = _PackedMessageIndex(channel_id, [])
         index.records.append((log_time, offset))
         chunk.num_messages += 1
         buffer.write(

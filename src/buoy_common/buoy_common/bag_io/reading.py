@@ -15,6 +15,7 @@ than refused, and :attr:`BagReader.recovery` tells the tool, which warns:
 
 from __future__ import annotations
 
+import itertools
 from collections import Counter
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -44,6 +45,9 @@ from buoy_common.bag_io.recovery import RecoveredMcap
 # opening (besides rosbags' own parse), 14 ms of the opening's 70 ms with the pure-Python
 # loader, 1 ms with libyaml's; the tools open their input twice before the first message.
 _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+# Messages a batch of a bag read through rosbags holds (a chunk of the suite's bags holds
+# thousands).
+BATCH_MESSAGES = 4096
 
 
 def _metadata(path: Path) -> dict:
@@ -86,6 +90,12 @@ def _lists_only(path: Path, mcap_file: Path) -> bool:
         )
     except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError):
         return False
+
+
+def _in_lists(messages: Iterator[BagMessage], size: int) -> Iterator[list[BagMessage]]:
+    """``messages`` in lists of ``size`` (the last one shorter)."""
+    while batch := list(itertools.islice(messages, size)):
+        yield batch
 
 
 class BagReader:
@@ -269,6 +279,14 @@ class BagReader:
         wanted = set(self.topics if topics is None else self._resolve_topics(topics))
         return self._iterate(wanted)
 
+    def message_batches(self, topics: Iterable[str] | None = None) -> Iterator[list[BagMessage]]:
+        """:meth:`messages` handed over a list at a time (the messages of one chunk of the
+        bag's file, or up to BATCH_MESSAGES of a bag read through rosbags): the same messages
+        in the same order, checked against the listing in the same way; for decoding a topic's
+        messages together (:func:`~buoy_common.bag_io.columns.batch_columns`)."""
+        wanted = set(self.topics if topics is None else self._resolve_topics(topics))
+        return self._iterate_batches(wanted)
+
     def _iterate(self, wanted: set[str]) -> Iterator[BagMessage]:
         if not wanted:
             return
@@ -279,6 +297,22 @@ class BagReader:
                 yield message
         except Exception as error:
             raise BagError(f"bag {self.path}: corrupt message data: {one_line(error)}") from error
+        self._check_counts(wanted, seen)
+
+    def _iterate_batches(self, wanted: set[str]) -> Iterator[list[BagMessage]]:
+        if not wanted:
+            return
+        seen: Counter[str] = Counter()
+        try:
+            for batch in self._read_batches(wanted):
+                seen.update([message.topic for message in batch])
+                yield batch
+        except Exception as error:
+            raise BagError(f"bag {self.path}: corrupt message data: {one_line(error)}") from error
+        self._check_counts(wanted, seen)
+
+    def _check_counts(self, wanted: set[str], seen: Counter[str]) -> None:
+        """BagError when the messages read of a topic are not as many as the bag lists."""
         short = {
             t: (seen[t], self.topics[t].count) for t in wanted if seen[t] != self.topics[t].count
         }
@@ -305,6 +339,12 @@ class BagReader:
             BagMessage(view_of[connection.topic], connection.msgtype, log_time_ns, raw)
             for connection, log_time_ns, raw in self._reader.messages(connections=connections)
         )
+
+    def _read_batches(self, wanted: set[str]) -> Iterator[list[BagMessage]]:
+        if self._indexed is not None:
+            view_of = {self._stored_of[name]: name for name in wanted}
+            return self._indexed.batches(view_of)
+        return _in_lists(self._read(wanted), BATCH_MESSAGES)
 
     def decode(self, message: BagMessage):
         """The rosbags message object of ``message`` (fields named as in ROS, arrays as numpy)."""

@@ -51,17 +51,26 @@ _BANDS_PER_DECADE = 20
 
 
 def write_figures(data: ReportData, out_dir: Path) -> list[Path]:
-    """Draw the figures ``data`` allows into the folder ``out_dir``; return their paths."""
-    paths = [_plot_wind_time_series(data, out_dir / "wind_time_series.png")]
+    """Draw the figures ``data`` allows into the folder ``out_dir``; return their paths. A
+    figure none of whose values is finite is not drawn: an empty frame is no data."""
+    paths = []
+    if any(np.isfinite(wind).any() for _, wind, _ in wind_series(data)):
+        paths.append(_plot_wind_time_series(data, out_dir / "wind_time_series.png"))
     if data.truth_rpy_rad is not None:
         paths.append(_plot_attitude_error(data, out_dir / "attitude_error.png"))
     spectrum = _plot_vertical_wind_spectrum(data, out_dir / "vertical_wind_spectrum.png")
     if spectrum is not None:
         paths.append(spectrum)
-    if data.fluxes:
+    if _any_finite(data.fluxes, "friction_velocity_mps", "w_ts_k_mps"):
         paths.append(_plot_fluxes(data, out_dir / "wind_fluxes.png"))
+    if _any_finite(data.fluxes, "motion_left_share", "motion_left_coherence"):
         paths.append(_save(wave_motion_left_figure(data), out_dir / "wave_motion_left.png"))
     return paths
+
+
+def _any_finite(windows: list, *names: str) -> bool:
+    """Whether any of ``windows`` has a finite value of any of the fields ``names``."""
+    return any(np.isfinite(getattr(window, name)) for window in windows for name in names)
 
 
 # Drawing order and weight of each series: the truth broad and pale underneath, the corrected

@@ -255,6 +255,7 @@ def summary_markdown(
             ]
     if data is not None:
         lines += [f"Wind directions in degrees {data.north_text}. {data.sensors_sentence}", ""]
+        lines += _no_valid_wind_lines(data)
     lines += [f"![{Path(name).stem.replace('_', ' ')}]({name})" for name in figures]
     if data is not None:
         lines += ["", *_quality_table(data), "", *_filter_health_table(data), ""]
@@ -263,6 +264,23 @@ def summary_markdown(
         lines += ["", *_current_quality_table(current), ""]
         lines += current_markdown(current, title).splitlines()[2:]
     return "\n".join(lines) + "\n"
+
+
+def _no_valid_wind_lines(data: ReportData) -> list[str]:
+    """A paragraph saying that the run gave no valid wind, and why as far as the data show;
+    none when it gave some."""
+    if np.isfinite(data.corrected_wind_enu_mps).all(axis=1).any():
+        return []
+    samples = data.t_s.size
+    if not np.isfinite(data.measured_wind_sensor_mps).all(axis=1).any():
+        why = "the anemometer delivered no valid sample"
+    else:
+        why = "none could be corrected (see the quality control below)"
+    return [
+        f"**No valid wind**: none of the {samples} anemometer samples gave a wind: {why}. "
+        "No window below holds a wind value.",
+        "",
+    ]
 
 
 def _current_quality_table(current: CurrentData) -> list[str]:
@@ -316,7 +334,9 @@ def _quality_table(data: ReportData) -> list[str]:
 
 def _filter_health_table(data: ReportData) -> list[str]:
     """The filter's own 1σ of each angle and, with truth, whether its errors stay inside it."""
-    if data.nav_rpy_rad is None or data.nav_rpy_sigma_rad is None:
+    if data.nav_rpy_rad is None:
+        return ["## Filter health", "", "(the source holds no navigation solution)"]
+    if data.nav_rpy_sigma_rad is None:
         return ["## Filter health", "", "(the source carries no navigation covariance)"]
     sigma_deg = np.degrees(data.nav_rpy_sigma_rad)
     header = "| angle | 1σ at the end (deg) | median 1σ (deg) |"
