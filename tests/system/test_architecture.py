@@ -39,6 +39,7 @@ STANDARD_LIBRARY = set(sys.stdlib_module_names)
 ROSDEP_KEYS = {
     "numpy": "python3-numpy",
     "numba": "python3-numba",
+    "llvmlite": "python3-llvmlite",
     "scipy": "python3-scipy",
     "yaml": "python3-yaml",
     "rosbags": "python3-rosbags",

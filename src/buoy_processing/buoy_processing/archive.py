@@ -92,11 +92,17 @@ def parameters_digest(
     compensator_config: CompensatorConfig,
     namespace: str | None,
     remaps: tuple[str, ...],
+    nav_rate_hz: float = 0.0,
 ) -> str:
     """SHA-256 of every setting that decides the outputs: the resolved configurations (frozen
-    dataclasses of plain values, so their repr is exact) and the namespace options. A parameter
-    file edited without changing a value (a comment, the order) keeps the digest."""
+    dataclasses of plain values, so their repr is exact), the namespace options and the rate of
+    the written navigation. A parameter file edited without changing a value (a comment, the
+    order) keeps the digest."""
     text = repr((fusion_config, compensator_config, namespace, tuple(remaps)))
+    if nav_rate_hz:
+        # Every solution written, the default, keeps the digest of the bags done before the
+        # rate could be lowered: they need no redoing.
+        text += f" nav_rate_hz={float(nav_rate_hz)!r}"
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -148,6 +154,8 @@ class BagJob:
     remaps: tuple[str, ...]
     digest: str
     version: str
+    nav_rate_hz: float = 0.0
+    """Rate of the written navigation, Hz (0: every solution), as ``process_bag --nav-rate-hz``."""
 
     @property
     def in_bag(self) -> Path:
@@ -252,6 +260,7 @@ def _process(job: BagJob, started: float) -> BagOutcome:
                 overwrite=True,
                 view=view,
                 write_in_background=False,
+                nav_rate_hz=job.nav_rate_hz,
             )
             # The products table is the wind's; a bag with a DVL also gets its current CSV,
             # one with an anemometer the CSV of its fluxes.
@@ -405,8 +414,10 @@ def plan_archive(
     namespace: str | None = None,
     remaps: tuple[str, ...] = (),
     redo: bool = False,
+    nav_rate_hz: float = 0.0,
 ) -> ArchivePlan:
-    """Find the bags of ``archive`` and decide which need processing (all with ``redo``).
+    """Find the bags of ``archive`` and decide which need processing (all with ``redo``);
+    ``nav_rate_hz``: the rate of their written navigation, Hz (0: every solution).
     Raises ArchiveError for a missing archive and OutputError for an output directory that
     overlaps it."""
     archive, out = Path(archive), Path(out)
@@ -415,7 +426,7 @@ def plan_archive(
     check_outputs_apart_from_inputs([archive], [out])
     if out.exists() and not out.is_dir():
         raise ArchiveError(f"output {out} exists and is not a directory")
-    digest = parameters_digest(fusion_config, compensator_config, namespace, remaps)
+    digest = parameters_digest(fusion_config, compensator_config, namespace, remaps, nav_rate_hz)
     version = suite_version()
     jobs = [
         BagJob(
@@ -428,6 +439,7 @@ def plan_archive(
             tuple(remaps),
             digest,
             version,
+            nav_rate_hz,
         )
         for relative in find_bags(archive)
     ]

@@ -39,13 +39,15 @@ def fuse_bag(
     overwrite: bool = False,
     view: TopicView | None = None,
     smooth: bool = False,
+    nav_rate_hz: float = 0.0,
 ) -> FusedBag:
-    """Run the fusion over ``in_bag`` into ``out_bag`` (a new bag; replaced with
-    ``overwrite``), over the topics of ``view``'s namespace (the root when None), writing into
-    the same namespace; with ``smooth`` the fixed-interval smoother's solution
-    (:mod:`buoy_processing.offline_runner`). Raises BagError for a missing or unreadable bag or
-    one without the fusion's required topics, and OutputError, before anything is read or
-    written, if ``out_bag`` is, contains or lies inside ``in_bag``."""
+    """Run the fusion over ``in_bag`` into ``out_bag`` (a new bag; replaced with ``overwrite``),
+    over the topics of ``view``'s namespace (the root when None), writing into the same namespace;
+    with ``smooth`` the fixed-interval smoother's solution (:mod:`buoy_processing.offline_runner`);
+    with ``nav_rate_hz`` (Hz) above 0 the solutions at that rate only
+    (:mod:`buoy_processing.nav_output_rate`). Raises BagError for a missing or unreadable bag or one
+    without the fusion's required topics, and OutputError, before anything is read or written, if
+    ``out_bag`` is, contains or lies inside ``in_bag``."""
     started = time.monotonic()
     check_outputs_apart_from_inputs([in_bag], [out_bag])
     view = view or TopicView()
@@ -60,6 +62,7 @@ def fuse_bag(
             copied_topics=truth_topics_of(reader),
             smooth=smooth,
             overwrite=overwrite,
+            nav_rate_hz=nav_rate_hz,
             static_transforms=sensor_transforms(shared_values(config), imu_link=True),
         )
         fusion, counts = run_fusion(run)

@@ -514,6 +514,7 @@ def process_bag(
     netcdf_path=None,
     history: str = "",
     netcdf_attributes: dict[str, str] | None = None,
+    nav_rate_hz: float = 0.0,
 ) -> ProcessSummary:
     """Fuse ``in_bag`` and correct its wind and its DVL samples into ``out_bag`` (a new bag;
     replaced with ``overwrite``) and the products CSVs beside it, over the topics of ``view``'s
@@ -532,7 +533,11 @@ def process_bag(
     written there as NetCDF-CF (:mod:`buoy_processing.netcdf_output`; ``history`` is the
     command that asked for it, ``netcdf_attributes`` global attributes of the user's); an
     existing file is replaced only with ``overwrite`` (OutputError before anything is read
-    otherwise)."""
+    otherwise).
+
+    With ``nav_rate_hz`` (Hz) above 0 the bag's ``nav/*`` and ``tf`` and the NetCDF file's
+    navigation carry the solutions at that rate only; the corrections still use every solution
+    (:mod:`buoy_processing.nav_output_rate`)."""
     started = time.monotonic()
     csv_paths = products_csv_paths(out_bag)
     _check_outputs(in_bag, [out_bag, *csv_paths.values()], netcdf_path, overwrite)
@@ -544,9 +549,11 @@ def process_bag(
             flow_topics_of(reader, view),
             compensator_config,
             current_config,
-            None if netcdf_path is None else NavigationSeries(),
+            None if netcdf_path is None else NavigationSeries(nav_rate_hz),
         )
-        facts_of_run = _FactsOfRun(fusion_config, corrections, read_imported_record(reader.path))
+        facts_of_run = _FactsOfRun(
+            fusion_config, corrections, read_imported_record(reader.path), nav_rate_hz
+        )
         run = OfflineRun(
             reader,
             out_bag,
@@ -557,6 +564,7 @@ def process_bag(
             copied_topics=[*corrections.topics, *truth_topics_of(reader)],
             smooth=smooth,
             overwrite=overwrite,
+            nav_rate_hz=nav_rate_hz,
             write_in_background=write_in_background,
             static_transforms=sensor_transforms(
                 shared_values(fusion_config, compensator_config, current_config), imu_link=True
@@ -592,6 +600,7 @@ class _FactsOfRun:
     fusion_config: FusionConfig
     corrections: BagCorrections
     record: ImportedRecord | None
+    nav_rate_hz: float = 0.0
     facts: OutputFacts | None = None
 
     def __call__(self, fusion: OfflineFusion) -> dict[str, dict[str, str]]:
@@ -603,6 +612,7 @@ class _FactsOfRun:
             _sample_spans_s(self.corrections),
             self.record,
             aligned=health.alignments > 0,
+            nav_rate_hz=self.nav_rate_hz,
         )
         return self.facts.metadata_records()
 

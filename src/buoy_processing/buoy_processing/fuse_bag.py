@@ -1,7 +1,7 @@
 """``fuse_bag``: the fusion of ``fusion_node`` run over a recorded bag, as fast as it goes.
 
     fuse_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file fusion.yaml] [--overwrite]
-             [--namespace NS] [--remap FROM:=TO ...] [--smooth]
+             [--namespace NS] [--remap FROM:=TO ...] [--smooth] [--nav-rate-hz HZ]
 
 Reads the sensor topics (``imu/data_raw`` and at least one heading reference: a GNSS heading or
 baseline, ``imu/mag`` or a motion pack's ``imu/data``; GNSS fixes and velocities when present,
@@ -12,7 +12,9 @@ produced it. Truth topics (``truth/*``) are copied unchanged, so the output carr
 answer. With ``--smooth`` ``nav/*`` carry the fixed-interval smoother's solution (every sample
 estimated from the whole recording, :mod:`buoy_nav.smoother`) and ``nav/forward/odometry`` the
 forward filter's; the run reads the bag twice and keeps its records in a temporary directory
-beside OUT_BAG (about 0.35 GB per hour of 100 Hz data, removed at the end). Parameters come
+beside OUT_BAG (about 0.35 GB per hour of 100 Hz data, removed at the end). With
+``--nav-rate-hz HZ`` the solutions at that rate only are written, a subset of the full-rate
+ones with the same stamps and bytes. Parameters come
 from the same YAML files the node takes (sections ``/**`` and ``fusion_node``).
 
 A bag recorded under a namespace (``/buoy1/imu/data_raw``) is read in that namespace, and the
@@ -44,6 +46,7 @@ from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_processing.bag_facts import fusion_config_for_bag
 from buoy_processing.bag_fusion import FusedBag, fuse_bag
+from buoy_processing.nav_output_rate import add_nav_rate_argument
 from buoy_processing.offline_fusion import FUSION_TOPICS_HELP
 
 EXIT_CODES = (*INTERRUPTIBLE_EXIT_CODES, RECOVERED_BAG)
@@ -66,6 +69,7 @@ def parse_arguments(argv):
         help="write the fixed-interval smoother's solution (nav/*) and the forward filter's "
         "(nav/forward/odometry)",
     )
+    add_nav_rate_argument(parser)
     add_namespace_arguments(parser)
     return parser.parse_args(argv)
 
@@ -85,7 +89,13 @@ def main(argv=None) -> None:
             if len(views) > 1:
                 print(f"namespace {view.label} -> {out_bag}")
             fused = fuse_bag(
-                arguments.in_bag, out_bag, config, arguments.overwrite, view, arguments.smooth
+                arguments.in_bag,
+                out_bag,
+                config,
+                arguments.overwrite,
+                view,
+                arguments.smooth,
+                arguments.nav_rate_hz,
             )
             print_summary(fused, out_bag)
             if fused.recovery is not None:

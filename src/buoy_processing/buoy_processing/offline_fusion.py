@@ -46,6 +46,7 @@ from buoy_nav.fusion_messages import (
     transform_cdr,
 )
 from buoy_nav.source_health import HealthTransition, SourceStatus
+from buoy_processing.nav_output_rate import NavOutputRate
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
 """The fusion needs one of these at least: without a heading reference it cannot align."""
@@ -115,11 +116,14 @@ class OfflineFusion:
         writer: BagWriter | BackgroundBagWriter | NamespacedWriter | None,
         smoother_spill_parent: str | Path | None = None,
         smooth: bool = False,
+        nav_rate_hz: float = 0.0,
     ):
-        """``writer`` receives the ``nav/*`` and ``tf`` messages. With ``smooth`` (the filter's
-        own solutions, ``realtime_output`` off) nothing is written: the solutions are kept by
-        :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``) and
-        written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
+        """``writer`` receives the ``nav/*`` and ``tf`` messages, of every solution or, with
+        ``nav_rate_hz`` (Hz) above 0, of a subset at that rate
+        (:mod:`buoy_processing.nav_output_rate`; every solution is still returned). With ``smooth``
+        (the filter's own solutions, ``realtime_output`` off) nothing is written: the solutions are
+        kept by :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``)
+        and written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
         if smooth:
             config = dataclasses.replace(config, realtime_output=False)
         self.engine = FusionEngine(config)
@@ -132,6 +136,7 @@ class OfflineFusion:
             self.smoother = FixedIntervalSmoother(self.engine, smoother_spill_parent)
         self.stamps = StampBook()
         self.writer = writer
+        self.nav_output = NavOutputRate(nav_rate_hz)
         self.rejections: Counter[str] = Counter()
         self.first_solution_s: float | None = None
         self.last_log_time_ns = 0
@@ -178,7 +183,8 @@ class OfflineFusion:
                 smoother.add(solution, *self.stamps.exact(solution.t_s), log_time_ns)
                 continue
             values = nav_values(solution, self.stamps)
-            self._write_nav(values, log_time_ns)
+            if self.nav_output.due(values):
+                self._write_nav(values, log_time_ns)
             written.append(values)
         return written
 
@@ -199,7 +205,10 @@ class OfflineFusion:
             yield forward, smoothed, pair.log_time_ns
 
     def write_smoothed_values(self, forward: NavValues, smoothed: NavValues, log_time_ns: int):
-        """``nav/forward/odometry`` of ``forward``; ``nav/*`` and ``tf`` of ``smoothed``."""
+        """``nav/forward/odometry`` of ``forward``; ``nav/*`` and ``tf`` of ``smoothed``; nothing
+        for a solution the navigation output rate leaves out."""
+        if not self.nav_output.due(smoothed):
+            return
         self.writer.write_raw(
             FORWARD_ODOMETRY_BAG_TOPIC, ODOMETRY_MSGTYPE, log_time_ns, odometry_cdr(forward)
         )

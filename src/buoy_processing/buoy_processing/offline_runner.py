@@ -87,6 +87,9 @@ class OfflineRun:
     """Stored names of the topics copied to the output and handed to the consumer."""
     smooth: bool = False
     overwrite: bool = False
+    nav_rate_hz: float = 0.0
+    """Rate of the written ``nav/*`` and ``tf``, Hz (0: every solution); the consumer still
+    receives every solution (:mod:`buoy_processing.nav_output_rate`)."""
     write_in_background: bool = True
     """Write the bag from a process of its own, on a second core (False: in this process, for a
     caller that keeps every core busy with bags of its own)."""
@@ -153,7 +156,7 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
     with BagProgress(reader, run.label) as progress, run.open_writer() as bag_writer:
         writer = NamespacedWriter(bag_writer, run.view)
         run.write_static_transforms(writer)
-        fusion = OfflineFusion(run.config, writer)
+        fusion = OfflineFusion(run.config, writer, nav_rate_hz=run.nav_rate_hz)
         consumer.start(writer)
         log_time_ns = reader.start_ns
         for index, message in enumerate(reader.messages([*relative_of, *run.copied_topics])):
@@ -179,7 +182,9 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
     """The forward filter, the smoother's backward pass, then the smoothed solutions merged
     with the copies, fed to the consumer."""
     reader = run.reader
-    fusion = OfflineFusion(run.config, None, spill_parent_of(run.out_bag), smooth=True)
+    fusion = OfflineFusion(
+        run.config, None, spill_parent_of(run.out_bag), smooth=True, nav_rate_hz=run.nav_rate_hz
+    )
     try:
         # The writing process starts during the forward pass: until it is ready the writer
         # keeps what it is given, and the second pass produces fast.

@@ -119,6 +119,9 @@ class OutputFacts:
     record: ImportedRecord | None = None
     """The facts of the record the input bag was imported from (its start and who gave it, the
     screening of each field); None for a bag that was not imported."""
+    nav_rate_hz: float = 0.0
+    """Rate of the written navigation (``nav/*``, ``tf``, the NetCDF file's), Hz, a subset of
+    the solutions the corrections used (``--nav-rate-hz``); 0: every solution."""
 
     @property
     def position_known(self) -> bool:
@@ -205,6 +208,7 @@ class OutputFacts:
             "first_sample_s": json.dumps(self.first_sample_s),
             "last_sample_s": json.dumps(self.last_sample_s),
             "declination_deg": json.dumps(self.declination_deg),
+            "nav_rate_hz": json.dumps(self.nav_rate_hz),
         }
 
     def metadata_records(self) -> dict[str, dict[str, str]]:
@@ -236,6 +240,8 @@ class OutputFacts:
             site_source=json.loads(metadata["site_source"]),
             latitude_only_deg=json.loads(metadata["latitude_only_deg"]),
             record=record,
+            # Stored since the rate could be lowered: a bag processed before has every solution.
+            nav_rate_hz=float(json.loads(metadata.get("nav_rate_hz", "0"))),
         )
 
 
@@ -312,6 +318,7 @@ def output_facts(
     sample_stamps_s: Iterable[tuple[float, float]],
     record: ImportedRecord | None = None,
     aligned: bool = True,
+    nav_rate_hz: float = 0.0,
 ) -> OutputFacts:
     """The facts of a run: ``config`` its effective fusion parameters, ``valid_flow_samples``
     the number of valid samples each flow sensor topic of the input bag delivered, by relative
@@ -320,7 +327,8 @@ def output_facts(
     ``sample_stamps_s`` the (first, last) stamp in s of each output series that holds samples,
     ``record`` the facts of the record the bag was imported from (None: not imported),
     ``aligned`` whether the fusion completed an alignment (without one no navigation sensor
-    entered the outputs, whatever its samples fed)."""
+    entered the outputs, whatever its samples fed), ``nav_rate_hz`` the rate of the written
+    navigation, Hz (0: every solution)."""
     used = {kind: use for kind, use in source_use.items() if aligned and use.accepted > 0}
     position_from_gnss = any(
         POSITION_REFERENCE in _SOURCES_BY_KIND[kind].roles
@@ -344,6 +352,7 @@ def output_facts(
         position_from_gnss=position_from_gnss,
         first_sample_s=min((span[0] for span in spans), default=None),
         last_sample_s=max((span[1] for span in spans), default=None),
+        nav_rate_hz=float(nav_rate_hz),
     )
 
 

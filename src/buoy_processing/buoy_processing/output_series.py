@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterable
 
 import numpy as np
 
+from buoy_processing.nav_output_rate import NavOutputRate
 from wind_comp.compensator import CorrectedBatch, SampleStatus
 
 NANOSECONDS = 1_000_000_000
@@ -56,16 +57,22 @@ class FlowSeries:
 
 
 class NavigationSeries:
-    """The navigation solutions handed to the corrections (``nav/odometry`` and ``nav/fix``)."""
+    """The navigation solutions handed to the corrections (``nav/odometry`` and ``nav/fix``),
+    every one or those the bag's ``nav/*`` carry at a lower rate."""
 
-    def __init__(self):
+    def __init__(self, nav_rate_hz: float = 0.0):
+        """nav_rate_hz: keep the solutions at this rate, Hz, as the bag's ``nav/*`` are
+        written (:mod:`buoy_processing.nav_output_rate`); 0: every solution."""
         self._stamps_ns = array("q")
         self._values = array("d")
+        self._output = NavOutputRate(nav_rate_hz)
 
     def add(self, solutions: Iterable) -> None:
-        """Solutions as :class:`buoy_nav.fusion_messages.NavValues`."""
+        """Solutions as :class:`buoy_nav.fusion_messages.NavValues`, in stamp order."""
         values = self._values
         for solution in solutions:
+            if not self._output.due(solution):
+                continue
             self._stamps_ns.append(solution.sec * NANOSECONDS + solution.nanosec)
             values.extend((solution.latitude_deg, solution.longitude_deg, solution.altitude_m))
             values.extend(solution.attitude_xyzw)

@@ -1,16 +1,16 @@
 """``process_archive``: ``process_bag`` over every bag of a directory tree, in parallel.
 
-    process_archive ARCHIVE OUT [--params-file buoy.yaml ...] [--redo]
+    process_archive ARCHIVE OUT [--params-file buoy.yaml ...] [--redo] [--nav-rate-hz HZ]
                     [--workers N | --scheduler tcp://HOST:8786]
                     [--namespace NS] [--remap FROM:=TO ...]
 
-Each bag under ARCHIVE (``ARCHIVE/REL``) is processed as ``process_bag ARCHIVE/REL OUT/REL``
-would process it, with the same parameter files and namespace options; the wind products of the
-whole archive go to ``OUT/wind_products.parquet``, one row per window, naming its bag. Bags run
-on N local processes (default: one per core) or, with ``--scheduler``, on the workers of a Dask
-distributed scheduler. Bags done by an earlier run with the same parameters are skipped (all
-redone with ``--redo``); a bag that fails is listed at the end with its reason and the others go
-on. See :mod:`buoy_processing.archive`.
+Each bag under ARCHIVE (``ARCHIVE/REL``) is processed as ``process_bag ARCHIVE/REL OUT/REL`` would
+process it, with the same parameter files, namespace options and ``--nav-rate-hz``; the wind
+products of the whole archive go to ``OUT/wind_products.parquet``, one row per window, naming its
+bag. Bags run on N local processes (default: one per core) or, with ``--scheduler``, on the workers
+of a Dask distributed scheduler. Bags done by an earlier run with the same parameters are skipped
+(all redone with ``--redo``); a bag that fails is listed at the end with its reason and the others
+go on. See :mod:`buoy_processing.archive`.
 
 Exit codes: 0 every bag done; 1 some bags failed (listed on stderr); 2 bad arguments,
 parameters, archive or scheduler (one line on stderr); 3 every bag done, but some were cut short
@@ -38,6 +38,7 @@ from buoy_processing.archive import (
     run_archive,
 )
 from buoy_processing.archive_pools import DaskPool, LocalPool, default_workers
+from buoy_processing.nav_output_rate import add_nav_rate_argument
 from wind_comp.config import compensator_config_from_files
 
 EXIT_FAILED_BAGS = 1
@@ -71,6 +72,7 @@ def parse_arguments(argv):
         help="ROS parameter YAML as given to the nodes (repeatable; later files win)",
     )
     add_namespace_arguments(parser)
+    add_nav_rate_argument(parser)
     where = parser.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",
@@ -146,6 +148,7 @@ def run(arguments) -> int:
             arguments.namespace,
             remaps,
             arguments.redo,
+            arguments.nav_rate_hz,
         )
         if arguments.scheduler:
             pool = DaskPool(arguments.scheduler)

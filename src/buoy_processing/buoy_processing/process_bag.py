@@ -3,7 +3,7 @@ the nodes.
 
     process_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file compensation.yaml]
                 [--params-file current.yaml] [--overwrite] [--namespace NS]
-                [--remap FROM:=TO ...] [--smooth]
+                [--remap FROM:=TO ...] [--smooth] [--nav-rate-hz HZ]
                 [--netcdf PATH [--netcdf-attribute NAME=VALUE ...]]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
@@ -26,7 +26,10 @@ buoys each namespace gets its own file, named after it (``out.nc`` → ``out_buo
 With ``--smooth`` ``nav/*`` carry the fixed-interval smoother's solution, the wind and the
 current are computed with the smoothed attitude and velocity, and the forward filter's odometry
 is kept as ``nav/forward/odometry`` (the bag is read twice; temporary records beside OUT_BAG,
-about 0.35 GB per hour of 100 Hz data). Parameters come from the same YAML files the nodes take.
+about 0.35 GB per hour of 100 Hz data). With ``--nav-rate-hz HZ`` ``nav/*``, ``tf`` (and the
+NetCDF file's navigation) carry the solutions at that rate only, a subset with the same stamps
+and bytes, while the wind and the current are still corrected with every solution; the
+processed bag's facts state the rate. Parameters come from the same YAML files the nodes take.
 Namespaces and remappings as for ``fuse_bag``: a bag recorded under one namespace is read and
 written in it; a bag of several buoys gives one output per namespace holding an anemometer or a
 DVL (``OUT_BAG/buoy1`` and its CSVs ``OUT_BAG/buoy1_wind_products.csv``, ...).
@@ -74,6 +77,7 @@ from buoy_common.parameters import ParameterError
 from buoy_common.safe_output import OutputError
 from buoy_processing.bag_facts import fusion_config_for_bag
 from buoy_processing.bag_processing import ProcessSummary, process_bag
+from buoy_processing.nav_output_rate import add_nav_rate_argument
 from buoy_processing.offline_fusion import FUSION_TOPICS_HELP
 from wind_comp.config import (
     COMPENSATION_PARAMETER_PREFIX,
@@ -119,6 +123,7 @@ def parse_arguments(argv):
         help="correct the wind and the current with the fixed-interval smoother's navigation "
         "(nav/*); the forward filter's odometry goes to nav/forward/odometry",
     )
+    add_nav_rate_argument(parser)
     parser.add_argument(
         "--netcdf",
         metavar="PATH",
@@ -162,6 +167,11 @@ def print_summary(summary: ProcessSummary, out_bag: str, netcdf_path: Path | Non
         print(f"outputs: {summary.facts.north_sentence()}")
         print(f"outputs: sensors used: {summary.facts.sensor_text()}")
         print(f"outputs: {summary.facts.site_text()}")
+        if summary.facts.nav_rate_hz > 0:
+            print(
+                f"outputs: navigation written at {summary.facts.nav_rate_hz:g} Hz; the "
+                "corrections used every solution"
+            )
     written = [str(out_bag)]
     for name, topic, correction in (
         ("wind", WIND_RAW_TOPIC, summary.wind),
@@ -278,6 +288,7 @@ def main(argv=None) -> None:
                 netcdf_path=netcdf_path,
                 history=shlex.join(["process_bag", *argv]),
                 netcdf_attributes=dict(arguments.netcdf_attribute),
+                nav_rate_hz=arguments.nav_rate_hz,
             )
             print_summary(summary, out_bag, netcdf_path)
             for correction, topic, expected_frame_id, parameter, samples_name in (

@@ -139,7 +139,7 @@ def test_malformed_odometry_is_rejected_with_its_reason(change, reason):
             rejected[error.reason] = rejected.get(error.reason, 0) + 1
     assert rejected == {reason: 1}
     pipeline.ready()
-    assert pipeline.compensator.nav_track.n_accepted == 2
+    assert pipeline.n_nav_accepted == 2
 
 
 def test_anemometer_sample_round_trip_and_rejections():

@@ -11,7 +11,6 @@ from wind_comp.flow_uncertainty import (
     bound_of_correlated_sum,
     corrected_flow_covariance_enu,
     horizontal_and_vertical_sigma,
-    skew_matrices,
     window_mean_covariance_enu,
 )
 from wind_comp.miller import miller_correction, mounting_rotation_from_rpy_deg
@@ -153,10 +152,40 @@ def test_a_batch_gives_each_sample_what_it_gives_alone():
         np.testing.assert_array_equal(batch[i], alone[0])
 
 
-def test_skew_matrices_are_the_cross_product():
-    rng = np.random.default_rng(0)
-    v, u = rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
-    np.testing.assert_allclose(np.einsum("nij,nj->ni", skew_matrices(v), u), np.cross(v, u))
+def _skew(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def test_the_compiled_covariance_is_the_first_order_formula():
+    """The module docstring's formula with numpy's matrices, sample by sample, against the
+    compiled loop over a batch: equal to rounding (1e-14 of each matrix's largest element)."""
+    rng = np.random.default_rng(3)
+    n = 50
+    rotations = Rotation.random(n, random_state=5).as_matrix()
+    covariances = [
+        np.stack([_random_covariance(rng, 3, np.full(3, s)) for _ in range(n)])
+        for s in (0.01, 0.2, 0.03)
+    ]
+    noises = np.stack([_random_covariance(rng, 3, np.full(3, 0.05)) for _ in range(n)])
+    flows, rates = rng.normal(size=(n, 3)) * 5, rng.normal(size=(n, 3)) * 0.2
+    mounting = MOUNTING.as_matrix()
+    compiled = corrected_flow_covariance_enu(
+        rotations, mounting, LEVER_ARM_M, flows, rates, *covariances, noises
+    )
+    for i in range(n):
+        rotation = rotations[i]
+        a = rotation @ (mounting @ flows[i] + np.cross(rates[i], LEVER_ARM_M))
+        rate_jacobian = rotation @ _skew(LEVER_ARM_M)
+        terms = [
+            _skew(a) @ covariances[0][i] @ _skew(a).T,
+            covariances[1][i],
+            rate_jacobian @ covariances[2][i] @ rate_jacobian.T,
+        ]
+        roots = [np.sqrt(np.trace(term)) for term in terms]
+        navigation = sum(term * sum(roots) / root for term, root in zip(terms, roots, strict=True))
+        sensor = rotation @ mounting @ noises[i] @ (rotation @ mounting).T
+        for ours, formula in ((compiled.navigation[i], navigation), (compiled.sensor[i], sensor)):
+            np.testing.assert_allclose(ours, formula, rtol=0, atol=1e-14 * np.abs(formula).max())
 
 
 def test_horizontal_and_vertical_sigma():

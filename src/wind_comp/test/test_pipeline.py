@@ -14,7 +14,7 @@ from wind_comp.compensation_messages import FlowSample
 from wind_comp.compensator import SampleStatus
 from wind_comp.config import CompensatorConfig
 from wind_comp.flux_products import FluxProduct
-from wind_comp.pipeline import level_rate_components, wind_pipeline
+from wind_comp.pipeline import NAV_SAMPLES_HELD_AT_MOST, level_rate_components, wind_pipeline
 
 RNG = np.random.default_rng(31)
 LEVER_ARM_M = (0.2, -0.1, 3.0)
@@ -221,7 +221,7 @@ def test_rejections_are_reported_and_every_sample_gets_its_output():
         SampleStatus.INVALID_STAMP,
         SampleStatus.INVALID_MEASUREMENT,
     ]
-    assert pipeline.compensator.nav_track.n_accepted == 2
+    assert pipeline.n_nav_accepted == 2
 
 
 def test_earth_rate_removal_inverts_what_a_gyro_senses():
@@ -299,3 +299,27 @@ def test_navigation_too_uncertain_corrects_no_wind_alike_live_and_offline():
         status, wind, _, _ = feed(messages, wind_per_stretch)
         np.testing.assert_array_equal(status, live_status)
         np.testing.assert_array_equal(wind, live_wind)
+
+
+def test_navigation_waits_for_a_sample_it_can_decide_and_never_without_bound():
+    """Live, navigation stamped before every waiting sample is held back, not handed over at
+    each message; a sensor that stops leaves at most a stretch of it held."""
+    pipeline = wind_pipeline(CONFIG)
+    held_at_most = NAV_SAMPLES_HELD_AT_MOST
+    stamps_s = np.arange(3 * held_at_most) / NAV_RATE_HZ
+    handed_over = []
+    for odometry in odometry_messages(stamps_s):
+        pipeline.add_odometry(*odometry)
+        pipeline.ready()
+        handed_over.append(pipeline.compensator.nav_track.n_accepted)
+    assert max(np.diff([0, *handed_over])) == held_at_most
+    assert len(stamps_s) - handed_over[-1] < held_at_most
+    assert pipeline.n_nav_accepted == len(stamps_s)
+    # A sample stamped after the navigation so far is decided by the first navigation after it.
+    t_s = stamps_s[-1] + 0.005
+    pipeline.add_sample(anemometer_samples(np.array([t_s]))[0])
+    assert len(pipeline.ready().samples) == 0
+    pipeline.add_odometry(*odometry_messages(np.array([t_s - 0.002]))[0])
+    assert len(pipeline.ready().samples) == 0
+    pipeline.add_odometry(*odometry_messages(np.array([t_s + 0.005]))[0])
+    assert pipeline.ready().samples.status.tolist() == [SampleStatus.VALID]

@@ -366,7 +366,7 @@ class CorrectionNode(FlushingNode):
         values.update(
             {
                 "nav_samples_in": self._counters["nav_in"],
-                "nav_samples_accepted": self.pipeline.compensator.nav_track.n_accepted,
+                "nav_samples_accepted": self.pipeline.n_nav_accepted,
                 "fix_messages_in": self._counters["fix_in"],
                 "latitude_deg": self.pipeline.latitude_deg,
                 f"{name}_rate_hz": new["samples_in"] / period_s,

@@ -29,13 +29,9 @@ from typing import NamedTuple
 import numpy as np
 
 from buoy_common.contract import Reason
-from buoy_nav.rotations import rotation_matrix_elements
-from wind_comp.flow_uncertainty import (
-    FlowCovariance,
-    corrected_flow_covariance_enu,
-    horizontal_and_vertical_sigma,
-)
-from wind_comp.miller import miller_components, mounting_rotation_from_rpy_deg
+from wind_comp.correction_kernel import correct_samples
+from wind_comp.flow_uncertainty import FlowCovariance, horizontal_and_vertical_sigma
+from wind_comp.miller import mounting_rotation_from_rpy_deg
 from wind_comp.nav_interpolation import InterpolatedNav, InterpolationStatus, NavTrack
 
 
@@ -204,6 +200,9 @@ _N_OUTPUTS = 4
 """Output vectors per sample: the corrected flow and its three Miller terms."""
 _N_COVARIANCES = 2
 """Output covariances per sample: the navigation's part and the sensor noise's."""
+_ROW_SHAPES = ((4,), (3,), (3,), (3, 3), (3, 3), (3, 3), (3,), (3, 3))
+"""Shape of one row of each per-sample argument of the compiled correction: attitude, rate,
+velocity, their three covariances, the flow and its noise covariance."""
 
 
 class _Corrector:
@@ -216,8 +215,10 @@ class _Corrector:
         self._mounting_matrix = mounting_matrix
         self._mounting_elements = tuple(mounting_matrix.ravel().tolist())
         self._lever_arm_elements_body_m = tuple(float(c) for c in sensor.position_body_m)
-        self._lever_arm_body_m = np.array(self._lever_arm_elements_body_m)
         self._sigma_limits = sensor.sigma_limits
+        # The compiled correction is built (or loaded from numba's cache) now, when a node
+        # starts, so that no sample waits for the compiler.
+        self._correct_rows(*(np.empty((0, *shape)) for shape in _ROW_SHAPES))
 
     def correct(self, track: NavTrack, stamps_s, flows_mps, noises_m2s2, as_of_newest_s):
         """Return (N,) statuses (``_PENDING`` while navigation may still bracket a stamp), a
@@ -234,53 +235,56 @@ class _Corrector:
         outputs = np.full((_N_OUTPUTS, stamps_s.shape[0], 3), np.nan)
         covariances = np.full((_N_COVARIANCES, stamps_s.shape[0], 3, 3), np.nan)
         if np.any(nav.valid):
-            rows = nav.valid
-            covariance = self._covariance(flows_mps[rows], noises_m2s2[rows], nav, rows)
-            beyond = self._sigma_limits.exceeded(covariance.total)
-            kept = np.flatnonzero(rows)[~beyond]
-            status[np.flatnonzero(rows)[beyond]] = SampleStatus.UNCERTAINTY_TOO_LARGE
-            outputs[:, kept] = self._miller_terms(flows_mps[kept], nav, kept)
-            covariances[:, kept] = np.stack(covariance)[:, ~beyond]
+            rows = np.flatnonzero(nav.valid)
+            terms, covariance = self._corrected(flows_mps[rows], noises_m2s2[rows], nav, rows)
+            beyond = self._sigma_limits.exceeded(covariance[0] + covariance[1])
+            status[rows[beyond]] = SampleStatus.UNCERTAINTY_TOO_LARGE
+            kept = rows[~beyond]
+            outputs[:, kept] = terms[:, ~beyond]
+            covariances[:, kept] = covariance[:, ~beyond]
         return status, outputs, covariances
 
-    def _covariance(self, flows_mps, noises_m2s2, nav: InterpolatedNav, rows) -> FlowCovariance:
-        """The ENU covariance (m²/s²) of (M, 3) flows in sensor axes with noise covariances
-        (M, 3, 3) (sensor axes, m²/s²), corrected with the navigation's ``rows``."""
-        rotation_nb = np.stack(
-            rotation_matrix_elements(*nav.attitude_xyzw[rows].T), axis=-1
-        ).reshape(-1, 3, 3)
-        return corrected_flow_covariance_enu(
-            rotation_nb,
-            self._mounting_matrix,
-            self._lever_arm_body_m,
-            flows_mps,
+    def _corrected(self, flows_mps, noises_m2s2, nav: InterpolatedNav, rows):
+        """The Miller terms (4, M, 3: the flow over ground and the tilt, rotation and
+        translation terms, ENU m/s) and the covariance (2, M, 3, 3: navigation and sensor parts,
+        ENU m²/s²) of (M, 3) flows in sensor axes with noise covariances (M, 3, 3, sensor axes,
+        m²/s²), corrected with the navigation's ``rows`` (:mod:`wind_comp.correction_kernel`)."""
+        return self._correct_rows(
+            nav.attitude_xyzw[rows],
             nav.angular_rate_body_rad_s[rows],
+            nav.velocity_enu_mps[rows],
             nav.attitude_covariance_enu_rad2[rows],
             nav.velocity_covariance_enu_m2s2[rows],
             nav.angular_rate_covariance_body_rad2s2[rows],
-            noises_m2s2,
+            flows_mps,
+            np.ascontiguousarray(noises_m2s2),
         )
 
-    def _miller_terms(self, flows_mps, nav: InterpolatedNav, rows) -> np.ndarray:
-        """(4, M, 3): the flow over ground and the tilt, rotation and translation terms, ENU
-        m/s, of (M, 3) flows in sensor axes with the navigation's ``rows``."""
-        terms = miller_components(
-            tuple(flows_mps.T),
-            rotation_matrix_elements(*nav.attitude_xyzw[rows].T),
-            tuple(nav.angular_rate_body_rad_s[rows].T),
-            tuple(nav.velocity_enu_mps[rows].T),
+    def _correct_rows(self, *rows) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`~wind_comp.correction_kernel.correct_samples` of M rows of each per-sample
+        argument (in its order, shapes :data:`_ROW_SHAPES`) with this sensor's mounting and
+        lever arm: the terms (4, M, 3) and the covariances (2, M, 3, 3)."""
+        n_rows = rows[0].shape[0]
+        terms = np.empty((_N_OUTPUTS, n_rows, 3))
+        covariance = np.empty((_N_COVARIANCES, n_rows, 3, 3))
+        correct_samples(
+            *rows,
+            self._mounting_matrix,
             self._mounting_elements,
             self._lever_arm_elements_body_m,
+            terms,
+            covariance,
         )
-        return np.array(terms).transpose(0, 2, 1)
+        return terms, covariance
 
 
-_NOTHING_DECIDED = CorrectedBatch(
+NOTHING_DECIDED = CorrectedBatch(
     np.empty(0),
     np.empty(0, dtype=np.int8),
     *(np.empty((0, 3)) for _ in range(5)),
     FlowCovariance(np.empty((0, 3, 3)), np.empty((0, 3, 3))),
 )
+"""The batch of no samples."""
 _INITIAL_CAPACITY = 64
 
 
@@ -322,6 +326,14 @@ class FlowCompensator:
     def n_pending(self) -> int:
         """Sensor samples received but not yet returned."""
         return self._tail - self._head
+
+    @property
+    def first_undecided_stamp_s(self) -> float:
+        """Stamp (s) of the oldest sample still waiting for navigation (inf when none waits):
+        navigation stamped before it can decide nothing that could be returned."""
+        if self._first_pending == self._tail:
+            return math.inf
+        return float(self._t_s[self._first_pending])
 
     def add_nav(
         self,
@@ -485,7 +497,7 @@ class FlowCompensator:
 
     def _pop_decided(self) -> CorrectedBatch:
         if self._head == self._first_pending:
-            return _NOTHING_DECIDED
+            return NOTHING_DECIDED
         done = slice(self._head, self._first_pending)
         self._head = self._first_pending
         status = self._status[done].copy()

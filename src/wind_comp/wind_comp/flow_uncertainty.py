@@ -21,24 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-_TRACE_FLOOR = 1e-300
-"""Below this a term's trace counts as zero (it gets no weight and adds nothing)."""
-
-
-def skew_matrices(vectors: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) cross-product matrices [v×] of (N, 3) vectors (so that [v×]·u = v × u)."""
-    # Element by element: a few microseconds for the one sample the live node corrects.
-    v = np.asarray(vectors, dtype=float)
-    skew = np.zeros((*v.shape[:-1], 3, 3))
-    skew[..., 0, 1], skew[..., 0, 2] = -v[..., 2], v[..., 1]
-    skew[..., 1, 0], skew[..., 1, 2] = v[..., 2], -v[..., 0]
-    skew[..., 2, 0], skew[..., 2, 1] = -v[..., 1], v[..., 0]
-    return skew
-
-
-def sandwich(jacobians: np.ndarray, covariances: np.ndarray) -> np.ndarray:
-    """J·P·Jᵀ for (N, 3, 3) Jacobians and (N, 3, 3) or (3, 3) covariances."""
-    return jacobians @ covariances @ np.swapaxes(jacobians, -1, -2)
+from wind_comp.flow_covariance_kernel import TRACE_FLOOR, flow_covariances_enu
 
 
 def bound_of_correlated_sum(terms) -> np.ndarray:
@@ -49,7 +32,7 @@ def bound_of_correlated_sum(terms) -> np.ndarray:
     roots = np.sqrt(np.maximum(np.trace(terms, axis1=-2, axis2=-1), 0.0))
     total_root = np.sum(roots, axis=0)
     # A_i / w_i = A_i · Σ√tr / √tr_i; a term of zero trace is the zero matrix.
-    scale = np.where(roots > _TRACE_FLOOR, total_root / np.maximum(roots, _TRACE_FLOOR), 0.0)
+    scale = np.where(roots > TRACE_FLOOR, total_root / np.maximum(roots, TRACE_FLOOR), 0.0)
     return np.sum(terms * scale[..., None, None], axis=0)
 
 
@@ -89,26 +72,31 @@ def corrected_flow_covariance_enu(
             axes, rad².
         velocity_covariance_enu_m2s2: (N, 3, 3) ENU velocity error of the body origin, m²/s².
         angular_rate_covariance_body_rad2s2: (N, 3, 3) body rate error, body axes, rad²/s².
-        sensor_noise_covariance_m2s2: (3, 3) the sensor's noise in its own axes, m²/s².
+        sensor_noise_covariance_m2s2: (3, 3) the sensor's noise in its own axes, or (N, 3, 3)
+            each sample's, m²/s².
+
+    Compiled (:mod:`wind_comp.flow_covariance_kernel`): one sample costs microseconds, and
+    each sample's covariance is the same alone or in a batch.
     """
-    rotation_nb = np.asarray(rotation_nb, dtype=float)
-    mounting = np.asarray(mounting_rotation_bs, dtype=float)
-    lever_arm = np.asarray(lever_arm_body_m, dtype=float)
-    # Not flows @ mountingᵀ: a matrix product of (N, 3) rows may sum in another order for
-    # N = 1 than for a batch, and the live node corrects one sample at a time.
-    flow_body = np.einsum("ij,nj->ni", mounting, np.asarray(flow_sensor_mps, dtype=float))
-    rotation_velocity_body = np.einsum(
-        "nij,j->ni", skew_matrices(angular_rate_body_rad_s), lever_arm
-    )  # ω × B
-    relative_enu = np.einsum("nij,nj->ni", rotation_nb, flow_body + rotation_velocity_body)
-    attitude_term = sandwich(skew_matrices(relative_enu), attitude_covariance_enu_rad2)
-    rate_jacobian = rotation_nb @ skew_matrices(np.broadcast_to(lever_arm, relative_enu.shape))
-    rate_term = sandwich(rate_jacobian, angular_rate_covariance_body_rad2s2)
-    navigation = bound_of_correlated_sum(
-        [attitude_term, np.asarray(velocity_covariance_enu_m2s2, dtype=float), rate_term]
+    rotation_nb = np.ascontiguousarray(rotation_nb, dtype=float)
+    n_samples = rotation_nb.shape[0]
+    navigation = np.empty((n_samples, 3, 3))
+    sensor = np.empty((n_samples, 3, 3))
+    noise = np.asarray(sensor_noise_covariance_m2s2, dtype=float)
+    flow_covariances_enu(
+        rotation_nb,
+        np.asarray(mounting_rotation_bs, dtype=float),
+        np.asarray(lever_arm_body_m, dtype=float),
+        np.asarray(flow_sensor_mps, dtype=float),
+        np.asarray(angular_rate_body_rad_s, dtype=float),
+        np.asarray(attitude_covariance_enu_rad2, dtype=float),
+        np.asarray(velocity_covariance_enu_m2s2, dtype=float),
+        np.asarray(angular_rate_covariance_body_rad2s2, dtype=float),
+        np.broadcast_to(noise, (n_samples, 3, 3)),
+        navigation,
+        sensor,
     )
-    sensor_jacobian = rotation_nb @ mounting
-    return FlowCovariance(navigation, sandwich(sensor_jacobian, sensor_noise_covariance_m2s2))
+    return FlowCovariance(navigation, sensor)
 
 
 def window_mean_covariance_enu(covariance: FlowCovariance) -> np.ndarray:

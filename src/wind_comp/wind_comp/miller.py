@@ -21,7 +21,8 @@ at V_w = −v_DVL, and with the DVL's mounting R_bd and position l in place of R
     current = R_nb · R_bd · (−v_DVL)  +  R_nb · (ω × l)  +  V_b.
 
 One component-wise routine, :func:`miller_components`, corrects one sample (floats, live) or a
-whole recording (arrays, offline), with bit-identical results.
+whole recording (arrays, offline), with bit-identical results; the compensator runs it compiled
+(numba, :mod:`wind_comp.correction_kernel`), sample by sample, on the same floats.
 """
 
 from dataclasses import dataclass
@@ -244,11 +245,11 @@ def miller_components(
     tilt_term = rotate_components(attitude_elements_nb, flow_body)
     lever_arm_velocity_body = cross_components(angular_rate_body_rad_s, sensor_position_body_m)
     rotation_term = rotate_components(attitude_elements_nb, lever_arm_velocity_body)
-    translation_term = tuple(velocity_enu_mps)
-    flow = tuple(
-        tilt + rotation + translation
-        for tilt, rotation, translation in zip(
-            tilt_term, rotation_term, translation_term, strict=True
-        )
+    east, north, up = velocity_enu_mps
+    translation_term = (east, north, up)
+    flow = (
+        tilt_term[0] + rotation_term[0] + translation_term[0],
+        tilt_term[1] + rotation_term[1] + translation_term[1],
+        tilt_term[2] + rotation_term[2] + translation_term[2],
     )
     return flow, tilt_term, rotation_term, translation_term

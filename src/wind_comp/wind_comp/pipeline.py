@@ -42,7 +42,13 @@ from buoy_common.contract import Reason
 from buoy_nav.earth import earth_rate_enu_components
 from buoy_nav.rotations import rotate_by_quaternion_components, rotation_matrix_elements
 from wind_comp.compensation_messages import FlowSample
-from wind_comp.compensator import CorrectedBatch, FlowCompensator, FlowSensor, SampleStatus
+from wind_comp.compensator import (
+    NOTHING_DECIDED,
+    CorrectedBatch,
+    FlowCompensator,
+    FlowSensor,
+    SampleStatus,
+)
 from wind_comp.config import CompensatorConfig, CurrentConfig
 from wind_comp.flux_products import FluxAverager, FluxProduct
 from wind_comp.nav_interpolation import quaternion_norm
@@ -99,6 +105,10 @@ _LINEAR_BLOCK = operator.itemgetter(0, 1, 2, 6, 7, 8, 12, 13, 14)
 _ANGULAR_BLOCK = operator.itemgetter(21, 22, 23, 27, 28, 29, 33, 34, 35)
 """The 3×3 angular block of a row-major 6×6 covariance."""
 
+
+NAV_SAMPLES_HELD_AT_MOST = 256
+"""Navigation samples held while they can decide no sensor sample (2.56 s at 100 Hz: a sensor
+that stops must not make the pipeline hold the navigation without bound)."""
 
 VALID = "valid"
 """The outcome of a valid sample in :meth:`CompensationPipeline.status_counts`."""
@@ -245,8 +255,28 @@ class CompensationPipeline:
 
     def ready(self) -> CompensationOutput:
         """Every sample that can now be decided, in input order, and the windows it closes."""
+        # Navigation stamped before every waiting sample decides nothing: it waits here, up to
+        # a stretch, and goes to the compensator with what can decide a sample (the decisions
+        # depend on the order of arrival, not on when results are asked for: see the module
+        # docstring), sparing the live node a hand-over per navigation message.
+        if (
+            not self._samples
+            and len(self._nav) < NAV_SAMPLES_HELD_AT_MOST * _NAV_FIELDS
+            and self._newest_nav_held_s() < self.compensator.first_undecided_stamp_s
+        ):
+            return CompensationOutput(NOTHING_DECIDED, [])
         self._hand_over()
         return self._output(self.compensator.ready())
+
+    def _newest_nav_held_s(self) -> float:
+        """Stamp (s) of the newest navigation sample not yet handed over (-inf: none)."""
+        return self._nav[-_NAV_FIELDS] if self._nav else -math.inf
+
+    @property
+    def n_nav_accepted(self) -> int:
+        """Navigation samples accepted so far (those still held here included)."""
+        self._hand_over()
+        return self.compensator.nav_track.n_accepted
 
     def expire(self, before_t_s: float) -> CompensationOutput:
         """:meth:`ready`, giving up on samples stamped before ``before_t_s`` (s) that still
