@@ -15,6 +15,7 @@ rate.
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,6 +38,9 @@ TEMPERATURE_STREAM_KEY = 104
 # Turbulence is represented from 1/record length, but never from longer than 10 minutes (the
 # standard averaging window), down to the configured highest frequency.
 _LONGEST_TURBULENCE_PERIOD_FLOOR_S = 600.0
+# Evaluations kept for callers at the same times: the distinct sample grids of one block (the
+# IMU's, the magnetometer's, the anemometer's, the GNSS's).
+_REMEMBERED_EVALUATIONS = 4
 
 
 @dataclass(frozen=True)
@@ -163,6 +167,7 @@ class TruthModel:
         self._east_radius_m = (
             prime_vertical_radius_m(self.origin_latitude_rad) + self.origin_altitude_m
         ) * np.cos(self.origin_latitude_rad)
+        self._recent: OrderedDict[bytes, TruthState] = OrderedDict()
 
     def water_at(self, state: TruthState, position_body_m: ArrayLike) -> WaterAtSensor:
         """The water at ``position_body_m`` (base_link, m) at the times of ``state``."""
@@ -176,8 +181,23 @@ class TruthModel:
         return WaterAtSensor(depth, current, current + orbital)
 
     def evaluate(self, t_s: ArrayLike) -> TruthState:
-        """Truth at times t_s (s since the scenario start), flattened to shape (N,)."""
+        """Truth at times t_s (s since the scenario start), flattened to shape (N,).
+
+        The sensors of one buoy sample the truth at the same times (the IMU, its motion pack
+        and the truth stream, block by block), so the last few evaluations are kept and handed
+        out again for the same times: callers share the state and must not modify it."""
         t = np.atleast_1d(np.asarray(t_s, dtype=float)).ravel()
+        key = t.tobytes()
+        state = self._recent.get(key)
+        if state is None:
+            state = self._evaluate(t.copy())
+            self._recent[key] = state
+            if len(self._recent) > _REMEMBERED_EVALUATIONS:
+                self._recent.popitem(last=False)
+        return state
+
+    def _evaluate(self, t: np.ndarray) -> TruthState:
+        """Truth at times t (N,), s since the scenario start."""
         sample = self.motion.evaluate(t)
         euler, euler_rate, euler_accel = sample.euler_rad
         attitude = Rotation.from_euler("ZYX", euler[:, ::-1])
