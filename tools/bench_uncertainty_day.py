@@ -39,6 +39,10 @@ SCENARIO_OVERRIDES = (
 )
 """A moored buoy whose motion pack gives the heading while its magnetometer, uncalibrated, is
 suspended."""
+TRUTH_OVERRIDES = ("sensors.rates.truth_hz=10",)
+"""The truth on the sonic's 10 Hz sample times, the only truth the judgement reads (at 50 Hz,
+the scenario's rate, it would be two fifths of the simulated messages, passed through
+``process_bag`` unread)."""
 MEMORY_SAMPLE_S = 5.0
 NANOSECONDS_PER_HOUR = 3_600_000_000_000
 
@@ -52,6 +56,7 @@ def outages(duration_s: float, every_s: float, length_s: float) -> list[list[flo
 def simulate_day(in_bag: Path, duration_s: float, outage_list) -> None:
     overrides = [
         *SCENARIO_OVERRIDES,
+        *TRUTH_OVERRIDES,
         f"duration_s={duration_s}",
         f"sensors.gnss.silent_outages_s={outage_list}",
     ]
