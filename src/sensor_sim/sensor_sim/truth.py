@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -55,7 +57,8 @@ class TruthState:
     latitude_deg, longitude_deg, altitude_m: (N,) WGS-84 geodetic base_link origin, ellipsoidal.
     velocity_enu_mps: (N,3) base_link origin over ground, local ENU.
     acceleration_enu_mps2: (N,3) time derivative of velocity_enu_mps.
-    wind_enu_mps: (N,3) air velocity over ground (direction it moves toward), ENU.
+    wind_enu_mps: (N,3) air velocity over ground (direction it moves toward), ENU; evaluated
+    when first asked for (most sensors never ask, and it is the dearest part of the truth).
     current_enu_mps: (N,3) surface current (mean and tidal, toward), ENU, or None when not
     simulated.
     """
@@ -71,8 +74,13 @@ class TruthState:
     altitude_m: np.ndarray
     velocity_enu_mps: np.ndarray
     acceleration_enu_mps2: np.ndarray
-    wind_enu_mps: np.ndarray
     current_enu_mps: np.ndarray | None
+    wind_at: Callable[[np.ndarray], np.ndarray] = field(repr=False, compare=False)
+    """The wind (N,3; ENU, m/s) at times (N,) s."""
+
+    @cached_property
+    def wind_enu_mps(self) -> np.ndarray:
+        return self.wind_at(self.t_s)
 
 
 def body_rate_from_euler(
@@ -260,6 +268,6 @@ class TruthModel:
             altitude_m=altitude,
             velocity_enu_mps=velocity,
             acceleration_enu_mps2=acceleration,
-            wind_enu_mps=self.wind.evaluate_enu_mps(t),
             current_enu_mps=current,
+            wind_at=self.wind.evaluate_enu_mps,
         )
