@@ -7,9 +7,10 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 PACKAGES := src/buoy_common src/sensor_sim src/buoy_nav src/wind_comp src/buoy_processing
 PACKAGE_FILES := $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/setup.cfg $(p)/package.xml)
-# Every run gets its own DDS domain unless the caller chose one; traffic stays on loopback.
+# DDS traffic stays on loopback. Every live run takes a domain of its own unless the caller
+# chose one (ROS_DOMAIN_ID): the tests, demo, bags and benchmarks each claim one from their own
+# range in tools/ros_domains.py.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
-export ROS_DOMAIN_ID ?= $(shell echo $$(( $$$$ % 100 + 100 )))
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)
 export PYTHONUNBUFFERED := 1
 

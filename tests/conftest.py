@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import os
 import signal
 import subprocess
@@ -12,19 +11,16 @@ from pathlib import Path
 
 import pytest
 
+from tools.ros_domains import claim_domain, isolated_environment, release_domain
+
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
-_domain_counter = itertools.count()
 
 
-def _isolated_ros_environment() -> dict[str, str]:
-    """An environment whose DDS traffic stays on loopback, in a domain no other run uses."""
-    env = dict(os.environ)
-    # pid-derived base keeps parallel pytest runs apart; the counter keeps tests of one run apart.
-    domain = 1 + (os.getpid() * 7 + next(_domain_counter)) % 200
-    env["ROS_DOMAIN_ID"] = str(domain)
-    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    env.pop("ROS_LOCALHOST_ONLY", None)
+def _isolated_ros_environment(domain: int) -> dict[str, str]:
+    """An environment whose DDS traffic stays on loopback, in ``domain`` (claimed from the
+    tests' range of tools/ros_domains.py, so that no other run on the machine uses it)."""
+    env = isolated_environment(domain, dict(os.environ))
     env["AMENT_PREFIX_PATH"] = str(BIN.parent)
     env["PYTHONUNBUFFERED"] = "1"
     return env
@@ -34,7 +30,8 @@ class NodeProcesses:
     """Starts suite executables as separate processes in one isolated domain; stops them all."""
 
     def __init__(self, log_dir: Path):
-        self.env = _isolated_ros_environment()
+        self.domain = claim_domain("tests")
+        self.env = _isolated_ros_environment(self.domain)
         self.log_dir = log_dir
         self.processes: list[tuple[str, subprocess.Popen]] = []
 
@@ -88,6 +85,7 @@ class NodeProcesses:
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
+        release_domain(self.domain)
 
 
 # Tests that run nodes over DDS share one pytest-xdist worker, one after another: side by side
@@ -117,10 +115,14 @@ def nodes(tmp_path):
 @pytest.fixture
 def ros_env():
     """An isolated environment for subprocesses that talk DDS."""
-    return _isolated_ros_environment()
+    domain = claim_domain("tests")
+    yield _isolated_ros_environment(domain)
+    release_domain(domain)
 
 
 @pytest.fixture(scope="module")
 def module_ros_env():
     """An isolated environment shared by the tests of one module (expensive shared runs)."""
-    return _isolated_ros_environment()
+    domain = claim_domain("tests")
+    yield _isolated_ros_environment(domain)
+    release_domain(domain)

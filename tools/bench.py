@@ -763,7 +763,7 @@ def uncertainty_sections(run: BenchRun) -> dict:
     """Every sensor set's valid wind against its stated uncertainty (tools/bench_uncertainty.py,
     15-min runs, 5 with --quick; about 3 min on two cores), and with --only uncertainty_day a
     simulated day through process_bag with its memory (tools/bench_uncertainty_day.py, about
-    45 min; 2 h with --quick). Their own tools write out/bench/uncertainty*.json."""
+    30 min; 2 h with --quick). Their own tools write out/bench/uncertainty*.json."""
     results = {}
     if "uncertainty" in run.sections:
         from tools import bench_uncertainty

@@ -24,7 +24,6 @@ import argparse
 import json
 import math
 import os
-import random
 import subprocess
 import sys
 import tempfile
@@ -35,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from buoy_common import cdr
+from tools.ros_domains import claim_domain, isolated_environment, release_domain
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -65,12 +65,11 @@ IN_SERVICE_AFTER_S = 1.0
 
 
 def isolate_ros_domain() -> int:
-    """A random domain in 100-200, discovery on loopback only; set for this process and its
-    children (rclpy reads the environment at init)."""
-    domain = random.randint(100, 200)
-    os.environ["ROS_DOMAIN_ID"] = str(domain)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    """A domain of the live benchmark's range (tools/ros_domains.py) no other run holds,
+    discovery on loopback only; set for this process and its children (rclpy reads the
+    environment at init)."""
+    domain = claim_domain("bench_live")
+    isolated_environment(domain, os.environ)
     os.environ.setdefault("AMENT_PREFIX_PATH", str(BIN.parent))
     os.environ["PYTHONUNBUFFERED"] = "1"
     return domain
@@ -263,11 +262,14 @@ def run_live(duration_s: float, log_dir: Path, passthrough: bool = False) -> dic
     """Run the live scenario and measure; returns figures (or ``error`` with what failed).
     ``passthrough``: with the stand-ins of tools/passthrough_node.py in place of the nodes."""
     domain = isolate_ros_domain()
-    with tempfile.TemporaryDirectory(prefix="bench_live_") as shim_dir:
-        environment = dict(os.environ)
-        if passthrough:
-            environment["PATH"] = passthrough_path(Path(shim_dir))
-        return _run_live(duration_s, log_dir, environment, domain, passthrough)
+    try:
+        with tempfile.TemporaryDirectory(prefix="bench_live_") as shim_dir:
+            environment = dict(os.environ)
+            if passthrough:
+                environment["PATH"] = passthrough_path(Path(shim_dir))
+            return _run_live(duration_s, log_dir, environment, domain, passthrough)
+    finally:
+        release_domain(domain)
 
 
 def _run_live(

@@ -9,8 +9,9 @@ GNSS outage of ``outage_s`` every ``outage_every_s``; runs the ``process_bag`` c
 while sampling the process's resident memory (``/proc``), and judges the valid corrected wind
 against the truth hour by hour (the share beyond 3σ, the count beyond 5σ). Prints the hourly
 table and the memory after the first hour and at the end; writes
-out/bench/uncertainty_day.json. A day takes about an hour here: half
-simulating, half processing.
+out/bench/uncertainty_day.json (and, as the run goes, the memory samples to
+out/bench/uncertainty_day/memory.tsv). Simulating a day takes a few minutes; processing it takes
+the rest, about half an hour of one core (docs/benchmarks.md).
 """
 
 from __future__ import annotations
@@ -39,6 +40,10 @@ SCENARIO_OVERRIDES = (
 )
 """A moored buoy whose motion pack gives the heading while its magnetometer, uncalibrated, is
 suspended."""
+TRUTH_OVERRIDES = ("sensors.rates.truth_hz=10",)
+"""The truth on the sonic's 10 Hz sample times, the only truth the judgement reads (at 50 Hz,
+the scenario's rate, it would be two fifths of the simulated messages, passed through
+``process_bag`` unread)."""
 MEMORY_SAMPLE_S = 5.0
 NANOSECONDS_PER_HOUR = 3_600_000_000_000
 
@@ -52,6 +57,7 @@ def outages(duration_s: float, every_s: float, length_s: float) -> list[list[flo
 def simulate_day(in_bag: Path, duration_s: float, outage_list) -> None:
     overrides = [
         *SCENARIO_OVERRIDES,
+        *TRUTH_OVERRIDES,
         f"duration_s={duration_s}",
         f"sensors.gnss.silent_outages_s={outage_list}",
     ]
@@ -74,7 +80,8 @@ def resident_mib(pid: int) -> float | None:
 
 
 def process_with_memory(in_bag: Path, out_bag: Path, params: list[str]) -> list[tuple]:
-    """Run ``process_bag`` on the bag; (wall s, resident MiB) every MEMORY_SAMPLE_S."""
+    """Run ``process_bag`` on the bag; (wall s, resident MiB) every MEMORY_SAMPLE_S, also
+    written to memory.tsv as they come (what a run stopped early has)."""
     command = [str(Path(sys.executable).parent / "process_bag"), str(in_bag), str(out_bag)]
     for path in params:
         command += ["--params-file", path]
@@ -82,11 +89,15 @@ def process_with_memory(in_bag: Path, out_bag: Path, params: list[str]) -> list[
     log = (WORK / "process.log").open("w")
     process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
     started, samples = time.monotonic(), []
-    while process.poll() is None:
-        rss = resident_mib(process.pid)
-        if rss is not None:
-            samples.append((time.monotonic() - started, rss))
-        time.sleep(MEMORY_SAMPLE_S)
+    with (WORK / "memory.tsv").open("w") as table:
+        table.write("wall_s\tresident_mib\n")
+        while process.poll() is None:
+            rss = resident_mib(process.pid)
+            if rss is not None:
+                samples.append((time.monotonic() - started, rss))
+                table.write(f"{samples[-1][0]:.1f}\t{rss:.1f}\n")
+                table.flush()
+            time.sleep(MEMORY_SAMPLE_S)
     if process.returncode != 0:
         raise SystemExit(f"process_bag failed ({process.returncode}); see {WORK / 'process.log'}")
     return samples
@@ -129,6 +140,7 @@ def main(argv=None) -> None:
     started = time.monotonic()
     simulate_day(in_bag, duration_s, outages(duration_s, args.outage_every_s, args.outage_s))
     simulated_s = time.monotonic() - started
+    print(f"simulated {args.hours:g} h in {simulated_s:.0f} s", file=sys.stderr, flush=True)
     scenario = load_scenario(SCENARIO, [*SCENARIO_OVERRIDES, f"duration_s={duration_s}"], None)
     case = Case(SCENARIO, "a day", (), (MOORED,))
     params = [*PROCESSING_PARAMS, write_parameters(WORK, scenario, case)]

@@ -36,6 +36,7 @@ from buoy_processing.report.data import (
     stamped_vectors,
     utc_text,
 )
+from tools.ros_domains import own_domain_unless_chosen
 from wind_comp.config import compensator_config_from_files
 from wind_comp.miller import mounting_rotation_from_rpy_deg
 from wind_comp.products import WindAverager, meteorological_direction_deg
@@ -59,7 +60,9 @@ def shown(path: Path) -> str:
 
 
 def record_live_run() -> Path:
-    """Run the scenario with every node and the recorder; return the new bag."""
+    """Run the scenario with every node and the recorder, in a ROS domain of their own unless
+    the caller chose one; return the new bag."""
+    own_domain_unless_chosen("tools")
     name = time.strftime(f"{SCENARIO}_%Y%m%d_%H%M%S")
     bag = REPO / "out" / "demo" / name
     bag.parent.mkdir(parents=True, exist_ok=True)

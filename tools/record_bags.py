@@ -13,6 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from tools.ros_domains import own_domain_unless_chosen
+
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 RATE_FACTOR = "4"
@@ -45,6 +47,8 @@ def main() -> None:
     unknown = [name for name in selected if name not in BAGS]
     if unknown:
         sys.exit(f"record_bags: unknown bag(s) {unknown}; known: {list(BAGS)}")
+    # The recording's nodes in a domain of their own, unless the caller chose one.
+    own_domain_unless_chosen("tools")
     bags = REPO / "bags"
     for name in selected:
         target = bags / name

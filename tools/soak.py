@@ -44,7 +44,6 @@ import collections
 import json
 import math
 import os
-import random
 import re
 import signal
 import subprocess
@@ -64,6 +63,7 @@ from sensor_sim.scenario import load_scenario
 from tools.bench_plan import PROCESSING_PARAMS
 from tools.bench_uncertainty import MOORED, Case, write_parameters
 from tools.bench_uncertainty_day import SCENARIO_OVERRIDES as MOORED_DAY_OVERRIDES
+from tools.ros_domains import claim_domain, isolated_environment, release_domain
 
 BIN = Path(sys.executable).parent
 NODES = ("fusion_node", "compensation_node")
@@ -79,9 +79,6 @@ FLAT_MEMORY_SHARE = 0.10
 TRANSITION = re.compile(r"stamp ([-\d.]+) s: (\S+) (suspended|resumed):")
 REJECTION = re.compile(r"rejected (\S+): (\S+) \(total (\d+)\)")
 ALIGNMENT_MARK = "aligned at stamp"
-SOAK_DOMAINS = range(201, 231)
-"""ROS domains for the soak: the suite's tests, benchmarks and make targets take 1-200, and a
-run of theirs in the soak's domain would mix its samples into the soak's counts."""
 DOMAIN_TRIES = 5
 DISCOVERY_S = 2.0
 """How long the listener waits to see whether its new domain holds other nodes."""
@@ -127,12 +124,11 @@ DEFAULT_SETUP = "moored_outages"
 
 
 def isolate_ros_domain() -> int:
-    """A random domain of SOAK_DOMAINS, discovery on loopback only, for this process and its
-    children."""
-    domain = random.choice(SOAK_DOMAINS)
-    os.environ["ROS_DOMAIN_ID"] = str(domain)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    """A domain of the soak's range (tools/ros_domains.py: apart from every other run of the
+    suite, whose samples would mix into the soak's counts) that no other run holds, discovery
+    on loopback only, for this process and its children."""
+    domain = claim_domain("soak")
+    isolated_environment(domain, os.environ)
     os.environ.setdefault("AMENT_PREFIX_PATH", str(BIN.parent))
     os.environ["PYTHONUNBUFFERED"] = "1"
     return domain
@@ -303,16 +299,25 @@ def scenario_command(setup: Setup, duration_s: float, rate_factor: float, log_di
 
 def listener_in_a_quiet_domain() -> tuple[WindTriples, int]:
     """The listener, in a domain where it saw no other node (after DOMAIN_TRIES, the last
-    domain tried; the run then reports the intruders), and that domain."""
-    for _ in range(DOMAIN_TRIES):
-        domain = isolate_ros_domain()
-        triples = WindTriples()
-        time.sleep(DISCOVERY_S)
-        if not triples.intruders({LISTENER_NODE}):
-            return triples, domain
-        print(f"soak: ROS domain {domain} is in use; trying another", file=sys.stderr)
-        triples.close()
-    return WindTriples(), domain
+    domain tried; the run then reports the intruders), and that domain, held until
+    :func:`~tools.ros_domains.release_domain`. The domains found in use are held while the
+    others are tried, then let go."""
+    in_use: list[int] = []
+    try:
+        for _ in range(DOMAIN_TRIES):
+            domain = isolate_ros_domain()
+            triples = WindTriples()
+            time.sleep(DISCOVERY_S)
+            if not triples.intruders({LISTENER_NODE}):
+                return triples, domain
+            print(f"soak: ROS domain {domain} is in use; trying another", file=sys.stderr)
+            triples.close()
+            in_use.append(domain)
+        in_use.remove(domain)
+        return WindTriples(), domain
+    finally:
+        for other in in_use:
+            release_domain(other)
 
 
 def own_node_names(setup: Setup, duration_s: float) -> set[str]:
@@ -389,6 +394,7 @@ def soak(
         time.sleep(1.0)
     finally:
         triples.close()
+        release_domain(domain)
     result["wall_s"] = time.monotonic() - started_s
     if scenario.returncode != 0:
         result["error"] = f"run_scenario exited with {scenario.returncode}"

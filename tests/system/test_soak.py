@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from sensor_sim.scenario import load_scenario
+from tools.ros_domains import release_domain
 from tools.soak import (
     DEFAULT_SETUP,
     DISCOVERY_S,
@@ -100,7 +101,7 @@ def test_nodes_of_another_run_in_the_soak_domain_are_seen(monkeypatch):
     # The soak sets its domain in this process's environment: given back after the test.
     for name in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOCALHOST_ONLY"):
         monkeypatch.delenv(name, raising=False)
-    listener, _ = listener_in_a_quiet_domain()
+    listener, domain = listener_in_a_quiet_domain()
     context = Context()
     rclpy.init(context=context)
     try:
@@ -117,3 +118,4 @@ def test_nodes_of_another_run_in_the_soak_domain_are_seen(monkeypatch):
     finally:
         rclpy.try_shutdown(context=context)
         listener.close()
+        release_domain(domain)

@@ -350,3 +350,48 @@ class NavSatFixWriter:
             *position_covariance,
             position_covariance_type,
         )
+
+
+class MagneticFieldWriter:
+    """sensor_msgs/MagneticField in frame ``frame_id``."""
+
+    def __init__(self, frame_id: str):
+        layout = _Layout()
+        self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
+        layout.add("d", 8, 3 + 9)
+        self._struct = layout.struct()
+
+    def write(self, sec: int, nanosec: int, magnetic_field_t, covariance_t2) -> bytes:
+        """The field as 3 values (T), its covariance as 9 (row-major, T²)."""
+        return self._struct.pack(
+            ENCAPSULATION_LITTLE_ENDIAN,
+            sec,
+            nanosec,
+            self._frame_length,
+            self._frame,
+            *magnetic_field_t,
+            *covariance_t2,
+        )
+
+
+class TemperatureWriter:
+    """sensor_msgs/Temperature in frame ``frame_id``."""
+
+    def __init__(self, frame_id: str):
+        layout = _Layout()
+        self._frame = layout.header(frame_id)
+        self._frame_length = len(self._frame)
+        layout.add("d", 8, 2)
+        self._struct = layout.struct()
+
+    def write(self, sec: int, nanosec: int, temperature_degc: float, variance_k2: float) -> bytes:
+        return self._struct.pack(
+            ENCAPSULATION_LITTLE_ENDIAN,
+            sec,
+            nanosec,
+            self._frame_length,
+            self._frame,
+            temperature_degc,
+            variance_k2,
+        )

@@ -8,7 +8,7 @@ import pytest
 from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
-from sensor_msgs.msg import Imu, NavSatFix
+from sensor_msgs.msg import Imu, MagneticField, NavSatFix, Temperature
 
 from buoy_common import cdr
 
@@ -206,6 +206,30 @@ def test_nav_sat_fix(frame_id, status, service):
     )
     assert same_bytes_but_padding(written, raw)
     assert deserialize_message(written, NavSatFix) == message
+
+
+@pytest.mark.parametrize("frame_id", FRAMES)
+def test_magnetic_field(frame_id):
+    message = set_header(MagneticField(), STAMPS[2], frame_id)
+    field = message.magnetic_field
+    field.x, field.y, field.z = values(3)
+    message.magnetic_field_covariance = values(9)
+    written = cdr.MagneticFieldWriter(frame_id).write(
+        *STAMPS[2], xyz(field), message.magnetic_field_covariance.tolist()
+    )
+    assert same_bytes_but_padding(written, serialize_message(message))
+    assert deserialize_message(written, MagneticField) == message
+
+
+@pytest.mark.parametrize("frame_id", FRAMES)
+def test_temperature(frame_id):
+    message = set_header(Temperature(), STAMPS[0], frame_id)
+    message.temperature, message.variance = values(2)
+    written = cdr.TemperatureWriter(frame_id).write(
+        *STAMPS[0], message.temperature, message.variance
+    )
+    assert same_bytes_but_padding(written, serialize_message(message))
+    assert deserialize_message(written, Temperature) == message
 
 
 def test_readers_decline_what_they_do_not_handle():

@@ -1,9 +1,9 @@
 """Build the contract's ROS messages from simulated samples.
 
-The live sensor nodes and the offline bag generator both build their messages here, so a bag
-recorded from the nodes and a bag generated offline hold the same messages. Only the message
-packages are imported (no rclpy): the resulting objects are published by the nodes and
-serialised by the bag writer.
+The live sensor nodes build their messages here; the offline bag generator writes the same
+messages as CDR bytes (:mod:`sensor_sim.message_bytes`, held equal to these by the tests), so a
+bag recorded from the nodes and a bag generated offline hold the same messages. Only the
+message packages are imported (no rclpy): the resulting objects are published by the nodes.
 """
 
 from __future__ import annotations

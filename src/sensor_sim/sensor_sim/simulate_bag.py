@@ -12,9 +12,10 @@ import sys
 
 from tqdm import tqdm
 
-from buoy_common.bag_io import BagError, BagWriter
+from buoy_common.bag_io import BackgroundBagWriter, BagError
 from buoy_common.cli import INTERRUPTIBLE_EXIT_CODES, command_parser, interruptible
 from buoy_common.parameters import ParameterError, load_parameter_files
+from sensor_sim import message_bytes
 from sensor_sim.scenario import ScenarioError, load_scenario
 from sensor_sim.streams import STREAMS, merged_messages
 from sensor_sim.truth import TruthModel
@@ -61,7 +62,7 @@ def simulate(arguments) -> dict[str, int]:
     for kind in kinds:
         spec = STREAMS[kind]
         values = load_parameter_files(arguments.params_file, spec.node_name)
-        streams.append(spec.build(scenario, truth, values))
+        streams.append(spec.build(scenario, truth, values, encoding=message_bytes))
     types = {topic: t for stream in streams for topic, t in stream.topics.items()}
     with (
         tqdm(
@@ -70,13 +71,13 @@ def simulate(arguments) -> dict[str, int]:
             unit="sim s",
             disable=None,
         ) as progress,
-        BagWriter(arguments.output, overwrite=arguments.overwrite) as writer,
+        BackgroundBagWriter(arguments.output, overwrite=arguments.overwrite) as writer,
     ):
         until_s = 0.0
         while not all(stream.finished() for stream in streams):
             until_s += CHUNK_S
-            for topic, stamp, message in merged_messages(streams, until_s):
-                writer.write(topic, types[topic], stamp, message)
+            for topic, stamp, raw in merged_messages(streams, until_s):
+                writer.write_raw(topic, types[topic], stamp, raw)
             progress.update(min(math.ceil(until_s), progress.total) - progress.n)
     return dict(writer.counts)
 

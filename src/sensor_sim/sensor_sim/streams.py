@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from types import ModuleType
 
 import numpy as np
 
@@ -111,6 +112,10 @@ class SensorStream:
     scenario: Scenario
     truth: TruthModel
     timing: StreamTiming
+    encoding: ModuleType = field(default=messages, kw_only=True, repr=False)
+    """What the messages are made of: :mod:`sensor_sim.messages` (message objects, as the live
+    nodes publish them) or :mod:`sensor_sim.message_bytes` (their CDR bytes, as a bag holds
+    them)."""
     next_index: int = field(default=0, init=False)
 
     topics: dict[str, str] = field(default_factory=dict, init=False)
@@ -197,7 +202,7 @@ class ImuStream(SensorStream):
         gyro, force = self._simulator.measure(times_s)
         for stamp, message in zip(
             stamps_ns,
-            messages.imu_messages(
+            self.encoding.imu_messages(
                 stamps_ns, gyro, force, self._gyro_variance, self._accel_variance
             ),
             strict=True,
@@ -210,7 +215,7 @@ class ImuStream(SensorStream):
                 (MAGNETOMETER_TOPIC, stamp, message)
                 for stamp, message in zip(
                     stamps_ns,
-                    messages.magnetic_field_messages(
+                    self.encoding.magnetic_field_messages(
                         stamps_ns, field_body_t, self._magnetometer_variance_t2
                     ),
                     strict=True,
@@ -223,7 +228,7 @@ class ImuStream(SensorStream):
                 (AHRS_TOPIC, stamp, message)
                 for stamp, message in zip(
                     stamps_ns,
-                    messages.ahrs_messages(stamps_ns, attitude, gyro, force, variance),
+                    self.encoding.ahrs_messages(stamps_ns, attitude, gyro, force, variance),
                     strict=True,
                 )
             )
@@ -271,13 +276,13 @@ class GnssStream(SensorStream):
         sample = self._simulator.measure(times_s)
         silent = _in_any_interval(times_s, self.errors.silent_outages_s)
         per_topic = {
-            GNSS_FIX_TOPIC: messages.gnss_fix_messages(stamps_ns, sample),
-            GNSS_VELOCITY_TOPIC: messages.gnss_velocity_messages(stamps_ns, sample),
-            GNSS_HEADING_TOPIC: messages.gnss_heading_messages(stamps_ns, sample),
-            GNSS_BASELINE_TOPIC: messages.gnss_baseline_messages(stamps_ns, sample),
+            GNSS_FIX_TOPIC: self.encoding.gnss_fix_messages(stamps_ns, sample),
+            GNSS_VELOCITY_TOPIC: self.encoding.gnss_velocity_messages(stamps_ns, sample),
+            GNSS_HEADING_TOPIC: self.encoding.gnss_heading_messages(stamps_ns, sample),
+            GNSS_BASELINE_TOPIC: self.encoding.gnss_baseline_messages(stamps_ns, sample),
         }
         if sample.tertiary_baseline_enu_m is not None:
-            per_topic[GNSS_BASELINE_TERTIARY_TOPIC] = messages.gnss_baseline_tertiary_messages(
+            per_topic[GNSS_BASELINE_TERTIARY_TOPIC] = self.encoding.gnss_baseline_tertiary_messages(
                 stamps_ns, sample
             )
         per_topic = {topic: rows for topic, rows in per_topic.items() if topic in self.topics}
@@ -318,12 +323,12 @@ class AnemometerStream(SensorStream):
     def _messages(self, times_s, stamps_ns):
         wind = self._simulator.measure(times_s)
         temperature = self._simulator.measure_temperature(times_s)
-        winds = messages.anemometer_messages(stamps_ns, wind)
+        winds = self.encoding.anemometer_messages(stamps_ns, wind)
         if temperature is None:
             for stamp, message in zip(stamps_ns, winds, strict=True):
                 yield WIND_RAW_TOPIC, stamp, message
             return
-        temperatures = messages.temperature_messages(
+        temperatures = self.encoding.temperature_messages(
             stamps_ns, temperature, self.errors.temperature_noise_k**2
         )
         for stamp, message, sonic in zip(stamps_ns, winds, temperatures, strict=True):
@@ -350,7 +355,7 @@ class DvlStream(SensorStream):
         velocity = self._simulator.measure(times_s)
         for stamp, message in zip(
             stamps_ns,
-            messages.dvl_messages(stamps_ns, velocity, self.errors.noise_mps**2),
+            self.encoding.dvl_messages(stamps_ns, velocity, self.errors.noise_mps**2),
             strict=True,
         ):
             yield DVL_TOPIC, stamp, message
@@ -384,15 +389,15 @@ class TruthStream(SensorStream):
         streams = [
             (
                 TRUTH_ODOMETRY_TOPIC,
-                messages.truth_odometry_messages(stamps_ns, state, position_map),
+                self.encoding.truth_odometry_messages(stamps_ns, state, position_map),
             ),
-            (TRUTH_WIND_TOPIC, messages.enu_vector_messages(stamps_ns, state.wind_enu_mps)),
+            (TRUTH_WIND_TOPIC, self.encoding.enu_vector_messages(stamps_ns, state.wind_enu_mps)),
         ]
         if TRUTH_CURRENT_TOPIC in self.topics:
             streams.append(
                 (
                     TRUTH_CURRENT_TOPIC,
-                    messages.enu_vector_messages(stamps_ns, state.current_enu_mps),
+                    self.encoding.enu_vector_messages(stamps_ns, state.current_enu_mps),
                 )
             )
         if TRUTH_WATER_VELOCITY_TOPIC in self.topics:
@@ -400,7 +405,7 @@ class TruthStream(SensorStream):
             streams.append(
                 (
                     TRUTH_WATER_VELOCITY_TOPIC,
-                    messages.enu_vector_messages(stamps_ns, water.velocity_enu_mps),
+                    self.encoding.enu_vector_messages(stamps_ns, water.velocity_enu_mps),
                 )
             )
         topics = [topic for topic, _ in streams]
@@ -485,8 +490,15 @@ class StreamSpec:
             return getattr(scenario.sensors, self.sensor)
         return getattr(scenario.sensors, field_name, None)
 
-    def build(self, scenario: Scenario, truth: TruthModel, values: dict) -> SensorStream:
-        """The stream configured by parameter ``values`` (absent ones: the scenario's values)."""
+    def build(
+        self,
+        scenario: Scenario,
+        truth: TruthModel,
+        values: dict,
+        encoding: ModuleType = messages,
+    ) -> SensorStream:
+        """The stream configured by parameter ``values`` (absent ones: the scenario's values),
+        making its messages with ``encoding`` (:attr:`SensorStream.encoding`)."""
         defaults = {
             "rate_hz": self.default_rate_hz(scenario),
             "time_offset_s": self.default_time_offset_s(scenario),
@@ -502,7 +514,7 @@ class StreamSpec:
             )
             for field_name, (config_type, prefix, renamed) in self.configs.items()
         }
-        return self.stream_type(scenario, truth, timing, **configs)
+        return self.stream_type(scenario, truth, timing, encoding=encoding, **configs)
 
 
 _EXTRINSICS = (Extrinsics, "", {})

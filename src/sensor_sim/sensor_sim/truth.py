@@ -15,7 +15,10 @@ rate.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -37,6 +40,9 @@ TEMPERATURE_STREAM_KEY = 104
 # Turbulence is represented from 1/record length, but never from longer than 10 minutes (the
 # standard averaging window), down to the configured highest frequency.
 _LONGEST_TURBULENCE_PERIOD_FLOOR_S = 600.0
+# Evaluations kept for callers at the same times: the distinct sample grids of one block (the
+# IMU's, the magnetometer's, the anemometer's, the GNSS's).
+_REMEMBERED_EVALUATIONS = 4
 
 
 @dataclass(frozen=True)
@@ -51,7 +57,8 @@ class TruthState:
     latitude_deg, longitude_deg, altitude_m: (N,) WGS-84 geodetic base_link origin, ellipsoidal.
     velocity_enu_mps: (N,3) base_link origin over ground, local ENU.
     acceleration_enu_mps2: (N,3) time derivative of velocity_enu_mps.
-    wind_enu_mps: (N,3) air velocity over ground (direction it moves toward), ENU.
+    wind_enu_mps: (N,3) air velocity over ground (direction it moves toward), ENU; evaluated
+    when first asked for (most sensors never ask, and it is the dearest part of the truth).
     current_enu_mps: (N,3) surface current (mean and tidal, toward), ENU, or None when not
     simulated.
     """
@@ -67,8 +74,13 @@ class TruthState:
     altitude_m: np.ndarray
     velocity_enu_mps: np.ndarray
     acceleration_enu_mps2: np.ndarray
-    wind_enu_mps: np.ndarray
     current_enu_mps: np.ndarray | None
+    wind_at: Callable[[np.ndarray], np.ndarray] = field(repr=False, compare=False)
+    """The wind (N,3; ENU, m/s) at times (N,) s."""
+
+    @cached_property
+    def wind_enu_mps(self) -> np.ndarray:
+        return self.wind_at(self.t_s)
 
 
 def body_rate_from_euler(
@@ -163,6 +175,7 @@ class TruthModel:
         self._east_radius_m = (
             prime_vertical_radius_m(self.origin_latitude_rad) + self.origin_altitude_m
         ) * np.cos(self.origin_latitude_rad)
+        self._recent: OrderedDict[bytes, TruthState] = OrderedDict()
 
     def water_at(self, state: TruthState, position_body_m: ArrayLike) -> WaterAtSensor:
         """The water at ``position_body_m`` (base_link, m) at the times of ``state``."""
@@ -176,8 +189,23 @@ class TruthModel:
         return WaterAtSensor(depth, current, current + orbital)
 
     def evaluate(self, t_s: ArrayLike) -> TruthState:
-        """Truth at times t_s (s since the scenario start), flattened to shape (N,)."""
+        """Truth at times t_s (s since the scenario start), flattened to shape (N,).
+
+        The sensors of one buoy sample the truth at the same times (the IMU, its motion pack
+        and the truth stream, block by block), so the last few evaluations are kept and handed
+        out again for the same times: callers share the state and must not modify it."""
         t = np.atleast_1d(np.asarray(t_s, dtype=float)).ravel()
+        key = t.tobytes()
+        state = self._recent.get(key)
+        if state is None:
+            state = self._evaluate(t.copy())
+            self._recent[key] = state
+            if len(self._recent) > _REMEMBERED_EVALUATIONS:
+                self._recent.popitem(last=False)
+        return state
+
+    def _evaluate(self, t: np.ndarray) -> TruthState:
+        """Truth at times t (N,), s since the scenario start."""
         sample = self.motion.evaluate(t)
         euler, euler_rate, euler_accel = sample.euler_rad
         attitude = Rotation.from_euler("ZYX", euler[:, ::-1])
@@ -240,6 +268,6 @@ class TruthModel:
             altitude_m=altitude,
             velocity_enu_mps=velocity,
             acceleration_enu_mps2=acceleration,
-            wind_enu_mps=self.wind.evaluate_enu_mps(t),
             current_enu_mps=current,
+            wind_at=self.wind.evaluate_enu_mps,
         )
