@@ -29,6 +29,7 @@ from test_nav_sensor_sets import fuse, scenario_messages
 from buoy_common.contract import AHRS_TOPIC, IMU_RAW_TOPIC, header_seconds
 from buoy_nav.assess_motion_pack import xyz
 from buoy_nav.config import FusionConfig
+from buoy_nav.health import diagnostic_values
 from buoy_nav.motion_pack_assessment import (
     SUGGESTION_CUTOFF_HZ,
     MotionPackRecord,
@@ -36,6 +37,7 @@ from buoy_nav.motion_pack_assessment import (
     heave_sigma_m,
     uniform_grid,
 )
+from buoy_nav.source_health import HealthChange
 
 pytestmark = pytest.mark.long
 
@@ -130,6 +132,33 @@ def test_told_also_the_seas_excursion_the_velocity_error_is_centimetres(wanderin
 )
 def test_with_the_default_gyro_model_the_velocity_leaves_its_sigma(wandering_gyro_run):
     assert_within_sigma(*horizontal_velocity_errors(fdchp_like_config(), wandering_gyro_run))
+
+
+def mooring_warnings(config: FusionConfig, run) -> tuple[list[str], str]:
+    """(the warnings the fusion logged, the one its diagnostics hold at the end)."""
+    scenario, _, messages = run
+    engine, _, _, _ = fuse(config, messages, scenario)
+    logged = [
+        transition.message
+        for transition in engine.take_source_transitions()
+        if transition.change is HealthChange.WARNED
+    ]
+    return logged, diagnostic_values(engine.health())["moored.warning"]
+
+
+def test_held_too_tight_the_mooring_says_so(wandering_gyro_run):
+    logged, held = mooring_warnings(fdchp_like_config(), wandering_gyro_run)
+    assert logged and all("run assess_motion_pack" in message for message in logged)
+    assert "fusion.gyro_bias_instability_deg_h" in held
+
+
+@pytest.mark.parametrize(
+    "told",
+    [TOLD_THE_GYRO, {**TOLD_THE_GYRO, "moored_position_sigma_horizontal_m": 0.075}],
+    ids=["the gyro", "the gyro and the sea"],
+)
+def test_told_the_truth_the_mooring_does_not_warn(wandering_gyro_run, told):
+    assert mooring_warnings(fdchp_like_config(**told), wandering_gyro_run) == ([], "")
 
 
 # assess_motion_pack on the simulator: the gyro's wander and the sea's heave against the truth.
