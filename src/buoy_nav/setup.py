@@ -53,6 +53,7 @@ setup(
             "fusion_node = buoy_nav.fusion_node:main",
             "calibrate_imu = buoy_nav.calibrate_imu:main",
             "calibrate_magnetometer = buoy_nav.calibrate_magnetometer:main",
+            "assess_motion_pack = buoy_nav.assess_motion_pack:main",
         ],
     },
 )

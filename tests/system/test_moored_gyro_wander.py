@@ -23,9 +23,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from test_nav_sensor_sets import fuse, scenario_messages
 
+from buoy_common.contract import AHRS_TOPIC, IMU_RAW_TOPIC, header_seconds
+from buoy_nav.assess_motion_pack import xyz
 from buoy_nav.config import FusionConfig
+from buoy_nav.health import diagnostic_values
+from buoy_nav.motion_pack_assessment import (
+    SUGGESTION_CUTOFF_HZ,
+    MotionPackRecord,
+    assess_motion_pack,
+    heave_sigma_m,
+    uniform_grid,
+)
+from buoy_nav.source_health import HealthChange
 
 pytestmark = pytest.mark.long
 
@@ -120,3 +132,100 @@ def test_told_also_the_seas_excursion_the_velocity_error_is_centimetres(wanderin
 )
 def test_with_the_default_gyro_model_the_velocity_leaves_its_sigma(wandering_gyro_run):
     assert_within_sigma(*horizontal_velocity_errors(fdchp_like_config(), wandering_gyro_run))
+
+
+def mooring_warnings(config: FusionConfig, run) -> tuple[list[str], str]:
+    """(the warnings the fusion logged, the one its diagnostics hold at the end)."""
+    scenario, _, messages = run
+    engine, _, _, _ = fuse(config, messages, scenario)
+    logged = [
+        transition.message
+        for transition in engine.take_source_transitions()
+        if transition.change is HealthChange.WARNED
+    ]
+    return logged, diagnostic_values(engine.health())["moored.warning"]
+
+
+def test_held_too_tight_the_mooring_says_so(wandering_gyro_run):
+    logged, held = mooring_warnings(fdchp_like_config(), wandering_gyro_run)
+    assert logged and all("run assess_motion_pack" in message for message in logged)
+    assert "fusion.gyro_bias_instability_deg_h" in held
+
+
+@pytest.mark.parametrize(
+    "told",
+    [TOLD_THE_GYRO, {**TOLD_THE_GYRO, "moored_position_sigma_horizontal_m": 0.075}],
+    ids=["the gyro", "the gyro and the sea"],
+)
+def test_told_the_truth_the_mooring_does_not_warn(wandering_gyro_run, told):
+    assert mooring_warnings(fdchp_like_config(**told), wandering_gyro_run) == ([], "")
+
+
+# assess_motion_pack on the simulator: the gyro's wander and the sea's heave against the truth.
+# The pack here is an honest one (its slow attitude error 0.3°, the simulator's default): the
+# command measures the gyro's error minus the rate of the pack's own attitude error.
+HONEST_PACK = (*FDCHP_LIKE_MOORED_BUOY, "sensors.ahrs.error_deg=0.3")
+STEADY_GYRO = ("sensors.imu.gyro_bias_instability_deg_h=5.0",)
+ASSESSED_DURATION_S = 1200.0
+"""Twelve of the wander's correlation times: its 1σ known to about a fifth."""
+
+
+def motion_pack_record(messages) -> MotionPackRecord:
+    raw = np.array(
+        [
+            (header_seconds(m.header), *xyz(m.angular_velocity), *xyz(m.linear_acceleration))
+            for topic, _, m in messages
+            if topic == IMU_RAW_TOPIC
+        ]
+    )
+    attitude = np.array(
+        [
+            (header_seconds(m.header), *xyz(m.orientation), m.orientation.w)
+            for topic, _, m in messages
+            if topic == AHRS_TOPIC
+        ]
+    )
+    return MotionPackRecord(
+        raw[:, 0], raw[:, 1:4], raw[:, 4:7], attitude[:, 0], Rotation.from_quat(attitude[:, 1:])
+    )
+
+
+def assessed(overrides):
+    """(the command's assessment, the true heave 1σ over the wave band m)."""
+    _, truth, messages = scenario_messages("open_ocean", ASSESSED_DURATION_S, overrides)
+    record = motion_pack_record(messages)
+    grid = uniform_grid(record)
+    true_up_acceleration = truth.evaluate(grid).acceleration_enu_mps2[:, 2]
+    return assess_motion_pack(record), heave_sigma_m(true_up_acceleration, grid[1] - grid[0])
+
+
+@pytest.fixture(scope="module")
+def wandering_assessed():
+    return assessed(HONEST_PACK)
+
+
+def command_tilt_sigma_deg_h(assessment) -> float:
+    band = assessment.wander_deg_h[SUGGESTION_CUTOFF_HZ][:2]
+    return float(np.sqrt(np.mean(band**2)))
+
+
+def test_the_command_measures_the_gyros_wander(wandering_assessed):
+    assessment, _ = wandering_assessed
+    # The simulator's stated 150 °/h, within the sampling error of a 1σ over twelve
+    # correlation times on two axes (about a fifth) plus the pack's own attitude-rate error,
+    # which the command cannot tell from the gyro's (a tenth or so): a third allowed.
+    assert abs(assessment.gyro_bias_instability_deg_h / GYRO_BIAS_INSTABILITY_DEG_H - 1) < 1 / 3
+    assert assessment.correlation_time_s > GYRO_BIAS_CORRELATION_TIME_S / 3
+
+
+def test_a_steady_gyro_gives_a_small_figure(wandering_assessed):
+    steady, _ = assessed((*HONEST_PACK, *STEADY_GYRO))
+    assert command_tilt_sigma_deg_h(steady) < 0.5 * command_tilt_sigma_deg_h(wandering_assessed[0])
+
+
+def test_the_command_measures_the_seas_heave(wandering_assessed):
+    assessment, true_heave_m = wandering_assessed
+    # The pack's attitude error leaks horizontal acceleration into the levelled vertical, and
+    # the division by (2πf)² amplifies it at the band's low end: a quarter allowed.
+    assert abs(assessment.heave_sigma_m / true_heave_m - 1) < 0.25
+    assert abs(true_heave_m / (SIGNIFICANT_WAVE_HEIGHT_M / 4) - 1) < 0.15

@@ -69,6 +69,7 @@ class AidingGates:
         self._consecutive_rejections = dict.fromkeys((source.kind for source in aided_index), 0)
         self._run_start_s = dict.fromkeys((source.kind for source in aided_index), math.nan)
         self._health = {source.kind: SourceHealth(health_rule) for source in aided_index}
+        self._warnings = dict.fromkeys((source.kind for source in aided_index), "")
 
     def suspended(self, kind: str) -> bool:
         """Whether the source of ``kind`` is suspended."""
@@ -101,7 +102,9 @@ class AidingGates:
     def status(self) -> dict[str, SourceStatus]:
         """The health of each source, by kind."""
         return {
-            kind: SourceStatus(health.suspended, health.reason, health.suspensions)
+            kind: SourceStatus(
+                health.suspended, health.reason, health.suspensions, self._warnings[kind]
+            )
             for kind, health in self._health.items()
         }
 
@@ -138,6 +141,7 @@ class AidingGates:
                         gate.accepted,
                     )
                 )
+            self._watch_innovations(source, t_s, model.innovation, gate, outcome)
             if self._judge(source, t_s, not gate.accepted, outcome):
                 self._counters[source.kind].reject(Reason.SUSPENDED)
             elif gate.accepted:
@@ -146,6 +150,22 @@ class AidingGates:
             else:
                 self._book_rejection(source, t_s, measurement, model, gate.nis, outcome)
         return outcome
+
+    def _watch_innovations(
+        self, source: AidingSource, t_s: float, innovation, gate, outcome: GateOutcome
+    ) -> None:
+        """Keep the source's innovation warning (:meth:`AidingSource.innovation_warning`) and
+        report a new one as a transition; it never changes what is fused."""
+        if not math.isfinite(gate.nis):
+            return
+        warning = source.innovation_warning(t_s, innovation, gate.innovation_covariance)
+        if warning is None:
+            return
+        self._warnings[source.kind] = warning
+        if warning:
+            outcome.transitions.append(
+                HealthTransition(t_s, source.kind, HealthChange.WARNED, warning)
+            )
 
     def _judge(self, source: AidingSource, t_s: float, failed: bool, outcome: GateOutcome) -> bool:
         """Record one outcome of ``source`` at stamp ``t_s`` (s) in its health; returns whether

@@ -142,6 +142,7 @@ def diagnostic_values(health: EngineHealth) -> dict:
                 values[f"{kind}.suspended"] = status.suspended
                 values[f"{kind}.suspension_reason"] = status.reason
                 values[f"{kind}.suspensions"] = status.suspensions
+                values[f"{kind}.warning"] = status.warning
     values.update(
         {
             "covariance_repairs": health.covariance_repairs,

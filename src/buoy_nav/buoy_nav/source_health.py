@@ -43,6 +43,8 @@ class HealthChange(Enum):
     NONE = "none"
     SUSPENDED = "suspended"
     RESUMED = "resumed"
+    WARNED = "warned"
+    """Not suspended: its innovations say a parameter is stated too small."""
 
 
 class HealthTransition(NamedTuple):
@@ -56,12 +58,14 @@ class HealthTransition(NamedTuple):
 
 
 class SourceStatus(NamedTuple):
-    """The health of one source: suspended or not, why (empty when not), and how often it was
-    suspended so far."""
+    """The health of one source: suspended or not, why (empty when not), how often it was
+    suspended so far, and what its innovations warn of."""
 
     suspended: bool
     reason: str
     suspensions: int
+    warning: str = ""
+    """The source's latest innovation warning while it holds (empty when none)."""
 
 
 @dataclass(frozen=True)

@@ -240,6 +240,16 @@ class AidingSource(abc.ABC):
         """What to check when this source is suspended (by its sensor)."""
         return SUSPENSION_HINTS.get(self.sensor, "check its configuration")
 
+    def innovation_warning(
+        self, t_s: float, innovation: np.ndarray, innovation_covariance: np.ndarray
+    ) -> str | None:
+        """Whether this source's gated innovations, the latest ``innovation`` (measured −
+        predicted) with its covariance S = H P Hᵀ + R at stamp ``t_s`` (s), are persistently
+        larger than stated: a new warning to log (rate-limited by the source), ``""`` when a
+        warning no longer holds, None when nothing changed. Only sources that can tell why say
+        so."""
+        return None
+
     @classmethod
     def enabled_by(cls, config: FusionConfig) -> bool:
         """Whether ``config`` lets the fusion use this source (its measurements are otherwise

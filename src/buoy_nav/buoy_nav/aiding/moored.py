@@ -33,11 +33,21 @@ contradicted and suspended; below the quantile of
 :data:`~buoy_nav.contradictions.AGREEMENT_PROBABILITY` it is not (in between the verdict
 stands). Without a receiver it cannot be judged; the start-up statement
 (:mod:`buoy_nav.observability`) says so.
+
+Without GNSS the mooring's own innovations still say when it is held too tight
+(:class:`InnovationWatch`): over ``moored_check_window_s`` the normalised RMS of their
+horizontal part, ``sqrt(Σ NIS / Σ dim)``, is 1 for a consistent filter; beyond
+:data:`WARNING_RATIO` the filter's position wanders from its anchor more than the stated σ
+and the filter's covariance together allow, because a slow tilt error (the gyro's bias wander
+stated too small) drives the velocity, or because the sea moves the buoy further than
+``moored_position_sigma_horizontal_m``.
+It is said (logged once a window while it holds, and in the diagnostics), never acted on.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import NamedTuple
 
 import numpy as np
@@ -56,6 +66,49 @@ from buoy_nav.gnss_motion import GnssMotion
 
 MIN_SPAN_OF_WINDOW = 0.2
 """Share of ``moored_check_window_s`` the measurements must span before the mooring is judged."""
+WARNING_RATIO = 1.3
+"""Normalised RMS of the mooring's innovations over a window beyond which it warns: a variance
+1.7 times the stated one. Consecutive innovations are correlated over the anchor's minutes, so
+a window holds only a few independent samples and a consistent filter's ratio scatters by a
+tenth or two about 1."""
+
+
+class InnovationWatch:
+    """The normalised RMS of the mooring's innovations over the last ``window_s`` (s), and the
+    warning it gives beyond :data:`WARNING_RATIO` (once a window while it holds)."""
+
+    def __init__(self, window_s: float):
+        self._window_s = window_s
+        self._samples: deque[tuple[float, float, int]] = deque()
+        self._warned_at_s = -math.inf
+        self._warning = False
+
+    def ratio(self) -> float:
+        total_nis = sum(nis for _, nis, _ in self._samples)
+        return math.sqrt(total_nis / sum(dimension for _, _, dimension in self._samples))
+
+    def add(self, t_s: float, nis: float, dimension: int) -> str | None:
+        """Take one innovation (stamp s, NIS, its dimension): a new warning, ``""`` when one
+        no longer holds, None when nothing changed."""
+        self._samples.append((t_s, nis, dimension))
+        while self._samples[0][0] < t_s - self._window_s:
+            self._samples.popleft()
+        if t_s - self._samples[0][0] < (1.0 - MIN_SPAN_OF_WINDOW) * self._window_s:
+            return None
+        ratio = self.ratio()
+        if ratio <= WARNING_RATIO:
+            was_warning, self._warning = self._warning, False
+            return "" if was_warning else None
+        self._warning = True
+        if t_s - self._warned_at_s < self._window_s:
+            return None
+        self._warned_at_s = t_s
+        return (
+            f"mooring innovations {ratio:.1f}× their stated σ over the last "
+            f"{self._window_s:.0f} s: the gyro's wander (fusion.gyro_bias_instability_deg_h) or "
+            f"the mooring's σ (fusion.moored_position_sigma_horizontal_m) is stated too small; "
+            f"run assess_motion_pack"
+        )
 
 
 class MooringAnchor(NamedTuple):
@@ -91,6 +144,7 @@ class MooredSource(AidingSource):
         self._min_span_s = MIN_SPAN_OF_WINDOW * config.moored_check_window_s
         self._contradiction_quantile = chi_square_quantile(2, config.gate_probability)
         self._agreement_quantile = chi_square_quantile(2, AGREEMENT_PROBABILITY)
+        self._watch = InnovationWatch(config.moored_check_window_s)
         self._anchor: np.ndarray | None = None
         self._anchor_t_s = -math.inf
         self.next_due_s = -math.inf
@@ -129,6 +183,15 @@ class MooredSource(AidingSource):
         if normalised_squared < self._agreement_quantile:
             return Verdict(False, said)
         return None
+
+    def innovation_warning(
+        self, t_s: float, innovation: np.ndarray, innovation_covariance: np.ndarray
+    ) -> str | None:
+        """The horizontal innovation's NIS to :class:`InnovationWatch`: the vertical one, of a
+        σ the heave rarely fills, would dilute what the tilt error does to the horizontal."""
+        horizontal = innovation[:2]
+        nis = float(horizontal @ np.linalg.solve(innovation_covariance[:2, :2], horizontal))
+        return self._watch.add(t_s, nis, 2)
 
     def restart(self) -> None:
         """Forget the anchor (after a realignment)."""
