@@ -286,6 +286,40 @@ def combine(*faults: Fault) -> Fault:
     return fault
 
 
+def intruder(
+    other: list[Record], topics: Iterable[str], from_s: float, to_s: float, offset_s: float
+) -> Fault:
+    """A second buoy on the same topics: the records of ``topics`` that ``other`` (a bag of
+    another buoy starting at the same log time) logged in [``from_s``, ``to_s``) interleaved by log
+    time, their header stamps moved by ``offset_s`` (its own clock)."""
+    kept = set(topics)
+    chosen = [other[i] for i in range(len(other)) if other[i].topic in kept]
+    start_ns = other[0].log_time_ns
+    window = [
+        r for r in chosen if from_s <= (r.log_time_ns - start_ns) / NANOSECONDS_PER_SECOND < to_s
+    ]
+    shifted = shift_stamps_of_all(window, offset_s)
+
+    def fault(records: list[Record]) -> list[Record]:
+        return sorted([*records, *shifted], key=lambda r: r.log_time_ns)
+
+    return fault
+
+
+def shift_stamps_of_all(records: list[Record], shift_s: float) -> list[Record]:
+    """``records`` with every header stamp moved by ``shift_s``."""
+    shift_ns = round(shift_s * NANOSECONDS_PER_SECOND)
+    shifted = []
+    for record in records:
+        message = record.message()
+        stamp_ns = stamp_to_ns(message.header.stamp) + shift_ns
+        message.header.stamp.sec, message.header.stamp.nanosec = divmod(
+            stamp_ns, NANOSECONDS_PER_SECOND
+        )
+        shifted.append(record.with_message(message))
+    return shifted
+
+
 # -- the IMU faults of the integrity monitoring ------------------------------------------------
 
 

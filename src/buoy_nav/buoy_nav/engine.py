@@ -179,10 +179,22 @@ class FusionEngine:
         """
         self.catch_up()
         self.last_input_rejection = None
-        sample = self._imu_input.accept(t_s, gyro_rad_s, specific_force_mps2)
-        if isinstance(sample, Reason):
-            self.reject_input(IMU, sample)
+        imu_input = self._imu_input
+        samples = imu_input.accept(t_s, gyro_rad_s, specific_force_mps2)
+        for reason in imu_input.take_given_up():
+            self._counters[IMU].reject(reason)
+        if isinstance(samples, Reason):
+            self.reject_input(IMU, samples)
             return []
+        solutions = []
+        for sample in samples:
+            solutions.extend(self._take_imu_sample(sample))
+        return solutions
+
+    def _take_imu_sample(self, sample: tuple) -> list[NavSolution]:
+        """Take an accepted IMU sample (stamp s, ω_ib body rad/s, specific force body m/s²);
+        the solutions :meth:`add_imu` returns for it."""
+        self.catch_up()
         self._counters[IMU].accepted += 1
         self._imu_buffer.append(sample)
         config = self.config
@@ -273,6 +285,9 @@ class FusionEngine:
         ``realtime_output`` every sample already had its solution, so none is returned.
         """
         self.catch_up()
+        self._imu_input.give_up()
+        for reason in self._imu_input.take_given_up():
+            self._counters[IMU].reject(reason)
         solutions = self._process(math.inf)
         self._queue.give_up_all()
         self.recorder.end_segment(None if self._nav is None else self._nav.kalman.covariance)

@@ -3,8 +3,10 @@
 A raw sample passes, in this order: three finite numbers each for ω_ib and the specific force
 (else ``malformed`` or ``non_finite``); the ``calibrate_imu`` biases and scale removed; magnitudes
 a sensor can report (``out_of_range``); its stamp put back on the aiding sources' clock after a
-step of the IMU's clock (:mod:`buoy_nav.imu_clock`); a stamp after the last accepted one
-(``duplicate_stamp``, ``stamp_not_increasing``); a change from the last accepted sample that a
+step of the IMU's clock (:mod:`buoy_nav.imu_clock`); a stamp that follows the accepted sequence
+at the IMU's rate, else held until it proves to start the IMU's new sequence and given up when the
+accepted one goes on (:mod:`buoy_nav.imu_sequence`: ``out_of_sequence``, or behind the latest
+accepted stamp ``duplicate_stamp``, ``stamp_not_increasing``); a change from the last accepted sample that a
 platform can make (``implausible_change``, :mod:`buoy_nav.imu_screening`).
 """
 
@@ -16,8 +18,10 @@ from buoy_common.contract import Reason
 from buoy_nav.config import FusionConfig
 from buoy_nav.imu_clock import ImuClock
 from buoy_nav.imu_screening import ImuPlausibility
+from buoy_nav.imu_sequence import HeldSequence
 
 Triple = tuple[float, float, float]
+Sample = tuple[float, Triple, Triple]
 
 
 class ImuInput:
@@ -38,12 +42,20 @@ class ImuInput:
         )
         self.latest_stamp_s = -math.inf
         """Stamp of the newest accepted sample (s, on the aiding sources' clock)."""
+        # The latest stamp of the accepted sequence, accepted or not (a spike the screening
+        # rejects is still the IMU's sample): the next one follows it.
+        self._sequence_last_s = -math.inf
+        self._held = HeldSequence()
+        self._given_up: list[Reason] = []
+        self.other_stream_lead_s = math.nan
+        """The latest held stamp less the latest accepted one (s; NaN when nothing is held): how
+        far a second stream on the IMU's topic runs ahead (negative: behind)."""
 
-    def accept(
-        self, t_s: float, gyro_rad_s, specific_force_mps2
-    ) -> tuple[float, Triple, Triple] | Reason:
-        """(stamp s, ω_ib body rad/s, specific force body m/s²) of the sample stamped ``t_s``
-        (s) as the fusion uses it, calibrated and re-stamped; or the reason it is refused."""
+    def accept(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[Sample] | Reason:
+        """The samples (stamp s, ω_ib body rad/s, specific force body m/s²) the fusion takes,
+        calibrated and re-stamped, now that the one stamped ``t_s`` (s) came: that one, none (it
+        is held, :mod:`buoy_nav.imu_sequence`) or the held ones of a new sequence; or the reason
+        it is refused. Held samples given up on the way are in :meth:`take_given_up`."""
         try:
             t = float(t_s)
             gx, gy, gz = _float_triple(gyro_rad_s)
@@ -61,18 +73,74 @@ class ImuInput:
             or fx * fx + fy * fy + fz * fz > self._max_force_sq
         ):
             return Reason.OUT_OF_RANGE
+        sample = (self.clock.restamp(t), (gx, gy, gz), (fx, fy, fz))
+        if self.clock.follows(sample[0], self._sequence_last_s) and sample[0] > self.latest_stamp_s:
+            self._give_up_held()
+            self._sequence_last_s = sample[0]
+            screened = self._screened(sample)
+            return screened if isinstance(screened, Reason) else [screened]
+        return self._hold(sample)
+
+    def take_given_up(self) -> list[Reason]:
+        """Why each held sample given up since the last call was rejected."""
+        given_up, self._given_up = self._given_up, []
+        return given_up
+
+    def give_up(self) -> None:
+        """Give up the held samples (end of data)."""
+        self._give_up_held()
+
+    def _hold(self, sample: Sample) -> list[Sample]:
+        """Hold ``sample``, out of the accepted sequence; the held samples once they make the
+        IMU's new sequence (re-stamped after a step), else none."""
+        held = self._held
+        if held.samples and not self.clock.follows(sample[0], held.samples[-1][0]):
+            self._give_up_held()
+        if not held.samples:
+            held.newest_aiding_s = self.clock.newest_aiding_s
+        held.samples.append(sample)
+        self.other_stream_lead_s = sample[0] - self.latest_stamp_s
+        if not held.confirmed():
+            return []
+        self.other_stream_lead_s = math.nan
+        samples = held.take()
+        step = self.clock.new_sequence(samples[0][0], self.latest_stamp_s, held.newest_aiding_s)
+        released = []
+        for t, gyro, force in samples:
+            screened = self._screened((t - step, gyro, force))
+            if isinstance(screened, Reason):
+                self._given_up.append(screened)
+            else:
+                released.append(screened)
+            self._sequence_last_s = t - step
+        return released
+
+    def _give_up_held(self) -> None:
+        """Count the held samples rejected: another stream's, or stale ones."""
         latest = self.latest_stamp_s
-        t = self.clock.restamp(t, latest)
+        for t, _, _ in self._held.take():
+            if t > latest:
+                self._given_up.append(Reason.OUT_OF_SEQUENCE)
+            else:
+                self._given_up.append(
+                    Reason.DUPLICATE_STAMP if t == latest else Reason.STAMP_NOT_INCREASING
+                )
+        self.other_stream_lead_s = math.nan
+
+    def _screened(self, sample: Sample) -> Sample | Reason:
+        """``sample`` if its stamp follows the latest accepted one and its change from it is
+        one a platform can make (it becomes the latest), else the reason it is refused."""
+        t, gyro, force = sample
+        latest = self.latest_stamp_s
         if t <= latest:
             return Reason.DUPLICATE_STAMP if t == latest else Reason.STAMP_NOT_INCREASING
         if t - latest > self._max_gap_s:
             self._plausibility.restart()
-        gyro, force = (gx, gy, gz), (fx, fy, fz)
         if not self._plausibility.plausible(t, gyro, force):
             return Reason.IMPLAUSIBLE_CHANGE
         self.clock.accepted(t, latest)
         self.latest_stamp_s = t
-        return t, gyro, force
+        return sample
 
 
 def _float_triple(values) -> Triple:
