@@ -55,24 +55,29 @@ class ImuClock:
         (always, while the rate is not known)."""
         return t_s > previous_s and not t_s - previous_s > SEQUENCE_INTERVALS * self.interval_s
 
-    def new_sequence(self, first_s: float, latest_s: float, newest_aiding_s: float) -> float:
+    def new_sequence(self, first_s: float, latest_s: float, newest_aiding_s: float) -> float | None:
         """The step (s) to take off the stamps of a new sequence of the IMU's, whose first
         (re-stamped) stamp is ``first_s``, after the latest accepted one at ``latest_s``, the
-        newest aiding stamp being ``newest_aiding_s`` when it came (0: no step).
+        newest aiding stamp being ``newest_aiding_s`` when it came (0: no step); None when the
+        sequence cannot be taken (it lies behind the latest on the aiding sources' clock).
 
-        Behind the latest, the clock went back. More than ``max_gap_s`` ahead, it is an outage
-        if the aiding stamps went on meanwhile, and a step if the aiding was running with the
-        IMU until then and did not: its newest stamp is still nearer the IMU's latest stamp than
-        the new one. A step is undone so that the first sample follows the latest one sample
-        interval later.
+        The aiding says which of the two sequences its clock ran with: a step (of the new
+        sequence's clock) when its newest stamp is nearer the latest IMU stamp than the new one
+        and it was running with the IMU until then (within :data:`MAX_AIDING_INTERVAL_S`). More
+        than ``max_gap_s`` ahead without a step, it is an outage. Behind the latest without a
+        step, the accepted sequence was off the aiding clock (another stream's, which took over
+        where its stamps met the IMU's): the new one cannot go back in time, and is given up
+        until its stamps pass the latest. A step is undone so that the first sample follows the
+        latest one sample interval later.
         """
         if not (math.isfinite(latest_s) and math.isfinite(self.interval_s)):
             return 0.0
-        if first_s <= latest_s or (
-            first_s > latest_s + self._max_gap_s
-            and newest_aiding_s > latest_s - MAX_AIDING_INTERVAL_S
-            and newest_aiding_s < 0.5 * (latest_s + first_s)
-        ):
+        aiding_ran_with_latest = newest_aiding_s > latest_s - MAX_AIDING_INTERVAL_S and abs(
+            newest_aiding_s - latest_s
+        ) < abs(newest_aiding_s - first_s)
+        if first_s <= latest_s and not aiding_ran_with_latest:
+            return None
+        if first_s <= latest_s or (first_s > latest_s + self._max_gap_s and aiding_ran_with_latest):
             step = first_s - (latest_s + self.interval_s)
             self._offset_s -= step
             self.steps.append((first_s - step, step))

@@ -6,8 +6,8 @@ a sensor can report (``out_of_range``); its stamp put back on the aiding sources
 step of the IMU's clock (:mod:`buoy_nav.imu_clock`); a stamp that follows the accepted sequence
 at the IMU's rate, else held until it proves to start the IMU's new sequence and given up when the
 accepted one goes on (:mod:`buoy_nav.imu_sequence`: ``out_of_sequence``, or behind the latest
-accepted stamp ``duplicate_stamp``, ``stamp_not_increasing``); a change from the last accepted sample that a
-platform can make (``implausible_change``, :mod:`buoy_nav.imu_screening`).
+accepted stamp ``duplicate_stamp``, ``stamp_not_increasing``); a change from the last accepted
+sample that a platform can make (``implausible_change``, :mod:`buoy_nav.imu_screening`).
 """
 
 import math
@@ -105,6 +105,10 @@ class ImuInput:
         self.other_stream_lead_s = math.nan
         samples = held.take()
         step = self.clock.new_sequence(samples[0][0], self.latest_stamp_s, held.newest_aiding_s)
+        if step is None:
+            held.samples = samples
+            self._give_up_held()
+            return []
         released = []
         for t, gyro, force in samples:
             screened = self._screened((t - step, gyro, force))
