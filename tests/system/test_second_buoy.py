@@ -102,7 +102,8 @@ def judge(case, intruding_imu_samples: int):
                 pytest.mark.xfail(
                     strict=True,
                     reason="a second buoy's GNSS and anemometer ahead of the buoy's own are not "
-                    "yet told apart: its fixes take the stamps of the buoy's own (duplicate_stamp), "
+                    "yet told apart: its fixes take the stamps of the buoy's own "
+                    "(duplicate_stamp), "
                     "the gates suspend the baseline and the fusion does not recover; its wind "
                     "samples are corrected as the buoy's",
                 ),
