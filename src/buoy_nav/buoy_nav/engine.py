@@ -256,7 +256,7 @@ class FusionEngine:
         if refused is not None:
             return refused
         latest_imu_stamp = self._imu_input.latest_stamp_s
-        if t - latest_imu_stamp > MAX_MEASUREMENT_LEAD_S:
+        if t - self._imu_input.newest_stamp_s > MAX_MEASUREMENT_LEAD_S:
             # An IMU outage: only the last seconds can serve the realignment that follows.
             self._queue.give_up_between(latest_imu_stamp, t - MAX_MEASUREMENT_LEAD_S)
         return None
@@ -326,6 +326,14 @@ class FusionEngine:
             coasting_sources=tuple(sorted(lapsed)),
             source_health=self._gates.status(),
         )
+
+    @property
+    def second_imu_stream(self) -> tuple[int, float]:
+        """(IMU samples of a second stream on the IMU's topic rejected so far, how far the last
+        ran ahead of the IMU's own in s, negative behind). Input screening, done when a sample
+        comes: no filtering to catch up with."""
+        imu_input = self._imu_input
+        return imu_input.second_stream_samples, imu_input.second_stream_lead_s
 
     @property
     def covariance(self) -> np.ndarray | None:

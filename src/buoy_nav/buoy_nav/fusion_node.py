@@ -87,6 +87,7 @@ except ImportError:
 
 from buoy_common.base_node import (
     DATA_QOS,
+    REJECTION_LOG_PERIOD_S,
     DiagnosticsPublisher,
     FlushingNode,
     main_for,
@@ -155,6 +156,7 @@ class FusionNode(FlushingNode):
         self._filtering_durations_s: list[float] = []
         self._previous_imu_callback_s = -math.inf
         self._previous_imu_stamp_s = math.nan
+        self._second_imu_stream_samples = 0
         self.filtering_overdue = 0
         self._gnss_waiting: list[tuple[str, bytes]] = []
         self.solutions_published = 0
@@ -236,6 +238,7 @@ class FusionNode(FlushingNode):
                 return
             fed = feed_message(self.engine, IMU_RAW_TOPIC, message, self.stamps)
         self._take(IMU_RAW_TOPIC, fed)
+        self._warn_of_a_second_imu_stream()
         # The solution is out. The GNSS messages that came in and the filtering this sample made
         # due wait a little, so that the nodes that take this solution run first.
         if self.deferred_work_due_s is None:
@@ -245,6 +248,19 @@ class FusionNode(FlushingNode):
             self.filtering_overdue += 1
             self.run_deferred_work()
         self._imu_callback_durations_s.append(time.perf_counter() - started_s)
+
+    def _warn_of_a_second_imu_stream(self) -> None:
+        """Say so, rate-limited, while a second stream's samples on the IMU's topic are
+        rejected (another buoy's nodes on the same ROS domain)."""
+        samples, lead_s = self.engine.second_imu_stream
+        if samples == self._second_imu_stream_samples:
+            return
+        self._second_imu_stream_samples = samples
+        self.get_logger().warning(
+            f"two IMU streams on {IMU_RAW_TOPIC}: {samples} samples stamped {lead_s:+.3f} s off "
+            "the accepted sequence rejected so far; another buoy's nodes on this ROS domain?",
+            throttle_duration_sec=REJECTION_LOG_PERIOD_S,
+        )
 
     def _follows_an_imu_gap(self, raw: bytes) -> bool:
         """Whether this IMU message's stamp lies more than ``max_imu_gap_s`` from the previous

@@ -47,9 +47,11 @@ class ImuInput:
         self._sequence_last_s = -math.inf
         self._held = HeldSequence()
         self._given_up: list[Reason] = []
-        self.other_stream_lead_s = math.nan
-        """The latest held stamp less the latest accepted one (s; NaN when nothing is held): how
-        far a second stream on the IMU's topic runs ahead (negative: behind)."""
+        self.second_stream_samples = 0
+        """Held samples given up because the accepted sequence went on: a second stream's."""
+        self.second_stream_lead_s = math.nan
+        """The last of them less the latest accepted stamp (s): how far the second stream runs
+        ahead of the IMU's (negative: behind)."""
 
     def accept(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[Sample] | Reason:
         """The samples (stamp s, ω_ib body rad/s, specific force body m/s²) the fusion takes,
@@ -75,11 +77,22 @@ class ImuInput:
             return Reason.OUT_OF_RANGE
         sample = (self.clock.restamp(t), (gx, gy, gz), (fx, fy, fz))
         if self.clock.follows(sample[0], self._sequence_last_s) and sample[0] > self.latest_stamp_s:
+            held = self._held.samples
+            if held:
+                self.second_stream_samples += len(held)
+                self.second_stream_lead_s = held[-1][0] - self.latest_stamp_s
             self._give_up_held()
             self._sequence_last_s = sample[0]
             screened = self._screened(sample)
             return screened if isinstance(screened, Reason) else [screened]
         return self._hold(sample)
+
+    @property
+    def newest_stamp_s(self) -> float:
+        """The newest stamp of the IMU's samples, accepted or held (s): while samples are held
+        the IMU runs on, and the measurements are not ahead of it."""
+        held = self._held.samples
+        return max(self.latest_stamp_s, held[-1][0]) if held else self.latest_stamp_s
 
     def take_given_up(self) -> list[Reason]:
         """Why each held sample given up since the last call was rejected."""
@@ -99,10 +112,8 @@ class ImuInput:
         if not held.samples:
             held.newest_aiding_s = self.clock.newest_aiding_s
         held.samples.append(sample)
-        self.other_stream_lead_s = sample[0] - self.latest_stamp_s
         if not held.confirmed():
             return []
-        self.other_stream_lead_s = math.nan
         samples = held.take()
         step = self.clock.new_sequence(samples[0][0], self.latest_stamp_s, held.newest_aiding_s)
         if step is None:
@@ -129,7 +140,6 @@ class ImuInput:
                 self._given_up.append(
                     Reason.DUPLICATE_STAMP if t == latest else Reason.STAMP_NOT_INCREASING
                 )
-        self.other_stream_lead_s = math.nan
 
     def _screened(self, sample: Sample) -> Sample | Reason:
         """``sample`` if its stamp follows the latest accepted one and its change from it is
