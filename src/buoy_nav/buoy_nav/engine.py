@@ -42,12 +42,14 @@ is rejected and counted by input and reason; it never reaches the state. Measure
 ``beyond_imu_data``, oldest first, so an outage cannot fill the memory. An IMU sample whose
 change from the last accepted one no platform can make is rejected as ``implausible_change``
 (:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
-(:mod:`buoy_nav.imu_clock`); :mod:`buoy_nav.imu_input` holds that screening of the IMU
-samples. When the gates keep rejecting the aiding, the filter no longer agrees with it: the
-integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
-published inflated while the trust is not back, and the alignment started again if that does
-not bring the aiding back into the gates. When one source keeps failing its gate while the
-others agree, the source is wrong, not the filter: it is suspended
+(:mod:`buoy_nav.imu_clock`); a sample out of the accepted sequence (a second IMU stream on the
+topic) never moves the filter's time (:mod:`buoy_nav.imu_sequence`, ``out_of_sequence``);
+:mod:`buoy_nav.imu_input` holds that screening of the IMU samples. When the gates keep
+rejecting the aiding, the filter no longer agrees with it: the integrity monitor
+(:mod:`buoy_nav.integrity`) has the covariance inflated, published inflated while the trust is
+not back, and the alignment started again if that does not bring the aiding back into the gates.
+When one source keeps failing its gate while the others agree, the source is wrong, not the
+filter: it is suspended
 (:mod:`buoy_nav.source_health`), its measurements gated but not fused, until it agrees again.
 What the GNSS receiver measured of the buoy's motion is also set against the sources directly,
 without the filter (:mod:`buoy_nav.contradictions`): a velocity that the fixes contradict is
