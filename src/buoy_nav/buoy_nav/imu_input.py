@@ -64,6 +64,13 @@ class ImuInput:
             fx, fy, fz = _float_triple(specific_force_mps2)
         except (TypeError, ValueError):
             return Reason.MALFORMED
+        # A sample refused for its values is still the IMU's: the sequence goes on through it.
+        stamp = self.clock.restamp(t)
+        in_sequence = (
+            self.clock.follows(stamp, self._sequence_last_s) and stamp > self.latest_stamp_s
+        )
+        if in_sequence:
+            self._sequence_goes_on(stamp)
         if not (math.isfinite(t) and math.isfinite(gx + gy + gz) and math.isfinite(fx + fy + fz)):
             return Reason.NON_FINITE
         if self._calibration is not None:
@@ -75,17 +82,21 @@ class ImuInput:
             or fx * fx + fy * fy + fz * fz > self._max_force_sq
         ):
             return Reason.OUT_OF_RANGE
-        sample = (self.clock.restamp(t), (gx, gy, gz), (fx, fy, fz))
-        if self.clock.follows(sample[0], self._sequence_last_s) and sample[0] > self.latest_stamp_s:
-            held = self._held.samples
-            if held:
-                self.second_stream_samples += len(held)
-                self.second_stream_lead_s = held[-1][0] - self.latest_stamp_s
-            self._give_up_held()
-            self._sequence_last_s = sample[0]
-            screened = self._screened(sample)
-            return screened if isinstance(screened, Reason) else [screened]
-        return self._hold(sample)
+        sample = (stamp, (gx, gy, gz), (fx, fy, fz))
+        if not in_sequence:
+            return self._hold(sample)
+        screened = self._screened(sample)
+        return screened if isinstance(screened, Reason) else [screened]
+
+    def _sequence_goes_on(self, t_s: float) -> None:
+        """A sample of the accepted sequence stamped ``t_s`` (s) came: the held samples were a
+        second stream's (or stale ones)."""
+        held = self._held.samples
+        if held:
+            self.second_stream_samples += len(held)
+            self.second_stream_lead_s = held[-1][0] - self.latest_stamp_s
+        self._give_up_held()
+        self._sequence_last_s = t_s
 
     @property
     def newest_stamp_s(self) -> float:
