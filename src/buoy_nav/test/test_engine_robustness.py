@@ -150,6 +150,34 @@ def test_a_step_of_the_imu_clock_is_undone(step_s):
     assert attitude_errors_rad(buoy, solutions).max() < math.radians(0.02)
 
 
+@pytest.mark.parametrize("offset_s", [-5.0, 0.3, 40.0])
+def test_a_second_imu_stream_never_moves_the_filter(offset_s):
+    """Another buoy's IMU samples (rocking otherwise, on its own clock ``offset_s`` off) each
+    delivered just after one of the buoy's own, from 20 s to 30 s: every one is rejected, no
+    step of the clock is taken, and the run is the one without them."""
+    buoy, other = RockingBuoy(), RockingBuoy(roll_deg=3.0, yaw_deg=120.0)
+    events = make_events(buoy, 40.0)
+    other_events = {e[0]: e for e in make_events(other, 40.0) if e[2] == "imu"}
+    interleaved = []
+    for event in events:
+        interleaved.append(event)
+        if event[2] == "imu" and 20.0 <= event[0] < 30.0:
+            _, order, kind, args = other_events[event[0]]
+            interleaved.append((event[0] + offset_s, order, kind, args))
+    engine, solutions = run(interleaved)
+    _, reference = run(events)
+    health = engine.health()
+    reason = "stamp_not_increasing" if offset_s < 0 else "out_of_sequence"
+    assert health.counters["imu"].rejected == {reason: 1000}
+    assert health.imu_clock_steps == () and health.imu_gaps == 0 and health.alignments == 1
+    assert engine.second_imu_stream[0] == 1000
+    assert engine.second_imu_stream[1] == pytest.approx(offset_s, abs=0.011)
+    assert [s.t_s for s in solutions] == [s.t_s for s in reference]
+    assert [s.attitude_xyzw.tolist() for s in solutions] == [
+        s.attitude_xyzw.tolist() for s in reference
+    ]
+
+
 def test_an_imu_outage_is_not_taken_for_a_clock_step():
     buoy = RockingBuoy()
     events = [e for e in make_events(buoy, 40.0) if not (e[2] == "imu" and 20.0 < e[0] < 21.0)]
