@@ -64,10 +64,12 @@ class ImuInput:
             fx, fy, fz = _float_triple(specific_force_mps2)
         except (TypeError, ValueError):
             return Reason.MALFORMED
-        # A sample refused for its values is still the IMU's: the sequence goes on through it.
+        # A sample refused for its values is still the IMU's: the sequence goes on through it
+        # (and a valid sample of its stamp is still in sequence).
         stamp = self.clock.restamp(t)
-        in_sequence = (
-            self.clock.follows(stamp, self._sequence_last_s) and stamp > self.latest_stamp_s
+        last = self._sequence_last_s
+        in_sequence = stamp > self.latest_stamp_s and (
+            stamp == last or self.clock.follows(stamp, last)
         )
         if in_sequence:
             self._sequence_goes_on(stamp)
