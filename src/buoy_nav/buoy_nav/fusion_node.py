@@ -143,6 +143,10 @@ FILTERING_DELAY_S = 0.003
 TF_QOS = QoSProfile(depth=100)
 
 
+SECOND_IMU_STREAM_SAMPLES = 10
+"""Samples off the IMU's sequence, given up when it went on, that say a second stream is there."""
+
+
 class FusionNode(FlushingNode):
     def __init__(self):
         super().__init__(FUSION_NODE_NAME)
@@ -251,9 +255,10 @@ class FusionNode(FlushingNode):
 
     def _warn_of_a_second_imu_stream(self) -> None:
         """Say so, rate-limited, while a second stream's samples on the IMU's topic are
-        rejected (another buoy's nodes on the same ROS domain)."""
+        rejected (another buoy's nodes on the same ROS domain), once there are more than a few
+        stale samples would explain."""
         samples, lead_s = self.engine.second_imu_stream
-        if samples == self._second_imu_stream_samples:
+        if samples < SECOND_IMU_STREAM_SAMPLES or samples == self._second_imu_stream_samples:
             return
         self._second_imu_stream_samples = samples
         self.get_logger().warning(
