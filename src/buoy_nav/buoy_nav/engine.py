@@ -127,6 +127,9 @@ class FusionEngine:
         )
         self.last_input_rejection: str | None = None
         """Why the latest input call rejected its input (None: accepted)."""
+        self.imu_given_up: tuple[Reason, ...] = ()
+        """Why each held IMU sample that the latest :meth:`add_imu` (or :meth:`flush`) gave up
+        was rejected: samples out of the IMU's sequence, rejected once it went on."""
 
         self._imu_model = ImuErrorModel.from_config(config)
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
@@ -183,8 +186,7 @@ class FusionEngine:
         self.last_input_rejection = None
         imu_input = self._imu_input
         samples = imu_input.accept(t_s, gyro_rad_s, specific_force_mps2)
-        for reason in imu_input.take_given_up():
-            self._counters[IMU].reject(reason)
+        self._count_given_up_imu_samples()
         if isinstance(samples, Reason):
             self.reject_input(IMU, samples)
             return []
@@ -192,6 +194,12 @@ class FusionEngine:
         for sample in samples:
             solutions.extend(self._take_imu_sample(sample))
         return solutions
+
+    def _count_given_up_imu_samples(self) -> None:
+        """Count the held IMU samples given up by the latest call (:mod:`buoy_nav.imu_sequence`)."""
+        self.imu_given_up = tuple(self._imu_input.take_given_up())
+        for reason in self.imu_given_up:
+            self._counters[IMU].reject(reason)
 
     def _take_imu_sample(self, sample: tuple) -> list[NavSolution]:
         """Take an accepted IMU sample (stamp s, ω_ib body rad/s, specific force body m/s²);
@@ -288,8 +296,7 @@ class FusionEngine:
         """
         self.catch_up()
         self._imu_input.give_up()
-        for reason in self._imu_input.take_given_up():
-            self._counters[IMU].reject(reason)
+        self._count_given_up_imu_samples()
         solutions = self._process(math.inf)
         self._queue.give_up_all()
         self.recorder.end_segment(None if self._nav is None else self._nav.kalman.covariance)

@@ -242,6 +242,8 @@ class FusionNode(FlushingNode):
                 return
             fed = feed_message(self.engine, IMU_RAW_TOPIC, message, self.stamps)
         self._take(IMU_RAW_TOPIC, fed)
+        for reason in self.engine.imu_given_up:
+            self.reject(IMU_RAW_TOPIC, reason)
         self._warn_of_a_second_imu_stream()
         # The solution is out. The GNSS messages that came in and the filtering this sample made
         # due wait a little, so that the nodes that take this solution run first.
@@ -340,6 +342,8 @@ class FusionNode(FlushingNode):
         """End of input: publish the solutions the engine still holds."""
         self.feed_waiting_gnss()
         self.publish_solutions(self.engine.flush())
+        for reason in self.engine.imu_given_up:
+            self.reject(IMU_RAW_TOPIC, reason)
         return list(self._nav_publishers.values())
 
     # -- diagnostics ------------------------------------------------------------------------
