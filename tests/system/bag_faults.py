@@ -286,6 +286,54 @@ def combine(*faults: Fault) -> Fault:
     return fault
 
 
+def intruder(
+    other: list[Record], topics: Iterable[str], from_s: float, to_s: float, offset_s: float
+) -> Fault:
+    """A second buoy on the same topics: the records of ``topics`` that ``other`` (a bag of
+    another buoy starting at the same log time) logged in [``from_s``, ``to_s``), logged at their
+    own header stamps (as live nodes deliver them, not in a recorder's bursts) and interleaved by
+    log time, their header stamps then moved by ``offset_s`` (its own clock)."""
+    kept = set(topics)
+    start_ns = other[0].log_time_ns
+    window = [
+        r
+        for r in other
+        if r.topic in kept and from_s <= (r.log_time_ns - start_ns) / NANOSECONDS_PER_SECOND < to_s
+    ]
+    shifted = shift_stamps_of_all(logged_at_stamps(kept)(window), offset_s)
+
+    def fault(records: list[Record]) -> list[Record]:
+        return sorted([*records, *shifted], key=lambda r: r.log_time_ns)
+
+    return fault
+
+
+def logged_at_stamps(topics: Iterable[str]) -> Fault:
+    """The records of ``topics`` logged at their header stamps: delivered as they were stamped."""
+    kept = set(topics)
+
+    def fault(records: list[Record]) -> list[Record]:
+        return [
+            replace(r, log_time_ns=header_stamp_ns(r)) if r.topic in kept else r for r in records
+        ]
+
+    return fault
+
+
+def shift_stamps_of_all(records: list[Record], shift_s: float) -> list[Record]:
+    """``records`` with every header stamp moved by ``shift_s``."""
+    shift_ns = round(shift_s * NANOSECONDS_PER_SECOND)
+    shifted = []
+    for record in records:
+        message = record.message()
+        stamp_ns = stamp_to_ns(message.header.stamp) + shift_ns
+        message.header.stamp.sec, message.header.stamp.nanosec = divmod(
+            stamp_ns, NANOSECONDS_PER_SECOND
+        )
+        shifted.append(record.with_message(message))
+    return shifted
+
+
 # -- the IMU faults of the integrity monitoring ------------------------------------------------
 
 

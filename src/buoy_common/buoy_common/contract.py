@@ -218,6 +218,9 @@ class Reason(StrEnum):
     NO_FIX = "no_fix"
     """``gnss/fix`` with ``status.status < 0``."""
     STAMP_NOT_INCREASING = "stamp_not_increasing"
+    OUT_OF_SEQUENCE = "out_of_sequence"
+    """An IMU sample ahead of the previous one by more than the IMU's rate allows, while the
+    IMU's own samples went on: a second IMU stream on the topic (another buoy's)."""
     DUPLICATE_STAMP = "duplicate_stamp"
     TOO_LATE = "too_late"
     """Arrived after the filter had processed past its stamp."""

@@ -42,12 +42,14 @@ is rejected and counted by input and reason; it never reaches the state. Measure
 ``beyond_imu_data``, oldest first, so an outage cannot fill the memory. An IMU sample whose
 change from the last accepted one no platform can make is rejected as ``implausible_change``
 (:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
-(:mod:`buoy_nav.imu_clock`); :mod:`buoy_nav.imu_input` holds that screening of the IMU
-samples. When the gates keep rejecting the aiding, the filter no longer agrees with it: the
-integrity monitor (:mod:`buoy_nav.integrity`) has the covariance inflated,
-published inflated while the trust is not back, and the alignment started again if that does
-not bring the aiding back into the gates. When one source keeps failing its gate while the
-others agree, the source is wrong, not the filter: it is suspended
+(:mod:`buoy_nav.imu_clock`); a sample out of the accepted sequence (a second IMU stream on the
+topic) never moves the filter's time (:mod:`buoy_nav.imu_sequence`, ``out_of_sequence``);
+:mod:`buoy_nav.imu_input` holds that screening of the IMU samples. When the gates keep
+rejecting the aiding, the filter no longer agrees with it: the integrity monitor
+(:mod:`buoy_nav.integrity`) has the covariance inflated, published inflated while the trust is
+not back, and the alignment started again if that does not bring the aiding back into the gates.
+When one source keeps failing its gate while the others agree, the source is wrong, not the
+filter: it is suspended
 (:mod:`buoy_nav.source_health`), its measurements gated but not fused, until it agrees again.
 What the GNSS receiver measured of the buoy's motion is also set against the sources directly,
 without the filter (:mod:`buoy_nav.contradictions`): a velocity that the fixes contradict is
@@ -125,6 +127,9 @@ class FusionEngine:
         )
         self.last_input_rejection: str | None = None
         """Why the latest input call rejected its input (None: accepted)."""
+        self.imu_given_up: tuple[Reason, ...] = ()
+        """Why each held IMU sample that the latest :meth:`add_imu` (or :meth:`flush`) gave up
+        was rejected: samples out of the IMU's sequence, rejected once it went on."""
 
         self._imu_model = ImuErrorModel.from_config(config)
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
@@ -179,10 +184,27 @@ class FusionEngine:
         """
         self.catch_up()
         self.last_input_rejection = None
-        sample = self._imu_input.accept(t_s, gyro_rad_s, specific_force_mps2)
-        if isinstance(sample, Reason):
-            self.reject_input(IMU, sample)
+        imu_input = self._imu_input
+        samples = imu_input.accept(t_s, gyro_rad_s, specific_force_mps2)
+        self._count_given_up_imu_samples()
+        if isinstance(samples, Reason):
+            self.reject_input(IMU, samples)
             return []
+        solutions = []
+        for sample in samples:
+            solutions.extend(self._take_imu_sample(sample))
+        return solutions
+
+    def _count_given_up_imu_samples(self) -> None:
+        """Count the held IMU samples given up by the latest call (:mod:`buoy_nav.imu_sequence`)."""
+        self.imu_given_up = tuple(self._imu_input.take_given_up())
+        for reason in self.imu_given_up:
+            self._counters[IMU].reject(reason)
+
+    def _take_imu_sample(self, sample: tuple) -> list[NavSolution]:
+        """Take an accepted IMU sample (stamp s, ω_ib body rad/s, specific force body m/s²);
+        the solutions :meth:`add_imu` returns for it."""
+        self.catch_up()
         self._counters[IMU].accepted += 1
         self._imu_buffer.append(sample)
         config = self.config
@@ -244,7 +266,7 @@ class FusionEngine:
         if refused is not None:
             return refused
         latest_imu_stamp = self._imu_input.latest_stamp_s
-        if t - latest_imu_stamp > MAX_MEASUREMENT_LEAD_S:
+        if t - self._imu_input.newest_stamp_s > MAX_MEASUREMENT_LEAD_S:
             # An IMU outage: only the last seconds can serve the realignment that follows.
             self._queue.give_up_between(latest_imu_stamp, t - MAX_MEASUREMENT_LEAD_S)
         return None
@@ -273,6 +295,8 @@ class FusionEngine:
         ``realtime_output`` every sample already had its solution, so none is returned.
         """
         self.catch_up()
+        self._imu_input.give_up()
+        self._count_given_up_imu_samples()
         solutions = self._process(math.inf)
         self._queue.give_up_all()
         self.recorder.end_segment(None if self._nav is None else self._nav.kalman.covariance)
@@ -311,6 +335,14 @@ class FusionEngine:
             coasting_sources=tuple(sorted(lapsed)),
             source_health=self._gates.status(),
         )
+
+    @property
+    def second_imu_stream(self) -> tuple[int, float]:
+        """(IMU samples of a second stream on the IMU's topic rejected so far, how far the last
+        ran ahead of the IMU's own in s, negative behind). Input screening, done when a sample
+        comes: no filtering to catch up with."""
+        imu_input = self._imu_input
+        return imu_input.second_stream_samples, imu_input.second_stream_lead_s
 
     @property
     def covariance(self) -> np.ndarray | None:

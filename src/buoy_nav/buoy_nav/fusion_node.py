@@ -87,6 +87,7 @@ except ImportError:
 
 from buoy_common.base_node import (
     DATA_QOS,
+    REJECTION_LOG_PERIOD_S,
     DiagnosticsPublisher,
     FlushingNode,
     main_for,
@@ -142,6 +143,10 @@ FILTERING_DELAY_S = 0.003
 TF_QOS = QoSProfile(depth=100)
 
 
+SECOND_IMU_STREAM_SAMPLES = 10
+"""Samples off the IMU's sequence, given up when it went on, that say a second stream is there."""
+
+
 class FusionNode(FlushingNode):
     def __init__(self):
         super().__init__(FUSION_NODE_NAME)
@@ -155,6 +160,7 @@ class FusionNode(FlushingNode):
         self._filtering_durations_s: list[float] = []
         self._previous_imu_callback_s = -math.inf
         self._previous_imu_stamp_s = math.nan
+        self._second_imu_stream_samples = 0
         self.filtering_overdue = 0
         self._gnss_waiting: list[tuple[str, bytes]] = []
         self.solutions_published = 0
@@ -236,6 +242,9 @@ class FusionNode(FlushingNode):
                 return
             fed = feed_message(self.engine, IMU_RAW_TOPIC, message, self.stamps)
         self._take(IMU_RAW_TOPIC, fed)
+        for reason in self.engine.imu_given_up:
+            self.reject(IMU_RAW_TOPIC, reason)
+        self._warn_of_a_second_imu_stream()
         # The solution is out. The GNSS messages that came in and the filtering this sample made
         # due wait a little, so that the nodes that take this solution run first.
         if self.deferred_work_due_s is None:
@@ -245,6 +254,20 @@ class FusionNode(FlushingNode):
             self.filtering_overdue += 1
             self.run_deferred_work()
         self._imu_callback_durations_s.append(time.perf_counter() - started_s)
+
+    def _warn_of_a_second_imu_stream(self) -> None:
+        """Say so, rate-limited, while a second stream's samples on the IMU's topic are
+        rejected (another buoy's nodes on the same ROS domain), once there are more than a few
+        stale samples would explain."""
+        samples, lead_s = self.engine.second_imu_stream
+        if samples < SECOND_IMU_STREAM_SAMPLES or samples == self._second_imu_stream_samples:
+            return
+        self._second_imu_stream_samples = samples
+        self.get_logger().warning(
+            f"two IMU streams on {IMU_RAW_TOPIC}: {samples} samples stamped {lead_s:+.3f} s off "
+            "the accepted sequence rejected so far; another buoy's nodes on this ROS domain?",
+            throttle_duration_sec=REJECTION_LOG_PERIOD_S,
+        )
 
     def _follows_an_imu_gap(self, raw: bytes) -> bool:
         """Whether this IMU message's stamp lies more than ``max_imu_gap_s`` from the previous
@@ -319,6 +342,8 @@ class FusionNode(FlushingNode):
         """End of input: publish the solutions the engine still holds."""
         self.feed_waiting_gnss()
         self.publish_solutions(self.engine.flush())
+        for reason in self.engine.imu_given_up:
+            self.reject(IMU_RAW_TOPIC, reason)
         return list(self._nav_publishers.values())
 
     # -- diagnostics ------------------------------------------------------------------------

@@ -6,6 +6,10 @@ back makes every sample until the old stamps are reached "not increasing" and th
 strapdown integration seconds off the GNSS; a step ahead looks like an outage and every later
 GNSS measurement arrives "too late". :class:`ImuClock` tells a step from an outage and puts the
 IMU stamps back on the aiding sources' clock.
+
+Which samples make a new sequence of the IMU's own (after a step or an outage), rather than a
+second stream interleaved with it, is for :mod:`buoy_nav.imu_sequence` to say; the clock is told
+of a new sequence once it is the IMU's.
 """
 
 import math
@@ -13,6 +17,10 @@ import math
 MAX_AIDING_INTERVAL_S = 1.0
 """Longest interval between aiding measurements of a running GNSS receiver (s): aiding stamps
 this close to the newest IMU stamp say the aiding sources and the IMU ran on together."""
+
+SEQUENCE_INTERVALS = 2.5
+"""A sample follows the latest one of the sequence when its stamp is later by at most this many
+sample intervals (a sample lost in between is still in sequence)."""
 
 
 class ImuClock:
@@ -25,61 +33,60 @@ class ImuClock:
     def __init__(self, max_gap_s: float):
         self._max_gap_s = max_gap_s
         self._offset_s = 0.0
-        self._interval_s = math.nan
-        self._newest_aiding_s = -math.inf
-        # A stamp far behind the latest, on the IMU's clock: a step back if the next sample
-        # follows it, a stale sample otherwise.
-        self._step_back_candidate_s = math.nan
+        self.interval_s = math.nan
+        """The IMU's sample interval (s; NaN until two samples in sequence were accepted)."""
+        self.newest_aiding_s = -math.inf
+        """The newest aiding stamp seen (s)."""
         self.steps: list[tuple[float, float]] = []
         """(stamp of the first sample after the step on the aiding sources' clock, s; step, s,
         negative when the IMU clock went back)."""
 
     def aiding_stamp(self, t_s: float) -> None:
         """An aiding measurement stamped ``t_s`` (s) arrived."""
-        if t_s > self._newest_aiding_s:
-            self._newest_aiding_s = t_s
+        if t_s > self.newest_aiding_s:
+            self.newest_aiding_s = t_s
 
-    def restamp(self, t_s: float, latest_s: float) -> float:
-        """The IMU stamp ``t_s`` (s) on the aiding sources' clock, given the latest accepted
-        (re-stamped) IMU stamp ``latest_s``.
+    def restamp(self, t_s: float) -> float:
+        """The IMU stamp ``t_s`` (s) on the aiding sources' clock, as the steps so far say."""
+        return t_s + self._offset_s
 
-        A stamp more than ``max_gap_s`` before the latest is a sample out of place (it stays
-        on its own clock, and is rejected as not increasing); if the next sample follows it one
-        sample interval later, the clock went back, and the samples from the second one on are
-        re-stamped to continue two sample intervals after the latest. A stamp more than
-        ``max_gap_s`` after the latest is an outage if the aiding stamps went on meanwhile, and
-        a step if the aiding was running with the IMU until then and did not: its newest stamp is
-        still nearer the IMU's latest stamp than this one; the sample is re-stamped to follow
-        the latest one sample interval later.
+    def follows(self, t_s: float, previous_s: float) -> bool:
+        """Whether the (re-stamped) stamp ``t_s`` (s) follows ``previous_s`` at the IMU's rate
+        (always, while the rate is not known)."""
+        return t_s > previous_s and not t_s - previous_s > SEQUENCE_INTERVALS * self.interval_s
+
+    def new_sequence(self, first_s: float, latest_s: float, newest_aiding_s: float) -> float | None:
+        """The step (s) to take off the stamps of a new sequence of the IMU's, whose first
+        (re-stamped) stamp is ``first_s``, after the latest accepted one at ``latest_s``, the
+        newest aiding stamp being ``newest_aiding_s`` when it came (0: no step); None when the
+        sequence cannot be taken (it lies behind the latest on the aiding sources' clock).
+
+        The aiding says which of the two sequences its clock ran with: a step (of the new
+        sequence's clock) when its newest stamp is nearer the latest IMU stamp than the new one
+        and it was running with the IMU until then (within :data:`MAX_AIDING_INTERVAL_S`). More
+        than ``max_gap_s`` ahead without a step, it is an outage. Behind the latest without a
+        step, the accepted sequence was off the aiding clock (another stream's, which took over
+        where its stamps met the IMU's): the new one cannot go back in time, and is given up
+        until its stamps pass the latest. A step is undone so that the first sample follows the
+        latest one sample interval later.
         """
-        t_s += self._offset_s
-        if not (math.isfinite(latest_s) and math.isfinite(self._interval_s)):
-            return t_s
-        interval = self._interval_s
-        candidate, self._step_back_candidate_s = self._step_back_candidate_s, math.nan
-        if abs(t_s - (candidate + interval)) <= 0.5 * interval:
-            return self._step(t_s, candidate - (latest_s + interval))
-        gap_limit = self._max_gap_s
-        if t_s < latest_s - gap_limit:
-            self._step_back_candidate_s = t_s
-            return t_s
-        newest_aiding = self._newest_aiding_s
-        if (
-            t_s > latest_s + gap_limit
-            and newest_aiding > latest_s - MAX_AIDING_INTERVAL_S
-            and newest_aiding < 0.5 * (latest_s + t_s)
-        ):
-            return self._step(t_s, t_s - (latest_s + interval))
-        return t_s
-
-    def _step(self, t_s: float, step: float) -> float:
-        """Undo a step of ``step`` s of the IMU clock for the sample stamped ``t_s``."""
-        self._offset_s -= step
-        self.steps.append((t_s - step, step))
-        return t_s - step
+        if not (math.isfinite(latest_s) and math.isfinite(self.interval_s)):
+            return 0.0
+        aiding_ran_with_latest = newest_aiding_s > latest_s - MAX_AIDING_INTERVAL_S and abs(
+            newest_aiding_s - latest_s
+        ) < abs(newest_aiding_s - first_s)
+        if first_s <= latest_s and not aiding_ran_with_latest:
+            return None
+        if first_s <= latest_s or (first_s > latest_s + self._max_gap_s and aiding_ran_with_latest):
+            step = first_s - (latest_s + self.interval_s)
+            self._offset_s -= step
+            self.steps.append((first_s - step, step))
+            return step
+        return 0.0
 
     def accepted(self, t_s: float, latest_s: float) -> None:
         """The sample re-stamped ``t_s`` (s) was accepted after the one at ``latest_s``: the
-        sample interval follows it unless the two are a gap apart."""
-        if t_s - latest_s <= self._max_gap_s:
-            self._interval_s = t_s - latest_s
+        sample interval follows it when it is in sequence (or none is known yet)."""
+        dt = t_s - latest_s
+        if dt <= self._max_gap_s and not dt > SEQUENCE_INTERVALS * self.interval_s:
+            self.interval_s = dt
