@@ -223,6 +223,9 @@ class ImuStream(SensorStream):
             )
         if self._ahrs is not None:
             times_s, stamps_ns = self._every(all_times_s, all_stamps_ns, self.ahrs.sample_every)
+            if len(times_s) == 0:
+                # A block shorter than the pack's sampling interval may hold none of its samples.
+                return
             attitude, gyro, force, variance = self._ahrs.measure(times_s)
             yield from (
                 (AHRS_TOPIC, stamp, message)

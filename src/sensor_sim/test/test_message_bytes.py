@@ -62,3 +62,17 @@ def test_bytes_are_the_serialised_messages(kind):
     store, bag = jazzy_typestore(), Path("compared")
     for (topic, stamp, message), (_, _, raw) in zip(objects, written, strict=True):
         assert raw == serialize(store, bag, topic, types[topic], message), (topic, stamp)
+
+
+def test_a_live_clock_advancing_one_imu_sample_at_a_time_gives_every_pack_sample_once():
+    """A live node may advance by one IMU sample, which holds no motion-pack sample every other
+    time (``sample_every=2``): the stream yields nothing for the pack then and, over the run, the
+    pack's samples at every second IMU stamp."""
+    scenario = load_scenario("open_ocean", OVERRIDES, None)
+    stream = STREAMS["imu"].build(scenario, TruthModel(scenario), PARAMETERS, encoding=messages)
+    period_s = 1.0 / scenario.sensors.rates.imu_hz
+    rows = [row for k in range(1, 41) for row in stream.advance(k * period_s)]
+    imu_stamps = [stamp for topic, stamp, _ in rows if topic == "imu/data_raw"]
+    pack_stamps = [stamp for topic, stamp, _ in rows if topic == "imu/data"]
+    assert len(imu_stamps) >= 40
+    assert pack_stamps == imu_stamps[::2]
