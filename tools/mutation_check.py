@@ -117,8 +117,8 @@ MUTANTS = (
         (
             Edit(
                 MILLER,
-                "    translation_term = tuple(velocity_enu_mps)\n",
-                "    translation_term = tuple(-v for v in velocity_enu_mps)\n",
+                "    translation_term = (east, north, up)\n",
+                "    translation_term = (-east, -north, -up)\n",
             ),
         ),
     ),
