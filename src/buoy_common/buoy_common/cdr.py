@@ -173,23 +173,34 @@ class _Layout:
         return struct.Struct("".join(self._format))
 
 
-class Vector3StampedWriter:
-    """geometry_msgs/Vector3Stamped in frame ``frame_id``."""
+class _StampedWriter:
+    """A fixed-layout message with a ``std_msgs/Header`` in frame ``frame_id``: the layout of the
+    header, then the fields a subclass adds in :meth:`_add_fields`. ``self._header`` is what to
+    pack after the encapsulation header and the stamp (the frame id's length and bytes)."""
 
     def __init__(self, frame_id: str):
         layout = _Layout()
-        self._frame = layout.header(frame_id)
-        self._frame_length = len(self._frame)
-        layout.add("d", 8, 3)
+        frame = layout.header(frame_id)
+        self._header = (len(frame), frame)
+        self._add_fields(layout)
         self._struct = layout.struct()
+
+    def _add_fields(self, layout: _Layout) -> None:
+        raise NotImplementedError
+
+
+class Vector3StampedWriter(_StampedWriter):
+    """geometry_msgs/Vector3Stamped in frame ``frame_id``."""
+
+    def _add_fields(self, layout: _Layout) -> None:
+        layout.add("d", 8, 3)
 
     def write(self, sec: int, nanosec: int, x: float, y: float, z: float) -> bytes:
         return self._struct.pack(
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            self._frame_length,
-            self._frame,
+            *self._header,
             x,
             y,
             z,
@@ -208,17 +219,17 @@ class Vector3StampedWriter:
         return [data[start : start + size] for start in range(0, len(data), size)]
 
 
-class OdometryWriter:
+class OdometryWriter(_StampedWriter):
     """nav_msgs/Odometry in frame ``frame_id`` of child frame ``child_frame_id``."""
 
     def __init__(self, frame_id: str, child_frame_id: str):
-        layout = _Layout()
-        self._frame = layout.header(frame_id)
-        self._frame_length = len(self._frame)
-        self._child_frame = layout.string(child_frame_id)
-        self._child_frame_length = len(self._child_frame)
+        self._child_frame_id = child_frame_id
+        super().__init__(frame_id)
+
+    def _add_fields(self, layout: _Layout) -> None:
+        child_frame = layout.string(self._child_frame_id)
+        self._child_frame = (len(child_frame), child_frame)
         layout.add("d", 8, 7 + 36 + 6 + 36)
-        self._struct = layout.struct()
 
     def write(
         self,
@@ -236,10 +247,8 @@ class OdometryWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            self._frame_length,
-            self._frame,
-            self._child_frame_length,
-            self._child_frame,
+            *self._header,
+            *self._child_frame,
             *position,
             *orientation_xyzw,
             *pose_covariance,
@@ -249,15 +258,11 @@ class OdometryWriter:
         )
 
 
-class ImuWriter:
+class ImuWriter(_StampedWriter):
     """sensor_msgs/Imu in frame ``frame_id``."""
 
-    def __init__(self, frame_id: str):
-        layout = _Layout()
-        self._frame = layout.header(frame_id)
-        self._frame_length = len(self._frame)
+    def _add_fields(self, layout: _Layout) -> None:
         layout.add("d", 8, 4 + 9 + 3 + 9 + 3 + 9)
-        self._struct = layout.struct()
 
     def write(
         self,
@@ -275,8 +280,7 @@ class ImuWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            self._frame_length,
-            self._frame,
+            *self._header,
             *orientation_xyzw,
             *orientation_covariance,
             *angular_velocity,
@@ -286,15 +290,11 @@ class ImuWriter:
         )
 
 
-class TwistWithCovarianceStampedWriter:
+class TwistWithCovarianceStampedWriter(_StampedWriter):
     """geometry_msgs/TwistWithCovarianceStamped in frame ``frame_id``."""
 
-    def __init__(self, frame_id: str):
-        layout = _Layout()
-        self._frame = layout.header(frame_id)
-        self._frame_length = len(self._frame)
+    def _add_fields(self, layout: _Layout) -> None:
         layout.add("d", 8, 6 + 36)
-        self._struct = layout.struct()
 
     def write(self, sec: int, nanosec: int, linear, angular, covariance) -> bytes:
         """Vectors as 3 values, the covariance as 36 (row-major)."""
@@ -302,26 +302,21 @@ class TwistWithCovarianceStampedWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            self._frame_length,
-            self._frame,
+            *self._header,
             *linear,
             *angular,
             *covariance,
         )
 
 
-class NavSatFixWriter:
+class NavSatFixWriter(_StampedWriter):
     """sensor_msgs/NavSatFix in frame ``frame_id``."""
 
-    def __init__(self, frame_id: str):
-        layout = _Layout()
-        self._frame = layout.header(frame_id)
-        self._frame_length = len(self._frame)
+    def _add_fields(self, layout: _Layout) -> None:
         layout.add("b", 1)
         layout.add("H", 2)
         layout.add("d", 8, 3 + 9)
         layout.add("B", 1)
-        self._struct = layout.struct()
 
     def write(
         self,
@@ -340,8 +335,7 @@ class NavSatFixWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            self._frame_length,
-            self._frame,
+            *self._header,
             status,
             service,
             latitude_deg,
@@ -352,15 +346,11 @@ class NavSatFixWriter:
         )
 
 
-class MagneticFieldWriter:
+class MagneticFieldWriter(_StampedWriter):
     """sensor_msgs/MagneticField in frame ``frame_id``."""
 
-    def __init__(self, frame_id: str):
-        layout = _Layout()
-        self._frame = layout.header(frame_id)
-        self._frame_length = len(self._frame)
+    def _add_fields(self, layout: _Layout) -> None:
         layout.add("d", 8, 3 + 9)
-        self._struct = layout.struct()
 
     def write(self, sec: int, nanosec: int, magnetic_field_t, covariance_t2) -> bytes:
         """The field as 3 values (T), its covariance as 9 (row-major, T²)."""
@@ -368,30 +358,24 @@ class MagneticFieldWriter:
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            self._frame_length,
-            self._frame,
+            *self._header,
             *magnetic_field_t,
             *covariance_t2,
         )
 
 
-class TemperatureWriter:
+class TemperatureWriter(_StampedWriter):
     """sensor_msgs/Temperature in frame ``frame_id``."""
 
-    def __init__(self, frame_id: str):
-        layout = _Layout()
-        self._frame = layout.header(frame_id)
-        self._frame_length = len(self._frame)
+    def _add_fields(self, layout: _Layout) -> None:
         layout.add("d", 8, 2)
-        self._struct = layout.struct()
 
     def write(self, sec: int, nanosec: int, temperature_degc: float, variance_k2: float) -> bytes:
         return self._struct.pack(
             ENCAPSULATION_LITTLE_ENDIAN,
             sec,
             nanosec,
-            self._frame_length,
-            self._frame,
+            *self._header,
             temperature_degc,
             variance_k2,
         )
