@@ -43,7 +43,7 @@ is rejected and counted by input and reason; it never reaches the state. Measure
 change from the last accepted one no platform can make is rejected as ``implausible_change``
 (:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
 (:mod:`buoy_nav.imu_clock`); a sample out of the accepted sequence (a second IMU stream on the
-topic) never moves the filter's time (:mod:`buoy_nav.imu_sequence`, ``out_of_sequence``);
+topic) never moves the filter's time (:mod:`buoy_nav.stream_sequence`, ``out_of_sequence``);
 :mod:`buoy_nav.imu_input` holds that screening of the IMU samples. When the gates keep
 rejecting the aiding, the filter no longer agrees with it: the integrity monitor
 (:mod:`buoy_nav.integrity`) has the covariance inflated, published inflated while the trust is
@@ -93,6 +93,7 @@ from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
 from buoy_nav.source_health import HealthTransition
 from buoy_nav.source_registry import SourceRegistry
+from buoy_nav.stream_sequence import StreamSequence
 
 __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
 
@@ -130,6 +131,10 @@ class FusionEngine:
         self.imu_given_up: tuple[Reason, ...] = ()
         """Why each held IMU sample that the latest :meth:`add_imu` (or :meth:`flush`) gave up
         was rejected: samples out of the IMU's sequence, rejected once it went on."""
+        self.measurements_decided_later: tuple[tuple[AidingSource, Reason], ...] = ()
+        """(source, why) of each measurement held off its source's sequence that the latest
+        :meth:`add_measurement` (or :meth:`flush`) rejected: given up as a second stream's once
+        the sequence went on, or, released with a new sequence, too late to be used."""
 
         self._imu_model = ImuErrorModel.from_config(config)
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
@@ -147,6 +152,7 @@ class FusionEngine:
         self._deferred_horizon: float | None = None
 
         kinds = self._registry.kinds
+        self._sequences = {kind: StreamSequence() for kind in kinds}
         self._counters = {kind: MeasurementCounters() for kind in (IMU, *kinds)}
         self._queue = MeasurementQueue(self.sources, self._counters)
         self._recency = AidingRecency(kinds, len(AIDED_QUANTITIES), config.coasting_timeout_s)
@@ -196,7 +202,8 @@ class FusionEngine:
         return solutions
 
     def _count_given_up_imu_samples(self) -> None:
-        """Count the held IMU samples given up by the latest call (:mod:`buoy_nav.imu_sequence`)."""
+        """Count the held IMU samples given up by the latest call
+        (:mod:`buoy_nav.stream_sequence`)."""
         self.imu_given_up = tuple(self._imu_input.take_given_up())
         for reason in self.imu_given_up:
             self._counters[IMU].reject(reason)
@@ -243,20 +250,41 @@ class FusionEngine:
         source = self._registry.of_measurement(measurement)
         self.catch_up()
         self.last_input_rejection = None
-        refusal = self._queue_measurement(source, t_s, measurement)
+        self.measurements_decided_later = ()
+        refusal = self._screen_measurement(source, t_s, measurement)
         if refusal is not None:
             self.reject_input(source.kind, refusal)
 
-    def _queue_measurement(self, source: AidingSource, t_s: float, measurement) -> Reason | None:
-        """Validate ``measurement`` of ``source`` stamped ``t_s`` (s) and queue it; the reason
-        it is refused (None: queued)."""
+    def _screen_measurement(self, source: AidingSource, t_s: float, measurement) -> Reason | None:
+        """Validate ``measurement`` of ``source`` stamped ``t_s`` (s) and queue it unless it is
+        off the source's sequence (:mod:`buoy_nav.stream_sequence`: held, queued if it proves
+        to start the source's new sequence); the reason it is refused (None: queued or held).
+        The held measurements this one decides on are in :attr:`measurements_decided_later`."""
         if not source.enabled:
             return Reason.DISABLED
         stamp = as_floats(t_s)
         if isinstance(stamp, Reason):
             return stamp
         (t,) = stamp
-        validated = source.validated(measurement)
+        # Measurements with bad values are still the sensor's: its sequence goes on through them.
+        screening = self._sequences[source.kind].screen(t, (t, source.validated(measurement)))
+        decided_later = [(source, Reason.OUT_OF_SEQUENCE) for _ in screening.given_up]
+        refusal = None
+        for t_taken, validated in screening.taken:
+            refused = self._queue_measurement(source, t_taken, validated)
+            if t_taken == t:
+                refusal = refused
+            elif refused is not None:
+                decided_later.append((source, refused))
+        for _, reason in decided_later:
+            self._counters[source.kind].reject(reason)
+        self.measurements_decided_later = tuple(decided_later)
+        return refusal
+
+    def _queue_measurement(self, source: AidingSource, t: float, validated) -> Reason | None:
+        """Queue the ``validated`` measurement of ``source`` stamped ``t`` (s) (or the
+        :class:`Reason` its validation refused it for); the reason it is refused (None:
+        queued)."""
         if isinstance(validated, Reason):
             return validated
         if t <= self._point.last_imu_stamp_s:
@@ -297,6 +325,13 @@ class FusionEngine:
         self.catch_up()
         self._imu_input.give_up()
         self._count_given_up_imu_samples()
+        self.measurements_decided_later = tuple(
+            (source, Reason.OUT_OF_SEQUENCE)
+            for source in self.sources
+            for _ in self._sequences[source.kind].give_up()
+        )
+        for source, reason in self.measurements_decided_later:
+            self._counters[source.kind].reject(reason)
         solutions = self._process(math.inf)
         self._queue.give_up_all()
         self.recorder.end_segment(None if self._nav is None else self._nav.kalman.covariance)
@@ -337,12 +372,15 @@ class FusionEngine:
         )
 
     @property
-    def second_imu_stream(self) -> tuple[int, float]:
-        """(IMU samples of a second stream on the IMU's topic rejected so far, how far the last
-        ran ahead of the IMU's own in s, negative behind). Input screening, done when a sample
-        comes: no filtering to catch up with."""
+    def second_streams(self) -> dict[str, tuple[int, float]]:
+        """By input (``imu`` or a source's kind): (samples of a second stream on its topic
+        rejected so far, how far the last ran ahead of the input's own in s, negative behind).
+        Input screening, done when a sample comes: no filtering to catch up with."""
         imu_input = self._imu_input
-        return imu_input.second_stream_samples, imu_input.second_stream_lead_s
+        streams = {IMU: (imu_input.second_stream_samples, imu_input.second_stream_lead_s)}
+        for kind, sequence in self._sequences.items():
+            streams[kind] = (sequence.second_stream_samples, sequence.second_stream_lead_s)
+        return streams
 
     @property
     def covariance(self) -> np.ndarray | None:

@@ -170,8 +170,9 @@ def test_a_second_imu_stream_never_moves_the_filter(offset_s):
     reason = "stamp_not_increasing" if offset_s < 0 else "out_of_sequence"
     assert health.counters["imu"].rejected == {reason: 1000}
     assert health.imu_clock_steps == () and health.imu_gaps == 0 and health.alignments == 1
-    assert engine.second_imu_stream[0] == 1000
-    assert engine.second_imu_stream[1] == pytest.approx(offset_s, abs=0.011)
+    samples, lead_s = engine.second_streams["imu"]
+    assert samples == 1000
+    assert lead_s == pytest.approx(offset_s, abs=0.011)
     assert [s.t_s for s in solutions] == [s.t_s for s in reference]
     assert [s.attitude_xyzw.tolist() for s in solutions] == [
         s.attitude_xyzw.tolist() for s in reference
