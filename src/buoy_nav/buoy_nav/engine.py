@@ -131,10 +131,6 @@ class FusionEngine:
         self.imu_given_up: tuple[Reason, ...] = ()
         """Why each held IMU sample that the latest :meth:`add_imu` (or :meth:`flush`) gave up
         was rejected: samples out of the IMU's sequence, rejected once it went on."""
-        self.measurements_decided_later: tuple[tuple[AidingSource, Reason], ...] = ()
-        """(source, why) of each measurement held off its source's sequence that the latest
-        :meth:`add_measurement` (or :meth:`flush`) rejected: given up as a second stream's once
-        the sequence went on, or, released with a new sequence, too late to be used."""
 
         self._imu_model = ImuErrorModel.from_config(config)
         self._aligner = InMotionAligner(config, self._imu_model, self.states)
@@ -154,7 +150,7 @@ class FusionEngine:
         kinds = self._registry.kinds
         self._sequences = {kind: StreamSequence() for kind in kinds}
         self._counters = {kind: MeasurementCounters() for kind in (IMU, *kinds)}
-        self._queue = MeasurementQueue(self.sources, self._counters)
+        self._queue = MeasurementQueue(self.sources, self._counters, self._sequences)
         self._recency = AidingRecency(kinds, len(AIDED_QUANTITIES), config.coasting_timeout_s)
         self._sensor_sets = SensorSets(self.sources)
         self._gates = AidingGates(
@@ -250,16 +246,15 @@ class FusionEngine:
         source = self._registry.of_measurement(measurement)
         self.catch_up()
         self.last_input_rejection = None
-        self.measurements_decided_later = ()
         refusal = self._screen_measurement(source, t_s, measurement)
         if refusal is not None:
             self.reject_input(source.kind, refusal)
 
     def _screen_measurement(self, source: AidingSource, t_s: float, measurement) -> Reason | None:
-        """Validate ``measurement`` of ``source`` stamped ``t_s`` (s) and queue it unless it is
-        off the source's sequence (:mod:`buoy_nav.stream_sequence`: held, queued if it proves
-        to start the source's new sequence); the reason it is refused (None: queued or held).
-        The held measurements this one decides on are in :attr:`measurements_decided_later`."""
+        """Validate ``measurement`` of ``source`` stamped ``t_s`` (s) and queue it, marked when
+        it arrived ahead of the source's sequence (:mod:`buoy_nav.stream_sequence`, judged at
+        its turn by :class:`~buoy_nav.measurement_queue.MeasurementQueue`); the reason it is
+        refused (None: queued)."""
         if not source.enabled:
             return Reason.DISABLED
         stamp = as_floats(t_s)
@@ -267,32 +262,29 @@ class FusionEngine:
             return stamp
         (t,) = stamp
         # Measurements with bad values are still the sensor's: its sequence goes on through them.
-        screening = self._sequences[source.kind].screen(t, (t, source.validated(measurement)))
-        decided_later = [(source, Reason.OUT_OF_SEQUENCE) for _ in screening.given_up]
-        refusal = None
-        for t_taken, validated in screening.taken:
-            refused = self._queue_measurement(source, t_taken, validated)
-            if t_taken == t:
-                refusal = refused
-            elif refused is not None:
-                decided_later.append((source, refused))
-        for _, reason in decided_later:
-            self._counters[source.kind].reject(reason)
-        self.measurements_decided_later = tuple(decided_later)
-        return refusal
-
-    def _queue_measurement(self, source: AidingSource, t: float, validated) -> Reason | None:
-        """Queue the ``validated`` measurement of ``source`` stamped ``t`` (s) (or the
-        :class:`Reason` its validation refused it for); the reason it is refused (None:
-        queued)."""
+        screening = self._sequences[source.kind].screen(t, t)
+        if screening.held and screening.taken:
+            self._queue.settle(source, screening.taken)
+        validated = source.validated(measurement)
         if isinstance(validated, Reason):
             return validated
+        ahead = screening.held and not screening.taken
+        if ahead and t - self._imu_input.newest_stamp_s > MAX_MEASUREMENT_LEAD_S:
+            return Reason.OUT_OF_SEQUENCE
+        return self._queue_measurement(source, t, validated, ahead)
+
+    def _queue_measurement(
+        self, source: AidingSource, t: float, validated, ahead: bool
+    ) -> Reason | None:
+        """Queue the ``validated`` measurement of ``source`` stamped ``t`` (s), ``ahead`` of
+        its sequence or not; the reason it is refused (None: queued)."""
         if t <= self._point.last_imu_stamp_s:
             return Reason.TOO_LATE
-        self._imu_input.clock.aiding_stamp(t)
-        refused = self._queue.push(source, t, validated)
-        if refused is not None:
+        refused = self._queue.push(source, t, validated, ahead)
+        if refused is not None or ahead:
+            # A measurement ahead of its sequence tells the IMU's clock nothing until its turn.
             return refused
+        self._imu_input.clock.aiding_stamp(t)
         latest_imu_stamp = self._imu_input.latest_stamp_s
         if t - self._imu_input.newest_stamp_s > MAX_MEASUREMENT_LEAD_S:
             # An IMU outage: only the last seconds can serve the realignment that follows.
@@ -325,13 +317,6 @@ class FusionEngine:
         self.catch_up()
         self._imu_input.give_up()
         self._count_given_up_imu_samples()
-        self.measurements_decided_later = tuple(
-            (source, Reason.OUT_OF_SEQUENCE)
-            for source in self.sources
-            for _ in self._sequences[source.kind].give_up()
-        )
-        for source, reason in self.measurements_decided_later:
-            self._counters[source.kind].reject(reason)
         solutions = self._process(math.inf)
         self._queue.give_up_all()
         self.recorder.end_segment(None if self._nav is None else self._nav.kalman.covariance)
@@ -371,15 +356,24 @@ class FusionEngine:
             source_health=self._gates.status(),
         )
 
+    def take_out_of_sequence(self) -> list[AidingSource]:
+        """The sources of the measurements rejected as ``out_of_sequence`` since the last call,
+        in order (a second stream's, rejected when their turn came or when the source's own
+        measurement of their stamp arrived)."""
+        rejected, self._queue.out_of_sequence = self._queue.out_of_sequence, []
+        return rejected
+
     @property
     def second_streams(self) -> dict[str, tuple[int, float]]:
         """By input (``imu`` or a source's kind): (samples of a second stream on its topic
-        rejected so far, how far the last ran ahead of the input's own in s, negative behind).
-        Input screening, done when a sample comes: no filtering to catch up with."""
+        rejected so far, how far the last ran ahead of the input's own in s, negative behind;
+        NaN where not known: a measurement's, rejected at its turn). Not caught up: a count as
+        of the filtering done."""
         imu_input = self._imu_input
         streams = {IMU: (imu_input.second_stream_samples, imu_input.second_stream_lead_s)}
-        for kind, sequence in self._sequences.items():
-            streams[kind] = (sequence.second_stream_samples, sequence.second_stream_lead_s)
+        for kind in self._sequences:
+            rejected = self._counters[kind].rejected.get(Reason.OUT_OF_SEQUENCE, 0)
+            streams[kind] = (rejected, math.nan)
         return streams
 
     @property
@@ -437,6 +431,8 @@ class FusionEngine:
         queue = self._queue
         while queue.heap and queue.heap[0][0] <= t:
             stamp, group = queue.pop_stamp()
+            if not group:  # all rejected at their turn: no step to their stamp
+                continue
             gyro_m, force_m = point.samples_at(stamp, t, gyro, force)
             self._advance(stamp, gyro_m, force_m)
             self._handle_measurements(stamp, group, gyro_m)

@@ -265,10 +265,10 @@ class FusionNode(FlushingNode):
             if samples < SECOND_STREAM_SAMPLES or samples == self._second_stream_samples[kind]:
                 continue
             self._second_stream_samples[kind] = samples
+            lead = f" stamped {lead_s:+.3f} s" if math.isfinite(lead_s) else ""
             self.get_logger().warning(
-                f"two streams on {topics.get(kind, IMU_RAW_TOPIC)}: {samples} samples stamped "
-                f"{lead_s:+.3f} s off the accepted sequence rejected so far; another buoy's "
-                "nodes on this ROS domain?",
+                f"two streams on {topics.get(kind, IMU_RAW_TOPIC)}: {samples} samples{lead} off "
+                "the accepted sequence rejected so far; another buoy's nodes on this ROS domain?",
                 throttle_duration_sec=REJECTION_LOG_PERIOD_S,
             )
 
@@ -287,6 +287,7 @@ class FusionNode(FlushingNode):
         super().run_deferred_work()
         self.feed_waiting_gnss()
         self.engine.catch_up()
+        self._reject_out_of_sequence_measurements()
         self._filtering_durations_s.append(time.perf_counter() - started_s)
 
     def feed_waiting_gnss(self) -> None:
@@ -304,13 +305,15 @@ class FusionNode(FlushingNode):
         """Give a sensor message to the engine; publish the solutions it yields."""
         self._messages_in[topic] += 1
         self._take(topic, feed_message(self.engine, topic, message, self.stamps))
-        self._reject_decided_later()
+        self._reject_out_of_sequence_measurements()
 
-    def _reject_decided_later(self) -> None:
-        """Count and log the held measurements the engine's latest call rejected."""
-        for source, reason in self.engine.measurements_decided_later:
-            self.reject(source.topic, reason)
-        if self.engine.measurements_decided_later:
+    def _reject_out_of_sequence_measurements(self) -> None:
+        """Count and log the measurements of a second stream the engine rejected since the last
+        call (when their turn came, or their source's own measurement of their stamp)."""
+        rejected = self.engine.take_out_of_sequence()
+        for source in rejected:
+            self.reject(source.topic, Reason.OUT_OF_SEQUENCE)
+        if rejected:
             self._warn_of_second_streams()
 
     def _take(self, topic: str, fed) -> None:
@@ -355,7 +358,7 @@ class FusionNode(FlushingNode):
         self.publish_solutions(self.engine.flush())
         for reason in self.engine.imu_given_up:
             self.reject(IMU_RAW_TOPIC, reason)
-        self._reject_decided_later()
+        self._reject_out_of_sequence_measurements()
         return list(self._nav_publishers.values())
 
     # -- diagnostics ------------------------------------------------------------------------

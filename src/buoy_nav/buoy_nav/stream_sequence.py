@@ -9,7 +9,7 @@ it: it moves no clock and gives no output. Held samples that follow each other m
 sequence; when their stamps span :data:`CONFIRMING_SPAN_S` with no sample of the accepted
 sequence in between, the accepted sequence has stopped and the new one is the sensor's (after
 a step of its clock, or an outage). A sample of the accepted sequence gives the held ones up:
-they were another stream's (or a single stray sample), rejected as ``out_of_sequence``.
+they were another stream's (or a single stray sample).
 
 Messages arrive in bursts (a recorder or a busy middleware delivers a topic's messages up to a
 second late and together), so the span is far longer than a burst: a second stream interleaved
@@ -17,10 +17,22 @@ with the sensor's never spans it, and a real step or outage only delays (or, for
 wait, loses) the samples of its first :data:`CONFIRMING_SPAN_S`. A second stream whose stamps lie
 within :data:`SEQUENCE_INTERVALS` sample intervals of the sensor's cannot be told from it.
 
-The IMU's samples (:mod:`buoy_nav.imu_input`) are held and, once confirmed, released after a
-step of the IMU's clock is undone; every other stream is screened by :class:`StreamSequence`:
-the aiding sources' measurements in the fusion (:class:`buoy_nav.engine.FusionEngine`) and the
-flow sensors' samples in the compensation (:class:`wind_comp.pipeline.CompensationPipeline`).
+What becomes of a held sample depends on who waits for it:
+
+- the IMU's samples (:mod:`buoy_nav.imu_input`) are held, given up when the IMU's own go on,
+  and, once confirmed, released after a step of the IMU's clock is undone;
+- an aiding measurement (screened by a :class:`StreamSequence` per source in
+  :class:`buoy_nav.engine.FusionEngine`) may arrive out of order within
+  ``max_measurement_delay_s`` and so ahead of its sequence: it waits in the queue like the
+  others, moving nothing, and is judged when its turn comes
+  (:class:`buoy_nav.measurement_queue.MeasurementQueue`): the source's own measurement of its
+  stamp arriving in sequence replaces it, and at its turn it is used only if it lies on the
+  sequence's grid (:meth:`StreamSequence.on_grid`: a whole number of sample intervals from it,
+  as a measurement that came early or the first after an outage does); the measurements of a
+  confirmed new sequence are used whatever their grid;
+- a flow sensor's sample (:class:`wind_comp.pipeline.CompensationPipeline`) gets its output in
+  input order at once: held, it is invalid (``out_of_sequence``), also when the held samples
+  prove to be the sensor's new sequence.
 """
 
 import itertools
@@ -35,6 +47,10 @@ sequence in between, to be the stream's new sequence."""
 SEQUENCE_INTERVALS = 2.5
 """A sample follows the latest one of the sequence when its stamp is later by at most this many
 sample intervals (a sample lost in between is still in sequence)."""
+
+GRID_TOLERANCE = 0.01
+"""A stamp lies on the stream's grid when it is within this share of a sample interval of a
+whole number of intervals from the sequence's latest stamp."""
 
 RATE_MEMORY = 16
 """In-sequence intervals a :class:`StreamSequence` keeps: the stream's sample interval is the
@@ -74,7 +90,8 @@ class Screening(NamedTuple):
     """The items to take now, oldest first: the sample's (in sequence, or behind the latest for
     the caller's own order checks), or those of a new sequence once confirmed."""
     given_up: list
-    """Held items given up (rejected ``out_of_sequence``): a second stream's, or stray ones."""
+    """Held items given up because the accepted sequence went on: a second stream's, or stray
+    ones (or, for a stream that may arrive out of order, early ones)."""
 
 
 class StreamSequence:
@@ -111,9 +128,15 @@ class StreamSequence:
             return Screening(False, [item], given_up)
         return self._hold(t_s, item)
 
-    def give_up(self) -> list:
-        """The held items, given up (end of data)."""
-        return self._give_up_held()
+    def on_grid(self, t_s: float) -> bool:
+        """Whether the stamp ``t_s`` (s) lies on the sequence's grid: a whole number of sample
+        intervals from its latest stamp (within :data:`GRID_TOLERANCE`), a stamp the stream
+        itself has or could have (always, while the rate is not known)."""
+        interval = self.interval_s
+        if not (math.isfinite(interval) and math.isfinite(self.latest_s)):
+            return True
+        intervals = (t_s - self.latest_s) / interval
+        return abs(intervals - round(intervals)) <= GRID_TOLERANCE
 
     def _hold(self, t_s: float, item) -> Screening:
         held = self._held

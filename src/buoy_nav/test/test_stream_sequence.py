@@ -69,11 +69,22 @@ def test_a_stamp_behind_the_sequence_is_left_to_the_callers_order_checks():
     assert sequence.latest_s == 0.2
 
 
-def test_held_samples_are_given_up_at_the_end_and_counted_with_their_lead():
+def test_held_samples_given_up_are_counted_with_their_lead():
     sequence = StreamSequence()
     for t in (0.0, 0.1, 0.2):
         sequence.screen(t, t)
     assert sequence.screen(1.0, "stray").held
-    assert sequence.give_up() == ["stray"]
+    assert sequence.screen(0.3, 0.3) == (False, [0.3], ["stray"])
     assert sequence.second_stream_samples == 1
     assert sequence.second_stream_lead_s == pytest.approx(0.8)
+
+
+@pytest.mark.parametrize(
+    ("t_s", "on_grid"),
+    [(0.5, True), (0.2, True), (10.0 + 0.0005, True), (0.53, False), (0.3 + 0.002, False)],
+)
+def test_a_stamp_on_the_grid_is_a_whole_number_of_intervals_from_the_sequence(t_s, on_grid):
+    sequence = StreamSequence()
+    for t in (0.0, 0.1, 0.2):
+        sequence.screen(t, t)
+    assert sequence.on_grid(t_s) == on_grid
