@@ -11,7 +11,8 @@ accepted stamp, ``stamp_not_increasing`` or, for a measurement behind those the 
 processed, ``too_late`` behind it), no step of the IMU's clock is taken, each
 GNSS topic and the anemometer count the second buoy's messages among their rejections; no valid
 ``wind/true_with_covariance`` sample is beyond 5σ of ``truth/wind``; and from ``RECOVERY_S``
-after the second buoy stops, the wind is valid again.
+after the second buoy stops, the wind is valid again. Replayed live, the nodes publish what
+``process_bag`` writes.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pathlib import Path
 import bag_faults
 import numpy as np
 import pytest
+from live_replay import SENSOR_TOPICS, differences_from_offline, replay
 from test_wind_uncertainty import normalised_errors, published
 
 from against_truth import Truth
@@ -125,3 +127,17 @@ def test_a_second_buoy_never_corrupts_the_fusion(tmp_path, offset_s, topics, rea
     if ANEMOMETER[0] in topics:
         rejected_winds = summary.wind.rejected_messages
         assert rejected_winds[reason] >= intruding(ANEMOMETER), rejected_winds
+
+
+@pytest.mark.ros
+@pytest.mark.long
+def test_live_equals_offline_with_a_second_buoy(tmp_path, nodes):
+    """The second buoy's IMU, GNSS and anemometer 0.3 s ahead, replayed to ``fusion_node`` and
+    ``compensation_node``: they publish what ``process_bag`` writes, sample for sample."""
+    run_case(tmp_path, 0.3, IMU + GNSS + ANEMOMETER)
+    recorded = tmp_path / "live"
+    figures = replay(
+        nodes, tmp_path / "in", [BUOY_PARAMETERS], tmp_path / "out", recorded, SENSOR_TOPICS
+    )
+    failures = differences_from_offline(recorded, tmp_path / "out")
+    assert not failures, "\n".join(failures) + f"\n{figures}"
