@@ -44,7 +44,10 @@ change from the last accepted one no platform can make is rejected as ``implausi
 (:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
 (:mod:`buoy_nav.imu_clock`); a sample out of the accepted sequence (a second IMU stream on the
 topic) never moves the filter's time (:mod:`buoy_nav.stream_sequence`, ``out_of_sequence``);
-:mod:`buoy_nav.imu_input` holds that screening of the IMU samples. When the gates keep
+:mod:`buoy_nav.imu_input` holds that screening of the IMU samples. An aiding measurement ahead
+of its source's sequence (a second receiver on the topic, or one that came early) waits in the
+queue, moving nothing, and is judged when its turn comes (:mod:`buoy_nav.measurement_queue`).
+When the gates keep
 rejecting the aiding, the filter no longer agrees with it: the integrity monitor
 (:mod:`buoy_nav.integrity`) has the covariance inflated, published inflated while the trust is
 not back, and the alignment started again if that does not bring the aiding back into the gates.
