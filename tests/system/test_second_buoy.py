@@ -1,16 +1,18 @@
 """A second buoy's streams interleaved with the buoy's own on the same topics, judged against
 the bag's own truth.
 
-Another buoy's nodes on the same ROS domain publish on the fusion's topics: from 45 s to 75 s of
-``bags/sea_state`` the IMU (and in one case the GNSS and anemometer) messages of
-``bags/open_ocean`` are interleaved by log time, stamped on their own clock: 5 s behind the
-buoy's, 40 s ahead or 0.3 s ahead, delivered as they were stamped (as live nodes deliver them).
-The GNSS and anemometer of a second buoy ahead of the buoy's own are not yet told apart (the
-case is expected to fail). Each bag is processed by ``process_bag``. The second IMU stream
-never moves the filter's time: its samples are rejected (``out_of_sequence`` ahead of the
-latest accepted stamp, ``stamp_not_increasing`` behind it), no step of the IMU's clock is taken;
-no valid ``wind/true_with_covariance`` sample is beyond 5σ of ``truth/wind``; and from
-``RECOVERY_S`` after the second buoy stops, the wind is valid again.
+Another buoy's nodes on the same ROS domain publish on the fusion's and the compensation's
+topics: from 45 s to 75 s of ``bags/sea_state`` the IMU (and in some cases the GNSS and
+anemometer) messages of ``bags/open_ocean`` are interleaved by log time, stamped on their own
+clock: 5 s behind the buoy's, 40 s ahead or 0.3 s ahead, delivered as they were stamped (as live
+nodes deliver them). Each bag is processed by ``process_bag``. The second buoy's streams never
+move anything's time: their samples are rejected (``out_of_sequence`` ahead of the latest
+accepted stamp, ``stamp_not_increasing`` or, for a measurement behind those the fusion
+processed, ``too_late`` behind it), no step of the IMU's clock is taken, each
+GNSS topic and the anemometer count the second buoy's messages among their rejections; no valid
+``wind/true_with_covariance`` sample is beyond 5σ of ``truth/wind``; and from ``RECOVERY_S``
+after the second buoy stops, the wind is valid again. Replayed live, the nodes publish what
+``process_bag`` writes.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from pathlib import Path
 import bag_faults
 import numpy as np
 import pytest
+from live_replay import SENSOR_TOPICS, differences_from_offline, replay
 from test_wind_uncertainty import normalised_errors, published
 
 from against_truth import Truth
@@ -38,6 +41,12 @@ RECOVERY_S = 30.0
 IMU = ["/imu/data_raw"]
 GNSS = ["/gnss/fix", "/gnss/vel", "/gnss/heading", "/gnss/baseline"]
 ANEMOMETER = ["/anemometer/wind"]
+GNSS_KINDS = {
+    "/gnss/fix": "gnss_fix",
+    "/gnss/vel": "gnss_velocity",
+    "/gnss/heading": "gnss_heading",
+    "/gnss/baseline": "gnss_baseline",
+}
 MIN_VALID_SHARE_AFTER = 0.99
 
 
@@ -62,21 +71,29 @@ def run_case(base: Path, offset_s: float, topics: list[str]):
     return summary, *published(out), Truth(bag), first_s, len(other)
 
 
-def imu_rejections(summary) -> dict[str, int]:
-    """The IMU's rejection counts by reason, from the fusion's summary line."""
-    (line,) = [line for line in summary.fusion_lines if line.startswith("imu ")]
-    listed = line.split("rejected:")[1].strip()
+def rejections(summary, kind: str) -> dict[str, int]:
+    """An input's (``imu`` or an aiding source's kind) rejection counts by reason, from the
+    fusion's summary line."""
+    (line,) = [line for line in summary.fusion_lines if line.split()[0] == kind]
+    listed = line.split("rejected:")[1].split("suspensions")[0].strip()
     if listed == "none":
         return {}
     pairs = (item.strip().rsplit(" ", 1) for item in listed.split(","))
     return {reason: int(count) for reason, count in pairs}
 
 
+def intruding(topics: list[str]) -> int:
+    """Messages of ``topics`` the second buoy sends."""
+    return len(bag_faults.read_records(OTHER_BAG, topics, INTRUSION_S[1])) - len(
+        bag_faults.read_records(OTHER_BAG, topics, INTRUSION_S[0])
+    )
+
+
 def judge(case, intruding_imu_samples: int):
     summary, stamps_ns, winds, covariances, truth, first_s, _ = case
     figures = "; ".join(summary.fusion_lines)
     assert not [line for line in summary.fusion_lines if "IMU clock stepped" in line], figures
-    rejected = imu_rejections(summary)
+    rejected = rejections(summary, "imu")
     assert sum(rejected.values()) >= intruding_imu_samples, figures
     errors = normalised_errors(truth, stamps_ns, winds, covariances)
     assert np.count_nonzero(np.abs(errors) > 5.0) == 0, f"{np.abs(errors).max():.1f} σ; {figures}"
@@ -93,29 +110,34 @@ def judge(case, intruding_imu_samples: int):
         (-5.0, IMU + GNSS + ANEMOMETER, "stamp_not_increasing"),
         (40.0, IMU, "out_of_sequence"),
         (0.3, IMU, "out_of_sequence"),
-        pytest.param(
-            0.3,
-            IMU + GNSS + ANEMOMETER,
-            "out_of_sequence",
-            marks=[
-                pytest.mark.long,
-                pytest.mark.xfail(
-                    strict=True,
-                    reason="a second buoy's GNSS and anemometer ahead of the buoy's own are not "
-                    "yet told apart: its fixes take the stamps of the buoy's own "
-                    "(duplicate_stamp), "
-                    "the gates suspend the baseline and the fusion does not recover; its wind "
-                    "samples are corrected as the buoy's",
-                ),
-            ],
-            id="0.3-all-streams",
-        ),
+        (0.3, IMU + GNSS + ANEMOMETER, "out_of_sequence"),
     ],
 )
 def test_a_second_buoy_never_corrupts_the_fusion(tmp_path, offset_s, topics, reason):
     case = run_case(tmp_path, offset_s, topics)
-    other_imu = len(bag_faults.read_records(OTHER_BAG, IMU, INTRUSION_S[1])) - len(
-        bag_faults.read_records(OTHER_BAG, IMU, INTRUSION_S[0])
-    )
+    other_imu = intruding(IMU)
     rejected = judge(case, other_imu)
     assert rejected.get(reason, 0) > other_imu // 3, rejected
+    summary = case[0]
+    # Measurements behind those already processed are too late for the fusion.
+    gnss_reason = "too_late" if offset_s < 0 else reason
+    for topic, kind in GNSS_KINDS.items():
+        if topic in topics:
+            assert rejections(summary, kind).get(gnss_reason, 0) >= intruding([topic]), kind
+    if ANEMOMETER[0] in topics:
+        rejected_winds = summary.wind.rejected_messages
+        assert rejected_winds[reason] >= intruding(ANEMOMETER), rejected_winds
+
+
+@pytest.mark.ros
+@pytest.mark.long
+def test_live_equals_offline_with_a_second_buoy(tmp_path, nodes):
+    """The second buoy's IMU, GNSS and anemometer 0.3 s ahead, replayed to ``fusion_node`` and
+    ``compensation_node``: they publish what ``process_bag`` writes, sample for sample."""
+    run_case(tmp_path, 0.3, IMU + GNSS + ANEMOMETER)
+    recorded = tmp_path / "live"
+    figures = replay(
+        nodes, tmp_path / "in", [BUOY_PARAMETERS], tmp_path / "out", recorded, SENSOR_TOPICS
+    )
+    failures = differences_from_offline(recorded, tmp_path / "out")
+    assert not failures, "\n".join(failures) + f"\n{figures}"

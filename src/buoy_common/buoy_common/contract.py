@@ -219,8 +219,10 @@ class Reason(StrEnum):
     """``gnss/fix`` with ``status.status < 0``."""
     STAMP_NOT_INCREASING = "stamp_not_increasing"
     OUT_OF_SEQUENCE = "out_of_sequence"
-    """An IMU sample ahead of the previous one by more than the IMU's rate allows, while the
-    IMU's own samples went on: a second IMU stream on the topic (another buoy's)."""
+    """A sample ahead of the previous one by more than its stream's rate allows: an IMU sample
+    or aiding measurement while the sensor's own samples went on, a second stream on the topic
+    (another buoy's); a flow sensor's sample, whose output cannot wait to tell, also the first
+    samples after an outage (:mod:`buoy_nav.stream_sequence`)."""
     DUPLICATE_STAMP = "duplicate_stamp"
     TOO_LATE = "too_late"
     """Arrived after the filter had processed past its stamp."""

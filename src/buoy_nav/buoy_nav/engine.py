@@ -43,8 +43,11 @@ is rejected and counted by input and reason; it never reaches the state. Measure
 change from the last accepted one no platform can make is rejected as ``implausible_change``
 (:mod:`buoy_nav.imu_screening`); a step of the IMU's clock is undone by re-stamping
 (:mod:`buoy_nav.imu_clock`); a sample out of the accepted sequence (a second IMU stream on the
-topic) never moves the filter's time (:mod:`buoy_nav.imu_sequence`, ``out_of_sequence``);
-:mod:`buoy_nav.imu_input` holds that screening of the IMU samples. When the gates keep
+topic) never moves the filter's time (:mod:`buoy_nav.stream_sequence`, ``out_of_sequence``);
+:mod:`buoy_nav.imu_input` holds that screening of the IMU samples. An aiding measurement ahead
+of its source's sequence (a second receiver on the topic, or one that came early) waits in the
+queue, moving nothing, and is judged when its turn comes (:mod:`buoy_nav.measurement_queue`).
+When the gates keep
 rejecting the aiding, the filter no longer agrees with it: the integrity monitor
 (:mod:`buoy_nav.integrity`) has the covariance inflated, published inflated while the trust is
 not back, and the alignment started again if that does not bring the aiding back into the gates.
@@ -93,6 +96,7 @@ from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
 from buoy_nav.source_health import HealthTransition
 from buoy_nav.source_registry import SourceRegistry
+from buoy_nav.stream_sequence import StreamSequence
 
 __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
 
@@ -147,8 +151,9 @@ class FusionEngine:
         self._deferred_horizon: float | None = None
 
         kinds = self._registry.kinds
+        self._sequences = {kind: StreamSequence() for kind in kinds}
         self._counters = {kind: MeasurementCounters() for kind in (IMU, *kinds)}
-        self._queue = MeasurementQueue(self.sources, self._counters)
+        self._queue = MeasurementQueue(self.sources, self._counters, self._sequences)
         self._recency = AidingRecency(kinds, len(AIDED_QUANTITIES), config.coasting_timeout_s)
         self._sensor_sets = SensorSets(self.sources)
         self._gates = AidingGates(
@@ -196,7 +201,8 @@ class FusionEngine:
         return solutions
 
     def _count_given_up_imu_samples(self) -> None:
-        """Count the held IMU samples given up by the latest call (:mod:`buoy_nav.imu_sequence`)."""
+        """Count the held IMU samples given up by the latest call
+        (:mod:`buoy_nav.stream_sequence`)."""
         self.imu_given_up = tuple(self._imu_input.take_given_up())
         for reason in self.imu_given_up:
             self._counters[IMU].reject(reason)
@@ -243,28 +249,45 @@ class FusionEngine:
         source = self._registry.of_measurement(measurement)
         self.catch_up()
         self.last_input_rejection = None
-        refusal = self._queue_measurement(source, t_s, measurement)
+        refusal = self._screen_measurement(source, t_s, measurement)
         if refusal is not None:
             self.reject_input(source.kind, refusal)
 
-    def _queue_measurement(self, source: AidingSource, t_s: float, measurement) -> Reason | None:
-        """Validate ``measurement`` of ``source`` stamped ``t_s`` (s) and queue it; the reason
-        it is refused (None: queued)."""
+    def _screen_measurement(self, source: AidingSource, t_s: float, measurement) -> Reason | None:
+        """Validate ``measurement`` of ``source`` stamped ``t_s`` (s) and queue it, marked when
+        it arrived ahead of the source's sequence (:mod:`buoy_nav.stream_sequence`, judged at
+        its turn by :class:`~buoy_nav.measurement_queue.MeasurementQueue`); the reason it is
+        refused (None: queued)."""
         if not source.enabled:
             return Reason.DISABLED
         stamp = as_floats(t_s)
         if isinstance(stamp, Reason):
             return stamp
         (t,) = stamp
+        # Measurements with bad values are still the sensor's: its sequence goes on through them.
+        screening = self._sequences[source.kind].screen(t, t)
+        if screening.held and screening.taken:
+            self._queue.settle(source, screening.taken)
         validated = source.validated(measurement)
         if isinstance(validated, Reason):
             return validated
+        ahead = screening.held and not screening.taken
+        if ahead and t - self._imu_input.newest_stamp_s > MAX_MEASUREMENT_LEAD_S:
+            return Reason.OUT_OF_SEQUENCE
+        return self._queue_measurement(source, t, validated, ahead)
+
+    def _queue_measurement(
+        self, source: AidingSource, t: float, validated, ahead: bool
+    ) -> Reason | None:
+        """Queue the ``validated`` measurement of ``source`` stamped ``t`` (s), ``ahead`` of
+        its sequence or not; the reason it is refused (None: queued)."""
         if t <= self._point.last_imu_stamp_s:
             return Reason.TOO_LATE
-        self._imu_input.clock.aiding_stamp(t)
-        refused = self._queue.push(source, t, validated)
-        if refused is not None:
+        refused = self._queue.push(source, t, validated, ahead)
+        if refused is not None or ahead:
+            # A measurement ahead of its sequence tells the IMU's clock nothing until its turn.
             return refused
+        self._imu_input.clock.aiding_stamp(t)
         latest_imu_stamp = self._imu_input.latest_stamp_s
         if t - self._imu_input.newest_stamp_s > MAX_MEASUREMENT_LEAD_S:
             # An IMU outage: only the last seconds can serve the realignment that follows.
@@ -336,13 +359,25 @@ class FusionEngine:
             source_health=self._gates.status(),
         )
 
+    def take_out_of_sequence(self) -> list[AidingSource]:
+        """The sources of the measurements rejected as ``out_of_sequence`` since the last call,
+        in order (a second stream's, rejected when their turn came or when the source's own
+        measurement of their stamp arrived)."""
+        rejected, self._queue.out_of_sequence = self._queue.out_of_sequence, []
+        return rejected
+
     @property
-    def second_imu_stream(self) -> tuple[int, float]:
-        """(IMU samples of a second stream on the IMU's topic rejected so far, how far the last
-        ran ahead of the IMU's own in s, negative behind). Input screening, done when a sample
-        comes: no filtering to catch up with."""
+    def second_streams(self) -> dict[str, tuple[int, float]]:
+        """By input (``imu`` or a source's kind): (samples of a second stream on its topic
+        rejected so far, how far the last ran ahead of the input's own in s, negative behind;
+        NaN where not known: a measurement's, rejected at its turn). Not caught up: a count as
+        of the filtering done."""
         imu_input = self._imu_input
-        return imu_input.second_stream_samples, imu_input.second_stream_lead_s
+        streams = {IMU: (imu_input.second_stream_samples, imu_input.second_stream_lead_s)}
+        for kind in self._sequences:
+            rejected = self._counters[kind].rejected.get(Reason.OUT_OF_SEQUENCE, 0)
+            streams[kind] = (rejected, math.nan)
+        return streams
 
     @property
     def covariance(self) -> np.ndarray | None:
@@ -399,6 +434,8 @@ class FusionEngine:
         queue = self._queue
         while queue.heap and queue.heap[0][0] <= t:
             stamp, group = queue.pop_stamp()
+            if not group:  # all rejected at their turn: no step to their stamp
+                continue
             gyro_m, force_m = point.samples_at(stamp, t, gyro, force)
             self._advance(stamp, gyro_m, force_m)
             self._handle_measurements(stamp, group, gyro_m)

@@ -143,8 +143,9 @@ FILTERING_DELAY_S = 0.003
 TF_QOS = QoSProfile(depth=100)
 
 
-SECOND_IMU_STREAM_SAMPLES = 10
-"""Samples off the IMU's sequence, given up when it went on, that say a second stream is there."""
+SECOND_STREAM_SAMPLES = 10
+"""Samples off an input's sequence, given up when it went on, that say a second stream is
+there."""
 
 
 class FusionNode(FlushingNode):
@@ -160,7 +161,7 @@ class FusionNode(FlushingNode):
         self._filtering_durations_s: list[float] = []
         self._previous_imu_callback_s = -math.inf
         self._previous_imu_stamp_s = math.nan
-        self._second_imu_stream_samples = 0
+        self._second_stream_samples: collections.Counter[str] = collections.Counter()
         self.filtering_overdue = 0
         self._gnss_waiting: list[tuple[str, bytes]] = []
         self.solutions_published = 0
@@ -244,7 +245,7 @@ class FusionNode(FlushingNode):
         self._take(IMU_RAW_TOPIC, fed)
         for reason in self.engine.imu_given_up:
             self.reject(IMU_RAW_TOPIC, reason)
-        self._warn_of_a_second_imu_stream()
+        self._warn_of_second_streams()
         # The solution is out. The GNSS messages that came in and the filtering this sample made
         # due wait a little, so that the nodes that take this solution run first.
         if self.deferred_work_due_s is None:
@@ -255,19 +256,21 @@ class FusionNode(FlushingNode):
             self.run_deferred_work()
         self._imu_callback_durations_s.append(time.perf_counter() - started_s)
 
-    def _warn_of_a_second_imu_stream(self) -> None:
-        """Say so, rate-limited, while a second stream's samples on the IMU's topic are
+    def _warn_of_second_streams(self) -> None:
+        """Say so, rate-limited, while a second stream's samples on an input's topic are
         rejected (another buoy's nodes on the same ROS domain), once there are more than a few
         stale samples would explain."""
-        samples, lead_s = self.engine.second_imu_stream
-        if samples < SECOND_IMU_STREAM_SAMPLES or samples == self._second_imu_stream_samples:
-            return
-        self._second_imu_stream_samples = samples
-        self.get_logger().warning(
-            f"two IMU streams on {IMU_RAW_TOPIC}: {samples} samples stamped {lead_s:+.3f} s off "
-            "the accepted sequence rejected so far; another buoy's nodes on this ROS domain?",
-            throttle_duration_sec=REJECTION_LOG_PERIOD_S,
-        )
+        topics = {source.kind: source.topic for source in self.engine.sources}
+        for kind, (samples, lead_s) in self.engine.second_streams.items():
+            if samples < SECOND_STREAM_SAMPLES or samples == self._second_stream_samples[kind]:
+                continue
+            self._second_stream_samples[kind] = samples
+            lead = f" stamped {lead_s:+.3f} s" if math.isfinite(lead_s) else ""
+            self.get_logger().warning(
+                f"two streams on {topics.get(kind, IMU_RAW_TOPIC)}: {samples} samples{lead} off "
+                "the accepted sequence rejected so far; another buoy's nodes on this ROS domain?",
+                throttle_duration_sec=REJECTION_LOG_PERIOD_S,
+            )
 
     def _follows_an_imu_gap(self, raw: bytes) -> bool:
         """Whether this IMU message's stamp lies more than ``max_imu_gap_s`` from the previous
@@ -284,6 +287,7 @@ class FusionNode(FlushingNode):
         super().run_deferred_work()
         self.feed_waiting_gnss()
         self.engine.catch_up()
+        self._reject_out_of_sequence_measurements()
         self._filtering_durations_s.append(time.perf_counter() - started_s)
 
     def feed_waiting_gnss(self) -> None:
@@ -301,6 +305,16 @@ class FusionNode(FlushingNode):
         """Give a sensor message to the engine; publish the solutions it yields."""
         self._messages_in[topic] += 1
         self._take(topic, feed_message(self.engine, topic, message, self.stamps))
+        self._reject_out_of_sequence_measurements()
+
+    def _reject_out_of_sequence_measurements(self) -> None:
+        """Count and log the measurements of a second stream the engine rejected since the last
+        call (when their turn came, or their source's own measurement of their stamp)."""
+        rejected = self.engine.take_out_of_sequence()
+        for source in rejected:
+            self.reject(source.topic, Reason.OUT_OF_SEQUENCE)
+        if rejected:
+            self._warn_of_second_streams()
 
     def _take(self, topic: str, fed) -> None:
         solutions, rejection = fed
@@ -344,6 +358,7 @@ class FusionNode(FlushingNode):
         self.publish_solutions(self.engine.flush())
         for reason in self.engine.imu_given_up:
             self.reject(IMU_RAW_TOPIC, reason)
+        self._reject_out_of_sequence_measurements()
         return list(self._nav_publishers.values())
 
     # -- diagnostics ------------------------------------------------------------------------

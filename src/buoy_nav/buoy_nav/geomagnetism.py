@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from typing import NamedTuple
 
 from pygeomag import GeoMag
 
@@ -26,6 +27,8 @@ def _model() -> GeoMag:
 
 
 NANOTESLA = 1e-9
+PARALLEL_STEP_DEG = 1.0
+"""Spacing (deg) of the longitudes at which the field along a parallel is evaluated."""
 
 
 @lru_cache(maxsize=256)
@@ -75,3 +78,46 @@ def declination_rad(
     if not math.isnan(configured_deg):
         return math.radians(configured_deg)
     return math.radians(wmm_declination_deg(latitude_rad, longitude_rad, t_s))
+
+
+class FieldRange(NamedTuple):
+    """The strengths (T) and dips (rad, positive pointing down) the Earth's field takes."""
+
+    strength_t: tuple[float, float]
+    """Smallest and largest strength."""
+    dip_rad: tuple[float, float]
+    """Smallest and largest dip."""
+
+
+def _range_of(results) -> FieldRange:
+    strengths = [float(result.f) * NANOTESLA for result in results]
+    dips = [math.radians(float(result.i)) for result in results]
+    return FieldRange((min(strengths), max(strengths)), (min(dips), max(dips)))
+
+
+def wmm_field_range_at(latitude_rad: float, longitude_rad: float, t_s: float) -> FieldRange:
+    """The WMM's field at a position (rad) and a time (s since the Unix epoch), at sea level,
+    as a range of one strength and one dip."""
+    return _range_of([_wmm_at(latitude_rad, longitude_rad, t_s)])
+
+
+def wmm_field_range_along_parallel(latitude_rad: float, t_s: float) -> FieldRange:
+    """The range of the WMM's field strength and dip along the parallel of ``latitude_rad``
+    (rad), over every longitude (every :data:`PARALLEL_STEP_DEG`), at a time (s since the Unix
+    epoch), at sea level: what a buoy at that latitude may see when its longitude is not
+    known."""
+    year = UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
+    return _parallel_range(round(math.degrees(latitude_rad) / _CELL_DEG), round(year / _YEAR_STEP))
+
+
+@lru_cache(maxsize=16)
+def _parallel_range(latitude_cell: int, year_step: int) -> FieldRange:
+    cells_per_step = round(PARALLEL_STEP_DEG / _CELL_DEG)
+    return _range_of(
+        [
+            _wmm_cell(latitude_cell, longitude_cell, year_step)
+            for longitude_cell in range(
+                round(-180.0 / _CELL_DEG), round(180.0 / _CELL_DEG), cells_per_step
+            )
+        ]
+    )

@@ -8,19 +8,17 @@ GNSS measurement arrives "too late". :class:`ImuClock` tells a step from an outa
 IMU stamps back on the aiding sources' clock.
 
 Which samples make a new sequence of the IMU's own (after a step or an outage), rather than a
-second stream interleaved with it, is for :mod:`buoy_nav.imu_sequence` to say; the clock is told
+second stream interleaved with it, is for :mod:`buoy_nav.stream_sequence` to say; the clock is told
 of a new sequence once it is the IMU's.
 """
 
 import math
 
+from buoy_nav.stream_sequence import SEQUENCE_INTERVALS, follows
+
 MAX_AIDING_INTERVAL_S = 1.0
 """Longest interval between aiding measurements of a running GNSS receiver (s): aiding stamps
 this close to the newest IMU stamp say the aiding sources and the IMU ran on together."""
-
-SEQUENCE_INTERVALS = 2.5
-"""A sample follows the latest one of the sequence when its stamp is later by at most this many
-sample intervals (a sample lost in between is still in sequence)."""
 
 
 class ImuClock:
@@ -53,7 +51,7 @@ class ImuClock:
     def follows(self, t_s: float, previous_s: float) -> bool:
         """Whether the (re-stamped) stamp ``t_s`` (s) follows ``previous_s`` at the IMU's rate
         (always, while the rate is not known)."""
-        return t_s > previous_s and not t_s - previous_s > SEQUENCE_INTERVALS * self.interval_s
+        return follows(t_s, previous_s, self.interval_s)
 
     def new_sequence(self, first_s: float, latest_s: float, newest_aiding_s: float) -> float | None:
         """The step (s) to take off the stamps of a new sequence of the IMU's, whose first

@@ -5,7 +5,7 @@ A raw sample passes, in this order: three finite numbers each for ω_ib and the 
 a sensor can report (``out_of_range``); its stamp put back on the aiding sources' clock after a
 step of the IMU's clock (:mod:`buoy_nav.imu_clock`); a stamp that follows the accepted sequence
 at the IMU's rate, else held until it proves to start the IMU's new sequence and given up when the
-accepted one goes on (:mod:`buoy_nav.imu_sequence`: ``out_of_sequence``, or behind the latest
+accepted one goes on (:mod:`buoy_nav.stream_sequence`: ``out_of_sequence``, or behind the latest
 accepted stamp ``duplicate_stamp``, ``stamp_not_increasing``); a change from the last accepted
 sample that a platform can make (``implausible_change``, :mod:`buoy_nav.imu_screening`).
 """
@@ -18,7 +18,7 @@ from buoy_common.contract import Reason
 from buoy_nav.config import FusionConfig
 from buoy_nav.imu_clock import ImuClock
 from buoy_nav.imu_screening import ImuPlausibility
-from buoy_nav.imu_sequence import HeldSequence
+from buoy_nav.stream_sequence import HeldSequence
 
 Triple = tuple[float, float, float]
 Sample = tuple[float, Triple, Triple]
@@ -46,6 +46,8 @@ class ImuInput:
         # rejects is still the IMU's sample): the next one follows it.
         self._sequence_last_s = -math.inf
         self._held = HeldSequence()
+        # The newest aiding stamp (s) when the first held sample came.
+        self._held_since_aiding_s = -math.inf
         self._given_up: list[Reason] = []
         self.second_stream_samples = 0
         """Held samples given up because the accepted sequence went on: a second stream's."""
@@ -56,7 +58,7 @@ class ImuInput:
     def accept(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[Sample] | Reason:
         """The samples (stamp s, ω_ib body rad/s, specific force body m/s²) the fusion takes,
         calibrated and re-stamped, now that the one stamped ``t_s`` (s) came: that one, none (it
-        is held, :mod:`buoy_nav.imu_sequence`) or the held ones of a new sequence; or the reason
+        is held, :mod:`buoy_nav.stream_sequence`) or the held ones of a new sequence; or the reason
         it is refused. Held samples given up on the way are in :meth:`take_given_up`."""
         try:
             t = float(t_s)
@@ -123,12 +125,14 @@ class ImuInput:
         if held.samples and not self.clock.follows(sample[0], held.samples[-1][0]):
             self._give_up_held()
         if not held.samples:
-            held.newest_aiding_s = self.clock.newest_aiding_s
+            self._held_since_aiding_s = self.clock.newest_aiding_s
         held.samples.append(sample)
         if not held.confirmed():
             return []
         samples = held.take()
-        step = self.clock.new_sequence(samples[0][0], self.latest_stamp_s, held.newest_aiding_s)
+        step = self.clock.new_sequence(
+            samples[0][0], self.latest_stamp_s, self._held_since_aiding_s
+        )
         if step is None:
             held.samples = samples
             self._give_up_held()

@@ -43,7 +43,7 @@ from buoy_nav.aiding.gnss_velocity import predicted_antenna_velocity_enu_mps
 from buoy_nav.antenna_geometry import baseline_azimuth_rad, horizontal_fraction
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ERROR_STATES, NavState, inject_error_state
-from buoy_nav.geomagnetism import wmm_field_enu_t
+from buoy_nav.geomagnetism import wmm_field_enu_t, wmm_field_range_along_parallel
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_euler, wrap_angle
 from buoy_nav.sensor_sets import SensorSets
 from buoy_nav.state_layout import EAST, NORTH, UP, StateLayout
@@ -510,6 +510,42 @@ def _magnetometer_at(yaw_deg: float, field_body_t):
 
 
 T_2026_S = 1767225600.0
+
+
+def test_a_latitude_alone_judges_the_field_against_the_models_along_the_parallel():
+    """A site at 35° N without a longitude (the navigation's 0): a field of the model at a
+    longitude where it is unlike the field at longitude 0 is accepted; one beyond the range of
+    strength or dip along the parallel is refused."""
+    latitude = math.radians(35.0)
+    latitude_only = MagnetometerSource(
+        FusionConfig(site_latitude_deg=35.0, magnetic_declination_deg=0.0), ERROR_STATES
+    )
+    at_longitude_zero = MagnetometerSource(
+        FusionConfig(site_latitude_deg=35.0, site_longitude_deg=0.0), ERROR_STATES
+    )
+    fields = [
+        np.array(wmm_field_enu_t(latitude, math.radians(longitude), T_2026_S))
+        for longitude in range(-180, 180, 5)
+    ]
+    unlike_longitude_zero = [
+        field
+        for field in fields
+        if at_longitude_zero.field_refusal(field, latitude, 0.0, T_2026_S) is not None
+    ]
+    assert unlike_longitude_zero  # the parallel's fields differ beyond the tolerances
+    for field in fields:
+        assert latitude_only.field_refusal(field, latitude, 0.0, T_2026_S) is None
+    expected = wmm_field_range_along_parallel(latitude, T_2026_S)
+    tolerance = FusionConfig().magnetometer_strength_tolerance
+    strongest = unlike_longitude_zero[0] / np.linalg.norm(unlike_longitude_zero[0])
+    too_strong = strongest * expected.strength_t[1] * (1.0 + tolerance) * 1.05
+    assert latitude_only.field_refusal(too_strong, latitude, 0.0, T_2026_S) is not None
+    horizontal = np.hypot(*strongest[:2])
+    steeper = math.tan(expected.dip_rad[1] + math.radians(15.0))
+    too_steep = np.array([*strongest[:2], -horizontal * steeper]) * (
+        expected.strength_t[0] / np.linalg.norm([horizontal, horizontal * steeper])
+    )
+    assert latitude_only.field_refusal(too_steep, latitude, 0.0, T_2026_S) is not None
 
 
 @pytest.mark.parametrize(

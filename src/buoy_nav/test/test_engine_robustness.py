@@ -170,8 +170,9 @@ def test_a_second_imu_stream_never_moves_the_filter(offset_s):
     reason = "stamp_not_increasing" if offset_s < 0 else "out_of_sequence"
     assert health.counters["imu"].rejected == {reason: 1000}
     assert health.imu_clock_steps == () and health.imu_gaps == 0 and health.alignments == 1
-    assert engine.second_imu_stream[0] == 1000
-    assert engine.second_imu_stream[1] == pytest.approx(offset_s, abs=0.011)
+    samples, lead_s = engine.second_streams["imu"]
+    assert samples == 1000
+    assert lead_s == pytest.approx(offset_s, abs=0.011)
     assert [s.t_s for s in solutions] == [s.t_s for s in reference]
     assert [s.attitude_xyzw.tolist() for s in solutions] == [
         s.attitude_xyzw.tolist() for s in reference
@@ -272,3 +273,35 @@ def test_the_smoother_is_told_of_the_integrity_monitors_inflation_and_realignmen
         smoothed_sigma = np.sqrt(smoothed_solution.attitude_covariance_rad2.diagonal())
         assert np.all(smoothed_sigma > math.radians(engine.config.integrity_attitude_sigma_deg))
         assert np.all(forward_sigma > math.radians(engine.config.integrity_attitude_sigma_deg))
+
+
+@pytest.mark.parametrize("stamps_ahead", [3, 3.3])
+def test_a_second_gnss_stream_ahead_never_reaches_the_filter(stamps_ahead):
+    """Another buoy's GNSS (rocking otherwise: its heading 120° off) on its own clock
+    ``stamps_ahead`` GNSS intervals ahead, each message delivered just after one of the buoy's
+    own, from 20 s to 30 s: every one is rejected as out_of_sequence (on the buoy's grid when
+    the buoy's own message of its stamp comes, off it at its turn), and the run is the one
+    without them."""
+    buoy, other = RockingBuoy(), RockingBuoy(roll_deg=3.0, yaw_deg=120.0)
+    events = make_events(buoy, 40.0)
+    gnss_stamps = sorted({e[0] for e in events if e[2] != "imu"})
+    other_events = {(e[0], e[2]): e for e in make_events(other, 40.0) if e[2] != "imu"}
+    interleaved = []
+    for event in events:
+        interleaved.append(event)
+        if event[2] != "imu" and 20.0 <= event[0] < 30.0:
+            _, order, kind, args = other_events[event[0], event[2]]
+            index = gnss_stamps.index(event[0]) + int(stamps_ahead)
+            # On the grid, its stamps are the buoy's own (integer nanoseconds in a message).
+            stamp = gnss_stamps[index] + (stamps_ahead % 1) * 0.1
+            interleaved.append((stamp, order, kind, args))
+    engine, solutions = run(interleaved)
+    _, reference = run(events)
+    counters = engine.health().counters
+    for kind in ("gnss_fix", "gnss_velocity", "gnss_heading"):
+        assert counters[kind].rejected == {"out_of_sequence": 100}, kind
+    assert len(engine.take_out_of_sequence()) == 300
+    assert [s.t_s for s in solutions] == [s.t_s for s in reference]
+    assert [s.attitude_xyzw.tolist() for s in solutions] == [
+        s.attitude_xyzw.tolist() for s in reference
+    ]

@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from buoy_common.contract import Reason
 from buoy_nav.earth import EARTH_RATE_RAD_S
 from buoy_nav.rotations import rotate_by_quaternion_components
+from buoy_nav.stream_sequence import CONFIRMING_SPAN_S
 from wind_comp.compensation_messages import FlowSample
 from wind_comp.compensator import SampleStatus
 from wind_comp.config import CompensatorConfig
@@ -101,6 +103,14 @@ def arrivals(
     return [("fix", (0, LATITUDE_DEG))] + [(kinds[kind], message) for _, kind, message in timeline]
 
 
+def resumed_after_the_gap(wind_t: np.ndarray) -> np.ndarray:
+    """(N,) True for the anemometer's samples (stamps ``wind_t``, s) after the gap that are off
+    its sequence (:mod:`buoy_nav.stream_sequence`): until they span CONFIRMING_SPAN_S, they
+    could be a second stream's."""
+    after_gap = wind_t > ANEMOMETER_GAP_S[1]
+    return after_gap & (wind_t - wind_t[after_gap][0] <= CONFIRMING_SPAN_S)
+
+
 def feed(messages, wind_per_stretch: int | None):
     """Feed the pipeline as compensation_node does (``wind_per_stretch`` None: results after
     every message) or as process_bag does (results every ``wind_per_stretch`` anemometer
@@ -120,7 +130,8 @@ def feed(messages, wind_per_stretch: int | None):
         elif kind == "temperature":
             temperature_products.extend(pipeline.add_temperature(*values))
         else:
-            assert pipeline.add_sample(values) is None
+            # Only the samples resuming after the gap are rejected (off the sequence).
+            assert pipeline.add_sample(values) in (None, Reason.OUT_OF_SEQUENCE)
             waiting += 1
             if wind_per_stretch is None or waiting == wind_per_stretch:
                 outputs.append(pipeline.ready())
@@ -147,13 +158,16 @@ def test_live_and_offline_decide_identically_across_an_anemometer_gap(
     live_status, live_wind, live_products, live = feed(messages, wind_per_stretch=None)
     wind_t = np.array([values.t_s for kind, values in messages if kind == "wind"])
     # Every sample is corrected, those just before the gap included (navigation around them
-    # arrived long before the anemometer resumed), and exactly.
+    # arrived long before the anemometer resumed), and exactly; but the samples after the gap
+    # are off the anemometer's sequence until they span CONFIRMING_SPAN_S (they could be a
+    # second stream's).
     before_gap = wind_t[wind_t < ANEMOMETER_GAP_S[0]][-3:]
-    assert np.all(live_status == SampleStatus.VALID), dict(
-        zip(*np.unique(live_status, return_counts=True), strict=True)
-    )
+    held = resumed_after_the_gap(wind_t)
+    expected = np.where(held, SampleStatus.OUT_OF_SEQUENCE, SampleStatus.VALID)
+    np.testing.assert_array_equal(live_status, expected)
     assert before_gap.size == 3
-    np.testing.assert_allclose(live_wind - TRUE_WIND_ENU, 0.0, atol=1e-9)
+    valid = live_status == SampleStatus.VALID
+    np.testing.assert_allclose(live_wind[valid] - TRUE_WIND_ENU, 0.0, atol=1e-9)
     assert live.n_pending == 0
     for wind_per_stretch in (1, 7, 256, 10_000):
         status, wind, products, offline = feed(messages, wind_per_stretch)
@@ -168,7 +182,9 @@ def test_live_and_offline_decide_identically_across_an_anemometer_gap(
     )
     # wind from 1 to 39 s, a gap from 15 to 25 s: the windows on both sides of it are partial
     assert [p.window_start_s for p in fluxes] == [0.0, 10.0, 20.0, 30.0]
-    assert [p.coverage for p in fluxes] == [0.9, 0.5, 0.5, 0.9]
+    # (200 samples in a window at 20 Hz)
+    resumed_share = np.count_nonzero(held) / (10.0 * WIND_RATE_HZ)
+    assert [p.coverage for p in fluxes] == pytest.approx([0.9, 0.5, 0.5 - resumed_share, 0.9])
     # every wind sample found its temperature; a steady wind carries no flux
     assert all(p.n_temperature == p.n_valid + p.n_invalid for p in fluxes)
     np.testing.assert_allclose([p.friction_velocity_mps for p in fluxes], 0.0, atol=1e-4)
@@ -196,7 +212,8 @@ def test_wind_arriving_after_the_navigation_history_is_reported_alike_live_and_o
     assert np.all(
         live_status[(wind_t >= 5.0) & (wind_t < 7.9)] == SampleStatus.NAV_HISTORY_EXCEEDED
     )
-    assert np.all(live_status[(wind_t < 5.0) | (wind_t > 8.1)] == SampleStatus.VALID)
+    decided_by_navigation = ((wind_t < 5.0) | (wind_t > 8.1)) & ~resumed_after_the_gap(wind_t)
+    assert np.all(live_status[decided_by_navigation] == SampleStatus.VALID)
     for wind_per_stretch in (5, 10_000):
         status, wind, _, _ = feed(messages, wind_per_stretch)
         np.testing.assert_array_equal(status, live_status)
@@ -291,7 +308,7 @@ def test_navigation_too_uncertain_corrects_no_wind_alike_live_and_offline():
     affected = (wind_t > untrusted_s[0] - 0.01) & (wind_t < untrusted_s[1] + 0.01)
     assert np.all(live_status[affected] == SampleStatus.NAVIGATION_NOT_TRUSTED)
     assert np.all(np.isnan(live_wind[affected]))
-    assert np.all(live_status[~affected] == SampleStatus.VALID)
+    assert np.all(live_status[~affected & ~resumed_after_the_gap(wind_t)] == SampleStatus.VALID)
     assert CONFIG.flow_sensor().reason(SampleStatus.NAVIGATION_NOT_TRUSTED) == (
         "navigation_not_trusted"
     )
@@ -323,3 +340,32 @@ def test_navigation_waits_for_a_sample_it_can_decide_and_never_without_bound():
     assert len(pipeline.ready().samples) == 0
     pipeline.add_odometry(*odometry_messages(np.array([t_s + 0.005]))[0])
     assert pipeline.ready().samples.status.tolist() == [SampleStatus.VALID]
+
+
+def test_a_second_anemometer_stream_gets_invalid_outputs_alike_live_and_offline():
+    """Another sonic's samples, its clock 0.3 s ahead, each just after one of the buoy's own
+    from 5 s to 10 s: each gets its output, invalid as out_of_sequence, and the buoy's own
+    samples are corrected as without them."""
+    clean = arrivals(NAV_LATENCY_S)
+    messages, second = [], []
+    for kind, values in clean:
+        messages.append((kind, values))
+        if kind == "wind":
+            second.append(False)
+            if 5.0 <= values.t_s < 10.0:
+                messages.append(("wind", values._replace(t_s=values.t_s + 0.3)))
+                second.append(True)
+    second = np.array(second)
+    live_status, live_wind, _, live = feed(messages, None)
+    clean_status, clean_wind, _, _ = feed(clean, None)
+    assert np.count_nonzero(second) == 100
+    assert np.all(live_status[second] == SampleStatus.OUT_OF_SEQUENCE)
+    assert np.all(np.isnan(live_wind[second]))
+    np.testing.assert_array_equal(live_status[~second], clean_status)
+    np.testing.assert_array_equal(live_wind[~second], clean_wind)
+    assert live.second_stream[0] == 100
+    assert live.second_stream[1] == pytest.approx(0.3, abs=0.06)
+    for wind_per_stretch in (1, 7, 10_000):
+        status, wind, _, _ = feed(messages, wind_per_stretch)
+        np.testing.assert_array_equal(status, live_status)
+        np.testing.assert_array_equal(wind, live_wind)

@@ -63,6 +63,9 @@ class SampleStatus(IntEnum):
     UNCERTAINTY_TOO_LARGE = 9
     """The corrected sample's own 1σ (from the navigation's covariance and the sensor's noise)
     exceeds the sensor's :class:`SigmaLimits`, horizontally or vertically."""
+    OUT_OF_SEQUENCE = 10
+    """Held off the sensor's sequence of stamps (:mod:`buoy_nav.stream_sequence`): a second
+    stream on the sensor's topic, or the first samples after an outage or a step of its clock."""
 
 
 class SigmaLimits(NamedTuple):
@@ -176,15 +179,20 @@ class CorrectedBatch:
 
 
 def _screen_samples(
-    stamps_s: np.ndarray, flows_mps: np.ndarray, latest_stamp_s: float, max_speed_mps: float
+    stamps_s: np.ndarray,
+    flows_mps: np.ndarray,
+    out_of_sequence: np.ndarray,
+    latest_stamp_s: float,
+    max_speed_mps: float,
 ) -> tuple[np.ndarray, float]:
     """Status of each sample from its own values and stamp order alone.
 
     Returns (N,) statuses (``_PENDING`` where navigation decides) and the latest accepted stamp.
-    A stamp is accepted when it is finite and later than every earlier accepted stamp.
+    A stamp is accepted when it is finite, of a sample in the sensor's sequence (``out_of_
+    sequence`` (N,) False) and later than every earlier accepted stamp.
     """
     finite_stamp = np.isfinite(stamps_s)
-    candidates = np.where(finite_stamp, stamps_s, -np.inf)
+    candidates = np.where(finite_stamp & ~out_of_sequence, stamps_s, -np.inf)
     running_latest = np.maximum.accumulate(np.concatenate(([latest_stamp_s], candidates)))
     stamp_ok = finite_stamp & (stamps_s > running_latest[:-1])
     finite_flow = np.all(np.isfinite(flows_mps), axis=1)
@@ -193,6 +201,7 @@ def _screen_samples(
     status[speed > max_speed_mps] = SampleStatus.SPEED_OUT_OF_RANGE
     status[~finite_flow] = SampleStatus.INVALID_MEASUREMENT
     status[~stamp_ok] = SampleStatus.INVALID_STAMP
+    status[out_of_sequence] = SampleStatus.OUT_OF_SEQUENCE
     return status, float(running_latest[-1])
 
 
@@ -358,11 +367,20 @@ class FlowCompensator:
         sensor's): :meth:`add_arrivals` of one sample after the navigation so far."""
         noises = None if noise_covariance_m2s2 is None else [noise_covariance_m2s2]
         self._enqueue(
-            *_sample_arrays([t_s], [flow_sensor_mps]), self._newest_nav_s(), self._noises(noises, 1)
+            *_sample_arrays([t_s], [flow_sensor_mps]),
+            self._newest_nav_s(),
+            self._noises(noises, 1),
+            np.zeros(1, dtype=bool),
         )
 
     def add_arrivals(
-        self, nav, sample_t_s, flow_sensor_mps, nav_before_sample, noise_covariances_m2s2=None
+        self,
+        nav,
+        sample_t_s,
+        flow_sensor_mps,
+        nav_before_sample,
+        noise_covariances_m2s2=None,
+        out_of_sequence=None,
     ) -> int:
         """Navigation and sensor samples that arrived interleaved: exactly :meth:`add_nav`
         of each navigation sample in order, with :meth:`add_sample` of sensor sample ``i``
@@ -377,6 +395,9 @@ class FlowCompensator:
             nav_before_sample: (N,) non-decreasing counts, 0 to M.
             noise_covariances_m2s2: (N, 3, 3) as :meth:`add_sample` takes them (None: the
                 sensor's for all).
+            out_of_sequence: (N,) True for a sample held off the sensor's sequence
+                (:mod:`buoy_nav.stream_sequence`): OUT_OF_SEQUENCE, its stamp not taken
+                (None: none is).
 
         Returns the number of navigation samples accepted.
         """
@@ -394,6 +415,9 @@ class FlowCompensator:
                 flows,
                 newest_after[np.asarray(nav_before_sample, dtype=np.intp)],
                 self._noises(noise_covariances_m2s2, stamps.shape[0]),
+                np.zeros(stamps.shape[0], dtype=bool)
+                if out_of_sequence is None
+                else np.asarray(out_of_sequence, dtype=bool),
             )
         return int(np.count_nonzero(accepted))
 
@@ -433,12 +457,19 @@ class FlowCompensator:
             )
         return noises
 
-    def _enqueue(self, stamps: np.ndarray, flows: np.ndarray, as_of_nav_s, noises) -> None:
+    def _enqueue(
+        self, stamps: np.ndarray, flows: np.ndarray, as_of_nav_s, noises, out_of_sequence
+    ) -> None:
         """Screen and queue (N,) stamps (s), (N, 3) flows (m/s, sensor axes) and their (N, 3, 3)
         noise covariances (m²/s², sensor axes) that arrived when the newest navigation stamp
-        was ``as_of_nav_s`` (s, scalar or (N,))."""
+        was ``as_of_nav_s`` (s, scalar or (N,)); (N,) ``out_of_sequence`` as
+        :meth:`add_arrivals` takes them."""
         status, self._latest_sample_stamp_s = _screen_samples(
-            stamps, flows, self._latest_sample_stamp_s, self.sensor.max_speed_mps
+            stamps,
+            flows,
+            out_of_sequence,
+            self._latest_sample_stamp_s,
+            self.sensor.max_speed_mps,
         )
         self._reserve(stamps.shape[0])
         new = slice(self._tail, self._tail + stamps.shape[0])

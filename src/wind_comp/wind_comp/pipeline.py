@@ -41,6 +41,7 @@ import numpy as np
 from buoy_common.contract import Reason
 from buoy_nav.earth import earth_rate_enu_components
 from buoy_nav.rotations import rotate_by_quaternion_components, rotation_matrix_elements
+from buoy_nav.stream_sequence import StreamSequence
 from wind_comp.compensation_messages import FlowSample
 from wind_comp.compensator import (
     NOTHING_DECIDED,
@@ -97,7 +98,7 @@ def level_rate_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> t
 # stamp, quaternion (4), rate (3), body velocity (3), latitude, trusted, then the covariances
 # (9 each, row-major) of the attitude (ENU), the body velocity and the body rate
 _NAV_FIELDS = 40
-_SAMPLE_FIELDS = 13  # stamp, flow (3), noise covariance (9, row-major)
+_SAMPLE_FIELDS = 14  # stamp, flow (3), noise covariance (9, row-major), out of sequence (1 or 0)
 _ZEROS9 = (0.0,) * 9
 _ZEROS36 = (0.0,) * 36
 _LINEAR_BLOCK = operator.itemgetter(0, 1, 2, 6, 7, 8, 12, 13, 14)
@@ -148,6 +149,7 @@ class CompensationPipeline:
         self._nav_order = StampOrder()
         self._max_attitude_variance_rad2 = math.radians(max_attitude_sigma_deg) ** 2
         self._sample_order = StampOrder()
+        self._sample_sequence = StreamSequence()
         # Arrivals not yet handed to the compensator: the navigation samples' numbers in a row
         # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude, trusted,
         # covariances), the sensor samples', and for each sensor sample the number of
@@ -241,17 +243,39 @@ class CompensationPipeline:
 
     def add_sample(self, sample: FlowSample) -> str | None:
         """One ``anemometer/wind`` or ``dvl/velocity``. Returns why it is rejected (the
-        message's own ``rejection``, or a stamp not later than the previous one), None when
-        accepted. Every sample, rejected or not, gets its (then invalid) output."""
+        message's own ``rejection``, a stamp off the sensor's sequence, or not later than the
+        previous one), None when accepted. Every sample, rejected or not, gets its (then
+        invalid) output."""
         x, y, z = sample.flow_sensor_mps
-        stamp_increases = self._sample_order.advance(sample.t_s)
+        held = self._held_off_sequence(sample)
+        stamp_increases = not held and self._sample_order.advance(sample.t_s)
         self._samples.extend((sample.t_s, x, y, z))
         noise = sample.noise_covariance_m2s2
         self._samples.extend(self.sensor.noise_covariance_m2s2 if noise is None else noise)
+        self._samples.append(float(held))
         self._nav_before_sample.append(len(self._nav) // _NAV_FIELDS)
         if sample.rejection is not None:
             return sample.rejection
+        if held:
+            return Reason.OUT_OF_SEQUENCE
         return None if stamp_increases else Reason.STAMP_NOT_INCREASING
+
+    def _held_off_sequence(self, sample: FlowSample) -> bool:
+        """Whether ``sample`` is off the sensor's sequence of stamps
+        (:mod:`buoy_nav.stream_sequence`). Its output cannot wait for the sequence to be told
+        apart from a second stream's, so a sample held is invalid at once, also when the held
+        samples prove to be the sensor's new sequence (after an outage or a step of its
+        clock). Samples the sensor flags invalid are still its own; another frame's are not."""
+        if sample.rejection == Reason.WRONG_FRAME or not math.isfinite(sample.t_s):
+            return False
+        return self._sample_sequence.screen(sample.t_s, None).held
+
+    @property
+    def second_stream(self) -> tuple[int, float]:
+        """(samples of a second stream on the sensor's topic rejected so far, how far the last
+        ran ahead of the sensor's own in s)."""
+        sequence = self._sample_sequence
+        return sequence.second_stream_samples, sequence.second_stream_lead_s
 
     def ready(self) -> CompensationOutput:
         """Every sample that can now be decided, in input order, and the windows it closes."""
@@ -305,7 +329,8 @@ class CompensationPipeline:
             flows[:, 0],
             flows[:, 1:4],
             nav_before_sample,
-            flows[:, 4:].reshape(-1, 3, 3),
+            flows[:, 4:13].reshape(-1, 3, 3),
+            flows[:, 13] == 1.0,
         )
 
     def _output(self, corrected: CorrectedBatch) -> CompensationOutput:

@@ -23,14 +23,17 @@ horizontal part is under :data:`MIN_HORIZONTAL_FIELD_FRACTION` of its length (ne
 poles, or a steep tilt) carries no heading (``geometry``).
 
 **The field checked against the Earth's.** A calibrated magnetometer reproduces the World
-Magnetic Model's field (:func:`buoy_nav.geomagnetism.wmm_field_enu_t`): its strength within
+Magnetic Model's field (:func:`buoy_nav.geomagnetism.wmm_field_range_at`): its strength within
 ``magnetometer_strength_tolerance`` (a share) and its dip, the angle under the horizon seen with
-the nominal attitude, within ``magnetometer_dip_tolerance_deg``. A field that does not (an
-uncalibrated sensor, hard iron near it, a passing hull) would give a wrong heading whatever its
-noise: its sample is refused as ``magnetic_field_inconsistent``, counted as a failed outcome for
-the source's health (an uncalibrated magnetometer is soon suspended), and never gives the
-alignment its heading (there judged with the levelled attitude). PX4's EKF2 checks its
-magnetometer the same way (field strength and inclination).
+the nominal attitude, within ``magnetometer_dip_tolerance_deg``. A site given by its latitude
+alone leaves the longitude unknown (the navigation's is 0): the field is then judged against
+the range of the model's strength and dip along that parallel
+(:func:`buoy_nav.geomagnetism.wmm_field_range_along_parallel`), no longitude favoured. A field
+that does not (an uncalibrated sensor, hard iron near it, a passing hull) would give a wrong
+heading whatever its noise: its sample is refused as ``magnetic_field_inconsistent``, counted
+as a failed outcome for the source's health (an uncalibrated magnetometer is soon suspended),
+and never gives the alignment its heading (there judged with the levelled attitude). PX4's EKF2
+checks its magnetometer the same way (field strength and inclination).
 
 Bad input: a non-finite component (``non_finite``), a component at full scale
 (``magnetometer_full_scale_t``: saturated, ``out_of_range``), a field below
@@ -60,7 +63,11 @@ from buoy_nav.aiding.base import (
     vector_of,
     yaw_reset,
 )
-from buoy_nav.geomagnetism import declination_rad, wmm_field_enu_t
+from buoy_nav.geomagnetism import (
+    declination_rad,
+    wmm_field_range_along_parallel,
+    wmm_field_range_at,
+)
 from buoy_nav.rotations import (
     wrap_angle,
 )
@@ -102,6 +109,9 @@ class MagnetometerSource(AidingSource):
         self._declination_deg = config.magnetic_declination_deg
         self._strength_tolerance = config.magnetometer_strength_tolerance
         self._dip_tolerance_rad = math.radians(config.magnetometer_dip_tolerance_deg)
+        # A latitude given alone puts the buoy at longitude 0 for the navigation: its field is
+        # then judged against the model's along the whole parallel.
+        self._longitude_unknown = config.site_latitude_only_deg is not None
         self.reset_after_rejections = config.gate_reset_count * RESET_AFTER_GATE_RESETS
         rule = config.source_health_rule
         self._alignment_resume_share = rule.resume_share
@@ -155,14 +165,25 @@ class MagnetometerSource(AidingSource):
     ) -> Reason | None:
         """``magnetic_field_inconsistent`` when a calibrated field (ENU, T) differs from the
         Earth's at a place (rad) and time (s since the Unix epoch) in strength or (with
-        ``judge_dip``) dip beyond the tolerances; None when it agrees."""
-        expected = np.asarray(wmm_field_enu_t(latitude_rad, longitude_rad, t_s))
+        ``judge_dip``) dip beyond the tolerances; None when it agrees. With a site's latitude
+        given alone (the navigation's longitude 0 then), the Earth's field is any the model
+        gives along that parallel."""
+        expected = (
+            wmm_field_range_along_parallel(latitude_rad, t_s)
+            if self._longitude_unknown
+            else wmm_field_range_at(latitude_rad, longitude_rad, t_s)
+        )
         field = np.asarray(field_enu_t, dtype=float)
-        expected_strength = float(np.linalg.norm(expected))
         strength = float(np.linalg.norm(field))
-        if abs(strength - expected_strength) > self._strength_tolerance * expected_strength:
+        weakest, strongest = expected.strength_t
+        tolerance = self._strength_tolerance
+        if not weakest * (1.0 - tolerance) <= strength <= strongest * (1.0 + tolerance):
             return Reason.MAGNETIC_FIELD_INCONSISTENT
-        if judge_dip and abs(_dip_rad(field) - _dip_rad(expected)) > self._dip_tolerance_rad:
+        shallowest, steepest = expected.dip_rad
+        dip = _dip_rad(field)
+        if judge_dip and not (
+            shallowest - self._dip_tolerance_rad <= dip <= steepest + self._dip_tolerance_rad
+        ):
             return Reason.MAGNETIC_FIELD_INCONSISTENT
         return None
 

@@ -1,0 +1,161 @@
+"""Samples out of a sensor stream's accepted sequence: a second stream on its topic.
+
+A second device publishing on a sensor's topic (another buoy's nodes on the same ROS domain)
+looks, sample by sample, like a step of the sensor's clock or the end of an outage: its stamps
+lie off the sensor's own, back or ahead. What tells it apart is that the sensor's own samples go
+on between its samples. So a sample that does not follow the latest one of the accepted
+sequence at the stream's rate (within :data:`SEQUENCE_INTERVALS` sample intervals) is held off
+it: it moves no clock and gives no output. Held samples that follow each other make a new
+sequence; when their stamps span :data:`CONFIRMING_SPAN_S` with no sample of the accepted
+sequence in between, the accepted sequence has stopped and the new one is the sensor's (after
+a step of its clock, or an outage). A sample of the accepted sequence gives the held ones up:
+they were another stream's (or a single stray sample).
+
+Messages arrive in bursts (a recorder or a busy middleware delivers a topic's messages up to a
+second late and together), so the span is far longer than a burst: a second stream interleaved
+with the sensor's never spans it, and a real step or outage only delays (or, for whoever cannot
+wait, loses) the samples of its first :data:`CONFIRMING_SPAN_S`. A second stream whose stamps lie
+within :data:`SEQUENCE_INTERVALS` sample intervals of the sensor's cannot be told from it.
+
+What becomes of a held sample depends on who waits for it:
+
+- the IMU's samples (:mod:`buoy_nav.imu_input`) are held, given up when the IMU's own go on,
+  and, once confirmed, released after a step of the IMU's clock is undone;
+- an aiding measurement (screened by a :class:`StreamSequence` per source in
+  :class:`buoy_nav.engine.FusionEngine`) may arrive out of order within
+  ``max_measurement_delay_s`` and so ahead of its sequence: it waits in the queue like the
+  others, moving nothing, and is judged when its turn comes
+  (:class:`buoy_nav.measurement_queue.MeasurementQueue`): the source's own measurement of its
+  stamp arriving in sequence replaces it, and at its turn it is used only if it lies on the
+  sequence's grid (:meth:`StreamSequence.on_grid`: a whole number of sample intervals from it,
+  as a measurement that came early or the first after an outage does); the measurements of a
+  confirmed new sequence are used whatever their grid;
+- a flow sensor's sample (:class:`wind_comp.pipeline.CompensationPipeline`) gets its output in
+  input order at once: held, it is invalid (``out_of_sequence``), also when the held samples
+  prove to be the sensor's new sequence.
+"""
+
+import itertools
+import math
+from collections import deque
+from typing import NamedTuple
+
+CONFIRMING_SPAN_S = 2.0
+"""Span of stamps (s) over which held samples must follow each other, with none of the accepted
+sequence in between, to be the stream's new sequence."""
+
+SEQUENCE_INTERVALS = 2.5
+"""A sample follows the latest one of the sequence when its stamp is later by at most this many
+sample intervals (a sample lost in between is still in sequence)."""
+
+GRID_TOLERANCE = 0.01
+"""A stamp lies on the stream's grid when it is within this share of a sample interval of a
+whole number of intervals from the sequence's latest stamp."""
+
+RATE_MEMORY = 16
+"""In-sequence intervals a :class:`StreamSequence` keeps: the stream's sample interval is the
+shortest of them, so a lost sample does not widen what follows the sequence."""
+
+
+def follows(t_s: float, previous_s: float, interval_s: float) -> bool:
+    """Whether the stamp ``t_s`` (s) follows ``previous_s`` (s) for a stream sampled every
+    ``interval_s`` (s; always, while NaN: the rate not known yet)."""
+    return t_s > previous_s and not t_s - previous_s > SEQUENCE_INTERVALS * interval_s
+
+
+class HeldSequence:
+    """Samples (tuples, stamp in s first) out of the accepted sequence, oldest first, that
+    follow each other at the stream's rate."""
+
+    def __init__(self):
+        self.samples: list[tuple] = []
+
+    def confirmed(self) -> bool:
+        """Whether the held samples span :data:`CONFIRMING_SPAN_S`."""
+        samples = self.samples
+        return bool(samples) and samples[-1][0] - samples[0][0] >= CONFIRMING_SPAN_S
+
+    def take(self) -> list[tuple]:
+        """The held samples, leaving none."""
+        samples, self.samples = self.samples, []
+        return samples
+
+
+class Screening(NamedTuple):
+    """What :meth:`StreamSequence.screen` made of a sample."""
+
+    held: bool
+    """The sample is off the accepted sequence and held."""
+    taken: list
+    """The items to take now, oldest first: the sample's (in sequence, or behind the latest for
+    the caller's own order checks), or those of a new sequence once confirmed."""
+    given_up: list
+    """Held items given up because the accepted sequence went on: a second stream's, or stray
+    ones (or, for a stream that may arrive out of order, early ones)."""
+
+
+class StreamSequence:
+    """The accepted sequence of one stream's stamps and the samples held off it (see the module
+    docstring)."""
+
+    def __init__(self):
+        self.latest_s = -math.inf
+        """The latest stamp of the accepted sequence (s)."""
+        self._intervals: deque[float] = deque(maxlen=RATE_MEMORY)
+        self._held = HeldSequence()
+        self.second_stream_samples = 0
+        """Held samples given up so far: a second stream's."""
+        self.second_stream_lead_s = math.nan
+        """The last of them less the latest stamp of the sequence then (s): how far the second
+        stream runs ahead of the sensor's."""
+
+    @property
+    def interval_s(self) -> float:
+        """The stream's sample interval (s): the shortest recent one in sequence (NaN until
+        two samples in sequence came)."""
+        return min(self._intervals) if self._intervals else math.nan
+
+    def screen(self, t_s: float, item) -> Screening:
+        """Screen the sample stamped ``t_s`` (s, finite) that the caller knows as ``item``."""
+        latest = self.latest_s
+        if t_s <= latest:
+            return Screening(False, [item], [])
+        if follows(t_s, latest, self.interval_s):
+            given_up = self._give_up_held()
+            if math.isfinite(latest):
+                self._intervals.append(t_s - latest)
+            self.latest_s = t_s
+            return Screening(False, [item], given_up)
+        return self._hold(t_s, item)
+
+    def on_grid(self, t_s: float) -> bool:
+        """Whether the stamp ``t_s`` (s) lies on the sequence's grid: a whole number of sample
+        intervals from its latest stamp (within :data:`GRID_TOLERANCE`), a stamp the stream
+        itself has or could have (always, while the rate is not known)."""
+        interval = self.interval_s
+        if not (math.isfinite(interval) and math.isfinite(self.latest_s)):
+            return True
+        intervals = (t_s - self.latest_s) / interval
+        return abs(intervals - round(intervals)) <= GRID_TOLERANCE
+
+    def _hold(self, t_s: float, item) -> Screening:
+        held = self._held
+        given_up = []
+        if held.samples and not follows(t_s, held.samples[-1][0], self.interval_s):
+            given_up = self._give_up_held()
+        held.samples.append((t_s, item))
+        if not held.confirmed():
+            return Screening(True, [], given_up)
+        samples = held.take()
+        stamps = [t for t, _ in samples]
+        self._intervals.clear()
+        self._intervals.extend(b - a for a, b in itertools.pairwise(stamps))
+        self.latest_s = stamps[-1]
+        return Screening(True, [item for _, item in samples], given_up)
+
+    def _give_up_held(self) -> list:
+        samples = self._held.take()
+        if samples:
+            self.second_stream_samples += len(samples)
+            self.second_stream_lead_s = samples[-1][0] - self.latest_s
+        return [item for _, item in samples]
