@@ -72,7 +72,8 @@ from buoy_nav.contradictions import AGREEMENT_PROBABILITY, chi_square_quantile
 from buoy_nav.gnss_motion import GnssMotion
 
 MIN_SPAN_OF_WINDOW = 0.2
-"""Share of ``moored_check_window_s`` the measurements must span before the mooring is judged."""
+"""Share of ``moored_check_window_s`` the measurements must span before the mooring is judged
+(against GNSS, or its σ widened by its own innovations)."""
 WARNING_RATIO = 1.3
 """Normalised RMS of the mooring's innovations over a window beyond which it warns and starts
 widening its σ: a variance 1.7 times the stated one. Consecutive innovations are correlated
@@ -136,7 +137,12 @@ class InnovationWatch:
         if span_s < MIN_SPAN_OF_WINDOW * self._window_s:
             return None
         ratio = self.ratio()
-        self._follow(t_s, self._consistent_scale(ratio))
+        # Started beyond the warning, kept until the innovations are no larger than stated.
+        if ratio > WARNING_RATIO:
+            self._widening = True
+        elif ratio <= 1.0:
+            self._widening = False
+        self._follow(t_s, self._consistent_scale() if self._widening else 1.0)
         if span_s < (1.0 - MIN_SPAN_OF_WINDOW) * self._window_s:
             return None
         if ratio <= WARNING_RATIO:
@@ -165,15 +171,8 @@ class InnovationWatch:
             self.scale += share * (consistent_scale - self.scale)
         self._scaled_at_s = t_s
 
-    def _consistent_scale(self, stated_ratio: float) -> float:
-        """The widening for a window whose ratio at the stated σ is ``stated_ratio``: started
-        beyond :data:`WARNING_RATIO`, kept until the ratio is 1 or less."""
-        if stated_ratio > WARNING_RATIO:
-            self._widening = True
-        elif stated_ratio <= 1.0:
-            self._widening = False
-        if not self._widening:
-            return 1.0
+    def _consistent_scale(self) -> float:
+        """The k of ratio(k) = 1, within [1, scale limit]."""
         if self.ratio(self._scale_limit) >= 1.0:
             return self._scale_limit
         return brentq(lambda scale: self.ratio(scale) - 1.0, 1.0, self._scale_limit)
