@@ -47,7 +47,7 @@ from buoy_common.contract import (
 )
 from buoy_common.import_records import import_records
 from buoy_nav.config import fusion_config_from_files
-from buoy_processing.bag_processing import process_bag
+from buoy_processing.bag_processing import ProcessSummary, process_bag
 from buoy_processing.report.data import published_fluxes, stamped_vectors
 from tools import edson_fdchp, fdchp_figures
 from wind_comp.config import compensator_config_from_files
@@ -85,18 +85,25 @@ ENU_FROM_NWU = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 def import_and_process(record: Path, work: Path, parameter_files) -> Path:
     """Import an FDCHP L0 record into ``work`` with the shipped column map and process it with
     ``parameter_files`` (later files win); returns the processed bag."""
+    return import_and_process_with_summary(record, work, parameter_files)[0]
+
+
+def import_and_process_with_summary(
+    record: Path, work: Path, parameter_files
+) -> tuple[Path, ProcessSummary]:
+    """:func:`import_and_process`, with what ``process_bag`` says of the run."""
     imported, processed = work / "fdchp", work / "fdchp_processed"
     import_records(record, COLUMN_MAP, imported, overwrite=True)
     files = [str(path) for path in parameter_files]
     with contextlib.redirect_stdout(io.StringIO()):
-        process_bag(
+        summary = process_bag(
             imported,
             processed,
             fusion_config_from_files(files),
             compensator_config_from_files(files),
             overwrite=True,
         )
-    return processed
+    return processed, summary
 
 
 def process_record(record: Path, work: Path, extra_parameter_files=()) -> Path:

@@ -16,7 +16,11 @@ the record's short sea) whose gyro bias wanders by 150 °/h with a correlation t
 - told also the sea's wave excursion (Hs/4 = 0.075 m) as the mooring's position σ, the error
   falls to centimetres per second, still within its σ;
 - with the default gyro model it leaves its σ: the record's failure, reproduced (expected
-  failure).
+  failure). Widening the mooring's σ, as its innovations ask, does not cover it: the velocity
+  error a tilt error leaves grows with √σ_p as the velocity's stated σ does;
+- told the gyro but a mooring σ four times too small (0.02 m for the sea's 0.075 m), the
+  velocity leaves its σ unless the mooring's σ follows its innovations; with that it stays
+  within; told both truly, the σ is never widened.
 """
 
 from __future__ import annotations
@@ -62,6 +66,12 @@ FDCHP_LIKE_MOORED_BUOY = (
     f"sensors.imu.gyro_bias_instability_deg_h={GYRO_BIAS_INSTABILITY_DEG_H}",
     f"sensors.imu.gyro_bias_correlation_time_s={GYRO_BIAS_CORRELATION_TIME_S}",
 )
+
+SEA_EXCURSION_M = SIGNIFICANT_WAVE_HEIGHT_M / 4.0
+"""The sea's 1σ heave, Hs/4."""
+TOO_TIGHT_MOORING_M = 0.02
+"""About a quarter of the sea's excursion."""
+NEVER_WIDENED = {"moored_sigma_scale_limit": 1.0}
 
 
 @pytest.fixture(scope="module")
@@ -114,9 +124,7 @@ def test_told_the_gyros_wander_the_velocity_stays_within_its_sigma(wandering_gyr
 
 def test_told_also_the_seas_excursion_the_velocity_error_is_centimetres(wandering_gyro_run):
     errors, sigma = horizontal_velocity_errors(
-        fdchp_like_config(
-            **TOLD_THE_GYRO, moored_position_sigma_horizontal_m=SIGNIFICANT_WAVE_HEIGHT_M / 4.0
-        ),
+        fdchp_like_config(**TOLD_THE_GYRO, moored_position_sigma_horizontal_m=SEA_EXCURSION_M),
         wandering_gyro_run,
     )
     assert_within_sigma(errors, sigma)
@@ -128,10 +136,41 @@ def test_told_also_the_seas_excursion_the_velocity_error_is_centimetres(wanderin
     raises=AssertionError,
     reason="a gyro that wanders beyond the fusion's gyro model drives a slow tilt error, and "
     "the mooring's position constraint lets its velocity grow to about 1 m/s unstated: the "
-    "FDCHP record's failure",
+    "FDCHP record's failure; the mooring's widened σ widens the velocity's σ and its error alike",
 )
 def test_with_the_default_gyro_model_the_velocity_leaves_its_sigma(wandering_gyro_run):
     assert_within_sigma(*horizontal_velocity_errors(fdchp_like_config(), wandering_gyro_run))
+
+
+def beyond_three_sigma(errors_mps: np.ndarray, sigma_mps: np.ndarray) -> np.ndarray:
+    """Share of samples beyond 3σ, per axis."""
+    return (np.abs(errors_mps) / sigma_mps > 3.0).mean(axis=0)
+
+
+def test_a_mooring_stated_too_tight_widens_its_sigma_until_the_velocity_is_within(
+    wandering_gyro_run,
+):
+    too_tight = {**TOLD_THE_GYRO, "moored_position_sigma_horizontal_m": TOO_TIGHT_MOORING_M}
+    assert_within_sigma(
+        *horizontal_velocity_errors(fdchp_like_config(**too_tight), wandering_gyro_run)
+    )
+    held = horizontal_velocity_errors(
+        fdchp_like_config(**too_tight, **NEVER_WIDENED), wandering_gyro_run
+    )
+    assert np.max(beyond_three_sigma(*held)) > 0.1
+
+
+@pytest.mark.parametrize(
+    "told",
+    [TOLD_THE_GYRO, {**TOLD_THE_GYRO, "moored_position_sigma_horizontal_m": SEA_EXCURSION_M}],
+    ids=["the gyro", "the gyro and the sea"],
+)
+def test_a_mooring_stated_truly_is_not_widened(wandering_gyro_run, told):
+    _, sigma = horizontal_velocity_errors(fdchp_like_config(**told), wandering_gyro_run)
+    _, never_widened_sigma = horizontal_velocity_errors(
+        fdchp_like_config(**told, **NEVER_WIDENED), wandering_gyro_run
+    )
+    np.testing.assert_allclose(np.median(sigma, axis=0), np.median(never_widened_sigma, axis=0))
 
 
 def mooring_warnings(config: FusionConfig, run) -> tuple[list[str], str]:
@@ -149,12 +188,12 @@ def mooring_warnings(config: FusionConfig, run) -> tuple[list[str], str]:
 def test_held_too_tight_the_mooring_says_so(wandering_gyro_run):
     logged, held = mooring_warnings(fdchp_like_config(), wandering_gyro_run)
     assert logged and all("run assess_motion_pack" in message for message in logged)
-    assert "fusion.gyro_bias_instability_deg_h" in held
+    assert "fusion.gyro_bias_instability_deg_h" in held and "σ widened" in held
 
 
 @pytest.mark.parametrize(
     "told",
-    [TOLD_THE_GYRO, {**TOLD_THE_GYRO, "moored_position_sigma_horizontal_m": 0.075}],
+    [TOLD_THE_GYRO, {**TOLD_THE_GYRO, "moored_position_sigma_horizontal_m": SEA_EXCURSION_M}],
     ids=["the gyro", "the gyro and the sea"],
 )
 def test_told_the_truth_the_mooring_does_not_warn(wandering_gyro_run, told):

@@ -372,6 +372,12 @@ class FusionConfig:
         "suspended",
         rule=POSITIVE,
     )
+    moored_sigma_scale_limit: float = parameter(
+        3.0,
+        meaning="largest factor by which the mooring's own innovations may widen its "
+        "horizontal σ (1: never widened)",
+        rule=at_least(1),
+    )
     imu_gyro_bias_rad_s: tuple[float, float, float] = parameter(
         (0.0, 0.0, 0.0),
         unit="rad/s",

@@ -41,7 +41,13 @@ horizontal part, ``sqrt(Σ NIS / Σ dim)``, is 1 for a consistent filter; beyond
 and the filter's covariance together allow, because a slow tilt error (the gyro's bias wander
 stated too small) drives the velocity, or because the sea moves the buoy further than
 ``moored_position_sigma_horizontal_m``.
-It is said (logged once a window while it holds, and in the diagnostics), never acted on.
+It is said (logged once a window while it holds, and in the diagnostics) and acted on: a source
+that claims more than it delivers is fused with the noise its own innovations show. Beyond
+:data:`WARNING_RATIO` the horizontal σ is widened by the factor that makes the window's
+innovations consistent (bounded by ``moored_sigma_scale_limit``; 1 never widens), followed as
+the window moves, back to the stated σ once the innovations are no larger than stated; the
+wider σ lets the velocity's and position's covariance grow with what the mooring cannot hold.
+The vertical σ, which no watch judges, stays as stated.
 """
 
 from __future__ import annotations
@@ -51,6 +57,7 @@ from collections import deque
 from typing import NamedTuple
 
 import numpy as np
+from scipy.optimize import brentq
 
 from buoy_common.contract import Reason
 from buoy_nav import earth
@@ -65,37 +72,79 @@ from buoy_nav.contradictions import AGREEMENT_PROBABILITY, chi_square_quantile
 from buoy_nav.gnss_motion import GnssMotion
 
 MIN_SPAN_OF_WINDOW = 0.2
-"""Share of ``moored_check_window_s`` the measurements must span before the mooring is judged."""
+"""Share of ``moored_check_window_s`` the measurements must span before the mooring is judged
+(against GNSS, or its σ widened by its own innovations)."""
 WARNING_RATIO = 1.3
-"""Normalised RMS of the mooring's innovations over a window beyond which it warns: a variance
-1.7 times the stated one. Consecutive innovations are correlated over the anchor's minutes, so
-a window holds only a few independent samples and a consistent filter's ratio scatters by a
-tenth or two about 1."""
+"""Normalised RMS of the mooring's innovations over a window beyond which it warns and starts
+widening its σ: a variance 1.7 times the stated one. Consecutive innovations are correlated
+over the anchor's minutes, so a window holds only a few independent samples and a consistent
+filter's ratio scatters by a tenth or two about 1."""
 
 
 class InnovationWatch:
-    """The normalised RMS of the mooring's innovations over the last ``window_s`` (s), and the
-    warning it gives beyond :data:`WARNING_RATIO` (once a window while it holds)."""
+    """The mooring's horizontal innovations over the last ``window_s`` (s): their normalised
+    RMS at the stated σ, the factor its σ is widened by, and the warning beyond
+    :data:`WARNING_RATIO` (once a window while it holds).
 
-    def __init__(self, window_s: float):
+    Each innovation ν (m, ENU east and north) is kept with the part of its covariance that is
+    the filter's, C = H P Hᵀ (m²), so the normalised RMS is known for any σ of the mooring::
+
+        ratio(k)² = Σ νᵀ (C + k² σ² I)⁻¹ ν / Σ 2.
+
+    Beyond :data:`WARNING_RATIO` at the stated σ (k = 1) the σ is widened by the k that makes
+    the window consistent, ratio(k) = 1, at most ``scale_limit``: at once when k grows, with the
+    window as time constant when it shrinks, and back toward 1 the same way once the
+    innovations are no larger than stated, ratio(1) ≤ 1. Starting only beyond the warning keeps
+    a consistent filter's scatter from widening it."""
+
+    def __init__(self, window_s: float, stated_sigma_m: float, scale_limit: float):
         self._window_s = window_s
-        self._samples: deque[tuple[float, float, int]] = deque()
+        self._stated_variance_m2 = stated_sigma_m**2
+        self._scale_limit = scale_limit
+        self._stamps: deque[float] = deque()
+        self._projected: deque[np.ndarray] = deque()
+        """Per innovation, its squared components along the eigenvectors of C (m²)."""
+        self._eigenvalues: deque[np.ndarray] = deque()
+        """Per innovation, the eigenvalues of C (m²)."""
+        self.scale = 1.0
+        """Factor (≥ 1) on the stated horizontal σ the mooring is fused with."""
+        self._widening = False
+        self._scaled_at_s = -math.inf
         self._warned_at_s = -math.inf
         self._warning = False
 
-    def ratio(self) -> float:
-        total_nis = sum(nis for _, nis, _ in self._samples)
-        return math.sqrt(total_nis / sum(dimension for _, _, dimension in self._samples))
+    def ratio(self, scale: float = 1.0) -> float:
+        """Normalised RMS of the window's innovations with the σ widened by ``scale``."""
+        projected, eigenvalues = np.array(self._projected), np.array(self._eigenvalues)
+        variance = eigenvalues + scale**2 * self._stated_variance_m2
+        return math.sqrt(float(np.sum(projected / variance)) / projected.size)
 
-    def add(self, t_s: float, nis: float, dimension: int) -> str | None:
-        """Take one innovation (stamp s, NIS, its dimension): a new warning, ``""`` when one
-        no longer holds, None when nothing changed."""
-        self._samples.append((t_s, nis, dimension))
-        while self._samples[0][0] < t_s - self._window_s:
-            self._samples.popleft()
-        if t_s - self._samples[0][0] < (1.0 - MIN_SPAN_OF_WINDOW) * self._window_s:
+    def add(
+        self, t_s: float, innovation_m: np.ndarray, filter_covariance_m2: np.ndarray
+    ) -> str | None:
+        """Take one horizontal innovation (stamp s, ν m, C = H P Hᵀ m²) and update
+        :attr:`scale`: a new warning, ``""`` when one no longer holds, None when nothing
+        changed."""
+        eigenvalues, eigenvectors = np.linalg.eigh(filter_covariance_m2)
+        self._stamps.append(t_s)
+        self._projected.append((eigenvectors.T @ innovation_m) ** 2)
+        self._eigenvalues.append(np.maximum(eigenvalues, 0.0))
+        while self._stamps[0] < t_s - self._window_s:
+            self._stamps.popleft()
+            self._projected.popleft()
+            self._eigenvalues.popleft()
+        span_s = t_s - self._stamps[0]
+        if span_s < MIN_SPAN_OF_WINDOW * self._window_s:
             return None
         ratio = self.ratio()
+        # Started beyond the warning, kept until the innovations are no larger than stated.
+        if ratio > WARNING_RATIO:
+            self._widening = True
+        elif ratio <= 1.0:
+            self._widening = False
+        self._follow(t_s, self._consistent_scale() if self._widening else 1.0)
+        if span_s < (1.0 - MIN_SPAN_OF_WINDOW) * self._window_s:
+            return None
         if ratio <= WARNING_RATIO:
             was_warning, self._warning = self._warning, False
             return "" if was_warning else None
@@ -107,8 +156,26 @@ class InnovationWatch:
             f"mooring innovations {ratio:.1f}× their stated σ over the last "
             f"{self._window_s:.0f} s: the gyro's wander (fusion.gyro_bias_instability_deg_h) or "
             f"the mooring's σ (fusion.moored_position_sigma_horizontal_m) is stated too small; "
-            f"run assess_motion_pack"
+            f"its σ widened {self.scale:.1f}× (at most fusion.moored_sigma_scale_limit, "
+            f"{self._scale_limit:g}); run assess_motion_pack"
         )
+
+    def _follow(self, t_s: float, consistent_scale: float) -> None:
+        """Widen at once, narrow over the window: the filter's covariance grows with the
+        widening, so the innovations judged at a narrower σ look consistent before the
+        mooring is."""
+        if consistent_scale >= self.scale:
+            self.scale = consistent_scale
+        else:
+            share = -math.expm1(-(t_s - self._scaled_at_s) / self._window_s)
+            self.scale += share * (consistent_scale - self.scale)
+        self._scaled_at_s = t_s
+
+    def _consistent_scale(self) -> float:
+        """The k of ratio(k) = 1, within [1, scale limit]."""
+        if self.ratio(self._scale_limit) >= 1.0:
+            return self._scale_limit
+        return brentq(lambda scale: self.ratio(scale) - 1.0, 1.0, self._scale_limit)
 
 
 class MooringAnchor(NamedTuple):
@@ -144,7 +211,11 @@ class MooredSource(AidingSource):
         self._min_span_s = MIN_SPAN_OF_WINDOW * config.moored_check_window_s
         self._contradiction_quantile = chi_square_quantile(2, config.gate_probability)
         self._agreement_quantile = chi_square_quantile(2, AGREEMENT_PROBABILITY)
-        self._watch = InnovationWatch(config.moored_check_window_s)
+        self._watch = InnovationWatch(
+            config.moored_check_window_s,
+            config.moored_position_sigma_horizontal_m,
+            config.moored_sigma_scale_limit,
+        )
         self._anchor: np.ndarray | None = None
         self._anchor_t_s = -math.inf
         self.next_due_s = -math.inf
@@ -187,11 +258,12 @@ class MooredSource(AidingSource):
     def innovation_warning(
         self, t_s: float, innovation: np.ndarray, innovation_covariance: np.ndarray
     ) -> str | None:
-        """The horizontal innovation's NIS to :class:`InnovationWatch`: the vertical one, of a
-        σ the heave rarely fills, would dilute what the tilt error does to the horizontal."""
-        horizontal = innovation[:2]
-        nis = float(horizontal @ np.linalg.solve(innovation_covariance[:2, :2], horizontal))
-        return self._watch.add(t_s, nis, 2)
+        """The horizontal innovation to :class:`InnovationWatch`, with the filter's part of its
+        covariance (S less the mooring's σ it was fused with): the vertical one, of a σ the
+        heave rarely fills, would dilute what the tilt error does to the horizontal."""
+        fused_variance = self._watch.scale**2 * self._covariance[0, 0]
+        filter_covariance = innovation_covariance[:2, :2] - fused_variance * np.eye(2)
+        return self._watch.add(t_s, innovation[:2], filter_covariance)
 
     def restart(self) -> None:
         """Forget the anchor (after a realignment)."""
@@ -237,8 +309,14 @@ class MooredSource(AidingSource):
             predicted=np.zeros(3),
             innovation=offset,
             jacobian=jacobian,
-            covariance=self._covariance,
+            covariance=self._widened_covariance(),
         )
+
+    def _widened_covariance(self) -> np.ndarray:
+        """The stated covariance (m²) with its horizontal σ widened as the innovations say."""
+        widened = self._covariance.copy()
+        widened[:2, :2] *= self._watch.scale**2
+        return widened
 
     def align(self, aligner, t_s: float, measurement, raw_gyro_rad_s) -> None:
         return None

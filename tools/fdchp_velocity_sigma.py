@@ -1,0 +1,169 @@
+"""The real record without GNSS: does the fused platform velocity's stated σ cover its error?
+
+Imports OOI's FDCHP record with the shipped column map and processes it (``process_bag``)
+with ``ooi_fdchp_params.yaml`` and any ``--params-file`` on top, as ``tools/bench_fdchp.py``
+does, and prints over the samples Edson keeps (30 s trimmed at each end):
+
+- the fused horizontal velocity below 0.05 Hz (``nav/velocity``), which for a moored buoy is
+  error (it moves by centimetres per second there): its standard deviation per axis, the median
+  stated 1σ, and the share of samples where it exceeds three of the stated σ;
+- the corrected wind's validity and the real record's criterion of
+  ``tests/system/test_real_record_uncertainty.py``: valid samples whose horizontal speed the
+  correction changes by more than Edson's largest change plus three of their own σ;
+- the mooring's innovation warnings ``process_bag`` logged (their ratio and widening).
+
+    python -m tools.fdchp_velocity_sigma [--rows N] [--params-file YAML ...]
+
+``--rows 6000`` processes the first 10 min only, as the test does. Results go to
+out/bench/fdchp_velocity_sigma.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+
+import numpy as np
+
+from buoy_common.bag_io import BagReader
+from buoy_common.contract import (
+    NAV_VELOCITY_TOPIC,
+    WIND_RAW_TOPIC,
+    WIND_TRUE_WITH_COVARIANCE_TOPIC,
+)
+from tools.bench_fdchp import (
+    ENU_FROM_NWU,
+    KEPT,
+    OUT_DIR,
+    PARAMS,
+    RECORD,
+    REPO,
+    SLOW_HZ,
+    below,
+    import_and_process_with_summary,
+)
+
+EDSON_WIND_NWU = REPO / "tests/data/ooi_fdchp/edson_corrected_wind_nwu.npy"
+"""Edson's corrected wind of the kept rows (``tools/edson_fdchp.py --save-wind``)."""
+WARNING = re.compile(r"mooring innovations ([\d.]+)× .*?σ widened ([\d.]+)×")
+
+
+def horizontal_speed_mps(vectors: np.ndarray) -> np.ndarray:
+    return np.hypot(vectors[:, 0], vectors[:, 1])
+
+
+def velocity_and_sigma(reader: BagReader) -> tuple[np.ndarray, np.ndarray]:
+    """``nav/velocity``'s east and north velocity (m/s) and their stated 1σ (m/s)."""
+    velocity, sigma = [], []
+    for message in reader.messages([NAV_VELOCITY_TOPIC]):
+        twist = reader.decode(message).twist
+        velocity.append((twist.twist.linear.x, twist.twist.linear.y))
+        sigma.append(np.sqrt((twist.covariance[0], twist.covariance[7])))
+    return np.array(velocity), np.array(sigma)
+
+
+def wind_and_sigma(reader: BagReader) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Measured wind (sonic axes), corrected wind (ENU; NaN where invalid), both m/s, and the
+    corrected wind's horizontal 1σ (the larger of east and north, m/s)."""
+    measured = []
+    for message in reader.messages([WIND_RAW_TOPIC]):
+        vector = reader.decode(message).vector
+        measured.append((vector.x, vector.y, vector.z))
+    corrected, sigma = [], []
+    for message in reader.messages([WIND_TRUE_WITH_COVARIANCE_TOPIC]):
+        twist = reader.decode(message).twist
+        linear = twist.twist.linear
+        corrected.append((linear.x, linear.y, linear.z))
+        sigma.append(np.sqrt(max(twist.covariance[0], twist.covariance[7])))
+    return np.array(measured), np.array(corrected), np.array(sigma)
+
+
+def edsons_largest_speed_change_mps() -> float:
+    """The largest change of horizontal speed Edson's correction makes over the kept rows."""
+    edson = np.load(EDSON_WIND_NWU) @ ENU_FROM_NWU.T
+    measured = np.loadtxt(RECORD, delimiter=",")[KEPT, 0:3] * 0.01  # cm/s
+    return float(np.max(np.abs(horizontal_speed_mps(edson) - horizontal_speed_mps(measured))))
+
+
+def velocity_figures(velocity: np.ndarray, sigma: np.ndarray) -> dict:
+    slow = below(SLOW_HZ, velocity)[KEPT]
+    stated = sigma[KEPT]
+    return {
+        "slow_velocity_std_en_mps": slow.std(axis=0).round(3).tolist(),
+        "stated_sigma_median_en_mps": np.median(stated, axis=0).round(3).tolist(),
+        "slow_velocity_beyond_3_sigma_share_en": (np.abs(slow) > 3.0 * stated)
+        .mean(axis=0)
+        .round(3)
+        .tolist(),
+    }
+
+
+def criterion_figures(measured: np.ndarray, corrected: np.ndarray, sigma: np.ndarray) -> dict:
+    """Validity and the speed-change criterion over every processed sample."""
+    valid = np.isfinite(corrected).all(axis=1)
+    change = np.abs(horizontal_speed_mps(corrected) - horizontal_speed_mps(measured))[valid]
+    margin = change - (edsons_largest_speed_change_mps() + 3.0 * sigma[valid])
+    return {
+        "samples": int(valid.size),
+        "valid": int(valid.sum()),
+        "beyond_plausible": int(np.count_nonzero(margin > 0.0)),
+        "closest_margin_mps": round(float(np.max(margin)), 3),
+        "speed_change_median_p99_mps": np.percentile(change, (50, 99)).round(2).tolist(),
+    }
+
+
+def mooring_warnings(log: str) -> dict:
+    found = np.array([(float(a), float(b)) for a, b in WARNING.findall(log)]).reshape(-1, 2)
+    if not found.size:
+        return {"count": 0}
+    return {
+        "count": len(found),
+        "ratio_range": [float(found[:, 0].min()), float(found[:, 0].max())],
+        "widened_range": [float(found[:, 1].min()), float(found[:, 1].max())],
+    }
+
+
+def measure(rows: int | None, parameter_files: list[str]) -> dict:
+    work = OUT_DIR / "fdchp_velocity_sigma"
+    work.mkdir(parents=True, exist_ok=True)
+    record = RECORD
+    if rows is not None:
+        record = work / "fdchp_rows.dat"
+        record.write_text("".join(RECORD.read_text().splitlines(keepends=True)[:rows]))
+    processed, summary = import_and_process_with_summary(record, work, [PARAMS, *parameter_files])
+    with BagReader(processed) as reader:
+        velocity, velocity_sigma = velocity_and_sigma(reader)
+        measured, corrected, wind_sigma = wind_and_sigma(reader)
+    return {
+        "rows": rows,
+        "params_files": [str(PARAMS), *parameter_files],
+        "velocity": velocity_figures(velocity, velocity_sigma),
+        "wind": criterion_figures(measured, corrected, wind_sigma),
+        "mooring_warnings": mooring_warnings("\n".join(summary.fusion_lines)),
+    }
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="fdchp_velocity_sigma", description=__doc__.split("\n")[0]
+    )
+    parser.add_argument("--rows", type=int, help="process only the record's first ROWS rows")
+    parser.add_argument(
+        "--params-file",
+        action="append",
+        default=[],
+        help="ROS parameter YAML applied after ooi_fdchp_params.yaml (repeatable)",
+    )
+    arguments = parser.parse_args(argv)
+    if not RECORD.is_file():
+        print(f"fdchp_velocity_sigma: no record at {RECORD} (set FDCHP_RECORD)", file=sys.stderr)
+        sys.exit(2)
+    result = measure(arguments.rows, arguments.params_file)
+    print(json.dumps(result, indent=2))
+    (OUT_DIR / "fdchp_velocity_sigma.json").write_text(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()
