@@ -188,11 +188,29 @@ def startup(bag: Path, params: list[Path], out: Path, runs: int) -> dict:
     return {"cold_s": min(cold), "warm_s": min(warm), "runs_cold_s": cold, "runs_warm_s": warm}
 
 
-def profile(bag: Path, params: list[Path], out: Path) -> list[dict]:
-    """One run under cProfile: the functions of most own time, with their cumulative time."""
+AREAS = (
+    ("fusion (buoy_nav)", ("/buoy_nav/",)),
+    ("wind correction (wind_comp)", ("/wind_comp/",)),
+    ("offline tools, NetCDF (buoy_processing)", ("/buoy_processing/",)),
+    ("bag reading and writing, contract (buoy_common)", ("/buoy_common/",)),
+    ("numpy", ("/numpy/",)),
+    ("rosbags (decoding)", ("/rosbags/",)),
+    ("xarray, netCDF4, pandas", ("/xarray/", "/netCDF4/", "/pandas/")),
+)
+"""Where a function's own time is counted: the first area whose path it lies under (the rest,
+builtins included, is "other")."""
+
+
+def profile(bag: Path, params: list[Path], out: Path) -> dict:
+    """One run under cProfile: own time by area (:data:`AREAS`) and the functions of most own
+    time, with their cumulative time."""
     profiler = cProfile.Profile()
     profiler.runcall(_process, bag, params, out)
     stats = pstats.Stats(profiler).stats
+    areas = dict.fromkeys([name for name, _ in AREAS] + ["other"], 0.0)
+    for (file, _, _), (_, _, own, _, _) in stats.items():
+        area = next((name for name, parts in AREAS if any(p in file for p in parts)), "other")
+        areas[area] += own
     rows = [
         {
             "function": f"{Path(file).name}:{line}({name})",
@@ -204,7 +222,11 @@ def profile(bag: Path, params: list[Path], out: Path) -> list[dict]:
     ]
     total_s = sum(row["own_s"] for row in rows)
     rows.sort(key=lambda row: -row["own_s"])
-    return [{**row, "share": row["own_s"] / total_s} for row in rows[:PROFILE_LINES]]
+    return {
+        "total_s": total_s,
+        "areas_s": areas,
+        "functions": [{**row, "share": row["own_s"] / total_s} for row in rows[:PROFILE_LINES]],
+    }
 
 
 def run_fdchp_hour(runs: int = RUNS, log=lambda text: None) -> dict:
@@ -249,8 +271,15 @@ def print_fdchp_hour(result: dict) -> None:
         "and the bytecode caches removed); µs/sample: wall per 10 Hz row"
     )
     for name in ("simulated", "ooi_repeated"):
-        print(f"\n  Where the time of {name} goes (cProfile, own time; the profiler slows it):")
-        for row in result[name]["profile"]:
+        profiled = result[name]["profile"]
+        print(
+            f"\n  Where the time of {name} goes (cProfile, own time; the profiler slows it: "
+            f"{profiled['total_s']:.1f} s in all):"
+        )
+        for area, own_s in profiled["areas_s"].items():
+            print(f"    {own_s / profiled['total_s']:6.1%} {own_s:6.2f} s  {area}")
+        print("  the functions of most own time:")
+        for row in profiled["functions"]:
             print(
                 f"    {row['share']:6.1%} {row['own_s']:6.2f} s {row['calls']:8d} calls  "
                 f"{row['function']}"

@@ -169,9 +169,7 @@ class FusionEngine:
         )
         self._solutions = SolutionBuilder(_configured_map_plane(config))
         self._output = OutputDecimation(config.output_rate_hz)
-        self._prediction = RealtimePrediction(
-            config.max_imu_gap_s, self.states, self._solutions, self._output
-        )
+        self._prediction = RealtimePrediction(config.max_imu_gap_s, self._solutions, self._output)
 
     # ------------------------------------------------------------------ input
     def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[NavSolution]:
@@ -438,7 +436,7 @@ class FusionEngine:
         point = nav.linearisation_point(gyro)
         outcome = self._gates.gate(t, group, point, nav.kalman)
         if outcome.accepted:
-            correction = nav.correct(point.state, outcome.accepted)
+            correction = nav.correct(outcome.accepted)
             self._solutions.covariance_changed()
             self._solutions.biases_changed()
             self._prediction.carry_over(self._point.t_s, point.state, correction)

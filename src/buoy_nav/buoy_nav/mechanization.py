@@ -30,20 +30,16 @@ updates in place the one array that holds the integrator's state.
 
 import contextlib
 import copy
-import math
 import signal
 import threading
 from dataclasses import dataclass
 
 import numpy as np
 
-from buoy_nav import earth
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ImuErrorModel, NavState, discrete_error_model
 from buoy_nav.rotations import (
     Quaternion,
-    normalize_quaternion,
-    rotation_matrix_elements,
 )
 from buoy_nav.strapdown_kernel import (
     ACCEL_BIAS,
@@ -61,10 +57,10 @@ from buoy_nav.strapdown_kernel import (
     ROTATION_SUM,
     STATE_SIZE,
     VELOCITY,
+    inject_error_state,
+    store_nominal,
     strapdown_step,
 )
-
-_OMEGA = earth.EARTH_RATE_RAD_S
 
 
 @dataclass(frozen=True)
@@ -138,26 +134,24 @@ class StrapdownIntegrator:
     ):
         """Replace the nominal state (after a filter correction); increments history is kept."""
         state = self._state
-        attitude = normalize_quaternion(_floats(attitude_xyzw))
-        ve, vn, _ = velocity_enu_mps = _floats(velocity_enu_mps)
-        lat = float(latitude_rad)
-        alt = float(altitude_m)
-        state[ATTITUDE : ATTITUDE + 4] = attitude
-        state[ROTATION : ROTATION + 9] = rotation_matrix_elements(*attitude)
-        state[VELOCITY : VELOCITY + 3] = velocity_enu_mps
-        state[LATITUDE] = lat
+        state[VELOCITY : VELOCITY + 3] = _floats(velocity_enu_mps)
+        state[LATITUDE] = float(latitude_rad)
         state[LONGITUDE] = float(longitude_rad)
-        state[ALTITUDE] = alt
+        state[ALTITUDE] = float(altitude_m)
         state[GYRO_BIAS : GYRO_BIAS + 3] = _floats(gyro_bias_rad_s)
         state[ACCEL_BIAS : ACCEL_BIAS + 3] = _floats(accel_bias_mps2)
-        # earth.navigation_frame_rate_enu_rad_s (ω_ie + ω_en) in floats, the same arithmetic.
-        meridian, prime_vertical = earth.radii_of_curvature_m(lat)
-        east_radius = prime_vertical + alt
-        state[NAV_FRAME_RATE : NAV_FRAME_RATE + 3] = (
-            0.0 + -vn / (meridian + alt),
-            _OMEGA * math.cos(lat) + ve / east_radius,
-            _OMEGA * math.sin(lat) + ve * math.tan(lat) / east_radius,
-        )
+        store_nominal(state, *_floats(attitude_xyzw))
+
+    def inject(self, error) -> None:
+        """Apply the error state ``error`` (:data:`buoy_nav.error_state_filter.ERROR_STATES`)
+        to the nominal state, as a filter correction does; increments history is kept."""
+        inject_error_state(self._state, np.asarray(error, dtype=float))
+
+    @property
+    def state_vector(self) -> np.ndarray:
+        """The state vector itself (:mod:`buoy_nav.strapdown_kernel`'s layout), for compiled
+        kernels that read it; it is changed only through this integrator's methods."""
+        return self._state
 
     @property
     def attitude_xyzw(self) -> Quaternion:
