@@ -87,7 +87,7 @@ from buoy_nav.imu_input import ImuInput
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, load_compiled_kernels
-from buoy_nav.prediction import RealtimePrediction
+from buoy_nav.prediction import RealtimePrediction, load_compiled_carry_over
 from buoy_nav.processing_point import ProcessingPoint
 from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
@@ -113,11 +113,15 @@ class FusionEngine:
     def __init__(
         self, config: FusionConfig, sources: Iterable[type[AidingSource]] = AIDING_SOURCES
     ):
-        load_compiled_kernels()  # here, not at the first IMU sample of a live stream
         self.config = config
         self.states = ERROR_STATES
         """Names of the error states (rows and columns of :attr:`covariance`)."""
         self._registry = SourceRegistry(config, self.states, sources)
+        # Here, not at the first IMU sample or measurement of a live stream.
+        load_compiled_kernels(
+            load_compiled_carry_over,
+            *(source.load_compiled_code for source in self._registry.sources),
+        )
         self.sources: tuple[AidingSource, ...] = self._registry.sources
         """The aiding sources, one instance per class, in the order of application."""
         self.recorder = EpochRecorder()

@@ -37,7 +37,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from buoy_nav.config import FusionConfig
-from buoy_nav.error_state_filter import ImuErrorModel, NavState, discrete_error_model
+from buoy_nav.error_state_filter import (
+    ERROR_STATES,
+    ErrorStateFilter,
+    ImuErrorModel,
+    NavState,
+    discrete_error_model,
+)
 from buoy_nav.rotations import (
     Quaternion,
 )
@@ -279,12 +285,15 @@ class StrapdownIntegrator:
         return sums
 
 
-def load_compiled_kernels() -> None:
-    """Compile the fusion's compiled functions, or load them from the cache, now: a node calls
-    this at start-up so that no sensor message ever waits for the compiler (up to 2 s on the
-    first run after an install or a change of their source)."""
+def load_compiled_kernels(*further_loads) -> None:
+    """Compile the fusion's compiled functions, or load them from the cache, now, and then call
+    each of ``further_loads`` (the same for the compiled code of other parts): a node calls this
+    at start-up so that no sensor message ever waits for the compiler (up to 2 s on the first
+    run after an install or a change of their source)."""
     with _stop_signals_held():
         _run_compiled_kernels()
+        for load in further_loads:
+            load()
 
 
 @contextlib.contextmanager
@@ -322,6 +331,16 @@ def _run_compiled_kernels() -> None:
         (0.0, 0.0, 0.0),
         ImuErrorModel.from_config(FusionConfig()),
     )
+    integrator.inject(np.zeros(ERROR_STATES.dim))
+    kalman = ErrorStateFilter(np.eye(ERROR_STATES.dim), 0.99)
+    kalman.propagate(np.eye(ERROR_STATES.dim), np.zeros((ERROR_STATES.dim, ERROR_STATES.dim)))
+    jacobian = np.zeros((3, ERROR_STATES.dim))
+    jacobian[:, ERROR_STATES.attitude] = np.eye(3)
+    read_only = jacobian.copy()
+    read_only.flags.writeable = False
+    for model_jacobian in (jacobian, read_only):  # models may hand over read-only Jacobians
+        kalman.gate(np.zeros(3), model_jacobian, np.eye(3))
+    kalman.reset_after_injection(kalman.update(np.zeros(3), jacobian, np.eye(3)))
 
 
 def interpolate_sample(

@@ -33,6 +33,7 @@ from buoy_nav.strapdown_kernel import (
     ERROR_POSITION,
     ERROR_VELOCITY,
     ROTATION,
+    STATE_SIZE,
     VELOCITY,
 )
 
@@ -126,6 +127,12 @@ class RealtimePrediction:
             gravity = earth.normal_gravity_mps2(state.latitude_rad, state.altitude_m)
             _carry_over(integrator.state_vector, state.velocity_enu_mps, gravity, span, dx)
         integrator.inject(dx)
+
+
+def load_compiled_carry_over() -> None:
+    """Compile the carry-over, or load it from the cache, now (see
+    :func:`buoy_nav.mechanization.load_compiled_kernels`)."""
+    _carry_over(np.zeros(STATE_SIZE), np.zeros(3), 9.8, 0.1, np.zeros(ERROR_ACCEL_BIAS + 3))
 
 
 @numba.njit(cache=True)

@@ -180,6 +180,9 @@ class AhrsAttitudeSource(AidingSource):
             covariance=covariance,
         )
 
+    def load_compiled_code(self) -> None:
+        _attitude_innovation(np.eye(3), np.eye(3), 0.0, 0.0, 0.0, self._lag_s)
+
     def align(self, aligner, t_s: float, measurement: AhrsAttitude, raw_gyro_rad_s):
         """The pack's heading (azimuth of its body x axis) completes the alignment at a known
         place; the levelling is the fusion's own."""
