@@ -53,6 +53,9 @@ as constants and printed beside our figures:
 18. io_floor (long): the I/O floor on one hour of open_ocean: the suite's reader reading and
     decoding every input message, its writer writing process_bag's output messages, and
     process_bag against their sum (tools/bench_io_floor.py; about ten minutes).
+19. fdchp_hour: a motion-pack hour to NetCDF, process_bag --netcdf on a simulated FDCHP hour
+    and on the OOI record repeated to an hour, against 1 000× real time, with start-up cold and
+    warm and a profile (tools/bench_fdchp_hour.py).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -62,7 +65,8 @@ go to stdout and out/bench/results.json, progress to stderr.
                                             smoother|antennas|smoother_table1|smoother_speed|
                                             smoother_day|soak|real_record|archive|
                                             current|current_long|fluxes|
-                                            magnetometer_calibration|io_floor ...]
+                                            magnetometer_calibration|io_floor|
+                                            fdchp_hour ...]
 
 Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
 runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 2
@@ -167,6 +171,7 @@ SECTIONS = (
     "uncertainty_day",
     "magnetometer_calibration",
     "io_floor",
+    "fdchp_hour",
 )
 LONG_SECTIONS = (
     "smoother_table1",
@@ -807,6 +812,19 @@ def magnetometer_calibration_section(run: BenchRun) -> dict:
     }
 
 
+def fdchp_hour_section(run: BenchRun) -> dict:
+    """A motion-pack hour to NetCDF against 1 000× real time (its own tool, which writes
+    out/bench/fdchp_hour.json)."""
+    if "fdchp_hour" not in run.sections:
+        return {}
+    from tools import bench_fdchp_hour
+
+    result = bench_fdchp_hour.run_fdchp_hour(log=log)
+    bench_fdchp_hour.print_fdchp_hour(result)
+    (OUT_DIR / "fdchp_hour.json").write_text(json.dumps(result, indent=2))
+    return {"fdchp_hour": result}
+
+
 SECTION_STEPS = (
     sensor_sets_section,
     real_record_section,
@@ -825,6 +843,7 @@ SECTION_STEPS = (
     smoother_speed_sections,
     archive_section,
     io_floor_section,
+    fdchp_hour_section,
 )
 """The sections after the cases, in the order they run and print; each returns its results."""
 

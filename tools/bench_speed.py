@@ -149,18 +149,35 @@ def _remove_bytecode_caches() -> None:
         shutil.rmtree(cache, ignore_errors=True)
 
 
-def _first_output_s(tool: str, in_bag: Path, out_bag: Path, write_bytecode: bool) -> float:
-    """Wall time, s, from starting ``tool`` on ``in_bag`` to its first output message; the tool
-    is then interrupted (it leaves nothing under ``out_bag``)."""
+def first_output_s(
+    tool: str,
+    in_bag: Path,
+    out_bag: Path,
+    params=PROCESSING_PARAMS,
+    arguments=(),
+    write_bytecode: bool = True,
+) -> float:
+    """Wall time, s, from starting ``tool`` on ``in_bag`` with the parameter files ``params`` and
+    the further command-line ``arguments`` to its first output message; the tool is then
+    interrupted (it leaves nothing under ``out_bag``)."""
     environment = dict(os.environ)
     environment.pop("PYTHONDONTWRITEBYTECODE", None)
     if not write_bytecode:
         environment["PYTHONDONTWRITEBYTECODE"] = "1"
-    params = [argument for path in PROCESSING_PARAMS for argument in ("--params-file", str(path))]
+    params = [argument for path in params for argument in ("--params-file", str(path))]
     command = _FIRST_OUTPUT_COMMAND.replace("{module}", TOOL_MODULES[tool])
     started_s = time.monotonic()
     with subprocess.Popen(
-        [sys.executable, "-c", command, str(in_bag), str(out_bag), "--overwrite", *params],
+        [
+            sys.executable,
+            "-c",
+            command,
+            str(in_bag),
+            str(out_bag),
+            "--overwrite",
+            *params,
+            *arguments,
+        ],
         env=environment,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
@@ -186,9 +203,9 @@ def run_startup(in_bag: Path, work_dir: Path, log=lambda text: None) -> dict:
             log(f"bench: start-up: {tool}, run {run} of {SPEED_RUNS}")
             _remove_bytecode_caches()
             out_bag = work_dir / tool
-            runs[tool]["cold"].append(_first_output_s(tool, in_bag, out_bag, False))
-            _first_output_s(tool, in_bag, out_bag, True)  # writes the caches
-            runs[tool]["warm"].append(_first_output_s(tool, in_bag, out_bag, True))
+            runs[tool]["cold"].append(first_output_s(tool, in_bag, out_bag, write_bytecode=False))
+            first_output_s(tool, in_bag, out_bag)  # writes the caches
+            runs[tool]["warm"].append(first_output_s(tool, in_bag, out_bag))
     return {
         tool: {
             "cold_s": min(figures["cold"]),

@@ -107,8 +107,11 @@ def site_params(work: Path, site_deg: tuple[float, float]) -> Path:
     return path
 
 
-def simulate(bag: Path, scenario: str, overrides: list[str]) -> None:
-    duration_s = (SETTLE_ROWS + PACKET_ROWS) / RATE_HZ
+def simulate(
+    bag: Path, scenario: str, overrides: list[str], rows: int = SETTLE_ROWS + PACKET_ROWS
+) -> None:
+    """Simulate ``rows`` samples of the FDCHP's 10 Hz sensors of ``scenario`` into ``bag``."""
+    duration_s = rows / RATE_HZ
     arguments = [scenario, str(bag), "--set", f"duration_s={duration_s}"]
     for override in overrides:
         arguments += ["--set", override]

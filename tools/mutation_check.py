@@ -82,7 +82,6 @@ class Mutant:
 
 MILLER = "src/wind_comp/wind_comp/miller.py"
 COMPENSATOR = "src/wind_comp/wind_comp/compensator.py"
-MECHANIZATION = "src/buoy_nav/buoy_nav/mechanization.py"
 STRAPDOWN_KERNEL = "src/buoy_nav/buoy_nav/strapdown_kernel.py"
 
 MUTANTS = (
@@ -165,9 +164,9 @@ MUTANTS = (
                 "        -EARTH_RATE_RAD_S * np.cos(latitude_rad),\n",
             ),
             Edit(
-                MECHANIZATION,
-                "            _OMEGA * math.cos(lat) + ve / east_radius,\n",
-                "            -_OMEGA * math.cos(lat) + ve / east_radius,\n",
+                STRAPDOWN_KERNEL,
+                "    state[NAV_FRAME_RATE + 1] = _OMEGA * math.cos(lat) + ve / east_radius\n",
+                "    state[NAV_FRAME_RATE + 1] = -_OMEGA * math.cos(lat) + ve / east_radius\n",
             ),
             Edit(STRAPDOWN_KERNEL, "wie_n = _OMEGA * cos_lat", "wie_n = -_OMEGA * cos_lat"),
         ),

@@ -16,10 +16,8 @@ from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_state_filter import (
     ErrorStateFilter,
     ImuErrorModel,
-    NavState,
     block_diagonal,
     discrete_error_model,
-    inject_error_state,
 )
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.state_layout import StateLayout
@@ -93,16 +91,17 @@ class AidedNavigation:
             state, state.rotation_nb, raw_gyro_rad_s, integrator.nav_frame_rate_enu_rad_s
         )
 
-    def correct(self, state: NavState, models: list[MeasurementModel]) -> np.ndarray:
-        """Apply the accepted ``models`` of one stamp in one stacked update, which equals
-        applying them one after the other (their noises are independent) at a fraction of the
-        cost, and inject the correction into the nominal ``state``. Returns the correction."""
+    def correct(self, models: list[MeasurementModel]) -> np.ndarray:
+        """Apply the accepted ``models`` of one stamp (linearised at the nominal state now) in
+        one stacked update, which equals applying them one after the other (their noises are
+        independent) at a fraction of the cost, and inject the correction into the nominal
+        state. Returns the correction."""
         correction = self.kalman.update(
             np.concatenate([m.innovation for m in models]),
             np.vstack([m.jacobian for m in models]),
             block_diagonal([m.covariance for m in models]),
         )
-        self.integrator.set_nav_state(inject_error_state(state, correction))
+        self.integrator.inject(correction)
         self.kalman.reset_after_injection(correction)
         self._recorder.corrected(correction)
         return correction

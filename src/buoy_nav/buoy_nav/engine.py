@@ -90,7 +90,7 @@ from buoy_nav.imu_input import ImuInput
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, load_compiled_kernels
-from buoy_nav.prediction import RealtimePrediction
+from buoy_nav.prediction import RealtimePrediction, load_compiled_carry_over
 from buoy_nav.processing_point import ProcessingPoint
 from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
@@ -117,11 +117,15 @@ class FusionEngine:
     def __init__(
         self, config: FusionConfig, sources: Iterable[type[AidingSource]] = AIDING_SOURCES
     ):
-        load_compiled_kernels()  # here, not at the first IMU sample of a live stream
         self.config = config
         self.states = ERROR_STATES
         """Names of the error states (rows and columns of :attr:`covariance`)."""
         self._registry = SourceRegistry(config, self.states, sources)
+        # Here, not at the first IMU sample or measurement of a live stream.
+        load_compiled_kernels(
+            load_compiled_carry_over,
+            *(source.load_compiled_code for source in self._registry.sources),
+        )
         self.sources: tuple[AidingSource, ...] = self._registry.sources
         """The aiding sources, one instance per class, in the order of application."""
         self.recorder = EpochRecorder()
@@ -174,9 +178,7 @@ class FusionEngine:
         )
         self._solutions = SolutionBuilder(_configured_map_plane(config))
         self._output = OutputDecimation(config.output_rate_hz)
-        self._prediction = RealtimePrediction(
-            config.max_imu_gap_s, self.states, self._solutions, self._output
-        )
+        self._prediction = RealtimePrediction(config.max_imu_gap_s, self._solutions, self._output)
 
     # ------------------------------------------------------------------ input
     def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[NavSolution]:
@@ -475,7 +477,7 @@ class FusionEngine:
         point = nav.linearisation_point(gyro)
         outcome = self._gates.gate(t, group, point, nav.kalman)
         if outcome.accepted:
-            correction = nav.correct(point.state, outcome.accepted)
+            correction = nav.correct(outcome.accepted)
             self._solutions.covariance_changed()
             self._solutions.biases_changed()
             self._prediction.carry_over(self._point.t_s, point.state, correction)

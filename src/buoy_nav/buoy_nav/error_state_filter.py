@@ -70,15 +70,12 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy.linalg import lapack
 from scipy.special import gammaincinv
 
-from buoy_nav import earth
+from buoy_nav import earth, kalman_kernel
+from buoy_nav import strapdown_kernel as kernel
 from buoy_nav.config import FusionConfig
 from buoy_nav.rotations import (
-    normalize_quaternion,
-    quaternion_from_rotation_vector,
-    quaternion_multiply,
     rotation_matrix_from_quaternion,
 )
 from buoy_nav.state_layout import EAST, NORTH, UP, StateLayout
@@ -90,6 +87,13 @@ ERROR_STATES = StateLayout(
 (gyro Gauss-Markov drift as ``("gyro_drift", 3)``) are appended here, with their dynamics in
 :func:`discrete_error_model` and :func:`inject_error_state`."""
 _S = ERROR_STATES
+if (_S.attitude.start, _S.velocity.start, _S.position.start, _S.gyro_bias.start) != (
+    kernel.ERROR_ATTITUDE,
+    kernel.ERROR_VELOCITY,
+    kernel.ERROR_POSITION,
+    kernel.ERROR_GYRO_BIAS,
+) or _S.accel_bias.start != kernel.ERROR_ACCEL_BIAS:
+    raise ImportError("the compiled error injection's blocks differ from ERROR_STATES")
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 DEG = math.pi / 180.0
@@ -99,12 +103,16 @@ DEG = math.pi / 180.0
 SCALE_FACTOR_CORRELATION_TIME_S = 3.0
 # Smallest eigenvalue kept when a covariance has to be repaired, relative to the largest one.
 _EIGENVALUE_FLOOR_RELATIVE = 1e-15
-_EYE3 = np.eye(3)
 
 
-def _skew_array(vector: np.ndarray) -> np.ndarray:
-    x, y, z = vector
-    return np.array(((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0)))
+def _measurement_arrays(innovation, jacobian, measurement_covariance):
+    """ν (m,), H (m × states) and R (m × m) as contiguous float arrays for the compiled
+    update."""
+    return (
+        np.ascontiguousarray(np.atleast_1d(innovation), dtype=float),
+        np.ascontiguousarray(np.atleast_2d(jacobian), dtype=float),
+        np.ascontiguousarray(np.atleast_2d(measurement_covariance), dtype=float),
+    )
 
 
 def block_diagonal(blocks) -> np.ndarray:
@@ -147,27 +155,25 @@ class NavState:
 
 def inject_error_state(state: NavState, error) -> NavState:
     """Apply an error state of :data:`ERROR_STATES` to a nominal state (THE error-injection
-    convention)."""
-    dx = np.asarray(error, dtype=float)
-    phi = dx[_S.attitude]
-    position = dx[_S.position]
-    attitude = normalize_quaternion(
-        quaternion_multiply(
-            quaternion_from_rotation_vector(float(phi[0]), float(phi[1]), float(phi[2])),
-            state.attitude_xyzw,
-        )
-    )
-    meridian, prime_vertical = earth.radii_of_curvature_m(state.latitude_rad)
+    convention, :func:`buoy_nav.strapdown_kernel.inject_error_state`, which the integrator
+    applies to its own state in place)."""
+    nominal = np.zeros(kernel.STATE_SIZE)
+    nominal[kernel.ATTITUDE : kernel.ATTITUDE + 4] = state.attitude_xyzw
+    nominal[kernel.VELOCITY : kernel.VELOCITY + 3] = state.velocity_enu_mps
+    nominal[kernel.LATITUDE] = state.latitude_rad
+    nominal[kernel.LONGITUDE] = state.longitude_rad
+    nominal[kernel.ALTITUDE] = state.altitude_m
+    nominal[kernel.GYRO_BIAS : kernel.GYRO_BIAS + 3] = state.gyro_bias_rad_s
+    nominal[kernel.ACCEL_BIAS : kernel.ACCEL_BIAS + 3] = state.accel_bias_mps2
+    kernel.inject_error_state(nominal, np.asarray(error, dtype=float))
     return NavState(
-        attitude_xyzw=attitude,
-        velocity_enu_mps=state.velocity_enu_mps + dx[_S.velocity],
-        latitude_rad=state.latitude_rad + float(position[NORTH]) / (meridian + state.altitude_m),
-        longitude_rad=state.longitude_rad
-        + float(position[EAST])
-        / ((prime_vertical + state.altitude_m) * math.cos(state.latitude_rad)),
-        altitude_m=state.altitude_m + float(position[UP]),
-        gyro_bias_rad_s=state.gyro_bias_rad_s + dx[_S.gyro_bias],
-        accel_bias_mps2=state.accel_bias_mps2 + dx[_S.accel_bias],
+        attitude_xyzw=tuple(nominal[kernel.ATTITUDE : kernel.ATTITUDE + 4].tolist()),
+        velocity_enu_mps=nominal[kernel.VELOCITY : kernel.VELOCITY + 3].copy(),
+        latitude_rad=float(nominal[kernel.LATITUDE]),
+        longitude_rad=float(nominal[kernel.LONGITUDE]),
+        altitude_m=float(nominal[kernel.ALTITUDE]),
+        gyro_bias_rad_s=nominal[kernel.GYRO_BIAS : kernel.GYRO_BIAS + 3].copy(),
+        accel_bias_mps2=nominal[kernel.ACCEL_BIAS : kernel.ACCEL_BIAS + 3].copy(),
     )
 
 
@@ -407,8 +413,7 @@ class ErrorStateFilter:
 
     def propagate(self, transition: np.ndarray, process_noise: np.ndarray):
         """P ← Φ P Φ^T + Q_d."""
-        covariance = transition @ self.covariance @ transition.T + process_noise
-        self.covariance = 0.5 * (covariance + covariance.T)
+        self.covariance = kalman_kernel.propagated(self.covariance, transition, process_noise)
 
     def gate(
         self, innovation, jacobian, measurement_covariance, probability: float | None = None
@@ -418,17 +423,9 @@ class ErrorStateFilter:
 
         innovation ν (m,), jacobian H (m × states), measurement covariance R (m×m).
         """
-        nu = np.atleast_1d(np.asarray(innovation, dtype=float))
-        h = np.atleast_2d(np.asarray(jacobian, dtype=float))
-        s = h @ self.covariance @ h.T + np.atleast_2d(measurement_covariance)
-        s = 0.5 * (s + s.T)
+        nu, h, r = _measurement_arrays(innovation, jacobian, measurement_covariance)
         threshold = self.gate_threshold(nu.shape[0], probability)
-        # LAPACK directly: numpy.linalg costs ten times more in call overhead at this size.
-        factor, info = lapack.dpotrf(s)
-        if info != 0:
-            return GateResult(False, math.nan, threshold, s)
-        solved, _ = lapack.dpotrs(factor, nu)
-        nis = float(nu @ solved)
+        nis, s = kalman_kernel.innovation_test(self.covariance, nu, h, r)
         return GateResult(nis <= threshold, nis, threshold, s)
 
     def update(self, innovation, jacobian, measurement_covariance) -> np.ndarray:
@@ -438,20 +435,12 @@ class ErrorStateFilter:
         gate each measurement with :meth:`gate` first. Raises ``numpy.linalg.LinAlgError`` if
         the innovation covariance is not positive definite (the gate rejects those first).
         """
-        nu = np.atleast_1d(np.asarray(innovation, dtype=float))
-        h = np.atleast_2d(np.asarray(jacobian, dtype=float))
-        r = np.atleast_2d(np.asarray(measurement_covariance, dtype=float))
-        hp = h @ self.covariance
-        s = hp @ h.T + r
-        factor, info = lapack.dpotrf(0.5 * (s + s.T))
-        if info != 0:
+        nu, h, r = _measurement_arrays(innovation, jacobian, measurement_covariance)
+        covariance, correction, positive = kalman_kernel.joseph_update(self.covariance, nu, h, r)
+        if not positive:
             raise np.linalg.LinAlgError("innovation covariance is not positive definite")
-        gain_t, _ = lapack.dpotrs(factor, hp)
-        gain = gain_t.T
-        i_kh = self._identity - gain @ h
-        covariance = i_kh @ self.covariance @ i_kh.T + gain @ r @ gain_t
-        self.covariance = 0.5 * (covariance + covariance.T)
-        return gain @ nu
+        self.covariance = covariance
+        return correction
 
     def reset_after_injection(self, correction):
         """Covariance of the error after the correction was injected and the mean reset.
@@ -460,26 +449,27 @@ class ErrorStateFilter:
         attitude rows and columns are transformed by G = I + ½[δφ̂×]; the other states are
         additive and unchanged.
         """
-        attitude = self.states.attitude
-        g = _skew_array(0.5 * np.asarray(correction)[attitude])
-        g += _EYE3
-        covariance = self.covariance
-        covariance[attitude, :] = g @ covariance[attitude, :]
-        covariance[:, attitude] = covariance[:, attitude] @ g.T
-        self.covariance = 0.5 * (covariance + covariance.T)
-        self.ensure_positive_definite()
+        self.covariance, positive = kalman_kernel.attitude_reset(
+            self.covariance, np.asarray(correction, dtype=float), self.states.attitude.start
+        )
+        if not positive:
+            self._repair_covariance()
 
     def ensure_positive_definite(self) -> bool:
         """Repair P if it lost positive definiteness; returns True when a repair was needed."""
-        if lapack.dpotrf(self.covariance)[1] == 0:
+        if kalman_kernel.is_positive_definite(self.covariance):
             return False
+        self._repair_covariance()
+        return True
+
+    def _repair_covariance(self) -> None:
+        """Raise the eigenvalues of P to a floor relative to the largest."""
         eigenvalues, eigenvectors = np.linalg.eigh(self.covariance)
         floor = max(float(np.max(np.abs(eigenvalues))), 1e-30) * _EIGENVALUE_FLOOR_RELATIVE
         eigenvalues = np.maximum(eigenvalues, floor)
         covariance = (eigenvectors * eigenvalues) @ eigenvectors.T
         self.covariance = 0.5 * (covariance + covariance.T)
         self.covariance_repairs += 1
-        return True
 
     def reset_states(self, indices, variances):
         """Decorrelate the states at ``indices`` (from :attr:`states`, e.g.

@@ -30,20 +30,22 @@ updates in place the one array that holds the integrator's state.
 
 import contextlib
 import copy
-import math
 import signal
 import threading
 from dataclasses import dataclass
 
 import numpy as np
 
-from buoy_nav import earth
 from buoy_nav.config import FusionConfig
-from buoy_nav.error_state_filter import ImuErrorModel, NavState, discrete_error_model
+from buoy_nav.error_state_filter import (
+    ERROR_STATES,
+    ErrorStateFilter,
+    ImuErrorModel,
+    NavState,
+    discrete_error_model,
+)
 from buoy_nav.rotations import (
     Quaternion,
-    normalize_quaternion,
-    rotation_matrix_elements,
 )
 from buoy_nav.strapdown_kernel import (
     ACCEL_BIAS,
@@ -61,10 +63,10 @@ from buoy_nav.strapdown_kernel import (
     ROTATION_SUM,
     STATE_SIZE,
     VELOCITY,
+    inject_error_state,
+    store_nominal,
     strapdown_step,
 )
-
-_OMEGA = earth.EARTH_RATE_RAD_S
 
 
 @dataclass(frozen=True)
@@ -138,26 +140,24 @@ class StrapdownIntegrator:
     ):
         """Replace the nominal state (after a filter correction); increments history is kept."""
         state = self._state
-        attitude = normalize_quaternion(_floats(attitude_xyzw))
-        ve, vn, _ = velocity_enu_mps = _floats(velocity_enu_mps)
-        lat = float(latitude_rad)
-        alt = float(altitude_m)
-        state[ATTITUDE : ATTITUDE + 4] = attitude
-        state[ROTATION : ROTATION + 9] = rotation_matrix_elements(*attitude)
-        state[VELOCITY : VELOCITY + 3] = velocity_enu_mps
-        state[LATITUDE] = lat
+        state[VELOCITY : VELOCITY + 3] = _floats(velocity_enu_mps)
+        state[LATITUDE] = float(latitude_rad)
         state[LONGITUDE] = float(longitude_rad)
-        state[ALTITUDE] = alt
+        state[ALTITUDE] = float(altitude_m)
         state[GYRO_BIAS : GYRO_BIAS + 3] = _floats(gyro_bias_rad_s)
         state[ACCEL_BIAS : ACCEL_BIAS + 3] = _floats(accel_bias_mps2)
-        # earth.navigation_frame_rate_enu_rad_s (ω_ie + ω_en) in floats, the same arithmetic.
-        meridian, prime_vertical = earth.radii_of_curvature_m(lat)
-        east_radius = prime_vertical + alt
-        state[NAV_FRAME_RATE : NAV_FRAME_RATE + 3] = (
-            0.0 + -vn / (meridian + alt),
-            _OMEGA * math.cos(lat) + ve / east_radius,
-            _OMEGA * math.sin(lat) + ve * math.tan(lat) / east_radius,
-        )
+        store_nominal(state, *_floats(attitude_xyzw))
+
+    def inject(self, error) -> None:
+        """Apply the error state ``error`` (:data:`buoy_nav.error_state_filter.ERROR_STATES`)
+        to the nominal state, as a filter correction does; increments history is kept."""
+        inject_error_state(self._state, np.asarray(error, dtype=float))
+
+    @property
+    def state_vector(self) -> np.ndarray:
+        """The state vector itself (:mod:`buoy_nav.strapdown_kernel`'s layout), for compiled
+        kernels that read it; it is changed only through this integrator's methods."""
+        return self._state
 
     @property
     def attitude_xyzw(self) -> Quaternion:
@@ -285,12 +285,15 @@ class StrapdownIntegrator:
         return sums
 
 
-def load_compiled_kernels() -> None:
-    """Compile the fusion's compiled functions, or load them from the cache, now: a node calls
-    this at start-up so that no sensor message ever waits for the compiler (up to 2 s on the
-    first run after an install or a change of their source)."""
+def load_compiled_kernels(*further_loads) -> None:
+    """Compile the fusion's compiled functions, or load them from the cache, now, and then call
+    each of ``further_loads`` (the same for the compiled code of other parts): a node calls this
+    at start-up so that no sensor message ever waits for the compiler (up to 2 s on the first
+    run after an install or a change of their source)."""
     with _stop_signals_held():
         _run_compiled_kernels()
+        for load in further_loads:
+            load()
 
 
 @contextlib.contextmanager
@@ -328,6 +331,16 @@ def _run_compiled_kernels() -> None:
         (0.0, 0.0, 0.0),
         ImuErrorModel.from_config(FusionConfig()),
     )
+    integrator.inject(np.zeros(ERROR_STATES.dim))
+    kalman = ErrorStateFilter(np.eye(ERROR_STATES.dim), 0.99)
+    kalman.propagate(np.eye(ERROR_STATES.dim), np.zeros((ERROR_STATES.dim, ERROR_STATES.dim)))
+    jacobian = np.zeros((3, ERROR_STATES.dim))
+    jacobian[:, ERROR_STATES.attitude] = np.eye(3)
+    read_only = jacobian.copy()
+    read_only.flags.writeable = False
+    for model_jacobian in (jacobian, read_only):  # models may hand over read-only Jacobians
+        kalman.gate(np.zeros(3), model_jacobian, np.eye(3))
+    kalman.reset_after_injection(kalman.update(np.zeros(3), jacobian, np.eye(3)))
 
 
 def interpolate_sample(

@@ -17,14 +17,27 @@ node and an offline run of the same data give the same solutions.
 import math
 from collections.abc import Iterable
 
+import numba
 import numpy as np
 
 from buoy_nav import earth
-from buoy_nav.error_state_filter import ErrorStateFilter, NavState, inject_error_state
+from buoy_nav.error_state_filter import ErrorStateFilter, NavState
 from buoy_nav.mechanization import StrapdownIntegrator
-from buoy_nav.rotations import cross
+from buoy_nav.rotations import cross_components
 from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
-from buoy_nav.state_layout import UP, StateLayout
+from buoy_nav.state_layout import UP
+from buoy_nav.strapdown_kernel import (
+    ERROR_ACCEL_BIAS,
+    ERROR_ATTITUDE,
+    ERROR_GYRO_BIAS,
+    ERROR_POSITION,
+    ERROR_VELOCITY,
+    ROTATION,
+    STATE_SIZE,
+    VELOCITY,
+)
+
+_cross = numba.njit(cache=True)(cross_components)
 
 # Longest run of carried-over corrections before the real-time prediction is forked afresh from
 # the filter (s of stamps): bounds the second-order residue of the carry-over (≪ 1e-6 rad).
@@ -33,20 +46,17 @@ PREDICTION_RESYNC_INTERVAL_S = 1.0
 
 class RealtimePrediction:
     """The copy integrated ahead of the filter (see the module docstring); its solutions come
-    from ``solutions`` at the rate ``output`` lets through.
-
-    ``states`` names the error states of the corrections carried over.
+    from ``solutions`` at the rate ``output`` lets through. The corrections carried over are
+    of :data:`buoy_nav.error_state_filter.ERROR_STATES`.
     """
 
     def __init__(
         self,
         max_imu_gap_s: float,
-        states: StateLayout,
         solutions: SolutionBuilder,
         output: OutputDecimation,
     ):
         self._max_imu_gap_s = max_imu_gap_s
-        self._states = states
         self._solutions = solutions
         self._output = output
         # (integrator ahead of the filter, its time, raw gyro and force at that time); None when
@@ -114,16 +124,37 @@ class RealtimePrediction:
         span = t_ahead - filter_time
         dx = np.array(correction, dtype=float)
         if span > 0.0:
-            states = self._states
-            rotation_integral = integrator.rotation_nb * span
-            velocity_ahead = np.array(integrator.velocity_enu_mps)
             gravity = earth.normal_gravity_mps2(state.latitude_rad, state.altitude_m)
-            force_increment = velocity_ahead - state.velocity_enu_mps
-            force_increment[UP] += gravity * span
-            phi, dv = dx[states.attitude], dx[states.velocity].copy()
-            dx[states.position] += dv * span
-            dx[states.velocity] += cross(phi, force_increment) - (
-                rotation_integral @ dx[states.accel_bias]
-            )
-            dx[states.attitude] -= rotation_integral @ dx[states.gyro_bias]
-        integrator.set_nav_state(inject_error_state(integrator.nav_state(), dx))
+            _carry_over(integrator.state_vector, state.velocity_enu_mps, gravity, span, dx)
+        integrator.inject(dx)
+
+
+def load_compiled_carry_over() -> None:
+    """Compile the carry-over, or load it from the cache, now (see
+    :func:`buoy_nav.mechanization.load_compiled_kernels`)."""
+    _carry_over(np.zeros(STATE_SIZE), np.zeros(3), 9.8, 0.1, np.zeros(ERROR_ACCEL_BIAS + 3))
+
+
+@numba.njit(cache=True)
+def _carry_over(ahead, filter_velocity_enu_mps, gravity_mps2, span_s, error):
+    """Carry the filter's ``error`` (ERROR_STATES) over ``span_s`` (s) to the copy ahead, whose
+    state vector (strapdown_kernel layout) is ``ahead``, in place: δp += δv T,
+    δv += φ × Δv_f − ∫R dt δb_a, φ −= ∫R dt δb_g, with R_nb of the copy held over the span and
+    Δv_f the specific-force increment (ENU m/s) from the filter's velocity to the copy's
+    (gravity ``gravity_mps2`` m/s² added back)."""
+    force_increment = [ahead[VELOCITY + i] - filter_velocity_enu_mps[i] for i in range(3)]
+    force_increment[UP] += gravity_mps2 * span_s
+    turned = _cross(
+        (error[ERROR_ATTITUDE], error[ERROR_ATTITUDE + 1], error[ERROR_ATTITUDE + 2]),
+        (force_increment[0], force_increment[1], force_increment[2]),
+    )
+    for i in range(3):
+        error[ERROR_POSITION + i] += error[ERROR_VELOCITY + i] * span_s
+    for i in range(3):
+        accel_bias, gyro_bias = 0.0, 0.0
+        for j in range(3):
+            rotation_integral = ahead[ROTATION + 3 * i + j] * span_s
+            accel_bias += rotation_integral * error[ERROR_ACCEL_BIAS + j]
+            gyro_bias += rotation_integral * error[ERROR_GYRO_BIAS + j]
+        error[ERROR_VELOCITY + i] += turned[i] - accel_bias
+        error[ERROR_ATTITUDE + i] -= gyro_bias

@@ -10,12 +10,16 @@ Conventions (fixed for the whole project):
   ``a ⊗ b`` has the matrix ``R(a) · R(b)``.
 
 The scalar quaternion functions take and return plain tuples of floats because the strapdown
-integrator calls them at the IMU rate, where a numpy call costs more than the arithmetic.
+integrator calls them at the IMU rate, where a numpy call costs more than the arithmetic; the
+compiled kernels (numba) compile them from this one source. Those that another scalar function
+calls are also registered with numba (``register_jitable``), so that compiled code can call
+them there too.
 """
 
 import math
 
 import numpy as np
+from numba.extending import register_jitable
 
 Quaternion = tuple[float, float, float, float]
 
@@ -67,6 +71,7 @@ def quaternion_from_rotation_vector(x: float, y: float, z: float) -> Quaternion:
     return (x * half_sinc, y * half_sinc, z * half_sinc, w)
 
 
+@register_jitable
 def normalize_quaternion(q: Quaternion) -> Quaternion:
     """Scale an (x, y, z, w) quaternion to unit norm, with a non-negative scalar part."""
     x, y, z, w = q
@@ -130,22 +135,34 @@ def rotation_matrix_from_quaternion(q) -> np.ndarray:
 def quaternion_from_rotation_matrix(rotation) -> Quaternion:
     """Unit (x, y, z, w) quaternion (w ≥ 0) of a 3×3 rotation matrix (Shepperd's method)."""
     m = np.asarray(rotation, dtype=float)
-    trace = m[0, 0] + m[1, 1] + m[2, 2]
-    candidates = (trace, m[0, 0], m[1, 1], m[2, 2])
-    largest = max(range(4), key=candidates.__getitem__)
+    return quaternion_from_rotation_elements(*m.reshape(9).tolist())
+
+
+def quaternion_from_rotation_elements(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> Quaternion:
+    """Unit (x, y, z, w) quaternion (w ≥ 0) of the rotation matrix of row-major elements
+    ``m00 … m22`` (Shepperd's method: from the largest of the trace and the diagonal). Floats
+    only, so that compiled code (numba) runs the same source."""
+    trace = m00 + m11 + m22
+    largest, candidate = 0, trace
+    if m00 > candidate:
+        largest, candidate = 1, m00
+    if m11 > candidate:
+        largest, candidate = 2, m11
+    if m22 > candidate:
+        largest = 3
     if largest == 0:
         s = 2.0 * math.sqrt(1.0 + trace)
-        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4)
+        q = ((m21 - m12) / s, (m02 - m20) / s, (m10 - m01) / s, s / 4)
     elif largest == 1:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = (s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
+        s = 2.0 * math.sqrt(1.0 + m00 - m11 - m22)
+        q = (s / 4, (m01 + m10) / s, (m02 + m20) / s, (m21 - m12) / s)
     elif largest == 2:
-        s = 2.0 * math.sqrt(1.0 - m[0, 0] + m[1, 1] - m[2, 2])
-        q = ((m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
+        s = 2.0 * math.sqrt(1.0 - m00 + m11 - m22)
+        q = ((m01 + m10) / s, s / 4, (m12 + m21) / s, (m02 - m20) / s)
     else:
-        s = 2.0 * math.sqrt(1.0 - m[0, 0] - m[1, 1] + m[2, 2])
-        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4, (m[1, 0] - m[0, 1]) / s)
-    return normalize_quaternion(tuple(float(c) for c in q))
+        s = 2.0 * math.sqrt(1.0 - m00 - m11 + m22)
+        q = ((m02 + m20) / s, (m12 + m21) / s, s / 4, (m10 - m01) / s)
+    return normalize_quaternion(q)
 
 
 def rotation_matrix_from_rotation_vector(rotation_vector) -> np.ndarray:
@@ -156,12 +173,17 @@ def rotation_matrix_from_rotation_vector(rotation_vector) -> np.ndarray:
 
 def rotation_vector_from_rotation_matrix(rotation) -> np.ndarray:
     """Matrix logarithm of a rotation matrix as a rotation vector (rad), angle in [0, π]."""
-    x, y, z, w = quaternion_from_rotation_matrix(rotation)
+    return np.array(rotation_vector_from_quaternion(*quaternion_from_rotation_matrix(rotation)))
+
+
+def rotation_vector_from_quaternion(x, y, z, w) -> tuple[float, float, float]:
+    """Rotation vector (rad, angle in [0, π]) of a unit (x, y, z, w) quaternion with w ≥ 0.
+    Floats only (compiled code runs the same source)."""
     sin_half = math.sqrt(x * x + y * y + z * z)
     if sin_half < 1e-12:
-        return 2.0 * np.array((x, y, z))
-    angle = 2.0 * math.atan2(sin_half, w)
-    return np.array((x, y, z)) * (angle / sin_half)
+        return 2.0 * x, 2.0 * y, 2.0 * z
+    scale = 2.0 * math.atan2(sin_half, w) / sin_half
+    return x * scale, y * scale, z * scale
 
 
 def rotation_matrix_from_euler(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.ndarray:

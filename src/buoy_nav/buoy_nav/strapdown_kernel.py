@@ -12,7 +12,12 @@ import math
 import numba
 
 from buoy_nav import earth
-from buoy_nav.rotations import quaternion_from_rotation_vector
+from buoy_nav.rotations import (
+    normalize_quaternion,
+    quaternion_from_rotation_vector,
+    quaternion_multiply,
+    rotation_matrix_elements,
+)
 
 _OMEGA = earth.EARTH_RATE_RAD_S
 
@@ -43,6 +48,63 @@ STATE_SIZE = 60
 # The Earth-model and rotation functions the step calls, compiled from their one source.
 _normal_gravity_mps2 = numba.njit(cache=True)(earth.normal_gravity_mps2)
 _quaternion_from_rotation_vector = numba.njit(cache=True)(quaternion_from_rotation_vector)
+_quaternion_multiply = numba.njit(cache=True)(quaternion_multiply)
+_normalize_quaternion = numba.njit(cache=True)(normalize_quaternion)
+_rotation_matrix_elements = numba.njit(cache=True)(rotation_matrix_elements)
+_radii_of_curvature_m = numba.njit(cache=True)(earth.radii_of_curvature_m)
+
+# Blocks of the error state as :data:`buoy_nav.error_state_filter.ERROR_STATES` orders them
+# (that module checks the two agree): attitude, velocity, position (ENU), gyro and
+# accelerometer bias (body), three each.
+ERROR_ATTITUDE, ERROR_VELOCITY, ERROR_POSITION, ERROR_GYRO_BIAS, ERROR_ACCEL_BIAS = 0, 3, 6, 9, 12
+
+
+@numba.njit(cache=True)
+def store_nominal(state, x, y, z, w):
+    """Store the attitude quaternion (x, y, z, w) normalised, with its R_nb, and ω_in from the
+    state's velocity and position (earth.navigation_frame_rate_enu_rad_s, the same arithmetic),
+    after the nominal state was set other than by a step."""
+    x, y, z, w = _normalize_quaternion((x, y, z, w))
+    state[ATTITUDE], state[ATTITUDE + 1], state[ATTITUDE + 2], state[ATTITUDE + 3] = x, y, z, w
+    elements = _rotation_matrix_elements(x, y, z, w)
+    for i in range(9):
+        state[ROTATION + i] = elements[i]
+    ve, vn = state[VELOCITY], state[VELOCITY + 1]
+    lat, alt = state[LATITUDE], state[ALTITUDE]
+    meridian, prime_vertical = _radii_of_curvature_m(lat)
+    east_radius = prime_vertical + alt
+    state[NAV_FRAME_RATE] = 0.0 + -vn / (meridian + alt)
+    state[NAV_FRAME_RATE + 1] = _OMEGA * math.cos(lat) + ve / east_radius
+    state[NAV_FRAME_RATE + 2] = _OMEGA * math.sin(lat) + ve * math.tan(lat) / east_radius
+
+
+@numba.njit(cache=True)
+def inject_error_state(state, error):
+    """Apply the error state ``error`` to the nominal state in ``state`` in place: THE
+    error-injection convention (see :mod:`buoy_nav.error_state_filter`). R_true = Exp([φ×]) R,
+    v += δv, the position moved by δp (ENU m: Δlat = δp_N / (R_M + h), Δlon = δp_E /
+    ((R_N + h) cos lat), Δh = δp_U), both biases += δb."""
+    rotation = _quaternion_from_rotation_vector(
+        error[ERROR_ATTITUDE], error[ERROR_ATTITUDE + 1], error[ERROR_ATTITUDE + 2]
+    )
+    attitude = (
+        state[ATTITUDE],
+        state[ATTITUDE + 1],
+        state[ATTITUDE + 2],
+        state[ATTITUDE + 3],
+    )
+    x, y, z, w = _normalize_quaternion(_quaternion_multiply(rotation, attitude))
+    lat, alt = state[LATITUDE], state[ALTITUDE]
+    meridian, prime_vertical = _radii_of_curvature_m(lat)
+    east, north, up = error[ERROR_POSITION], error[ERROR_POSITION + 1], error[ERROR_POSITION + 2]
+    state[LATITUDE] = lat + north / (meridian + alt)
+    state[LONGITUDE] += east / ((prime_vertical + alt) * math.cos(lat))
+    state[ALTITUDE] = alt + up
+    for i in range(3):
+        state[VELOCITY + i] += error[ERROR_VELOCITY + i]
+        state[GYRO_BIAS + i] += error[ERROR_GYRO_BIAS + i]
+        state[ACCEL_BIAS + i] += error[ERROR_ACCEL_BIAS + i]
+    store_nominal(state, x, y, z, w)
 
 
 @numba.njit(cache=True)

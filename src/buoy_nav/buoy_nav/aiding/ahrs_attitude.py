@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from buoy_common.contract import AHRS_TOPIC, Reason, header_seconds
@@ -45,15 +46,24 @@ from buoy_nav.aiding.base import (
 )
 from buoy_nav.geomagnetism import declination_rad
 from buoy_nav.rotations import (
+    quaternion_from_rotation_elements,
+    quaternion_from_rotation_vector,
+    rotation_matrix_elements,
     rotation_matrix_from_euler,
     rotation_matrix_from_quaternion,
-    rotation_matrix_from_rotation_vector,
-    rotation_vector_from_rotation_matrix,
+    rotation_vector_from_quaternion,
 )
 
 UNIT_NORM_TOLERANCE = 1e-3
 MIN_QUATERNION_NORM = 1e-9
 BODY_X = np.array((1.0, 0.0, 0.0))
+_EYE3 = np.eye(3)
+
+# The rotation functions the innovation calls, compiled from their one source.
+_quaternion_from_rotation_vector = numba.njit(cache=True)(quaternion_from_rotation_vector)
+_rotation_matrix_elements = numba.njit(cache=True)(rotation_matrix_elements)
+_quaternion_from_rotation_elements = numba.njit(cache=True)(quaternion_from_rotation_elements)
+_rotation_vector_from_quaternion = numba.njit(cache=True)(rotation_vector_from_quaternion)
 
 
 class AhrsAttitude(NamedTuple):
@@ -85,6 +95,10 @@ class AhrsAttitudeSource(AidingSource):
         self._floor_rad2 = config.ahrs_variance_floor_rad2
         self._correlation_s = config.ahrs_error_correlation_time_s
         self._last_stamp_s = -math.inf
+        jacobian = np.zeros((3, states.dim))
+        jacobian[:, states.attitude] = np.eye(3)
+        jacobian.flags.writeable = False
+        self._jacobian = jacobian
 
     @classmethod
     def enabled_by(cls, config) -> bool:
@@ -148,23 +162,26 @@ class AhrsAttitudeSource(AidingSource):
 
     def model(self, measurement: AhrsAttitude, point: LinearisationPoint) -> MeasurementModel:
         state = point.state
-        rate = np.asarray(point.raw_gyro_rad_s, dtype=float) - state.gyro_bias_rad_s
+        gyro, bias = point.raw_gyro_rad_s, state.gyro_bias_rad_s
+        rate = (gyro[0] - bias[0], gyro[1] - bias[1], gyro[2] - bias[2])
         measured = self._true_north(measurement, state.latitude_rad, state.longitude_rad)
-        if self._lag_s > 0.0:
-            measured = measured @ rotation_matrix_from_rotation_vector(rate * self._lag_s)
-        innovation = rotation_vector_from_rotation_matrix(measured @ point.rotation_nb.T)
-        states = self.states
-        jacobian = np.zeros((3, states.dim))
-        jacobian[:, states.attitude] = np.eye(3)
-        lag_variance = float(rate @ rate) * self._lag_uncertainty_s**2
+        innovation = np.array(
+            _attitude_innovation(
+                np.ascontiguousarray(measured, dtype=float), point.rotation_nb, *rate, self._lag_s
+            )
+        )
+        lag_variance = (rate[0] ** 2 + rate[1] ** 2 + rate[2] ** 2) * self._lag_uncertainty_s**2
         covariance = floored_covariance(measurement.covariance_rad2, self._floor_rad2)
-        covariance = (covariance + np.eye(3) * lag_variance) * self._weight(measurement)
+        covariance = (covariance + _EYE3 * lag_variance) * self._weight(measurement)
         return MeasurementModel(
             predicted=np.zeros(3),
             innovation=innovation,
-            jacobian=jacobian,
+            jacobian=self._jacobian,
             covariance=covariance,
         )
+
+    def load_compiled_code(self) -> None:
+        _attitude_innovation(np.eye(3), np.eye(3), 0.0, 0.0, 0.0, self._lag_s)
 
     def align(self, aligner, t_s: float, measurement: AhrsAttitude, raw_gyro_rad_s):
         """The pack's heading (azimuth of its body x axis) completes the alignment at a known
@@ -178,3 +195,41 @@ class AhrsAttitudeSource(AidingSource):
         return aligner.add_heading(
             t_s, math.atan2(forward[1], forward[0]), variance, raw_gyro_rad_s, body_vector=BODY_X
         )
+
+
+@numba.njit(cache=True)
+def _attitude_innovation(measured_nb, rotation_nb, rate_x, rate_y, rate_z, lag_s):
+    """Log(R_m' R_nbᵀ) (rad, ENU): the pack's true-north attitude ``measured_nb`` (3×3,
+    body→ENU) carried forward by ``lag_s`` (s) with the bias-corrected body rate (rad/s),
+    R_m' = R_m Exp([ω τ]×), against the nominal ``rotation_nb``. Compiled: at the pack's rate
+    the interpreter's cost of the small products outweighed their arithmetic."""
+    carried = measured_nb
+    if lag_s > 0.0:
+        lag = _rotation_matrix_elements(
+            *_quaternion_from_rotation_vector(rate_x * lag_s, rate_y * lag_s, rate_z * lag_s)
+        )
+        carried = np.zeros((3, 3))
+        for i in range(3):
+            for j in range(3):
+                carried[i, j] = (
+                    measured_nb[i, 0] * lag[j] + measured_nb[i, 1] * lag[3 + j]
+                ) + measured_nb[i, 2] * lag[6 + j]
+    product = np.zeros(9)
+    for i in range(3):
+        for j in range(3):
+            product[3 * i + j] = (
+                carried[i, 0] * rotation_nb[j, 0] + carried[i, 1] * rotation_nb[j, 1]
+            ) + carried[i, 2] * rotation_nb[j, 2]
+    return _rotation_vector_from_quaternion(
+        *_quaternion_from_rotation_elements(
+            product[0],
+            product[1],
+            product[2],
+            product[3],
+            product[4],
+            product[5],
+            product[6],
+            product[7],
+            product[8],
+        )
+    )

@@ -278,6 +278,12 @@ class AidingSource(abc.ABC):
         no information there; the :class:`Reason` it contradicts the world known at ``point``
         (a failed outcome for the source's health, never fused)."""
 
+    def load_compiled_code(self) -> None:
+        """Compile the compiled code of this source's model, or load it from the cache, now:
+        the engine calls this when it is built, so that no measurement waits for the compiler.
+        The default: a model without compiled code."""
+        return None
+
     def reset(
         self, measurement, point: LinearisationPoint, model: MeasurementModel
     ) -> StateReset | None:
