@@ -24,15 +24,21 @@ from pathlib import Path
 from typing import NamedTuple, Protocol
 
 from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, BagWriter
-from buoy_common.contract import TF_STATIC_MSGTYPE, TF_STATIC_TOPIC, bag_topic, ns_to_stamp
+from buoy_common.contract import (
+    IMU_RAW_TOPIC,
+    TF_STATIC_MSGTYPE,
+    TF_STATIC_TOPIC,
+    bag_topic,
+    ns_to_stamp,
+)
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.transform_messages import FrameTransform, tf_cdr
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import NavValues
 from buoy_nav.observability import unobserved_quantities
-from buoy_processing.offline_fusion import OfflineFusion
+from buoy_processing.chunk_records import chunk_records
+from buoy_processing.offline_fusion import IMU_RECORD_FIELDS, OfflineFusion
 
-PROGRESS_EVERY_MESSAGES = 2000
 TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
 
 
@@ -45,8 +51,16 @@ class BagConsumer(Protocol):
     def add_navigation(self, solutions: list[NavValues]) -> None:
         """New navigation solutions, in order (what ``nav/odometry`` and ``nav/fix`` carry)."""
 
-    def add_message(self, reader: BagReader, message: BagMessage) -> None:
-        """A message of a copied topic, already written to the output."""
+    @property
+    def record_fields(self) -> dict[str, tuple[str, ...]]:
+        """Stored name → fields of the copied topics whose messages :meth:`add_message` takes
+        read with their chunk (:mod:`buoy_processing.chunk_records`)."""
+
+    def add_message(
+        self, reader: BagReader, message: BagMessage, record: tuple | None = None
+    ) -> None:
+        """A message of a copied topic, already written to the output; ``record``: its fields
+        of :attr:`record_fields`, None when read alone."""
 
     def finish(self, log_time_ns: int) -> None:
         """End of the data; ``log_time_ns`` is the log time of the last thing read, ns."""
@@ -61,7 +75,13 @@ class NothingFollows:
     def add_navigation(self, solutions: list[NavValues]) -> None:
         pass
 
-    def add_message(self, reader: BagReader, message: BagMessage) -> None:
+    @property
+    def record_fields(self) -> dict[str, tuple[str, ...]]:
+        return {}
+
+    def add_message(
+        self, reader: BagReader, message: BagMessage, record: tuple | None = None
+    ) -> None:
         pass
 
     def finish(self, log_time_ns: int) -> None:
@@ -158,19 +178,21 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
         run.write_static_transforms(writer)
         fusion = OfflineFusion(run.config, writer, nav_rate_hz=run.nav_rate_hz)
         consumer.start(writer)
+        fields_of_topic = {**imu_record_fields(run.sensors), **consumer.record_fields}
         log_time_ns = reader.start_ns
-        for index, message in enumerate(reader.messages([*relative_of, *run.copied_topics])):
-            log_time_ns = message.log_time_ns
-            topic = relative_of.get(message.topic)
-            if topic is not None:
-                solutions = fusion.add_message(reader, topic, message)
-                if solutions:
-                    consumer.add_navigation(solutions)
-            else:
-                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                consumer.add_message(reader, message)
-            if index % PROGRESS_EVERY_MESSAGES == 0:
-                progress.reached(log_time_ns)
+        for batch in reader.message_batches([*relative_of, *run.copied_topics]):
+            records = chunk_records(batch, fields_of_topic)
+            for position, message in enumerate(batch):
+                log_time_ns = message.log_time_ns
+                topic = relative_of.get(message.topic)
+                if topic is not None:
+                    solutions = fusion.add_message(reader, topic, message, records.get(position))
+                    if solutions:
+                        consumer.add_navigation(solutions)
+                else:
+                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                    consumer.add_message(reader, message, records.get(position))
+            progress.reached(log_time_ns)
         consumer.add_navigation(fusion.finish())
         consumer.finish(log_time_ns)
         run.store_closing_metadata(bag_writer, fusion)
@@ -211,6 +233,12 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
     return FusionRun(fusion, writer.counts)
 
 
+def imu_record_fields(sensors: dict[str, str]) -> dict[str, tuple[str, ...]]:
+    """The IMU topic of ``sensors`` (relative → stored names) and what the fusion reads of its
+    messages, a chunk at a time (:mod:`buoy_processing.chunk_records`)."""
+    return {sensors[IMU_RAW_TOPIC]: IMU_RECORD_FIELDS}
+
+
 def spill_parent_of(out_bag) -> Path:
     """Where a smoothing run keeps its temporary records: beside the output bag, on the disk
     the user chose for the output (a day of data needs gigabytes); the nearest existing folder
@@ -229,11 +257,16 @@ def forward_pass(
     label: str,
 ) -> None:
     """The forward filter of a smoothing run over the sensor topics of ``reader``'s bag."""
+    fields_of_topic = imu_record_fields(sensors)
+    progress_ns = reader.start_ns
     with BagProgress(reader, f"{label} (forward filter)") as progress:
-        for index, message in enumerate(reader.messages(list(sensors.values()))):
-            fusion.add_message(reader, relative_of[message.topic], message)
-            if index % PROGRESS_EVERY_MESSAGES == 0:
-                progress.reached(message.log_time_ns)
+        for batch in reader.message_batches(list(sensors.values())):
+            records = chunk_records(batch, fields_of_topic)
+            for position, message in enumerate(batch):
+                topic = relative_of[message.topic]
+                fusion.add_message(reader, topic, message, records.get(position))
+                progress_ns = message.log_time_ns
+            progress.reached(progress_ns)
         fusion.finish()
         progress.done()
 
