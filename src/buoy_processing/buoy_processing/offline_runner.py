@@ -217,7 +217,8 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
             fusion.writer = writer
             consumer.start(writer)
             log_time_ns = reader.start_ns
-            for message, solution in merged_with_smoothed(reader, fusion, run.copied_topics):
+            merged = merged_with_smoothed(reader, fusion, run.copied_topics, consumer.record_fields)
+            for message, record, solution in merged:
                 if message is None:
                     forward, smoothed, log_time_ns = solution
                     fusion.write_smoothed_values(forward, smoothed, log_time_ns)
@@ -225,7 +226,7 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
                     continue
                 log_time_ns = message.log_time_ns
                 writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                consumer.add_message(reader, message)
+                consumer.add_message(reader, message, record)
             consumer.finish(log_time_ns)
             run.store_closing_metadata(bag_writer, fusion)
     finally:
@@ -272,19 +273,26 @@ def forward_pass(
 
 
 def merged_with_smoothed(
-    reader: BagReader, fusion: OfflineFusion, topics: list[str]
-) -> Iterator[tuple[BagMessage | None, tuple | None]]:
+    reader: BagReader,
+    fusion: OfflineFusion,
+    topics: list[str],
+    fields_of_topic: dict[str, tuple[str, ...]],
+) -> Iterator[tuple[BagMessage | None, tuple | None, tuple | None]]:
     """The messages of ``topics`` (stored names) of ``reader``'s bag and the smoothed
     solutions of ``fusion`` (forward values, smoothed values, log time) in log-time order, as
-    ``(message, None)`` or ``(None, solution)``; a solution goes before the messages logged
-    after the IMU sample that produced it."""
+    ``(message, its record, None)`` or ``(None, None, solution)``; a solution goes before the
+    messages logged after the IMU sample that produced it. The messages are read a chunk at a
+    time, those of ``fields_of_topic`` into records (:mod:`buoy_processing.chunk_records`;
+    None for a message read alone)."""
     solutions = fusion.smoothed_values()
     pending = next(solutions, None)
-    for message in reader.messages(topics) if topics else ():
-        while pending is not None and pending[2] <= message.log_time_ns:
-            yield None, pending
-            pending = next(solutions, None)
-        yield message, None
+    for batch in reader.message_batches(topics) if topics else ():
+        records = chunk_records(batch, fields_of_topic)
+        for position, message in enumerate(batch):
+            while pending is not None and pending[2] <= message.log_time_ns:
+                yield None, None, pending
+                pending = next(solutions, None)
+            yield message, records.get(position), None
     while pending is not None:
-        yield None, pending
+        yield None, None, pending
         pending = next(solutions, None)
