@@ -2,10 +2,12 @@
 
 :func:`run_fusion` reads the bag's sensor topics in log-time order into an
 :class:`~buoy_processing.offline_fusion.OfflineFusion`, which writes ``nav/*`` and ``tf`` to the
-output bag; the other topics of the run (the truth, and for ``process_bag`` the anemometer's and
-the DVL's) are copied to the output unchanged. A :class:`BagConsumer` (``process_bag``'s
-corrections) receives every navigation solution and every copied message in the order the live
-nodes would: a solution as soon as the fusion has it, a message when it is read.
+output bag (a chunk of the bag at a time, its IMU and anemometer samples decoded together:
+:mod:`buoy_processing.chunk_records`); the other topics of the run (the truth, and for
+``process_bag`` the anemometer's and the DVL's) are copied to the output unchanged. A
+:class:`BagConsumer` (``process_bag``'s corrections) receives every navigation solution and every
+copied message in the order the live nodes would: a solution as soon as the fusion has it, a
+message when it is read.
 
 Without ``smooth`` one pass does it all. With ``smooth`` the run takes two passes
 (:mod:`buoy_nav.smoothed_solutions`): the forward filter over the sensor topics, its epochs and
