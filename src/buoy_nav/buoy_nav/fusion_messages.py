@@ -160,7 +160,20 @@ def feed_imu_cdr(
     fields = cdr.read_imu_rate_and_acceleration(raw)
     if fields is None:
         return None
-    sec, nanosec, angular_velocity, linear_acceleration = fields
+    return feed_imu_fields(engine, *fields, stamps)
+
+
+def feed_imu_fields(
+    engine: FusionEngine,
+    sec: int,
+    nanosec: int,
+    angular_velocity,
+    linear_acceleration,
+    stamps: StampBook | None = None,
+) -> tuple[list[NavSolution], str | None]:
+    """:func:`feed_message` of an ``imu/data_raw`` message read elsewhere (its CDR bytes,
+    alone or with the others of its chunk): header stamp ``sec``, ``nanosec``; angular velocity
+    (rad/s) and linear acceleration (m/s²), x, y, z in the IMU's frame."""
     t_s = sec + nanosec * 1e-9
     if stamps is not None:
         stamps.remember(t_s, sec, nanosec)

@@ -82,6 +82,7 @@ from wind_comp.compensation_messages import (
     FlowSample,
     anemometer_sample,
     anemometer_sample_cdr,
+    anemometer_sample_fields,
     dvl_sample,
     flows_cdr,
     flows_with_covariance_cdr,
@@ -154,9 +155,17 @@ class ProcessSummary:
     (:mod:`buoy_processing.output_facts`)."""
 
 
+ANEMOMETER_RECORD_FIELDS = ("frame_id", "vector")
+"""What :func:`_anemometer_record` reads of an ``anemometer/wind`` message read with its chunk,
+after the header stamp (:mod:`buoy_processing.chunk_records`)."""
+
+
 def _anemometer_record(
-    reader: BagReader, message: BagMessage, expected_frame_id: str
+    reader: BagReader, message: BagMessage, expected_frame_id: str, record: tuple | None = None
 ) -> tuple[FlowSample, int, int]:
+    if record is not None:
+        sec, nanosec, frame_id, vector = record
+        return anemometer_sample_fields(sec, nanosec, frame_id, tuple(vector), expected_frame_id)
     parsed = anemometer_sample_cdr(message.raw, expected_frame_id)
     if parsed is None:
         decoded = reader.decode(message)
@@ -166,7 +175,7 @@ def _anemometer_record(
 
 
 def _dvl_record(
-    reader: BagReader, message: BagMessage, expected_frame_id: str
+    reader: BagReader, message: BagMessage, expected_frame_id: str, record: None = None
 ) -> tuple[FlowSample, int, int]:
     decoded = reader.decode(message)
     stamp = decoded.header.stamp
@@ -196,8 +205,9 @@ class OfflineCorrection:
     ):
         """pipeline: the node's pipeline; output_topic: one vector per sample; covariance_topic:
         the same with its covariance; product_topics:
-        (mean topic, statistics topic) of a window length, s; read_record: a sensor record and
-        the frame expected of it as (sample, header sec, header nanosec); keep_series: keep the
+        (mean topic, statistics topic) of a window length, s; read_record: a sensor record, the
+        frame expected of it and the record's fields when its chunk was read together (or None)
+        as (sample, header sec, header nanosec); keep_series: keep the
         corrected samples (:attr:`series`) for the NetCDF file; temperature_topic: the stored
         ``anemometer/temperature`` whose records go to the fluxes (None: no temperature)."""
         self.pipeline = pipeline
@@ -241,9 +251,12 @@ class OfflineCorrection:
             )
             pipeline.add_fix(STATUS_FIX, values.latitude_deg)
 
-    def add_sample(self, reader: BagReader, message: BagMessage) -> None:
-        """One sensor record; every few hundred, the decided samples are written."""
-        sample, sec, nanosec = self._read_record(reader, message, self._expected_frame_id)
+    def add_sample(
+        self, reader: BagReader, message: BagMessage, record: tuple | None = None
+    ) -> None:
+        """One sensor record (its fields in ``record`` when its chunk was read together); every
+        few hundred, the decided samples are written."""
+        sample, sec, nanosec = self._read_record(reader, message, self._expected_frame_id, record)
         rejection = self.pipeline.add_sample(sample)
         if rejection is None:
             self.valid_samples += 1
@@ -485,12 +498,22 @@ class BagCorrections:
         for correction in self._running():
             correction.add_navigation(solutions)
 
-    def add_message(self, reader: BagReader, message: BagMessage) -> None:
+    @property
+    def record_fields(self) -> dict[str, tuple[str, ...]]:
+        """Stored name → fields of the topics whose messages are best read a chunk at a time:
+        ``anemometer/wind``."""
+        if self.flows.wind is None:
+            return {}
+        return {self.flows.wind: ANEMOMETER_RECORD_FIELDS}
+
+    def add_message(
+        self, reader: BagReader, message: BagMessage, record: tuple | None = None
+    ) -> None:
         """A flow sensor's sample to its correction, the sonic temperature to the wind's
         fluxes; anything else (the truth) is only copied."""
         topic = message.topic
         if topic == self.flows.wind and self.wind is not None:
-            self.wind.add_sample(reader, message)
+            self.wind.add_sample(reader, message, record)
         elif topic == self.flows.dvl and self.current is not None:
             self.current.add_sample(reader, message)
         elif topic == self.flows.temperature and self.wind is not None:

@@ -39,6 +39,7 @@ from buoy_nav.fusion_messages import (
     NavValues,
     StampBook,
     feed_imu_cdr,
+    feed_imu_fields,
     feed_message,
     nav_values,
     odometry_cdr,
@@ -58,6 +59,11 @@ FUSION_TOPICS_HELP = (
     "(GNSS is optional: a moored buoy needs none)"
 )
 """The fusion's input topics as the commands' help states them, from the registry."""
+
+
+IMU_RECORD_FIELDS = ("angular_velocity", "linear_acceleration")
+"""What :meth:`OfflineFusion.add_message` reads of an IMU sample read with its chunk, after the
+header stamp (:mod:`buoy_processing.chunk_records`)."""
 
 
 def relative_topic(name: str) -> str:
@@ -150,11 +156,18 @@ class OfflineFusion:
             topic, feed_message(self.engine, topic, message, self.stamps), log_time_ns
         )
 
-    def add_message(self, reader: BagReader, topic: str, message: BagMessage) -> list[NavValues]:
-        """:meth:`add` of a bag message of relative ``topic``, IMU samples read from CDR."""
-        fed = (
-            feed_imu_cdr(self.engine, message.raw, self.stamps) if topic == IMU_RAW_TOPIC else None
-        )
+    def add_message(
+        self, reader: BagReader, topic: str, message: BagMessage, record: tuple | None = None
+    ) -> list[NavValues]:
+        """:meth:`add` of a bag message of relative ``topic``, IMU samples read from CDR: from
+        ``record`` when its chunk was read together (:data:`IMU_RECORD_FIELDS`,
+        :mod:`buoy_processing.chunk_records`), else from the message alone."""
+        if topic != IMU_RAW_TOPIC:
+            fed = None
+        elif record is not None:
+            fed = feed_imu_fields(self.engine, *record, self.stamps)
+        else:
+            fed = feed_imu_cdr(self.engine, message.raw, self.stamps)
         if fed is None:
             return self.add(topic, reader.decode(message), message.log_time_ns)
         return self._take(topic, fed, message.log_time_ns)

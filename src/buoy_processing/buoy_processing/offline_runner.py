@@ -2,10 +2,12 @@
 
 :func:`run_fusion` reads the bag's sensor topics in log-time order into an
 :class:`~buoy_processing.offline_fusion.OfflineFusion`, which writes ``nav/*`` and ``tf`` to the
-output bag; the other topics of the run (the truth, and for ``process_bag`` the anemometer's and
-the DVL's) are copied to the output unchanged. A :class:`BagConsumer` (``process_bag``'s
-corrections) receives every navigation solution and every copied message in the order the live
-nodes would: a solution as soon as the fusion has it, a message when it is read.
+output bag (a chunk of the bag at a time, its IMU and anemometer samples decoded together:
+:mod:`buoy_processing.chunk_records`); the other topics of the run (the truth, and for
+``process_bag`` the anemometer's and the DVL's) are copied to the output unchanged. A
+:class:`BagConsumer` (``process_bag``'s corrections) receives every navigation solution and every
+copied message in the order the live nodes would: a solution as soon as the fusion has it, a
+message when it is read.
 
 Without ``smooth`` one pass does it all. With ``smooth`` the run takes two passes
 (:mod:`buoy_nav.smoothed_solutions`): the forward filter over the sensor topics, its epochs and
@@ -24,15 +26,21 @@ from pathlib import Path
 from typing import NamedTuple, Protocol
 
 from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, BagWriter
-from buoy_common.contract import TF_STATIC_MSGTYPE, TF_STATIC_TOPIC, bag_topic, ns_to_stamp
+from buoy_common.contract import (
+    IMU_RAW_TOPIC,
+    TF_STATIC_MSGTYPE,
+    TF_STATIC_TOPIC,
+    bag_topic,
+    ns_to_stamp,
+)
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.transform_messages import FrameTransform, tf_cdr
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import NavValues
 from buoy_nav.observability import unobserved_quantities
-from buoy_processing.offline_fusion import OfflineFusion
+from buoy_processing.chunk_records import chunk_records
+from buoy_processing.offline_fusion import IMU_RECORD_FIELDS, OfflineFusion
 
-PROGRESS_EVERY_MESSAGES = 2000
 TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
 
 
@@ -45,8 +53,16 @@ class BagConsumer(Protocol):
     def add_navigation(self, solutions: list[NavValues]) -> None:
         """New navigation solutions, in order (what ``nav/odometry`` and ``nav/fix`` carry)."""
 
-    def add_message(self, reader: BagReader, message: BagMessage) -> None:
-        """A message of a copied topic, already written to the output."""
+    @property
+    def record_fields(self) -> dict[str, tuple[str, ...]]:
+        """Stored name → fields of the copied topics whose messages :meth:`add_message` takes
+        read with their chunk (:mod:`buoy_processing.chunk_records`)."""
+
+    def add_message(
+        self, reader: BagReader, message: BagMessage, record: tuple | None = None
+    ) -> None:
+        """A message of a copied topic, already written to the output; ``record``: its fields
+        of :attr:`record_fields`, None when read alone."""
 
     def finish(self, log_time_ns: int) -> None:
         """End of the data; ``log_time_ns`` is the log time of the last thing read, ns."""
@@ -61,7 +77,13 @@ class NothingFollows:
     def add_navigation(self, solutions: list[NavValues]) -> None:
         pass
 
-    def add_message(self, reader: BagReader, message: BagMessage) -> None:
+    @property
+    def record_fields(self) -> dict[str, tuple[str, ...]]:
+        return {}
+
+    def add_message(
+        self, reader: BagReader, message: BagMessage, record: tuple | None = None
+    ) -> None:
         pass
 
     def finish(self, log_time_ns: int) -> None:
@@ -158,19 +180,21 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
         run.write_static_transforms(writer)
         fusion = OfflineFusion(run.config, writer, nav_rate_hz=run.nav_rate_hz)
         consumer.start(writer)
+        fields_of_topic = {**imu_record_fields(run.sensors), **consumer.record_fields}
         log_time_ns = reader.start_ns
-        for index, message in enumerate(reader.messages([*relative_of, *run.copied_topics])):
-            log_time_ns = message.log_time_ns
-            topic = relative_of.get(message.topic)
-            if topic is not None:
-                solutions = fusion.add_message(reader, topic, message)
-                if solutions:
-                    consumer.add_navigation(solutions)
-            else:
-                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                consumer.add_message(reader, message)
-            if index % PROGRESS_EVERY_MESSAGES == 0:
-                progress.reached(log_time_ns)
+        for batch in reader.message_batches([*relative_of, *run.copied_topics]):
+            records = chunk_records(batch, fields_of_topic)
+            for position, message in enumerate(batch):
+                log_time_ns = message.log_time_ns
+                topic = relative_of.get(message.topic)
+                if topic is not None:
+                    solutions = fusion.add_message(reader, topic, message, records.get(position))
+                    if solutions:
+                        consumer.add_navigation(solutions)
+                else:
+                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                    consumer.add_message(reader, message, records.get(position))
+            progress.reached(log_time_ns)
         consumer.add_navigation(fusion.finish())
         consumer.finish(log_time_ns)
         run.store_closing_metadata(bag_writer, fusion)
@@ -195,7 +219,8 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
             fusion.writer = writer
             consumer.start(writer)
             log_time_ns = reader.start_ns
-            for message, solution in merged_with_smoothed(reader, fusion, run.copied_topics):
+            merged = merged_with_smoothed(reader, fusion, run.copied_topics, consumer.record_fields)
+            for message, record, solution in merged:
                 if message is None:
                     forward, smoothed, log_time_ns = solution
                     fusion.write_smoothed_values(forward, smoothed, log_time_ns)
@@ -203,12 +228,18 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
                     continue
                 log_time_ns = message.log_time_ns
                 writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                consumer.add_message(reader, message)
+                consumer.add_message(reader, message, record)
             consumer.finish(log_time_ns)
             run.store_closing_metadata(bag_writer, fusion)
     finally:
         fusion.close()
     return FusionRun(fusion, writer.counts)
+
+
+def imu_record_fields(sensors: dict[str, str]) -> dict[str, tuple[str, ...]]:
+    """The IMU topic of ``sensors`` (relative → stored names) and what the fusion reads of its
+    messages, a chunk at a time (:mod:`buoy_processing.chunk_records`)."""
+    return {sensors[IMU_RAW_TOPIC]: IMU_RECORD_FIELDS}
 
 
 def spill_parent_of(out_bag) -> Path:
@@ -229,29 +260,41 @@ def forward_pass(
     label: str,
 ) -> None:
     """The forward filter of a smoothing run over the sensor topics of ``reader``'s bag."""
+    fields_of_topic = imu_record_fields(sensors)
+    progress_ns = reader.start_ns
     with BagProgress(reader, f"{label} (forward filter)") as progress:
-        for index, message in enumerate(reader.messages(list(sensors.values()))):
-            fusion.add_message(reader, relative_of[message.topic], message)
-            if index % PROGRESS_EVERY_MESSAGES == 0:
-                progress.reached(message.log_time_ns)
+        for batch in reader.message_batches(list(sensors.values())):
+            records = chunk_records(batch, fields_of_topic)
+            for position, message in enumerate(batch):
+                topic = relative_of[message.topic]
+                fusion.add_message(reader, topic, message, records.get(position))
+                progress_ns = message.log_time_ns
+            progress.reached(progress_ns)
         fusion.finish()
         progress.done()
 
 
 def merged_with_smoothed(
-    reader: BagReader, fusion: OfflineFusion, topics: list[str]
-) -> Iterator[tuple[BagMessage | None, tuple | None]]:
+    reader: BagReader,
+    fusion: OfflineFusion,
+    topics: list[str],
+    fields_of_topic: dict[str, tuple[str, ...]],
+) -> Iterator[tuple[BagMessage | None, tuple | None, tuple | None]]:
     """The messages of ``topics`` (stored names) of ``reader``'s bag and the smoothed
     solutions of ``fusion`` (forward values, smoothed values, log time) in log-time order, as
-    ``(message, None)`` or ``(None, solution)``; a solution goes before the messages logged
-    after the IMU sample that produced it."""
+    ``(message, its record, None)`` or ``(None, None, solution)``; a solution goes before the
+    messages logged after the IMU sample that produced it. The messages are read a chunk at a
+    time, those of ``fields_of_topic`` into records (:mod:`buoy_processing.chunk_records`;
+    None for a message read alone)."""
     solutions = fusion.smoothed_values()
     pending = next(solutions, None)
-    for message in reader.messages(topics) if topics else ():
-        while pending is not None and pending[2] <= message.log_time_ns:
-            yield None, pending
-            pending = next(solutions, None)
-        yield message, None
+    for batch in reader.message_batches(topics) if topics else ():
+        records = chunk_records(batch, fields_of_topic)
+        for position, message in enumerate(batch):
+            while pending is not None and pending[2] <= message.log_time_ns:
+                yield None, None, pending
+                pending = next(solutions, None)
+            yield message, records.get(position), None
     while pending is not None:
-        yield None, pending
+        yield None, None, pending
         pending = next(solutions, None)

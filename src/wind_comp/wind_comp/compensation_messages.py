@@ -189,7 +189,20 @@ def anemometer_sample_cdr(
     fields = cdr.read_vector3_stamped(raw)
     if fields is None:
         return None
-    sec, nanosec, frame_id, vector = fields
+    return anemometer_sample_fields(*fields, expected_frame_id)
+
+
+def anemometer_sample_fields(
+    sec: int,
+    nanosec: int,
+    frame_id: str,
+    vector: tuple[float, float, float],
+    expected_frame_id: str = ANEMOMETER_FRAME,
+) -> tuple[FlowSample, int, int]:
+    """:func:`anemometer_sample` of an ``anemometer/wind`` message read elsewhere (its CDR
+    bytes, alone or with the others of its chunk): header stamp ``sec``, ``nanosec``,
+    ``frame_id``, and the wind ``vector`` (m/s, x, y, z in the anemometer's frame); with the
+    header stamp (sec, nanosec)."""
     return _flow_sample(sec + nanosec * 1e-9, frame_id, vector, expected_frame_id), sec, nanosec
 
 
