@@ -37,7 +37,9 @@ as constants and printed beside our figures:
     (tools/bench_fdchp.py), and both on simulated FDCHP records against the truth
     (tools/fdchp_simulated.py).
 14. archive: process_archive over a tree of the committed bags, one local worker against two
-    (tools/bench_archive.py).
+    (tools/bench_archive.py); archive_year (long): a year-shaped tree of hourly simulated
+    10 Hz motion-pack files through process_archive --products-only on a Dask LocalCluster,
+    a sample spread over the year sized to about 40 minutes (tools/bench_archive_year.py).
 15. current (paper 003): process_bag on ship_current and sea_state with its DVL, short runs;
     current_long (long): an hour of ship_current, sea_state and open_ocean
     (tools/bench_current.py).
@@ -63,7 +65,7 @@ go to stdout and out/bench/results.json, progress to stderr.
 
     python -m tools.bench [--quick] [--only attitude|wind|speed|live|consistency|sensor_sets|
                                             smoother|antennas|smoother_table1|smoother_speed|
-                                            smoother_day|soak|real_record|archive|
+                                            smoother_day|soak|real_record|archive|archive_year|
                                             current|current_long|fluxes|
                                             magnetometer_calibration|io_floor|
                                             fdchp_hour ...]
@@ -72,7 +74,8 @@ Without --only every section runs but the long ones (LONG_SECTIONS: smoother_tab
 runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 2
 simulated hours through the live nodes, an hour of wall time; current_long, an hour of paper
 003's ship and of each buoy with its DVL, tens of minutes; io_floor, process_bag and the
-suite's bag reading and writing three times each on one hour), which run only when named.
+suite's bag reading and writing three times each on one hour; archive_year, about 40 minutes
+of a sample of a year of hourly files), which run only when named.
 
 The paper's figures, the targets and the runs are in tools/bench_plan.py, the analyses of the
 processed bags in tools/bench_analysis.py, the printed tables in tools/bench_tables.py.
@@ -164,6 +167,7 @@ SECTIONS = (
     "soak",
     "real_record",
     "archive",
+    "archive_year",
     "current",
     "current_long",
     "fluxes",
@@ -181,6 +185,7 @@ LONG_SECTIONS = (
     "current_long",
     "uncertainty_day",
     "io_floor",
+    "archive_year",
 )
 """Sections of long runs (simulated and processed only when named with --only)."""
 DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in LONG_SECTIONS)
@@ -764,6 +769,18 @@ def archive_section(run: BenchRun) -> dict:
     return {"archive": archive}
 
 
+def archive_year_section(run: BenchRun) -> dict:
+    """A sample of a year of hourly motion-pack files through process_archive on a Dask
+    LocalCluster (its own tool, which writes out/bench/archive_year.json; about 40 minutes,
+    a few with --quick)."""
+    if "archive_year" not in run.sections:
+        return {}
+    from tools import bench_archive_year
+
+    bench_archive_year.main(["--hours", "8"] if run.quick else [])
+    return {"archive_year": json.loads((OUT_DIR / "archive_year.json").read_text())}
+
+
 def uncertainty_sections(run: BenchRun) -> dict:
     """Every sensor set's valid wind against its stated uncertainty (tools/bench_uncertainty.py,
     15-min runs, 5 with --quick; about 3 min on two cores), and with --only uncertainty_day a
@@ -842,6 +859,7 @@ SECTION_STEPS = (
     antennas_section,
     smoother_speed_sections,
     archive_section,
+    archive_year_section,
     io_floor_section,
     fdchp_hour_section,
 )

@@ -2,7 +2,7 @@
 committed bags (linked in), a bag of two buoys under namespaces, a corrupt bag and a bag
 without IMU: every good bag's outputs are ``process_bag``'s, the combined table holds every
 product of every bag, the failures are listed, a second run skips what is done, and a changed
-parameter re-does it."""
+parameter re-does it. With ``--products-only`` the same products are written and no bag."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ import shutil
 from pathlib import Path
 
 import distributed
+import pandas
 import pyarrow.parquet as pq
 import pytest
 
@@ -123,6 +124,19 @@ class ArchiveRun:
         }
 
 
+def run_tool(cluster, archive: Path, out: Path, params: Path, *options: str) -> ArchiveRun:
+    """``process_archive ARCHIVE OUT --params-file PARAMS OPTIONS`` on ``cluster``."""
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        arguments = [str(archive), str(out), "--params-file", str(params), *options]
+        try:
+            main([*arguments, "--scheduler", cluster.scheduler_address])
+            code = 0
+        except SystemExit as exit_:
+            code = exit_.code
+    return ArchiveRun(code, stdout.getvalue(), stderr.getvalue())
+
+
 @pytest.fixture(scope="module")
 def archive_runs(cluster, tmp_path_factory):
     """The archive processed three times: first, again unchanged, then with a parameter file
@@ -132,15 +146,7 @@ def archive_runs(cluster, tmp_path_factory):
     out = root / "out"
 
     def run(params: Path) -> ArchiveRun:
-        stdout, stderr = io.StringIO(), io.StringIO()
-        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
-            arguments = [str(archive), str(out), "--params-file", str(params)]
-            try:
-                main([*arguments, "--scheduler", cluster.scheduler_address])
-                code = 0
-            except SystemExit as exit_:
-                code = exit_.code
-        return ArchiveRun(code, stdout.getvalue(), stderr.getvalue())
+        return run_tool(cluster, archive, out, params)
 
     params_dir = root / "params"
     params_dir.mkdir()
@@ -257,4 +263,31 @@ def test_a_changed_parameter_redoes_every_bag(archive_runs):
     # A higher anemometer on a moving buoy sees other motion: the corrected wind changes.
     assert any(
         a["mean_u_enu_mps"] != b["mean_u_enu_mps"] for a, b in zip(after, before, strict=True)
+    )
+
+
+def test_products_only_writes_the_same_products_and_no_bag(archive_runs, cluster, tmp_path):
+    """No output bag, so no nav/* or tf: only the products CSVs and the combined table, which
+    hold what the run that wrote the bags put in them."""
+    out = tmp_path / "products_only"
+    only = run_tool(
+        cluster,
+        archive_runs["archive"],
+        out,
+        parameter_file(tmp_path, 3.0),
+        "--products-only",
+    )
+    assert only.code == EXIT_FAILED_BAGS
+    assert only.done() == {*GOOD_BAGS, FLEET_BAG}
+    assert not [path for path in out.rglob("*") if path.suffix == ".mcap"]
+    assert not list(out.rglob("metadata.yaml"))
+    for relative in GOOD_BAGS:
+        assert not (out / relative).exists()
+        _, csv_with_bags = archive_runs["outputs_after_first"][relative]
+        assert products_csv_path(out / relative).read_text() == csv_with_bags
+    for namespace in FLEET:
+        assert products_csv_path(out / FLEET_BAG / namespace.strip("/")).is_file()
+    pandas.testing.assert_frame_equal(
+        pq.read_table(out / COMBINED_TABLE).to_pandas(),
+        pandas.DataFrame(archive_runs["table_after_first"]),
     )

@@ -4,8 +4,9 @@ Every bag found under the archive (a directory holding ``metadata.yaml`` or an M
 :class:`~buoy_common.bag_io.BagReader` reads it) is processed by
 :func:`buoy_processing.bag_processing.process_bag` into the same relative place under the output
 directory, exactly as ``process_bag ARCHIVE/REL OUT/REL`` would write it (the bag and its
-products CSV; one output per namespace for a bag of several buoys). The bags run in parallel,
-on a local process pool or on the workers of a Dask distributed scheduler.
+products CSV; one output per namespace for a bag of several buoys); with ``products_only``, its
+products alone (the CSVs, no bag: no ``nav/*``, ``tf`` or corrected samples are made). The bags
+run in parallel, on a local process pool or on the workers of a Dask distributed scheduler.
 
 The run is resumable. Once a bag's outputs are in place, the worker that made them writes its
 wind products as a Parquet fragment and then a completion marker (both under
@@ -93,16 +94,20 @@ def parameters_digest(
     namespace: str | None,
     remaps: tuple[str, ...],
     nav_rate_hz: float = 0.0,
+    products_only: bool = False,
 ) -> str:
     """SHA-256 of every setting that decides the outputs: the resolved configurations (frozen
-    dataclasses of plain values, so their repr is exact), the namespace options and the rate of
-    the written navigation. A parameter file edited without changing a value (a comment, the
-    order) keeps the digest."""
+    dataclasses of plain values, so their repr is exact), the namespace options, the rate of
+    the written navigation and whether bags are written. A parameter file edited without
+    changing a value (a comment, the order) keeps the digest."""
     text = repr((fusion_config, compensator_config, namespace, tuple(remaps)))
     if nav_rate_hz:
         # Every solution written, the default, keeps the digest of the bags done before the
         # rate could be lowered: they need no redoing.
         text += f" nav_rate_hz={float(nav_rate_hz)!r}"
+    if products_only:
+        # A bag done without its output bag is not done for a run that writes bags.
+        text += " products_only"
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -156,6 +161,8 @@ class BagJob:
     version: str
     nav_rate_hz: float = 0.0
     """Rate of the written navigation, Hz (0: every solution), as ``process_bag --nav-rate-hz``."""
+    products_only: bool = False
+    """Write the bag's products alone: no output bag (:func:`process_bag`'s ``write_bag``)."""
 
     @property
     def in_bag(self) -> Path:
@@ -261,11 +268,14 @@ def _process(job: BagJob, started: float) -> BagOutcome:
                 view=view,
                 write_in_background=False,
                 nav_rate_hz=job.nav_rate_hz,
+                write_bag=not job.products_only,
             )
             # The products table is the wind's; a bag with a DVL also gets its current CSV,
             # one with an anemometer the CSV of its fluxes.
             corrections = [c for c in (summary.wind, summary.current) if c is not None]
-            outcome.outputs += [str(output), *(str(c.csv_path) for c in corrections)]
+            if not job.products_only:
+                outcome.outputs.append(str(output))
+            outcome.outputs += [str(c.csv_path) for c in corrections]
             outcome.outputs += [
                 str(c.fluxes_csv_path) for c in corrections if c.fluxes_csv_path is not None
             ]
@@ -415,9 +425,11 @@ def plan_archive(
     remaps: tuple[str, ...] = (),
     redo: bool = False,
     nav_rate_hz: float = 0.0,
+    products_only: bool = False,
 ) -> ArchivePlan:
     """Find the bags of ``archive`` and decide which need processing (all with ``redo``);
-    ``nav_rate_hz``: the rate of their written navigation, Hz (0: every solution).
+    ``nav_rate_hz``: the rate of their written navigation, Hz (0: every solution);
+    ``products_only``: write their products alone, no output bags.
     Raises ArchiveError for a missing archive and OutputError for an output directory that
     overlaps it."""
     archive, out = Path(archive), Path(out)
@@ -426,7 +438,9 @@ def plan_archive(
     check_outputs_apart_from_inputs([archive], [out])
     if out.exists() and not out.is_dir():
         raise ArchiveError(f"output {out} exists and is not a directory")
-    digest = parameters_digest(fusion_config, compensator_config, namespace, remaps, nav_rate_hz)
+    digest = parameters_digest(
+        fusion_config, compensator_config, namespace, remaps, nav_rate_hz, products_only
+    )
     version = suite_version()
     jobs = [
         BagJob(
@@ -440,6 +454,7 @@ def plan_archive(
             digest,
             version,
             nav_rate_hz,
+            products_only,
         )
         for relative in find_bags(archive)
     ]

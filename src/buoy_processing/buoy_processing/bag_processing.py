@@ -538,6 +538,7 @@ def process_bag(
     history: str = "",
     netcdf_attributes: dict[str, str] | None = None,
     nav_rate_hz: float = 0.0,
+    write_bag: bool = True,
 ) -> ProcessSummary:
     """Fuse ``in_bag`` and correct its wind and its DVL samples into ``out_bag`` (a new bag;
     replaced with ``overwrite``) and the products CSVs beside it, over the topics of ``view``'s
@@ -560,7 +561,11 @@ def process_bag(
 
     With ``nav_rate_hz`` (Hz) above 0 the bag's ``nav/*`` and ``tf`` and the NetCDF file's
     navigation carry the solutions at that rate only; the corrections still use every solution
-    (:mod:`buoy_processing.nav_output_rate`)."""
+    (:mod:`buoy_processing.nav_output_rate`).
+
+    With ``write_bag`` False no bag is written and no ``nav/*`` or ``tf`` made: the products
+    CSVs (and the NetCDF file) alone, named after ``out_bag`` as always, hold the same
+    products."""
     started = time.monotonic()
     csv_paths = products_csv_paths(out_bag)
     _check_outputs(in_bag, [out_bag, *csv_paths.values()], netcdf_path, overwrite)
@@ -584,11 +589,13 @@ def process_bag(
             sensors,
             f"process_bag {in_bag}",
             view,
-            copied_topics=[*corrections.topics, *truth_topics_of(reader)],
+            # The truth is only copied: a run without a bag need not read it.
+            copied_topics=[*corrections.topics, *(truth_topics_of(reader) if write_bag else [])],
             smooth=smooth,
             overwrite=overwrite,
             nav_rate_hz=nav_rate_hz,
             write_in_background=write_in_background,
+            write_bag=write_bag,
             static_transforms=sensor_transforms(
                 shared_values(fusion_config, compensator_config, current_config), imu_link=True
             ),
@@ -597,6 +604,8 @@ def process_bag(
         fusion, topic_counts = run_fusion(run, corrections)
         duration_s = reader.duration_s
     facts = facts_of_run.facts
+    # Made by the bag's writer, unless no bag was written.
+    Path(out_bag).parent.mkdir(parents=True, exist_ok=True)
     summaries = write_products_csvs(corrections, csv_paths, facts)
     if netcdf_path is not None:
         _write_netcdf(

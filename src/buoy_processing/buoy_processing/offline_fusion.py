@@ -126,7 +126,8 @@ class OfflineFusion:
     ):
         """``writer`` receives the ``nav/*`` and ``tf`` messages, of every solution or, with
         ``nav_rate_hz`` (Hz) above 0, of a subset at that rate
-        (:mod:`buoy_processing.nav_output_rate`; every solution is still returned). With ``smooth``
+        (:mod:`buoy_processing.nav_output_rate`; every solution is still returned); None: none
+        is made (a run that writes its products alone). With ``smooth``
         (the filter's own solutions, ``realtime_output`` off) nothing is written: the solutions are
         kept by :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``)
         and written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
@@ -196,7 +197,7 @@ class OfflineFusion:
                 smoother.add(solution, *self.stamps.exact(solution.t_s), log_time_ns)
                 continue
             values = nav_values(solution, self.stamps)
-            if self.nav_output.due(values):
+            if self.writer is not None and self.nav_output.due(values):
                 self._write_nav(values, log_time_ns)
             written.append(values)
         return written
@@ -219,8 +220,8 @@ class OfflineFusion:
 
     def write_smoothed_values(self, forward: NavValues, smoothed: NavValues, log_time_ns: int):
         """``nav/forward/odometry`` of ``forward``; ``nav/*`` and ``tf`` of ``smoothed``; nothing
-        for a solution the navigation output rate leaves out."""
-        if not self.nav_output.due(smoothed):
+        for a solution the navigation output rate leaves out, nor without a writer."""
+        if self.writer is None or not self.nav_output.due(smoothed):
             return
         self.writer.write_raw(
             FORWARD_ODOMETRY_BAG_TOPIC, ODOMETRY_MSGTYPE, log_time_ns, odometry_cdr(forward)

@@ -68,6 +68,31 @@ class BagConsumer(Protocol):
         """End of the data; ``log_time_ns`` is the log time of the last thing read, ns."""
 
 
+class NoBag:
+    """The output of a run that writes no bag (its products alone): takes and drops what a bag
+    writer would write."""
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Messages written, per topic: none."""
+        return {}
+
+    def __enter__(self) -> NoBag:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        pass
+
+    def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
+        pass
+
+    def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
+        pass
+
+    def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
+        pass
+
+
 class NothingFollows:
     """The consumer of a run of the fusion alone (``fuse_bag``)."""
 
@@ -115,6 +140,9 @@ class OfflineRun:
     write_in_background: bool = True
     """Write the bag from a process of its own, on a second core (False: in this process, for a
     caller that keeps every core busy with bags of its own)."""
+    write_bag: bool = True
+    """False: no bag is written and no ``nav/*`` or ``tf`` made; the consumer still receives
+    every solution and message (a run that writes its products alone)."""
     static_transforms: list[FrameTransform] = field(default_factory=list)
     """``base_link`` → the sensor frames, written once on ``tf_static`` at the input bag's first
     log time, before every other output (:mod:`buoy_common.sensor_frames`)."""
@@ -127,12 +155,14 @@ class OfflineRun:
         """Stored → relative name of the sensor topics."""
         return {stored: relative for relative, stored in self.sensors.items()}
 
-    def open_writer(self) -> BackgroundBagWriter | BagWriter:
+    def open_writer(self) -> BackgroundBagWriter | BagWriter | NoBag:
+        if not self.write_bag:
+            return NoBag()
         writer_class = BackgroundBagWriter if self.write_in_background else BagWriter
         return writer_class(self.out_bag, overwrite=self.overwrite)
 
     def store_closing_metadata(
-        self, writer: BackgroundBagWriter | BagWriter, fusion: OfflineFusion
+        self, writer: BackgroundBagWriter | BagWriter | NoBag, fusion: OfflineFusion
     ) -> None:
         """The records of :attr:`closing_metadata` into ``writer``'s bag, before it closes."""
         if self.closing_metadata is None:
@@ -178,7 +208,9 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
     with BagProgress(reader, run.label) as progress, run.open_writer() as bag_writer:
         writer = NamespacedWriter(bag_writer, run.view)
         run.write_static_transforms(writer)
-        fusion = OfflineFusion(run.config, writer, nav_rate_hz=run.nav_rate_hz)
+        fusion = OfflineFusion(
+            run.config, writer if run.write_bag else None, nav_rate_hz=run.nav_rate_hz
+        )
         consumer.start(writer)
         fields_of_topic = {**imu_record_fields(run.sensors), **consumer.record_fields}
         log_time_ns = reader.start_ns
@@ -216,7 +248,7 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
             writer = NamespacedWriter(bag_writer, run.view)
             run.write_static_transforms(writer)
             forward_pass(reader, fusion, run.sensors, run.relative_of, run.label)
-            fusion.writer = writer
+            fusion.writer = writer if run.write_bag else None
             consumer.start(writer)
             log_time_ns = reader.start_ns
             merged = merged_with_smoothed(reader, fusion, run.copied_topics, consumer.record_fields)

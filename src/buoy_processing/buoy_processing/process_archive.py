@@ -1,16 +1,19 @@
 """``process_archive``: ``process_bag`` over every bag of a directory tree, in parallel.
 
-    process_archive ARCHIVE OUT [--params-file buoy.yaml ...] [--redo] [--nav-rate-hz HZ]
+    process_archive ARCHIVE OUT [--params-file buoy.yaml ...] [--redo]
+                    [--nav-rate-hz HZ | --products-only]
                     [--workers N | --scheduler tcp://HOST:8786]
                     [--namespace NS] [--remap FROM:=TO ...]
 
 Each bag under ARCHIVE (``ARCHIVE/REL``) is processed as ``process_bag ARCHIVE/REL OUT/REL`` would
 process it, with the same parameter files, namespace options and ``--nav-rate-hz``; the wind
 products of the whole archive go to ``OUT/wind_products.parquet``, one row per window, naming its
-bag. Bags run on N local processes (default: one per core) or, with ``--scheduler``, on the workers
-of a Dask distributed scheduler. Bags done by an earlier run with the same parameters are skipped
-(all redone with ``--redo``); a bag that fails is listed at the end with its reason and the others
-go on. See :mod:`buoy_processing.archive`.
+bag. With ``--products-only`` no bag is written (no ``nav/*``, ``tf`` or corrected samples): the
+products alone, the combined table and each bag's products CSVs. Bags run on N local processes
+(default: one per core) or, with ``--scheduler``, on the workers of a Dask distributed scheduler.
+Bags done by an earlier run with the same parameters are skipped (all redone with ``--redo``); a bag
+that fails is listed at the end with its reason and the others go on. See
+:mod:`buoy_processing.archive`.
 
 Exit codes: 0 every bag done; 1 some bags failed (listed on stderr); 2 bad arguments,
 parameters, archive or scheduler (one line on stderr); 3 every bag done, but some were cut short
@@ -72,7 +75,14 @@ def parse_arguments(argv):
         help="ROS parameter YAML as given to the nodes (repeatable; later files win)",
     )
     add_namespace_arguments(parser)
-    add_nav_rate_argument(parser)
+    written = parser.add_mutually_exclusive_group()
+    add_nav_rate_argument(written)
+    written.add_argument(
+        "--products-only",
+        action="store_true",
+        help="write the products alone (the combined table and each bag's products CSVs): no "
+        "bags, so no nav/*, tf or corrected samples are made",
+    )
     where = parser.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",
@@ -149,6 +159,7 @@ def run(arguments) -> int:
             remaps,
             arguments.redo,
             arguments.nav_rate_hz,
+            arguments.products_only,
         )
         if arguments.scheduler:
             pool = DaskPool(arguments.scheduler)
