@@ -276,8 +276,9 @@ class OfflineCorrection:
         """Samples held off the sensor's sequence passed the input checks on arrival; those
         given up since (a second stream's) are rejected after all."""
         given_up = self.pipeline.take_given_up()
-        self.valid_samples -= given_up
-        self.rejected[Reason.OUT_OF_SEQUENCE] += given_up
+        if given_up:
+            self.valid_samples -= given_up
+            self.rejected[Reason.OUT_OF_SEQUENCE] += given_up
 
     def summary(self, csv_path: Path, fluxes_csv_path: Path | None = None) -> CorrectionSummary:
         return CorrectionSummary(
