@@ -13,8 +13,8 @@ they were another stream's (or a single stray sample).
 
 Messages arrive in bursts (a recorder or a busy middleware delivers a topic's messages up to a
 second late and together), so the span is far longer than a burst: a second stream interleaved
-with the sensor's never spans it, and a real step or outage only delays (or, for whoever cannot
-wait, loses) the samples of its first :data:`CONFIRMING_SPAN_S`. A second stream whose stamps lie
+with the sensor's never spans it, and a real step or outage only delays the samples of its first
+:data:`CONFIRMING_SPAN_S`. A second stream whose stamps lie
 within :data:`SEQUENCE_INTERVALS` sample intervals of the sensor's cannot be told from it.
 
 What becomes of a held sample depends on who waits for it:
@@ -30,9 +30,10 @@ What becomes of a held sample depends on who waits for it:
   sequence's grid (:meth:`StreamSequence.on_grid`: a whole number of sample intervals from it,
   as a measurement that came early or the first after an outage does); the measurements of a
   confirmed new sequence are used whatever their grid;
-- a flow sensor's sample (:class:`wind_comp.pipeline.CompensationPipeline`) gets its output in
-  input order at once: held, it is invalid (``out_of_sequence``), also when the held samples
-  prove to be the sensor's new sequence.
+- a flow sensor's sample (:class:`wind_comp.pipeline.CompensationPipeline`) waits, held, in the
+  compensator's queue of samples (the outputs leave in input order), exempt from the live
+  latency budget, until the sequence decides: given up, its output is invalid
+  (``out_of_sequence``); confirmed, it is corrected like any other.
 """
 
 import itertools

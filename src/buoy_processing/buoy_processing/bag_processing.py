@@ -264,6 +264,7 @@ class OfflineCorrection:
             self.rejected[rejection] += 1
             if rejection == Reason.WRONG_FRAME:
                 self.wrong_frames[sample.frame_id] += 1
+        self._count_given_up()
         self._stamps.append((sec, nanosec))
         self._samples_waiting += 1
         if self._samples_waiting >= SAMPLES_PER_STRETCH:
@@ -282,6 +283,15 @@ class OfflineCorrection:
     def finish(self, log_time_ns: int) -> None:
         """End of the data: every sample decided and written, partial windows closed."""
         self._write(self.pipeline.flush(), log_time_ns)
+        self._count_given_up()
+
+    def _count_given_up(self) -> None:
+        """Samples held off the sensor's sequence passed the input checks on arrival; those
+        given up since (a second stream's) are rejected after all."""
+        given_up = self.pipeline.take_given_up()
+        if given_up:
+            self.valid_samples -= given_up
+            self.rejected[Reason.OUT_OF_SEQUENCE] += given_up
 
     def summary(self, csv_path: Path, fluxes_csv_path: Path | None = None) -> CorrectionSummary:
         return CorrectionSummary(

@@ -259,6 +259,41 @@ def test_outputs_keep_input_order_behind_a_pending_sample():
     ]
 
 
+def test_held_samples_wait_through_expiry_until_settled_in_input_order():
+    """Held samples (off the sensor's sequence) are neither looked up nor given up as late:
+    settled as the sensor's they are corrected, settled as not, or never settled by the end,
+    they are OUT_OF_SEQUENCE; everything after a held sample waits behind it."""
+    compensator = compensator_of(config())
+    stamps = np.array([0.0, 0.05, 0.1, 0.15, 0.2])
+    attitude, rates, velocities = nav_truth(stamps)
+    readings = anemometer_readings(stamps)
+    held = np.array([False, True, True, False, True])
+    compensator.add_arrivals(
+        (stamps, attitude.as_quat(), rates, velocities),
+        stamps[:4],
+        readings[:4],
+        [5, 5, 5, 5],
+        held=held[:4],
+    )
+    assert rows(compensator.expire(before_t_s=1.0)) == [(0.0, SampleStatus.VALID)]
+    assert compensator.n_pending == 3
+    compensator.settle_held([2], [True])
+    assert len(compensator.expire(before_t_s=1.0)) == 0  # behind the held sample 1
+    compensator.settle_held([1], [False])
+    result = compensator.ready()
+    assert rows(result) == [
+        (0.05, SampleStatus.OUT_OF_SEQUENCE),
+        (0.1, SampleStatus.VALID),
+        (0.15, SampleStatus.VALID),
+    ]
+    np.testing.assert_allclose(result.flow_enu_mps[1:], [TRUE_WIND_ENU] * 2, atol=1e-9)
+    compensator.add_arrivals((np.empty(0),) * 4, stamps[4:], readings[4:], [0], held=held[4:])
+    assert len(compensator.expire(before_t_s=1.0)) == 0
+    assert rows(compensator.flush()) == [(0.2, SampleStatus.OUT_OF_SEQUENCE)]
+    with pytest.raises(ValueError):
+        compensator.settle_held([4], [True])
+
+
 def test_wind_lagging_beyond_the_navigation_history_is_reported():
     compensator = compensator_of(config(nav_history_s=1.0))
     for t in np.arange(0.0, 5.0, 0.01):

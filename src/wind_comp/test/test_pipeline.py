@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from buoy_common.contract import Reason
 from buoy_nav.earth import EARTH_RATE_RAD_S
 from buoy_nav.rotations import rotate_by_quaternion_components
 from buoy_nav.stream_sequence import CONFIRMING_SPAN_S
@@ -103,14 +102,6 @@ def arrivals(
     return [("fix", (0, LATITUDE_DEG))] + [(kinds[kind], message) for _, kind, message in timeline]
 
 
-def resumed_after_the_gap(wind_t: np.ndarray) -> np.ndarray:
-    """(N,) True for the anemometer's samples (stamps ``wind_t``, s) after the gap that are off
-    its sequence (:mod:`buoy_nav.stream_sequence`): until they span CONFIRMING_SPAN_S, they
-    could be a second stream's."""
-    after_gap = wind_t > ANEMOMETER_GAP_S[1]
-    return after_gap & (wind_t - wind_t[after_gap][0] <= CONFIRMING_SPAN_S)
-
-
 def feed(messages, wind_per_stretch: int | None):
     """Feed the pipeline as compensation_node does (``wind_per_stretch`` None: results after
     every message) or as process_bag does (results every ``wind_per_stretch`` anemometer
@@ -130,8 +121,8 @@ def feed(messages, wind_per_stretch: int | None):
         elif kind == "temperature":
             temperature_products.extend(pipeline.add_temperature(*values))
         else:
-            # Only the samples resuming after the gap are rejected (off the sequence).
-            assert pipeline.add_sample(values) in (None, Reason.OUT_OF_SEQUENCE)
+            # The samples resuming after the gap are held off the sequence, not rejected.
+            assert pipeline.add_sample(values) is None
             waiting += 1
             if wind_per_stretch is None or waiting == wind_per_stretch:
                 outputs.append(pipeline.ready())
@@ -158,16 +149,12 @@ def test_live_and_offline_decide_identically_across_an_anemometer_gap(
     live_status, live_wind, live_products, live = feed(messages, wind_per_stretch=None)
     wind_t = np.array([values.t_s for kind, values in messages if kind == "wind"])
     # Every sample is corrected, those just before the gap included (navigation around them
-    # arrived long before the anemometer resumed), and exactly; but the samples after the gap
-    # are off the anemometer's sequence until they span CONFIRMING_SPAN_S (they could be a
-    # second stream's).
+    # arrived long before the anemometer resumed), and exactly; the samples after the gap,
+    # held off the anemometer's sequence until they proved to be its own, too.
     before_gap = wind_t[wind_t < ANEMOMETER_GAP_S[0]][-3:]
-    held = resumed_after_the_gap(wind_t)
-    expected = np.where(held, SampleStatus.OUT_OF_SEQUENCE, SampleStatus.VALID)
-    np.testing.assert_array_equal(live_status, expected)
+    assert np.all(live_status == SampleStatus.VALID)
     assert before_gap.size == 3
-    valid = live_status == SampleStatus.VALID
-    np.testing.assert_allclose(live_wind[valid] - TRUE_WIND_ENU, 0.0, atol=1e-9)
+    np.testing.assert_allclose(live_wind - TRUE_WIND_ENU, 0.0, atol=1e-9)
     assert live.n_pending == 0
     for wind_per_stretch in (1, 7, 256, 10_000):
         status, wind, products, offline = feed(messages, wind_per_stretch)
@@ -182,12 +169,67 @@ def test_live_and_offline_decide_identically_across_an_anemometer_gap(
     )
     # wind from 1 to 39 s, a gap from 15 to 25 s: the windows on both sides of it are partial
     assert [p.window_start_s for p in fluxes] == [0.0, 10.0, 20.0, 30.0]
-    # (200 samples in a window at 20 Hz)
-    resumed_share = np.count_nonzero(held) / (10.0 * WIND_RATE_HZ)
-    assert [p.coverage for p in fluxes] == pytest.approx([0.9, 0.5, 0.5 - resumed_share, 0.9])
+    assert [p.coverage for p in fluxes] == pytest.approx([0.9, 0.5, 0.5, 0.9])
     # every wind sample found its temperature; a steady wind carries no flux
     assert all(p.n_temperature == p.n_valid + p.n_invalid for p in fluxes)
     np.testing.assert_allclose([p.friction_velocity_mps for p in fluxes], 0.0, atol=1e-4)
+
+
+def feed_live_with_latency(messages):
+    """Feed the pipeline one message at a time as compensation_node does. Returns the statuses
+    of the outputs, in order, and how long each waited: the newest anemometer stamp added
+    when it came out less its own stamp, s."""
+    pipeline = wind_pipeline(CONFIG)
+    status, waited_s = [], []
+    newest_wind_s = -math.inf
+    for kind, values in messages:
+        if kind == "fix":
+            pipeline.add_fix(*values)
+        elif kind == "odometry":
+            pipeline.add_odometry(*values)
+        elif kind == "wind":
+            assert pipeline.add_sample(values) is None
+            newest_wind_s = values.t_s
+        else:
+            continue
+        samples = pipeline.ready().samples
+        status.extend(samples.status.tolist())
+        waited_s.extend((newest_wind_s - samples.t_s).tolist())
+    status.extend(pipeline.flush().samples.status.tolist())
+    return np.array(status), np.array(waited_s), pipeline
+
+
+@pytest.mark.parametrize("missed_samples", [3, 10, 100])
+def test_wind_resumes_valid_after_an_anemometer_outage(missed_samples):
+    """The anemometer misses ``missed_samples`` samples from 30 s on: the samples after the
+    outage are held off its sequence (they could be a second stream's) until they span
+    CONFIRMING_SPAN_S with none of the old sequence in between, then corrected: every sample
+    gets its output, valid, the resumed ones at most a confirming span late, live and offline
+    alike."""
+    messages, wind_t, missed = [], [], 0
+    for kind, values in arrivals(NAV_LATENCY_S):
+        if kind in ("wind", "temperature"):
+            t_s = values.t_s if kind == "wind" else values[0]
+            if t_s > 30.0 and missed < 2 * missed_samples:
+                missed += 1  # the sample and its temperature
+                continue
+            if kind == "wind":
+                wind_t.append(t_s)
+        messages.append((kind, values))
+    wind_t = np.array(wind_t)
+    status, waited_s, live = feed_live_with_latency(messages)
+    assert len(status) == len(wind_t)
+    np.testing.assert_array_equal(status, SampleStatus.VALID)
+    assert live.take_given_up() == 0
+    resumed = wind_t > 30.0
+    interval_s = 1.0 / WIND_RATE_HZ
+    steady = wind_t < ANEMOMETER_GAP_S[0] - 1.0
+    assert np.all(waited_s[steady] <= NAV_LATENCY_S + interval_s)
+    assert waited_s[resumed].max() == pytest.approx(CONFIRMING_SPAN_S, abs=1.01 * interval_s)
+    for wind_per_stretch in (1, 7, 10_000):
+        offline_status, _, _, offline = feed(messages, wind_per_stretch)
+        np.testing.assert_array_equal(offline_status, status)
+        assert offline.counts == live.counts
 
 
 def test_both_arrival_orders_decide_alike():
@@ -212,7 +254,7 @@ def test_wind_arriving_after_the_navigation_history_is_reported_alike_live_and_o
     assert np.all(
         live_status[(wind_t >= 5.0) & (wind_t < 7.9)] == SampleStatus.NAV_HISTORY_EXCEEDED
     )
-    decided_by_navigation = ((wind_t < 5.0) | (wind_t > 8.1)) & ~resumed_after_the_gap(wind_t)
+    decided_by_navigation = (wind_t < 5.0) | (wind_t > 8.1)
     assert np.all(live_status[decided_by_navigation] == SampleStatus.VALID)
     for wind_per_stretch in (5, 10_000):
         status, wind, _, _ = feed(messages, wind_per_stretch)
@@ -308,7 +350,7 @@ def test_navigation_too_uncertain_corrects_no_wind_alike_live_and_offline():
     affected = (wind_t > untrusted_s[0] - 0.01) & (wind_t < untrusted_s[1] + 0.01)
     assert np.all(live_status[affected] == SampleStatus.NAVIGATION_NOT_TRUSTED)
     assert np.all(np.isnan(live_wind[affected]))
-    assert np.all(live_status[~affected & ~resumed_after_the_gap(wind_t)] == SampleStatus.VALID)
+    assert np.all(live_status[~affected] == SampleStatus.VALID)
     assert CONFIG.flow_sensor().reason(SampleStatus.NAVIGATION_NOT_TRUSTED) == (
         "navigation_not_trusted"
     )
@@ -364,6 +406,7 @@ def test_a_second_anemometer_stream_gets_invalid_outputs_alike_live_and_offline(
     np.testing.assert_array_equal(live_status[~second], clean_status)
     np.testing.assert_array_equal(live_wind[~second], clean_wind)
     assert live.second_stream[0] == 100
+    assert live.take_given_up() == 100
     assert live.second_stream[1] == pytest.approx(0.3, abs=0.06)
     for wind_per_stretch in (1, 7, 10_000):
         status, wind, _, _ = feed(messages, wind_per_stretch)

@@ -264,8 +264,15 @@ class CorrectionNode(FlushingNode):
                         self._frame_parameter,
                     )
                 )
+        self._reject_given_up()
         self._pending.append(PendingStamp(sec, nanosec, sample.t_s, time.monotonic()))
         self.publish(self.pipeline.expire(self._timeout_horizon_s()))
+
+    def _reject_given_up(self) -> None:
+        """Count the samples held off the sensor's sequence and given up since (a second
+        stream's): rejected after their arrival."""
+        for _ in range(self.pipeline.take_given_up()):
+            self.reject(self.sensor_topic, Reason.OUT_OF_SEQUENCE)
 
     def _timeout_horizon_s(self) -> float:
         """Stamp (s) before which samples still without navigation are given up: older than
@@ -333,6 +340,7 @@ class CorrectionNode(FlushingNode):
     def flush_held_back(self) -> list:
         """End of input: publish every pending sample and the partial product windows."""
         self.publish(self.pipeline.flush())
+        self._reject_given_up()
         warning = mostly_invalid_warning(self.pipeline.status_counts(), self.samples_name)
         if warning is not None:
             self.get_logger().error(warning)

@@ -9,7 +9,9 @@ ground, ENU: the true wind, or the current.
 Navigation samples (:meth:`FlowCompensator.add_nav`) and sensor samples
 (:meth:`FlowCompensator.add_sample`) go in, in the order they arrive; every sensor sample comes
 out exactly once (:meth:`FlowCompensator.ready`), in input order, with its own stamp: either
-the motion-corrected flow or NaN with the reason it could not be corrected.
+the motion-corrected flow or NaN with the reason it could not be corrected. A sample held off
+the sensor's sequence of stamps (:mod:`buoy_nav.stream_sequence`) waits, and the samples after
+it behind it, until :meth:`FlowCompensator.settle_held` says whether it is the sensor's.
 
 Whether and how a sample is corrected depends only on stamps (the navigation samples around
 it), not on when messages happen to arrive, with two exceptions. The live-only
@@ -64,8 +66,8 @@ class SampleStatus(IntEnum):
     """The corrected sample's own 1σ (from the navigation's covariance and the sensor's noise)
     exceeds the sensor's :class:`SigmaLimits`, horizontally or vertically."""
     OUT_OF_SEQUENCE = 10
-    """Held off the sensor's sequence of stamps (:mod:`buoy_nav.stream_sequence`): a second
-    stream on the sensor's topic, or the first samples after an outage or a step of its clock."""
+    """Held off the sensor's sequence of stamps (:mod:`buoy_nav.stream_sequence`) and given up
+    there: a second stream on the sensor's topic (or a stray sample)."""
 
 
 class SigmaLimits(NamedTuple):
@@ -127,6 +129,9 @@ class FlowSensor:
 
 
 _PENDING = -1
+_HELD = -2
+"""Held off the sensor's sequence until :meth:`FlowCompensator.settle_held` says whether it is
+the sensor's: neither looked up nor given up by :meth:`FlowCompensator.expire`."""
 _NAV_OUTCOME = {
     InterpolationStatus.OK: SampleStatus.VALID,
     InterpolationStatus.BEFORE_START: SampleStatus.NO_NAVIGATION,
@@ -178,30 +183,39 @@ class CorrectedBatch:
         return {status: int(np.count_nonzero(self.status == status)) for status in SampleStatus}
 
 
+def _measurement_status(flows_mps: np.ndarray, max_speed_mps: float) -> np.ndarray:
+    """(N,) status of (N, 3) measured flows (m/s, sensor axes) from their values alone:
+    ``_PENDING`` (navigation decides), INVALID_MEASUREMENT or SPEED_OUT_OF_RANGE."""
+    finite_flow = np.all(np.isfinite(flows_mps), axis=1)
+    speed = np.sqrt(np.sum(np.where(finite_flow[:, None], flows_mps, 0.0) ** 2, axis=1))
+    status = np.full(flows_mps.shape[0], _PENDING, dtype=np.int8)
+    status[speed > max_speed_mps] = SampleStatus.SPEED_OUT_OF_RANGE
+    status[~finite_flow] = SampleStatus.INVALID_MEASUREMENT
+    return status
+
+
 def _screen_samples(
     stamps_s: np.ndarray,
     flows_mps: np.ndarray,
-    out_of_sequence: np.ndarray,
+    held: np.ndarray,
+    confirming: np.ndarray,
     latest_stamp_s: float,
     max_speed_mps: float,
 ) -> tuple[np.ndarray, float]:
     """Status of each sample from its own values and stamp order alone.
 
-    Returns (N,) statuses (``_PENDING`` where navigation decides) and the latest accepted stamp.
-    A stamp is accepted when it is finite, of a sample in the sensor's sequence (``out_of_
-    sequence`` (N,) False) and later than every earlier accepted stamp.
+    Returns (N,) statuses (``_PENDING`` where navigation decides, ``_HELD`` where ``held``) and
+    the latest accepted stamp. A stamp is accepted when it is finite, later than every earlier
+    accepted stamp, and of a sample in the sensor's sequence (``held`` (N,) False) or of the
+    held sample that confirms a new sequence (``confirming`` (N,) True: the latest of it).
     """
     finite_stamp = np.isfinite(stamps_s)
-    candidates = np.where(finite_stamp & ~out_of_sequence, stamps_s, -np.inf)
+    candidates = np.where(finite_stamp & (~held | confirming), stamps_s, -np.inf)
     running_latest = np.maximum.accumulate(np.concatenate(([latest_stamp_s], candidates)))
     stamp_ok = finite_stamp & (stamps_s > running_latest[:-1])
-    finite_flow = np.all(np.isfinite(flows_mps), axis=1)
-    speed = np.sqrt(np.sum(np.where(finite_flow[:, None], flows_mps, 0.0) ** 2, axis=1))
-    status = np.full(stamps_s.shape[0], _PENDING, dtype=np.int8)
-    status[speed > max_speed_mps] = SampleStatus.SPEED_OUT_OF_RANGE
-    status[~finite_flow] = SampleStatus.INVALID_MEASUREMENT
+    status = _measurement_status(flows_mps, max_speed_mps)
     status[~stamp_ok] = SampleStatus.INVALID_STAMP
-    status[out_of_sequence] = SampleStatus.OUT_OF_SEQUENCE
+    status[held] = _HELD
     return status, float(running_latest[-1])
 
 
@@ -325,6 +339,8 @@ class FlowCompensator:
         self._covariances = np.empty((_N_COVARIANCES, _INITIAL_CAPACITY, 3, 3))
         self._default_noise_m2s2 = np.reshape(sensor.noise_covariance_m2s2, (3, 3))
         self._head = self._first_pending = self._tail = 0
+        self._n_returned = 0
+        """Samples returned so far: the number of the sample at ``_head``."""
 
     @property
     def counts(self) -> dict[SampleStatus, int]:
@@ -371,6 +387,7 @@ class FlowCompensator:
             self._newest_nav_s(),
             self._noises(noises, 1),
             np.zeros(1, dtype=bool),
+            np.zeros(1, dtype=bool),
         )
 
     def add_arrivals(
@@ -380,7 +397,8 @@ class FlowCompensator:
         flow_sensor_mps,
         nav_before_sample,
         noise_covariances_m2s2=None,
-        out_of_sequence=None,
+        held=None,
+        confirming=None,
     ) -> int:
         """Navigation and sensor samples that arrived interleaved: exactly :meth:`add_nav`
         of each navigation sample in order, with :meth:`add_sample` of sensor sample ``i``
@@ -395,13 +413,16 @@ class FlowCompensator:
             nav_before_sample: (N,) non-decreasing counts, 0 to M.
             noise_covariances_m2s2: (N, 3, 3) as :meth:`add_sample` takes them (None: the
                 sensor's for all).
-            out_of_sequence: (N,) True for a sample held off the sensor's sequence
-                (:mod:`buoy_nav.stream_sequence`): OUT_OF_SEQUENCE, its stamp not taken
-                (None: none is).
+            held: (N,) True for a sample held off the sensor's sequence
+                (:mod:`buoy_nav.stream_sequence`): it waits, its stamp not taken, until
+                :meth:`settle_held` says whether it is the sensor's (None: none is held).
+            confirming: (N,) True for the held sample whose arrival confirmed the held ones
+                as the sensor's new sequence: the latest of them, its stamp taken (None: none).
 
         Returns the number of navigation samples accepted.
         """
         stamps, flows = _sample_arrays(sample_t_s, flow_sensor_mps)
+        none = np.zeros(stamps.shape[0], dtype=bool)
         newest_before = self._newest_nav_s()
         nav_t_s = np.asarray(nav[0], dtype=float)
         accepted = self.nav_track.extend(*nav) if nav_t_s.shape[0] else np.zeros(0, dtype=bool)
@@ -415,11 +436,24 @@ class FlowCompensator:
                 flows,
                 newest_after[np.asarray(nav_before_sample, dtype=np.intp)],
                 self._noises(noise_covariances_m2s2, stamps.shape[0]),
-                np.zeros(stamps.shape[0], dtype=bool)
-                if out_of_sequence is None
-                else np.asarray(out_of_sequence, dtype=bool),
+                none if held is None else np.asarray(held, dtype=bool),
+                none if confirming is None else np.asarray(confirming, dtype=bool),
             )
         return int(np.count_nonzero(accepted))
+
+    def settle_held(self, sequence_numbers, released) -> None:
+        """Settle held samples: those numbered ``sequence_numbers`` ((K,) ints, counting every
+        sample added from 0) are the sensor's (``released`` (K,) True: corrected like the
+        others, once navigation covers them) or not (OUT_OF_SEQUENCE). Only held samples not
+        yet settled may be named."""
+        rows = self._head + np.asarray(sequence_numbers, dtype=np.intp) - self._n_returned
+        released = np.asarray(released, dtype=bool)
+        if np.any(self._status[rows] != _HELD):
+            raise ValueError("only held samples not yet settled can be settled")
+        self._status[rows[~released]] = SampleStatus.OUT_OF_SEQUENCE
+        kept = rows[released]
+        self._status[kept] = _measurement_status(self._flow_mps[kept], self.sensor.max_speed_mps)
+        self._advance_first_pending()
 
     def ready(self) -> CorrectedBatch:
         """Every sample that can now be decided, in input order."""
@@ -428,7 +462,8 @@ class FlowCompensator:
 
     def expire(self, before_t_s: float) -> CorrectedBatch:
         """Decide what can be decided, give up on samples stamped before ``before_t_s`` (s)
-        as NAVIGATION_TIMEOUT, and return the decided samples in input order."""
+        that wait for navigation as NAVIGATION_TIMEOUT (held samples wait for their sequence,
+        not for navigation: not given up), and return the decided samples in input order."""
         self._decide()
         self._give_up(
             self._t_s[self._first_pending : self._tail] < before_t_s,
@@ -438,9 +473,10 @@ class FlowCompensator:
 
     def flush(self) -> CorrectedBatch:
         """End of data: decide every pending sample (NO_NAVIGATION where navigation never
-        caught up) and return them in input order."""
+        caught up, OUT_OF_SEQUENCE where still held) and return them in input order."""
         self._decide()
         self._give_up(True, SampleStatus.NO_NAVIGATION)
+        self._give_up(True, SampleStatus.OUT_OF_SEQUENCE, _HELD)
         return self._pop_decided()
 
     def _newest_nav_s(self) -> float:
@@ -458,16 +494,17 @@ class FlowCompensator:
         return noises
 
     def _enqueue(
-        self, stamps: np.ndarray, flows: np.ndarray, as_of_nav_s, noises, out_of_sequence
+        self, stamps: np.ndarray, flows: np.ndarray, as_of_nav_s, noises, held, confirming
     ) -> None:
         """Screen and queue (N,) stamps (s), (N, 3) flows (m/s, sensor axes) and their (N, 3, 3)
         noise covariances (m²/s², sensor axes) that arrived when the newest navigation stamp
-        was ``as_of_nav_s`` (s, scalar or (N,)); (N,) ``out_of_sequence`` as
+        was ``as_of_nav_s`` (s, scalar or (N,)); (N,) ``held`` and ``confirming`` as
         :meth:`add_arrivals` takes them."""
         status, self._latest_sample_stamp_s = _screen_samples(
             stamps,
             flows,
-            out_of_sequence,
+            held,
+            confirming,
             self._latest_sample_stamp_s,
             self.sensor.max_speed_mps,
         )
@@ -510,26 +547,29 @@ class FlowCompensator:
         # samples around it stay held (see NavTrack.forget_old_samples).
         self.nav_track.forget_old_samples()
 
-    def _give_up(self, which, status: SampleStatus) -> None:
-        """Decide as ``status`` the pending samples from ``_first_pending`` on where ``which``
-        (a mask over them, or True for all) holds."""
+    def _give_up(self, which, status: SampleStatus, waiting: int = _PENDING) -> None:
+        """Decide as ``status`` the samples from ``_first_pending`` on that wait as ``waiting``
+        (for navigation: ``_PENDING``, or held: ``_HELD``) where ``which`` (a mask over them,
+        or True for all) holds."""
         if self._first_pending == self._tail:
             return
         pending = self._status[self._first_pending : self._tail]
-        pending[(pending == _PENDING) & which] = status
+        pending[(pending == waiting) & which] = status
         self._advance_first_pending()
 
     def _advance_first_pending(self) -> None:
         first, tail = self._first_pending, self._tail
-        if first < tail and self._status[first] == _PENDING:
+        # _PENDING and _HELD, the undecided codes, are the negative ones.
+        if first < tail and self._status[first] < 0:
             return
-        pending = np.flatnonzero(self._status[first:tail] == _PENDING)
+        pending = np.flatnonzero(self._status[first:tail] < 0)
         self._first_pending = first + int(pending[0]) if pending.size else tail
 
     def _pop_decided(self) -> CorrectedBatch:
         if self._head == self._first_pending:
             return NOTHING_DECIDED
         done = slice(self._head, self._first_pending)
+        self._n_returned += self._first_pending - self._head
         self._head = self._first_pending
         status = self._status[done].copy()
         for code, count in enumerate(np.bincount(status, minlength=len(SampleStatus)).tolist()):

@@ -98,7 +98,9 @@ def level_rate_components(angular_rate_body_rad_s, quat_xyzw, latitude_deg) -> t
 # stamp, quaternion (4), rate (3), body velocity (3), latitude, trusted, then the covariances
 # (9 each, row-major) of the attitude (ENU), the body velocity and the body rate
 _NAV_FIELDS = 40
-_SAMPLE_FIELDS = 14  # stamp, flow (3), noise covariance (9, row-major), out of sequence (1 or 0)
+# stamp, flow (3), noise covariance (9, row-major), held off the sequence (1 or 0), confirming a
+# new sequence (1 or 0)
+_SAMPLE_FIELDS = 15
 _ZEROS9 = (0.0,) * 9
 _ZEROS36 = (0.0,) * 36
 _LINEAR_BLOCK = operator.itemgetter(0, 1, 2, 6, 7, 8, 12, 13, 14)
@@ -150,6 +152,16 @@ class CompensationPipeline:
         self._max_attitude_variance_rad2 = math.radians(max_attitude_sigma_deg) ** 2
         self._sample_order = StampOrder()
         self._sample_sequence = StreamSequence()
+        self._n_samples = 0
+        """Sensor samples added so far: the number of the next, as
+        :meth:`FlowCompensator.settle_held` counts them."""
+        self._n_held = 0
+        """Held samples not yet settled."""
+        self._n_given_up = 0
+        """Held samples given up since :meth:`take_given_up` was last asked."""
+        # Held samples settled since the last hand-over: their numbers, and True where released.
+        self._settled: list[int] = []
+        self._released: list[bool] = []
         # Arrivals not yet handed to the compensator: the navigation samples' numbers in a row
         # (_NAV_FIELDS per sample: stamp, quaternion, rate, body velocity, latitude, trusted,
         # covariances), the sensor samples', and for each sensor sample the number of
@@ -243,32 +255,53 @@ class CompensationPipeline:
 
     def add_sample(self, sample: FlowSample) -> str | None:
         """One ``anemometer/wind`` or ``dvl/velocity``. Returns why it is rejected (the
-        message's own ``rejection``, a stamp off the sensor's sequence, or not later than the
-        previous one), None when accepted. Every sample, rejected or not, gets its (then
-        invalid) output."""
+        message's own ``rejection``, or a stamp not later than the previous one), None when
+        accepted or held off the sensor's sequence (settled later; the held samples given up
+        are counted by :meth:`take_given_up`). Every sample, rejected or not, gets its (then
+        invalid) output, in input order."""
         x, y, z = sample.flow_sensor_mps
-        held = self._held_off_sequence(sample)
-        stamp_increases = not held and self._sample_order.advance(sample.t_s)
+        held, confirming = self._screen_sequence(sample)
+        stamp_increases = (not held or confirming) and self._sample_order.advance(sample.t_s)
         self._samples.extend((sample.t_s, x, y, z))
         noise = sample.noise_covariance_m2s2
         self._samples.extend(self.sensor.noise_covariance_m2s2 if noise is None else noise)
-        self._samples.append(float(held))
+        self._samples.extend((float(held), float(confirming)))
         self._nav_before_sample.append(len(self._nav) // _NAV_FIELDS)
+        self._n_samples += 1
         if sample.rejection is not None:
             return sample.rejection
-        if held:
-            return Reason.OUT_OF_SEQUENCE
-        return None if stamp_increases else Reason.STAMP_NOT_INCREASING
+        return None if held or stamp_increases else Reason.STAMP_NOT_INCREASING
 
-    def _held_off_sequence(self, sample: FlowSample) -> bool:
-        """Whether ``sample`` is off the sensor's sequence of stamps
-        (:mod:`buoy_nav.stream_sequence`). Its output cannot wait for the sequence to be told
-        apart from a second stream's, so a sample held is invalid at once, also when the held
-        samples prove to be the sensor's new sequence (after an outage or a step of its
-        clock). Samples the sensor flags invalid are still its own; another frame's are not."""
+    def _screen_sequence(self, sample: FlowSample) -> tuple[bool, bool]:
+        """Whether ``sample`` is held off the sensor's sequence of stamps
+        (:mod:`buoy_nav.stream_sequence`), and whether it confirms the held samples as the
+        sensor's new sequence (after an outage or a step of its clock). A held sample waits in
+        the compensator, output withheld, until the sequence tells it apart from a second
+        stream's. Samples the sensor flags invalid are still its own; another frame's are
+        not."""
         if sample.rejection == Reason.WRONG_FRAME or not math.isfinite(sample.t_s):
-            return False
-        return self._sample_sequence.screen(sample.t_s, None).held
+            return False, False
+        screening = self._sample_sequence.screen(sample.t_s, self._n_samples)
+        self._settle(screening.given_up, released=False)
+        if not screening.held:
+            return False, False
+        self._n_held += 1
+        confirming = bool(screening.taken)
+        self._settle(screening.taken, released=True)
+        return True, confirming
+
+    def _settle(self, sample_numbers: list[int], released: bool) -> None:
+        self._settled += sample_numbers
+        self._released += [released] * len(sample_numbers)
+        self._n_held -= len(sample_numbers)
+        if not released:
+            self._n_given_up += len(sample_numbers)
+
+    def take_given_up(self) -> int:
+        """Held samples given up (their outputs OUT_OF_SEQUENCE: a second stream's) since last
+        asked: the sensor's rejections that are decided after the sample's arrival."""
+        given_up, self._n_given_up = self._n_given_up, 0
+        return given_up
 
     @property
     def second_stream(self) -> tuple[int, float]:
@@ -312,6 +345,9 @@ class CompensationPipeline:
         """End of the data: every sample decided (NO_NAVIGATION where navigation never caught
         up) and every averaging window closed, partial ones included."""
         self._hand_over()
+        # Held samples never confirmed as the sensor's are given up.
+        self._n_given_up += self._n_held
+        self._n_held = 0
         output = self._output(self.compensator.flush())
         for averager in (*self.averagers, *self.flux_averagers):
             output.products.extend(averager.flush())
@@ -331,7 +367,13 @@ class CompensationPipeline:
             nav_before_sample,
             flows[:, 4:13].reshape(-1, 3, 3),
             flows[:, 13] == 1.0,
+            flows[:, 14] == 1.0,
         )
+        # Settling a held sample only changes what navigation it waits for, and no sample is
+        # looked up before the hand-over: settled here, as at its arrival.
+        if self._settled:
+            self.compensator.settle_held(self._settled, self._released)
+            self._settled, self._released = [], []
 
     def _output(self, corrected: CorrectedBatch) -> CompensationOutput:
         products = []
