@@ -49,16 +49,15 @@ from buoy_common.import_records import import_records
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_processing import process_bag
 from tools import bench_speed, fdchp_simulated
+from tools.bench_fdchp import COLUMN_MAP
+from tools.bench_fdchp import PARAMS as OOI_PARAMS
 from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parent.parent
 OUT_DIR = REPO / "out/bench"
 WORK_DIR = OUT_DIR / "runs/fdchp_hour"
 CACHE_DIR = OUT_DIR / "cache/fdchp_hour"
-RECORDS = REPO / "src/buoy_common/config/records"
-COLUMN_MAP = RECORDS / "ooi_fdchp.yaml"
 OOI_RECORD = REPO / "tests/data/ooi_fdchp/fdchp_test_dp.dat"
-OOI_PARAMS = RECORDS / "ooi_fdchp_params.yaml"
 OOI_COPIES = 3
 SIMULATED_SEA = "sway_6_to_9_s"
 HOUR_ROWS = 36000
