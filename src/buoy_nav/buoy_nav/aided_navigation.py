@@ -50,6 +50,8 @@ class AidedNavigation:
         self.kalman = ErrorStateFilter(result.covariance, config.gate_probability, states)
         self._propagation_interval_s = config.covariance_propagation_interval_s
         self._imu_model = imu_model
+        self.gyro_drift_scale = 1.0
+        """Factor on the σ of the gyro's drift in the process noise (the aiding sources')."""
         self._recorder = recorder
         recorder.begin_segment(t_s, self.kalman.covariance)
 
@@ -76,6 +78,7 @@ class AidedNavigation:
             integrator.altitude_m,
             integrator.velocity_enu_mps,
             self._imu_model,
+            self.gyro_drift_scale,
         )
         posterior = self.kalman.covariance
         self.kalman.propagate(transition, noise)
@@ -125,5 +128,15 @@ class AidedNavigation:
             covariance[index, index] += attitude_variance
         for index in states.indices("velocity"):
             covariance[index, index] += velocity_variance
+        self._recorder.noise_added(t_s, self.kalman.covariance, covariance)
+        self.kalman.covariance = covariance
+
+    def widen(self, t_s: float, factor: float) -> None:
+        """Multiply the attitude and velocity variances at stamp ``t_s`` (s) by ``factor`` (≥ 1),
+        as added noise: the filter has found them that much too small."""
+        states = self.kalman.states
+        covariance = self.kalman.covariance.copy()
+        for index in (*states.indices("attitude"), *states.indices("velocity")):
+            covariance[index, index] *= factor
         self._recorder.noise_added(t_s, self.kalman.covariance, covariance)
         self.kalman.covariance = covariance

@@ -378,6 +378,12 @@ class FusionConfig:
         "horizontal σ (1: never widened)",
         rule=at_least(1),
     )
+    moored_gyro_drift_scale_limit: float = parameter(
+        50.0,
+        meaning="largest factor by which a moored buoy's mean velocity over minutes may widen "
+        "the σ of the gyro's drift, gyro_bias_instability_deg_h (1: never widened)",
+        rule=at_least(1),
+    )
     imu_gyro_bias_rad_s: tuple[float, float, float] = parameter(
         (0.0, 0.0, 0.0),
         unit="rad/s",

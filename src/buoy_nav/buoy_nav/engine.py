@@ -564,16 +564,24 @@ class FusionEngine:
         due = [source for source in self._registry.pseudo if t >= source.next_due_s]
         if not due:
             return
-        state = self._nav.integrator.nav_state()
+        nav = self._nav
+        state = nav.integrator.nav_state()
         fix_age = self._recency.age_s(AIDED_QUANTITIES.index(FIX), t)
+        velocity = self.states.velocity
+        velocity_covariance = nav.kalman.covariance[velocity, velocity]
         group = []
         for source in due:
             verdict = self._contradictions.judge(source)
             if verdict is not None:
                 self._source_transitions.extend(self._gates.judged(source, t, verdict))
-            measurement = source.pseudo_measurement(t, state, fix_age)
+            measurement = source.pseudo_measurement(t, state, fix_age, velocity_covariance)
             if measurement is not None:
                 group.append((source, measurement))
+        nav.gyro_drift_scale = max(source.gyro_drift_scale for source in self._registry.pseudo)
+        factor = max(source.take_covariance_factor() for source in self._registry.pseudo)
+        if factor > 1.0:
+            nav.widen(t, factor)
+            self._solutions.covariance_changed()
         self._handle_measurements(t, group, gyro)
 
     def _reset_to_measurement(self, source: AidingSource, t: float, measurement, gyro, model):

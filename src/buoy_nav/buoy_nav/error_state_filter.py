@@ -231,10 +231,15 @@ class ImuErrorModel:
 
 
 def discrete_error_model(
-    sums, latitude_rad: float, altitude_m: float, velocity_enu_mps, imu: ImuErrorModel
+    sums,
+    latitude_rad: float,
+    altitude_m: float,
+    velocity_enu_mps,
+    imu: ImuErrorModel,
+    gyro_drift_scale: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Transition matrix Φ and process noise Q_d (:data:`ERROR_STATES`) over one
-    propagation interval.
+    propagation interval, with the σ of the gyro's drift widened by ``gyro_drift_scale``.
 
     sums: :class:`buoy_nav.mechanization.PropagationSums` of the interval.
     latitude_rad, altitude_m, velocity_enu_mps: nominal state at the end of the interval (the
@@ -263,7 +268,10 @@ def discrete_error_model(
         sums.force_deviation_sq_integral_m2_s3,
         imu.gyro_noise_psd_rad2_s * duration,
         imu.accel_noise_psd_m2_s3 * duration,
-        2.0 * imu.gyro_markov_sigma_rad_s**2 * duration / imu.gyro_correlation_time_s,
+        2.0
+        * (gyro_drift_scale * imu.gyro_markov_sigma_rad_s) ** 2
+        * duration
+        / imu.gyro_correlation_time_s,
         2.0 * imu.accel_markov_sigma_mps2**2 * duration / imu.accel_correlation_time_s,
         _S.attitude.start,
         _S.velocity.start,

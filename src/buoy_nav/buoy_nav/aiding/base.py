@@ -201,8 +201,8 @@ class AidingSource(abc.ABC):
         information and more (None: none); such a measurement is set aside and counted as
         superseded, so one observation is not fused twice.
       pseudo: True for a constraint that reads no topic (``topic`` None): the engine asks it
-        for a measurement with ``pseudo_measurement(t_s, state, fix_age_s)`` once an IMU
-        sample reaches its ``next_due_s``.
+        for a measurement with ``pseudo_measurement(t_s, state, fix_age_s,
+        velocity_covariance_m2s2)`` once an IMU sample reaches its ``next_due_s``.
 
     A source is built once per engine from the configuration and the engine's error-state
     layout (``states``), whose block names address the Jacobian's columns.
@@ -249,6 +249,18 @@ class AidingSource(abc.ABC):
         warning no longer holds, None when nothing changed. Only sources that can tell why say
         so."""
         return None
+
+    @property
+    def gyro_drift_scale(self) -> float:
+        """Factor (≥ 1) on the σ of the gyro's drift that this source's innovations ask for,
+        which the engine applies to the filter's process noise; 1 for a source that cannot
+        tell."""
+        return 1.0
+
+    def take_covariance_factor(self) -> float:
+        """Factor by which this source's innovations have just found the filter's attitude and
+        velocity variances too small, once (1: not found, or a source that cannot tell)."""
+        return 1.0
 
     @classmethod
     def enabled_by(cls, config: FusionConfig) -> bool:

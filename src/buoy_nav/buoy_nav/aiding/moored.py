@@ -70,6 +70,7 @@ from buoy_nav.aiding.base import (
 )
 from buoy_nav.contradictions import AGREEMENT_PROBABILITY, chi_square_quantile
 from buoy_nav.gnss_motion import GnssMotion
+from buoy_nav.mean_velocity_watch import MeanVelocityWatch
 
 MIN_SPAN_OF_WINDOW = 0.2
 """Share of ``moored_check_window_s`` the measurements must span before the mooring is judged
@@ -216,6 +217,13 @@ class MooredSource(AidingSource):
             config.moored_position_sigma_horizontal_m,
             config.moored_sigma_scale_limit,
         )
+        self._position_warning = ""
+        self._velocity_watch = MeanVelocityWatch(
+            config.moored_check_window_s,
+            config.moored_position_sigma_horizontal_m,
+            config.moored_gyro_drift_scale_limit,
+        )
+        self._drift_changed = False
         self._anchor: np.ndarray | None = None
         self._anchor_t_s = -math.inf
         self.next_due_s = -math.inf
@@ -263,22 +271,46 @@ class MooredSource(AidingSource):
         heave rarely fills, would dilute what the tilt error does to the horizontal."""
         fused_variance = self._watch.scale**2 * self._covariance[0, 0]
         filter_covariance = innovation_covariance[:2, :2] - fused_variance * np.eye(2)
-        return self._watch.add(t_s, innovation[:2], filter_covariance)
+        position_warning = self._watch.add(t_s, innovation[:2], filter_covariance)
+        if position_warning is not None:
+            self._position_warning = position_warning
+        elif not self._drift_changed:
+            return None
+        self._drift_changed = False
+        return "; ".join(w for w in (self._position_warning, self._velocity_watch.warning) if w)
+
+    @property
+    def gyro_drift_scale(self) -> float:
+        """Factor on the gyro drift's σ the blocks' mean velocity asks for
+        (:mod:`buoy_nav.mean_velocity_watch`)."""
+        return self._velocity_watch.scale
+
+    def take_covariance_factor(self) -> float:
+        return self._velocity_watch.take_covariance_factor()
 
     def restart(self) -> None:
-        """Forget the anchor (after a realignment)."""
+        """Forget the anchor and the mean velocity's block in progress (after a realignment);
+        the gyro's drift stays as widened, a property of the gyro."""
         self._anchor = None
+        self._velocity_watch.restart()
         self.next_due_s = -math.inf
 
-    def pseudo_measurement(self, t_s: float, state, fix_age_s: float) -> MooringAnchor | None:
+    def pseudo_measurement(
+        self, t_s: float, state, fix_age_s: float, velocity_covariance_m2s2: np.ndarray
+    ) -> MooringAnchor | None:
         """The anchor at ``t_s`` for the nominal ``state``; None while GNSS fixes are accepted
-        (``fix_age_s``: time since the last one, s). Moves the anchor toward the state."""
+        (``fix_age_s``: time since the last one, s). Moves the anchor toward the state, and
+        gives the state's velocity with its covariance (m²/s², ENU 3×3) to the mean velocity's
+        watch."""
         self.next_due_s = t_s + self._period_s
         position = np.array((state.latitude_rad, state.longitude_rad, state.altitude_m))
         if self._anchor is None or fix_age_s <= self._gnss_timeout_s:
             self._anchor = position
             self._anchor_t_s = t_s
+            self._velocity_watch.restart()
             return None
+        if self._velocity_watch.add(t_s, state.velocity_enu_mps, velocity_covariance_m2s2):
+            self._drift_changed = True
         weight = -math.expm1(-(t_s - self._anchor_t_s) / self._time_constant_s)
         self._anchor = self._anchor + weight * (position - self._anchor)
         self._anchor_t_s = t_s
