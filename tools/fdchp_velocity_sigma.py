@@ -10,7 +10,8 @@ does, and prints over the samples Edson keeps (30 s trimmed at each end):
 - the corrected wind's validity and the real record's criterion of
   ``tests/system/test_real_record_uncertainty.py``: valid samples whose horizontal speed the
   correction changes by more than Edson's largest change plus three of their own σ;
-- the mooring's innovation warnings ``process_bag`` logged (their ratio and widening).
+- the mooring's innovation warnings ``process_bag`` logged (their ratio and widening), and
+  the widenings of the gyro's drift by the mean velocity (:mod:`buoy_nav.mean_velocity_watch`).
 
     python -m tools.fdchp_velocity_sigma [--rows N] [--params-file YAML ...]
 
@@ -48,6 +49,9 @@ from tools.bench_fdchp import (
 EDSON_WIND_NWU = REPO / "tests/data/ooi_fdchp/edson_corrected_wind_nwu.npy"
 """Edson's corrected wind of the kept rows (``tools/edson_fdchp.py --save-wind``)."""
 WARNING = re.compile(r"mooring innovations ([\d.]+)× .*?σ widened ([\d.]+)×")
+DRIFT_WARNING = re.compile(
+    r"mean velocity over \d+-s blocks is ([\d.]+)× .*?drift widened ([\d.]+)×"
+)
 
 
 def horizontal_speed_mps(vectors: np.ndarray) -> np.ndarray:
@@ -114,8 +118,9 @@ def criterion_figures(measured: np.ndarray, corrected: np.ndarray, sigma: np.nda
     }
 
 
-def mooring_warnings(log: str) -> dict:
-    found = np.array([(float(a), float(b)) for a, b in WARNING.findall(log)]).reshape(-1, 2)
+def mooring_warnings(log: str, pattern: re.Pattern = WARNING) -> dict:
+    """The count of the ``pattern``'s warnings in ``log``, their ratios' and widenings' ranges."""
+    found = np.array([(float(a), float(b)) for a, b in pattern.findall(log)]).reshape(-1, 2)
     if not found.size:
         return {"count": 0}
     return {
@@ -142,6 +147,7 @@ def measure(rows: int | None, parameter_files: list[str]) -> dict:
         "velocity": velocity_figures(velocity, velocity_sigma),
         "wind": criterion_figures(measured, corrected, wind_sigma),
         "mooring_warnings": mooring_warnings("\n".join(summary.fusion_lines)),
+        "gyro_drift_widenings": mooring_warnings("\n".join(summary.fusion_lines), DRIFT_WARNING),
     }
 
 
