@@ -232,8 +232,8 @@ class Listener:
         inputs = self.node_inputs()
         return bool(inputs) and reports_publishers_on(self.diagnostics[-1], inputs)
 
-    def play(self, paced_stream, solution_stamps_ns=None) -> None:
-        """Publish (pace stamp ns, topic, message) rows at PLAY_RATE times real time.
+    def play(self, paced_stream, solution_stamps_ns=None, rate: float = PLAY_RATE) -> None:
+        """Publish (pace stamp ns, topic, message) rows at ``rate`` times real time.
 
         With ``solution_stamps_ns`` (the stamps of the solutions the node is to publish, from
         the offline run), the pace is also held back by the node's output: every CHECK_NS of
@@ -249,9 +249,9 @@ class Listener:
             if solution_stamps_ns is not None and pace_ns >= next_check_ns:
                 due = int(np.searchsorted(solution_stamps_ns, pace_ns - CATCH_UP_NS, "right"))
                 wait_for(lambda due=due: received_count(self) >= due, CATCH_UP_TIMEOUT_S)
-                start_wall_s = time.monotonic() - (pace_ns - first_ns) * 1e-9 / PLAY_RATE
+                start_wall_s = time.monotonic() - (pace_ns - first_ns) * 1e-9 / rate
                 next_check_ns = pace_ns + CHECK_NS
-            delay_s = (pace_ns - first_ns) * 1e-9 / PLAY_RATE - (time.monotonic() - start_wall_s)
+            delay_s = (pace_ns - first_ns) * 1e-9 / rate - (time.monotonic() - start_wall_s)
             if delay_s > 0:
                 time.sleep(delay_s)
             self.publishers[topic].publish(message)
