@@ -106,6 +106,11 @@ def assert_within_sigma(errors_mps: np.ndarray, sigma_mps: np.ndarray) -> None:
     assert not np.any(normalised > 5.0)
 
 
+def beyond_three_sigma(errors_mps: np.ndarray, sigma_mps: np.ndarray) -> np.ndarray:
+    """Share of samples beyond 3σ, per axis."""
+    return (np.abs(errors_mps) / sigma_mps > 3.0).mean(axis=0)
+
+
 def fdchp_like_config(**gyro_model) -> FusionConfig:
     scenario_site = {"site_latitude_deg": 20.0, "site_longitude_deg": 115.0}
     return FusionConfig(
@@ -155,11 +160,6 @@ def test_with_the_default_gyro_model_the_velocity_is_within_its_sigma_once_learn
     assert_within_sigma(
         *horizontal_velocity_errors(fdchp_like_config(), wandering_gyro_run, LEARNT_S)
     )
-
-
-def beyond_three_sigma(errors_mps: np.ndarray, sigma_mps: np.ndarray) -> np.ndarray:
-    """Share of samples beyond 3σ, per axis."""
-    return (np.abs(errors_mps) / sigma_mps > 3.0).mean(axis=0)
 
 
 def test_a_mooring_stated_too_tight_widens_its_sigma_until_the_velocity_is_within(
