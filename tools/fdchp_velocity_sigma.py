@@ -11,7 +11,12 @@ does, and prints over the samples Edson keeps (30 s trimmed at each end):
   ``tests/system/test_real_record_uncertainty.py``: valid samples whose horizontal speed the
   correction changes by more than Edson's largest change plus three of their own σ;
 - the mooring's innovation warnings ``process_bag`` logged (their ratio and widening), and
-  the widenings of the gyro's drift by the mean velocity (:mod:`buoy_nav.mean_velocity_watch`).
+  the widenings of the gyro's drift by the mean velocity (:mod:`buoy_nav.mean_velocity_watch`);
+- where in frequency the velocity lies: per band, its RMS beside the heave velocity the pack's
+  vertical specific force gives (a buoy on the waves moves about as fast horizontally as
+  vertically, so a horizontal velocity well above the heave's is error), and the normalised
+  RMS of its block means for blocks of 5 to 60 s, as the mean-velocity watch judges its 30-s
+  blocks (the excursion term from ``fusion.moored_position_sigma_horizontal_m``).
 
     python -m tools.fdchp_velocity_sigma [--rows N] [--params-file YAML ...]
 
@@ -27,18 +32,22 @@ import re
 import sys
 
 import numpy as np
+from scipy import signal, stats
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import (
+    IMU_RAW_TOPIC,
     NAV_VELOCITY_TOPIC,
     WIND_RAW_TOPIC,
     WIND_TRUE_WITH_COVARIANCE_TOPIC,
 )
+from buoy_nav.config import fusion_config_from_files
 from tools.bench_fdchp import (
     ENU_FROM_NWU,
     KEPT,
     OUT_DIR,
     PARAMS,
+    RATE_HZ,
     RECORD,
     REPO,
     SLOW_HZ,
@@ -104,6 +113,76 @@ def velocity_figures(velocity: np.ndarray, sigma: np.ndarray) -> dict:
     }
 
 
+VELOCITY_BANDS_HZ = ((0.005, 0.02), (0.02, 0.05), (0.05, 0.1), (0.1, 0.2), (0.2, 0.5), (0.5, 1.0))
+BLOCKS_S = (5.0, 10.0, 20.0, 30.0, 60.0)
+BLOCK_QUANTILE = float(stats.chi2.ppf(0.999, 2))
+
+
+def band_rms(series: np.ndarray, low_hz: float, high_hz: float) -> np.ndarray:
+    """RMS (per column) of ``series`` (samples at RATE_HZ along axis 0) between the two
+    frequencies, from its Welch spectrum."""
+    frequency, density = signal.welch(
+        series - series.mean(axis=0), fs=RATE_HZ, nperseg=4096, axis=0
+    )
+    inside = (frequency >= low_hz) & (frequency < high_hz)
+    return np.sqrt(density[inside].sum(axis=0) * (frequency[1] - frequency[0]))
+
+
+def velocity_bands(velocity_en_mps: np.ndarray, up_specific_force_mps2: np.ndarray) -> list:
+    """Per band: the fused horizontal velocity's RMS (m/s, east and north) and the heave
+    velocity's, the vertical specific force divided by 2πf (m/s)."""
+    frequency, density = signal.welch(
+        up_specific_force_mps2 - up_specific_force_mps2.mean(), fs=RATE_HZ, nperseg=4096
+    )
+    rows = []
+    for low_hz, high_hz in VELOCITY_BANDS_HZ:
+        inside = (frequency >= low_hz) & (frequency < high_hz)
+        heave_density = density[inside] / (2.0 * np.pi * frequency[inside]) ** 2
+        heave = float(np.sqrt(heave_density.sum() * (frequency[1] - frequency[0])))
+        rows.append(
+            {
+                "band_hz": [low_hz, high_hz],
+                "heave_velocity_mps": round(heave, 3),
+                "velocity_en_mps": band_rms(velocity_en_mps, low_hz, high_hz).round(3).tolist(),
+            }
+        )
+    return rows
+
+
+def block_ratios(velocity_en_mps, sigma_en_mps, excursion_sigma_m: float) -> list:
+    """Per block length: the normalised RMS of the blocks' mean velocity against their mean
+    stated variance plus the excursion term 2 σ_h² / T², and the blocks beyond the 0.999
+    quantile, as the mean-velocity watch judges them."""
+    rows = []
+    for block_s in BLOCKS_S:
+        length = round(block_s * RATE_HZ)
+        count = len(velocity_en_mps) // length
+        means = velocity_en_mps[: count * length].reshape(count, length, 2).mean(axis=1)
+        variances = (sigma_en_mps[: count * length] ** 2).reshape(count, length, 2).mean(axis=1)
+        variances += 2.0 * excursion_sigma_m**2 / block_s**2
+        normalised = (means**2 / variances).sum(axis=1)[1:]  # the first block holds the start
+        rows.append(
+            {
+                "block_s": block_s,
+                "ratio": round(float(np.sqrt(normalised.mean() / 2.0)), 2),
+                "beyond_quantile": int(np.count_nonzero(normalised > BLOCK_QUANTILE)),
+                "blocks": int(normalised.size),
+            }
+        )
+    return rows
+
+
+def up_specific_force_mps2(imported) -> np.ndarray:
+    """The pack's vertical (body z) specific force of every IMU sample (m/s²)."""
+    with BagReader(imported) as reader:
+        return np.array(
+            [
+                reader.decode(message).linear_acceleration.z
+                for message in reader.messages([IMU_RAW_TOPIC])
+            ]
+        )
+
+
 def criterion_figures(measured: np.ndarray, corrected: np.ndarray, sigma: np.ndarray) -> dict:
     """Validity and the speed-change criterion over every processed sample."""
     valid = np.isfinite(corrected).all(axis=1)
@@ -141,6 +220,8 @@ def measure(rows: int | None, parameter_files: list[str]) -> dict:
     with BagReader(processed) as reader:
         velocity, velocity_sigma = velocity_and_sigma(reader)
         measured, corrected, wind_sigma = wind_and_sigma(reader)
+    files = [str(path) for path in (PARAMS, *parameter_files)]
+    excursion_sigma_m = fusion_config_from_files(files).moored_position_sigma_horizontal_m
     return {
         "rows": rows,
         "params_files": [str(PARAMS), *parameter_files],
@@ -148,6 +229,8 @@ def measure(rows: int | None, parameter_files: list[str]) -> dict:
         "wind": criterion_figures(measured, corrected, wind_sigma),
         "mooring_warnings": mooring_warnings("\n".join(summary.fusion_lines)),
         "gyro_drift_widenings": mooring_warnings("\n".join(summary.fusion_lines), DRIFT_WARNING),
+        "velocity_bands": velocity_bands(velocity, up_specific_force_mps2(work / "fdchp")),
+        "block_ratios": block_ratios(velocity, velocity_sigma, excursion_sigma_m),
     }
 
 
