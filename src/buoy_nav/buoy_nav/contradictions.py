@@ -15,8 +15,8 @@ the filter:
   it. Its gate cannot lift that (a filter just realigned without it has a velocity σ wide
   enough to let a biased velocity pass): it is judged against the fixes again every second,
   over the last :data:`VELOCITY_CHECK_SPAN_S`, and resumes once the difference is below the
-  quantile of :data:`AGREEMENT_PROBABILITY`. A position source is not judged so: a fix that
-  jumps is followed (reset), as before.
+  quantile of :data:`~buoy_nav.chi_square.AGREEMENT_PROBABILITY`. A position source is not
+  judged so: a fix that jumps is followed (reset), as before.
 - **an assumption the motion disproves**: a constraint judges itself against the mean velocity
   the receiver measured (:meth:`~buoy_nav.aiding.base.AidingSource.judged_by`), such as the
   mooring's zero mean velocity on a buoy that drifts
@@ -31,23 +31,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from buoy_nav.aiding.base import AidingSource, Verdict
+from buoy_nav.chi_square import AGREEMENT_PROBABILITY, chi_square_quantile
 from buoy_nav.config import FusionConfig
 from buoy_nav.gnss_motion import GnssMotion
 
 VELOCITY_CHECK_SPAN_S = 60.0
 """Longest span (s) over which a velocity is set against the fixes: the time it has failed."""
-AGREEMENT_PROBABILITY = 0.99
-"""A contradiction is lifted once the evidence is below this chi-square quantile: a source
-whose evidence hovers about the contradiction's quantile does not flap in and out."""
-
-
-def chi_square_quantile(dimension: int, probability: float) -> float:
-    """The chi-square quantile of ``probability`` with ``dimension`` degrees of freedom (as
-    scipy.stats.chi2.ppf, without importing scipy.stats)."""
-    return float(2.0 * gammaincinv(0.5 * dimension, probability))
 
 
 class Contradictions:

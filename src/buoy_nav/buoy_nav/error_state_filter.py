@@ -70,10 +70,10 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy.special import gammaincinv
 
 from buoy_nav import earth, kalman_kernel
 from buoy_nav import strapdown_kernel as kernel
+from buoy_nav.chi_square import chi_square_quantile
 from buoy_nav.config import FusionConfig
 from buoy_nav.rotations import (
     rotation_matrix_from_quaternion,
@@ -413,10 +413,7 @@ class ErrorStateFilter:
             probability = self.gate_probability
         key = (dimension, probability)
         if key not in self._thresholds:
-            # The chi-square quantile as scipy.stats.chi2.ppf computes it, without the half
-            # second that importing scipy.stats adds to the start of every node and tool.
-            quantile = 2.0 * gammaincinv(0.5 * dimension, probability)
-            self._thresholds[key] = float(quantile)
+            self._thresholds[key] = chi_square_quantile(dimension, probability)
         return self._thresholds[key]
 
     def propagate(self, transition: np.ndarray, process_noise: np.ndarray):

@@ -41,7 +41,7 @@ from collections import deque
 
 import numpy as np
 
-from buoy_nav.contradictions import chi_square_quantile
+from buoy_nav.chi_square import chi_square_quantile
 
 BLOCK_S = 30.0
 """Length of a block (s): long against the waves (their velocity averages out) and short

@@ -11,8 +11,9 @@ from buoy_nav import earth
 from buoy_nav.aiding.gnss_fix import GnssFix
 from buoy_nav.aiding.gnss_velocity import GnssVelocity
 from buoy_nav.aiding.moored import MooredSource
+from buoy_nav.chi_square import chi_square_quantile
 from buoy_nav.config import FusionConfig
-from buoy_nav.contradictions import Contradictions, chi_square_quantile
+from buoy_nav.contradictions import Contradictions
 from buoy_nav.error_state_filter import ERROR_STATES
 from buoy_nav.gnss_motion import GnssMotion
 from buoy_nav.source_health import HealthChange, SourceHealth, SourceHealthRule

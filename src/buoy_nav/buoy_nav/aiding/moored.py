@@ -30,7 +30,7 @@ is held against what the mooring says of it, zero with the covariance of the wav
 both ends, ``2 σ_h² / T² I`` over a span T, plus the receiver's own noise. Beyond the
 chi-square quantile of ``gate_probability`` (two degrees of freedom) the mooring is
 contradicted and suspended; below the quantile of
-:data:`~buoy_nav.contradictions.AGREEMENT_PROBABILITY` it is not (in between the verdict
+:data:`~buoy_nav.chi_square.AGREEMENT_PROBABILITY` it is not (in between the verdict
 stands). Without a receiver it cannot be judged; the start-up statement
 (:mod:`buoy_nav.observability`) says so.
 
@@ -68,7 +68,7 @@ from buoy_nav.aiding.base import (
     MeasurementModel,
     Verdict,
 )
-from buoy_nav.contradictions import AGREEMENT_PROBABILITY, chi_square_quantile
+from buoy_nav.chi_square import AGREEMENT_PROBABILITY, chi_square_quantile
 from buoy_nav.gnss_motion import GnssMotion
 from buoy_nav.mean_velocity_watch import MeanVelocityWatch
 
