@@ -159,7 +159,8 @@ def _peak_rss_mb() -> float:
 def process_tree(tree: Path, out: Path, parameter_files: list[str], workers: int) -> dict:
     """``process_archive --products-only --redo`` of ``tree`` into ``out`` on a new
     ``LocalCluster`` of ``workers`` single-threaded processes: the wall time from planning to
-    the combined table, the data processed and each worker's peak memory."""
+    the combined table, the data processed, each worker's peak memory and how many bags carry
+    each warning."""
     shutil.rmtree(out, ignore_errors=True)
     fusion_config = fusion_config_from_files(parameter_files)
     compensator_config = compensator_config_from_files(parameter_files)
@@ -188,6 +189,7 @@ def process_tree(tree: Path, out: Path, parameter_files: list[str], workers: int
         "wall_s": wall_s,
         "data_s": sum(outcome.duration_s for outcome in report.outcomes),
         "peak_rss_mb_per_worker": peak_rss_mb,
+        "warnings": dict(Counter(w for outcome in report.outcomes for w in outcome.warnings)),
     }
 
 

@@ -68,6 +68,9 @@ def test_each_sampled_hour_has_its_products_in_the_combined_table_once(sources, 
             products += sum(1 for _ in csv.DictReader(stream))
     assert covered["rows"] == products > len(sample)
     assert not list(out.rglob("*.mcap"))
+    # What the hours' sensors leave unobserved (no GNSS) is kept with every hour.
+    assert run["warnings"] and set(run["warnings"].values()) == {len(sample)}
+    assert any("no velocity reference" in w or "mooring" in w for w in run["warnings"])
     # An hour the run did not process is missed, not passed over.
     unprocessed = "2026/06/15/12"
     missed = coverage(out, [*sample, unprocessed], sources)

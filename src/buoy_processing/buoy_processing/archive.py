@@ -269,6 +269,7 @@ def _process(job: BagJob, started: float) -> BagOutcome:
                 write_in_background=False,
                 nav_rate_hz=job.nav_rate_hz,
                 write_bag=not job.products_only,
+                say_statements=False,
             )
             # The products table is the wind's; a bag with a DVL also gets its current CSV,
             # one with an anemometer the CSV of its fluxes.
@@ -280,6 +281,8 @@ def _process(job: BagJob, started: float) -> BagOutcome:
                 str(c.fluxes_csv_path) for c in corrections if c.fluxes_csv_path is not None
             ]
             outcome.duration_s += summary.duration_s
+            # Kept in the bag's marker; the tool says each once for all the bags that share it.
+            outcome.warnings += [s for s in summary.statements if s not in outcome.warnings]
             if summary.recovery is not None:
                 outcome.warnings.append(summary.recovery.describe(str(in_bag)))
                 outcome.truncated = outcome.truncated or summary.recovery.truncated

@@ -153,6 +153,9 @@ class ProcessSummary:
     facts: OutputFacts | None = None
     """What the outputs say about the run: north reference, sensors used, site, data span
     (:mod:`buoy_processing.output_facts`)."""
+    statements: list[str] = field(default_factory=list)
+    """What the sensors leave unobserved, said at the start (printed unless the caller asked
+    to report them itself)."""
 
 
 ANEMOMETER_RECORD_FIELDS = ("frame_id", "vector")
@@ -549,6 +552,7 @@ def process_bag(
     netcdf_attributes: dict[str, str] | None = None,
     nav_rate_hz: float = 0.0,
     write_bag: bool = True,
+    say_statements: bool = True,
 ) -> ProcessSummary:
     """Fuse ``in_bag`` and correct its wind and its DVL samples into ``out_bag`` (a new bag;
     replaced with ``overwrite``) and the products CSVs beside it, over the topics of ``view``'s
@@ -575,7 +579,10 @@ def process_bag(
 
     With ``write_bag`` False no bag is written and no ``nav/*`` or ``tf`` made: the products
     CSVs (and the NetCDF file) alone, named after ``out_bag`` as always, hold the same
-    products."""
+    products.
+
+    With ``say_statements`` False what the sensors leave unobserved is not printed at the start
+    but only returned (:attr:`ProcessSummary.statements`)."""
     started = time.monotonic()
     csv_paths = products_csv_paths(out_bag)
     _check_outputs(in_bag, [out_bag, *csv_paths.values()], netcdf_path, overwrite)
@@ -610,8 +617,9 @@ def process_bag(
                 shared_values(fusion_config, compensator_config, current_config), imu_link=True
             ),
             closing_metadata=facts_of_run,
+            say_statements=say_statements,
         )
-        fusion, topic_counts = run_fusion(run, corrections)
+        fusion, topic_counts, statements = run_fusion(run, corrections)
         duration_s = reader.duration_s
     facts = facts_of_run.facts
     # Made by the bag's writer, unless no bag was written.
@@ -629,6 +637,7 @@ def process_bag(
         wall_s=time.monotonic() - started,
         recovery=reader.recovery,
         facts=facts,
+        statements=statements,
     )
 
 

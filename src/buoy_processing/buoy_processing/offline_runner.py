@@ -149,6 +149,10 @@ class OfflineRun:
     closing_metadata: Callable[[OfflineFusion], dict[str, dict[str, str]]] | None = None
     """The MCAP metadata records (name → map of strings) to store in the output bag, made from
     the fusion once every message is written (what the run's outputs say of it)."""
+    say_statements: bool = True
+    """Print the start-up statements (what the sensors leave unobserved) on stderr; False for a
+    caller that reports them itself (:attr:`FusionRun.statements`), as an archive does once
+    for all its bags."""
 
     @property
     def relative_of(self) -> dict[str, str]:
@@ -187,6 +191,9 @@ class FusionRun(NamedTuple):
     """The fusion that ran (its :meth:`OfflineFusion.summary` reports it)."""
     topic_counts: dict[str, int]
     """Messages written, per topic."""
+    statements: list[str]
+    """What the configured and present sensors leave unobserved, said before the run
+    (:func:`buoy_nav.observability.unobserved_quantities`)."""
 
 
 def run_fusion(run: OfflineRun, consumer: BagConsumer | None = None) -> FusionRun:
@@ -194,14 +201,18 @@ def run_fusion(run: OfflineRun, consumer: BagConsumer | None = None) -> FusionRu
     docstring)."""
     consumer = consumer or NothingFollows()
     # Said before the long pass over the bag, from the topics it holds.
-    for sentence in unobserved_quantities(run.config, run.sensors):
-        print(f"{run.label}: warning: {sentence}", file=sys.stderr)
+    statements = unobserved_quantities(run.config, run.sensors)
+    if run.say_statements:
+        for sentence in statements:
+            print(f"{run.label}: warning: {sentence}", file=sys.stderr)
     if run.smooth:
-        return _smoothed_run(run, consumer)
-    return _forward_run(run, consumer)
+        fusion, topic_counts = _smoothed_run(run, consumer)
+    else:
+        fusion, topic_counts = _forward_run(run, consumer)
+    return FusionRun(fusion, topic_counts, statements)
 
 
-def _forward_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
+def _forward_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion, dict[str, int]]:
     """Fusion, copies and consumer in one pass over the bag."""
     reader = run.reader
     relative_of = run.relative_of
@@ -231,10 +242,10 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
         consumer.finish(log_time_ns)
         run.store_closing_metadata(bag_writer, fusion)
         progress.done()
-    return FusionRun(fusion, writer.counts)
+    return fusion, writer.counts
 
 
-def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
+def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion, dict[str, int]]:
     """The forward filter, the smoother's backward pass, then the smoothed solutions merged
     with the copies, fed to the consumer."""
     reader = run.reader
@@ -265,7 +276,7 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> FusionRun:
             run.store_closing_metadata(bag_writer, fusion)
     finally:
         fusion.close()
-    return FusionRun(fusion, writer.counts)
+    return fusion, writer.counts
 
 
 def imu_record_fields(sensors: dict[str, str]) -> dict[str, tuple[str, ...]]:

@@ -120,9 +120,7 @@ def print_report(report: ArchiveReport) -> None:
     )
     if report.table is not None:
         print(f"wrote {report.table}")
-    for outcome in report.outcomes:
-        for warning in outcome.warnings:
-            print(f"process_archive: warning: {outcome.relative}: {warning}", file=sys.stderr)
+    print_warnings(report.outcomes)
     for outcome in report.with_status("failed"):
         print(f"process_archive: failed: {outcome.relative}: {outcome.reason}", file=sys.stderr)
     if report.interrupted:
@@ -130,6 +128,25 @@ def print_report(report: ArchiveReport) -> None:
             "process_archive: interrupted; the bags not finished are processed by the next run",
             file=sys.stderr,
         )
+
+
+def print_warnings(outcomes: list[BagOutcome]) -> None:
+    """Each bag's warnings on stderr; one that several bags share (what their common sensors
+    leave unobserved, said at the start of each) once, with how many bags and the first of
+    them: an archive of a year of hourly files would otherwise repeat it 8,760 times. Every
+    bag's marker keeps its own."""
+    bags_of: dict[str, list[str]] = {}
+    for outcome in outcomes:
+        for warning in outcome.warnings:
+            bags_of.setdefault(warning, []).append(outcome.relative)
+    for warning, bags in bags_of.items():
+        if len(bags) == 1:
+            print(f"process_archive: warning: {bags[0]}: {warning}", file=sys.stderr)
+        else:
+            print(
+                f"process_archive: warning: {len(bags)} bags (the first {bags[0]}): {warning}",
+                file=sys.stderr,
+            )
 
 
 _STATUSES = ("done", "skipped", "failed", "interrupted")

@@ -26,6 +26,7 @@ from buoy_processing.archive import (
     write_marker,
     write_products_fragment,
 )
+from buoy_processing.process_archive import print_warnings
 from wind_comp.config import CompensatorConfig
 
 
@@ -136,3 +137,17 @@ def test_the_combined_table_says_which_version_wrote_it_and_its_conventions(done
     for stated in ("East, North, Up", "FROM, clockwise from true north", "QARTOD", "1970-01-01"):
         assert stated in conventions
     assert table.column_names[:2] == [BAG_COLUMN, NAMESPACE_COLUMN]
+
+
+def test_a_warning_many_bags_share_is_said_once_with_their_count(capsys):
+    shared = "no velocity reference: no GNSS and fusion.moored is false"
+    outcomes = [
+        BagOutcome(f"2026/01/01/{hour:02d}", "done", warnings=[shared]) for hour in range(3)
+    ]
+    outcomes[1].warnings.append("recovered 10 s of a cut bag")
+    print_warnings(outcomes)
+    said = capsys.readouterr().err.splitlines()
+    assert said == [
+        f"process_archive: warning: 3 bags (the first 2026/01/01/00): {shared}",
+        "process_archive: warning: 2026/01/01/01: recovered 10 s of a cut bag",
+    ]
