@@ -184,13 +184,15 @@ def up_specific_force_mps2(imported) -> np.ndarray:
 
 
 def criterion_figures(measured: np.ndarray, corrected: np.ndarray, sigma: np.ndarray) -> dict:
-    """Validity and the speed-change criterion over every processed sample."""
+    """Validity and the speed-change criterion over every processed sample (without a valid
+    sample, the counts alone)."""
     valid = np.isfinite(corrected).all(axis=1)
     change = np.abs(horizontal_speed_mps(corrected) - horizontal_speed_mps(measured))[valid]
     margin = change - (edsons_largest_speed_change_mps() + 3.0 * sigma[valid])
-    return {
-        "samples": int(valid.size),
-        "valid": int(valid.sum()),
+    figures = {"samples": int(valid.size), "valid": int(valid.sum()), "beyond_plausible": 0}
+    if not change.size:
+        return figures
+    return figures | {
         "beyond_plausible": int(np.count_nonzero(margin > 0.0)),
         "closest_margin_mps": round(float(np.max(margin)), 3),
         "speed_change_median_p99_mps": np.percentile(change, (50, 99)).round(2).tolist(),
