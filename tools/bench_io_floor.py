@@ -45,7 +45,7 @@ from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_processing import process_bag
 from tools.bench_plan import PROCESSING_PARAMS, REPO
-from tools.bench_speed import _cpu_s
+from tools.bench_speed import cpu_with_children_s
 from wind_comp.config import compensator_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"
@@ -65,9 +65,9 @@ class Timing(NamedTuple):
 
 
 def _timed(step: Callable[..., int], *arguments) -> Timing:
-    cpu_before, wall_before = _cpu_s(), time.perf_counter()
+    cpu_before, wall_before = cpu_with_children_s(), time.perf_counter()
     messages = step(*arguments)
-    return Timing(time.perf_counter() - wall_before, _cpu_s() - cpu_before, messages)
+    return Timing(time.perf_counter() - wall_before, cpu_with_children_s() - cpu_before, messages)
 
 
 # -- (a) reading ----------------------------------------------------------------------------------

@@ -70,7 +70,7 @@ main(sys.argv[1:])
 """
 
 
-def _cpu_s() -> float:
+def cpu_with_children_s() -> float:
     """CPU time of this process and of its children that have ended (user + system), s."""
     own = resource.getrusage(resource.RUSAGE_SELF)
     children = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -80,13 +80,13 @@ def _cpu_s() -> float:
 def _run(tool: str, in_bag: Path, out_bag: Path):
     """One run of ``tool``: (its summary, CPU s)."""
     config = fusion_config_from_files(PROCESSING_PARAMS)
-    cpu_before = _cpu_s()
+    cpu_before = cpu_with_children_s()
     if tool == "fuse_bag":
         summary = fuse_bag(str(in_bag), str(out_bag), config, overwrite=True)
     else:
         compensator_config = compensator_config_from_files(PROCESSING_PARAMS)
         summary = process_bag(str(in_bag), str(out_bag), config, compensator_config, overwrite=True)
-    return summary, _cpu_s() - cpu_before
+    return summary, cpu_with_children_s() - cpu_before
 
 
 def run_speed(in_bag: Path, work_dir: Path, log=lambda text: None) -> dict:
