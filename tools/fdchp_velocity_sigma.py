@@ -11,7 +11,8 @@ does, and prints over the samples Edson keeps (30 s trimmed at each end):
   ``tests/system/test_real_record_uncertainty.py``: valid samples whose horizontal speed the
   correction changes by more than Edson's largest change plus three of their own σ;
 - the mooring's innovation warnings ``process_bag`` logged (their ratio and widening), and
-  the widenings of the gyro's drift by the mean velocity (:mod:`buoy_nav.mean_velocity_watch`);
+  the widenings of the gyro's drift and of the velocity's noise by the mean velocity
+  (:mod:`buoy_nav.mean_velocity_watch`);
 - where in frequency the velocity lies: per band, its RMS beside the heave velocity the pack's
   vertical specific force gives (a buoy on the waves moves about as fast horizontally as
   vertically, so a horizontal velocity well above the heave's is error), and the normalised
@@ -59,7 +60,10 @@ EDSON_WIND_NWU = REPO / "tests/data/ooi_fdchp/edson_corrected_wind_nwu.npy"
 """Edson's corrected wind of the kept rows (``tools/edson_fdchp.py --save-wind``)."""
 WARNING = re.compile(r"mooring innovations ([\d.]+)× .*?σ widened ([\d.]+)×")
 DRIFT_WARNING = re.compile(
-    r"mean velocity over \d+-s blocks is ([\d.]+)× .*?drift widened ([\d.]+)×"
+    r"mean velocity over \d+-s blocks is ([\d.]+)× .*?gyro's drift widened ([\d.]+)×"
+)
+NOISE_WARNING = re.compile(
+    r"mean velocity over \d+-s blocks is ([\d.]+)× .*?velocity's noise widened ([\d.]+)×"
 )
 
 
@@ -231,6 +235,9 @@ def measure(rows: int | None, parameter_files: list[str]) -> dict:
         "wind": criterion_figures(measured, corrected, wind_sigma),
         "mooring_warnings": mooring_warnings("\n".join(summary.fusion_lines)),
         "gyro_drift_widenings": mooring_warnings("\n".join(summary.fusion_lines), DRIFT_WARNING),
+        "velocity_noise_widenings": mooring_warnings(
+            "\n".join(summary.fusion_lines), NOISE_WARNING
+        ),
         "velocity_bands": velocity_bands(velocity, up_specific_force_mps2(work / "fdchp")),
         "block_ratios": block_ratios(velocity, velocity_sigma, excursion_sigma_m),
     }

@@ -51,6 +51,8 @@ class AidedNavigation:
         self._propagation_interval_s = config.covariance_propagation_interval_s
         self._imu_model = imu_model
         self.gyro_drift_scale = 1.0
+        self.accel_noise_scale = 1.0
+        """Factor on the σ of the accelerometer's velocity random walk (the sources')."""
         """Factor on the σ of the gyro's drift in the process noise (the aiding sources')."""
         self._recorder = recorder
         recorder.begin_segment(t_s, self.kalman.covariance)
@@ -79,6 +81,7 @@ class AidedNavigation:
             integrator.velocity_enu_mps,
             self._imu_model,
             self.gyro_drift_scale,
+            self.accel_noise_scale,
         )
         posterior = self.kalman.covariance
         self.kalman.propagate(transition, noise)

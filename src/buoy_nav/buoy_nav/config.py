@@ -384,6 +384,12 @@ class FusionConfig:
         "the σ of the gyro's drift, gyro_bias_instability_deg_h (1: never widened)",
         rule=at_least(1),
     )
+    moored_velocity_noise_scale_limit: float = parameter(
+        200.0,
+        meaning="largest factor by which a moored buoy's mean velocity over 10-s blocks may "
+        "widen the σ of the velocity's noise, accel_noise_mps_sqrt_h (1: never widened)",
+        rule=at_least(1),
+    )
     imu_gyro_bias_rad_s: tuple[float, float, float] = parameter(
         (0.0, 0.0, 0.0),
         unit="rad/s",

@@ -578,6 +578,7 @@ class FusionEngine:
             if measurement is not None:
                 group.append((source, measurement))
         nav.gyro_drift_scale = max(source.gyro_drift_scale for source in self._registry.pseudo)
+        nav.accel_noise_scale = max(source.accel_noise_scale for source in self._registry.pseudo)
         factor = max(source.take_covariance_factor() for source in self._registry.pseudo)
         if factor > 1.0:
             nav.widen(t, factor)

@@ -237,9 +237,11 @@ def discrete_error_model(
     velocity_enu_mps,
     imu: ImuErrorModel,
     gyro_drift_scale: float = 1.0,
+    accel_noise_scale: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Transition matrix Φ and process noise Q_d (:data:`ERROR_STATES`) over one
-    propagation interval, with the σ of the gyro's drift widened by ``gyro_drift_scale``.
+    propagation interval, with the σ of the gyro's drift widened by ``gyro_drift_scale`` and that
+    of the accelerometer's velocity random walk by ``accel_noise_scale``.
 
     sums: :class:`buoy_nav.mechanization.PropagationSums` of the interval.
     latitude_rad, altitude_m, velocity_enu_mps: nominal state at the end of the interval (the
@@ -267,7 +269,7 @@ def discrete_error_model(
         sums.gyro_rate_sq_integral_rad2_s,
         sums.force_deviation_sq_integral_m2_s3,
         imu.gyro_noise_psd_rad2_s * duration,
-        imu.accel_noise_psd_m2_s3 * duration,
+        accel_noise_scale**2 * imu.accel_noise_psd_m2_s3 * duration,
         2.0
         * (gyro_drift_scale * imu.gyro_markov_sigma_rad_s) ** 2
         * duration

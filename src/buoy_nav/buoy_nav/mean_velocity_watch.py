@@ -1,4 +1,5 @@
-"""A moored buoy's mean velocity over minutes as the witness of the gyro's drift.
+"""A moored buoy's mean velocity over blocks of seconds as the witness of the gyro's drift and
+of the velocity's noise.
 
 Without GNSS the mooring (:mod:`buoy_nav.aiding.moored`) bounds the inertial velocity, but what
 it cannot hold is a slow tilt error: a gyro that wanders more than
@@ -32,20 +33,32 @@ left.
 Learning takes a few blocks: until the first verdict the velocity's error is what the stated
 gyro model allows it to be (``tests/system/test_moored_gyro_wander.py``: within σ from the
 mooring's check window on).
+
+The same judgement over 10-s blocks (:data:`SHORT_BLOCK_S`) sees a velocity error at periods of
+10 to 50 s, shorter than the gyro's wander and longer than the waves': what a motion pack's own
+tilt error at those periods leaves (OOI's FDCHP record, ``docs/real-records.md``). That one
+widens the velocity's own process noise (``fusion.accel_noise_mps_sqrt_h``), so the mooring
+holds the velocity harder and its σ grows with what it cannot hold; widening the gyro's drift
+would only let the filter follow the pack's tilt more closely.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
+from typing import NamedTuple
 
 import numpy as np
 
 from buoy_nav.chi_square import chi_square_quantile
 
 BLOCK_S = 30.0
-"""Length of a block (s): long against the waves (their velocity averages out) and short
-against the gyro's wander (minutes), so the block's mean is the slow velocity error."""
+"""Length of the gyro drift's blocks (s): long against the waves (their velocity averages out)
+and short against the gyro's wander (minutes), so the block's mean is the slow velocity
+error."""
+SHORT_BLOCK_S = 10.0
+"""Length of the velocity noise's blocks (s): still longer than most waves' periods, whose
+displacement the excursion term covers."""
 MIN_BLOCKS = 3
 """Blocks the window's verdict needs."""
 BLOCK_QUANTILE = chi_square_quantile(2, 0.999)
@@ -60,17 +73,54 @@ NARROW_RATIO = 0.5
 NARROWING_PER_WINDOW = math.sqrt(2.0)
 
 
+class WidenedNoise(NamedTuple):
+    """What a watch widens, over which blocks, and how it says so."""
+
+    name: str
+    parameter: str
+    """The fusion parameter of the σ widened."""
+    limit_parameter: str
+    """The fusion parameter bounding the widening."""
+    block_s: float
+    cause: str
+
+
+GYRO_DRIFT = WidenedNoise(
+    "the gyro's drift",
+    "gyro_bias_instability_deg_h",
+    "moored_gyro_drift_scale_limit",
+    BLOCK_S,
+    "the gyro wanders more than its stated model says",
+)
+VELOCITY_NOISE = WidenedNoise(
+    "the velocity's noise",
+    "accel_noise_mps_sqrt_h",
+    "moored_velocity_noise_scale_limit",
+    SHORT_BLOCK_S,
+    "the velocity errs at tens of seconds more than its stated noise allows",
+)
+
+
 class MeanVelocityWatch:
     """The blocks' mean horizontal velocity of a moored buoy against its stated σ, and the factor
-    on the gyro's drift σ it asks for (see the module docstring).
+    on the σ of the noise it widens that it asks for (see the module docstring).
 
     ``window_s``: span of the blocks judged together (s); ``excursion_sigma_m``: the mooring's
-    horizontal 1-σ wave excursion (m); ``scale_limit``: the largest factor on the drift's σ
-    (1: never widened)."""
+    horizontal 1-σ wave excursion (m); ``widened``: what it widens (:data:`GYRO_DRIFT` over
+    :data:`BLOCK_S`, :data:`VELOCITY_NOISE` over :data:`SHORT_BLOCK_S`); ``scale_limit``: the
+    largest factor on that σ (1: never widened)."""
 
-    def __init__(self, window_s: float, excursion_sigma_m: float, scale_limit: float):
-        self._blocks_in_window = max(MIN_BLOCKS, round(window_s / BLOCK_S))
-        self._excursion_variance_m2s2 = 2.0 * excursion_sigma_m**2 / BLOCK_S**2
+    def __init__(
+        self,
+        window_s: float,
+        excursion_sigma_m: float,
+        widened: WidenedNoise,
+        scale_limit: float,
+    ):
+        self._widened = widened
+        self._block_s = widened.block_s
+        self._blocks_in_window = max(MIN_BLOCKS, round(window_s / self._block_s))
+        self._excursion_variance_m2s2 = 2.0 * excursion_sigma_m**2 / self._block_s**2
         self._scale_limit = scale_limit
         self._block_start_s = math.nan
         self._velocity_sum_mps = np.zeros(2)
@@ -78,7 +128,7 @@ class MeanVelocityWatch:
         self._samples = 0
         self._normalised_squared: deque[float] = deque(maxlen=self._blocks_in_window)
         self.scale = 1.0
-        """Factor (≥ 1) on the σ of the gyro's drift (``fusion.gyro_bias_instability_deg_h``)."""
+        """Factor (≥ 1) on the σ of the noise it widens (``widened.parameter``)."""
         self.warning = ""
         """What the watch says while the drift is widened, else ``""``."""
         self._covariance_factor = 1.0
@@ -96,7 +146,7 @@ class MeanVelocityWatch:
         :attr:`scale` changed."""
         if math.isnan(self._block_start_s):
             self._block_start_s = t_s
-        if t_s - self._block_start_s >= BLOCK_S and self._samples:
+        if t_s - self._block_start_s >= self._block_s and self._samples:
             changed = self._close_block()
             self.restart()
             self._block_start_s = t_s
@@ -135,11 +185,12 @@ class MeanVelocityWatch:
             self.scale = min(self._scale_limit, self.scale * ratio**2)
             self._covariance_factor = ratio**2
             self._normalised_squared.clear()
+            widened = self._widened
             self.warning = (
-                f"the moored buoy's mean velocity over {BLOCK_S:.0f}-s blocks is {ratio:.1f}× "
-                f"its stated σ: the gyro wanders more than fusion.gyro_bias_instability_deg_h "
-                f"says; its drift widened {self.scale:.1f}× (at most "
-                f"fusion.moored_gyro_drift_scale_limit, {self._scale_limit:g}); run "
+                f"the moored buoy's mean velocity over {self._block_s:.0f}-s blocks is "
+                f"{ratio:.1f}× its stated σ: {widened.cause} (fusion.{widened.parameter}); "
+                f"{widened.name} widened {self.scale:.1f}× (at most "
+                f"fusion.{widened.limit_parameter}, {self._scale_limit:g}); run "
                 f"assess_motion_pack"
             )
             return True
@@ -148,9 +199,10 @@ class MeanVelocityWatch:
             self.scale = max(1.0, self.scale / NARROWING_PER_WINDOW)
             self._normalised_squared.clear()
             self.warning = (
-                f"the gyro's drift (fusion.gyro_bias_instability_deg_h) held widened "
-                f"{self.scale:.1f}×, narrowing as the moored buoy's mean velocity stays within "
-                f"its σ ({ratio:.1f}×); run assess_motion_pack"
+                f"{self._widened.name} (fusion.{self._widened.parameter}) held widened "
+                f"{self.scale:.1f}×, narrowing as the moored buoy's mean velocity over "
+                f"{self._block_s:.0f}-s blocks stays within its σ ({ratio:.1f}×); run "
+                f"assess_motion_pack"
                 if self.scale > 1.0
                 else ""
             )

@@ -257,6 +257,12 @@ class AidingSource(abc.ABC):
         tell."""
         return 1.0
 
+    @property
+    def accel_noise_scale(self) -> float:
+        """Factor (≥ 1) on the σ of the accelerometer's velocity random walk that this source's
+        innovations ask for, applied as the gyro drift's is; 1 for a source that cannot tell."""
+        return 1.0
+
     def take_covariance_factor(self) -> float:
         """Factor by which this source's innovations have just found the filter's attitude and
         velocity variances too small, once (1: not found, or a source that cannot tell)."""

@@ -70,7 +70,7 @@ from buoy_nav.aiding.base import (
 )
 from buoy_nav.chi_square import AGREEMENT_PROBABILITY, chi_square_quantile
 from buoy_nav.gnss_motion import GnssMotion
-from buoy_nav.mean_velocity_watch import MeanVelocityWatch
+from buoy_nav.mean_velocity_watch import GYRO_DRIFT, VELOCITY_NOISE, MeanVelocityWatch
 
 MIN_SPAN_OF_WINDOW = 0.2
 """Share of ``moored_check_window_s`` the measurements must span before the mooring is judged
@@ -221,7 +221,14 @@ class MooredSource(AidingSource):
         self._velocity_watch = MeanVelocityWatch(
             config.moored_check_window_s,
             config.moored_position_sigma_horizontal_m,
+            GYRO_DRIFT,
             config.moored_gyro_drift_scale_limit,
+        )
+        self._noise_watch = MeanVelocityWatch(
+            config.moored_check_window_s,
+            config.moored_position_sigma_horizontal_m,
+            VELOCITY_NOISE,
+            config.moored_velocity_noise_scale_limit,
         )
         self._drift_changed = False
         self._anchor: np.ndarray | None = None
@@ -277,7 +284,15 @@ class MooredSource(AidingSource):
         elif not self._drift_changed:
             return None
         self._drift_changed = False
-        return "; ".join(w for w in (self._position_warning, self._velocity_watch.warning) if w)
+        return "; ".join(
+            w
+            for w in (
+                self._position_warning,
+                self._velocity_watch.warning,
+                self._noise_watch.warning,
+            )
+            if w
+        )
 
     @property
     def gyro_drift_scale(self) -> float:
@@ -286,13 +301,22 @@ class MooredSource(AidingSource):
         return self._velocity_watch.scale
 
     def take_covariance_factor(self) -> float:
-        return self._velocity_watch.take_covariance_factor()
+        return max(
+            self._velocity_watch.take_covariance_factor(),
+            self._noise_watch.take_covariance_factor(),
+        )
+
+    @property
+    def accel_noise_scale(self) -> float:
+        """Factor on the velocity noise's σ its 10-s blocks ask for."""
+        return self._noise_watch.scale
 
     def restart(self) -> None:
         """Forget the anchor and the mean velocity's block in progress (after a realignment);
         the gyro's drift stays as widened, a property of the gyro."""
         self._anchor = None
         self._velocity_watch.restart()
+        self._noise_watch.restart()
         self.next_due_s = -math.inf
 
     def pseudo_measurement(
@@ -308,8 +332,11 @@ class MooredSource(AidingSource):
             self._anchor = position
             self._anchor_t_s = t_s
             self._velocity_watch.restart()
+            self._noise_watch.restart()
             return None
         if self._velocity_watch.add(t_s, state.velocity_enu_mps, velocity_covariance_m2s2):
+            self._drift_changed = True
+        if self._noise_watch.add(t_s, state.velocity_enu_mps, velocity_covariance_m2s2):
             self._drift_changed = True
         weight = -math.expm1(-(t_s - self._anchor_t_s) / self._time_constant_s)
         self._anchor = self._anchor + weight * (position - self._anchor)
