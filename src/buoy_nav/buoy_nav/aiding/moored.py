@@ -218,7 +218,7 @@ class MooredSource(AidingSource):
             config.moored_sigma_scale_limit,
         )
         self._position_warning = ""
-        self._velocity_watch = MeanVelocityWatch(
+        self._drift_watch = MeanVelocityWatch(
             config.moored_check_window_s,
             config.moored_position_sigma_horizontal_m,
             GYRO_DRIFT,
@@ -230,7 +230,7 @@ class MooredSource(AidingSource):
             VELOCITY_NOISE,
             config.moored_velocity_noise_scale_limit,
         )
-        self._drift_changed = False
+        self._watches_changed = False
         self._anchor: np.ndarray | None = None
         self._anchor_t_s = -math.inf
         self.next_due_s = -math.inf
@@ -275,20 +275,21 @@ class MooredSource(AidingSource):
     ) -> str | None:
         """The horizontal innovation to :class:`InnovationWatch`, with the filter's part of its
         covariance (S less the mooring's σ it was fused with): the vertical one, of a σ the
-        heave rarely fills, would dilute what the tilt error does to the horizontal."""
+        heave rarely fills, would dilute what the tilt error does to the horizontal. Said with
+        what the mean velocity's watches say, joined, whenever one of them changed."""
         fused_variance = self._watch.scale**2 * self._covariance[0, 0]
         filter_covariance = innovation_covariance[:2, :2] - fused_variance * np.eye(2)
         position_warning = self._watch.add(t_s, innovation[:2], filter_covariance)
         if position_warning is not None:
             self._position_warning = position_warning
-        elif not self._drift_changed:
+        elif not self._watches_changed:
             return None
-        self._drift_changed = False
+        self._watches_changed = False
         return "; ".join(
             w
             for w in (
                 self._position_warning,
-                self._velocity_watch.warning,
+                self._drift_watch.warning,
                 self._noise_watch.warning,
             )
             if w
@@ -298,11 +299,12 @@ class MooredSource(AidingSource):
     def gyro_drift_scale(self) -> float:
         """Factor on the gyro drift's σ the blocks' mean velocity asks for
         (:mod:`buoy_nav.mean_velocity_watch`)."""
-        return self._velocity_watch.scale
+        return self._drift_watch.scale
 
     def take_covariance_factor(self) -> float:
+        """The larger of the two watches' variance factors found since last asked."""
         return max(
-            self._velocity_watch.take_covariance_factor(),
+            self._drift_watch.take_covariance_factor(),
             self._noise_watch.take_covariance_factor(),
         )
 
@@ -312,10 +314,10 @@ class MooredSource(AidingSource):
         return self._noise_watch.scale
 
     def restart(self) -> None:
-        """Forget the anchor and the mean velocity's block in progress (after a realignment);
-        the gyro's drift stays as widened, a property of the gyro."""
+        """Forget the anchor and the mean velocity's blocks in progress (after a realignment);
+        the gyro's drift and the velocity's noise stay as widened, properties of the sensors."""
         self._anchor = None
-        self._velocity_watch.restart()
+        self._drift_watch.restart()
         self._noise_watch.restart()
         self.next_due_s = -math.inf
 
@@ -331,13 +333,13 @@ class MooredSource(AidingSource):
         if self._anchor is None or fix_age_s <= self._gnss_timeout_s:
             self._anchor = position
             self._anchor_t_s = t_s
-            self._velocity_watch.restart()
+            self._drift_watch.restart()
             self._noise_watch.restart()
             return None
-        if self._velocity_watch.add(t_s, state.velocity_enu_mps, velocity_covariance_m2s2):
-            self._drift_changed = True
+        if self._drift_watch.add(t_s, state.velocity_enu_mps, velocity_covariance_m2s2):
+            self._watches_changed = True
         if self._noise_watch.add(t_s, state.velocity_enu_mps, velocity_covariance_m2s2):
-            self._drift_changed = True
+            self._watches_changed = True
         weight = -math.expm1(-(t_s - self._anchor_t_s) / self._time_constant_s)
         self._anchor = self._anchor + weight * (position - self._anchor)
         self._anchor_t_s = t_s
