@@ -51,9 +51,9 @@ class AidedNavigation:
         self._propagation_interval_s = config.covariance_propagation_interval_s
         self._imu_model = imu_model
         self.gyro_drift_scale = 1.0
+        """Factor on the σ of the gyro's drift in the process noise (the aiding sources')."""
         self.accel_noise_scale = 1.0
         """Factor on the σ of the accelerometer's velocity random walk (the sources')."""
-        """Factor on the σ of the gyro's drift in the process noise (the aiding sources')."""
         self._recorder = recorder
         recorder.begin_segment(t_s, self.kalman.covariance)
 

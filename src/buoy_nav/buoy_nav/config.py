@@ -380,8 +380,8 @@ class FusionConfig:
     )
     moored_gyro_drift_scale_limit: float = parameter(
         50.0,
-        meaning="largest factor by which a moored buoy's mean velocity over minutes may widen "
-        "the σ of the gyro's drift, gyro_bias_instability_deg_h (1: never widened)",
+        meaning="largest factor by which a moored buoy's mean velocity over 30-s blocks may "
+        "widen the σ of the gyro's drift, gyro_bias_instability_deg_h (1: never widened)",
         rule=at_least(1),
     )
     moored_velocity_noise_scale_limit: float = parameter(

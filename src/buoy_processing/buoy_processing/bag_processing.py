@@ -622,13 +622,8 @@ def process_bag(
         fusion, topic_counts, statements = run_fusion(run, corrections)
         duration_s = reader.duration_s
     facts = facts_of_run.facts
-    # Made by the bag's writer, unless no bag was written.
-    Path(out_bag).parent.mkdir(parents=True, exist_ok=True)
-    summaries = write_products_csvs(corrections, csv_paths, facts)
-    if netcdf_path is not None:
-        _write_netcdf(
-            netcdf_path, corrections, facts, in_bag, history, netcdf_attributes, overwrite
-        )
+    netcdf = _NetcdfRequest(netcdf_path, in_bag, history, netcdf_attributes, overwrite)
+    summaries = _write_products(corrections, facts, out_bag, csv_paths, netcdf)
     return ProcessSummary(
         **summaries,
         topic_counts=topic_counts,
@@ -639,6 +634,35 @@ def process_bag(
         facts=facts,
         statements=statements,
     )
+
+
+class _NetcdfRequest(NamedTuple):
+    """What :func:`process_bag` was asked of the NetCDF file (``path`` None: no file)."""
+
+    path: object
+    in_bag: object
+    history: str
+    attributes: dict[str, str] | None
+    overwrite: bool
+
+
+def _write_products(corrections, facts, out_bag, csv_paths, netcdf: _NetcdfRequest) -> dict:
+    """The products CSVs beside ``out_bag`` and the NetCDF file ``netcdf`` asks for; the
+    products' summaries."""
+    # Made by the bag's writer, unless no bag was written.
+    Path(out_bag).parent.mkdir(parents=True, exist_ok=True)
+    summaries = write_products_csvs(corrections, csv_paths, facts)
+    if netcdf.path is not None:
+        _write_netcdf(
+            netcdf.path,
+            corrections,
+            facts,
+            netcdf.in_bag,
+            netcdf.history,
+            netcdf.attributes,
+            netcdf.overwrite,
+        )
+    return summaries
 
 
 @dataclass
