@@ -54,6 +54,20 @@ def test_an_uncalibrated_magnetometer_never_gives_the_filter_its_heading():
     assert solutions == []
 
 
+def test_an_uncalibrated_magnetometer_is_not_trusted_for_agreeing_in_strength_alone():
+    """Set (e) uncalibrated: the levelling of a drifting buoy starts again while the GNSS
+    velocity settles, and in between only the field's strength can be judged, which this
+    sensor's iron leaves within tolerance. Those fields must not vouch for its heading (70° off
+    here): no solution's yaw is beyond five of its stated σ, and the alignment waits for fields
+    judged in strength and dip."""
+    scenario, truth, messages = scenario_messages("set_e_imperfect", 60.0)
+    engine, solutions, times, _ = fuse(single_antenna_config(), messages, scenario)
+    assert engine.health().counters["magnetometer"].rejected[Reason.MAGNETIC_FIELD_INCONSISTENT]
+    if solutions:
+        yaw_errors = np.abs(euler_errors_deg(solutions, truth, times)[:, 2])
+        assert np.all(yaw_errors <= 5.0 * attitude_sigma_deg(solutions)[:, 2])
+
+
 def test_a_calibrated_magnetometer_is_never_suspended():
     """Set (b) with the simulated iron undone by the fusion's calibration: the field agrees
     with the Earth's and the magnetometer with the filter; it is never suspended."""

@@ -40,9 +40,15 @@ from buoy_nav.aiding.base import (
     floored_covariance,
 )
 from buoy_nav.aiding.gnss_velocity import predicted_antenna_velocity_enu_mps
+from buoy_nav.alignment import InMotionAligner
 from buoy_nav.antenna_geometry import baseline_azimuth_rad, horizontal_fraction
 from buoy_nav.config import FusionConfig
-from buoy_nav.error_state_filter import ERROR_STATES, NavState, inject_error_state
+from buoy_nav.error_state_filter import (
+    ERROR_STATES,
+    ImuErrorModel,
+    NavState,
+    inject_error_state,
+)
 from buoy_nav.geomagnetism import wmm_field_enu_t, wmm_field_range_along_parallel
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_euler, wrap_angle
 from buoy_nav.sensor_sets import SensorSets
@@ -577,3 +583,39 @@ def test_the_magnetometer_refuses_a_field_unlike_the_earths(scale, tilt_deg, agr
         assert abs(model.innovation[0]) < 1e-6
     else:
         assert model == Reason.MAGNETIC_FIELD_INCONSISTENT
+
+
+def test_only_a_field_judged_in_strength_and_dip_counts_toward_the_magnetometers_alignment():
+    """Before the levelling is done the field's strength alone can be judged. A field of the
+    Earth's strength whose dip is 25° off (the hard iron of an uncalibrated sensor) passes that;
+    such passes must not count as agreement, or the first levelled field that agrees (as an
+    uncalibrated field does at some headings) would give the filter its heading. Only fields
+    judged whole count: the alignment completes after a window of them, not before."""
+    config = FusionConfig(site_latitude_deg=35.0, site_longitude_deg=120.0)
+    source = MagnetometerSource(config, ERROR_STATES)
+    aligner = InMotionAligner(config, ImuErrorModel.from_config(config))
+    latitude = math.radians(35.0)
+    yaw = Rotation.from_euler("z", 40.0, degrees=True)
+    field_enu = np.array(wmm_field_enu_t(latitude, math.radians(120.0), T_2026_S))
+    axis = np.cross(field_enu, (0.0, 0.0, 1.0))
+    bent = Rotation.from_rotvec(math.radians(25.0) * axis / np.linalg.norm(axis))
+    bent_field_body = yaw.inv().apply(bent.apply(field_enu))
+    true_field_body = yaw.inv().apply(field_enu)
+    gyro = yaw.inv().apply(earth.earth_rate_enu_rad_s(latitude))
+    force = yaw.inv().apply((0.0, 0.0, earth.normal_gravity_mps2(latitude, 0.0)))
+    window = config.source_health_rule.min_samples
+
+    def offer(t_s, field_body):
+        return source.align(aligner, t_s, MagneticField(field_body, 0.0, T_2026_S + t_s), gyro)
+
+    t_s = 0.0
+    while aligner.levelled_rotation() is None:
+        assert offer(t_s, bent_field_body) is None  # the strength agrees
+        for _ in range(10):
+            aligner.add_motion(0.01, gyro, gyro, force, force)
+        t_s += 0.1
+        assert t_s < 120.0
+    assert t_s > 0.1 * window
+    offers = [offer(t_s + 0.1 * k, true_field_body) for k in range(window + 1)]
+    assert all(result is None for result in offers[: window - 1])
+    assert offers[-1] is not None and not isinstance(offers[-1], Reason)

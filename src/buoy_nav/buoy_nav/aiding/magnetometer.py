@@ -118,7 +118,8 @@ class MagnetometerSource(AidingSource):
         self._alignment_field_checks: deque[bool] = deque(maxlen=rule.min_samples)
         """Whether each of the recent fields offered to the alignment disagreed with the
         Earth's: the alignment trusts the magnetometer only as a suspended source would be
-        resumed, after ``min_samples`` fields of which no more than ``resume_share`` disagreed."""
+        resumed, after ``min_samples`` fields judged in strength and dip of which no more than
+        ``resume_share`` disagreed."""
 
     @classmethod
     def enabled_by(cls, config) -> bool:
@@ -259,7 +260,10 @@ class MagnetometerSource(AidingSource):
             measurement.field_body_t if levelled is None else levelled @ measurement.field_body_t
         )
         refusal = self.field_refusal(field, *place, measurement.t_s, judge_dip=levelled is not None)
-        self._alignment_field_checks.append(refusal is not None)
+        # A strength that agrees says nothing of the dip, which hard iron bends as much: only a
+        # field judged whole counts as agreeing, while one that fails either way counts against.
+        if refusal is not None or levelled is not None:
+            self._alignment_field_checks.append(refusal is not None)
         if refusal is not None:
             return refusal
         if levelled is None or not self._field_agreed_long_enough():
