@@ -221,6 +221,11 @@ def with_start(column_map: ColumnMap, start_ns: int | None) -> ColumnMap:
     """``column_map`` with the record's start given on the command line (None: the map's)."""
     if start_ns is None:
         return column_map
+    if column_map.time.calendar:
+        raise MapError(
+            "--start: the record writes each sample's date and time (time.calendar), so its "
+            "start is its own"
+        )
     time = dataclasses.replace(
         column_map.time, epoch_ns=start_ns, start_source=START_FROM_COMMAND_LINE
     )

@@ -118,9 +118,15 @@ class Field:
             return np.where(self.screen(values).rejected, np.nan, values * scale + offset)
 
 
+CALENDAR_PARTS = ("year", "month", "day", "hour", "minute", "second", "millisecond")
+"""The parts of a stamp written as a calendar date and time of day (UTC), in order: each a
+column; ``millisecond`` may be left out, and ``second`` may carry a fraction."""
+
+
 @dataclass(frozen=True)
 class TimeSpec:
-    """Sample times: a stamp column (unit, epoch) or a start time and a rate."""
+    """Sample times: a stamp column (unit, epoch), a calendar date and time in parts, or a
+    start time and a rate."""
 
     stamp: Field | None
     epoch_ns: int | None
@@ -131,6 +137,9 @@ class TimeSpec:
     start_source: str = START_FROM_MAP
     """Who said when the record starts: ``START_FROM_MAP``, ``START_FROM_COMMAND_LINE`` or
     ``START_FROM_TIME_COLUMN``."""
+    calendar: tuple[Field, ...] = ()
+    """The columns of the stamp's calendar parts (:data:`CALENDAR_PARTS`, named
+    ``time.calendar.<part>``), when the record writes its stamps so."""
 
 
 @dataclass(frozen=True)
@@ -162,7 +171,11 @@ class ColumnMap:
     def fields(self) -> list[Field]:
         groups = (self.wind, self.angular_rate, self.specific_force, self.ahrs_angles)
         singles = (self.time.stamp, self.sonic_temperature, self.speed_of_sound)
-        return [f for group in groups if group for f in group] + [f for f in singles if f]
+        return [
+            *(f for group in groups if group for f in group),
+            *(f for f in singles if f),
+            *self.time.calendar,
+        ]
 
 
 def axes_to_body(axes: str, key: str) -> np.ndarray:
@@ -269,15 +282,47 @@ def iso8601_ns(value, key: str) -> int:
     return (since_epoch // dt.timedelta(microseconds=1)) * 1000
 
 
+def _calendar(spec, binary: bool) -> tuple[Field, ...]:
+    """The columns of a stamp's calendar parts (MapError naming a missing or unknown part)."""
+    spec = _require_mapping(spec, "time.calendar")
+    unknown = sorted(set(spec) - set(CALENDAR_PARTS))
+    if unknown:
+        raise MapError(
+            f"time.calendar: unknown parts {', '.join(map(str, unknown))} (the parts are "
+            f"{', '.join(CALENDAR_PARTS)})"
+        )
+    missing = [part for part in CALENDAR_PARTS[:-1] if part not in spec]
+    if missing:
+        raise MapError(f"time.calendar: give the column of {', '.join(missing)}")
+    return tuple(
+        Field(
+            f"time.calendar.{part}",
+            _column(spec[part], f"time.calendar.{part}", binary),
+            "calendar",
+            "",
+        )
+        for part in CALENDAR_PARTS
+        if part in spec
+    )
+
+
 def _time(spec, binary: bool) -> TimeSpec:
     spec = _require_mapping(spec, "time")
+    if "calendar" in spec:
+        # Absolute stamps, as a time column of Unix stamps: its epoch is 1970.
+        return TimeSpec(
+            None, 0, math.nan, START_FROM_TIME_COLUMN, _calendar(spec["calendar"], binary)
+        )
     if "column" in spec:
         stamp = _field(spec, "time", "time", binary)
         if "epoch" not in spec:
             return TimeSpec(stamp, 0, math.nan, START_FROM_TIME_COLUMN)
         return TimeSpec(stamp, iso8601_ns(spec["epoch"], "time.epoch"), math.nan, START_FROM_MAP)
     if "rate_hz" not in spec:
-        raise MapError("time: give either column (with unit and epoch) or rate_hz (and start)")
+        raise MapError(
+            "time: give a column (with unit and epoch), the calendar parts' columns, or rate_hz "
+            "(and start)"
+        )
     rate_hz = _number(spec["rate_hz"], "time.rate_hz")
     if not rate_hz > 0:
         raise MapError(f"time.rate_hz: must be positive, got {rate_hz}")

@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from buoy_common.records.column_map import (
+    CALENDAR_PARTS,
     SPEED_OF_SOUND_TO_KELVIN_S2_M2,
     STANDARD_GRAVITY_MPS2,
     ColumnMap,
@@ -173,6 +174,8 @@ def sample_times_ns(table, column_map: ColumnMap, count: int) -> np.ndarray:
             "time: the record carries no time and the map gives no start: give the record's "
             "start, e.g. --start 2014-12-18T00:00:00Z"
         )
+    if spec.calendar:
+        return spec.epoch_ns + calendar_times_ns(table, spec.calendar)
     if spec.stamp is not None:
         offsets_s = spec.stamp.to_si(table[spec.stamp.name])
     else:
@@ -182,6 +185,39 @@ def sample_times_ns(table, column_map: ColumnMap, count: int) -> np.ndarray:
             f"time: {np.count_nonzero(~np.isfinite(offsets_s))} samples have no valid time"
         )
     return spec.epoch_ns + np.round(offsets_s * 1e9).astype(np.int64)
+
+
+def calendar_times_ns(table, parts) -> np.ndarray:
+    """Nanoseconds since the Unix epoch of stamps written as a calendar date and time of day,
+    UTC (``parts``: the fields of :data:`~.column_map.CALENDAR_PARTS` the map gives). MapError
+    naming the first sample whose parts are no date and time (a month 13, a 31 April, a
+    fractional day)."""
+    values = {field.name.rsplit(".", 1)[1]: table[field.name] for field in parts}
+    year, month, day, hour, minute, second = (values[part] for part in CALENDAR_PARTS[:-1])
+    millisecond = values.get("millisecond", np.zeros_like(second))
+    whole = np.stack([year, month, day, hour, minute])
+    with np.errstate(invalid="ignore"):
+        valid = (
+            np.all(np.isfinite(whole) & (whole == np.round(whole)), axis=0)
+            & (month >= 1) & (month <= 12) & (day >= 1) & (day <= 31)
+            & (hour >= 0) & (hour < 24) & (minute >= 0) & (minute < 60)
+            & (second >= 0) & (second < 61) & (millisecond >= 0) & (millisecond < 1000)
+        )  # fmt: skip
+    months = np.full(year.shape, np.datetime64("NaT", "M"))
+    since_1970 = (year[valid] - 1970) * 12 + month[valid] - 1
+    months[valid] = since_1970.astype(np.int64).astype("datetime64[M]")
+    days = months.astype("datetime64[D]") + np.where(valid, day - 1, 0).astype(np.int64)
+    valid &= days.astype("datetime64[M]") == months
+    if not valid.all():
+        first = int(np.flatnonzero(~valid)[0])
+        raise MapError(
+            f"time: {np.count_nonzero(~valid)} samples have no valid calendar time, the first "
+            f"sample {first + 1} ({', '.join(f'{p} {values[p][first]:g}' for p in values)})"
+        )
+    seconds = hour * 3600.0 + minute * 60.0 + second
+    return days.astype("datetime64[ns]").astype(np.int64) + np.round(
+        seconds * 1e9 + millisecond * 1e6
+    ).astype(np.int64)
 
 
 def decode(table: dict[str, np.ndarray], column_map: ColumnMap) -> ContractSamples:
