@@ -89,11 +89,12 @@ def import_and_process(record: Path, work: Path, parameter_files) -> Path:
 
 
 def import_and_process_with_summary(
-    record: Path, work: Path, parameter_files
+    record: Path, work: Path, parameter_files, column_map: Path = COLUMN_MAP
 ) -> tuple[Path, ProcessSummary]:
-    """:func:`import_and_process`, with what ``process_bag`` says of the run."""
+    """:func:`import_and_process`, with what ``process_bag`` says of the run (``column_map``:
+    the record's, the text test record's by default)."""
     imported, processed = work / "fdchp", work / "fdchp_processed"
-    import_records(record, COLUMN_MAP, imported, overwrite=True)
+    import_records(record, column_map, imported, overwrite=True)
     files = [str(path) for path in parameter_files]
     with contextlib.redirect_stdout(io.StringIO()):
         summary = process_bag(

@@ -19,7 +19,8 @@ does, and prints over the samples Edson keeps (30 s trimmed at each end):
   RMS of its block means for blocks of 5 to 60 s, as the mean-velocity watch judges its 30-s
   blocks (the excursion term from ``fusion.moored_position_sigma_horizontal_m``).
 
-    python -m tools.fdchp_velocity_sigma [--rows N] [--params-file YAML ...]
+    python -m tools.fdchp_velocity_sigma [--record test_record|2014-12-18T18] [--rows N]
+        [--params-file YAML ...]
 
 ``--rows 6000`` processes the first 10 min only, as the test does. Results go to
 out/bench/fdchp_velocity_sigma.json.
@@ -30,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import sys
 
 import numpy as np
 from scipy import signal, stats
@@ -44,20 +44,22 @@ from buoy_common.contract import (
 )
 from buoy_nav.config import fusion_config_from_files
 from tools.bench_fdchp import (
-    ENU_FROM_NWU,
     KEPT,
     OUT_DIR,
     PARAMS,
     RATE_HZ,
-    RECORD,
-    REPO,
     SLOW_HZ,
     below,
     import_and_process_with_summary,
 )
+from tools.ooi_records import (
+    OOI_RECORDS,
+    OoiRecord,
+    edsons_largest_speed_change_mps,
+    first_rows,
+    horizontal_speed_mps,
+)
 
-EDSON_WIND_NWU = REPO / "tests/data/ooi_fdchp/edson_corrected_wind_nwu.npy"
-"""Edson's corrected wind of the kept rows (``tools/edson_fdchp.py --save-wind``)."""
 WARNING = re.compile(r"mooring innovations ([\d.]+)× .*?σ widened ([\d.]+)×")
 DRIFT_WARNING = re.compile(
     r"mean velocity over \d+-s blocks is ([\d.]+)× .*?gyro's drift widened ([\d.]+)×"
@@ -65,10 +67,6 @@ DRIFT_WARNING = re.compile(
 NOISE_WARNING = re.compile(
     r"mean velocity over \d+-s blocks is ([\d.]+)× .*?velocity's noise widened ([\d.]+)×"
 )
-
-
-def horizontal_speed_mps(vectors: np.ndarray) -> np.ndarray:
-    return np.hypot(vectors[:, 0], vectors[:, 1])
 
 
 def velocity_and_sigma(reader: BagReader) -> tuple[np.ndarray, np.ndarray]:
@@ -95,13 +93,6 @@ def wind_and_sigma(reader: BagReader) -> tuple[np.ndarray, np.ndarray, np.ndarra
         corrected.append((linear.x, linear.y, linear.z))
         sigma.append(np.sqrt(max(twist.covariance[0], twist.covariance[7])))
     return np.array(measured), np.array(corrected), np.array(sigma)
-
-
-def edsons_largest_speed_change_mps() -> float:
-    """The largest change of horizontal speed Edson's correction makes over the kept rows."""
-    edson = np.load(EDSON_WIND_NWU) @ ENU_FROM_NWU.T
-    measured = np.loadtxt(RECORD, delimiter=",")[KEPT, 0:3] * 0.01  # cm/s
-    return float(np.max(np.abs(horizontal_speed_mps(edson) - horizontal_speed_mps(measured))))
 
 
 def velocity_figures(velocity: np.ndarray, sigma: np.ndarray) -> dict:
@@ -187,12 +178,14 @@ def up_specific_force_mps2(imported) -> np.ndarray:
         )
 
 
-def criterion_figures(measured: np.ndarray, corrected: np.ndarray, sigma: np.ndarray) -> dict:
-    """Validity and the speed-change criterion over every processed sample (without a valid
-    sample, the counts alone)."""
+def criterion_figures(
+    record: OoiRecord, measured: np.ndarray, corrected: np.ndarray, sigma: np.ndarray
+) -> dict:
+    """Validity and the speed-change criterion over every processed sample of ``record``
+    (without a valid sample, the counts alone)."""
     valid = np.isfinite(corrected).all(axis=1)
     change = np.abs(horizontal_speed_mps(corrected) - horizontal_speed_mps(measured))[valid]
-    margin = change - (edsons_largest_speed_change_mps() + 3.0 * sigma[valid])
+    margin = change - (edsons_largest_speed_change_mps(record) + 3.0 * sigma[valid])
     figures = {"samples": int(valid.size), "valid": int(valid.sum()), "beyond_plausible": 0}
     if not change.size:
         return figures
@@ -215,24 +208,26 @@ def mooring_warnings(log: str, pattern: re.Pattern = WARNING) -> dict:
     }
 
 
-def measure(rows: int | None, parameter_files: list[str]) -> dict:
+def measure(rows: int | None, parameter_files: list[str], name: str = "test_record") -> dict:
+    """The figures of the module docstring for the OOI record ``name`` (its first ``rows``
+    rows; None: all), processed with ``ooi_fdchp_params.yaml`` and ``parameter_files``."""
+    record = OOI_RECORDS[name]
     work = OUT_DIR / "fdchp_velocity_sigma"
     work.mkdir(parents=True, exist_ok=True)
-    record = RECORD
-    if rows is not None:
-        record = work / "fdchp_rows.dat"
-        record.write_text("".join(RECORD.read_text().splitlines(keepends=True)[:rows]))
-    processed, summary = import_and_process_with_summary(record, work, [PARAMS, *parameter_files])
+    processed, summary = import_and_process_with_summary(
+        first_rows(record, rows, work), work, [PARAMS, *parameter_files], record.column_map
+    )
     with BagReader(processed) as reader:
         velocity, velocity_sigma = velocity_and_sigma(reader)
         measured, corrected, wind_sigma = wind_and_sigma(reader)
     files = [str(path) for path in (PARAMS, *parameter_files)]
     excursion_sigma_m = fusion_config_from_files(files).moored_position_sigma_horizontal_m
     return {
+        "record": name,
         "rows": rows,
         "params_files": [str(PARAMS), *parameter_files],
         "velocity": velocity_figures(velocity, velocity_sigma),
-        "wind": criterion_figures(measured, corrected, wind_sigma),
+        "wind": criterion_figures(record, measured, corrected, wind_sigma),
         "mooring_warnings": mooring_warnings("\n".join(summary.fusion_lines)),
         "gyro_drift_widenings": mooring_warnings("\n".join(summary.fusion_lines), DRIFT_WARNING),
         "velocity_noise_widenings": mooring_warnings(
@@ -254,11 +249,14 @@ def main(argv=None) -> None:
         default=[],
         help="ROS parameter YAML applied after ooi_fdchp_params.yaml (repeatable)",
     )
+    parser.add_argument(
+        "--record",
+        choices=sorted(OOI_RECORDS),
+        default="test_record",
+        help="which OOI record: the text test record, or the binary records of 2014-12-18 18:00",
+    )
     arguments = parser.parse_args(argv)
-    if not RECORD.is_file():
-        print(f"fdchp_velocity_sigma: no record at {RECORD} (set FDCHP_RECORD)", file=sys.stderr)
-        sys.exit(2)
-    result = measure(arguments.rows, arguments.params_file)
+    result = measure(arguments.rows, arguments.params_file, arguments.record)
     print(json.dumps(result, indent=2))
     (OUT_DIR / "fdchp_velocity_sigma.json").write_text(json.dumps(result, indent=2))
 
