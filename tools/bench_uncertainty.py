@@ -130,6 +130,9 @@ CASES = {
         (),
         (MOORED,),
     ),
+    "measured_not_moored": Case(
+        "measured_moored_no_gnss", "measured: as above, fusion.moored false"
+    ),
 }
 
 
@@ -162,10 +165,10 @@ def write_parameters(directory: Path, scenario, case: Case) -> str:
     return str(path)
 
 
-def run_case(key: str, duration_s: float) -> dict:
-    """Simulate, process and judge one case (in a worker)."""
+def run_case(key: str, duration_s: float, work: Path = WORK) -> dict:
+    """Simulate, process and judge one case (in a worker), its bags under ``work``/``key``."""
     case = CASES[key]
-    directory = WORK / key
+    directory = work / key
     directory.mkdir(parents=True, exist_ok=True)
     overrides = (*case.overrides, f"duration_s={duration_s}")
     scenario = load_scenario(case.scenario, list(overrides), None)
@@ -286,9 +289,10 @@ def judge_wind(out_bag: Path) -> dict:
     return errors.summary(int(errors.stamps_ns[0]), int(errors.stamps_ns[-1]) + 1)
 
 
-def _roll_pitch_rms_deg(bag: Path, topic: str, truth) -> list[float] | None:
-    """RMS roll and pitch error (deg) of the orientations on ``topic`` of ``bag`` against the
-    truth, after :data:`ATTITUDE_SETTLING_S`; None when the bag has none."""
+def _attitude_errors_deg(bag: Path, topic: str, truth) -> np.ndarray | None:
+    """(N, 3) roll, pitch and heading errors (deg, ZYX of R_estimated R_true⁻¹) of the
+    orientations on ``topic`` of ``bag`` against the truth, after :data:`ATTITUDE_SETTLING_S`;
+    None when the bag has none."""
     with BagReader(bag) as reader:
         try:
             messages = [reader.decode(r) for r in reader.messages([topic])]
@@ -305,7 +309,13 @@ def _roll_pitch_rms_deg(bag: Path, topic: str, truth) -> list[float] | None:
     seconds = (truth_ns - truth_ns[0]) * 1e-9
     true = Slerp(seconds, truth_attitude)((stamps[keep] - truth_ns[0]) * 1e-9)
     error = (Rotation.from_quat(quats[keep]) * true.inv()).as_euler("ZYX", degrees=True)
-    return np.sqrt((error[:, [2, 1]] ** 2).mean(axis=0)).tolist()
+    return error[:, ::-1]
+
+
+def _roll_pitch_rms_deg(errors_deg: np.ndarray | None) -> list[float] | None:
+    if errors_deg is None:
+        return None
+    return np.sqrt((errors_deg[:, :2] ** 2).mean(axis=0)).tolist()
 
 
 def _q(message):
@@ -314,16 +324,21 @@ def _q(message):
 
 
 def judge_attitude(in_bag: Path, out_bag: Path) -> dict:
-    """RMS roll and pitch errors (deg) of the fusion and of the motion pack's own attitude."""
+    """RMS roll and pitch errors (deg) of the fusion and of the motion pack's own attitude, and
+    the fusion's largest roll, pitch and heading errors (deg), after the settling time."""
     with BagReader(in_bag) as reader:
         truth_messages = [reader.decode(r) for r in reader.messages([TRUTH_ODOMETRY_TOPIC])]
     truth = (
         np.array([stamp_to_ns(m.header.stamp) for m in truth_messages]),
         Rotation.from_quat([_quaternion(_q(m)) for m in truth_messages]),
     )
+    fused = _attitude_errors_deg(out_bag, NAV_ODOMETRY_TOPIC, truth)
     return {
-        "fused_roll_pitch_rms_deg": _roll_pitch_rms_deg(out_bag, NAV_ODOMETRY_TOPIC, truth),
-        "motion_pack_roll_pitch_rms_deg": _roll_pitch_rms_deg(in_bag, AHRS_TOPIC, truth),
+        "fused_roll_pitch_rms_deg": _roll_pitch_rms_deg(fused),
+        "fused_max_error_deg": None if fused is None else np.abs(fused).max(axis=0).tolist(),
+        "motion_pack_roll_pitch_rms_deg": _roll_pitch_rms_deg(
+            _attitude_errors_deg(in_bag, AHRS_TOPIC, truth)
+        ),
     }
 
 
@@ -345,9 +360,10 @@ def _figure(values, digits: int = 3) -> str:
 def print_table(results: dict) -> None:
     print(
         "| case | valid | beyond 3σ (E/N/U) | beyond 5σ | RMS error m/s | max error m/s | "
-        "median σ m/s | roll/pitch RMS deg: fused, pack | aligned | suspended |"
+        "median σ m/s | roll/pitch RMS deg: fused, pack | fused max error deg: roll/pitch/"
+        "heading | aligned | suspended |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for key, result in results.items():
         wind, attitude = result["wind"], result["attitude"]
         print(
@@ -357,6 +373,7 @@ def print_table(results: dict) -> None:
             f"{_figure(wind['median_sigma_mps'], 2)} | "
             f"{_figure(attitude['fused_roll_pitch_rms_deg'], 2)}, "
             f"{_figure(attitude['motion_pack_roll_pitch_rms_deg'], 2)} | "
+            f"{_figure(attitude['fused_max_error_deg'], 2)} | "
             f"{'yes' if result['aligned'] else 'never'} | "
             f"{'; '.join(result['suspended']) or '–'} |"
         )
