@@ -46,6 +46,8 @@ from sensor_sim.scenario import load_scenario
 from sensor_sim.simulate_bag import parse_arguments as simulate_arguments
 from sensor_sim.simulate_bag import simulate
 from tools.bench_plan import PROCESSING_PARAMS, REPO, SIMULATION_PARAMS
+from tools.fdchp_simulated import PARAMS as FDCHP_PARAMS
+from tools.fdchp_simulated import SEAS
 from wind_comp.config import compensator_config_from_files
 
 OUT = REPO / "out" / "bench"
@@ -76,6 +78,41 @@ class Case:
     description: str
     overrides: tuple[str, ...] = ()
     fusion_lines: tuple[str, ...] = ()
+    buoy_params: tuple[str, ...] = ()
+    """Parameter files of the buoy after the shipped ones, for the simulator and the fusion
+    alike (the simulated FDCHP's geometry and rates)."""
+
+
+GYRO_BIAS_INSTABILITY_DEG_H = 150.0
+"""How much the FDCHP-like buoy's gyro wanders (the fusion is told its default, 5 °/h)."""
+GYRO_BIAS_CORRELATION_TIME_S = 100.0
+SIGNIFICANT_WAVE_HEIGHT_M = 0.3
+"""The short sea of the OOI record."""
+FDCHP_LIKE_MOORED_BUOY = (
+    "sensors.gnss.receiver=none",
+    "current=null",
+    "sensors.magnetometer.fitted=false",
+    "sensors.ahrs.fitted=true",
+    "sensors.ahrs.yaw_reference=magnetic_north",
+    "sensors.ahrs.sample_every=1",
+    "sensors.ahrs.error_deg=1.5",
+    "sensors.ahrs.claimed_sigma_deg=[1.0, 1.0, 2.0]",
+    "sensors.rates.imu_hz=10.0",
+    "waves.peak_period_s=2.0",
+    f"waves.significant_height_m={SIGNIFICANT_WAVE_HEIGHT_M}",
+    "waves.max_tilt_deg=10.0",
+    f"sensors.imu.gyro_bias_instability_deg_h={GYRO_BIAS_INSTABILITY_DEG_H}",
+    f"sensors.imu.gyro_bias_correlation_time_s={GYRO_BIAS_CORRELATION_TIME_S}",
+)
+"""An FDCHP-like moored buoy: a motion pack at 10 Hz whose slow attitude is off by 1.5° while it
+claims 1°, no magnetometer, no GNSS, the OOI record's short sea, a gyro wandering 30 times
+more than the fusion's default model."""
+
+
+def fdchp_case(sea: str, description: str) -> Case:
+    """A simulated FDCHP in one of :data:`tools.fdchp_simulated.SEAS`."""
+    scenario, _, overrides = SEAS[sea]
+    return Case(scenario, description, tuple(overrides), buoy_params=(str(FDCHP_PARAMS),))
 
 
 CASES = {
@@ -133,6 +170,18 @@ CASES = {
     "measured_not_moored": Case(
         "measured_moored_no_gnss", "measured: as above, fusion.moored false"
     ),
+    "fdchp_sway": fdchp_case(
+        "sway_6_to_9_s", "simulated FDCHP: sonic 0.753 m above a motion pack, 10 Hz, moored"
+    ),
+    "fdchp_wandering_gyro": Case(
+        "open_ocean",
+        "FDCHP-like, a gyro wandering 150 °/h told the default 5 °/h",
+        FDCHP_LIKE_MOORED_BUOY,
+        (MOORED, "fusion.ahrs_lag_s: 0.2"),
+    ),
+    "fdchp_short_sea": fdchp_case(
+        "jonswap_tp_2_s", "simulated FDCHP in a short sea (Hs 0.3 m, Tp 2 s), as the OOI record's"
+    ),
 }
 
 
@@ -179,12 +228,16 @@ def run_case(key: str, duration_s: float, work: Path = WORK) -> dict:
     # A scenario that places the sensors itself is simulated as it says (parameter files would
     # override its places); the others as the shipped buoy, which processing assumes.
     if scenario.sensors.extrinsics is None:
-        for params in SIMULATION_PARAMS:
+        for params in (*SIMULATION_PARAMS, *case.buoy_params):
             arguments += ["--params-file", params]
     log = io.StringIO()
     with contextlib.redirect_stderr(log), contextlib.redirect_stdout(log):
         simulate(simulate_arguments(arguments))
-        params = [*PROCESSING_PARAMS, write_parameters(directory, scenario, case)]
+        params = [
+            *PROCESSING_PARAMS,
+            *case.buoy_params,
+            write_parameters(directory, scenario, case),
+        ]
         summary = process_bag(
             str(in_bag),
             str(out_bag),

@@ -45,31 +45,17 @@ from buoy_nav.motion_pack_assessment import (
     uniform_grid,
 )
 from buoy_nav.source_health import HealthChange
+from tools.bench_uncertainty import (
+    FDCHP_LIKE_MOORED_BUOY,
+    GYRO_BIAS_CORRELATION_TIME_S,
+    GYRO_BIAS_INSTABILITY_DEG_H,
+    SIGNIFICANT_WAVE_HEIGHT_M,
+)
 
 pytestmark = pytest.mark.long
 
 DURATION_S = 600.0
 SETTLING_S = 120.0
-GYRO_BIAS_INSTABILITY_DEG_H = 150.0
-GYRO_BIAS_CORRELATION_TIME_S = 100.0
-SIGNIFICANT_WAVE_HEIGHT_M = 0.3
-FDCHP_LIKE_MOORED_BUOY = (
-    "sensors.gnss.receiver=none",
-    "current=null",
-    "sensors.magnetometer.fitted=false",
-    "sensors.ahrs.fitted=true",
-    "sensors.ahrs.yaw_reference=magnetic_north",
-    "sensors.ahrs.sample_every=1",
-    "sensors.ahrs.error_deg=1.5",
-    "sensors.ahrs.claimed_sigma_deg=[1.0, 1.0, 2.0]",
-    "sensors.rates.imu_hz=10.0",
-    "waves.peak_period_s=2.0",
-    f"waves.significant_height_m={SIGNIFICANT_WAVE_HEIGHT_M}",
-    "waves.max_tilt_deg=10.0",
-    f"sensors.imu.gyro_bias_instability_deg_h={GYRO_BIAS_INSTABILITY_DEG_H}",
-    f"sensors.imu.gyro_bias_correlation_time_s={GYRO_BIAS_CORRELATION_TIME_S}",
-)
-
 SEA_EXCURSION_M = SIGNIFICANT_WAVE_HEIGHT_M / 4.0
 """The sea's 1σ heave, Hs/4."""
 TOO_TIGHT_MOORING_M = 0.02
