@@ -128,7 +128,7 @@ class AidingGates:
                 self._judge(source, t_s, True, outcome)
                 continue
             gate = kalman.gate(
-                model.innovation, model.jacobian, model.covariance, source.gate_probability
+                model.innovation, model.jacobian, model.gated_covariance, source.gate_probability
             )
             if self._innovation_log is not None:
                 self._innovation_log.append(

@@ -309,6 +309,13 @@ class FusionConfig:
         "local fields",
         rule=POSITIVE,
     )
+    magnetometer_error_correlation_time_s: float = parameter(
+        60.0,
+        unit="s",
+        meaning="how long the magnetic heading's error beyond the sensor noise stays alike (it "
+        "moves with the buoy's heading): closer samples share one error and are weighted so",
+        rule=POSITIVE,
+    )
     magnetometer_full_scale_t: float = parameter(
         8e-4, unit="T", meaning="a component this large is a saturated sample", rule=POSITIVE
     )

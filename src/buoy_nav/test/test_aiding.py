@@ -619,3 +619,36 @@ def test_only_a_field_judged_in_strength_and_dip_counts_toward_the_magnetometers
     offers = [offer(t_s + 0.1 * k, true_field_body) for k in range(window + 1)]
     assert all(result is None for result in offers[: window - 1])
     assert offers[-1] is not None and not isinstance(offers[-1], Reason)
+
+
+@pytest.mark.parametrize("rate_hz", [1.0, 10.0, 50.0])
+def test_the_magnetometers_calibration_error_is_one_samples_worth_per_correlation_time(rate_hz):
+    """The heading's error beyond the sensor noise is shared by the samples of a correlation
+    time: the update weights each sample by their number, so that a correlation time of samples
+    holds one sample's information; the gate takes one sample's variance, and so does the first
+    sample, whose interval is unknown."""
+    config = FusionConfig(magnetometer_error_correlation_time_s=60.0)
+    source = MagnetometerSource(config, ERROR_STATES)
+    rotation = Rotation.from_euler("z", 40.0, degrees=True)
+    field_enu = np.array(wmm_field_enu_t(math.radians(35.0), math.radians(120.0), T_2026_S))
+    field_body = rotation.inv().apply(field_enu)
+    state = NavState(
+        tuple(rotation.as_quat()),
+        (0.0, 0.0, 0.0),
+        math.radians(35.0),
+        math.radians(120.0),
+        0.0,
+        (0.0, 0.0, 0.0),
+        (0.0, 0.0, 0.0),
+    )
+    point = LinearisationPoint(state, rotation.as_matrix(), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    calibration = math.radians(config.magnetometer_heading_sigma_deg) ** 2
+    first = source.model(MagneticField(field_body, 0.0, T_2026_S), point)
+    later = source.model(MagneticField(field_body, 0.0, T_2026_S, 1.0 / rate_hz), point)
+    assert first.covariance[0, 0] == pytest.approx(calibration)
+    assert later.gated_covariance[0, 0] == pytest.approx(calibration)
+    samples_per_correlation_time = 60.0 * rate_hz
+    assert later.covariance[0, 0] == pytest.approx(calibration * samples_per_correlation_time)
+    # n samples of one shared error, weighted so, inform as one sample does
+    information = samples_per_correlation_time / later.covariance[0, 0]
+    assert information == pytest.approx(1.0 / calibration)

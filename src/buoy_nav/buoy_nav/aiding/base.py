@@ -122,12 +122,21 @@ class MeasurementModel:
     innovation: measured − predicted (m,), angles wrapped to (−π, π].
     jacobian: ∂(measurement)/∂(error state), m × number of error states.
     covariance: measurement noise covariance R, m × m.
+    gate_covariance: the noise one sample is gated with, when its error is shared with the
+      samples around it and R weights it for that (None: R). The gate asks whether one sample
+      is what the sensor claims; the update takes only its share of the information.
     """
 
     predicted: np.ndarray
     innovation: np.ndarray
     jacobian: np.ndarray
     covariance: np.ndarray
+    gate_covariance: np.ndarray | None = None
+
+    @property
+    def gated_covariance(self) -> np.ndarray:
+        """The noise the gate takes: :attr:`gate_covariance`, else R."""
+        return self.covariance if self.gate_covariance is None else self.gate_covariance
 
 
 class LinearisationPoint(NamedTuple):

@@ -17,8 +17,19 @@ disturbance can only move the heading and is gated as a heading.
 
 Jacobian under ``R_true = Exp([φ×]) R_nb`` (the same geometry as the antenna heading, with the
 field in place of the baseline): ``∂h/∂φ = (−m_E m_U / ρ², −m_N m_U / ρ², 1)``, ρ² = m_E² + m_N².
-Noise: the sensor's own (``magnetic_field_covariance``, over ρ²) plus
-``magnetometer_heading_sigma_deg`` for what calibration leaves and local fields. A field whose
+Noise: the sensor's own (``magnetic_field_covariance``, over ρ²), white, plus
+``magnetometer_heading_sigma_deg`` for what calibration leaves and local fields. That part is no
+white noise: a residual hard iron turns the heading by an error that depends on the heading
+itself, and the buoy's heading changes over minutes, so consecutive samples share one error.
+Fused as white it would claim a heading √(rate·T) times better than the calibration allows (a
+tenth of its σ after a minute at 1 Hz), and a magnetometer a few degrees off, as an uncalibrated
+one whose field still passes the checks below is, would pull the heading off the motion pack's
+with a σ of a tenth of a degree. It is weighted as the motion pack's error is: one sample's worth
+per ``magnetometer_error_correlation_time_s`` (the variance of each sample times the samples in
+that time). The gate still asks of each sample whether it is what the magnetometer claims (one
+sample's variance): a heading off by more than its calibration allows fails it, and a
+magnetometer that keeps failing is suspended. A yaw reset and the alignment take one sample's
+variance too. A field whose
 horizontal part is under :data:`MIN_HORIZONTAL_FIELD_FRACTION` of its length (near the magnetic
 poles, or a steep tilt) carries no heading (``geometry``).
 
@@ -80,11 +91,13 @@ RESET_AFTER_GATE_RESETS = 100
 
 class MagneticField(NamedTuple):
     """A raw magnetometer sample: field in ``imu_link`` (T), its mean per-axis noise variance
-    (T², 0 when unknown) and its stamp (s, for the geomagnetic model's date)."""
+    (T², 0 when unknown), its stamp (s, for the geomagnetic model's date) and the interval to
+    the previous sample (s; NaN for the first)."""
 
     field_body_t: np.ndarray
     noise_variance_t2: float
     t_s: float
+    interval_s: float = math.nan
 
 
 class MagnetometerSource(AidingSource):
@@ -105,6 +118,8 @@ class MagnetometerSource(AidingSource):
         self._hard_iron_t = np.array(config.magnetometer_hard_iron_t, dtype=float)
         self._soft_iron = np.array(config.magnetometer_soft_iron, dtype=float).reshape(3, 3)
         self._heading_variance_rad2 = math.radians(config.magnetometer_heading_sigma_deg) ** 2
+        self._correlation_s = config.magnetometer_error_correlation_time_s
+        self._last_stamp_s = -math.inf
         self._full_scale_t = config.magnetometer_full_scale_t
         self._declination_deg = config.magnetic_declination_deg
         self._strength_tolerance = config.magnetometer_strength_tolerance
@@ -130,10 +145,15 @@ class MagnetometerSource(AidingSource):
         if covariance.shape != (9,):
             return Reason.MALFORMED
         variance = float(np.mean(covariance[0::4]))
+        t_s = header_seconds(message.header)
+        interval = t_s - self._last_stamp_s
+        if math.isfinite(t_s) and t_s > self._last_stamp_s:
+            self._last_stamp_s = t_s
         return MagneticField(
             vector_of(message.magnetic_field),
             variance if math.isfinite(variance) and variance > 0.0 else 0.0,
-            header_seconds(message.header),
+            t_s,
+            interval if math.isfinite(interval) and interval > 0.0 else math.nan,
         )
 
     def validated(self, measurement: MagneticField) -> MagneticField | Reason:
@@ -147,7 +167,10 @@ class MagnetometerSource(AidingSource):
             return Reason.OUT_OF_RANGE
         variance = float(measurement.noise_variance_t2)
         return MagneticField(
-            calibrated, variance if math.isfinite(variance) else 0.0, float(measurement.t_s)
+            calibrated,
+            variance if math.isfinite(variance) else 0.0,
+            float(measurement.t_s),
+            float(measurement.interval_s),
         )
 
     def magnetic_north_azimuth_rad(self, latitude_rad: float, longitude_rad: float, t_s: float):
@@ -195,8 +218,22 @@ class MagnetometerSource(AidingSource):
             return None
         return field, horizontal_sq
 
-    def _variance(self, measurement: MagneticField, horizontal_sq: float) -> float:
-        return self._heading_variance_rad2 + measurement.noise_variance_t2 / horizontal_sq
+    def _variance(
+        self, measurement: MagneticField, horizontal_sq: float, weighted: bool = False
+    ) -> float:
+        """The heading's variance (rad²) of one sample (``weighted``: with the calibration's
+        part shared over its correlation time, as the filter's update takes it)."""
+        calibration = self._heading_variance_rad2
+        if weighted:
+            calibration *= self._weight(measurement)
+        return calibration + measurement.noise_variance_t2 / horizontal_sq
+
+    def _weight(self, measurement: MagneticField) -> float:
+        """Samples per correlation time: they share one error of the calibration."""
+        interval = measurement.interval_s
+        if not (math.isfinite(interval) and interval > 0.0):
+            return 1.0
+        return max(1.0, self._correlation_s / interval)
 
     def model(self, measurement: MagneticField, point: LinearisationPoint):
         state = point.state
@@ -227,7 +264,8 @@ class MagnetometerSource(AidingSource):
             predicted=np.array((predicted,)),
             innovation=np.array((wrap_angle(target - predicted),)),
             jacobian=jacobian,
-            covariance=np.array([[self._variance(measurement, horizontal_sq)]]),
+            covariance=np.array([[self._variance(measurement, horizontal_sq, weighted=True)]]),
+            gate_covariance=np.array([[self._variance(measurement, horizontal_sq)]]),
         )
 
     def reset(self, measurement: MagneticField, point: LinearisationPoint, model):
