@@ -497,10 +497,8 @@ def test_state_layout_names_every_state_once():
         StateLayout(("dim", 1))
 
 
-def _magnetometer_at(yaw_deg: float, field_body_t):
-    """The magnetometer's model of a field (body, T) on a level buoy at 35° N, 120° E whose
-    yaw is ``yaw_deg`` (ENU)."""
-    source = MagnetometerSource(FusionConfig(), ERROR_STATES)
+def _level_buoy_at(yaw_deg: float) -> LinearisationPoint:
+    """A level buoy at rest at 35° N, 120° E whose yaw is ``yaw_deg`` (ENU)."""
     rotation = Rotation.from_euler("z", yaw_deg, degrees=True)
     state = NavState(
         tuple(rotation.as_quat()),
@@ -511,8 +509,15 @@ def _magnetometer_at(yaw_deg: float, field_body_t):
         (0.0, 0.0, 0.0),
         (0.0, 0.0, 0.0),
     )
-    point = LinearisationPoint(state, rotation.as_matrix(), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-    return source.model(MagneticField(np.asarray(field_body_t), 0.0, T_2026_S), point)
+    return LinearisationPoint(state, rotation.as_matrix(), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+
+
+def _magnetometer_at(yaw_deg: float, field_body_t):
+    """The magnetometer's model of a field (body, T) on a level buoy whose yaw is ``yaw_deg``
+    (ENU)."""
+    source = MagnetometerSource(FusionConfig(), ERROR_STATES)
+    field = MagneticField(np.asarray(field_body_t), 0.0, T_2026_S)
+    return source.model(field, _level_buoy_at(yaw_deg))
 
 
 T_2026_S = 1767225600.0
@@ -629,19 +634,9 @@ def test_the_magnetometers_calibration_error_is_one_samples_worth_per_correlatio
     sample, whose interval is unknown."""
     config = FusionConfig(magnetometer_error_correlation_time_s=60.0)
     source = MagnetometerSource(config, ERROR_STATES)
-    rotation = Rotation.from_euler("z", 40.0, degrees=True)
     field_enu = np.array(wmm_field_enu_t(math.radians(35.0), math.radians(120.0), T_2026_S))
-    field_body = rotation.inv().apply(field_enu)
-    state = NavState(
-        tuple(rotation.as_quat()),
-        (0.0, 0.0, 0.0),
-        math.radians(35.0),
-        math.radians(120.0),
-        0.0,
-        (0.0, 0.0, 0.0),
-        (0.0, 0.0, 0.0),
-    )
-    point = LinearisationPoint(state, rotation.as_matrix(), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    field_body = Rotation.from_euler("z", 40.0, degrees=True).inv().apply(field_enu)
+    point = _level_buoy_at(40.0)
     calibration = math.radians(config.magnetometer_heading_sigma_deg) ** 2
     first = source.model(MagneticField(field_body, 0.0, T_2026_S), point)
     later = source.model(MagneticField(field_body, 0.0, T_2026_S, 1.0 / rate_hz), point)
