@@ -171,7 +171,7 @@ class AidingGates:
         """Record one outcome of ``source`` at stamp ``t_s`` (s) in its health; returns whether
         the source is suspended now."""
         health = self._health[source.kind]
-        change = health.record(failed)
+        change = health.record(failed, t_s)
         if change is HealthChange.SUSPENDED:
             # Its run of rejections is over: a suspended source asks for no reset.
             self._consecutive_rejections[source.kind] = 0

@@ -226,6 +226,13 @@ class FusionConfig:
         "resumption (at most source_health_window)",
         rule=at_least(1),
     )
+    source_health_min_span_s: float = parameter(
+        60.0,
+        unit="s",
+        meaning="a slow source is judged for suspension once its outcomes span this long (with "
+        "at least 20 of them), before source_health_min_samples are in",
+        rule=POSITIVE,
+    )
     source_health_suspend_share: float = parameter(
         0.5,
         meaning="share of failed outcomes in the window that suspends a source",
@@ -487,6 +494,7 @@ class FusionConfig:
             self.source_health_min_samples,
             self.source_health_suspend_share,
             self.source_health_resume_share,
+            self.source_health_min_span_s,
         )
 
     @property

@@ -9,9 +9,11 @@ passes it at some headings and fails it at others). As PX4's EKF2 judges each so
 test ratios over a window, :class:`SourceHealth` keeps the last ``window`` outcomes of one
 source and
 
-- **suspends** the source when at least ``min_samples`` outcomes are known and the share that
-  failed the gate reaches ``suspend_share``: its measurements are still modelled and gated
-  against the filter, so that its agreement stays watched, but none is fused;
+- **suspends** the source when at least ``min_samples`` outcomes are known (or, for a slow
+  source, when its outcomes span ``min_span_s`` with at least :data:`MIN_OUTCOMES_OVER_SPAN` of
+  them: a magnetometer at 1 Hz is judged after a minute, not after a hundred seconds) and the
+  share that failed the gate reaches ``suspend_share``: its measurements are still modelled and
+  gated against the filter, so that its agreement stays watched, but none is fused;
 - **resumes** it when, of the last ``min_samples`` outcomes, no more than ``resume_share``
   failed: it agrees with the filter again.
 
@@ -31,6 +33,7 @@ only the evidence that suspended it lifts the suspension
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 from enum import Enum
@@ -68,19 +71,26 @@ class SourceStatus(NamedTuple):
     """The source's latest innovation warning while it holds (empty when none)."""
 
 
+MIN_OUTCOMES_OVER_SPAN = 20
+"""Outcomes a slow source's ``min_span_s`` must hold before it is judged: at a 0.9999 gate a
+consistent source fails half of twenty with a chance of about 10⁻³⁵."""
+
+
 @dataclass(frozen=True)
 class SourceHealthRule:
     """When a source is suspended and resumed (see the module docstring).
 
     window: number of recent gate outcomes judged. min_samples: outcomes needed before a source
     is suspended, and the span judged for its resumption. suspend_share, resume_share: shares of
-    failed outcomes (0 to 1).
+    failed outcomes (0 to 1). min_span_s: time (s) over which fewer outcomes suffice to suspend
+    a slow source (at least :data:`MIN_OUTCOMES_OVER_SPAN`).
     """
 
     window: int = 200
     min_samples: int = 100
     suspend_share: float = 0.5
     resume_share: float = 0.05
+    min_span_s: float = 60.0
 
     def __post_init__(self) -> None:
         if not 1 <= self.min_samples <= self.window:
@@ -101,6 +111,7 @@ class SourceHealth:
     def __init__(self, rule: SourceHealthRule):
         self.rule = rule
         self._failed = deque(maxlen=rule.window)
+        self._stamps_s = deque(maxlen=rule.window)
         self._gate_suspended = False
         self._gate_reason = ""
         self._contradiction = ""
@@ -123,11 +134,13 @@ class SourceHealth:
         samples failed the gate``; a contradiction first."""
         return self._contradiction or (self._gate_reason if self._gate_suspended else "")
 
-    def record(self, failed_gate: bool) -> HealthChange:
-        """Add one gate outcome (True: the measurement failed the gate) and return what it
+    def record(self, failed_gate: bool, t_s: float = math.nan) -> HealthChange:
+        """Add one gate outcome (True: the measurement failed the gate) of the measurement of
+        stamp ``t_s`` (s; NaN: judged by the count of outcomes alone) and return what it
         changed."""
         was_suspended = self.suspended
         self._failed.append(bool(failed_gate))
+        self._stamps_s.append(t_s)
         if self._gate_suspended:
             self._maybe_resume()
         else:
@@ -158,7 +171,7 @@ class SourceHealth:
     def forget(self) -> None:
         """Drop the outcomes and resume (a new alignment starts the judgement again); a
         contradiction stays, since it was not judged against the filter."""
-        self._failed.clear()
+        self._clear()
         self._gate_suspended = False
         self._gate_reason = ""
 
@@ -170,8 +183,21 @@ class SourceHealth:
             return HealthChange.SUSPENDED
         return HealthChange.RESUMED
 
+    def _clear(self) -> None:
+        self._failed.clear()
+        self._stamps_s.clear()
+
+    def _enough_to_suspend(self) -> bool:
+        """``min_samples`` outcomes, or (a slow source) ``min_span_s`` of them."""
+        count = len(self._failed)
+        if count >= self.rule.min_samples:
+            return True
+        if count < MIN_OUTCOMES_OVER_SPAN:
+            return False
+        return self._stamps_s[-1] - self._stamps_s[0] >= self.rule.min_span_s
+
     def _maybe_suspend(self) -> None:
-        if len(self._failed) < self.rule.min_samples:
+        if not self._enough_to_suspend():
             return
         share = self.failed_share()
         if share < self.rule.suspend_share:
@@ -181,7 +207,7 @@ class SourceHealth:
             f"{share * 100:.0f} % of the last {len(self._failed)} samples failed the gate"
         )
         # Resumption is judged on outcomes seen while suspended only.
-        self._failed.clear()
+        self._clear()
 
     def _maybe_resume(self) -> None:
         if len(self._failed) < self.rule.min_samples:
@@ -190,4 +216,4 @@ class SourceHealth:
             return
         self._gate_suspended = False
         self._gate_reason = ""
-        self._failed.clear()
+        self._clear()

@@ -105,3 +105,21 @@ def test_the_diagnostics_say_per_source_whether_it_is_suspended_and_why():
     assert values["gnss_velocity.suspension_reason"].startswith("62 %")
     level, message = health_status(health, "imu/data_raw", 100, 10)
     assert level == "warn" and "suspended: gnss_velocity" in message
+
+
+@pytest.mark.parametrize(("rate_hz", "suspended_after_s"), [(1.0, 60.0), (0.2, 95.0), (10.0, 9.9)])
+def test_a_slow_source_is_judged_after_a_span_of_time_a_fast_one_after_its_count(
+    rate_hz, suspended_after_s
+):
+    """Failing every other sample: a 1-Hz source is suspended once its outcomes span the
+    minute (not after a hundred of them), a 0.2-Hz one once twenty are in, a 10-Hz one after
+    its hundred outcomes, as before."""
+    health = SourceHealth(RULE)
+    stamps = np.arange(400) / rate_hz
+    changes = [health.record(i % 2 == 0, t) for i, t in enumerate(stamps)]
+    first = changes.index(HealthChange.SUSPENDED)
+    assert stamps[first] == pytest.approx(suspended_after_s)
+    assert health.reason == (
+        f"{round(100 * (first // 2 + 1) / (first + 1))} % of the last {first + 1} samples failed "
+        "the gate"
+    )
