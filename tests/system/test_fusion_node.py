@@ -665,11 +665,12 @@ LIVE_SENSOR_SETS = {
         CALIBRATED_MAGNETOMETER,
         "b: single-antenna GNSS + magnetometer",
     ),
-    # A steel hull beside the moored buoy from 12 s on: the magnetometer keeps failing its gate
-    # and is suspended; the heading is carried by the gyros.
+    # A steel hull beside the moored buoy from 25 s on, after the alignment (which takes the
+    # levelling's 10 s and then 10 s of fields judged whole): the magnetometer keeps failing its
+    # gate and is suspended; the heading is carried by the gyros.
     "moored_magnetometer_suspended": (
         "moored_motion_pack",
-        ("sensors.magnetometer.disturbances_s=[[12, 40]]", "sensors.ahrs.fitted=false"),
+        ("sensors.magnetometer.disturbances_s=[[25, 40]]", "sensors.ahrs.fitted=false"),
         ("    fusion.moored: true", *CALIBRATED_MAGNETOMETER),
         "inertial only",
     ),

@@ -51,6 +51,7 @@ from buoy_nav.rotations import (
     rotation_matrix_elements,
     rotation_matrix_from_euler,
     rotation_matrix_from_quaternion,
+    rotation_matrix_from_rotation_vector,
     rotation_vector_from_quaternion,
 )
 
@@ -185,13 +186,20 @@ class AhrsAttitudeSource(AidingSource):
 
     def align(self, aligner, t_s: float, measurement: AhrsAttitude, raw_gyro_rad_s):
         """The pack's heading (azimuth of its body x axis) completes the alignment at a known
-        place; the levelling is the fusion's own."""
+        place; the levelling is the fusion's own. The pack's attitude is carried forward by its
+        lag with the raw gyro, and what is not known of the lag adds its variance, as in the
+        update: a buoy yawing at 5 °/s leaves a pack lagging 0.2 s a degree behind, five times
+        the σ a pack claims."""
         place = aligner.latest_position_rad()
         if place is None:
             return None
-        rotation = self._true_north(measurement, *place)
+        rate = np.asarray(raw_gyro_rad_s, dtype=float)
+        rotation = self._true_north(measurement, *place) @ rotation_matrix_from_rotation_vector(
+            rate * self._lag_s
+        )
         forward = rotation @ BODY_X
-        variance = max(float(measurement.covariance_rad2[2, 2]), self._floor_rad2)
+        lag_variance = float(rate @ rate) * self._lag_uncertainty_s**2
+        variance = max(float(measurement.covariance_rad2[2, 2]), self._floor_rad2) + lag_variance
         return aligner.add_heading(
             t_s, math.atan2(forward[1], forward[0]), variance, raw_gyro_rad_s, body_vector=BODY_X
         )
