@@ -43,6 +43,7 @@ from buoy_nav.aiding.base import (
     as_float_array,
     floored_covariance,
     has_non_positive_variance,
+    samples_per_correlation_time,
 )
 from buoy_nav.geomagnetism import declination_rad
 from buoy_nav.rotations import (
@@ -156,10 +157,7 @@ class AhrsAttitudeSource(AidingSource):
 
     def _weight(self, measurement: AhrsAttitude) -> float:
         """Variance multiplier of one sample: samples per correlation time share one error."""
-        interval = measurement.interval_s
-        if not (math.isfinite(interval) and interval > 0.0):
-            return 1.0
-        return max(1.0, self._correlation_s / interval)
+        return samples_per_correlation_time(measurement.interval_s, self._correlation_s)
 
     def model(self, measurement: AhrsAttitude, point: LinearisationPoint) -> MeasurementModel:
         state = point.state

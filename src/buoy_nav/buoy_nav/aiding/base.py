@@ -373,6 +373,15 @@ def vector_of(message_vector) -> tuple[float, float, float]:
     return float(message_vector.x), float(message_vector.y), float(message_vector.z)
 
 
+def samples_per_correlation_time(interval_s: float, correlation_time_s: float) -> float:
+    """Variance multiplier of one sample whose error it shares with the samples of
+    ``correlation_time_s`` (s) around it, ``interval_s`` (s) apart: so many samples inform as
+    one. 1 for an unknown interval (the first sample)."""
+    if not (math.isfinite(interval_s) and interval_s > 0.0):
+        return 1.0
+    return max(1.0, correlation_time_s / interval_s)
+
+
 def floored_covariance(covariance, variance_floor: float) -> np.ndarray:
     """Symmetrised covariance whose diagonal is raised to at least ``variance_floor``."""
     matrix = np.array(covariance, dtype=float, ndmin=2)

@@ -12,8 +12,8 @@ Why not the 3-D field: a 3-D model also needs the field's magnitude and dip to a
 percent and lets every residual soft-iron error and every steel hull that passes pull on roll
 and pitch, which the accelerometers and the inertial solution already hold far better than a
 compass can. The derived heading carries the one thing the magnetometer is needed for; its
-dependence on tilt is kept exactly in the Jacobian (below), so no approximation is made, but a
-disturbance can only move the heading and is gated as a heading.
+dependence on tilt is kept exactly in the Jacobian (below), so no approximation is made, and a
+disturbance is gated as a heading (one that passes moves the tilt only through the dip's terms).
 
 Jacobian under ``R_true = Exp([φ×]) R_nb`` (the same geometry as the antenna heading, with the
 field in place of the baseline): ``∂h/∂φ = (−m_E m_U / ρ², −m_N m_U / ρ², 1)``, ρ² = m_E² + m_N².
@@ -71,6 +71,7 @@ from buoy_nav.aiding.base import (
     LinearisationPoint,
     MeasurementModel,
     as_float_array,
+    samples_per_correlation_time,
     vector_of,
     yaw_reset,
 )
@@ -230,10 +231,7 @@ class MagnetometerSource(AidingSource):
 
     def _weight(self, measurement: MagneticField) -> float:
         """Samples per correlation time: they share one error of the calibration."""
-        interval = measurement.interval_s
-        if not (math.isfinite(interval) and interval > 0.0):
-            return 1.0
-        return max(1.0, self._correlation_s / interval)
+        return samples_per_correlation_time(measurement.interval_s, self._correlation_s)
 
     def model(self, measurement: MagneticField, point: LinearisationPoint):
         state = point.state
