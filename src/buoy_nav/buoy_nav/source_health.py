@@ -11,7 +11,9 @@ source and
 
 - **suspends** the source when at least ``min_samples`` outcomes are known (or, for a slow
   source, when its outcomes span ``min_span_s`` with at least :data:`MIN_OUTCOMES_OVER_SPAN` of
-  them: a magnetometer at 1 Hz is judged after a minute, not after a hundred seconds) and the
+  them: a magnetometer at 1 Hz is judged after a minute, not after a hundred seconds; the
+  minute is longer than the filter's reset after ``gate_reset_count`` consecutive rejections
+  of a 1-Hz source, so that its reset still comes first) and the
   share that failed the gate reaches ``suspend_share``: its measurements are still modelled and
   gated against the filter, so that its agreement stays watched, but none is fused;
 - **resumes** it when, of the last ``min_samples`` outcomes, no more than ``resume_share``

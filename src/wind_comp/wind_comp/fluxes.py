@@ -38,7 +38,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
 DRY_AIR_GAS_CONSTANT_J_KG_K = 287.05
 STANDARD_PRESSURE_PA = 101_325.0
@@ -180,6 +179,9 @@ def vickers_mahrt_spikes(values, rate_hz: float, test: SpikeTest = SpikeTest()) 
     beyond ``threshold_sigma`` of the moving mean, in runs of at most ``max_run_samples``
     (longer runs may be real and are kept); repeated, with the spikes removed and the threshold
     raised by ``threshold_step_sigma``, until a pass finds none."""
+    # Imported here: scipy.ndimage adds almost half a second to every start-up otherwise.
+    from scipy.ndimage import uniform_filter1d
+
     values = np.asarray(values, dtype=float)
     spikes = np.zeros(values.size, dtype=bool)
     width = max(3, round(test.window_s * rate_hz) | 1)

@@ -21,7 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 SEGMENT_S = 60.0
 """Welch segment length, s: resolves 1/60 Hz, leaves ~40 half-overlapping segments in 20 min."""
@@ -38,6 +37,15 @@ class MotionResidual:
     coherence_before: float
     """Mean coherence of the uncorrected w with the vertical acceleration over the band."""
     coherence_after: float
+
+
+def scipy_signal():
+    """``scipy.signal``, imported on first use: importing it (it brings scipy.stats along) takes
+    most of a second, which every command and node that can compute a spectrum would otherwise
+    pay at start-up."""
+    from scipy import signal
+
+    return signal
 
 
 def gaps_filled(values) -> np.ndarray:
@@ -67,7 +75,7 @@ def wave_band_hz(vertical_acceleration, rate_hz: float) -> tuple[float, float]:
     """The contiguous band around the spectral peak of the vertical acceleration where its
     spectrum exceeds :data:`BAND_FRACTION` of the peak, within the wave frequencies, Hz."""
     x = gaps_filled(vertical_acceleration)
-    frequency, density = signal.welch(x, fs=rate_hz, nperseg=_segment(rate_hz, x.size))
+    frequency, density = scipy_signal().welch(x, fs=rate_hz, nperseg=_segment(rate_hz, x.size))
     return band_around_peak_hz(frequency, density)
 
 
@@ -94,7 +102,7 @@ def band_around_peak_hz(frequency_hz: np.ndarray, density: np.ndarray) -> tuple[
 def band_variance(values, rate_hz: float, band_hz: tuple[float, float]) -> float:
     """Variance of ``values`` within ``band_hz`` (Welch spectrum integrated over the band)."""
     x = gaps_filled(values)
-    frequency, density = signal.welch(x, fs=rate_hz, nperseg=_segment(rate_hz, x.size))
+    frequency, density = scipy_signal().welch(x, fs=rate_hz, nperseg=_segment(rate_hz, x.size))
     inside = (frequency >= band_hz[0]) & (frequency <= band_hz[1])
     return float(np.sum(density[inside]) * (frequency[1] - frequency[0]))
 
@@ -102,7 +110,9 @@ def band_variance(values, rate_hz: float, band_hz: tuple[float, float]) -> float
 def band_coherence(a, b, rate_hz: float, band_hz: tuple[float, float]) -> float:
     """Mean magnitude-squared coherence of ``a`` and ``b`` over ``band_hz``."""
     x, y = gaps_filled(a), gaps_filled(b)
-    frequency, coherence = signal.coherence(x, y, fs=rate_hz, nperseg=_segment(rate_hz, x.size))
+    frequency, coherence = scipy_signal().coherence(
+        x, y, fs=rate_hz, nperseg=_segment(rate_hz, x.size)
+    )
     inside = (frequency >= band_hz[0]) & (frequency <= band_hz[1])
     return float(np.mean(coherence[inside]))
 
@@ -118,8 +128,8 @@ def platform_velocity_left(
     platform, adds only estimator noise, so a sound correction of sound sensors leaves about 0."""
     x, y = gaps_filled(platform_up_velocity_mps), gaps_filled(corrected_w_mps)
     segment = _segment(rate_hz, x.size)
-    frequency, cross = signal.csd(x, y, fs=rate_hz, nperseg=segment)
-    _, platform = signal.welch(x, fs=rate_hz, nperseg=segment)
+    frequency, cross = scipy_signal().csd(x, y, fs=rate_hz, nperseg=segment)
+    _, platform = scipy_signal().welch(x, fs=rate_hz, nperseg=segment)
     inside = (frequency >= band_hz[0]) & (frequency <= band_hz[1])
     return complex(np.sum(cross[inside]) / np.sum(platform[inside]))
 

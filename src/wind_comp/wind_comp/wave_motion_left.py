@@ -42,10 +42,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 from buoy_common.contract import QualityFlag
-from wind_comp.motion_residual import band_around_peak_hz
+from wind_comp.motion_residual import band_around_peak_hz, scipy_signal
 
 SEGMENT_S = 30.0
 """Welch segment length, s: resolves 1/30 Hz, the longest waves that move a buoy
@@ -194,6 +193,7 @@ def averaged_spectra(runs, w_mps, platform_up_mps, rate_hz: float) -> _Spectra |
             continue
         count = (length - segment) // step + 1
         x, y = platform_up_mps[run], w_mps[run]
+        signal = scipy_signal()
         frequency, cross = signal.csd(x, y, fs=rate_hz, nperseg=segment)
         spectra = (
             signal.welch(x, fs=rate_hz, nperseg=segment)[1],

@@ -57,7 +57,6 @@ from collections import deque
 from typing import NamedTuple
 
 import numpy as np
-from scipy.optimize import brentq
 
 from buoy_common.contract import Reason
 from buoy_nav import earth
@@ -176,6 +175,9 @@ class InnovationWatch:
         """The k of ratio(k) = 1, within [1, scale limit]."""
         if self.ratio(self._scale_limit) >= 1.0:
             return self._scale_limit
+        # Imported here: scipy.optimize adds a quarter second to every start-up otherwise.
+        from scipy.optimize import brentq
+
         return brentq(lambda scale: self.ratio(scale) - 1.0, 1.0, self._scale_limit)
 
 
