@@ -354,7 +354,9 @@ def received_count(listener: Listener) -> int:
     return min(len(messages) for messages in listener.received_raw.values())
 
 
-@pytest.mark.parametrize("name", ["sea_state", "off_axis"])
+# off_axis (every lever arm, mounting angle and stamp offset unlike the shipped buoy's) is the
+# stricter case; the shipped geometry's sea_state is a long run.
+@pytest.mark.parametrize("name", [pytest.param("sea_state", marks=pytest.mark.long), "off_axis"])
 def test_live_solutions_equal_offline_fusion(nodes, name):
     sensor_stream = sensor_stream_of(name)
     offline, engine, _ = offline_run(sensor_stream, name)

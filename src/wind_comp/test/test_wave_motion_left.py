@@ -176,18 +176,18 @@ def test_the_flag_follows_the_thresholds():
 @pytest.mark.parametrize(("segments", "frequencies"), [(22, 2), (25, 23), (119, 4)])
 def test_unrelated_series_rarely_exceed_the_coherence_threshold(segments, frequencies):
     # The mean coherence over a band of unrelated white noise, window after window, sits at 1/K
-    # and lies above the 3σ threshold in a few windows of a thousand at most.
+    # and lies above the 3σ threshold in about 1 % of the windows (its tail is heavier than a
+    # normal's 0.13 %; 0.7 to 1.4 % over 3,000 windows of each case), 2.5 % at most.
     rng = np.random.default_rng(segments)
     segment = round(SEGMENT_S * RATE_HZ)
     samples = segment // 2 * (segments + 1)
-    means = []
-    for _ in range(300):
-        _, coherence = signal.coherence(
-            rng.normal(size=samples), rng.normal(size=samples), fs=RATE_HZ, nperseg=segment
-        )
-        means.append(coherence[5 : 5 + frequencies].mean())
+    windows = (600, samples)
+    _, coherence = signal.coherence(
+        rng.normal(size=windows), rng.normal(size=windows), fs=RATE_HZ, nperseg=segment
+    )
+    means = coherence[:, 5 : 5 + frequencies].mean(axis=1)
     threshold = coherence_threshold(segments, frequencies, 3.0)
-    assert np.count_nonzero(np.array(means) > threshold) <= 3
+    assert np.count_nonzero(means > threshold) <= 0.025 * means.size
     assert np.mean(means) == pytest.approx(1.0 / segments, rel=0.1)
 
 
