@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -389,8 +390,8 @@ def test_the_file_states_the_north_the_sensors_and_the_span_of_the_samples(writt
         assert dataset.attrs["time_coverage_duration"] == "PT149.950S"
 
 
-@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # the checker's own, of its plugins
-def test_a_magnetic_heading_without_declination_is_said_and_stays_cf_compliant(tmp_path):
+def magnetic_heading_file(directory: Path) -> Path:
+    """The file of a motion pack whose heading is magnetic, with no declination known."""
     made, stamps_ns, _, _ = content()
     facts = facts_of(
         MAGNETIC_MOTION_PACK_RUN,
@@ -400,7 +401,11 @@ def test_a_magnetic_heading_without_declination_is_said_and_stays_cf_compliant(t
         site_latitude_deg=LATITUDE_DEG,
         site_longitude_deg=LONGITUDE_DEG,
     )
-    path = write_netcdf(tmp_path / "magnetic.nc", dataclasses.replace(made, facts=facts), False)
+    return write_netcdf(directory / "magnetic.nc", dataclasses.replace(made, facts=facts), False)
+
+
+def test_a_magnetic_heading_without_declination_is_said(tmp_path):
+    path = magnetic_heading_file(tmp_path)
     with xr.open_dataset(path, decode_times=False) as dataset:
         assert dataset.attrs["north_reference"] == "magnetic north"
         assert "magnetic north (no declination applied)" in dataset.attrs["comment"]
@@ -412,6 +417,13 @@ def test_a_magnetic_heading_without_declination_is_said_and_stays_cf_compliant(t
         assert dataset["upward_air_velocity"].attrs["standard_name"] == "upward_air_velocity"
         assert "not measured" in dataset["latitude"].attrs["comment"]
         assert dataset.attrs["geospatial_lat_min"] == LATITUDE_DEG
+
+
+# The CF checker takes about twenty seconds a file; the main file's check runs in `make test`.
+@pytest.mark.long
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # the checker's own, of its plugins
+def test_a_magnetic_heading_file_stays_cf_compliant(tmp_path):
+    path = magnetic_heading_file(tmp_path)
     suite = CheckSuite()
     suite.load_all_available_checkers()
     results, errors = suite.run_all(suite.load_dataset(str(path)), ["cf:1.10"], [])["cf:1.10"]
