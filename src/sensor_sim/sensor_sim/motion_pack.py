@@ -24,7 +24,6 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
-import ppigrf
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
@@ -47,6 +46,9 @@ def igrf_field_enu_t(latitude_deg: float, longitude_deg: float, altitude_m: floa
     """The IGRF main field (East, North, Up; tesla) at a geodetic place and a time (ns since
     the epoch)."""
     date = datetime.datetime.fromtimestamp(when_ns * 1e-9, tz=datetime.UTC).replace(tzinfo=None)
+    # Imported here: ppigrf brings pandas along, almost half a second of every node's start-up.
+    import ppigrf
+
     east, north, up = ppigrf.igrf(longitude_deg, latitude_deg, altitude_m * 1e-3, date)
     return np.array([float(np.ravel(c)[0]) for c in (east, north, up)]) * NANOTESLA
 
