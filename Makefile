@@ -38,6 +38,8 @@ $(STAMP): requirements.txt requirements-dev.txt $(PACKAGE_FILES)
 	# The tools are the package `tools` of the repository's root: `python -m tools.bench` from
 	# the root; with the root on the venv's path, `.venv/bin/python tools/bench.py` too.
 	$(BIN)/python -c 'import pathlib, site; pathlib.Path(site.getsitepackages()[0], "buoy_wind_tools.pth").write_text("$(CURDIR)\n")'
+	# Once, so that the processes of a run started together do not each compile the same code.
+	$(BIN)/python -m tools.compile_ahead
 	@touch $(STAMP)
 
 lint: venv
