@@ -664,16 +664,9 @@ def test_the_quick_console_commands_run_as_written(repository_copy, document):
     environment = {**os.environ, "PATH": f"{BIN}:{os.environ['PATH']}"}
     failures = {}
     for line in quick_lines(document):
-        completed = subprocess.run(
-            ["bash", "-c", line],
-            cwd=repository_copy,
-            env=environment,
-            capture_output=True,
-            text=True,
-            timeout=COMMAND_TIMEOUT_S,
-        )
-        if completed.returncode != expected_exit_code(line):
-            failures[line] = completed.stderr[-1000:]
+        problem = run_finite(line, repository_copy, environment, expected_exit_code(line))
+        if problem is not None:
+            failures[line] = problem
     assert failures == {}, "\n\n".join(f"{line}\n{error}" for line, error in failures.items())
 
 
@@ -739,8 +732,8 @@ def readme_live_lines() -> list[tuple[str, str]]:
     return lines
 
 
-def run_finite(line: str, cwd: Path, environment: dict[str, str]) -> str | None:
-    """Run a console line to its end; what went wrong, None when it exits with code 0."""
+def run_finite(line: str, cwd: Path, environment: dict[str, str], exit_code: int = 0) -> str | None:
+    """Run a console line to its end; what went wrong, None when it exits with ``exit_code``."""
     completed = subprocess.run(
         ["bash", "-c", line],
         cwd=cwd,
@@ -749,7 +742,7 @@ def run_finite(line: str, cwd: Path, environment: dict[str, str]) -> str | None:
         text=True,
         timeout=COMMAND_TIMEOUT_S,
     )
-    return None if completed.returncode == 0 else completed.stderr[-1000:]
+    return None if completed.returncode == exit_code else completed.stderr[-1000:]
 
 
 def run_until_interrupted(lines: list[str], cwd: Path, environment: dict[str, str]) -> dict:
