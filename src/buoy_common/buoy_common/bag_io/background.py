@@ -4,9 +4,11 @@ the second core instead of the offline tool's."""
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import multiprocessing
 import shutil
 import signal
+import sys
 from collections import Counter
 from pathlib import Path
 
@@ -67,7 +69,8 @@ class BackgroundBagWriter(BagOutput):
             name=f"bag writer {self.path.name}",
             daemon=True,
         )
-        self._process.start()
+        with _this_module_as_main():
+            self._process.start()
         child_end.close()
         self._open = True
 
@@ -196,6 +199,24 @@ class BackgroundBagWriter(BagOutput):
     def _raise_if_failed(reply) -> None:
         if reply[0] == "error":
             raise BagError(reply[1])
+
+
+@contextlib.contextmanager
+def _this_module_as_main():
+    """Name this module as the main module while the writing process is spawned.
+
+    A spawned process first runs the main module of the process that spawned it. The main module of
+    an offline tool is its console script, which imports the whole tool (numpy, numba, rosbags, the
+    fusion: about 1.5 s of CPU) that the writing process never uses. Named by this module's spec,
+    the writing process runs this module instead, which it imports anyway.
+    """
+    main = sys.modules["__main__"]
+    own_spec = getattr(main, "__spec__", None)
+    main.__spec__ = importlib.util.find_spec(__name__)
+    try:
+        yield
+    finally:
+        main.__spec__ = own_spec
 
 
 def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
