@@ -14,7 +14,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)
 export PYTHONUNBUFFERED := 1
 
-.PHONY: all venv demo test test-long bench mutants lint format bags colcon clean help
+.PHONY: all venv bytecode demo test test-long bench mutants lint format bags colcon clean help
 
 all: help
 
@@ -42,6 +42,12 @@ $(STAMP): requirements.txt requirements-dev.txt $(PACKAGE_FILES)
 	$(BIN)/python -m tools.compile_ahead
 	@touch $(STAMP)
 
+# Where the environment sets PYTHONDONTWRITEBYTECODE, no process writes the bytecode of the
+# suite's own modules, and each of the hundreds a test run starts compiles them again (about
+# 0.4 s of CPU). Written here, every process reads it; only changed sources are compiled again.
+bytecode: venv
+	$(BIN)/python -m compileall -q src tools tests
+
 lint: venv
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
@@ -53,16 +59,16 @@ format: venv
 # Long runs (marker `long`: the live fault matrix, double signals to every executable, the
 # soak, the archive on a Dask cluster, the DVL's and the real record's live replays) belong
 # to `make bench`.
-test: venv lint
+test: venv lint bytecode
 	$(BIN)/python -m pytest -n auto --dist loadgroup -m "not long"
 
-test-long: venv
+test-long: venv bytecode
 	$(BIN)/python -m pytest -n auto --dist loadgroup -m long
 
-demo: venv
+demo: venv bytecode
 	$(BIN)/python -m tools.demo
 
-bench: venv
+bench: venv bytecode
 	$(BIN)/python -m tools.bench
 	$(MAKE) test-long
 
