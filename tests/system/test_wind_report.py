@@ -1,6 +1,8 @@
 """Report figures, tables and the saved report data; the report of a processed bag."""
 
+import contextlib
 import dataclasses
+import io
 import json
 import math
 import re
@@ -13,6 +15,7 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.image import imread
 from mcap.reader import make_reader
+from PIL import Image
 from scipy.signal import welch
 from scipy.spatial.transform import Rotation
 
@@ -44,6 +47,12 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 REPO = Path(__file__).resolve().parents[2]
 BUOY_PARAMS = str(REPO / "src/buoy_common/config/buoy.yaml")
 FIGURES = ("wind_time_series.png", "attitude_error.png", "vertical_wind_spectrum.png")
+
+
+def distinct_colours(png: Path) -> int:
+    """How many different colours the pixels of the image ``png`` take."""
+    with Image.open(png) as image:
+        return len(image.getcolors(maxcolors=image.width * image.height))
 
 
 def sample_data(with_truth: bool) -> ReportData:
@@ -80,8 +89,16 @@ def sample_data(with_truth: bool) -> ReportData:
     )
 
 
-def test_report_with_truth_writes_all_figures_and_tables(tmp_path):
-    paths = write_report(sample_data(with_truth=True), tmp_path / "report")
+@pytest.fixture(scope="module")
+def sample_report_with_truth(tmp_path_factory) -> tuple[list[Path], Path]:
+    """(paths written, folder) of the report of ``sample_data(with_truth=True)``, rendered once:
+    the tests that only read it share it."""
+    folder = tmp_path_factory.mktemp("sample_with_truth") / "report"
+    return write_report(sample_data(with_truth=True), folder), folder
+
+
+def test_report_with_truth_writes_all_figures_and_tables(sample_report_with_truth):
+    paths, folder = sample_report_with_truth
     names = sorted(path.name for path in paths)
     assert names == [
         "attitude_error.png",
@@ -94,7 +111,7 @@ def test_report_with_truth_writes_all_figures_and_tables(tmp_path):
         if path.suffix == ".png":
             assert path.read_bytes()[:8] == PNG_SIGNATURE
             assert path.stat().st_size > 10_000
-    table = (tmp_path / "report" / "wind_products.md").read_text()
+    table = (folder / "wind_products.md").read_text()
     assert "Error against truth" in table
     assert table.count("| 60 |") == 3  # three 60 s windows in 130 s
     # Mean wind (6, -2) m/s toward ESE comes from 288.4°.
@@ -202,32 +219,61 @@ GEOMETRIES = {
     "default": (BUOY_PARAMS,),
     "off_axis": (BUOY_PARAMS, str(REPO / "bags" / "off_axis.yaml")),
 }
+# Flux windows of 10 s over the 40 s of sea_state, with a sonic temperature added: several
+# windows, before and after the alignment, to show with their flags. Neither changes the
+# corrected wind, so one run serves the tests of the wind and those of the fluxes.
+FLUX_WINDOW_S = 10.0
+FLUX_WINDOW_PARAMETERS = (
+    f"/**:\n  ros__parameters:\n    compensation:\n      flux_window_s: {FLUX_WINDOW_S}\n"
+)
 _RUNS = {}
+_REPORTS = {}
 
 
 def sea_state_run(tmp_path_factory, geometry: str):
-    """(sensor bag, processed bag, process summary, parameter files) of 40 s of the sea_state
-    scenario simulated and processed with the buoy parameters of ``geometry``, made once."""
+    """(sensor bag, processed bag, process summary, buoy parameter files) of 40 s of the
+    sea_state scenario simulated with the buoy parameters of ``geometry``, given a sonic
+    temperature and processed with those parameters and flux windows of :data:`FLUX_WINDOW_S`,
+    made once."""
     if geometry not in _RUNS:
         folder = tmp_path_factory.mktemp(f"sea_state_{geometry}")
+        simulated = folder / "simulated"
         sensors, processed = folder / "sensors", folder / "processed"
         truth_rate = folder / "truth_with_the_anemometer.yaml"
         truth_rate.write_text(TRUTH_WITH_THE_ANEMOMETER)
         files = GEOMETRIES[geometry]
         simulate(
             parse_arguments(
-                ["sea_state", str(sensors), "--set", "duration_s=40"]
+                ["sea_state", str(simulated), "--set", "duration_s=40"]
                 + [a for path in (*files, truth_rate) for a in ("--params-file", str(path))]
             )
         )
+        records = bag_faults.read_records(simulated, None, seconds=3600.0)
+        bag_faults.write_records(bag_faults.with_sonic_temperature(records), sensors)
+        flux_window = folder / "flux_window.yaml"
+        flux_window.write_text(FLUX_WINDOW_PARAMETERS)
+        processing_files = [*files, flux_window]
         summary = process_bag(
             sensors,
             processed,
-            fusion_config_from_files(files),
-            compensator_config_from_files(files),
+            fusion_config_from_files(processing_files),
+            compensator_config_from_files(processing_files),
         )
         _RUNS[geometry] = sensors, processed, summary, files
     return _RUNS[geometry]
+
+
+def sea_state_report(tmp_path_factory, geometry: str) -> tuple[Path, int, str]:
+    """(report folder, exit code, printed text) of ``wind_report`` on the processed bag of
+    :func:`sea_state_run`, rendered once: the tests here only read it."""
+    if geometry not in _REPORTS:
+        _, processed, _, _ = sea_state_run(tmp_path_factory, geometry)
+        folder = tmp_path_factory.mktemp(f"sea_state_{geometry}_report")
+        printed = io.StringIO()
+        with contextlib.redirect_stdout(printed):
+            exit_code = main([str(processed), "--out", str(folder)])
+        _REPORTS[geometry] = folder, exit_code, printed.getvalue()
+    return _REPORTS[geometry]
 
 
 @pytest.fixture(scope="module")
@@ -289,17 +335,17 @@ def table_row(markdown: str, series: str, quantity: str) -> tuple[float, float, 
     "geometry",
     [pytest.param(name, marks=[pytest.mark.long] * (name != "default")) for name in GEOMETRIES],
 )
-def test_report_of_a_processed_bag(tmp_path_factory, geometry, tmp_path, capsys):
+def test_report_of_a_processed_bag(tmp_path_factory, geometry):
     sensors, processed, summary, parameter_files = sea_state_run(tmp_path_factory, geometry)
-    assert main([str(processed), "--out", str(tmp_path)]) == 0
-    assert "wind_products.md" in capsys.readouterr().out
+    report, exit_code, printed = sea_state_report(tmp_path_factory, geometry)
+    assert exit_code == 0
+    assert "wind_products.md" in printed
     for name in FIGURES:
-        path = tmp_path / name
+        path = report / name
         assert path.read_bytes()[:8] == PNG_SIGNATURE
         image = imread(path)
         assert image.shape[0] > 400 and image.shape[1] > 600
-        colours = np.unique(image.reshape(-1, image.shape[2]), axis=0)
-        assert len(colours) > 50, f"{name} looks blank"
+        assert distinct_colours(path) > 50, f"{name} looks blank"
 
     corrected, errors = independent_errors(processed)
     data = report_data_from_bag(processed)
@@ -308,7 +354,7 @@ def test_report_of_a_processed_bag(tmp_path_factory, geometry, tmp_path, capsys)
         data.corrected_wind_enu_mps - data.true_wind_enu_mps, errors, rtol=0, atol=1e-9
     )
 
-    markdown = (tmp_path / "wind_products.md").read_text()
+    markdown = (report / "wind_products.md").read_text()
     usable = np.all(np.isfinite(errors), axis=1)
     rms = np.sqrt(np.mean(errors[usable] ** 2, axis=0))
     for axis, quantity in enumerate(("u (m/s)", "v (m/s)", "w (m/s)")):
@@ -350,7 +396,7 @@ def test_report_of_a_processed_bag(tmp_path_factory, geometry, tmp_path, capsys)
     assert data.north == "true_north"
     assert (
         "Wind directions in degrees clockwise from true north."
-        in (tmp_path / "summary.md").read_text()
+        in (report / "summary.md").read_text()
     )
 
 
@@ -394,9 +440,9 @@ def test_a_bag_without_its_outputs_facts_falls_back_to_the_csv_or_says_it_does_n
     data = report_data_from_bag(earlier)
     assert (data.north, data.sensors) == ("true_north", "")
     assert "not recorded with these data" in data.sensors_sentence
-    # recorded from the nodes: no facts, no CSV
-    recorded = copy_of(processed, tmp_path / "recorded")
-    write_report(report_data_from_bag(recorded), tmp_path / "report")
+    # recorded from the nodes: no facts, no CSV (the same messages, the CSV taken away)
+    Path(str(earlier) + csv_name).unlink()
+    write_report(report_data_from_bag(earlier), tmp_path / "report")
     page = (tmp_path / "report" / "summary.md").read_text()
     assert "which north is not recorded with these data" in page
     assert "The sensors used are not recorded with these data" in page
@@ -430,10 +476,11 @@ def test_missing_bag_or_wind_topics_exit_with_one_line(sea_state_bags, tmp_path,
     assert not (tmp_path / "report").exists()
 
 
-def test_summary_page_shows_every_figure_the_quality_and_the_filter_health(tmp_path):
-    data = sample_data(with_truth=True)
-    paths = write_report(data, tmp_path)
-    summary = (tmp_path / "summary.md").read_text()
+def test_summary_page_shows_every_figure_the_quality_and_the_filter_health(
+    sample_report_with_truth,
+):
+    paths, folder = sample_report_with_truth
+    summary = (folder / "summary.md").read_text()
     for path in paths:
         if path.suffix == ".png":
             assert f"]({path.name})" in summary
@@ -473,34 +520,6 @@ def test_directions_across_north_are_drawn_without_jumps():
     assert np.all(np.abs(steps) < 20.0)
     assert np.allclose(unwrapped[np.isfinite(unwrapped)] % 360.0, direction[np.isfinite(direction)])
     assert np.allclose(figures._near_deg([5.0, 355.0], 0.0), [5.0, -5.0])
-
-
-# Flux windows of 10 s over the 40 s of sea_state, with a sonic temperature added: several
-# windows, before and after the alignment, to show with their flags.
-FLUX_WINDOW_S = 10.0
-
-
-@pytest.fixture(scope="module")
-def fluxes_bag(tmp_path_factory):
-    """The default buoy's sea_state run processed again with a sonic temperature and flux
-    windows of :data:`FLUX_WINDOW_S`."""
-    sensors, _, _, parameter_files = sea_state_run(tmp_path_factory, "default")
-    folder = tmp_path_factory.mktemp("sea_state_fluxes")
-    with_temperature, processed = folder / "sensors", folder / "processed"
-    records = bag_faults.read_records(sensors, None, seconds=3600.0)
-    bag_faults.write_records(bag_faults.with_sonic_temperature(records), with_temperature)
-    flux_window = folder / "flux_window.yaml"
-    flux_window.write_text(
-        f"/**:\n  ros__parameters:\n    compensation:\n      flux_window_s: {FLUX_WINDOW_S}\n"
-    )
-    files = [*parameter_files, flux_window]
-    process_bag(
-        with_temperature,
-        processed,
-        fusion_config_from_files(files),
-        compensator_config_from_files(files),
-    )
-    return processed
 
 
 def published_windows(bag, prefix: str) -> list[dict[str, float]]:
@@ -546,11 +565,13 @@ def assert_flag(cell: str, flag: float) -> None:
     assert cell.startswith("**") == (int(flag) != 1), cell
 
 
-def test_report_tables_are_the_bags_products_and_fluxes(fluxes_bag, tmp_path):
-    assert main([str(fluxes_bag), "--out", str(tmp_path)]) == 0
-    markdown = (tmp_path / "wind_products.md").read_text()
+def test_report_tables_are_the_bags_products_and_fluxes(sea_state_bags, tmp_path_factory, tmp_path):
+    _, processed, _ = sea_state_bags
+    report, exit_code, _ = sea_state_report(tmp_path_factory, "default")
+    assert exit_code == 0
+    markdown = (report / "wind_products.md").read_text()
 
-    stats = published_windows(fluxes_bag, "wind/stats_")
+    stats = published_windows(processed, "wind/stats_")
     products = markdown_table(markdown, "Averaged wind")
     assert len(products) == len(stats) > 0
     for row, published in zip(products, stats, strict=True):
@@ -559,7 +580,7 @@ def test_report_tables_are_the_bags_products_and_fluxes(fluxes_bag, tmp_path):
         assert_printed(row["coverage"], published["coverage"], decimals=4)
         assert_flag(row["flag"], published["quality_flag"])
 
-    published_fluxes = published_windows(fluxes_bag, "wind/fluxes_")
+    published_fluxes = published_windows(processed, "wind/fluxes_")
     fluxes = markdown_table(markdown, "Eddy-covariance fluxes")
     # 40 s in 10 s windows; those before the alignment have no corrected wind
     assert len(fluxes) == len(published_fluxes) >= 4
@@ -587,15 +608,14 @@ def test_report_tables_are_the_bags_products_and_fluxes(fluxes_bag, tmp_path):
     # 10 s windows of a simulated minute: before the alignment missing, then non-stationary
     assert {int(published["quality_flag"]) for published in published_fluxes} - {1}
 
-    summary = (tmp_path / "summary.md").read_text()
+    summary = (report / "summary.md").read_text()
     assert "](wind_fluxes.png)" in summary and "## Eddy-covariance fluxes" in summary
-    image = imread(tmp_path / "wind_fluxes.png")
-    assert len(np.unique(image.reshape(-1, image.shape[2]), axis=0)) > 50
+    assert distinct_colours(report / "wind_fluxes.png") > 50
     flagged = sum(1 for published in published_fluxes if published["quality_flag"] != 1)
     assert f"| {FLUX_WINDOW_S:g} s flux windows flagged other than good | {flagged} of " in summary
 
     # the fluxes survive a saved report data file
-    data = report_data_from_bag(fluxes_bag)
+    data = report_data_from_bag(processed)
     loaded = load_report_data(save_report_data(data, tmp_path / "run.npz")).fluxes
     # NaN fluxes of the missing windows included
     np.testing.assert_equal(
