@@ -30,22 +30,28 @@ def read_all(path: Path) -> tuple[BagReader, list[tuple[str, int, bytes]]]:
     return reader, messages
 
 
-def messages_of_chunks_before(mcap_file: Path, cut: int) -> list[tuple[str, int, bytes]]:
-    """(topic, log time, bytes) of every message in a chunk that ends at or before byte ``cut``,
-    found through the file's chunk index."""
-    found = []
+def chunks_of(mcap_file: Path) -> list[tuple[int, list[tuple[str, int, bytes]]]]:
+    """(end byte, (topic, log time, bytes) of each of its messages) of every chunk of the
+    file, found through its chunk index, in the order of their ends."""
+    chunks = []
     with mcap_file.open("rb") as stream:
         summary = make_reader(stream).get_summary()
         for index in summary.chunk_indexes:
-            if index.chunk_start_offset + index.chunk_length > cut:
-                continue
             stream.seek(index.chunk_start_offset + 1 + 8)  # past the opcode and the length
             chunk = Chunk.read(ReadDataStream(stream))
-            for record in breakup_chunk(chunk, validate_crc=True):
-                if isinstance(record, Message):
-                    topic = summary.channels[record.channel_id].topic
-                    found.append((topic, record.log_time, record.data))
-    return found
+            messages = [
+                (summary.channels[record.channel_id].topic, record.log_time, record.data)
+                for record in breakup_chunk(chunk, validate_crc=True)
+                if isinstance(record, Message)
+            ]
+            chunks.append((index.chunk_start_offset + index.chunk_length, messages))
+    return sorted(chunks, key=lambda chunk: chunk[0])
+
+
+def messages_of_chunks_before(chunks, cut: int) -> list[tuple[str, int, bytes]]:
+    """(topic, log time, bytes) of every message in a chunk of ``chunks`` (:func:`chunks_of`
+    the whole file) that ends at or before byte ``cut``."""
+    return [message for end, messages in chunks if end <= cut for message in messages]
 
 
 def cut_copy(bag: Path, target: Path, cut: int, keep_metadata: bool) -> Path:
@@ -60,12 +66,11 @@ def cut_copy(bag: Path, target: Path, cut: int, keep_metadata: bool) -> Path:
 
 @pytest.fixture(scope="module")
 def committed():
+    """The committed bag's MCAP file, its chunks (:func:`chunks_of`: read once, not once a
+    cut) and its messages as BagReader reads the whole bag."""
     (mcap_file,) = COMMITTED_BAG.glob("*.mcap")
-    with mcap_file.open("rb") as stream:
-        summary = make_reader(stream).get_summary()
-    chunk_ends = sorted(i.chunk_start_offset + i.chunk_length for i in summary.chunk_indexes)
     _, messages = read_all(COMMITTED_BAG)
-    return mcap_file, chunk_ends, messages
+    return mcap_file, chunks_of(mcap_file), messages
 
 
 def committed_cuts():
@@ -82,10 +87,10 @@ def committed_cuts():
 def test_cut_committed_bag_yields_every_message_of_its_complete_chunks(
     committed, tmp_path, cut, keep_metadata
 ):
-    mcap_file, _, whole = committed
+    _, chunks, whole = committed
     bag = cut_copy(COMMITTED_BAG, tmp_path / "cut", cut, keep_metadata)
     reader, recovered = read_all(bag)
-    expected = messages_of_chunks_before(mcap_file, cut)
+    expected = messages_of_chunks_before(chunks, cut)
     assert sorted(recovered) == sorted(expected)
     times = [time_ns for _, time_ns, _ in recovered]
     assert times == sorted(times)
@@ -102,13 +107,14 @@ def test_cut_committed_bag_yields_every_message_of_its_complete_chunks(
 
 
 def test_cut_exactly_at_a_chunk_end_keeps_that_chunk(committed, tmp_path):
-    mcap_file, chunk_ends, _ = committed
+    _, chunks, _ = committed
+    chunk_ends = [end for end, _ in chunks]
     for number, cut in enumerate((chunk_ends[2], chunk_ends[2] - 1)):
         bag = cut_copy(COMMITTED_BAG, tmp_path / f"cut{number}", cut, keep_metadata=False)
         _, recovered = read_all(bag)
-        assert sorted(recovered) == sorted(messages_of_chunks_before(mcap_file, cut))
-    assert len(messages_of_chunks_before(mcap_file, chunk_ends[2])) > len(
-        messages_of_chunks_before(mcap_file, chunk_ends[2] - 1)
+        assert sorted(recovered) == sorted(messages_of_chunks_before(chunks, cut))
+    assert len(messages_of_chunks_before(chunks, chunk_ends[2])) > len(
+        messages_of_chunks_before(chunks, chunk_ends[2] - 1)
     )
 
 

@@ -296,16 +296,31 @@ def committed_bag_topics():
                     yield pytest.param(bag, topic, id=f"{bag.name}{topic}")
 
 
+def recorded_by_topic(bag: Path) -> dict[str, tuple[str, list[bytes]]]:
+    """topic → (message type, every message's bytes in log-time order) of ``bag``."""
+    by_topic = {}
+    with BagReader(bag) as reader:
+        for message in reader.messages():
+            by_topic.setdefault(message.topic, (message.msgtype, []))[1].append(message.raw)
+    return by_topic
+
+
+@pytest.fixture(scope="module")
+def recorded():
+    """:func:`recorded_by_topic`, a bag read once for all its topics' tests (which run one after
+    another) rather than once a topic, and only one bag held at a time."""
+    read_once = functools.lru_cache(maxsize=1)(recorded_by_topic)
+    yield read_once
+    read_once.cache_clear()
+
+
 @pytest.mark.parametrize(("bag", "topic"), list(committed_bag_topics()))
-def test_committed_bags(bag, topic):
+def test_committed_bags(recorded, bag, topic):
     """Every message of every handled topic of the committed bags: the columns hold what
     rosbags decodes, and encoding them gives what rosbags encodes: the recorded bytes, less
     the padding some writers add after a message's last field."""
     typestore = jazzy_typestore()
-    with BagReader(bag) as reader:
-        messages = list(reader.messages([topic]))
-    msgtype = messages[0].msgtype
-    raws = [message.raw for message in messages]
+    msgtype, raws = recorded(bag)[topic]
     decoded = cdr_bulk.decode(msgtype, raws)
     assert decoded.valid.all(), decoded.rejected
     fields = DEFINITIONS[msgtype][1]
