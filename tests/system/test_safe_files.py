@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import bag_faults
 import numpy as np
 import pytest
 import xarray as xr
@@ -22,12 +23,17 @@ from buoy_common.safe_output import OutputError
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_fusion import fuse_bag
 from buoy_processing.bag_processing import process_bag
+from processed_bags import made_once
 from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
 BUOY_PARAMETERS = REPO / "src" / "buoy_common" / "config" / "buoy.yaml"
-SHORT_BAG = REPO / "bags" / "static"
+STATIC_BAG = REPO / "bags" / "static"
+# The first minute of the static bag: the third of its file the cut-input test keeps still
+# holds two complete chunks (about 10 s each), more than the 10 s the fusion takes to align and
+# the chunk whose loss that test must see.
+SHORT_BAG_S = 60.0
 LONG_BAG = REPO / "bags" / "sea_state"
 RUNS_TO_CATCH_MID_RUN = 3
 TOOLS = ("fuse_bag", "process_bag")
@@ -48,10 +54,23 @@ def contents(directory: Path) -> dict[str, bytes]:
     }
 
 
+@pytest.fixture(scope="module")
+def short_bag(tmp_path_factory) -> Path:
+    """The first ``SHORT_BAG_S`` of ``bags/static``, every topic, written once per session."""
+
+    def make(directory: Path) -> None:
+        bag_faults.write_records(
+            bag_faults.read_records(STATIC_BAG, None, SHORT_BAG_S), directory / "bag"
+        )
+
+    return made_once(tmp_path_factory, f"static_first_{SHORT_BAG_S:g}s", make) / "bag"
+
+
 @pytest.fixture
-def input_bag(tmp_path):
+def input_bag(tmp_path, short_bag):
+    """A copy of the short bag of the test's own, which the test may cut or overwrite."""
     bag = tmp_path / "in"
-    shutil.copytree(SHORT_BAG, bag)
+    shutil.copytree(short_bag, bag)
     return bag
 
 

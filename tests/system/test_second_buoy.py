@@ -17,6 +17,7 @@ after the second buoy stops, the wind is valid again. Replayed live, the nodes p
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import bag_faults
@@ -50,11 +51,39 @@ GNSS_KINDS = {
 MIN_VALID_SHARE_AFTER = 0.99
 
 
-def run_case(base: Path, offset_s: float, topics: list[str]):
+@pytest.fixture(scope="module")
+def own_records() -> list[bag_faults.Record]:
+    """The first ``KEPT_S`` of the buoy's own bag, every topic: read once, each case copies
+    what it changes."""
+    return bag_faults.read_records(OWN_BAG, None, KEPT_S)
+
+
+@pytest.fixture(scope="module")
+def other_records() -> list[bag_faults.Record]:
+    """The first ``KEPT_S`` of every stream the second buoy may send, read once."""
+    return bag_faults.read_records(OTHER_BAG, IMU + GNSS + ANEMOMETER, KEPT_S)
+
+
+@pytest.fixture(scope="module")
+def truth() -> Truth:
+    """The truth of the buoy's own bag, which the second buoy sends none of. Wind samples are
+    matched to it by their stamps, so every kept sample finds its truth, even the last ones,
+    whose truth is logged just after the kept seconds."""
+    return Truth(OWN_BAG)
+
+
+def run_case(
+    base: Path,
+    own: list[bag_faults.Record],
+    other_streams: list[bag_faults.Record],
+    offset_s: float,
+    topics: list[str],
+):
     """(process_bag's summary, stamps ns, winds, covariances of wind/true_with_covariance,
-    truth, first stamp s) of ``bags/sea_state`` with the second buoy's ``topics`` in it."""
-    own = bag_faults.read_records(OWN_BAG, None, KEPT_S)
-    other = bag_faults.read_records(OTHER_BAG, topics, KEPT_S)
+    first stamp s) of ``own`` (records of ``bags/sea_state``) with the second buoy's
+    ``topics`` (of ``other_streams``) in it."""
+    sent = set(topics)
+    other = [r for r in other_streams if r.topic in sent]
     # Delivered as stamped, as the nodes of a live run deliver them, not in the bursts of the
     # recorder that wrote the bag (which let the two IMU streams' stamps meet).
     own = bag_faults.logged_at_stamps(topics)(own)
@@ -68,7 +97,7 @@ def run_case(base: Path, offset_s: float, topics: list[str]):
         compensator_config_from_files([BUOY_PARAMETERS]),
     )
     first_s = bag_faults.header_stamp_ns(own[0]) / NANOSECONDS_PER_SECOND
-    return summary, *published(out), Truth(bag), first_s, len(other)
+    return summary, *published(out), first_s
 
 
 def rejections(summary, kind: str) -> dict[str, int]:
@@ -82,15 +111,16 @@ def rejections(summary, kind: str) -> dict[str, int]:
     return {reason: int(count) for reason, count in pairs}
 
 
-def intruding(topics: list[str]) -> int:
+@functools.cache  # the same counts for every case
+def intruding(*topics: str) -> int:
     """Messages of ``topics`` the second buoy sends."""
     return len(bag_faults.read_records(OTHER_BAG, topics, INTRUSION_S[1])) - len(
         bag_faults.read_records(OTHER_BAG, topics, INTRUSION_S[0])
     )
 
 
-def judge(case, intruding_imu_samples: int):
-    summary, stamps_ns, winds, covariances, truth, first_s, _ = case
+def judge(case, truth: Truth, intruding_imu_samples: int):
+    summary, stamps_ns, winds, covariances, first_s = case
     figures = "; ".join(summary.fusion_lines)
     assert not [line for line in summary.fusion_lines if "IMU clock stepped" in line], figures
     rejected = rejections(summary, "imu")
@@ -113,28 +143,30 @@ def judge(case, intruding_imu_samples: int):
         (0.3, IMU + GNSS + ANEMOMETER, "out_of_sequence"),
     ],
 )
-def test_a_second_buoy_never_corrupts_the_fusion(tmp_path, offset_s, topics, reason):
-    case = run_case(tmp_path, offset_s, topics)
-    other_imu = intruding(IMU)
-    rejected = judge(case, other_imu)
+def test_a_second_buoy_never_corrupts_the_fusion(
+    tmp_path, own_records, other_records, truth, offset_s, topics, reason
+):
+    case = run_case(tmp_path, own_records, other_records, offset_s, topics)
+    other_imu = intruding(*IMU)
+    rejected = judge(case, truth, other_imu)
     assert rejected.get(reason, 0) > other_imu // 3, rejected
     summary = case[0]
     # Measurements behind those already processed are too late for the fusion.
     gnss_reason = "too_late" if offset_s < 0 else reason
     for topic, kind in GNSS_KINDS.items():
         if topic in topics:
-            assert rejections(summary, kind).get(gnss_reason, 0) >= intruding([topic]), kind
+            assert rejections(summary, kind).get(gnss_reason, 0) >= intruding(topic), kind
     if ANEMOMETER[0] in topics:
         rejected_winds = summary.wind.rejected_messages
-        assert rejected_winds[reason] >= intruding(ANEMOMETER), rejected_winds
+        assert rejected_winds[reason] >= intruding(*ANEMOMETER), rejected_winds
 
 
 @pytest.mark.ros
 @pytest.mark.long
-def test_live_equals_offline_with_a_second_buoy(tmp_path, nodes):
+def test_live_equals_offline_with_a_second_buoy(tmp_path, nodes, own_records, other_records):
     """The second buoy's IMU, GNSS and anemometer 0.3 s ahead, replayed to ``fusion_node`` and
     ``compensation_node``: they publish what ``process_bag`` writes, sample for sample."""
-    run_case(tmp_path, 0.3, IMU + GNSS + ANEMOMETER)
+    run_case(tmp_path, own_records, other_records, 0.3, IMU + GNSS + ANEMOMETER)
     recorded = tmp_path / "live"
     figures = replay(
         nodes, tmp_path / "in", [BUOY_PARAMETERS], tmp_path / "out", recorded, SENSOR_TOPICS
