@@ -13,7 +13,10 @@ interrupted, as ``process_bag`` does at the end of its data.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import subprocess
 import threading
 import time
 from dataclasses import dataclass
@@ -50,6 +53,8 @@ STARTUP_TIMEOUT_S = 30.0
 # After the player has finished: the nodes' queues drain in well under this.
 DRAIN_TIMEOUT_S = 30.0
 FLUSH_TIMEOUT_S = 10.0
+# From SIGINT to a node's exit (NodeProcesses.interrupt's bound).
+STOP_TIMEOUT_S = 15.0
 NAVIGATION_TOPICS = ("/imu/data_raw", "/gnss/fix", "/gnss/vel", "/gnss/heading", "/gnss/baseline")
 """The inputs of ``fusion_node``."""
 # The navigation is judged against the truth from this long after its first solution: the
@@ -80,12 +85,14 @@ def process_offline(played: Path, offline: Path, parameter_files, current: bool 
 
 @dataclass(frozen=True)
 class Correction:
-    """One of the corrections a replay runs: its node, input, output and latency budget."""
+    """One of the corrections a replay runs: its node, input, output, latency budget and the
+    key of its diagnostics that counts the input samples it has taken."""
 
     node: str
     input_topic: str
     output_topic: str
     timeout_parameter: str
+    samples_in_key: str
 
     @property
     def sensor_topics(self) -> tuple[str, ...]:
@@ -93,8 +100,20 @@ class Correction:
         return (*NAVIGATION_TOPICS, f"/{self.input_topic}")
 
 
-WIND = Correction("compensation_node", "anemometer/wind", "wind/true", "compensation.nav_timeout_s")
-CURRENT = Correction("current_node", "dvl/velocity", "current/velocity", "current.nav_timeout_s")
+WIND = Correction(
+    "compensation_node",
+    "anemometer/wind",
+    "wind/true",
+    "compensation.nav_timeout_s",
+    "wind_samples_in",
+)
+CURRENT = Correction(
+    "current_node",
+    "dvl/velocity",
+    "current/velocity",
+    "current.nav_timeout_s",
+    "dvl_samples_in",
+)
 SENSOR_TOPICS = WIND.sensor_topics
 """The inputs of ``fusion_node`` and ``compensation_node``."""
 
@@ -169,6 +188,20 @@ def odometry_arrays(bag: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.array([stamp_ns(m) for m in messages]), np.array(rows)
 
 
+def stop_together(nodes, processes) -> None:
+    """SIGINT to each of ``processes`` at once, as Ctrl-C would; each must exit with 0."""
+    for process in processes:
+        process.send_signal(signal.SIGINT)
+    for process in processes:
+        try:
+            code = process.wait(timeout=STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+            raise
+        assert code == 0, nodes.log_of(process)
+
+
 def replay(
     nodes,
     played: Path,
@@ -187,35 +220,76 @@ def replay(
     many messages. ``also_recorded``: further output topics to record; ``rate``: the pace, in
     times the bag's (a bag of fewer messages a second than the simulated ones can go faster).
     """
-    offline_nav_ns, _ = odometry_arrays(offline)
-    offline_out_ns, _ = vector_arrays(offline, correction.output_topic)
-    with BagReader(played) as reader:
-        n_inputs = next(
-            info.count
-            for name, info in reader.topics.items()
-            if name.lstrip("/") == correction.input_topic
-        )
-        duration_s = reader.duration_s
-    # samples after the last navigation wait for it until the node is interrupted
-    n_held_back = int(np.count_nonzero(offline_out_ns > offline_nav_ns[-1]))
-    recorded_topics = ("nav/odometry", correction.output_topic, *also_recorded)
-    parameters = (
-        "--ros-args",
-        *(a for path in parameter_files for a in ("--params-file", str(path))),
-    )
-    watcher = DiagnosticsWatcher(nodes.env)
+    with started_pipeline(nodes, parameter_files, recorded, correction, also_recorded) as pipeline:
+        return pipeline.replay(played, offline, topics, rate)
+
+
+@contextlib.contextmanager
+def started_pipeline(
+    nodes,
+    parameter_files,
+    recorded: Path,
+    correction: Correction = WIND,
+    also_recorded: tuple[str, ...] = (),
+):
+    """``fusion_node`` and the ``correction``'s node started with ``parameter_files``, and
+    ``bag_recorder`` recording their outputs (and ``also_recorded``) to ``recorded``: a
+    :class:`LivePipeline` whose :meth:`~LivePipeline.replay` plays a bag through them. A test
+    starts them before it writes the bag and runs ``process_bag``, which they start up during."""
+    pipeline = LivePipeline(nodes, parameter_files, recorded, correction, also_recorded)
     try:
-        fusion = nodes.start("fusion_node", *parameters)
-        compensation = nodes.start(
+        yield pipeline
+    finally:
+        pipeline.watcher.close()
+
+
+class LivePipeline:
+    """The nodes of :func:`started_pipeline` and the watcher of their diagnostics."""
+
+    def __init__(self, nodes, parameter_files, recorded: Path, correction, also_recorded):
+        self.nodes = nodes
+        self.correction = correction
+        self.recorded_topics = ("nav/odometry", correction.output_topic, *also_recorded)
+        parameters = (
+            "--ros-args",
+            *(a for path in parameter_files for a in ("--params-file", str(path))),
+        )
+        self.watcher = DiagnosticsWatcher(nodes.env)
+        self.fusion = nodes.start("fusion_node", *parameters)
+        self.correction_node = nodes.start(
             correction.node,
             *parameters,
             "-p",
             f"{correction.timeout_parameter}:={LATENCY_BUDGET_S}",
         )
-        recorder = nodes.start("bag_recorder", str(recorded), "--topics", *recorded_topics)
+        self.recorder = nodes.start(
+            "bag_recorder", str(recorded), "--topics", *self.recorded_topics
+        )
+
+    def _recorded_count(self, topic: str) -> int:
+        return self.watcher.value("bag_recorder", f"count[/{topic}]")
+
+    def replay(
+        self, played: Path, offline: Path, topics: tuple[str, ...] = (), rate: float = RATE
+    ) -> str:
+        """Play ``played`` through the nodes and stop them once the recorder holds what
+        ``process_bag`` wrote to ``offline``: :func:`replay`."""
+        nodes, correction = self.nodes, self.correction
+        fusion, compensation, recorder = self.fusion, self.correction_node, self.recorder
+        offline_nav_ns, _ = odometry_arrays(offline)
+        offline_out_ns, _ = vector_arrays(offline, correction.output_topic)
+        with BagReader(played) as reader:
+            n_inputs = next(
+                info.count
+                for name, info in reader.topics.items()
+                if name.lstrip("/") == correction.input_topic
+            )
+            duration_s = reader.duration_s
+        # samples after the last navigation wait for it until the node is interrupted
+        n_held_back = int(np.count_nonzero(offline_out_ns > offline_nav_ns[-1]))
         assert wait_for(
             lambda: all(
-                f"recording /{topic} (" in nodes.log_of(recorder) for topic in recorded_topics
+                f"recording /{topic} (" in nodes.log_of(recorder) for topic in self.recorded_topics
             ),
             STARTUP_TIMEOUT_S,
         ), nodes.log_of(recorder) + nodes.log_of(fusion) + nodes.log_of(compensation)
@@ -234,35 +308,40 @@ def replay(
         played_wall_s = time.monotonic() - started
         assert player.returncode == 0, player.stderr
 
-        def recorded_count(topic: str) -> int:
-            return watcher.value("bag_recorder", f"count[/{topic}]")
-
+        # Drained: the recorder holds what process_bag wrote but the samples that wait for
+        # navigation, and the correction node has taken every sample (those too).
         drained = wait_for(
             lambda: (
-                recorded_count("nav/odometry") >= offline_nav_ns.size
-                and recorded_count(correction.output_topic) >= n_inputs - n_held_back
+                self._recorded_count("nav/odometry") >= offline_nav_ns.size
+                and self._recorded_count(correction.output_topic) >= n_inputs - n_held_back
+                and self.watcher.value(correction.node, correction.samples_in_key) >= n_inputs
             ),
             DRAIN_TIMEOUT_S,
         )
-        compensation_before_interrupt = dict(watcher.latest.get(correction.node, {}))
-        assert nodes.interrupt(fusion) == 0, nodes.log_of(fusion)
-        assert nodes.interrupt(compensation) == 0, nodes.log_of(compensation)
-        wait_for(lambda: recorded_count(correction.output_topic) >= n_inputs, FLUSH_TIMEOUT_S)
+        compensation_before_interrupt = dict(self.watcher.latest.get(correction.node, {}))
+        if drained:
+            # The recorder holds every solution process_bag made, so fusion_node has none left
+            # to publish at SIGINT, and the correction node has taken every sample: both stop
+            # together.
+            stop_together(nodes, (fusion, compensation))
+        else:
+            # Upstream first: the correction node takes what fusion_node publishes at SIGINT.
+            stop_together(nodes, (fusion,))
+            stop_together(nodes, (compensation,))
+        wait_for(lambda: self._recorded_count(correction.output_topic) >= n_inputs, FLUSH_TIMEOUT_S)
         assert nodes.interrupt(recorder) == 0, nodes.log_of(recorder)
-    finally:
-        watcher.close()
-    live_invalid_reasons = {
-        key: value
-        for key, value in compensation_before_interrupt.items()
-        if key.startswith("invalid[") and value != "0"
-    }
-    return (
-        f"played {duration_s:.0f} s at {rate:g}x in {played_wall_s:.1f} s (drained: {drained}); "
-        f"{correction.node} before SIGINT: nav samples in "
-        f"{compensation_before_interrupt.get('nav_samples_in')}, {live_invalid_reasons}; "
-        f"offline: {offline_nav_ns.size} nav/odometry, {n_inputs} {correction.output_topic} of "
-        f"which {n_held_back} wait for navigation"
-    )
+        live_invalid_reasons = {
+            key: value
+            for key, value in compensation_before_interrupt.items()
+            if key.startswith("invalid[") and value != "0"
+        }
+        return (
+            f"played {duration_s:.0f} s at {rate:g}x in {played_wall_s:.1f} s (drained: "
+            f"{drained}); {correction.node} before SIGINT: nav samples in "
+            f"{compensation_before_interrupt.get('nav_samples_in')}, {live_invalid_reasons}; "
+            f"offline: {offline_nav_ns.size} nav/odometry, {n_inputs} {correction.output_topic} "
+            f"of which {n_held_back} wait for navigation"
+        )
 
 
 EQUAL_TO = 1e-9  # m/s, rad, m: the same arithmetic on the same numbers

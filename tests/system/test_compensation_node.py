@@ -67,10 +67,9 @@ ZERO_QUATERNION_AFTER_INDEX = 100
 ECHO_EVERY = 10
 
 
-@pytest.fixture(scope="module")
-def scenario(tmp_path_factory):
+def simulated_scenario(folder: Path):
     """Messages to publish, in stamp order, and the simulator's true wind by stamp."""
-    bag = tmp_path_factory.mktemp("compensation") / "sim"
+    bag = folder / "sim"
     simulated = subprocess.run(
         [
             str(Path(sys.executable).parent / "simulate_bag"),
@@ -201,9 +200,9 @@ class Listener:
 
 
 @pytest.fixture(scope="module")
-def live_run(scenario, module_ros_env, tmp_path_factory):
-    """Run compensation_node on the scenario; returns what it published and its exit code."""
-    winds, odometries, fix, _ = scenario
+def live_run(module_ros_env, tmp_path_factory):
+    """Run compensation_node on the scenario; returns the scenario, what the node published and
+    its exit code."""
     log_path = tmp_path_factory.mktemp("compensation_logs") / "compensation_node.log"
     listener = Listener(module_ros_env)
     with open(log_path, "w") as log:
@@ -228,6 +227,9 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
             start_new_session=True,
         )
     try:
+        # The nodes start (seconds of imports and discovery) while the scenario is simulated.
+        scenario = simulated_scenario(tmp_path_factory.mktemp("compensation"))
+        winds, odometries, fix, _ = scenario
         assert wait_for(
             lambda: (
                 min(
@@ -279,6 +281,7 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
         wait_for(lambda: "1-min stats" in echo_log_path.read_text(), 5.0)
         echo_exit_code = process_exit_code(echo)
         return {
+            "scenario": scenario,
             "echo_exit_code": echo_exit_code,
             "echo": echo_log_path.read_text(),
             "exit_code": exit_code,
@@ -294,6 +297,13 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
                 started.kill()
                 started.wait()
         listener.close()
+
+
+@pytest.fixture(scope="module")
+def scenario(live_run):
+    """The messages the live run published to the node and the simulator's true wind
+    (:func:`simulated_scenario`)."""
+    return live_run["scenario"]
 
 
 def process_exit_code(process: subprocess.Popen) -> int:

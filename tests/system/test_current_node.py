@@ -41,18 +41,22 @@ from wind_comp.pipeline import current_pipeline
 
 pytestmark = pytest.mark.ros
 
-SCENARIO_S = 130.0
+# sea_state starts on a whole minute and its DVL samples once a second: the first minute's
+# window is full (60 samples, for the products' test) and the second one closes at SIGINT.
+SCENARIO_S = 65.0
 LATITUDE_DEG = 35.0  # sea_state starts at 35 N
 PLAY_RATE = 10.0
-NAN_INDEX, FAST_INDEX, WRONG_FRAME_INDEX, REPEATED_INDEX = 20, 30, 40, 50
+# A sample whose stamp repeats the one before is left out of its minute's window: it comes
+# after the first minute, which stays full.
+NAN_INDEX, FAST_INDEX, WRONG_FRAME_INDEX, REPEATED_INDEX = 20, 30, 40, 62
 BAD = {NAN_INDEX, FAST_INDEX, WRONG_FRAME_INDEX, REPEATED_INDEX}
+MINUTE_NS = 60 * 1_000_000_000
 
 
-@pytest.fixture(scope="module")
-def scenario(tmp_path_factory):
+def simulated_scenario(folder: Path):
     """DVL and odometry messages to publish, the fix, and the simulator's water velocity at the
     DVL by stamp."""
-    bag = tmp_path_factory.mktemp("current") / "sim"
+    bag = folder / "sim"
     error_free_dvl = [
         "sensors.dvl.scale_factor_error_percent=0",
         "sensors.dvl.bias_mps=[0, 0, 0]",
@@ -158,9 +162,9 @@ class Listener:
 
 
 @pytest.fixture(scope="module")
-def live_run(scenario, module_ros_env, tmp_path_factory):
-    """Run current_node on the scenario; returns what it published and its exit code."""
-    samples, odometries, fix, _ = scenario
+def live_run(module_ros_env, tmp_path_factory):
+    """Run current_node on the scenario; returns the scenario, what the node published and its
+    exit code."""
     log_path = tmp_path_factory.mktemp("current_logs") / "current_node.log"
     listener = Listener(module_ros_env)
     with open(log_path, "w") as log:
@@ -172,6 +176,9 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
             start_new_session=True,
         )
     try:
+        # The node starts (seconds of imports and discovery) while the scenario is simulated.
+        scenario = simulated_scenario(tmp_path_factory.mktemp("current"))
+        samples, odometries, fix, _ = scenario
         assert wait_for(
             lambda: (
                 listener.node.count_publishers("current/velocity") > 0
@@ -202,8 +209,11 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
         status = listener.node_status()
         process.send_signal(signal.SIGINT)
         exit_code = process.wait(timeout=15.0)
-        wait_for(lambda: len(listener.received["current/stats_1min"]) >= 3, 5.0)
+        # A minute's window closes with the first sample after it, the last one at SIGINT.
+        n_minutes = len({stamp_ns(m) // MINUTE_NS for m in samples})
+        wait_for(lambda: len(listener.received["current/stats_1min"]) >= n_minutes, 5.0)
         return {
+            "scenario": scenario,
             "exit_code": exit_code,
             "log": log_path.read_text(),
             "diagnostics": {kv.key: kv.value for kv in status.values},
@@ -214,6 +224,13 @@ def live_run(scenario, module_ros_env, tmp_path_factory):
             process.kill()
             process.wait()
         listener.close()
+
+
+@pytest.fixture(scope="module")
+def scenario(live_run):
+    """The messages the live run published to the node and the simulator's water velocity
+    (:func:`simulated_scenario`)."""
+    return live_run["scenario"]
 
 
 def vectors(messages) -> np.ndarray:

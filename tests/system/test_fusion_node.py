@@ -19,6 +19,7 @@ import functools
 import importlib
 import math
 import os
+import signal
 import sys
 import threading
 import time
@@ -82,11 +83,18 @@ MALFORMED_RUN_S = 16.0
 MALFORMED_AFTER_S = 12.0  # aligned by then
 FLUSH_RUN_S = 12.0
 PLAY_RATE = 4.0
+# From the node's first solution on, the replay is held back by the node's output (Listener.play
+# given the solution stamps) and cannot outrun it: asked for more than the node sustains, it goes
+# at the node's own pace. Not before (nothing holds it back while the node aligns), nor in the
+# run that judges the node's timing figures, which were measured at PLAY_RATE.
+HELD_PLAY_RATE = 8.0
 # The replay's hold on the node's output (Listener.play): checked every half second of stamps,
 # the solutions a second behind must have arrived, waiting for them at most CATCH_UP_TIMEOUT_S.
 CHECK_NS = 500_000_000
 CATCH_UP_NS = 1_000_000_000
 CATCH_UP_TIMEOUT_S = 30.0
+# From SIGINT to the node's exit (NodeProcesses.interrupt's bound).
+STOP_TIMEOUT_S = 15.0
 # The solutions are judged against the truth from this long after the first one in the long
 # run (the first seconds after the alignment carry its errors), from the first in the short.
 SETTLING_S = 20.0
@@ -114,12 +122,6 @@ def sensor_stream_of(name: str) -> list:
             topic = record.topic.lstrip("/")
             stream.append((topic, to_rclpy(reader.decode(record), INPUT_CLASSES[topic]())))
     return stream
-
-
-@pytest.fixture(scope="module")
-def sensor_stream():
-    """The first LIVE_EQUALS_OFFLINE_S of ``sea_state``'s sensor data."""
-    return sensor_stream_of("sea_state")
 
 
 @functools.cache
@@ -232,7 +234,13 @@ class Listener:
         inputs = self.node_inputs()
         return bool(inputs) and reports_publishers_on(self.diagnostics[-1], inputs)
 
-    def play(self, paced_stream, solution_stamps_ns=None, rate: float = PLAY_RATE) -> None:
+    def play(
+        self,
+        paced_stream,
+        solution_stamps_ns=None,
+        rate: float = PLAY_RATE,
+        held_rate: float | None = None,
+    ) -> None:
         """Publish (pace stamp ns, topic, message) rows at ``rate`` times real time.
 
         With ``solution_stamps_ns`` (the stamps of the solutions the node is to publish, from
@@ -241,17 +249,21 @@ class Listener:
         arrived here (the node publishes up to ``max_measurement_delay_s`` behind its newest IMU
         sample). On a loaded machine the replay then slows down instead of the node or this
         listener falling further behind than their 1000-message queues hold; what is compared
-        is unchanged, since the node runs on stamps alone.
+        is unchanged, since the node runs on stamps alone. Held back so, the pace can rise to
+        ``held_rate`` (if given) from the first solution due on.
         """
         start_wall_s, first_ns = time.monotonic(), paced_stream[0][0]
         next_check_ns = first_ns + CHECK_NS
+        pace_rate = rate
         for pace_ns, topic, message in paced_stream:
             if solution_stamps_ns is not None and pace_ns >= next_check_ns:
                 due = int(np.searchsorted(solution_stamps_ns, pace_ns - CATCH_UP_NS, "right"))
                 wait_for(lambda due=due: received_count(self) >= due, CATCH_UP_TIMEOUT_S)
-                start_wall_s = time.monotonic() - (pace_ns - first_ns) * 1e-9 / rate
+                if due and held_rate is not None:
+                    pace_rate = held_rate
+                start_wall_s = time.monotonic() - (pace_ns - first_ns) * 1e-9 / pace_rate
                 next_check_ns = pace_ns + CHECK_NS
-            delay_s = (pace_ns - first_ns) * 1e-9 / rate - (time.monotonic() - start_wall_s)
+            delay_s = (pace_ns - first_ns) * 1e-9 / pace_rate - (time.monotonic() - start_wall_s)
             if delay_s > 0:
                 time.sleep(delay_s)
             self.publishers[topic].publish(message)
@@ -272,12 +284,9 @@ class Listener:
         wait_for(arrived, timeout_s)
         return found[0] if found else None
 
-    def received(self) -> dict[str, list]:
-        """The nav messages received so far, decoded, by topic."""
-        return {
-            topic: [deserialize_message(raw, OUTPUT_CLASSES[topic]) for raw in list(messages)]
-            for topic, messages in self.received_raw.items()
-        }
+    def received(self) -> dict[str, list[bytes]]:
+        """The nav messages received so far, as received (CDR), by topic."""
+        return {topic: list(messages) for topic, messages in self.received_raw.items()}
 
     def close(self):
         self.executor.shutdown()
@@ -300,15 +309,22 @@ def flatten(message, strings: list[str], numbers: list[float]) -> None:
             numbers.append(float(value))
 
 
-def assert_same_messages(live: dict[str, list], offline: dict[str, list]) -> float:
-    """Same count, stamps, strings and (to RELATIVE_TOLERANCE) numbers on every nav topic;
-    returns the largest relative difference seen."""
+def assert_same_messages(live_raw: dict[str, list[bytes]], offline: dict[str, list]) -> float:
+    """Same count, stamps, strings and (to RELATIVE_TOLERANCE) numbers on every nav topic, the
+    live messages as received (CDR); returns the largest relative difference seen.
+
+    A topic whose live messages equal the offline ones field for field (the same arithmetic on
+    the same numbers gives that; a NaN anywhere does not) holds all of these without the
+    number-by-number comparison, which takes a second for the thousands of messages of a run."""
     largest = 0.0
     for topic in NAV_MSGTYPES:
-        assert len(live[topic]) == len(offline[topic]), topic
-        assert [stamp_ns(m) for m in live[topic]] == [stamp_ns(m) for m in offline[topic]], topic
+        assert len(live_raw[topic]) == len(offline[topic]), topic
+        live = [deserialize_message(raw, OUTPUT_CLASSES[topic]) for raw in live_raw[topic]]
+        if live == offline[topic]:
+            continue
+        assert [stamp_ns(m) for m in live] == [stamp_ns(m) for m in offline[topic]], topic
         live_strings, live_numbers, offline_strings, offline_numbers = [], [], [], []
-        for message in live[topic]:
+        for message in live:
             flatten(message, live_strings, live_numbers)
         for message in offline[topic]:
             flatten(message, offline_strings, offline_numbers)
@@ -358,15 +374,16 @@ def received_count(listener: Listener) -> int:
 # stricter case; the shipped geometry's sea_state is a long run.
 @pytest.mark.parametrize("name", [pytest.param("sea_state", marks=pytest.mark.long), "off_axis"])
 def test_live_solutions_equal_offline_fusion(nodes, name):
-    sensor_stream = sensor_stream_of(name)
-    offline, engine, _ = offline_run(sensor_stream, name)
-    n_solutions = len(offline[NAV_ODOMETRY_TOPIC])
-    assert n_solutions > 0.6 * sum(topic == IMU_RAW_TOPIC for topic, _ in sensor_stream)
-    assert_near_the_truth(offline, name, SETTLING_S)
-
     listener = Listener(nodes.env)
     try:
+        # The node starts (seconds of imports and discovery) while the reference is computed.
         process = nodes.start(NODE, "--ros-args", *parameter_arguments(name))
+        sensor_stream = sensor_stream_of(name)
+        offline, engine, _ = offline_run(sensor_stream, name)
+        n_solutions = len(offline[NAV_ODOMETRY_TOPIC])
+        assert n_solutions > 0.6 * sum(topic == IMU_RAW_TOPIC for topic, _ in sensor_stream)
+        assert_near_the_truth(offline, name, SETTLING_S)
+
         assert listener.wait_for_node(), nodes.log_of(process)
         listener.play(
             [(stamp_ns(m), topic, m) for topic, m in sensor_stream],
@@ -379,7 +396,10 @@ def test_live_solutions_equal_offline_fusion(nodes, name):
         )
         live = listener.received()
         statuses = list(listener.diagnostics)
-        assert nodes.interrupt(process) == 0, nodes.log_of(process)
+        # SIGINT, as Ctrl-C would: the node stops while its messages are compared.
+        process.send_signal(signal.SIGINT)
+        largest_relative_difference = assert_same_messages(live, offline)
+        assert process.wait(timeout=STOP_TIMEOUT_S) == 0, nodes.log_of(process)
     finally:
         listener.close()
 
@@ -395,7 +415,6 @@ def test_live_solutions_equal_offline_fusion(nodes, name):
     assert (f"broadcasting {static_line} on tf_static" in log) == (tf_line in log), log
     assert (f"{static_line} is not broadcast on tf_static" in log) == (tf_line not in log), log
 
-    largest_relative_difference = assert_same_messages(live, offline)
     print(f"{n_solutions} solutions, largest relative difference {largest_relative_difference:g}")
 
     assert final is not None, nodes.log_of(process)
@@ -518,11 +537,11 @@ def malformed_messages(
     return bad
 
 
-def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_stream):
-    first_ns = stamp_ns(sensor_stream[0][1])
-    good = [
-        (topic, m) for topic, m in sensor_stream if stamp_ns(m) - first_ns <= MALFORMED_RUN_S * 1e9
-    ]
+def with_malformed_messages(good: list) -> tuple[list, list]:
+    """(pace stamp ns, topic, message) rows of the ``good`` (topic, message) in order, with the
+    :func:`malformed_messages` right after the first IMU sample from MALFORMED_AFTER_S on, at its
+    pace; and those bad ones."""
+    first_ns = stamp_ns(good[0][1])
     after_ns = first_ns + round(MALFORMED_AFTER_S * 1e9)
     imu_index = next(
         i for i, (topic, m) in enumerate(good) if topic == IMU_RAW_TOPIC and stamp_ns(m) >= after_ns
@@ -538,36 +557,48 @@ def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_st
         latest[GNSS_VELOCITY_TOPIC],
         latest[GNSS_HEADING_TOPIC],
     )
-    # Each bad message goes out right after the good IMU sample, at its pace.
     paced = []
     for index, (topic, m) in enumerate(good):
         paced.append((stamp_ns(m), topic, m))
         if index == imu_index:
             paced.extend((stamp_ns(m), bad_topic, message) for bad_topic, message, _, _ in bad)
-    reference, engine, _ = offline_run(good)
-    assert_near_the_truth(reference, "sea_state", 0.0)
-    n_solutions = len(reference[NAV_ODOMETRY_TOPIC])
-    last_bad_ns = max(stamp_ns(message) for _, message, _, _ in bad)
-    assert sum(stamp_ns(m) > last_bad_ns for m in reference[NAV_ODOMETRY_TOPIC]) > 100
+    return paced, bad
 
+
+def test_malformed_input_is_counted_and_never_reaches_the_state(nodes):
     listener = Listener(nodes.env)
     try:
+        # The node starts (seconds of imports and discovery) while the reference is computed.
         process = nodes.start(NODE, "--ros-args", *parameter_arguments("sea_state"))
+        sensor_stream = sensor_stream_of("sea_state")
+        first_ns = stamp_ns(sensor_stream[0][1])
+        good = [
+            (topic, m)
+            for topic, m in sensor_stream
+            if stamp_ns(m) - first_ns <= MALFORMED_RUN_S * 1e9
+        ]
+        paced, bad = with_malformed_messages(good)
+        reference, engine, _ = offline_run(good)
+        assert_near_the_truth(reference, "sea_state", 0.0)
+        n_solutions = len(reference[NAV_ODOMETRY_TOPIC])
+        last_bad_ns = max(stamp_ns(message) for _, message, _, _ in bad)
+        assert sum(stamp_ns(m) > last_bad_ns for m in reference[NAV_ODOMETRY_TOPIC]) > 100
+
         assert listener.wait_for_node(), nodes.log_of(process)
-        listener.play(paced, solution_stamps_ns(reference))
+        listener.play(paced, solution_stamps_ns(reference), held_rate=HELD_PLAY_RATE)
         wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
         n_imu = sum(topic == IMU_RAW_TOPIC for _, topic, _ in paced)
         final = listener.latest_diagnostics_where(
             lambda values: values.get(f"messages_in[{IMU_RAW_TOPIC}]") == str(n_imu), 5.0
         )
         live = listener.received()
-        still_running = process.poll() is None
-        assert nodes.interrupt(process) == 0, nodes.log_of(process)
+        assert process.poll() is None, nodes.log_of(process)
+        # SIGINT, as Ctrl-C would: the node stops while its messages are compared.
+        process.send_signal(signal.SIGINT)
+        assert_same_messages(live, reference)
+        assert process.wait(timeout=STOP_TIMEOUT_S) == 0, nodes.log_of(process)
     finally:
         listener.close()
-
-    assert still_running
-    assert_same_messages(live, reference)
 
     assert final is not None, nodes.log_of(process)
     expected_node = {}
@@ -587,21 +618,10 @@ def test_malformed_input_is_counted_and_never_reaches_the_state(nodes, sensor_st
     assert final["solutions_published"] == str(n_solutions)
 
 
-def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
-    first_ns = stamp_ns(sensor_stream[0][1])
-    stream = [
-        (topic, m) for topic, m in sensor_stream if stamp_ns(m) - first_ns <= FLUSH_RUN_S * 1e9
-    ]
-    reference, engine, stamps = offline_run(stream, **{"fusion.realtime_output": False})
-    n_before_end = len(reference[NAV_ODOMETRY_TOPIC])
-    nav_messages(engine.flush(), reference, stamps)
-    assert_near_the_truth(reference, "sea_state", 0.0)
-    n_solutions = len(reference[NAV_ODOMETRY_TOPIC])
-    # The last max_measurement_delay_s of IMU samples wait for measurements until the end.
-    assert n_solutions - n_before_end > 10
-
+def test_delayed_output_is_flushed_at_sigint(nodes):
     listener = Listener(nodes.env)
     try:
+        # The node starts (seconds of imports and discovery) while the reference is computed.
         process = nodes.start(
             NODE,
             "--ros-args",
@@ -609,6 +629,19 @@ def test_delayed_output_is_flushed_at_sigint(nodes, sensor_stream):
             "-p",
             "fusion.realtime_output:=false",
         )
+        sensor_stream = sensor_stream_of("sea_state")
+        first_ns = stamp_ns(sensor_stream[0][1])
+        stream = [
+            (topic, m) for topic, m in sensor_stream if stamp_ns(m) - first_ns <= FLUSH_RUN_S * 1e9
+        ]
+        reference, engine, stamps = offline_run(stream, **{"fusion.realtime_output": False})
+        n_before_end = len(reference[NAV_ODOMETRY_TOPIC])
+        nav_messages(engine.flush(), reference, stamps)
+        assert_near_the_truth(reference, "sea_state", 0.0)
+        n_solutions = len(reference[NAV_ODOMETRY_TOPIC])
+        # The last max_measurement_delay_s of IMU samples wait for measurements until the end.
+        assert n_solutions - n_before_end > 10
+
         assert listener.wait_for_node(), nodes.log_of(process)
         listener.play([(stamp_ns(m), topic, m) for topic, m in stream])
         n_imu = sum(topic == IMU_RAW_TOPIC for topic, _ in stream)
@@ -687,13 +720,6 @@ def test_live_sensor_sets_equal_offline_fusion(nodes, tmp_path, set_name):
     1° of the truth."""
     scenario_name, overrides, lines, final_set = LIVE_SENSOR_SETS[set_name]
     scenario = load_scenario(scenario_name, [*overrides, f"duration_s={LIVE_EQUALS_OFFLINE_S}"])
-    truth = TruthModel(scenario)
-    streams = [STREAMS[kind].build(scenario, truth, {}) for kind in ("imu", "gnss")]
-    stream = [
-        (topic, message)
-        for topic, _, message in merged_messages(streams, LIVE_EQUALS_OFFLINE_S)
-        if topic in FUSION_INPUT_MSGTYPES
-    ]
     parameters = tmp_path / "sensor_set.yaml"
     site = (
         f"    site.latitude_deg: {scenario.origin_latitude_deg}",
@@ -703,26 +729,38 @@ def test_live_sensor_sets_equal_offline_fusion(nodes, tmp_path, set_name):
     parameters.write_text("/**:\n  ros__parameters:\n" + "\n".join([*site, *lines]) + "\n")
     files = [*CASES["sea_state"].buoy_parameter_files, parameters]
 
-    engine = FusionEngine(config_from_files(files))
-    offline = {topic: [] for topic in NAV_MSGTYPES}
-    stamps = StampBook()
-    solutions = []
-    for topic, message in stream:
-        new = feed_message(engine, topic, message, stamps)[0]
-        solutions += new
-        nav_messages(new, offline, stamps)
-    times = np.array([s.t_s for s in solutions]) - scenario.start_time_ns * 1e-9
-    errors = euler_errors_deg(solutions, truth, times)
-    assert np.abs(errors[times >= 20.0]).max() < 1.0
-    assert engine.health().sensor_set == final_set
-
     listener = Listener(nodes.env)
     try:
         arguments = [a for path in files for a in ("--params-file", str(path))]
+        # The node starts (seconds of imports and discovery) while the reference is computed.
         process = nodes.start(NODE, "--ros-args", *arguments)
+        truth = TruthModel(scenario)
+        streams = [STREAMS[kind].build(scenario, truth, {}) for kind in ("imu", "gnss")]
+        stream = [
+            (topic, message)
+            for topic, _, message in merged_messages(streams, LIVE_EQUALS_OFFLINE_S)
+            if topic in FUSION_INPUT_MSGTYPES
+        ]
+        engine = FusionEngine(config_from_files(files))
+        offline = {topic: [] for topic in NAV_MSGTYPES}
+        stamps = StampBook()
+        solutions = []
+        for topic, message in stream:
+            new = feed_message(engine, topic, message, stamps)[0]
+            solutions += new
+            nav_messages(new, offline, stamps)
+        times = np.array([s.t_s for s in solutions]) - scenario.start_time_ns * 1e-9
+        errors = euler_errors_deg(solutions, truth, times)
+        assert np.abs(errors[times >= 20.0]).max() < 1.0
+        assert engine.health().sensor_set == final_set
+
         assert listener.wait_for_node(), nodes.log_of(process)
         assert {topic for topic, _ in stream} <= set(listener.node_inputs())
-        listener.play([(stamp_ns(m), topic, m) for topic, m in stream], solution_stamps_ns(offline))
+        listener.play(
+            [(stamp_ns(m), topic, m) for topic, m in stream],
+            solution_stamps_ns(offline),
+            held_rate=HELD_PLAY_RATE,
+        )
         n_solutions = len(offline[NAV_ODOMETRY_TOPIC])
         wait_for(lambda: received_count(listener) >= n_solutions, 20.0)
         n_imu = sum(topic == IMU_RAW_TOPIC for topic, _ in stream)
@@ -730,10 +768,12 @@ def test_live_sensor_sets_equal_offline_fusion(nodes, tmp_path, set_name):
             lambda values: values.get(f"messages_in[{IMU_RAW_TOPIC}]") == str(n_imu), 5.0
         )
         live = listener.received()
-        assert nodes.interrupt(process) == 0, nodes.log_of(process)
+        # SIGINT, as Ctrl-C would: the node stops while its messages are compared.
+        process.send_signal(signal.SIGINT)
+        assert_same_messages(live, offline)
+        assert process.wait(timeout=STOP_TIMEOUT_S) == 0, nodes.log_of(process)
     finally:
         listener.close()
-    assert_same_messages(live, offline)
     assert final is not None, nodes.log_of(process)
     assert final["sensor_set"] == final_set
     for kind, counters in engine.health().counters.items():

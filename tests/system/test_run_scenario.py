@@ -13,14 +13,24 @@ import pytest
 
 from buoy_common.bag_io import BagReader
 from buoy_common.contract import WIND_RAW_TOPIC
-from ros_messages import stamp_ns
+from ros_messages import stamp_ns, wait_for
+from sensor_sim.run_scenario import sensor_node_names
 from sensor_sim.scenario import load_scenario
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
 BUOY_PARAMETERS = str(REPO / "src" / "buoy_common" / "config" / "buoy.yaml")
-# run_scenario writes a progress line every 10 s: the first one after the reader has gone fails.
+# run_scenario writes a progress line every 10 s, and a line when the fusion has aligned: the
+# first one after the reader has gone fails.
 EXIT_TIMEOUT_S = 60.0
+# At four times real time the fusion aligns (after 10 s of the scenario) a few seconds after
+# the nodes are up, so that its line comes before the first progress line.
+ALIGNMENT_SOONER_RATE_FACTOR = 4.0
+# Imports and DDS discovery of the simulation's nodes on a busy machine.
+NODES_UP_TIMEOUT_S = 30.0
+# Simulated seconds per wall-clock second of the awaited listener's run: its samples' stamps
+# come from the simulation clock, whatever its pace.
+AWAITED_RATE_FACTOR = 4.0
 
 pytestmark = pytest.mark.ros
 
@@ -39,6 +49,14 @@ def running(pid: int) -> bool:
     return state != "Z"
 
 
+def node_log(log_dir: Path, name: str) -> str:
+    """What node ``name`` of a run_scenario has logged so far to ``log_dir``."""
+    try:
+        return (log_dir / f"{name}.log").read_text(errors="replace")
+    except OSError:
+        return ""
+
+
 def test_nodes_stop_when_the_reader_of_the_output_goes_away(nodes, tmp_path):
     scenario = subprocess.Popen(
         [
@@ -49,6 +67,8 @@ def test_nodes_stop_when_the_reader_of_the_output_goes_away(nodes, tmp_path):
             "--fusion",
             "--params-file",
             BUOY_PARAMETERS,
+            "--rate-factor",
+            f"{ALIGNMENT_SOONER_RATE_FACTOR:g}",
             "--log-dir",
             str(tmp_path),
         ],
@@ -79,8 +99,11 @@ def test_nodes_stop_when_the_reader_of_the_output_goes_away(nodes, tmp_path):
 def test_the_simulation_waits_for_an_awaited_listener_and_it_misses_no_sample(nodes, tmp_path):
     """A listener that subscribes seconds after run_scenario starts still receives the first
     anemometer sample and every one after it: the sensors hold the clock until its subscription
-    has reached them. (Without the wait, a listener 3 s late misses the first seconds.)"""
+    has reached them. (Without the wait, a listener started once the simulation's nodes are up
+    misses the first seconds.)"""
     duration_s, rate_hz = 4.0, 20.0
+    log_dir = tmp_path / "logs"
+    simulation_nodes = [*sensor_node_names(load_scenario("static")), "sim_clock_node"]
     scenario = subprocess.Popen(
         [
             str(BIN / "run_scenario"),
@@ -91,15 +114,24 @@ def test_the_simulation_waits_for_an_awaited_listener_and_it_misses_no_sample(no
             BUOY_PARAMETERS,
             "--wait-for-subscription",
             f"late_listener:{WIND_RAW_TOPIC}",
+            "--rate-factor",
+            f"{AWAITED_RATE_FACTOR:g}",
             "--log-dir",
-            str(tmp_path / "logs"),
+            str(log_dir),
         ],
         env=nodes.env,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
     try:
-        time.sleep(3.0)
+        # Every node of the simulation has started (each logs its scenario): the clock would
+        # run now but for the awaited listener, which only then starts, seconds late.
+        assert wait_for(
+            lambda: all(
+                "scenario 'static'" in node_log(log_dir, name) for name in simulation_nodes
+            ),
+            NODES_UP_TIMEOUT_S,
+        ), {name: node_log(log_dir, name) for name in simulation_nodes}
         bag = tmp_path / "late"
         nodes.start(
             "bag_recorder",
