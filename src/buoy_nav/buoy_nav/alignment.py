@@ -43,11 +43,13 @@ from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.rotations import (
     IDENTITY_QUATERNION,
+    cross_components,
     euler_from_rotation_matrix,
     normalize_quaternion,
     quaternion_from_rotation_matrix,
     quaternion_from_rotation_vector,
     quaternion_multiply,
+    rotation_matrix_elements,
     rotation_matrix_from_euler,
     rotation_matrix_from_quaternion,
     wrap_angle,
@@ -144,8 +146,10 @@ class InMotionAligner:
         """Forget the levelling window (after an IMU gap); GNSS measurements are kept."""
         self._relative: tuple[float, float, float, float] = IDENTITY_QUATERNION
         self._duration_s = 0.0
-        self._force_sum = np.zeros(3)
-        self._force_sq_sum = np.zeros(3)
+        self._force_sum = [0.0, 0.0, 0.0]
+        """Σ of the velocity increments rotated into the window's first body frame (m/s)."""
+        self._force_sq_sum = [0.0, 0.0, 0.0]
+        """Σ of their squares over the step (m²/s³), for the window's specific-force scatter."""
         self._has_imu = False
 
     @property
@@ -163,13 +167,25 @@ class InMotionAligner:
             # A long wait for GNSS lets gyro bias accumulate in R_b0b: start a fresh window.
             self.restart()
         self._has_imu = True
+        # Scalar arithmetic: this runs at the IMU rate until alignment, where numpy's per-call
+        # cost on 3-vectors is many times the arithmetic.
         half_dt = 0.5 * dt_s
-        dtheta = (np.asarray(gyro_start) + np.asarray(gyro_end)) * half_dt
-        dvel = (np.asarray(force_start) + np.asarray(force_end)) * half_dt
-        dvel = dvel + 0.5 * np.cross(dtheta, dvel)
-        rotated = rotation_matrix_from_quaternion(self._relative) @ dvel
-        self._force_sum += rotated
-        self._force_sq_sum += rotated * rotated / dt_s
+        (g0x, g0y, g0z), (g1x, g1y, g1z) = gyro_start, gyro_end
+        (f0x, f0y, f0z), (f1x, f1y, f1z) = force_start, force_end
+        dtheta = ((g0x + g1x) * half_dt, (g0y + g1y) * half_dt, (g0z + g1z) * half_dt)
+        dvel = ((f0x + f1x) * half_dt, (f0y + f1y) * half_dt, (f0z + f1z) * half_dt)
+        sx, sy, sz = cross_components(dtheta, dvel)
+        dx, dy, dz = dvel[0] + 0.5 * sx, dvel[1] + 0.5 * sy, dvel[2] + 0.5 * sz
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_matrix_elements(*self._relative)
+        rotated = (
+            r00 * dx + r01 * dy + r02 * dz,
+            r10 * dx + r11 * dy + r12 * dz,
+            r20 * dx + r21 * dy + r22 * dz,
+        )
+        force_sum, force_sq_sum = self._force_sum, self._force_sq_sum
+        for axis, component in enumerate(rotated):
+            force_sum[axis] += component
+            force_sq_sum[axis] += component * component / dt_s
         self._duration_s += dt_s
         self._relative = normalize_quaternion(
             quaternion_multiply(self._relative, quaternion_from_rotation_vector(*dtheta))
@@ -192,7 +208,7 @@ class InMotionAligner:
         reference's vertical component is judged with); None before the window is full."""
         if self.state is not AlignmentState.WAITING_FOR_GNSS:
             return None
-        mean_start_frame = self._force_sum / self._duration_s
+        mean_start_frame = np.array(self._force_sum) / self._duration_s
         mean_force = rotation_matrix_from_quaternion(self._relative).T @ mean_start_frame
         return rotation_matrix_from_euler(*_roll_pitch(mean_force), 0.0)
 
@@ -278,7 +294,7 @@ class InMotionAligner:
         """R_nb at the end of the window from its mean specific force and the azimuth
         ``yaw_rad`` (ENU, rad) of ``body_vector`` (body); None if the vector is too steep."""
         duration = self._duration_s
-        mean_start_frame = self._force_sum / duration
+        mean_start_frame = np.array(self._force_sum) / duration
         relative = rotation_matrix_from_quaternion(self._relative)
         mean_force = relative.T @ mean_start_frame
         earth_rate = earth.earth_rate_enu_rad_s(fix.latitude_rad)
@@ -293,9 +309,9 @@ class InMotionAligner:
     def _window_spread(self, fix: _Fix) -> _WindowSpread:
         """The tilt uncertainty the window's motion and the IMU's biases leave, at ``fix``."""
         duration = self._duration_s
-        mean_start_frame = self._force_sum / duration
+        mean_start_frame = np.array(self._force_sum) / duration
         gravity = earth.normal_gravity_mps2(fix.latitude_rad, fix.altitude_m)
-        variance = np.maximum(self._force_sq_sum / duration - mean_start_frame**2, 0.0)
+        variance = np.maximum(np.array(self._force_sq_sum) / duration - mean_start_frame**2, 0.0)
         motion_tilt_variance = (
             0.5 * (variance[0] + variance[1]) / gravity**2
             + self._imu.initial_gyro_bias_variance_rad2_s2 * (0.5 * duration) ** 2

@@ -106,6 +106,9 @@ class InnovationWatch:
         """Per innovation, its squared components along the eigenvectors of C (m²)."""
         self._eigenvalues: deque[np.ndarray] = deque()
         """Per innovation, the eigenvalues of C (m²)."""
+        self._window_arrays: tuple[np.ndarray, np.ndarray] | None = None
+        """The two above stacked, made once per innovation: the root search asks for the ratio
+        at a dozen scales of the same window."""
         self.scale = 1.0
         """Factor (≥ 1) on the stated horizontal σ the mooring is fused with."""
         self._widening = False
@@ -115,7 +118,9 @@ class InnovationWatch:
 
     def ratio(self, scale: float = 1.0) -> float:
         """Normalised RMS of the window's innovations with the σ widened by ``scale``."""
-        projected, eigenvalues = np.array(self._projected), np.array(self._eigenvalues)
+        if self._window_arrays is None:
+            self._window_arrays = (np.array(self._projected), np.array(self._eigenvalues))
+        projected, eigenvalues = self._window_arrays
         variance = eigenvalues + scale**2 * self._stated_variance_m2
         return math.sqrt(float(np.sum(projected / variance)) / projected.size)
 
@@ -126,6 +131,7 @@ class InnovationWatch:
         :attr:`scale`: a new warning, ``""`` when one no longer holds, None when nothing
         changed."""
         eigenvalues, eigenvectors = np.linalg.eigh(filter_covariance_m2)
+        self._window_arrays = None
         self._stamps.append(t_s)
         self._projected.append((eigenvectors.T @ innovation_m) ** 2)
         self._eigenvalues.append(np.maximum(eigenvalues, 0.0))
