@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from buoy_common import cdr_bulk
 from buoy_common.bag_io import BagReader
 from error_budget import AXES, IMU_RATE_HZ, NavigationLimits, wind_budget
 from ros_messages import stamp_ns
@@ -27,6 +28,14 @@ def vector(v) -> list[float]:
 def quaternion_xyzw(odometry) -> list[float]:
     q = odometry.pose.pose.orientation
     return [q.x, q.y, q.z, q.w]
+
+
+def topic_columns(reader: BagReader, topic: str, msgtype: str) -> cdr_bulk.MessageColumns:
+    """Every message of ``topic`` as columns, all of them decoded (the suite's column codec,
+    held equal to rosbags' message by message in its own tests)."""
+    columns = cdr_bulk.decode(msgtype, [record.raw for record in reader.messages([topic])])
+    assert columns.valid.all(), f"{topic}: undecodable messages {columns.rejected}"
+    return columns
 
 
 @dataclass(frozen=True)
@@ -55,15 +64,13 @@ class Truth:
 
     def __init__(self, bag: Path):
         with BagReader(bag) as reader:
-            odometry = [reader.decode(r) for r in reader.messages(["truth/odometry"])]
-            wind = [reader.decode(r) for r in reader.messages(["truth/wind"])]
-        self.odometry_ns = np.array([stamp_ns(m) for m in odometry])
-        self.attitude = Rotation.from_quat([quaternion_xyzw(m) for m in odometry])
-        self.velocity_enu_mps = self.attitude.apply(
-            [vector(m.twist.twist.linear) for m in odometry]
-        )
-        self.wind_ns = np.array([stamp_ns(m) for m in wind])
-        self.wind_enu_mps = np.array([vector(m.vector) for m in wind])
+            odometry = topic_columns(reader, "truth/odometry", "nav_msgs/msg/Odometry")
+            wind = topic_columns(reader, "truth/wind", "geometry_msgs/msg/Vector3Stamped")
+        self.odometry_ns = odometry.stamp_ns
+        self.attitude = Rotation.from_quat(odometry["orientation"])
+        self.velocity_enu_mps = self.attitude.apply(odometry["linear"])
+        self.wind_ns = wind.stamp_ns
+        self.wind_enu_mps = wind["vector"]
 
     def wind_errors(self, stamps_ns, wind_enu_mps) -> np.ndarray:
         """Corrected − true wind (M, 3) at the valid samples whose stamp truth/wind shares."""
