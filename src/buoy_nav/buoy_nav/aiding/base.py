@@ -44,7 +44,7 @@ import abc
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
@@ -60,7 +60,6 @@ from buoy_nav.state_layout import UP, StateLayout
 
 if TYPE_CHECKING:
     from buoy_nav.alignment import AlignmentResult, InMotionAligner
-    from buoy_nav.gnss_motion import GnssMotion
 
 # What a source aids, for the solutions' coasting flags (``coasting_fix``, ...): a flag is raised
 # when no source that aids its quantity was accepted for ``coasting_timeout_s``.
@@ -192,6 +191,15 @@ def yaw_reset(
     )
 
 
+class MotionWitness(Protocol):
+    """The buoy's motion as the GNSS receiver's own measurements show it, without the filter
+    (:class:`buoy_nav.gnss_motion.GnssMotion`): what a source's assumption is judged by."""
+
+    def mean_velocity(self, min_span_s: float) -> Any:
+        """The mean velocity (ENU m/s) over what is kept, with its covariance (m²/s²), span (s)
+        and what measured it, once the measurements span ``min_span_s`` (s); else None."""
+
+
 class AidingSource(abc.ABC):
     """One aiding sensor of the fusion (see the module docstring for the life of a measurement).
 
@@ -318,7 +326,7 @@ class AidingSource(abc.ABC):
         its model at ``point``); None: no reset. The default resets nothing."""
         return None
 
-    def judged_by(self, motion: GnssMotion) -> Verdict | None:
+    def judged_by(self, motion: MotionWitness) -> Verdict | None:
         """What the receiver's own measurements of the buoy's motion (``motion``) say of the
         assumption this source makes, without the filter; None when they say nothing either
         way. The default: a sensor makes no assumption."""

@@ -65,10 +65,10 @@ from buoy_nav.aiding.base import (
     AidingSource,
     LinearisationPoint,
     MeasurementModel,
+    MotionWitness,
     Verdict,
 )
 from buoy_nav.chi_square import AGREEMENT_PROBABILITY, chi_square_quantile
-from buoy_nav.gnss_motion import GnssMotion
 from buoy_nav.mean_velocity_watch import GYRO_DRIFT, VELOCITY_NOISE, MeanVelocityWatch
 
 MIN_SPAN_OF_WINDOW = 0.2
@@ -255,7 +255,7 @@ class MooredSource(AidingSource):
             "too small"
         )
 
-    def judged_by(self, motion: GnssMotion) -> Verdict | None:
+    def judged_by(self, motion: MotionWitness) -> Verdict | None:
         """The receiver's mean horizontal velocity against the mooring's zero mean (see the
         module docstring); None before the measurements span enough or while the drift is
         between the two quantiles."""
