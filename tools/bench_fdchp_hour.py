@@ -48,7 +48,7 @@ import numpy as np
 from buoy_common.import_records import import_records
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_processing import process_bag
-from tools import bench_speed, fdchp_simulated
+from tools import bench_speed, compiled_caches, fdchp_simulated
 from tools.bench_fdchp import COLUMN_MAP
 from tools.bench_fdchp import PARAMS as OOI_PARAMS
 from wind_comp.config import compensator_config_from_files
@@ -162,28 +162,20 @@ def timed_runs(bag: Path, params: list[Path], out: Path, runs: int) -> dict:
     }
 
 
-def _remove_compiled_caches() -> None:
-    """numba's cache files and the bytecode caches of the project's sources."""
-    for pattern in ("*.nbi", "*.nbc"):
-        for path in (REPO / "src").rglob(pattern):
-            path.unlink()
-    for cache in (REPO / "src").glob("*/*/**/__pycache__"):
-        shutil.rmtree(cache, ignore_errors=True)
-
-
 def startup(bag: Path, params: list[Path], out: Path, runs: int) -> dict:
     """Wall s from starting ``process_bag --netcdf`` to its first output message, cold and warm,
     the fastest of ``runs`` each."""
     arguments = ["--netcdf", str(out / "startup.nc")]
     cold, warm = [], []
     for _ in range(runs):
-        _remove_compiled_caches()
+        compiled_caches.remove()
         cold.append(
             bench_speed.first_output_s("process_bag", bag, out / "startup", params, arguments)
         )
         warm.append(
             bench_speed.first_output_s("process_bag", bag, out / "startup", params, arguments)
         )
+    compiled_caches.rebuild()
     return {"cold_s": min(cold), "warm_s": min(warm), "runs_cold_s": cold, "runs_warm_s": warm}
 
 

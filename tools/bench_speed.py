@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import os
 import resource
-import shutil
 import signal
 import subprocess
 import sys
@@ -39,6 +38,7 @@ from buoy_common.bag_io.writing import CHUNK_BYTES
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_fusion import fuse_bag
 from buoy_processing.bag_processing import process_bag
+from tools import compiled_caches
 from tools.bench_plan import (
     PROCESSING_PARAMS,
     REPO,
@@ -143,12 +143,6 @@ def run_speed(in_bag: Path, work_dir: Path, log=lambda text: None) -> dict:
     }
 
 
-def _remove_bytecode_caches() -> None:
-    """Delete the project's ``__pycache__`` directories (not those of the installed libraries)."""
-    for cache in (REPO / "src").glob("*/*/**/__pycache__"):
-        shutil.rmtree(cache, ignore_errors=True)
-
-
 def first_output_s(
     tool: str,
     in_bag: Path,
@@ -201,11 +195,12 @@ def run_startup(in_bag: Path, work_dir: Path, log=lambda text: None) -> dict:
     for run in range(1, SPEED_RUNS + 1):
         for tool in TOOLS:
             log(f"bench: start-up: {tool}, run {run} of {SPEED_RUNS}")
-            _remove_bytecode_caches()
+            compiled_caches.remove()
             out_bag = work_dir / tool
             runs[tool]["cold"].append(first_output_s(tool, in_bag, out_bag, write_bytecode=False))
             first_output_s(tool, in_bag, out_bag)  # writes the caches
             runs[tool]["warm"].append(first_output_s(tool, in_bag, out_bag))
+    compiled_caches.rebuild()
     return {
         tool: {
             "cold_s": min(figures["cold"]),
