@@ -81,6 +81,36 @@ over the anchor's minutes, so a window holds only a few independent samples and 
 filter's ratio scatters by a tenth or two about 1."""
 
 
+class _WindowRows:
+    """The rows of a sliding window, kept in one C-ordered array so that the window is a view,
+    not a copy: appended at the end, dropped from the start, moved back to the front when the
+    end reaches the capacity (doubled when the window fills more than half of it)."""
+
+    def __init__(self, width: int):
+        self._data = np.empty((64, width))
+        self._start = 0
+        self._end = 0
+
+    @property
+    def rows(self) -> np.ndarray:
+        """The window's rows, oldest first (a view: valid until the next append)."""
+        return self._data[self._start : self._end]
+
+    def append(self, row) -> None:
+        if self._end == len(self._data):
+            live = self._end - self._start
+            target = self._data
+            if 2 * live > len(self._data):
+                target = np.empty((2 * len(self._data), self._data.shape[1]))
+            target[:live] = self._data[self._start : self._end]
+            self._data, self._start, self._end = target, 0, live
+        self._data[self._end] = row
+        self._end += 1
+
+    def drop_first(self) -> None:
+        self._start += 1
+
+
 class InnovationWatch:
     """The mooring's horizontal innovations over the last ``window_s`` (s): their normalised
     RMS at the stated σ, the factor its σ is widened by, and the warning beyond
@@ -102,13 +132,10 @@ class InnovationWatch:
         self._stated_variance_m2 = stated_sigma_m**2
         self._scale_limit = scale_limit
         self._stamps: deque[float] = deque()
-        self._projected: deque[np.ndarray] = deque()
+        self._projected = _WindowRows(2)
         """Per innovation, its squared components along the eigenvectors of C (m²)."""
-        self._eigenvalues: deque[np.ndarray] = deque()
+        self._eigenvalues = _WindowRows(2)
         """Per innovation, the eigenvalues of C (m²)."""
-        self._window_arrays: tuple[np.ndarray, np.ndarray] | None = None
-        """The two above stacked, made once per innovation: the root search asks for the ratio
-        at a dozen scales of the same window."""
         self.scale = 1.0
         """Factor (≥ 1) on the stated horizontal σ the mooring is fused with."""
         self._widening = False
@@ -118,9 +145,7 @@ class InnovationWatch:
 
     def ratio(self, scale: float = 1.0) -> float:
         """Normalised RMS of the window's innovations with the σ widened by ``scale``."""
-        if self._window_arrays is None:
-            self._window_arrays = (np.array(self._projected), np.array(self._eigenvalues))
-        projected, eigenvalues = self._window_arrays
+        projected, eigenvalues = self._projected.rows, self._eigenvalues.rows
         variance = eigenvalues + scale**2 * self._stated_variance_m2
         return math.sqrt(float(np.sum(projected / variance)) / projected.size)
 
@@ -131,14 +156,13 @@ class InnovationWatch:
         :attr:`scale`: a new warning, ``""`` when one no longer holds, None when nothing
         changed."""
         eigenvalues, eigenvectors = np.linalg.eigh(filter_covariance_m2)
-        self._window_arrays = None
         self._stamps.append(t_s)
         self._projected.append((eigenvectors.T @ innovation_m) ** 2)
         self._eigenvalues.append(np.maximum(eigenvalues, 0.0))
         while self._stamps[0] < t_s - self._window_s:
             self._stamps.popleft()
-            self._projected.popleft()
-            self._eigenvalues.popleft()
+            self._projected.drop_first()
+            self._eigenvalues.drop_first()
         span_s = t_s - self._stamps[0]
         if span_s < MIN_SPAN_OF_WINDOW * self._window_s:
             return None
