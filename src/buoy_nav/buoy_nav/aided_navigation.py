@@ -102,11 +102,15 @@ class AidedNavigation:
         one stacked update, which equals applying them one after the other (their noises are
         independent) at a fraction of the cost, and inject the correction into the nominal
         state. Returns the correction."""
-        correction = self.kalman.update(
-            np.concatenate([m.innovation for m in models]),
-            np.vstack([m.jacobian for m in models]),
-            block_diagonal([m.covariance for m in models]),
-        )
+        if len(models) == 1:
+            (model,) = models
+            correction = self.kalman.update(model.innovation, model.jacobian, model.covariance)
+        else:
+            correction = self.kalman.update(
+                np.concatenate([m.innovation for m in models]),
+                np.vstack([m.jacobian for m in models]),
+                block_diagonal([m.covariance for m in models]),
+            )
         self.integrator.inject(correction)
         self.kalman.reset_after_injection(correction)
         self._recorder.corrected(correction)

@@ -109,10 +109,24 @@ def _measurement_arrays(innovation, jacobian, measurement_covariance):
     """ν (m,), H (m × states) and R (m × m) as contiguous float arrays for the compiled
     update."""
     return (
-        np.ascontiguousarray(np.atleast_1d(innovation), dtype=float),
-        np.ascontiguousarray(np.atleast_2d(jacobian), dtype=float),
-        np.ascontiguousarray(np.atleast_2d(measurement_covariance), dtype=float),
+        _contiguous_floats(innovation, 1),
+        _contiguous_floats(jacobian, 2),
+        _contiguous_floats(measurement_covariance, 2),
     )
+
+
+def _contiguous_floats(values, ndim: int) -> np.ndarray:
+    """``values`` as a C-contiguous float64 array of at least ``ndim`` (1 or 2) dimensions:
+    the array itself when it is one already (the compiled update only reads it)."""
+    if (
+        type(values) is np.ndarray
+        and values.ndim == ndim
+        and values.dtype == np.float64
+        and values.flags.c_contiguous
+    ):
+        return values
+    at_least = np.atleast_1d(values) if ndim == 1 else np.atleast_2d(values)
+    return np.ascontiguousarray(at_least, dtype=float)
 
 
 def block_diagonal(blocks) -> np.ndarray:

@@ -41,7 +41,6 @@ from buoy_nav.aiding.base import (
     LinearisationPoint,
     MeasurementModel,
     as_float_array,
-    floored_covariance,
     has_non_positive_variance,
     samples_per_correlation_time,
 )
@@ -59,7 +58,6 @@ from buoy_nav.rotations import (
 UNIT_NORM_TOLERANCE = 1e-3
 MIN_QUATERNION_NORM = 1e-9
 BODY_X = np.array((1.0, 0.0, 0.0))
-_EYE3 = np.eye(3)
 
 # The rotation functions the innovation calls, compiled from their one source.
 _quaternion_from_rotation_vector = numba.njit(cache=True)(quaternion_from_rotation_vector)
@@ -106,10 +104,20 @@ class AhrsAttitudeSource(AidingSource):
     def enabled_by(cls, config) -> bool:
         return config.use_ahrs
 
+    record_fields = ("orientation", "orientation_covariance")
+
     def measurement_from_message(self, message) -> AhrsAttitude | Reason:
-        t_s = header_seconds(message.header)
         q = message.orientation
-        x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+        return self.measurement_from_record(
+            header_seconds(message.header),
+            (float(q.x), float(q.y), float(q.z), float(q.w)),
+            message.orientation_covariance,
+        )
+
+    def measurement_from_record(
+        self, t_s: float, orientation_xyzw, orientation_covariance
+    ) -> AhrsAttitude | Reason:
+        x, y, z, w = orientation_xyzw
         norm = math.sqrt(x * x + y * y + z * z + w * w)
         if not math.isfinite(norm):
             return Reason.NON_FINITE
@@ -125,12 +133,11 @@ class AhrsAttitudeSource(AidingSource):
             )
         interval = t_s - self._last_stamp_s
         self._last_stamp_s = t_s
-        covariance = message.orientation_covariance
-        if len(covariance) != 9:
+        if len(orientation_covariance) != 9:
             return Reason.MALFORMED
         return AhrsAttitude(
             rotation_matrix_from_quaternion((x / norm, y / norm, z / norm, w / norm)),
-            np.asarray(covariance, dtype=float).reshape(3, 3),
+            np.asarray(orientation_covariance, dtype=float).reshape(3, 3),
             interval if math.isfinite(interval) else math.nan,
             t_s,
         )
@@ -170,8 +177,9 @@ class AhrsAttitudeSource(AidingSource):
             )
         )
         lag_variance = (rate[0] ** 2 + rate[1] ** 2 + rate[2] ** 2) * self._lag_uncertainty_s**2
-        covariance = floored_covariance(measurement.covariance_rad2, self._floor_rad2)
-        covariance = (covariance + _EYE3 * lag_variance) * self._weight(measurement)
+        covariance = _model_covariance(
+            measurement.covariance_rad2, self._floor_rad2, lag_variance, self._weight(measurement)
+        )
         return MeasurementModel(
             predicted=np.zeros(3),
             innovation=innovation,
@@ -181,6 +189,7 @@ class AhrsAttitudeSource(AidingSource):
 
     def load_compiled_code(self) -> None:
         _attitude_innovation(np.eye(3), np.eye(3), 0.0, 0.0, 0.0, self._lag_s)
+        _model_covariance(np.eye(3), self._floor_rad2, 0.0, 1.0)
 
     def align(self, aligner, t_s: float, measurement: AhrsAttitude, raw_gyro_rad_s):
         """The pack's heading (azimuth of its body x axis) completes the alignment at a known
@@ -201,6 +210,23 @@ class AhrsAttitudeSource(AidingSource):
         return aligner.add_heading(
             t_s, math.atan2(forward[1], forward[0]), variance, raw_gyro_rad_s, body_vector=BODY_X
         )
+
+
+@numba.njit(cache=True)
+def _model_covariance(covariance_rad2, floor_rad2, lag_variance_rad2, weight):
+    """The update's R (3×3, ENU rad²): the pack's ``covariance_rad2`` symmetrised, its
+    variances raised to ``floor_rad2``, the lag's variance added to each axis and the whole
+    multiplied by the sample's ``weight``, element by element as
+    ``(floored_covariance(C, floor) + I·lag) · weight`` computes it in numpy, to the bit."""
+    result = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            value = 0.5 * (covariance_rad2[i, j] + covariance_rad2[j, i])
+            if i == j and value < floor_rad2:
+                value = floor_rad2
+            identity = 1.0 if i == j else 0.0
+            result[i, j] = (value + identity * lag_variance_rad2) * weight
+    return result
 
 
 @numba.njit(cache=True)

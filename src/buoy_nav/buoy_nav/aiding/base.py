@@ -302,6 +302,18 @@ class AidingSource(abc.ABC):
         holds none. May raise AttributeError, TypeError or ValueError for a message that is not
         of the type (counted as ``malformed``)."""
 
+    record_fields: tuple[str, ...] = ()
+    """The fields of :attr:`topic`'s message that :meth:`measurement_from_record` reads, as
+    the bulk decoder names its columns (:mod:`buoy_common.cdr_bulk`): the offline tools decode
+    such a topic a chunk of the bag at a time. Empty: its messages are decoded one by one and
+    given to :meth:`measurement_from_message`."""
+
+    def measurement_from_record(self, t_s: float, *fields) -> Any:
+        """:meth:`measurement_from_message` of a message read as its header stamp ``t_s`` (s)
+        and the values of :attr:`record_fields`, in their order, as the bulk decoder gives them
+        (vectors and row-major matrices as flat sequences of floats)."""
+        raise NotImplementedError(f"{type(self).__name__} reads no records")
+
     @abc.abstractmethod
     def validated(self, measurement) -> Any:
         """``measurement`` with its values as floats and float arrays, or the :class:`Reason`
@@ -366,14 +378,15 @@ def as_float_array(values, shape: tuple[int, ...]) -> np.ndarray | Reason:
         array = array.reshape(shape)
     if array.shape != shape:
         return Reason.MALFORMED
-    if not np.all(np.isfinite(array)):
+    if not np.isfinite(array).all():
         return Reason.NON_FINITE
     return array
 
 
 def has_non_positive_variance(covariance: np.ndarray) -> bool:
-    """True when a variance on the diagonal of ``covariance`` is zero or negative."""
-    return bool(np.any(np.diag(covariance) <= 0.0))
+    """True when a variance on the diagonal of the square matrix ``covariance`` is zero or
+    negative."""
+    return bool((covariance.diagonal() <= 0.0).any())
 
 
 def vector_of(message_vector) -> tuple[float, float, float]:

@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from buoy_common.contract import GNSS_BASELINE_TOPIC, Reason
+from buoy_common.contract import GNSS_BASELINE_TOPIC, Reason, header_seconds
 from buoy_nav.aiding.base import (
     GNSS_ANTENNA_PAIR,
     HEADING,
@@ -74,8 +74,15 @@ class GnssBaselineSource(DualAntennaSource):
     def enabled_by(cls, config) -> bool:
         return config.use_gnss_baseline
 
+    record_fields = ("vector",)
+
     def measurement_from_message(self, message) -> GnssBaseline:
-        return GnssBaseline(vector_of(message.vector))
+        return self.measurement_from_record(
+            header_seconds(message.header), vector_of(message.vector)
+        )
+
+    def measurement_from_record(self, t_s: float, vector_enu_m) -> GnssBaseline:
+        return GnssBaseline(tuple(vector_enu_m))
 
     def validated(self, measurement: GnssBaseline) -> GnssBaseline | Reason:
         baseline = as_float_array(measurement.baseline_enu_m, (3,))

@@ -34,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from buoy_common.contract import GNSS_BASELINE_TERTIARY_TOPIC, Reason
+from buoy_common.contract import GNSS_BASELINE_TERTIARY_TOPIC, Reason, header_seconds
 from buoy_common.extrinsics import MIN_TERTIARY_BASELINE_ANGLE_DEG, tertiary_baseline_angle_deg
 from buoy_nav.aiding.base import (
     GNSS_THIRD_ANTENNA,
@@ -101,8 +101,15 @@ class GnssBaselineTertiarySource(DualAntennaSource):
     def enabled_by(cls, config) -> bool:
         return config.use_gnss_baseline_tertiary and config.tertiary_baseline_body_m is not None
 
+    record_fields = ("vector",)
+
     def measurement_from_message(self, message) -> GnssBaselineTertiary:
-        return GnssBaselineTertiary(vector_of(message.vector))
+        return self.measurement_from_record(
+            header_seconds(message.header), vector_of(message.vector)
+        )
+
+    def measurement_from_record(self, t_s: float, vector_enu_m) -> GnssBaselineTertiary:
+        return GnssBaselineTertiary(tuple(vector_enu_m))
 
     def validated(self, measurement: GnssBaselineTertiary) -> GnssBaselineTertiary | Reason:
         baseline = as_float_array(measurement.baseline_enu_m, (3,))

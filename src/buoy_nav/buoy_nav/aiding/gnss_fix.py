@@ -18,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from buoy_common.contract import GNSS_FIX_TOPIC, Reason
+from buoy_common.contract import GNSS_FIX_TOPIC, Reason, header_seconds
 from buoy_nav import earth
 from buoy_nav.aiding.base import (
     FIX,
@@ -75,14 +75,34 @@ class GnssFixSource(AidingSource):
         self._lever_arm_body_m = np.array(config.primary_antenna_body_m)
         self._variance_floor_m2 = config.gnss_position_variance_floor_m2
 
+    record_fields = ("status", "latitude", "longitude", "altitude", "position_covariance")
+
     def measurement_from_message(self, message) -> GnssFix | Reason:
-        if message.status.status < STATUS_FIX:
-            return Reason.NO_FIX
-        return GnssFix(
+        return self.measurement_from_record(
+            header_seconds(message.header),
+            message.status.status,
             message.latitude,
             message.longitude,
             message.altitude,
-            np.asarray(message.position_covariance, dtype=float),
+            message.position_covariance,
+        )
+
+    def measurement_from_record(
+        self,
+        t_s: float,
+        status: int,
+        latitude_deg: float,
+        longitude_deg: float,
+        altitude_m: float,
+        position_covariance_m2,
+    ) -> GnssFix | Reason:
+        if status < STATUS_FIX:
+            return Reason.NO_FIX
+        return GnssFix(
+            latitude_deg,
+            longitude_deg,
+            altitude_m,
+            np.asarray(position_covariance_m2, dtype=float),
         )
 
     def validated(self, measurement: GnssFix) -> GnssFix | Reason:

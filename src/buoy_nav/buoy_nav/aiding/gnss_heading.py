@@ -26,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from buoy_common.contract import GNSS_HEADING_TOPIC, Reason
+from buoy_common.contract import GNSS_HEADING_TOPIC, Reason, header_seconds
 from buoy_nav.aiding.base import (
     GNSS_ANTENNA_PAIR,
     HEADING,
@@ -74,16 +74,26 @@ class GnssHeadingSource(DualAntennaSource):
     roles = frozenset((HEADING_REFERENCE,))
     superseded_by = GnssBaselineSource.kind
 
+    record_fields = ("orientation", "orientation_covariance")
+
     def measurement_from_message(self, message) -> GnssHeading | Reason:
         q = message.orientation
-        x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+        return self.measurement_from_record(
+            header_seconds(message.header),
+            (float(q.x), float(q.y), float(q.z), float(q.w)),
+            message.orientation_covariance,
+        )
+
+    def measurement_from_record(
+        self, t_s: float, orientation_xyzw, orientation_covariance
+    ) -> GnssHeading | Reason:
+        x, y, z, w = orientation_xyzw
         norm = math.sqrt(x * x + y * y + z * z + w * w)
         if math.isfinite(norm) and norm < MIN_QUATERNION_NORM:
             return Reason.ZERO_QUATERNION
-        covariance = message.orientation_covariance
-        if len(covariance) != 9:
+        if len(orientation_covariance) != 9:
             return Reason.MALFORMED
-        return GnssHeading(yaw_from_quaternion_rad(x, y, z, w), covariance[8])
+        return GnssHeading(yaw_from_quaternion_rad(x, y, z, w), orientation_covariance[8])
 
     def validated(self, measurement: GnssHeading) -> GnssHeading | Reason:
         values = as_floats(measurement.yaw_rad, measurement.variance_rad2)

@@ -27,7 +27,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from buoy_common.contract import GNSS_VELOCITY_TOPIC, Reason
+from buoy_common.contract import GNSS_VELOCITY_TOPIC, Reason, header_seconds
 from buoy_nav.aiding.base import (
     GNSS_RECEIVER,
     VELOCITY,
@@ -88,13 +88,22 @@ class GnssVelocitySource(AidingSource):
         self._lever_arm_body_m = np.array(config.primary_antenna_body_m)
         self._variance_floor_m2s2 = config.gnss_velocity_variance_floor_m2s2
 
+    record_fields = ("linear", "covariance")
+
     def measurement_from_message(self, message) -> GnssVelocity | Reason:
-        """The linear part of the twist; its covariance is the linear 3×3 block of the 6×6."""
         twist = message.twist
-        covariance = np.asarray(twist.covariance, dtype=float)
+        return self.measurement_from_record(
+            header_seconds(message.header), vector_of(twist.twist.linear), twist.covariance
+        )
+
+    def measurement_from_record(
+        self, t_s: float, linear_enu_mps, twist_covariance
+    ) -> GnssVelocity | Reason:
+        """The linear part of the twist; its covariance is the linear 3×3 block of the 6×6."""
+        covariance = np.asarray(twist_covariance, dtype=float)
         if covariance.shape != (36,):
             return Reason.MALFORMED
-        return GnssVelocity(vector_of(twist.twist.linear), covariance.reshape(6, 6)[:3, :3])
+        return GnssVelocity(tuple(linear_enu_mps), covariance.reshape(6, 6)[:3, :3])
 
     def validated(self, measurement: GnssVelocity) -> GnssVelocity | Reason:
         velocity = as_float_array(measurement.velocity_enu_mps, (3,))

@@ -141,17 +141,27 @@ class MagnetometerSource(AidingSource):
     def enabled_by(cls, config) -> bool:
         return config.use_magnetometer
 
+    record_fields = ("magnetic_field", "magnetic_field_covariance")
+
     def measurement_from_message(self, message) -> MagneticField | Reason:
-        covariance = np.asarray(message.magnetic_field_covariance, dtype=float)
+        return self.measurement_from_record(
+            header_seconds(message.header),
+            vector_of(message.magnetic_field),
+            message.magnetic_field_covariance,
+        )
+
+    def measurement_from_record(
+        self, t_s: float, magnetic_field_t, magnetic_field_covariance_t2
+    ) -> MagneticField | Reason:
+        covariance = np.asarray(magnetic_field_covariance_t2, dtype=float)
         if covariance.shape != (9,):
             return Reason.MALFORMED
         variance = float(np.mean(covariance[0::4]))
-        t_s = header_seconds(message.header)
         interval = t_s - self._last_stamp_s
         if math.isfinite(t_s) and t_s > self._last_stamp_s:
             self._last_stamp_s = t_s
         return MagneticField(
-            vector_of(message.magnetic_field),
+            tuple(magnetic_field_t),
             variance if math.isfinite(variance) and variance > 0.0 else 0.0,
             t_s,
             interval if math.isfinite(interval) and interval > 0.0 else math.nan,

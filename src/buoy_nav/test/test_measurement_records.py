@@ -1,0 +1,84 @@
+"""Every aiding source that reads its messages as records (the fields the bulk decoder gives
+for a chunk of a bag) makes of each record the measurement, or the rejection, it makes of the
+same message decoded alone: offline tools decode by chunks, the live node one message at a
+time."""
+
+import math
+
+import numpy as np
+import pytest
+
+from buoy_common import cdr_bulk
+from buoy_common.bag_io import jazzy_typestore
+from buoy_nav.aiding import AIDING_SOURCES
+from buoy_nav.config import FusionConfig
+from buoy_nav.error_state_filter import ERROR_STATES
+
+RECORD_SOURCES = [source for source in AIDING_SOURCES if source.record_fields]
+MESSAGES = 400
+RNG = np.random.default_rng(11)
+
+
+def columns_of(source) -> dict[str, np.ndarray]:
+    """Plausible values of the source's fields, some of them what a source must reject (NaN,
+    a zero or scaled quaternion, a negative variance, no fix), on stamps that repeat or go back
+    now and then."""
+    layout = {item.name: item for item in cdr_bulk.LAYOUTS[source.msgtype()]}
+    stamps_ns = 1_700_000_000 * 10**9 + np.cumsum(RNG.integers(-20, 100, MESSAGES)) * 10**6
+    columns = {"stamp_ns": stamps_ns, "frame_id": "sensor"}
+    for item in layout.values():
+        if item.name not in ("sec", "nanosec", "frame_id") and item.constant is None:
+            columns[item.name] = np.ones((MESSAGES, *item.shape), dtype=item.kind)
+    for name in source.record_fields:
+        item = layout[name]
+        if item.kind.startswith("<i") or item.kind.startswith("<u"):
+            columns[name] = RNG.choice([-1, 0, 2], MESSAGES)
+            continue
+        values = RNG.normal(0.0, 1.0, (MESSAGES, *item.shape))
+        if name == "magnetic_field":
+            values *= 3e-5  # T: the Earth's field
+        if name.endswith("covariance"):
+            values = np.abs(values) * 1e-4
+            values[RNG.random(MESSAGES) < 0.05, ..., 0] = -1e-4
+        if item.parts == "xyzw":
+            values /= np.linalg.norm(values, axis=1, keepdims=True)
+            values[RNG.random(MESSAGES) < 0.05] = 0.0
+            values[RNG.random(MESSAGES) < 0.05] *= 1.1
+        first_component = values.reshape(MESSAGES, -1)[:, 0]
+        first_component[RNG.random(MESSAGES) < 0.03] = math.nan
+        columns[name] = values
+    return columns
+
+
+def same(a, b) -> bool:
+    """Equal to the bit: numbers, arrays, tuples and named tuples of them, reasons."""
+    if isinstance(a, tuple) and isinstance(b, tuple):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, (np.ndarray, float, np.floating)) or isinstance(b, np.ndarray):
+        x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        return x.shape == y.shape and x.tobytes() == y.tobytes()
+    return a == b
+
+
+@pytest.mark.parametrize("source_class", RECORD_SOURCES, ids=lambda s: s.kind)
+def test_a_record_makes_what_its_message_makes(source_class):
+    columns = columns_of(source_class)
+    raws = cdr_bulk.encode(source_class.msgtype(), columns)
+    decoded = cdr_bulk.decode(source_class.msgtype(), raws)
+    assert decoded.valid.all()
+    store = jazzy_typestore()
+    from_messages = source_class(FusionConfig(), ERROR_STATES)
+    from_records = source_class(FusionConfig(), ERROR_STATES)
+    outcomes = set()
+    for index, raw in enumerate(raws):
+        message = store.deserialize_cdr(raw, source_class.msgtype())
+        stamp = message.header.stamp
+        t_s = stamp.sec + stamp.nanosec * 1e-9
+        fields = [decoded[name][index].tolist() for name in source_class.record_fields]
+        expected = from_messages.measurement_from_message(message)
+        made = from_records.measurement_from_record(t_s, *fields)
+        assert same(made, expected), (index, made, expected)
+        outcome = expected if isinstance(expected, str) else from_messages.validated(expected)
+        outcomes.add(outcome if isinstance(outcome, str) else "usable")
+    # The values reached the sources' checks: they take some and refuse others.
+    assert len(outcomes) > 1, outcomes
