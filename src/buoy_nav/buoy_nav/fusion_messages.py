@@ -44,6 +44,7 @@ zeros, the ROS convention for "unknown".
 
 from __future__ import annotations
 
+import math
 import struct
 from collections import deque
 from typing import NamedTuple
@@ -140,7 +141,26 @@ def feed_message(
         t_s = header_seconds(message.header)
         measurement = source.measurement_from_message(message)
     except (AttributeError, TypeError, ValueError):
-        measurement = Reason.MALFORMED
+        t_s, measurement = math.nan, Reason.MALFORMED
+    return _add_measurement(engine, source, t_s, measurement)
+
+
+def feed_measurement_record(
+    engine: FusionEngine, topic: str, sec: int, nanosec: int, *fields
+) -> tuple[list[NavSolution], str | None]:
+    """:func:`feed_message` of a message of an aiding source's ``topic`` read elsewhere, with
+    the others of its chunk (:mod:`buoy_common.cdr_bulk`): header stamp ``sec``, ``nanosec``
+    and the values of the source's ``record_fields``."""
+    source = engine.source_of_topic(topic)
+    t_s = sec + nanosec * 1e-9
+    return _add_measurement(engine, source, t_s, source.measurement_from_record(t_s, *fields))
+
+
+def _add_measurement(
+    engine: FusionEngine, source, t_s: float, measurement
+) -> tuple[list[NavSolution], str | None]:
+    """Give ``source``'s ``measurement`` stamped ``t_s`` (s) to ``engine``, or count the
+    :class:`Reason` it is none."""
     if isinstance(measurement, Reason):
         engine.reject_input(source.kind, measurement)
         return [], measurement

@@ -40,6 +40,7 @@ from buoy_nav.fusion_messages import (
     StampBook,
     feed_imu_cdr,
     feed_imu_fields,
+    feed_measurement_record,
     feed_message,
     nav_values,
     odometry_cdr,
@@ -160,18 +161,35 @@ class OfflineFusion:
     def add_message(
         self, reader: BagReader, topic: str, message: BagMessage, record: tuple | None = None
     ) -> list[NavValues]:
-        """:meth:`add` of a bag message of relative ``topic``, IMU samples read from CDR: from
-        ``record`` when its chunk was read together (:data:`IMU_RECORD_FIELDS`,
-        :mod:`buoy_processing.chunk_records`), else from the message alone."""
-        if topic != IMU_RAW_TOPIC:
-            fed = None
-        elif record is not None:
-            fed = feed_imu_fields(self.engine, *record, self.stamps)
-        else:
+        """:meth:`add` of a bag message of relative ``topic``: from ``record`` when its chunk
+        was read together (:meth:`record_fields`, :mod:`buoy_processing.chunk_records`), else
+        an IMU sample from its CDR bytes and any other message decoded alone."""
+        if record is not None:
+            if topic == IMU_RAW_TOPIC:
+                fed = feed_imu_fields(self.engine, *record, self.stamps)
+            else:
+                fed = feed_measurement_record(self.engine, topic, *record)
+        elif topic == IMU_RAW_TOPIC:
             fed = feed_imu_cdr(self.engine, message.raw, self.stamps)
+        else:
+            fed = None
         if fed is None:
             return self.add(topic, reader.decode(message), message.log_time_ns)
         return self._take(topic, fed, message.log_time_ns)
+
+    def record_fields(self, sensors: dict[str, str]) -> dict[str, tuple[str, ...]]:
+        """Stored name → the fields :meth:`add_message` reads of a message read with its chunk
+        (:mod:`buoy_processing.chunk_records`), for the topics of ``sensors`` (relative →
+        stored names) read so: the IMU's and those of the aiding sources that read records
+        (``record_fields``)."""
+        fields = {sensors[IMU_RAW_TOPIC]: IMU_RECORD_FIELDS}
+        for topic, stored in sensors.items():
+            if topic == IMU_RAW_TOPIC:
+                continue
+            source_fields = self.engine.source_of_topic(topic).record_fields
+            if source_fields:
+                fields[stored] = source_fields
+        return fields
 
     def _take(self, topic: str, fed, log_time_ns: int) -> list[NavValues]:
         solutions, rejection = fed

@@ -27,7 +27,6 @@ from typing import NamedTuple, Protocol
 
 from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, BagWriter
 from buoy_common.contract import (
-    IMU_RAW_TOPIC,
     TF_STATIC_MSGTYPE,
     TF_STATIC_TOPIC,
     bag_topic,
@@ -39,7 +38,7 @@ from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import NavValues
 from buoy_nav.observability import unobserved_quantities
 from buoy_processing.chunk_records import chunk_records
-from buoy_processing.offline_fusion import IMU_RECORD_FIELDS, OfflineFusion
+from buoy_processing.offline_fusion import OfflineFusion
 
 TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
 
@@ -223,7 +222,7 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion,
             run.config, writer if run.write_bag else None, nav_rate_hz=run.nav_rate_hz
         )
         consumer.start(writer)
-        fields_of_topic = {**imu_record_fields(run.sensors), **consumer.record_fields}
+        fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
         log_time_ns = reader.start_ns
         for batch in reader.message_batches([*relative_of, *run.copied_topics]):
             records = chunk_records(batch, fields_of_topic)
@@ -279,12 +278,6 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion
     return fusion, writer.counts
 
 
-def imu_record_fields(sensors: dict[str, str]) -> dict[str, tuple[str, ...]]:
-    """The IMU topic of ``sensors`` (relative → stored names) and what the fusion reads of its
-    messages, a chunk at a time (:mod:`buoy_processing.chunk_records`)."""
-    return {sensors[IMU_RAW_TOPIC]: IMU_RECORD_FIELDS}
-
-
 def spill_parent_of(out_bag) -> Path:
     """Where a smoothing run keeps its temporary records: beside the output bag, on the disk
     the user chose for the output (a day of data needs gigabytes); the nearest existing folder
@@ -303,7 +296,7 @@ def forward_pass(
     label: str,
 ) -> None:
     """The forward filter of a smoothing run over the sensor topics of ``reader``'s bag."""
-    fields_of_topic = imu_record_fields(sensors)
+    fields_of_topic = fusion.record_fields(sensors)
     progress_ns = reader.start_ns
     with BagProgress(reader, f"{label} (forward filter)") as progress:
         for batch in reader.message_batches(list(sensors.values())):

@@ -15,7 +15,6 @@ from buoy_common.bag_io import BagError, BagMessage, BagReader, jazzy_typestore
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.chunk_records import chunk_records
 from buoy_processing.offline_fusion import IMU_RECORD_FIELDS, OfflineFusion, sensor_topics_of
-from buoy_processing.offline_runner import imu_record_fields
 
 REPO = Path(__file__).resolve().parents[3]
 BAG = REPO / "bags" / "open_ocean"
@@ -51,11 +50,40 @@ def with_frame_not_utf8(message: BagMessage) -> BagMessage:
     return with_raw(message, bytes(raw))
 
 
-def with_nan_rate(message: BagMessage) -> BagMessage:
+def with_value(message: BagMessage, path: str, value) -> BagMessage:
+    """The message with the field at attribute ``path`` (dotted) set to ``value``."""
     store = jazzy_typestore()
     decoded = store.deserialize_cdr(message.raw, message.msgtype)
-    decoded.angular_velocity.x = math.nan
+    *parents, name = path.split(".")
+    owner = decoded
+    for parent in parents:
+        owner = getattr(owner, parent)
+    setattr(owner, name, value)
     return with_raw(message, bytes(store.serialize_cdr(decoded, message.msgtype)))
+
+
+def with_nan_rate(message: BagMessage) -> BagMessage:
+    return with_value(message, "angular_velocity.x", math.nan)
+
+
+def with_zero_orientation(message: BagMessage) -> BagMessage:
+    for part in "xyzw":
+        message = with_value(message, f"orientation.{part}", 0.0)
+    return message
+
+
+AIDING_DAMAGE = {
+    "/gnss/fix": (
+        lambda m: with_value(m, "latitude", math.nan),
+        lambda m: with_value(m, "status.status", -1),
+        big_endian,
+    ),
+    "/gnss/vel": (lambda m: with_value(m, "twist.twist.linear.y", math.inf), big_endian),
+    "/gnss/heading": (with_zero_orientation, big_endian),
+    "/gnss/baseline": (lambda m: with_value(m, "vector.z", math.nan), big_endian),
+}
+"""What is done to some messages of each aiding topic: values the sources reject, and
+messages the bulk decoder leaves to the per-message path."""
 
 
 def test_records_are_what_the_per_message_readers_read_at_each_place():
@@ -108,7 +136,7 @@ def feed(reader: BagReader, sensors: dict[str, str], batches, in_chunks: bool):
     fusion = OfflineFusion(fusion_config_from_files([str(p) for p in PARAMETERS]), writer)
     solutions = []
     for batch in batches:
-        records = chunk_records(batch, imu_record_fields(sensors)) if in_chunks else {}
+        records = chunk_records(batch, fusion.record_fields(sensors)) if in_chunks else {}
         for position, message in enumerate(batch):
             topic = relative_of[message.topic]
             solutions += fusion.add_message(reader, topic, message, records.get(position))
@@ -127,6 +155,11 @@ def test_fusion_fed_by_chunks_equals_fusion_fed_one_message_at_a_time():
         for number, change in enumerate((with_nan_rate, big_endian, with_frame_not_utf8)):
             for at in imu_at[1000 + 300 * number :][:3]:
                 messages[at] = change(messages[at])
+        for topic, changes in AIDING_DAMAGE.items():
+            topic_at = [i for i, m in enumerate(messages) if m.topic == topic]
+            for number, change in enumerate(changes):
+                at = topic_at[len(topic_at) // 2 + 7 * number]
+                messages[at] = change(messages[at])
         batches = [
             messages[start : start + CHUNK_MESSAGES]
             for start in range(0, len(messages), CHUNK_MESSAGES)
@@ -136,6 +169,10 @@ def test_fusion_fed_by_chunks_equals_fusion_fed_one_message_at_a_time():
     assert len(written) > 5 * 2000, "the fusion aligned and navigated"
     assert rejections == expected[1] and rejections["imu/data_raw: non_finite"] == 3
     assert counters == expected[2]
+    assert rejections["gnss/fix: no_fix"] == 1
+    for kind in ("gnss_fix", "gnss_velocity", "gnss_baseline"):
+        assert counters[kind][1].get("non_finite", 0) >= 1, kind
+    assert counters["gnss_heading"][1].get("zero_quaternion", 0) == 1
     assert written == expected[0]
 
 
