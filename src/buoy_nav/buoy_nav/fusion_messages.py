@@ -300,9 +300,13 @@ class _CovarianceFieldCache:
             position_covariance_m2=tuple(position_flat),
             gyro_bias_covariance_rad2_s2=tuple(gyro_bias.ravel().tolist()),
         )
-        blocks = (attitude, velocity, position, gyro_bias)
-        if not any(block.flags.writeable for block in blocks):
-            self._latest = (*blocks, fields)
+        if not (
+            attitude.flags.writeable
+            or velocity.flags.writeable
+            or position.flags.writeable
+            or gyro_bias.flags.writeable
+        ):
+            self._latest = (attitude, velocity, position, gyro_bias, fields)
         return fields
 
 
@@ -498,22 +502,23 @@ def transform_message(sec: int, nanosec: int, position_map_m, attitude_xyzw):
 
 
 # One transform of fixed frame ids has a fixed layout: rosbags serialises it once, and each
-# solution's stamp and seven numbers are written into a copy (80 µs → 1 µs per solution).
+# solution's stamp and seven numbers are packed between its fixed bytes (80 µs → 0.5 µs per
+# solution).
 _TF_TEMPLATE = bytes(
     jazzy_typestore().serialize_cdr(
         transform_message(0, 0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)), TF_MSGTYPE
     )
 )
-_TF_STAMP = struct.Struct("<iI")
 _TF_STAMP_OFFSET = 8  # after the encapsulation header and the length of the transforms sequence
-_TF_POSE = struct.Struct("<7d")
-_TF_POSE_OFFSET = len(_TF_TEMPLATE) - _TF_POSE.size
+_TF_POSE_OFFSET = len(_TF_TEMPLATE) - 7 * 8  # the translation and rotation end the message
+_TF_HEAD = _TF_TEMPLATE[:_TF_STAMP_OFFSET]
+_TF_FRAME_IDS = _TF_TEMPLATE[_TF_STAMP_OFFSET + 8 : _TF_POSE_OFFSET]  # with their padding
+_TF_MESSAGE = struct.Struct(f"<{len(_TF_HEAD)}siI{len(_TF_FRAME_IDS)}s7d")
 
 
 def transform_cdr(v: NavValues) -> bytes:
     """The ``tf`` message of one solution's :func:`nav_values` as CDR bytes: what rosbags
     (and rclpy) serialise for its :func:`transform_message`."""
-    raw = bytearray(_TF_TEMPLATE)
-    _TF_STAMP.pack_into(raw, _TF_STAMP_OFFSET, v.sec, v.nanosec)
-    _TF_POSE.pack_into(raw, _TF_POSE_OFFSET, *v.position_map_m, *v.attitude_xyzw)
-    return bytes(raw)
+    return _TF_MESSAGE.pack(
+        _TF_HEAD, v.sec, v.nanosec, _TF_FRAME_IDS, *v.position_map_m, *v.attitude_xyzw
+    )

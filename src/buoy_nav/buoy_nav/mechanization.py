@@ -155,8 +155,9 @@ class StrapdownIntegrator:
 
     @property
     def state_vector(self) -> np.ndarray:
-        """The state vector itself (:mod:`buoy_nav.strapdown_kernel`'s layout), for compiled
-        kernels that read it; it is changed only through this integrator's methods."""
+        """The state vector itself (:mod:`buoy_nav.strapdown_kernel`'s layout), for code that
+        reads it in bulk (compiled kernels, the solutions); it is changed only through this
+        integrator's methods."""
         return self._state
 
     @property

@@ -9,6 +9,18 @@ from buoy_nav import earth
 from buoy_nav.error_state_filter import ErrorStateFilter
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_quaternion
+from buoy_nav.state_layout import StateLayout
+from buoy_nav.strapdown_kernel import (
+    ACCEL_BIAS,
+    ALTITUDE,
+    ATTITUDE,
+    GYRO_BIAS,
+    LATITUDE,
+    LONGITUDE,
+    NAV_FRAME_RATE,
+    ROTATION,
+    VELOCITY,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,6 +88,8 @@ class SolutionBuilder:
         self.map_plane = map_plane
         self._distrust_variances: tuple[float, float] | None = None
         self._covariance_blocks: tuple[np.ndarray, ...] | None = None
+        self._block_layout: StateLayout | None = None
+        self._block_indices: np.ndarray | None = None
         self._bias_arrays: tuple[np.ndarray, np.ndarray] | None = None
 
     def covariance_changed(self) -> None:
@@ -105,26 +119,30 @@ class SolutionBuilder:
         with the covariance of ``kalman`` and the (fix, velocity, heading) coasting flags."""
         if self._covariance_blocks is None:
             self._covariance_blocks = self._published_covariance_blocks(kalman)
+        state = integrator.state_vector
         if self._bias_arrays is None:
             self._bias_arrays = (
-                _read_only(np.array(integrator.gyro_bias_rad_s)),
-                _read_only(np.array(integrator.accel_bias_mps2)),
+                _read_only(state[GYRO_BIAS : GYRO_BIAS + 3].copy()),
+                _read_only(state[ACCEL_BIAS : ACCEL_BIAS + 3].copy()),
             )
-        bgx, bgy, bgz = integrator.gyro_bias_rad_s
-        bax, bay, baz = integrator.accel_bias_mps2
+        # The scalars below as floats in one conversion (the navigation-frame rate is the last
+        # of them in the state vector).
+        nominal = state[: NAV_FRAME_RATE + 3].tolist()
+        bgx, bgy, bgz = nominal[GYRO_BIAS : GYRO_BIAS + 3]
+        bax, bay, baz = nominal[ACCEL_BIAS : ACCEL_BIAS + 3]
         gx, gy, gz = gyro
         fx, fy, fz = force
         wx, wy, wz = gx - bgx, gy - bgy, gz - bgz
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = integrator.rotation_elements
-        ie, in_, iu = integrator.nav_frame_rate_enu_rad_s
-        latitude = integrator.latitude_rad
-        longitude = integrator.longitude_rad
-        altitude = integrator.altitude_m
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = nominal[ROTATION : ROTATION + 9]
+        ie, in_, iu = nominal[NAV_FRAME_RATE : NAV_FRAME_RATE + 3]
+        latitude = nominal[LATITUDE]
+        longitude = nominal[LONGITUDE]
+        altitude = nominal[ALTITUDE]
         attitude_cov, velocity_cov, position_cov, gyro_bias_cov = self._covariance_blocks
         gyro_bias, accel_bias = self._bias_arrays
         return NavSolution(
             t_s=t,
-            attitude_xyzw=np.array(integrator.attitude_xyzw),
+            attitude_xyzw=state[ATTITUDE : ATTITUDE + 4].copy(),
             angular_rate_body_rad_s=np.array((wx, wy, wz)),
             angular_rate_nb_body_rad_s=np.array(
                 (
@@ -134,7 +152,7 @@ class SolutionBuilder:
                 )
             ),
             specific_force_body_mps2=np.array((fx - bax, fy - bay, fz - baz)),
-            velocity_enu_mps=np.array(integrator.velocity_enu_mps),
+            velocity_enu_mps=state[VELOCITY : VELOCITY + 3].copy(),
             latitude_deg=math.degrees(latitude),
             longitude_deg=math.degrees(longitude),
             altitude_m=altitude,
@@ -157,16 +175,18 @@ class SolutionBuilder:
         """The attitude (rad²), velocity (m²/s²), position (m²) and gyro bias (rad²/s²)
         blocks of ``kalman``'s covariance, read-only, the first two widened while the filter is
         distrusted."""
-        covariance = kalman.covariance
         states = kalman.states
-        blocks = [
-            covariance[block, block].copy()
-            for block in (states.attitude, states.velocity, states.position, states.gyro_bias)
-        ]
+        if self._block_layout is not states:
+            self._block_layout = states
+            self._block_indices = _published_block_indices(states)
+        # One gather copies all four blocks (each a contiguous 3×3 of the result): half the
+        # time of four slices copied one by one, at a new covariance per IMU sample.
+        blocks = kalman.covariance.take(self._block_indices)
         if self._distrust_variances is not None:
             for block, variance in zip(blocks, self._distrust_variances, strict=False):
                 block[np.diag_indices(3)] += variance
-        return tuple(_read_only(block) for block in blocks)
+        blocks.setflags(write=False)
+        return tuple(blocks)
 
 
 class OutputDecimation:
@@ -191,6 +211,20 @@ class OutputDecimation:
         following = self._next_output_time + period
         self._next_output_time = following if following > t else t + period
         return True
+
+
+def _published_block_indices(states: StateLayout) -> np.ndarray:
+    """Flat (row-major) indices into a covariance of ``states`` of its attitude, velocity,
+    position and gyro bias blocks, shaped (4, 3, 3)."""
+    return np.array(
+        [
+            [
+                [row * states.dim + column for column in states.indices(name)]
+                for row in states.indices(name)
+            ]
+            for name in ("attitude", "velocity", "position", "gyro_bias")
+        ]
+    )
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:
