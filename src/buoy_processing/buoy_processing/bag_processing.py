@@ -89,6 +89,7 @@ from wind_comp.compensation_messages import (
     flux_message,
     product_messages,
     temperature_sample,
+    temperature_sample_fields,
 )
 from wind_comp.config import CompensatorConfig, CurrentConfig
 from wind_comp.flux_products import FluxProduct
@@ -161,6 +162,10 @@ class ProcessSummary:
 ANEMOMETER_RECORD_FIELDS = ("frame_id", "vector")
 """What :func:`_anemometer_record` reads of an ``anemometer/wind`` message read with its chunk,
 after the header stamp (:mod:`buoy_processing.chunk_records`)."""
+
+TEMPERATURE_RECORD_FIELDS = ("frame_id", "temperature")
+"""What :meth:`OfflineCorrection.add_temperature` reads of an ``anemometer/temperature`` message
+read with its chunk, after the header stamp."""
 
 
 def _anemometer_record(
@@ -237,22 +242,19 @@ class OfflineCorrection:
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
         """The ``nav/odometry`` and ``nav/fix`` of each solution, as the node receives them."""
-        pipeline = self.pipeline
+        add_odometry, add_fix = self.pipeline.add_odometry, self.pipeline.add_fix
         for values in solutions:
-            pipeline.add_odometry(
+            pose_covariance = values.pose_covariance
+            add_odometry(
                 values.sec + values.nanosec * 1e-9,
                 values.attitude_xyzw,
                 values.angular_rate_body_rad_s,
                 values.velocity_body_mps,
-                max(
-                    values.pose_covariance[21],
-                    values.pose_covariance[28],
-                    values.pose_covariance[35],
-                ),
+                max(pose_covariance[21], pose_covariance[28], pose_covariance[35]),
                 values.attitude_covariance_rad2,
                 values.body_twist_covariance,
             )
-            pipeline.add_fix(STATUS_FIX, values.latitude_deg)
+            add_fix(STATUS_FIX, values.latitude_deg)
 
     def add_sample(
         self, reader: BagReader, message: BagMessage, record: tuple | None = None
@@ -274,14 +276,23 @@ class OfflineCorrection:
             self._samples_waiting = 0
             self._write(self.pipeline.ready(), message.log_time_ns)
 
-    def add_temperature(self, reader: BagReader, message: BagMessage) -> None:
-        """One ``anemometer/temperature`` record, for the fluxes."""
-        sample = temperature_sample(reader.decode(message), self._expected_frame_id)
+    def add_temperature(
+        self, reader: BagReader, message: BagMessage, record: tuple | None = None
+    ) -> None:
+        """One ``anemometer/temperature`` record, for the fluxes (its fields in ``record``,
+        :data:`TEMPERATURE_RECORD_FIELDS` after the header stamp, when its chunk was read
+        together)."""
+        if record is None:
+            sample = temperature_sample(reader.decode(message), self._expected_frame_id)
+        else:
+            sample = temperature_sample_fields(*record, self._expected_frame_id)
         if isinstance(sample, str):
             self.rejected_temperatures[sample] += 1
             return
         self.valid_temperatures += 1
-        self._write_products(self.pipeline.add_temperature(*sample), message.log_time_ns)
+        products = self.pipeline.add_temperature(*sample)
+        if products:
+            self._write_products(products, message.log_time_ns)
 
     def finish(self, log_time_ns: int) -> None:
         """End of the data: every sample decided and written, partial windows closed."""
@@ -464,6 +475,8 @@ class BagCorrections:
         self.navigation = navigation
         self.wind: OfflineCorrection | None = None
         self.current: OfflineCorrection | None = None
+        self._running: list[OfflineCorrection] = []
+        """The corrections started: every solution goes to each."""
 
     @property
     def topics(self) -> list[str]:
@@ -501,23 +514,25 @@ class BagCorrections:
                 self.current_config.dvl_frame_id,
                 keep,
             )
-
-    def _running(self) -> list[OfflineCorrection]:
-        return [c for c in (self.wind, self.current) if c is not None]
+        self._running = [c for c in (self.wind, self.current) if c is not None]
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
         if self.navigation is not None:
             self.navigation.add(solutions)
-        for correction in self._running():
+        for correction in self._running:
             correction.add_navigation(solutions)
 
     @property
     def record_fields(self) -> dict[str, tuple[str, ...]]:
         """Stored name → fields of the topics whose messages are best read a chunk at a time:
-        ``anemometer/wind``."""
-        if self.flows.wind is None:
+        ``anemometer/wind`` and the ``anemometer/temperature`` that goes with it."""
+        flows = self.flows
+        if flows.wind is None:
             return {}
-        return {self.flows.wind: ANEMOMETER_RECORD_FIELDS}
+        fields_of_topic = {flows.wind: ANEMOMETER_RECORD_FIELDS}
+        if flows.temperature is not None:
+            fields_of_topic[flows.temperature] = TEMPERATURE_RECORD_FIELDS
+        return fields_of_topic
 
     def add_message(
         self, reader: BagReader, message: BagMessage, record: tuple | None = None
@@ -530,10 +545,10 @@ class BagCorrections:
         elif topic == self.flows.dvl and self.current is not None:
             self.current.add_sample(reader, message)
         elif topic == self.flows.temperature and self.wind is not None:
-            self.wind.add_temperature(reader, message)
+            self.wind.add_temperature(reader, message, record)
 
     def finish(self, log_time_ns: int) -> None:
-        for correction in self._running():
+        for correction in self._running:
             correction.finish(log_time_ns)
 
 

@@ -8,7 +8,7 @@ from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
 from nav_msgs.msg import Odometry
 from rclpy.serialization import deserialize_message, serialize_message
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import NavSatFix, NavSatStatus
+from sensor_msgs.msg import NavSatFix, NavSatStatus, Temperature
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from buoy_common.contract import (
@@ -19,6 +19,7 @@ from buoy_common.contract import (
 )
 from buoy_nav.rotations import rotate_by_quaternion_components
 from wind_comp.compensation_messages import (
+    BULK_ENCODING_FROM_SAMPLES,
     STATS_FIELDS,
     MalformedMessageError,
     anemometer_record,
@@ -30,11 +31,14 @@ from wind_comp.compensation_messages import (
     fix_record,
     flow_cdr,
     flows_cdr,
+    flows_with_covariance_cdr,
     odometry_fields,
     odometry_fields_cdr,
     odometry_record,
     product_messages,
     stats_values,
+    temperature_sample,
+    temperature_sample_fields,
 )
 from wind_comp.config import CompensatorConfig
 from wind_comp.pipeline import StampOrder, wind_pipeline
@@ -233,6 +237,51 @@ def test_flow_cdr_is_the_stamped_map_vector_ros_serialises():
         flow_cdr(int(sec), int(nanosec), vector)
         for sec, nanosec, vector in zip(secs, nanosecs, vectors.tolist(), strict=True)
     ]
+
+
+@pytest.mark.parametrize("copies", [1, BULK_ENCODING_FROM_SAMPLES])
+def test_flows_with_covariance_cdr_is_the_message_ros_serialises_for_each_sample(copies):
+    """A few samples (encoded one by one) and a batch (encoded at once)."""
+    vectors = np.tile([[1.0, -2.5, 0.25], [math.nan] * 3, [-0.0, 4.0, 5.0]], (copies, 1))
+    covariances = RNG.normal(size=(3 * copies, 3, 3))
+    covariances[1::3] = math.nan
+    secs, nanosecs = [1_767_225_600, 1, 2] * copies, [50_000_000, 0, 999_999_999] * copies
+    raws = flows_with_covariance_cdr(secs, nanosecs, vectors, covariances)
+    assert len(raws) == 3 * copies
+    for raw, sec, nanosec, vector, covariance in zip(
+        raws, secs, nanosecs, vectors, covariances, strict=True
+    ):
+        message = TwistWithCovarianceStamped()
+        message.header.stamp.sec, message.header.stamp.nanosec = sec, nanosec
+        message.header.frame_id = "map"
+        linear = message.twist.twist.linear
+        linear.x, linear.y, linear.z = vector.tolist()
+        covariance_6x6 = np.zeros((6, 6))
+        covariance_6x6[:3, :3] = covariance
+        covariance_6x6[3:, 3:] = np.diag([-1.0, -1.0, -1.0])
+        message.twist.covariance = covariance_6x6.ravel().tolist()
+        assert raw == serialize_message(message)
+    # One sample, as the live node asks, and none.
+    assert flows_with_covariance_cdr([1], [0], vectors[1:2], covariances[1:2]) == raws[1:2]
+    assert flows_with_covariance_cdr([], [], np.empty((0, 3)), np.empty((0, 3, 3))) == []
+
+
+@pytest.mark.parametrize(
+    ("frame", "value", "expected"),
+    [
+        ("anemometer_link", 21.5, (42.25, 21.5)),
+        ("anemometer_link", math.nan, "non_finite"),
+        ("anemometer_link", -math.inf, "non_finite"),
+        ("sonic_link", 21.5, "wrong_frame"),
+    ],
+)
+def test_temperature_sample_of_fields_equals_that_of_the_message(frame, value, expected):
+    message = Temperature()
+    message.header.stamp.sec, message.header.stamp.nanosec = 42, 250_000_000
+    message.header.frame_id = frame
+    message.temperature = value
+    assert temperature_sample(message) == expected
+    assert temperature_sample_fields(42, 250_000_000, frame, value) == expected
 
 
 def test_product_messages_carry_the_window_statistics():

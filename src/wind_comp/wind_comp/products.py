@@ -199,6 +199,7 @@ class WindowAverager:
         self._latest_stamp_s = -math.inf
         self._window_index: int | None = None
         self._stamps: list[float] = []
+        # The open window's vectors and covariances, a stretch of rows per batch.
         self._vectors: list[np.ndarray] = []
         self._covariances: list[np.ndarray] = []
         # The latest stamps before the open window: with its own, they give the sampling
@@ -249,7 +250,7 @@ class WindowAverager:
                 completed.append(self._close_window())
             self._window_index = index
             self._stamps.extend(stamps[start:stop].tolist())
-            self._vectors.extend(vectors[start:stop])
+            self._vectors.append(vectors[start:stop])
             self._covariances.append(covariances[start:stop])
         return completed
 
@@ -263,7 +264,7 @@ class WindowAverager:
 
     def _close_window(self):
         stamps = np.array(self._stamps)
-        vectors = np.array(self._vectors)
+        vectors = np.concatenate(self._vectors)
         covariances = np.concatenate(self._covariances)
         self._stamps, self._vectors, self._covariances = [], [], []
         recent = np.concatenate((self._earlier_stamps, stamps))[-(RATE_MEMORY_INTERVALS + 1) :]
