@@ -95,6 +95,9 @@ class AhrsAttitudeSource(AidingSource):
         self._floor_rad2 = config.ahrs_variance_floor_rad2
         self._correlation_s = config.ahrs_error_correlation_time_s
         self._last_stamp_s = -math.inf
+        # The rotation from magnetic to true north, made again only when the declination
+        # changes (a configured one never does).
+        self._declination_rotation: tuple[float, np.ndarray] | None = None
         jacobian = np.zeros((3, states.dim))
         jacobian[:, states.attitude] = np.eye(3)
         jacobian.flags.writeable = False
@@ -159,7 +162,13 @@ class AhrsAttitudeSource(AidingSource):
             declination = declination_rad(
                 self._declination_deg, latitude_rad, longitude_rad, measurement.t_s
             )
-            rotation = rotation_matrix_from_euler(0.0, 0.0, -declination) @ rotation
+            cached = self._declination_rotation
+            if cached is None or cached[0] != declination:
+                self._declination_rotation = (
+                    declination,
+                    rotation_matrix_from_euler(0.0, 0.0, -declination),
+                )
+            rotation = self._declination_rotation[1] @ rotation
         return rotation
 
     def _weight(self, measurement: AhrsAttitude) -> float:
