@@ -31,17 +31,19 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from buoy_common.contract import AHRS_TOPIC, Reason, header_seconds
+from buoy_common.contract import AHRS_TOPIC, Reason
 from buoy_nav.aiding.base import (
     ATTITUDE_SOURCE,
     HEADING,
     HEADING_REFERENCE,
     MOTION_PACK,
+    ORIENTATION_RECORD_FIELDS,
     AidingSource,
     LinearisationPoint,
     MeasurementModel,
     as_float_array,
     has_non_positive_variance,
+    orientation_record,
     samples_per_correlation_time,
 )
 from buoy_nav.geomagnetism import declination_rad
@@ -107,15 +109,10 @@ class AhrsAttitudeSource(AidingSource):
     def enabled_by(cls, config) -> bool:
         return config.use_ahrs
 
-    record_fields = ("orientation", "orientation_covariance")
+    record_fields = ORIENTATION_RECORD_FIELDS
 
     def measurement_from_message(self, message) -> AhrsAttitude | Reason:
-        q = message.orientation
-        return self.measurement_from_record(
-            header_seconds(message.header),
-            (float(q.x), float(q.y), float(q.z), float(q.w)),
-            message.orientation_covariance,
-        )
+        return self.measurement_from_record(*orientation_record(message))
 
     def measurement_from_record(
         self, t_s: float, orientation_xyzw, orientation_covariance

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol
 
 import numpy as np
 
-from buoy_common.contract import SENSOR_MSGTYPES, Reason
+from buoy_common.contract import SENSOR_MSGTYPES, Reason, header_seconds
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import NavState
 from buoy_nav.rotations import (
@@ -387,6 +387,22 @@ def has_non_positive_variance(covariance: np.ndarray) -> bool:
     """True when a variance on the diagonal of the square matrix ``covariance`` is zero or
     negative."""
     return bool((covariance.diagonal() <= 0.0).any())
+
+
+ORIENTATION_RECORD_FIELDS = ("orientation", "orientation_covariance")
+"""The fields a source reads of a sensor_msgs/Imu that carries an attitude or a heading."""
+
+
+def orientation_record(message) -> tuple[float, tuple[float, float, float, float], object]:
+    """What a source of :data:`ORIENTATION_RECORD_FIELDS` reads of a sensor_msgs/Imu
+    ``message``: its header stamp (s), orientation quaternion (x, y, z, w) as floats and
+    orientation covariance (9, row-major), the arguments of its ``measurement_from_record``."""
+    q = message.orientation
+    return (
+        header_seconds(message.header),
+        (float(q.x), float(q.y), float(q.z), float(q.w)),
+        message.orientation_covariance,
+    )
 
 
 def vector_of(message_vector) -> tuple[float, float, float]:

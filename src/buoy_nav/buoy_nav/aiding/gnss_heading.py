@@ -26,15 +26,17 @@ from typing import NamedTuple
 
 import numpy as np
 
-from buoy_common.contract import GNSS_HEADING_TOPIC, Reason, header_seconds
+from buoy_common.contract import GNSS_HEADING_TOPIC, Reason
 from buoy_nav.aiding.base import (
     GNSS_ANTENNA_PAIR,
     HEADING,
     HEADING_REFERENCE,
+    ORIENTATION_RECORD_FIELDS,
     LinearisationPoint,
     MeasurementModel,
     as_floats,
     floored_covariance,
+    orientation_record,
 )
 from buoy_nav.aiding.dual_antenna import DualAntennaSource
 from buoy_nav.aiding.gnss_baseline import GnssBaselineSource
@@ -74,15 +76,10 @@ class GnssHeadingSource(DualAntennaSource):
     roles = frozenset((HEADING_REFERENCE,))
     superseded_by = GnssBaselineSource.kind
 
-    record_fields = ("orientation", "orientation_covariance")
+    record_fields = ORIENTATION_RECORD_FIELDS
 
     def measurement_from_message(self, message) -> GnssHeading | Reason:
-        q = message.orientation
-        return self.measurement_from_record(
-            header_seconds(message.header),
-            (float(q.x), float(q.y), float(q.z), float(q.w)),
-            message.orientation_covariance,
-        )
+        return self.measurement_from_record(*orientation_record(message))
 
     def measurement_from_record(
         self, t_s: float, orientation_xyzw, orientation_covariance
