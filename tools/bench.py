@@ -469,12 +469,40 @@ def main(argv=None) -> None:
         results.update(section_results(run))
 
     results["meta"]["wall_s"] = time.monotonic() - started
-    with open(OUT_DIR / "results.json", "w") as stream:
-        json.dump(results, stream, indent=2, default=json_default)
-    print(
-        f"\nbench: {results['meta']['wall_s']:.0f} s wall; figures in "
-        f"{(OUT_DIR / 'results.json').relative_to(REPO)}"
-    )
+    path = OUT_DIR / "results.json"
+    merged = merged_results(results, earlier_results(path))
+    with open(path, "w") as stream:
+        json.dump(merged, stream, indent=2, default=json_default)
+    print(f"\nbench: {results['meta']['wall_s']:.0f} s wall; figures in {path.relative_to(REPO)}")
+
+
+def earlier_results(path: Path) -> dict:
+    """The results an earlier run wrote to ``path`` ({} when there are none). A file that is
+    not JSON is kept beside it, renamed, and said so, not overwritten."""
+    if not path.exists():
+        return {}
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        kept = path.with_suffix(".unreadable.json")
+        path.replace(kept)
+        print(f"bench: {path} is not JSON ({error}); kept as {kept}", file=sys.stderr)
+        return {}
+
+
+def merged_results(run_results: dict, earlier: dict) -> dict:
+    """This run's results over ``earlier`` ones: a run of some sections keeps the figures of
+    the others. ``meta`` is this run's; ``meta.measured_utc`` says, for every key, when the run
+    that measured it started."""
+    earlier_meta = earlier.get("meta", {})
+    measured = {key: earlier_meta.get("started_utc") for key in earlier if key != "meta"}
+    measured.update(earlier_meta.get("measured_utc", {}))
+    started = run_results["meta"]["started_utc"]
+    measured.update({key: started for key in run_results if key != "meta"})
+    merged = {key: value for key, value in earlier.items() if key != "meta"}
+    merged.update(run_results)
+    merged["meta"] = {**run_results["meta"], "measured_utc": measured}
+    return merged
 
 
 @dataclass
