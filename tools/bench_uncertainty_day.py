@@ -11,7 +11,7 @@ against the truth hour by hour (the share beyond 3σ, the count beyond 5σ). Pri
 table and the memory after the first hour and at the end; writes
 out/bench/uncertainty_day.json (and, as the run goes, the memory samples to
 out/bench/uncertainty_day/memory.tsv). Simulating a day takes a few minutes; processing it takes
-the rest, about half an hour of one core (docs/benchmarks.md).
+the rest, about 55 minutes of one core (docs/benchmarks.md).
 """
 
 from __future__ import annotations
