@@ -6,13 +6,12 @@ On the simulated FDCHP hour (``tools/bench_fdchp_hour.py``), every aligned row w
 measurement is the pack's attitude at the IMU stamp, with no constraint due, makes the same
 filter step: integrate to the stamp, propagate the covariance, the pack's attitude model, the
 gate, the Joseph update, the injection and the covariance's reset. The engine does it through
-some twenty interpreted calls between its compiled kernels. This tool times those rows in the
-engine (``FusionEngine._process_sample``, wall per row) and then runs the same step as ONE
-compiled call composed of the engine's own kernels (strapdown step, error model, gate, update,
-injection, reset, the pack's innovation and covariance), from the state and covariance the
-engine had before each row, and compares the result with what the engine had after it. It
-measures what a compiled event loop would cost a row of this filter; it is not a second engine
-(the composed step lives here, beside the measurement). Writes out/bench/filter_row.json.
+interpreted calls between its compiled kernels (the strapdown step, the covariance's
+propagation, the pack's compiled update). This tool times those rows in the engine
+(``FusionEngine._process_sample``, wall per row) and then runs the same step as ONE compiled
+call composed of the same kernels, from the state and covariance the engine had before each
+row, and compares the result with what the engine had after it: what a compiled event loop
+would cost a row of this filter. Writes out/bench/filter_row.json.
 """
 
 from __future__ import annotations
@@ -26,35 +25,19 @@ import time
 import numba
 import numpy as np
 
-from buoy_nav import earth
-from buoy_nav import kalman_kernel as kalman
-from buoy_nav.aiding.ahrs_attitude import (
-    AhrsAttitudeSource,
-    _attitude_innovation,
-    _model_covariance,
-)
-from buoy_nav.aiding.base import samples_per_correlation_time
+from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource, _attitude_update
 from buoy_nav.config import fusion_config_from_files
 from buoy_nav.engine import FusionEngine
 from buoy_nav.error_state_filter import (
     ERROR_STATES,
-    SCALE_FACTOR_CORRELATION_TIME_S,
     ImuErrorModel,
-    _fill_error_model,
+    _noise_coefficients,
+    _propagated_covariance,
     chi_square_quantile,
 )
-from buoy_nav.rotations import rotation_matrix_elements
 from buoy_nav.strapdown_kernel import (
-    ALTITUDE,
-    ATTITUDE,
     DURATION,
-    FORCE_DEVIATION_SQ_SUM,
-    FORCE_SUM,
     GYRO_BIAS,
-    LATITUDE,
-    RATE_SQ_SUM,
-    ROTATION_SUM,
-    VELOCITY,
     inject_error_state,
     strapdown_step,
 )
@@ -65,63 +48,8 @@ TIMED_PASSES = 3
 # The nominal state's part of the state vector: the propagation sums after it are reset by the
 # covariance's propagation and compared through the covariance.
 NOMINAL_SIZE = DURATION
-ATTITUDE_ERROR_START = ERROR_STATES.attitude.start
 
-_radii_of_curvature_m = numba.njit(cache=True)(earth.radii_of_curvature_m)
-_normal_gravity_mps2 = numba.njit(cache=True)(earth.normal_gravity_mps2)
-_rotation_matrix_elements = numba.njit(cache=True)(rotation_matrix_elements)
-
-
-@numba.njit(cache=True)
-def _propagate(state, covariance, imu, gyro_drift_scale, accel_noise_scale):
-    """The covariance ``covariance`` carried over the interval integrated in ``state`` (the
-    strapdown kernel's layout; its sums restarted), as ``discrete_error_model`` and
-    ``ErrorStateFilter.propagate`` compute it. ``imu``: scale_factor, gyro noise PSD (rad²/s),
-    accel noise PSD (m²/s³), gyro Markov σ (rad/s) and τ (s), accel Markov σ (m/s²) and τ (s)."""
-    duration = state[DURATION]
-    latitude, altitude = state[LATITUDE], state[ALTITUDE]
-    meridian, prime_vertical = _radii_of_curvature_m(latitude)
-    earth_rate = np.array(
-        (0.0, earth.EARTH_RATE_RAD_S * np.cos(latitude), earth.EARTH_RATE_RAD_S * np.sin(latitude))
-    )
-    east_radius = prime_vertical + altitude
-    v_east, v_north = state[VELOCITY], state[VELOCITY + 1]
-    transport_rate = np.array(
-        (
-            -v_north / (meridian + altitude),
-            v_east / east_radius,
-            v_east * math.tan(latitude) / east_radius,
-        )
-    )
-    transition = np.empty((covariance.shape[0], covariance.shape[0]))
-    noise = np.zeros((covariance.shape[0], covariance.shape[0]))
-    _fill_error_model(
-        transition,
-        noise,
-        duration,
-        earth_rate + transport_rate,
-        2.0 * earth_rate + transport_rate,
-        state[FORCE_SUM : FORCE_SUM + 3].copy(),
-        state[ROTATION_SUM : ROTATION_SUM + 9].reshape(3, 3).copy(),
-        meridian + altitude,
-        prime_vertical + altitude,
-        math.tan(latitude),
-        _normal_gravity_mps2(latitude, altitude),
-        imu[0] ** 2 * SCALE_FACTOR_CORRELATION_TIME_S,
-        state[RATE_SQ_SUM : RATE_SQ_SUM + 3].copy(),
-        state[FORCE_DEVIATION_SQ_SUM : FORCE_DEVIATION_SQ_SUM + 3].copy(),
-        imu[1] * duration,
-        accel_noise_scale**2 * imu[2] * duration,
-        2.0 * (gyro_drift_scale * imu[3]) ** 2 * duration / imu[4],
-        2.0 * imu[5] ** 2 * duration / imu[6],
-        0,
-        3,
-        6,
-        9,
-        12,
-    )
-    state[DURATION:] = 0.0
-    return kalman.propagated(covariance, transition, noise)
+_NOISE_TERMS = 7
 
 
 @numba.njit(cache=True)
@@ -133,21 +61,13 @@ def compiled_row(
     gyro_end,
     force_start,
     force_end,
-    measured_nb,
-    measured_covariance_rad2,
-    weight,
-    lag_s,
-    lag_uncertainty_s,
-    floor_rad2,
-    gate_threshold,
-    jacobian,
-    imu,
-    gyro_drift_scale,
-    accel_noise_scale,
+    noise_terms,
+    update_arguments,
 ):
     """One filter step of a motion-pack row in place of ``state``: integrate ``step_s`` (s)
-    between the raw samples (body rad/s, m/s²), propagate, and fuse the pack's true-north
-    attitude ``measured_nb`` (body→ENU) of covariance ``measured_covariance_rad2`` (ENU rad²).
+    between the raw samples (body rad/s, m/s²), propagate with the IMU's ``noise_terms``
+    (:func:`buoy_nav.error_state_filter.propagated_covariance`'s) and apply the pack's compiled
+    update (``update_arguments``: those of its kernel after the covariance and the state).
     Returns the covariance after the row, the NIS and whether the gate accepted it."""
     strapdown_step(
         state,
@@ -168,30 +88,23 @@ def compiled_row(
         True,
     )
     if state[DURATION] > 0.0:
-        covariance = _propagate(state, covariance, imu, gyro_drift_scale, accel_noise_scale)
-    elements = _rotation_matrix_elements(
-        state[ATTITUDE], state[ATTITUDE + 1], state[ATTITUDE + 2], state[ATTITUDE + 3]
+        _, covariance = _propagated_covariance(
+            state,
+            covariance,
+            noise_terms[0],
+            noise_terms[1],
+            noise_terms[2],
+            noise_terms[3],
+            noise_terms[4],
+            noise_terms[5],
+            noise_terms[6],
+        )
+    _, nis, _, accepted, updated, correction, _ = _attitude_update(
+        covariance, state, *update_arguments
     )
-    rotation_nb = np.empty((3, 3))
-    for index in range(9):
-        rotation_nb[index // 3, index % 3] = elements[index]
-    rate_x = gyro_end[0] - state[GYRO_BIAS]
-    rate_y = gyro_end[1] - state[GYRO_BIAS + 1]
-    rate_z = gyro_end[2] - state[GYRO_BIAS + 2]
-    innovation = np.array(
-        _attitude_innovation(measured_nb, rotation_nb, rate_x, rate_y, rate_z, lag_s)
-    )
-    lag_variance = (rate_x**2 + rate_y**2 + rate_z**2) * lag_uncertainty_s**2
-    model_covariance = _model_covariance(measured_covariance_rad2, floor_rad2, lag_variance, weight)
-    nis, _ = kalman.innovation_test(covariance, innovation, jacobian, model_covariance)
-    if not nis <= gate_threshold:
-        return covariance, nis, False
-    covariance, correction, _ = kalman.joseph_update(
-        covariance, innovation, jacobian, model_covariance
-    )
-    inject_error_state(state, correction)
-    covariance, _ = kalman.attitude_reset(covariance, correction, ATTITUDE_ERROR_START)
-    return covariance, nis, True
+    if accepted:
+        inject_error_state(state, correction)
+    return updated, nis, accepted
 
 
 class RowCapture:
@@ -293,55 +206,55 @@ def _watch_true_north(source: AhrsAttitudeSource, seen: dict) -> None:
     source._true_north = turned
 
 
-def row_arguments(row: dict, imu: np.ndarray, jacobian: np.ndarray) -> tuple:
+def row_arguments(row: dict, noise_terms: np.ndarray) -> tuple:
     """The arguments of :func:`compiled_row` for a captured ``row`` (state and covariance
     copied)."""
     source, measurement = row["source"], row["measurement"]
     gyro_end, force_end = row["interpolated"]
-    before = row["after"]["t_s"]
+    rate, lag_variance = source._rate_and_lag_variance(
+        gyro_end, row["state"][GYRO_BIAS : GYRO_BIAS + 3]
+    )
+    update_arguments = (
+        row["measured_nb"],
+        *rate,
+        source._lag_s,
+        np.ascontiguousarray(measurement.covariance_rad2, dtype=float),
+        source._floor_rad2,
+        lag_variance,
+        source._weight(measurement),
+        source._jacobian,
+        chi_square_quantile(3, source.gate_probability),
+        ERROR_STATES.attitude.start,
+    )
     return (
         row["state"].copy(),
         row["covariance"].copy(),
-        before - row["t_s"],
+        row["after"]["t_s"] - row["t_s"],
         np.array(row["gyro"]),
         np.array(gyro_end, dtype=float),
         np.array(row["force"]),
         np.array(force_end, dtype=float),
-        row["measured_nb"],
-        np.ascontiguousarray(measurement.covariance_rad2, dtype=float),
-        samples_per_correlation_time(measurement.interval_s, source._correlation_s),
-        source._lag_s,
-        source._lag_uncertainty_s,
-        source._floor_rad2,
-        chi_square_quantile(3, source.gate_probability),
-        jacobian,
-        imu,
-        *row["scales"],
+        noise_terms,
+        update_arguments,
     )
 
 
-def imu_parameters(config) -> np.ndarray:
-    """The IMU error model's parameters in the order :func:`_propagate` reads them."""
-    model = ImuErrorModel.from_config(config)
-    return np.array(
-        (
-            model.scale_factor,
-            model.gyro_noise_psd_rad2_s,
-            model.accel_noise_psd_m2_s3,
-            model.gyro_markov_sigma_rad_s,
-            model.gyro_correlation_time_s,
-            model.accel_markov_sigma_mps2,
-            model.accel_correlation_time_s,
-        )
-    )
+def noise_terms(config, scales: tuple[float, float]) -> np.ndarray:
+    """The IMU's noise terms of the covariance's propagation with the sources' ``scales`` of
+    the gyro's drift and the accelerometer's noise."""
+    return np.array(_noise_coefficients(ImuErrorModel.from_config(config), *scales))
 
 
-def replay(rows: list[dict], imu: np.ndarray) -> dict:
+def replay(rows: list[dict], config) -> dict:
     """Each captured row through :func:`compiled_row`: how many match the engine to the bit,
     the largest relative difference, and the best wall per row over :data:`TIMED_PASSES`."""
-    jacobian = np.zeros((3, ERROR_STATES.dim))
-    jacobian[:, ERROR_STATES.attitude] = np.eye(3)
-    arguments = [row_arguments(row, imu, jacobian) for row in rows]
+    terms = {}
+    arguments = []
+    for row in rows:
+        scales = row["scales"]
+        if scales not in terms:
+            terms[scales] = noise_terms(config, scales)
+        arguments.append(row_arguments(row, terms[scales]))
     identical_state = identical_covariance = same_verdict = 0
     largest = 0.0
     for row, call in zip(rows, arguments, strict=True):
@@ -391,7 +304,7 @@ def run_filter_row(log=lambda text: None) -> dict:
         raise SystemExit("bench_filter_row: no row of the pack's attitude alone was found")
     log(f"bench: filter_row: {len(rows)} rows through the compiled step ...")
     config = fusion_config_from_files([str(path) for path in params])
-    result = replay(rows, imu_parameters(config))
+    result = replay(rows, config)
     engine_s = sorted(row["engine_s"] for row in rows)
     result["engine_us_per_row_median"] = engine_s[len(engine_s) // 2] * 1e6
     result["engine_us_per_row_mean"] = sum(engine_s) / len(engine_s) * 1e6

@@ -17,7 +17,7 @@ from buoy_nav.error_state_filter import (
     ErrorStateFilter,
     ImuErrorModel,
     block_diagonal,
-    discrete_error_model,
+    propagated_covariance,
 )
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.state_layout import StateLayout
@@ -73,18 +73,14 @@ class AidedNavigation:
         integrator = self.integrator
         if integrator.accumulated_duration_s <= 0.0:
             return False
-        sums = integrator.take_propagation_sums()
-        transition, noise = discrete_error_model(
-            sums,
-            integrator.latitude_rad,
-            integrator.altitude_m,
-            integrator.velocity_enu_mps,
+        posterior = self.kalman.covariance
+        transition, self.kalman.covariance = propagated_covariance(
+            integrator.state_vector,
+            posterior,
             self._imu_model,
             self.gyro_drift_scale,
             self.accel_noise_scale,
         )
-        posterior = self.kalman.covariance
-        self.kalman.propagate(transition, noise)
         self._recorder.propagated(t_s, transition, self.kalman.covariance, posterior)
         return True
 
@@ -115,6 +111,14 @@ class AidedNavigation:
         self.kalman.reset_after_injection(correction)
         self._recorder.corrected(correction)
         return correction
+
+    def apply_correction(self, correction, covariance, positive_definite: bool) -> None:
+        """Inject a ``correction`` computed elsewhere (a source's compiled update, the same
+        arithmetic as :meth:`correct` of one model) and take ``covariance``, the covariance
+        after it and the reset, repaired when not ``positive_definite``."""
+        self.integrator.inject(correction)
+        self.kalman.adopt_reset_covariance(covariance, positive_definite)
+        self._recorder.corrected(correction)
 
     def reset(self, t_s: float, reset: StateReset) -> None:
         """Re-initialise the states of ``reset`` at stamp ``t_s`` (s): a new segment for the

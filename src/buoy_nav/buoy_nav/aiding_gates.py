@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 from buoy_common.contract import Reason
 from buoy_nav.aiding.base import AidingSource, LinearisationPoint, MeasurementModel, Verdict
-from buoy_nav.error_state_filter import ErrorStateFilter
+from buoy_nav.error_state_filter import ErrorStateFilter, GateResult
 from buoy_nav.health import InnovationRecord, MeasurementCounters
 from buoy_nav.sensor_sets import AidingRecency
 from buoy_nav.source_health import (
@@ -130,26 +130,50 @@ class AidingGates:
             gate = kalman.gate(
                 model.innovation, model.jacobian, model.gated_covariance, source.gate_probability
             )
-            if self._innovation_log is not None:
-                self._innovation_log.append(
-                    InnovationRecord(
-                        t_s,
-                        source.kind,
-                        model.innovation,
-                        gate.innovation_covariance,
-                        gate.nis,
-                        gate.accepted,
-                    )
-                )
+            if gate.accepted:
+                if self._book_passed(source, t_s, model.innovation, gate, outcome):
+                    outcome.accepted.append(model)
+                continue
+            self._log_innovation(source, t_s, model.innovation, gate)
             self._watch_innovations(source, t_s, model.innovation, gate, outcome)
-            if self._judge(source, t_s, not gate.accepted, outcome):
+            if self._judge(source, t_s, True, outcome):
                 self._counters[source.kind].reject(Reason.SUSPENDED)
-            elif gate.accepted:
-                self._book_acceptance(source, t_s, gate.nis)
-                outcome.accepted.append(model)
             else:
                 self._book_rejection(source, t_s, measurement, model, gate.nis, outcome)
         return outcome
+
+    def passed(
+        self, source: AidingSource, t_s: float, innovation, gate: GateResult
+    ) -> tuple[bool, GateOutcome]:
+        """Book a measurement of ``source`` at stamp ``t_s`` (s) that passed its ``gate``
+        elsewhere (a source's compiled update) as :meth:`gate` books it: whether it is to be
+        fused (False: the source is suspended), and the outcome."""
+        outcome = GateOutcome([], [], {}, [])
+        return self._book_passed(source, t_s, innovation, gate, outcome), outcome
+
+    def _book_passed(
+        self, source: AidingSource, t_s: float, innovation, gate: GateResult, outcome: GateOutcome
+    ) -> bool:
+        self._log_innovation(source, t_s, innovation, gate)
+        self._watch_innovations(source, t_s, innovation, gate, outcome)
+        if self._judge(source, t_s, False, outcome):
+            self._counters[source.kind].reject(Reason.SUSPENDED)
+            return False
+        self._book_acceptance(source, t_s, gate.nis)
+        return True
+
+    def _log_innovation(self, source: AidingSource, t_s: float, innovation, gate) -> None:
+        if self._innovation_log is not None:
+            self._innovation_log.append(
+                InnovationRecord(
+                    t_s,
+                    source.kind,
+                    innovation,
+                    gate.innovation_covariance,
+                    gate.nis,
+                    gate.accepted,
+                )
+            )
 
     def _watch_innovations(
         self, source: AidingSource, t_s: float, innovation, gate, outcome: GateOutcome

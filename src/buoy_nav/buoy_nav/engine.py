@@ -474,6 +474,8 @@ class FusionEngine:
             return
         if nav.propagate_covariance(t):
             self._solutions.covariance_changed()
+        if len(group) == 1 and self._updated_compiled(t, *group[0], gyro):
+            return
         point = nav.linearisation_point(gyro)
         outcome = self._gates.gate(t, group, point, nav.kalman)
         if outcome.accepted:
@@ -485,6 +487,28 @@ class FusionEngine:
             self._reset_to_measurement(source, t, measurement, gyro, model)
         self._source_transitions.extend(outcome.transitions)
         self._judge_integrity(t, outcome.rejected_kinds)
+
+    def _updated_compiled(self, t: float, source: AidingSource, measurement, gyro) -> bool:
+        """Apply the one ``measurement`` of ``source`` at stamp ``t`` (raw gyro ``gyro`` there)
+        through the source's compiled update, as :meth:`_handle_measurements` would; False,
+        with nothing changed, when the source has none or its gate rejects the measurement
+        (that one is then gated and booked the interpreted way)."""
+        if not source.has_compiled_update:
+            return False
+        nav = self._nav
+        update = source.compiled_update(measurement, gyro, nav.integrator.state_vector, nav.kalman)
+        if not update.gate.accepted:
+            return False
+        fused, outcome = self._gates.passed(source, t, update.innovation, update.gate)
+        if fused:
+            linearisation_state = nav.integrator.nav_state()
+            nav.apply_correction(update.correction, update.covariance, update.positive_definite)
+            self._solutions.covariance_changed()
+            self._solutions.biases_changed()
+            self._prediction.carry_over(self._point.t_s, linearisation_state, update.correction)
+        self._source_transitions.extend(outcome.transitions)
+        self._judge_integrity(t, outcome.rejected_kinds)
+        return True
 
     def _align_with(self, t: float, group: list, gyro) -> None:
         """Hand the (source, measurement) pairs of stamp ``t`` to the aligner; start the filter

@@ -261,41 +261,169 @@ def discrete_error_model(
     latitude_rad, altitude_m, velocity_enu_mps: nominal state at the end of the interval (the
     rates evaluated from them change by far less than 1e-9 rad/s within an interval).
     """
-    duration = sums.duration_s
-    meridian, prime_vertical = earth.radii_of_curvature_m(latitude_rad)
-    earth_rate = earth.earth_rate_enu_rad_s(latitude_rad)
-    transport_rate = earth.transport_rate_enu_rad_s(latitude_rad, altitude_m, velocity_enu_mps)
-    transition = np.empty((_S.dim, _S.dim))
-    noise = np.zeros((_S.dim, _S.dim))
+    return _error_model(
+        sums.duration_s,
+        np.ascontiguousarray(sums.rotation_integral_s, dtype=float),
+        np.ascontiguousarray(sums.specific_force_increment_enu_mps, dtype=float),
+        np.ascontiguousarray(sums.gyro_rate_sq_integral_rad2_s, dtype=float),
+        np.ascontiguousarray(sums.force_deviation_sq_integral_m2_s3, dtype=float),
+        latitude_rad,
+        altitude_m,
+        float(velocity_enu_mps[0]),
+        float(velocity_enu_mps[1]),
+        *_noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
+    )
+
+
+def propagated_covariance(
+    integrator_state: np.ndarray,
+    covariance: np.ndarray,
+    imu: ImuErrorModel,
+    gyro_drift_scale: float = 1.0,
+    accel_noise_scale: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Φ of :func:`discrete_error_model` over the interval whose sums the integrator's state
+    vector ``integrator_state`` (:mod:`buoy_nav.strapdown_kernel`'s layout) holds, and
+    ``covariance`` carried over it, Φ P Φᵀ + Q_d (:meth:`ErrorStateFilter.propagate`); the
+    sums are restarted (:meth:`StrapdownIntegrator.take_propagation_sums`). One compiled call."""
+    return _propagated_covariance(
+        integrator_state,
+        covariance,
+        *_noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
+    )
+
+
+def _noise_coefficients(
+    imu: ImuErrorModel, gyro_drift_scale: float, accel_noise_scale: float
+) -> tuple[float, ...]:
+    """The IMU's noise terms of Q_d before the interval's duration multiplies them: the
+    scale factor's s² τ, the gyro's and the (scaled) accelerometer's white-noise densities, and
+    the gyro's and the accelerometer's drift 2σ² with their correlation times. Squared here,
+    by the interpreter, so that every path to Q_d rounds them alike."""
+    return (
+        imu.scale_factor**2 * SCALE_FACTOR_CORRELATION_TIME_S,
+        imu.gyro_noise_psd_rad2_s,
+        accel_noise_scale**2 * imu.accel_noise_psd_m2_s3,
+        2.0 * (gyro_drift_scale * imu.gyro_markov_sigma_rad_s) ** 2,
+        imu.gyro_correlation_time_s,
+        2.0 * imu.accel_markov_sigma_mps2**2,
+        imu.accel_correlation_time_s,
+    )
+
+
+_radii_of_curvature_m = numba.njit(cache=True)(earth.radii_of_curvature_m)
+_normal_gravity_mps2 = numba.njit(cache=True)(earth.normal_gravity_mps2)
+
+
+@numba.njit(cache=True)
+def _propagated_covariance(
+    state,
+    covariance,
+    scale_sq_time_s,
+    gyro_noise_psd_rad2_s,
+    accel_noise_psd_m2_s3,
+    gyro_drift_twice_variance_rad2_s2,
+    gyro_correlation_time_s,
+    accel_drift_twice_variance_m2_s4,
+    accel_correlation_time_s,
+):
+    """:func:`propagated_covariance` (the noise terms of :func:`_noise_coefficients`)."""
+    transition, noise = _error_model(
+        state[kernel.DURATION],
+        state[kernel.ROTATION_SUM : kernel.ROTATION_SUM + 9].reshape(3, 3).copy(),
+        state[kernel.FORCE_SUM : kernel.FORCE_SUM + 3].copy(),
+        state[kernel.RATE_SQ_SUM : kernel.RATE_SQ_SUM + 3].copy(),
+        state[kernel.FORCE_DEVIATION_SQ_SUM : kernel.FORCE_DEVIATION_SQ_SUM + 3].copy(),
+        state[kernel.LATITUDE],
+        state[kernel.ALTITUDE],
+        state[kernel.VELOCITY],
+        state[kernel.VELOCITY + 1],
+        scale_sq_time_s,
+        gyro_noise_psd_rad2_s,
+        accel_noise_psd_m2_s3,
+        gyro_drift_twice_variance_rad2_s2,
+        gyro_correlation_time_s,
+        accel_drift_twice_variance_m2_s4,
+        accel_correlation_time_s,
+    )
+    state[kernel.DURATION :] = 0.0
+    return transition, kalman_kernel.propagated(covariance, transition, noise)
+
+
+@numba.njit(cache=True)
+def _error_model(
+    duration_s,
+    rotation_integral_s,
+    force_increment_enu_mps,
+    gyro_rate_sq_integral_rad2_s,
+    force_deviation_sq_integral_m2_s3,
+    latitude_rad,
+    altitude_m,
+    velocity_east_mps,
+    velocity_north_mps,
+    scale_sq_time_s,
+    gyro_noise_psd_rad2_s,
+    accel_noise_psd_m2_s3,
+    gyro_drift_twice_variance_rad2_s2,
+    gyro_correlation_time_s,
+    accel_drift_twice_variance_m2_s4,
+    accel_correlation_time_s,
+):
+    """Φ and Q_d of :func:`discrete_error_model` from the interval's sums, the nominal state
+    at its end and the noise terms of :func:`_noise_coefficients`; the Earth's rates as
+    :mod:`buoy_nav.earth` computes them."""
+    meridian, prime_vertical = _radii_of_curvature_m(latitude_rad)
+    earth_rate = np.array(
+        (
+            0.0,
+            earth.EARTH_RATE_RAD_S * np.cos(latitude_rad),
+            earth.EARTH_RATE_RAD_S * np.sin(latitude_rad),
+        )
+    )
+    east_radius = prime_vertical + altitude_m
+    transport_rate = np.array(
+        (
+            -velocity_north_mps / (meridian + altitude_m),
+            velocity_east_mps / east_radius,
+            velocity_east_mps * math.tan(latitude_rad) / east_radius,
+        )
+    )
+    transition = np.empty((_DIM, _DIM))
+    noise = np.zeros((_DIM, _DIM))
     _fill_error_model(
         transition,
         noise,
-        duration,
+        duration_s,
         earth_rate + transport_rate,
         2.0 * earth_rate + transport_rate,
-        sums.specific_force_increment_enu_mps,
-        sums.rotation_integral_s,
+        force_increment_enu_mps,
+        rotation_integral_s,
         meridian + altitude_m,
         prime_vertical + altitude_m,
         math.tan(latitude_rad),
-        earth.normal_gravity_mps2(latitude_rad, altitude_m),
-        imu.scale_factor**2 * SCALE_FACTOR_CORRELATION_TIME_S,
-        sums.gyro_rate_sq_integral_rad2_s,
-        sums.force_deviation_sq_integral_m2_s3,
-        imu.gyro_noise_psd_rad2_s * duration,
-        accel_noise_scale**2 * imu.accel_noise_psd_m2_s3 * duration,
-        2.0
-        * (gyro_drift_scale * imu.gyro_markov_sigma_rad_s) ** 2
-        * duration
-        / imu.gyro_correlation_time_s,
-        2.0 * imu.accel_markov_sigma_mps2**2 * duration / imu.accel_correlation_time_s,
-        _S.attitude.start,
-        _S.velocity.start,
-        _S.position.start,
-        _S.gyro_bias.start,
-        _S.accel_bias.start,
+        _normal_gravity_mps2(latitude_rad, altitude_m),
+        scale_sq_time_s,
+        gyro_rate_sq_integral_rad2_s,
+        force_deviation_sq_integral_m2_s3,
+        gyro_noise_psd_rad2_s * duration_s,
+        accel_noise_psd_m2_s3 * duration_s,
+        gyro_drift_twice_variance_rad2_s2 * duration_s / gyro_correlation_time_s,
+        accel_drift_twice_variance_m2_s4 * duration_s / accel_correlation_time_s,
+        _ATTITUDE,
+        _VELOCITY,
+        _POSITION,
+        _GYRO_BIAS,
+        _ACCEL_BIAS,
     )
     return transition, noise
+
+
+_DIM = _S.dim
+_ATTITUDE = _S.attitude.start
+_VELOCITY = _S.velocity.start
+_POSITION = _S.position.start
+_GYRO_BIAS = _S.gyro_bias.start
+_ACCEL_BIAS = _S.accel_bias.start
 
 
 @numba.njit(cache=True)
@@ -470,10 +598,17 @@ class ErrorStateFilter:
         attitude rows and columns are transformed by G = I + ½[δφ̂×]; the other states are
         additive and unchanged.
         """
-        self.covariance, positive = kalman_kernel.attitude_reset(
-            self.covariance, np.asarray(correction, dtype=float), self.states.attitude.start
+        self.adopt_reset_covariance(
+            *kalman_kernel.attitude_reset(
+                self.covariance, np.asarray(correction, dtype=float), self.states.attitude.start
+            )
         )
-        if not positive:
+
+    def adopt_reset_covariance(self, covariance: np.ndarray, positive_definite: bool) -> None:
+        """Take ``covariance``, the covariance after a correction's injection and reset,
+        repaired when it is not ``positive_definite``."""
+        self.covariance = covariance
+        if not positive_definite:
             self._repair_covariance()
 
     def ensure_positive_definite(self) -> bool:

@@ -43,6 +43,7 @@ from buoy_nav.error_state_filter import (
     ImuErrorModel,
     NavState,
     discrete_error_model,
+    propagated_covariance,
 )
 from buoy_nav.rotations import (
     Quaternion,
@@ -325,13 +326,9 @@ def _stop_signals_held():
 def _run_compiled_kernels() -> None:
     integrator = StrapdownIntegrator((0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
     integrator.step(0.01, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 9.8), (0.0, 0.0, 9.8))
-    discrete_error_model(
-        integrator.take_propagation_sums(),
-        0.0,
-        0.0,
-        (0.0, 0.0, 0.0),
-        ImuErrorModel.from_config(FusionConfig()),
-    )
+    imu_model = ImuErrorModel.from_config(FusionConfig())
+    propagated_covariance(integrator.state_vector.copy(), np.eye(ERROR_STATES.dim), imu_model)
+    discrete_error_model(integrator.take_propagation_sums(), 0.0, 0.0, (0.0, 0.0, 0.0), imu_model)
     integrator.inject(np.zeros(ERROR_STATES.dim))
     kalman = ErrorStateFilter(np.eye(ERROR_STATES.dim), 0.99)
     kalman.propagate(np.eye(ERROR_STATES.dim), np.zeros((ERROR_STATES.dim, ERROR_STATES.dim)))

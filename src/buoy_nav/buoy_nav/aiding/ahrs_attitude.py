@@ -32,6 +32,7 @@ import numba
 import numpy as np
 
 from buoy_common.contract import AHRS_TOPIC, Reason
+from buoy_nav import kalman_kernel
 from buoy_nav.aiding.base import (
     ATTITUDE_SOURCE,
     HEADING,
@@ -46,6 +47,7 @@ from buoy_nav.aiding.base import (
     orientation_record,
     samples_per_correlation_time,
 )
+from buoy_nav.error_state_filter import GateResult
 from buoy_nav.geomagnetism import declination_rad
 from buoy_nav.rotations import (
     quaternion_from_rotation_elements,
@@ -56,6 +58,7 @@ from buoy_nav.rotations import (
     rotation_matrix_from_rotation_vector,
     rotation_vector_from_quaternion,
 )
+from buoy_nav.strapdown_kernel import ATTITUDE, GYRO_BIAS, LATITUDE, LONGITUDE, STATE_SIZE
 
 UNIT_NORM_TOLERANCE = 1e-3
 MIN_QUATERNION_NORM = 1e-9
@@ -78,6 +81,19 @@ class AhrsAttitude(NamedTuple):
     t_s: float
 
 
+class CompiledUpdate(NamedTuple):
+    """What :meth:`AhrsAttitudeSource.compiled_update` made of one measurement: its innovation
+    (rad, ENU), the gate's result and, when the gate accepted it, the covariance after the
+    update and the reset (else the one given), the correction (error state; zeros when
+    rejected) and whether that covariance is positive definite."""
+
+    innovation: np.ndarray
+    gate: GateResult
+    covariance: np.ndarray
+    correction: np.ndarray
+    positive_definite: bool
+
+
 class AhrsAttitudeSource(AidingSource):
     """The motion pack's attitude (see the module docstring)."""
 
@@ -87,6 +103,7 @@ class AhrsAttitudeSource(AidingSource):
     aids = HEADING
     sensor = MOTION_PACK
     roles = frozenset((HEADING_REFERENCE, ATTITUDE_SOURCE))
+    has_compiled_update = True
 
     def __init__(self, config, states):
         super().__init__(config, states)
@@ -174,15 +191,15 @@ class AhrsAttitudeSource(AidingSource):
 
     def model(self, measurement: AhrsAttitude, point: LinearisationPoint) -> MeasurementModel:
         state = point.state
-        gyro, bias = point.raw_gyro_rad_s, state.gyro_bias_rad_s
-        rate = (gyro[0] - bias[0], gyro[1] - bias[1], gyro[2] - bias[2])
+        rate, lag_variance = self._rate_and_lag_variance(
+            point.raw_gyro_rad_s, state.gyro_bias_rad_s
+        )
         measured = self._true_north(measurement, state.latitude_rad, state.longitude_rad)
         innovation = np.array(
             _attitude_innovation(
                 np.ascontiguousarray(measured, dtype=float), point.rotation_nb, *rate, self._lag_s
             )
         )
-        lag_variance = (rate[0] ** 2 + rate[1] ** 2 + rate[2] ** 2) * self._lag_uncertainty_s**2
         covariance = _model_covariance(
             measurement.covariance_rad2, self._floor_rad2, lag_variance, self._weight(measurement)
         )
@@ -193,9 +210,77 @@ class AhrsAttitudeSource(AidingSource):
             covariance=covariance,
         )
 
+    def _rate_and_lag_variance(self, raw_gyro_rad_s, gyro_bias_rad_s) -> tuple[tuple, float]:
+        """The bias-corrected body rate (rad/s) and the variance (rad²) an unknown lag adds to
+        each axis at that rate."""
+        gyro, bias = raw_gyro_rad_s, gyro_bias_rad_s
+        rate = (gyro[0] - bias[0], gyro[1] - bias[1], gyro[2] - bias[2])
+        lag_variance = (rate[0] ** 2 + rate[1] ** 2 + rate[2] ** 2) * self._lag_uncertainty_s**2
+        return rate, lag_variance
+
+    def compiled_update(
+        self, measurement: AhrsAttitude, raw_gyro_rad_s, integrator_state, kalman
+    ) -> CompiledUpdate:
+        """The model, gate and update of ``measurement`` in one compiled call, from the nominal
+        state vector ``integrator_state`` (:mod:`buoy_nav.strapdown_kernel`'s layout) with the
+        raw gyro sample there (body rad/s) and the covariance of ``kalman``; nothing is changed.
+        The same arithmetic as :meth:`model`, :meth:`ErrorStateFilter.gate`,
+        :meth:`ErrorStateFilter.update` and :meth:`ErrorStateFilter.reset_after_injection`."""
+        rate, lag_variance = self._rate_and_lag_variance(
+            raw_gyro_rad_s,
+            integrator_state[GYRO_BIAS : GYRO_BIAS + 3],
+        )
+        measured = self._true_north(
+            measurement, float(integrator_state[LATITUDE]), float(integrator_state[LONGITUDE])
+        )
+        threshold = kalman.gate_threshold(3, self.gate_probability)
+        innovation, nis, innovation_covariance, accepted, covariance, correction, positive = (
+            _attitude_update(
+                kalman.covariance,
+                integrator_state,
+                np.ascontiguousarray(measured, dtype=float),
+                *rate,
+                self._lag_s,
+                measurement.covariance_rad2,
+                self._floor_rad2,
+                lag_variance,
+                self._weight(measurement),
+                self._jacobian,
+                threshold,
+                self.states.attitude.start,
+            )
+        )
+        return CompiledUpdate(
+            innovation,
+            GateResult(accepted, nis, threshold, innovation_covariance),
+            covariance,
+            correction,
+            positive,
+        )
+
     def load_compiled_code(self) -> None:
         _attitude_innovation(np.eye(3), np.eye(3), 0.0, 0.0, 0.0, self._lag_s)
         _model_covariance(np.eye(3), self._floor_rad2, 0.0, 1.0)
+        state = np.zeros(STATE_SIZE)
+        state[ATTITUDE + 3] = 1.0
+        covariance = np.eye(self.states.dim)
+        for jacobian in (self._jacobian, self._jacobian.copy()):  # read-only and writable
+            _attitude_update(
+                covariance,
+                state,
+                np.eye(3),
+                0.0,
+                0.0,
+                0.0,
+                self._lag_s,
+                np.eye(3),
+                self._floor_rad2,
+                0.0,
+                1.0,
+                jacobian,
+                7.8,
+                self.states.attitude.start,
+            )
 
     def align(self, aligner, t_s: float, measurement: AhrsAttitude, raw_gyro_rad_s):
         """The pack's heading (azimuth of its body x axis) completes the alignment at a known
@@ -271,3 +356,60 @@ def _attitude_innovation(measured_nb, rotation_nb, rate_x, rate_y, rate_z, lag_s
             product[8],
         )
     )
+
+
+@numba.njit(cache=True)
+def _attitude_update(
+    covariance,
+    integrator_state,
+    measured_nb,
+    rate_x,
+    rate_y,
+    rate_z,
+    lag_s,
+    measurement_covariance_rad2,
+    floor_rad2,
+    lag_variance_rad2,
+    weight,
+    jacobian,
+    gate_threshold,
+    attitude_start,
+):
+    """:class:`CompiledUpdate`'s fields of the pack's true-north attitude ``measured_nb``
+    against the nominal state vector ``integrator_state`` and ``covariance``: the innovation of
+    :func:`_attitude_innovation` (bias-corrected body rate in rad/s, ``lag_s`` s), R of
+    :func:`_model_covariance`, the gate at ``gate_threshold`` and, when it passes, the Joseph
+    update and the attitude reset (the error states' attitude from ``attitude_start``)."""
+    elements = _rotation_matrix_elements(
+        integrator_state[ATTITUDE],
+        integrator_state[ATTITUDE + 1],
+        integrator_state[ATTITUDE + 2],
+        integrator_state[ATTITUDE + 3],
+    )
+    rotation_nb = np.empty((3, 3))
+    for index in range(9):
+        rotation_nb[index // 3, index % 3] = elements[index]
+    innovation = np.array(
+        _attitude_innovation(measured_nb, rotation_nb, rate_x, rate_y, rate_z, lag_s)
+    )
+    model_covariance = _model_covariance(
+        measurement_covariance_rad2, floor_rad2, lag_variance_rad2, weight
+    )
+    nis, innovation_covariance = kalman_kernel.innovation_test(
+        covariance, innovation, jacobian, model_covariance
+    )
+    if not nis <= gate_threshold:
+        return (
+            innovation,
+            nis,
+            innovation_covariance,
+            False,
+            covariance,
+            np.zeros(covariance.shape[0]),
+            True,
+        )
+    posterior, correction, _ = kalman_kernel.joseph_update(
+        covariance, innovation, jacobian, model_covariance
+    )
+    reset, positive = kalman_kernel.attitude_reset(posterior, correction, attitude_start)
+    return innovation, nis, innovation_covariance, True, reset, correction, positive

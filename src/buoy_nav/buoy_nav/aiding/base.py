@@ -237,6 +237,12 @@ class AidingSource(abc.ABC):
     """Whether persistent gate rejections of this source mean that the filter is wrong (see
     :mod:`buoy_nav.integrity`); False for a sensor whose own disturbances are expected and
     stopped by the gate, such as a magnetometer beside a passing hull."""
+    has_compiled_update: ClassVar[bool] = False
+    """Whether the source makes the model, gate and update of a measurement in one compiled
+    call, ``compiled_update(measurement, raw_gyro_rad_s, integrator_state, kalman)``, with the
+    same arithmetic as :meth:`model` and the filter's gate and update (the engine then uses it
+    for a stamp of that one measurement, and books a measurement it rejects the interpreted
+    way)."""
 
     def __init__(self, config: FusionConfig, states: StateLayout):
         self.config = config
