@@ -474,21 +474,18 @@ class FusionEngine:
             return
         if nav.propagate_covariance(t):
             self._solutions.covariance_changed()
-        if len(group) == 1 and self._updated_compiled(t, *group[0], gyro):
+        if len(group) == 1 and self._applied_compiled_update(t, *group[0], gyro):
             return
         point = nav.linearisation_point(gyro)
         outcome = self._gates.gate(t, group, point, nav.kalman)
         if outcome.accepted:
-            correction = nav.correct(outcome.accepted)
-            self._solutions.covariance_changed()
-            self._solutions.biases_changed()
-            self._prediction.carry_over(self._point.t_s, point.state, correction)
+            self._corrected(point.state, nav.correct(outcome.accepted))
         for source, measurement, model in outcome.persistent_rejections:
             self._reset_to_measurement(source, t, measurement, gyro, model)
         self._source_transitions.extend(outcome.transitions)
         self._judge_integrity(t, outcome.rejected_kinds)
 
-    def _updated_compiled(self, t: float, source: AidingSource, measurement, gyro) -> bool:
+    def _applied_compiled_update(self, t: float, source: AidingSource, measurement, gyro) -> bool:
         """Apply the one ``measurement`` of ``source`` at stamp ``t`` (raw gyro ``gyro`` there)
         through the source's compiled update, as :meth:`_handle_measurements` would; False,
         with nothing changed, when the source has none or its gate rejects the measurement
@@ -503,12 +500,17 @@ class FusionEngine:
         if fused:
             linearisation_state = nav.integrator.nav_state()
             nav.apply_correction(update.correction, update.covariance, update.positive_definite)
-            self._solutions.covariance_changed()
-            self._solutions.biases_changed()
-            self._prediction.carry_over(self._point.t_s, linearisation_state, update.correction)
+            self._corrected(linearisation_state, update.correction)
         self._source_transitions.extend(outcome.transitions)
         self._judge_integrity(t, outcome.rejected_kinds)
         return True
+
+    def _corrected(self, linearisation_state, correction) -> None:
+        """The filter injected ``correction`` into its nominal state, which was
+        ``linearisation_state``: the solutions and the prediction ahead follow."""
+        self._solutions.covariance_changed()
+        self._solutions.biases_changed()
+        self._prediction.carry_over(self._point.t_s, linearisation_state, correction)
 
     def _align_with(self, t: float, group: list, gyro) -> None:
         """Hand the (source, measurement) pairs of stamp ``t`` to the aligner; start the filter

@@ -113,6 +113,7 @@ class SourceHealth:
     def __init__(self, rule: SourceHealthRule):
         self.rule = rule
         self._failed = deque(maxlen=rule.window)
+        self._failed_count = 0  # of the outcomes in _failed, kept with them
         self._stamps_s = deque(maxlen=rule.window)
         self._gate_suspended = False
         self._gate_reason = ""
@@ -141,7 +142,11 @@ class SourceHealth:
         stamp ``t_s`` (s; NaN: judged by the count of outcomes alone) and return what it
         changed."""
         was_suspended = self.suspended
-        self._failed.append(bool(failed_gate))
+        failed = bool(failed_gate)
+        if len(self._failed) == self._failed.maxlen:
+            self._failed_count -= self._failed[0]
+        self._failed.append(failed)
+        self._failed_count += failed
         self._stamps_s.append(t_s)
         if self._gate_suspended:
             self._maybe_resume()
@@ -165,9 +170,12 @@ class SourceHealth:
     def failed_share(self, last: int | None = None) -> float:
         """Share of the last ``last`` outcomes (all kept ones when None) that failed the gate;
         NaN before any outcome."""
-        outcomes = list(self._failed)[-last:] if last else list(self._failed)
-        if not outcomes:
-            return float("nan")
+        if not last or last >= len(self._failed):
+            # All kept: the running count, which equals their sum.
+            if not self._failed:
+                return float("nan")
+            return self._failed_count / len(self._failed)
+        outcomes = list(self._failed)[-last:]
         return sum(outcomes) / len(outcomes)
 
     def forget(self) -> None:
@@ -187,6 +195,7 @@ class SourceHealth:
 
     def _clear(self) -> None:
         self._failed.clear()
+        self._failed_count = 0
         self._stamps_s.clear()
 
     def _enough_to_suspend(self) -> bool:
