@@ -49,8 +49,6 @@ TIMED_PASSES = 3
 # covariance's propagation and compared through the covariance.
 NOMINAL_SIZE = DURATION
 
-_NOISE_TERMS = 7
-
 
 @numba.njit(cache=True)
 def compiled_row(
@@ -88,17 +86,7 @@ def compiled_row(
         True,
     )
     if state[DURATION] > 0.0:
-        _, covariance = _propagated_covariance(
-            state,
-            covariance,
-            noise_terms[0],
-            noise_terms[1],
-            noise_terms[2],
-            noise_terms[3],
-            noise_terms[4],
-            noise_terms[5],
-            noise_terms[6],
-        )
+        _, covariance = _propagated_covariance(state, covariance, noise_terms)
     _, nis, _, accepted, updated, correction, _ = _attitude_update(
         covariance, state, *update_arguments
     )
@@ -239,10 +227,10 @@ def row_arguments(row: dict, noise_terms: np.ndarray) -> tuple:
     )
 
 
-def noise_terms(config, scales: tuple[float, float]) -> np.ndarray:
+def noise_terms(config, scales: tuple[float, float]) -> tuple[float, ...]:
     """The IMU's noise terms of the covariance's propagation with the sources' ``scales`` of
     the gyro's drift and the accelerometer's noise."""
-    return np.array(_noise_coefficients(ImuErrorModel.from_config(config), *scales))
+    return _noise_coefficients(ImuErrorModel.from_config(config), *scales)
 
 
 def replay(rows: list[dict], config) -> dict:

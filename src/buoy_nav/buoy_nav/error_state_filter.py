@@ -271,7 +271,7 @@ def discrete_error_model(
         altitude_m,
         float(velocity_enu_mps[0]),
         float(velocity_enu_mps[1]),
-        *_noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
+        _noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
     )
 
 
@@ -289,7 +289,7 @@ def propagated_covariance(
     return _propagated_covariance(
         integrator_state,
         covariance,
-        *_noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
+        _noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
     )
 
 
@@ -316,18 +316,8 @@ _normal_gravity_mps2 = numba.njit(cache=True)(earth.normal_gravity_mps2)
 
 
 @numba.njit(cache=True)
-def _propagated_covariance(
-    state,
-    covariance,
-    scale_sq_time_s,
-    gyro_noise_psd_rad2_s,
-    accel_noise_psd_m2_s3,
-    gyro_drift_twice_variance_rad2_s2,
-    gyro_correlation_time_s,
-    accel_drift_twice_variance_m2_s4,
-    accel_correlation_time_s,
-):
-    """:func:`propagated_covariance` (the noise terms of :func:`_noise_coefficients`)."""
+def _propagated_covariance(state, covariance, noise_terms):
+    """:func:`propagated_covariance` (``noise_terms``: those of :func:`_noise_coefficients`)."""
     transition, noise = _error_model(
         state[kernel.DURATION],
         state[kernel.ROTATION_SUM : kernel.ROTATION_SUM + 9].reshape(3, 3).copy(),
@@ -338,13 +328,7 @@ def _propagated_covariance(
         state[kernel.ALTITUDE],
         state[kernel.VELOCITY],
         state[kernel.VELOCITY + 1],
-        scale_sq_time_s,
-        gyro_noise_psd_rad2_s,
-        accel_noise_psd_m2_s3,
-        gyro_drift_twice_variance_rad2_s2,
-        gyro_correlation_time_s,
-        accel_drift_twice_variance_m2_s4,
-        accel_correlation_time_s,
+        noise_terms,
     )
     state[kernel.DURATION :] = 0.0
     return transition, kalman_kernel.propagated(covariance, transition, noise)
@@ -361,17 +345,20 @@ def _error_model(
     altitude_m,
     velocity_east_mps,
     velocity_north_mps,
-    scale_sq_time_s,
-    gyro_noise_psd_rad2_s,
-    accel_noise_psd_m2_s3,
-    gyro_drift_twice_variance_rad2_s2,
-    gyro_correlation_time_s,
-    accel_drift_twice_variance_m2_s4,
-    accel_correlation_time_s,
+    noise_terms,
 ):
     """Φ and Q_d of :func:`discrete_error_model` from the interval's sums, the nominal state
-    at its end and the noise terms of :func:`_noise_coefficients`; the Earth's rates as
+    at its end and the ``noise_terms`` of :func:`_noise_coefficients`; the Earth's rates as
     :mod:`buoy_nav.earth` computes them."""
+    (
+        scale_sq_time_s,
+        gyro_noise_psd_rad2_s,
+        accel_noise_psd_m2_s3,
+        gyro_drift_twice_variance_rad2_s2,
+        gyro_correlation_time_s,
+        accel_drift_twice_variance_m2_s4,
+        accel_correlation_time_s,
+    ) = noise_terms
     meridian, prime_vertical = _radii_of_curvature_m(latitude_rad)
     earth_rate = np.array(
         (
