@@ -14,7 +14,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export AMENT_PREFIX_PATH := $(CURDIR)/$(VENV)
 export PYTHONUNBUFFERED := 1
 
-.PHONY: all venv bytecode demo test test-long bench mutants lint format bags colcon clean help
+.PHONY: all venv compiled bytecode demo test test-long bench mutants lint format bags colcon clean help
 
 all: help
 
@@ -26,6 +26,7 @@ help:
 	@echo "make mutants - flip signs and conventions of the core on a copy, report which tests catch each"
 	@echo "make bags   - re-record the committed bags in bags/ from the live simulation nodes"
 	@echo "make colcon - colcon build of ros2_ws inside the venv"
+	@echo "make compiled - compile the numba code into its cache again (after a change of the sources)"
 	@echo "make format - ruff format + autofix"
 
 venv: $(STAMP)
@@ -38,14 +39,27 @@ $(STAMP): requirements.txt requirements-dev.txt $(PACKAGE_FILES)
 	# The tools are the package `tools` of the repository's root: `python -m tools.bench` from
 	# the root; with the root on the venv's path, `.venv/bin/python tools/bench.py` too.
 	$(BIN)/python -c 'import pathlib, site; pathlib.Path(site.getsitepackages()[0], "buoy_wind_tools.pth").write_text("$(CURDIR)\n")'
-	# Once, so that the processes of a run started together do not each compile the same code.
-	$(BIN)/python -m tools.compile_ahead
 	@touch $(STAMP)
+
+# numba's cache of a compiled function is judged by its own file's time alone, and the kernels
+# compose functions of other files (kalman_kernel.py, earth.py, rotations.py, the layout of
+# strapdown_kernel.py): after a change to any source of the packages every cached function is
+# removed and the code compiled again, once, so that the processes of a run started together
+# do not each compile it and none runs a stale composition.
+COMPILED_STAMP := $(VENV)/.compiled-code
+PACKAGE_SOURCES := $(shell find $(PACKAGES) -name '*.py' -not -path '*/test/*')
+
+compiled: $(COMPILED_STAMP)
+
+$(COMPILED_STAMP): $(STAMP) $(PACKAGE_SOURCES)
+	find src tools -name '*.nbi' -delete -o -name '*.nbc' -delete
+	$(BIN)/python -m tools.compile_ahead
+	@touch $(COMPILED_STAMP)
 
 # Where the environment sets PYTHONDONTWRITEBYTECODE, no process writes the bytecode of the
 # suite's own modules, and each of the hundreds a test run starts compiles them again (about
 # 0.4 s of CPU). Written here, every process reads it; only changed sources are compiled again.
-bytecode: venv
+bytecode: compiled
 	$(BIN)/python -m compileall -q src tools tests
 
 lint: venv
@@ -72,10 +86,10 @@ bench: venv bytecode
 	$(BIN)/python -m tools.bench
 	$(MAKE) test-long
 
-mutants: venv
+mutants: compiled
 	$(BIN)/python -m tools.mutation_check
 
-bags: venv
+bags: compiled
 	$(BIN)/python -m tools.record_bags
 
 colcon: venv
