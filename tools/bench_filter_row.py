@@ -28,13 +28,8 @@ import numpy as np
 from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource, _attitude_update
 from buoy_nav.config import fusion_config_from_files
 from buoy_nav.engine import FusionEngine
-from buoy_nav.error_state_filter import (
-    ERROR_STATES,
-    ImuErrorModel,
-    _noise_coefficients,
-    _propagated_covariance,
-    chi_square_quantile,
-)
+from buoy_nav.error_dynamics import _noise_coefficients, _propagated_covariance
+from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, chi_square_quantile
 from buoy_nav.strapdown_kernel import (
     DURATION,
     GYRO_BIAS,
@@ -64,7 +59,7 @@ def compiled_row(
 ):
     """One filter step of a motion-pack row in place of ``state``: integrate ``step_s`` (s)
     between the raw samples (body rad/s, m/s²), propagate with the IMU's ``noise_terms``
-    (:func:`buoy_nav.error_state_filter.propagated_covariance`'s) and apply the pack's compiled
+    (:func:`buoy_nav.error_dynamics.propagated_covariance`'s) and apply the pack's compiled
     update (``update_arguments``: those of its kernel after the covariance and the state).
     Returns the covariance after the row, the NIS and whether the gate accepted it."""
     strapdown_step(

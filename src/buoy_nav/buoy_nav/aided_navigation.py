@@ -13,12 +13,8 @@ from buoy_nav.aiding.base import LinearisationPoint, MeasurementModel, StateRese
 from buoy_nav.alignment import AlignmentResult
 from buoy_nav.config import FusionConfig
 from buoy_nav.epoch_recorder import EpochRecorder
-from buoy_nav.error_state_filter import (
-    ErrorStateFilter,
-    ImuErrorModel,
-    block_diagonal,
-    propagated_covariance,
-)
+from buoy_nav.error_dynamics import propagated_covariance
+from buoy_nav.error_state_filter import ErrorStateFilter, ImuErrorModel, block_diagonal
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.state_layout import StateLayout
 

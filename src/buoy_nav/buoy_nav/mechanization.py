@@ -37,13 +37,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from buoy_nav.config import FusionConfig
+from buoy_nav.error_dynamics import discrete_error_model, propagated_covariance
 from buoy_nav.error_state_filter import (
     ERROR_STATES,
     ErrorStateFilter,
     ImuErrorModel,
     NavState,
-    discrete_error_model,
-    propagated_covariance,
 )
 from buoy_nav.rotations import (
     Quaternion,

@@ -9,12 +9,12 @@ from scipy.stats import chi2
 
 from buoy_nav import earth
 from buoy_nav.config import FusionConfig
+from buoy_nav.error_dynamics import discrete_error_model
 from buoy_nav.error_state_filter import (
     ERROR_STATES,
     ErrorStateFilter,
     ImuErrorModel,
     NavState,
-    discrete_error_model,
     inject_error_state,
 )
 from buoy_nav.mechanization import StrapdownIntegrator
