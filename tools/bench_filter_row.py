@@ -29,10 +29,9 @@ from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource, _attitude_update
 from buoy_nav.config import fusion_config_from_files
 from buoy_nav.engine import FusionEngine
 from buoy_nav.error_dynamics import _noise_coefficients, _propagated_covariance
-from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, chi_square_quantile
+from buoy_nav.error_state_filter import ImuErrorModel
 from buoy_nav.strapdown_kernel import (
     DURATION,
-    GYRO_BIAS,
     inject_error_state,
     strapdown_step,
 )
@@ -43,6 +42,29 @@ TIMED_PASSES = 3
 # The nominal state's part of the state vector: the propagation sums after it are reset by the
 # covariance's propagation and compared through the covariance.
 NOMINAL_SIZE = DURATION
+
+
+@numba.njit(cache=True)
+def _integrate(state, step_s, gyro_start, gyro_end, force_start, force_end):
+    """The strapdown step of ``step_s`` (s) between the raw samples (body rad/s, m/s²)."""
+    strapdown_step(
+        state,
+        step_s,
+        gyro_start[0],
+        gyro_start[1],
+        gyro_start[2],
+        gyro_end[0],
+        gyro_end[1],
+        gyro_end[2],
+        force_start[0],
+        force_start[1],
+        force_start[2],
+        force_end[0],
+        force_end[1],
+        force_end[2],
+        True,
+        True,
+    )
 
 
 @numba.njit(cache=True)
@@ -62,24 +84,7 @@ def compiled_row(
     (:func:`buoy_nav.error_dynamics.propagated_covariance`'s) and apply the pack's compiled
     update (``update_arguments``: those of its kernel after the covariance and the state).
     Returns the covariance after the row, the NIS and whether the gate accepted it."""
-    strapdown_step(
-        state,
-        step_s,
-        gyro_start[0],
-        gyro_start[1],
-        gyro_start[2],
-        gyro_end[0],
-        gyro_end[1],
-        gyro_end[2],
-        force_start[0],
-        force_start[1],
-        force_start[2],
-        force_end[0],
-        force_end[1],
-        force_end[2],
-        True,
-        True,
-    )
+    _integrate(state, step_s, gyro_start, gyro_end, force_start, force_end)
     if state[DURATION] > 0.0:
         _, covariance = _propagated_covariance(state, covariance, noise_terms)
     _, nis, _, accepted, updated, correction, _ = _attitude_update(
@@ -119,8 +124,6 @@ class RowCapture:
             elapsed_s = time.perf_counter() - start
             del queue.pop_stamp, engine._point.samples_at
             group = seen["group"]
-            for source, _ in group:
-                source.__dict__.pop("_true_north", None)
             if len(group) == 1 and isinstance(group[0][0], AhrsAttitudeSource):
                 source, measurement = group[0]
                 rows.append(
@@ -128,7 +131,7 @@ class RowCapture:
                         **before,
                         "after": _filter_snapshot(engine),
                         "interpolated": seen["samples"],
-                        "measured_nb": np.ascontiguousarray(seen["measured_nb"], dtype=float),
+                        "gate": nav.kalman,
                         "measurement": measurement,
                         "source": source,
                         "accepted": engine._counters[source.kind].accepted == accepted + 1,
@@ -157,18 +160,14 @@ def _filter_snapshot(engine) -> dict:
 
 
 def _watch_row(engine) -> dict:
-    """Record the group the row pops, the samples interpolated at its stamp and the pack's
-    attitude turned to true north (instance attributes over the methods, removed after the
-    row)."""
-    seen = {"group": [], "samples": None, "measured_nb": None}
+    """Record the group the row pops and the samples interpolated at its stamp (instance
+    attributes over the methods, removed after the row)."""
+    seen = {"group": [], "samples": None}
     queue, point = engine._queue, engine._point
     pop_stamp, samples_at = queue.pop_stamp, point.samples_at
 
     def popped():
         stamp, seen["group"] = pop_stamp()
-        for source, _ in seen["group"]:
-            if isinstance(source, AhrsAttitudeSource):
-                _watch_true_north(source, seen)
         return stamp, seen["group"]
 
     def interpolated(*arguments):
@@ -179,47 +178,24 @@ def _watch_row(engine) -> dict:
     return seen
 
 
-def _watch_true_north(source: AhrsAttitudeSource, seen: dict) -> None:
-    true_north = source._true_north
-
-    def turned(*arguments):
-        seen["measured_nb"] = true_north(*arguments)
-        return seen["measured_nb"]
-
-    source._true_north = turned
-
-
-def row_arguments(row: dict, noise_terms: np.ndarray) -> tuple:
+def row_arguments(row: dict, noise_terms: tuple[float, ...]) -> tuple:
     """The arguments of :func:`compiled_row` for a captured ``row`` (state and covariance
-    copied)."""
-    source, measurement = row["source"], row["measurement"]
+    copied): the pack's update is linearised where the engine linearised it, at the state
+    integrated to the row's stamp."""
     gyro_end, force_end = row["interpolated"]
-    rate, lag_variance = source._rate_and_lag_variance(
-        gyro_end, row["state"][GYRO_BIAS : GYRO_BIAS + 3]
-    )
-    update_arguments = (
-        row["measured_nb"],
-        *rate,
-        source._lag_s,
-        np.ascontiguousarray(measurement.covariance_rad2, dtype=float),
-        source._floor_rad2,
-        lag_variance,
-        source._weight(measurement),
-        source._jacobian,
-        chi_square_quantile(3, source.gate_probability),
-        ERROR_STATES.attitude.start,
-    )
-    return (
-        row["state"].copy(),
-        row["covariance"].copy(),
+    step = (
         row["after"]["t_s"] - row["t_s"],
         np.array(row["gyro"]),
         np.array(gyro_end, dtype=float),
         np.array(row["force"]),
         np.array(force_end, dtype=float),
-        noise_terms,
-        update_arguments,
     )
+    integrated = row["state"].copy()
+    _integrate(integrated, *step)
+    update_arguments = row["source"].update_arguments(
+        row["measurement"], gyro_end, integrated, row["gate"]
+    )
+    return (row["state"].copy(), row["covariance"].copy(), *step, noise_terms, update_arguments)
 
 
 def noise_terms(config, scales: tuple[float, float]) -> tuple[float, ...]:

@@ -226,36 +226,42 @@ class AhrsAttitudeSource(AidingSource):
         raw gyro sample there (body rad/s) and the covariance of ``kalman``; nothing is changed.
         The same arithmetic as :meth:`model`, :meth:`ErrorStateFilter.gate`,
         :meth:`ErrorStateFilter.update` and :meth:`ErrorStateFilter.reset_after_injection`."""
+        arguments = self.update_arguments(measurement, raw_gyro_rad_s, integrator_state, kalman)
+        innovation, nis, innovation_covariance, accepted, covariance, correction, positive = (
+            _attitude_update(kalman.covariance, integrator_state, *arguments)
+        )
+        return CompiledUpdate(
+            innovation,
+            GateResult(accepted, nis, arguments[-2], innovation_covariance),
+            covariance,
+            correction,
+            positive,
+        )
+
+    def update_arguments(
+        self, measurement: AhrsAttitude, raw_gyro_rad_s, integrator_state, kalman
+    ) -> tuple:
+        """The arguments of the compiled update (:func:`_attitude_update`) after the covariance
+        and the state vector, for ``measurement`` at the nominal ``integrator_state`` with the
+        raw gyro sample there (body rad/s) and the gate of ``kalman``: for code that composes it
+        with other kernels."""
         rate, lag_variance = self._rate_and_lag_variance(
-            raw_gyro_rad_s,
-            integrator_state[GYRO_BIAS : GYRO_BIAS + 3],
+            raw_gyro_rad_s, integrator_state[GYRO_BIAS : GYRO_BIAS + 3]
         )
         measured = self._true_north(
             measurement, float(integrator_state[LATITUDE]), float(integrator_state[LONGITUDE])
         )
-        threshold = kalman.gate_threshold(3, self.gate_probability)
-        innovation, nis, innovation_covariance, accepted, covariance, correction, positive = (
-            _attitude_update(
-                kalman.covariance,
-                integrator_state,
-                np.ascontiguousarray(measured, dtype=float),
-                *rate,
-                self._lag_s,
-                measurement.covariance_rad2,
-                self._floor_rad2,
-                lag_variance,
-                self._weight(measurement),
-                self._jacobian,
-                threshold,
-                self.states.attitude.start,
-            )
-        )
-        return CompiledUpdate(
-            innovation,
-            GateResult(accepted, nis, threshold, innovation_covariance),
-            covariance,
-            correction,
-            positive,
+        return (
+            np.ascontiguousarray(measured, dtype=float),
+            *rate,
+            self._lag_s,
+            measurement.covariance_rad2,
+            self._floor_rad2,
+            lag_variance,
+            self._weight(measurement),
+            self._jacobian,
+            kalman.gate_threshold(3, self.gate_probability),
+            self.states.attitude.start,
         )
 
     def load_compiled_code(self) -> None:
