@@ -4,7 +4,8 @@ workers against one, the whole year's wall time, each worker's peak memory, and 
 hour's products in the combined table once.
 
 The records are simulated FDCHP hours (``tools/fdchp_simulated.py``: sonic 0.753 m above a
-motion pack, every sensor at 10 Hz, no GNSS, moored), one file per hour in a year-shaped tree
+motion pack; IMU, the pack's attitude and the sonic at 10 Hz, as the FDCHP records them, and a
+magnetometer at 1 Hz; no GNSS, moored), one file per hour in a year-shaped tree
 ``YEAR/MM/DD/HH``. A few distinct hours are simulated (DISTINCT_HOURS: the sway and two JONSWAP
 seas, and the sway again with another seed, all at one mooring); each hour of the year is a link
 to one of them, drawn by its path. Their stamps are those of the simulated hour, not of the
@@ -89,6 +90,8 @@ def simulate_hour(bag: Path, name: str, duration_s: float = HOUR_S) -> None:
     for override in (
         *overrides,
         *extra,
+        # The FDCHP records the pack's attitude with every row, not once a second.
+        "sensors.ahrs.sample_every=1",
         f"origin_latitude_deg={latitude}",
         f"origin_longitude_deg={longitude}",
     ):
