@@ -27,6 +27,7 @@ from buoy_processing.bag_processing import (
     products_csv_path,
 )
 from buoy_processing.netcdf_variables import product_time_name, product_variable_name
+from buoy_processing.process_bag import main as process_bag_main
 from error_budget import ANEMOMETER
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS, CASES, processed_bag, processed_netcdf
 from ros_messages import raw_stamp_ns
@@ -283,3 +284,26 @@ def test_navigation_is_fuse_bags_byte_for_byte(tmp_path_factory, tmp_path):
             assert ours.topics[topic] == theirs.topics[topic]
             for a, b in zip(ours.messages([topic]), theirs.messages([topic]), strict=True):
                 assert (a.log_time_ns, a.raw) == (b.log_time_ns, b.raw), topic
+
+
+def test_without_a_bag_the_csvs_and_the_netcdf_file_are_the_same(tmp_path_factory, tmp_path):
+    name = "sea_state"
+    with_bag = processed_bag(tmp_path_factory, name)
+    out_bag = tmp_path / "bag"
+    netcdf = tmp_path / f"{name}.nc"
+    files = CASES[name].parameter_files(tmp_path)
+    arguments = [str(CASES[name].bag_path), str(out_bag), "--netcdf", str(netcdf), "--no-bag"]
+    process_bag_main([*arguments, *(f"--params-file={path}" for path in files)])
+    assert not out_bag.exists()
+    csvs = sorted(tmp_path.glob("*.csv"))
+    assert csvs
+    for path in csvs:
+        assert path.read_text() == with_bag.with_name(path.name).read_text(), path.name
+    with (
+        xr.open_dataset(netcdf, decode_times=False) as ours,
+        xr.open_dataset(processed_netcdf(tmp_path_factory, name), decode_times=False) as theirs,
+    ):
+        assert sorted(ours.variables) == sorted(theirs.variables)
+        assert ours.sizes["nav_time"] > 0
+        for variable in theirs.variables:
+            np.testing.assert_array_equal(ours[variable], theirs[variable], err_msg=variable)

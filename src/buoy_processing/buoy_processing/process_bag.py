@@ -4,7 +4,7 @@ the nodes.
     process_bag IN_BAG OUT_BAG [--params-file buoy.yaml] [--params-file compensation.yaml]
                 [--params-file current.yaml] [--overwrite] [--namespace NS]
                 [--remap FROM:=TO ...] [--smooth] [--nav-rate-hz HZ]
-                [--netcdf PATH [--netcdf-attribute NAME=VALUE ...]]
+                [--netcdf PATH [--netcdf-attribute NAME=VALUE ...]] [--no-bag]
 
 Runs over the bag's sensor topics, in log-time order, the same core as ``fusion_node`` followed
 by ``compensation_node`` and ``current_node`` (:func:`buoy_processing.bag_processing.process_bag`):
@@ -29,7 +29,11 @@ is kept as ``nav/forward/odometry`` (the bag is read twice; temporary records be
 about 0.35 GB per hour of 100 Hz data). With ``--nav-rate-hz HZ`` ``nav/*``, ``tf`` (and the
 NetCDF file's navigation) carry the solutions at that rate only, a subset with the same stamps
 and bytes, while the wind and the current are still corrected with every solution; the
-processed bag's facts state the rate. Parameters come from the same YAML files the nodes take.
+processed bag's facts state the rate. With ``--no-bag`` no bag is written: the products CSVs
+(and with ``--netcdf`` the NetCDF file, navigation included) alone, named after OUT_BAG as
+always, holding the same values; it saves the bag's disk space and about a tenth of the time
+for a user who reads only the columnar outputs. Parameters come from the same YAML files the
+nodes take.
 Namespaces and remappings as for ``fuse_bag``: a bag recorded under one namespace is read and
 written in it; a bag of several buoys gives one output per namespace holding an anemometer or a
 DVL (``OUT_BAG/buoy1`` and its CSVs ``OUT_BAG/buoy1_wind_products.csv``, ...).
@@ -139,6 +143,12 @@ def parse_arguments(argv):
         help="a global attribute of the NetCDF file (repeatable), such as creator_name=..., "
         "institution=..., license=..., project=...",
     )
+    parser.add_argument(
+        "--no-bag",
+        action="store_true",
+        help="write no bag: the products CSVs (and the NetCDF file of --netcdf) alone, named "
+        "after OUT_BAG",
+    )
     add_namespace_arguments(parser)
     return parser.parse_args(argv)
 
@@ -160,7 +170,8 @@ def netcdf_output_for(netcdf_path: str, view, several: bool) -> Path:
     return path.with_name(f"{path.stem}_{name}{path.suffix}")
 
 
-def print_summary(summary: ProcessSummary, out_bag: str, netcdf_path: Path | None) -> None:
+def print_summary(summary: ProcessSummary, out_bag: str | None, netcdf_path: Path | None) -> None:
+    """What the run did and wrote (``out_bag`` None: no bag was written)."""
     for line in summary.fusion_lines:
         print(line)
     if summary.facts is not None:
@@ -172,7 +183,7 @@ def print_summary(summary: ProcessSummary, out_bag: str, netcdf_path: Path | Non
                 f"outputs: navigation written at {summary.facts.nav_rate_hz:g} Hz; the "
                 "corrections used every solution"
             )
-    written = [str(out_bag)]
+    written = [] if out_bag is None else [str(out_bag)]
     for name, topic, correction in (
         ("wind", WIND_RAW_TOPIC, summary.wind),
         ("current", DVL_TOPIC, summary.current),
@@ -289,8 +300,9 @@ def main(argv=None) -> None:
                 history=shlex.join(["process_bag", *argv]),
                 netcdf_attributes=dict(arguments.netcdf_attribute),
                 nav_rate_hz=arguments.nav_rate_hz,
+                write_bag=not arguments.no_bag,
             )
-            print_summary(summary, out_bag, netcdf_path)
+            print_summary(summary, None if arguments.no_bag else out_bag, netcdf_path)
             for correction, topic, expected_frame_id, parameter, samples_name in (
                 (
                     summary.wind,
