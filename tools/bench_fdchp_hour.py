@@ -13,10 +13,12 @@ Two hours of input, each imported from an FDCHP L0 file through the shipped colu
   without a gap: 3 602.7 s; the motion jumps where one copy meets the next, twice in the hour);
   processed with ``ooi_fdchp_params.yaml``.
 
-Each is processed RUNS times in this process (after a first run that loads every module and
-numba's compiled kernels, not counted); the figure is the fastest run: wall and CPU time of this
-process (the processing) and of the process writing the output bag (on a second core), × real
-time of the wall time and of this process's CPU time. Start-up is apart: the wall time from
+Each is processed RUNS times in this process two ways, alternately (after a first run that
+loads every module and numba's compiled kernels, not counted): with the output bag, as
+``process_bag --netcdf``, and to the NetCDF file and the products CSVs alone, as
+``process_bag --netcdf --no-bag``. The figure of each way is its fastest run: wall and CPU time
+of this process (the processing) and of the process writing the output bag (on a second core),
+× real time of the wall time and of this process's CPU time. Start-up is apart: the wall time from
 starting ``process_bag --netcdf`` as a command to its first output message, cold (numba's cache
 files and the project's bytecode caches removed, as after a change of the sources) and warm
 (the caches the cold run wrote). A cProfile of one run of each hour says where the time goes.
@@ -120,7 +122,11 @@ def _children_cpu_s() -> float:
     return children.ru_utime + children.ru_stime
 
 
-def _process(bag: Path, params: list[Path], out: Path):
+OUTPUTS = {"with_bag": True, "netcdf_only": False}
+"""The two ways an hour is timed, by name: whether the output bag is written."""
+
+
+def _process(bag: Path, params: list[Path], out: Path, write_bag: bool = True):
     files = [str(path) for path in params]
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         return process_bag(
@@ -130,26 +136,33 @@ def _process(bag: Path, params: list[Path], out: Path):
             compensator_config_from_files(files),
             overwrite=True,
             netcdf_path=out / "processed.nc",
+            write_bag=write_bag,
         )
 
 
 def timed_runs(bag: Path, params: list[Path], out: Path, runs: int) -> dict:
-    """``runs`` timed runs after one untimed: the fastest wall, and every run."""
+    """``runs`` timed runs of each way of :data:`OUTPUTS`, alternating, after one untimed: by
+    way, the fastest wall and every run."""
     _process(bag, params, out)
-    figures = []
+    figures = {name: [] for name in OUTPUTS}
     for _ in range(runs):
-        os.sync()
-        cpu_s, writer_cpu_s = time.process_time(), _children_cpu_s()
-        summary = _process(bag, params, out)
-        figures.append(
-            {
-                "wall_s": summary.wall_s,
-                "cpu_s": time.process_time() - cpu_s,
-                "writer_cpu_s": _children_cpu_s() - writer_cpu_s,
-            }
-        )
+        for name, write_bag in OUTPUTS.items():
+            os.sync()
+            cpu_s, writer_cpu_s = time.process_time(), _children_cpu_s()
+            summary = _process(bag, params, out, write_bag)
+            figures[name].append(
+                {
+                    "wall_s": summary.wall_s,
+                    "cpu_s": time.process_time() - cpu_s,
+                    "writer_cpu_s": _children_cpu_s() - writer_cpu_s,
+                }
+            )
+    return {name: _fastest(timed, summary.duration_s) for name, timed in figures.items()}
+
+
+def _fastest(figures: list[dict], data_s: float) -> dict:
+    """The fastest of the timed ``figures`` of an hour of ``data_s`` s, and every run."""
     best = min(figures, key=lambda run: run["wall_s"])
-    data_s = summary.duration_s
     return {
         "data_s": data_s,
         **best,
@@ -244,22 +257,29 @@ def print_fdchp_hour(result: dict) -> None:
         f"{result['load_average_1min_after']:.2f} after, {result['cpus']} CPUs)"
     )
     print(
-        f"  {'hour':14s} {'data s':>7s} {'wall s':>7s} {'× real time':>11s} {'target ≥ 1000×':14s} "
-        f"{'CPU s':>6s} {'× per CPU s':>11s} {'writer CPU s':>12s} {'µs/sample':>9s} "
-        f"{'start cold s':>12s} {'warm s':>6s}"
+        f"  {'hour':14s} {'outputs':12s} {'data s':>7s} {'wall s':>7s} {'× real time':>11s} "
+        f"{'target ≥ 1000×':14s} {'CPU s':>6s} {'× per CPU s':>11s} {'writer CPU s':>12s} "
+        f"{'µs/sample':>9s}"
     )
     for name in ("simulated", "ooi_repeated"):
-        s = result[name]
-        verdict = "PASS" if s["pass"] else "MISS"
+        for outputs in OUTPUTS:
+            s = result[name][outputs]
+            verdict = "PASS" if s["pass"] else "MISS"
+            print(
+                f"  {name:14s} {outputs:12s} {s['data_s']:7.0f} {s['wall_s']:7.2f} "
+                f"{s['real_time_multiple']:11.0f} {verdict:14s} {s['cpu_s']:6.2f} "
+                f"{s['cpu_real_time_multiple']:11.0f} {s['writer_cpu_s']:12.2f} "
+                f"{s['us_per_sample']:9.0f}"
+            )
+    for name in ("simulated", "ooi_repeated"):
+        startup_s = result[name]["startup"]
         print(
-            f"  {name:14s} {s['data_s']:7.0f} {s['wall_s']:7.2f} {s['real_time_multiple']:11.0f} "
-            f"{verdict:14s} {s['cpu_s']:6.2f} {s['cpu_real_time_multiple']:11.0f} "
-            f"{s['writer_cpu_s']:12.2f} {s['us_per_sample']:9.0f} "
-            f"{s['startup']['cold_s']:12.2f} {s['startup']['warm_s']:6.2f}"
+            f"  {name}: start-up cold {startup_s['cold_s']:.2f} s, warm {startup_s['warm_s']:.2f} s"
         )
     print(
-        "  start: wall s from starting the command to its first output message (cold: numba's "
-        "and the bytecode caches removed); µs/sample: wall per 10 Hz row"
+        "  outputs: with_bag, process_bag --netcdf; netcdf_only, with --no-bag (the NetCDF file "
+        "and the CSVs). start-up: wall s from starting the command to its first output message "
+        "(cold: numba's and the bytecode caches removed); µs/sample: wall per 10 Hz row"
     )
     for name in ("simulated", "ooi_repeated"):
         profiled = result[name]["profile"]
