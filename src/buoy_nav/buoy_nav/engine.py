@@ -90,6 +90,7 @@ from buoy_nav.imu_input import ImuInput
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, load_compiled_kernels
+from buoy_nav.nav_numbers import load_compiled_nav_numbers
 from buoy_nav.prediction import RealtimePrediction, load_compiled_carry_over
 from buoy_nav.processing_point import ProcessingPoint
 from buoy_nav.sensor_sets import AidingRecency, SensorSets
@@ -124,6 +125,7 @@ class FusionEngine:
         # Here, not at the first IMU sample or measurement of a live stream.
         load_compiled_kernels(
             load_compiled_carry_over,
+            load_compiled_nav_numbers,
             *(source.load_compiled_code for source in self._registry.sources),
         )
         self.sources: tuple[AidingSource, ...] = self._registry.sources

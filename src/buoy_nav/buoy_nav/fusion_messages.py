@@ -49,8 +49,6 @@ import struct
 from collections import deque
 from typing import NamedTuple
 
-import numpy as np
-
 from buoy_common import cdr
 from buoy_common.bag_io import jazzy_typestore
 from buoy_common.contract import (
@@ -72,7 +70,16 @@ from buoy_nav.aiding import TOPIC_SOURCES
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.aiding.gnss_fix import STATUS_FIX
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
-from buoy_nav.rotations import rotation_matrix_elements
+from buoy_nav.nav_numbers import (
+    ATTITUDE_COVARIANCE,
+    BODY_TWIST_COVARIANCE,
+    ENU_TWIST_COVARIANCE,
+    GYRO_BIAS_COVARIANCE,
+    POSE_COVARIANCE,
+    POSITION_COVARIANCE,
+    VELOCITY_BODY,
+    nav_numbers,
+)
 
 FUSION_INPUT_MSGTYPES = {
     IMU_RAW_TOPIC: SENSOR_MSGTYPES[IMU_RAW_TOPIC],
@@ -225,92 +232,7 @@ class NavValues(NamedTuple):
 
 
 _ZEROS3 = (0.0, 0.0, 0.0)
-_ZEROS18 = (0.0,) * 18
-
-
-def _block_diagonal_6x6(upper, lower) -> tuple:
-    """Row-major 6×6 with 3×3 blocks ``upper`` (top left) and ``lower`` (bottom right), each
-    given as a row-major 9-sequence."""
-    return (
-        *upper[0:3],
-        *_ZEROS3,
-        *upper[3:6],
-        *_ZEROS3,
-        *upper[6:9],
-        *_ZEROS3,
-        *_ZEROS3,
-        *lower[0:3],
-        *_ZEROS3,
-        *lower[3:6],
-        *_ZEROS3,
-        *lower[6:9],
-    )
-
-
-def _upper_block_6x6(upper) -> tuple:
-    """Row-major 6×6 with the 3×3 block ``upper`` (row-major 9-sequence) top left, else 0."""
-    return (
-        *upper[0:3],
-        *_ZEROS3,
-        *upper[3:6],
-        *_ZEROS3,
-        *upper[6:9],
-        *_ZEROS3,
-        *_ZEROS18,
-    )
-
-
-class _CovarianceFields(NamedTuple):
-    """The ``nav/*`` fields that depend on a solution's covariance blocks alone."""
-
-    pose_covariance: tuple
-    attitude_covariance_rad2: tuple
-    enu_twist_covariance: tuple
-    position_covariance_m2: tuple
-    gyro_bias_covariance_rad2_s2: tuple
-
-
-class _CovarianceFieldCache:
-    """:class:`_CovarianceFields` of the latest covariance blocks seen.
-
-    The engine hands consecutive solutions the same read-only covariance arrays until the
-    filter changes them, so at the IMU rate almost every solution reuses the fields of the one
-    before. Writable arrays could change in place and are never taken from the cache.
-    """
-
-    def __init__(self):
-        self._latest: tuple | None = None
-
-    def fields(self, attitude, velocity, position, gyro_bias) -> _CovarianceFields:
-        latest = self._latest  # one read: the blocks and their fields stay a consistent pair
-        if (
-            latest is not None
-            and latest[0] is attitude
-            and latest[1] is velocity
-            and latest[2] is position
-            and latest[3] is gyro_bias
-        ):
-            return latest[4]
-        attitude_flat = attitude.ravel().tolist()
-        position_flat = position.ravel().tolist()
-        fields = _CovarianceFields(
-            pose_covariance=_block_diagonal_6x6(position_flat, attitude_flat),
-            attitude_covariance_rad2=tuple(attitude_flat),
-            enu_twist_covariance=_upper_block_6x6(velocity.ravel().tolist()),
-            position_covariance_m2=tuple(position_flat),
-            gyro_bias_covariance_rad2_s2=tuple(gyro_bias.ravel().tolist()),
-        )
-        if not (
-            attitude.flags.writeable
-            or velocity.flags.writeable
-            or position.flags.writeable
-            or gyro_bias.flags.writeable
-        ):
-            self._latest = (attitude, velocity, position, gyro_bias, fields)
-        return fields
-
-
-_COVARIANCE_FIELDS = _CovarianceFieldCache()
+_ZEROS9 = (0.0,) * 9
 
 
 def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavValues:
@@ -318,45 +240,35 @@ def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavVal
     with the exact IMU stamp from ``stamps`` when given."""
     t_s = solution.t_s
     sec, nanosec = seconds_to_stamp(t_s) if stamps is None else stamps.exact(t_s)
-    x, y, z, w = solution.attitude_xyzw.tolist()
-    rotation_elements = rotation_matrix_elements(x, y, z, w)
-    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_elements
-    rotation_nb = np.array(rotation_elements).reshape(3, 3)
-    velocity_covariance = solution.velocity_covariance_m2s2
-    covariances = _COVARIANCE_FIELDS.fields(
+    numbers = nav_numbers(
+        solution.attitude_xyzw,
+        solution.velocity_enu_mps,
         solution.attitude_covariance_rad2,
-        velocity_covariance,
+        solution.velocity_covariance_m2s2,
         solution.position_covariance_m2,
         solution.gyro_bias_covariance_rad2_s2,
     )
-    ve, vn, vu = velocity_enu = solution.velocity_enu_mps.tolist()
     return NavValues(
         t_s=t_s,
         sec=sec,
         nanosec=nanosec,
         position_map_m=tuple(solution.position_map_m.tolist()),
-        attitude_xyzw=(x, y, z, w),
-        pose_covariance=covariances.pose_covariance,
-        # R_nb^T v, summed in the order numpy's product sums.
-        velocity_body_mps=(
-            r00 * ve + r10 * vn + r20 * vu,
-            r01 * ve + r11 * vn + r21 * vu,
-            r02 * ve + r12 * vn + r22 * vu,
-        ),
+        attitude_xyzw=tuple(solution.attitude_xyzw.tolist()),
+        pose_covariance=tuple(numbers[POSE_COVARIANCE : POSE_COVARIANCE + 36]),
+        velocity_body_mps=tuple(numbers[VELOCITY_BODY : VELOCITY_BODY + 3]),
         angular_rate_body_rad_s=tuple(solution.angular_rate_body_rad_s.tolist()),
-        body_twist_covariance=_block_diagonal_6x6(
-            (rotation_nb.T @ velocity_covariance @ rotation_nb).ravel().tolist(),
-            covariances.gyro_bias_covariance_rad2_s2,
+        body_twist_covariance=tuple(numbers[BODY_TWIST_COVARIANCE : BODY_TWIST_COVARIANCE + 36]),
+        attitude_covariance_rad2=tuple(numbers[ATTITUDE_COVARIANCE : ATTITUDE_COVARIANCE + 9]),
+        gyro_bias_covariance_rad2_s2=tuple(
+            numbers[GYRO_BIAS_COVARIANCE : GYRO_BIAS_COVARIANCE + 9]
         ),
-        attitude_covariance_rad2=covariances.attitude_covariance_rad2,
-        gyro_bias_covariance_rad2_s2=covariances.gyro_bias_covariance_rad2_s2,
         specific_force_body_mps2=tuple(solution.specific_force_body_mps2.tolist()),
-        velocity_enu_mps=tuple(velocity_enu),
-        enu_twist_covariance=covariances.enu_twist_covariance,
+        velocity_enu_mps=tuple(solution.velocity_enu_mps.tolist()),
+        enu_twist_covariance=tuple(numbers[ENU_TWIST_COVARIANCE : ENU_TWIST_COVARIANCE + 36]),
         latitude_deg=float(solution.latitude_deg),
         longitude_deg=float(solution.longitude_deg),
         altitude_m=float(solution.altitude_m),
-        position_covariance_m2=covariances.position_covariance_m2,
+        position_covariance_m2=tuple(numbers[POSITION_COVARIANCE : POSITION_COVARIANCE + 9]),
     )
 
 
@@ -442,7 +354,6 @@ _ODOMETRY_CDR = cdr.OdometryWriter(MAP_FRAME, BODY_FRAME)
 _IMU_CDR = cdr.ImuWriter(BODY_FRAME)
 _TWIST_CDR = cdr.TwistWithCovarianceStampedWriter(MAP_FRAME)
 _FIX_CDR = cdr.NavSatFixWriter(BODY_FRAME)
-_ZEROS9 = (0.0,) * 9
 
 
 def odometry_cdr(v: NavValues) -> bytes:

@@ -1,0 +1,110 @@
+"""The numbers of one solution's ``nav/*`` messages that its arrays do not hold as they are (the
+body velocity, the 6×6 covariances, the flat 3×3 ones), in one compiled call.
+
+A solution's covariance blocks change with every update, at the IMU rate where an aiding source
+measures every sample (a motion pack): made by the interpreter, the 6×6 tuples and the rotated
+twist covariance cost a fifth of such a row. The call keeps the interpreted order of every
+operation: the rotation's elements as :func:`buoy_nav.rotations.rotation_matrix_elements`
+forms them, R_nbᵀ·v summed in the order numpy's product sums, and R_nbᵀ·P_v·R_nb through
+``np.dot``, which compiled code hands to the same BLAS as numpy's ``@``, so every number is the
+interpreter's to the bit (``src/buoy_nav/test/test_nav_numbers.py``).
+"""
+
+import numba
+import numpy as np
+
+# Where each part begins in the numbers (row-major 3×3 and 6×6 blocks).
+VELOCITY_BODY = 0  # 3
+BODY_TWIST_COVARIANCE = 3  # 36
+POSE_COVARIANCE = 39  # 36
+ENU_TWIST_COVARIANCE = 75  # 36
+ATTITUDE_COVARIANCE = 111  # 9
+POSITION_COVARIANCE = 120  # 9
+GYRO_BIAS_COVARIANCE = 129  # 9
+NAV_NUMBERS = 138
+
+
+def nav_numbers(
+    attitude_xyzw,
+    velocity_enu_mps,
+    attitude_covariance_rad2,
+    velocity_covariance_m2s2,
+    position_covariance_m2,
+    gyro_bias_covariance_rad2_s2,
+) -> list[float]:
+    """The numbers, as floats laid out as the offsets above say, of a solution with the quaternion
+    ``attitude_xyzw`` of R_nb (body → ENU), the ENU velocity (m/s) and the 3×3 covariances of
+    the attitude error (ENU, rad²), the velocity (ENU, m²/s²), the position (ENU, m²) and the
+    gyro bias (body, rad²/s²):
+
+    - the body velocity R_nbᵀ·v (m/s);
+    - ``nav/odometry``'s twist covariance: R_nbᵀ·P_v·R_nb (body, m²/s²) and the gyro bias's
+      block (the body rate's, rad²/s²) on the diagonal;
+    - its pose covariance: the position's block, then the attitude's;
+    - ``nav/velocity``'s: the velocity's block, then zeros;
+    - the attitude's, the position's and the gyro bias's 3×3 blocks, flat."""
+    return _nav_numbers(
+        attitude_xyzw,
+        velocity_enu_mps,
+        attitude_covariance_rad2,
+        velocity_covariance_m2s2,
+        position_covariance_m2,
+        gyro_bias_covariance_rad2_s2,
+    ).tolist()
+
+
+@numba.njit(cache=True)
+def _nav_numbers(attitude, velocity, attitude_cov, velocity_cov, position_cov, gyro_bias_cov):
+    x, y, z, w = attitude[0], attitude[1], attitude[2], attitude[3]
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    rotation = np.empty((3, 3))
+    rotation[0, 0] = 1.0 - 2.0 * (yy + zz)
+    rotation[0, 1] = 2.0 * (xy - wz)
+    rotation[0, 2] = 2.0 * (xz + wy)
+    rotation[1, 0] = 2.0 * (xy + wz)
+    rotation[1, 1] = 1.0 - 2.0 * (xx + zz)
+    rotation[1, 2] = 2.0 * (yz - wx)
+    rotation[2, 0] = 2.0 * (xz - wy)
+    rotation[2, 1] = 2.0 * (yz + wx)
+    rotation[2, 2] = 1.0 - 2.0 * (xx + yy)
+    numbers = np.zeros(NAV_NUMBERS)
+    ve, vn, vu = velocity[0], velocity[1], velocity[2]
+    for axis in range(3):
+        numbers[VELOCITY_BODY + axis] = (
+            rotation[0, axis] * ve + rotation[1, axis] * vn
+        ) + rotation[2, axis] * vu
+    body_velocity_cov = np.dot(np.dot(rotation.T, velocity_cov), rotation)
+    _place_block(numbers, BODY_TWIST_COVARIANCE, 0, body_velocity_cov)
+    _place_block(numbers, BODY_TWIST_COVARIANCE, 3, gyro_bias_cov)
+    _place_block(numbers, POSE_COVARIANCE, 0, position_cov)
+    _place_block(numbers, POSE_COVARIANCE, 3, attitude_cov)
+    _place_block(numbers, ENU_TWIST_COVARIANCE, 0, velocity_cov)
+    for row in range(3):
+        for column in range(3):
+            flat = 3 * row + column
+            numbers[ATTITUDE_COVARIANCE + flat] = attitude_cov[row, column]
+            numbers[POSITION_COVARIANCE + flat] = position_cov[row, column]
+            numbers[GYRO_BIAS_COVARIANCE + flat] = gyro_bias_cov[row, column]
+    return numbers
+
+
+@numba.njit(cache=True)
+def _place_block(numbers, start, corner, block):
+    """Put the 3×3 ``block`` on the diagonal of the row-major 6×6 at ``numbers[start:]``, its
+    first row and column at ``corner`` (0 or 3)."""
+    for row in range(3):
+        for column in range(3):
+            numbers[start + 6 * (corner + row) + corner + column] = block[row, column]
+
+
+def load_compiled_nav_numbers() -> None:
+    """Compile the nav numbers, or load them from the cache, now (see
+    :func:`buoy_nav.mechanization.load_compiled_kernels`), for the solutions' read-only
+    covariance blocks and for writable ones (the smoother's)."""
+    attitude = np.array([0.0, 0.0, 0.0, 1.0])
+    for writable in (True, False):
+        blocks = np.eye(3)[np.newaxis].repeat(4, axis=0)
+        blocks.setflags(write=writable)
+        nav_numbers(attitude, np.zeros(3), *blocks)

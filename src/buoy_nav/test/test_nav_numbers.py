@@ -1,0 +1,91 @@
+"""The compiled numbers of a solution's ``nav/*`` messages: to the bit what the interpreter makes
+of the same formulae (numpy's products included), in the layout of the messages' 6×6
+covariances, and physically what they say: a rotation keeps a vector's length and a
+covariance's trace."""
+
+import numpy as np
+import pytest
+
+from buoy_nav import nav_numbers as layout
+from buoy_nav.nav_numbers import load_compiled_nav_numbers, nav_numbers
+from buoy_nav.rotations import rotation_matrix_elements
+
+RNG = np.random.default_rng(52)
+CASES = 2000
+
+
+def random_case(writable: bool):
+    """A unit quaternion, an ENU velocity (m/s) and four covariances (attitude, velocity,
+    position, gyro bias) of the magnitudes a solution carries."""
+    quaternion = RNG.normal(size=4)
+    quaternion /= np.linalg.norm(quaternion)
+    velocity = RNG.normal(scale=2.0, size=3)
+    blocks = []
+    for scale in (1e-5, 1e-2, 1.0, 1e-9):
+        root = RNG.normal(scale=np.sqrt(scale), size=(3, 3))
+        blocks.append(root @ root.T)
+    blocks = np.array(blocks)
+    blocks.setflags(write=writable)
+    return quaternion, velocity, tuple(blocks)
+
+
+def interpreted(quaternion, velocity, blocks):
+    """The same numbers as the interpreter forms them."""
+    elements = rotation_matrix_elements(*quaternion.tolist())
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = elements
+    rotation = np.array(elements).reshape(3, 3)
+    ve, vn, vu = velocity.tolist()
+    attitude, velocity_cov, position, gyro_bias = blocks
+    body = np.zeros((6, 6))
+    body[:3, :3] = rotation.T @ velocity_cov @ rotation
+    body[3:, 3:] = gyro_bias
+    pose = np.zeros((6, 6))
+    pose[:3, :3], pose[3:, 3:] = position, attitude
+    enu = np.zeros((6, 6))
+    enu[:3, :3] = velocity_cov
+    return [
+        r00 * ve + r10 * vn + r20 * vu,
+        r01 * ve + r11 * vn + r21 * vu,
+        r02 * ve + r12 * vn + r22 * vu,
+        *body.ravel().tolist(),
+        *pose.ravel().tolist(),
+        *enu.ravel().tolist(),
+        *attitude.ravel().tolist(),
+        *position.ravel().tolist(),
+        *gyro_bias.ravel().tolist(),
+    ]
+
+
+@pytest.mark.parametrize("writable", [False, True])
+def test_every_number_is_the_interpreters_to_the_bit(writable):
+    load_compiled_nav_numbers()
+    for _ in range(CASES):
+        quaternion, velocity, blocks = random_case(writable)
+        ours = nav_numbers(quaternion, velocity, *blocks)
+        theirs = interpreted(quaternion, velocity, blocks)
+        assert len(ours) == layout.NAV_NUMBERS
+        # Bit for bit, the sign of a zero included.
+        assert np.array(ours).view(np.int64).tolist() == np.array(theirs).view(np.int64).tolist()
+
+
+def test_a_rotation_keeps_the_velocitys_length_and_the_covariances_trace():
+    for _ in range(200):
+        quaternion, velocity, blocks = random_case(writable=False)
+        numbers = np.array(nav_numbers(quaternion, velocity, *blocks))
+        body_velocity = numbers[layout.VELOCITY_BODY : layout.VELOCITY_BODY + 3]
+        np.testing.assert_allclose(np.linalg.norm(body_velocity), np.linalg.norm(velocity))
+        twist = numbers[layout.BODY_TWIST_COVARIANCE : layout.BODY_TWIST_COVARIANCE + 36]
+        body_velocity_cov = twist.reshape(6, 6)[:3, :3]
+        np.testing.assert_allclose(np.trace(body_velocity_cov), np.trace(blocks[1]), rtol=1e-12)
+        np.testing.assert_allclose(body_velocity_cov, body_velocity_cov.T, rtol=1e-12, atol=0)
+        assert np.linalg.eigvalsh(body_velocity_cov).min() > -1e-12 * np.trace(blocks[1])
+
+
+def test_a_quaternion_of_the_identity_leaves_the_body_frame_the_enu_frame():
+    _, velocity, blocks = random_case(writable=False)
+    numbers = np.array(nav_numbers(np.array([0.0, 0.0, 0.0, 1.0]), velocity, *blocks))
+    np.testing.assert_array_equal(numbers[:3], velocity)
+    twist = numbers[layout.BODY_TWIST_COVARIANCE : layout.BODY_TWIST_COVARIANCE + 36]
+    np.testing.assert_array_equal(twist.reshape(6, 6)[:3, :3], blocks[1])
+    np.testing.assert_array_equal(twist.reshape(6, 6)[3:, 3:], blocks[3])
+    np.testing.assert_array_equal(twist.reshape(6, 6)[:3, 3:], 0.0)
