@@ -13,7 +13,7 @@ from buoy_nav.aiding.base import LinearisationPoint, MeasurementModel, StateRese
 from buoy_nav.alignment import AlignmentResult
 from buoy_nav.config import FusionConfig
 from buoy_nav.epoch_recorder import EpochRecorder
-from buoy_nav.error_dynamics import propagated_covariance
+from buoy_nav.error_dynamics import propagated_covariance, stepped_covariance
 from buoy_nav.error_state_filter import ErrorStateFilter, ImuErrorModel, block_diagonal
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.state_layout import StateLayout
@@ -62,6 +62,29 @@ class AidedNavigation:
         if integrator.accumulated_duration_s >= self._propagation_interval_s:
             return self.propagate_covariance(t_s)
         return False
+
+    def integrate_and_propagate(
+        self, t_s: float, dt_s: float, gyro_start, gyro_end, force_start, force_end
+    ) -> None:
+        """:meth:`integrate` and then :meth:`propagate_covariance`, to stamp ``t_s`` (s), in
+        one compiled call: the step to a stamp a measurement is applied at, whose covariance
+        is always propagated (the same arithmetic, whether or not a batch was full)."""
+        integrator = self.integrator
+        posterior = self.kalman.covariance
+        transition, self.kalman.covariance = stepped_covariance(
+            integrator.state_vector,
+            posterior,
+            dt_s,
+            gyro_start,
+            gyro_end,
+            force_start,
+            force_end,
+            (integrator.coning_correction, integrator.sculling_correction),
+            self._imu_model,
+            self.gyro_drift_scale,
+            self.accel_noise_scale,
+        )
+        self._recorder.propagated(t_s, transition, self.kalman.covariance, posterior)
 
     def propagate_covariance(self, t_s: float) -> bool:
         """Propagate the covariance over the interval integrated so far, to stamp ``t_s`` (s).

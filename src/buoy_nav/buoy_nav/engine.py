@@ -441,7 +441,7 @@ class FusionEngine:
             if not group:  # all rejected at their turn: no step to their stamp
                 continue
             gyro_m, force_m = point.samples_at(stamp, t, gyro, force)
-            self._advance(stamp, gyro_m, force_m)
+            self._advance(stamp, gyro_m, force_m, measured=True)
             self._handle_measurements(stamp, group, gyro_m)
         self._advance(t, gyro, force)
         if self._registry.pseudo and self._nav is not None:
@@ -451,13 +451,18 @@ class FusionEngine:
             return None
         return self._solution(self._nav.integrator, t, gyro, force)
 
-    def _advance(self, t: float, gyro, force):
-        """Integrate from the current state time to ``t`` (raw samples at both ends)."""
+    def _advance(self, t: float, gyro, force, measured: bool = False):
+        """Integrate from the current state time to ``t`` (raw samples at both ends); with
+        ``measured``, to a stamp whose measurements are applied next, which propagates the
+        covariance there in the same call."""
         point = self._point
         dt = t - point.t_s
         if dt > 0.0:
             if self._nav is None:
                 self._aligner.add_motion(dt, point.gyro, gyro, point.force, force)
+            elif measured:
+                self._nav.integrate_and_propagate(t, dt, point.gyro, gyro, point.force, force)
+                self._solutions.covariance_changed()
             elif self._nav.integrate(t, dt, point.gyro, gyro, point.force, force):
                 self._solutions.covariance_changed()
         point.moved_to(t, gyro, force)

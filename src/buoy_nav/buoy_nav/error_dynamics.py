@@ -107,6 +107,38 @@ def propagated_covariance(
     )
 
 
+def stepped_covariance(
+    integrator_state: np.ndarray,
+    covariance: np.ndarray,
+    step_s: float,
+    gyro_start,
+    gyro_end,
+    force_start,
+    force_end,
+    corrections: tuple[bool, bool],
+    imu: ImuErrorModel,
+    gyro_drift_scale: float = 1.0,
+    accel_noise_scale: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The strapdown step of ``step_s`` (s) between the raw samples (body rad/s, m/s²; the
+    (coning, sculling) ``corrections`` asked for) in place of ``integrator_state``, then
+    :func:`propagated_covariance` over the interval it closes: Φ and the covariance carried
+    over it, in one compiled call, for the step to a stamp a measurement is applied at."""
+    g0x, g0y, g0z = gyro_start
+    g1x, g1y, g1z = gyro_end
+    f0x, f0y, f0z = force_start
+    f1x, f1y, f1z = force_end
+    return _stepped_covariance(
+        integrator_state,
+        covariance,
+        step_s,
+        (g0x, g0y, g0z, g1x, g1y, g1z),
+        (f0x, f0y, f0z, f1x, f1y, f1z),
+        corrections,
+        _noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
+    )
+
+
 def _noise_coefficients(
     imu: ImuErrorModel, gyro_drift_scale: float, accel_noise_scale: float
 ) -> tuple[float, ...]:
@@ -146,6 +178,30 @@ def _propagated_covariance(state, covariance, noise_terms):
     )
     state[kernel.DURATION :] = 0.0
     return transition, kalman_kernel.propagated(covariance, transition, noise)
+
+
+@numba.njit(cache=True)
+def _stepped_covariance(state, covariance, step_s, gyro, force, corrections, noise_terms):
+    """:func:`stepped_covariance` (the samples' components as (start x, y, z, end x, y, z))."""
+    kernel.strapdown_step(
+        state,
+        step_s,
+        gyro[0],
+        gyro[1],
+        gyro[2],
+        gyro[3],
+        gyro[4],
+        gyro[5],
+        force[0],
+        force[1],
+        force[2],
+        force[3],
+        force[4],
+        force[5],
+        corrections[0],
+        corrections[1],
+    )
+    return _propagated_covariance(state, covariance, noise_terms)
 
 
 @numba.njit(cache=True)

@@ -37,7 +37,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from buoy_nav.config import FusionConfig
-from buoy_nav.error_dynamics import discrete_error_model, propagated_covariance
+from buoy_nav.error_dynamics import (
+    discrete_error_model,
+    propagated_covariance,
+    stepped_covariance,
+)
 from buoy_nav.error_state_filter import (
     ERROR_STATES,
     ErrorStateFilter,
@@ -327,6 +331,17 @@ def _run_compiled_kernels() -> None:
     integrator.step(0.01, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 9.8), (0.0, 0.0, 9.8))
     imu_model = ImuErrorModel.from_config(FusionConfig())
     propagated_covariance(integrator.state_vector.copy(), np.eye(ERROR_STATES.dim), imu_model)
+    stepped_covariance(
+        integrator.state_vector.copy(),
+        np.eye(ERROR_STATES.dim),
+        0.01,
+        (0.0, 0.0, 0.0),
+        (0.0, 0.0, 0.0),
+        (0.0, 0.0, 9.8),
+        (0.0, 0.0, 9.8),
+        (True, True),
+        imu_model,
+    )
     discrete_error_model(integrator.take_propagation_sums(), 0.0, 0.0, (0.0, 0.0, 0.0), imu_model)
     integrator.inject(np.zeros(ERROR_STATES.dim))
     kalman = ErrorStateFilter(np.eye(ERROR_STATES.dim), 0.99)

@@ -8,7 +8,11 @@ import pytest
 
 from buoy_nav import kalman_kernel
 from buoy_nav.config import FusionConfig
-from buoy_nav.error_dynamics import discrete_error_model, propagated_covariance
+from buoy_nav.error_dynamics import (
+    discrete_error_model,
+    propagated_covariance,
+    stepped_covariance,
+)
 from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.strapdown_kernel import DURATION
@@ -94,3 +98,43 @@ def test_the_bias_and_white_noise_terms_are_their_closed_forms(scales):
     assert np.all(
         velocity >= accel_noise_scale**2 * IMU_MODEL.accel_noise_psd_m2_s3 * duration * (1 - 1e-12)
     )
+
+
+@pytest.mark.parametrize("corrections", [(True, True), (False, True), (True, False)])
+@pytest.mark.parametrize("steps", [0, 1, 9])
+def test_the_step_and_the_propagation_in_one_call_are_the_two_calls_to_the_bit(steps, corrections):
+    """A step to a measurement's stamp, after ``steps`` steps of the batch: the state, Φ and
+    the covariance of one call are those of the integrator's step followed by the
+    propagation."""
+    integrator = integrated(steps)
+    integrator.coning_correction, integrator.sculling_correction = corrections
+    covariance = random_covariance()
+    samples = (
+        RNG.normal(0.0, 0.2, 3).tolist(),
+        RNG.normal(0.0, 0.2, 3).tolist(),
+        RNG.normal((0.0, 0.0, 9.8), 0.8).tolist(),
+        RNG.normal((0.0, 0.0, 9.8), 0.8).tolist(),
+    )
+    gyro_start, gyro_end, force_start, force_end = samples
+    one_call_state = integrator.state_vector.copy()
+    transition, propagated = stepped_covariance(
+        one_call_state,
+        covariance,
+        0.0071,
+        gyro_start,
+        gyro_end,
+        force_start,
+        force_end,
+        corrections,
+        IMU_MODEL,
+        1.3,
+        2.1,
+    )
+    integrator.step(0.0071, gyro_start, gyro_end, force_start, force_end)
+    expected_transition, expected = propagated_covariance(
+        integrator.state_vector, covariance, IMU_MODEL, 1.3, 2.1
+    )
+    assert np.array_equal(one_call_state, integrator.state_vector)
+    assert np.array_equal(transition, expected_transition)
+    assert np.array_equal(propagated, expected)
+    assert one_call_state[DURATION] == 0.0
