@@ -240,6 +240,7 @@ def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavVal
     with the exact IMU stamp from ``stamps`` when given."""
     t_s = solution.t_s
     sec, nanosec = seconds_to_stamp(t_s) if stamps is None else stamps.exact(t_s)
+    x, y, z, w = solution.attitude_xyzw.tolist()
     numbers = nav_numbers(
         solution.attitude_xyzw,
         solution.velocity_enu_mps,
@@ -253,7 +254,7 @@ def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavVal
         sec=sec,
         nanosec=nanosec,
         position_map_m=tuple(solution.position_map_m.tolist()),
-        attitude_xyzw=tuple(solution.attitude_xyzw.tolist()),
+        attitude_xyzw=(x, y, z, w),
         pose_covariance=tuple(numbers[POSE_COVARIANCE : POSE_COVARIANCE + 36]),
         velocity_body_mps=tuple(numbers[VELOCITY_BODY : VELOCITY_BODY + 3]),
         angular_rate_body_rad_s=tuple(solution.angular_rate_body_rad_s.tolist()),
