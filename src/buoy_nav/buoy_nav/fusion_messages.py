@@ -78,7 +78,8 @@ from buoy_nav.nav_numbers import (
     POSE_COVARIANCE,
     POSITION_COVARIANCE,
     VELOCITY_BODY,
-    nav_numbers,
+    body_numbers,
+    covariance_numbers,
 )
 
 FUSION_INPUT_MSGTYPES = {
@@ -235,19 +236,80 @@ _ZEROS3 = (0.0, 0.0, 0.0)
 _ZEROS9 = (0.0,) * 9
 
 
+class _CovarianceFields(NamedTuple):
+    """The ``nav/*`` fields that depend on a solution's covariance blocks alone."""
+
+    pose_covariance: tuple
+    attitude_covariance_rad2: tuple
+    enu_twist_covariance: tuple
+    position_covariance_m2: tuple
+    gyro_bias_covariance_rad2_s2: tuple
+
+
+class _CovarianceFieldCache:
+    """:class:`_CovarianceFields` of the latest covariance blocks seen.
+
+    The engine hands consecutive solutions the same read-only covariance arrays until the
+    filter changes them, so at the IMU rate with aiding at a lower rate most solutions reuse
+    the fields of the one before. Writable arrays could change in place and are never taken
+    from the cache.
+    """
+
+    def __init__(self):
+        self._latest: tuple | None = None
+
+    def fields(self, attitude, velocity, position, gyro_bias) -> _CovarianceFields:
+        latest = self._latest  # one read: the blocks and their fields stay a consistent pair
+        if (
+            latest is not None
+            and latest[0] is attitude
+            and latest[1] is velocity
+            and latest[2] is position
+            and latest[3] is gyro_bias
+        ):
+            return latest[4]
+        numbers = covariance_numbers(attitude, velocity, position, gyro_bias)
+        fields = _CovarianceFields(
+            pose_covariance=tuple(numbers[POSE_COVARIANCE : POSE_COVARIANCE + 36]),
+            attitude_covariance_rad2=tuple(numbers[ATTITUDE_COVARIANCE : ATTITUDE_COVARIANCE + 9]),
+            enu_twist_covariance=tuple(numbers[ENU_TWIST_COVARIANCE : ENU_TWIST_COVARIANCE + 36]),
+            position_covariance_m2=tuple(numbers[POSITION_COVARIANCE : POSITION_COVARIANCE + 9]),
+            gyro_bias_covariance_rad2_s2=tuple(
+                numbers[GYRO_BIAS_COVARIANCE : GYRO_BIAS_COVARIANCE + 9]
+            ),
+        )
+        if not (
+            attitude.flags.writeable
+            or velocity.flags.writeable
+            or position.flags.writeable
+            or gyro_bias.flags.writeable
+        ):
+            self._latest = (attitude, velocity, position, gyro_bias, fields)
+        return fields
+
+
+_COVARIANCE_FIELDS = _CovarianceFieldCache()
+
+
 def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavValues:
     """What the ``nav/*`` messages of ``solution`` carry (see the module docstring), stamped
     with the exact IMU stamp from ``stamps`` when given."""
     t_s = solution.t_s
     sec, nanosec = seconds_to_stamp(t_s) if stamps is None else stamps.exact(t_s)
     x, y, z, w = solution.attitude_xyzw.tolist()
-    numbers = nav_numbers(
+    velocity_covariance = solution.velocity_covariance_m2s2
+    gyro_bias_covariance = solution.gyro_bias_covariance_rad2_s2
+    covariances = _COVARIANCE_FIELDS.fields(
+        solution.attitude_covariance_rad2,
+        velocity_covariance,
+        solution.position_covariance_m2,
+        gyro_bias_covariance,
+    )
+    body = body_numbers(
         solution.attitude_xyzw,
         solution.velocity_enu_mps,
-        solution.attitude_covariance_rad2,
-        solution.velocity_covariance_m2s2,
-        solution.position_covariance_m2,
-        solution.gyro_bias_covariance_rad2_s2,
+        velocity_covariance,
+        gyro_bias_covariance,
     )
     return NavValues(
         t_s=t_s,
@@ -255,21 +317,19 @@ def nav_values(solution: NavSolution, stamps: StampBook | None = None) -> NavVal
         nanosec=nanosec,
         position_map_m=tuple(solution.position_map_m.tolist()),
         attitude_xyzw=(x, y, z, w),
-        pose_covariance=tuple(numbers[POSE_COVARIANCE : POSE_COVARIANCE + 36]),
-        velocity_body_mps=tuple(numbers[VELOCITY_BODY : VELOCITY_BODY + 3]),
+        pose_covariance=covariances.pose_covariance,
+        velocity_body_mps=tuple(body[VELOCITY_BODY : VELOCITY_BODY + 3]),
         angular_rate_body_rad_s=tuple(solution.angular_rate_body_rad_s.tolist()),
-        body_twist_covariance=tuple(numbers[BODY_TWIST_COVARIANCE : BODY_TWIST_COVARIANCE + 36]),
-        attitude_covariance_rad2=tuple(numbers[ATTITUDE_COVARIANCE : ATTITUDE_COVARIANCE + 9]),
-        gyro_bias_covariance_rad2_s2=tuple(
-            numbers[GYRO_BIAS_COVARIANCE : GYRO_BIAS_COVARIANCE + 9]
-        ),
+        body_twist_covariance=tuple(body[BODY_TWIST_COVARIANCE : BODY_TWIST_COVARIANCE + 36]),
+        attitude_covariance_rad2=covariances.attitude_covariance_rad2,
+        gyro_bias_covariance_rad2_s2=covariances.gyro_bias_covariance_rad2_s2,
         specific_force_body_mps2=tuple(solution.specific_force_body_mps2.tolist()),
         velocity_enu_mps=tuple(solution.velocity_enu_mps.tolist()),
-        enu_twist_covariance=tuple(numbers[ENU_TWIST_COVARIANCE : ENU_TWIST_COVARIANCE + 36]),
+        enu_twist_covariance=covariances.enu_twist_covariance,
         latitude_deg=float(solution.latitude_deg),
         longitude_deg=float(solution.longitude_deg),
         altitude_m=float(solution.altitude_m),
-        position_covariance_m2=tuple(numbers[POSITION_COVARIANCE : POSITION_COVARIANCE + 9]),
+        position_covariance_m2=covariances.position_covariance_m2,
     )
 
 

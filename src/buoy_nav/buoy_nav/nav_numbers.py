@@ -1,9 +1,11 @@
-"""The numbers of one solution's ``nav/*`` messages that its arrays do not hold as they are (the
-body velocity, the 6×6 covariances, the flat 3×3 ones), in one compiled call.
+"""The numbers of one solution's ``nav/*`` messages that its arrays do not hold as they are, in
+compiled calls: those that turn with the attitude (the body velocity, the twist covariance),
+and those of the covariance blocks alone (the 6×6 covariances, the flat 3×3 ones), which
+consecutive solutions share until the filter changes them.
 
 A solution's covariance blocks change with every update, at the IMU rate where an aiding source
 measures every sample (a motion pack): made by the interpreter, the 6×6 tuples and the rotated
-twist covariance cost a fifth of such a row. The call keeps the interpreted order of every
+twist covariance cost a tenth of such a row. The call keeps the interpreted order of every
 operation: the rotation's elements as :func:`buoy_nav.rotations.rotation_matrix_elements`
 forms them, R_nbᵀ·v summed in the order numpy's product sums, and R_nbᵀ·P_v·R_nb through
 ``np.dot``, which compiled code hands to the same BLAS as numpy's ``@``, so every number is the
@@ -13,39 +15,45 @@ interpreter's to the bit (``src/buoy_nav/test/test_nav_numbers.py``).
 import numba
 import numpy as np
 
-# Where each part begins in the numbers (row-major 3×3 and 6×6 blocks).
+# Where each part begins in :func:`body_numbers` (row-major 6×6).
 VELOCITY_BODY = 0  # 3
 BODY_TWIST_COVARIANCE = 3  # 36
-POSE_COVARIANCE = 39  # 36
-ENU_TWIST_COVARIANCE = 75  # 36
-ATTITUDE_COVARIANCE = 111  # 9
-POSITION_COVARIANCE = 120  # 9
-GYRO_BIAS_COVARIANCE = 129  # 9
-NAV_NUMBERS = 138
+BODY_NUMBERS = 39
+# ... and in :func:`covariance_numbers` (row-major 6×6, then 3×3 blocks).
+POSE_COVARIANCE = 0  # 36
+ENU_TWIST_COVARIANCE = 36  # 36
+ATTITUDE_COVARIANCE = 72  # 9
+POSITION_COVARIANCE = 81  # 9
+GYRO_BIAS_COVARIANCE = 90  # 9
+COVARIANCE_NUMBERS = 99
 
 
-def nav_numbers(
-    attitude_xyzw,
-    velocity_enu_mps,
+def body_numbers(
+    attitude_xyzw, velocity_enu_mps, velocity_covariance_m2s2, gyro_bias_covariance_rad2_s2
+) -> list[float]:
+    """The numbers that turn with the attitude, as floats laid out as the offsets above say, of
+    a solution with the quaternion ``attitude_xyzw`` of R_nb (body → ENU), the ENU velocity
+    (m/s) and the 3×3 covariances of the velocity (ENU, m²/s²) and the gyro bias (body,
+    rad²/s²): the body velocity R_nbᵀ·v (m/s), and ``nav/odometry``'s twist covariance,
+    R_nbᵀ·P_v·R_nb (body, m²/s²) and the gyro bias's block (the body rate's, rad²/s²) on its
+    diagonal."""
+    return _body_numbers(
+        attitude_xyzw, velocity_enu_mps, velocity_covariance_m2s2, gyro_bias_covariance_rad2_s2
+    ).tolist()
+
+
+def covariance_numbers(
     attitude_covariance_rad2,
     velocity_covariance_m2s2,
     position_covariance_m2,
     gyro_bias_covariance_rad2_s2,
 ) -> list[float]:
-    """The numbers, as floats laid out as the offsets above say, of a solution with the quaternion
-    ``attitude_xyzw`` of R_nb (body → ENU), the ENU velocity (m/s) and the 3×3 covariances of
-    the attitude error (ENU, rad²), the velocity (ENU, m²/s²), the position (ENU, m²) and the
-    gyro bias (body, rad²/s²):
-
-    - the body velocity R_nbᵀ·v (m/s);
-    - ``nav/odometry``'s twist covariance: R_nbᵀ·P_v·R_nb (body, m²/s²) and the gyro bias's
-      block (the body rate's, rad²/s²) on the diagonal;
-    - its pose covariance: the position's block, then the attitude's;
-    - ``nav/velocity``'s: the velocity's block, then zeros;
-    - the attitude's, the position's and the gyro bias's 3×3 blocks, flat."""
-    return _nav_numbers(
-        attitude_xyzw,
-        velocity_enu_mps,
+    """The numbers of a solution's 3×3 covariance blocks alone (attitude error ENU rad²,
+    velocity ENU m²/s², position ENU m², gyro bias body rad²/s²), as floats laid out as the
+    offsets above say: ``nav/odometry``'s pose covariance (the position's block, then the
+    attitude's), ``nav/velocity``'s (the velocity's block, then zeros), and the attitude's,
+    the position's and the gyro bias's blocks, flat."""
+    return _covariance_numbers(
         attitude_covariance_rad2,
         velocity_covariance_m2s2,
         position_covariance_m2,
@@ -54,7 +62,7 @@ def nav_numbers(
 
 
 @numba.njit(cache=True)
-def _nav_numbers(attitude, velocity, attitude_cov, velocity_cov, position_cov, gyro_bias_cov):
+def _body_numbers(attitude, velocity, velocity_cov, gyro_bias_cov):
     x, y, z, w = attitude[0], attitude[1], attitude[2], attitude[3]
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
@@ -69,7 +77,7 @@ def _nav_numbers(attitude, velocity, attitude_cov, velocity_cov, position_cov, g
     rotation[2, 0] = 2.0 * (xz - wy)
     rotation[2, 1] = 2.0 * (yz + wx)
     rotation[2, 2] = 1.0 - 2.0 * (xx + yy)
-    numbers = np.zeros(NAV_NUMBERS)
+    numbers = np.zeros(BODY_NUMBERS)
     ve, vn, vu = velocity[0], velocity[1], velocity[2]
     for axis in range(3):
         numbers[VELOCITY_BODY + axis] = (
@@ -78,6 +86,12 @@ def _nav_numbers(attitude, velocity, attitude_cov, velocity_cov, position_cov, g
     body_velocity_cov = np.dot(np.dot(rotation.T, velocity_cov), rotation)
     _place_block(numbers, BODY_TWIST_COVARIANCE, 0, body_velocity_cov)
     _place_block(numbers, BODY_TWIST_COVARIANCE, 3, gyro_bias_cov)
+    return numbers
+
+
+@numba.njit(cache=True)
+def _covariance_numbers(attitude_cov, velocity_cov, position_cov, gyro_bias_cov):
+    numbers = np.zeros(COVARIANCE_NUMBERS)
     _place_block(numbers, POSE_COVARIANCE, 0, position_cov)
     _place_block(numbers, POSE_COVARIANCE, 3, attitude_cov)
     _place_block(numbers, ENU_TWIST_COVARIANCE, 0, velocity_cov)
@@ -107,4 +121,5 @@ def load_compiled_nav_numbers() -> None:
     for writable in (True, False):
         blocks = np.eye(3)[np.newaxis].repeat(4, axis=0)
         blocks.setflags(write=writable)
-        nav_numbers(attitude, np.zeros(3), *blocks)
+        body_numbers(attitude, np.zeros(3), blocks[1], blocks[3])
+        covariance_numbers(*blocks)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from buoy_nav import nav_numbers as layout
-from buoy_nav.nav_numbers import load_compiled_nav_numbers, nav_numbers
+from buoy_nav.nav_numbers import body_numbers, covariance_numbers, load_compiled_nav_numbers
 from buoy_nav.rotations import rotation_matrix_elements
 
 RNG = np.random.default_rng(52)
@@ -30,7 +30,8 @@ def random_case(writable: bool):
 
 
 def interpreted(quaternion, velocity, blocks):
-    """The same numbers as the interpreter forms them."""
+    """The same numbers as the interpreter forms them: those that turn with the attitude,
+    then those of the covariance blocks alone."""
     elements = rotation_matrix_elements(*quaternion.tolist())
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = elements
     rotation = np.array(elements).reshape(3, 3)
@@ -43,17 +44,25 @@ def interpreted(quaternion, velocity, blocks):
     pose[:3, :3], pose[3:, 3:] = position, attitude
     enu = np.zeros((6, 6))
     enu[:3, :3] = velocity_cov
-    return [
+    turning = [
         r00 * ve + r10 * vn + r20 * vu,
         r01 * ve + r11 * vn + r21 * vu,
         r02 * ve + r12 * vn + r22 * vu,
         *body.ravel().tolist(),
+    ]
+    alone = [
         *pose.ravel().tolist(),
         *enu.ravel().tolist(),
         *attitude.ravel().tolist(),
         *position.ravel().tolist(),
         *gyro_bias.ravel().tolist(),
     ]
+    return turning, alone
+
+
+def bits(values) -> list[int]:
+    """The values' bit patterns: equal only when equal to the bit, the sign of a zero too."""
+    return np.array(values, dtype=float).view(np.int64).tolist()
 
 
 @pytest.mark.parametrize("writable", [False, True])
@@ -61,17 +70,19 @@ def test_every_number_is_the_interpreters_to_the_bit(writable):
     load_compiled_nav_numbers()
     for _ in range(CASES):
         quaternion, velocity, blocks = random_case(writable)
-        ours = nav_numbers(quaternion, velocity, *blocks)
-        theirs = interpreted(quaternion, velocity, blocks)
-        assert len(ours) == layout.NAV_NUMBERS
-        # Bit for bit, the sign of a zero included.
-        assert np.array(ours).view(np.int64).tolist() == np.array(theirs).view(np.int64).tolist()
+        turning, alone = interpreted(quaternion, velocity, blocks)
+        ours = body_numbers(quaternion, velocity, blocks[1], blocks[3])
+        assert len(ours) == layout.BODY_NUMBERS
+        assert bits(ours) == bits(turning)
+        ours = covariance_numbers(*blocks)
+        assert len(ours) == layout.COVARIANCE_NUMBERS
+        assert bits(ours) == bits(alone)
 
 
 def test_a_rotation_keeps_the_velocitys_length_and_the_covariances_trace():
     for _ in range(200):
         quaternion, velocity, blocks = random_case(writable=False)
-        numbers = np.array(nav_numbers(quaternion, velocity, *blocks))
+        numbers = np.array(body_numbers(quaternion, velocity, blocks[1], blocks[3]))
         body_velocity = numbers[layout.VELOCITY_BODY : layout.VELOCITY_BODY + 3]
         np.testing.assert_allclose(np.linalg.norm(body_velocity), np.linalg.norm(velocity))
         twist = numbers[layout.BODY_TWIST_COVARIANCE : layout.BODY_TWIST_COVARIANCE + 36]
@@ -83,7 +94,8 @@ def test_a_rotation_keeps_the_velocitys_length_and_the_covariances_trace():
 
 def test_a_quaternion_of_the_identity_leaves_the_body_frame_the_enu_frame():
     _, velocity, blocks = random_case(writable=False)
-    numbers = np.array(nav_numbers(np.array([0.0, 0.0, 0.0, 1.0]), velocity, *blocks))
+    identity = np.array([0.0, 0.0, 0.0, 1.0])
+    numbers = np.array(body_numbers(identity, velocity, blocks[1], blocks[3]))
     np.testing.assert_array_equal(numbers[:3], velocity)
     twist = numbers[layout.BODY_TWIST_COVARIANCE : layout.BODY_TWIST_COVARIANCE + 36]
     np.testing.assert_array_equal(twist.reshape(6, 6)[:3, :3], blocks[1])
