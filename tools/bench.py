@@ -56,9 +56,11 @@ as constants and printed beside our figures:
     decoding every input message, its writer writing process_bag's output messages, and
     process_bag against their sum (tools/bench_io_floor.py; about ten minutes).
 19. fdchp_hour: a motion-pack hour to NetCDF, process_bag --netcdf on a simulated FDCHP hour
-    and on the OOI record repeated to an hour, against 1 000× real time, with start-up cold and
-    warm and a profile (tools/bench_fdchp_hour.py); then the filter's step of its rows, the
-    engine's against the same kernels composed into one compiled call (tools/bench_filter_row.py).
+    and on the OOI record repeated to an hour, with the bag and without (--no-bag), against
+    1 000× real time, with start-up cold and warm and a profile (tools/bench_fdchp_hour.py);
+    then the filter's step of its rows, the engine's against the same kernels composed into one
+    compiled call (tools/bench_filter_row.py), and a row's time by stage, without a profiler
+    (tools/bench_row_stages.py).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -859,12 +861,12 @@ def magnetometer_calibration_section(run: BenchRun) -> dict:
 
 
 def fdchp_hour_section(run: BenchRun) -> dict:
-    """A motion-pack hour to NetCDF against 1 000× real time, and the filter's step of its rows
-    interpreted and compiled (their own tools, which write out/bench/fdchp_hour.json and
-    out/bench/filter_row.json)."""
+    """A motion-pack hour to NetCDF against 1 000× real time, the filter's step of its rows
+    interpreted and compiled, and a row's time by stage (their own tools, which write
+    out/bench/fdchp_hour.json, out/bench/filter_row.json and out/bench/row_stages.json)."""
     if "fdchp_hour" not in run.sections:
         return {}
-    from tools import bench_fdchp_hour, bench_filter_row
+    from tools import bench_fdchp_hour, bench_filter_row, bench_row_stages
 
     result = bench_fdchp_hour.run_fdchp_hour(log=log)
     bench_fdchp_hour.print_fdchp_hour(result)
@@ -872,7 +874,10 @@ def fdchp_hour_section(run: BenchRun) -> dict:
     filter_row = bench_filter_row.run_filter_row(log=log)
     bench_filter_row.print_filter_row(filter_row)
     (OUT_DIR / "filter_row.json").write_text(json.dumps(filter_row, indent=2))
-    return {"fdchp_hour": result, "filter_row": filter_row}
+    row_stages = bench_row_stages.run_row_stages(log=log)
+    bench_row_stages.print_row_stages(row_stages)
+    (OUT_DIR / "row_stages.json").write_text(json.dumps(row_stages, indent=2))
+    return {"fdchp_hour": result, "filter_row": filter_row, "row_stages": row_stages}
 
 
 SECTION_STEPS = (
