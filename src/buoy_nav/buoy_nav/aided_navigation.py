@@ -14,7 +14,12 @@ from buoy_nav.alignment import AlignmentResult
 from buoy_nav.config import FusionConfig
 from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_dynamics import propagated_covariance, stepped_covariance
-from buoy_nav.error_state_filter import ErrorStateFilter, ImuErrorModel, block_diagonal
+from buoy_nav.error_state_filter import (
+    ErrorStateFilter,
+    ImuErrorModel,
+    StackedUpdate,
+    block_diagonal,
+)
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.state_layout import StateLayout
 
@@ -121,15 +126,20 @@ class AidedNavigation:
             (model,) = models
             correction = self.kalman.update(model.innovation, model.jacobian, model.covariance)
         else:
-            correction = self.kalman.update(
-                np.concatenate([m.innovation for m in models]),
-                np.vstack([m.jacobian for m in models]),
-                block_diagonal([m.covariance for m in models]),
-            )
+            correction = self.kalman.update(*_stacked(models))
         self.integrator.inject(correction)
         self.kalman.reset_after_injection(correction)
         self._recorder.corrected(correction)
         return correction
+
+    def gated_update(self, models: list[MeasurementModel], probabilities) -> StackedUpdate:
+        """Gate each of the ``models`` of one stamp (linearised at the nominal state now) at its
+        chi-square probability (``probabilities``, in order) and, when each passes, the stacked
+        update of :meth:`correct`, in one compiled call; nothing is changed (take the update
+        with :meth:`apply_correction`)."""
+        return self.kalman.gated_update(
+            *_stacked(models), [model.innovation.shape[0] for model in models], probabilities
+        )
 
     def apply_correction(self, correction, covariance, positive_definite: bool) -> None:
         """Inject a ``correction`` computed elsewhere (a source's compiled update, the same
@@ -170,3 +180,13 @@ class AidedNavigation:
             covariance[index, index] *= factor
         self._recorder.noise_added(t_s, self.kalman.covariance, covariance)
         self.kalman.covariance = covariance
+
+
+def _stacked(models: list[MeasurementModel]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The innovations, Jacobians and noises of ``models`` stacked: ν (m,), H (m × states) and
+    the block-diagonal R (m × m)."""
+    return (
+        np.concatenate([m.innovation for m in models]),
+        np.vstack([m.jacobian for m in models]),
+        block_diagonal([m.covariance for m in models]),
+    )

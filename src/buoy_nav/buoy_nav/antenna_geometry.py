@@ -18,8 +18,12 @@ def baseline_enu_m(rotation_nb, baseline_body_m) -> np.ndarray:
 
 def horizontal_fraction(rotation_nb, baseline_body_m) -> float:
     """Length of the baseline's horizontal projection divided by its length (0 = vertical)."""
-    baseline = baseline_enu_m(rotation_nb, baseline_body_m)
-    return math.hypot(baseline[0], baseline[1]) / float(np.linalg.norm(baseline))
+    return horizontal_fraction_enu(baseline_enu_m(rotation_nb, baseline_body_m))
+
+
+def horizontal_fraction_enu(baseline_enu) -> float:
+    """Length of an ENU baseline's (any unit) horizontal projection divided by its length."""
+    return math.hypot(baseline_enu[0], baseline_enu[1]) / float(np.linalg.norm(baseline_enu))
 
 
 def baseline_azimuth_rad(baseline_enu_m) -> tuple[float, float]:

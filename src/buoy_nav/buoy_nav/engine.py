@@ -77,6 +77,7 @@ from buoy_nav.aiding.base import (
     POSITION_REFERENCE,
     VELOCITY_REFERENCE,
     AidingSource,
+    MeasurementModel,
     as_floats,
 )
 from buoy_nav.aiding_gates import AidingGates
@@ -484,6 +485,8 @@ class FusionEngine:
         if len(group) == 1 and self._applied_compiled_update(t, *group[0], gyro):
             return
         point = nav.linearisation_point(gyro)
+        if self._applied_stacked_update(t, group, point):
+            return
         outcome = self._gates.gate(t, group, point, nav.kalman)
         if outcome.accepted:
             self._corrected(point.state, nav.correct(outcome.accepted))
@@ -510,6 +513,41 @@ class FusionEngine:
             self._corrected(linearisation_state, update.correction)
         self._source_transitions.extend(outcome.transitions)
         self._judge_integrity(t, outcome.rejected_kinds)
+        return True
+
+    def _applied_stacked_update(self, t: float, group: list, point) -> bool:
+        """Apply the (source, measurement) pairs of stamp ``t``, linearised at ``point``, as
+        :meth:`_handle_measurements` would, when every source's model is one compiled call: the
+        gates and the stacked update in one compiled call, booked as the gates book them. False,
+        with nothing changed, when a source has no compiled model or is suspended, a model is
+        not a measurement's, or one fails its gate (then they are gated and booked the
+        interpreted way)."""
+        models = []
+        for source, measurement in group:
+            if not source.has_compiled_model or self._gates.suspended(source.kind):
+                return False
+            model = source.model(measurement, point)
+            if not isinstance(model, MeasurementModel) or model.gate_covariance is not None:
+                return False
+            models.append(model)
+        nav = self._nav
+        update = nav.gated_update(models, [source.gate_probability for source, _ in group])
+        if not update.accepted:
+            return False
+        fused = []
+        transitions = []
+        for (source, _), model, gate in zip(group, models, update.gates, strict=True):
+            passed, outcome = self._gates.passed(source, t, model.innovation, gate)
+            transitions.extend(outcome.transitions)
+            if passed:
+                fused.append(model)
+        if len(fused) == len(models):
+            nav.apply_correction(update.correction, update.covariance, update.positive_definite)
+            self._corrected(point.state, update.correction)
+        elif fused:  # a source suspended by this very outcome: the others alone
+            self._corrected(point.state, nav.correct(fused))
+        self._source_transitions.extend(transitions)
+        self._judge_integrity(t, {})
         return True
 
     def _corrected(self, linearisation_state, correction) -> None:

@@ -112,14 +112,20 @@ def innovation_test(covariance, innovation, jacobian, measurement_covariance):
     (m × n), ``measurement_covariance`` R (m × m), in the units of the error state and the
     measurement."""
     s = _innovation_covariance(_product(jacobian, covariance), jacobian, measurement_covariance)
-    factor, positive = _cholesky_lower(s)
+    return _normalised_squared(innovation, s), s
+
+
+@numba.njit(cache=True)
+def _normalised_squared(innovation, innovation_covariance):
+    """νᵀ S⁻¹ ν; NaN when S is not positive definite."""
+    factor, positive = _cholesky_lower(innovation_covariance)
     if not positive:
-        return math.nan, s
+        return math.nan
     solved = _solve_with_cholesky(factor, innovation.reshape(-1, 1).copy())
     nis = 0.0
     for i in range(innovation.shape[0]):
         nis += innovation[i] * solved[i, 0]
-    return nis, s
+    return nis
 
 
 @numba.njit(cache=True)
@@ -128,9 +134,22 @@ def joseph_update(covariance, innovation, jacobian, measurement_covariance):
     the error estimate K ν of the stacked measurement (ν, H, R as :func:`innovation_test`), and
     whether S was positive definite (else the covariance is returned unchanged and the estimate
     is zero)."""
-    size = covariance.shape[0]
     hp = _product(jacobian, covariance)
-    factor, positive = _cholesky_lower(_innovation_covariance(hp, jacobian, measurement_covariance))
+    return _joseph_posterior(
+        covariance,
+        innovation,
+        jacobian,
+        measurement_covariance,
+        hp,
+        _innovation_covariance(hp, jacobian, measurement_covariance),
+    )
+
+
+@numba.njit(cache=True)
+def _joseph_posterior(covariance, innovation, jacobian, measurement_covariance, hp, s):
+    """:func:`joseph_update` from H P (``hp``) and S (``s``) already formed."""
+    size = covariance.shape[0]
+    factor, positive = _cholesky_lower(s)
     if not positive:
         return covariance, np.zeros(size), False
     gain_t = _solve_with_cholesky(factor, hp)
@@ -179,3 +198,46 @@ def attitude_reset(covariance, correction, attitude_start):
 def is_positive_definite(matrix):
     """Whether the symmetric ``matrix`` is positive definite."""
     return _cholesky_lower(matrix)[1]
+
+
+@numba.njit(cache=True)
+def gated_stacked_update(
+    covariance,
+    innovation,
+    jacobian,
+    measurement_covariance,
+    block_ends,
+    gate_thresholds,
+    attitude_start,
+):
+    """The innovation test of each measurement of a stack (:func:`innovation_test` of its rows,
+    up to ``block_ends[k]``, with its diagonal block of R) and, when each passes its
+    ``gate_thresholds[k]``, the stacked :func:`joseph_update` and the :func:`attitude_reset`
+    after the injection: the NIS of each, the stack's S (each one's S on its diagonal),
+    whether every one passed and S of the stack was positive definite, and then the covariance
+    after the update and the reset, the error estimate and whether that covariance is positive
+    definite (else ``covariance``, zeros and True). The same arithmetic as gating each
+    measurement alone and updating with the stack."""
+    count = block_ends.shape[0]
+    # Each block's rows of H P and its diagonal block of the stack's S are, element by element,
+    # those of the block alone: the stack forms them once.
+    hp = _product(jacobian, covariance)
+    s = _innovation_covariance(hp, jacobian, measurement_covariance)
+    nis = np.empty(count)
+    passed = True
+    start = 0
+    for k in range(count):
+        end = block_ends[k]
+        nis[k] = _normalised_squared(innovation[start:end].copy(), s[start:end, start:end].copy())
+        passed = passed and nis[k] <= gate_thresholds[k]
+        start = end
+    unchanged = np.zeros(covariance.shape[0])
+    if not passed:
+        return nis, s, False, covariance, unchanged, True
+    posterior, correction, positive = _joseph_posterior(
+        covariance, innovation, jacobian, measurement_covariance, hp, s
+    )
+    if not positive:
+        return nis, s, False, covariance, unchanged, True
+    reset, positive_definite = attitude_reset(posterior, correction, attitude_start)
+    return nis, s, True, reset, correction, positive_definite

@@ -353,6 +353,7 @@ def _run_compiled_kernels() -> None:
     for model_jacobian in (jacobian, read_only):  # models may hand over read-only Jacobians
         kalman.gate(np.zeros(3), model_jacobian, np.eye(3))
     kalman.reset_after_injection(kalman.update(np.zeros(3), jacobian, np.eye(3)))
+    kalman.gated_update(np.zeros(3), jacobian, np.eye(3), [3], [0.99])
 
 
 def interpolate_sample(

@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, Protocol
 import numpy as np
 
 from buoy_common.contract import SENSOR_MSGTYPES, Reason, header_seconds
+from buoy_nav.aiding import model_kernels
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import NavState
 from buoy_nav.rotations import (
@@ -243,6 +244,11 @@ class AidingSource(abc.ABC):
     same arithmetic as :meth:`model` and the filter's gate and update (the engine then uses it
     for a stamp of that one measurement, and books a measurement it rejects the interpreted
     way)."""
+    has_compiled_model: ClassVar[bool] = False
+    """Whether :meth:`model` is one compiled call (:mod:`buoy_nav.aiding.model_kernels`) that
+    keeps nothing between measurements and whose gate takes R: the engine then gates a stamp's
+    measurements of such sources and applies them in one compiled call, and gates and books
+    them the interpreted way when one of them fails its gate."""
 
     def __init__(self, config: FusionConfig, states: StateLayout):
         self.config = config
@@ -426,9 +432,9 @@ def samples_per_correlation_time(interval_s: float, correlation_time_s: float) -
 
 
 def floored_covariance(covariance, variance_floor: float) -> np.ndarray:
-    """Symmetrised covariance whose diagonal is raised to at least ``variance_floor``."""
-    matrix = np.array(covariance, dtype=float, ndmin=2)
-    matrix = 0.5 * (matrix + matrix.T)
-    diagonal = matrix.reshape(-1)[:: matrix.shape[0] + 1]
-    np.maximum(diagonal, variance_floor, out=diagonal)
-    return matrix
+    """Symmetrised covariance (a square matrix, or a variance) whose diagonal is raised to at
+    least ``variance_floor``: :func:`buoy_nav.aiding.model_kernels.floored_covariance`, which the
+    sources' compiled measurement functions call."""
+    return model_kernels.floored_covariance_called_alone(
+        np.array(covariance, dtype=float, ndmin=2), float(variance_floor)
+    )

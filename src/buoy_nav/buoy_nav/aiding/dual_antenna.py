@@ -13,9 +13,17 @@ from __future__ import annotations
 
 import abc
 
+import numba
 import numpy as np
 
-from buoy_nav.aiding.base import AidingSource, LinearisationPoint, StateReset, yaw_reset
+from buoy_nav.aiding.base import (
+    AidingSource,
+    LinearisationPoint,
+    MeasurementModel,
+    StateReset,
+    yaw_reset,
+)
+from buoy_nav.aiding.model_kernels import place_block, skew
 
 
 class DualAntennaSource(AidingSource):
@@ -29,6 +37,27 @@ class DualAntennaSource(AidingSource):
         super().__init__(config, states)
         self._baseline_body_m = np.array(config.baseline_body_m)
         self._heading_variance_floor_rad2 = config.gnss_heading_variance_floor_rad2
+
+    def baseline_vector_model(
+        self, measured_enu_m, point: LinearisationPoint, covariance_m2
+    ) -> MeasurementModel:
+        """The model of a measured antenna vector ``measured_enu_m`` (ENU, m; noise
+        ``covariance_m2``, m²), ``b = R_nb · baseline`` with ∂b/∂φ = −[b×], at ``point``."""
+        states = self.states
+        predicted, innovation, jacobian = baseline_vector_model(
+            measured_enu_m,
+            point.rotation_nb,
+            self._baseline_body_m,
+            states.attitude.start,
+            states.dim,
+        )
+        return MeasurementModel(predicted, innovation, jacobian, covariance_m2)
+
+    def load_compiled_code(self) -> None:
+        states = self.states
+        baseline_vector_model(
+            np.zeros(3), np.eye(3), self._baseline_body_m, states.attitude.start, states.dim
+        )
 
     @abc.abstractmethod
     def baseline_azimuth(self, measurement) -> tuple[float, float] | None:
@@ -49,3 +78,16 @@ class DualAntennaSource(AidingSource):
         if measured is None:
             return None
         return aligner.add_heading(t_s, *measured, raw_gyro_rad_s)
+
+
+@numba.njit(cache=True)
+def baseline_vector_model(
+    measured_enu_m, rotation_nb, baseline_body_m, attitude_start, state_count
+):
+    """The measurement function of an antenna vector ``measured_enu_m`` (ENU, m) whose body
+    vector is ``baseline_body_m`` (m) at the nominal R_nb: the predicted vector, the innovation
+    and the Jacobian over ``state_count`` error states (the attitude's from its start)."""
+    predicted = np.dot(rotation_nb, baseline_body_m)
+    jacobian = np.zeros((3, state_count))
+    place_block(jacobian, attitude_start, -skew(predicted))
+    return predicted, measured_enu_m - predicted, jacobian

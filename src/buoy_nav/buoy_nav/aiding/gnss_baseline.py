@@ -36,7 +36,6 @@ from buoy_nav.aiding.base import (
 )
 from buoy_nav.aiding.dual_antenna import DualAntennaSource
 from buoy_nav.antenna_geometry import MIN_HORIZONTAL_BASELINE_FRACTION, baseline_azimuth_rad
-from buoy_nav.rotations import skew
 
 # A measured baseline whose length differs from the configured antenna separation by more than
 # this fraction is a wrong configuration or a wrong fix, not a measurement.
@@ -58,6 +57,7 @@ class GnssBaselineSource(DualAntennaSource):
     aids = HEADING
     sensor = GNSS_ANTENNA_PAIR
     roles = frozenset((HEADING_REFERENCE,))
+    has_compiled_model = True
 
     def __init__(self, config, states):
         super().__init__(config, states)
@@ -94,16 +94,7 @@ class GnssBaselineSource(DualAntennaSource):
         return GnssBaseline(baseline)
 
     def model(self, measurement: GnssBaseline, point: LinearisationPoint) -> MeasurementModel:
-        predicted = point.rotation_nb @ self._baseline_body_m
-        states = self.states
-        jacobian = np.zeros((3, states.dim))
-        jacobian[:, states.attitude] = -skew(predicted)
-        return MeasurementModel(
-            predicted=predicted,
-            innovation=measurement.baseline_enu_m - predicted,
-            jacobian=jacobian,
-            covariance=self._covariance_m2,
-        )
+        return self.baseline_vector_model(measurement.baseline_enu_m, point, self._covariance_m2)
 
     def baseline_azimuth(self, measurement: GnssBaseline) -> tuple[float, float] | None:
         """The azimuth of the measured vector, its variance the horizontal error over the

@@ -46,7 +46,6 @@ from buoy_nav.aiding.base import (
 )
 from buoy_nav.aiding.dual_antenna import DualAntennaSource
 from buoy_nav.antenna_geometry import MIN_HORIZONTAL_BASELINE_FRACTION, baseline_azimuth_rad
-from buoy_nav.rotations import skew
 
 
 class GnssBaselineTertiary(NamedTuple):
@@ -67,6 +66,7 @@ class GnssBaselineTertiarySource(DualAntennaSource):
     # antenna) are stopped by the length check before the gate, so persistent gate rejections
     # of a valid vector mean the filter's attitude is wrong.
     witnesses_integrity = True
+    has_compiled_model = True
 
     def __init__(self, config, states):
         super().__init__(config, states)
@@ -122,17 +122,10 @@ class GnssBaselineTertiarySource(DualAntennaSource):
             return Reason.OUT_OF_RANGE
         return GnssBaselineTertiary(baseline)
 
-    def model(self, measurement: GnssBaselineTertiary, point: LinearisationPoint):
-        predicted = point.rotation_nb @ self._baseline_body_m
-        states = self.states
-        jacobian = np.zeros((3, states.dim))
-        jacobian[:, states.attitude] = -skew(predicted)
-        return MeasurementModel(
-            predicted=predicted,
-            innovation=measurement.baseline_enu_m - predicted,
-            jacobian=jacobian,
-            covariance=self._covariance_m2,
-        )
+    def model(
+        self, measurement: GnssBaselineTertiary, point: LinearisationPoint
+    ) -> MeasurementModel:
+        return self.baseline_vector_model(measurement.baseline_enu_m, point, self._covariance_m2)
 
     def baseline_azimuth(self, measurement: GnssBaselineTertiary) -> tuple[float, float] | None:
         """The azimuth of the measured vector and its variance; None when too steep."""

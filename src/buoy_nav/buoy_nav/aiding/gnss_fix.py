@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from buoy_common.contract import GNSS_FIX_TOPIC, Reason, header_seconds
@@ -30,11 +31,15 @@ from buoy_nav.aiding.base import (
     StateReset,
     as_float_array,
     as_floats,
-    floored_covariance,
     has_non_positive_variance,
 )
+from buoy_nav.aiding.model_kernels import (
+    floored_covariance,
+    place_block,
+    place_identity,
+    skew,
+)
 from buoy_nav.error_state_filter import NavState
-from buoy_nav.rotations import skew
 
 # sensor_msgs/NavSatStatus: a status below this is no fix.
 STATUS_FIX = 0
@@ -60,6 +65,29 @@ class GnssFix(NamedTuple):
         return math.radians(self.longitude_deg)
 
 
+@numba.njit(cache=True)
+def antenna_position_model(
+    measured_enu_m,
+    measured_covariance_enu_m2,
+    variance_floor_m2,
+    rotation_nb,
+    lever_arm_body_m,
+    attitude_start,
+    position_start,
+    state_count,
+):
+    """The measurement function of the antenna's position ``measured_enu_m`` (ENU m at the
+    nominal position; its covariance m², floored at ``variance_floor_m2``) at the nominal R_nb:
+    the predicted position R_nb l, the innovation, the Jacobian over ``state_count`` error
+    states (the blocks from their starts) and R."""
+    lever_enu = np.dot(rotation_nb, lever_arm_body_m)
+    jacobian = np.zeros((3, state_count))
+    place_block(jacobian, attitude_start, -skew(lever_enu))
+    place_identity(jacobian, position_start)
+    covariance = floored_covariance(measured_covariance_enu_m2, variance_floor_m2)
+    return lever_enu, measured_enu_m - lever_enu, jacobian, covariance
+
+
 class GnssFixSource(AidingSource):
     """Position of the primary antenna (see the module docstring)."""
 
@@ -69,6 +97,7 @@ class GnssFixSource(AidingSource):
     aids = FIX
     sensor = GNSS_RECEIVER
     roles = frozenset((POSITION_REFERENCE,))
+    has_compiled_model = True
 
     def __init__(self, config, states):
         super().__init__(config, states)
@@ -134,16 +163,30 @@ class GnssFixSource(AidingSource):
                 measurement.altitude_m,
             )
         )
-        lever_enu = point.rotation_nb @ self._lever_arm_body_m
         states = self.states
-        jacobian = np.zeros((3, states.dim))
-        jacobian[:, states.attitude] = -skew(lever_enu)
-        jacobian[:, states.position] = np.eye(3)
-        return MeasurementModel(
-            predicted=lever_enu,
-            innovation=measured - lever_enu,
-            jacobian=jacobian,
-            covariance=floored_covariance(measurement.covariance_enu_m2, self._variance_floor_m2),
+        predicted, innovation, jacobian, covariance = antenna_position_model(
+            measured,
+            measurement.covariance_enu_m2,
+            self._variance_floor_m2,
+            point.rotation_nb,
+            self._lever_arm_body_m,
+            states.attitude.start,
+            states.position.start,
+            states.dim,
+        )
+        return MeasurementModel(predicted, innovation, jacobian, covariance)
+
+    def load_compiled_code(self) -> None:
+        states = self.states
+        antenna_position_model(
+            np.zeros(3),
+            np.eye(3),
+            self._variance_floor_m2,
+            np.eye(3),
+            self._lever_arm_body_m,
+            states.attitude.start,
+            states.position.start,
+            states.dim,
         )
 
     def reset(self, measurement: GnssFix, point: LinearisationPoint, model) -> StateReset:

@@ -40,11 +40,8 @@ from buoy_nav.aiding.base import (
 )
 from buoy_nav.aiding.dual_antenna import DualAntennaSource
 from buoy_nav.aiding.gnss_baseline import GnssBaselineSource
-from buoy_nav.antenna_geometry import (
-    MIN_HORIZONTAL_BASELINE_FRACTION,
-    baseline_enu_m,
-    horizontal_fraction,
-)
+from buoy_nav.aiding.model_kernels import azimuth_model
+from buoy_nav.antenna_geometry import MIN_HORIZONTAL_BASELINE_FRACTION, horizontal_fraction_enu
 from buoy_nav.rotations import wrap_angle
 
 # Quaternions shorter than this carry no heading.
@@ -75,6 +72,7 @@ class GnssHeadingSource(DualAntennaSource):
     sensor = GNSS_ANTENNA_PAIR
     roles = frozenset((HEADING_REFERENCE,))
     superseded_by = GnssBaselineSource.kind
+    has_compiled_model = True
 
     record_fields = ORIENTATION_RECORD_FIELDS
 
@@ -104,20 +102,12 @@ class GnssHeadingSource(DualAntennaSource):
     def model(self, measurement: GnssHeading, point: LinearisationPoint) -> MeasurementModel | None:
         """The azimuth of the projected baseline (innovation wrapped to (−π, π]); None for a
         baseline too steep to have one."""
-        rotation = point.rotation_nb
-        baseline = self._baseline_body_m
-        if horizontal_fraction(rotation, baseline) < MIN_HORIZONTAL_BASELINE_FRACTION:
-            return None
-        b_east, b_north, b_up = baseline_enu_m(rotation, baseline)
-        horizontal_sq = b_east * b_east + b_north * b_north
-        predicted = math.atan2(b_north, b_east)
         states = self.states
-        jacobian = np.zeros((1, states.dim))
-        jacobian[0, states.attitude] = (
-            -b_east * b_up / horizontal_sq,
-            -b_north * b_up / horizontal_sq,
-            1.0,
+        baseline_enu, _, predicted, jacobian = azimuth_model(
+            point.rotation_nb, self._baseline_body_m, states.attitude.start, states.dim
         )
+        if horizontal_fraction_enu(baseline_enu) < MIN_HORIZONTAL_BASELINE_FRACTION:
+            return None
         return MeasurementModel(
             predicted=np.array((predicted,)),
             innovation=np.array((wrap_angle(measurement.yaw_rad - predicted),)),
@@ -126,6 +116,10 @@ class GnssHeadingSource(DualAntennaSource):
                 measurement.variance_rad2, self._heading_variance_floor_rad2
             ),
         )
+
+    def load_compiled_code(self) -> None:
+        states = self.states
+        azimuth_model(np.eye(3), self._baseline_body_m, states.attitude.start, states.dim)
 
     def baseline_azimuth(self, measurement: GnssHeading) -> tuple[float, float]:
         return measurement.yaw_rad, max(

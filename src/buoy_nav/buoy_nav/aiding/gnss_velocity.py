@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from buoy_common.contract import GNSS_VELOCITY_TOPIC, Reason, header_seconds
@@ -37,12 +38,17 @@ from buoy_nav.aiding.base import (
     MeasurementModel,
     StateReset,
     as_float_array,
-    floored_covariance,
     has_non_positive_variance,
     vector_of,
 )
+from buoy_nav.aiding.model_kernels import (
+    cross,
+    floored_covariance,
+    place_block,
+    place_identity,
+    skew,
+)
 from buoy_nav.error_state_filter import NavState
-from buoy_nav.rotations import cross, skew
 
 # Beyond this speed over ground (m/s) a value is a malformed message, not a buoy's velocity.
 MAX_SPEED_MPS = 100.0
@@ -64,13 +70,60 @@ def predicted_antenna_velocity_enu_mps(
     lever_arm_body_m,
 ) -> np.ndarray:
     """Velocity over ground of a point at ``lever_arm_body_m`` of ``base_link`` (ENU, m/s)."""
-    rotation = np.asarray(rotation_nb, dtype=float)
-    lever_arm = np.asarray(lever_arm_body_m, dtype=float)
-    return (
-        np.asarray(velocity_enu_mps, dtype=float)
-        + rotation @ cross(angular_rate_ib_body_rad_s, lever_arm)
-        - cross(nav_frame_rate_enu_rad_s, rotation @ lever_arm)
+    return _antenna_velocity(
+        np.asarray(velocity_enu_mps, dtype=float),
+        np.asarray(rotation_nb, dtype=float),
+        np.asarray(angular_rate_ib_body_rad_s, dtype=float),
+        np.asarray(nav_frame_rate_enu_rad_s, dtype=float),
+        np.asarray(lever_arm_body_m, dtype=float),
+    )[0]
+
+
+@numba.njit(cache=True)
+def _antenna_velocity(
+    velocity_enu_mps, rotation_nb, rate_body_rad_s, frame_rate_enu_rad_s, lever_arm_body_m
+):
+    """v + R_nb (ω_ib × l) − ω_in × (R_nb l) (ENU, m/s), with R_nb l (ENU, m) and
+    R_nb (ω_ib × l) (ENU, m/s), which the Jacobian takes."""
+    lever_enu = np.dot(rotation_nb, lever_arm_body_m)
+    rotation_velocity = np.dot(rotation_nb, cross(rate_body_rad_s, lever_arm_body_m))
+    velocity = velocity_enu_mps + rotation_velocity - cross(frame_rate_enu_rad_s, lever_enu)
+    return velocity, lever_enu, rotation_velocity
+
+
+@numba.njit(cache=True)
+def antenna_velocity_model(
+    measured_enu_mps,
+    measured_covariance_m2s2,
+    variance_floor_m2s2,
+    velocity_enu_mps,
+    rotation_nb,
+    rate_body_rad_s,
+    frame_rate_enu_rad_s,
+    lever_arm_body_m,
+    attitude_start,
+    velocity_start,
+    gyro_bias_start,
+    state_count,
+):
+    """The measurement function of the antenna's velocity ``measured_enu_mps`` (ENU, m/s; its
+    covariance m²/s², floored at ``variance_floor_m2s2``) at the nominal velocity (ENU, m/s),
+    R_nb, bias-corrected body rate ω_ib (rad/s) and ENU rate ω_in (rad/s): the predicted
+    velocity, the innovation, the Jacobian over ``state_count`` error states (the blocks from
+    their starts) and R."""
+    predicted, lever_enu, rotation_velocity = _antenna_velocity(
+        velocity_enu_mps, rotation_nb, rate_body_rad_s, frame_rate_enu_rad_s, lever_arm_body_m
     )
+    jacobian = np.zeros((3, state_count))
+    place_block(
+        jacobian,
+        attitude_start,
+        -skew(rotation_velocity) + np.dot(skew(frame_rate_enu_rad_s), skew(lever_enu)),
+    )
+    place_identity(jacobian, velocity_start)
+    place_block(jacobian, gyro_bias_start, np.dot(rotation_nb, skew(lever_arm_body_m)))
+    covariance = floored_covariance(measured_covariance_m2s2, variance_floor_m2s2)
+    return predicted, measured_enu_mps - predicted, jacobian, covariance
 
 
 class GnssVelocitySource(AidingSource):
@@ -82,6 +135,7 @@ class GnssVelocitySource(AidingSource):
     aids = VELOCITY
     sensor = GNSS_RECEIVER
     roles = frozenset((VELOCITY_REFERENCE,))
+    has_compiled_model = True
 
     def __init__(self, config, states):
         super().__init__(config, states)
@@ -120,23 +174,38 @@ class GnssVelocitySource(AidingSource):
 
     def model(self, measurement: GnssVelocity, point: LinearisationPoint) -> MeasurementModel:
         state = point.state
-        rotation = point.rotation_nb
-        lever_arm = self._lever_arm_body_m
-        rate = np.asarray(point.raw_gyro_rad_s, dtype=float) - state.gyro_bias_rad_s
-        frame_rate = np.asarray(point.nav_frame_rate_enu_rad_s, dtype=float)
-        lever_enu = rotation @ lever_arm
-        rotation_velocity = rotation @ cross(rate, lever_arm)
-        predicted = state.velocity_enu_mps + rotation_velocity - cross(frame_rate, lever_enu)
         states = self.states
-        jacobian = np.zeros((3, states.dim))
-        jacobian[:, states.attitude] = -skew(rotation_velocity) + skew(frame_rate) @ skew(lever_enu)
-        jacobian[:, states.velocity] = np.eye(3)
-        jacobian[:, states.gyro_bias] = rotation @ skew(lever_arm)
-        return MeasurementModel(
-            predicted=predicted,
-            innovation=measurement.velocity_enu_mps - predicted,
-            jacobian=jacobian,
-            covariance=floored_covariance(measurement.covariance_m2s2, self._variance_floor_m2s2),
+        predicted, innovation, jacobian, covariance = antenna_velocity_model(
+            measurement.velocity_enu_mps,
+            measurement.covariance_m2s2,
+            self._variance_floor_m2s2,
+            state.velocity_enu_mps,
+            point.rotation_nb,
+            np.asarray(point.raw_gyro_rad_s, dtype=float) - state.gyro_bias_rad_s,
+            np.asarray(point.nav_frame_rate_enu_rad_s, dtype=float),
+            self._lever_arm_body_m,
+            states.attitude.start,
+            states.velocity.start,
+            states.gyro_bias.start,
+            states.dim,
+        )
+        return MeasurementModel(predicted, innovation, jacobian, covariance)
+
+    def load_compiled_code(self) -> None:
+        states = self.states
+        antenna_velocity_model(
+            np.zeros(3),
+            np.eye(3),
+            self._variance_floor_m2s2,
+            np.zeros(3),
+            np.eye(3),
+            np.zeros(3),
+            np.zeros(3),
+            self._lever_arm_body_m,
+            states.attitude.start,
+            states.velocity.start,
+            states.gyro_bias.start,
+            states.dim,
         )
 
     def reset(self, measurement: GnssVelocity, point: LinearisationPoint, model) -> StateReset:

@@ -75,6 +75,7 @@ from buoy_nav.aiding.base import (
     vector_of,
     yaw_reset,
 )
+from buoy_nav.aiding.model_kernels import azimuth_model
 from buoy_nav.geomagnetism import (
     declination_rad,
     wmm_field_range_along_parallel,
@@ -222,13 +223,6 @@ class MagnetometerSource(AidingSource):
             return Reason.MAGNETIC_FIELD_INCONSISTENT
         return None
 
-    def _field_geometry(self, rotation_nb, field_body_t):
-        field = np.asarray(rotation_nb) @ field_body_t
-        horizontal_sq = field[0] * field[0] + field[1] * field[1]
-        if horizontal_sq < (MIN_HORIZONTAL_FIELD_FRACTION**2) * float(field @ field):
-            return None
-        return field, horizontal_sq
-
     def _variance(
         self, measurement: MagneticField, horizontal_sq: float, weighted: bool = False
     ) -> float:
@@ -245,28 +239,19 @@ class MagnetometerSource(AidingSource):
 
     def model(self, measurement: MagneticField, point: LinearisationPoint):
         state = point.state
+        states = self.states
+        field, horizontal_sq, predicted, jacobian = azimuth_model(
+            point.rotation_nb, measurement.field_body_t, states.attitude.start, states.dim
+        )
         refusal = self.field_refusal(
-            np.asarray(point.rotation_nb) @ measurement.field_body_t,
-            state.latitude_rad,
-            state.longitude_rad,
-            measurement.t_s,
+            field, state.latitude_rad, state.longitude_rad, measurement.t_s
         )
         if refusal is not None:
             return refusal
-        geometry = self._field_geometry(point.rotation_nb, measurement.field_body_t)
-        if geometry is None:
+        if horizontal_sq < (MIN_HORIZONTAL_FIELD_FRACTION**2) * float(field @ field):
             return None
-        (east, north, up), horizontal_sq = geometry
         target = self.magnetic_north_azimuth_rad(
             state.latitude_rad, state.longitude_rad, measurement.t_s
-        )
-        predicted = math.atan2(north, east)
-        states = self.states
-        jacobian = np.zeros((1, states.dim))
-        jacobian[0, states.attitude] = (
-            -east * up / horizontal_sq,
-            -north * up / horizontal_sq,
-            1.0,
         )
         return MeasurementModel(
             predicted=np.array((predicted,)),
@@ -275,6 +260,10 @@ class MagnetometerSource(AidingSource):
             covariance=np.array([[self._variance(measurement, horizontal_sq, weighted=True)]]),
             gate_covariance=np.array([[self._variance(measurement, horizontal_sq)]]),
         )
+
+    def load_compiled_code(self) -> None:
+        states = self.states
+        azimuth_model(np.eye(3), np.ones(3), states.attitude.start, states.dim)
 
     def reset(self, measurement: MagneticField, point: LinearisationPoint, model):
         """The yaw that puts the field's horizontal part on magnetic north, tilt kept."""

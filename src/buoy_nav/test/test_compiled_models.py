@@ -1,0 +1,318 @@
+"""The GNSS sources' compiled measurement functions give to the bit what numpy makes of the same
+algebra (numba's ``np.dot`` calls numpy's BLAS), so that compiling them changes no output; and
+the filter's stacked gate and update in one compiled call is, to the bit, each measurement's
+gate followed by the stacked update and the reset. (Their physics, the Jacobians against
+finite differences and the rigid-body velocity, is held by ``test_aiding.py``.)"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from buoy_nav import earth
+from buoy_nav.aiding import (
+    GnssBaseline,
+    GnssBaselineSource,
+    GnssBaselineTertiary,
+    GnssBaselineTertiarySource,
+    GnssFix,
+    GnssFixSource,
+    GnssHeading,
+    GnssHeadingSource,
+    GnssVelocity,
+    GnssVelocitySource,
+)
+from buoy_nav.aiding.base import LinearisationPoint
+from buoy_nav.aiding.model_kernels import azimuth_model
+from buoy_nav.antenna_geometry import horizontal_fraction
+from buoy_nav.config import FusionConfig
+from buoy_nav.error_state_filter import ERROR_STATES, ErrorStateFilter, NavState
+from buoy_nav.rotations import cross, skew, wrap_angle
+
+STATES = ERROR_STATES
+CASES = 500
+CONFIG = FusionConfig(
+    primary_antenna_body_m=(0.31, -0.42, 1.17),
+    secondary_antenna_body_m=(-0.93, 0.57, 1.46),
+    tertiary_antenna_body_m=(0.8, 1.1, 1.3),
+)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(61)
+
+
+def random_point(rng) -> LinearisationPoint:
+    """A nominal state anywhere, tilted and turning as a buoy in a sea does."""
+    state = NavState(
+        attitude_xyzw=tuple(Rotation.random(random_state=rng).as_quat()),
+        velocity_enu_mps=rng.normal(0.0, 1.5, 3),
+        latitude_rad=math.radians(rng.uniform(-70.0, 70.0)),
+        longitude_rad=math.radians(rng.uniform(-180.0, 180.0)),
+        altitude_m=rng.uniform(-5.0, 20.0),
+        gyro_bias_rad_s=rng.normal(0.0, 0.01, 3),
+        accel_bias_mps2=rng.normal(0.0, 0.05, 3),
+    )
+    frame_rate = earth.navigation_frame_rate_enu_rad_s(
+        state.latitude_rad, state.altitude_m, state.velocity_enu_mps
+    )
+    raw_gyro = tuple(rng.normal(0.0, 0.4, 3))
+    return LinearisationPoint(state, state.rotation_nb, raw_gyro, tuple(frame_rate))
+
+
+def random_covariance(rng, scale: float) -> np.ndarray:
+    root = rng.normal(0.0, math.sqrt(scale), (3, 3))
+    return root @ root.T + np.eye(3) * scale * rng.choice([1e-6, 1.0])
+
+
+def numpy_floored(covariance, floor):
+    symmetric = 0.5 * (covariance + covariance.T)
+    np.fill_diagonal(symmetric, np.maximum(np.diag(symmetric), floor))
+    return symmetric
+
+
+def assert_same_bits(model, predicted, innovation, jacobian, covariance):
+    for name, value, expected in (
+        ("predicted", model.predicted, predicted),
+        ("innovation", model.innovation, innovation),
+        ("jacobian", model.jacobian, jacobian),
+        ("covariance", model.covariance, covariance),
+    ):
+        assert np.asarray(value).tobytes() == np.asarray(expected).tobytes(), name
+
+
+def test_antenna_velocity_model_is_the_numpy_algebra_to_the_bit(rng):
+    source = GnssVelocitySource(CONFIG, STATES)
+    lever_arm = np.array(CONFIG.primary_antenna_body_m)
+    floor = CONFIG.gnss_velocity_variance_floor_m2s2
+    for _ in range(CASES):
+        point = random_point(rng)
+        measurement = source.validated(
+            GnssVelocity(rng.normal(0.0, 2.0, 3), random_covariance(rng, 1e-3))
+        )
+        state, rotation = point.state, point.rotation_nb
+        rate = np.asarray(point.raw_gyro_rad_s) - state.gyro_bias_rad_s
+        frame_rate = np.asarray(point.nav_frame_rate_enu_rad_s)
+        lever_enu = rotation @ lever_arm
+        rotation_velocity = rotation @ cross(rate, lever_arm)
+        predicted = state.velocity_enu_mps + rotation_velocity - cross(frame_rate, lever_enu)
+        jacobian = np.zeros((3, STATES.dim))
+        jacobian[:, STATES.attitude] = -skew(rotation_velocity) + skew(frame_rate) @ skew(lever_enu)
+        jacobian[:, STATES.velocity] = np.eye(3)
+        jacobian[:, STATES.gyro_bias] = rotation @ skew(lever_arm)
+        assert_same_bits(
+            source.model(measurement, point),
+            predicted,
+            measurement.velocity_enu_mps - predicted,
+            jacobian,
+            numpy_floored(measurement.covariance_m2s2, floor),
+        )
+
+
+def test_antenna_position_model_is_the_numpy_algebra_to_the_bit(rng):
+    source = GnssFixSource(CONFIG, STATES)
+    lever_arm = np.array(CONFIG.primary_antenna_body_m)
+    floor = CONFIG.gnss_position_variance_floor_m2
+    for _ in range(CASES):
+        point = random_point(rng)
+        state = point.state
+        measurement = source.validated(
+            GnssFix(
+                math.degrees(state.latitude_rad) + rng.normal(0.0, 1e-5),
+                math.degrees(state.longitude_rad) + rng.normal(0.0, 1e-5),
+                state.altitude_m + rng.normal(0.0, 2.0),
+                random_covariance(rng, 1e-2),
+            )
+        )
+        measured = np.array(
+            earth.enu_offset_scalar(
+                state.latitude_rad,
+                state.longitude_rad,
+                state.altitude_m,
+                measurement.latitude_rad,
+                measurement.longitude_rad,
+                measurement.altitude_m,
+            )
+        )
+        lever_enu = point.rotation_nb @ lever_arm
+        jacobian = np.zeros((3, STATES.dim))
+        jacobian[:, STATES.attitude] = -skew(lever_enu)
+        jacobian[:, STATES.position] = np.eye(3)
+        assert_same_bits(
+            source.model(measurement, point),
+            lever_enu,
+            measured - lever_enu,
+            jacobian,
+            numpy_floored(measurement.covariance_enu_m2, floor),
+        )
+
+
+@pytest.mark.parametrize(
+    ("source_class", "measurement_class", "body_vector"),
+    [
+        (
+            GnssBaselineSource,
+            GnssBaseline,
+            np.subtract(CONFIG.secondary_antenna_body_m, CONFIG.primary_antenna_body_m),
+        ),
+        (
+            GnssBaselineTertiarySource,
+            GnssBaselineTertiary,
+            np.subtract(CONFIG.tertiary_antenna_body_m, CONFIG.primary_antenna_body_m),
+        ),
+    ],
+    ids=["baseline", "tertiary baseline"],
+)
+def test_baseline_vector_model_is_the_numpy_algebra_to_the_bit(
+    source_class, measurement_class, body_vector, rng
+):
+    source = source_class(CONFIG, STATES)
+    for _ in range(CASES):
+        point = random_point(rng)
+        predicted = point.rotation_nb @ body_vector
+        measured = predicted + rng.normal(0.0, 0.01, 3)
+        jacobian = np.zeros((3, STATES.dim))
+        jacobian[:, STATES.attitude] = -skew(predicted)
+        model = source.model(source.validated(measurement_class(measured)), point)
+        assert_same_bits(model, predicted, measured - predicted, jacobian, model.covariance)
+    assert np.array_equal(np.diag(model.covariance) > 0.0, [True, True, True])
+
+
+def numpy_azimuth(rotation, body_vector):
+    """The azimuth's prediction and Jacobian as numpy forms them."""
+    east, north, up = rotation @ body_vector
+    horizontal_sq = east * east + north * north
+    jacobian = np.zeros((1, STATES.dim))
+    jacobian[0, STATES.attitude] = (-east * up / horizontal_sq, -north * up / horizontal_sq, 1.0)
+    return math.atan2(north, east), horizontal_sq, jacobian
+
+
+def test_azimuth_model_is_the_numpy_algebra_to_the_bit(rng):
+    """The magnetometer's and the receiver heading's shared function, for any vector."""
+    for _ in range(CASES):
+        rotation = Rotation.random(random_state=rng).as_matrix()
+        body_vector = rng.normal(0.0, 1.0, 3) * 10.0 ** rng.uniform(-5.0, 1.0)
+        vector, horizontal_sq, predicted, jacobian = azimuth_model(
+            rotation, body_vector, STATES.attitude.start, STATES.dim
+        )
+        expected_predicted, expected_sq, expected_jacobian = numpy_azimuth(rotation, body_vector)
+        assert vector.tobytes() == (rotation @ body_vector).tobytes()
+        assert (predicted, horizontal_sq) == (expected_predicted, expected_sq)
+        assert jacobian.tobytes() == expected_jacobian.tobytes()
+
+
+def test_heading_model_is_the_numpy_algebra_to_the_bit(rng):
+    source = GnssHeadingSource(CONFIG, STATES)
+    body_vector = np.subtract(CONFIG.secondary_antenna_body_m, CONFIG.primary_antenna_body_m)
+    floor = CONFIG.gnss_heading_variance_floor_rad2
+    steep = 0
+    for _ in range(CASES):
+        point = random_point(rng)
+        measurement = source.validated(
+            GnssHeading(rng.uniform(-math.pi, math.pi), float(rng.choice([1e-6, 1e-3])))
+        )
+        model = source.model(measurement, point)
+        if horizontal_fraction(point.rotation_nb, body_vector) < 0.2:
+            assert model is None
+            steep += 1
+            continue
+        predicted, _, jacobian = numpy_azimuth(point.rotation_nb, body_vector)
+        assert_same_bits(
+            model,
+            np.array((predicted,)),
+            np.array((wrap_angle(measurement.yaw_rad - predicted),)),
+            jacobian,
+            np.array([[max(measurement.variance_rad2, floor)]]),
+        )
+    assert 0 < steep < CASES // 10
+
+
+def random_filter(rng) -> ErrorStateFilter:
+    root = rng.normal(0.0, 1.0, (STATES.dim, STATES.dim)) * np.sqrt(
+        rng.choice([1e-6, 1e-4, 1e-2], STATES.dim)
+    )
+    return ErrorStateFilter(root @ root.T + np.eye(STATES.dim) * 1e-9, 0.999)
+
+
+def random_stack(rng, point):
+    """The models of one GNSS epoch: fix, velocity and baseline at ``point``."""
+    state = point.state
+    fix = GnssFix(
+        math.degrees(state.latitude_rad) + rng.normal(0.0, 2e-7),
+        math.degrees(state.longitude_rad) + rng.normal(0.0, 2e-7),
+        state.altitude_m + rng.normal(0.0, 0.05),
+        random_covariance(rng, 1e-3),
+    )
+    velocity = GnssVelocity(state.velocity_enu_mps + rng.normal(0.0, 0.05, 3), np.eye(3) * 1e-3)
+    baseline_vector = point.rotation_nb @ np.subtract(
+        CONFIG.secondary_antenna_body_m, CONFIG.primary_antenna_body_m
+    )
+    pairs = (
+        (GnssFixSource, fix),
+        (GnssVelocitySource, velocity),
+        (GnssBaselineSource, GnssBaseline(baseline_vector + rng.normal(0.0, 0.01, 3))),
+    )
+    chosen = [pair for pair in pairs if rng.uniform() < 0.8] or [pairs[1]]
+    return [
+        source_class(CONFIG, STATES).model(
+            source_class(CONFIG, STATES).validated(measurement), point
+        )
+        for source_class, measurement in chosen
+    ]
+
+
+def test_the_stacked_gate_and_update_is_each_gate_then_the_update_to_the_bit(rng):
+    """Every gate's NIS and S, the covariance after the update and the reset, and the correction
+    equal those of the filter's own calls, for stacks of one to three measurements; a stack
+    with a measurement its gate rejects changes nothing."""
+    outcomes = {True: 0, False: 0}
+    for _ in range(CASES):
+        point = random_point(rng)
+        models = random_stack(rng, point)
+        probability = float(rng.choice([0.9, 0.999]))
+        kalman = random_filter(rng)
+        before = kalman.covariance.copy()
+        stacked = kalman.gated_update(
+            np.concatenate([m.innovation for m in models]),
+            np.vstack([m.jacobian for m in models]),
+            _block_diagonal([m.covariance for m in models]),
+            [m.innovation.shape[0] for m in models],
+            [probability] * len(models),
+        )
+        assert np.array_equal(kalman.covariance, before)
+        gates = [kalman.gate(m.innovation, m.jacobian, m.covariance, probability) for m in models]
+        for gate, expected in zip(stacked.gates, gates, strict=True):
+            assert (gate.accepted, gate.nis, gate.threshold) == (
+                expected.accepted,
+                expected.nis,
+                expected.threshold,
+            )
+            assert gate.innovation_covariance.tobytes() == expected.innovation_covariance.tobytes()
+        outcomes[stacked.accepted] += 1
+        if not stacked.accepted:
+            assert not all(gate.accepted for gate in gates)
+            assert np.array_equal(stacked.correction, np.zeros(STATES.dim))
+            assert stacked.covariance is kalman.covariance
+            continue
+        correction = kalman.update(
+            np.concatenate([m.innovation for m in models]),
+            np.vstack([m.jacobian for m in models]),
+            _block_diagonal([m.covariance for m in models]),
+        )
+        kalman.reset_after_injection(correction)
+        assert stacked.correction.tobytes() == correction.tobytes()
+        assert stacked.covariance.tobytes() == kalman.covariance.tobytes()
+        assert stacked.positive_definite
+    assert min(outcomes.values()) > CASES // 20, outcomes
+
+
+def _block_diagonal(blocks):
+    size = sum(block.shape[0] for block in blocks)
+    matrix = np.zeros((size, size))
+    offset = 0
+    for block in blocks:
+        matrix[offset : offset + block.shape[0], offset : offset + block.shape[0]] = block
+        offset += block.shape[0]
+    return matrix
