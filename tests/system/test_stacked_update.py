@@ -6,7 +6,8 @@ position, velocity and antenna vectors), the engine gates them and applies them 
 call and books them as the gates book them; a stamp with a measurement its gate rejects, or of
 a suspended source, goes the interpreted way. Run with the compiled models' path and without
 it, the same messages must give the same solutions, counters and source health to the bit: for
-a three-antenna buoy in a sea whose every epoch passes, and for a filter told that its
+a three-antenna buoy in a sea whose every epoch passes, for a receiver's heading, for a
+moored buoy without GNSS, and for a filter told that its
 antennas are 1.5 m from where they are, whose positions are rejected, whose velocity is
 suspended and which realigns.
 """
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 from test_compiled_update import assert_same_solutions
-from test_nav_sensor_sets import fuse, scenario_messages
+from test_nav_sensor_sets import fuse, moored_config, scenario_messages
 from test_nav_simulated import simulate
 
 from buoy_common.contract import Reason
@@ -25,6 +26,7 @@ from buoy_nav.aiding import (
     GnssFixSource,
     GnssHeadingSource,
     GnssVelocitySource,
+    MooredSource,
 )
 from buoy_nav.config import FusionConfig
 
@@ -34,6 +36,7 @@ COMPILED_MODEL_SOURCES = (
     GnssBaselineSource,
     GnssBaselineTertiarySource,
     GnssHeadingSource,
+    MooredSource,
 )
 
 
@@ -65,7 +68,7 @@ def test_three_antennas_in_a_sea_give_the_same_filter(monkeypatch):
     assert_same_solutions(solutions, expected)
     assert_same_engine(engine, reference)
     counters = engine.health().counters
-    for source_class in COMPILED_MODEL_SOURCES[:-1]:  # the heading is superseded by the vector
+    for source_class in COMPILED_MODEL_SOURCES[:4]:  # the heading is superseded by the vector
         assert counters[source_class.kind].accepted > 500, source_class.kind
 
 
@@ -81,6 +84,20 @@ def test_a_receivers_heading_gives_the_same_filter(monkeypatch):
     assert_same_solutions(solutions, expected)
     assert_same_engine(engine, reference)
     assert engine.health().counters[GnssHeadingSource.kind].accepted > 300
+
+
+def test_a_mooring_without_gnss_gives_the_same_filter(monkeypatch):
+    """The mooring's anchor, once a second, beside the motion pack's attitude (whose own
+    compiled update is used either way)."""
+    scenario, _, messages = scenario_messages("moored_motion_pack", 200.0)
+    config = moored_config(use_magnetometer=False, ahrs_lag_s=0.2)
+
+    (engine, solutions, _, _), (reference, expected, _, _) = with_and_without_the_compiled_path(
+        lambda: fuse(config, messages, scenario), monkeypatch
+    )
+    assert_same_solutions(solutions, expected)
+    assert_same_engine(engine, reference)
+    assert engine.health().counters[MooredSource.kind].accepted > 100
 
 
 def test_a_wrong_lever_arm_gives_the_same_rejections_and_filter(monkeypatch):

@@ -22,6 +22,8 @@ from buoy_nav.aiding import (
     GnssHeadingSource,
     GnssVelocity,
     GnssVelocitySource,
+    MooredSource,
+    MooringAnchor,
 )
 from buoy_nav.aiding.base import LinearisationPoint
 from buoy_nav.aiding.model_kernels import azimuth_model
@@ -227,6 +229,36 @@ def test_heading_model_is_the_numpy_algebra_to_the_bit(rng):
             np.array([[max(measurement.variance_rad2, floor)]]),
         )
     assert 0 < steep < CASES // 10
+
+
+def test_anchor_model_is_the_numpy_algebra_to_the_bit(rng):
+    source = MooredSource(CONFIG, STATES)
+    stated = np.diag(
+        (
+            CONFIG.moored_position_sigma_horizontal_m**2,
+            CONFIG.moored_position_sigma_horizontal_m**2,
+            CONFIG.moored_position_sigma_vertical_m**2,
+        )
+    )
+    for _ in range(CASES):
+        point = random_point(rng)
+        state = point.state
+        anchor = MooringAnchor(
+            state.latitude_rad + rng.normal(0.0, 1e-6),
+            state.longitude_rad + rng.normal(0.0, 1e-6),
+            state.altitude_m + rng.normal(0.0, 1.0),
+        )
+        source._watch.scale = float(rng.choice([1.0, rng.uniform(1.0, 5.0)]))
+        offset = np.array(
+            earth.enu_offset_scalar(
+                state.latitude_rad, state.longitude_rad, state.altitude_m, *anchor
+            )
+        )
+        jacobian = np.zeros((3, STATES.dim))
+        jacobian[:, STATES.position] = np.eye(3)
+        widened = stated.copy()
+        widened[:2, :2] *= source._watch.scale**2
+        assert_same_bits(source.model(anchor, point), np.zeros(3), offset, jacobian, widened)
 
 
 def random_filter(rng) -> ErrorStateFilter:

@@ -56,6 +56,7 @@ import math
 from collections import deque
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from buoy_common.contract import Reason
@@ -68,6 +69,7 @@ from buoy_nav.aiding.base import (
     MotionWitness,
     Verdict,
 )
+from buoy_nav.aiding.model_kernels import place_identity
 from buoy_nav.chi_square import AGREEMENT_PROBABILITY, chi_square_quantile
 from buoy_nav.mean_velocity_watch import GYRO_DRIFT, VELOCITY_NOISE, MeanVelocityWatch
 
@@ -219,6 +221,24 @@ class MooringAnchor(NamedTuple):
     altitude_m: float
 
 
+@numba.njit(cache=True)
+def anchor_model(
+    offset_enu_m, covariance_m2, horizontal_variance_scale, position_start, state_count
+):
+    """The measurement function of the anchor at ``offset_enu_m`` (ENU, m) from the nominal
+    position: predicted offset 0, the innovation, the Jacobian over ``state_count`` error states
+    (I on the position from ``position_start``) and R, the stated ``covariance_m2`` (m²) with
+    its horizontal block multiplied by ``horizontal_variance_scale`` (the square of the factor
+    the innovations widen the σ by, formed by the caller as the interpreter forms it)."""
+    jacobian = np.zeros((3, state_count))
+    place_identity(jacobian, position_start)
+    covariance = covariance_m2.copy()
+    for i in range(2):
+        for j in range(2):
+            covariance[i, j] *= horizontal_variance_scale
+    return np.zeros(3), offset_enu_m, jacobian, covariance
+
+
 class MooredSource(AidingSource):
     """Zero mean velocity of a moored buoy (see the module docstring)."""
 
@@ -227,6 +247,7 @@ class MooredSource(AidingSource):
     measurement_type = MooringAnchor
     aids = MOORING
     pseudo = True
+    has_compiled_model = True
 
     def __init__(self, config, states):
         super().__init__(config, states)
@@ -396,20 +417,15 @@ class MooredSource(AidingSource):
             )
         )
         states = self.states
-        jacobian = np.zeros((3, states.dim))
-        jacobian[:, states.position] = np.eye(3)
         return MeasurementModel(
-            predicted=np.zeros(3),
-            innovation=offset,
-            jacobian=jacobian,
-            covariance=self._widened_covariance(),
+            *anchor_model(
+                offset, self._covariance, self._watch.scale**2, states.position.start, states.dim
+            )
         )
 
-    def _widened_covariance(self) -> np.ndarray:
-        """The stated covariance (m²) with its horizontal σ widened as the innovations say."""
-        widened = self._covariance.copy()
-        widened[:2, :2] *= self._watch.scale**2
-        return widened
+    def load_compiled_code(self) -> None:
+        states = self.states
+        anchor_model(np.zeros(3), self._covariance, 1.0, states.position.start, states.dim)
 
     def align(self, aligner, t_s: float, measurement, raw_gyro_rad_s) -> None:
         return None
