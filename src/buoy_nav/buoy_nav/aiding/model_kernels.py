@@ -71,7 +71,7 @@ def azimuth_model(rotation_nb, body_vector, attitude_start, state_count):
 
 @numba.njit(cache=True)
 def floored_covariance_called_alone(covariance, variance_floor):
-    """:func:`floored_covariance` for the interpreter's callers. Numba's cache loses the
+    """:func:`floored_covariance` for the interpreter's callers. Numba's cache can lose the
     environment of a compiled function that other cached functions link in when the
     interpreter also calls it (its arrays then fail to return), so they call it through this."""
     return floored_covariance(covariance, variance_floor)
