@@ -9,7 +9,10 @@ order within that delay give exactly the result of in-order arrival. A measureme
 falls between two IMU samples is applied at its own stamp: the state is integrated to it with
 IMU samples interpolated there (:mod:`buoy_nav.processing_point`), updated, and integrated on to
 the next sample. Measurements sharing a stamp are gated one by one and the accepted ones applied in
-one stacked update, in the order of the registry (:data:`buoy_nav.aiding.AIDING_SOURCES`).
+one stacked update, in the order of the registry (:data:`buoy_nav.aiding.AIDING_SOURCES`). When
+their sources' models are compiled (``has_compiled_model``), the gates and the update are one
+compiled call with the same arithmetic, and the interpreted way takes over for a stamp with a
+rejection; a stamp of the motion pack's attitude alone goes through its compiled update.
 
 A source may be superseded by another (``superseded_by``): the dual antennas give either the
 full baseline vector (which observes the baseline's azimuth and tilt) or only its azimuth. Both
