@@ -2,6 +2,7 @@
 and registered from outside the package, runs in the engine and joins the lists the tools
 compute from the registry."""
 
+import dataclasses
 import math
 import re
 import sys
@@ -75,8 +76,9 @@ def linearisation_point_of(point: LinearisationPoint, error) -> LinearisationPoi
     return LinearisationPoint(state, state.rotation_nb, point.raw_gyro_rad_s, (0.0, 0.0, 0.0))
 
 
-def test_the_compass_alone_aligns_the_fusion_and_holds_its_attitude():
-    """GNSS position and velocity, no antenna heading: the compass is the heading reference."""
+def compass_run():
+    """GNSS position and velocity and the compass, 40 s of a rocking buoy: the engine, its
+    solutions and the last compass message."""
     buoy = RockingBuoy()
     sources = (GnssFixSource, GnssVelocitySource, gyrocompass.GyrocompassSource)
     engine = FusionEngine(engine_config(), sources=sources)
@@ -98,6 +100,12 @@ def test_the_compass_alone_aligns_the_fusion_and_holds_its_attitude():
             orientation_covariance=[0.0] * 8 + [COMPASS_SIGMA_RAD**2],
         )
         assert feed_message(engine, "compass/heading", message) == ([], None)
+    return buoy, engine, solutions, message
+
+
+def test_the_compass_alone_aligns_the_fusion_and_holds_its_attitude():
+    """GNSS position and velocity, no antenna heading: the compass is the heading reference."""
+    buoy, engine, solutions, message = compass_run()
     bad = SimpleNamespace(
         header=message.header,
         orientation=message.orientation,
@@ -125,3 +133,21 @@ def test_the_registered_compass_joins_the_lists_the_tools_compute():
     sets = SensorSets(registered)
     assert sets.label({"gyrocompass"}, set()) == "other: gyrocompass"
     assert sets.label({"gyrocompass", "gnss_fix"}, set()) == "b: single-antenna GNSS"
+
+
+def test_the_compass_through_the_compiled_path_gives_the_filter_of_the_interpreted_one(
+    monkeypatch,
+):
+    """Its compiled model takes a stamp's gates and update into one compiled call with the
+    GNSS measurements; without that path every solution is the same to the bit."""
+    _, engine, solutions, _ = compass_run()
+    with monkeypatch.context() as patch:
+        for source_class in (GnssFixSource, GnssVelocitySource, gyrocompass.GyrocompassSource):
+            patch.setattr(source_class, "has_compiled_model", False)
+        _, reference, expected, _ = compass_run()
+    assert len(solutions) == len(expected) > 1000
+    for solution, other in zip(solutions, expected, strict=True):
+        for field in dataclasses.fields(solution):
+            value, expected_value = getattr(solution, field.name), getattr(other, field.name)
+            assert np.array_equal(value, expected_value), field.name
+    assert engine.health().counters == reference.health().counters
