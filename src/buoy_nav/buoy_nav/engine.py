@@ -83,6 +83,7 @@ from buoy_nav.aiding.base import (
     MeasurementModel,
     as_floats,
 )
+from buoy_nav.aiding.model_kernels import load_compiled_model_kernels
 from buoy_nav.aiding_gates import AidingGates
 from buoy_nav.alignment import AlignmentResult, AlignmentState, InMotionAligner
 from buoy_nav.config import FusionConfig
@@ -130,6 +131,7 @@ class FusionEngine:
         load_compiled_kernels(
             load_compiled_carry_over,
             load_compiled_nav_numbers,
+            load_compiled_model_kernels,
             *(source.load_compiled_code for source in self._registry.sources),
         )
         self.sources: tuple[AidingSource, ...] = self._registry.sources
