@@ -435,6 +435,6 @@ def floored_covariance(covariance, variance_floor: float) -> np.ndarray:
     """Symmetrised covariance (a square matrix, or a variance) whose diagonal is raised to at
     least ``variance_floor``: :func:`buoy_nav.aiding.model_kernels.floored_covariance`, which the
     sources' compiled measurement functions call."""
-    return model_kernels.floored_covariance_called_alone(
+    return model_kernels.floored_covariance(
         np.array(covariance, dtype=float, ndmin=2), float(variance_floor)
     )

@@ -207,6 +207,10 @@ class GnssVelocitySource(AidingSource):
             states.gyro_bias.start,
             states.dim,
         )
+        # The reset's, rare: loaded now, so that it never waits for the compiler either.
+        predicted_antenna_velocity_enu_mps(
+            np.zeros(3), np.eye(3), np.zeros(3), np.zeros(3), self._lever_arm_body_m
+        )
 
     def reset(self, measurement: GnssVelocity, point: LinearisationPoint, model) -> StateReset:
         """The velocity to the measured one less the lever-arm term, with its variances."""

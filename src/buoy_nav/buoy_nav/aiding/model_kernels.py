@@ -69,15 +69,7 @@ def azimuth_model(rotation_nb, body_vector, attitude_start, state_count):
     return vector, horizontal_sq, math.atan2(north, east), jacobian
 
 
-@numba.njit(cache=True)
-def floored_covariance_called_alone(covariance, variance_floor):
-    """:func:`floored_covariance` for the interpreter's callers. Numba's cache can lose the
-    environment of a compiled function that other cached functions link in when the
-    interpreter also calls it (its arrays then fail to return), so they call it through this."""
-    return floored_covariance(covariance, variance_floor)
-
-
 def load_compiled_model_kernels() -> None:
     """Compile what the interpreter calls here, or load it from the cache, now (the sources'
     compiled models load with each source): the engine calls this when it is built."""
-    floored_covariance_called_alone(np.eye(3), 0.0)
+    floored_covariance(np.eye(3), 0.0)
