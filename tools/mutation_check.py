@@ -177,8 +177,10 @@ MUTANTS = (
         (
             Edit(
                 "src/buoy_nav/buoy_nav/aiding/gnss_velocity.py",
-                "        lever_arm = self._lever_arm_body_m\n",
-                "        lever_arm = -self._lever_arm_body_m\n",
+                "            np.asarray(point.nav_frame_rate_enu_rad_s, dtype=float),\n"
+                "            self._lever_arm_body_m,\n",
+                "            np.asarray(point.nav_frame_rate_enu_rad_s, dtype=float),\n"
+                "            -self._lever_arm_body_m,\n",
             ),
         ),
     ),
@@ -188,10 +190,13 @@ MUTANTS = (
         (
             Edit(
                 "src/buoy_nav/buoy_nav/aiding/gnss_heading.py",
-                "        predicted = math.atan2(b_north, b_east)\n",
+                "            return None\n        return MeasurementModel(\n",
+                "            return None\n"
+                "        rotation, baseline = point.rotation_nb, self._baseline_body_m\n"
                 "        predicted = math.atan2(rotation[1][0], rotation[0][0]) + math.atan2(\n"
                 "            baseline[1], baseline[0]\n"
-                "        )\n",
+                "        )\n"
+                "        return MeasurementModel(\n",
             ),
         ),
     ),
