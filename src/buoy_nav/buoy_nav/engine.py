@@ -527,10 +527,13 @@ class FusionEngine:
         with nothing changed, when a source has no compiled model or is suspended, a model is
         not a measurement's, or one fails its gate (then they are gated and booked the
         interpreted way)."""
+        gates = self._gates
+        if not all(
+            source.has_compiled_model and not gates.suspended(source.kind) for source, _ in group
+        ):
+            return False  # before any model: a mixed stamp is modelled once, the interpreted way
         models = []
         for source, measurement in group:
-            if not source.has_compiled_model or self._gates.suspended(source.kind):
-                return False
             model = source.model(measurement, point)
             if not isinstance(model, MeasurementModel) or model.gate_covariance is not None:
                 return False
@@ -542,7 +545,7 @@ class FusionEngine:
         fused = []
         transitions = []
         for (source, _), model, gate in zip(group, models, update.gates, strict=True):
-            passed, outcome = self._gates.passed(source, t, model.innovation, gate)
+            passed, outcome = gates.passed(source, t, model.innovation, gate)
             transitions.extend(outcome.transitions)
             if passed:
                 fused.append(model)
