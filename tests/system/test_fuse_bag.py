@@ -11,6 +11,7 @@ covariance claims) and never worse than what the simulated sensors allow (limits
 
 from __future__ import annotations
 
+import gc
 import math
 import subprocess
 import sys
@@ -30,6 +31,9 @@ from against_truth import (
     topic_columns,
 )
 from buoy_common.bag_io import BagReader, BagWriter
+from buoy_nav.config import fusion_config_from_files
+from buoy_processing.bag_fusion import fuse_bag
+from buoy_processing.offline_fusion import OfflineFusion
 from processed_bags import BAGS_DIR, BUOY_PARAMETERS, CASES, processed_bag
 from ros_messages import raw_stamp_ns
 
@@ -355,3 +359,25 @@ def test_cli_smooth_writes_the_forward_odometry_beside_the_smoothed_nav(short_ba
         forward = stamps_of(fused, "nav/forward/odometry")
         assert forward and all(stamps_of(fused, topic) == forward for topic in NAV_TOPICS)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["smoothed"]
+
+
+@pytest.mark.parametrize("smooth", [False, True], ids=["forward", "smoothed"])
+def test_the_pass_keeps_the_set_up_out_of_the_collector_and_hands_it_back(
+    short_bags, tmp_path, monkeypatch, smooth
+):
+    """During the pass over the bag what the set-up built is frozen (left out of the cyclic
+    collector's walks); after it nothing stays frozen, so a long-lived process (an archive's
+    worker) still collects the garbage among it."""
+    frozen_while_fusing = []
+    add_message = OfflineFusion.add_message
+
+    def watched(fusion, *arguments):
+        frozen_while_fusing.append(gc.get_freeze_count())
+        return add_message(fusion, *arguments)
+
+    monkeypatch.setattr(OfflineFusion, "add_message", watched)
+    config = fusion_config_from_files([str(BUOY_PARAMETERS)])
+    fuse_bag(short_bags["complete"], tmp_path / "out", config, smooth=smooth)
+    engine_objects = 10_000  # an engine and its compiled kernels are far more
+    assert frozen_while_fusing and min(frozen_while_fusing) > engine_objects
+    assert gc.get_freeze_count() == 0

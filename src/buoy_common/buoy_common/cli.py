@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import gc
 import os
 import re
 import signal
@@ -23,6 +22,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from buoy_common.bag_io.common import RECOVERED_BAG_EXIT_CODE
+from buoy_common.heap import freeze_existing_objects
 
 INTERRUPTED_EXIT_CODE = 130
 """Exit code of a command stopped by SIGINT or SIGTERM (the shell's 128 + SIGINT)."""
@@ -175,15 +175,15 @@ def interruptible(program: str) -> Callable:
 
     What exists when the command starts (modules, classes, numpy, scipy: some 65 000 objects that
     live as long as the process) is moved out of the cyclic garbage collector's reach
-    (``gc.freeze``): each full collection during a run over a bag would otherwise walk all of
-    it again, about a tenth of a second of CPU each time."""
+    (:mod:`buoy_common.heap`): each full collection during a run over a bag would otherwise walk
+    all of it again, about a tenth of a second of CPU each time."""
 
     def decorate(main: Callable) -> Callable:
         @functools.wraps(main)
         def run(*args, **kwargs):
             if threading.current_thread() is not threading.main_thread():
                 return main(*args, **kwargs)
-            gc.freeze()
+            freeze_existing_objects()
             interruption = _Interruption()
             for number in _STOP_SIGNALS:
                 signal.signal(number, interruption)

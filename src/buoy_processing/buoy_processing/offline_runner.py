@@ -32,6 +32,7 @@ from buoy_common.contract import (
     bag_topic,
     ns_to_stamp,
 )
+from buoy_common.heap import existing_objects_frozen
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_common.transform_messages import FrameTransform, tf_cdr
 from buoy_nav.config import FusionConfig
@@ -213,35 +214,50 @@ def run_fusion(run: OfflineRun, consumer: BagConsumer | None = None) -> FusionRu
 
 def _forward_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion, dict[str, int]]:
     """Fusion, copies and consumer in one pass over the bag."""
-    reader = run.reader
-    relative_of = run.relative_of
-    with BagProgress(reader, run.label) as progress, run.open_writer() as bag_writer:
+    with BagProgress(run.reader, run.label) as progress, run.open_writer() as bag_writer:
         writer = NamespacedWriter(bag_writer, run.view)
         run.write_static_transforms(writer)
         fusion = OfflineFusion(
             run.config, writer if run.write_bag else None, nav_rate_hz=run.nav_rate_hz
         )
         consumer.start(writer)
-        fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
-        log_time_ns = reader.start_ns
-        for batch in reader.message_batches([*relative_of, *run.copied_topics]):
-            records = chunk_records(batch, fields_of_topic)
-            for position, message in enumerate(batch):
-                log_time_ns = message.log_time_ns
-                topic = relative_of.get(message.topic)
-                if topic is not None:
-                    solutions = fusion.add_message(reader, topic, message, records.get(position))
-                    if solutions:
-                        consumer.add_navigation(solutions)
-                else:
-                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                    consumer.add_message(reader, message, records.get(position))
-            progress.reached(log_time_ns)
+        # What the set-up built (the engine, the compiled kernels) lives through the pass.
+        with existing_objects_frozen():
+            log_time_ns = _fusing_pass(run, fusion, consumer, writer, progress)
         consumer.add_navigation(fusion.finish())
         consumer.finish(log_time_ns)
         run.store_closing_metadata(bag_writer, fusion)
         progress.done()
     return fusion, writer.counts
+
+
+def _fusing_pass(
+    run: OfflineRun,
+    fusion: OfflineFusion,
+    consumer: BagConsumer,
+    writer: NamespacedWriter,
+    progress: BagProgress,
+) -> int:
+    """``run``'s bag in log-time order: the sensor messages into ``fusion``, its solutions to
+    ``consumer``, the copied topics written and given to ``consumer``; the last log time (ns)."""
+    reader = run.reader
+    relative_of = run.relative_of
+    fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
+    log_time_ns = reader.start_ns
+    for batch in reader.message_batches([*relative_of, *run.copied_topics]):
+        records = chunk_records(batch, fields_of_topic)
+        for position, message in enumerate(batch):
+            log_time_ns = message.log_time_ns
+            topic = relative_of.get(message.topic)
+            if topic is not None:
+                solutions = fusion.add_message(reader, topic, message, records.get(position))
+                if solutions:
+                    consumer.add_navigation(solutions)
+            else:
+                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                consumer.add_message(reader, message, records.get(position))
+        progress.reached(log_time_ns)
+    return log_time_ns
 
 
 def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion, dict[str, int]]:
@@ -257,25 +273,42 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion
         with run.open_writer() as bag_writer:
             writer = NamespacedWriter(bag_writer, run.view)
             run.write_static_transforms(writer)
-            forward_pass(reader, fusion, run.sensors, run.relative_of, run.label)
-            fusion.writer = writer if run.write_bag else None
-            consumer.start(writer)
-            log_time_ns = reader.start_ns
-            merged = merged_with_smoothed(reader, fusion, run.copied_topics, consumer.record_fields)
-            for message, record, solution in merged:
-                if message is None:
-                    forward, smoothed, log_time_ns = solution
-                    fusion.write_smoothed_values(forward, smoothed, log_time_ns)
-                    consumer.add_navigation([smoothed])
-                    continue
-                log_time_ns = message.log_time_ns
-                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                consumer.add_message(reader, message, record)
+            # What the set-up built (the engine, the compiled kernels) lives through the passes.
+            with existing_objects_frozen():
+                forward_pass(reader, fusion, run.sensors, run.relative_of, run.label)
+                fusion.writer = writer if run.write_bag else None
+                consumer.start(writer)
+                log_time_ns = _merged_pass(reader, fusion, run.copied_topics, consumer, writer)
             consumer.finish(log_time_ns)
             run.store_closing_metadata(bag_writer, fusion)
     finally:
         fusion.close()
     return fusion, writer.counts
+
+
+def _merged_pass(
+    reader: BagReader,
+    fusion: OfflineFusion,
+    topics: list[str],
+    consumer: BagConsumer,
+    writer: NamespacedWriter,
+) -> int:
+    """The smoothed solutions of ``fusion`` and the copied ``topics`` (stored names) of
+    ``reader``'s bag in log-time order, written and given to ``consumer``; the last log time
+    (ns)."""
+    log_time_ns = reader.start_ns
+    for message, record, solution in merged_with_smoothed(
+        reader, fusion, topics, consumer.record_fields
+    ):
+        if message is None:
+            forward, smoothed, log_time_ns = solution
+            fusion.write_smoothed_values(forward, smoothed, log_time_ns)
+            consumer.add_navigation([smoothed])
+            continue
+        log_time_ns = message.log_time_ns
+        writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+        consumer.add_message(reader, message, record)
+    return log_time_ns
 
 
 def spill_parent_of(out_bag) -> Path:
