@@ -390,15 +390,15 @@ def as_float_array(values, shape: tuple[int, ...]) -> np.ndarray | Reason:
         array = array.reshape(shape)
     if array.shape != shape:
         return Reason.MALFORMED
-    if not np.isfinite(array).all():
+    if not model_kernels.all_finite(array):
         return Reason.NON_FINITE
     return array
 
 
 def has_non_positive_variance(covariance: np.ndarray) -> bool:
-    """True when a variance on the diagonal of the square matrix ``covariance`` is zero or
-    negative."""
-    return bool((covariance.diagonal() <= 0.0).any())
+    """True when a variance on the diagonal of the square float matrix ``covariance`` (an
+    array of :func:`as_float_array`) is zero or negative."""
+    return model_kernels.has_non_positive_diagonal(covariance)
 
 
 ORIENTATION_RECORD_FIELDS = ("orientation", "orientation_covariance")
