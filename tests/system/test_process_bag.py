@@ -15,11 +15,12 @@ import xarray as xr
 from scipy.spatial.transform import Rotation
 
 from against_truth import Truth, assert_wind_within_budget
-from buoy_common.bag_io import BagReader
+from buoy_common.bag_io import BagReader, BagWriter
 from buoy_common.contract import (
     window_label,
 )
 from buoy_nav.config import fusion_config_from_files
+from buoy_processing import bag_processing
 from buoy_processing.bag_fusion import fuse_bag
 from buoy_processing.bag_processing import (
     ISO_TIME_COLUMNS,
@@ -37,6 +38,7 @@ from wind_comp.compensation_messages import (
 )
 from wind_comp.compensator import SampleStatus
 from wind_comp.config import compensator_config_from_files
+from wind_comp.pipeline import CompensationPipeline
 
 COMPENSATOR = compensator_config_from_files([BUOY_PARAMETERS])
 NAV_TOPICS = ("/nav/odometry", "/nav/imu", "/nav/velocity", "/nav/fix")
@@ -305,5 +307,57 @@ def test_without_a_bag_the_csvs_and_the_netcdf_file_are_the_same(tmp_path_factor
     ):
         assert sorted(ours.variables) == sorted(theirs.variables)
         assert ours.sizes["nav_time"] > 0
+        for variable in theirs.variables:
+            np.testing.assert_array_equal(ours[variable], theirs[variable], err_msg=variable)
+
+
+def test_a_silent_anemometer_does_not_pile_up_the_navigation(tmp_path, monkeypatch):
+    """Two minutes of ``sea_state`` whose anemometer falls silent for the second minute: the
+    corrections hold no more solutions than their bound (here lowered to 1,000, ten seconds),
+    and hand them over without changing a corrected sample or a product."""
+    bag = tmp_path / "silent_minute"
+    with BagReader(CASES["sea_state"].bag_path) as reader:
+        silent_from_ns = reader.start_ns + 60 * NANOSECONDS_PER_SECOND
+        with BagWriter(bag) as writer:
+            for record in reader.messages(list(reader.topics)):
+                if record.log_time_ns > silent_from_ns + 60 * NANOSECONDS_PER_SECOND:
+                    break
+                silent = record.log_time_ns > silent_from_ns
+                if silent and record.topic.startswith("/anemometer/"):
+                    continue
+                writer.write_raw(record.topic, record.msgtype, record.log_time_ns, record.raw)
+    files = [str(path) for path in CASES["sea_state"].parameter_files(tmp_path)]
+    held = []
+    add_odometry = CompensationPipeline.add_odometry
+
+    def watched(pipeline, *arguments):
+        held.append(pipeline.n_navigation_held)
+        return add_odometry(pipeline, *arguments)
+
+    monkeypatch.setattr(CompensationPipeline, "add_odometry", watched)
+    outputs, most_held = {}, {}
+    for bound in (bag_processing.NAV_SOLUTIONS_HELD_AT_MOST, 1000):
+        monkeypatch.setattr(bag_processing, "NAV_SOLUTIONS_HELD_AT_MOST", bound)
+        held.clear()
+        out = tmp_path / f"held_{bound}"
+        bag_processing.process_bag(
+            bag,
+            out,
+            fusion_config_from_files(files),
+            compensator_config_from_files(files),
+            netcdf_path=out.with_suffix(".nc"),
+            say_statements=False,
+        )
+        outputs[bound] = out
+        most_held[bound] = max(held)
+    default_held, bounded_held = most_held.values()
+    assert bounded_held < 1000 < 60 * 100 <= default_held  # a silent minute at 100 Hz
+    default, bounded = outputs.values()
+    assert products_csv_path(bounded).read_text() == products_csv_path(default).read_text()
+    with (
+        xr.open_dataset(default.with_suffix(".nc"), decode_times=False) as theirs,
+        xr.open_dataset(bounded.with_suffix(".nc"), decode_times=False) as ours,
+    ):
+        assert ours.sizes["time"] > 0
         for variable in theirs.variables:
             np.testing.assert_array_equal(ours[variable], theirs[variable], err_msg=variable)

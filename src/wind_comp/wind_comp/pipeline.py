@@ -24,9 +24,10 @@ its sensor messages, first in first out.
 The arrivals wait in the pipeline until results are asked for (:meth:`ready`, :meth:`expire`,
 :meth:`flush`) and are then handed to the :class:`~wind_comp.compensator.FlowCompensator` in
 arrival order, as columns: of one message (the live node asks after every message) or of a
-whole stretch (offline processing asks every few hundred samples). The decisions and numbers
-are the same either way, by construction: the compensator decides each sample as of its
-arrival, and one column arithmetic, elementwise, runs on a batch of any length.
+whole stretch (offline processing asks every few hundred samples, or thousand without a bag).
+The decisions and numbers are the same either way, by construction: the compensator decides
+each sample as of its arrival, and one column arithmetic, elementwise, runs on a batch of any
+length.
 """
 
 from __future__ import annotations
@@ -191,6 +192,11 @@ class CompensationPipeline:
     def latest_sample_stamp_s(self) -> float:
         """The latest sensor stamp accepted in order, s (-inf before the first)."""
         return self._sample_order.latest_s
+
+    @property
+    def n_navigation_held(self) -> int:
+        """Navigation samples received but not yet handed to the compensator."""
+        return len(self._nav) // _NAV_FIELDS
 
     @property
     def n_pending(self) -> int:
