@@ -30,6 +30,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from buoy_common.cli import asks_for_help, node_help, write_help
 from buoy_common.contract import BODY_FRAME, TF_STATIC_TOPIC
+from buoy_common.heap import freeze_existing_objects
 from buoy_common.parameters import (
     ParameterError,
     build_config,
@@ -335,6 +336,9 @@ def run_node(node_factory: Callable[[], SuiteNode], args: list[str] | None = Non
         node = node_factory()
         node.refuse_unknown_parameters(args)
         executor.add_node(node)
+        # What the start-up built lives as long as the node: a full collection walking it would
+        # stall a callback for tens of milliseconds.
+        freeze_existing_objects()
         while rclpy.ok() and not node.finished and not stop_requested.is_set():
             due_s = node.deferred_work_due_s
             if due_s is None:
