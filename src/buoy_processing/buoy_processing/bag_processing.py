@@ -522,7 +522,7 @@ class BagCorrections:
                 self.compensator_config.anemometer_frame_id,
                 keep,
                 flows.temperature,
-                self._samples_per_stretch,
+                samples_per_stretch=self._samples_per_stretch,
             )
         if flows.dvl is not None:
             self.current = OfflineCorrection(
@@ -632,7 +632,9 @@ def process_bag(
             compensator_config,
             current_config,
             None if netcdf_path is None else NavigationSeries(nav_rate_hz),
-            SAMPLES_PER_STRETCH if write_bag else SAMPLES_PER_STRETCH_WITHOUT_BAG,
+            samples_per_stretch=(
+                SAMPLES_PER_STRETCH if write_bag else SAMPLES_PER_STRETCH_WITHOUT_BAG
+            ),
         )
         facts_of_run = _FactsOfRun(
             fusion_config, corrections, read_imported_record(reader.path), nav_rate_hz
