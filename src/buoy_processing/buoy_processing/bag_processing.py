@@ -208,7 +208,7 @@ class OfflineCorrection:
     def __init__(
         self,
         pipeline: CompensationPipeline,
-        writer: NamespacedWriter,
+        writer: NamespacedWriter | None,
         output_topic: str,
         covariance_topic: str,
         product_topics,
@@ -218,7 +218,8 @@ class OfflineCorrection:
         temperature_topic: str | None = None,
         samples_per_stretch: int = SAMPLES_PER_STRETCH,
     ):
-        """pipeline: the node's pipeline; output_topic: one vector per sample; covariance_topic:
+        """pipeline: the node's pipeline; writer: where the outputs go (None: no bag, nothing
+        encoded); output_topic: one vector per sample; covariance_topic:
         the same with its covariance; product_topics:
         (mean topic, statistics topic) of a window length, s; read_record: a sensor record, the
         frame expected of it and the record's fields when its chunk was read together (or None)
@@ -340,7 +341,14 @@ class OfflineCorrection:
         stamps = [self._stamps.popleft() for _ in range(len(output.samples))]
         secs = np.array([sec for sec, _ in stamps], dtype=np.int64)
         nanosecs = np.array([nanosec for _, nanosec in stamps], dtype=np.int64)
-        samples = output.samples
+        if self.writer is not None:
+            self._write_samples(secs, nanosecs, output.samples, log_time_ns)
+        if self.series is not None:
+            self.series.add(secs, nanosecs, output.samples)
+        self._write_products(output.products, log_time_ns)
+
+    def _write_samples(self, secs, nanosecs, samples, log_time_ns: int) -> None:
+        """The corrected vector of each sample, alone and with its covariance."""
         for raw, with_covariance in zip(
             flows_cdr(secs, nanosecs, samples.flow_enu_mps),
             flows_with_covariance_cdr(
@@ -352,16 +360,16 @@ class OfflineCorrection:
             self.writer.write_raw(
                 self._covariance_topic, TWIST_COVARIANCE_MSGTYPE, log_time_ns, with_covariance
             )
-        if self.series is not None:
-            self.series.add(secs, nanosecs, output.samples)
-        self._write_products(output.products, log_time_ns)
 
     def _write_products(self, products: list, log_time_ns: int) -> None:
         mean_topic, stats_topic = self._product_topics
+        writer = self.writer
         for product in products:
             if isinstance(product, FluxProduct):
                 self.fluxes.append(product)
-                self.writer.write(
+                if writer is None:
+                    continue
+                writer.write(
                     bag_topic(wind_fluxes_topic(product.window_s)),
                     FLOAT64_ARRAY_MSGTYPE,
                     log_time_ns,
@@ -369,13 +377,15 @@ class OfflineCorrection:
                 )
                 continue
             self.products.append(product)
+            if writer is None:
+                continue
             mean, stats = product_messages(
                 Vector3Stamped, Float64MultiArray, MultiArrayDimension, product
             )
-            self.writer.write(
+            writer.write(
                 bag_topic(mean_topic(product.window_s)), VECTOR3_MSGTYPE, log_time_ns, mean
             )
-            self.writer.write(
+            writer.write(
                 bag_topic(stats_topic(product.window_s)), FLOAT64_ARRAY_MSGTYPE, log_time_ns, stats
             )
 
@@ -507,8 +517,8 @@ class BagCorrections:
             topics.append(flows.temperature)
         return topics
 
-    def start(self, writer: NamespacedWriter) -> None:
-        """The corrections, writing to ``writer``."""
+    def start(self, writer: NamespacedWriter | None) -> None:
+        """The corrections, writing to ``writer`` (None: no bag)."""
         flows = self.flows
         keep = self.navigation is not None
         if flows.wind is not None:

@@ -47,8 +47,9 @@ TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
 class BagConsumer(Protocol):
     """What follows the fusion over a bag, fed as the live nodes downstream of it are."""
 
-    def start(self, writer: NamespacedWriter) -> None:
-        """The run's output is open: what the consumer writes goes to ``writer``."""
+    def start(self, writer: NamespacedWriter | None) -> None:
+        """The run's output is open: what the consumer writes goes to ``writer`` (None: the
+        run writes no bag, and the consumer encodes no message)."""
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
         """New navigation solutions, in order (what ``nav/odometry`` and ``nav/fix`` carry)."""
@@ -96,7 +97,7 @@ class NoBag:
 class NothingFollows:
     """The consumer of a run of the fusion alone (``fuse_bag``)."""
 
-    def start(self, writer: NamespacedWriter) -> None:
+    def start(self, writer: NamespacedWriter | None) -> None:
         pass
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
@@ -217,13 +218,12 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion,
     with BagProgress(run.reader, run.label) as progress, run.open_writer() as bag_writer:
         writer = NamespacedWriter(bag_writer, run.view)
         run.write_static_transforms(writer)
-        fusion = OfflineFusion(
-            run.config, writer if run.write_bag else None, nav_rate_hz=run.nav_rate_hz
-        )
-        consumer.start(writer)
+        output = writer if run.write_bag else None
+        fusion = OfflineFusion(run.config, output, nav_rate_hz=run.nav_rate_hz)
+        consumer.start(output)
         # What the set-up built (the engine, the compiled kernels) lives through the pass.
         with existing_objects_frozen():
-            log_time_ns = _fusing_pass(run, fusion, consumer, writer, progress)
+            log_time_ns = _fusing_pass(run, fusion, consumer, output, progress)
         consumer.add_navigation(fusion.finish())
         consumer.finish(log_time_ns)
         run.store_closing_metadata(bag_writer, fusion)
@@ -235,11 +235,12 @@ def _fusing_pass(
     run: OfflineRun,
     fusion: OfflineFusion,
     consumer: BagConsumer,
-    writer: NamespacedWriter,
+    writer: NamespacedWriter | None,
     progress: BagProgress,
 ) -> int:
     """``run``'s bag in log-time order: the sensor messages into ``fusion``, its solutions to
-    ``consumer``, the copied topics written and given to ``consumer``; the last log time (ns)."""
+    ``consumer``, the copied topics written (unless ``writer`` is None: no bag) and given to
+    ``consumer``; the last log time (ns)."""
     reader = run.reader
     relative_of = run.relative_of
     fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
@@ -254,7 +255,8 @@ def _fusing_pass(
                 if solutions:
                     consumer.add_navigation(solutions)
             else:
-                writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+                if writer is not None:
+                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
                 consumer.add_message(reader, message, records.get(position))
         progress.reached(log_time_ns)
     return log_time_ns
@@ -276,9 +278,10 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion
             # What the set-up built (the engine, the compiled kernels) lives through the passes.
             with existing_objects_frozen():
                 forward_pass(reader, fusion, run.sensors, run.relative_of, run.label)
-                fusion.writer = writer if run.write_bag else None
-                consumer.start(writer)
-                log_time_ns = _merged_pass(reader, fusion, run.copied_topics, consumer, writer)
+                output = writer if run.write_bag else None
+                fusion.writer = output
+                consumer.start(output)
+                log_time_ns = _merged_pass(reader, fusion, run.copied_topics, consumer, output)
             consumer.finish(log_time_ns)
             run.store_closing_metadata(bag_writer, fusion)
     finally:
@@ -291,11 +294,11 @@ def _merged_pass(
     fusion: OfflineFusion,
     topics: list[str],
     consumer: BagConsumer,
-    writer: NamespacedWriter,
+    writer: NamespacedWriter | None,
 ) -> int:
     """The smoothed solutions of ``fusion`` and the copied ``topics`` (stored names) of
-    ``reader``'s bag in log-time order, written and given to ``consumer``; the last log time
-    (ns)."""
+    ``reader``'s bag in log-time order, written (unless ``writer`` is None: no bag) and given
+    to ``consumer``; the last log time (ns)."""
     log_time_ns = reader.start_ns
     for message, record, solution in merged_with_smoothed(
         reader, fusion, topics, consumer.record_fields
@@ -306,7 +309,8 @@ def _merged_pass(
             consumer.add_navigation([smoothed])
             continue
         log_time_ns = message.log_time_ns
-        writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
+        if writer is not None:
+            writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
         consumer.add_message(reader, message, record)
     return log_time_ns
 
