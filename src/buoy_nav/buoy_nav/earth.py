@@ -209,6 +209,10 @@ class LocalTangentPlane:
         # Scalar copies for the per-sample path (enu_from_geodetic_scalar).
         self._origin_xyz = ecef_from_geodetic_scalar(latitude_rad, longitude_rad, altitude_m)
         self._rows = tuple(tuple(float(c) for c in row) for row in self._enu_to_ecef.T)
+        self.scalar_terms = np.array([*self._origin_xyz, *(c for row in self._rows for c in row)])
+        """The ECEF origin (m) and the rows of the ECEF → ENU rotation (row-major) that
+        :meth:`enu_from_geodetic_scalar` uses, as one array of 12 for compiled code that
+        repeats its arithmetic."""
 
     def enu_from_geodetic(self, latitude_rad, longitude_rad, altitude_m) -> np.ndarray:
         """ENU coordinates (m, last axis E, N, U) of geodetic points (rad, rad, m)."""

@@ -99,7 +99,12 @@ from buoy_nav.nav_numbers import load_compiled_nav_numbers
 from buoy_nav.prediction import RealtimePrediction, load_compiled_carry_over
 from buoy_nav.processing_point import ProcessingPoint
 from buoy_nav.sensor_sets import AidingRecency, SensorSets
-from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
+from buoy_nav.solution import (
+    NavSolution,
+    OutputDecimation,
+    SolutionBuilder,
+    load_compiled_solution_vector,
+)
 from buoy_nav.source_health import HealthTransition
 from buoy_nav.source_registry import SourceRegistry
 from buoy_nav.stream_sequence import StreamSequence
@@ -131,6 +136,7 @@ class FusionEngine:
         load_compiled_kernels(
             load_compiled_carry_over,
             load_compiled_nav_numbers,
+            load_compiled_solution_vector,
             load_compiled_model_kernels,
             *(source.load_compiled_code for source in self._registry.sources),
         )

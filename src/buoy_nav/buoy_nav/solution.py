@@ -3,6 +3,7 @@
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from buoy_nav import earth
@@ -19,6 +20,7 @@ from buoy_nav.strapdown_kernel import (
     LONGITUDE,
     NAV_FRAME_RATE,
     ROTATION,
+    STATE_SIZE,
     VELOCITY,
 )
 
@@ -125,40 +127,23 @@ class SolutionBuilder:
                 _read_only(state[GYRO_BIAS : GYRO_BIAS + 3].copy()),
                 _read_only(state[ACCEL_BIAS : ACCEL_BIAS + 3].copy()),
             )
-        # The scalars below as floats in one conversion (the navigation-frame rate is the last
-        # of them in the state vector).
-        nominal = state[: NAV_FRAME_RATE + 3].tolist()
-        bgx, bgy, bgz = nominal[GYRO_BIAS : GYRO_BIAS + 3]
-        bax, bay, baz = nominal[ACCEL_BIAS : ACCEL_BIAS + 3]
         gx, gy, gz = gyro
         fx, fy, fz = force
-        wx, wy, wz = gx - bgx, gy - bgy, gz - bgz
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = nominal[ROTATION : ROTATION + 9]
-        ie, in_, iu = nominal[NAV_FRAME_RATE : NAV_FRAME_RATE + 3]
-        latitude = nominal[LATITUDE]
-        longitude = nominal[LONGITUDE]
-        altitude = nominal[ALTITUDE]
+        vector = _solution_vector(state, gx, gy, gz, fx, fy, fz, self.map_plane.scalar_terms)
+        latitude, longitude, altitude = state[LATITUDE : ALTITUDE + 1].tolist()
         attitude_cov, velocity_cov, position_cov, gyro_bias_cov = self._covariance_blocks
         gyro_bias, accel_bias = self._bias_arrays
         return NavSolution(
             t_s=t,
-            attitude_xyzw=state[ATTITUDE : ATTITUDE + 4].copy(),
-            angular_rate_body_rad_s=np.array((wx, wy, wz)),
-            angular_rate_nb_body_rad_s=np.array(
-                (
-                    wx - (r00 * ie + r10 * in_ + r20 * iu),
-                    wy - (r01 * ie + r11 * in_ + r21 * iu),
-                    wz - (r02 * ie + r12 * in_ + r22 * iu),
-                )
-            ),
-            specific_force_body_mps2=np.array((fx - bax, fy - bay, fz - baz)),
-            velocity_enu_mps=state[VELOCITY : VELOCITY + 3].copy(),
+            attitude_xyzw=vector[_ATTITUDE_XYZW],
+            angular_rate_body_rad_s=vector[_ANGULAR_RATE],
+            angular_rate_nb_body_rad_s=vector[_ANGULAR_RATE_NB],
+            specific_force_body_mps2=vector[_SPECIFIC_FORCE],
+            velocity_enu_mps=vector[_VELOCITY],
             latitude_deg=math.degrees(latitude),
             longitude_deg=math.degrees(longitude),
             altitude_m=altitude,
-            position_map_m=np.array(
-                self.map_plane.enu_from_geodetic_scalar(latitude, longitude, altitude)
-            ),
+            position_map_m=vector[_POSITION_MAP],
             attitude_covariance_rad2=attitude_cov,
             velocity_covariance_m2s2=velocity_cov,
             position_covariance_m2=position_cov,
@@ -211,6 +196,60 @@ class OutputDecimation:
         following = self._next_output_time + period
         self._next_output_time = following if following > t else t + period
         return True
+
+
+# The arrays of a solution, each a slice of the one vector :func:`_solution_vector` fills.
+_ATTITUDE_XYZW = slice(0, 4)
+_ANGULAR_RATE = slice(4, 7)
+_ANGULAR_RATE_NB = slice(7, 10)
+_SPECIFIC_FORCE = slice(10, 13)
+_VELOCITY = slice(13, 16)
+_POSITION_MAP = slice(16, 19)
+_SOLUTION_VECTOR_SIZE = 19
+
+_ecef_from_geodetic_scalar = numba.njit(cache=True)(earth.ecef_from_geodetic_scalar)
+
+
+@numba.njit(cache=True)
+def _solution_vector(state, gx, gy, gz, fx, fy, fz, plane_terms):
+    """The arrays of the solution of the nominal ``state`` (strapdown_kernel's layout) with
+    the raw gyro (body rad/s) and specific force (body m/s²) there, in one vector (the slices
+    above): the attitude, the bias-corrected rate ω_ib and ω_nb = ω_ib − R_nbᵀ ω_in, the
+    bias-corrected force, the velocity and the ``map`` position (m) of the plane whose
+    ``scalar_terms`` are ``plane_terms``. The sums are grouped as the interpreter groups
+    them, so a solution is the same to the bit whichever computes it."""
+    vector = np.empty(_SOLUTION_VECTOR_SIZE)
+    for i in range(4):
+        vector[i] = state[ATTITUDE + i]
+    wx = gx - state[GYRO_BIAS]
+    wy = gy - state[GYRO_BIAS + 1]
+    wz = gz - state[GYRO_BIAS + 2]
+    vector[4], vector[5], vector[6] = wx, wy, wz
+    ie, in_, iu = state[NAV_FRAME_RATE], state[NAV_FRAME_RATE + 1], state[NAV_FRAME_RATE + 2]
+    for i, w in enumerate((wx, wy, wz)):
+        r0, r1, r2 = state[ROTATION + i], state[ROTATION + 3 + i], state[ROTATION + 6 + i]
+        vector[7 + i] = w - (r0 * ie + r1 * in_ + r2 * iu)
+    vector[10] = fx - state[ACCEL_BIAS]
+    vector[11] = fy - state[ACCEL_BIAS + 1]
+    vector[12] = fz - state[ACCEL_BIAS + 2]
+    for i in range(3):
+        vector[13 + i] = state[VELOCITY + i]
+    x, y, z = _ecef_from_geodetic_scalar(state[LATITUDE], state[LONGITUDE], state[ALTITUDE])
+    dx, dy, dz = x - plane_terms[0], y - plane_terms[1], z - plane_terms[2]
+    for i in range(3):
+        row = 3 + 3 * i
+        vector[16 + i] = (
+            plane_terms[row] * dx + plane_terms[row + 1] * dy + plane_terms[row + 2] * dz
+        )
+    return vector
+
+
+def load_compiled_solution_vector() -> None:
+    """Compile the solution's vector, or load it from the cache, now (see
+    :func:`buoy_nav.mechanization.load_compiled_kernels`)."""
+    state = np.zeros(STATE_SIZE)
+    state[ATTITUDE + 3] = 1.0
+    _solution_vector(state, 0.0, 0.0, 0.0, 0.0, 0.0, 9.8, np.zeros(12))
 
 
 def _published_block_indices(states: StateLayout) -> np.ndarray:

@@ -68,3 +68,72 @@ def test_solutions_share_the_blocks_until_the_covariance_changes():
         states = getattr(ERROR_STATES, name)
         assert getattr(second, field) is getattr(first, field)
         np.testing.assert_array_equal(getattr(third, field), kalman.covariance[states, states])
+
+
+def _turning_integrator(rng) -> StrapdownIntegrator:
+    """A nominal state away from the origin: tilted, moving, biased, at another place."""
+    attitude = rng.normal(size=4)
+    return StrapdownIntegrator(
+        tuple(attitude / np.linalg.norm(attitude)),
+        tuple(rng.normal(scale=3.0, size=3)),
+        LATITUDE_RAD + rng.normal(scale=1e-3),
+        LONGITUDE_RAD + rng.normal(scale=1e-3),
+        rng.normal(scale=20.0),
+        tuple(rng.normal(scale=1e-3, size=3)),
+        tuple(rng.normal(scale=1e-2, size=3)),
+    )
+
+
+def test_a_solutions_vectors_are_the_interpreters_arithmetic_to_the_bit():
+    """The compiled solution against the same sums written out for the interpreter: ω_ib
+    and the force less their biases, ω_nb = ω_ib − R_nbᵀ ω_in, and the ``map`` position of
+    the plane's own scalar conversion."""
+    rng = np.random.default_rng(11)
+    builder = _builder()
+    kalman = _random_filter(6)
+    for _ in range(200):
+        integrator = _turning_integrator(rng)
+        gyro = tuple(rng.normal(scale=0.3, size=3).tolist())
+        force = tuple(rng.normal(loc=(0.0, 0.0, 9.8), scale=2.0).tolist())
+        solution = builder.solution(integrator, kalman, 1.0, gyro, force, (False,) * 3)
+        rate = np.array(gyro) - np.array(integrator.gyro_bias_rad_s)
+        r = integrator.rotation_elements
+        ie, in_, iu = integrator.nav_frame_rate_enu_rad_s
+        rate_nb = [rate[i] - (r[i] * ie + r[3 + i] * in_ + r[6 + i] * iu) for i in range(3)]
+        position = builder.map_plane.enu_from_geodetic_scalar(
+            integrator.latitude_rad, integrator.longitude_rad, integrator.altitude_m
+        )
+        expected = {
+            "attitude_xyzw": integrator.attitude_xyzw,
+            "angular_rate_body_rad_s": rate,
+            "angular_rate_nb_body_rad_s": rate_nb,
+            "specific_force_body_mps2": np.array(force) - np.array(integrator.accel_bias_mps2),
+            "velocity_enu_mps": integrator.velocity_enu_mps,
+            "position_map_m": position,
+        }
+        for field, values in expected.items():
+            array = getattr(solution, field)
+            assert array.tobytes() == np.array(values, dtype=float).tobytes(), field
+
+
+def test_a_solutions_rate_relative_to_enu_and_its_place_follow_the_frames():
+    """Physics, not arithmetic: ω_nb turned into ENU is ω_ib turned there less ω_in, and the
+    position in the ``map`` plane goes back to the integrator's latitude, longitude and height."""
+    rng = np.random.default_rng(12)
+    builder = _builder()
+    integrator = _turning_integrator(rng)
+    gyro = (0.2, -0.1, 0.3)
+    solution = builder.solution(
+        integrator, _random_filter(7), 1.0, gyro, (0.0, 0.0, 9.8), (False,) * 3
+    )
+    rotation_nb = integrator.rotation_nb
+    np.testing.assert_allclose(
+        rotation_nb @ solution.angular_rate_nb_body_rad_s,
+        rotation_nb @ solution.angular_rate_body_rad_s
+        - np.array(integrator.nav_frame_rate_enu_rad_s),
+        atol=1e-15,
+    )
+    latitude, longitude, altitude = builder.map_plane.geodetic_from_enu(solution.position_map_m)
+    assert latitude == pytest.approx(integrator.latitude_rad, abs=1e-12)
+    assert longitude == pytest.approx(integrator.longitude_rad, abs=1e-12)
+    assert altitude == pytest.approx(integrator.altitude_m, abs=1e-6)
