@@ -53,6 +53,7 @@ from buoy_processing.bag_processing import process_bag
 from tools import bench_speed, compiled_caches, fdchp_simulated
 from tools.bench_fdchp import COLUMN_MAP
 from tools.bench_fdchp import PARAMS as OOI_PARAMS
+from tools.interpreter import describe, interpreter
 from wind_comp.config import compensator_config_from_files
 
 REPO = Path(__file__).resolve().parent.parent
@@ -234,7 +235,11 @@ def profile(bag: Path, params: list[Path], out: Path) -> dict:
 
 
 def run_fdchp_hour(runs: int = RUNS, log=lambda text: None) -> dict:
-    results = {"target_real_time_multiple": TARGET_REAL_TIME, "cpus": os.cpu_count()}
+    results = {
+        "target_real_time_multiple": TARGET_REAL_TIME,
+        "cpus": os.cpu_count(),
+        "interpreter": interpreter(),
+    }
     results["load_average_1min_before"] = os.getloadavg()[0]
     for name, make in (("simulated", simulated_hour), ("ooi_repeated", repeated_ooi_hour)):
         log(f"bench: fdchp_hour: {name} ...")
@@ -256,6 +261,7 @@ def print_fdchp_hour(result: dict) -> None:
         f"(best of the runs; load average {result['load_average_1min_before']:.2f} before, "
         f"{result['load_average_1min_after']:.2f} after, {result['cpus']} CPUs)"
     )
+    print(f"  on {describe(result['interpreter'])}")
     print(
         f"  {'hour':14s} {'outputs':12s} {'data s':>7s} {'wall s':>7s} {'× real time':>11s} "
         f"{'target ≥ 1000×':14s} {'CPU s':>6s} {'× per CPU s':>11s} {'writer CPU s':>12s} "

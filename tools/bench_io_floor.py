@@ -46,6 +46,7 @@ from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_processing import process_bag
 from tools.bench_plan import PROCESSING_PARAMS, REPO
 from tools.bench_speed import cpu_with_children_s
+from tools.interpreter import describe, interpreter
 from wind_comp.config import compensator_config_from_files
 
 OUT_DIR = REPO / "out" / "bench"
@@ -238,6 +239,7 @@ def run_io_floor(in_bag: Path, work_dir: Path, runs: int = RUNS, log=lambda text
         "data_s": data_s,
         "runs": runs,
         "cpus": os.cpu_count(),
+        "interpreter": interpreter(),
         "load_average_1min_before": load_before,
         "load_average_1min_after": os.getloadavg()[0],
         **steps,
@@ -257,6 +259,7 @@ def print_io_floor(result: dict) -> None:
         f"{result['runs']} runs (machine load average {result['load_average_1min_before']:.2f} "
         f"before, {result['load_average_1min_after']:.2f} after, {result['cpus']} CPUs)"
     )
+    print(f"  on {describe(result['interpreter'])}")
     print(f"  {'step':44s} {'messages':>9s} {'wall s':>7s} {'CPU s':>7s} {'µs/msg':>7s}")
     labels = {
         "read_only": "(a0) read, not decoded",
