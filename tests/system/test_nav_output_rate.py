@@ -96,6 +96,28 @@ def test_facts_state_the_rate_and_the_netcdf_navigation_is_the_bags(decimated, t
         np.testing.assert_array_equal(ours["eastward_wind"].values, theirs["eastward_wind"])
 
 
+def test_without_a_bag_the_netcdf_navigation_is_the_same_subset(decimated, tmp_path):
+    """Without a bag the solutions reach the NetCDF file in bulk, the rate's choice made of
+    their stamps alone: the same solutions, to the bit."""
+    process_bag(
+        BAGS_DIR / BAG,
+        tmp_path / "bag",
+        fusion_config_from_files([BUOY_PARAMETERS]),
+        compensator_config_from_files([BUOY_PARAMETERS]),
+        netcdf_path=tmp_path / "bag.nc",
+        nav_rate_hz=NAV_RATE_HZ,
+        write_bag=False,
+    )
+    with (
+        xr.open_dataset(tmp_path / "bag.nc", decode_times=False) as ours,
+        xr.open_dataset(decimated.with_name("bag.nc"), decode_times=False) as theirs,
+    ):
+        assert 0 < ours.sizes["nav_time"] < ours.sizes["time"]
+        assert sorted(ours.variables) == sorted(theirs.variables)
+        for variable in theirs.variables:
+            np.testing.assert_array_equal(ours[variable], theirs[variable], err_msg=variable)
+
+
 @pytest.mark.long
 def test_smoothed_navigation_at_a_lower_rate_is_a_subset(tmp_path):
     config = fusion_config_from_files([BUOY_PARAMETERS])

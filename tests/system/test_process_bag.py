@@ -311,10 +311,12 @@ def test_without_a_bag_the_csvs_and_the_netcdf_file_are_the_same(tmp_path_factor
             np.testing.assert_array_equal(ours[variable], theirs[variable], err_msg=variable)
 
 
-def test_a_silent_anemometer_does_not_pile_up_the_navigation(tmp_path, monkeypatch):
+@pytest.mark.parametrize("write_bag", [True, False], ids=["bag", "no_bag"])
+def test_a_silent_anemometer_does_not_pile_up_the_navigation(tmp_path, monkeypatch, write_bag):
     """Two minutes of ``sea_state`` whose anemometer falls silent for the second minute: the
     corrections hold no more solutions than their bound (here lowered to 1,000, ten seconds),
-    and hand them over without changing a corrected sample or a product."""
+    and hand them over without changing a corrected sample or a product; with a bag, one by
+    one as messages, without one, held back and handed over in bulk."""
     bag = tmp_path / "silent_minute"
     with BagReader(CASES["sea_state"].bag_path) as reader:
         silent_from_ns = reader.start_ns + 60 * NANOSECONDS_PER_SECOND
@@ -329,12 +331,18 @@ def test_a_silent_anemometer_does_not_pile_up_the_navigation(tmp_path, monkeypat
     files = [str(path) for path in CASES["sea_state"].parameter_files(tmp_path)]
     held = []
     add_odometry = CompensationPipeline.add_odometry
+    add_navigation_columns = CompensationPipeline.add_navigation_columns
 
     def watched(pipeline, *arguments):
         held.append(pipeline.n_navigation_held)
         return add_odometry(pipeline, *arguments)
 
+    def watched_in_bulk(pipeline, columns):
+        held.append(pipeline.n_navigation_held + len(columns.stamps_s) - 1)
+        return add_navigation_columns(pipeline, columns)
+
     monkeypatch.setattr(CompensationPipeline, "add_odometry", watched)
+    monkeypatch.setattr(CompensationPipeline, "add_navigation_columns", watched_in_bulk)
     outputs, most_held = {}, {}
     for bound in (bag_processing.NAV_SOLUTIONS_HELD_AT_MOST, 1000):
         monkeypatch.setattr(bag_processing, "NAV_SOLUTIONS_HELD_AT_MOST", bound)
@@ -347,6 +355,7 @@ def test_a_silent_anemometer_does_not_pile_up_the_navigation(tmp_path, monkeypat
             compensator_config_from_files(files),
             netcdf_path=out.with_suffix(".nc"),
             say_statements=False,
+            write_bag=write_bag,
         )
         outputs[bound] = out
         most_held[bound] = max(held)

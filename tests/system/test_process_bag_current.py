@@ -14,6 +14,7 @@ from pathlib import Path
 import bag_faults
 import numpy as np
 import pytest
+import xarray as xr
 from scipy.spatial.transform import Rotation
 
 from buoy_common.bag_io import BagReader
@@ -242,3 +243,36 @@ def test_wind_report_names_both_reports_when_a_bag_has_neither(ship, tmp_path, c
     assert exit_info.value.code == 2
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and "wind/true" in error and "current/velocity" in error
+
+
+def test_without_a_bag_the_wind_and_the_current_are_the_same(open_ocean, tmp_path):
+    """Both corrections of one buoy take the navigation in bulk when no bag is written: their
+    CSVs and the NetCDF file are the bag's run's, byte for byte and value for value."""
+    bag, _, _ = open_ocean
+    runs = {}
+    for write_bag in (True, False):
+        out = tmp_path / f"write_bag_{write_bag}"
+        process_bag(
+            bag,
+            out,
+            fusion_config_from_files(PARAMETER_FILES),
+            compensator_config_from_files(PARAMETER_FILES),
+            current_config=current_config_from_files(PARAMETER_FILES),
+            netcdf_path=out.with_suffix(".nc"),
+            write_bag=write_bag,
+        )
+        runs[write_bag] = out
+    csvs = sorted(path.name for path in tmp_path.glob(f"{runs[True].name}*.csv"))
+    assert any("current" in name for name in csvs) and any("wind" in name for name in csvs)
+    for name in csvs:
+        theirs = tmp_path / name
+        ours = tmp_path / name.replace(runs[True].name, runs[False].name, 1)
+        assert ours.read_text() == theirs.read_text(), name
+    with (
+        xr.open_dataset(runs[True].with_suffix(".nc"), decode_times=False) as theirs,
+        xr.open_dataset(runs[False].with_suffix(".nc"), decode_times=False) as ours,
+    ):
+        assert sorted(ours.variables) == sorted(theirs.variables)
+        assert ours.sizes["nav_time"] > 0
+        for variable in theirs.variables:
+            np.testing.assert_array_equal(ours[variable], theirs[variable], err_msg=variable)

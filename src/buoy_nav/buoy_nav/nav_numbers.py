@@ -61,6 +61,31 @@ def covariance_numbers(
     ).tolist()
 
 
+def body_numbers_of_solutions(
+    attitude_xyzw, velocity_enu_mps, velocity_covariance_m2s2, gyro_bias_covariance_rad2_s2
+) -> np.ndarray:
+    """:func:`body_numbers` of many solutions at once, one row each (N × :data:`BODY_NUMBERS`),
+    from their stacked quaternions (N × 4), ENU velocities (N × 3, m/s) and 3×3 covariances
+    (N × 3 × 3: the velocity's, ENU m²/s², the gyro bias's, body rad²/s²); each row the numbers
+    of that solution alone, to the bit."""
+    return _body_numbers_of_solutions(
+        np.ascontiguousarray(attitude_xyzw, dtype=float),
+        np.ascontiguousarray(velocity_enu_mps, dtype=float),
+        np.ascontiguousarray(velocity_covariance_m2s2, dtype=float),
+        np.ascontiguousarray(gyro_bias_covariance_rad2_s2, dtype=float),
+    )
+
+
+@numba.njit(cache=True)
+def _body_numbers_of_solutions(attitude, velocity, velocity_cov, gyro_bias_cov):
+    rows = np.empty((attitude.shape[0], BODY_NUMBERS))
+    for index in range(attitude.shape[0]):
+        rows[index] = _body_numbers(
+            attitude[index], velocity[index], velocity_cov[index], gyro_bias_cov[index]
+        )
+    return rows
+
+
 @numba.njit(cache=True)
 def _body_numbers(attitude, velocity, velocity_cov, gyro_bias_cov):
     x, y, z, w = attitude[0], attitude[1], attitude[2], attitude[3]
@@ -116,10 +141,14 @@ def _place_block(numbers, start, corner, block):
 def load_compiled_nav_numbers() -> None:
     """Compile the nav numbers, or load them from the cache, now (see
     :func:`buoy_nav.mechanization.load_compiled_kernels`), for the solutions' read-only
-    covariance blocks and for writable ones (the smoother's)."""
+    covariance blocks and for writable ones (the smoother's), and of many solutions at once
+    (a run that writes no bag)."""
     attitude = np.array([0.0, 0.0, 0.0, 1.0])
     for writable in (True, False):
         blocks = np.eye(3)[np.newaxis].repeat(4, axis=0)
         blocks.setflags(write=writable)
         body_numbers(attitude, np.zeros(3), blocks[1], blocks[3])
         covariance_numbers(*blocks)
+    body_numbers_of_solutions(
+        attitude[np.newaxis], np.zeros((1, 3)), np.eye(3)[np.newaxis], np.eye(3)[np.newaxis]
+    )

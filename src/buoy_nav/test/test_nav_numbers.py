@@ -101,3 +101,20 @@ def test_a_quaternion_of_the_identity_leaves_the_body_frame_the_enu_frame():
     np.testing.assert_array_equal(twist.reshape(6, 6)[:3, :3], blocks[1])
     np.testing.assert_array_equal(twist.reshape(6, 6)[3:, 3:], blocks[3])
     np.testing.assert_array_equal(twist.reshape(6, 6)[:3, 3:], 0.0)
+
+
+def test_the_numbers_of_many_solutions_are_each_ones_own():
+    """A run without a bag makes the body numbers of a stretch of solutions at once: each row
+    is the one solution's, to the bit."""
+    cases = [random_case(writable=False) for _ in range(300)]
+    quaternions = np.array([quaternion for quaternion, _, _ in cases])
+    velocities = np.array([velocity for _, velocity, _ in cases])
+    velocity_covariances = np.array([blocks[1] for _, _, blocks in cases])
+    gyro_bias_covariances = np.array([blocks[3] for _, _, blocks in cases])
+    rows = layout.body_numbers_of_solutions(
+        quaternions, velocities, velocity_covariances, gyro_bias_covariances
+    )
+    assert rows.shape == (len(cases), layout.BODY_NUMBERS)
+    for row, (quaternion, velocity, blocks) in zip(rows, cases, strict=True):
+        alone = body_numbers(quaternion, velocity, blocks[1], blocks[3])
+        assert row.tobytes() == np.array(alone).tobytes()

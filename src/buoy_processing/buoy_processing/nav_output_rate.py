@@ -36,9 +36,13 @@ class NavOutputRate:
 
     def due(self, values: NavValues) -> bool:
         """Whether the solution ``values`` (the next one in stamp order) is written."""
+        return self.due_at(values.sec, values.nanosec)
+
+    def due_at(self, sec: int, nanosec: int) -> bool:
+        """Whether the next solution in stamp order, stamped ``sec``, ``nanosec``, is written."""
         if self.every_solution:
             return True
-        stamp_ns = values.sec * NANOSECONDS + values.nanosec
+        stamp_ns = sec * NANOSECONDS + nanosec
         previous_ns = self._previous_stamp_ns
         # The interval to the previous solution gives the grid its tolerance (half of it).
         span_s = 0.0 if previous_ns is None else (stamp_ns - previous_ns) / NANOSECONDS

@@ -49,6 +49,7 @@ from buoy_nav.fusion_messages import (
 )
 from buoy_nav.source_health import HealthTransition, SourceStatus
 from buoy_processing.nav_output_rate import NavOutputRate
+from buoy_processing.solution_columns import StampedSolution
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
 """The fusion needs one of these at least: without a heading reference it cannot align."""
@@ -114,6 +115,11 @@ def truth_topics_of(reader: BagReader) -> list[str]:
     return sorted(n for n in reader.topics if relative_topic(n).startswith(TRUTH_PREFIX))
 
 
+HandedOver = list[NavValues] | list[StampedSolution]
+"""New solutions as a run hands them on: their ``nav/*`` values, or as they are with their
+header stamps (``stamped_solutions``)."""
+
+
 class OfflineFusion:
     """Feeds sensor messages to a :class:`FusionEngine` and writes its ``nav/*`` to a bag."""
 
@@ -124,11 +130,15 @@ class OfflineFusion:
         smoother_spill_parent: str | Path | None = None,
         smooth: bool = False,
         nav_rate_hz: float = 0.0,
+        stamped_solutions: bool = False,
     ):
         """``writer`` receives the ``nav/*`` and ``tf`` messages, of every solution or, with
         ``nav_rate_hz`` (Hz) above 0, of a subset at that rate
         (:mod:`buoy_processing.nav_output_rate`; every solution is still returned); None: none
-        is made (a run that writes its products alone). With ``smooth``
+        is made (a run that writes its products alone). The solutions are returned as their
+        ``nav/*`` values or, with ``stamped_solutions`` (no writer), as they are with their
+        header stamps (:class:`~buoy_processing.solution_columns.StampedSolution`), for
+        corrections that take them in bulk. With ``smooth``
         (the filter's own solutions, ``realtime_output`` off) nothing is written: the solutions are
         kept by :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``)
         and written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
@@ -142,8 +152,11 @@ class OfflineFusion:
             from buoy_nav.smoothed_solutions import FixedIntervalSmoother
 
             self.smoother = FixedIntervalSmoother(self.engine, smoother_spill_parent)
+        if stamped_solutions and writer is not None:
+            raise ValueError("stamped solutions are for a run that writes no nav/* messages")
         self.stamps = StampBook()
         self.writer = writer
+        self.stamped_solutions = stamped_solutions
         self.nav_output = NavOutputRate(nav_rate_hz)
         self.rejections: Counter[str] = Counter()
         self.first_solution_s: float | None = None
@@ -151,16 +164,17 @@ class OfflineFusion:
         self.source_transitions: list[HealthTransition] = []
         """The sources suspended and resumed, oldest first."""
 
-    def add(self, topic: str, message, log_time_ns: int) -> list[NavValues]:
-        """One decoded sensor message of relative ``topic``; returns the values of the new
-        solutions' ``nav/*`` messages, which are written with log time ``log_time_ns``."""
+    def add(self, topic: str, message, log_time_ns: int) -> HandedOver:
+        """One decoded sensor message of relative ``topic``; returns the new solutions (their
+        ``nav/*`` values, which are written with log time ``log_time_ns``, or as they are with
+        ``stamped_solutions``)."""
         return self._take(
             topic, feed_message(self.engine, topic, message, self.stamps), log_time_ns
         )
 
     def add_message(
         self, reader: BagReader, topic: str, message: BagMessage, record: tuple | None = None
-    ) -> list[NavValues]:
+    ) -> HandedOver:
         """:meth:`add` of a bag message of relative ``topic``: from ``record`` when its chunk
         was read together (:meth:`record_fields`, :mod:`buoy_processing.chunk_records`), else
         an IMU sample from its CDR bytes and any other message decoded alone."""
@@ -191,7 +205,7 @@ class OfflineFusion:
                 fields[stored] = source_fields
         return fields
 
-    def _take(self, topic: str, fed, log_time_ns: int) -> list[NavValues]:
+    def _take(self, topic: str, fed, log_time_ns: int) -> HandedOver:
         solutions, rejection = fed
         if rejection is not None:
             self.rejections[f"{topic}: {rejection}"] += 1
@@ -199,13 +213,13 @@ class OfflineFusion:
         self.last_log_time_ns = log_time_ns
         return self._write(solutions, log_time_ns)
 
-    def finish(self) -> list[NavValues]:
+    def finish(self) -> HandedOver:
         """End of the data: the solutions still held back by the engine (written too)."""
         written = self._write(self.engine.flush(), self.last_log_time_ns)
         self.source_transitions.extend(self.engine.take_source_transitions())
         return written
 
-    def _write(self, solutions: list[NavSolution], log_time_ns: int) -> list[NavValues]:
+    def _write(self, solutions: list[NavSolution], log_time_ns: int) -> HandedOver:
         written = []
         smoother = self.smoother
         for solution in solutions:
@@ -213,6 +227,9 @@ class OfflineFusion:
                 self.first_solution_s = solution.t_s
             if smoother is not None:
                 smoother.add(solution, *self.stamps.exact(solution.t_s), log_time_ns)
+                continue
+            if self.stamped_solutions:
+                written.append(StampedSolution(solution, *self.stamps.exact(solution.t_s)))
                 continue
             values = nav_values(solution, self.stamps)
             if self.writer is not None and self.nav_output.due(values):

@@ -40,6 +40,7 @@ from buoy_nav.fusion_messages import NavValues
 from buoy_nav.observability import unobserved_quantities
 from buoy_processing.chunk_records import chunk_records
 from buoy_processing.offline_fusion import OfflineFusion
+from buoy_processing.solution_columns import StampedSolution
 
 TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
 
@@ -53,6 +54,10 @@ class BagConsumer(Protocol):
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
         """New navigation solutions, in order (what ``nav/odometry`` and ``nav/fix`` carry)."""
+
+    def add_stamped_solutions(self, stamped: list[StampedSolution]) -> None:
+        """New navigation solutions of a run that writes no bag, in order, as they are with
+        their header stamps (:mod:`buoy_processing.solution_columns`)."""
 
     @property
     def record_fields(self) -> dict[str, tuple[str, ...]]:
@@ -101,6 +106,9 @@ class NothingFollows:
         pass
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
+        pass
+
+    def add_stamped_solutions(self, stamped: list[StampedSolution]) -> None:
         pass
 
     @property
@@ -219,12 +227,14 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion,
         writer = NamespacedWriter(bag_writer, run.view)
         run.write_static_transforms(writer)
         output = writer if run.write_bag else None
-        fusion = OfflineFusion(run.config, output, nav_rate_hz=run.nav_rate_hz)
+        fusion = OfflineFusion(
+            run.config, output, nav_rate_hz=run.nav_rate_hz, stamped_solutions=output is None
+        )
         consumer.start(output)
         # What the set-up built (the engine, the compiled kernels) lives through the pass.
         with existing_objects_frozen():
             log_time_ns = _fusing_pass(run, fusion, consumer, output, progress)
-        consumer.add_navigation(fusion.finish())
+        _hand_over(fusion, consumer)(fusion.finish())
         consumer.finish(log_time_ns)
         run.store_closing_metadata(bag_writer, fusion)
         progress.done()
@@ -244,6 +254,7 @@ def _fusing_pass(
     reader = run.reader
     relative_of = run.relative_of
     fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
+    hand_over = _hand_over(fusion, consumer)
     log_time_ns = reader.start_ns
     for batch in reader.message_batches([*relative_of, *run.copied_topics]):
         records = chunk_records(batch, fields_of_topic)
@@ -253,7 +264,7 @@ def _fusing_pass(
             if topic is not None:
                 solutions = fusion.add_message(reader, topic, message, records.get(position))
                 if solutions:
-                    consumer.add_navigation(solutions)
+                    hand_over(solutions)
             else:
                 if writer is not None:
                     writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
@@ -287,6 +298,12 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion
     finally:
         fusion.close()
     return fusion, writer.counts
+
+
+def _hand_over(fusion: OfflineFusion, consumer: BagConsumer):
+    """How ``consumer`` takes what ``fusion`` returns: its solutions' ``nav/*`` values or, in a
+    run that makes none, the solutions with their stamps."""
+    return consumer.add_stamped_solutions if fusion.stamped_solutions else consumer.add_navigation
 
 
 def _merged_pass(

@@ -15,7 +15,12 @@ from wind_comp.compensation_messages import FlowSample
 from wind_comp.compensator import SampleStatus
 from wind_comp.config import CompensatorConfig
 from wind_comp.flux_products import FluxProduct
-from wind_comp.pipeline import NAV_SAMPLES_HELD_AT_MOST, level_rate_components, wind_pipeline
+from wind_comp.pipeline import (
+    NAV_SAMPLES_HELD_AT_MOST,
+    NavigationColumns,
+    level_rate_components,
+    wind_pipeline,
+)
 
 RNG = np.random.default_rng(31)
 LEVER_ARM_M = (0.2, -0.1, 3.0)
@@ -412,3 +417,64 @@ def test_a_second_anemometer_stream_gets_invalid_outputs_alike_live_and_offline(
         status, wind, _, _ = feed(messages, wind_per_stretch)
         np.testing.assert_array_equal(status, live_status)
         np.testing.assert_array_equal(wind, live_wind)
+
+
+def _odometry_batch(count: int) -> tuple:
+    """``count`` solutions' odometry and fix values with what a run can hand over: a stamp
+    repeated and one going back (left out), a fix without a finite latitude and one beyond
+    ±90° (not taken), a NaN variance first on the diagonal and one later (the builtin max
+    keeps the first NaN and skips a later one), and one attitude beyond the trusted σ."""
+    t_s = 100.0 + 0.01 * np.arange(count)
+    t_s[5] = t_s[4]
+    t_s[9] = t_s[7]
+    attitude, _, _ = navigation(t_s)
+    quaternions = attitude.as_quat()
+    rates = RNG.normal(scale=0.2, size=(count, 3))
+    velocities = RNG.normal(scale=1.0, size=(count, 3))
+    factors = RNG.normal(scale=1e-3, size=(count, 3, 3))
+    attitude_covariance = factors @ factors.transpose(0, 2, 1)
+    attitude_covariance[11, 0, 0] = math.nan
+    attitude_covariance[12, 2, 2] = math.nan
+    attitude_covariance[13] *= 1e6
+    factors = RNG.normal(scale=1e-2, size=(count, 6, 6))
+    twist_covariance = factors @ factors.transpose(0, 2, 1)
+    latitudes = np.full(count, LATITUDE_DEG) + 1e-4 * np.arange(count)
+    latitudes[2] = math.nan
+    latitudes[3] = 91.0
+    return t_s, quaternions, rates, velocities, attitude_covariance, twist_covariance, latitudes
+
+
+def test_navigation_in_bulk_is_the_messages_one_by_one():
+    """What a run without a bag hands over at once gives the pipeline the rows, the latitude
+    and the latest stamp that the same solutions' ``nav/odometry`` and ``nav/fix``, one by
+    one, give it, to the bit."""
+    t_s, quaternions, rates, velocities, attitude_cov, twist_cov, latitudes = _odometry_batch(20)
+    one_by_one = wind_pipeline(CONFIG)
+    for index in range(len(t_s)):
+        one_by_one.add_odometry(
+            float(t_s[index]),
+            tuple(quaternions[index].tolist()),
+            tuple(rates[index].tolist()),
+            tuple(velocities[index].tolist()),
+            max(*np.diagonal(attitude_cov[index]).tolist()),
+            tuple(attitude_cov[index].ravel().tolist()),
+            tuple(twist_cov[index].ravel().tolist()),
+        )
+        one_by_one.add_fix(0, float(latitudes[index]))
+    in_bulk = wind_pipeline(CONFIG)
+    in_bulk.add_navigation_columns(
+        NavigationColumns(
+            stamps_s=t_s,
+            attitude_xyzw=quaternions,
+            angular_rate_body_rad_s=rates,
+            velocity_body_mps=velocities,
+            attitude_covariance_rad2=attitude_cov,
+            body_velocity_covariance_m2s2=twist_cov[:, :3, :3],
+            body_rate_covariance_rad2_s2=twist_cov[:, 3:, 3:],
+            fix_latitude_deg=latitudes,
+        )
+    )
+    assert in_bulk.n_navigation_held == one_by_one.n_navigation_held == len(t_s) - 2
+    assert bytes(in_bulk._nav) == bytes(one_by_one._nav)
+    assert in_bulk.latitude_deg == one_by_one.latitude_deg
+    assert in_bulk.latest_navigation_stamp_s == one_by_one.latest_navigation_stamp_s

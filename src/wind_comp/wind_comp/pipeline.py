@@ -115,6 +115,40 @@ _ANGULAR_BLOCK = operator.itemgetter(21, 22, 23, 27, 28, 29, 33, 34, 35)
 """The 3×3 angular block of a row-major 6×6 covariance."""
 
 
+class NavigationColumns(NamedTuple):
+    """Many solutions' ``nav/odometry`` and ``nav/fix`` values, a row each, in stamp order
+    (:meth:`CompensationPipeline.add_navigation_columns`)."""
+
+    stamps_s: np.ndarray
+    """(N,) header stamps, s."""
+    attitude_xyzw: np.ndarray
+    """(N, 4) quaternions of R_nb (body → ENU)."""
+    angular_rate_body_rad_s: np.ndarray
+    """(N, 3) ω_ib, body, rad/s."""
+    velocity_body_mps: np.ndarray
+    """(N, 3) body velocity, m/s."""
+    attitude_covariance_rad2: np.ndarray
+    """(N, 3, 3) attitude error covariance, ENU axes, rad²."""
+    body_velocity_covariance_m2s2: np.ndarray
+    """(N, 3, 3) body velocity covariance, m²/s² (the twist covariance's linear block)."""
+    body_rate_covariance_rad2_s2: np.ndarray
+    """(N, 3, 3) body rate covariance, rad²/s² (the twist covariance's angular block)."""
+    fix_latitude_deg: np.ndarray
+    """(N,) latitude of each solution's ``nav/fix`` (status: a fix), deg."""
+
+
+def _largest_diagonal(covariances: np.ndarray) -> np.ndarray:
+    """The largest variance of each 3×3 in ``covariances`` (N × 3 × 3), as the builtin ``max``
+    of the three takes it (the first, replaced by a later one only when greater: NaN kept
+    only in first place), so that a batch decides as :meth:`add_odometry` does."""
+    largest = covariances[:, 0, 0].copy()
+    for axis in (1, 2):
+        variance = covariances[:, axis, axis]
+        greater = variance > largest
+        largest[greater] = variance[greater]
+    return largest
+
+
 NAV_SAMPLES_HELD_AT_MOST = 256
 """Navigation samples held while they can decide no sensor sample (2.56 s at 100 Hz: a sensor
 that stops must not make the pipeline hold the navigation without bound)."""
@@ -189,6 +223,11 @@ class CompensationPipeline:
         }
 
     @property
+    def latest_navigation_stamp_s(self) -> float:
+        """The latest ``nav/odometry`` stamp taken, s (-inf before the first)."""
+        return self._nav_order.latest_s
+
+    @property
     def latest_sample_stamp_s(self) -> float:
         """The latest sensor stamp accepted in order, s (-inf before the first)."""
         return self._sample_order.latest_s
@@ -257,6 +296,52 @@ class CompensationPipeline:
         self._nav_order.advance(t_s)
         return None
 
+    def add_navigation_columns(self, columns: NavigationColumns) -> None:
+        """Many ``nav/odometry`` and ``nav/fix`` at once, each solution's odometry then its fix
+        in stamp order, as :meth:`add_odometry` and :meth:`add_fix` take them one by one: the
+        same rows to the bit (a run that writes no bag hands its navigation over in bulk). An
+        odometry whose stamp is not later than every earlier one is left out, as
+        :meth:`add_odometry` rejects it; its fix still counts."""
+        count = len(columns.stamps_s)
+        if count == 0:
+            return
+        stamps = np.asarray(columns.stamps_s, dtype=float)
+        # Later than every stamp before it, kept or not: the kept ones increase, and one left
+        # out is no later than the latest kept (a NaN, never kept, moves nothing).
+        previous_latest = np.fmax.accumulate(np.concatenate(([self._nav_order.latest_s], stamps)))
+        kept = stamps > previous_latest[:-1]
+        latitude_before = self._latitudes_before(columns.fix_latitude_deg)
+        attitude_covariance = np.asarray(columns.attitude_covariance_rad2, dtype=float)
+        rows = np.column_stack(
+            (
+                stamps,
+                columns.attitude_xyzw,
+                columns.angular_rate_body_rad_s,
+                columns.velocity_body_mps,
+                latitude_before,
+                _largest_diagonal(attitude_covariance) <= self._max_attitude_variance_rad2,
+                attitude_covariance.reshape(count, 9),
+                np.asarray(columns.body_velocity_covariance_m2s2, dtype=float).reshape(count, 9),
+                np.asarray(columns.body_rate_covariance_rad2_s2, dtype=float).reshape(count, 9),
+            )
+        )
+        self._nav.frombytes(rows[kept].tobytes())
+        if kept.any():
+            self._nav_order.advance(float(stamps[kept][-1]))
+
+    def _latitudes_before(self, fix_latitude_deg) -> np.ndarray:
+        """The latitude each odometry of a batch is converted with (deg): that of the latest
+        valid fix before it, as :meth:`add_fix` keeps it; the pipeline's latitude then
+        follows the batch's fixes."""
+        latitudes = np.empty(len(fix_latitude_deg))
+        latitude = self.latitude_deg
+        for index, fix_latitude in enumerate(fix_latitude_deg):
+            latitudes[index] = latitude
+            if math.isfinite(fix_latitude) and abs(fix_latitude) <= 90.0:
+                latitude = fix_latitude
+        self.latitude_deg = latitude
+        return latitudes
+
     def add_temperature(self, t_s: float, temperature_degc: float) -> list[FluxProduct]:
         """One ``anemometer/temperature`` (stamp s, °C) for the fluxes; returns the flux
         windows it lets close (:class:`~wind_comp.flux_products.FluxAverager`)."""
@@ -265,12 +350,14 @@ class CompensationPipeline:
             products += averager.add_temperature(t_s, temperature_degc)
         return products
 
-    def add_sample(self, sample: FlowSample) -> str | None:
+    def add_sample(self, sample: FlowSample, navigation_held_back: int = 0) -> str | None:
         """One ``anemometer/wind`` or ``dvl/velocity``. Returns why it is rejected (the
         message's own ``rejection``, or a stamp not later than the previous one), None when
         accepted or held off the sensor's sequence (settled later; the held samples given up
         are counted by :meth:`take_given_up`). Every sample, rejected or not, gets its (then
-        invalid) output, in input order."""
+        invalid) output, in input order. navigation_held_back: navigation samples that
+        arrived before this sample but that the caller hands over later
+        (:meth:`add_navigation_columns`, before it asks for results)."""
         x, y, z = sample.flow_sensor_mps
         held, confirming = self._screen_sequence(sample)
         stamp_increases = (not held or confirming) and self._sample_order.advance(sample.t_s)
@@ -286,7 +373,7 @@ class CompensationPipeline:
                 float(confirming),
             )
         )
-        self._nav_before_sample.append(len(self._nav) // _NAV_FIELDS)
+        self._nav_before_sample.append(len(self._nav) // _NAV_FIELDS + navigation_held_back)
         self._n_samples += 1
         if sample.rejection is not None:
             return sample.rejection
