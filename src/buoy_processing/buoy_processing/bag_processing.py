@@ -78,7 +78,7 @@ from buoy_processing.offline_fusion import (
 from buoy_processing.offline_runner import OfflineRun, run_fusion
 from buoy_processing.output_facts import OutputFacts, output_facts, source_use_of
 from buoy_processing.output_series import NANOSECONDS, FlowSeries, NavigationSeries
-from buoy_processing.solution_columns import StampedSolution, navigation_columns, stamp_s
+from buoy_processing.solution_columns import HeldBackSolutions, SolutionColumns, StampedSolution
 from wind_comp.compensation_messages import (
     FlowSample,
     anemometer_sample,
@@ -252,12 +252,9 @@ class OfflineCorrection:
         self._samples_per_stretch = samples_per_stretch
         self._log_time_ns = 0
         """Log time (ns) of the latest record of the sensor's topics."""
-        self._held_back: list[StampedSolution] = []
-        """Solutions taken but not yet handed to the pipeline (:meth:`add_stamped_solutions`)."""
-        self._held_back_in_order = 0
-        """Of those, the ones whose stamp is later than every earlier one: the navigation
-        samples the pipeline will keep of them."""
-        self._held_back_latest_s = -math.inf
+        self.held_back: HeldBackSolutions | None = None
+        """The solutions held back for the pipeline, in a run that makes no ``nav/*`` values
+        (None: they come one by one, :meth:`add_navigation`)."""
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
         """The ``nav/odometry`` and ``nav/fix`` of each solution, as the node receives them;
@@ -279,33 +276,21 @@ class OfflineCorrection:
             )
             add_fix(STATUS_FIX, values.latitude_deg)
 
-    def add_stamped_solutions(self, stamped: list[StampedSolution]) -> None:
-        """:meth:`add_navigation` of solutions not made into ``nav/*`` values (a run that writes
-        no bag): held back and handed to the pipeline in bulk before it decides samples, with
-        the same outcome, sample for sample."""
-        pipeline = self.pipeline
-        held = pipeline.n_navigation_held + self._held_back_in_order
-        if held + len(stamped) > NAV_SOLUTIONS_HELD_AT_MOST:
+    def make_room(self, count: int) -> None:
+        """Before ``count`` more solutions are held back: beyond
+        :data:`NAV_SOLUTIONS_HELD_AT_MOST` held, what they decide is written."""
+        held = self.pipeline.n_navigation_held + self.held_back.in_order
+        if held + count > NAV_SOLUTIONS_HELD_AT_MOST:
             self._write(self._ready(), self._log_time_ns)
-        latest_s = max(pipeline.latest_navigation_stamp_s, self._held_back_latest_s)
-        for item in stamped:
-            t_s = stamp_s(item)
-            if t_s > latest_s:
-                latest_s = t_s
-                self._held_back_in_order += 1
-        self._held_back_latest_s = latest_s
-        self._held_back.extend(stamped)
 
-    def _hand_over_held_back(self) -> None:
-        """The solutions held back to the pipeline, as columns."""
-        if self._held_back:
-            self.pipeline.add_navigation_columns(navigation_columns(self._held_back))
-            self._held_back = []
-            self._held_back_in_order = 0
+    def take_columns(self, columns: SolutionColumns) -> None:
+        """Held-back solutions handed over (:class:`HeldBackSolutions`)."""
+        self.pipeline.add_navigation_columns(columns.navigation)
 
     def _ready(self) -> CompensationOutput:
         """What the pipeline decides with every solution taken so far."""
-        self._hand_over_held_back()
+        if self.held_back is not None:
+            self.held_back.hand_over()
         return self.pipeline.ready()
 
     def add_sample(
@@ -315,7 +300,8 @@ class OfflineCorrection:
         a stretch of them, the decided samples are written."""
         self._log_time_ns = message.log_time_ns
         sample, sec, nanosec = self._read_record(reader, message, self._expected_frame_id, record)
-        rejection = self.pipeline.add_sample(sample, self._held_back_in_order)
+        held_back = 0 if self.held_back is None else self.held_back.in_order
+        rejection = self.pipeline.add_sample(sample, held_back)
         if rejection is None:
             self.valid_samples += 1
         else:
@@ -350,7 +336,8 @@ class OfflineCorrection:
 
     def finish(self, log_time_ns: int) -> None:
         """End of the data: every sample decided and written, partial windows closed."""
-        self._hand_over_held_back()
+        if self.held_back is not None:
+            self.held_back.hand_over()
         self._write(self.pipeline.flush(), log_time_ns)
         self._count_given_up()
 
@@ -592,10 +579,24 @@ class BagCorrections:
             correction.add_navigation(solutions)
 
     def add_stamped_solutions(self, stamped: list[StampedSolution]) -> None:
-        if self.navigation is not None:
-            self.navigation.add_stamped(stamped)
+        """Solutions of a run that makes no ``nav/*`` values: held back once for every
+        correction and the NetCDF file, handed over in bulk (:class:`HeldBackSolutions`)."""
+        held_back = self._held_back()
         for correction in self._running:
-            correction.add_stamped_solutions(stamped)
+            correction.make_room(len(stamped))
+        held_back.take(stamped, self._running[0].pipeline.latest_navigation_stamp_s)
+
+    def _held_back(self) -> HeldBackSolutions:
+        """The holder of the solutions, made at the first ones."""
+        held_back = self._running[0].held_back
+        if held_back is None:
+            takers = [correction.take_columns for correction in self._running]
+            if self.navigation is not None:
+                takers.append(self.navigation.add_columns)
+            held_back = HeldBackSolutions(takers)
+            for correction in self._running:
+                correction.held_back = held_back
+        return held_back
 
     @property
     def record_fields(self) -> dict[str, tuple[str, ...]]:

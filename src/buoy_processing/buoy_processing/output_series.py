@@ -12,7 +12,7 @@ from collections.abc import Callable, Iterable
 import numpy as np
 
 from buoy_processing.nav_output_rate import NavOutputRate
-from buoy_processing.solution_columns import StampedSolution, navigation_values
+from buoy_processing.solution_columns import SolutionColumns
 from wind_comp.compensator import CorrectedBatch, SampleStatus
 
 NANOSECONDS = 1_000_000_000
@@ -67,24 +67,26 @@ class NavigationSeries:
         self._stamps_ns = array("q")
         self._values = array("d")
         self._output = NavOutputRate(nav_rate_hz)
-        self._held_back: list[StampedSolution] = []
 
-    def add_stamped(self, stamped: Iterable[StampedSolution]) -> None:
-        """Solutions with their header stamps, in stamp order (a run that makes no ``nav/*``
-        values): kept as they are, made into columns when the columns are asked for."""
-        due = self._output.due_at
-        self._held_back.extend(item for item in stamped if due(item.sec, item.nanosec))
-
-    def _take_held_back(self) -> None:
-        if self._held_back:
-            stamps_ns, values = navigation_values(self._held_back)
-            self._stamps_ns.extend(stamps_ns.tolist())
-            self._values.extend(values.ravel().tolist())
-            self._held_back = []
+    def add_columns(self, columns: SolutionColumns) -> None:
+        """Solutions handed over as columns, in stamp order (a run that makes no ``nav/*``
+        values)."""
+        secs, nanosecs = columns.secs, columns.nanosecs
+        kept = slice(None)
+        if not self._output.every_solution:
+            due = self._output.due_at
+            kept = np.array(
+                [due(*stamp) for stamp in zip(secs.tolist(), nanosecs.tolist(), strict=True)],
+                dtype=bool,
+            )
+        values = np.column_stack(
+            (columns.geodetic, columns.navigation.attitude_xyzw, columns.velocity_enu_mps)
+        )[kept]
+        self._stamps_ns.frombytes((secs * NANOSECONDS + nanosecs)[kept].tobytes())
+        self._values.frombytes(values.tobytes())
 
     def add(self, solutions: Iterable) -> None:
         """Solutions as :class:`buoy_nav.fusion_messages.NavValues`, in stamp order."""
-        self._take_held_back()
         values = self._values
         for solution in solutions:
             if not self._output.due(solution):
@@ -95,12 +97,11 @@ class NavigationSeries:
             values.extend(solution.velocity_enu_mps)
 
     def __len__(self) -> int:
-        return len(self._stamps_ns) + len(self._held_back)
+        return len(self._stamps_ns)
 
     def columns(self) -> tuple[np.ndarray, np.ndarray]:
         """(M,) stamps ns and (M, 10): latitude, longitude, altitude, quaternion x y z w,
         velocity E N U."""
-        self._take_held_back()
         return (
             np.frombuffer(self._stamps_ns, dtype=np.int64),
             np.frombuffer(self._values, dtype=float).reshape(-1, _NAV_FIELDS),

@@ -13,7 +13,8 @@ own arrays.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -39,21 +40,44 @@ def stamp_s(stamped: StampedSolution) -> float:
     return stamped.sec + stamped.nanosec * 1e-9
 
 
-def navigation_columns(stamped: Sequence[StampedSolution]) -> NavigationColumns:
-    """What the ``nav/odometry`` and ``nav/fix`` of the ``stamped`` solutions carry for a
-    correction, a row each."""
+class SolutionColumns(NamedTuple):
+    """Held-back solutions as columns: what the corrections take
+    (:attr:`navigation`) and what the NetCDF file keeps of them."""
+
+    navigation: NavigationColumns
+    secs: np.ndarray
+    """(N,) header stamps' seconds."""
+    nanosecs: np.ndarray
+    """(N,) header stamps' nanoseconds."""
+    geodetic: np.ndarray
+    """(N, 3) latitude, longitude (deg), altitude (m)."""
+    velocity_enu_mps: np.ndarray
+    """(N, 3) ENU velocity, m/s."""
+
+
+def solution_columns(stamped: Sequence[StampedSolution]) -> SolutionColumns:
+    """What the ``nav/odometry`` and ``nav/fix`` of the ``stamped`` solutions carry, a row
+    each."""
     solutions = [item.solution for item in stamped]
     secs = np.array([item.sec for item in stamped], dtype=np.int64)
     nanosecs = np.array([item.nanosec for item in stamped], dtype=np.int64)
     attitude = np.array([solution.attitude_xyzw for solution in solutions], dtype=float)
+    velocity = np.array([solution.velocity_enu_mps for solution in solutions], dtype=float)
     body = body_numbers_of_solutions(
         attitude,
-        [solution.velocity_enu_mps for solution in solutions],
+        velocity,
         [solution.velocity_covariance_m2s2 for solution in solutions],
         [solution.gyro_bias_covariance_rad2_s2 for solution in solutions],
     )
     twist = body[:, BODY_TWIST_COVARIANCE : BODY_TWIST_COVARIANCE + 36].reshape(-1, 6, 6)
-    return NavigationColumns(
+    geodetic = np.array(
+        [
+            (solution.latitude_deg, solution.longitude_deg, solution.altitude_m)
+            for solution in solutions
+        ],
+        dtype=float,
+    ).reshape(-1, 3)
+    navigation = NavigationColumns(
         stamps_s=secs + nanosecs * 1e-9,
         attitude_xyzw=attitude,
         angular_rate_body_rad_s=np.array(
@@ -65,26 +89,48 @@ def navigation_columns(stamped: Sequence[StampedSolution]) -> NavigationColumns:
         ),
         body_velocity_covariance_m2s2=twist[:, :3, :3],
         body_rate_covariance_rad2_s2=twist[:, 3:, 3:],
-        fix_latitude_deg=np.array([solution.latitude_deg for solution in solutions], dtype=float),
+        fix_latitude_deg=geodetic[:, 0],
     )
+    return SolutionColumns(navigation, secs, nanosecs, geodetic, velocity)
 
 
-def navigation_values(stamped: Sequence[StampedSolution]) -> tuple[np.ndarray, np.ndarray]:
-    """What the NetCDF file keeps of the ``stamped`` solutions
-    (:class:`buoy_processing.output_series.NavigationSeries`): (N,) stamps ns and (N, 10)
-    latitude, longitude (deg), altitude (m), quaternion x y z w, velocity E N U (m/s)."""
-    stamps_ns = np.array([item.sec * NANOSECONDS + item.nanosec for item in stamped], np.int64)
-    values = np.array(
-        [
-            (
-                solution.latitude_deg,
-                solution.longitude_deg,
-                solution.altitude_m,
-                *solution.attitude_xyzw,
-                *solution.velocity_enu_mps,
-            )
-            for solution in (item.solution for item in stamped)
-        ],
-        dtype=float,
-    ).reshape(-1, 10)
-    return stamps_ns, values
+class HeldBackSolutions:
+    """The solutions of a run that writes no bag, from the fusion to the corrections and the
+    NetCDF file: held back with their stamps, counted as the corrections' pipelines will count
+    them, and handed over as columns, once for all, when a correction is about to decide
+    samples (:meth:`hand_over`)."""
+
+    def __init__(self, takers: Sequence[Callable[[SolutionColumns], None]]):
+        """takers: what each hand-over goes to, in order (each correction's pipeline, the
+        NetCDF file's series)."""
+        self._takers = list(takers)
+        self._held: list[StampedSolution] = []
+        self._latest_s = -math.inf
+        self.in_order = 0
+        """Of the solutions held, those whose stamp is later than every earlier one: the ones a
+        pipeline keeps (:meth:`~wind_comp.pipeline.CompensationPipeline.add_odometry`)."""
+
+    def __len__(self) -> int:
+        return len(self._held)
+
+    def take(self, stamped: Sequence[StampedSolution], latest_taken_s: float) -> None:
+        """Hold the ``stamped`` solutions; ``latest_taken_s``: the latest stamp the pipelines
+        took so far (s)."""
+        latest_s = max(latest_taken_s, self._latest_s)
+        for item in stamped:
+            t_s = stamp_s(item)
+            if t_s > latest_s:
+                latest_s = t_s
+                self.in_order += 1
+        self._latest_s = latest_s
+        self._held.extend(stamped)
+
+    def hand_over(self) -> None:
+        """Every solution held, as columns, to each taker."""
+        if not self._held:
+            return
+        columns = solution_columns(self._held)
+        self._held = []
+        self.in_order = 0
+        for taker in self._takers:
+            taker(columns)
