@@ -5,8 +5,9 @@
 Runs ``process_bag --netcdf --no-bag`` on the simulated FDCHP hour (``tools/bench_fdchp_hour.py``)
 with a clock around the entry of each stage of the processing, and prints the wall time of each
 per 10 Hz row: the fusion's filter step, the prediction ahead with its solution, the screening
-and queueing of the pack's measurements, the ``nav/*`` values, the wind's correction (the
-sonic's samples, the navigation handed over) and the decoding of the chunks. cProfile charges
+and queueing of the pack's measurements, the solutions held back for the corrections, the
+wind's correction (the sonic's samples, the navigation handed over in bulk, which runs inside
+them) and the decoding of the chunks. cProfile charges
 every call the profiler's own cost and so inflates the interpreter's share; a clock per stage
 entry costs about half a microsecond a call, and the stages nest (the filter step runs inside
 the message that catches it up), so they do not add up to the row. One run after an untimed one
@@ -23,9 +24,10 @@ from collections import Counter, defaultdict
 
 from buoy_nav.engine import FusionEngine
 from buoy_nav.prediction import RealtimePrediction
-from buoy_processing import offline_fusion, offline_runner
+from buoy_processing import offline_runner
 from buoy_processing.bag_processing import BagCorrections
 from buoy_processing.offline_fusion import OfflineFusion
+from buoy_processing.solution_columns import HeldBackSolutions
 from tools import bench_fdchp_hour, fdchp_simulated
 
 OUT_DIR = bench_fdchp_hour.OUT_DIR
@@ -33,9 +35,9 @@ STAGES = (
     ("the filter's step (FusionEngine._process)", FusionEngine, "_process"),
     ("the prediction ahead and its solution", RealtimePrediction, "predict"),
     ("a measurement's screening and queue", FusionEngine, "_screen_measurement"),
-    ("the nav/* values", offline_fusion, "nav_values"),
+    ("the solutions held back for the corrections", BagCorrections, "add_stamped_solutions"),
     ("the wind's correction: the sonic's samples", BagCorrections, "add_message"),
-    ("the wind's correction: the navigation handed over", BagCorrections, "add_navigation"),
+    ("the wind's correction: the navigation handed over in bulk", HeldBackSolutions, "hand_over"),
     ("decoding the chunks", offline_runner, "chunk_records"),
     ("a message through the fusion, all of the above in it", OfflineFusion, "add_message"),
 )
