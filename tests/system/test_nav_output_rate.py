@@ -37,10 +37,9 @@ def messages(bag, topic: str) -> list[tuple[int, bytes]]:
         return [(m.log_time_ns, m.raw) for m in reader.messages([topic])]
 
 
-@pytest.fixture(scope="module")
-def decimated(tmp_path_factory):
-    """``process_bag --nav-rate-hz 10`` of the bag, with its NetCDF file."""
-    out = tmp_path_factory.mktemp("nav_rate")
+def process_decimated(out, write_bag: bool = True):
+    """``process_bag --nav-rate-hz 10`` of the bag into ``out``/bag, with its NetCDF file
+    ``out``/bag.nc (``write_bag`` False: ``--no-bag``); the output bag's path."""
     process_bag(
         BAGS_DIR / BAG,
         out / "bag",
@@ -48,8 +47,15 @@ def decimated(tmp_path_factory):
         compensator_config_from_files([BUOY_PARAMETERS]),
         netcdf_path=out / "bag.nc",
         nav_rate_hz=NAV_RATE_HZ,
+        write_bag=write_bag,
     )
     return out / "bag"
+
+
+@pytest.fixture(scope="module")
+def decimated(tmp_path_factory):
+    """``process_bag --nav-rate-hz 10`` of the bag, with its NetCDF file."""
+    return process_decimated(tmp_path_factory.mktemp("nav_rate"))
 
 
 def test_corrected_wind_and_products_are_byte_identical(decimated, tmp_path_factory):
@@ -99,15 +105,7 @@ def test_facts_state_the_rate_and_the_netcdf_navigation_is_the_bags(decimated, t
 def test_without_a_bag_the_netcdf_navigation_is_the_same_subset(decimated, tmp_path):
     """Without a bag the solutions reach the NetCDF file in bulk, the rate's choice made of
     their stamps alone: the same solutions, to the bit."""
-    process_bag(
-        BAGS_DIR / BAG,
-        tmp_path / "bag",
-        fusion_config_from_files([BUOY_PARAMETERS]),
-        compensator_config_from_files([BUOY_PARAMETERS]),
-        netcdf_path=tmp_path / "bag.nc",
-        nav_rate_hz=NAV_RATE_HZ,
-        write_bag=False,
-    )
+    process_decimated(tmp_path, write_bag=False)
     with (
         xr.open_dataset(tmp_path / "bag.nc", decode_times=False) as ours,
         xr.open_dataset(decimated.with_name("bag.nc"), decode_times=False) as theirs,
