@@ -1,12 +1,17 @@
 # Two commands matter: `make demo` and `make test`. Both create .venv when it is
 # missing and install every pinned dependency and the five packages into it.
 SHELL := /bin/bash
-# The venv's interpreter: Debian's own Python 3.11 where the machine has it with venv, else
-# python3 on the PATH. Debian builds it with profile-guided and link-time optimisation and links
-# the interpreter statically; a plain source build (pyenv's default: shared library, neither
-# optimisation) runs the suite's interpreted code about 15 % slower (docs/benchmarks.md).
+# The venv's interpreter: PYTHON when given; else Debian's own Python 3.11 where it makes a
+# venv (Debian ships venv's pip apart, in python3.11-venv), else python3 on the PATH. Debian
+# builds it with profile-guided and link-time optimisation and links the interpreter
+# statically; a plain source build (pyenv's default: shared library, neither optimisation) runs
+# the suite's interpreted code about 15 % slower (docs/benchmarks.md).
 SYSTEM_PYTHON := /usr/bin/python3.11
-PYTHON ?= $(shell $(SYSTEM_PYTHON) -c 'import ensurepip, venv' 2>/dev/null && echo $(SYSTEM_PYTHON) || echo python3)
+ifdef PYTHON
+MAKE_VENV = $(PYTHON) -m venv $(VENV)
+else
+MAKE_VENV = { $(SYSTEM_PYTHON) -m venv $(VENV) 2>/dev/null || { rm -rf $(VENV) && python3 -m venv $(VENV); }; }
+endif
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
@@ -37,7 +42,7 @@ help:
 venv: $(STAMP)
 
 $(STAMP): requirements.txt requirements-dev.txt $(PACKAGE_FILES)
-	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	@test -x $(BIN)/python || $(MAKE_VENV)
 	$(BIN)/python -m pip install --quiet --upgrade "pip==25.3"
 	$(BIN)/python -m pip install --quiet -r requirements-dev.txt
 	$(BIN)/python -m pip install --quiet --no-build-isolation --no-deps $(foreach p,$(PACKAGES),-e $(p))
