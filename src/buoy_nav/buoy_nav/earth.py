@@ -206,13 +206,10 @@ class LocalTangentPlane:
         self.altitude_m = float(altitude_m)
         self._origin_ecef = ecef_from_geodetic(latitude_rad, longitude_rad, altitude_m)
         self._enu_to_ecef = rotation_enu_to_ecef(latitude_rad, longitude_rad)
-        # Scalar copies for the per-sample path (enu_from_geodetic_scalar).
-        self._origin_xyz = ecef_from_geodetic_scalar(latitude_rad, longitude_rad, altitude_m)
-        self._rows = tuple(tuple(float(c) for c in row) for row in self._enu_to_ecef.T)
-        self.scalar_terms = np.array([*self._origin_xyz, *(c for row in self._rows for c in row)])
-        """The ECEF origin (m) and the rows of the ECEF → ENU rotation (row-major) that
-        :meth:`enu_from_geodetic_scalar` uses, as one array of 12 for compiled code that
-        repeats its arithmetic."""
+        origin = ecef_from_geodetic_scalar(latitude_rad, longitude_rad, altitude_m)
+        self.scalar_terms = np.array([*origin, *self._enu_to_ecef.T.ravel()])
+        """The ECEF origin (m) and the rows of the ECEF → ENU rotation (row-major), one array
+        of 12: the plane as :func:`enu_from_ecef_scalar` takes it, in compiled code too."""
 
     def enu_from_geodetic(self, latitude_rad, longitude_rad, altitude_m) -> np.ndarray:
         """ENU coordinates (m, last axis E, N, U) of geodetic points (rad, rad, m)."""
@@ -227,16 +224,25 @@ class LocalTangentPlane:
     def enu_from_geodetic_scalar(
         self, latitude_rad: float, longitude_rad: float, altitude_m: float
     ) -> tuple[float, float, float]:
-        """Same as :meth:`enu_from_geodetic` for one point, with plain floats (fast path)."""
-        x, y, z = ecef_from_geodetic_scalar(latitude_rad, longitude_rad, altitude_m)
-        ox, oy, oz = self._origin_xyz
-        dx, dy, dz = x - ox, y - oy, z - oz
-        east, north, up = self._rows
-        return (
-            east[0] * dx + east[1] * dy + east[2] * dz,
-            north[0] * dx + north[1] * dy + north[2] * dz,
-            up[0] * dx + up[1] * dy + up[2] * dz,
+        """Same as :meth:`enu_from_geodetic` for one point, by the scalar arithmetic that the
+        solutions' compiled code runs (:func:`enu_from_ecef_scalar`)."""
+        return enu_from_ecef_scalar(
+            *ecef_from_geodetic_scalar(latitude_rad, longitude_rad, altitude_m),
+            self.scalar_terms,
         )
+
+
+def enu_from_ecef_scalar(x_m: float, y_m: float, z_m: float, plane_terms) -> tuple:
+    """ENU coordinates (m) of the ECEF point (``x_m``, ``y_m``, ``z_m``, m) in the tangent
+    plane whose :attr:`LocalTangentPlane.scalar_terms` are ``plane_terms``. Scalars only, so
+    that compiled code (numba) runs the same source, sum for sum."""
+    t = plane_terms
+    dx, dy, dz = x_m - t[0], y_m - t[1], z_m - t[2]
+    return (
+        t[3] * dx + t[4] * dy + t[5] * dz,
+        t[6] * dx + t[7] * dy + t[8] * dz,
+        t[9] * dx + t[10] * dy + t[11] * dz,
+    )
 
 
 def geodetic_offset(

@@ -208,6 +208,7 @@ _POSITION_MAP = slice(16, 19)
 _SOLUTION_VECTOR_SIZE = 19
 
 _ecef_from_geodetic_scalar = numba.njit(cache=True)(earth.ecef_from_geodetic_scalar)
+_enu_from_ecef_scalar = numba.njit(cache=True)(earth.enu_from_ecef_scalar)
 
 
 @numba.njit(cache=True)
@@ -217,7 +218,8 @@ def _solution_vector(state, gx, gy, gz, fx, fy, fz, plane_terms):
     above): the attitude, the bias-corrected rate ω_ib and ω_nb = ω_ib − R_nbᵀ ω_in, the
     bias-corrected force, the velocity and the ``map`` position (m) of the plane whose
     ``scalar_terms`` are ``plane_terms``. The sums are grouped as the interpreter groups
-    them, so a solution is the same to the bit whichever computes it."""
+    them (the position by the plane's own scalar conversion, compiled), so a solution is the
+    same to the bit whichever computes it."""
     vector = np.empty(_SOLUTION_VECTOR_SIZE)
     for i in range(4):
         vector[i] = state[ATTITUDE + i]
@@ -235,12 +237,7 @@ def _solution_vector(state, gx, gy, gz, fx, fy, fz, plane_terms):
     for i in range(3):
         vector[13 + i] = state[VELOCITY + i]
     x, y, z = _ecef_from_geodetic_scalar(state[LATITUDE], state[LONGITUDE], state[ALTITUDE])
-    dx, dy, dz = x - plane_terms[0], y - plane_terms[1], z - plane_terms[2]
-    for i in range(3):
-        row = 3 + 3 * i
-        vector[16 + i] = (
-            plane_terms[row] * dx + plane_terms[row + 1] * dy + plane_terms[row + 2] * dz
-        )
+    vector[16], vector[17], vector[18] = _enu_from_ecef_scalar(x, y, z, plane_terms)
     return vector
 
 

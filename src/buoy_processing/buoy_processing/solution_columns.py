@@ -23,8 +23,6 @@ from buoy_nav.nav_numbers import BODY_TWIST_COVARIANCE, VELOCITY_BODY, body_numb
 from buoy_nav.solution import NavSolution
 from wind_comp.pipeline import NavigationColumns
 
-NANOSECONDS = 1_000_000_000
-
 
 class StampedSolution(NamedTuple):
     """A solution with the exact header stamp of its IMU sample (``sec``, ``nanosec``), which
@@ -109,9 +107,6 @@ class HeldBackSolutions:
         self.in_order = 0
         """Of the solutions held, those whose stamp is later than every earlier one: the ones a
         pipeline keeps (:meth:`~wind_comp.pipeline.CompensationPipeline.add_odometry`)."""
-
-    def __len__(self) -> int:
-        return len(self._held)
 
     def take(self, stamped: Sequence[StampedSolution], latest_taken_s: float) -> None:
         """Hold the ``stamped`` solutions; ``latest_taken_s``: the latest stamp the pipelines
