@@ -35,7 +35,7 @@ STAGES = (
     ("the filter's step (FusionEngine._process)", FusionEngine, "_process"),
     ("the prediction ahead and its solution", RealtimePrediction, "predict"),
     ("a measurement's screening and queue", FusionEngine, "_screen_measurement"),
-    ("the solutions held back for the corrections", BagCorrections, "add_stamped_solutions"),
+    ("the solutions held back for the corrections", BagCorrections, "add_solution_rows"),
     ("the wind's correction: the sonic's samples", BagCorrections, "add_message"),
     ("the wind's correction: the navigation handed over in bulk", HeldBackSolutions, "hand_over"),
     ("decoding the chunks", offline_runner, "chunk_records"),

@@ -100,11 +100,13 @@ from buoy_nav.prediction import RealtimePrediction, load_compiled_carry_over
 from buoy_nav.processing_point import ProcessingPoint
 from buoy_nav.sensor_sets import AidingRecency, SensorSets
 from buoy_nav.solution import (
+    Emitted,
     NavSolution,
     OutputDecimation,
     SolutionBuilder,
     load_compiled_solution_vector,
 )
+from buoy_nav.solution_rows import SolutionRows, load_compiled_solution_rows
 from buoy_nav.source_health import HealthTransition
 from buoy_nav.source_registry import SourceRegistry
 from buoy_nav.stream_sequence import StreamSequence
@@ -122,11 +124,16 @@ class FusionEngine:
     """Strapdown INS aided by the sources of ``sources`` (see the module docstring).
 
     sources: the aiding-source classes to run, in the order measurements of one stamp are
-    applied (default :data:`buoy_nav.aiding.AIDING_SOURCES`).
+    applied (default :data:`buoy_nav.aiding.AIDING_SOURCES`). solution_rows: where a run that
+    makes no message of the solutions has them written, a row each; the methods that return
+    solutions then return their stamps (s) (None: they return :class:`NavSolution`).
     """
 
     def __init__(
-        self, config: FusionConfig, sources: Iterable[type[AidingSource]] = AIDING_SOURCES
+        self,
+        config: FusionConfig,
+        sources: Iterable[type[AidingSource]] = AIDING_SOURCES,
+        solution_rows: SolutionRows | None = None,
     ):
         self.config = config
         self.states = ERROR_STATES
@@ -137,6 +144,7 @@ class FusionEngine:
             load_compiled_carry_over,
             load_compiled_nav_numbers,
             load_compiled_solution_vector,
+            load_compiled_solution_rows,
             load_compiled_model_kernels,
             *(source.load_compiled_code for source in self._registry.sources),
         )
@@ -190,12 +198,12 @@ class FusionEngine:
             config.integrity_realign_s,
             config.integrity_recovery_s,
         )
-        self._solutions = SolutionBuilder(_configured_map_plane(config))
+        self._solutions = SolutionBuilder(_configured_map_plane(config), solution_rows)
         self._output = OutputDecimation(config.output_rate_hz)
         self._prediction = RealtimePrediction(config.max_imu_gap_s, self._solutions, self._output)
 
     # ------------------------------------------------------------------ input
-    def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[NavSolution]:
+    def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[Emitted]:
         """Add an IMU sample (stamp s; ω_ib body rad/s; specific force body m/s²).
 
         Returns the new solutions: with ``realtime_output`` the new sample's prediction (after an
@@ -223,7 +231,7 @@ class FusionEngine:
         for reason in self.imu_given_up:
             self._counters[IMU].reject(reason)
 
-    def _take_imu_sample(self, sample: tuple) -> list[NavSolution]:
+    def _take_imu_sample(self, sample: tuple) -> list[Emitted]:
         """Take an accepted IMU sample (stamp s, ω_ib body rad/s, specific force body m/s²);
         the solutions :meth:`add_imu` returns for it."""
         self.catch_up()
@@ -327,7 +335,7 @@ class FusionEngine:
         """The aiding source that reads ``topic`` (ValueError naming it when none does)."""
         return self._registry.of_topic(topic)
 
-    def flush(self) -> list[NavSolution]:
+    def flush(self) -> list[Emitted]:
         """End of data: process every buffered IMU sample and every applicable measurement.
 
         Measurements stamped after the last IMU sample cannot be reached and are rejected. With
@@ -415,10 +423,10 @@ class FusionEngine:
         return self._solutions.map_plane
 
     # ------------------------------------------------------------------ processing
-    def _process(self, horizon: float) -> list[NavSolution]:
+    def _process(self, horizon: float) -> list[Emitted]:
         """Filter the buffered data up to ``horizon``: the solutions of the processed IMU
         samples, unless ``realtime_output`` predicts them ahead instead."""
-        solutions: list[NavSolution] = []
+        solutions: list[Emitted] = []
         buffer = self._imu_buffer
         while buffer and buffer[0][0] <= horizon:
             t, gyro, force = buffer.popleft()
@@ -442,7 +450,7 @@ class FusionEngine:
             self._handle_measurements(*queue.pop_stamp(), gyro)
         self._point.start_run(t, gyro, force)
 
-    def _process_sample(self, t: float, gyro, force) -> NavSolution | None:
+    def _process_sample(self, t: float, gyro, force) -> Emitted | None:
         """Integrate to the IMU sample at ``t``, applying the measurements stamped up to it at
         their own stamps; its solution when one is due from the filter."""
         point = self._point
@@ -720,10 +728,10 @@ class FusionEngine:
         self._prediction.drop()
 
     # ------------------------------------------------------------------ output
-    def _solution(self, integrator: StrapdownIntegrator, t: float, gyro, force) -> NavSolution:
+    def _solution(self, integrator: StrapdownIntegrator, t: float, gyro, force) -> Emitted:
         """The solution of ``integrator``'s state at stamp ``t`` (raw gyro and force there)."""
         # Coasting is judged where the filter is: measurements ahead of it are not yet used.
-        return self._solutions.solution(
+        return self._solutions.emit(
             integrator,
             self._nav.kalman,
             t,

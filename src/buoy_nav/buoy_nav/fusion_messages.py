@@ -81,6 +81,7 @@ from buoy_nav.nav_numbers import (
     body_numbers,
     covariance_numbers,
 )
+from buoy_nav.solution import Emitted
 
 FUSION_INPUT_MSGTYPES = {
     IMU_RAW_TOPIC: SENSOR_MSGTYPES[IMU_RAW_TOPIC],
@@ -122,7 +123,7 @@ class StampBook:
 
 def feed_message(
     engine: FusionEngine, topic: str, message, stamps: StampBook | None = None
-) -> tuple[list[NavSolution], str | None]:
+) -> tuple[list[Emitted], str | None]:
     """Give one sensor message of ``topic`` to ``engine``: an IMU sample, or a measurement of
     the aiding source that reads ``topic`` (which converts the message).
 
@@ -155,7 +156,7 @@ def feed_message(
 
 def feed_measurement_record(
     engine: FusionEngine, topic: str, sec: int, nanosec: int, *fields
-) -> tuple[list[NavSolution], str | None]:
+) -> tuple[list[Emitted], str | None]:
     """:func:`feed_message` of a message of an aiding source's ``topic`` read elsewhere, with
     the others of its chunk (:mod:`buoy_common.cdr_bulk`): header stamp ``sec``, ``nanosec``
     and the values of the source's ``record_fields``."""
@@ -166,7 +167,7 @@ def feed_measurement_record(
 
 def _add_measurement(
     engine: FusionEngine, source, t_s: float, measurement
-) -> tuple[list[NavSolution], str | None]:
+) -> tuple[list[Emitted], str | None]:
     """Give ``source``'s ``measurement`` stamped ``t_s`` (s) to ``engine``, or count the
     :class:`Reason` it is none."""
     if isinstance(measurement, Reason):
@@ -178,7 +179,7 @@ def _add_measurement(
 
 def feed_imu_cdr(
     engine: FusionEngine, raw: bytes, stamps: StampBook | None = None
-) -> tuple[list[NavSolution], str | None] | None:
+) -> tuple[list[Emitted], str | None] | None:
     """:func:`feed_message` of an ``imu/data_raw`` message straight from its CDR bytes.
 
     Offline tools read IMU samples this way, several times faster than decoding a message
@@ -198,7 +199,7 @@ def feed_imu_fields(
     angular_velocity,
     linear_acceleration,
     stamps: StampBook | None = None,
-) -> tuple[list[NavSolution], str | None]:
+) -> tuple[list[Emitted], str | None]:
     """:func:`feed_message` of an ``imu/data_raw`` message read elsewhere (its CDR bytes,
     alone or with the others of its chunk): header stamp ``sec``, ``nanosec``; angular velocity
     (rad/s) and linear acceleration (m/s²), x, y, z in the IMU's frame."""

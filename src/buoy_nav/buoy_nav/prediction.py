@@ -24,7 +24,7 @@ from buoy_nav import earth
 from buoy_nav.error_state_filter import ErrorStateFilter, NavState
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.rotations import cross_components
-from buoy_nav.solution import NavSolution, OutputDecimation, SolutionBuilder
+from buoy_nav.solution import Emitted, OutputDecimation, SolutionBuilder
 from buoy_nav.state_layout import UP
 from buoy_nav.strapdown_kernel import (
     ERROR_ACCEL_BIAS,
@@ -77,14 +77,14 @@ class RealtimePrediction:
         buffered_samples: Iterable[tuple],
         sample: tuple,
         coasting: tuple[bool, bool, bool],
-    ) -> list[NavSolution]:
+    ) -> list[Emitted]:
         """The solutions up to the newest IMU ``sample`` (t, raw gyro, raw force): its own, and
         after a fork from the filter (whose state is at ``filter_sample``, the (t, raw gyro, raw
         force) it refers to) also those of the ``buffered_samples`` ahead of the filter, the
         newest included. Their covariances are ``kalman``'s, their coasting flags
         ``coasting``."""
         due = self._output.due
-        solution = self._solutions.solution
+        solution = self._solutions.emit
         solutions = []
         if self._ahead is None:
             integrator = filter_integrator.fork()

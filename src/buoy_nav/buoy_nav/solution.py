@@ -10,6 +10,7 @@ from buoy_nav import earth
 from buoy_nav.error_state_filter import ErrorStateFilter
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_quaternion
+from buoy_nav.solution_rows import SolutionRows
 from buoy_nav.state_layout import StateLayout
 from buoy_nav.strapdown_kernel import (
     ACCEL_BIAS,
@@ -77,17 +78,28 @@ class NavSolution:
         return euler_from_rotation_matrix(rotation_matrix_from_quaternion(self.attitude_xyzw))
 
 
+Emitted = NavSolution | float
+"""What the engine emits of a solution: the solution, or its stamp (s) when it is written as a
+row (:class:`SolutionBuilder`'s ``rows``)."""
+
+
 class SolutionBuilder:
     """Builds :class:`NavSolution` from an integrator's state.
 
     At the IMU rate most consecutive solutions share the filter's covariance and bias estimates:
     their read-only arrays are made once and kept until :meth:`covariance_changed` or
     :meth:`biases_changed`. ``map_plane`` is the ``map`` frame the positions are expressed in
-    (set before the first solution).
+    (set before the first solution). With ``rows`` (a run that makes no message of them) the
+    solutions are written there instead (:meth:`row`); the engine makes each through
+    :attr:`emit`.
     """
 
-    def __init__(self, map_plane: earth.LocalTangentPlane | None):
+    def __init__(self, map_plane: earth.LocalTangentPlane | None, rows: SolutionRows | None = None):
         self.map_plane = map_plane
+        self.rows = rows
+        """Where the solutions are written as rows instead (None: made as :class:`NavSolution`)."""
+        self.emit = self.solution if rows is None else self.row
+        """:meth:`solution`, or :meth:`row` when the solutions are written as rows."""
         self._distrust_variances: tuple[float, float] | None = None
         self._covariance_blocks: tuple[np.ndarray, ...] | None = None
         self._block_layout: StateLayout | None = None
@@ -156,17 +168,42 @@ class SolutionBuilder:
             coasting_heading=coasting[2],
         )
 
+    def row(
+        self,
+        integrator: StrapdownIntegrator,
+        kalman: ErrorStateFilter,
+        t: float,
+        gyro,
+        force,
+        coasting: tuple[bool, bool, bool],
+    ) -> float:
+        """:meth:`solution`'s numbers that :class:`~buoy_nav.solution_rows.SolutionRows` keeps,
+        written as a row of :attr:`rows`; returns the stamp ``t`` (the raw ``force`` and the
+        ``coasting`` flags are not kept)."""
+        self.rows.append(
+            t,
+            integrator.state_vector,
+            gyro,
+            kalman.covariance,
+            self._block_indices_of(kalman.states),
+            self._distrust_variances,
+        )
+        return t
+
+    def _block_indices_of(self, states: StateLayout) -> np.ndarray:
+        """:func:`_published_block_indices` of ``states``, made once per layout."""
+        if self._block_layout is not states:
+            self._block_layout = states
+            self._block_indices = _published_block_indices(states)
+        return self._block_indices
+
     def _published_covariance_blocks(self, kalman: ErrorStateFilter) -> tuple[np.ndarray, ...]:
         """The attitude (rad²), velocity (m²/s²), position (m²) and gyro bias (rad²/s²)
         blocks of ``kalman``'s covariance, read-only, the first two widened while the filter is
         distrusted."""
-        states = kalman.states
-        if self._block_layout is not states:
-            self._block_layout = states
-            self._block_indices = _published_block_indices(states)
         # One gather copies all four blocks (each a contiguous 3×3 of the result): half the
         # time of four slices copied one by one, at a new covariance per IMU sample.
-        blocks = kalman.covariance.take(self._block_indices)
+        blocks = kalman.covariance.take(self._block_indices_of(kalman.states))
         if self._distrust_variances is not None:
             for block, variance in zip(blocks, self._distrust_variances, strict=False):
                 block[np.diag_indices(3)] += variance

@@ -1,13 +1,16 @@
 """The covariance blocks a solution carries: the filter's own, read-only, widened while the
-filter is distrusted, and shared by consecutive solutions until the covariance changes."""
+filter is distrusted, and shared by consecutive solutions until the covariance changes; its
+vectors; and its numbers written as a row."""
 
 import numpy as np
 import pytest
 
 from buoy_nav import earth
+from buoy_nav import solution_rows as row
 from buoy_nav.error_state_filter import ERROR_STATES, ErrorStateFilter
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.solution import NavSolution, SolutionBuilder
+from buoy_nav.solution_rows import SolutionRows
 
 BLOCK_OF_FIELD = {
     "attitude_covariance_rad2": "attitude",
@@ -137,3 +140,50 @@ def test_a_solutions_rate_relative_to_enu_and_its_place_follow_the_frames():
     assert latitude == pytest.approx(integrator.latitude_rad, abs=1e-12)
     assert longitude == pytest.approx(integrator.longitude_rad, abs=1e-12)
     assert altitude == pytest.approx(integrator.altitude_m, abs=1e-6)
+
+
+@pytest.mark.parametrize("variances", [None, (1e-4, 2e-3)])
+def test_a_solutions_row_is_its_own_numbers_to_the_bit(variances):
+    """Written as rows (a run that makes no message of them), the solutions keep the numbers
+    the built ones carry, column by column, distrusted or not; taken, the oldest rows leave
+    and the rest stay in order."""
+    rng = np.random.default_rng(13)
+    built, written = _builder(), SolutionBuilder(_builder().map_plane, SolutionRows())
+    solutions = []
+    for index in range(300):
+        kalman = _random_filter(100 + index)
+        for builder in (built, written):
+            builder.distrust(variances)
+            builder.covariance_changed()
+            builder.biases_changed()
+        integrator = _turning_integrator(rng)
+        gyro = tuple(rng.normal(scale=0.3, size=3).tolist())
+        arguments = (integrator, kalman, 10.0 + index, gyro, (0.0, 0.0, 9.8), (False,) * 3)
+        solutions.append(built.emit(*arguments))
+        assert written.emit(*arguments) == 10.0 + index
+    first = written.rows.take(100)
+    rows = np.concatenate((first, written.rows.take(200)))
+    assert written.rows.count == 0
+    for solution, values in zip(solutions, rows, strict=True):
+        expected = [
+            (row.STAMP, [solution.t_s]),
+            (row.ATTITUDE_XYZW, solution.attitude_xyzw),
+            (row.ANGULAR_RATE, solution.angular_rate_body_rad_s),
+            (row.VELOCITY_ENU, solution.velocity_enu_mps),
+            (
+                row.GEODETIC,
+                [solution.latitude_deg, solution.longitude_deg, solution.altitude_m],
+            ),
+            (row.ATTITUDE_COVARIANCE, solution.attitude_covariance_rad2.ravel()),
+            (row.VELOCITY_COVARIANCE, solution.velocity_covariance_m2s2.ravel()),
+            (row.GYRO_BIAS_COVARIANCE, solution.gyro_bias_covariance_rad2_s2.ravel()),
+        ]
+        for columns, numbers in expected:
+            kept = np.atleast_1d(values[columns])
+            assert kept.tobytes() == np.asarray(numbers, dtype=float).tobytes(), columns
+
+
+def test_more_rows_are_taken_than_written_is_an_error():
+    rows = SolutionRows()
+    with pytest.raises(ValueError, match="1 rows asked for, 0 written"):
+        rows.take(1)

@@ -69,6 +69,7 @@ from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
+from buoy_nav.solution_rows import SolutionRows
 from buoy_processing.offline_fusion import (
     OfflineFusion,
     relative_topic,
@@ -78,7 +79,7 @@ from buoy_processing.offline_fusion import (
 from buoy_processing.offline_runner import OfflineRun, run_fusion
 from buoy_processing.output_facts import OutputFacts, output_facts, source_use_of
 from buoy_processing.output_series import NANOSECONDS, FlowSeries, NavigationSeries
-from buoy_processing.solution_columns import HeldBackSolutions, SolutionColumns, StampedSolution
+from buoy_processing.solution_columns import HeldBackSolutions, SolutionColumns, Stamp
 from wind_comp.compensation_messages import (
     FlowSample,
     anemometer_sample,
@@ -578,22 +579,23 @@ class BagCorrections:
         for correction in self._running:
             correction.add_navigation(solutions)
 
-    def add_stamped_solutions(self, stamped: list[StampedSolution]) -> None:
-        """Solutions of a run that makes no ``nav/*`` values: held back once for every
-        correction and the NetCDF file, handed over in bulk (:class:`HeldBackSolutions`)."""
-        held_back = self._held_back()
+    def add_solution_rows(self, rows: SolutionRows, stamps: list[Stamp]) -> None:
+        """Solutions of a run that makes no ``nav/*`` values, written as the latest ``rows``,
+        of header ``stamps``: held back once for every correction and the NetCDF file, handed
+        over in bulk (:class:`HeldBackSolutions`)."""
+        held_back = self._held_back(rows)
         for correction in self._running:
-            correction.make_room(len(stamped))
-        held_back.take(stamped, self._running[0].pipeline.latest_navigation_stamp_s)
+            correction.make_room(len(stamps))
+        held_back.take(stamps, self._running[0].pipeline.latest_navigation_stamp_s)
 
-    def _held_back(self) -> HeldBackSolutions:
-        """The holder of the solutions, made at the first ones."""
+    def _held_back(self, rows: SolutionRows) -> HeldBackSolutions:
+        """The holder of the solutions written to ``rows``, made at the first ones."""
         held_back = self._running[0].held_back
         if held_back is None:
             takers = [correction.take_columns for correction in self._running]
             if self.navigation is not None:
                 takers.append(self.navigation.add_columns)
-            held_back = HeldBackSolutions(takers)
+            held_back = HeldBackSolutions(rows, takers)
             for correction in self._running:
                 correction.held_back = held_back
         return held_back

@@ -33,7 +33,7 @@ from buoy_common.contract import (
 from buoy_common.namespaces import NamespacedWriter
 from buoy_nav.aiding import HEADING_REFERENCE_TOPICS, disabled_topics
 from buoy_nav.config import FusionConfig
-from buoy_nav.engine import FusionEngine, NavSolution
+from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import (
     FUSION_INPUT_MSGTYPES,
     NavValues,
@@ -47,9 +47,11 @@ from buoy_nav.fusion_messages import (
     solution_cdr,
     transform_cdr,
 )
+from buoy_nav.solution import Emitted
+from buoy_nav.solution_rows import SolutionRows
 from buoy_nav.source_health import HealthTransition, SourceStatus
 from buoy_processing.nav_output_rate import NavOutputRate
-from buoy_processing.solution_columns import StampedSolution
+from buoy_processing.solution_columns import Stamp
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
 """The fusion needs one of these at least: without a heading reference it cannot align."""
@@ -115,9 +117,9 @@ def truth_topics_of(reader: BagReader) -> list[str]:
     return sorted(n for n in reader.topics if relative_topic(n).startswith(TRUTH_PREFIX))
 
 
-HandedOver = list[NavValues] | list[StampedSolution]
-"""New solutions as a run hands them on: their ``nav/*`` values, or as they are with their
-header stamps (``stamped_solutions``)."""
+HandedOver = list[NavValues] | list[Stamp]
+"""New solutions as a run hands them on: their ``nav/*`` values, or their header stamps, the
+solutions themselves written as rows (``solution_rows``)."""
 
 
 class OfflineFusion:
@@ -130,21 +132,26 @@ class OfflineFusion:
         smoother_spill_parent: str | Path | None = None,
         smooth: bool = False,
         nav_rate_hz: float = 0.0,
-        stamped_solutions: bool = False,
+        solution_rows: bool = False,
     ):
         """``writer`` receives the ``nav/*`` and ``tf`` messages, of every solution or, with
         ``nav_rate_hz`` (Hz) above 0, of a subset at that rate
         (:mod:`buoy_processing.nav_output_rate`; every solution is still returned); None: none
         is made (a run that writes its products alone). The solutions are returned as their
-        ``nav/*`` values or, with ``stamped_solutions`` (no writer), as they are with their
-        header stamps (:class:`~buoy_processing.solution_columns.StampedSolution`), for
-        corrections that take them in bulk. With ``smooth``
+        ``nav/*`` values or, with ``solution_rows`` (no writer), as their header stamps, the
+        engine writing the solutions to :attr:`solution_rows` (:mod:`buoy_nav.solution_rows`),
+        for corrections that take them in bulk. With ``smooth``
         (the filter's own solutions, ``realtime_output`` off) nothing is written: the solutions are
         kept by :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``)
         and written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
         if smooth:
             config = dataclasses.replace(config, realtime_output=False)
-        self.engine = FusionEngine(config)
+        if solution_rows and writer is not None:
+            raise ValueError("solution rows are for a run that writes no nav/* messages")
+        self.solution_rows = SolutionRows() if solution_rows and not smooth else None
+        """Where the engine writes the solutions of a run that makes no ``nav/*`` values (None:
+        it makes :class:`~buoy_nav.solution.NavSolution`); a smoothing run keeps those."""
+        self.engine = FusionEngine(config, solution_rows=self.solution_rows)
         self.smoother = None
         if smooth:
             # Imported for a smoothing run only: scipy's rotations, which the smoother needs,
@@ -152,11 +159,8 @@ class OfflineFusion:
             from buoy_nav.smoothed_solutions import FixedIntervalSmoother
 
             self.smoother = FixedIntervalSmoother(self.engine, smoother_spill_parent)
-        if stamped_solutions and writer is not None:
-            raise ValueError("stamped solutions are for a run that writes no nav/* messages")
         self.stamps = StampBook()
         self.writer = writer
-        self.stamped_solutions = stamped_solutions
         self.nav_output = NavOutputRate(nav_rate_hz)
         self.rejections: Counter[str] = Counter()
         self.first_solution_s: float | None = None
@@ -166,8 +170,8 @@ class OfflineFusion:
 
     def add(self, topic: str, message, log_time_ns: int) -> HandedOver:
         """One decoded sensor message of relative ``topic``; returns the new solutions (their
-        ``nav/*`` values, which are written with log time ``log_time_ns``, or as they are with
-        ``stamped_solutions``)."""
+        ``nav/*`` values, which are written with log time ``log_time_ns``, or their stamps with
+        ``solution_rows``)."""
         return self._take(
             topic, feed_message(self.engine, topic, message, self.stamps), log_time_ns
         )
@@ -219,7 +223,9 @@ class OfflineFusion:
         self.source_transitions.extend(self.engine.take_source_transitions())
         return written
 
-    def _write(self, solutions: list[NavSolution], log_time_ns: int) -> HandedOver:
+    def _write(self, solutions: list[Emitted], log_time_ns: int) -> HandedOver:
+        if self.solution_rows is not None:
+            return self._stamps_of(solutions)
         written = []
         smoother = self.smoother
         for solution in solutions:
@@ -228,14 +234,19 @@ class OfflineFusion:
             if smoother is not None:
                 smoother.add(solution, *self.stamps.exact(solution.t_s), log_time_ns)
                 continue
-            if self.stamped_solutions:
-                written.append(StampedSolution(solution, *self.stamps.exact(solution.t_s)))
-                continue
             values = nav_values(solution, self.stamps)
             if self.writer is not None and self.nav_output.due(values):
                 self._write_nav(values, log_time_ns)
             written.append(values)
         return written
+
+    def _stamps_of(self, stamps_s: list[float]) -> list[Stamp]:
+        """The header stamps of the solutions the engine wrote as rows, stamped ``stamps_s``
+        (s)."""
+        if stamps_s and self.first_solution_s is None:
+            self.first_solution_s = stamps_s[0]
+        exact = self.stamps.exact
+        return [exact(t_s) for t_s in stamps_s]
 
     def _write_nav(self, values: NavValues, log_time_ns: int) -> None:
         """``nav/*`` and ``tf`` of one solution."""

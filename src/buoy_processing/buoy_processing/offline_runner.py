@@ -19,6 +19,7 @@ and the consumer receives the smoothed one.
 
 from __future__ import annotations
 
+import functools
 import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -38,9 +39,10 @@ from buoy_common.transform_messages import FrameTransform, tf_cdr
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import NavValues
 from buoy_nav.observability import unobserved_quantities
+from buoy_nav.solution_rows import SolutionRows
 from buoy_processing.chunk_records import chunk_records
 from buoy_processing.offline_fusion import OfflineFusion
-from buoy_processing.solution_columns import StampedSolution
+from buoy_processing.solution_columns import Stamp
 
 TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
 
@@ -55,9 +57,10 @@ class BagConsumer(Protocol):
     def add_navigation(self, solutions: list[NavValues]) -> None:
         """New navigation solutions, in order (what ``nav/odometry`` and ``nav/fix`` carry)."""
 
-    def add_stamped_solutions(self, stamped: list[StampedSolution]) -> None:
-        """New navigation solutions of a run that writes no bag, in order, as they are with
-        their header stamps (:mod:`buoy_processing.solution_columns`)."""
+    def add_solution_rows(self, rows: SolutionRows, stamps: list[Stamp]) -> None:
+        """New navigation solutions of a run that writes no bag, in order: their header
+        ``stamps``, the solutions written as the latest rows of ``rows``
+        (:mod:`buoy_processing.solution_columns`)."""
 
     @property
     def record_fields(self) -> dict[str, tuple[str, ...]]:
@@ -108,8 +111,8 @@ class NothingFollows:
     def add_navigation(self, solutions: list[NavValues]) -> None:
         pass
 
-    def add_stamped_solutions(self, stamped: list[StampedSolution]) -> None:
-        pass
+    def add_solution_rows(self, rows: SolutionRows, stamps: list[Stamp]) -> None:
+        rows.take(len(stamps))
 
     @property
     def record_fields(self) -> dict[str, tuple[str, ...]]:
@@ -228,7 +231,7 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion,
         run.write_static_transforms(writer)
         output = writer if run.write_bag else None
         fusion = OfflineFusion(
-            run.config, output, nav_rate_hz=run.nav_rate_hz, stamped_solutions=output is None
+            run.config, output, nav_rate_hz=run.nav_rate_hz, solution_rows=output is None
         )
         consumer.start(output)
         # What the set-up built (the engine, the compiled kernels) lives through the pass.
@@ -302,8 +305,10 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion
 
 def _hand_over(fusion: OfflineFusion, consumer: BagConsumer):
     """How ``consumer`` takes what ``fusion`` returns: its solutions' ``nav/*`` values or, in a
-    run that makes none, the solutions with their stamps."""
-    return consumer.add_stamped_solutions if fusion.stamped_solutions else consumer.add_navigation
+    run that makes none, their stamps, the solutions written as rows."""
+    if fusion.solution_rows is None:
+        return consumer.add_navigation
+    return functools.partial(consumer.add_solution_rows, fusion.solution_rows)
 
 
 def _merged_pass(

@@ -2,13 +2,12 @@
 
 With a bag, every solution becomes its ``nav/*`` values
 (:func:`buoy_nav.fusion_messages.nav_values`) and each correction takes its ``nav/odometry``
-and ``nav/fix`` one by one, as the live node does. Without one, no message is made: the
-corrections hold the solutions back with their exact header stamps and, before they decide
-samples, take a stretch of them as columns (:class:`wind_comp.pipeline.NavigationColumns`),
-every number as the messages' values carry it, to the bit: the body velocity and its covariance
-from the compiled code that makes them for the messages
-(:func:`buoy_nav.nav_numbers.body_numbers_of_solutions`), the rest copied from the solutions'
-own arrays.
+and ``nav/fix`` one by one, as the live node does. Without one, no message is made: the engine
+writes each solution as a row (:mod:`buoy_nav.solution_rows`), the corrections hold their exact
+header stamps back and, before they decide samples, take the rows held as columns
+(:class:`wind_comp.pipeline.NavigationColumns`), every number as the messages' values carry it,
+to the bit: the body velocity and its covariance from the compiled code that makes them for the
+messages (:func:`buoy_nav.nav_numbers.body_numbers_of_solutions`), the rest the rows' own.
 """
 
 from __future__ import annotations
@@ -19,23 +18,14 @@ from typing import NamedTuple
 
 import numpy as np
 
+from buoy_nav import solution_rows as row
 from buoy_nav.nav_numbers import BODY_TWIST_COVARIANCE, VELOCITY_BODY, body_numbers_of_solutions
-from buoy_nav.solution import NavSolution
+from buoy_nav.solution_rows import SolutionRows
 from wind_comp.pipeline import NavigationColumns
 
-
-class StampedSolution(NamedTuple):
-    """A solution with the exact header stamp of its IMU sample (``sec``, ``nanosec``), which
-    its ``nav/*`` messages would carry."""
-
-    solution: NavSolution
-    sec: int
-    nanosec: int
-
-
-def stamp_s(stamped: StampedSolution) -> float:
-    """The header stamp (s) a correction reads off a solution's ``nav/odometry``."""
-    return stamped.sec + stamped.nanosec * 1e-9
+Stamp = tuple[int, int]
+"""A solution's header stamp (sec, nanosec): its IMU sample's, which its ``nav/*`` messages
+would carry."""
 
 
 class SolutionColumns(NamedTuple):
@@ -53,38 +43,27 @@ class SolutionColumns(NamedTuple):
     """(N, 3) ENU velocity, m/s."""
 
 
-def solution_columns(stamped: Sequence[StampedSolution]) -> SolutionColumns:
-    """What the ``nav/odometry`` and ``nav/fix`` of the ``stamped`` solutions carry, a row
-    each."""
-    solutions = [item.solution for item in stamped]
-    secs = np.array([item.sec for item in stamped], dtype=np.int64)
-    nanosecs = np.array([item.nanosec for item in stamped], dtype=np.int64)
-    attitude = np.array([solution.attitude_xyzw for solution in solutions], dtype=float)
-    velocity = np.array([solution.velocity_enu_mps for solution in solutions], dtype=float)
+def solution_columns(rows: np.ndarray, stamps: np.ndarray) -> SolutionColumns:
+    """What the ``nav/odometry`` and ``nav/fix`` of the solutions written as ``rows``
+    (:mod:`buoy_nav.solution_rows`) with their header ``stamps`` (N × (sec, nanosec)) carry, a
+    row each."""
+    secs, nanosecs = stamps[:, 0].copy(), stamps[:, 1].copy()
+    attitude = np.ascontiguousarray(rows[:, row.ATTITUDE_XYZW])
+    velocity = np.ascontiguousarray(rows[:, row.VELOCITY_ENU])
     body = body_numbers_of_solutions(
         attitude,
         velocity,
-        [solution.velocity_covariance_m2s2 for solution in solutions],
-        [solution.gyro_bias_covariance_rad2_s2 for solution in solutions],
+        _matrices(rows[:, row.VELOCITY_COVARIANCE]),
+        _matrices(rows[:, row.GYRO_BIAS_COVARIANCE]),
     )
     twist = body[:, BODY_TWIST_COVARIANCE : BODY_TWIST_COVARIANCE + 36].reshape(-1, 6, 6)
-    geodetic = np.array(
-        [
-            (solution.latitude_deg, solution.longitude_deg, solution.altitude_m)
-            for solution in solutions
-        ],
-        dtype=float,
-    ).reshape(-1, 3)
+    geodetic = np.ascontiguousarray(rows[:, row.GEODETIC])
     navigation = NavigationColumns(
         stamps_s=secs + nanosecs * 1e-9,
         attitude_xyzw=attitude,
-        angular_rate_body_rad_s=np.array(
-            [solution.angular_rate_body_rad_s for solution in solutions], dtype=float
-        ),
+        angular_rate_body_rad_s=np.ascontiguousarray(rows[:, row.ANGULAR_RATE]),
         velocity_body_mps=body[:, VELOCITY_BODY : VELOCITY_BODY + 3],
-        attitude_covariance_rad2=np.array(
-            [solution.attitude_covariance_rad2 for solution in solutions], dtype=float
-        ),
+        attitude_covariance_rad2=_matrices(rows[:, row.ATTITUDE_COVARIANCE]),
         body_velocity_covariance_m2s2=twist[:, :3, :3],
         body_rate_covariance_rad2_s2=twist[:, 3:, 3:],
         fix_latitude_deg=geodetic[:, 0],
@@ -92,40 +71,48 @@ def solution_columns(stamped: Sequence[StampedSolution]) -> SolutionColumns:
     return SolutionColumns(navigation, secs, nanosecs, geodetic, velocity)
 
 
+def _matrices(columns: np.ndarray) -> np.ndarray:
+    """N rows of nine row-major numbers as N 3×3 matrices, contiguous."""
+    return np.ascontiguousarray(columns).reshape(-1, 3, 3)
+
+
 class HeldBackSolutions:
     """The solutions of a run that writes no bag, from the fusion to the corrections and the
-    NetCDF file: held back with their stamps, counted as the corrections' pipelines will count
-    them, and handed over as columns, once for all, when a correction is about to decide
-    samples (:meth:`hand_over`)."""
+    NetCDF file: written as rows by the engine, their stamps held back here, counted as the
+    corrections' pipelines will count them, and handed over as columns, once for all, when a
+    correction is about to decide samples (:meth:`hand_over`)."""
 
-    def __init__(self, takers: Sequence[Callable[[SolutionColumns], None]]):
-        """takers: what each hand-over goes to, in order (each correction's pipeline, the
-        NetCDF file's series)."""
+    def __init__(self, rows: SolutionRows, takers: Sequence[Callable[[SolutionColumns], None]]):
+        """rows: where the engine writes the solutions; takers: what each hand-over goes to,
+        in order (each correction's pipeline, the NetCDF file's series)."""
+        self._rows = rows
         self._takers = list(takers)
-        self._held: list[StampedSolution] = []
+        self._stamps: list[Stamp] = []
         self._latest_s = -math.inf
         self.in_order = 0
         """Of the solutions held, those whose stamp is later than every earlier one: the ones a
         pipeline keeps (:meth:`~wind_comp.pipeline.CompensationPipeline.add_odometry`)."""
 
-    def take(self, stamped: Sequence[StampedSolution], latest_taken_s: float) -> None:
-        """Hold the ``stamped`` solutions; ``latest_taken_s``: the latest stamp the pipelines
-        took so far (s)."""
+    def take(self, stamps: Sequence[Stamp], latest_taken_s: float) -> None:
+        """Hold the solutions of header ``stamps``, the latest rows written; ``latest_taken_s``:
+        the latest stamp the pipelines took so far (s)."""
         latest_s = max(latest_taken_s, self._latest_s)
-        for item in stamped:
-            t_s = stamp_s(item)
+        for sec, nanosec in stamps:
+            # The stamp a correction reads off a solution's nav/odometry.
+            t_s = sec + nanosec * 1e-9
             if t_s > latest_s:
                 latest_s = t_s
                 self.in_order += 1
         self._latest_s = latest_s
-        self._held.extend(stamped)
+        self._stamps.extend(stamps)
 
     def hand_over(self) -> None:
         """Every solution held, as columns, to each taker."""
-        if not self._held:
+        if not self._stamps:
             return
-        columns = solution_columns(self._held)
-        self._held = []
+        stamps = np.array(self._stamps, dtype=np.int64).reshape(-1, 2)
+        columns = solution_columns(self._rows.take(len(stamps)), stamps)
+        self._stamps = []
         self.in_order = 0
         for taker in self._takers:
             taker(columns)

@@ -1,0 +1,153 @@
+"""Solutions as rows of one block, for a run that makes no message of them.
+
+A run that writes its products alone (``process_bag --no-bag``) needs of each solution only
+the numbers its corrections and its NetCDF file take. Built as a :class:`NavSolution` each,
+with its arrays, and gathered into columns later, they cost more than the filter's step that
+made them; written here, one compiled call a solution, they are columns already. Every number
+is the one :meth:`SolutionBuilder.solution` gives, to the bit.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from buoy_nav.strapdown_kernel import (
+    ALTITUDE,
+    ATTITUDE,
+    GYRO_BIAS,
+    LATITUDE,
+    LONGITUDE,
+    STATE_SIZE,
+    VELOCITY,
+)
+
+# The columns of a row: what the corrections and the NetCDF file take of a solution.
+STAMP = 0
+"""t_s: the solution's stamp (s)."""
+ATTITUDE_XYZW = slice(1, 5)
+"""Quaternion of R_nb (body FLU → ENU)."""
+ANGULAR_RATE = slice(5, 8)
+"""Bias-corrected gyro rate ω_ib (body, rad/s)."""
+VELOCITY_ENU = slice(8, 11)
+"""Velocity over ground (ENU, m/s)."""
+GEODETIC = slice(11, 14)
+"""Latitude, longitude (deg), altitude (m)."""
+ATTITUDE_COVARIANCE = slice(14, 23)
+"""Attitude error's covariance (ENU, rad², 3×3 row-major)."""
+VELOCITY_COVARIANCE = slice(23, 32)
+"""Velocity's covariance (ENU, m²/s², 3×3 row-major)."""
+GYRO_BIAS_COVARIANCE = slice(32, 41)
+"""Gyro bias's covariance (body, rad²/s², 3×3 row-major)."""
+ROW_WIDTH = 41
+
+_FIRST_CAPACITY = 4096
+
+# The published covariance blocks a row keeps, by their place in the builder's (4, 3, 3)
+# indices (attitude, velocity, position, gyro bias): the position's is not taken.
+_KEPT_BLOCKS = (0, 1, 3)
+_RADIANS_TO_DEGREES = 180.0 / math.pi
+
+
+class SolutionRows:
+    """The solutions written since the last :meth:`take`, a row each (the columns above)."""
+
+    def __init__(self):
+        self._block = np.empty((_FIRST_CAPACITY, ROW_WIDTH))
+        self.count = 0
+        """Rows written and not yet taken."""
+
+    def append(
+        self,
+        t_s: float,
+        state: np.ndarray,
+        gyro_rad_s: tuple[float, float, float],
+        covariance: np.ndarray,
+        block_indices: np.ndarray,
+        distrust_variances: tuple[float, float] | None,
+    ) -> None:
+        """Write the solution of the nominal ``state`` (strapdown_kernel's layout) at stamp
+        ``t_s`` (s) with the raw gyro sample there (body rad/s) and the filter's
+        ``covariance``, whose published blocks are at ``block_indices``
+        (:class:`~buoy_nav.solution.SolutionBuilder`'s), the attitude and velocity variances
+        ``distrust_variances`` (rad², m²/s²) added to their diagonals when not None."""
+        if self.count == self._block.shape[0]:
+            self._block = np.concatenate((self._block, np.empty_like(self._block)))
+        gx, gy, gz = gyro_rad_s
+        distrusted = distrust_variances is not None
+        attitude_variance, velocity_variance = distrust_variances if distrusted else (0.0, 0.0)
+        _write_row(
+            self._block,
+            self.count,
+            t_s,
+            state,
+            gx,
+            gy,
+            gz,
+            covariance,
+            block_indices,
+            distrusted,
+            attitude_variance,
+            velocity_variance,
+        )
+        self.count += 1
+
+    def take(self, count: int) -> np.ndarray:
+        """The oldest ``count`` rows (count × :data:`ROW_WIDTH`), no longer held."""
+        if count > self.count:
+            raise ValueError(f"{count} rows asked for, {self.count} written")
+        taken = self._block[:count].copy()
+        left = self.count - count
+        self._block[:left] = self._block[count : self.count]
+        self.count = left
+        return taken
+
+
+@numba.njit(cache=True)
+def _write_row(
+    block,
+    row,
+    t_s,
+    state,
+    gx,
+    gy,
+    gz,
+    covariance,
+    block_indices,
+    distrusted,
+    attitude_variance,
+    velocity_variance,
+):
+    """Row ``row`` of ``block``: :meth:`SolutionRows.append`'s arguments as the columns of the
+    module; each number computed as :meth:`~buoy_nav.solution.SolutionBuilder.solution`
+    computes it (its rate as ``_solution_vector`` does, its degrees as ``math.degrees``)."""
+    values = block[row]
+    values[STAMP] = t_s
+    for i in range(4):
+        values[1 + i] = state[ATTITUDE + i]
+    values[5] = gx - state[GYRO_BIAS]
+    values[6] = gy - state[GYRO_BIAS + 1]
+    values[7] = gz - state[GYRO_BIAS + 2]
+    for i in range(3):
+        values[8 + i] = state[VELOCITY + i]
+    values[11] = state[LATITUDE] * _RADIANS_TO_DEGREES
+    values[12] = state[LONGITUDE] * _RADIANS_TO_DEGREES
+    values[13] = state[ALTITUDE]
+    dimension = covariance.shape[1]
+    for place, block_index in enumerate(_KEPT_BLOCKS):
+        for i in range(3):
+            for j in range(3):
+                index = block_indices[block_index, i, j]
+                value = covariance[index // dimension, index % dimension]
+                if distrusted and i == j and block_index < 2:
+                    value += attitude_variance if block_index == 0 else velocity_variance
+                values[14 + 9 * place + 3 * i + j] = value
+
+
+def load_compiled_solution_rows() -> None:
+    """Compile the row writer, or load it from the cache, now (see
+    :func:`buoy_nav.mechanization.load_compiled_kernels`)."""
+    state = np.zeros(STATE_SIZE)
+    state[ATTITUDE + 3] = 1.0
+    indices = np.arange(36, dtype=np.int64).reshape(4, 3, 3)
+    SolutionRows().append(0.0, state, (0.0, 0.0, 0.0), np.eye(6), indices, (1e-6, 1e-4))
