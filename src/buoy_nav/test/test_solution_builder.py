@@ -11,6 +11,7 @@ from buoy_nav.error_state_filter import ERROR_STATES, ErrorStateFilter
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.solution import NavSolution, SolutionBuilder
 from buoy_nav.solution_rows import SolutionRows
+from buoy_nav.strapdown_kernel import STATE_SIZE
 
 BLOCK_OF_FIELD = {
     "attitude_covariance_rad2": "attitude",
@@ -187,3 +188,24 @@ def test_more_rows_are_taken_than_written_is_an_error():
     rows = SolutionRows()
     with pytest.raises(ValueError, match="1 rows asked for, 0 written"):
         rows.take(1)
+
+
+def test_the_block_grows_and_keeps_its_rows_in_order():
+    """More rows than the first block holds, taken in parts while more are written: every
+    stamp comes out once, in the order written."""
+    rows = SolutionRows()
+    state = np.zeros(STATE_SIZE)
+    covariance = _random_filter(8).covariance
+    indices = np.arange(36, dtype=np.int64).reshape(4, 3, 3)
+
+    def write(stamps):
+        for t_s in stamps:
+            rows.append(float(t_s), state, (0.0, 0.0, 0.0), covariance, indices, None)
+
+    write(range(10_000))
+    taken = [rows.take(3_000)]
+    write(range(10_000, 12_000))
+    taken.append(rows.take(rows.count))
+    stamps = np.concatenate(taken)[:, row.STAMP]
+    np.testing.assert_array_equal(stamps, np.arange(12_000, dtype=float))
+    assert rows.count == 0
