@@ -10,7 +10,7 @@ from buoy_nav import earth
 from buoy_nav.error_state_filter import ErrorStateFilter
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_quaternion
-from buoy_nav.solution_rows import SolutionRows
+from buoy_nav.solution_rows import SolutionRows, ecef_from_geodetic_scalar, enu_from_ecef_scalar
 from buoy_nav.state_layout import StateLayout
 from buoy_nav.strapdown_kernel import (
     ACCEL_BIAS,
@@ -178,12 +178,14 @@ class SolutionBuilder:
         coasting: tuple[bool, bool, bool],
     ) -> float:
         """:meth:`solution`'s numbers that :class:`~buoy_nav.solution_rows.SolutionRows` keeps,
-        written as a row of :attr:`rows`; returns the stamp ``t`` (the raw ``force`` and the
-        ``coasting`` flags are not kept)."""
+        written as a row of :attr:`rows`; returns the stamp ``t`` (the ``coasting`` flags are
+        not kept)."""
         self.rows.append(
             t,
             integrator.state_vector,
             gyro,
+            force,
+            self.map_plane.scalar_terms,
             kalman.covariance,
             self._block_indices_of(kalman.states),
             self._distrust_variances,
@@ -244,9 +246,6 @@ _VELOCITY = slice(13, 16)
 _POSITION_MAP = slice(16, 19)
 _SOLUTION_VECTOR_SIZE = 19
 
-_ecef_from_geodetic_scalar = numba.njit(cache=True)(earth.ecef_from_geodetic_scalar)
-_enu_from_ecef_scalar = numba.njit(cache=True)(earth.enu_from_ecef_scalar)
-
 
 @numba.njit(cache=True)
 def _solution_vector(state, gx, gy, gz, fx, fy, fz, plane_terms):
@@ -273,8 +272,8 @@ def _solution_vector(state, gx, gy, gz, fx, fy, fz, plane_terms):
     vector[12] = fz - state[ACCEL_BIAS + 2]
     for i in range(3):
         vector[13 + i] = state[VELOCITY + i]
-    x, y, z = _ecef_from_geodetic_scalar(state[LATITUDE], state[LONGITUDE], state[ALTITUDE])
-    vector[16], vector[17], vector[18] = _enu_from_ecef_scalar(x, y, z, plane_terms)
+    x, y, z = ecef_from_geodetic_scalar(state[LATITUDE], state[LONGITUDE], state[ALTITUDE])
+    vector[16], vector[17], vector[18] = enu_from_ecef_scalar(x, y, z, plane_terms)
     return vector
 
 

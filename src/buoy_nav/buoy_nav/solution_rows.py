@@ -1,10 +1,10 @@
 """Solutions as rows of one block, for a run that makes no message of them.
 
-A run that writes its products alone (``process_bag --no-bag``) needs of each solution only
-the numbers its corrections and its NetCDF file take. Built as a :class:`NavSolution` each,
-with its arrays, and gathered into columns later, they cost more than the filter's step that
-made them; written here, one compiled call a solution, they are columns already. Every number
-is the one :meth:`SolutionBuilder.solution` gives, to the bit.
+An offline run needs of each solution only the numbers its ``nav/*`` messages, its corrections
+and its NetCDF file take. Built as a :class:`NavSolution` each, with its arrays, made into the
+values of its messages and gathered into columns later, they cost more than the filter's step
+that made them; written here, one compiled call a solution, they are columns already. Every
+number is the one :meth:`SolutionBuilder.solution` gives, to the bit.
 """
 
 import math
@@ -12,7 +12,9 @@ import math
 import numba
 import numpy as np
 
+from buoy_nav import earth
 from buoy_nav.strapdown_kernel import (
+    ACCEL_BIAS,
     ALTITUDE,
     ATTITUDE,
     GYRO_BIAS,
@@ -22,7 +24,8 @@ from buoy_nav.strapdown_kernel import (
     VELOCITY,
 )
 
-# The columns of a row: what the corrections and the NetCDF file take of a solution.
+# The columns of a row: what the messages, the corrections and the NetCDF file take of a
+# solution.
 STAMP = 0
 """t_s: the solution's stamp (s)."""
 ATTITUDE_XYZW = slice(1, 5)
@@ -37,16 +40,23 @@ ATTITUDE_COVARIANCE = slice(14, 23)
 """Attitude error's covariance (ENU, rad², 3×3 row-major)."""
 VELOCITY_COVARIANCE = slice(23, 32)
 """Velocity's covariance (ENU, m²/s², 3×3 row-major)."""
-GYRO_BIAS_COVARIANCE = slice(32, 41)
+POSITION_COVARIANCE = slice(32, 41)
+"""Position's covariance (ENU, m², 3×3 row-major)."""
+GYRO_BIAS_COVARIANCE = slice(41, 50)
 """Gyro bias's covariance (body, rad²/s², 3×3 row-major)."""
-ROW_WIDTH = 41
+POSITION_MAP = slice(50, 53)
+"""Position in the ``map`` frame (ENU, m)."""
+SPECIFIC_FORCE = slice(53, 56)
+"""Bias-corrected specific force (body, m/s²)."""
+ROW_WIDTH = 56
 
 _FIRST_CAPACITY = 4096
 
-# The published covariance blocks a row keeps, by their place in the builder's (4, 3, 3)
-# indices (attitude, velocity, position, gyro bias): the position's is not taken.
-_KEPT_BLOCKS = (0, 1, 3)
 _RADIANS_TO_DEGREES = 180.0 / math.pi
+
+# The plane's scalar conversion, compiled: the rows' and the solutions' ``map`` positions.
+ecef_from_geodetic_scalar = numba.njit(cache=True)(earth.ecef_from_geodetic_scalar)
+enu_from_ecef_scalar = numba.njit(cache=True)(earth.enu_from_ecef_scalar)
 
 
 class SolutionRows:
@@ -62,18 +72,23 @@ class SolutionRows:
         t_s: float,
         state: np.ndarray,
         gyro_rad_s: tuple[float, float, float],
+        force_mps2: tuple[float, float, float],
+        plane_terms: np.ndarray,
         covariance: np.ndarray,
         block_indices: np.ndarray,
         distrust_variances: tuple[float, float] | None,
     ) -> None:
         """Write the solution of the nominal ``state`` (strapdown_kernel's layout) at stamp
-        ``t_s`` (s) with the raw gyro sample there (body rad/s) and the filter's
+        ``t_s`` (s) with the raw gyro and specific force samples there (body rad/s, m/s²), its
+        ``map`` position in the plane of ``plane_terms``
+        (:attr:`~buoy_nav.earth.LocalTangentPlane.scalar_terms`) and the filter's
         ``covariance``, whose published blocks are at ``block_indices``
         (:class:`~buoy_nav.solution.SolutionBuilder`'s), the attitude and velocity variances
         ``distrust_variances`` (rad², m²/s²) added to their diagonals when not None."""
         if self.count == self._block.shape[0]:
             self._block = np.concatenate((self._block, np.empty_like(self._block)))
         gx, gy, gz = gyro_rad_s
+        fx, fy, fz = force_mps2
         distrusted = distrust_variances is not None
         attitude_variance, velocity_variance = distrust_variances if distrusted else (0.0, 0.0)
         _write_row(
@@ -84,6 +99,10 @@ class SolutionRows:
             gx,
             gy,
             gz,
+            fx,
+            fy,
+            fz,
+            plane_terms,
             covariance,
             block_indices,
             distrusted,
@@ -112,6 +131,10 @@ def _write_row(
     gx,
     gy,
     gz,
+    fx,
+    fy,
+    fz,
+    plane_terms,
     covariance,
     block_indices,
     distrusted,
@@ -120,7 +143,8 @@ def _write_row(
 ):
     """Row ``row`` of ``block``: :meth:`SolutionRows.append`'s arguments as the columns of the
     module; each number computed as :meth:`~buoy_nav.solution.SolutionBuilder.solution`
-    computes it (its rate as ``_solution_vector`` does, its degrees as ``math.degrees``)."""
+    computes it (its rate, force and place as ``_solution_vector`` does, its degrees as
+    ``math.degrees``)."""
     values = block[row]
     values[STAMP] = t_s
     for i in range(4):
@@ -134,14 +158,19 @@ def _write_row(
     values[12] = state[LONGITUDE] * _RADIANS_TO_DEGREES
     values[13] = state[ALTITUDE]
     dimension = covariance.shape[1]
-    for place, block_index in enumerate(_KEPT_BLOCKS):
+    for block_index in range(4):  # attitude, velocity, position, gyro bias
         for i in range(3):
             for j in range(3):
                 index = block_indices[block_index, i, j]
                 value = covariance[index // dimension, index % dimension]
                 if distrusted and i == j and block_index < 2:
                     value += attitude_variance if block_index == 0 else velocity_variance
-                values[14 + 9 * place + 3 * i + j] = value
+                values[14 + 9 * block_index + 3 * i + j] = value
+    x, y, z = ecef_from_geodetic_scalar(state[LATITUDE], state[LONGITUDE], state[ALTITUDE])
+    values[50], values[51], values[52] = enu_from_ecef_scalar(x, y, z, plane_terms)
+    values[53] = fx - state[ACCEL_BIAS]
+    values[54] = fy - state[ACCEL_BIAS + 1]
+    values[55] = fz - state[ACCEL_BIAS + 2]
 
 
 def load_compiled_solution_rows() -> None:
@@ -150,4 +179,6 @@ def load_compiled_solution_rows() -> None:
     state = np.zeros(STATE_SIZE)
     state[ATTITUDE + 3] = 1.0
     indices = np.arange(36, dtype=np.int64).reshape(4, 3, 3)
-    SolutionRows().append(0.0, state, (0.0, 0.0, 0.0), np.eye(6), indices, (1e-6, 1e-4))
+    SolutionRows().append(
+        0.0, state, (0.0, 0.0, 0.0), (0.0, 0.0, 9.8), np.zeros(12), np.eye(6), indices, (1e-6, 1e-4)
+    )

@@ -159,7 +159,8 @@ def test_a_solutions_row_is_its_own_numbers_to_the_bit(variances):
             builder.biases_changed()
         integrator = _turning_integrator(rng)
         gyro = tuple(rng.normal(scale=0.3, size=3).tolist())
-        arguments = (integrator, kalman, 10.0 + index, gyro, (0.0, 0.0, 9.8), (False,) * 3)
+        force = tuple(rng.normal(loc=(0.0, 0.0, 9.8), scale=2.0).tolist())
+        arguments = (integrator, kalman, 10.0 + index, gyro, force, (False,) * 3)
         solutions.append(built.emit(*arguments))
         assert written.emit(*arguments) == 10.0 + index
     first = written.rows.take(100)
@@ -177,7 +178,10 @@ def test_a_solutions_row_is_its_own_numbers_to_the_bit(variances):
             ),
             (row.ATTITUDE_COVARIANCE, solution.attitude_covariance_rad2.ravel()),
             (row.VELOCITY_COVARIANCE, solution.velocity_covariance_m2s2.ravel()),
+            (row.POSITION_COVARIANCE, solution.position_covariance_m2.ravel()),
             (row.GYRO_BIAS_COVARIANCE, solution.gyro_bias_covariance_rad2_s2.ravel()),
+            (row.POSITION_MAP, solution.position_map_m),
+            (row.SPECIFIC_FORCE, solution.specific_force_body_mps2),
         ]
         for columns, numbers in expected:
             kept = np.atleast_1d(values[columns])
@@ -200,7 +204,16 @@ def test_the_block_grows_and_keeps_its_rows_in_order():
 
     def write(stamps):
         for t_s in stamps:
-            rows.append(float(t_s), state, (0.0, 0.0, 0.0), covariance, indices, None)
+            rows.append(
+                float(t_s),
+                state,
+                (0.0,) * 3,
+                (0.0, 0.0, 9.8),
+                np.zeros(12),
+                covariance,
+                indices,
+                None,
+            )
 
     write(range(10_000))
     taken = [rows.take(3_000)]

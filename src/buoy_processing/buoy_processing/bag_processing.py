@@ -69,7 +69,7 @@ from buoy_common.safe_output import check_outputs_apart_from_inputs, staged_file
 from buoy_common.sensor_frames import sensor_transforms, shared_values
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import STATUS_FIX, NavValues
-from buoy_nav.solution_rows import SolutionRows
+from buoy_processing.nav_rows_output import OrderedOutput
 from buoy_processing.offline_fusion import (
     OfflineFusion,
     relative_topic,
@@ -542,8 +542,13 @@ class BagCorrections:
             topics.append(flows.temperature)
         return topics
 
-    def start(self, writer: NamespacedWriter | None) -> None:
-        """The corrections, writing to ``writer`` (None: no bag)."""
+    def start(
+        self,
+        writer: NamespacedWriter | OrderedOutput | None,
+        held_back: HeldBackSolutions | None = None,
+    ) -> None:
+        """The corrections, writing to ``writer`` (None: no bag), taking the solutions that
+        ``held_back`` hands over (None: one by one, :meth:`add_navigation`)."""
         flows = self.flows
         keep = self.navigation is not None
         if flows.wind is not None:
@@ -572,6 +577,12 @@ class BagCorrections:
                 samples_per_stretch=self._samples_per_stretch,
             )
         self._running = [c for c in (self.wind, self.current) if c is not None]
+        if held_back is not None:
+            for correction in self._running:
+                correction.held_back = held_back
+                held_back.add_taker(correction.take_columns)
+            if self.navigation is not None:
+                held_back.add_taker(self.navigation.add_columns)
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
         if self.navigation is not None:
@@ -579,26 +590,13 @@ class BagCorrections:
         for correction in self._running:
             correction.add_navigation(solutions)
 
-    def add_solution_rows(self, rows: SolutionRows, stamps: list[Stamp]) -> None:
-        """Solutions of a run that makes no ``nav/*`` values, written as the latest ``rows``,
-        of header ``stamps``: held back once for every correction and the NetCDF file, handed
-        over in bulk (:class:`HeldBackSolutions`)."""
-        held_back = self._held_back(rows)
+    def add_solution_rows(self, stamps: list[Stamp]) -> None:
+        """Solutions written as rows, of header ``stamps``: held back once for every
+        correction and the NetCDF file, handed over in bulk (:class:`HeldBackSolutions`)."""
         for correction in self._running:
             correction.make_room(len(stamps))
-        held_back.take(stamps, self._running[0].pipeline.latest_navigation_stamp_s)
-
-    def _held_back(self, rows: SolutionRows) -> HeldBackSolutions:
-        """The holder of the solutions written to ``rows``, made at the first ones."""
-        held_back = self._running[0].held_back
-        if held_back is None:
-            takers = [correction.take_columns for correction in self._running]
-            if self.navigation is not None:
-                takers.append(self.navigation.add_columns)
-            held_back = HeldBackSolutions(rows, takers)
-            for correction in self._running:
-                correction.held_back = held_back
-        return held_back
+        corrections = self._running[0]
+        corrections.held_back.take(stamps, corrections.pipeline.latest_navigation_stamp_s)
 
     @property
     def record_fields(self) -> dict[str, tuple[str, ...]]:

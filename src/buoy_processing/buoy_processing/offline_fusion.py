@@ -51,6 +51,7 @@ from buoy_nav.solution import Emitted
 from buoy_nav.solution_rows import SolutionRows
 from buoy_nav.source_health import HealthTransition, SourceStatus
 from buoy_processing.nav_output_rate import NavOutputRate
+from buoy_processing.nav_rows_output import OrderedOutput
 from buoy_processing.solution_columns import Stamp
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
@@ -128,7 +129,7 @@ class OfflineFusion:
     def __init__(
         self,
         config: FusionConfig,
-        writer: BagWriter | BackgroundBagWriter | NamespacedWriter | None,
+        writer: BagWriter | BackgroundBagWriter | NamespacedWriter | OrderedOutput | None,
         smoother_spill_parent: str | Path | None = None,
         smooth: bool = False,
         nav_rate_hz: float = 0.0,
@@ -138,19 +139,21 @@ class OfflineFusion:
         ``nav_rate_hz`` (Hz) above 0, of a subset at that rate
         (:mod:`buoy_processing.nav_output_rate`; every solution is still returned); None: none
         is made (a run that writes its products alone). The solutions are returned as their
-        ``nav/*`` values or, with ``solution_rows`` (no writer), as their header stamps, the
-        engine writing the solutions to :attr:`solution_rows` (:mod:`buoy_nav.solution_rows`),
-        for corrections that take them in bulk. With ``smooth``
+        ``nav/*`` values or, with ``solution_rows``, as their header stamps, the engine writing
+        the solutions to :attr:`solution_rows` (:mod:`buoy_nav.solution_rows`), for
+        corrections that take them in bulk; the writer is then an
+        :class:`~buoy_processing.nav_rows_output.OrderedOutput`, given a place for each
+        solution's messages, which it writes when the rows are handed over. With ``smooth``
         (the filter's own solutions, ``realtime_output`` off) nothing is written: the solutions are
         kept by :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``)
         and written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
         if smooth:
             config = dataclasses.replace(config, realtime_output=False)
-        if solution_rows and writer is not None:
-            raise ValueError("solution rows are for a run that writes no nav/* messages")
         self.solution_rows = SolutionRows() if solution_rows and not smooth else None
-        """Where the engine writes the solutions of a run that makes no ``nav/*`` values (None:
-        it makes :class:`~buoy_nav.solution.NavSolution`); a smoothing run keeps those."""
+        """Where the engine writes the solutions (None: it makes
+        :class:`~buoy_nav.solution.NavSolution`, which a smoothing run keeps)."""
+        if self.solution_rows is not None and not isinstance(writer, OrderedOutput | None):
+            raise ValueError("solution rows are written through an OrderedOutput")
         self.engine = FusionEngine(config, solution_rows=self.solution_rows)
         self.smoother = None
         if smooth:
@@ -225,7 +228,7 @@ class OfflineFusion:
 
     def _write(self, solutions: list[Emitted], log_time_ns: int) -> HandedOver:
         if self.solution_rows is not None:
-            return self._stamps_of(solutions)
+            return self._stamps_of(solutions, log_time_ns)
         written = []
         smoother = self.smoother
         for solution in solutions:
@@ -240,13 +243,20 @@ class OfflineFusion:
             written.append(values)
         return written
 
-    def _stamps_of(self, stamps_s: list[float]) -> list[Stamp]:
+    def _stamps_of(self, stamps_s: list[float], log_time_ns: int) -> list[Stamp]:
         """The header stamps of the solutions the engine wrote as rows, stamped ``stamps_s``
-        (s)."""
+        (s); with a writer, each one's place in the output, its messages logged at
+        ``log_time_ns`` when the navigation output's rate takes it."""
         if stamps_s and self.first_solution_s is None:
             self.first_solution_s = stamps_s[0]
         exact = self.stamps.exact
-        return [exact(t_s) for t_s in stamps_s]
+        stamps = [exact(t_s) for t_s in stamps_s]
+        if self.writer is not None:
+            due_at = self.nav_output.due_at
+            add_solution = self.writer.add_solution
+            for sec, nanosec in stamps:
+                add_solution(log_time_ns, due_at(sec, nanosec))
+        return stamps
 
     def _write_nav(self, values: NavValues, log_time_ns: int) -> None:
         """``nav/*`` and ``tf`` of one solution."""

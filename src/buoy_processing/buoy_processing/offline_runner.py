@@ -19,7 +19,7 @@ and the consumer receives the smoothed one.
 
 from __future__ import annotations
 
-import functools
+import math
 import sys
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -39,10 +39,10 @@ from buoy_common.transform_messages import FrameTransform, tf_cdr
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import NavValues
 from buoy_nav.observability import unobserved_quantities
-from buoy_nav.solution_rows import SolutionRows
 from buoy_processing.chunk_records import chunk_records
+from buoy_processing.nav_rows_output import OrderedOutput
 from buoy_processing.offline_fusion import OfflineFusion
-from buoy_processing.solution_columns import Stamp
+from buoy_processing.solution_columns import HeldBackSolutions, Stamp
 
 TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
 
@@ -50,17 +50,21 @@ TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
 class BagConsumer(Protocol):
     """What follows the fusion over a bag, fed as the live nodes downstream of it are."""
 
-    def start(self, writer: NamespacedWriter | None) -> None:
+    def start(
+        self,
+        writer: NamespacedWriter | OrderedOutput | None,
+        held_back: HeldBackSolutions | None = None,
+    ) -> None:
         """The run's output is open: what the consumer writes goes to ``writer`` (None: the
-        run writes no bag, and the consumer encodes no message)."""
+        run writes no bag, and the consumer encodes no message); the solutions come through
+        ``held_back`` (:meth:`add_solution_rows`; None: as values, :meth:`add_navigation`)."""
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
         """New navigation solutions, in order (what ``nav/odometry`` and ``nav/fix`` carry)."""
 
-    def add_solution_rows(self, rows: SolutionRows, stamps: list[Stamp]) -> None:
-        """New navigation solutions of a run that writes no bag, in order: their header
-        ``stamps``, the solutions written as the latest rows of ``rows``
-        (:mod:`buoy_processing.solution_columns`)."""
+    def add_solution_rows(self, stamps: list[Stamp]) -> None:
+        """New navigation solutions, in order, written as rows: their header ``stamps``, to
+        hold back (:mod:`buoy_processing.solution_columns`)."""
 
     @property
     def record_fields(self) -> dict[str, tuple[str, ...]]:
@@ -105,14 +109,18 @@ class NoBag:
 class NothingFollows:
     """The consumer of a run of the fusion alone (``fuse_bag``)."""
 
-    def start(self, writer: NamespacedWriter | None) -> None:
-        pass
+    def start(
+        self,
+        writer: NamespacedWriter | OrderedOutput | None,
+        held_back: HeldBackSolutions | None = None,
+    ) -> None:
+        self._held_back = held_back
 
     def add_navigation(self, solutions: list[NavValues]) -> None:
         pass
 
-    def add_solution_rows(self, rows: SolutionRows, stamps: list[Stamp]) -> None:
-        rows.take(len(stamps))
+    def add_solution_rows(self, stamps: list[Stamp]) -> None:
+        self._held_back.take(stamps, -math.inf)
 
     @property
     def record_fields(self) -> dict[str, tuple[str, ...]]:
@@ -229,15 +237,17 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion,
     with BagProgress(run.reader, run.label) as progress, run.open_writer() as bag_writer:
         writer = NamespacedWriter(bag_writer, run.view)
         run.write_static_transforms(writer)
-        output = writer if run.write_bag else None
-        fusion = OfflineFusion(
-            run.config, output, nav_rate_hz=run.nav_rate_hz, solution_rows=output is None
+        output = OrderedOutput(writer) if run.write_bag else None
+        fusion = OfflineFusion(run.config, output, nav_rate_hz=run.nav_rate_hz, solution_rows=True)
+        held_back = HeldBackSolutions(
+            fusion.solution_rows, [] if output is None else [output.take_columns]
         )
-        consumer.start(output)
+        consumer.start(output, held_back)
         # What the set-up built (the engine, the compiled kernels) lives through the pass.
         with existing_objects_frozen():
             log_time_ns = _fusing_pass(run, fusion, consumer, output, progress)
-        _hand_over(fusion, consumer)(fusion.finish())
+        consumer.add_solution_rows(fusion.finish())
+        held_back.hand_over()
         consumer.finish(log_time_ns)
         run.store_closing_metadata(bag_writer, fusion)
         progress.done()
@@ -248,7 +258,7 @@ def _fusing_pass(
     run: OfflineRun,
     fusion: OfflineFusion,
     consumer: BagConsumer,
-    writer: NamespacedWriter | None,
+    writer: OrderedOutput | None,
     progress: BagProgress,
 ) -> int:
     """``run``'s bag in log-time order: the sensor messages into ``fusion``, its solutions to
@@ -257,7 +267,6 @@ def _fusing_pass(
     reader = run.reader
     relative_of = run.relative_of
     fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
-    hand_over = _hand_over(fusion, consumer)
     log_time_ns = reader.start_ns
     for batch in reader.message_batches([*relative_of, *run.copied_topics]):
         records = chunk_records(batch, fields_of_topic)
@@ -267,7 +276,7 @@ def _fusing_pass(
             if topic is not None:
                 solutions = fusion.add_message(reader, topic, message, records.get(position))
                 if solutions:
-                    hand_over(solutions)
+                    consumer.add_solution_rows(solutions)
             else:
                 if writer is not None:
                     writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
@@ -301,14 +310,6 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion
     finally:
         fusion.close()
     return fusion, writer.counts
-
-
-def _hand_over(fusion: OfflineFusion, consumer: BagConsumer):
-    """How ``consumer`` takes what ``fusion`` returns: its solutions' ``nav/*`` values or, in a
-    run that makes none, their stamps, the solutions written as rows."""
-    if fusion.solution_rows is None:
-        return consumer.add_navigation
-    return functools.partial(consumer.add_solution_rows, fusion.solution_rows)
 
 
 def _merged_pass(

@@ -1,13 +1,15 @@
-"""The navigation of a run that writes no bag, handed to the corrections in bulk.
+"""The navigation of an offline run, handed to its outputs and corrections in bulk.
 
-With a bag, every solution becomes its ``nav/*`` values
-(:func:`buoy_nav.fusion_messages.nav_values`) and each correction takes its ``nav/odometry``
-and ``nav/fix`` one by one, as the live node does. Without one, no message is made: the engine
-writes each solution as a row (:mod:`buoy_nav.solution_rows`), the corrections hold their exact
-header stamps back and, before they decide samples, take the rows held as columns
-(:class:`wind_comp.pipeline.NavigationColumns`), every number as the messages' values carry it,
-to the bit: the body velocity and its covariance from the compiled code that makes them for the
-messages (:func:`buoy_nav.nav_numbers.body_numbers_of_solutions`), the rest the rows' own.
+The live node makes every solution into its ``nav/*`` values
+(:func:`buoy_nav.fusion_messages.nav_values`) and the compensation node takes its
+``nav/odometry`` and ``nav/fix`` one by one. An offline run (but a smoothing one) does not: the
+engine writes each solution as a row (:mod:`buoy_nav.solution_rows`), the run holds their exact
+header stamps back and hands the rows held over as columns, to the output's ``nav/*``
+(:mod:`buoy_processing.nav_rows_output`) and, before a correction decides samples, to the
+corrections (:class:`wind_comp.pipeline.NavigationColumns`), every number as the messages'
+values carry it, to the bit: the body velocity and its covariance from the compiled code that
+makes them for the messages (:func:`buoy_nav.nav_numbers.body_numbers_of_solutions`), the rest
+the rows' own.
 """
 
 from __future__ import annotations
@@ -22,6 +24,11 @@ from buoy_nav import solution_rows as row
 from buoy_nav.nav_numbers import BODY_TWIST_COVARIANCE, VELOCITY_BODY, body_numbers_of_solutions
 from buoy_nav.solution_rows import SolutionRows
 from wind_comp.pipeline import NavigationColumns
+
+HELD_AT_MOST = 8192
+"""Solutions held back at most: beyond, they are handed over, whether or not a correction is
+about to decide samples (what a correction decides does not depend on when it takes them; a
+run without corrections writes its ``nav/*`` as they are handed over)."""
 
 Stamp = tuple[int, int]
 """A solution's header stamp (sec, nanosec): its IMU sample's, which its ``nav/*`` messages
@@ -41,6 +48,8 @@ class SolutionColumns(NamedTuple):
     """(N, 3) latitude, longitude (deg), altitude (m)."""
     velocity_enu_mps: np.ndarray
     """(N, 3) ENU velocity, m/s."""
+    rows: np.ndarray
+    """The solutions' rows themselves (:mod:`buoy_nav.solution_rows`)."""
 
 
 def solution_columns(rows: np.ndarray, stamps: np.ndarray) -> SolutionColumns:
@@ -68,7 +77,7 @@ def solution_columns(rows: np.ndarray, stamps: np.ndarray) -> SolutionColumns:
         body_rate_covariance_rad2_s2=twist[:, 3:, 3:],
         fix_latitude_deg=geodetic[:, 0],
     )
-    return SolutionColumns(navigation, secs, nanosecs, geodetic, velocity)
+    return SolutionColumns(navigation, secs, nanosecs, geodetic, velocity, rows)
 
 
 def _matrices(columns: np.ndarray) -> np.ndarray:
@@ -77,14 +86,16 @@ def _matrices(columns: np.ndarray) -> np.ndarray:
 
 
 class HeldBackSolutions:
-    """The solutions of a run that writes no bag, from the fusion to the corrections and the
-    NetCDF file: written as rows by the engine, their stamps held back here, counted as the
-    corrections' pipelines will count them, and handed over as columns, once for all, when a
-    correction is about to decide samples (:meth:`hand_over`)."""
+    """The solutions of an offline run, from the fusion to the output's ``nav/*``, the
+    corrections and the NetCDF file: written as rows by the engine, their stamps held back
+    here, counted as the corrections' pipelines will count them, and handed over as columns,
+    once for all, when a correction is about to decide samples (:meth:`hand_over`), at the end,
+    and whenever :data:`HELD_AT_MOST` are held."""
 
     def __init__(self, rows: SolutionRows, takers: Sequence[Callable[[SolutionColumns], None]]):
         """rows: where the engine writes the solutions; takers: what each hand-over goes to,
-        in order (each correction's pipeline, the NetCDF file's series)."""
+        in order (the output's messages; each correction's pipeline and the NetCDF file's
+        series add theirs, :meth:`add_taker`)."""
         self._rows = rows
         self._takers = list(takers)
         self._stamps: list[Stamp] = []
@@ -105,6 +116,12 @@ class HeldBackSolutions:
                 self.in_order += 1
         self._latest_s = latest_s
         self._stamps.extend(stamps)
+        if len(self._stamps) >= HELD_AT_MOST:
+            self.hand_over()
+
+    def add_taker(self, taker: Callable[[SolutionColumns], None]) -> None:
+        """One more taker of every hand-over, after the others."""
+        self._takers.append(taker)
 
     def hand_over(self) -> None:
         """Every solution held, as columns, to each taker."""
