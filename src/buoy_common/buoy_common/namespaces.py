@@ -218,6 +218,16 @@ class NamespacedWriter:
     def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
         self._writer.write_raw(self._output_name(topic), msgtype, log_time_ns, raw)
 
+    def write_raw_many(self, records: list[tuple[str, str, int, bytes]]) -> None:
+        """Each (topic, msgtype, log time ns, CDR bytes) of ``records``, in order."""
+        name = self._output_name
+        self._writer.write_raw_many(
+            [
+                (name(topic), msgtype, log_time_ns, raw)
+                for topic, msgtype, log_time_ns, raw in records
+            ]
+        )
+
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
         self._writer.write(self._output_name(topic), msgtype, log_time_ns, message)
 

@@ -57,6 +57,26 @@ def test_background_writer_writes_the_same_bag(written_bag, tmp_path):
         assert copied.topics == original.topics
 
 
+@pytest.mark.parametrize("writer_class", [BagWriter, BackgroundBagWriter])
+def test_messages_written_a_stretch_at_a_time_make_the_same_bag(
+    written_bag, tmp_path, writer_class
+):
+    """Stretches of raw messages (each type's first message in one) and single ones between
+    them, an empty stretch too: the bag written one by one."""
+    path, counts = written_bag
+    copy = tmp_path / "stretches"
+    with BagReader(path) as reader, writer_class(copy) as writer:
+        records = [(m.topic, m.msgtype, m.log_time_ns, m.raw) for m in reader.messages()]
+        writer.write_raw_many(records[:3])
+        writer.write_raw(*records[3])
+        writer.write_raw_many([])
+        writer.write_raw_many(records[4:])
+    assert writer.counts == counts
+    with BagReader(path) as original, BagReader(copy) as copied:
+        assert list(original.messages()) == list(copied.messages())
+        assert copied.topics == original.topics
+
+
 def test_background_writer_stores_metadata_records_as_the_bag_writer_does(tmp_path):
     facts = {"north": "true north", "sensors": '["IMU"]'}
     for writer_class in (BagWriter, BackgroundBagWriter):

@@ -154,14 +154,24 @@ class _Place(NamedTuple):
     log_time_ns: int
 
 
+class _Message(NamedTuple):
+    """A message object's write, held back (a raw write is held as its record)."""
+
+    topic: str
+    msgtype: str
+    log_time_ns: int
+    message: object
+
+
 class OrderedOutput:
     """The run's output (``writer``) with a place kept for each solution's messages until
     they are encoded (:meth:`take_rows`): a write after the first place waits behind it."""
 
     def __init__(self, writer: NamespacedWriter):
         self._writer = writer
-        self._queue: list[_Place | tuple] = []
-        """The places kept and, as (the writer's method, its arguments), the writes held."""
+        self._queue: list[_Place | _Message | tuple] = []
+        """The places kept and the writes held: a message object's, or a raw one as its
+        (topic, msgtype, log time ns, CDR bytes)."""
         self._solutions = 0
         """Solutions given since the last rows were taken, with a place or without."""
         self._places: list[int] = []
@@ -173,14 +183,14 @@ class OrderedOutput:
 
     def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
         if self._places:
-            self._queue.append((self._writer.write_raw, (topic, msgtype, log_time_ns, raw)))
+            self._queue.append((topic, msgtype, log_time_ns, raw))
         else:
             self._writer.write_raw(topic, msgtype, log_time_ns, raw)
 
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
         """A message object (a product's, made afresh): written in its turn."""
         if self._places:
-            self._queue.append((self._writer.write, (topic, msgtype, log_time_ns, message)))
+            self._queue.append(_Message(topic, msgtype, log_time_ns, message))
         else:
             self._writer.write(topic, msgtype, log_time_ns, message)
 
@@ -212,16 +222,21 @@ class OrderedOutput:
         if len(places):
             encoded = nav_messages(rows[places], secs[places], nanosecs[places])
             messages = list(zip(*encoded, strict=True))
-        write_raw = self._writer.write_raw
+        # Raw messages go to the writer a stretch at a time; a message object in its turn.
+        records = []
         written = 0
         for item in due:
             if isinstance(item, _Place):
                 for (stored, msgtype), raw in zip(_STORED_IN_ORDER, messages[written], strict=True):
-                    write_raw(stored, msgtype, item.log_time_ns, raw)
+                    records.append((stored, msgtype, item.log_time_ns, raw))
                 written += 1
+            elif isinstance(item, _Message):
+                self._writer.write_raw_many(records)
+                records = []
+                self._writer.write(*item)
             else:
-                method, arguments = item
-                method(*arguments)
+                records.append(item)
+        self._writer.write_raw_many(records)
 
     def _due(self, count: int) -> list:
         """What is written once the oldest ``count`` solutions' rows are taken: the queue up

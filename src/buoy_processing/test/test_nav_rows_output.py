@@ -3,6 +3,7 @@ the live node packs one solution at a time, and a bag in the order written one b
 
 import numpy as np
 import pytest
+from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader
 
 from buoy_common.bag_io import BagWriter
@@ -75,14 +76,24 @@ def bag_messages(path):
         ]
 
 
+def mean_bytes(tmp_path, mean, message) -> bytes:
+    """What a bag holds of ``message`` written alone on topic and type ``mean``."""
+    with BagWriter(tmp_path / "alone") as bag:
+        bag.write(*mean, 0, message)
+    return bag_messages(tmp_path / "alone")[0][2]
+
+
 def test_a_stretch_is_written_where_its_solutions_were_given(tmp_path):
-    """Writes between and after solutions (a copied sonic message, a solution left out by the
-    navigation rate) come out in the order given, each solution's five messages in its place
-    with its log time; rows taken for the oldest solutions write what came before the next
-    place, and nothing after it."""
+    """Writes between and after solutions (a copied sonic message, a product's message object,
+    a solution left out by the navigation rate) come out in the order given, each solution's
+    five messages in its place with its log time; rows taken for the oldest solutions write
+    what came before the next place, and nothing after it."""
     solutions, rows, stamps = solutions_and_rows(3, None)
     sonic = ("/anemometer/wind", "geometry_msgs/msg/Vector3Stamped")
     raw = bytes(range(40))
+    mean = ("/wind/mean_1min", "geometry_msgs/msg/Vector3Stamped")
+    mean_message = Vector3Stamped()
+    mean_message.vector.x = 7.5
     with BagWriter(tmp_path / "out") as bag:
         output = OrderedOutput(NamespacedWriter(bag, TopicView()))
         output.write_raw(*sonic, 5, raw)
@@ -90,6 +101,7 @@ def test_a_stretch_is_written_where_its_solutions_were_given(tmp_path):
         output.write_raw(*sonic, 11, raw)
         output.add_solution(20, False)
         output.add_solution(30, True)
+        output.write(mean[0], mean[1], 30, mean_message)
         output.write_raw(*sonic, 31, raw)
         assert output.counts == {sonic[0]: 1}
         output.take_rows(rows[:2], stamps[:2, 0].copy(), stamps[:2, 1].copy())
@@ -105,5 +117,7 @@ def test_a_stretch_is_written_where_its_solutions_were_given(tmp_path):
             ("/" + topic, log_time, message)
             for topic, message in zip(NAV_TOPIC_ORDER, packed, strict=True)
         ]
+        if log_time == 30:
+            expected.append((mean[0], 30, mean_bytes(tmp_path, mean, mean_message)))
         expected.append((sonic[0], log_time + 1, raw))
     assert bag_messages(tmp_path / "out") == expected

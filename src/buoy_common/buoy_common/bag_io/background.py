@@ -95,6 +95,20 @@ class BackgroundBagWriter(BagOutput):
         if len(self._batch) >= _BATCH_MESSAGES:
             self._send_batch()
 
+    def write_raw_many(self, records: list[tuple[str, str, int, bytes]]) -> None:
+        """:meth:`write_raw` of each (topic, msgtype, log time ns, CDR bytes) of ``records``,
+        in order, appended together: a stretch of messages costs one call, not one a message."""
+        if not self._open:
+            raise BagError(f"bag {self.path} is closed")
+        for topic, msgtype, _, _ in records:
+            if msgtype not in self._described:
+                self._descriptions[msgtype] = type_description(self.path, topic, msgtype)
+                self._described.add(msgtype)
+        self._counts.update(record[0] for record in records)
+        self._batch.extend(records)
+        if len(self._batch) >= _BATCH_MESSAGES:
+            self._send_batch()
+
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
         """Serialise ``message`` (a rosbags or an rclpy message of ``msgtype``) and append it."""
         # Imported here, not with the module, which the writing process imports too.

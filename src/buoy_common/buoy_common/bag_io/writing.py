@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Sequence
 from pathlib import Path
 
 import yaml
@@ -106,6 +107,12 @@ class BagOutput:
         return (
             f"bag {self.path} was not written: abandoned after {sum(self.counts.values())} messages"
         )
+
+    def write_raw_many(self, records: Sequence[tuple[str, str, int, bytes]]) -> None:
+        """:meth:`write_raw` of each (topic, msgtype, log time ns, CDR bytes) of ``records``,
+        in order."""
+        for record in records:
+            self.write_raw(*record)
 
 
 class BagWriter(BagOutput):
