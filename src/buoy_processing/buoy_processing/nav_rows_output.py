@@ -203,6 +203,15 @@ class OrderedOutput:
             self._places.append(self._solutions)
         self._solutions += 1
 
+    def finish(self) -> None:
+        """End of the run: every place must have been written (RuntimeError saying how many
+        solutions' messages were not: their rows were never handed over)."""
+        if self._places:
+            raise RuntimeError(
+                f"the nav/* and tf of {len(self._places)} solutions were never written: "
+                "their rows were not handed over"
+            )
+
     def take_columns(self, columns: SolutionColumns) -> None:
         """The solutions given since the last call, as columns
         (:class:`~buoy_processing.solution_columns.HeldBackSolutions` hands them over): their

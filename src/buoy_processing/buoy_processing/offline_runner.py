@@ -249,6 +249,8 @@ def _forward_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion,
         consumer.add_solution_rows(fusion.finish())
         held_back.hand_over()
         consumer.finish(log_time_ns)
+        if output is not None:
+            output.finish()
         run.store_closing_metadata(bag_writer, fusion)
         progress.done()
     return fusion, writer.counts

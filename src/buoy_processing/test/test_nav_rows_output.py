@@ -109,7 +109,10 @@ def test_a_stretch_is_written_where_its_solutions_were_given(tmp_path):
         assert sum(output.counts.values()) == 2 + len(NAV_TOPIC_ORDER)
         with pytest.raises(ValueError, match="2 rows for 1 solutions given"):
             output.take_rows(rows[1:], stamps[1:, 0].copy(), stamps[1:, 1].copy())
+        with pytest.raises(RuntimeError, match="of 1 solutions were never written"):
+            output.finish()
         output.take_rows(rows[2:], stamps[2:, 0].copy(), stamps[2:, 1].copy())
+        output.finish()
     expected = [(sonic[0], 5, raw)]
     for index, log_time in ((0, 10), (2, 30)):
         packed = packed_one_by_one(solutions[index], *stamps[index].tolist())
