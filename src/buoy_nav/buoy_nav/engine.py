@@ -104,9 +104,9 @@ from buoy_nav.solution import (
     NavSolution,
     OutputDecimation,
     SolutionBuilder,
-    load_compiled_solution_vector,
 )
 from buoy_nav.solution_rows import SolutionRows, load_compiled_solution_rows
+from buoy_nav.solution_vector import load_compiled_solution_vector
 from buoy_nav.source_health import HealthTransition
 from buoy_nav.source_registry import SourceRegistry
 from buoy_nav.stream_sequence import StreamSequence
@@ -124,9 +124,9 @@ class FusionEngine:
     """Strapdown INS aided by the sources of ``sources`` (see the module docstring).
 
     sources: the aiding-source classes to run, in the order measurements of one stamp are
-    applied (default :data:`buoy_nav.aiding.AIDING_SOURCES`). solution_rows: where a run that
-    makes no message of the solutions has them written, a row each; the methods that return
-    solutions then return their stamps (s) (None: they return :class:`NavSolution`).
+    applied (default :data:`buoy_nav.aiding.AIDING_SOURCES`). solution_rows: where an offline
+    run has the solutions written, a row each (:mod:`buoy_nav.solution_rows`); the methods that
+    return solutions then return their stamps (s) (None: they return :class:`NavSolution`).
     """
 
     def __init__(

@@ -86,6 +86,33 @@ def _body_numbers_of_solutions(attitude, velocity, velocity_cov, gyro_bias_cov):
     return rows
 
 
+def covariance_numbers_of_solutions(
+    attitude_covariance_rad2,
+    velocity_covariance_m2s2,
+    position_covariance_m2,
+    gyro_bias_covariance_rad2_s2,
+) -> np.ndarray:
+    """:func:`covariance_numbers` of many solutions at once, one row each
+    (N × :data:`COVARIANCE_NUMBERS`), from their stacked 3×3 blocks (N × 3 × 3 each, the units
+    of :func:`covariance_numbers`)."""
+    return _covariance_numbers_of_solutions(
+        np.ascontiguousarray(attitude_covariance_rad2, dtype=float),
+        np.ascontiguousarray(velocity_covariance_m2s2, dtype=float),
+        np.ascontiguousarray(position_covariance_m2, dtype=float),
+        np.ascontiguousarray(gyro_bias_covariance_rad2_s2, dtype=float),
+    )
+
+
+@numba.njit(cache=True)
+def _covariance_numbers_of_solutions(attitude_cov, velocity_cov, position_cov, gyro_bias_cov):
+    rows = np.empty((attitude_cov.shape[0], COVARIANCE_NUMBERS))
+    for index in range(attitude_cov.shape[0]):
+        rows[index] = _covariance_numbers(
+            attitude_cov[index], velocity_cov[index], position_cov[index], gyro_bias_cov[index]
+        )
+    return rows
+
+
 @numba.njit(cache=True)
 def _body_numbers(attitude, velocity, velocity_cov, gyro_bias_cov):
     x, y, z, w = attitude[0], attitude[1], attitude[2], attitude[3]
@@ -142,7 +169,7 @@ def load_compiled_nav_numbers() -> None:
     """Compile the nav numbers, or load them from the cache, now (see
     :func:`buoy_nav.mechanization.load_compiled_kernels`), for the solutions' read-only
     covariance blocks and for writable ones (the smoother's), and of many solutions at once
-    (a run that writes no bag)."""
+    (an offline run)."""
     attitude = np.array([0.0, 0.0, 0.0, 1.0])
     for writable in (True, False):
         blocks = np.eye(3)[np.newaxis].repeat(4, axis=0)
@@ -152,3 +179,4 @@ def load_compiled_nav_numbers() -> None:
     body_numbers_of_solutions(
         attitude[np.newaxis], np.zeros((1, 3)), np.eye(3)[np.newaxis], np.eye(3)[np.newaxis]
     )
+    covariance_numbers_of_solutions(*(np.eye(3)[np.newaxis],) * 4)

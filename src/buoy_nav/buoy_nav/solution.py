@@ -3,26 +3,21 @@
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from buoy_nav import earth
+from buoy_nav import solution_vector as vec
 from buoy_nav.error_state_filter import ErrorStateFilter
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.rotations import euler_from_rotation_matrix, rotation_matrix_from_quaternion
-from buoy_nav.solution_rows import SolutionRows, ecef_from_geodetic_scalar, enu_from_ecef_scalar
+from buoy_nav.solution_rows import SolutionRows
+from buoy_nav.solution_vector import solution_vector
 from buoy_nav.state_layout import StateLayout
 from buoy_nav.strapdown_kernel import (
     ACCEL_BIAS,
     ALTITUDE,
-    ATTITUDE,
     GYRO_BIAS,
     LATITUDE,
-    LONGITUDE,
-    NAV_FRAME_RATE,
-    ROTATION,
-    STATE_SIZE,
-    VELOCITY,
 )
 
 
@@ -89,7 +84,7 @@ class SolutionBuilder:
     At the IMU rate most consecutive solutions share the filter's covariance and bias estimates:
     their read-only arrays are made once and kept until :meth:`covariance_changed` or
     :meth:`biases_changed`. ``map_plane`` is the ``map`` frame the positions are expressed in
-    (set before the first solution). With ``rows`` (a run that makes no message of them) the
+    (set before the first solution). With ``rows`` (an offline run's) the
     solutions are written there instead (:meth:`row`); the engine makes each through
     :attr:`emit`.
     """
@@ -141,21 +136,21 @@ class SolutionBuilder:
             )
         gx, gy, gz = gyro
         fx, fy, fz = force
-        vector = _solution_vector(state, gx, gy, gz, fx, fy, fz, self.map_plane.scalar_terms)
+        vector = solution_vector(state, gx, gy, gz, fx, fy, fz, self.map_plane.scalar_terms)
         latitude, longitude, altitude = state[LATITUDE : ALTITUDE + 1].tolist()
         attitude_cov, velocity_cov, position_cov, gyro_bias_cov = self._covariance_blocks
         gyro_bias, accel_bias = self._bias_arrays
         return NavSolution(
             t_s=t,
-            attitude_xyzw=vector[_ATTITUDE_XYZW],
-            angular_rate_body_rad_s=vector[_ANGULAR_RATE],
-            angular_rate_nb_body_rad_s=vector[_ANGULAR_RATE_NB],
-            specific_force_body_mps2=vector[_SPECIFIC_FORCE],
-            velocity_enu_mps=vector[_VELOCITY],
+            attitude_xyzw=vector[vec.ATTITUDE_XYZW],
+            angular_rate_body_rad_s=vector[vec.ANGULAR_RATE],
+            angular_rate_nb_body_rad_s=vector[vec.ANGULAR_RATE_NB],
+            specific_force_body_mps2=vector[vec.SPECIFIC_FORCE],
+            velocity_enu_mps=vector[vec.VELOCITY_ENU],
             latitude_deg=math.degrees(latitude),
             longitude_deg=math.degrees(longitude),
             altitude_m=altitude,
-            position_map_m=vector[_POSITION_MAP],
+            position_map_m=vector[vec.POSITION_MAP],
             attitude_covariance_rad2=attitude_cov,
             velocity_covariance_m2s2=velocity_cov,
             position_covariance_m2=position_cov,
@@ -235,54 +230,6 @@ class OutputDecimation:
         following = self._next_output_time + period
         self._next_output_time = following if following > t else t + period
         return True
-
-
-# The arrays of a solution, each a slice of the one vector :func:`_solution_vector` fills.
-_ATTITUDE_XYZW = slice(0, 4)
-_ANGULAR_RATE = slice(4, 7)
-_ANGULAR_RATE_NB = slice(7, 10)
-_SPECIFIC_FORCE = slice(10, 13)
-_VELOCITY = slice(13, 16)
-_POSITION_MAP = slice(16, 19)
-_SOLUTION_VECTOR_SIZE = 19
-
-
-@numba.njit(cache=True)
-def _solution_vector(state, gx, gy, gz, fx, fy, fz, plane_terms):
-    """The arrays of the solution of the nominal ``state`` (strapdown_kernel's layout) with
-    the raw gyro (body rad/s) and specific force (body m/s²) there, in one vector (the slices
-    above): the attitude, the bias-corrected rate ω_ib and ω_nb = ω_ib − R_nbᵀ ω_in, the
-    bias-corrected force, the velocity and the ``map`` position (m) of the plane whose
-    ``scalar_terms`` are ``plane_terms``. The sums are grouped as the interpreter groups
-    them (the position by the plane's own scalar conversion, compiled), so a solution is the
-    same to the bit whichever computes it."""
-    vector = np.empty(_SOLUTION_VECTOR_SIZE)
-    for i in range(4):
-        vector[i] = state[ATTITUDE + i]
-    wx = gx - state[GYRO_BIAS]
-    wy = gy - state[GYRO_BIAS + 1]
-    wz = gz - state[GYRO_BIAS + 2]
-    vector[4], vector[5], vector[6] = wx, wy, wz
-    ie, in_, iu = state[NAV_FRAME_RATE], state[NAV_FRAME_RATE + 1], state[NAV_FRAME_RATE + 2]
-    for i, w in enumerate((wx, wy, wz)):
-        r0, r1, r2 = state[ROTATION + i], state[ROTATION + 3 + i], state[ROTATION + 6 + i]
-        vector[7 + i] = w - (r0 * ie + r1 * in_ + r2 * iu)
-    vector[10] = fx - state[ACCEL_BIAS]
-    vector[11] = fy - state[ACCEL_BIAS + 1]
-    vector[12] = fz - state[ACCEL_BIAS + 2]
-    for i in range(3):
-        vector[13 + i] = state[VELOCITY + i]
-    x, y, z = ecef_from_geodetic_scalar(state[LATITUDE], state[LONGITUDE], state[ALTITUDE])
-    vector[16], vector[17], vector[18] = enu_from_ecef_scalar(x, y, z, plane_terms)
-    return vector
-
-
-def load_compiled_solution_vector() -> None:
-    """Compile the solution's vector, or load it from the cache, now (see
-    :func:`buoy_nav.mechanization.load_compiled_kernels`)."""
-    state = np.zeros(STATE_SIZE)
-    state[ATTITUDE + 3] = 1.0
-    _solution_vector(state, 0.0, 0.0, 0.0, 0.0, 0.0, 9.8, np.zeros(12))
 
 
 def _published_block_indices(states: StateLayout) -> np.ndarray:

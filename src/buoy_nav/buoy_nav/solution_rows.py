@@ -1,4 +1,4 @@
-"""Solutions as rows of one block, for a run that makes no message of them.
+"""Solutions as rows of one block, for an offline run.
 
 An offline run needs of each solution only the numbers its ``nav/*`` messages, its corrections
 and its NetCDF file take. Built as a :class:`NavSolution` each, with its arrays, made into the
@@ -12,16 +12,13 @@ import math
 import numba
 import numpy as np
 
-from buoy_nav import earth
+from buoy_nav.solution_vector import solution_vector
 from buoy_nav.strapdown_kernel import (
-    ACCEL_BIAS,
     ALTITUDE,
     ATTITUDE,
-    GYRO_BIAS,
     LATITUDE,
     LONGITUDE,
     STATE_SIZE,
-    VELOCITY,
 )
 
 # The columns of a row: what the messages, the corrections and the NetCDF file take of a
@@ -53,10 +50,6 @@ ROW_WIDTH = 56
 _FIRST_CAPACITY = 4096
 
 _RADIANS_TO_DEGREES = 180.0 / math.pi
-
-# The plane's scalar conversion, compiled: the rows' and the solutions' ``map`` positions.
-ecef_from_geodetic_scalar = numba.njit(cache=True)(earth.ecef_from_geodetic_scalar)
-enu_from_ecef_scalar = numba.njit(cache=True)(earth.enu_from_ecef_scalar)
 
 
 class SolutionRows:
@@ -143,17 +136,14 @@ def _write_row(
 ):
     """Row ``row`` of ``block``: :meth:`SolutionRows.append`'s arguments as the columns of the
     module; each number computed as :meth:`~buoy_nav.solution.SolutionBuilder.solution`
-    computes it (its rate, force and place as ``_solution_vector`` does, its degrees as
-    ``math.degrees``)."""
+    computes it (its vectors by :func:`~buoy_nav.solution_vector.solution_vector`, its degrees
+    as ``math.degrees``)."""
     values = block[row]
+    vector = solution_vector(state, gx, gy, gz, fx, fy, fz, plane_terms)
     values[STAMP] = t_s
-    for i in range(4):
-        values[1 + i] = state[ATTITUDE + i]
-    values[5] = gx - state[GYRO_BIAS]
-    values[6] = gy - state[GYRO_BIAS + 1]
-    values[7] = gz - state[GYRO_BIAS + 2]
-    for i in range(3):
-        values[8 + i] = state[VELOCITY + i]
+    values[1:5] = vector[0:4]  # attitude
+    values[5:8] = vector[4:7]  # bias-corrected rate
+    values[8:11] = vector[13:16]  # velocity
     values[11] = state[LATITUDE] * _RADIANS_TO_DEGREES
     values[12] = state[LONGITUDE] * _RADIANS_TO_DEGREES
     values[13] = state[ALTITUDE]
@@ -166,11 +156,8 @@ def _write_row(
                 if distrusted and i == j and block_index < 2:
                     value += attitude_variance if block_index == 0 else velocity_variance
                 values[14 + 9 * block_index + 3 * i + j] = value
-    x, y, z = ecef_from_geodetic_scalar(state[LATITUDE], state[LONGITUDE], state[ALTITUDE])
-    values[50], values[51], values[52] = enu_from_ecef_scalar(x, y, z, plane_terms)
-    values[53] = fx - state[ACCEL_BIAS]
-    values[54] = fy - state[ACCEL_BIAS + 1]
-    values[55] = fz - state[ACCEL_BIAS + 2]
+    values[50:53] = vector[16:19]  # map position
+    values[53:56] = vector[10:13]  # bias-corrected force
 
 
 def load_compiled_solution_rows() -> None:

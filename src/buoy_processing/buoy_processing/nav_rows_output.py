@@ -38,7 +38,17 @@ from buoy_common.namespaces import NamespacedWriter
 from buoy_nav import solution_rows as row
 from buoy_nav.aiding.gnss_fix import STATUS_FIX
 from buoy_nav.fusion_messages import COVARIANCE_TYPE_KNOWN, SERVICE_GPS
-from buoy_nav.nav_numbers import BODY_TWIST_COVARIANCE, VELOCITY_BODY, body_numbers_of_solutions
+from buoy_nav.nav_numbers import (
+    ATTITUDE_COVARIANCE,
+    BODY_TWIST_COVARIANCE,
+    ENU_TWIST_COVARIANCE,
+    GYRO_BIAS_COVARIANCE,
+    POSE_COVARIANCE,
+    POSITION_COVARIANCE,
+    VELOCITY_BODY,
+    body_numbers_of_solutions,
+    covariance_numbers_of_solutions,
+)
 from buoy_processing.solution_columns import SolutionColumns
 
 NAV_TOPIC_ORDER = (NAV_ODOMETRY_TOPIC, NAV_IMU_TOPIC, NAV_VELOCITY_TOPIC, NAV_FIX_TOPIC, TF_TOPIC)
@@ -55,18 +65,23 @@ def nav_messages(rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray) -> li
     count = rows.shape[0]
     attitude = np.ascontiguousarray(rows[:, row.ATTITUDE_XYZW])
     velocity_enu = np.ascontiguousarray(rows[:, row.VELOCITY_ENU])
-    blocks = {
-        name: np.ascontiguousarray(rows[:, columns]).reshape(-1, 3, 3)
-        for name, columns in (
-            ("attitude", row.ATTITUDE_COVARIANCE),
-            ("velocity", row.VELOCITY_COVARIANCE),
-            ("position", row.POSITION_COVARIANCE),
-            ("gyro_bias", row.GYRO_BIAS_COVARIANCE),
+    attitude_cov, velocity_cov, position_cov, gyro_bias_cov = (
+        np.ascontiguousarray(rows[:, columns]).reshape(-1, 3, 3)
+        for columns in (
+            row.ATTITUDE_COVARIANCE,
+            row.VELOCITY_COVARIANCE,
+            row.POSITION_COVARIANCE,
+            row.GYRO_BIAS_COVARIANCE,
         )
-    }
-    body = body_numbers_of_solutions(
-        attitude, velocity_enu, blocks["velocity"], blocks["gyro_bias"]
     )
+    body = body_numbers_of_solutions(attitude, velocity_enu, velocity_cov, gyro_bias_cov)
+    numbers = covariance_numbers_of_solutions(
+        attitude_cov, velocity_cov, position_cov, gyro_bias_cov
+    )
+
+    def covariance(start: int, size: int) -> np.ndarray:
+        return numbers[:, start : start + size]
+
     stamp = {"sec": secs, "nanosec": nanosecs}
     position_map = rows[:, row.POSITION_MAP]
     rate = rows[:, row.ANGULAR_RATE]
@@ -80,7 +95,7 @@ def nav_messages(rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray) -> li
                 "child_frame_id": BODY_FRAME,
                 "position": position_map,
                 "orientation": attitude,
-                "pose_covariance": _diagonal_blocks(blocks["position"], blocks["attitude"]),
+                "pose_covariance": covariance(POSE_COVARIANCE, 36),
                 "linear": body[:, VELOCITY_BODY : VELOCITY_BODY + 3],
                 "angular": rate,
                 "twist_covariance": body[:, BODY_TWIST_COVARIANCE : BODY_TWIST_COVARIANCE + 36],
@@ -92,9 +107,9 @@ def nav_messages(rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray) -> li
                 **stamp,
                 "frame_id": BODY_FRAME,
                 "orientation": attitude,
-                "orientation_covariance": blocks["attitude"].reshape(count, 9),
+                "orientation_covariance": covariance(ATTITUDE_COVARIANCE, 9),
                 "angular_velocity": rate,
-                "angular_velocity_covariance": blocks["gyro_bias"].reshape(count, 9),
+                "angular_velocity_covariance": covariance(GYRO_BIAS_COVARIANCE, 9),
                 "linear_acceleration": rows[:, row.SPECIFIC_FORCE],
                 "linear_acceleration_covariance": np.zeros((count, 9)),
             },
@@ -106,7 +121,7 @@ def nav_messages(rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray) -> li
                 "frame_id": MAP_FRAME,
                 "linear": velocity_enu,
                 "angular": np.zeros((count, 3)),
-                "covariance": _diagonal_blocks(blocks["velocity"], np.zeros((count, 3, 3))),
+                "covariance": covariance(ENU_TWIST_COVARIANCE, 36),
             },
         ),
         cdr_bulk.encode(
@@ -119,7 +134,7 @@ def nav_messages(rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray) -> li
                 "latitude": geodetic[:, 0],
                 "longitude": geodetic[:, 1],
                 "altitude": geodetic[:, 2],
-                "position_covariance": blocks["position"].reshape(count, 9),
+                "position_covariance": covariance(POSITION_COVARIANCE, 9),
                 "position_covariance_type": np.full(count, COVARIANCE_TYPE_KNOWN),
             },
         ),
@@ -134,16 +149,6 @@ def nav_messages(rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray) -> li
             },
         ),
     ]
-
-
-def _diagonal_blocks(first: np.ndarray, second: np.ndarray) -> np.ndarray:
-    """N row-major 6×6 matrices with the 3×3 ``first`` and ``second`` on their diagonal,
-    zeros elsewhere (N × 36), as :func:`buoy_nav.nav_numbers.covariance_numbers` lays the
-    covariances of ``nav/odometry`` and ``nav/velocity`` out."""
-    matrices = np.zeros((first.shape[0], 6, 6))
-    matrices[:, :3, :3] = first
-    matrices[:, 3:, 3:] = second
-    return matrices.reshape(-1, 36)
 
 
 class _Place(NamedTuple):
