@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from buoy_common.bag_io import BagReader
+from buoy_common.bag_io.stretch import Stretch
 
 REMAP_SEPARATOR = ":="
 
@@ -209,27 +210,24 @@ class NamespacedWriter:
         # A tool writes a handful of topics at the IMU's rate: name each once.
         self._output_names: dict[str, str] = {}
 
-    def _output_name(self, topic: str) -> str:
+    def output_name(self, topic: str) -> str:
+        """Where ``topic`` of this buoy is written (:meth:`TopicView.output_name`)."""
         name = self._output_names.get(topic)
         if name is None:
             name = self._output_names[topic] = self._view.output_name(topic)
         return name
 
     def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
-        self._writer.write_raw(self._output_name(topic), msgtype, log_time_ns, raw)
+        self._writer.write_raw(self.output_name(topic), msgtype, log_time_ns, raw)
 
-    def write_raw_many(self, records: list[tuple[str, str, int, bytes]]) -> None:
-        """Each (topic, msgtype, log time ns, CDR bytes) of ``records``, in order."""
-        name = self._output_name
-        self._writer.write_raw_many(
-            [
-                (name(topic), msgtype, log_time_ns, raw)
-                for topic, msgtype, log_time_ns, raw in records
-            ]
-        )
+    def write_named_stretch(self, stretch: Stretch) -> None:
+        """The messages of ``stretch`` (:mod:`buoy_common.bag_io.stretch`), in order, each
+        topic already its :meth:`output_name`: a stretch named as it was gathered goes to the
+        bag's writer as it is."""
+        self._writer.write_stretch(stretch)
 
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
-        self._writer.write(self._output_name(topic), msgtype, log_time_ns, message)
+        self._writer.write(self.output_name(topic), msgtype, log_time_ns, message)
 
     @property
     def counts(self) -> dict[str, int]:

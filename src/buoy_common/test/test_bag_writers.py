@@ -16,8 +16,10 @@ from mcap.reader import make_reader
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import Imu, NavSatFix
 
+from buoy_common import cdr_bulk
 from buoy_common.bag_io import BackgroundBagWriter, BagError, BagReader, BagWriter
 from buoy_common.bag_io.recording import RecordingBagWriter
+from buoy_common.bag_io.stretch import ColumnMessages, Stretch
 
 T0_NS = 1_700_000_000_000_000_000
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -58,23 +60,48 @@ def test_background_writer_writes_the_same_bag(written_bag, tmp_path):
 
 
 @pytest.mark.parametrize("writer_class", [BagWriter, BackgroundBagWriter])
-def test_messages_written_a_stretch_at_a_time_make_the_same_bag(
-    written_bag, tmp_path, writer_class
-):
-    """Stretches of raw messages (each type's first message in one) and single ones between
-    them, an empty stretch too: the bag written one by one."""
+def test_a_stretch_makes_the_bag_written_one_by_one(written_bag, tmp_path, writer_class):
+    """The IMU samples as columns, one a row, the fixes between them as records: split around
+    a fix written alone (the rows before it with the first part), an empty stretch too, the
+    writer encodes them into the bag written one by one."""
     path, counts = written_bag
+    with BagReader(path) as reader:
+        messages = list(reader.messages())
+    imu = [message for message in messages if message.topic == "/imu/data_raw"]
+    records, records_before = [], []
+    for message in messages:
+        if message.topic == "/imu/data_raw":
+            records_before.append(len(records))
+        else:
+            records.append((message.topic, message.msgtype, message.log_time_ns, message.raw))
+    columns = cdr_bulk.decode(IMU_TYPE, [message.raw for message in imu]).columns
+    stretch = Stretch(
+        (ColumnMessages("/imu/data_raw", IMU_TYPE, columns),),
+        [message.log_time_ns for message in imu],
+        records,
+        records_before,
+    )
+    first, rest = stretch.split(12)
     copy = tmp_path / "stretches"
-    with BagReader(path) as reader, writer_class(copy) as writer:
-        records = [(m.topic, m.msgtype, m.log_time_ns, m.raw) for m in reader.messages()]
-        writer.write_raw_many(records[:3])
-        writer.write_raw(*records[3])
-        writer.write_raw_many([])
-        writer.write_raw_many(records[4:])
+    with writer_class(copy) as writer:
+        writer.write_stretch(first)
+        writer.write_raw(*records[12])
+        writer.write_stretch(Stretch((), [], [], []))
+        writer.write_stretch(rest)
     assert writer.counts == counts
+    assert messages_in_file_order(copy) == messages_in_file_order(path)
     with BagReader(path) as original, BagReader(copy) as copied:
-        assert list(original.messages()) == list(copied.messages())
         assert copied.topics == original.topics
+
+
+def messages_in_file_order(path) -> list[tuple[str, int, bytes]]:
+    """(topic, log time ns, CDR bytes) of each message of the bag at ``path``, in the order
+    its file holds them (a reader in log-time order would hide a message out of place)."""
+    with open(next(path.glob("*.mcap")), "rb") as stream:
+        return [
+            (channel.topic, message.log_time, bytes(message.data))
+            for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)
+        ]
 
 
 def test_background_writer_stores_metadata_records_as_the_bag_writer_does(tmp_path):

@@ -5,23 +5,25 @@ An offline run writes five messages a solution (``nav/odometry``, ``nav/imu``,
 (:func:`buoy_nav.fusion_messages.solution_cdr`, what the live node publishes), they cost the
 interpreter more than the filter's step that made the solution. The engine of an offline run
 writes its solutions as rows instead (:mod:`buoy_nav.solution_rows`); here a stretch of rows
-becomes the messages' columns and each type's messages are encoded together
-(:func:`buoy_common.cdr_bulk.encode`): the same bytes, which a test holds equal to the
+becomes the messages' columns, which the bag's writer encodes, each type's messages together
+(:func:`buoy_common.cdr_bulk.encode`; the offline tools' writing process does it on the second
+core: :mod:`buoy_common.bag_io.stretch`): the same bytes, which a test holds equal to the
 messages packed one by one.
 
-Until a stretch is encoded, :class:`OrderedOutput` keeps a place in the output for each of its
-solutions' messages and holds back whatever the run writes after the first of them, so the
+Until a stretch is handed over, :class:`OrderedOutput` keeps a place in the output for each of
+its solutions' messages and holds back whatever the run writes after the first of them, so the
 bag holds every message in the order, and with the log time, it would have had written one by
 one.
 """
 
 from __future__ import annotations
 
+import bisect
 from typing import NamedTuple
 
 import numpy as np
 
-from buoy_common import cdr_bulk
+from buoy_common.bag_io.stretch import ColumnMessages, Stretch
 from buoy_common.contract import (
     BODY_FRAME,
     MAP_FRAME,
@@ -58,10 +60,12 @@ _STORED_IN_ORDER = tuple(
 )
 
 
-def nav_messages(rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray) -> list[list[bytes]]:
-    """The CDR bytes of the five messages of each solution written as ``rows``
-    (:mod:`buoy_nav.solution_rows`) with header stamps ``secs``, ``nanosecs``, by topic in
-    :data:`NAV_TOPIC_ORDER`, each list a message per row."""
+def nav_columns(
+    rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray
+) -> list[dict[str, object]]:
+    """The columns (:func:`buoy_common.cdr_bulk.encode`'s) of the five messages of each
+    solution written as ``rows`` (:mod:`buoy_nav.solution_rows`) with header stamps ``secs``,
+    ``nanosecs``, by topic in :data:`NAV_TOPIC_ORDER`, a message per row."""
     count = rows.shape[0]
     attitude = np.ascontiguousarray(rows[:, row.ATTITUDE_XYZW])
     velocity_enu = np.ascontiguousarray(rows[:, row.VELOCITY_ENU])
@@ -87,76 +91,53 @@ def nav_messages(rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray) -> li
     rate = rows[:, row.ANGULAR_RATE]
     geodetic = rows[:, row.GEODETIC]
     return [
-        cdr_bulk.encode(
-            NAV_MSGTYPES[NAV_ODOMETRY_TOPIC],
-            {
-                **stamp,
-                "frame_id": MAP_FRAME,
-                "child_frame_id": BODY_FRAME,
-                "position": position_map,
-                "orientation": attitude,
-                "pose_covariance": covariance(POSE_COVARIANCE, 36),
-                "linear": body[:, VELOCITY_BODY : VELOCITY_BODY + 3],
-                "angular": rate,
-                "twist_covariance": body[:, BODY_TWIST_COVARIANCE : BODY_TWIST_COVARIANCE + 36],
-            },
-        ),
-        cdr_bulk.encode(
-            NAV_MSGTYPES[NAV_IMU_TOPIC],
-            {
-                **stamp,
-                "frame_id": BODY_FRAME,
-                "orientation": attitude,
-                "orientation_covariance": covariance(ATTITUDE_COVARIANCE, 9),
-                "angular_velocity": rate,
-                "angular_velocity_covariance": covariance(GYRO_BIAS_COVARIANCE, 9),
-                "linear_acceleration": rows[:, row.SPECIFIC_FORCE],
-                "linear_acceleration_covariance": np.zeros((count, 9)),
-            },
-        ),
-        cdr_bulk.encode(
-            NAV_MSGTYPES[NAV_VELOCITY_TOPIC],
-            {
-                **stamp,
-                "frame_id": MAP_FRAME,
-                "linear": velocity_enu,
-                "angular": np.zeros((count, 3)),
-                "covariance": covariance(ENU_TWIST_COVARIANCE, 36),
-            },
-        ),
-        cdr_bulk.encode(
-            NAV_MSGTYPES[NAV_FIX_TOPIC],
-            {
-                **stamp,
-                "frame_id": BODY_FRAME,
-                "status": np.full(count, STATUS_FIX),
-                "service": np.full(count, SERVICE_GPS),
-                "latitude": geodetic[:, 0],
-                "longitude": geodetic[:, 1],
-                "altitude": geodetic[:, 2],
-                "position_covariance": covariance(POSITION_COVARIANCE, 9),
-                "position_covariance_type": np.full(count, COVARIANCE_TYPE_KNOWN),
-            },
-        ),
-        cdr_bulk.encode(
-            TF_MSGTYPE,
-            {
-                **stamp,
-                "frame_id": MAP_FRAME,
-                "child_frame_id": BODY_FRAME,
-                "translation": position_map,
-                "rotation": attitude,
-            },
-        ),
+        {
+            **stamp,
+            "frame_id": MAP_FRAME,
+            "child_frame_id": BODY_FRAME,
+            "position": position_map,
+            "orientation": attitude,
+            "pose_covariance": covariance(POSE_COVARIANCE, 36),
+            "linear": body[:, VELOCITY_BODY : VELOCITY_BODY + 3],
+            "angular": rate,
+            "twist_covariance": body[:, BODY_TWIST_COVARIANCE : BODY_TWIST_COVARIANCE + 36],
+        },
+        {
+            **stamp,
+            "frame_id": BODY_FRAME,
+            "orientation": attitude,
+            "orientation_covariance": covariance(ATTITUDE_COVARIANCE, 9),
+            "angular_velocity": rate,
+            "angular_velocity_covariance": covariance(GYRO_BIAS_COVARIANCE, 9),
+            "linear_acceleration": rows[:, row.SPECIFIC_FORCE],
+            "linear_acceleration_covariance": np.zeros((count, 9)),
+        },
+        {
+            **stamp,
+            "frame_id": MAP_FRAME,
+            "linear": velocity_enu,
+            "angular": np.zeros((count, 3)),
+            "covariance": covariance(ENU_TWIST_COVARIANCE, 36),
+        },
+        {
+            **stamp,
+            "frame_id": BODY_FRAME,
+            "status": np.full(count, STATUS_FIX),
+            "service": np.full(count, SERVICE_GPS),
+            "latitude": geodetic[:, 0],
+            "longitude": geodetic[:, 1],
+            "altitude": geodetic[:, 2],
+            "position_covariance": covariance(POSITION_COVARIANCE, 9),
+            "position_covariance_type": np.full(count, COVARIANCE_TYPE_KNOWN),
+        },
+        {
+            **stamp,
+            "frame_id": MAP_FRAME,
+            "child_frame_id": BODY_FRAME,
+            "translation": position_map,
+            "rotation": attitude,
+        },
     ]
-
-
-class _Place(NamedTuple):
-    """The place of one solution's messages: the solution's index among those given since the
-    last rows were taken, and the messages' log time (ns)."""
-
-    solution: int
-    log_time_ns: int
 
 
 class _Message(NamedTuple):
@@ -174,12 +155,21 @@ class OrderedOutput:
 
     def __init__(self, writer: NamespacedWriter):
         self._writer = writer
-        self._queue: list[_Place | _Message | tuple] = []
-        """The places kept and the writes held: a message object's, or a raw one as its
-        (topic, msgtype, log time ns, CDR bytes)."""
+        self._nav_topics = tuple(
+            (writer.output_name(stored), msgtype) for stored, msgtype in _STORED_IN_ORDER
+        )
+        self._held: list[tuple] = []
+        """The writes held behind the places, in order: a raw write as its record (output
+        topic, msgtype, log time ns, CDR bytes), a message object's as a :class:`_Message`."""
+        self._objects_held: list[int] = []
+        """Where the message objects are in :attr:`_held`."""
+        # Each place kept: its solution's index among those given since the last rows were
+        # taken, its messages' log time (ns), and how many writes were held before it.
+        self._place_solutions: list[int] = []
+        self._place_log_times_ns: list[int] = []
+        self._place_held_before: list[int] = []
         self._solutions = 0
         """Solutions given since the last rows were taken, with a place or without."""
-        self._places: list[int] = []
 
     @property
     def counts(self) -> dict[str, int]:
@@ -187,15 +177,16 @@ class OrderedOutput:
         return self._writer.counts
 
     def write_raw(self, topic: str, msgtype: str, log_time_ns: int, raw: bytes) -> None:
-        if self._places:
-            self._queue.append((topic, msgtype, log_time_ns, raw))
+        if self._place_solutions:
+            self._held.append((self._writer.output_name(topic), msgtype, log_time_ns, raw))
         else:
             self._writer.write_raw(topic, msgtype, log_time_ns, raw)
 
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
         """A message object (a product's, made afresh): written in its turn."""
-        if self._places:
-            self._queue.append(_Message(topic, msgtype, log_time_ns, message))
+        if self._place_solutions:
+            self._objects_held.append(len(self._held))
+            self._held.append(_Message(topic, msgtype, log_time_ns, message))
         else:
             self._writer.write(topic, msgtype, log_time_ns, message)
 
@@ -204,17 +195,18 @@ class OrderedOutput:
         ``log_time_ns`` (ns), or, when not ``written`` (the navigation output's rate leaves
         it out), no place."""
         if written:
-            self._queue.append(_Place(self._solutions, log_time_ns))
-            self._places.append(self._solutions)
+            self._place_solutions.append(self._solutions)
+            self._place_log_times_ns.append(log_time_ns)
+            self._place_held_before.append(len(self._held))
         self._solutions += 1
 
     def finish(self) -> None:
         """End of the run: every place must have been written (RuntimeError saying how many
         solutions' messages were not: their rows were never handed over)."""
-        if self._places:
+        if self._place_solutions:
             raise RuntimeError(
-                f"the nav/* and tf of {len(self._places)} solutions were never written: "
-                "their rows were not handed over"
+                f"the nav/* and tf of {len(self._place_solutions)} solutions were never "
+                "written: their rows were not handed over"
             )
 
     def take_columns(self, columns: SolutionColumns) -> None:
@@ -230,41 +222,43 @@ class OrderedOutput:
         count = rows.shape[0]
         if count > self._solutions:
             raise ValueError(f"{count} rows for {self._solutions} solutions given")
-        due = self._due(count)
-        places = np.array([item.solution for item in due if isinstance(item, _Place)], dtype=int)
-        messages = []
-        if len(places):
-            encoded = nav_messages(rows[places], secs[places], nanosecs[places])
-            messages = list(zip(*encoded, strict=True))
-        # Raw messages go to the writer a stretch at a time; a message object in its turn.
-        records = []
-        written = 0
-        for item in due:
-            if isinstance(item, _Place):
-                for (stored, msgtype), raw in zip(_STORED_IN_ORDER, messages[written], strict=True):
-                    records.append((stored, msgtype, item.log_time_ns, raw))
-                written += 1
-            elif isinstance(item, _Message):
-                self._writer.write_raw_many(records)
-                records = []
-                self._writer.write(*item)
-            else:
-                records.append(item)
-        self._writer.write_raw_many(records)
+        places = bisect.bisect_left(self._place_solutions, count)
+        held_due = (
+            self._place_held_before[places]
+            if places < len(self._place_solutions)
+            else len(self._held)
+        )
+        solutions = np.asarray(self._place_solutions[:places], dtype=int)
+        columns = nav_columns(rows[solutions], secs[solutions], nanosecs[solutions])
+        stretch = Stretch(
+            tuple(
+                ColumnMessages(topic, msgtype, topic_columns)
+                for (topic, msgtype), topic_columns in zip(self._nav_topics, columns, strict=True)
+            ),
+            self._place_log_times_ns[:places],
+            self._held[:held_due],
+            self._place_held_before[:places],
+        )
+        self._write_in_order(stretch, [at for at in self._objects_held if at < held_due])
+        self._keep_after(count, places, held_due)
 
-    def _due(self, count: int) -> list:
-        """What is written once the oldest ``count`` solutions' rows are taken: the queue up
-        to the place of the first solution after them; the rest is kept, renumbered."""
-        queue = self._queue
-        cut = len(queue)
-        for at, item in enumerate(queue):
-            if isinstance(item, _Place) and item.solution >= count:
-                cut = at
-                break
-        self._queue = [
-            _Place(item.solution - count, item.log_time_ns) if isinstance(item, _Place) else item
-            for item in queue[cut:]
-        ]
-        self._places = [solution - count for solution in self._places if solution >= count]
+    def _write_in_order(self, stretch: Stretch, objects_at: list[int]) -> None:
+        """``stretch`` to the writer, split at the message objects among its records (at
+        ``objects_at``), each written in its turn."""
+        written = 0
+        for at in objects_at:
+            before, stretch = stretch.split(at - written)
+            self._writer.write_named_stretch(before)
+            self._writer.write(*self._held[at])
+            written = at + 1
+        self._writer.write_named_stretch(stretch)
+
+    def _keep_after(self, count: int, places: int, held_due: int) -> None:
+        """Drop the first ``places`` places, of the oldest ``count`` solutions, and the
+        first ``held_due`` writes held; what remains renumbered."""
+        self._place_solutions = [solution - count for solution in self._place_solutions[places:]]
+        del self._place_log_times_ns[:places]
+        self._place_held_before = [before - held_due for before in self._place_held_before[places:]]
+        del self._held[:held_due]
+        self._objects_held = [at - held_due for at in self._objects_held if at >= held_due]
         self._solutions -= count
-        return queue[:cut]

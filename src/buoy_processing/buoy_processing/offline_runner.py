@@ -71,11 +71,16 @@ class BagConsumer(Protocol):
         """Stored name → fields of the copied topics whose messages :meth:`add_message` takes
         read with their chunk (:mod:`buoy_processing.chunk_records`)."""
 
+    @property
+    def topics(self) -> list[str]:
+        """Stored names of the copied topics whose messages :meth:`add_message` takes (the
+        others, such as the truth, are only copied)."""
+
     def add_message(
         self, reader: BagReader, message: BagMessage, record: tuple | None = None
     ) -> None:
-        """A message of a copied topic, already written to the output; ``record``: its fields
-        of :attr:`record_fields`, None when read alone."""
+        """A message of one of :attr:`topics`, already written to the output; ``record``: its
+        fields of :attr:`record_fields`, None when read alone."""
 
     def finish(self, log_time_ns: int) -> None:
         """End of the data; ``log_time_ns`` is the log time of the last thing read, ns."""
@@ -121,6 +126,10 @@ class NothingFollows:
 
     def add_solution_rows(self, stamps: list[Stamp]) -> None:
         self._held_back.take(stamps, -math.inf)
+
+    @property
+    def topics(self) -> list[str]:
+        return []
 
     @property
     def record_fields(self) -> dict[str, tuple[str, ...]]:
@@ -269,6 +278,7 @@ def _fusing_pass(
     reader = run.reader
     relative_of = run.relative_of
     fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
+    taken = frozenset(consumer.topics)
     log_time_ns = reader.start_ns
     for batch in reader.message_batches([*relative_of, *run.copied_topics]):
         records = chunk_records(batch, fields_of_topic)
@@ -282,7 +292,8 @@ def _fusing_pass(
             else:
                 if writer is not None:
                     writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                consumer.add_message(reader, message, records.get(position))
+                if message.topic in taken:
+                    consumer.add_message(reader, message, records.get(position))
         progress.reached(log_time_ns)
     return log_time_ns
 
@@ -324,6 +335,7 @@ def _merged_pass(
     """The smoothed solutions of ``fusion`` and the copied ``topics`` (stored names) of
     ``reader``'s bag in log-time order, written (unless ``writer`` is None: no bag) and given
     to ``consumer``; the last log time (ns)."""
+    taken = frozenset(consumer.topics)
     log_time_ns = reader.start_ns
     for message, record, solution in merged_with_smoothed(
         reader, fusion, topics, consumer.record_fields
@@ -336,7 +348,8 @@ def _merged_pass(
         log_time_ns = message.log_time_ns
         if writer is not None:
             writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-        consumer.add_message(reader, message, record)
+        if message.topic in taken:
+            consumer.add_message(reader, message, record)
     return log_time_ns
 
 

@@ -6,7 +6,9 @@ import pytest
 from geometry_msgs.msg import Vector3Stamped
 from mcap.reader import make_reader
 
+from buoy_common import cdr_bulk
 from buoy_common.bag_io import BagWriter
+from buoy_common.contract import NAV_MSGTYPES, TF_MSGTYPE, TF_TOPIC
 from buoy_common.namespaces import NamespacedWriter, TopicView
 from buoy_nav import earth
 from buoy_nav.error_state_filter import ERROR_STATES, ErrorStateFilter
@@ -14,7 +16,7 @@ from buoy_nav.fusion_messages import nav_values, solution_cdr, transform_cdr
 from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.solution import SolutionBuilder
 from buoy_nav.solution_rows import SolutionRows
-from buoy_processing.nav_rows_output import NAV_TOPIC_ORDER, OrderedOutput, nav_messages
+from buoy_processing.nav_rows_output import NAV_TOPIC_ORDER, OrderedOutput, nav_columns
 
 PLANE = earth.LocalTangentPlane(0.7, -1.2, 0.0)
 
@@ -60,8 +62,12 @@ def packed_one_by_one(solution, sec: int, nanosec: int) -> list[bytes]:
 @pytest.mark.parametrize("distrust", [None, (1e-4, 2e-3)])
 def test_messages_of_rows_are_the_bytes_packed_one_by_one(distrust):
     solutions, rows, stamps = solutions_and_rows(64, distrust)
-    encoded = nav_messages(rows, stamps[:, 0].copy(), stamps[:, 1].copy())
-    assert len(encoded) == len(NAV_TOPIC_ORDER)
+    columns = nav_columns(rows, stamps[:, 0].copy(), stamps[:, 1].copy())
+    msgtypes = {**NAV_MSGTYPES, TF_TOPIC: TF_MSGTYPE}
+    encoded = [
+        cdr_bulk.encode(msgtypes[topic], topic_columns)
+        for topic, topic_columns in zip(NAV_TOPIC_ORDER, columns, strict=True)
+    ]
     for index, solution in enumerate(solutions):
         expected = packed_one_by_one(solution, *stamps[index].tolist())
         assert [messages[index] for messages in encoded] == expected, index
@@ -83,11 +89,13 @@ def mean_bytes(tmp_path, mean, message) -> bytes:
     return bag_messages(tmp_path / "alone")[0][2]
 
 
-def test_a_stretch_is_written_where_its_solutions_were_given(tmp_path):
+@pytest.mark.parametrize("namespace", ["", "/buoy2"])
+def test_a_stretch_is_written_where_its_solutions_were_given(tmp_path, namespace):
     """Writes between and after solutions (a copied sonic message, a product's message object,
     a solution left out by the navigation rate) come out in the order given, each solution's
-    five messages in its place with its log time; rows taken for the oldest solutions write
-    what came before the next place, and nothing after it."""
+    five messages in its place with its log time, every topic in the buoy's namespace; rows
+    taken for the oldest solutions write what came before the next place, and nothing after
+    it."""
     solutions, rows, stamps = solutions_and_rows(3, None)
     sonic = ("/anemometer/wind", "geometry_msgs/msg/Vector3Stamped")
     raw = bytes(range(40))
@@ -95,7 +103,7 @@ def test_a_stretch_is_written_where_its_solutions_were_given(tmp_path):
     mean_message = Vector3Stamped()
     mean_message.vector.x = 7.5
     with BagWriter(tmp_path / "out") as bag:
-        output = OrderedOutput(NamespacedWriter(bag, TopicView()))
+        output = OrderedOutput(NamespacedWriter(bag, TopicView(namespace)))
         output.write_raw(*sonic, 5, raw)
         output.add_solution(10, True)
         output.write_raw(*sonic, 11, raw)
@@ -103,9 +111,9 @@ def test_a_stretch_is_written_where_its_solutions_were_given(tmp_path):
         output.add_solution(30, True)
         output.write(mean[0], mean[1], 30, mean_message)
         output.write_raw(*sonic, 31, raw)
-        assert output.counts == {sonic[0]: 1}
+        assert output.counts == {namespace + sonic[0]: 1}
         output.take_rows(rows[:2], stamps[:2, 0].copy(), stamps[:2, 1].copy())
-        assert output.counts[sonic[0]] == 2
+        assert output.counts[namespace + sonic[0]] == 2
         assert sum(output.counts.values()) == 2 + len(NAV_TOPIC_ORDER)
         with pytest.raises(ValueError, match="2 rows for 1 solutions given"):
             output.take_rows(rows[1:], stamps[1:, 0].copy(), stamps[1:, 1].copy())
@@ -113,14 +121,14 @@ def test_a_stretch_is_written_where_its_solutions_were_given(tmp_path):
             output.finish()
         output.take_rows(rows[2:], stamps[2:, 0].copy(), stamps[2:, 1].copy())
         output.finish()
-    expected = [(sonic[0], 5, raw)]
+    expected = [(namespace + sonic[0], 5, raw)]
     for index, log_time in ((0, 10), (2, 30)):
         packed = packed_one_by_one(solutions[index], *stamps[index].tolist())
         expected += [
-            ("/" + topic, log_time, message)
+            (f"{namespace}/{topic}", log_time, message)
             for topic, message in zip(NAV_TOPIC_ORDER, packed, strict=True)
         ]
         if log_time == 30:
-            expected.append((mean[0], 30, mean_bytes(tmp_path, mean, mean_message)))
-        expected.append((sonic[0], log_time + 1, raw))
+            expected.append((namespace + mean[0], 30, mean_bytes(tmp_path, mean, mean_message)))
+        expected.append((namespace + sonic[0], log_time + 1, raw))
     assert bag_messages(tmp_path / "out") == expected

@@ -10,7 +10,9 @@ import shutil
 import signal
 import sys
 from collections import Counter
+from operator import itemgetter
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from buoy_common.bag_io.common import (
     BagError,
@@ -21,12 +23,20 @@ from buoy_common.bag_io.common import (
 )
 from buoy_common.bag_io.writing import BagOutput, BagWriter, check_bag_destination
 
+if TYPE_CHECKING:
+    # The writing process imports it (and numpy) with the first stretch it is given.
+    from buoy_common.bag_io.stretch import Stretch
+
 # Messages handed to the writing process at a time: large enough that sending costs a fraction
 # of a microsecond per message, small enough to keep both processes busy.
 _BATCH_MESSAGES = 2048
 # Longest wait for the writing process to exit once the bag is finished (s).
 _WRITER_EXIT_TIMEOUT_S = 60.0
 
+
+_TOPIC_OF = itemgetter(0)
+_MSGTYPE_OF = itemgetter(1)
+"""The topic and the message type of a record (topic, msgtype, log time ns, CDR bytes)."""
 
 _CLOSE = "close"
 """The command that ends the writing process's batches: finish the bag."""
@@ -36,28 +46,32 @@ class BackgroundBagWriter(BagOutput):
     """A :class:`BagWriter` in a process of its own, for the offline tools.
 
     Same interface and bag as :class:`BagWriter`. Messages are handed over in batches through a
-    pipe; an error of the writing process (a full disk, a type conflict) is raised as BagError
-    at the next hand-over or at :meth:`close`. Leaving the ``with`` block by an exception, or
-    the death of the tool, deletes the partial bag, as :class:`BagWriter` does. What is at
-    ``path`` is checked at construction; the tool does not wait for the writing process to
-    start (about a second of imports) but keeps the first batches until it is ready. The
-    writing process ignores SIGINT and SIGTERM: the tool decides whether the bag is finished or
-    abandoned.
+    pipe, a stretch (:meth:`write_stretch`) with its columns, which the writing process
+    encodes; an error of the writing process (a full disk, a type conflict, a value a message
+    cannot hold) is raised as BagError at the next hand-over or at :meth:`close`. Leaving the
+    ``with`` block by an exception, or the death of the tool, deletes the partial bag, as
+    :class:`BagWriter` does. What is at ``path`` is checked at construction; the tool does not
+    wait for the writing process to start (about a second of imports) but keeps the first
+    batches until it is ready. The writing process ignores SIGINT and SIGTERM: the tool decides
+    whether the bag is finished or abandoned.
 
     The tool describes each message type (definition, hash) to the writing process with the
     first batch that holds it: the writing process imports neither rosbags nor numpy and starts
-    in a third of the time (about 0.3 s of CPU less per run).
+    in a third of the time (about 0.3 s of CPU less per run); it imports numpy with the first
+    stretch it is given, while it has the rest of the second core to itself.
     """
 
     def __init__(self, path: str | Path, overwrite: bool = False):
         self.path = Path(path)
         check_bag_destination(self.path, overwrite)
         self._counts: Counter[str] = Counter()
-        self._batch: list[tuple[str, str, int, bytes]] = []
+        # Records (topic, msgtype, log time ns, CDR bytes) and stretches, in order.
+        self._batch: list[tuple[str, str, int, bytes] | Stretch] = []
+        self._batch_messages = 0
         # Types described to the writing process, and those to describe with the next batch.
         self._described: set[str] = set()
         self._descriptions: dict[str, TypeDescription] = {}
-        self._waiting_batches: list[tuple[dict, list[tuple[str, str, int, bytes]]]] = []
+        self._waiting_batches: list[tuple[dict, list]] = []
         self._metadata_records: list[tuple[str, dict[str, str]]] = []
         self._writer_ready = False
         # Spawned, not forked: the tools may run inside processes with middleware threads.
@@ -87,27 +101,37 @@ class BackgroundBagWriter(BagOutput):
         """Append one CDR-serialised message with log time ``log_time_ns`` (ns since the epoch)."""
         if not self._open:
             raise BagError(f"bag {self.path} is closed")
+        self._describe(topic, msgtype)
+        self._batch.append((topic, msgtype, log_time_ns, raw))
+        self._counts[topic] += 1
+        self._batch_messages += 1
+        if self._batch_messages >= _BATCH_MESSAGES:
+            self._send_batch()
+
+    def write_stretch(self, stretch: Stretch) -> None:
+        """The messages of ``stretch`` (:mod:`~buoy_common.bag_io.stretch`), in order, handed
+        over as they are: the writing process encodes its columns."""
+        if not self._open:
+            raise BagError(f"bag {self.path} is closed")
+        for group in stretch.groups:
+            self._describe(group.topic, group.msgtype)
+            self._counts[group.topic] += stretch.rows
+        records = stretch.records
+        # Checked and counted by the C loops of set and map: a stretch holds thousands.
+        if not self._described.issuperset(map(_MSGTYPE_OF, records)):
+            for topic, msgtype, _, _ in records:
+                self._describe(topic, msgtype)
+        self._counts.update(map(_TOPIC_OF, records))
+        self._batch.append(stretch)
+        self._batch_messages += stretch.messages
+        if self._batch_messages >= _BATCH_MESSAGES:
+            self._send_batch()
+
+    def _describe(self, topic: str, msgtype: str) -> None:
+        """Describe ``msgtype`` (of ``topic``) with the next batch, unless it was already."""
         if msgtype not in self._described:
             self._descriptions[msgtype] = type_description(self.path, topic, msgtype)
             self._described.add(msgtype)
-        self._batch.append((topic, msgtype, log_time_ns, raw))
-        self._counts[topic] += 1
-        if len(self._batch) >= _BATCH_MESSAGES:
-            self._send_batch()
-
-    def write_raw_many(self, records: list[tuple[str, str, int, bytes]]) -> None:
-        """:meth:`write_raw` of each (topic, msgtype, log time ns, CDR bytes) of ``records``,
-        in order, appended together: a stretch of messages costs one call, not one a message."""
-        if not self._open:
-            raise BagError(f"bag {self.path} is closed")
-        for topic, msgtype, _, _ in records:
-            if msgtype not in self._described:
-                self._descriptions[msgtype] = type_description(self.path, topic, msgtype)
-                self._described.add(msgtype)
-        self._counts.update(record[0] for record in records)
-        self._batch.extend(records)
-        if len(self._batch) >= _BATCH_MESSAGES:
-            self._send_batch()
 
     def write(self, topic: str, msgtype: str, log_time_ns: int, message) -> None:
         """Serialise ``message`` (a rosbags or an rclpy message of ``msgtype``) and append it."""
@@ -142,6 +166,7 @@ class BackgroundBagWriter(BagOutput):
             return
         self._open = False
         self._batch.clear()
+        self._batch_messages = 0
         self._waiting_batches.clear()
         self._connection.close()
         self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
@@ -156,7 +181,7 @@ class BackgroundBagWriter(BagOutput):
         ``wait_for_writer``)."""
         if self._batch:
             self._waiting_batches.append((self._descriptions, self._batch))
-            self._descriptions, self._batch = {}, []
+            self._descriptions, self._batch, self._batch_messages = {}, [], 0
         if not self._writer_ready:
             if not (wait_for_writer or self._connection.poll()):
                 return
@@ -257,8 +282,11 @@ def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
                 break
             descriptions, records = batch
             writer.describe(descriptions)
-            for topic, msgtype, log_time_ns, raw in records:
-                writer.write_raw(topic, msgtype, log_time_ns, raw)
+            for record in records:
+                if type(record) is tuple:
+                    writer.write_raw(*record)
+                else:
+                    writer.write_stretch(record)
         writer.close()
     except (EOFError, BrokenPipeError, ConnectionResetError):
         # The tool abandoned the bag (or died).

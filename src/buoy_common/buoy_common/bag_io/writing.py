@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import yaml
 from mcap.writer import CompressionType
@@ -36,6 +36,10 @@ from buoy_common.bag_io.common import (
 )
 from buoy_common.bag_io.mcap_writer import McapWriter
 from buoy_common.safe_output import OutputError, move_into_place, staging_path
+
+if TYPE_CHECKING:
+    # Not imported by the offline tools' writing process until a stretch comes: numpy.
+    from buoy_common.bag_io.stretch import Stretch
 
 # Uncompressed bytes after which a chunk is closed: rosbag2's and mcap's default. Larger chunks
 # compress no better and cost more to hold; smaller ones add index records (measured; the bag
@@ -108,10 +112,10 @@ class BagOutput:
             f"bag {self.path} was not written: abandoned after {sum(self.counts.values())} messages"
         )
 
-    def write_raw_many(self, records: Sequence[tuple[str, str, int, bytes]]) -> None:
-        """:meth:`write_raw` of each (topic, msgtype, log time ns, CDR bytes) of ``records``,
-        in order."""
-        for record in records:
+    def write_stretch(self, stretch: Stretch) -> None:
+        """:meth:`write_raw` of each message of ``stretch`` (:mod:`~buoy_common.bag_io.stretch`),
+        encoded here, in order."""
+        for record in stretch.encoded():
             self.write_raw(*record)
 
 
