@@ -11,6 +11,7 @@ import sys
 import threading
 import time
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from rclpy.serialization import serialize_message
@@ -123,6 +124,25 @@ def test_background_writer_reports_errors_of_the_writing_process(tmp_path):
     ):
         writer.write("/imu/data_raw", "sensor_msgs/msg/Imu", T0_NS, Imu())
         writer.write_raw("/imu/data_raw", "sensor_msgs/msg/NavSatFix", T0_NS, b"\x00\x01")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("writer_class", [BagWriter, BackgroundBagWriter])
+def test_a_stretch_its_writer_cannot_encode_is_refused_and_the_bag_abandoned(
+    tmp_path, writer_class
+):
+    """A stamp no header can hold (beyond 2038): the error names the field, raised where the
+    stretch is encoded (the writing process's at the close), and no partial bag is left."""
+    columns = cdr_bulk.decode(IMU_TYPE, [serialize_message(Imu())] * 2).columns
+    columns["sec"] = np.array([1_700_000_000, 2**33])
+    stretch = Stretch(
+        (ColumnMessages("/imu/data_raw", IMU_TYPE, columns),), [T0_NS, T0_NS + 1], [], [0, 0]
+    )
+    with (
+        pytest.raises((BagError, ValueError), match="sec"),
+        writer_class(tmp_path / "bag") as writer,
+    ):
+        writer.write_stretch(stretch)
     assert list(tmp_path.iterdir()) == []
 
 

@@ -7,7 +7,8 @@ kept as CDR bytes; log times are integer nanoseconds. Bags are read through rosb
 :mod:`~buoy_common.bag_io.indexed`, damaged ones through the ``mcap`` stream reader,
 :mod:`~buoy_common.bag_io.recovery`) and written through the ``mcap`` writer
 (:mod:`~buoy_common.bag_io.writing`), in a process of its own for the offline tools
-(:mod:`~buoy_common.bag_io.background`). A chunk of messages at a time can be decoded by
+(:mod:`~buoy_common.bag_io.background`), which also encodes the messages handed to it as
+columns (:mod:`~buoy_common.bag_io.stretch`). A chunk of messages at a time can be decoded by
 topic into numpy columns (:mod:`~buoy_common.bag_io.columns`). No module here imports rclpy:
 bags are used offline as well as by the recorder and player nodes.
 
