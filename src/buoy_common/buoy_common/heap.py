@@ -23,25 +23,13 @@ def freeze_existing_objects() -> None:
     gc.freeze()
 
 
-# Allocations (less deallocations) of tracked objects between two collections of the youngest
-# generation during a pass, against Python's 700: the pass's young objects are nearly all
-# acyclic tuples and lists that die young or live to its end, and each collection of the
-# youngest generation brings the older ones' nearer. About 2 % of the CPU of an hour of
-# ``process_bag`` (docs/benchmarks.md); the cyclic garbage waits a few thousand allocations more.
-PASS_COLLECTION_ALLOCATIONS = 20_000
-
-
 @contextlib.contextmanager
 def existing_objects_frozen() -> Iterator[None]:
     """Leave every object alive at entry out of the collector's walks while the block runs, and
-    the youngest generation collected every :data:`PASS_COLLECTION_ALLOCATIONS` allocations;
-    both handed back after: a pass may run in a long-lived process (a worker of an archive's
+    hand them back to it after: a pass may run in a long-lived process (a worker of an archive's
     cluster), where cyclic garbage among them must still be collected one day."""
-    thresholds = gc.get_threshold()
     gc.freeze()
-    gc.set_threshold(PASS_COLLECTION_ALLOCATIONS, *thresholds[1:])
     try:
         yield
     finally:
-        gc.set_threshold(*thresholds)
         gc.unfreeze()
