@@ -356,6 +356,9 @@ def test_a_silent_anemometer_does_not_pile_up_the_navigation(tmp_path, monkeypat
             netcdf_path=out.with_suffix(".nc"),
             say_statements=False,
             write_bag=write_bag,
+            # The corrections in this process, where the watch and the bound are set (with the
+            # bag written in the background they run in its writing process).
+            write_in_background=False,
         )
         outputs[bound] = out
         most_held[bound] = max(held)

@@ -266,3 +266,54 @@ def test_the_writing_process_starts_without_rosbags_or_numpy():
     heavy = [m for m in loaded if m.split(".")[0] in ("rosbags", "numpy", "scipy", "tqdm")]
     assert heavy == []
     assert "mcap.writer" in loaded
+
+
+class EchoHost:
+    """A host for the writing process: writes each batch it takes as IMU messages, and says at
+    the end how many it wrote."""
+
+    def __init__(self, topic: str):
+        self.topic = topic
+        self.written = 0
+
+    def start(self, writer):
+        self.writer = writer
+
+    def take(self, content):
+        for log_time_ns, raw in content:
+            if raw is None:
+                raise ValueError(f"no message at {log_time_ns} ns")
+            self.writer.write_raw(self.topic, IMU_TYPE, log_time_ns, raw)
+            self.written += 1
+
+    def finish(self):
+        return self.written
+
+
+def test_a_host_in_the_writing_process_writes_in_its_turn(tmp_path):
+    """What the host writes lies between the messages handed over before and after it, and
+    what its finish returns comes back; the bag stays open for more."""
+    raw = serialize_message(Imu())
+    with BackgroundBagWriter(tmp_path / "hosted", preload=(__name__,)) as writer:
+        writer.write_raw("/first", IMU_TYPE, T0_NS, raw)
+        writer.host(EchoHost("/hosted"))
+        writer.to_host([(T0_NS + 1, raw), (T0_NS + 2, raw)], 2)
+        writer.write_raw("/between", IMU_TYPE, T0_NS + 3, raw)
+        writer.to_host([(T0_NS + 4, raw)], 1)
+        assert writer.finish_host() == 3
+        assert writer.counts == {"/first": 1, "/hosted": 3, "/between": 1}
+        writer.write_raw("/last", IMU_TYPE, T0_NS + 5, raw)
+    topics = [topic for topic, _, _ in messages_in_file_order(tmp_path / "hosted")]
+    assert topics == ["/first", "/hosted", "/hosted", "/between", "/hosted", "/last"]
+
+
+def test_a_host_that_fails_abandons_the_bag_and_says_why(tmp_path):
+    raw = serialize_message(Imu())
+    with (
+        pytest.raises(BagError, match="ValueError: no message at 7 ns"),
+        BackgroundBagWriter(tmp_path / "hosted", preload=(__name__,)) as writer,
+    ):
+        writer.host(EchoHost("/hosted"))
+        writer.to_host([(5, raw), (7, None)], 2)
+        writer.finish_host()
+    assert list(tmp_path.iterdir()) == []

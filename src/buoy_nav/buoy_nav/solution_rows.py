@@ -104,6 +104,18 @@ class SolutionRows:
         )
         self.count += 1
 
+    def extend(self, rows: np.ndarray) -> None:
+        """Hold ``rows`` (n × :data:`ROW_WIDTH`) after those held: rows another process wrote
+        and handed over."""
+        needed = self.count + rows.shape[0]
+        if needed > self._block.shape[0]:
+            capacity = max(needed, 2 * self._block.shape[0])
+            grown = np.empty((capacity, ROW_WIDTH))
+            grown[: self.count] = self._block[: self.count]
+            self._block = grown
+        self._block[self.count : needed] = rows
+        self.count = needed
+
     def take(self, count: int) -> np.ndarray:
         """The oldest ``count`` rows (count × :data:`ROW_WIDTH`), no longer held."""
         if count > self.count:

@@ -65,5 +65,5 @@ def fuse_bag(
             nav_rate_hz=nav_rate_hz,
             static_transforms=sensor_transforms(shared_values(config), imu_link=True),
         )
-        fusion, counts, _ = run_fusion(run)
+        fusion, counts, _, _ = run_fusion(run)
     return FusedBag(fusion, counts, time.monotonic() - started, reader.duration_s, reader.recovery)

@@ -627,6 +627,11 @@ class BagCorrections:
         for correction in self._running:
             correction.finish(log_time_ns)
 
+    def detach(self) -> None:
+        for correction in self._running:
+            correction.writer = None
+            correction.held_back = None
+
 
 def process_bag(
     in_bag,
@@ -690,9 +695,7 @@ def process_bag(
                 SAMPLES_PER_STRETCH if write_bag else SAMPLES_PER_STRETCH_WITHOUT_BAG
             ),
         )
-        facts_of_run = _FactsOfRun(
-            fusion_config, corrections, read_imported_record(reader.path), nav_rate_hz
-        )
+        facts_of_run = _FactsOfRun(fusion_config, read_imported_record(reader.path), nav_rate_hz)
         run = OfflineRun(
             reader,
             out_bag,
@@ -713,7 +716,7 @@ def process_bag(
             closing_metadata=facts_of_run,
             say_statements=say_statements,
         )
-        fusion, topic_counts, statements = run_fusion(run, corrections)
+        fusion, topic_counts, statements, corrections = run_fusion(run, corrections)
         duration_s = reader.duration_s
     facts = facts_of_run.facts
     netcdf = _NetcdfRequest(netcdf_path, in_bag, history, netcdf_attributes, overwrite)
@@ -767,18 +770,19 @@ class _FactsOfRun:
     (:attr:`OfflineRun.closing_metadata`) and then every other writer."""
 
     fusion_config: FusionConfig
-    corrections: BagCorrections
     record: ImportedRecord | None
     nav_rate_hz: float = 0.0
     facts: OutputFacts | None = None
 
-    def __call__(self, fusion: OfflineFusion) -> dict[str, dict[str, str]]:
+    def __call__(
+        self, fusion: OfflineFusion, corrections: BagCorrections
+    ) -> dict[str, dict[str, str]]:
         health = fusion.engine.health()
         self.facts = output_facts(
             self.fusion_config,
-            _valid_flow_samples(self.corrections),
+            _valid_flow_samples(corrections),
             source_use_of(health),
-            _sample_spans_s(self.corrections),
+            _sample_spans_s(corrections),
             self.record,
             aligned=health.alignments > 0,
             nav_rate_hz=self.nav_rate_hz,

@@ -51,7 +51,6 @@ from buoy_nav.solution import Emitted
 from buoy_nav.solution_rows import SolutionRows
 from buoy_nav.source_health import HealthTransition, SourceStatus
 from buoy_processing.nav_output_rate import NavOutputRate
-from buoy_processing.nav_rows_output import OrderedOutput
 from buoy_processing.solution_columns import Stamp
 
 REQUIRED_TOPICS = (IMU_RAW_TOPIC,)
@@ -129,7 +128,7 @@ class OfflineFusion:
     def __init__(
         self,
         config: FusionConfig,
-        writer: BagWriter | BackgroundBagWriter | NamespacedWriter | OrderedOutput | None,
+        writer: BagWriter | BackgroundBagWriter | NamespacedWriter | None,
         smoother_spill_parent: str | Path | None = None,
         smooth: bool = False,
         nav_rate_hz: float = 0.0,
@@ -140,10 +139,9 @@ class OfflineFusion:
         (:mod:`buoy_processing.nav_output_rate`; every solution is still returned); None: none
         is made (a run that writes its products alone). The solutions are returned as their
         ``nav/*`` values or, with ``solution_rows``, as their header stamps, the engine writing
-        the solutions to :attr:`solution_rows` (:mod:`buoy_nav.solution_rows`), for
-        corrections that take them in bulk; the writer is then an
-        :class:`~buoy_processing.nav_rows_output.OrderedOutput`, given a place for each
-        solution's messages, which it writes when the rows are handed over. With ``smooth``
+        the solutions to :attr:`solution_rows` (:mod:`buoy_nav.solution_rows`), for what
+        follows to write and correct in bulk (:mod:`buoy_processing.output_side`); the writer
+        is then None. With ``smooth``
         (the filter's own solutions, ``realtime_output`` off) nothing is written: the solutions are
         kept by :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``)
         and written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
@@ -152,8 +150,8 @@ class OfflineFusion:
         self.solution_rows = SolutionRows() if solution_rows and not smooth else None
         """Where the engine writes the solutions (None: it makes
         :class:`~buoy_nav.solution.NavSolution`, which a smoothing run keeps)."""
-        if self.solution_rows is not None and not isinstance(writer, OrderedOutput | None):
-            raise ValueError("solution rows are written through an OrderedOutput")
+        if self.solution_rows is not None and writer is not None:
+            raise ValueError("solutions written as rows are written out by what follows")
         self.engine = FusionEngine(config, solution_rows=self.solution_rows)
         self.smoother = None
         if smooth:
@@ -228,7 +226,7 @@ class OfflineFusion:
 
     def _write(self, solutions: list[Emitted], log_time_ns: int) -> HandedOver:
         if self.solution_rows is not None:
-            return self._stamps_of(solutions, log_time_ns)
+            return self._stamps_of(solutions)
         written = []
         smoother = self.smoother
         for solution in solutions:
@@ -243,20 +241,13 @@ class OfflineFusion:
             written.append(values)
         return written
 
-    def _stamps_of(self, stamps_s: list[float], log_time_ns: int) -> list[Stamp]:
+    def _stamps_of(self, stamps_s: list[float]) -> list[Stamp]:
         """The header stamps of the solutions the engine wrote as rows, stamped ``stamps_s``
-        (s); with a writer, each one's place in the output, its messages logged at
-        ``log_time_ns`` when the navigation output's rate takes it."""
+        (s)."""
         if stamps_s and self.first_solution_s is None:
             self.first_solution_s = stamps_s[0]
         exact = self.stamps.exact
-        stamps = [exact(t_s) for t_s in stamps_s]
-        if self.writer is not None:
-            due_at = self.nav_output.due_at
-            add_solution = self.writer.add_solution
-            for sec, nanosec in stamps:
-                add_solution(log_time_ns, due_at(sec, nanosec))
-        return stamps
+        return [exact(t_s) for t_s in stamps_s]
 
     def _write_nav(self, values: NavValues, log_time_ns: int) -> None:
         """``nav/*`` and ``tf`` of one solution."""

@@ -7,7 +7,9 @@ output bag (a chunk of the bag at a time, its IMU and anemometer samples decoded
 ``process_bag`` the anemometer's and the DVL's) are copied to the output unchanged. A
 :class:`BagConsumer` (``process_bag``'s corrections) receives every navigation solution and every
 copied message in the order the live nodes would: a solution as soon as the fusion has it, a
-message when it is read.
+message when it is read. Without ``smooth`` what follows the fusion is one output side
+(:mod:`buoy_processing.output_side`), which the process writing the bag runs when the bag is
+written in the background: the fusion keeps the first core.
 
 Without ``smooth`` one pass does it all. With ``smooth`` the run takes two passes
 (:mod:`buoy_nav.smoothed_solutions`): the forward filter over the sensor topics, its epochs and
@@ -42,6 +44,7 @@ from buoy_nav.observability import unobserved_quantities
 from buoy_processing.chunk_records import chunk_records
 from buoy_processing.nav_rows_output import OrderedOutput
 from buoy_processing.offline_fusion import OfflineFusion
+from buoy_processing.output_side import COPY, SOLUTIONS, HostedOutputSide, OutputSide
 from buoy_processing.solution_columns import HeldBackSolutions, Stamp
 
 TF_STATIC_BAG_TOPIC = bag_topic(TF_STATIC_TOPIC)
@@ -84,6 +87,10 @@ class BagConsumer(Protocol):
 
     def finish(self, log_time_ns: int) -> None:
         """End of the data; ``log_time_ns`` is the log time of the last thing read, ns."""
+
+    def detach(self) -> None:
+        """After :meth:`finish`: drop what ties the consumer to the run's output, which stays
+        in the process that wrote the bag when the consumer leaves it."""
 
 
 class NoBag:
@@ -143,6 +150,9 @@ class NothingFollows:
     def finish(self, log_time_ns: int) -> None:
         pass
 
+    def detach(self) -> None:
+        self._held_back = None
+
 
 @dataclass
 class OfflineRun:
@@ -175,9 +185,12 @@ class OfflineRun:
     static_transforms: list[FrameTransform] = field(default_factory=list)
     """``base_link`` → the sensor frames, written once on ``tf_static`` at the input bag's first
     log time, before every other output (:mod:`buoy_common.sensor_frames`)."""
-    closing_metadata: Callable[[OfflineFusion], dict[str, dict[str, str]]] | None = None
+    closing_metadata: Callable[[OfflineFusion, BagConsumer], dict[str, dict[str, str]]] | None = (
+        None
+    )
     """The MCAP metadata records (name → map of strings) to store in the output bag, made from
-    the fusion once every message is written (what the run's outputs say of it)."""
+    the fusion and the consumer once every message is written (what the run's outputs say of
+    it)."""
     say_statements: bool = True
     """Print the start-up statements (what the sensors leave unobserved) on stderr; False for a
     caller that reports them itself (:attr:`FusionRun.statements`), as an archive does once
@@ -188,29 +201,36 @@ class OfflineRun:
         """Stored → relative name of the sensor topics."""
         return {stored: relative for relative, stored in self.sensors.items()}
 
-    def open_writer(self) -> BackgroundBagWriter | BagWriter | NoBag:
+    def open_writer(self, preload: tuple[str, ...] = ()) -> BackgroundBagWriter | BagWriter | NoBag:
+        """The output bag's writer; ``preload``: the modules a writing process of its own
+        imports first (those of what it will host)."""
         if not self.write_bag:
             return NoBag()
-        writer_class = BackgroundBagWriter if self.write_in_background else BagWriter
-        return writer_class(self.out_bag, overwrite=self.overwrite)
+        if self.write_in_background:
+            return BackgroundBagWriter(self.out_bag, overwrite=self.overwrite, preload=preload)
+        return BagWriter(self.out_bag, overwrite=self.overwrite)
 
     def store_closing_metadata(
-        self, writer: BackgroundBagWriter | BagWriter | NoBag, fusion: OfflineFusion
+        self,
+        writer: BackgroundBagWriter | BagWriter | NoBag,
+        fusion: OfflineFusion,
+        consumer: BagConsumer,
     ) -> None:
         """The records of :attr:`closing_metadata` into ``writer``'s bag, before it closes."""
         if self.closing_metadata is None:
             return
-        for name, metadata in self.closing_metadata(fusion).items():
+        for name, metadata in self.closing_metadata(fusion, consumer).items():
             writer.add_metadata(name, metadata)
 
-    def write_static_transforms(self, writer: NamespacedWriter) -> None:
-        """The one ``tf_static`` message of :attr:`static_transforms`, stamped and logged at the
-        input bag's first log time (nothing without transforms)."""
+    def static_transform_records(self) -> list[tuple[str, str, int, bytes]]:
+        """The one ``tf_static`` message of :attr:`static_transforms` (none without
+        transforms), stamped and logged at the input bag's first log time, as a record (topic,
+        msgtype, log time ns, CDR bytes), to be written before anything else."""
         if not self.static_transforms:
-            return
+            return []
         start_ns = self.reader.start_ns
         raw = tf_cdr(*ns_to_stamp(start_ns), self.static_transforms)
-        writer.write_raw(TF_STATIC_BAG_TOPIC, TF_STATIC_MSGTYPE, start_ns, raw)
+        return [(TF_STATIC_BAG_TOPIC, TF_STATIC_MSGTYPE, start_ns, raw)]
 
 
 class FusionRun(NamedTuple):
@@ -223,6 +243,9 @@ class FusionRun(NamedTuple):
     statements: list[str]
     """What the configured and present sensors leave unobserved, said before the run
     (:func:`buoy_nav.observability.unobserved_quantities`)."""
+    consumer: BagConsumer
+    """The consumer as the run left it: what it kept (a bag written in the background has
+    it run in the writing process, whence it came back: not the object given)."""
 
 
 def run_fusion(run: OfflineRun, consumer: BagConsumer | None = None) -> FusionRun:
@@ -234,71 +257,80 @@ def run_fusion(run: OfflineRun, consumer: BagConsumer | None = None) -> FusionRu
     if run.say_statements:
         for sentence in statements:
             print(f"{run.label}: warning: {sentence}", file=sys.stderr)
-    if run.smooth:
-        fusion, topic_counts = _smoothed_run(run, consumer)
-    else:
-        fusion, topic_counts = _forward_run(run, consumer)
-    return FusionRun(fusion, topic_counts, statements)
+    run_pass = _smoothed_run if run.smooth else _forward_run
+    fusion, topic_counts, consumer = run_pass(run, consumer)
+    return FusionRun(fusion, topic_counts, statements, consumer)
 
 
-def _forward_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion, dict[str, int]]:
-    """Fusion, copies and consumer in one pass over the bag."""
-    with BagProgress(run.reader, run.label) as progress, run.open_writer() as bag_writer:
-        writer = NamespacedWriter(bag_writer, run.view)
-        run.write_static_transforms(writer)
-        output = OrderedOutput(writer) if run.write_bag else None
-        fusion = OfflineFusion(run.config, output, nav_rate_hz=run.nav_rate_hz, solution_rows=True)
-        held_back = HeldBackSolutions(
-            fusion.solution_rows, [] if output is None else [output.take_columns]
+def _forward_run(
+    run: OfflineRun, consumer: BagConsumer
+) -> tuple[OfflineFusion, dict[str, int], BagConsumer]:
+    """Fusion, copies and consumer in one pass over the bag: the output side
+    (:mod:`buoy_processing.output_side`) in the process writing the bag when it is written in
+    the background, else here."""
+    preload = (OutputSide.__module__, type(consumer).__module__)
+    with (
+        BagProgress(run.reader, run.label) as progress,
+        run.open_writer(preload) as bag_writer,
+    ):
+        fusion = OfflineFusion(run.config, None, solution_rows=True)
+        fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
+        side = OutputSide(
+            consumer,
+            run.view,
+            run.nav_rate_hz,
+            run.write_bag,
+            run.static_transform_records(),
+            run.reader.path,
         )
-        consumer.start(output, held_back)
+        if isinstance(bag_writer, BackgroundBagWriter):
+            side = HostedOutputSide(side, bag_writer, fusion.solution_rows)
+        else:
+            side.start(bag_writer, fusion.solution_rows, run.reader)
         # What the set-up built (the engine, the compiled kernels) lives through the pass.
         with existing_objects_frozen():
-            log_time_ns = _fusing_pass(run, fusion, consumer, output, progress)
-        consumer.add_solution_rows(fusion.finish())
-        held_back.hand_over()
-        consumer.finish(log_time_ns)
-        if output is not None:
-            output.finish()
-        run.store_closing_metadata(bag_writer, fusion)
+            log_time_ns = _fusing_pass(run, fusion, side, fields_of_topic, progress)
+        last = [(SOLUTIONS, fusion.last_log_time_ns, fusion.finish())]
+        consumer, topic_counts = side.finish_run(last, log_time_ns)
+        run.store_closing_metadata(bag_writer, fusion, consumer)
         progress.done()
-    return fusion, writer.counts
+    return fusion, topic_counts, consumer
 
 
 def _fusing_pass(
     run: OfflineRun,
     fusion: OfflineFusion,
-    consumer: BagConsumer,
-    writer: OrderedOutput | None,
+    side: OutputSide | HostedOutputSide,
+    fields_of_topic: dict[str, tuple[str, ...]],
     progress: BagProgress,
 ) -> int:
-    """``run``'s bag in log-time order: the sensor messages into ``fusion``, its solutions to
-    ``consumer``, the copied topics written (unless ``writer`` is None: no bag) and given to
-    ``consumer``; the last log time (ns)."""
+    """``run``'s bag in log-time order: the sensor messages into ``fusion``, and its solutions
+    and the copied topics' messages to ``side`` as events (:mod:`buoy_processing.output_side`),
+    a chunk at a time, as is what ``fields_of_topic`` names of them; the last log time (ns)."""
     reader = run.reader
     relative_of = run.relative_of
-    fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
-    taken = frozenset(consumer.topics)
     log_time_ns = reader.start_ns
     for batch in reader.message_batches([*relative_of, *run.copied_topics]):
         records = chunk_records(batch, fields_of_topic)
+        events = []
+        add = events.append
         for position, message in enumerate(batch):
             log_time_ns = message.log_time_ns
             topic = relative_of.get(message.topic)
             if topic is not None:
-                solutions = fusion.add_message(reader, topic, message, records.get(position))
-                if solutions:
-                    consumer.add_solution_rows(solutions)
+                stamps = fusion.add_message(reader, topic, message, records.get(position))
+                if stamps:
+                    add((SOLUTIONS, log_time_ns, stamps))
             else:
-                if writer is not None:
-                    writer.write_raw(message.topic, message.msgtype, log_time_ns, message.raw)
-                if message.topic in taken:
-                    consumer.add_message(reader, message, records.get(position))
+                add((COPY, message, records.get(position)))
+        side.hand_over(events)
         progress.reached(log_time_ns)
     return log_time_ns
 
 
-def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion, dict[str, int]]:
+def _smoothed_run(
+    run: OfflineRun, consumer: BagConsumer
+) -> tuple[OfflineFusion, dict[str, int], BagConsumer]:
     """The forward filter, the smoother's backward pass, then the smoothed solutions merged
     with the copies, fed to the consumer."""
     reader = run.reader
@@ -310,7 +342,8 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion
         # keeps what it is given, and the second pass produces fast.
         with run.open_writer() as bag_writer:
             writer = NamespacedWriter(bag_writer, run.view)
-            run.write_static_transforms(writer)
+            for record in run.static_transform_records():
+                writer.write_raw(*record)
             # What the set-up built (the engine, the compiled kernels) lives through the passes.
             with existing_objects_frozen():
                 forward_pass(reader, fusion, run.sensors, run.relative_of, run.label)
@@ -319,10 +352,10 @@ def _smoothed_run(run: OfflineRun, consumer: BagConsumer) -> tuple[OfflineFusion
                 consumer.start(output)
                 log_time_ns = _merged_pass(reader, fusion, run.copied_topics, consumer, output)
             consumer.finish(log_time_ns)
-            run.store_closing_metadata(bag_writer, fusion)
+            run.store_closing_metadata(bag_writer, fusion, consumer)
     finally:
         fusion.close()
-    return fusion, writer.counts
+    return fusion, writer.counts, consumer
 
 
 def _merged_pass(

@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 
 import pytest
+import xarray as xr
 from mcap.reader import make_reader
 
 from buoy_common.bag_io import BagReader, BagWriter, jazzy_typestore
@@ -76,13 +77,17 @@ def bag_with_temperature(tmp_path_factory) -> Path:
     return bag
 
 
-def run(bag: Path, out: Path):
+def run(bag: Path, out: Path, in_background: bool = False, netcdf_path: Path | None = None):
+    """``process_bag``'s summary and every message of its bag (topic, log time, bytes) in the
+    order the file holds them; the bag written here, or by a process of its own."""
     configs = (fusion_config_from_files(PARAMETERS), compensator_config_from_files(PARAMETERS))
-    summary = process_bag(bag, out, *configs, write_in_background=False)
+    summary = process_bag(
+        bag, out, *configs, write_in_background=in_background, netcdf_path=netcdf_path
+    )
     with open(next(out.glob("*.mcap")), "rb") as stream:
         messages = [
             (channel.topic, message.log_time, message.data)
-            for _, channel, message in make_reader(stream).iter_messages(log_time_order=True)
+            for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)
         ]
     return summary, messages
 
@@ -125,3 +130,31 @@ def test_temperatures_from_chunk_records_equal_those_read_one_at_a_time(
     assert repr(wind.fluxes) == repr(expected.fluxes)
     assert repr(wind.products) == repr(expected.products)
     assert messages == expected_messages
+
+
+def test_the_writing_process_corrects_as_this_process_does(bag_with_temperature, tmp_path):
+    """With the bag written by a process of its own, the corrections run there
+    (:mod:`buoy_processing.output_side`), the temperatures the bulk decoder leaves decoded from
+    the bag that process opens: the same bag, message by message in the file's order, the same
+    products, fluxes and facts, CSV files and NetCDF file."""
+    here, here_messages = run(
+        bag_with_temperature, tmp_path / "here" / "bag", False, tmp_path / "here.nc"
+    )
+    there, there_messages = run(
+        bag_with_temperature, tmp_path / "there" / "bag", True, tmp_path / "there.nc"
+    )
+    assert there_messages == here_messages
+    assert there.topic_counts == here.topic_counts
+    assert there.wind.status_counts == here.wind.status_counts
+    assert there.wind.status_counts["valid"] > 0, "the fusion aligned and the wind was corrected"
+    assert there.wind.rejected_temperatures == here.wind.rejected_temperatures
+    assert repr(there.wind.fluxes) == repr(here.wind.fluxes)
+    assert repr(there.wind.products) == repr(here.wind.products)
+    assert there.facts.metadata_records() == here.facts.metadata_records()
+    for name in ("bag_wind_products.csv", "bag_wind_fluxes.csv"):
+        assert (tmp_path / "there" / name).read_bytes() == (tmp_path / "here" / name).read_bytes()
+    with (
+        xr.open_dataset(tmp_path / "here.nc") as expected,
+        xr.open_dataset(tmp_path / "there.nc") as written,
+    ):
+        assert written.equals(expected)

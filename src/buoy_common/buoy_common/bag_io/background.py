@@ -4,12 +4,18 @@ the second core instead of the offline tool's."""
 from __future__ import annotations
 
 import contextlib
+import importlib
 import importlib.util
 import multiprocessing
+import os
+import queue
 import shutil
 import signal
 import sys
+import threading
+import traceback
 from collections import Counter
+from multiprocessing.reduction import ForkingPickler
 from operator import itemgetter
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -30,6 +36,9 @@ if TYPE_CHECKING:
 # Messages handed to the writing process at a time: large enough that sending costs a fraction
 # of a microsecond per message, small enough to keep both processes busy.
 _BATCH_MESSAGES = 2048
+# Batches handed over and waiting for the pipe at most: the tool goes on while the writing
+# process takes one (the pipe itself holds 64 KiB, a fraction of a batch).
+_QUEUED_BATCHES = 16
 # Longest wait for the writing process to exit once the bag is finished (s).
 _WRITER_EXIT_TIMEOUT_S = 60.0
 
@@ -40,6 +49,26 @@ _MSGTYPE_OF = itemgetter(1)
 
 _CLOSE = "close"
 """The command that ends the writing process's batches: finish the bag."""
+_FINISH_HOST = "finish host"
+"""The command that has the writing process's host finish and report (the bag stays open)."""
+
+
+class _HostStart:
+    """The host the writing process runs from here on (:meth:`BackgroundBagWriter.host`)."""
+
+    __slots__ = ("host",)
+
+    def __init__(self, host):
+        self.host = host
+
+
+class _ForHost:
+    """What the host takes next (:meth:`BackgroundBagWriter.to_host`)."""
+
+    __slots__ = ("content",)
+
+    def __init__(self, content):
+        self.content = content
 
 
 class BackgroundBagWriter(BagOutput):
@@ -59,9 +88,18 @@ class BackgroundBagWriter(BagOutput):
     first batch that holds it: the writing process imports neither rosbags nor numpy and starts
     in a third of the time (about 0.3 s of CPU less per run); it imports numpy with the first
     stretch it is given, while it has the rest of the second core to itself.
+
+    A tool may also have the writing process run a part of its own work beside the bag, a host
+    (:meth:`host`): what follows the fusion in ``process_bag``, which writes the bag's messages
+    in their order (:mod:`buoy_processing.output_side`). The tool's batches then go through the
+    pipe from a thread of its own, a few of them queued, so the tool goes on while the host
+    works.
     """
 
-    def __init__(self, path: str | Path, overwrite: bool = False):
+    def __init__(self, path: str | Path, overwrite: bool = False, preload: tuple[str, ...] = ()):
+        """``preload``: modules the writing process imports before it reports ready, those of
+        a host it will be given (:meth:`host`): the tool keeps its first batches meanwhile
+        rather than wait on the pipe."""
         self.path = Path(path)
         check_bag_destination(self.path, overwrite)
         self._counts: Counter[str] = Counter()
@@ -79,13 +117,14 @@ class BackgroundBagWriter(BagOutput):
         self._connection, child_end = context.Pipe()
         self._process = context.Process(
             target=_write_bag_from_pipe,
-            args=(child_end, str(self.path), overwrite),
+            args=(child_end, str(self.path), overwrite, preload),
             name=f"bag writer {self.path.name}",
             daemon=True,
         )
         with _this_module_as_main():
             self._process.start()
         child_end.close()
+        self._sender = _PipeSender(self._connection)
         self._open = True
 
     @property
@@ -148,6 +187,45 @@ class BackgroundBagWriter(BagOutput):
             raise BagError(f"bag {self.path} is closed")
         self._metadata_records.append((name, dict(metadata)))
 
+    def host(self, host) -> None:
+        """Have the writing process run ``host`` (picklable) beside the bag, after everything
+        handed over so far: ``host.start(writer)`` with the process's :class:`BagWriter`, then
+        ``host.take(content)`` for each :meth:`to_host`, in order with the messages, and
+        ``host.finish()`` at :meth:`finish_host`. What the host writes goes into the bag in the
+        order it writes it; its error is raised as BagError as the writing process's are."""
+        self._append(_HostStart(host), 0)
+
+    def to_host(self, content, messages: int) -> None:
+        """Hand ``content`` to the host (:meth:`host`), which will write about ``messages``
+        messages of it (the hand-over's batch size counts them)."""
+        self._append(_ForHost(content), messages)
+
+    def finish_host(self):
+        """Everything handed over written, the host's ``finish()`` and what it returns; the
+        bag stays open (:attr:`counts` then counts what the host wrote too)."""
+        if not self._open:
+            raise BagError(f"bag {self.path} is closed")
+        self._send_batch(wait_for_writer=True)
+        self._sender.send((_FINISH_HOST,))
+        reply = self._receive()
+        if reply[0] == "error":
+            self._open = False
+            self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
+            self._sender.stop()
+            self._connection.close()
+            raise BagError(reply[1])
+        _, result, counts = reply
+        self._counts = Counter(counts)
+        return result
+
+    def _append(self, item, messages: int) -> None:
+        if not self._open:
+            raise BagError(f"bag {self.path} is closed")
+        self._batch.append(item)
+        self._batch_messages += messages
+        if self._batch_messages >= _BATCH_MESSAGES:
+            self._send_batch()
+
     def close(self) -> None:
         """Finish the bag, move it into place and wait for the writing process."""
         if not self._open:
@@ -168,6 +246,9 @@ class BackgroundBagWriter(BagOutput):
         self._batch.clear()
         self._batch_messages = 0
         self._waiting_batches.clear()
+        # The batch on its way is finished first: the writing process then reads the end of
+        # the pipe after a whole batch, never half of one.
+        self._sender.abandon()
         self._connection.close()
         self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
         if self._process.is_alive():
@@ -186,14 +267,13 @@ class BackgroundBagWriter(BagOutput):
             if not (wait_for_writer or self._connection.poll()):
                 return
             self._await_writer()
-        try:
-            for batch in self._waiting_batches:
-                self._connection.send(batch)
-        except (BrokenPipeError, ConnectionResetError, EOFError):
+        for batch in self._waiting_batches:
+            self._sender.send(batch)
+        self._waiting_batches.clear()
+        if self._sender.failed:
             self._open = False
             self._raise_if_failed(self._receive())
-            raise BagError(f"bag {self.path}: the writing process stopped") from None
-        self._waiting_batches.clear()
+            raise BagError(f"bag {self.path}: the writing process stopped")
 
     def _finish(self, command: tuple) -> None:
         """Send ``command`` and raise what the writing process reports, if it failed."""
@@ -201,14 +281,13 @@ class BackgroundBagWriter(BagOutput):
         if not self._writer_ready:
             self._await_writer()
         try:
-            self._connection.send(command)
-            reply = self._receive()
-        except (BrokenPipeError, ConnectionResetError):
+            self._sender.send(command)
             reply = self._receive()
         finally:
             self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
             if self._process.is_alive():
                 self._process.kill()
+            self._sender.stop()
             self._connection.close()
         self._raise_if_failed(reply)
 
@@ -219,6 +298,7 @@ class BackgroundBagWriter(BagOutput):
         if reply[0] == "error":
             self._open = False
             self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
+            self._sender.stop()
             self._connection.close()
             raise BagError(reply[1])
         self._writer_ready = True
@@ -240,6 +320,46 @@ class BackgroundBagWriter(BagOutput):
             raise BagError(reply[1])
 
 
+class _PipeSender:
+    """Sends what the tool hands over from a thread of its own: the tool pickles a batch and
+    goes on while the writing process takes the one before (up to :data:`_QUEUED_BATCHES`
+    wait). Once the pipe broke (the writing process stopped) it sends nothing more and says so
+    (:attr:`failed`); the tool then reads why."""
+
+    def __init__(self, connection):
+        self._connection = connection
+        self._queue: queue.Queue[bytes | None] = queue.Queue(maxsize=_QUEUED_BATCHES)
+        self.failed = False
+        self._thread = threading.Thread(target=self._run, name="bag batches", daemon=True)
+        self._thread.start()
+
+    def send(self, item) -> None:
+        """Queue ``item`` for the pipe, pickled here; wait while the queue is full."""
+        self._queue.put(ForkingPickler.dumps(item))
+
+    def stop(self) -> None:
+        """Send what is queued (or drop it, once failed) and end the thread."""
+        self._queue.put(None)
+        self._thread.join(timeout=_WRITER_EXIT_TIMEOUT_S)
+
+    def abandon(self) -> None:
+        """Drop what is queued, the batch being sent finished, and end the thread."""
+        self.failed = True
+        self.stop()
+
+    def _run(self) -> None:
+        while True:
+            data = self._queue.get()
+            if data is None:
+                return
+            if self.failed:
+                continue
+            try:
+                self._connection.send_bytes(data)
+            except OSError:
+                self.failed = True
+
+
 @contextlib.contextmanager
 def _this_module_as_main():
     """Name this module as the main module while the writing process is spawned.
@@ -258,7 +378,7 @@ def _this_module_as_main():
         main.__spec__ = own_spec
 
 
-def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
+def _write_bag_from_pipe(connection, path: str, overwrite: bool, preload: tuple[str, ...]) -> None:
     """The writing process: a BagWriter fed batches of records until the close, which brings the
     bag's metadata records. If the tool closes the pipe instead (it abandons the bag, or dies),
     the partial bag is deleted."""
@@ -266,6 +386,8 @@ def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
     # the tool, which finishes or abandons the bag; the end of the pipe ends this process.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    for module in preload:
+        importlib.import_module(module)
     try:
         writer = BagWriter(path, overwrite=overwrite)
     except BagError as error:
@@ -274,28 +396,53 @@ def _write_bag_from_pipe(connection, path: str, overwrite: bool) -> None:
         return
     try:
         connection.send(("ok",))
+        host = None
         while True:
             batch = connection.recv()
             if batch[0] == _CLOSE:
                 for name, metadata in batch[1]:
                     writer.add_metadata(name, metadata)
                 break
+            if batch[0] == _FINISH_HOST:
+                connection.send(("ok", host.finish(), writer.counts))
+                continue
             descriptions, records = batch
             writer.describe(descriptions)
-            for record in records:
-                if type(record) is tuple:
-                    writer.write_raw(*record)
-                else:
-                    writer.write_stretch(record)
+            host = _write_records(writer, records, host)
         writer.close()
     except (EOFError, BrokenPipeError, ConnectionResetError):
         # The tool abandoned the bag (or died).
         writer.abort()
         return
     except Exception as error:  # reported to the tool, which raises it as a BagError
+        if not isinstance(error, BagError):
+            # A host's failure is a program's: its whole story, for whoever reads the log.
+            traceback.print_exc()
         writer.abort()
         with contextlib.suppress(OSError):
             connection.send(("error", f"bag {path}: {type(error).__name__}: {one_line(error)}"))
         return
     with contextlib.suppress(OSError):
         connection.send(("ok",))
+    # The bag is in place and the tool told, which waits for this process to end: leave
+    # without the interpreter's teardown of what a host imported (numba's, llvm's), 0.3 s.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
+
+
+def _write_records(writer: BagWriter, records: list, host):
+    """The batch's ``records`` into ``writer``, in order: a record, a stretch, a host to run
+    or what it takes; the host running after them."""
+    for record in records:
+        kind = type(record)
+        if kind is tuple:
+            writer.write_raw(*record)
+        elif kind is _ForHost:
+            host.take(record.content)
+        elif kind is _HostStart:
+            host = record.host
+            host.start(writer)
+        else:
+            writer.write_stretch(record)
+    return host
