@@ -54,17 +54,23 @@ TOOL_MODULES = {
     "fuse_bag": "buoy_processing.fuse_bag",
     "process_bag": "buoy_processing.process_bag",
 }
-# The tool's command, with its first hand-over of an output message to the bag writer reported
-# on stderr as the system-wide monotonic clock (which the starting process reads too).
+# The tool's command, with its first hand-over of output to the bag writer (a message, or the
+# output side the writing process runs, which writes tf_static first) reported on stderr as
+# the system-wide monotonic clock (which the starting process reads too).
 _FIRST_OUTPUT_COMMAND = """
 import sys, time
 from buoy_common.bag_io import background
-write_raw = background.BackgroundBagWriter.write_raw
-def first_write_raw(self, *args):
-    background.BackgroundBagWriter.write_raw = write_raw
-    print(f"first output at {time.monotonic():.6f}", file=sys.stderr, flush=True)
-    write_raw(self, *args)
-background.BackgroundBagWriter.write_raw = first_write_raw
+writer = background.BackgroundBagWriter
+handing_over = {name: getattr(writer, name) for name in ("write_raw", "host")}
+def first(name):
+    def hand_over(self, *args):
+        for each, method in handing_over.items():
+            setattr(writer, each, method)
+        print(f"first output at {time.monotonic():.6f}", file=sys.stderr, flush=True)
+        handing_over[name](self, *args)
+    return hand_over
+for name in handing_over:
+    setattr(writer, name, first(name))
 from {module} import main
 main(sys.argv[1:])
 """

@@ -132,22 +132,22 @@ class OfflineFusion:
         smoother_spill_parent: str | Path | None = None,
         smooth: bool = False,
         nav_rate_hz: float = 0.0,
-        solution_rows: bool = False,
+        solution_rows: SolutionRows | None = None,
     ):
         """``writer`` receives the ``nav/*`` and ``tf`` messages, of every solution or, with
         ``nav_rate_hz`` (Hz) above 0, of a subset at that rate
         (:mod:`buoy_processing.nav_output_rate`; every solution is still returned); None: none
         is made (a run that writes its products alone). The solutions are returned as their
-        ``nav/*`` values or, with ``solution_rows``, as their header stamps, the engine writing
-        the solutions to :attr:`solution_rows` (:mod:`buoy_nav.solution_rows`), for what
-        follows to write and correct in bulk (:mod:`buoy_processing.output_side`); the writer
-        is then None. With ``smooth``
-        (the filter's own solutions, ``realtime_output`` off) nothing is written: the solutions are
-        kept by :attr:`smoother` (its records in a temporary directory in ``smoother_spill_parent``)
-        and written smoothed by :meth:`write_smoothed_values` after :meth:`finish`."""
+        ``nav/*`` values or, given ``solution_rows``, as their header stamps, the engine writing
+        the solutions there (:mod:`buoy_nav.solution_rows`), for what follows to write and
+        correct in bulk (:mod:`buoy_processing.output_side`); the writer is then None. With
+        ``smooth`` (the filter's own solutions, ``realtime_output`` off) nothing is written: the
+        solutions are kept by :attr:`smoother` (its records in a temporary directory in
+        ``smoother_spill_parent``) and written smoothed by :meth:`write_smoothed_values` after
+        :meth:`finish`."""
         if smooth:
             config = dataclasses.replace(config, realtime_output=False)
-        self.solution_rows = SolutionRows() if solution_rows and not smooth else None
+        self.solution_rows = None if smooth else solution_rows
         """Where the engine writes the solutions (None: it makes
         :class:`~buoy_nav.solution.NavSolution`, which a smoothing run keeps)."""
         if self.solution_rows is not None and writer is not None:

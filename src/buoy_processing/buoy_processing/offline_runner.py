@@ -41,6 +41,7 @@ from buoy_common.transform_messages import FrameTransform, tf_cdr
 from buoy_nav.config import FusionConfig
 from buoy_nav.fusion_messages import NavValues
 from buoy_nav.observability import unobserved_quantities
+from buoy_nav.solution_rows import SolutionRows
 from buoy_processing.chunk_records import chunk_records
 from buoy_processing.nav_rows_output import OrderedOutput
 from buoy_processing.offline_fusion import OfflineFusion
@@ -273,8 +274,7 @@ def _forward_run(
         BagProgress(run.reader, run.label) as progress,
         run.open_writer(preload) as bag_writer,
     ):
-        fusion = OfflineFusion(run.config, None, solution_rows=True)
-        fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
+        rows = SolutionRows()
         side = OutputSide(
             consumer,
             run.view,
@@ -283,10 +283,13 @@ def _forward_run(
             run.static_transform_records(),
             run.reader.path,
         )
+        # The output side first: its tf_static leaves before the engine is built.
         if isinstance(bag_writer, BackgroundBagWriter):
-            side = HostedOutputSide(side, bag_writer, fusion.solution_rows)
+            side = HostedOutputSide(side, bag_writer, rows)
         else:
-            side.start(bag_writer, fusion.solution_rows, run.reader)
+            side.start(bag_writer, rows, run.reader)
+        fusion = OfflineFusion(run.config, None, solution_rows=rows)
+        fields_of_topic = {**fusion.record_fields(run.sensors), **consumer.record_fields}
         # What the set-up built (the engine, the compiled kernels) lives through the pass.
         with existing_objects_frozen():
             log_time_ns = _fusing_pass(run, fusion, side, fields_of_topic, progress)
