@@ -20,7 +20,6 @@ NetCDF file are the same to the bit; a test holds them equal.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagReader
 from buoy_common.namespaces import NamespacedWriter, TopicView
@@ -28,10 +27,6 @@ from buoy_nav.solution_rows import SolutionRows
 from buoy_processing.nav_output_rate import NavOutputRate
 from buoy_processing.nav_rows_output import OrderedOutput
 from buoy_processing.solution_columns import HeldBackSolutions, Stamp
-
-if TYPE_CHECKING:
-    # The runner imports this module: named for the annotations only.
-    from buoy_processing.offline_runner import BagConsumer
 
 SOLUTIONS = 0
 """An event of the solutions one sensor message made: (SOLUTIONS, its log time ns, their header
@@ -54,7 +49,7 @@ class OutputSide:
 
     def __init__(
         self,
-        consumer: BagConsumer,
+        consumer,
         view: TopicView,
         nav_rate_hz: float,
         write_bag: bool,

@@ -208,12 +208,7 @@ class BackgroundBagWriter(BagOutput):
         self._send_batch(wait_for_writer=True)
         self._sender.send((_FINISH_HOST,))
         reply = self._receive()
-        if reply[0] == "error":
-            self._open = False
-            self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
-            self._sender.stop()
-            self._connection.close()
-            raise BagError(reply[1])
+        self._end_on_error(reply)
         _, result, counts = reply
         self._counts = Counter(counts)
         return result
@@ -294,14 +289,18 @@ class BackgroundBagWriter(BagOutput):
     def _await_writer(self) -> None:
         """Wait for the writing process to report that it has created the bag; raise its
         error if it could not."""
-        reply = self._receive()
+        self._end_on_error(self._receive())
+        self._writer_ready = True
+
+    def _end_on_error(self, reply) -> None:
+        """When ``reply`` is the writing process's error: the process ended, the pipe closed,
+        the error raised as BagError."""
         if reply[0] == "error":
             self._open = False
             self._process.join(timeout=_WRITER_EXIT_TIMEOUT_S)
             self._sender.stop()
             self._connection.close()
             raise BagError(reply[1])
-        self._writer_ready = True
 
     def _receive(self):
         try:
