@@ -61,11 +61,16 @@ _STORED_IN_ORDER = tuple(
 
 
 def nav_columns(
-    rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray
+    rows: np.ndarray,
+    secs: np.ndarray,
+    nanosecs: np.ndarray,
+    body_numbers: np.ndarray | None = None,
 ) -> list[dict[str, object]]:
     """The columns (:func:`buoy_common.cdr_bulk.encode`'s) of the five messages of each
     solution written as ``rows`` (:mod:`buoy_nav.solution_rows`) with header stamps ``secs``,
-    ``nanosecs``, by topic in :data:`NAV_TOPIC_ORDER`, a message per row."""
+    ``nanosecs``, by topic in :data:`NAV_TOPIC_ORDER`, a message per row; ``body_numbers``:
+    the rows' :func:`~buoy_nav.nav_numbers.body_numbers` when the hand-over made them already
+    (None: made here)."""
     count = rows.shape[0]
     attitude = np.ascontiguousarray(rows[:, row.ATTITUDE_XYZW])
     velocity_enu = np.ascontiguousarray(rows[:, row.VELOCITY_ENU])
@@ -78,7 +83,11 @@ def nav_columns(
             row.GYRO_BIAS_COVARIANCE,
         )
     )
-    body = body_numbers_of_solutions(attitude, velocity_enu, velocity_cov, gyro_bias_cov)
+    body = (
+        body_numbers_of_solutions(attitude, velocity_enu, velocity_cov, gyro_bias_cov)
+        if body_numbers is None
+        else body_numbers
+    )
     numbers = covariance_numbers_of_solutions(
         attitude_cov, velocity_cov, position_cov, gyro_bias_cov
     )
@@ -213,12 +222,19 @@ class OrderedOutput:
         """The solutions given since the last call, as columns
         (:class:`~buoy_processing.solution_columns.HeldBackSolutions` hands them over): their
         messages written in their places, and every write held back behind them."""
-        self.take_rows(columns.rows, columns.secs, columns.nanosecs)
+        self.take_rows(columns.rows, columns.secs, columns.nanosecs, columns.body_numbers)
 
-    def take_rows(self, rows: np.ndarray, secs: np.ndarray, nanosecs: np.ndarray) -> None:
+    def take_rows(
+        self,
+        rows: np.ndarray,
+        secs: np.ndarray,
+        nanosecs: np.ndarray,
+        body_numbers: np.ndarray | None = None,
+    ) -> None:
         """:meth:`take_columns` of the rows of the oldest solutions given and their header
-        stamps: those written in their places and the writes held between them; the places
-        of solutions given since, and what waits behind them, kept."""
+        stamps (and their body-frame numbers, None: made here): those written in their places
+        and the writes held between them; the places of solutions given since, and what waits
+        behind them, kept."""
         count = rows.shape[0]
         if count > self._solutions:
             raise ValueError(f"{count} rows for {self._solutions} solutions given")
@@ -229,7 +245,12 @@ class OrderedOutput:
             else len(self._held)
         )
         solutions = np.asarray(self._place_solutions[:places], dtype=int)
-        columns = nav_columns(rows[solutions], secs[solutions], nanosecs[solutions])
+        columns = nav_columns(
+            rows[solutions],
+            secs[solutions],
+            nanosecs[solutions],
+            None if body_numbers is None else body_numbers[solutions],
+        )
         stretch = Stretch(
             tuple(
                 ColumnMessages(topic, msgtype, topic_columns)

@@ -52,6 +52,9 @@ class SolutionColumns(NamedTuple):
     """(N, 3) ENU velocity, m/s."""
     rows: np.ndarray
     """The solutions' rows themselves (:mod:`buoy_nav.solution_rows`)."""
+    body_numbers: np.ndarray
+    """(N, :data:`~buoy_nav.nav_numbers.BODY_NUMBERS`) each solution's body-frame numbers
+    (:func:`~buoy_nav.nav_numbers.body_numbers`), which its ``nav/odometry`` carries too."""
 
 
 def solution_columns(rows: np.ndarray, stamps: np.ndarray) -> SolutionColumns:
@@ -79,7 +82,7 @@ def solution_columns(rows: np.ndarray, stamps: np.ndarray) -> SolutionColumns:
         body_rate_covariance_rad2_s2=twist[:, 3:, 3:],
         fix_latitude_deg=geodetic[:, 0],
     )
-    return SolutionColumns(navigation, secs, nanosecs, geodetic, velocity, rows)
+    return SolutionColumns(navigation, secs, nanosecs, geodetic, velocity, rows, body)
 
 
 def _matrices(columns: np.ndarray) -> np.ndarray:

@@ -17,6 +17,7 @@ from buoy_nav.mechanization import StrapdownIntegrator
 from buoy_nav.solution import SolutionBuilder
 from buoy_nav.solution_rows import SolutionRows
 from buoy_processing.nav_rows_output import NAV_TOPIC_ORDER, OrderedOutput, nav_columns
+from buoy_processing.solution_columns import solution_columns
 
 PLANE = earth.LocalTangentPlane(0.7, -1.2, 0.0)
 
@@ -67,6 +68,16 @@ def test_messages_of_rows_are_the_bytes_packed_one_by_one(distrust):
     encoded = [
         cdr_bulk.encode(msgtypes[topic], topic_columns)
         for topic, topic_columns in zip(NAV_TOPIC_ORDER, columns, strict=True)
+    ]
+    # The body-frame numbers the hand-over made for the corrections give the same bytes.
+    handed_over = solution_columns(rows, stamps)
+    assert encoded == [
+        cdr_bulk.encode(msgtypes[topic], topic_columns)
+        for topic, topic_columns in zip(
+            NAV_TOPIC_ORDER,
+            nav_columns(rows, handed_over.secs, handed_over.nanosecs, handed_over.body_numbers),
+            strict=True,
+        )
     ]
     for index, solution in enumerate(solutions):
         expected = packed_one_by_one(solution, *stamps[index].tolist())
