@@ -32,8 +32,8 @@ SOLUTIONS = 0
 """An event of the solutions one sensor message made: (SOLUTIONS, its log time ns, their header
 stamps); their rows are written where :meth:`OutputSide.start` was told."""
 COPY = 1
-"""An event of a copied message: (COPY, the message, its record: its fields when its chunk was
-read together, else None)."""
+"""An event of a copied message: (COPY, its topic, type, log time ns and CDR bytes as a tuple,
+its record: its fields when its chunk was read together, else None)."""
 
 
 class OutputSide:
@@ -119,11 +119,11 @@ class OutputSide:
                 output.add_solution(log_time_ns, due_at(sec, nanosec))
         self.consumer.add_solution_rows(stamps)
 
-    def _copy(self, message: BagMessage, record: tuple | None) -> None:
+    def _copy(self, fields: tuple[str, str, int, bytes], record: tuple | None) -> None:
         if self._output is not None:
-            self._output.write_raw(message.topic, message.msgtype, message.log_time_ns, message.raw)
-        if message.topic in self._taken:
-            self.consumer.add_message(self._decoding_reader(), message, record)
+            self._output.write_raw(*fields)
+        if fields[0] in self._taken:
+            self.consumer.add_message(self._decoding_reader(), BagMessage._make(fields), record)
 
     def _end(self, log_time_ns: int) -> None:
         """End of the data: every solution handed over, the consumer finished, every place
