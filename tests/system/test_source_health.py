@@ -6,6 +6,7 @@ truth is the simulator's, never the fusion's."""
 import math
 
 import numpy as np
+from gnss_faults import biased_velocity
 from test_nav_sensor_sets import (
     attitude_sigma_deg,
     euler_errors_deg,
@@ -13,7 +14,7 @@ from test_nav_sensor_sets import (
     scenario_messages,
 )
 
-from buoy_common.contract import GNSS_VELOCITY_TOPIC, Reason
+from buoy_common.contract import Reason
 from buoy_nav.config import FusionConfig
 from buoy_nav.source_health import HealthChange
 
@@ -87,14 +88,6 @@ def test_a_calibrated_magnetometer_is_never_suspended():
     converged = times >= 120.0
     yaw_error = euler_errors_deg(solutions, truth, times)[converged, 2]
     assert np.sqrt(np.mean(yaw_error**2)) <= 2.0
-
-
-def biased_velocity(messages, from_s: float, start_ns: int, bias_east_mps: float):
-    """The messages with ``bias_east_mps`` added to every GNSS velocity from ``from_s``."""
-    for topic, stamp_ns, message in messages:
-        if topic == GNSS_VELOCITY_TOPIC and stamp_ns - start_ns >= from_s * 1e9:
-            message.twist.twist.linear.x += bias_east_mps
-        yield topic, stamp_ns, message
 
 
 def test_a_biased_gnss_velocity_is_suspended_while_the_antennas_hold_the_heading():

@@ -28,6 +28,11 @@ of a sample is predicted before the filter catches up with that sample's horizon
 propagation it triggers, and corrections reach the prediction one IMU sample later. Its
 covariances are the filter's, from up to ``max_measurement_delay_s`` earlier.
 
+An offline run hands the engine the IMU samples between two other sensor messages together
+(:meth:`FusionEngine.add_imu_samples`): each stretch of them with nothing else to do is taken in
+one compiled call (:mod:`buoy_nav.imu_stretch`), with the same arithmetic in the same order as
+one sample at a time, which a live node does.
+
 Before alignment the IMU samples and the measurements feed :class:`InMotionAligner`; once
 aligned, :class:`~buoy_nav.aided_navigation.AidedNavigation` carries the nominal state and
 corrects it after every accepted measurement, its covariance propagated in batches of at most
@@ -64,6 +69,7 @@ the measurements disprove (a mooring on a buoy that drifts) is suspended while t
 """
 
 import dataclasses
+import itertools
 import math
 from collections import deque
 from collections.abc import Iterable
@@ -92,6 +98,13 @@ from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
 from buoy_nav.imu_input import ImuInput
+from buoy_nav.imu_stretch import (
+    CATCH_UP,
+    NEXT_OUTPUT_T,
+    ROWS,
+    imu_stretch,
+    load_compiled_imu_stretch,
+)
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, load_compiled_kernels
@@ -146,6 +159,8 @@ class FusionEngine:
             load_compiled_solution_vector,
             load_compiled_solution_rows,
             load_compiled_model_kernels,
+            # The stretches are for solutions written as rows, an offline run's.
+            *(() if solution_rows is None else (load_compiled_imu_stretch,)),
             *(source.load_compiled_code for source in self._registry.sources),
         )
         self.sources: tuple[AidingSource, ...] = self._registry.sources
@@ -223,6 +238,139 @@ class FusionEngine:
         for sample in samples:
             solutions.extend(self._take_imu_sample(sample))
         return solutions
+
+    def add_imu_samples(self, samples: list[tuple]) -> list[tuple[list[Emitted], str | None]]:
+        """:meth:`add_imu` of consecutive IMU samples (stamp s, ω_ib body rad/s, specific force
+        body m/s² each), nothing else given between them: the solutions of each and the reason
+        it was rejected (None: accepted); :attr:`imu_given_up` is the last one's.
+
+        The same as one call each: the screening takes no part in the filtering, so the
+        samples are screened first; then each aligned stretch of them with nothing else to do
+        is taken in one compiled call (:mod:`buoy_nav.imu_stretch`), and the engine takes the
+        others, and catches up, as :meth:`add_imu` does.
+        """
+        self.catch_up()
+        imu_input = self._imu_input
+        outcomes = []
+        taken = []
+        for number, (t_s, gyro, force) in enumerate(samples):
+            self.last_input_rejection = None
+            accepted = imu_input.accept(t_s, gyro, force)
+            self._count_given_up_imu_samples()
+            if isinstance(accepted, Reason):
+                self.reject_input(IMU, accepted)
+                outcomes.append(([], accepted))
+                continue
+            outcomes.append(([], None))
+            taken.extend((number, sample) for sample in accepted)
+        position = 0
+        while position < len(taken):
+            if self._stretch_applies():
+                position += self._take_stretch(taken, position, outcomes)
+                if position == len(taken):
+                    break
+            number, sample = taken[position]
+            outcomes[number][0].extend(self._take_imu_sample(sample))
+            self.catch_up()
+            position += 1
+        return outcomes
+
+    def _stretch_applies(self) -> bool:
+        """Whether the next samples may go through :mod:`buoy_nav.imu_stretch`: aligned, with
+        solutions written as rows and predicted ahead from a copy already forked, no
+        constraint to ask."""
+        return (
+            self._nav is not None
+            and self.config.realtime_output
+            and self._solutions.rows is not None
+            and self._prediction.ahead is not None
+            and not self._registry.pseudo
+        )
+
+    def _take_stretch(self, taken: list[tuple], position: int, outcomes: list[tuple]) -> int:
+        """The ``taken`` samples (number among the given ones, sample) from ``position`` on
+        through :func:`~buoy_nav.imu_stretch.imu_stretch`, their stamps added to their
+        ``outcomes``; how many it took (0: the engine takes the next one itself)."""
+        stretch = taken[position:]
+        config = self.config
+        delay_s = config.max_measurement_delay_s
+        # The filter can reach no buffered sample beyond the last one's horizon.
+        reach_s = stretch[-1][1][0] - delay_s
+        due = list(itertools.takewhile(lambda sample: sample[0] <= reach_s, self._imu_buffer))
+        point = self._point
+        ahead, ahead_t, ahead_gyro, ahead_force = self._prediction.ahead
+        output = self._output
+        rows = self._solutions.rows
+        nav = self._nav
+        plane_terms, covariance, block_indices, distrusted, distrust = (
+            self._solutions.row_arguments(nav.kalman)
+        )
+        state = np.array(
+            (
+                point.t_s,
+                *point.gyro,
+                *point.force,
+                ahead_t,
+                *ahead_gyro,
+                *ahead_force,
+                self._prediction.last_predicted_stamp_s,
+                output.next_output_s,
+                rows.count,
+            ),
+            dtype=float,
+        )
+        heap = self._queue.heap
+        limits = np.array(
+            (
+                delay_s,
+                config.max_imu_gap_s,
+                config.covariance_propagation_interval_s,
+                heap[0][0] if heap else math.inf,
+                output.period_s,
+                1.0 if distrusted else 0.0,
+                *distrust,
+            )
+        )
+        row_written = np.zeros(len(stretch), dtype=bool)
+        integrator = nav.integrator
+        count, stepped, stop = imu_stretch(
+            np.array([(t, *gyro, *force) for _, (t, gyro, force) in stretch]),
+            np.array([(t, *gyro, *force) for t, gyro, force in due]).reshape(-1, 7),
+            state,
+            limits,
+            integrator.state_vector,
+            integrator.coning_correction,
+            integrator.sculling_correction,
+            ahead.state_vector,
+            ahead.coning_correction,
+            ahead.sculling_correction,
+            rows.block,
+            plane_terms,
+            covariance,
+            block_indices,
+            row_written,
+        )
+        if count == 0:
+            return 0
+        self._counters[IMU].accepted += count
+        took = [sample for _, sample in stretch[:count]]
+        buffer = self._imu_buffer
+        buffer.extend(took)
+        if stepped:
+            walked = [(point.t_s, point.gyro, point.force), *due, *took]
+            for _ in range(stepped):
+                buffer.popleft()
+            point.stepped_through(walked[stepped - 1], walked[stepped])
+        self._prediction.predicted_through(took[-1])
+        output.next_output_s = float(state[NEXT_OUTPUT_T])
+        rows.count = int(state[ROWS])
+        for (number, sample), written in zip(stretch[:count], row_written.tolist(), strict=False):
+            if written:
+                outcomes[number][0].append(sample[0])
+        if stop == CATCH_UP:
+            self._deferred_horizon = took[-1][0] - delay_s
+            self.catch_up()
+        return count
 
     def _count_given_up_imu_samples(self) -> None:
         """Count the held IMU samples given up by the latest call

@@ -210,6 +210,21 @@ def feed_imu_fields(
     return solutions, engine.last_input_rejection
 
 
+def feed_imu_records(
+    engine: FusionEngine, records: list[tuple], stamps: StampBook | None = None
+) -> list[tuple[list[Emitted], str | None]]:
+    """:func:`feed_imu_fields` of consecutive ``imu/data_raw`` messages, nothing else between
+    them, in one call (:meth:`FusionEngine.add_imu_samples`): each one's record ``(sec,
+    nanosec, angular_velocity, linear_acceleration)``; each one's solutions and rejection."""
+    samples = []
+    for sec, nanosec, angular_velocity, linear_acceleration in records:
+        t_s = sec + nanosec * 1e-9
+        if stamps is not None:
+            stamps.remember(t_s, sec, nanosec)
+        samples.append((t_s, angular_velocity, linear_acceleration))
+    return engine.add_imu_samples(samples)
+
+
 class NavValues(NamedTuple):
     """The numbers of the four ``nav/*`` messages of one solution (flat, row-major)."""
 

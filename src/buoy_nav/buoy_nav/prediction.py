@@ -112,6 +112,23 @@ class RealtimePrediction:
         self._ahead = (integrator, t, gyro, force)
         return solutions
 
+    @property
+    def ahead(self) -> tuple[StrapdownIntegrator, float, tuple, tuple] | None:
+        """(the copy ahead, its stamp s, raw gyro and force there), None when it is to be
+        forked afresh at the next sample."""
+        return self._ahead
+
+    @property
+    def last_predicted_stamp_s(self) -> float:
+        """The stamp of the latest sample predicted (s)."""
+        return self._last_predicted_stamp
+
+    def predicted_through(self, sample: tuple) -> None:
+        """The copy ahead was stepped through a stretch of samples to ``sample`` (stamp s, raw
+        gyro, raw force), in place (:mod:`buoy_nav.imu_stretch`)."""
+        self._ahead = (self._ahead[0], *sample)
+        self._last_predicted_stamp = sample[0]
+
     def carry_over(self, filter_time: float, state: NavState, correction) -> None:
         """Apply the filter's ``correction`` of its nominal ``state`` at ``filter_time`` to the
         copy ahead (or drop the copy when it is due to be forked afresh)."""

@@ -63,6 +63,14 @@ class ProcessingPoint:
         self.last_imu_stamp_s = self.t_s
         return self.t_s - self._step_start[0]
 
+    def stepped_through(self, before: tuple, last: tuple) -> None:
+        """Steps were made up to the sample ``last`` (stamp s, gyro, force), the one before it
+        ``before``, as :meth:`begin_step`, :meth:`moved_to` and :meth:`end_step` leave them
+        (:mod:`buoy_nav.imu_stretch`)."""
+        self.t_s, self.gyro, self.force = last
+        self._step_start = self._older = before
+        self.last_imu_stamp_s = last[0]
+
     def moved_to(self, t_s: float, gyro, force) -> None:
         """The state was integrated to ``t_s`` (s), where the raw samples are ``gyro`` and
         ``force``."""

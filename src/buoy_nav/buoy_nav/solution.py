@@ -187,6 +187,19 @@ class SolutionBuilder:
         )
         return t
 
+    def row_arguments(self, kalman: ErrorStateFilter) -> tuple:
+        """What :meth:`row` hands the row writer besides the sample: the plane's terms,
+        ``kalman``'s covariance, its published blocks' indices, whether the filter is
+        distrusted and the variances then added (:mod:`buoy_nav.imu_stretch`)."""
+        distrust = self._distrust_variances
+        return (
+            self.map_plane.scalar_terms,
+            kalman.covariance,
+            self._block_indices_of(kalman.states),
+            distrust is not None,
+            (0.0, 0.0) if distrust is None else distrust,
+        )
+
     def _block_indices_of(self, states: StateLayout) -> np.ndarray:
         """:func:`_published_block_indices` of ``states``, made once per layout."""
         if self._block_layout is not states:
@@ -218,6 +231,21 @@ class OutputDecimation:
 
     def restart(self) -> None:
         self._next_output_time = -math.inf
+
+    @property
+    def period_s(self) -> float:
+        """The output period (s; 0: every sample)."""
+        return self._period
+
+    @property
+    def next_output_s(self) -> float:
+        """The stamp (s) from which the next sample is output, half a step of tolerance
+        before it (:mod:`buoy_nav.imu_stretch` takes and gives it back)."""
+        return self._next_output_time
+
+    @next_output_s.setter
+    def next_output_s(self, t_s: float) -> None:
+        self._next_output_time = t_s
 
     def due(self, t: float, span: float) -> bool:
         """Whether the sample at stamp ``t`` (``span`` s after the previous one) is output."""

@@ -84,7 +84,7 @@ class SolutionRows:
         fx, fy, fz = force_mps2
         distrusted = distrust_variances is not None
         attitude_variance, velocity_variance = distrust_variances if distrusted else (0.0, 0.0)
-        _write_row(
+        write_row(
             self._block,
             self.count,
             t_s,
@@ -103,6 +103,12 @@ class SolutionRows:
             velocity_variance,
         )
         self.count += 1
+
+    @property
+    def block(self) -> np.ndarray:
+        """The rows' block: :attr:`count` rows written, room for the rest (writers that add
+        several at a time set :attr:`count` after)."""
+        return self._block
 
     def extend(self, rows: np.ndarray) -> None:
         """Hold ``rows`` (n × :data:`ROW_WIDTH`) after those held: rows another process wrote
@@ -128,7 +134,7 @@ class SolutionRows:
 
 
 @numba.njit(cache=True)
-def _write_row(
+def write_row(
     block,
     row,
     t_s,

@@ -40,6 +40,7 @@ from buoy_nav.fusion_messages import (
     StampBook,
     feed_imu_cdr,
     feed_imu_fields,
+    feed_imu_records,
     feed_measurement_record,
     feed_message,
     nav_values,
@@ -195,6 +196,18 @@ class OfflineFusion:
         if fed is None:
             return self.add(topic, reader.decode(message), message.log_time_ns)
         return self._take(topic, fed, message.log_time_ns)
+
+    def add_imu_records(self, records: list[tuple], log_times_ns: list[int]) -> list[HandedOver]:
+        """:meth:`add_message` of consecutive IMU messages read with their chunk, no other
+        sensor message between them: each one's record (:meth:`record_fields`) and log time
+        (ns); what each one handed over, in order. One call to the engine for them all
+        (:meth:`~buoy_nav.engine.FusionEngine.add_imu_samples`)."""
+        fed = feed_imu_records(self.engine, records, self.stamps)
+        take = self._take
+        return [
+            take(IMU_RAW_TOPIC, outcome, log_time_ns)
+            for outcome, log_time_ns in zip(fed, log_times_ns, strict=True)
+        ]
 
     def record_fields(self, sensors: dict[str, str]) -> dict[str, tuple[str, ...]]:
         """Stored name → the fields :meth:`add_message` reads of a message read with its chunk

@@ -30,6 +30,7 @@ from typing import NamedTuple, Protocol
 
 from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, BagWriter
 from buoy_common.contract import (
+    IMU_RAW_TOPIC,
     TF_STATIC_MSGTYPE,
     TF_STATIC_TOPIC,
     bag_topic,
@@ -315,21 +316,60 @@ def _fusing_pass(
     log_time_ns = reader.start_ns
     for batch in reader.message_batches([*relative_of, *run.copied_topics]):
         records = chunk_records(batch, fields_of_topic)
-        events = []
+        events: list[tuple | None] = []
         add = events.append
+        # The IMU messages read with their chunk wait, their events' places kept, until another
+        # sensor message comes: the fusion takes them in one call.
+        imu_run = _ImuRun(fusion, events)
         for position, message in enumerate(batch):
             log_time_ns = message.log_time_ns
             topic = relative_of.get(message.topic)
-            if topic is not None:
-                stamps = fusion.add_message(reader, topic, message, records.get(position))
+            record = records.get(position)
+            if topic is None:
+                # A plain tuple pickles several times faster than the named one.
+                add((COPY, tuple(message), record))
+            elif topic == IMU_RAW_TOPIC and record is not None:
+                imu_run.wait(record, log_time_ns)
+            else:
+                imu_run.fuse()
+                stamps = fusion.add_message(reader, topic, message, record)
                 if stamps:
                     add((SOLUTIONS, log_time_ns, stamps))
-            else:
-                # A plain tuple pickles several times faster than the named one.
-                add((COPY, tuple(message), records.get(position)))
-        side.hand_over(events)
+        imu_run.fuse()
+        side.hand_over([event for event in events if event is not None])
         progress.reached(log_time_ns)
     return log_time_ns
+
+
+class _ImuRun:
+    """IMU messages of a chunk waiting for the fusion, their places kept in ``events``."""
+
+    def __init__(self, fusion: OfflineFusion, events: list[tuple | None]):
+        self._fusion = fusion
+        self._events = events
+        self._places: list[int] = []
+        self._records: list[tuple] = []
+        self._log_times_ns: list[int] = []
+
+    def wait(self, record: tuple, log_time_ns: int) -> None:
+        """One more IMU message (its record and log time, ns); its event's place kept."""
+        self._places.append(len(self._events))
+        self._events.append(None)
+        self._records.append(record)
+        self._log_times_ns.append(log_time_ns)
+
+    def fuse(self) -> None:
+        """The waiting messages into the fusion, the events of their solutions into their
+        places (None stays where a message made none)."""
+        if not self._places:
+            return
+        events = self._events
+        log_times = self._log_times_ns
+        handed_over = self._fusion.add_imu_records(self._records, log_times)
+        for place, log_time_ns, stamps in zip(self._places, log_times, handed_over, strict=True):
+            if stamps:
+                events[place] = (SOLUTIONS, log_time_ns, stamps)
+        self._places, self._records, self._log_times_ns = [], [], []
 
 
 def _smoothed_run(

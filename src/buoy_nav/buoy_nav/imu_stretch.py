@@ -1,0 +1,203 @@
+"""A stretch of IMU samples between aiding measurements, in one compiled call.
+
+Most IMU samples of an aided run change nothing but the nominal states: the sample enters the
+buffer, the prediction ahead steps to it and writes its solution's row
+(:mod:`buoy_nav.prediction`), and the filter, ``max_measurement_delay_s`` behind, steps to the
+buffered samples its horizon passed (:meth:`~buoy_nav.engine.FusionEngine._process`).
+:func:`imu_stretch` does exactly that for consecutive accepted samples, with the engine's own
+kernels (the strapdown step, the row writer) and in the engine's order, and stops where the
+engine has more to do: a measurement due, the covariance's batch full, a gap, the prediction to
+fork afresh, the rows' block full. The engine then takes over at that sample
+(:meth:`~buoy_nav.engine.FusionEngine.add_imu_samples`), so the result is the engine's to the
+bit; a test holds the two equal.
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from buoy_nav.solution_rows import write_row
+from buoy_nav.strapdown_kernel import DURATION, strapdown_step
+
+DONE = 0
+"""Every sample of the stretch taken, the filter caught up to the last one's horizon."""
+BEFORE_SAMPLE = 1
+"""Stopped before the sample at the count returned: the engine takes it the interpreted way."""
+CATCH_UP = 2
+"""Stopped after the prediction of the last sample counted: the engine's filtering up to that
+sample's horizon (:meth:`~buoy_nav.engine.FusionEngine.catch_up`) is left to do."""
+
+# The state handed in and out (:func:`imu_stretch`'s ``state``): where the (stamp s, gyro,
+# force) samples the filter's and the prediction's states are at begin, then the stamp of the
+# latest sample predicted (s), the output decimation's next output stamp (s), the rows written.
+POINT = 0
+AHEAD = 7
+SAMPLE_SIZE = 7
+LAST_PREDICTED_T = 14
+NEXT_OUTPUT_T = 15
+ROWS = 16
+STATE_SIZE = 17
+# The limits handed in (:func:`imu_stretch`'s ``limits``).
+DELAY, MAX_GAP, PROPAGATION_INTERVAL, NEXT_MEASUREMENT, OUTPUT_PERIOD = range(5)
+DISTRUSTED, ATTITUDE_VARIANCE, VELOCITY_VARIANCE = range(5, 8)
+
+
+@numba.njit(cache=True)
+def imu_stretch(
+    samples,
+    buffered,
+    state,
+    limits,
+    filter_state,
+    filter_coning,
+    filter_sculling,
+    ahead_state,
+    ahead_coning,
+    ahead_sculling,
+    rows_block,
+    plane_terms,
+    covariance,
+    block_indices,
+    row_written,
+):
+    """Take the accepted IMU ``samples`` (n × 7: stamp s, ω_ib body rad/s, specific force body
+    m/s²), after the ``buffered`` ones ahead of the filter that the stretch may reach (k × 7,
+    oldest first), as the engine's ``_take_imu_sample`` and ``catch_up`` would, until one needs
+    the engine.
+
+    state: :data:`POINT` … :data:`ROWS`, updated; limits: :data:`DELAY` (the fusion's
+    ``max_measurement_delay_s``) … :data:`VELOCITY_VARIANCE` (the stamp of the next measurement
+    queued, inf: none; the output period, 0: every sample; the distrust, 1.0 or 0.0, and its
+    variances); filter_state, ahead_state: the strapdown states, stepped in place, with their
+    coning and sculling corrections; rows_block and the row writer's other arguments
+    (:func:`~buoy_nav.solution_rows.write_row`); row_written: set for each sample whose
+    solution was written.
+
+    Returns (samples taken, buffered samples the filter stepped to, :data:`DONE`,
+    :data:`BEFORE_SAMPLE` or :data:`CATCH_UP`); the filter's latest two samples are then the
+    last two stepped to (the buffered ones, then the taken ones).
+    """
+    delay_s = limits[DELAY]
+    max_gap_s = limits[MAX_GAP]
+    # Integer bounds: a slice object held globally would be unpickled at each call.
+    point = state[POINT : POINT + SAMPLE_SIZE]
+    ahead = state[AHEAD : AHEAD + SAMPLE_SIZE]
+    n_buffered = buffered.shape[0]
+    stepped = 0
+    for index in range(samples.shape[0]):
+        sample = samples[index]
+        t = sample[0]
+        span = t - ahead[0]
+        if span > max_gap_s or state[ROWS] >= rows_block.shape[0]:
+            return index, stepped, BEFORE_SAMPLE
+        _step(ahead_state, span, ahead, sample, ahead_coning, ahead_sculling)
+        ahead[:] = sample
+        if t > state[LAST_PREDICTED_T] and _due(state, t, span, limits[OUTPUT_PERIOD]):
+            write_row(
+                rows_block,
+                int(state[ROWS]),
+                t,
+                ahead_state,
+                sample[1],
+                sample[2],
+                sample[3],
+                sample[4],
+                sample[5],
+                sample[6],
+                plane_terms,
+                covariance,
+                block_indices,
+                limits[DISTRUSTED] != 0.0,
+                limits[ATTITUDE_VARIANCE],
+                limits[VELOCITY_VARIANCE],
+            )
+            state[ROWS] += 1
+            row_written[index] = True
+        state[LAST_PREDICTED_T] = t
+        horizon = t - delay_s
+        while stepped < n_buffered + index + 1:
+            due = buffered[stepped] if stepped < n_buffered else samples[stepped - n_buffered]
+            t_due = due[0]
+            if t_due > horizon:
+                break
+            dt = t_due - point[0]
+            # A gap, or a sample predicted before (above), the prediction meets first and the
+            # engine takes; the stretch still never steps across one.
+            if (
+                t_due - point[0] > max_gap_s
+                or limits[NEXT_MEASUREMENT] <= t_due
+                or (dt > 0.0 and filter_state[DURATION] + dt >= limits[PROPAGATION_INTERVAL])
+            ):
+                return index + 1, stepped, CATCH_UP
+            if dt > 0.0:
+                _step(filter_state, dt, point, due, filter_coning, filter_sculling)
+            point[:] = due
+            stepped += 1
+    return samples.shape[0], stepped, DONE
+
+
+@numba.njit(cache=True)
+def _step(state, dt_s, start, end, coning, sculling):
+    """The strapdown step of ``state`` over ``dt_s`` (s) from the (stamp, gyro, force) sample
+    ``start`` to ``end``, with the ``coning`` and ``sculling`` corrections or not."""
+    strapdown_step(
+        state,
+        dt_s,
+        start[1],
+        start[2],
+        start[3],
+        end[1],
+        end[2],
+        end[3],
+        start[4],
+        start[5],
+        start[6],
+        end[4],
+        end[5],
+        end[6],
+        coning,
+        sculling,
+    )
+
+
+@numba.njit(cache=True)
+def _due(state, t, span, period_s):
+    """:meth:`~buoy_nav.solution.OutputDecimation.due` on the decimation's next output stamp
+    in ``state``."""
+    if period_s == 0.0:
+        return True
+    if t + 0.5 * span < state[NEXT_OUTPUT_T]:
+        return False
+    following = state[NEXT_OUTPUT_T] + period_s
+    state[NEXT_OUTPUT_T] = following if following > t else t + period_s
+    return True
+
+
+def load_compiled_imu_stretch() -> None:
+    """Compile the stretch, or load it from the cache, now (see
+    :func:`buoy_nav.mechanization.load_compiled_kernels`)."""
+    from buoy_nav.strapdown_kernel import STATE_SIZE as STRAPDOWN_STATE_SIZE
+
+    state = np.zeros(STATE_SIZE)
+    state[AHEAD] = -1.0
+    state[LAST_PREDICTED_T] = -math.inf
+    limits = np.array([0.3, 0.5, 0.1, math.inf, 0.0, 0.0, 0.0, 0.0])
+    strapdown = np.zeros(STRAPDOWN_STATE_SIZE)
+    imu_stretch(
+        np.zeros((1, 7)),
+        np.zeros((0, 7)),
+        state,
+        limits,
+        strapdown,
+        True,
+        True,
+        strapdown.copy(),
+        True,
+        True,
+        np.zeros((4, 56)),
+        np.zeros(12),
+        np.eye(15),
+        np.arange(36, dtype=np.int64).reshape(4, 3, 3),
+        np.zeros(1, dtype=np.bool_),
+    )

@@ -1,0 +1,214 @@
+"""Stretches of IMU samples in one compiled call against one sample at a time, on the simulator.
+
+An offline run hands the engine the IMU messages between two other sensor messages together
+(:meth:`FusionEngine.add_imu_samples`): they are screened one by one, then each stretch with
+nothing else to do goes through :mod:`buoy_nav.imu_stretch` and the engine takes the samples that
+need it. Fed the same messages one at a time (:meth:`FusionEngine.add_imu`, as a live node feeds
+them), the engine must give the same rows, stamps, counters, source health, state and
+covariance to the bit: on a clean sea state and through a GNSS outage (the covariance then
+propagated in batches between the IMU samples); on IMU samples with a spike, non-finite values,
+a repeated stamp, a second stream, a gap that restarts the alignment and a step of the IMU's
+clock;
+on a GNSS velocity biased enough that the filter is distrusted, realigned and the velocity
+suspended; and with the solutions decimated to 10 Hz.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import Counter
+
+import numpy as np
+import pytest
+from gnss_faults import biased_velocity
+from test_nav_sensor_sets import scenario_messages
+
+from buoy_common.contract import IMU_RAW_TOPIC, Reason, header_seconds
+from buoy_nav import engine as engine_module
+from buoy_nav.aiding.base import vector_of
+from buoy_nav.config import FusionConfig
+from buoy_nav.engine import FusionEngine
+from buoy_nav.fusion_messages import FUSION_INPUT_MSGTYPES, feed_message
+from buoy_nav.solution_rows import SolutionRows
+
+IMU = "imu"
+
+
+def fusion_inputs(messages) -> list[tuple]:
+    """The fusion's inputs of ``messages`` in order: ``(IMU, (stamp s, gyro, force))`` for an
+    IMU sample, ``(topic, message)`` for the others."""
+    inputs = []
+    for topic, _, message in messages:
+        if topic == IMU_RAW_TOPIC:
+            sample = (
+                header_seconds(message.header),
+                vector_of(message.angular_velocity),
+                vector_of(message.linear_acceleration),
+            )
+            inputs.append((IMU, sample))
+        elif topic in FUSION_INPUT_MSGTYPES:
+            inputs.append((topic, message))
+    return inputs
+
+
+def with_imu_faults(inputs: list[tuple]) -> list[tuple]:
+    """``inputs`` with, among the IMU samples after the first minute: a 5 rad/s spike, a
+    non-finite force, a repeated sample, three samples of a second stream 0.25 s ahead, 0.8 s
+    of samples lost (a gap beyond ``max_imu_gap_s``), and from 100 s on the IMU's clock 3 s
+    behind."""
+    faulty, imu_count, first_s = [], 0, None
+    for kind, item in inputs:
+        if kind != IMU:
+            faulty.append((kind, item))
+            continue
+        t, gyro, force = item
+        first_s = t if first_s is None else first_s
+        elapsed = t - first_s
+        imu_count += 1
+        if 80.0 <= elapsed < 80.8:
+            continue
+        if elapsed >= 100.0:
+            t -= 3.0
+        faulty.append((IMU, (t, gyro, force)))
+        if imu_count == 6000:
+            faulty.append((IMU, (t + 0.01, (gyro[0] + 5.0, gyro[1], gyro[2]), force)))
+        elif imu_count == 6500:
+            faulty.append((IMU, (t + 0.01, gyro, (math.nan, force[1], force[2]))))
+        elif imu_count == 7000:
+            faulty.append((IMU, (t, gyro, force)))
+        elif imu_count in (7500, 7501, 7502):
+            faulty.append((IMU, (t + 0.25, gyro, force)))
+    return faulty
+
+
+def without_gnss_between(inputs: list[tuple], from_s: float, to_s: float) -> list[tuple]:
+    """``inputs`` without the aiding measurements of [``from_s``, ``to_s``) after the first IMU
+    sample (an outage: the covariance is then propagated in batches between IMU samples)."""
+    first_s = next(item[0] for kind, item in inputs if kind == IMU)
+    kept, now_s = [], first_s
+    for kind, item in inputs:
+        if kind == IMU:
+            now_s = item[0]
+        elif from_s <= now_s - first_s < to_s:
+            continue
+        kept.append((kind, item))
+    return kept
+
+
+def one_at_a_time(config: FusionConfig, inputs: list[tuple]):
+    """The engine fed each input alone: (engine, its rows, each IMU sample's stamps)."""
+    rows = SolutionRows()
+    engine = FusionEngine(config, solution_rows=rows)
+    stamps = []
+    for kind, item in inputs:
+        if kind == IMU:
+            stamps.append((engine.add_imu(*item), engine.last_input_rejection))
+            engine.catch_up()
+        else:
+            feed_message(engine, kind, item)
+    engine.flush()
+    return engine, rows.take(rows.count), stamps
+
+
+def in_stretches(config: FusionConfig, inputs: list[tuple]):
+    """The engine fed the IMU samples between two other inputs together."""
+    rows = SolutionRows()
+    engine = FusionEngine(config, solution_rows=rows)
+    stamps, waiting = [], []
+    for kind, item in [*inputs, (None, None)]:
+        if kind == IMU:
+            waiting.append(item)
+            continue
+        if waiting:
+            stamps += engine.add_imu_samples(waiting)
+            waiting = []
+        if kind is not None:
+            feed_message(engine, kind, item)
+    engine.flush()
+    return engine, rows.take(rows.count), stamps
+
+
+@pytest.fixture
+def stretch_counts(monkeypatch) -> Counter:
+    """Samples offered to the compiled stretch and taken by it, counted."""
+    counts = Counter()
+    compiled = engine_module.imu_stretch
+
+    def counted(samples, *arguments):
+        taken, stepped, stop = compiled(samples, *arguments)
+        counts["offered"] += samples.shape[0]
+        counts["taken"] += taken
+        return taken, stepped, stop
+
+    monkeypatch.setattr(engine_module, "imu_stretch", counted)
+    return counts
+
+
+def assert_same_engines(first: FusionEngine, second: FusionEngine) -> None:
+    health, other = first.health(), second.health()
+    assert health.counters == other.counters
+    assert health.source_health == other.source_health
+    assert (health.realignments, health.imu_gaps, health.alignments) == (
+        other.realignments,
+        other.imu_gaps,
+        other.alignments,
+    )
+    assert health.imu_clock_steps == other.imu_clock_steps
+    assert np.array_equal(first.covariance, second.covariance)
+    state, other_state = first.nav_state, second.nav_state
+    for field in dataclasses.fields(state):
+        name = field.name
+        assert np.array_equal(getattr(state, name), getattr(other_state, name)), name
+
+
+CASES = {
+    "clean, then a GNSS outage": ("sea_state", 120.0, FusionConfig(), False, False),
+    "imu faults": ("sea_state", 160.0, FusionConfig(), True, False),
+    "biased velocity": (
+        "sea_state",
+        240.0,
+        FusionConfig(),
+        False,
+        True,
+    ),
+    "decimated": ("open_ocean", 90.0, FusionConfig(output_rate_hz=10.0), False, False),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_counts):
+    name, duration_s, config, imu_faults, velocity_bias = CASES[case]
+    overrides = (
+        (
+            "sensors.gnss.position_noise_horizontal_m=2.0",
+            "sensors.gnss.position_noise_vertical_m=4.0",
+        )
+        if velocity_bias
+        else ()
+    )
+    scenario, _, messages = scenario_messages(name, duration_s, overrides)
+    if velocity_bias:
+        messages = biased_velocity(messages, 60.0, scenario.start_time_ns, 1.0)
+    inputs = fusion_inputs(messages)
+    if imu_faults:
+        inputs = with_imu_faults(inputs)
+    if case.startswith("clean"):
+        inputs = without_gnss_between(inputs, 80.0, 100.0)
+    stretched, rows, stamps = in_stretches(config, inputs)
+    alone, expected_rows, expected_stamps = one_at_a_time(config, inputs)
+    assert stamps == expected_stamps
+    assert rows.shape == expected_rows.shape and rows.shape[0] > 500
+    assert np.array_equal(rows, expected_rows)
+    assert_same_engines(stretched, alone)
+    imu_samples = sum(kind == IMU for kind, _ in inputs)
+    assert stretch_counts["taken"] >= 0.8 * imu_samples, "the stretch took too few samples"
+    health = stretched.health()
+    if imu_faults:
+        rejected = health.counters[IMU].rejected
+        for reason in (Reason.IMPLAUSIBLE_CHANGE, Reason.NON_FINITE, Reason.DUPLICATE_STAMP):
+            assert rejected[reason] >= 1, reason
+        assert health.imu_clock_steps, "the clock's step was undone"
+    if velocity_bias:
+        assert health.realignments >= 1
+        assert health.source_health["gnss_velocity"].suspended
