@@ -10,7 +10,7 @@ propagated in batches between the IMU samples); on IMU samples with a spike, non
 a repeated stamp, a second stream, a gap that restarts the alignment and a step of the IMU's
 clock;
 on a GNSS velocity biased enough that the filter is distrusted, realigned and the velocity
-suspended; and with the solutions decimated to 10 Hz.
+suspended; and with the solutions decimated to 10 Hz and the IMU's calibration applied.
 """
 
 from __future__ import annotations
@@ -54,9 +54,10 @@ def fusion_inputs(messages) -> list[tuple]:
 
 def with_imu_faults(inputs: list[tuple]) -> list[tuple]:
     """``inputs`` with, among the IMU samples after the first minute: a 5 rad/s spike, a
-    non-finite force, a repeated sample, three samples of a second stream 0.25 s ahead, 0.8 s
-    of samples lost (a gap beyond ``max_imu_gap_s``), and from 100 s on the IMU's clock 3 s
-    behind."""
+    non-finite force, a repeated sample, three samples of a second stream 0.25 s ahead, a
+    sample 4 ms after another (the screening learns a shorter interval), a force beyond the
+    sensor's range, 0.8 s of samples lost (a gap beyond ``max_imu_gap_s``), and from 100 s on
+    the IMU's clock 3 s behind."""
     faulty, imu_count, first_s = [], 0, None
     for kind, item in inputs:
         if kind != IMU:
@@ -70,6 +71,8 @@ def with_imu_faults(inputs: list[tuple]) -> list[tuple]:
             continue
         if elapsed >= 100.0:
             t -= 3.0
+        if imu_count == 7200:
+            force = (1000.0, force[1], force[2])
         faulty.append((IMU, (t, gyro, force)))
         if imu_count == 6000:
             faulty.append((IMU, (t + 0.01, (gyro[0] + 5.0, gyro[1], gyro[2]), force)))
@@ -79,6 +82,8 @@ def with_imu_faults(inputs: list[tuple]) -> list[tuple]:
             faulty.append((IMU, (t, gyro, force)))
         elif imu_count in (7500, 7501, 7502):
             faulty.append((IMU, (t + 0.25, gyro, force)))
+        elif imu_count == 7700:
+            faulty.append((IMU, (t + 0.004, gyro, force)))
     return faulty
 
 
@@ -155,6 +160,14 @@ def assert_same_engines(first: FusionEngine, second: FusionEngine) -> None:
         other.alignments,
     )
     assert health.imu_clock_steps == other.imu_clock_steps
+    # What the IMU's screening learnt (the sample interval, its noise allowance) is the same.
+    screening, other_screening = (
+        engine._imu_input.steady_screening() for engine in (first, second)
+    )
+    assert (screening is None) == (other_screening is None)
+    if screening is not None:
+        for array, other_array in zip(screening, other_screening, strict=True):
+            assert np.array_equal(array, other_array)
     assert np.array_equal(first.covariance, second.covariance)
     state, other_state = first.nav_state, second.nav_state
     for field in dataclasses.fields(state):
@@ -172,7 +185,18 @@ CASES = {
         False,
         True,
     ),
-    "decimated": ("open_ocean", 90.0, FusionConfig(output_rate_hz=10.0), False, False),
+    "decimated, calibrated": (
+        "open_ocean",
+        90.0,
+        FusionConfig(
+            output_rate_hz=10.0,
+            imu_gyro_bias_rad_s=(1e-4, -2e-4, 5e-5),
+            imu_accel_bias_mps2=(0.02, -0.01, 0.03),
+            imu_accel_scale=(1.001, 0.999, 1.002),
+        ),
+        False,
+        False,
+    ),
 }
 
 
@@ -206,7 +230,12 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
     health = stretched.health()
     if imu_faults:
         rejected = health.counters[IMU].rejected
-        for reason in (Reason.IMPLAUSIBLE_CHANGE, Reason.NON_FINITE, Reason.DUPLICATE_STAMP):
+        for reason in (
+            Reason.IMPLAUSIBLE_CHANGE,
+            Reason.NON_FINITE,
+            Reason.DUPLICATE_STAMP,
+            Reason.OUT_OF_RANGE,
+        ):
             assert rejected[reason] >= 1, reason
         assert health.imu_clock_steps, "the clock's step was undone"
     if velocity_bias:

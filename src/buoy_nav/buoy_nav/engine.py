@@ -100,6 +100,7 @@ from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCoun
 from buoy_nav.imu_input import ImuInput
 from buoy_nav.imu_stretch import (
     CATCH_UP,
+    CLOCK_OFFSET,
     NEXT_OUTPUT_T,
     ROWS,
     imu_stretch,
@@ -244,33 +245,21 @@ class FusionEngine:
         body m/s² each), nothing else given between them: the solutions of each and the reason
         it was rejected (None: accepted); :attr:`imu_given_up` is the last one's.
 
-        The same as one call each: the screening takes no part in the filtering, so the
-        samples are screened first; then each aligned stretch of them with nothing else to do
-        is taken in one compiled call (:mod:`buoy_nav.imu_stretch`), and the engine takes the
-        others, and catches up, as :meth:`add_imu` does.
+        Each stretch of them with nothing else to do is screened and taken in one compiled call
+        (:mod:`buoy_nav.imu_stretch`); the engine takes the others, and catches up, as
+        :meth:`add_imu` does: the same as one call each.
         """
-        self.catch_up()
-        imu_input = self._imu_input
-        outcomes = []
-        taken = []
-        for number, (t_s, gyro, force) in enumerate(samples):
-            self.last_input_rejection = None
-            accepted = imu_input.accept(t_s, gyro, force)
-            self._count_given_up_imu_samples()
-            if isinstance(accepted, Reason):
-                self.reject_input(IMU, accepted)
-                outcomes.append(([], accepted))
-                continue
-            outcomes.append(([], None))
-            taken.extend((number, sample) for sample in accepted)
+        raw = _raw_samples(samples)
+        outcomes: list = [None] * len(samples)
         position = 0
-        while position < len(taken):
-            if self._stretch_applies():
-                position += self._take_stretch(taken, position, outcomes)
-                if position == len(taken):
+        while position < len(samples):
+            if raw is not None and self._stretch_applies():
+                position += self._take_stretch(raw, position, outcomes)
+                if position == len(samples):
                     break
-            number, sample = taken[position]
-            outcomes[number][0].extend(self._take_imu_sample(sample))
+            t_s, gyro, force = samples[position]
+            solutions = self.add_imu(t_s, gyro, force)
+            outcomes[position] = (solutions, self.last_input_rejection)
             self.catch_up()
             position += 1
         return outcomes
@@ -278,24 +267,30 @@ class FusionEngine:
     def _stretch_applies(self) -> bool:
         """Whether the next samples may go through :mod:`buoy_nav.imu_stretch`: aligned, with
         solutions written as rows and predicted ahead from a copy already forked, no
-        constraint to ask."""
+        constraint to ask, and the IMU's screening in its steady course."""
         return (
             self._nav is not None
             and self.config.realtime_output
             and self._solutions.rows is not None
             and self._prediction.ahead is not None
             and not self._registry.pseudo
+            and self._imu_input.steady_screening() is not None
         )
 
-    def _take_stretch(self, taken: list[tuple], position: int, outcomes: list[tuple]) -> int:
-        """The ``taken`` samples (number among the given ones, sample) from ``position`` on
-        through :func:`~buoy_nav.imu_stretch.imu_stretch`, their stamps added to their
+    def _take_stretch(self, raw: np.ndarray, position: int, outcomes: list[tuple]) -> int:
+        """The ``raw`` samples (n × 7: stamp s, gyro, force) from ``position`` on through
+        :func:`~buoy_nav.imu_stretch.imu_stretch`, their solutions' stamps in their
         ``outcomes``; how many it took (0: the engine takes the next one itself)."""
-        stretch = taken[position:]
+        raw = raw[position:]
         config = self.config
         delay_s = config.max_measurement_delay_s
-        # The filter can reach no buffered sample beyond the last one's horizon.
-        reach_s = stretch[-1][1][0] - delay_s
+        screening, screened_state = self._imu_input.steady_screening()
+        # The filter can reach no buffered sample beyond the horizon of the latest stamp (the
+        # clock's offset stays while the stretch runs: a step makes samples held, which stops it).
+        stamps = raw[:, 0]
+        finite = stamps[np.isfinite(stamps)]
+        latest_s = finite.max() + screening[CLOCK_OFFSET] if finite.size else -math.inf
+        reach_s = latest_s - delay_s
         due = list(itertools.takewhile(lambda sample: sample[0] <= reach_s, self._imu_buffer))
         point = self._point
         ahead, ahead_t, ahead_gyro, ahead_force = self._prediction.ahead
@@ -331,10 +326,14 @@ class FusionEngine:
                 *distrust,
             )
         )
-        row_written = np.zeros(len(stretch), dtype=bool)
+        screened = np.empty_like(raw)
+        row_written = np.zeros(len(raw), dtype=bool)
         integrator = nav.integrator
         count, stepped, stop = imu_stretch(
-            np.array([(t, *gyro, *force) for _, (t, gyro, force) in stretch]),
+            raw,
+            screening,
+            screened_state,
+            screened,
             np.array([(t, *gyro, *force) for t, gyro, force in due]).reshape(-1, 7),
             state,
             limits,
@@ -352,8 +351,14 @@ class FusionEngine:
         )
         if count == 0:
             return 0
+        took = [
+            (t, (gx, gy, gz), (fx, fy, fz))
+            for t, gx, gy, gz, fx, fy, fz in screened[:count].tolist()
+        ]
+        self._imu_input.screened_through(screened_state, took[-1])
+        self.last_input_rejection = None
+        self.imu_given_up = ()
         self._counters[IMU].accepted += count
-        took = [sample for _, sample in stretch[:count]]
         buffer = self._imu_buffer
         buffer.extend(took)
         if stepped:
@@ -364,9 +369,8 @@ class FusionEngine:
         self._prediction.predicted_through(took[-1])
         output.next_output_s = float(state[NEXT_OUTPUT_T])
         rows.count = int(state[ROWS])
-        for (number, sample), written in zip(stretch[:count], row_written.tolist(), strict=False):
-            if written:
-                outcomes[number][0].append(sample[0])
+        for number, (sample, written) in enumerate(zip(took, row_written.tolist(), strict=False)):
+            outcomes[position + number] = ([sample[0]], None) if written else ([], None)
         if stop == CATCH_UP:
             self._deferred_horizon = took[-1][0] - delay_s
             self.catch_up()
@@ -899,3 +903,13 @@ def _configured_map_plane(config: FusionConfig) -> earth.LocalTangentPlane | Non
         math.radians(config.origin_longitude_deg),
         config.origin_altitude_m,
     )
+
+
+def _raw_samples(samples: list[tuple]) -> np.ndarray | None:
+    """``samples`` (stamp s, gyro, force each) as n × 7 floats; None when one is not three
+    numbers each (:meth:`FusionEngine.add_imu` then says why, sample by sample)."""
+    try:
+        raw = np.array([(t_s, *gyro, *force) for t_s, gyro, force in samples], dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return raw if raw.shape == (len(samples), 7) else None

@@ -44,6 +44,11 @@ class ImuClock:
         if t_s > self.newest_aiding_s:
             self.newest_aiding_s = t_s
 
+    @property
+    def offset_s(self) -> float:
+        """What :meth:`restamp` adds to an IMU stamp (s)."""
+        return self._offset_s
+
     def restamp(self, t_s: float) -> float:
         """The IMU stamp ``t_s`` (s) on the aiding sources' clock, as the steps so far say."""
         return t_s + self._offset_s

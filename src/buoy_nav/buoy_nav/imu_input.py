@@ -92,6 +92,62 @@ class ImuInput:
         screened = self._screened(sample)
         return screened if isinstance(screened, Reason) else [screened]
 
+    def steady_screening(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The screening's limits and state as :func:`~buoy_nav.imu_stretch.imu_stretch` takes
+        them (its ``screening`` and ``screened_state``), or None while it is not in its steady
+        course (samples held, a sample refused since the last accepted one, the sample interval
+        not learnt yet): :meth:`accept` then takes the next sample itself."""
+        plausibility = self._plausibility
+        if self._held.samples or not plausibility.steady:
+            return None
+        calibrated = self._calibration is not None
+        (bgx, bgy, bgz), (bax, bay, baz), (sx, sy, sz) = (
+            self._calibration if calibrated else ((0.0,) * 3, (0.0,) * 3, (1.0,) * 3)
+        )
+        screening = np.array(
+            (
+                self.clock.offset_s,
+                self._max_rate_sq,
+                self._max_force_sq,
+                self._max_gap_s,
+                1.0 if calibrated else 0.0,
+                bgx,
+                bgy,
+                bgz,
+                bax,
+                bay,
+                baz,
+                sx,
+                sy,
+                sz,
+                *plausibility.limits(),
+                2.0,
+            ),
+            dtype=float,
+        )
+        last_t, last_gyro, last_force = plausibility.last
+        screened_state = np.array(
+            (
+                self.latest_stamp_s,
+                self._sequence_last_s,
+                self.clock.interval_s,
+                last_t,
+                *last_gyro,
+                *last_force,
+            ),
+            dtype=float,
+        )
+        return screening, screened_state
+
+    def screened_through(self, screened_state: np.ndarray, last: Sample) -> None:
+        """Samples were screened and accepted as :meth:`accept` does, up to ``last``, by
+        :func:`~buoy_nav.imu_stretch.imu_stretch`, which left the ``screened_state``."""
+        latest, sequence_last, interval = screened_state[:3].tolist()
+        self.latest_stamp_s = latest
+        self._sequence_last_s = sequence_last
+        self.clock.interval_s = interval
+        self._plausibility.last = last
+
     def _sequence_goes_on(self, t_s: float) -> None:
         """A sample of the accepted sequence stamped ``t_s`` (s) came: the held samples were a
         second stream's (or stale ones)."""

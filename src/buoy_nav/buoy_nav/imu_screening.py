@@ -59,6 +59,36 @@ class ImuPlausibility:
         self.rejected_in_a_row = 0
         """Samples rejected since the last accepted one."""
 
+    @property
+    def steady(self) -> bool:
+        """Whether the screening is in its steady course: a last sample to compare with, none
+        refused since, the sample interval learnt."""
+        return (
+            self._last is not None
+            and self.rejected_in_a_row == 0
+            and self._sample_interval_s is not None
+        )
+
+    @property
+    def last(self) -> tuple[float, tuple, tuple] | None:
+        """The last accepted sample (stamp s, gyro body rad/s, force body m/s²)."""
+        return self._last
+
+    @last.setter
+    def last(self, sample: tuple[float, tuple, tuple]) -> None:
+        self._last = sample
+
+    def limits(self) -> tuple[float, float, float, float, float]:
+        """(largest angular acceleration rad/s², largest jerk m/s³, the rate's and the force's
+        noise allowances, the sample interval learnt s) (:mod:`buoy_nav.imu_stretch`)."""
+        return (
+            self._max_angular_acceleration,
+            self._max_jerk,
+            self._gyro_noise_bound,
+            self._force_noise_bound,
+            self._sample_interval_s,
+        )
+
     def restart(self) -> None:
         """Forget the last sample (after a gap in the data, nothing to compare with)."""
         self._last = None

@@ -19,6 +19,7 @@ import numpy as np
 
 from buoy_nav.solution_rows import write_row
 from buoy_nav.strapdown_kernel import DURATION, strapdown_step
+from buoy_nav.stream_sequence import SEQUENCE_INTERVALS
 
 DONE = 0
 """Every sample of the stretch taken, the filter caught up to the last one's horizon."""
@@ -41,10 +42,28 @@ STATE_SIZE = 17
 # The limits handed in (:func:`imu_stretch`'s ``limits``).
 DELAY, MAX_GAP, PROPAGATION_INTERVAL, NEXT_MEASUREMENT, OUTPUT_PERIOD = range(5)
 DISTRUSTED, ATTITUDE_VARIANCE, VELOCITY_VARIANCE = range(5, 8)
+# The screening's limits and state (:func:`imu_stretch`'s ``screening`` and ``screened_state``,
+# :meth:`~buoy_nav.imu_input.ImuInput.steady_screening`): the clock's offset (s), the largest
+# squared rate and force, the largest gap (s), the calibration's gyro biases, accelerometer
+# biases and scales (none when CALIBRATED is 0.0), the largest angular acceleration and jerk,
+# the rate's and force's noise allowances, the learnt sample interval (s) and the exponent of
+# the squares (2.0, handed in so that they are the C library's, as the interpreter's ``** 2``);
+# the latest accepted stamp, the sequence's latest stamp, the clock's sample interval (s) and
+# the last accepted sample (stamp s, gyro, force).
+(CLOCK_OFFSET, MAX_RATE_SQ, MAX_FORCE_SQ, SCREENING_MAX_GAP, CALIBRATED) = range(5)
+GYRO_BIAS, ACCEL_BIAS, ACCEL_SCALE = 5, 8, 11
+(MAX_ANGULAR_ACCELERATION, MAX_JERK, RATE_NOISE, FORCE_NOISE, SAMPLE_INTERVAL) = range(14, 19)
+SQUARE = 19
+SCREENING_SIZE = 20
+LATEST, SEQUENCE_LAST, CLOCK_INTERVAL, LAST_SAMPLE = 0, 1, 2, 3
+SCREENED_STATE_SIZE = 10
 
 
 @numba.njit(cache=True)
 def imu_stretch(
+    raw,
+    screening,
+    screened_state,
     samples,
     buffered,
     state,
@@ -61,10 +80,12 @@ def imu_stretch(
     block_indices,
     row_written,
 ):
-    """Take the accepted IMU ``samples`` (n × 7: stamp s, ω_ib body rad/s, specific force body
-    m/s²), after the ``buffered`` ones ahead of the filter that the stretch may reach (k × 7,
-    oldest first), as the engine's ``_take_imu_sample`` and ``catch_up`` would, until one needs
-    the engine.
+    """Take the ``raw`` IMU samples (n × 7: header stamp s, ω_ib body rad/s, specific force
+    body m/s²), after the ``buffered`` ones ahead of the filter that the stretch may reach
+    (k × 7, oldest first), as the engine's ``add_imu`` and ``catch_up`` would, until one needs
+    the engine: each screened as :meth:`~buoy_nav.imu_input.ImuInput.accept` screens it
+    (``screening``, ``screened_state`` updated; into ``samples``, n × 7, re-stamped and
+    calibrated), then taken.
 
     state: :data:`POINT` … :data:`ROWS`, updated; limits: :data:`DELAY` (the fusion's
     ``max_measurement_delay_s``) … :data:`VELOCITY_VARIANCE` (the stamp of the next measurement
@@ -85,12 +106,15 @@ def imu_stretch(
     ahead = state[AHEAD : AHEAD + SAMPLE_SIZE]
     n_buffered = buffered.shape[0]
     stepped = 0
-    for index in range(samples.shape[0]):
+    for index in range(raw.shape[0]):
         sample = samples[index]
+        if not _screened(raw[index], screening, screened_state, sample):
+            return index, stepped, BEFORE_SAMPLE
         t = sample[0]
         span = t - ahead[0]
         if span > max_gap_s or state[ROWS] >= rows_block.shape[0]:
             return index, stepped, BEFORE_SAMPLE
+        _accepted(screening, screened_state, sample)
         _step(ahead_state, span, ahead, sample, ahead_coning, ahead_sculling)
         ahead[:] = sample
         if t > state[LAST_PREDICTED_T] and _due(state, t, span, limits[OUTPUT_PERIOD]):
@@ -134,7 +158,87 @@ def imu_stretch(
                 _step(filter_state, dt, point, due, filter_coning, filter_sculling)
             point[:] = due
             stepped += 1
-    return samples.shape[0], stepped, DONE
+    return raw.shape[0], stepped, DONE
+
+
+@numba.njit(cache=True)
+def _screened(raw_sample, screening, screened_state, sample) -> bool:
+    """Whether :meth:`~buoy_nav.imu_input.ImuInput.accept` would accept ``raw_sample`` as the
+    next sample of the sequence with nothing else to do (nothing held, refused, restarted or
+    learnt); ``sample`` then holds it re-stamped and calibrated. Nothing else is changed."""
+    t = raw_sample[0]
+    stamp = t + screening[CLOCK_OFFSET]
+    latest = screened_state[LATEST]
+    sequence_last = screened_state[SEQUENCE_LAST]
+    if not (
+        stamp > latest
+        and (
+            stamp == sequence_last
+            or (
+                stamp > sequence_last
+                and not stamp - sequence_last > SEQUENCE_INTERVALS * screened_state[CLOCK_INTERVAL]
+            )
+        )
+    ):
+        return False
+    gx, gy, gz, fx, fy, fz = raw_sample[1:7]
+    if not (math.isfinite(t) and math.isfinite(gx + gy + gz) and math.isfinite(fx + fy + fz)):
+        return False
+    if screening[CALIBRATED] != 0.0:
+        gx = gx - screening[GYRO_BIAS]
+        gy = gy - screening[GYRO_BIAS + 1]
+        gz = gz - screening[GYRO_BIAS + 2]
+        fx = (fx - screening[ACCEL_BIAS]) / screening[ACCEL_SCALE]
+        fy = (fy - screening[ACCEL_BIAS + 1]) / screening[ACCEL_SCALE + 1]
+        fz = (fz - screening[ACCEL_BIAS + 2]) / screening[ACCEL_SCALE + 2]
+    if (
+        gx * gx + gy * gy + gz * gz > screening[MAX_RATE_SQ]
+        or fx * fx + fy * fy + fz * fz > screening[MAX_FORCE_SQ]
+    ):
+        return False
+    if stamp - latest > screening[SCREENING_MAX_GAP]:
+        return False
+    last = screened_state[LAST_SAMPLE : LAST_SAMPLE + SAMPLE_SIZE]
+    dt = stamp - last[0]
+    if dt > 0.0 and dt < screening[SAMPLE_INTERVAL]:
+        return False
+    square = screening[SQUARE]
+    rate_bound = screening[MAX_ANGULAR_ACCELERATION] * dt + screening[RATE_NOISE]
+    force_bound = screening[MAX_JERK] * dt + screening[FORCE_NOISE]
+    if (
+        math.pow(gx - last[1], square)
+        + math.pow(gy - last[2], square)
+        + math.pow(gz - last[3], square)
+        > rate_bound * rate_bound
+        or math.pow(fx - last[4], square)
+        + math.pow(fy - last[5], square)
+        + math.pow(fz - last[6], square)
+        > force_bound * force_bound
+    ):
+        return False
+    sample[0] = stamp
+    sample[1] = gx
+    sample[2] = gy
+    sample[3] = gz
+    sample[4] = fx
+    sample[5] = fy
+    sample[6] = fz
+    return True
+
+
+@numba.njit(cache=True)
+def _accepted(screening, screened_state, sample) -> None:
+    """The screened ``sample`` accepted: the screening's state follows it (the sequence, the
+    clock's sample interval, the last accepted sample)."""
+    stamp = sample[0]
+    dt = stamp - screened_state[LATEST]
+    if dt <= screening[SCREENING_MAX_GAP] and not dt > (
+        SEQUENCE_INTERVALS * screened_state[CLOCK_INTERVAL]
+    ):
+        screened_state[CLOCK_INTERVAL] = dt
+    screened_state[LATEST] = stamp
+    screened_state[SEQUENCE_LAST] = stamp
+    screened_state[LAST_SAMPLE : LAST_SAMPLE + SAMPLE_SIZE] = sample
 
 
 @numba.njit(cache=True)
@@ -184,7 +288,15 @@ def load_compiled_imu_stretch() -> None:
     state[LAST_PREDICTED_T] = -math.inf
     limits = np.array([0.3, 0.5, 0.1, math.inf, 0.0, 0.0, 0.0, 0.0])
     strapdown = np.zeros(STRAPDOWN_STATE_SIZE)
+    screening = np.zeros(SCREENING_SIZE)
+    screening[SAMPLE_INTERVAL] = 0.01
+    screening[SQUARE] = 2.0
+    screened_state = np.zeros(SCREENED_STATE_SIZE)
+    screened_state[LATEST] = -1.0
     imu_stretch(
+        np.zeros((1, 7)),
+        screening,
+        screened_state,
         np.zeros((1, 7)),
         np.zeros((0, 7)),
         state,

@@ -203,10 +203,16 @@ class OfflineFusion:
         (ns); what each one handed over, in order. One call to the engine for them all
         (:meth:`~buoy_nav.engine.FusionEngine.add_imu_samples`)."""
         fed = feed_imu_records(self.engine, records, self.stamps)
-        take = self._take
+        for _, rejection in fed:
+            if rejection is not None:
+                self._count_rejection(IMU_RAW_TOPIC, rejection)
+        # As :meth:`_take` after each message: no other input came between them.
+        self.source_transitions.extend(self.engine.take_source_transitions())
+        self.last_log_time_ns = log_times_ns[-1]
+        write = self._write
         return [
-            take(IMU_RAW_TOPIC, outcome, log_time_ns)
-            for outcome, log_time_ns in zip(fed, log_times_ns, strict=True)
+            write(solutions, log_time_ns)
+            for (solutions, _), log_time_ns in zip(fed, log_times_ns, strict=True)
         ]
 
     def record_fields(self, sensors: dict[str, str]) -> dict[str, tuple[str, ...]]:
@@ -223,10 +229,13 @@ class OfflineFusion:
                 fields[stored] = source_fields
         return fields
 
+    def _count_rejection(self, topic: str, rejection: str) -> None:
+        self.rejections[f"{topic}: {rejection}"] += 1
+
     def _take(self, topic: str, fed, log_time_ns: int) -> HandedOver:
         solutions, rejection = fed
         if rejection is not None:
-            self.rejections[f"{topic}: {rejection}"] += 1
+            self._count_rejection(topic, rejection)
         self.source_transitions.extend(self.engine.take_source_transitions())
         self.last_log_time_ns = log_time_ns
         return self._write(solutions, log_time_ns)
