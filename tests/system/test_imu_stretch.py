@@ -54,7 +54,7 @@ def fusion_inputs(messages) -> list[tuple]:
 
 def with_imu_faults(inputs: list[tuple]) -> list[tuple]:
     """``inputs`` with, among the IMU samples after the first minute: a 5 rad/s spike, a
-    non-finite force, a repeated sample, three samples of a second stream 0.25 s ahead, a
+    non-finite force, a rate of two numbers and one of None, a repeated sample, three samples of a second stream 0.25 s ahead, a
     sample 4 ms after another (the screening learns a shorter interval), a force beyond the
     sensor's range, 0.8 s of samples lost (a gap beyond ``max_imu_gap_s``), and from 100 s on
     the IMU's clock 3 s behind."""
@@ -78,6 +78,10 @@ def with_imu_faults(inputs: list[tuple]) -> list[tuple]:
             faulty.append((IMU, (t + 0.01, (gyro[0] + 5.0, gyro[1], gyro[2]), force)))
         elif imu_count == 6500:
             faulty.append((IMU, (t + 0.01, gyro, (math.nan, force[1], force[2]))))
+        elif imu_count == 6800:
+            faulty.append((IMU, (t + 0.005, gyro[:2], force)))
+        elif imu_count == 6900:
+            faulty.append((IMU, (t + 0.005, (None, gyro[1], gyro[2]), force)))
         elif imu_count == 7000:
             faulty.append((IMU, (t, gyro, force)))
         elif imu_count in (7500, 7501, 7502):
@@ -235,6 +239,7 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
             Reason.NON_FINITE,
             Reason.DUPLICATE_STAMP,
             Reason.OUT_OF_RANGE,
+            Reason.MALFORMED,
         ):
             assert rejected[reason] >= 1, reason
         assert health.imu_clock_steps, "the clock's step was undone"

@@ -249,14 +249,17 @@ class FusionEngine:
         (:mod:`buoy_nav.imu_stretch`); the engine takes the others, and catches up, as
         :meth:`add_imu` does: the same as one call each.
         """
-        raw = _raw_samples(samples)
+        raw = None  # the samples as an array, made when a stretch first applies
         outcomes: list = [None] * len(samples)
         position = 0
         while position < len(samples):
-            if raw is not None and self._stretch_applies():
-                position += self._take_stretch(raw, position, outcomes)
-                if position == len(samples):
-                    break
+            if raw is not False and self._stretch_applies():
+                if raw is None:
+                    raw = _raw_samples(samples)
+                if raw is not False:
+                    position += self._take_stretch(raw, position, outcomes)
+                    if position == len(samples):
+                        break
             t_s, gyro, force = samples[position]
             solutions = self.add_imu(t_s, gyro, force)
             outcomes[position] = (solutions, self.last_input_rejection)
@@ -905,11 +908,11 @@ def _configured_map_plane(config: FusionConfig) -> earth.LocalTangentPlane | Non
     )
 
 
-def _raw_samples(samples: list[tuple]) -> np.ndarray | None:
-    """``samples`` (stamp s, gyro, force each) as n × 7 floats; None when one is not three
+def _raw_samples(samples: list[tuple]) -> np.ndarray | bool:
+    """``samples`` (stamp s, gyro, force each) as n × 7 floats; False when one is not three
     numbers each (:meth:`FusionEngine.add_imu` then says why, sample by sample)."""
     try:
         raw = np.array([(t_s, *gyro, *force) for t_s, gyro, force in samples], dtype=float)
     except (TypeError, ValueError):
-        return None
-    return raw if raw.shape == (len(samples), 7) else None
+        return False
+    return raw if raw.shape == (len(samples), 7) else False
