@@ -277,11 +277,15 @@ class OfflineCorrection:
             )
             add_fix(STATUS_FIX, values.latitude_deg)
 
+    @property
+    def held(self) -> int:
+        """Solutions held, by the pipeline and held back for it."""
+        return self.pipeline.n_navigation_held + self.held_back.in_order
+
     def make_room(self, count: int) -> None:
         """Before ``count`` more solutions are held back: beyond
         :data:`NAV_SOLUTIONS_HELD_AT_MOST` held, what they decide is written."""
-        held = self.pipeline.n_navigation_held + self.held_back.in_order
-        if held + count > NAV_SOLUTIONS_HELD_AT_MOST:
+        if self.held + count > NAV_SOLUTIONS_HELD_AT_MOST:
             self._write(self._ready(), self._log_time_ns)
 
     def take_columns(self, columns: SolutionColumns) -> None:
@@ -531,6 +535,8 @@ class BagCorrections:
         self.wind: OfflineCorrection | None = None
         self.current: OfflineCorrection | None = None
         self._running: list[OfflineCorrection] = []
+        self._room = 0
+        """Solutions that may be held back before the corrections are asked to make room."""
         """The corrections started: every solution goes to each."""
 
     @property
@@ -593,8 +599,15 @@ class BagCorrections:
     def add_solution_rows(self, stamps: list[Stamp]) -> None:
         """Solutions written as rows, of header ``stamps``: held back once for every
         correction and the NetCDF file, handed over in bulk (:class:`HeldBackSolutions`)."""
-        for correction in self._running:
-            correction.make_room(len(stamps))
+        count = len(stamps)
+        if count > self._room:
+            for correction in self._running:
+                correction.make_room(count)
+            # What a correction holds grows by what is held back and by nothing else (the
+            # hand-over moves it to the pipeline, which drops some): until this many more are
+            # held back, no correction can exceed its bound, and none is asked.
+            self._room = NAV_SOLUTIONS_HELD_AT_MOST - max(c.held for c in self._running)
+        self._room -= count
         corrections = self._running[0]
         corrections.held_back.take(stamps, corrections.pipeline.latest_navigation_stamp_s)
 
