@@ -253,11 +253,12 @@ class FusionEngine:
         outcomes: list = [None] * len(samples)
         position = 0
         while position < len(samples):
-            if raw is not False and self._stretch_applies():
+            screening = None if raw is False else self._stretch_screening()
+            if screening is not None:
                 if raw is None:
                     raw = _raw_samples(samples)
                 if raw is not False:
-                    position += self._take_stretch(raw, position, outcomes)
+                    position += self._take_stretch(raw, position, screening, outcomes)
                     if position == len(samples):
                         break
             t_s, gyro, force = samples[position]
@@ -267,27 +268,33 @@ class FusionEngine:
             position += 1
         return outcomes
 
-    def _stretch_applies(self) -> bool:
-        """Whether the next samples may go through :mod:`buoy_nav.imu_stretch`: aligned, with
-        solutions written as rows and predicted ahead from a copy already forked, no
-        constraint to ask, and the IMU's screening in its steady course."""
-        return (
-            self._nav is not None
-            and self.config.realtime_output
-            and self._solutions.rows is not None
-            and self._prediction.ahead is not None
-            and not self._registry.pseudo
-            and self._imu_input.steady_screening() is not None
-        )
+    def _stretch_screening(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The IMU screening's limits and state for :mod:`buoy_nav.imu_stretch`
+        (:meth:`~buoy_nav.imu_input.ImuInput.steady_screening`) when the next samples may go
+        through it: aligned, with solutions written as rows and predicted ahead from a copy
+        already forked, no constraint to ask, and the screening in its steady course; else
+        None."""
+        if (
+            self._nav is None
+            or not self.config.realtime_output
+            or self._solutions.rows is None
+            or self._prediction.ahead is None
+            or self._registry.pseudo
+        ):
+            return None
+        return self._imu_input.steady_screening()
 
-    def _take_stretch(self, raw: np.ndarray, position: int, outcomes: list[tuple]) -> int:
+    def _take_stretch(
+        self, raw: np.ndarray, position: int, screening: tuple, outcomes: list[tuple]
+    ) -> int:
         """The ``raw`` samples (n × 7: stamp s, gyro, force) from ``position`` on through
-        :func:`~buoy_nav.imu_stretch.imu_stretch`, their solutions' stamps in their
-        ``outcomes``; how many it took (0: the engine takes the next one itself)."""
+        :func:`~buoy_nav.imu_stretch.imu_stretch` with the IMU ``screening``'s limits and
+        state, their solutions' stamps in their ``outcomes``; how many it took (0: the engine
+        takes the next one itself)."""
         raw = raw[position:]
         config = self.config
         delay_s = config.max_measurement_delay_s
-        screening, screened_state = self._imu_input.steady_screening()
+        screening, screened_state = screening
         # The filter can reach no buffered sample beyond the horizon of the latest stamp (the
         # clock's offset stays while the stretch runs: a step makes samples held, which stops it).
         stamps = raw[:, 0]

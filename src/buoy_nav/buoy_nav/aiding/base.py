@@ -371,10 +371,10 @@ class AidingSource(abc.ABC):
 def as_floats(*values) -> tuple[float, ...] | Reason:
     """Scalar inputs as floats, or the reason one is malformed or not finite."""
     try:
-        numbers = tuple(float(v) for v in values)
+        numbers = tuple(map(float, values))
     except (TypeError, ValueError):
         return Reason.MALFORMED
-    if not all(math.isfinite(n) for n in numbers):
+    if not all(map(math.isfinite, numbers)):
         return Reason.NON_FINITE
     return numbers
 
