@@ -16,13 +16,15 @@ import time
 
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
+from buoy_nav.solution_rows import SolutionRows
 from wind_comp.config import CompensatorConfig
 from wind_comp.pipeline import wind_pipeline
 
 
 def main() -> None:
     started_s = time.perf_counter()
-    FusionEngine(FusionConfig())  # every aiding source's compiled model, whatever the set
+    # Every aiding source's compiled model, whatever the set, and an offline run's stretches.
+    FusionEngine(FusionConfig(), solution_rows=SolutionRows())
     wind_pipeline(CompensatorConfig())  # the Miller correction and its covariance
     print(f"compiled code cached in {time.perf_counter() - started_s:.0f} s")
 

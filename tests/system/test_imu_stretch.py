@@ -25,7 +25,7 @@ from gnss_faults import biased_velocity
 from test_nav_sensor_sets import scenario_messages
 
 from buoy_common.contract import IMU_RAW_TOPIC, Reason, header_seconds
-from buoy_nav import engine as engine_module
+from buoy_nav import imu_stretch as stretch_module
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
@@ -54,10 +54,10 @@ def fusion_inputs(messages) -> list[tuple]:
 
 def with_imu_faults(inputs: list[tuple]) -> list[tuple]:
     """``inputs`` with, among the IMU samples after the first minute: a 5 rad/s spike, a
-    non-finite force, a rate of two numbers and one of None, a repeated sample, three samples of a second stream 0.25 s ahead, a
-    sample 4 ms after another (the screening learns a shorter interval), a force beyond the
-    sensor's range, 0.8 s of samples lost (a gap beyond ``max_imu_gap_s``), and from 100 s on
-    the IMU's clock 3 s behind."""
+    non-finite force, a rate of two numbers and one of None, a repeated sample, three samples
+    of a second stream 0.25 s ahead, a sample 4 ms after another (the screening learns a
+    shorter interval), a force beyond the sensor's range, 0.8 s of samples lost (a gap beyond
+    ``max_imu_gap_s``), and from 100 s on the IMU's clock 3 s behind."""
     faulty, imu_count, first_s = [], 0, None
     for kind, item in inputs:
         if kind != IMU:
@@ -142,7 +142,7 @@ def in_stretches(config: FusionConfig, inputs: list[tuple]):
 def stretch_counts(monkeypatch) -> Counter:
     """Samples offered to the compiled stretch and taken by it, counted."""
     counts = Counter()
-    compiled = engine_module.imu_stretch
+    compiled = stretch_module.imu_stretch
 
     def counted(samples, *arguments):
         taken, stepped, stop = compiled(samples, *arguments)
@@ -150,7 +150,7 @@ def stretch_counts(monkeypatch) -> Counter:
         counts["taken"] += taken
         return taken, stepped, stop
 
-    monkeypatch.setattr(engine_module, "imu_stretch", counted)
+    monkeypatch.setattr(stretch_module, "imu_stretch", counted)
     return counts
 
 

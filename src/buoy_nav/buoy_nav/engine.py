@@ -69,7 +69,6 @@ the measurements disprove (a mooring on a buoy that drifts) is suspended while t
 """
 
 import dataclasses
-import itertools
 import math
 from collections import deque
 from collections.abc import Iterable
@@ -98,14 +97,7 @@ from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
 from buoy_nav.imu_input import ImuInput
-from buoy_nav.imu_stretch import (
-    CATCH_UP,
-    CLOCK_OFFSET,
-    NEXT_OUTPUT_T,
-    ROWS,
-    imu_stretch,
-    load_compiled_imu_stretch,
-)
+from buoy_nav.imu_stretch import ImuStretches, load_compiled_imu_stretch
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, load_compiled_kernels
@@ -217,6 +209,16 @@ class FusionEngine:
         self._solutions = SolutionBuilder(_configured_map_plane(config), solution_rows)
         self._output = OutputDecimation(config.output_rate_hz)
         self._prediction = RealtimePrediction(config.max_imu_gap_s, self._solutions, self._output)
+        self._stretches = ImuStretches(
+            config,
+            self._imu_buffer,
+            self._point,
+            self._prediction,
+            self._output,
+            self._solutions,
+            self._queue,
+            self._imu_input,
+        )
 
     # ------------------------------------------------------------------ input
     def add_imu(self, t_s: float, gyro_rad_s, specific_force_mps2) -> list[Emitted]:
@@ -291,100 +293,19 @@ class FusionEngine:
         :func:`~buoy_nav.imu_stretch.imu_stretch` with the IMU ``screening``'s limits and
         state, their solutions' stamps in their ``outcomes``; how many it took (0: the engine
         takes the next one itself)."""
-        raw = raw[position:]
-        config = self.config
-        delay_s = config.max_measurement_delay_s
-        screening, screened_state = screening
-        # The filter can reach no buffered sample beyond the horizon of the latest stamp (the
-        # clock's offset stays while the stretch runs: a step makes samples held, which stops it).
-        stamps = raw[:, 0]
-        finite = stamps[np.isfinite(stamps)]
-        latest_s = finite.max() + screening[CLOCK_OFFSET] if finite.size else -math.inf
-        reach_s = latest_s - delay_s
-        due = list(itertools.takewhile(lambda sample: sample[0] <= reach_s, self._imu_buffer))
-        point = self._point
-        ahead, ahead_t, ahead_gyro, ahead_force = self._prediction.ahead
-        output = self._output
-        rows = self._solutions.rows
-        nav = self._nav
-        plane_terms, covariance, block_indices, distrusted, distrust = (
-            self._solutions.row_arguments(nav.kalman)
-        )
-        state = np.array(
-            (
-                point.t_s,
-                *point.gyro,
-                *point.force,
-                ahead_t,
-                *ahead_gyro,
-                *ahead_force,
-                self._prediction.last_predicted_stamp_s,
-                output.next_output_s,
-                rows.count,
-            ),
-            dtype=float,
-        )
-        heap = self._queue.heap
-        limits = np.array(
-            (
-                delay_s,
-                config.max_imu_gap_s,
-                config.covariance_propagation_interval_s,
-                heap[0][0] if heap else math.inf,
-                output.period_s,
-                1.0 if distrusted else 0.0,
-                *distrust,
-            )
-        )
-        screened = np.empty_like(raw)
-        row_written = np.zeros(len(raw), dtype=bool)
-        integrator = nav.integrator
-        count, stepped, stop = imu_stretch(
-            raw,
-            screening,
-            screened_state,
-            screened,
-            np.array([(t, *gyro, *force) for t, gyro, force in due]).reshape(-1, 7),
-            state,
-            limits,
-            integrator.state_vector,
-            integrator.coning_correction,
-            integrator.sculling_correction,
-            ahead.state_vector,
-            ahead.coning_correction,
-            ahead.sculling_correction,
-            rows.block,
-            plane_terms,
-            covariance,
-            block_indices,
-            row_written,
-        )
-        if count == 0:
+        taken = self._stretches.take(raw[position:], screening, self._nav)
+        if taken is None:
             return 0
-        took = [
-            (t, (gx, gy, gz), (fx, fy, fz))
-            for t, gx, gy, gz, fx, fy, fz in screened[:count].tolist()
-        ]
-        self._imu_input.screened_through(screened_state, took[-1])
+        samples, rows_written, catch_up = taken
         self.last_input_rejection = None
         self.imu_given_up = ()
-        self._counters[IMU].accepted += count
-        buffer = self._imu_buffer
-        buffer.extend(took)
-        if stepped:
-            walked = [(point.t_s, point.gyro, point.force), *due, *took]
-            for _ in range(stepped):
-                buffer.popleft()
-            point.stepped_through(walked[stepped - 1], walked[stepped])
-        self._prediction.predicted_through(took[-1])
-        output.next_output_s = float(state[NEXT_OUTPUT_T])
-        rows.count = int(state[ROWS])
-        for number, (sample, written) in enumerate(zip(took, row_written.tolist(), strict=False)):
+        self._counters[IMU].accepted += len(samples)
+        for number, (sample, written) in enumerate(zip(samples, rows_written, strict=True)):
             outcomes[position + number] = ([sample[0]], None) if written else ([], None)
-        if stop == CATCH_UP:
-            self._deferred_horizon = took[-1][0] - delay_s
+        if catch_up:
+            self._deferred_horizon = samples[-1][0] - self.config.max_measurement_delay_s
             self.catch_up()
-        return count
+        return len(samples)
 
     def _count_given_up_imu_samples(self) -> None:
         """Count the held IMU samples given up by the latest call

@@ -12,7 +12,10 @@ fork afresh, the rows' block full. The engine then takes over at that sample
 bit; a test holds the two equal.
 """
 
+import itertools
 import math
+from collections import deque
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -57,6 +60,140 @@ SQUARE = 19
 SCREENING_SIZE = 20
 LATEST, SEQUENCE_LAST, CLOCK_INTERVAL, LAST_SAMPLE = 0, 1, 2, 3
 SCREENED_STATE_SIZE = 10
+
+
+class Taken(NamedTuple):
+    """What a stretch took: its samples (stamp s, gyro, force; re-stamped and calibrated),
+    whether each one's solution was written, and whether the engine's filtering up to the last
+    one's horizon is left to do (:data:`CATCH_UP`)."""
+
+    samples: list[tuple]
+    rows_written: list[bool]
+    catch_up: bool
+
+
+class ImuStretches:
+    """The parts of a :class:`~buoy_nav.engine.FusionEngine` a stretch reads and moves (its
+    fusion ``config``, IMU ``buffer`` ahead of the filter, processing ``point``, real-time
+    ``prediction``, ``output`` decimation, ``solutions`` and measurement ``queue``, the
+    ``imu_input``'s screening), handed to :func:`imu_stretch` and set from what it did."""
+
+    def __init__(
+        self, config, buffer: deque, point, prediction, output, solutions, queue, imu_input
+    ):
+        self._config = config
+        self._buffer = buffer
+        self._point = point
+        self._prediction = prediction
+        self._output = output
+        self._solutions = solutions
+        self._queue = queue
+        self._imu_input = imu_input
+
+    def take(self, raw: np.ndarray, screening: tuple, nav) -> Taken | None:
+        """The ``raw`` samples (n × 7: stamp s, gyro, force) through :func:`imu_stretch`, with
+        the IMU ``screening``'s limits and state and the aided navigation ``nav``; None when it
+        took none (the engine takes the first itself)."""
+        limits_of_screening, screened_state = screening
+        due = self._buffered_within_reach(raw, limits_of_screening[CLOCK_OFFSET])
+        ahead = self._prediction.ahead[0]
+        state = self._state()
+        screened = np.empty_like(raw)
+        rows_written = np.zeros(len(raw), dtype=bool)
+        plane_terms, covariance, block_indices, distrusted, distrust = (
+            self._solutions.row_arguments(nav.kalman)
+        )
+        count, stepped, stop = imu_stretch(
+            raw,
+            limits_of_screening,
+            screened_state,
+            screened,
+            np.array([(t, *gyro, *force) for t, gyro, force in due]).reshape(-1, SAMPLE_SIZE),
+            state,
+            self._limits(distrusted, distrust),
+            nav.integrator.state_vector,
+            nav.integrator.coning_correction,
+            nav.integrator.sculling_correction,
+            ahead.state_vector,
+            ahead.coning_correction,
+            ahead.sculling_correction,
+            self._solutions.rows.block,
+            plane_terms,
+            covariance,
+            block_indices,
+            rows_written,
+        )
+        if count == 0:
+            return None
+        took = [
+            (t, (gx, gy, gz), (fx, fy, fz))
+            for t, gx, gy, gz, fx, fy, fz in screened[:count].tolist()
+        ]
+        self._imu_input.screened_through(screened_state, took[-1])
+        self._moved(state, due, took, stepped)
+        return Taken(took, rows_written[:count].tolist(), stop == CATCH_UP)
+
+    def _buffered_within_reach(self, raw: np.ndarray, clock_offset_s: float) -> list[tuple]:
+        """The buffered samples the filter may step to while taking ``raw``: none beyond the
+        horizon of its latest stamp (the clock's offset ``clock_offset_s`` stays while a
+        stretch runs: a step of the clock has samples held, which stops it)."""
+        stamps = raw[:, 0]
+        finite = stamps[np.isfinite(stamps)]
+        latest_s = finite.max() + clock_offset_s if finite.size else -math.inf
+        reach_s = latest_s - self._config.max_measurement_delay_s
+        return list(itertools.takewhile(lambda sample: sample[0] <= reach_s, self._buffer))
+
+    def _state(self) -> np.ndarray:
+        """:func:`imu_stretch`'s ``state`` from the parts."""
+        point, prediction = self._point, self._prediction
+        _, ahead_t, ahead_gyro, ahead_force = prediction.ahead
+        return np.array(
+            (
+                point.t_s,
+                *point.gyro,
+                *point.force,
+                ahead_t,
+                *ahead_gyro,
+                *ahead_force,
+                prediction.last_predicted_stamp_s,
+                self._output.next_output_s,
+                self._solutions.rows.count,
+            ),
+            dtype=float,
+        )
+
+    def _limits(self, distrusted: bool, distrust: tuple[float, float]) -> np.ndarray:
+        """:func:`imu_stretch`'s ``limits``, the filter ``distrusted`` or not (``distrust``: the
+        attitude and velocity variances then added)."""
+        config = self._config
+        heap = self._queue.heap
+        return np.array(
+            (
+                config.max_measurement_delay_s,
+                config.max_imu_gap_s,
+                config.covariance_propagation_interval_s,
+                heap[0][0] if heap else math.inf,
+                self._output.period_s,
+                1.0 if distrusted else 0.0,
+                *distrust,
+            )
+        )
+
+    def _moved(self, state: np.ndarray, due: list, took: list, stepped: int) -> None:
+        """The parts set from what the stretch did: it ``took`` these samples (into the
+        buffer) and stepped the filter to ``stepped`` of the ``due`` buffered samples and
+        then of those; ``state`` as it left it."""
+        point = self._point
+        buffer = self._buffer
+        buffer.extend(took)
+        if stepped:
+            walked = [(point.t_s, point.gyro, point.force), *due, *took]
+            for _ in range(stepped):
+                buffer.popleft()
+            point.stepped_through(walked[stepped - 1], walked[stepped])
+        self._prediction.predicted_through(took[-1])
+        self._output.next_output_s = float(state[NEXT_OUTPUT_T])
+        self._solutions.rows.count = int(state[ROWS])
 
 
 @numba.njit(cache=True)
