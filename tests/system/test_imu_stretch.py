@@ -121,7 +121,8 @@ def one_at_a_time(config: FusionConfig, inputs: list[tuple]):
 
 
 def in_stretches(config: FusionConfig, inputs: list[tuple]):
-    """The engine fed the IMU samples between two other inputs together."""
+    """The engine fed the IMU samples between two other inputs together, but for the first of
+    each run, fed alone and its filtering left for the run's call to catch up."""
     rows = SolutionRows()
     engine = FusionEngine(config, solution_rows=rows)
     stamps, waiting = [], []
@@ -130,7 +131,8 @@ def in_stretches(config: FusionConfig, inputs: list[tuple]):
             waiting.append(item)
             continue
         if waiting:
-            stamps += engine.add_imu_samples(waiting)
+            stamps.append((engine.add_imu(*waiting[0]), engine.last_input_rejection))
+            stamps += engine.add_imu_samples(waiting[1:])
             waiting = []
         if kind is not None:
             feed_message(engine, kind, item)
@@ -230,7 +232,8 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
     assert np.array_equal(rows, expected_rows)
     assert_same_engines(stretched, alone)
     imu_samples = sum(kind == IMU for kind, _ in inputs)
-    assert stretch_counts["taken"] >= 0.8 * imu_samples, "the stretch took too few samples"
+    # The first sample of each run (one in ten between the GNSS epochs) is fed alone.
+    assert stretch_counts["taken"] >= 0.7 * imu_samples, "the stretch took too few samples"
     health = stretched.health()
     if imu_faults:
         rejected = health.counters[IMU].rejected

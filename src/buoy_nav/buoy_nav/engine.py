@@ -251,6 +251,7 @@ class FusionEngine:
         (:mod:`buoy_nav.imu_stretch`); the engine takes the others, and catches up, as
         :meth:`add_imu` does: the same as one call each.
         """
+        self.catch_up()
         raw = None  # the samples as an array, made when a stretch first applies
         outcomes: list = [None] * len(samples)
         position = 0
