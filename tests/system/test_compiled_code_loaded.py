@@ -3,7 +3,8 @@ call, so that no sensor message of a live node waits for the compiler (up to sec
 first run after an install or a change of the sources).
 
 In a fresh interpreter (another process: in this one, earlier tests have called the compiled
-functions already), the engine and the wind's pipeline are built, as the nodes build them, the
+functions already), the engine and the wind's pipeline are built, as the nodes build them (and
+the engine as the offline tools build it, its solutions written as rows), the
 signatures of every compiled function of the fusion's and the compensation's modules are noted,
 and engines then fuse a minute of each sensor set (the dual-antenna receiver, the receiver's
 heading alone, a single antenna with a magnetometer, a moored buoy with a motion pack and a
@@ -29,6 +30,7 @@ import buoy_nav.aiding
 import wind_comp
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
+from buoy_nav.solution_rows import SolutionRows
 from buoy_processing.bag_processing import process_bag
 from wind_comp.config import CompensatorConfig
 from wind_comp.pipeline import wind_pipeline
@@ -72,6 +74,7 @@ def compiled_during_the_runs() -> dict[str, list[str]]:
     """The compiled functions that gained signatures while the engines fused and the wind was
     corrected, after the first engine and pipeline were built: name → the new signatures."""
     FusionEngine(FusionConfig())
+    FusionEngine(FusionConfig(), solution_rows=SolutionRows())
     wind_pipeline(CompensatorConfig())
     functions = compiled_functions()
     loaded = {name: set(function.signatures) for name, function in functions.items()}
