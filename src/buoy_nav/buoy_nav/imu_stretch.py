@@ -22,6 +22,7 @@ import numpy as np
 
 from buoy_nav.solution_rows import write_row
 from buoy_nav.strapdown_kernel import DURATION, strapdown_step
+from buoy_nav.strapdown_kernel import STATE_SIZE as STRAPDOWN_STATE_SIZE
 from buoy_nav.stream_sequence import SEQUENCE_INTERVALS
 
 DONE = 0
@@ -418,8 +419,6 @@ def _due(state, t, span, period_s):
 def load_compiled_imu_stretch() -> None:
     """Compile the stretch, or load it from the cache, now (see
     :func:`buoy_nav.mechanization.load_compiled_kernels`)."""
-    from buoy_nav.strapdown_kernel import STATE_SIZE as STRAPDOWN_STATE_SIZE
-
     state = np.zeros(STATE_SIZE)
     state[AHEAD] = -1.0
     state[LAST_PREDICTED_T] = -math.inf
