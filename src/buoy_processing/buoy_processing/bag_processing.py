@@ -535,9 +535,9 @@ class BagCorrections:
         self.wind: OfflineCorrection | None = None
         self.current: OfflineCorrection | None = None
         self._running: list[OfflineCorrection] = []
+        """The corrections started: every solution goes to each."""
         self._room = 0
         """Solutions that may be held back before the corrections are asked to make room."""
-        """The corrections started: every solution goes to each."""
 
     @property
     def topics(self) -> list[str]:
