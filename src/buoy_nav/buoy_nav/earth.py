@@ -42,7 +42,10 @@ def normal_gravity_mps2(latitude_rad: float, altitude_m: float) -> float:
 
     It points down the ellipsoid normal: the gravity vector in ENU is (0, 0, −g).
     """
-    sin_sq = math.sin(latitude_rad) ** 2
+    # A product, not a power: the interpreter's ``** 2`` is the C library's pow, which the
+    # compiled copies of this function (a product) differ from in the last bit now and then.
+    sin_latitude = math.sin(latitude_rad)
+    sin_sq = sin_latitude * sin_latitude
     surface = (
         _EQUATORIAL_GRAVITY_MPS2
         * (1.0 + _SOMIGLIANA_K * sin_sq)

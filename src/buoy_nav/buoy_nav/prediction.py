@@ -38,6 +38,7 @@ from buoy_nav.strapdown_kernel import (
 )
 
 _cross = numba.njit(cache=True)(cross_components)
+_normal_gravity_mps2 = numba.njit(cache=True)(earth.normal_gravity_mps2)
 
 # Longest run of carried-over corrections before the real-time prediction is forked afresh from
 # the filter (s of stamps): bounds the second-order residue of the carry-over (≪ 1e-6 rad).
@@ -123,6 +124,12 @@ class RealtimePrediction:
         """The stamp of the latest sample predicted (s)."""
         return self._last_predicted_stamp
 
+    @property
+    def resync_at_s(self) -> float:
+        """The filter stamp (s) from which a correction drops the copy ahead, to be forked
+        afresh."""
+        return self._forked_at + PREDICTION_RESYNC_INTERVAL_S
+
     def predicted_through(self, sample: tuple) -> None:
         """The copy ahead was stepped through a stretch of samples to ``sample`` (stamp s, raw
         gyro, raw force), in place (:mod:`buoy_nav.imu_stretch`)."""
@@ -134,31 +141,42 @@ class RealtimePrediction:
         copy ahead (or drop the copy when it is due to be forked afresh)."""
         if self._ahead is None:
             return
-        if filter_time >= self._forked_at + PREDICTION_RESYNC_INTERVAL_S:
+        if filter_time >= self.resync_at_s:
             self._ahead = None
             return
         integrator, t_ahead, _, _ = self._ahead
         span = t_ahead - filter_time
         dx = np.array(correction, dtype=float)
         if span > 0.0:
-            gravity = earth.normal_gravity_mps2(state.latitude_rad, state.altitude_m)
-            _carry_over(integrator.state_vector, state.velocity_enu_mps, gravity, span, dx)
+            carry_over_kernel(
+                integrator.state_vector,
+                state.velocity_enu_mps,
+                state.latitude_rad,
+                state.altitude_m,
+                span,
+                dx,
+            )
         integrator.inject(dx)
 
 
 def load_compiled_carry_over() -> None:
     """Compile the carry-over, or load it from the cache, now (see
     :func:`buoy_nav.mechanization.load_compiled_kernels`)."""
-    _carry_over(np.zeros(STATE_SIZE), np.zeros(3), 9.8, 0.1, np.zeros(ERROR_ACCEL_BIAS + 3))
+    carry_over_kernel(
+        np.zeros(STATE_SIZE), np.zeros(3), 0.7, 0.0, 0.1, np.zeros(ERROR_ACCEL_BIAS + 3)
+    )
 
 
 @numba.njit(cache=True)
-def _carry_over(ahead, filter_velocity_enu_mps, gravity_mps2, span_s, error):
+def carry_over_kernel(
+    ahead, filter_velocity_enu_mps, filter_latitude_rad, filter_altitude_m, span_s, error
+):
     """Carry the filter's ``error`` (ERROR_STATES) over ``span_s`` (s) to the copy ahead, whose
     state vector (strapdown_kernel layout) is ``ahead``, in place: δp += δv T,
     δv += φ × Δv_f − ∫R dt δb_a, φ −= ∫R dt δb_g, with R_nb of the copy held over the span and
     Δv_f the specific-force increment (ENU m/s) from the filter's velocity to the copy's
-    (gravity ``gravity_mps2`` m/s² added back)."""
+    (the normal gravity at the filter's latitude (rad) and altitude (m) added back)."""
+    gravity_mps2 = _normal_gravity_mps2(filter_latitude_rad, filter_altitude_m)
     force_increment = [ahead[VELOCITY + i] - filter_velocity_enu_mps[i] for i in range(3)]
     force_increment[UP] += gravity_mps2 * span_s
     turned = _cross(
