@@ -25,10 +25,10 @@ import time
 import numba
 import numpy as np
 
-from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource, _attitude_update
+from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource, attitude_update
 from buoy_nav.config import fusion_config_from_files
 from buoy_nav.engine import FusionEngine
-from buoy_nav.error_dynamics import _noise_coefficients, _propagated_covariance
+from buoy_nav.error_dynamics import _propagated_covariance, noise_coefficients
 from buoy_nav.error_state_filter import ImuErrorModel
 from buoy_nav.strapdown_kernel import (
     DURATION,
@@ -87,7 +87,7 @@ def compiled_row(
     _integrate(state, step_s, gyro_start, gyro_end, force_start, force_end)
     if state[DURATION] > 0.0:
         _, covariance = _propagated_covariance(state, covariance, noise_terms)
-    _, nis, _, accepted, updated, correction, _ = _attitude_update(
+    _, nis, _, accepted, updated, correction, _ = attitude_update(
         covariance, state, *update_arguments
     )
     if accepted:
@@ -201,7 +201,7 @@ def row_arguments(row: dict, noise_terms: tuple[float, ...]) -> tuple:
 def noise_terms(config, scales: tuple[float, float]) -> tuple[float, ...]:
     """The IMU's noise terms of the covariance's propagation with the sources' ``scales`` of
     the gyro's drift and the accelerometer's noise."""
-    return _noise_coefficients(ImuErrorModel.from_config(config), *scales)
+    return noise_coefficients(ImuErrorModel.from_config(config), *scales)
 
 
 def replay(rows: list[dict], config) -> dict:

@@ -1,20 +1,23 @@
-"""Stretches of IMU samples in one compiled call against one sample at a time, on the simulator.
+"""Stretches of IMU samples in one compiled call against one input at a time, on the simulator.
 
-An offline run hands the engine the IMU messages between two other sensor messages together
-(:meth:`FusionEngine.add_imu_samples`): they are screened one by one, then each stretch with
-nothing else to do goes through :mod:`buoy_nav.imu_stretch` and the engine takes the samples that
-need it. Fed the same messages one at a time (:meth:`FusionEngine.add_imu`, as a live node feeds
-them), the engine must give the same rows, stamps, counters, source health, state and
-covariance to the bit: on a clean sea state and through a GNSS outage (the covariance then
-propagated in batches between the IMU samples); on IMU samples with a spike, non-finite values,
-a repeated stamp, a second stream, a gap that restarts the alignment and a step of the IMU's
-clock;
-on a GNSS velocity biased enough that the filter is distrusted, realigned and the velocity
-suspended; and with the solutions decimated to 10 Hz and the IMU's calibration applied.
+An offline run hands the engine the IMU messages between two other sensor messages together,
+with the motion pack's attitudes among them (:meth:`FusionEngine.add_inputs`): they are
+screened one by one, then each stretch with nothing else to do goes through
+:mod:`buoy_nav.imu_stretch` and the engine takes the inputs that need it. Fed the same messages
+one at a time (:meth:`FusionEngine.add_imu`, :func:`feed_message`, as a live node feeds them),
+the engine must give the same rows, stamps, counters, source health, state and covariance to
+the bit: on a clean sea state and through a GNSS outage (the covariance then propagated in
+batches between the IMU samples); on IMU samples with a spike, non-finite values, a repeated
+stamp, a second stream, a gap that restarts the alignment and a step of the IMU's clock; on a
+GNSS velocity biased enough that the filter is distrusted, realigned and the velocity
+suspended; with the solutions decimated to 10 Hz and the IMU's calibration applied; and on a
+moored motion pack whose attitudes come with faults (refused quaternions, a stamp out of order,
+a non-finite covariance, attitudes the gate rejects, an outage), alone and with a magnetometer.
 """
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections import Counter
@@ -22,14 +25,16 @@ from collections import Counter
 import numpy as np
 import pytest
 from gnss_faults import biased_velocity
-from test_nav_sensor_sets import scenario_messages
+from scipy.spatial.transform import Rotation
+from test_nav_sensor_sets import moored_config, scenario_messages
 
-from buoy_common.contract import IMU_RAW_TOPIC, Reason, header_seconds
+from buoy_common.contract import AHRS_TOPIC, IMU_RAW_TOPIC, Reason, header_seconds
 from buoy_nav import imu_stretch as stretch_module
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import FUSION_INPUT_MSGTYPES, feed_message
+from buoy_nav.imu_stretch import MeasurementInput
 from buoy_nav.solution_rows import SolutionRows
 
 IMU = "imu"
@@ -121,18 +126,30 @@ def one_at_a_time(config: FusionConfig, inputs: list[tuple]):
 
 
 def in_stretches(config: FusionConfig, inputs: list[tuple]):
-    """The engine fed the IMU samples between two other inputs together, but for the first of
-    each run, fed alone and its filtering left for the run's call to catch up."""
+    """The engine fed the IMU samples between two other inputs together, with the motion
+    pack's attitudes among them, but for the first IMU sample of each run, fed alone and its
+    filtering left for the run's call to catch up."""
     rows = SolutionRows()
     engine = FusionEngine(config, solution_rows=rows)
+    run_topics = {source.topic for source in engine.stretched_sources}
     stamps, waiting = [], []
     for kind, item in [*inputs, (None, None)]:
         if kind == IMU:
             waiting.append(item)
             continue
+        if kind in run_topics:
+            source = engine.source_of_topic(kind)
+            measurement = source.measurement_from_message(item)
+            waiting.append(MeasurementInput(source, header_seconds(item.header), measurement))
+            continue
         if waiting:
-            stamps.append((engine.add_imu(*waiting[0]), engine.last_input_rejection))
-            stamps += engine.add_imu_samples(waiting[1:])
+            first, rest = waiting[0], waiting[1:]
+            if type(first) is MeasurementInput:
+                first, rest = None, waiting
+            else:
+                stamps.append((engine.add_imu(*first), engine.last_input_rejection))
+            outcomes = engine.add_inputs(rest)
+            stamps += [out for out, i in zip(outcomes, rest, strict=True) if type(i) is tuple]
             waiting = []
         if kind is not None:
             feed_message(engine, kind, item)
@@ -142,14 +159,16 @@ def in_stretches(config: FusionConfig, inputs: list[tuple]):
 
 @pytest.fixture
 def stretch_counts(monkeypatch) -> Counter:
-    """Samples offered to the compiled stretch and taken by it, counted."""
+    """Inputs offered to the compiled stretch and taken by it, and the pack's epochs it
+    applied, counted."""
     counts = Counter()
     compiled = stretch_module.imu_stretch
 
-    def counted(samples, *arguments):
-        taken, stepped, stop = compiled(samples, *arguments)
-        counts["offered"] += samples.shape[0]
+    def counted(raw, order, *arguments):
+        taken, stepped, stop = compiled(raw, order, *arguments)
+        counts["offered"] += order.shape[0]
         counts["taken"] += taken
+        counts["epochs"] += int(arguments[-1][stretch_module.EPOCHS])
         return taken, stepped, stop
 
     monkeypatch.setattr(stretch_module, "imu_stretch", counted)
@@ -249,3 +268,92 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
     if velocity_bias:
         assert health.realignments >= 1
         assert health.source_health["gnss_velocity"].suspended
+
+
+def with_pack_faults(inputs: list[tuple]) -> list[tuple]:
+    """``inputs`` with, among the motion pack's attitudes after the first minute: a zero
+    quaternion, a non-unit one and one stamped before the last (each an extra message), one
+    with a non-finite covariance, twelve in a row turned 120° in yaw (the gate rejects them),
+    two seconds of them lost and the pack's clock half a sample interval later from then on
+    (off its sequence's grid); and twelve seconds without IMU samples from 110 s (the
+    attitudes run ahead of the IMU beyond what the engine keeps)."""
+    faulty, count = [], 0
+    first_s = next(item[0] for kind, item in inputs if kind == IMU)
+    turn = Rotation.from_euler("z", 120.0, degrees=True)
+    for kind, item in inputs:
+        if kind == IMU and 110.0 <= item[0] - first_s < 122.0:
+            continue
+        if kind != AHRS_TOPIC:
+            faulty.append((kind, item))
+            continue
+        count += 1
+        if 900 <= count < 920:
+            continue
+        message = copy.deepcopy(item)
+        if count >= 920:
+            stamp_ns = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec + 5 * 10**7
+            message.header.stamp.sec, message.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+        if count == 760:
+            message.orientation_covariance[4] = math.nan
+        elif 800 <= count < 812:
+            q = message.orientation
+            x, y, z, w = (turn * Rotation.from_quat((q.x, q.y, q.z, q.w))).as_quat()
+            q.x, q.y, q.z, q.w = float(x), float(y), float(z), float(w)
+        faulty.append((kind, message))
+        if count in (700, 720, 740):
+            extra = copy.deepcopy(item)
+            if count == 700:
+                extra.orientation.x = extra.orientation.y = 0.0
+                extra.orientation.z = extra.orientation.w = 0.0
+            elif count == 720:
+                extra.orientation.w *= 1.1
+            else:
+                extra.header.stamp.sec -= 1
+            faulty.append((kind, extra))
+    return faulty
+
+
+PACK_CASES = {
+    "moored pack": moored_config(use_magnetometer=False, ahrs_lag_s=0.2),
+    "moored pack, magnetometer": moored_config(ahrs_lag_s=0.2),
+    # On the corner of the cells the geomagnetic model is evaluated for: the filter's position
+    # wanders across their edges, and the pack's true north with it.
+    "free pack": FusionConfig(
+        site_latitude_deg=35.025,
+        site_longitude_deg=120.025,
+        ahrs_yaw_reference="magnetic_north",
+        use_magnetometer=False,
+        ahrs_lag_s=0.2,
+    ),
+}
+
+
+@pytest.mark.parametrize("case", PACK_CASES)
+def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretch_counts):
+    """A motion pack (its attitude with every tenth IMU sample; moored, the constraint once a
+    second) with faulty attitudes: the same to the bit, most IMU samples in the stretch and,
+    without the magnetometer, most of the pack's epochs too (with it, each attitude shares its
+    stamp with a field, a stamp of two measurements the engine applies itself)."""
+    _, _, messages = scenario_messages("moored_motion_pack", 150.0)
+    config = PACK_CASES[case]
+    magnetometer = config.use_magnetometer
+    inputs = with_pack_faults(fusion_inputs(messages))
+    stretched, rows, stamps = in_stretches(config, inputs)
+    alone, expected_rows, expected_stamps = one_at_a_time(config, inputs)
+    assert stamps == expected_stamps
+    assert rows.shape == expected_rows.shape and rows.shape[0] > 10_000
+    assert np.array_equal(rows, expected_rows)
+    assert_same_engines(stretched, alone)
+    counters = stretched.health().counters["ahrs"]
+    for reason in (
+        Reason.ZERO_QUATERNION,
+        Reason.NON_UNIT_QUATERNION,
+        Reason.STAMP_NOT_INCREASING,
+        Reason.NON_FINITE,
+        Reason.GATE,
+    ):
+        assert counters.rejected.get(reason, 0) >= 1, reason
+    imu_samples = sum(kind == IMU for kind, _ in inputs)
+    assert stretch_counts["taken"] >= 0.7 * imu_samples, "the stretch took too few inputs"
+    if not magnetometer:
+        assert stretch_counts["epochs"] >= 0.5 * counters.accepted, "too few epochs taken"

@@ -13,7 +13,11 @@ from buoy_nav.aiding.base import LinearisationPoint, MeasurementModel, StateRese
 from buoy_nav.alignment import AlignmentResult
 from buoy_nav.config import FusionConfig
 from buoy_nav.epoch_recorder import EpochRecorder
-from buoy_nav.error_dynamics import propagated_covariance, stepped_covariance
+from buoy_nav.error_dynamics import (
+    noise_coefficients,
+    propagated_covariance,
+    stepped_covariance,
+)
 from buoy_nav.error_state_filter import (
     ErrorStateFilter,
     ImuErrorModel,
@@ -90,6 +94,16 @@ class AidedNavigation:
             self.accel_noise_scale,
         )
         self._recorder.propagated(t_s, transition, self.kalman.covariance, posterior)
+
+    def noise_terms(self) -> tuple[float, ...]:
+        """The process noise's terms the covariance is propagated with now
+        (:func:`~buoy_nav.error_dynamics.noise_coefficients`)."""
+        return noise_coefficients(self._imu_model, self.gyro_drift_scale, self.accel_noise_scale)
+
+    @property
+    def records_epochs(self) -> bool:
+        """Whether the recorder keeps the epochs (a smoother's), not the engine's default."""
+        return type(self._recorder) is not EpochRecorder
 
     def propagate_covariance(self, t_s: float) -> bool:
         """Propagate the covariance over the interval integrated so far, to stamp ``t_s`` (s).

@@ -75,6 +75,11 @@ class AidingGates:
         """Whether the source of ``kind`` is suspended."""
         return self._health[kind].suspended
 
+    def unmoved_by_passes(self, kind: str) -> bool:
+        """Whether measurements of ``kind`` that pass the gate leave its health as it is
+        (:attr:`SourceHealth.unmoved_by_passes`)."""
+        return self._health[kind].unmoved_by_passes
+
     def run_start_s(self, kind: str) -> float:
         """Stamp (s) of the first of the current run of gate rejections of ``kind``."""
         return self._run_start_s[kind]

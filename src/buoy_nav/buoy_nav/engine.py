@@ -28,10 +28,10 @@ of a sample is predicted before the filter catches up with that sample's horizon
 propagation it triggers, and corrections reach the prediction one IMU sample later. Its
 covariances are the filter's, from up to ``max_measurement_delay_s`` earlier.
 
-An offline run hands the engine the IMU samples between two other sensor messages together
-(:meth:`FusionEngine.add_imu_samples`): each stretch of them with nothing else to do is taken in
-one compiled call (:mod:`buoy_nav.imu_stretch`), with the same arithmetic in the same order as
-one sample at a time, which a live node does.
+An offline run hands the engine the IMU samples between two other sensor messages together,
+with the motion pack's attitudes among them (:meth:`FusionEngine.add_inputs`): each stretch of
+them with nothing else to do is taken in one compiled call (:mod:`buoy_nav.imu_stretch`), with
+the same arithmetic in the same order as one input at a time, which a live node does.
 
 Before alignment the IMU samples and the measurements feed :class:`InMotionAligner`; once
 aligned, :class:`~buoy_nav.aided_navigation.AidedNavigation` carries the nominal state and
@@ -79,6 +79,7 @@ from buoy_common.contract import Reason
 from buoy_nav import earth
 from buoy_nav.aided_navigation import AidedNavigation
 from buoy_nav.aiding import AIDING_SOURCES
+from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource
 from buoy_nav.aiding.base import (
     AIDED_QUANTITIES,
     FIX,
@@ -97,9 +98,14 @@ from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
 from buoy_nav.imu_input import ImuInput
-from buoy_nav.imu_stretch import ImuStretches, load_compiled_imu_stretch
+from buoy_nav.imu_stretch import (
+    EngineParts,
+    ImuStretches,
+    MeasurementInput,
+    load_compiled_imu_stretch,
+)
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
-from buoy_nav.measurement_queue import MeasurementQueue
+from buoy_nav.measurement_queue import MAX_MEASUREMENT_LEAD_S, MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, load_compiled_kernels
 from buoy_nav.nav_numbers import load_compiled_nav_numbers
 from buoy_nav.prediction import RealtimePrediction, load_compiled_carry_over
@@ -118,12 +124,6 @@ from buoy_nav.source_registry import SourceRegistry
 from buoy_nav.stream_sequence import StreamSequence
 
 __all__ = ["IMU", "MAX_MEASUREMENT_LEAD_S", "EngineHealth", "FusionEngine", "NavSolution"]
-
-# How far measurements may run ahead of the newest IMU sample (s of stamps). More can only be an
-# IMU outage (or GNSS before the IMU starts): the filter could use them only for the alignment
-# that follows, which needs the last seconds alone, and keeping them all would let an outage
-# fill the memory and, when the IMU returns, stall the node on the backlog.
-MAX_MEASUREMENT_LEAD_S = 10.0
 
 
 class FusionEngine:
@@ -210,14 +210,26 @@ class FusionEngine:
         self._output = OutputDecimation(config.output_rate_hz)
         self._prediction = RealtimePrediction(config.max_imu_gap_s, self._solutions, self._output)
         self._stretches = ImuStretches(
-            config,
-            self._imu_buffer,
-            self._point,
-            self._prediction,
-            self._output,
-            self._solutions,
-            self._queue,
-            self._imu_input,
+            EngineParts(
+                config,
+                self._imu_buffer,
+                self._point,
+                self._prediction,
+                self._output,
+                self._solutions,
+                self._queue,
+                self._imu_input,
+                self._gates,
+                self._sequences,
+                self._contradictions,
+                self._integrity,
+                self._source_transitions,
+                self._registry.pseudo,
+                next(
+                    (s for s in self.sources if isinstance(s, AhrsAttitudeSource) and s.enabled),
+                    None,
+                ),
+            )
         )
 
     # ------------------------------------------------------------------ input
@@ -242,71 +254,85 @@ class FusionEngine:
             solutions.extend(self._take_imu_sample(sample))
         return solutions
 
-    def add_imu_samples(self, samples: list[tuple]) -> list[tuple[list[Emitted], str | None]]:
-        """:meth:`add_imu` of consecutive IMU samples (stamp s, ω_ib body rad/s, specific force
-        body m/s² each), nothing else given between them: the solutions of each and the reason
-        it was rejected (None: accepted); :attr:`imu_given_up` is the last one's.
+    def add_inputs(self, inputs: list) -> list[tuple[list[Emitted], str | None]]:
+        """:meth:`add_imu` of each IMU sample (stamp s, ω_ib body rad/s, specific force body
+        m/s²) and :meth:`add_measurement` of each :class:`MeasurementInput` among ``inputs``,
+        in order, nothing else given between them: the solutions of each and the reason it was
+        rejected (None: accepted); :attr:`imu_given_up` is the last IMU sample's.
 
         Each stretch of them with nothing else to do is screened and taken in one compiled call
         (:mod:`buoy_nav.imu_stretch`); the engine takes the others, and catches up, as
         :meth:`add_imu` does: the same as one call each.
         """
         self.catch_up()
-        raw = None  # the samples as an array, made when a stretch first applies
-        outcomes: list = [None] * len(samples)
+        run = None  # the inputs made ready, when a stretch first applies
+        outcomes: list = [None] * len(inputs)
         position = 0
-        while position < len(samples):
-            screening = None if raw is False else self._stretch_screening()
+        while position < len(inputs):
+            screening = None if run is False else self._stretch_screening()
             if screening is not None:
-                if raw is None:
-                    raw = _raw_samples(samples)
-                if raw is not False:
-                    position += self._take_stretch(raw, position, screening, outcomes)
-                    if position == len(samples):
+                if run is None:
+                    run = self._stretches.run_of(inputs, self._nav) or False
+                if run is not False:
+                    position += self._take_stretch(run, position, screening, outcomes)
+                    if position == len(inputs):
                         break
-            t_s, gyro, force = samples[position]
-            solutions = self.add_imu(t_s, gyro, force)
-            outcomes[position] = (solutions, self.last_input_rejection)
-            self.catch_up()
+            outcomes[position] = self._take_input(inputs[position])
             position += 1
         return outcomes
+
+    def _take_input(self, item) -> tuple[list[Emitted], str | None]:
+        """:meth:`add_imu` of an IMU sample and a catch-up, or :meth:`add_measurement` of a
+        :class:`MeasurementInput` (its :class:`Reason` counted when its message is none); its
+        solutions and rejection."""
+        if type(item) is MeasurementInput:
+            source, t_s, measurement = item
+            if isinstance(measurement, Reason):
+                self.reject_input(source.kind, measurement)
+                return [], measurement
+            self.add_measurement(t_s, measurement)
+            return [], self.last_input_rejection
+        solutions = self.add_imu(*item)
+        rejection = self.last_input_rejection
+        self.catch_up()
+        return solutions, rejection
 
     def _stretch_screening(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The IMU screening's limits and state for :mod:`buoy_nav.imu_stretch`
         (:meth:`~buoy_nav.imu_input.ImuInput.steady_screening`) when the next samples may go
         through it: aligned, with solutions written as rows and predicted ahead from a copy
-        already forked, no constraint to ask, and the screening in its steady course; else
-        None."""
+        already forked, and the screening in its steady course; else None."""
         if (
             self._nav is None
             or not self.config.realtime_output
             or self._solutions.rows is None
             or self._prediction.ahead is None
-            or self._registry.pseudo
         ):
             return None
         return self._imu_input.steady_screening()
 
-    def _take_stretch(
-        self, raw: np.ndarray, position: int, screening: tuple, outcomes: list[tuple]
-    ) -> int:
-        """The ``raw`` samples (n × 7: stamp s, gyro, force) from ``position`` on through
+    def _take_stretch(self, run, position: int, screening: tuple, outcomes: list[tuple]) -> int:
+        """The inputs of ``run`` from ``position`` on through
         :func:`~buoy_nav.imu_stretch.imu_stretch` with the IMU ``screening``'s limits and
         state, their solutions' stamps in their ``outcomes``; how many it took (0: the engine
         takes the next one itself)."""
-        taken = self._stretches.take(raw[position:], screening, self._nav)
+        taken = self._stretches.take(run, position, screening, self._nav)
         if taken is None:
             return 0
-        samples, rows_written, catch_up = taken
+        for place in range(position, position + taken.inputs):
+            outcomes[place] = ([], None)
         self.last_input_rejection = None
-        self.imu_given_up = ()
-        self._counters[IMU].accepted += len(samples)
-        for number, (sample, written) in enumerate(zip(samples, rows_written, strict=True)):
-            outcomes[position + number] = ([sample[0]], None) if written else ([], None)
-        if catch_up:
-            self._deferred_horizon = samples[-1][0] - self.config.max_measurement_delay_s
+        if taken.samples:
+            self.imu_given_up = ()
+            self._counters[IMU].accepted += len(taken.samples)
+            for place, sample, written in zip(
+                taken.places, taken.samples, taken.rows_written, strict=True
+            ):
+                outcomes[place] = ([sample[0]], None) if written else ([], None)
+        if taken.catch_up:
+            self._deferred_horizon = taken.samples[-1][0] - self.config.max_measurement_delay_s
             self.catch_up()
-        return len(samples)
+        return taken.inputs
 
     def _count_given_up_imu_samples(self) -> None:
         """Count the held IMU samples given up by the latest call
@@ -414,6 +440,13 @@ class FusionEngine:
         self.catch_up()
         transitions, self._source_transitions = self._source_transitions, []
         return transitions
+
+    @property
+    def stretched_sources(self) -> tuple[AidingSource, ...]:
+        """The aiding sources whose measurements :meth:`add_inputs` may take in its compiled
+        stretches besides the IMU's samples (the motion pack's attitude, when enabled)."""
+        pack = self._stretches.pack
+        return () if pack is None else (pack,)
 
     def source_of_topic(self, topic: str) -> AidingSource:
         """The aiding source that reads ``topic`` (ValueError naming it when none does)."""
@@ -835,13 +868,3 @@ def _configured_map_plane(config: FusionConfig) -> earth.LocalTangentPlane | Non
         math.radians(config.origin_longitude_deg),
         config.origin_altitude_m,
     )
-
-
-def _raw_samples(samples: list[tuple]) -> np.ndarray | bool:
-    """``samples`` (stamp s, gyro, force each) as n × 7 floats; False when one is not three
-    numbers each (:meth:`FusionEngine.add_imu` then says why, sample by sample)."""
-    try:
-        raw = np.array([(t_s, *gyro, *force) for t_s, gyro, force in samples], dtype=float)
-    except (TypeError, ValueError):
-        return False
-    return raw if raw.shape == (len(samples), 7) else False

@@ -85,7 +85,7 @@ def discrete_error_model(
         altitude_m,
         float(velocity_enu_mps[0]),
         float(velocity_enu_mps[1]),
-        _noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
+        noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
     )
 
 
@@ -103,7 +103,7 @@ def propagated_covariance(
     return _propagated_covariance(
         integrator_state,
         covariance,
-        _noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
+        noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
     )
 
 
@@ -128,18 +128,18 @@ def stepped_covariance(
     g1x, g1y, g1z = gyro_end
     f0x, f0y, f0z = force_start
     f1x, f1y, f1z = force_end
-    return _stepped_covariance(
+    return stepped_covariance_kernel(
         integrator_state,
         covariance,
         step_s,
         (g0x, g0y, g0z, g1x, g1y, g1z),
         (f0x, f0y, f0z, f1x, f1y, f1z),
         corrections,
-        _noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
+        noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
     )
 
 
-def _noise_coefficients(
+def noise_coefficients(
     imu: ImuErrorModel, gyro_drift_scale: float, accel_noise_scale: float
 ) -> tuple[float, ...]:
     """The IMU's noise terms of Q_d before the interval's duration multiplies them: the
@@ -163,7 +163,7 @@ _normal_gravity_mps2 = numba.njit(cache=True)(earth.normal_gravity_mps2)
 
 @numba.njit(cache=True)
 def _propagated_covariance(state, covariance, noise_terms):
-    """:func:`propagated_covariance` (``noise_terms``: those of :func:`_noise_coefficients`)."""
+    """:func:`propagated_covariance` (``noise_terms``: those of :func:`noise_coefficients`)."""
     transition, noise = _error_model(
         state[kernel.DURATION],
         state[kernel.ROTATION_SUM : kernel.ROTATION_SUM + 9].reshape(3, 3).copy(),
@@ -181,7 +181,7 @@ def _propagated_covariance(state, covariance, noise_terms):
 
 
 @numba.njit(cache=True)
-def _stepped_covariance(state, covariance, step_s, gyro, force, corrections, noise_terms):
+def stepped_covariance_kernel(state, covariance, step_s, gyro, force, corrections, noise_terms):
     """:func:`stepped_covariance` (the samples' components as (start x, y, z, end x, y, z))."""
     kernel.strapdown_step(
         state,
@@ -218,7 +218,7 @@ def _error_model(
     noise_terms,
 ):
     """Φ and Q_d of :func:`discrete_error_model` from the interval's sums, the nominal state
-    at its end and the ``noise_terms`` of :func:`_noise_coefficients`; the Earth's rates as
+    at its end and the ``noise_terms`` of :func:`noise_coefficients`; the Earth's rates as
     :mod:`buoy_nav.earth` computes them."""
     (
         scale_sq_time_s,

@@ -70,6 +70,7 @@ from buoy_nav.aiding import TOPIC_SOURCES
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.aiding.gnss_fix import STATUS_FIX
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
+from buoy_nav.imu_stretch import MeasurementInput
 from buoy_nav.nav_numbers import (
     ATTITUDE_COVARIANCE,
     BODY_TWIST_COVARIANCE,
@@ -210,19 +211,26 @@ def feed_imu_fields(
     return solutions, engine.last_input_rejection
 
 
-def feed_imu_records(
-    engine: FusionEngine, records: list[tuple], stamps: StampBook | None = None
+def feed_records(
+    engine: FusionEngine, topics: list[str], records: list[tuple], stamps: StampBook | None = None
 ) -> list[tuple[list[Emitted], str | None]]:
-    """:func:`feed_imu_fields` of consecutive ``imu/data_raw`` messages, nothing else between
-    them, in one call (:meth:`FusionEngine.add_imu_samples`): each one's record ``(sec,
-    nanosec, angular_velocity, linear_acceleration)``; each one's solutions and rejection."""
-    samples = []
-    for sec, nanosec, angular_velocity, linear_acceleration in records:
+    """:func:`feed_imu_fields` and :func:`feed_measurement_record` of consecutive messages of
+    ``topics`` (``imu/data_raw`` and those of :attr:`FusionEngine.stretched_sources`), nothing
+    else between them, in one call (:meth:`FusionEngine.add_inputs`): each one's record
+    ``(sec, nanosec, *fields)``; each one's solutions and rejection."""
+    inputs = []
+    for topic, record in zip(topics, records, strict=True):
+        sec, nanosec, *fields = record
         t_s = sec + nanosec * 1e-9
-        if stamps is not None:
-            stamps.remember(t_s, sec, nanosec)
-        samples.append((t_s, angular_velocity, linear_acceleration))
-    return engine.add_imu_samples(samples)
+        if topic == IMU_RAW_TOPIC:
+            if stamps is not None:
+                stamps.remember(t_s, sec, nanosec)
+            inputs.append((t_s, *fields))
+        else:
+            source = engine.source_of_topic(topic)
+            measurement = source.measurement_from_record(t_s, *fields)
+            inputs.append(MeasurementInput(source, t_s, measurement))
+    return engine.add_inputs(inputs)
 
 
 class NavValues(NamedTuple):

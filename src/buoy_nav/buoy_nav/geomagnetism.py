@@ -53,6 +53,25 @@ def _wmm_at(latitude_rad: float, longitude_rad: float, t_s: float):
     )
 
 
+CELL_MARGIN_RAD = 1e-9
+"""How far inside its cell's edges (rad) a position is held to be in the cell: far beyond the
+rounding of the cell's index."""
+
+
+def wmm_cell_bounds_rad(latitude_rad: float, longitude_rad: float) -> tuple[float, ...]:
+    """(lowest, highest latitude, lowest, highest longitude), rad: the open bounds, less
+    :data:`CELL_MARGIN_RAD`, of the cell the model is evaluated for at a position (rad); the
+    field is the same anywhere within them at one time."""
+    bounds = []
+    for angle_rad in (latitude_rad, longitude_rad):
+        cell = round(math.degrees(angle_rad) / _CELL_DEG)
+        bounds += [
+            math.radians((cell - 0.5) * _CELL_DEG) + CELL_MARGIN_RAD,
+            math.radians((cell + 0.5) * _CELL_DEG) - CELL_MARGIN_RAD,
+        ]
+    return tuple(bounds)
+
+
 def wmm_declination_deg(latitude_rad: float, longitude_rad: float, t_s: float) -> float:
     """Declination (deg, east positive) of the WMM at a position (rad) and a time (s since the
     Unix epoch), at sea level."""

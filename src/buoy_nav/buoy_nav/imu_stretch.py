@@ -8,8 +8,17 @@ buffered samples its horizon passed (:meth:`~buoy_nav.engine.FusionEngine._proce
 kernels (the strapdown step, the row writer) and in the engine's order, and stops where the
 engine has more to do: a measurement due, the covariance's batch full, a gap, the prediction to
 fork afresh, the rows' block full. The engine then takes over at that sample
-(:meth:`~buoy_nav.engine.FusionEngine.add_imu_samples`), so the result is the engine's to the
-bit; a test holds the two equal.
+(:meth:`~buoy_nav.engine.FusionEngine.add_inputs`), so the result is the engine's to the bit;
+a test holds the two equal.
+
+A motion pack's attitude comes with every IMU sample (:mod:`buoy_nav.aiding.ahrs_attitude`).
+The stretch queues it as the engine does and, when the filter reaches its stamp, makes its
+epoch with the engine's kernels: the step there with the covariance's propagation, the pack's
+compiled update, the injection of the correction and its carry-over to the prediction. It
+stops before an epoch the engine must make itself (a gate that fails, a covariance to repair,
+a constraint due, the prediction forked afresh) and where the pack's books could change what
+follows (its health moved by a pass, the filter distrusted, a smoother recording the epochs);
+the engine then keeps the books of the epochs it made, in their order.
 """
 
 import itertools
@@ -20,10 +29,25 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from buoy_common.contract import Reason
+from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource, attitude_update
+from buoy_nav.error_dynamics import stepped_covariance_kernel
+from buoy_nav.error_state_filter import GateResult
+from buoy_nav.measurement_queue import MAX_MEASUREMENT_LEAD_S
+from buoy_nav.prediction import carry_over_kernel
 from buoy_nav.solution_rows import write_row
-from buoy_nav.strapdown_kernel import DURATION, strapdown_step
+from buoy_nav.strapdown_kernel import (
+    ALTITUDE,
+    DURATION,
+    LATITUDE,
+    LONGITUDE,
+    VELOCITY,
+    inject_error_state,
+    strapdown_step,
+)
+from buoy_nav.strapdown_kernel import GYRO_BIAS as NOMINAL_GYRO_BIAS
 from buoy_nav.strapdown_kernel import STATE_SIZE as STRAPDOWN_STATE_SIZE
-from buoy_nav.stream_sequence import SEQUENCE_INTERVALS
+from buoy_nav.stream_sequence import RATE_MEMORY, SEQUENCE_INTERVALS
 
 DONE = 0
 """Every sample of the stretch taken, the filter caught up to the last one's horizon."""
@@ -45,7 +69,8 @@ ROWS = 16
 STATE_SIZE = 17
 # The limits handed in (:func:`imu_stretch`'s ``limits``).
 DELAY, MAX_GAP, PROPAGATION_INTERVAL, NEXT_MEASUREMENT, OUTPUT_PERIOD = range(5)
-DISTRUSTED, ATTITUDE_VARIANCE, VELOCITY_VARIANCE = range(5, 8)
+DISTRUSTED, ATTITUDE_VARIANCE, VELOCITY_VARIANCE, CONSTRAINT_DUE = range(5, 9)
+LIMITS_SIZE = 9
 # The screening's limits and state (:func:`imu_stretch`'s ``screening`` and ``screened_state``,
 # :meth:`~buoy_nav.imu_input.ImuInput.steady_screening`): the clock's offset (s), the largest
 # squared rate and force, the largest gap (s), the calibration's gyro biases, accelerometer
@@ -61,51 +86,187 @@ SQUARE = 19
 SCREENING_SIZE = 20
 LATEST, SEQUENCE_LAST, CLOCK_INTERVAL, LAST_SAMPLE = 0, 1, 2, 3
 SCREENED_STATE_SIZE = 10
+# The motion pack's attitudes a stretch takes (:func:`imu_stretch`'s ``pack_rows``, one row
+# each, those already queued first): stamp (s), the pack's attitude on true north (R_nb, 3×3
+# row-major), its covariance (3×3 ENU rad², row-major) and the sample's weight.
+PACK_T, PACK_ROTATION, PACK_COVARIANCE, PACK_WEIGHT = 0, 1, 10, 19
+PACK_ROW_SIZE = 20
+# The pack's sequence (``pack_sequence``): its latest stamp (s), the newest aiding stamp the
+# IMU's clock knows (s), then its recent in-sequence intervals (s): how many, where the next goes,
+# the intervals (:class:`~buoy_nav.stream_sequence.StreamSequence`).
+SEQUENCE_LATEST, NEWEST_AIDING, INTERVAL_COUNT, INTERVAL_NEXT, INTERVALS = range(5)
+PACK_SEQUENCE_SIZE = INTERVALS + RATE_MEMORY
+# The pack's update and what it stops at (``pack_terms``): the lag (s) and its uncertainty
+# squared (s²), the variance floor (rad²), the gate's threshold, the error states' attitude
+# start; how far a measurement may lead the IMU (s), the filter stamp at which the prediction
+# forks afresh (s), and the latitude and longitude (rad) between which the pack's true north is
+# the one its rows were turned to.
+(LAG, LAG_UNCERTAINTY_SQ, FLOOR, THRESHOLD, ATTITUDE_START, MAX_LEAD, RESYNC_AT) = range(7)
+LATITUDE_LOW, LATITUDE_HIGH, LONGITUDE_LOW, LONGITUDE_HIGH = range(7, 11)
+PACK_TERMS_SIZE = 11
+# The epochs of the pack's attitude a stretch applied (``epochs``, a row each): stamp (s), the
+# innovation (rad, 3), its NIS and S (3×3 rad², row-major), for the books.
+EPOCH_T, EPOCH_INNOVATION, EPOCH_NIS, EPOCH_S = 0, 1, 4, 5
+EPOCH_SIZE = 14
+# How far a stretch went (``counts``): the IMU samples it took, where the queued attitudes begin
+# and end in ``pack_rows`` (those before the first were applied), the epochs applied.
+IMU_TAKEN, QUEUE_HEAD, QUEUE_TAIL, EPOCHS = range(4)
+
+
+WINDOW = 512
+"""Inputs offered to one call at most: a stretch rarely runs longer (a constraint, a fix, the
+covariance's batch stop it), and its arrays are made for what it is offered."""
+
+
+class MeasurementInput(NamedTuple):
+    """An aiding source's measurement among the inputs of
+    :meth:`~buoy_nav.engine.FusionEngine.add_inputs`: its ``source``, its stamp ``t_s`` (s) and
+    the ``measurement`` (or the :class:`~buoy_common.contract.Reason` its message is none)."""
+
+    source: object
+    t_s: float
+    measurement: object
 
 
 class Taken(NamedTuple):
-    """What a stretch took: its samples (stamp s, gyro, force; re-stamped and calibrated),
-    whether each one's solution was written, and whether the engine's filtering up to the last
-    one's horizon is left to do (:data:`CATCH_UP`)."""
+    """What a stretch took: how many inputs, the IMU samples among them (stamp s, gyro,
+    force; re-stamped and calibrated) with their places among the inputs and whether each
+    one's solution was written, and whether the engine's filtering up to the last sample's
+    horizon is left to do (:data:`CATCH_UP`)."""
 
+    inputs: int
     samples: list[tuple]
+    places: list[int]
     rows_written: list[bool]
     catch_up: bool
 
 
+class _Run(NamedTuple):
+    """The inputs of one call made ready for the stretches: the IMU samples' rows (n × 7), and
+    for each input its IMU sample's index there or its pack attitude's in ``pack_rows`` (−1:
+    neither, the engine takes it), the pack's validated attitudes and their rows, and the
+    terms those rows hold with (:meth:`AhrsAttitudeSource.stretch_terms`; None: no pack)."""
+
+    raw: np.ndarray
+    imu_index: list[int]
+    pack_index: list[int]
+    measurements: list
+    pack_rows: np.ndarray
+    pack_terms: tuple | None
+    position_rad: tuple[float, float]
+
+
+class EngineParts(NamedTuple):
+    """The parts of a :class:`~buoy_nav.engine.FusionEngine` a stretch reads and moves."""
+
+    config: object
+    buffer: deque
+    point: object
+    prediction: object
+    output: object
+    solutions: object
+    queue: object
+    imu_input: object
+    gates: object
+    sequences: dict
+    contradictions: object
+    integrity: object
+    transitions: list
+    pseudo: tuple
+    pack: AhrsAttitudeSource | None
+    """The motion pack's attitude source when enabled: its attitudes are taken in stretches."""
+
+
 class ImuStretches:
-    """The parts of a :class:`~buoy_nav.engine.FusionEngine` a stretch reads and moves (its
-    fusion ``config``, IMU ``buffer`` ahead of the filter, processing ``point``, real-time
-    ``prediction``, ``output`` decimation, ``solutions`` and measurement ``queue``, the
-    ``imu_input``'s screening), handed to :func:`imu_stretch` and set from what it did."""
+    """The engine's ``parts`` handed to :func:`imu_stretch` and set from what it did, and the
+    books of the pack's attitudes it applied kept as the engine keeps them."""
 
-    def __init__(
-        self, config, buffer: deque, point, prediction, output, solutions, queue, imu_input
-    ):
-        self._config = config
-        self._buffer = buffer
-        self._point = point
-        self._prediction = prediction
-        self._output = output
-        self._solutions = solutions
-        self._queue = queue
-        self._imu_input = imu_input
+    def __init__(self, parts: EngineParts):
+        self._parts = parts
+        # Writable, as the compiled stretch is loaded for.
+        self._jacobian = np.zeros((3, 1)) if parts.pack is None else parts.pack.jacobian.copy()
 
-    def take(self, raw: np.ndarray, screening: tuple, nav) -> Taken | None:
-        """The ``raw`` samples (n × 7: stamp s, gyro, force) through :func:`imu_stretch`, with
-        the IMU ``screening``'s limits and state and the aided navigation ``nav``; None when it
-        took none (the engine takes the first itself)."""
+    @property
+    def pack(self) -> AhrsAttitudeSource | None:
+        """The motion pack's attitude source whose attitudes the stretches take (None: none)."""
+        return self._parts.pack
+
+    def run_of(self, inputs: list, nav) -> _Run | None:
+        """``inputs`` (IMU samples and :class:`MeasurementInput`) made ready, the pack's true
+        north turned at the filter's position of ``nav`` now; None when an IMU sample is not
+        three numbers each (:meth:`~buoy_nav.engine.FusionEngine.add_imu` then says why)."""
+        pack = self._parts.pack
+        imu_index, pack_index, samples, measurements = [], [], [], []
+        for item in inputs:
+            if type(item) is not MeasurementInput:
+                imu_index.append(len(samples))
+                pack_index.append(-1)
+                samples.append(item)
+                continue
+            imu_index.append(-1)
+            validated = (
+                item.source.validated(item.measurement)
+                if item.source is pack
+                and not isinstance(item.measurement, Reason)
+                and math.isfinite(item.t_s)
+                else None
+            )
+            if validated is None or isinstance(validated, Reason):
+                pack_index.append(-1)
+            else:
+                pack_index.append(len(measurements))
+                measurements.append(validated)
+        try:
+            raw = np.array([(t_s, *gyro, *force) for t_s, gyro, force in samples], dtype=float)
+        except (TypeError, ValueError):
+            return None
+        if raw.shape != (len(samples), SAMPLE_SIZE):
+            return None
+        state = nav.integrator.state_vector
+        position = (float(state[LATITUDE]), float(state[LONGITUDE]))
+        rows = [pack.stretch_row(m, *position) for m in measurements] if measurements else []
+        return _Run(
+            raw,
+            imu_index,
+            pack_index,
+            measurements,
+            np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE),
+            None if pack is None else pack.stretch_terms(*position, nav.kalman),
+            position,
+        )
+
+    def take(self, run: _Run, start: int, screening: tuple, nav) -> Taken | None:
+        """The inputs of ``run`` from ``start`` through :func:`imu_stretch`, with the IMU
+        ``screening``'s limits and state and the aided navigation ``nav``; None when it took
+        none (the engine takes the first itself)."""
+        parts = self._parts
+        with_pack = self._pack_ready(nav)
+        window = self._window(run, start, with_pack)
+        queued = None
+        if with_pack and any(run.pack_index[place] >= 0 for place in window):
+            queued = parts.queue.take_source(parts.pack)
+            if queued is None:
+                window = self._window(run, start, False)
+        if not window:
+            return None
+        raw = run.raw[[run.imu_index[place] for place in window if run.imu_index[place] >= 0]]
+        order, pack_rows, measurements = self._order(run, window, queued)
         limits_of_screening, screened_state = screening
         due = self._buffered_within_reach(raw, limits_of_screening[CLOCK_OFFSET])
-        ahead = self._prediction.ahead[0]
+        ahead = parts.prediction.ahead[0]
         state = self._state()
         screened = np.empty_like(raw)
         rows_written = np.zeros(len(raw), dtype=bool)
         plane_terms, covariance, block_indices, distrusted, distrust = (
-            self._solutions.row_arguments(nav.kalman)
+            parts.solutions.row_arguments(nav.kalman)
         )
+        covariance = covariance.copy()
+        pack_sequence = self._pack_sequence()
+        counts = np.array((0, 0, len(queued or ()), 0), dtype=np.int64)
+        epochs = np.empty((len(pack_rows), EPOCH_SIZE))
         count, stepped, stop = imu_stretch(
             raw,
+            np.array(order, dtype=np.int64),
             limits_of_screening,
             screened_state,
             screened,
@@ -118,21 +279,37 @@ class ImuStretches:
             ahead.state_vector,
             ahead.coning_correction,
             ahead.sculling_correction,
-            self._solutions.rows.block,
+            parts.solutions.rows.block,
             plane_terms,
             covariance,
             block_indices,
             rows_written,
+            pack_rows,
+            pack_sequence,
+            self._pack_terms(run),
+            np.array(nav.noise_terms(), dtype=float),
+            self._jacobian,
+            epochs,
+            counts,
         )
+        if measurements:
+            self._book_pack(run, measurements, len(queued or ()), counts, epochs, nav)
+        if counts[EPOCHS]:
+            nav.kalman.covariance = covariance
+            parts.solutions.covariance_changed()
+            parts.solutions.biases_changed()
         if count == 0:
             return None
+        imu_taken = int(counts[IMU_TAKEN])
         took = [
             (t, (gx, gy, gz), (fx, fy, fz))
-            for t, gx, gy, gz, fx, fy, fz in screened[:count].tolist()
+            for t, gx, gy, gz, fx, fy, fz in screened[:imu_taken].tolist()
         ]
-        self._imu_input.screened_through(screened_state, took[-1])
-        self._moved(state, due, took, stepped)
-        return Taken(took, rows_written[:count].tolist(), stop == CATCH_UP)
+        places = [start + k for k in range(count) if order[k] >= 0]
+        if took:
+            parts.imu_input.screened_through(screened_state, took[-1])
+            self._moved(state, due, took, stepped)
+        return Taken(count, took, places, rows_written[:imu_taken].tolist(), stop == CATCH_UP)
 
     def _buffered_within_reach(self, raw: np.ndarray, clock_offset_s: float) -> list[tuple]:
         """The buffered samples the filter may step to while taking ``raw``: none beyond the
@@ -141,12 +318,13 @@ class ImuStretches:
         stamps = raw[:, 0]
         finite = stamps[np.isfinite(stamps)]
         latest_s = finite.max() + clock_offset_s if finite.size else -math.inf
-        reach_s = latest_s - self._config.max_measurement_delay_s
-        return list(itertools.takewhile(lambda sample: sample[0] <= reach_s, self._buffer))
+        reach_s = latest_s - self._parts.config.max_measurement_delay_s
+        return list(itertools.takewhile(lambda sample: sample[0] <= reach_s, self._parts.buffer))
 
     def _state(self) -> np.ndarray:
         """:func:`imu_stretch`'s ``state`` from the parts."""
-        point, prediction = self._point, self._prediction
+        parts = self._parts
+        point, prediction = parts.point, parts.prediction
         _, ahead_t, ahead_gyro, ahead_force = prediction.ahead
         return np.array(
             (
@@ -157,8 +335,8 @@ class ImuStretches:
                 *ahead_gyro,
                 *ahead_force,
                 prediction.last_predicted_stamp_s,
-                self._output.next_output_s,
-                self._solutions.rows.count,
+                parts.output.next_output_s,
+                parts.solutions.rows.count,
             ),
             dtype=float,
         )
@@ -166,17 +344,19 @@ class ImuStretches:
     def _limits(self, distrusted: bool, distrust: tuple[float, float]) -> np.ndarray:
         """:func:`imu_stretch`'s ``limits``, the filter ``distrusted`` or not (``distrust``: the
         attitude and velocity variances then added)."""
-        config = self._config
-        heap = self._queue.heap
+        parts = self._parts
+        config = parts.config
+        heap = parts.queue.heap
         return np.array(
             (
                 config.max_measurement_delay_s,
                 config.max_imu_gap_s,
                 config.covariance_propagation_interval_s,
                 heap[0][0] if heap else math.inf,
-                self._output.period_s,
+                parts.output.period_s,
                 1.0 if distrusted else 0.0,
                 *distrust,
+                min((source.next_due_s for source in parts.pseudo), default=math.inf),
             )
         )
 
@@ -184,22 +364,149 @@ class ImuStretches:
         """The parts set from what the stretch did: it ``took`` these samples (into the
         buffer) and stepped the filter to ``stepped`` of the ``due`` buffered samples and
         then of those; ``state`` as it left it."""
-        point = self._point
-        buffer = self._buffer
+        parts = self._parts
+        point = parts.point
+        buffer = parts.buffer
         buffer.extend(took)
         if stepped:
             walked = [(point.t_s, point.gyro, point.force), *due, *took]
             for _ in range(stepped):
                 buffer.popleft()
             point.stepped_through(walked[stepped - 1], walked[stepped])
-        self._prediction.predicted_through(took[-1])
-        self._output.next_output_s = float(state[NEXT_OUTPUT_T])
-        self._solutions.rows.count = int(state[ROWS])
+        parts.prediction.predicted_through(took[-1])
+        parts.output.next_output_s = float(state[NEXT_OUTPUT_T])
+        parts.solutions.rows.count = int(state[ROWS])
+
+    def _pack_ready(self, nav) -> bool:
+        """Whether a stretch may apply the pack's attitudes as the engine would: the pack's
+        health unmoved by passing attitudes, its sequence holding none, the filter trusted,
+        nothing recorded for a smoother."""
+        parts = self._parts
+        pack = parts.pack
+        return (
+            pack is not None
+            and parts.gates.unmoved_by_passes(pack.kind)
+            and parts.sequences[pack.kind].steady
+            and parts.integrity.trusted
+            and not nav.records_epochs
+        )
+
+    def _window(self, run: _Run, start: int, with_pack: bool) -> list[int]:
+        """The places of the inputs from ``start`` a stretch is offered: up to the first the
+        engine must take (the pack's too, unless ``with_pack``), and not beyond the first IMU
+        sample whose filtering reaches the next measurement or constraint due (the stretch
+        stops there), :data:`WINDOW` at most."""
+        parts = self._parts
+        pack = parts.pack if with_pack else None
+        stop_s = min(
+            min((entry[0] for entry in parts.queue.heap if entry[3] is not pack), default=math.inf),
+            min((source.next_due_s for source in parts.pseudo), default=math.inf),
+        )
+        stop_s += parts.config.max_measurement_delay_s
+        window = []
+        for place in range(start, min(start + WINDOW, len(run.imu_index))):
+            imu = run.imu_index[place]
+            if imu < 0 and not (with_pack and run.pack_index[place] >= 0):
+                break
+            window.append(place)
+            if imu >= 0 and run.raw[imu, 0] > stop_s:
+                break
+        return window
+
+    def _order(self, run: _Run, window: list[int], queued: list | None) -> tuple:
+        """:func:`imu_stretch`'s ``order`` for the inputs at the ``window``'s places, and the
+        pack's rows and attitudes: the ``queued`` ones first, then those of the window."""
+        pack = self._parts.pack
+        measurements = [measurement for _, measurement in queued or ()]
+        rows = [pack.stretch_row(m, *run.position_rad) for m in measurements]
+        order, imu_count = [], 0
+        for place in window:
+            if run.imu_index[place] >= 0:
+                order.append(imu_count)
+                imu_count += 1
+            else:
+                index = run.pack_index[place]
+                order.append(-1 - len(measurements))
+                measurements.append(run.measurements[index])
+                rows.append(run.pack_rows[index])
+        return order, np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE), measurements
+
+    def _pack_sequence(self) -> np.ndarray:
+        """:func:`imu_stretch`'s ``pack_sequence`` from the pack's sequence and the IMU's clock."""
+        parts = self._parts
+        sequence = np.zeros(PACK_SEQUENCE_SIZE)
+        sequence[NEWEST_AIDING] = parts.imu_input.clock.newest_aiding_s
+        if parts.pack is None:
+            sequence[SEQUENCE_LATEST] = math.inf
+            return sequence
+        stream = parts.sequences[parts.pack.kind]
+        intervals = stream.intervals_s
+        sequence[SEQUENCE_LATEST] = stream.latest_s
+        sequence[INTERVAL_COUNT] = len(intervals)
+        sequence[INTERVAL_NEXT] = len(intervals) % RATE_MEMORY
+        sequence[INTERVALS : INTERVALS + len(intervals)] = intervals
+        return sequence
+
+    def _pack_terms(self, run: _Run) -> np.ndarray:
+        """:func:`imu_stretch`'s ``pack_terms``."""
+        lag, lag_uncertainty_sq, floor, threshold, *bounds = run.pack_terms or (
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            -math.inf,
+            math.inf,
+            -math.inf,
+            math.inf,
+        )
+        return np.array(
+            (
+                lag,
+                lag_uncertainty_sq,
+                floor,
+                threshold,
+                float(self._parts.pack.states.attitude.start) if self._parts.pack else 0.0,
+                MAX_MEASUREMENT_LEAD_S,
+                self._parts.prediction.resync_at_s,
+                *bounds,
+            )
+        )
+
+    def _book_pack(self, run: _Run, measurements: list, first_new: int, counts, epochs, nav):
+        """Keep the books of what the stretch did with the pack's ``measurements`` (those
+        queued before it first, the new ones from ``first_new``) as the engine keeps them: its
+        sequence and the IMU's clock follow the new ones it queued, each epoch it applied
+        (``epochs``) is observed and booked as passed by its gate, and the attitudes still
+        queued go back to the queue."""
+        parts = self._parts
+        pack = parts.pack
+        head, tail, applied = int(counts[QUEUE_HEAD]), int(counts[QUEUE_TAIL]), int(counts[EPOCHS])
+        for measurement in measurements[first_new:tail]:
+            parts.sequences[pack.kind].followed(measurement.t_s)
+            parts.imu_input.clock.aiding_stamp(measurement.t_s)
+        threshold = run.pack_terms[THRESHOLD]
+        for epoch, measurement in zip(epochs[:applied].tolist(), measurements, strict=False):
+            t = epoch[EPOCH_T]
+            parts.contradictions.observe(t, measurement)
+            gate = GateResult(
+                True,
+                epoch[EPOCH_NIS],
+                threshold,
+                np.array(epoch[EPOCH_S : EPOCH_S + 9]).reshape(3, 3),
+            )
+            innovation = np.array(epoch[EPOCH_INNOVATION : EPOCH_INNOVATION + 3])
+            fused, outcome = parts.gates.passed(pack, t, innovation, gate)
+            if not fused:
+                raise RuntimeError(f"{pack.kind}: an attitude the stretch applied was not fused")
+            parts.transitions.extend(outcome.transitions)
+        for measurement in measurements[head:tail]:
+            parts.queue.push(pack, measurement.t_s, measurement)
 
 
 @numba.njit(cache=True)
 def imu_stretch(
     raw,
+    order,
     screening,
     screened_state,
     samples,
@@ -217,23 +524,42 @@ def imu_stretch(
     covariance,
     block_indices,
     row_written,
+    pack_rows,
+    pack_sequence,
+    pack_terms,
+    noise_terms,
+    pack_jacobian,
+    epochs,
+    counts,
 ):
-    """Take the ``raw`` IMU samples (n × 7: header stamp s, ω_ib body rad/s, specific force
-    body m/s²), after the ``buffered`` ones ahead of the filter that the stretch may reach
-    (k × 7, oldest first), as the engine's ``add_imu`` and ``catch_up`` would, until one needs
-    the engine: each screened as :meth:`~buoy_nav.imu_input.ImuInput.accept` screens it
-    (``screening``, ``screened_state`` updated; into ``samples``, n × 7, re-stamped and
-    calibrated), then taken.
+    """Take the inputs in ``order`` (an IMU sample's index in ``raw``, or −1 − the index of a
+    motion-pack attitude in ``pack_rows``), after the ``buffered`` IMU samples ahead of the
+    filter that the stretch may reach (k × 7, oldest first), as the engine's ``add_imu``,
+    ``add_measurement`` and ``catch_up`` would, until one needs the engine.
+
+    raw: the IMU samples (n × 7: header stamp s, ω_ib body rad/s, specific force body m/s²),
+    each screened as :meth:`~buoy_nav.imu_input.ImuInput.accept` screens it (``screening``,
+    ``screened_state`` updated; into ``samples``, n × 7, re-stamped and calibrated), then taken.
+    pack_rows (:data:`PACK_T` …): the pack's attitudes, validated, those queued before the
+    stretch first (``counts``' :data:`QUEUE_HEAD` to :data:`QUEUE_TAIL`); each new one is
+    screened as the engine screens a measurement in its sequence (``pack_sequence``, updated)
+    and queued, and applied when the filter reaches its stamp, which must be an IMU sample's:
+    the step there with the covariance's propagation, the pack's compiled update, the
+    correction's injection and its carry-over to the prediction, each epoch's gate into
+    ``epochs`` for the books.
 
     state: :data:`POINT` … :data:`ROWS`, updated; limits: :data:`DELAY` (the fusion's
-    ``max_measurement_delay_s``) … :data:`VELOCITY_VARIANCE` (the stamp of the next measurement
-    queued, inf: none; the output period, 0: every sample; the distrust, 1.0 or 0.0, and its
-    variances); filter_state, ahead_state: the strapdown states, stepped in place, with their
-    coning and sculling corrections; rows_block and the row writer's other arguments
-    (:func:`~buoy_nav.solution_rows.write_row`); row_written: set for each sample whose
-    solution was written.
+    ``max_measurement_delay_s``) … :data:`CONSTRAINT_DUE` (the stamp of the next measurement
+    queued but the pack's, inf: none; the output period, 0: every sample; the distrust, 1.0
+    or 0.0, and its variances; the first stamp a constraint is due at, inf: none);
+    filter_state, ahead_state: the strapdown states, stepped in place, with their coning and
+    sculling corrections; covariance: the filter's, updated in place; rows_block and the row
+    writer's other arguments (:func:`~buoy_nav.solution_rows.write_row`); row_written: set for
+    each IMU sample whose solution was written; pack_terms (:data:`LAG` …), noise_terms (the
+    process noise's, :func:`~buoy_nav.error_dynamics.stepped_covariance`) and pack_jacobian:
+    the pack's update's; counts: :data:`IMU_TAKEN` … :data:`EPOCHS`, updated.
 
-    Returns (samples taken, buffered samples the filter stepped to, :data:`DONE`,
+    Returns (inputs taken, buffered samples the filter stepped to, :data:`DONE`,
     :data:`BEFORE_SAMPLE` or :data:`CATCH_UP`); the filter's latest two samples are then the
     last two stepped to (the buffered ones, then the taken ones).
     """
@@ -244,15 +570,25 @@ def imu_stretch(
     ahead = state[AHEAD : AHEAD + SAMPLE_SIZE]
     n_buffered = buffered.shape[0]
     stepped = 0
-    for index in range(raw.shape[0]):
+    for item in range(order.shape[0]):
+        position = order[item]
+        if position < 0:
+            if not _queued(
+                pack_rows[-1 - position, PACK_T], pack_sequence, pack_terms, point, screened_state
+            ):
+                return item, stepped, BEFORE_SAMPLE
+            counts[QUEUE_TAIL] += 1
+            continue
+        index = counts[IMU_TAKEN]
         sample = samples[index]
-        if not _screened(raw[index], screening, screened_state, sample):
-            return index, stepped, BEFORE_SAMPLE
+        if not _screened(raw[position], screening, screened_state, sample):
+            return item, stepped, BEFORE_SAMPLE
         t = sample[0]
         span = t - ahead[0]
         if span > max_gap_s or state[ROWS] >= rows_block.shape[0]:
-            return index, stepped, BEFORE_SAMPLE
+            return item, stepped, BEFORE_SAMPLE
         _accepted(screening, screened_state, sample)
+        counts[IMU_TAKEN] += 1
         _step(ahead_state, span, ahead, sample, ahead_coning, ahead_sculling)
         ahead[:] = sample
         if t > state[LAST_PREDICTED_T] and _due(state, t, span, limits[OUTPUT_PERIOD]):
@@ -289,14 +625,166 @@ def imu_stretch(
             if (
                 t_due - point[0] > max_gap_s
                 or limits[NEXT_MEASUREMENT] <= t_due
-                or (dt > 0.0 and filter_state[DURATION] + dt >= limits[PROPAGATION_INTERVAL])
+                or limits[CONSTRAINT_DUE] <= t_due
             ):
-                return index + 1, stepped, CATCH_UP
-            if dt > 0.0:
-                _step(filter_state, dt, point, due, filter_coning, filter_sculling)
+                return item + 1, stepped, CATCH_UP
+            head = counts[QUEUE_HEAD]
+            if head < counts[QUEUE_TAIL] and pack_rows[head, PACK_T] <= t_due:
+                if not (
+                    pack_rows[head, PACK_T] == t_due
+                    and dt > 0.0
+                    and _pack_epoch(
+                        pack_rows[head],
+                        point,
+                        due,
+                        filter_state,
+                        filter_coning,
+                        filter_sculling,
+                        covariance,
+                        noise_terms,
+                        pack_terms,
+                        pack_jacobian,
+                        ahead_state,
+                        ahead[0],
+                        epochs[counts[EPOCHS]],
+                    )
+                ):
+                    return item + 1, stepped, CATCH_UP
+                counts[QUEUE_HEAD] += 1
+                counts[EPOCHS] += 1
+            else:
+                if dt > 0.0 and filter_state[DURATION] + dt >= limits[PROPAGATION_INTERVAL]:
+                    return item + 1, stepped, CATCH_UP
+                if dt > 0.0:
+                    _step(filter_state, dt, point, due, filter_coning, filter_sculling)
             point[:] = due
             stepped += 1
-    return raw.shape[0], stepped, DONE
+    return order.shape[0], stepped, DONE
+
+
+@numba.njit(cache=True)
+def _queued(t, pack_sequence, pack_terms, point, screened_state) -> bool:
+    """Whether the engine would queue the pack's attitude stamped ``t`` (s) with nothing else
+    to do (in its sequence, not too late, not beyond the IMU's data); the sequence then
+    follows it and the IMU's clock knows the newest aiding stamp. Nothing else is changed."""
+    latest = pack_sequence[SEQUENCE_LATEST]
+    count = int(pack_sequence[INTERVAL_COUNT])
+    interval = math.nan
+    for k in range(count):
+        if k == 0 or pack_sequence[INTERVALS + k] < interval:
+            interval = pack_sequence[INTERVALS + k]
+    if not (
+        math.isfinite(t)
+        and t > latest
+        and not t - latest > SEQUENCE_INTERVALS * interval
+        and t > point[0]
+        and not t - screened_state[LATEST] > pack_terms[MAX_LEAD]
+    ):
+        return False
+    if math.isfinite(latest):
+        following = int(pack_sequence[INTERVAL_NEXT])
+        pack_sequence[INTERVALS + following] = t - latest
+        pack_sequence[INTERVAL_NEXT] = (following + 1) % RATE_MEMORY
+        pack_sequence[INTERVAL_COUNT] = min(count + 1, RATE_MEMORY)
+    pack_sequence[SEQUENCE_LATEST] = t
+    if t > pack_sequence[NEWEST_AIDING]:
+        pack_sequence[NEWEST_AIDING] = t
+    return True
+
+
+@numba.njit(cache=True)
+def _pack_epoch(
+    row,
+    point,
+    due,
+    filter_state,
+    coning,
+    sculling,
+    covariance,
+    noise_terms,
+    pack_terms,
+    jacobian,
+    ahead_state,
+    ahead_t,
+    epoch,
+) -> bool:
+    """The epoch of the pack's attitude ``row`` at the IMU sample ``due``, as the engine makes
+    it: the filter's step there from ``point`` with the covariance's propagation, the pack's
+    compiled update and, when its gate passes and the covariance after it is positive
+    definite, the injection into ``filter_state``, the new ``covariance`` and the correction
+    carried over to the prediction (``ahead_state``, at ``ahead_t`` s), the gate into
+    ``epoch``. False, with nothing changed, when the engine is to make it (the gate fails, the
+    covariance needs a repair, the filter left the true north's cell, the prediction forks
+    afresh there)."""
+    t = due[0]
+    if t >= pack_terms[RESYNC_AT]:
+        return False
+    stepped = filter_state.copy()
+    _, prior = stepped_covariance_kernel(
+        stepped,
+        covariance,
+        t - point[0],
+        (point[1], point[2], point[3], due[1], due[2], due[3]),
+        (point[4], point[5], point[6], due[4], due[5], due[6]),
+        (coning, sculling),
+        (
+            noise_terms[0],
+            noise_terms[1],
+            noise_terms[2],
+            noise_terms[3],
+            noise_terms[4],
+            noise_terms[5],
+            noise_terms[6],
+        ),
+    )
+    latitude, longitude = stepped[LATITUDE], stepped[LONGITUDE]
+    if not (
+        pack_terms[LATITUDE_LOW] < latitude < pack_terms[LATITUDE_HIGH]
+        and pack_terms[LONGITUDE_LOW] < longitude < pack_terms[LONGITUDE_HIGH]
+    ):
+        return False
+    rate_x = due[1] - stepped[NOMINAL_GYRO_BIAS]
+    rate_y = due[2] - stepped[NOMINAL_GYRO_BIAS + 1]
+    rate_z = due[3] - stepped[NOMINAL_GYRO_BIAS + 2]
+    square = 2.0 + 0.0 * t  # a run-time exponent: the C library's pow, as the interpreter's
+    lag_variance = (
+        math.pow(rate_x, square) + math.pow(rate_y, square) + math.pow(rate_z, square)
+    ) * pack_terms[LAG_UNCERTAINTY_SQ]
+    innovation, nis, innovation_covariance, accepted, updated, correction, positive = (
+        attitude_update(
+            prior,
+            stepped,
+            row[PACK_ROTATION : PACK_ROTATION + 9].reshape(3, 3).copy(),
+            rate_x,
+            rate_y,
+            rate_z,
+            pack_terms[LAG],
+            row[PACK_COVARIANCE : PACK_COVARIANCE + 9].reshape(3, 3).copy(),
+            pack_terms[FLOOR],
+            lag_variance,
+            row[PACK_WEIGHT],
+            jacobian,
+            pack_terms[THRESHOLD],
+            int(pack_terms[ATTITUDE_START]),
+        )
+    )
+    if not (accepted and positive):
+        return False
+    velocity = stepped[VELOCITY : VELOCITY + 3].copy()
+    filter_altitude = stepped[ALTITUDE]
+    filter_state[:] = stepped
+    inject_error_state(filter_state, correction)
+    covariance[:, :] = updated
+    carried = correction.copy()
+    span = ahead_t - t
+    if span > 0.0:
+        carry_over_kernel(ahead_state, velocity, latitude, filter_altitude, span, carried)
+    inject_error_state(ahead_state, carried)
+    epoch[EPOCH_T] = t
+    epoch[EPOCH_INNOVATION : EPOCH_INNOVATION + 3] = innovation
+    epoch[EPOCH_NIS] = nis
+    epoch[EPOCH_S : EPOCH_S + 9] = innovation_covariance.reshape(9)
+    return True
 
 
 @numba.njit(cache=True)
@@ -422,7 +910,9 @@ def load_compiled_imu_stretch() -> None:
     state = np.zeros(STATE_SIZE)
     state[AHEAD] = -1.0
     state[LAST_PREDICTED_T] = -math.inf
-    limits = np.array([0.3, 0.5, 0.1, math.inf, 0.0, 0.0, 0.0, 0.0])
+    limits = np.zeros(LIMITS_SIZE)
+    limits[[DELAY, MAX_GAP, PROPAGATION_INTERVAL]] = (0.3, 0.5, 0.1)
+    limits[[NEXT_MEASUREMENT, CONSTRAINT_DUE]] = math.inf
     strapdown = np.zeros(STRAPDOWN_STATE_SIZE)
     screening = np.zeros(SCREENING_SIZE)
     screening[SAMPLE_INTERVAL] = 0.01
@@ -430,11 +920,12 @@ def load_compiled_imu_stretch() -> None:
     screened_state = np.zeros(SCREENED_STATE_SIZE)
     screened_state[LATEST] = -1.0
     imu_stretch(
-        np.zeros((1, 7)),
+        np.zeros((1, SAMPLE_SIZE)),
+        np.zeros(1, dtype=np.int64),
         screening,
         screened_state,
-        np.zeros((1, 7)),
-        np.zeros((0, 7)),
+        np.zeros((1, SAMPLE_SIZE)),
+        np.zeros((0, SAMPLE_SIZE)),
         state,
         limits,
         strapdown,
@@ -448,4 +939,11 @@ def load_compiled_imu_stretch() -> None:
         np.eye(15),
         np.arange(36, dtype=np.int64).reshape(4, 3, 3),
         np.zeros(1, dtype=np.bool_),
+        np.zeros((0, PACK_ROW_SIZE)),
+        np.zeros(PACK_SEQUENCE_SIZE),
+        np.zeros(PACK_TERMS_SIZE),
+        np.zeros(7),
+        np.zeros((3, 15)),
+        np.zeros((0, EPOCH_SIZE)),
+        np.zeros(4, dtype=np.int64),
     )

@@ -21,6 +21,12 @@ from buoy_nav.aiding.base import AidingSource
 from buoy_nav.health import MeasurementCounters
 from buoy_nav.stream_sequence import StreamSequence
 
+# How far measurements may run ahead of the newest IMU sample (s of stamps). More can only be an
+# IMU outage (or GNSS before the IMU starts): the filter could use them only for the alignment
+# that follows, which needs the last seconds alone, and keeping them all would let an outage
+# fill the memory and, when the IMU returns, stall the node on the backlog.
+MAX_MEASUREMENT_LEAD_S = 10.0
+
 
 class MeasurementQueue:
     """Validated measurements of ``sources`` by stamp; counts into ``counters`` (by kind) what it
@@ -120,6 +126,24 @@ class MeasurementQueue:
             else:
                 kept.append((source, measurement))
         return t, kept
+
+    def take_source(self, source: AidingSource) -> list[tuple[float, object]] | None:
+        """Take out the queued measurements of ``source`` as (stamp s, measurement), oldest
+        first, to be applied elsewhere (:mod:`buoy_nav.imu_stretch`) or queued again with
+        :meth:`push`; None, with nothing taken, when one of the queue's arrived ahead of its
+        sequence or was replaced (the queue judges those at their turn)."""
+        if self._replaced or any(self._ahead.values()):
+            return None
+        kind = source.kind
+        taken = sorted(
+            (entry[0], entry[2], entry[4]) for entry in self.heap if entry[3].kind == kind
+        )
+        if taken:
+            kept = [entry for entry in self.heap if entry[3].kind != kind]
+            heapq.heapify(kept)
+            self.heap[:] = kept
+            self._stamps[kind].clear()
+        return [(stamp, measurement) for stamp, _, measurement in taken]
 
     def give_up_between(self, after_s: float, before_s: float) -> None:
         """Give up the measurements stamped after ``after_s`` and before ``before_s`` (s)."""

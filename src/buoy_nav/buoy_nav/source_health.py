@@ -137,6 +137,15 @@ class SourceHealth:
         samples failed the gate``; a contradiction first."""
         return self._contradiction or (self._gate_reason if self._gate_suspended else "")
 
+    @property
+    def unmoved_by_passes(self) -> bool:
+        """Whether outcomes that pass the gate can neither suspend nor resume the source: it
+        is not suspended, and either none of its outcomes failed or it holds ``min_samples``
+        (a pass then only lowers the share failed)."""
+        return not self.suspended and (
+            self._failed_count == 0 or len(self._failed) >= self.rule.min_samples
+        )
+
     def record(self, failed_gate: bool, t_s: float = math.nan) -> HealthChange:
         """Add one gate outcome (True: the measurement failed the gate) of the measurement of
         stamp ``t_s`` (s; NaN: judged by the count of outcomes alone) and return what it

@@ -129,6 +129,23 @@ class StreamSequence:
             return Screening(False, [item], given_up)
         return self._hold(t_s, item)
 
+    @property
+    def steady(self) -> bool:
+        """Whether no sample is held off the sequence."""
+        return not self._held.samples
+
+    @property
+    def intervals_s(self) -> list[float]:
+        """The recent in-sequence intervals (s), oldest first."""
+        return list(self._intervals)
+
+    def followed(self, t_s: float) -> None:
+        """A sample stamped ``t_s`` (s) followed the sequence, none held: as :meth:`screen`
+        takes it (:mod:`buoy_nav.imu_stretch` screened it)."""
+        if math.isfinite(self.latest_s):
+            self._intervals.append(t_s - self.latest_s)
+        self.latest_s = t_s
+
     def on_grid(self, t_s: float) -> bool:
         """Whether the stamp ``t_s`` (s) lies on the sequence's grid: a whole number of sample
         intervals from its latest stamp (within :data:`GRID_TOLERANCE`), a stamp the stream

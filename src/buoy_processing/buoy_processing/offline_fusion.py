@@ -40,9 +40,9 @@ from buoy_nav.fusion_messages import (
     StampBook,
     feed_imu_cdr,
     feed_imu_fields,
-    feed_imu_records,
     feed_measurement_record,
     feed_message,
+    feed_records,
     nav_values,
     odometry_cdr,
     solution_cdr,
@@ -197,15 +197,25 @@ class OfflineFusion:
             return self.add(topic, reader.decode(message), message.log_time_ns)
         return self._take(topic, fed, message.log_time_ns)
 
-    def add_imu_records(self, records: list[tuple], log_times_ns: list[int]) -> list[HandedOver]:
-        """:meth:`add_message` of consecutive IMU messages read with their chunk, no other
-        sensor message between them: each one's record (:meth:`record_fields`) and log time
-        (ns); what each one handed over, in order. One call to the engine for them all
-        (:meth:`~buoy_nav.engine.FusionEngine.add_imu_samples`)."""
-        fed = feed_imu_records(self.engine, records, self.stamps)
-        for _, rejection in fed:
+    @property
+    def run_topics(self) -> frozenset[str]:
+        """The topics whose messages, read with their chunk, :meth:`add_records` takes in runs:
+        the IMU's and those of the sources the engine takes in its stretches."""
+        return frozenset(
+            (IMU_RAW_TOPIC, *(source.topic for source in self.engine.stretched_sources))
+        )
+
+    def add_records(
+        self, topics: list[str], records: list[tuple], log_times_ns: list[int]
+    ) -> list[HandedOver]:
+        """:meth:`add_message` of consecutive messages of :attr:`run_topics` read with their
+        chunk, no other sensor message between them: each one's (relative) topic, record
+        (:meth:`record_fields`) and log time (ns); what each one handed over, in order. One
+        call to the engine for them all (:meth:`~buoy_nav.engine.FusionEngine.add_inputs`)."""
+        fed = feed_records(self.engine, topics, records, self.stamps)
+        for topic, (_, rejection) in zip(topics, fed, strict=True):
             if rejection is not None:
-                self._count_rejection(IMU_RAW_TOPIC, rejection)
+                self._count_rejection(topic, rejection)
         # As :meth:`_take` after each message: no other input came between them.
         self.source_transitions.extend(self.engine.take_source_transitions())
         self.last_log_time_ns = log_times_ns[-1]

@@ -30,7 +30,6 @@ from typing import NamedTuple, Protocol
 
 from buoy_common.bag_io import BackgroundBagWriter, BagMessage, BagProgress, BagReader, BagWriter
 from buoy_common.contract import (
-    IMU_RAW_TOPIC,
     TF_STATIC_MSGTYPE,
     TF_STATIC_TOPIC,
     bag_topic,
@@ -318,9 +317,11 @@ def _fusing_pass(
         records = chunk_records(batch, fields_of_topic)
         events: list[tuple | None] = []
         add = events.append
-        # The IMU messages read with their chunk wait, their events' places kept, until another
-        # sensor message comes: the fusion takes them in one call.
-        imu_run = _ImuRun(fusion, events)
+        # The IMU messages read with their chunk (and the messages the fusion takes with them)
+        # wait, their events' places kept, until another sensor message comes: the fusion
+        # takes them in one call.
+        run = _FusionRun(fusion, events)
+        run_topics = fusion.run_topics
         for position, message in enumerate(batch):
             log_time_ns = message.log_time_ns
             topic = relative_of.get(message.topic)
@@ -328,33 +329,36 @@ def _fusing_pass(
             if topic is None:
                 # A plain tuple pickles several times faster than the named one.
                 add((COPY, tuple(message), record))
-            elif topic == IMU_RAW_TOPIC and record is not None:
-                imu_run.wait(record, log_time_ns)
+            elif topic in run_topics and record is not None:
+                run.wait(topic, record, log_time_ns)
             else:
-                imu_run.fuse()
+                run.fuse()
                 stamps = fusion.add_message(reader, topic, message, record)
                 if stamps:
                     add((SOLUTIONS, log_time_ns, stamps))
-        imu_run.fuse()
+        run.fuse()
         side.hand_over([event for event in events if event is not None])
         progress.reached(log_time_ns)
     return log_time_ns
 
 
-class _ImuRun:
-    """IMU messages of a chunk waiting for the fusion, their places kept in ``events``."""
+class _FusionRun:
+    """Sensor messages of a chunk waiting for the fusion, their places kept in ``events``."""
 
     def __init__(self, fusion: OfflineFusion, events: list[tuple | None]):
         self._fusion = fusion
         self._events = events
         self._places: list[int] = []
+        self._topics: list[str] = []
         self._records: list[tuple] = []
         self._log_times_ns: list[int] = []
 
-    def wait(self, record: tuple, log_time_ns: int) -> None:
-        """One more IMU message (its record and log time, ns); its event's place kept."""
+    def wait(self, topic: str, record: tuple, log_time_ns: int) -> None:
+        """One more message of (relative) ``topic`` (its record and log time, ns); its event's
+        place kept."""
         self._places.append(len(self._events))
         self._events.append(None)
+        self._topics.append(topic)
         self._records.append(record)
         self._log_times_ns.append(log_time_ns)
 
@@ -365,11 +369,11 @@ class _ImuRun:
             return
         events = self._events
         log_times = self._log_times_ns
-        handed_over = self._fusion.add_imu_records(self._records, log_times)
+        handed_over = self._fusion.add_records(self._topics, self._records, log_times)
         for place, log_time_ns, stamps in zip(self._places, log_times, handed_over, strict=True):
             if stamps:
                 events[place] = (SOLUTIONS, log_time_ns, stamps)
-        self._places, self._records, self._log_times_ns = [], [], []
+        self._places, self._topics, self._records, self._log_times_ns = [], [], [], []
 
 
 def _smoothed_run(

@@ -48,7 +48,7 @@ from buoy_nav.aiding.base import (
     samples_per_correlation_time,
 )
 from buoy_nav.error_state_filter import GateResult
-from buoy_nav.geomagnetism import declination_rad
+from buoy_nav.geomagnetism import declination_rad, wmm_cell_bounds_rad
 from buoy_nav.rotations import (
     quaternion_from_rotation_elements,
     quaternion_from_rotation_vector,
@@ -228,7 +228,7 @@ class AhrsAttitudeSource(AidingSource):
         :meth:`ErrorStateFilter.update` and :meth:`ErrorStateFilter.reset_after_injection`."""
         arguments = self.update_arguments(measurement, raw_gyro_rad_s, integrator_state, kalman)
         innovation, nis, innovation_covariance, accepted, covariance, correction, positive = (
-            _attitude_update(kalman.covariance, integrator_state, *arguments)
+            attitude_update(kalman.covariance, integrator_state, *arguments)
         )
         return CompiledUpdate(
             innovation,
@@ -241,7 +241,7 @@ class AhrsAttitudeSource(AidingSource):
     def update_arguments(
         self, measurement: AhrsAttitude, raw_gyro_rad_s, integrator_state, kalman
     ) -> tuple:
-        """The arguments of the compiled update (:func:`_attitude_update`) after the covariance
+        """The arguments of the compiled update (:func:`attitude_update`) after the covariance
         and the state vector, for ``measurement`` at the nominal ``integrator_state`` with the
         raw gyro sample there (body rad/s) and the gate of ``kalman``: for code that composes it
         with other kernels."""
@@ -264,6 +264,40 @@ class AhrsAttitudeSource(AidingSource):
             self.states.attitude.start,
         )
 
+    def stretch_terms(self, latitude_rad: float, longitude_rad: float, kalman) -> tuple:
+        """What :mod:`buoy_nav.imu_stretch` applies this source's attitudes with, the filter at
+        a position (rad) with the gate of ``kalman``: (lag s, its uncertainty squared s², the
+        variance floor rad², the gate's threshold, and the bounds (rad) of latitude and longitude
+        within which :meth:`stretch_row`'s true north holds: (lowest, highest latitude, lowest,
+        highest longitude))."""
+        if self._magnetic and math.isnan(self._declination_deg):
+            bounds = wmm_cell_bounds_rad(latitude_rad, longitude_rad)
+        else:
+            bounds = (-math.inf, math.inf, -math.inf, math.inf)
+        return (
+            self._lag_s,
+            self._lag_uncertainty_s**2,
+            self._floor_rad2,
+            kalman.gate_threshold(3, self.gate_probability),
+            *bounds,
+        )
+
+    def stretch_row(self, measurement: AhrsAttitude, latitude_rad: float, longitude_rad: float):
+        """A validated ``measurement`` as :mod:`buoy_nav.imu_stretch` takes it, its true north
+        that at a position (rad) within :meth:`stretch_terms`' bounds: (stamp s, the attitude
+        on true north, R_nb row-major, its covariance rad² row-major, the sample's weight)."""
+        return (
+            measurement.t_s,
+            *self._true_north(measurement, latitude_rad, longitude_rad).reshape(9).tolist(),
+            *measurement.covariance_rad2.reshape(9).tolist(),
+            self._weight(measurement),
+        )
+
+    @property
+    def jacobian(self) -> np.ndarray:
+        """The update's H (3 × states; read-only)."""
+        return self._jacobian
+
     def load_compiled_code(self) -> None:
         _attitude_innovation(np.eye(3), np.eye(3), 0.0, 0.0, 0.0, self._lag_s)
         _model_covariance(np.eye(3), self._floor_rad2, 0.0, 1.0)
@@ -271,7 +305,7 @@ class AhrsAttitudeSource(AidingSource):
         state[ATTITUDE + 3] = 1.0
         covariance = np.eye(self.states.dim)
         for jacobian in (self._jacobian, self._jacobian.copy()):  # read-only and writable
-            _attitude_update(
+            attitude_update(
                 covariance,
                 state,
                 np.eye(3),
@@ -365,7 +399,7 @@ def _attitude_innovation(measured_nb, rotation_nb, rate_x, rate_y, rate_z, lag_s
 
 
 @numba.njit(cache=True)
-def _attitude_update(
+def attitude_update(
     covariance,
     integrator_state,
     measured_nb,
