@@ -144,8 +144,9 @@ class Taken(NamedTuple):
 class _Run(NamedTuple):
     """The inputs of one call made ready for the stretches: the IMU samples' rows (n × 7), and
     for each input its IMU sample's index there or its pack attitude's in ``pack_rows`` (−1:
-    neither, the engine takes it), the pack's validated attitudes and their rows, and the
-    terms those rows hold with (:meth:`AhrsAttitudeSource.stretch_terms`; None: no pack)."""
+    neither, the engine takes it), the pack's validated attitudes and their rows, the terms
+    those rows hold with (:meth:`AhrsAttitudeSource.stretch_terms`; None: no pack) at the
+    filter's position then (rad), and whether the inputs are IMU samples alone."""
 
     raw: np.ndarray
     imu_index: list[int]
@@ -154,6 +155,34 @@ class _Run(NamedTuple):
     pack_rows: np.ndarray
     pack_terms: tuple | None
     position_rad: tuple[float, float]
+    imu_only: bool
+
+
+class _PackArguments(NamedTuple):
+    """:func:`imu_stretch`'s arguments for the pack's attitudes, in its order."""
+
+    rows: np.ndarray
+    sequence: np.ndarray
+    terms: np.ndarray
+    noise_terms: np.ndarray
+    jacobian: np.ndarray
+    epochs: np.ndarray
+
+
+class _Offer(NamedTuple):
+    """What one call of :func:`imu_stretch` is offered: the IMU samples' rows, the inputs'
+    ``order``, the pack's arguments, its attitudes (those queued before first, ``queued`` of
+    them; none when the stretch takes IMU samples alone)."""
+
+    raw: np.ndarray
+    order: np.ndarray
+    pack: _PackArguments
+    measurements: list
+    queued: int
+
+
+_POSITIONS = np.arange(WINDOW, dtype=np.int64)
+"""The ``order`` of a stretch of IMU samples alone."""
 
 
 class EngineParts(NamedTuple):
@@ -185,6 +214,14 @@ class ImuStretches:
         self._parts = parts
         # Writable, as the compiled stretch is loaded for.
         self._jacobian = np.zeros((3, 1)) if parts.pack is None else parts.pack.jacobian.copy()
+        self._no_pack = _PackArguments(
+            np.zeros((0, PACK_ROW_SIZE)),
+            np.zeros(PACK_SEQUENCE_SIZE),
+            np.zeros(PACK_TERMS_SIZE),
+            np.zeros(7),
+            self._jacobian,
+            np.zeros((0, EPOCH_SIZE)),
+        )
 
     @property
     def pack(self) -> AhrsAttitudeSource | None:
@@ -233,6 +270,7 @@ class ImuStretches:
             np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE),
             None if pack is None else pack.stretch_terms(*position, nav.kalman),
             position,
+            len(samples) == len(inputs),
         )
 
     def take(self, run: _Run, start: int, screening: tuple, nav) -> Taken | None:
@@ -240,17 +278,10 @@ class ImuStretches:
         ``screening``'s limits and state and the aided navigation ``nav``; None when it took
         none (the engine takes the first itself)."""
         parts = self._parts
-        with_pack = self._pack_ready(nav)
-        window = self._window(run, start, with_pack)
-        queued = None
-        if with_pack and any(run.pack_index[place] >= 0 for place in window):
-            queued = parts.queue.take_source(parts.pack)
-            if queued is None:
-                window = self._window(run, start, False)
-        if not window:
+        offer = self._imu_offer(run, start) if run.imu_only else self._pack_offer(run, start, nav)
+        if offer is None:
             return None
-        raw = run.raw[[run.imu_index[place] for place in window if run.imu_index[place] >= 0]]
-        order, pack_rows, measurements = self._order(run, window, queued)
+        raw = offer.raw
         limits_of_screening, screened_state = screening
         due = self._buffered_within_reach(raw, limits_of_screening[CLOCK_OFFSET])
         ahead = parts.prediction.ahead[0]
@@ -260,13 +291,12 @@ class ImuStretches:
         plane_terms, covariance, block_indices, distrusted, distrust = (
             parts.solutions.row_arguments(nav.kalman)
         )
-        covariance = covariance.copy()
-        pack_sequence = self._pack_sequence()
-        counts = np.array((0, 0, len(queued or ()), 0), dtype=np.int64)
-        epochs = np.empty((len(pack_rows), EPOCH_SIZE))
+        if offer.measurements:
+            covariance = covariance.copy()  # the epochs' covariance, the filter's if they end
+        counts = np.array((0, 0, offer.queued, 0), dtype=np.int64)
         count, stepped, stop = imu_stretch(
             raw,
-            np.array(order, dtype=np.int64),
+            offer.order,
             limits_of_screening,
             screened_state,
             screened,
@@ -284,20 +314,15 @@ class ImuStretches:
             covariance,
             block_indices,
             rows_written,
-            pack_rows,
-            pack_sequence,
-            self._pack_terms(run),
-            np.array(nav.noise_terms(), dtype=float),
-            self._jacobian,
-            epochs,
+            *offer.pack,
             counts,
         )
-        if measurements:
-            self._book_pack(run, measurements, len(queued or ()), counts, epochs, nav)
-        if counts[EPOCHS]:
-            nav.kalman.covariance = covariance
-            parts.solutions.covariance_changed()
-            parts.solutions.biases_changed()
+        if offer.measurements:
+            self._book_pack(run, offer.measurements, offer.queued, counts, offer.pack.epochs, nav)
+            if counts[EPOCHS]:
+                nav.kalman.covariance = covariance
+                parts.solutions.covariance_changed()
+                parts.solutions.biases_changed()
         if count == 0:
             return None
         imu_taken = int(counts[IMU_TAKEN])
@@ -305,11 +330,42 @@ class ImuStretches:
             (t, (gx, gy, gz), (fx, fy, fz))
             for t, gx, gy, gz, fx, fy, fz in screened[:imu_taken].tolist()
         ]
-        places = [start + k for k in range(count) if order[k] >= 0]
         if took:
             parts.imu_input.screened_through(screened_state, took[-1])
             self._moved(state, due, took, stepped)
+        places = [start + k for k in range(count) if offer.order[k] >= 0]
         return Taken(count, took, places, rows_written[:imu_taken].tolist(), stop == CATCH_UP)
+
+    def _imu_offer(self, run: _Run, start: int) -> _Offer:
+        """What a stretch of IMU samples alone is offered from ``start``."""
+        end = min(start + WINDOW, len(run.imu_index))
+        return _Offer(run.raw[start:end], _POSITIONS[: end - start], self._no_pack, [], 0)
+
+    def _pack_offer(self, run: _Run, start: int, nav) -> _Offer | None:
+        """What a stretch is offered from ``start`` with the pack's attitudes among the IMU
+        samples (the pack's queued ones taken out of the queue, when they can be applied in it);
+        None: nothing."""
+        parts = self._parts
+        with_pack = self._pack_ready(nav)
+        window = self._window(run, start, with_pack)
+        queued = None
+        if with_pack and any(run.pack_index[place] >= 0 for place in window):
+            queued = parts.queue.take_source(parts.pack)
+            if queued is None:
+                window = self._window(run, start, False)
+        if not window:
+            return None
+        raw = run.raw[[run.imu_index[place] for place in window if run.imu_index[place] >= 0]]
+        order, pack_rows, measurements = self._order(run, window, queued)
+        pack = _PackArguments(
+            pack_rows,
+            self._pack_sequence(),
+            self._pack_terms(run),
+            np.array(nav.noise_terms(), dtype=float),
+            self._jacobian,
+            np.empty((len(pack_rows), EPOCH_SIZE)),
+        )
+        return _Offer(raw, np.array(order, dtype=np.int64), pack, measurements, len(queued or ()))
 
     def _buffered_within_reach(self, raw: np.ndarray, clock_offset_s: float) -> list[tuple]:
         """The buffered samples the filter may step to while taking ``raw``: none beyond the
