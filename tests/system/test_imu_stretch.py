@@ -200,6 +200,18 @@ def assert_same_engines(first: FusionEngine, second: FusionEngine) -> None:
         assert np.array_equal(getattr(state, name), getattr(other_state, name)), name
 
 
+def stretched_as_alone(config: FusionConfig, inputs: list[tuple], min_rows: int) -> FusionEngine:
+    """The engine fed ``inputs`` in stretches, asserted the same as fed one at a time (more
+    than ``min_rows`` rows, so that the equality cannot hold on nothing)."""
+    stretched, rows, stamps = in_stretches(config, inputs)
+    alone, expected_rows, expected_stamps = one_at_a_time(config, inputs)
+    assert stamps == expected_stamps
+    assert rows.shape == expected_rows.shape and rows.shape[0] > min_rows
+    assert np.array_equal(rows, expected_rows)
+    assert_same_engines(stretched, alone)
+    return stretched
+
+
 CASES = {
     "clean, then a GNSS outage": ("sea_state", 120.0, FusionConfig(), False, False),
     "imu faults": ("sea_state", 160.0, FusionConfig(), True, False),
@@ -244,12 +256,7 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
         inputs = with_imu_faults(inputs)
     if case.startswith("clean"):
         inputs = without_gnss_between(inputs, 80.0, 100.0)
-    stretched, rows, stamps = in_stretches(config, inputs)
-    alone, expected_rows, expected_stamps = one_at_a_time(config, inputs)
-    assert stamps == expected_stamps
-    assert rows.shape == expected_rows.shape and rows.shape[0] > 500
-    assert np.array_equal(rows, expected_rows)
-    assert_same_engines(stretched, alone)
+    stretched = stretched_as_alone(config, inputs, 500)
     imu_samples = sum(kind == IMU for kind, _ in inputs)
     # The first sample of each run (one in ten between the GNSS epochs) is fed alone.
     assert stretch_counts["taken"] >= 0.7 * imu_samples, "the stretch took too few samples"
@@ -338,12 +345,7 @@ def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretc
     config = PACK_CASES[case]
     magnetometer = config.use_magnetometer
     inputs = with_pack_faults(fusion_inputs(messages))
-    stretched, rows, stamps = in_stretches(config, inputs)
-    alone, expected_rows, expected_stamps = one_at_a_time(config, inputs)
-    assert stamps == expected_stamps
-    assert rows.shape == expected_rows.shape and rows.shape[0] > 10_000
-    assert np.array_equal(rows, expected_rows)
-    assert_same_engines(stretched, alone)
+    stretched = stretched_as_alone(config, inputs, 10_000)
     counters = stretched.health().counters["ahrs"]
     for reason in (
         Reason.ZERO_QUATERNION,

@@ -13,8 +13,9 @@ a test holds the two equal.
 
 A motion pack's attitude comes with every IMU sample (:mod:`buoy_nav.aiding.ahrs_attitude`).
 The stretch queues it as the engine does and, when the filter reaches its stamp, makes its
-epoch with the engine's kernels: the step there with the covariance's propagation, the pack's
-compiled update, the injection of the correction and its carry-over to the prediction. It
+epoch with the engine's kernels (:mod:`buoy_nav.pack_epoch`): the step there with the
+covariance's propagation, the pack's compiled update, the injection of the correction and its
+carry-over to the prediction. It
 stops before an epoch the engine must make itself (a gate that fails, a covariance to repair,
 a constraint due, the prediction forked afresh) and where the pack's books could change what
 follows (its health moved by a pass, the filter distrusted, a smoother recording the epochs);
@@ -30,22 +31,35 @@ import numba
 import numpy as np
 
 from buoy_common.contract import Reason
-from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource, attitude_update
-from buoy_nav.error_dynamics import stepped_covariance_kernel
+from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource
 from buoy_nav.error_state_filter import GateResult
 from buoy_nav.measurement_queue import MAX_MEASUREMENT_LEAD_S
-from buoy_nav.prediction import carry_over_kernel
+from buoy_nav.pack_epoch import (
+    EPOCH_INNOVATION,
+    EPOCH_NIS,
+    EPOCH_S,
+    EPOCH_SIZE,
+    EPOCH_T,
+    INTERVAL_COUNT,
+    INTERVAL_NEXT,
+    INTERVALS,
+    NEWEST_AIDING,
+    PACK_ROW_SIZE,
+    PACK_SEQUENCE_SIZE,
+    PACK_T,
+    PACK_TERMS_SIZE,
+    SEQUENCE_LATEST,
+    THRESHOLD,
+    pack_epoch,
+    queued_attitude,
+)
 from buoy_nav.solution_rows import write_row
 from buoy_nav.strapdown_kernel import (
-    ALTITUDE,
     DURATION,
     LATITUDE,
     LONGITUDE,
-    VELOCITY,
-    inject_error_state,
     strapdown_step,
 )
-from buoy_nav.strapdown_kernel import GYRO_BIAS as NOMINAL_GYRO_BIAS
 from buoy_nav.strapdown_kernel import STATE_SIZE as STRAPDOWN_STATE_SIZE
 from buoy_nav.stream_sequence import RATE_MEMORY, SEQUENCE_INTERVALS
 
@@ -86,28 +100,6 @@ SQUARE = 19
 SCREENING_SIZE = 20
 LATEST, SEQUENCE_LAST, CLOCK_INTERVAL, LAST_SAMPLE = 0, 1, 2, 3
 SCREENED_STATE_SIZE = 10
-# The motion pack's attitudes a stretch takes (:func:`imu_stretch`'s ``pack_rows``, one row
-# each, those already queued first): stamp (s), the pack's attitude on true north (R_nb, 3×3
-# row-major), its covariance (3×3 ENU rad², row-major) and the sample's weight.
-PACK_T, PACK_ROTATION, PACK_COVARIANCE, PACK_WEIGHT = 0, 1, 10, 19
-PACK_ROW_SIZE = 20
-# The pack's sequence (``pack_sequence``): its latest stamp (s), the newest aiding stamp the
-# IMU's clock knows (s), then its recent in-sequence intervals (s): how many, where the next goes,
-# the intervals (:class:`~buoy_nav.stream_sequence.StreamSequence`).
-SEQUENCE_LATEST, NEWEST_AIDING, INTERVAL_COUNT, INTERVAL_NEXT, INTERVALS = range(5)
-PACK_SEQUENCE_SIZE = INTERVALS + RATE_MEMORY
-# The pack's update and what it stops at (``pack_terms``): the lag (s) and its uncertainty
-# squared (s²), the variance floor (rad²), the gate's threshold, the error states' attitude
-# start; how far a measurement may lead the IMU (s), the filter stamp at which the prediction
-# forks afresh (s), and the latitude and longitude (rad) between which the pack's true north is
-# the one its rows were turned to.
-(LAG, LAG_UNCERTAINTY_SQ, FLOOR, THRESHOLD, ATTITUDE_START, MAX_LEAD, RESYNC_AT) = range(7)
-LATITUDE_LOW, LATITUDE_HIGH, LONGITUDE_LOW, LONGITUDE_HIGH = range(7, 11)
-PACK_TERMS_SIZE = 11
-# The epochs of the pack's attitude a stretch applied (``epochs``, a row each): stamp (s), the
-# innovation (rad, 3), its NIS and S (3×3 rad², row-major), for the books.
-EPOCH_T, EPOCH_INNOVATION, EPOCH_NIS, EPOCH_S = 0, 1, 4, 5
-EPOCH_SIZE = 14
 # How far a stretch went (``counts``): the IMU samples it took, where the queued attitudes begin
 # and end in ``pack_rows`` (those before the first were applied), the epochs applied.
 IMU_TAKEN, QUEUE_HEAD, QUEUE_TAIL, EPOCHS = range(4)
@@ -629,8 +621,12 @@ def imu_stretch(
     for item in range(order.shape[0]):
         position = order[item]
         if position < 0:
-            if not _queued(
-                pack_rows[-1 - position, PACK_T], pack_sequence, pack_terms, point, screened_state
+            if not queued_attitude(
+                pack_rows[-1 - position, PACK_T],
+                pack_sequence,
+                pack_terms,
+                point[0],
+                screened_state[LATEST],
             ):
                 return item, stepped, BEFORE_SAMPLE
             counts[QUEUE_TAIL] += 1
@@ -689,7 +685,7 @@ def imu_stretch(
                 if not (
                     pack_rows[head, PACK_T] == t_due
                     and dt > 0.0
-                    and _pack_epoch(
+                    and pack_epoch(
                         pack_rows[head],
                         point,
                         due,
@@ -716,131 +712,6 @@ def imu_stretch(
             point[:] = due
             stepped += 1
     return order.shape[0], stepped, DONE
-
-
-@numba.njit(cache=True)
-def _queued(t, pack_sequence, pack_terms, point, screened_state) -> bool:
-    """Whether the engine would queue the pack's attitude stamped ``t`` (s) with nothing else
-    to do (in its sequence, not too late, not beyond the IMU's data); the sequence then
-    follows it and the IMU's clock knows the newest aiding stamp. Nothing else is changed."""
-    latest = pack_sequence[SEQUENCE_LATEST]
-    count = int(pack_sequence[INTERVAL_COUNT])
-    interval = math.nan
-    for k in range(count):
-        if k == 0 or pack_sequence[INTERVALS + k] < interval:
-            interval = pack_sequence[INTERVALS + k]
-    if not (
-        math.isfinite(t)
-        and t > latest
-        and not t - latest > SEQUENCE_INTERVALS * interval
-        and t > point[0]
-        and not t - screened_state[LATEST] > pack_terms[MAX_LEAD]
-    ):
-        return False
-    if math.isfinite(latest):
-        following = int(pack_sequence[INTERVAL_NEXT])
-        pack_sequence[INTERVALS + following] = t - latest
-        pack_sequence[INTERVAL_NEXT] = (following + 1) % RATE_MEMORY
-        pack_sequence[INTERVAL_COUNT] = min(count + 1, RATE_MEMORY)
-    pack_sequence[SEQUENCE_LATEST] = t
-    if t > pack_sequence[NEWEST_AIDING]:
-        pack_sequence[NEWEST_AIDING] = t
-    return True
-
-
-@numba.njit(cache=True)
-def _pack_epoch(
-    row,
-    point,
-    due,
-    filter_state,
-    coning,
-    sculling,
-    covariance,
-    noise_terms,
-    pack_terms,
-    jacobian,
-    ahead_state,
-    ahead_t,
-    epoch,
-) -> bool:
-    """The epoch of the pack's attitude ``row`` at the IMU sample ``due``, as the engine makes
-    it: the filter's step there from ``point`` with the covariance's propagation, the pack's
-    compiled update and, when its gate passes and the covariance after it is positive
-    definite, the injection into ``filter_state``, the new ``covariance`` and the correction
-    carried over to the prediction (``ahead_state``, at ``ahead_t`` s), the gate into
-    ``epoch``. False, with nothing changed, when the engine is to make it (the gate fails, the
-    covariance needs a repair, the filter left the true north's cell, the prediction forks
-    afresh there)."""
-    t = due[0]
-    if t >= pack_terms[RESYNC_AT]:
-        return False
-    stepped = filter_state.copy()
-    _, prior = stepped_covariance_kernel(
-        stepped,
-        covariance,
-        t - point[0],
-        (point[1], point[2], point[3], due[1], due[2], due[3]),
-        (point[4], point[5], point[6], due[4], due[5], due[6]),
-        (coning, sculling),
-        (
-            noise_terms[0],
-            noise_terms[1],
-            noise_terms[2],
-            noise_terms[3],
-            noise_terms[4],
-            noise_terms[5],
-            noise_terms[6],
-        ),
-    )
-    latitude, longitude = stepped[LATITUDE], stepped[LONGITUDE]
-    if not (
-        pack_terms[LATITUDE_LOW] < latitude < pack_terms[LATITUDE_HIGH]
-        and pack_terms[LONGITUDE_LOW] < longitude < pack_terms[LONGITUDE_HIGH]
-    ):
-        return False
-    rate_x = due[1] - stepped[NOMINAL_GYRO_BIAS]
-    rate_y = due[2] - stepped[NOMINAL_GYRO_BIAS + 1]
-    rate_z = due[3] - stepped[NOMINAL_GYRO_BIAS + 2]
-    square = 2.0 + 0.0 * t  # a run-time exponent: the C library's pow, as the interpreter's
-    lag_variance = (
-        math.pow(rate_x, square) + math.pow(rate_y, square) + math.pow(rate_z, square)
-    ) * pack_terms[LAG_UNCERTAINTY_SQ]
-    innovation, nis, innovation_covariance, accepted, updated, correction, positive = (
-        attitude_update(
-            prior,
-            stepped,
-            row[PACK_ROTATION : PACK_ROTATION + 9].reshape(3, 3).copy(),
-            rate_x,
-            rate_y,
-            rate_z,
-            pack_terms[LAG],
-            row[PACK_COVARIANCE : PACK_COVARIANCE + 9].reshape(3, 3).copy(),
-            pack_terms[FLOOR],
-            lag_variance,
-            row[PACK_WEIGHT],
-            jacobian,
-            pack_terms[THRESHOLD],
-            int(pack_terms[ATTITUDE_START]),
-        )
-    )
-    if not (accepted and positive):
-        return False
-    velocity = stepped[VELOCITY : VELOCITY + 3].copy()
-    filter_altitude = stepped[ALTITUDE]
-    filter_state[:] = stepped
-    inject_error_state(filter_state, correction)
-    covariance[:, :] = updated
-    carried = correction.copy()
-    span = ahead_t - t
-    if span > 0.0:
-        carry_over_kernel(ahead_state, velocity, latitude, filter_altitude, span, carried)
-    inject_error_state(ahead_state, carried)
-    epoch[EPOCH_T] = t
-    epoch[EPOCH_INNOVATION : EPOCH_INNOVATION + 3] = innovation
-    epoch[EPOCH_NIS] = nis
-    epoch[EPOCH_S : EPOCH_S + 9] = innovation_covariance.reshape(9)
-    return True
 
 
 @numba.njit(cache=True)
