@@ -44,13 +44,14 @@ def _wmm_cell(latitude_cell: int, longitude_cell: int, year_step: int):
     )
 
 
+def _cell(angle_rad: float) -> int:
+    """The index of the cell a latitude or longitude (rad) falls in."""
+    return round(math.degrees(angle_rad) / _CELL_DEG)
+
+
 def _wmm_at(latitude_rad: float, longitude_rad: float, t_s: float):
     year = UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
-    return _wmm_cell(
-        round(math.degrees(latitude_rad) / _CELL_DEG),
-        round(math.degrees(longitude_rad) / _CELL_DEG),
-        round(year / _YEAR_STEP),
-    )
+    return _wmm_cell(_cell(latitude_rad), _cell(longitude_rad), round(year / _YEAR_STEP))
 
 
 CELL_MARGIN_RAD = 1e-9
@@ -64,7 +65,7 @@ def wmm_cell_bounds_rad(latitude_rad: float, longitude_rad: float) -> tuple[floa
     field is the same anywhere within them at one time."""
     bounds = []
     for angle_rad in (latitude_rad, longitude_rad):
-        cell = round(math.degrees(angle_rad) / _CELL_DEG)
+        cell = _cell(angle_rad)
         bounds += [
             math.radians((cell - 0.5) * _CELL_DEG) + CELL_MARGIN_RAD,
             math.radians((cell + 0.5) * _CELL_DEG) - CELL_MARGIN_RAD,
@@ -126,7 +127,7 @@ def wmm_field_range_along_parallel(latitude_rad: float, t_s: float) -> FieldRang
     epoch), at sea level: what a buoy at that latitude may see when its longitude is not
     known."""
     year = UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
-    return _parallel_range(round(math.degrees(latitude_rad) / _CELL_DEG), round(year / _YEAR_STEP))
+    return _parallel_range(_cell(latitude_rad), round(year / _YEAR_STEP))
 
 
 @lru_cache(maxsize=16)

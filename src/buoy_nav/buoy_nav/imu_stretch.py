@@ -325,7 +325,7 @@ class ImuStretches:
         if took:
             parts.imu_input.screened_through(screened_state, took[-1])
             self._moved(state, due, took, stepped)
-        places = [start + k for k in range(count) if offer.order[k] >= 0]
+        places = [start + k for k, place in enumerate(offer.order[:count].tolist()) if place >= 0]
         return Taken(count, took, places, rows_written[:imu_taken].tolist(), stop == CATCH_UP)
 
     def _imu_offer(self, run: _Run, start: int) -> _Offer:
@@ -581,137 +581,210 @@ def imu_stretch(
     counts,
 ):
     """Take the inputs in ``order`` (an IMU sample's index in ``raw``, or −1 − the index of a
-    motion-pack attitude in ``pack_rows``), after the ``buffered`` IMU samples ahead of the
-    filter that the stretch may reach (k × 7, oldest first), as the engine's ``add_imu``,
-    ``add_measurement`` and ``catch_up`` would, until one needs the engine.
+    motion-pack attitude in ``pack_rows``) as the engine's ``add_imu``, ``add_measurement`` and
+    ``catch_up`` would, until one needs the engine; the filter may also reach the ``buffered``
+    IMU samples ahead of it (k × 7, oldest first).
 
-    raw: the IMU samples (n × 7: header stamp s, ω_ib body rad/s, specific force body m/s²),
-    each screened as :meth:`~buoy_nav.imu_input.ImuInput.accept` screens it (``screening``,
-    ``screened_state`` updated; into ``samples``, n × 7, re-stamped and calibrated), then taken.
-    pack_rows (:data:`PACK_T` …): the pack's attitudes, validated, those queued before the
-    stretch first (``counts``' :data:`QUEUE_HEAD` to :data:`QUEUE_TAIL`); each new one is
-    screened as the engine screens a measurement in its sequence (``pack_sequence``, updated)
-    and queued, and applied when the filter reaches its stamp, which must be an IMU sample's:
-    the step there with the covariance's propagation, the pack's compiled update, the
-    correction's injection and its carry-over to the prediction, each epoch's gate into
-    ``epochs`` for the books.
-
-    state: :data:`POINT` … :data:`ROWS`, updated; limits: :data:`DELAY` (the fusion's
-    ``max_measurement_delay_s``) … :data:`CONSTRAINT_DUE` (the stamp of the next measurement
-    queued but the pack's, inf: none; the output period, 0: every sample; the distrust, 1.0
-    or 0.0, and its variances; the first stamp a constraint is due at, inf: none);
-    filter_state, ahead_state: the strapdown states, stepped in place, with their coning and
-    sculling corrections; covariance: the filter's, updated in place; rows_block and the row
-    writer's other arguments (:func:`~buoy_nav.solution_rows.write_row`); row_written: set for
-    each IMU sample whose solution was written; pack_terms (:data:`LAG` …), noise_terms (the
-    process noise's, :func:`~buoy_nav.error_dynamics.stepped_covariance`) and pack_jacobian:
-    the pack's update's; counts: :data:`IMU_TAKEN` … :data:`EPOCHS`, updated.
+    Each IMU sample (n × 7: header stamp s, ω_ib body rad/s, specific force body m/s²) is
+    screened (``screening``, ``screened_state``; into ``samples``, re-stamped and calibrated),
+    predicted ahead with its row (:func:`_predicted`) and the filter stepped to its horizon
+    (:func:`_filtered`); each attitude is queued (:func:`~buoy_nav.pack_epoch.queued_attitude`)
+    and its epoch made when the filter reaches it. The arrays' layouts are this module's
+    constants and :mod:`buoy_nav.pack_epoch`'s; ``state``, the strapdown states, ``covariance``
+    and ``counts`` are updated in place, ``row_written`` set for each sample whose row was
+    written.
 
     Returns (inputs taken, buffered samples the filter stepped to, :data:`DONE`,
-    :data:`BEFORE_SAMPLE` or :data:`CATCH_UP`); the filter's latest two samples are then the
-    last two stepped to (the buffered ones, then the taken ones).
+    :data:`BEFORE_SAMPLE` or :data:`CATCH_UP`).
     """
-    delay_s = limits[DELAY]
-    max_gap_s = limits[MAX_GAP]
     # Integer bounds: a slice object held globally would be unpickled at each call.
     point = state[POINT : POINT + SAMPLE_SIZE]
     ahead = state[AHEAD : AHEAD + SAMPLE_SIZE]
-    n_buffered = buffered.shape[0]
     stepped = 0
     for item in range(order.shape[0]):
         position = order[item]
         if position < 0:
-            if not queued_attitude(
-                pack_rows[-1 - position, PACK_T],
-                pack_sequence,
-                pack_terms,
-                point[0],
-                screened_state[LATEST],
-            ):
+            t = pack_rows[-1 - position, PACK_T]
+            if not queued_attitude(t, pack_sequence, pack_terms, point[0], screened_state[LATEST]):
                 return item, stepped, BEFORE_SAMPLE
             counts[QUEUE_TAIL] += 1
             continue
         index = counts[IMU_TAKEN]
         sample = samples[index]
-        if not _screened(raw[position], screening, screened_state, sample):
+        if not _taken(raw[position], screening, screened_state, sample, state, limits, rows_block):
             return item, stepped, BEFORE_SAMPLE
-        t = sample[0]
-        span = t - ahead[0]
-        if span > max_gap_s or state[ROWS] >= rows_block.shape[0]:
-            return item, stepped, BEFORE_SAMPLE
-        _accepted(screening, screened_state, sample)
         counts[IMU_TAKEN] += 1
-        _step(ahead_state, span, ahead, sample, ahead_coning, ahead_sculling)
-        ahead[:] = sample
-        if t > state[LAST_PREDICTED_T] and _due(state, t, span, limits[OUTPUT_PERIOD]):
-            write_row(
-                rows_block,
-                int(state[ROWS]),
-                t,
-                ahead_state,
-                sample[1],
-                sample[2],
-                sample[3],
-                sample[4],
-                sample[5],
-                sample[6],
-                plane_terms,
-                covariance,
-                block_indices,
-                limits[DISTRUSTED] != 0.0,
-                limits[ATTITUDE_VARIANCE],
-                limits[VELOCITY_VARIANCE],
-            )
-            state[ROWS] += 1
-            row_written[index] = True
-        state[LAST_PREDICTED_T] = t
-        horizon = t - delay_s
-        while stepped < n_buffered + index + 1:
-            due = buffered[stepped] if stepped < n_buffered else samples[stepped - n_buffered]
-            t_due = due[0]
-            if t_due > horizon:
-                break
-            dt = t_due - point[0]
-            # A gap, or a sample predicted before (above), the prediction meets first and the
-            # engine takes; the stretch still never steps across one.
-            if (
-                t_due - point[0] > max_gap_s
-                or limits[NEXT_MEASUREMENT] <= t_due
-                or limits[CONSTRAINT_DUE] <= t_due
-            ):
-                return item + 1, stepped, CATCH_UP
-            head = counts[QUEUE_HEAD]
-            if head < counts[QUEUE_TAIL] and pack_rows[head, PACK_T] <= t_due:
-                if not (
-                    pack_rows[head, PACK_T] == t_due
-                    and dt > 0.0
-                    and pack_epoch(
-                        pack_rows[head],
-                        point,
-                        due,
-                        filter_state,
-                        filter_coning,
-                        filter_sculling,
-                        covariance,
-                        noise_terms,
-                        pack_terms,
-                        pack_jacobian,
-                        ahead_state,
-                        ahead[0],
-                        epochs[counts[EPOCHS]],
-                    )
-                ):
-                    return item + 1, stepped, CATCH_UP
-                counts[QUEUE_HEAD] += 1
-                counts[EPOCHS] += 1
-            else:
-                if dt > 0.0 and filter_state[DURATION] + dt >= limits[PROPAGATION_INTERVAL]:
-                    return item + 1, stepped, CATCH_UP
-                if dt > 0.0:
-                    _step(filter_state, dt, point, due, filter_coning, filter_sculling)
-            point[:] = due
-            stepped += 1
+        row_written[index] = _predicted(
+            sample,
+            state,
+            limits,
+            ahead_state,
+            ahead_coning,
+            ahead_sculling,
+            rows_block,
+            plane_terms,
+            covariance,
+            block_indices,
+        )
+        stepped = _filtered(
+            sample[0] - limits[DELAY],
+            stepped,
+            buffered.shape[0] + index + 1,
+            buffered,
+            samples,
+            point,
+            limits,
+            filter_state,
+            filter_coning,
+            filter_sculling,
+            covariance,
+            pack_rows,
+            pack_terms,
+            noise_terms,
+            pack_jacobian,
+            ahead_state,
+            ahead[0],
+            epochs,
+            counts,
+        )
+        if stepped < 0:
+            return item + 1, -1 - stepped, CATCH_UP
     return order.shape[0], stepped, DONE
+
+
+@numba.njit(cache=True)
+def _taken(raw_sample, screening, screened_state, sample, state, limits, rows_block) -> bool:
+    """Whether the stretch takes ``raw_sample``: screened as :func:`_screened` screens it, not
+    beyond a gap from the prediction ahead (``state``'s :data:`AHEAD`), with room in the rows'
+    block; the screening then accepts it into ``sample``."""
+    if not _screened(raw_sample, screening, screened_state, sample):
+        return False
+    if sample[0] - state[AHEAD] > limits[MAX_GAP] or state[ROWS] >= rows_block.shape[0]:
+        return False
+    _accepted(screening, screened_state, sample)
+    return True
+
+
+@numba.njit(cache=True)
+def _predicted(
+    sample,
+    state,
+    limits,
+    ahead_state,
+    coning,
+    sculling,
+    rows_block,
+    plane_terms,
+    covariance,
+    block_indices,
+) -> bool:
+    """The prediction ahead (``ahead_state``, at ``state``'s :data:`AHEAD` sample) stepped to
+    the accepted IMU ``sample`` and, when the output is due there, its solution's row written;
+    whether it was (``state``'s :data:`ROWS`, :data:`LAST_PREDICTED_T` and the decimation's
+    next stamp follow)."""
+    ahead = state[AHEAD : AHEAD + SAMPLE_SIZE]
+    t = sample[0]
+    span = t - ahead[0]
+    _step(ahead_state, span, ahead, sample, coning, sculling)
+    ahead[:] = sample
+    written = t > state[LAST_PREDICTED_T] and _due(state, t, span, limits[OUTPUT_PERIOD])
+    if written:
+        write_row(
+            rows_block,
+            int(state[ROWS]),
+            t,
+            ahead_state,
+            sample[1],
+            sample[2],
+            sample[3],
+            sample[4],
+            sample[5],
+            sample[6],
+            plane_terms,
+            covariance,
+            block_indices,
+            limits[DISTRUSTED] != 0.0,
+            limits[ATTITUDE_VARIANCE],
+            limits[VELOCITY_VARIANCE],
+        )
+        state[ROWS] += 1
+    state[LAST_PREDICTED_T] = t
+    return written
+
+
+@numba.njit(cache=True)
+def _filtered(
+    horizon_s,
+    stepped,
+    reachable,
+    buffered,
+    samples,
+    point,
+    limits,
+    filter_state,
+    coning,
+    sculling,
+    covariance,
+    pack_rows,
+    pack_terms,
+    noise_terms,
+    pack_jacobian,
+    ahead_state,
+    ahead_t,
+    epochs,
+    counts,
+) -> int:
+    """The filter (``filter_state`` at ``point``) stepped through the samples it has not
+    reached of the first ``reachable`` (the ``buffered`` ones, then the taken ``samples``) up to
+    ``horizon_s`` (s), each queued pack attitude's epoch made at its stamp: how many samples
+    it has reached in all, or −1 − that when it stopped where the engine must go on (a gap, a
+    measurement or constraint due, the covariance's batch full, an epoch it cannot make)."""
+    n_buffered = buffered.shape[0]
+    while stepped < reachable:
+        due = buffered[stepped] if stepped < n_buffered else samples[stepped - n_buffered]
+        t_due = due[0]
+        if t_due > horizon_s:
+            break
+        dt = t_due - point[0]
+        # A gap, or a sample predicted before (above), the prediction meets first and the
+        # engine takes; the stretch still never steps across one.
+        if (
+            dt > limits[MAX_GAP]
+            or limits[NEXT_MEASUREMENT] <= t_due
+            or limits[CONSTRAINT_DUE] <= t_due
+        ):
+            return -1 - stepped
+        head = counts[QUEUE_HEAD]
+        if head < counts[QUEUE_TAIL] and pack_rows[head, PACK_T] <= t_due:
+            if not (
+                pack_rows[head, PACK_T] == t_due
+                and dt > 0.0
+                and pack_epoch(
+                    pack_rows[head],
+                    point,
+                    due,
+                    filter_state,
+                    coning,
+                    sculling,
+                    covariance,
+                    noise_terms,
+                    pack_terms,
+                    pack_jacobian,
+                    ahead_state,
+                    ahead_t,
+                    epochs[counts[EPOCHS]],
+                )
+            ):
+                return -1 - stepped
+            counts[QUEUE_HEAD] += 1
+            counts[EPOCHS] += 1
+        elif dt > 0.0:
+            if filter_state[DURATION] + dt >= limits[PROPAGATION_INTERVAL]:
+                return -1 - stepped
+            _step(filter_state, dt, point, due, coning, sculling)
+        point[:] = due
+        stepped += 1
+    return stepped
 
 
 @numba.njit(cache=True)
