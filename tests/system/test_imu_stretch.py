@@ -61,8 +61,9 @@ def with_imu_faults(inputs: list[tuple]) -> list[tuple]:
     """``inputs`` with, among the IMU samples after the first minute: a 5 rad/s spike, a
     non-finite force, a rate of two numbers and one of None, a repeated sample, three samples
     of a second stream 0.25 s ahead, a sample 4 ms after another (the screening learns a
-    shorter interval), a force beyond the sensor's range, 0.8 s of samples lost (a gap beyond
-    ``max_imu_gap_s``), and from 100 s on the IMU's clock 3 s behind."""
+    shorter interval), a force beyond the sensor's range, a sample 3 ms after another and
+    then 0.8 s of samples lost (a gap beyond ``max_imu_gap_s``), and from 100 s on the IMU's
+    clock 3 s behind."""
     faulty, imu_count, first_s = [], 0, None
     for kind, item in inputs:
         if kind != IMU:
@@ -93,6 +94,8 @@ def with_imu_faults(inputs: list[tuple]) -> list[tuple]:
             faulty.append((IMU, (t + 0.25, gyro, force)))
         elif imu_count == 7700:
             faulty.append((IMU, (t + 0.004, gyro, force)))
+        elif imu_count == 8000:  # the last before the samples lost
+            faulty.append((IMU, (t + 0.003, gyro, force)))
     return faulty
 
 
@@ -271,6 +274,7 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
             Reason.MALFORMED,
         ):
             assert rejected[reason] >= 1, reason
+        assert rejected[Reason.OUT_OF_SEQUENCE] == 3, "the second stream's alone"
         assert health.imu_clock_steps, "the clock's step was undone"
     if velocity_bias:
         assert health.realignments >= 1

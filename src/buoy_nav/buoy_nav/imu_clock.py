@@ -14,7 +14,7 @@ of a new sequence once it is the IMU's.
 
 import math
 
-from buoy_nav.stream_sequence import SEQUENCE_INTERVALS, follows
+from buoy_nav.stream_sequence import SEQUENCE_INTERVALS, RecentIntervals, follows
 
 MAX_AIDING_INTERVAL_S = 1.0
 """Longest interval between aiding measurements of a running GNSS receiver (s): aiding stamps
@@ -31,8 +31,8 @@ class ImuClock:
     def __init__(self, max_gap_s: float):
         self._max_gap_s = max_gap_s
         self._offset_s = 0.0
-        self.interval_s = math.nan
-        """The IMU's sample interval (s; NaN until two samples in sequence were accepted)."""
+        self.intervals = RecentIntervals()
+        """The IMU's recent in-sequence intervals and its sample interval from them."""
         self.newest_aiding_s = -math.inf
         """The newest aiding stamp seen (s)."""
         self.steps: list[tuple[float, float]] = []
@@ -43,6 +43,11 @@ class ImuClock:
         """An aiding measurement stamped ``t_s`` (s) arrived."""
         if t_s > self.newest_aiding_s:
             self.newest_aiding_s = t_s
+
+    @property
+    def interval_s(self) -> float:
+        """The IMU's sample interval (s; NaN until two samples in sequence were accepted)."""
+        return self.intervals.interval_s
 
     @property
     def offset_s(self) -> float:
@@ -89,7 +94,7 @@ class ImuClock:
 
     def accepted(self, t_s: float, latest_s: float) -> None:
         """The sample re-stamped ``t_s`` (s) was accepted after the one at ``latest_s``: the
-        sample interval follows it when it is in sequence (or none is known yet)."""
+        interval is one of the recent ones when it is in sequence (or none is known yet)."""
         dt = t_s - latest_s
         if dt <= self._max_gap_s and not dt > SEQUENCE_INTERVALS * self.interval_s:
-            self.interval_s = dt
+            self.intervals.add(dt)

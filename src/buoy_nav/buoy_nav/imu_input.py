@@ -18,6 +18,7 @@ from buoy_common.contract import Reason
 from buoy_nav.config import FusionConfig
 from buoy_nav.imu_clock import ImuClock
 from buoy_nav.imu_screening import ImuPlausibility
+from buoy_nav.sequence_kernels import RING_SIZE, intervals_of, ring_of
 from buoy_nav.stream_sequence import HeldSequence
 
 Triple = tuple[float, float, float]
@@ -134,6 +135,7 @@ class ImuInput:
                 last_t,
                 *last_gyro,
                 *last_force,
+                *ring_of(self.clock.intervals.values_s),
             ),
             dtype=float,
         )
@@ -142,10 +144,10 @@ class ImuInput:
     def screened_through(self, screened_state: np.ndarray, last: Sample) -> None:
         """Samples were screened and accepted as :meth:`accept` does, up to ``last``, by
         :func:`~buoy_nav.imu_stretch.imu_stretch`, which left the ``screened_state``."""
-        latest, sequence_last, interval = screened_state[:3].tolist()
+        latest, sequence_last = screened_state[:2].tolist()
         self.latest_stamp_s = latest
         self._sequence_last_s = sequence_last
-        self.clock.interval_s = interval
+        self.clock.intervals.restart(intervals_of(screened_state[-RING_SIZE:]))
         self._plausibility.last = last
 
     def _sequence_goes_on(self, t_s: float) -> None:

@@ -40,9 +40,7 @@ from buoy_nav.pack_epoch import (
     EPOCH_S,
     EPOCH_SIZE,
     EPOCH_T,
-    INTERVAL_COUNT,
-    INTERVAL_NEXT,
-    INTERVALS,
+    INTERVAL_RING,
     NEWEST_AIDING,
     PACK_ROW_SIZE,
     PACK_SEQUENCE_SIZE,
@@ -53,6 +51,7 @@ from buoy_nav.pack_epoch import (
     pack_epoch,
     queued_attitude,
 )
+from buoy_nav.sequence_kernels import RING_SIZE, ring_add, ring_interval, ring_of
 from buoy_nav.solution_rows import write_row
 from buoy_nav.strapdown_kernel import (
     DURATION,
@@ -61,7 +60,7 @@ from buoy_nav.strapdown_kernel import (
     strapdown_step,
 )
 from buoy_nav.strapdown_kernel import STATE_SIZE as STRAPDOWN_STATE_SIZE
-from buoy_nav.stream_sequence import RATE_MEMORY, SEQUENCE_INTERVALS
+from buoy_nav.stream_sequence import SEQUENCE_INTERVALS
 
 DONE = 0
 """Every sample of the stretch taken, the filter caught up to the last one's horizon."""
@@ -91,15 +90,16 @@ LIMITS_SIZE = 9
 # biases and scales (none when CALIBRATED is 0.0), the largest angular acceleration and jerk,
 # the rate's and force's noise allowances, the learnt sample interval (s) and the exponent of
 # the squares (2.0, handed in so that they are the C library's, as the interpreter's ``** 2``);
-# the latest accepted stamp, the sequence's latest stamp, the clock's sample interval (s) and
-# the last accepted sample (stamp s, gyro, force).
+# the latest accepted stamp, the sequence's latest stamp, the clock's sample interval (s), the
+# last accepted sample (stamp s, gyro, force) and, last, the ring of the clock's recent
+# intervals the sample interval is taken from (:mod:`buoy_nav.sequence_kernels`).
 (CLOCK_OFFSET, MAX_RATE_SQ, MAX_FORCE_SQ, SCREENING_MAX_GAP, CALIBRATED) = range(5)
 GYRO_BIAS, ACCEL_BIAS, ACCEL_SCALE = 5, 8, 11
 (MAX_ANGULAR_ACCELERATION, MAX_JERK, RATE_NOISE, FORCE_NOISE, SAMPLE_INTERVAL) = range(14, 19)
 SQUARE = 19
 SCREENING_SIZE = 20
-LATEST, SEQUENCE_LAST, CLOCK_INTERVAL, LAST_SAMPLE = 0, 1, 2, 3
-SCREENED_STATE_SIZE = 10
+LATEST, SEQUENCE_LAST, CLOCK_INTERVAL, LAST_SAMPLE, CLOCK_RING = 0, 1, 2, 3, 10
+SCREENED_STATE_SIZE = CLOCK_RING + RING_SIZE
 # How far a stretch went (``counts``): the IMU samples it took, where the queued attitudes begin
 # and end in ``pack_rows`` (those before the first were applied), the epochs applied.
 IMU_TAKEN, QUEUE_HEAD, QUEUE_TAIL, EPOCHS = range(4)
@@ -488,11 +488,8 @@ class ImuStretches:
             sequence[SEQUENCE_LATEST] = math.inf
             return sequence
         stream = parts.sequences[parts.pack.kind]
-        intervals = stream.intervals_s
         sequence[SEQUENCE_LATEST] = stream.latest_s
-        sequence[INTERVAL_COUNT] = len(intervals)
-        sequence[INTERVAL_NEXT] = len(intervals) % RATE_MEMORY
-        sequence[INTERVALS : INTERVALS + len(intervals)] = intervals
+        sequence[INTERVAL_RING:] = ring_of(stream.intervals_s)
         return sequence
 
     def _pack_terms(self, run: _Run) -> np.ndarray:
@@ -861,7 +858,9 @@ def _accepted(screening, screened_state, sample) -> None:
     if dt <= screening[SCREENING_MAX_GAP] and not dt > (
         SEQUENCE_INTERVALS * screened_state[CLOCK_INTERVAL]
     ):
-        screened_state[CLOCK_INTERVAL] = dt
+        ring = screened_state[CLOCK_RING:]
+        ring_add(ring, dt)
+        screened_state[CLOCK_INTERVAL] = ring_interval(ring)
     screened_state[LATEST] = stamp
     screened_state[SEQUENCE_LAST] = stamp
     screened_state[LAST_SAMPLE : LAST_SAMPLE + SAMPLE_SIZE] = sample

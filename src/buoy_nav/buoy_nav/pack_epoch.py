@@ -16,6 +16,7 @@ import numba
 from buoy_nav.aiding.ahrs_attitude import attitude_update
 from buoy_nav.error_dynamics import stepped_covariance_kernel
 from buoy_nav.prediction import carry_over_kernel
+from buoy_nav.sequence_kernels import RING_SIZE, ring_add, ring_interval
 from buoy_nav.strapdown_kernel import (
     ALTITUDE,
     GYRO_BIAS,
@@ -24,7 +25,7 @@ from buoy_nav.strapdown_kernel import (
     VELOCITY,
     inject_error_state,
 )
-from buoy_nav.stream_sequence import RATE_MEMORY, SEQUENCE_INTERVALS
+from buoy_nav.stream_sequence import SEQUENCE_INTERVALS
 
 # The motion pack's attitudes a stretch takes (the stretch's ``pack_rows``, one row each, those
 # already queued first): stamp (s), the pack's attitude on true north (R_nb, 3×3 row-major), its
@@ -32,10 +33,10 @@ from buoy_nav.stream_sequence import RATE_MEMORY, SEQUENCE_INTERVALS
 PACK_T, PACK_ROTATION, PACK_COVARIANCE, PACK_WEIGHT = 0, 1, 10, 19
 PACK_ROW_SIZE = 20
 # The pack's sequence (``pack_sequence``): its latest stamp (s), the newest aiding stamp the
-# IMU's clock knows (s), then its recent in-sequence intervals (s): how many, where the next goes,
-# the intervals (:class:`~buoy_nav.stream_sequence.StreamSequence`).
-SEQUENCE_LATEST, NEWEST_AIDING, INTERVAL_COUNT, INTERVAL_NEXT, INTERVALS = range(5)
-PACK_SEQUENCE_SIZE = INTERVALS + RATE_MEMORY
+# IMU's clock knows (s), then the ring of its recent in-sequence intervals
+# (:mod:`buoy_nav.sequence_kernels`, :class:`~buoy_nav.stream_sequence.StreamSequence`).
+SEQUENCE_LATEST, NEWEST_AIDING, INTERVAL_RING = range(3)
+PACK_SEQUENCE_SIZE = INTERVAL_RING + RING_SIZE
 # The pack's update and what it stops at (``pack_terms``): the lag (s) and its uncertainty
 # squared (s²), the variance floor (rad²), the gate's threshold, the error states' attitude
 # start; how far a measurement may lead the IMU (s), the filter stamp at which the prediction
@@ -57,24 +58,17 @@ def queued_attitude(t, pack_sequence, pack_terms, last_imu_stamp_s, newest_imu_s
     and not beyond the newest IMU stamp by ``pack_terms``' :data:`MAX_LEAD` (s); the sequence
     then follows it and knows the newest aiding stamp. Nothing is changed otherwise."""
     latest = pack_sequence[SEQUENCE_LATEST]
-    count = int(pack_sequence[INTERVAL_COUNT])
-    interval = math.nan
-    for k in range(count):
-        if k == 0 or pack_sequence[INTERVALS + k] < interval:
-            interval = pack_sequence[INTERVALS + k]
+    ring = pack_sequence[INTERVAL_RING:]
     if not (
         math.isfinite(t)
         and t > latest
-        and not t - latest > SEQUENCE_INTERVALS * interval
+        and not t - latest > SEQUENCE_INTERVALS * ring_interval(ring)
         and t > last_imu_stamp_s
         and not t - newest_imu_stamp_s > pack_terms[MAX_LEAD]
     ):
         return False
     if math.isfinite(latest):
-        following = int(pack_sequence[INTERVAL_NEXT])
-        pack_sequence[INTERVALS + following] = t - latest
-        pack_sequence[INTERVAL_NEXT] = (following + 1) % RATE_MEMORY
-        pack_sequence[INTERVAL_COUNT] = min(count + 1, RATE_MEMORY)
+        ring_add(ring, t - latest)
     pack_sequence[SEQUENCE_LATEST] = t
     if t > pack_sequence[NEWEST_AIDING]:
         pack_sequence[NEWEST_AIDING] = t

@@ -54,8 +54,52 @@ GRID_TOLERANCE = 0.01
 whole number of intervals from the sequence's latest stamp."""
 
 RATE_MEMORY = 16
-"""In-sequence intervals a :class:`StreamSequence` keeps: the stream's sample interval is the
-shortest of them, so a lost sample does not widen what follows the sequence."""
+"""In-sequence intervals a stream's sequence keeps (:class:`RecentIntervals`)."""
+
+
+def stream_interval_s(intervals) -> float:
+    """The sample interval (s) of a stream whose recent in-sequence intervals (s) are
+    ``intervals``: their median, the lower one of an even count; NaN when there is none.
+
+    A sample lost in between makes one interval twice the stream's, a stamp off its grid (a
+    driver's jitter) two shorter ones that sum to it. The median holds the stream's rate against
+    a few of either. The shortest would follow the jittered one: a stream stamped every 10 ms
+    after a stamp 4 ms off would be taken for one sampled every 4 ms, its own samples would no
+    longer follow each other within :data:`SEQUENCE_INTERVALS` of that, and after an outage no
+    new sequence would ever be confirmed: the stream would be lost for good. The lower median
+    of two keeps the shorter, so that a sample lost early does not widen what follows.
+
+    Written for the interpreter and numba alike (:mod:`buoy_nav.sequence_kernels`)."""
+    count = len(intervals)
+    if count == 0:
+        return math.nan
+    return sorted(intervals)[(count - 1) // 2]
+
+
+class RecentIntervals:
+    """A stream's recent in-sequence intervals (s), :data:`RATE_MEMORY` at most, and its sample
+    interval from them (:func:`stream_interval_s`)."""
+
+    def __init__(self):
+        self._intervals: deque[float] = deque(maxlen=RATE_MEMORY)
+        self.interval_s = math.nan
+        """The stream's sample interval (s; NaN until an interval came)."""
+
+    @property
+    def values_s(self) -> list[float]:
+        """The recent intervals (s), oldest first."""
+        return list(self._intervals)
+
+    def add(self, interval_s: float) -> None:
+        """An in-sequence interval of ``interval_s`` (s) came."""
+        self._intervals.append(interval_s)
+        self.interval_s = stream_interval_s(self._intervals)
+
+    def restart(self, intervals_s) -> None:
+        """The recent intervals are ``intervals_s`` (s, oldest first) alone."""
+        self._intervals.clear()
+        self._intervals.extend(intervals_s)
+        self.interval_s = stream_interval_s(self._intervals)
 
 
 def follows(t_s: float, previous_s: float, interval_s: float) -> bool:
@@ -102,7 +146,7 @@ class StreamSequence:
     def __init__(self):
         self.latest_s = -math.inf
         """The latest stamp of the accepted sequence (s)."""
-        self._intervals: deque[float] = deque(maxlen=RATE_MEMORY)
+        self._intervals = RecentIntervals()
         self._held = HeldSequence()
         self.second_stream_samples = 0
         """Held samples given up so far: a second stream's."""
@@ -112,9 +156,9 @@ class StreamSequence:
 
     @property
     def interval_s(self) -> float:
-        """The stream's sample interval (s): the shortest recent one in sequence (NaN until
-        two samples in sequence came)."""
-        return min(self._intervals) if self._intervals else math.nan
+        """The stream's sample interval (s) from its recent ones in sequence
+        (:func:`stream_interval_s`; NaN until two samples in sequence came)."""
+        return self._intervals.interval_s
 
     def screen(self, t_s: float, item) -> Screening:
         """Screen the sample stamped ``t_s`` (s, finite) that the caller knows as ``item``."""
@@ -124,7 +168,7 @@ class StreamSequence:
         if follows(t_s, latest, self.interval_s):
             given_up = self._give_up_held()
             if math.isfinite(latest):
-                self._intervals.append(t_s - latest)
+                self._intervals.add(t_s - latest)
             self.latest_s = t_s
             return Screening(False, [item], given_up)
         return self._hold(t_s, item)
@@ -137,13 +181,13 @@ class StreamSequence:
     @property
     def intervals_s(self) -> list[float]:
         """The recent in-sequence intervals (s), oldest first."""
-        return list(self._intervals)
+        return self._intervals.values_s
 
     def followed(self, t_s: float) -> None:
         """A sample stamped ``t_s`` (s) followed the sequence, none held: as :meth:`screen`
         takes it (:mod:`buoy_nav.imu_stretch` screened it)."""
         if math.isfinite(self.latest_s):
-            self._intervals.append(t_s - self.latest_s)
+            self._intervals.add(t_s - self.latest_s)
         self.latest_s = t_s
 
     def on_grid(self, t_s: float) -> bool:
@@ -166,8 +210,7 @@ class StreamSequence:
             return Screening(True, [], given_up)
         samples = held.take()
         stamps = [t for t, _ in samples]
-        self._intervals.clear()
-        self._intervals.extend(b - a for a, b in itertools.pairwise(stamps))
+        self._intervals.restart([b - a for a, b in itertools.pairwise(stamps)])
         self.latest_s = stamps[-1]
         return Screening(True, [item for _, item in samples], given_up)
 

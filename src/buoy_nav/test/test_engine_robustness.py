@@ -188,6 +188,27 @@ def test_an_imu_outage_is_not_taken_for_a_clock_step():
     assert health.imu_gaps == 1
 
 
+def test_a_stamp_off_the_imu_grid_before_an_outage_loses_no_sample_after_it():
+    """A sample stamped 3 ms after the one before it (the IMU samples every 10 ms), then a 1 s
+    outage: the IMU's interval stays 10 ms, the samples after the outage make its new sequence,
+    and none is lost (taken for a 3 ms interval, they would not follow each other, and no new
+    sequence would ever be confirmed)."""
+    buoy = RockingBuoy()
+    events = []
+    for event in make_events(buoy, 40.0):
+        t, order, kind, args = event
+        if kind == "imu" and 20.0 - 1e-9 <= t < 21.0 - 1e-9:
+            continue
+        events.append(event)
+        if kind == "imu" and abs(t - 19.99) < 1e-9:
+            events.append((t + 0.003, order, kind, args))
+    engine, solutions = run(events)
+    health = engine.health()
+    assert health.counters["imu"].accepted == sum(kind == "imu" for _, _, kind, _ in events)
+    assert health.imu_gaps == 1 and health.imu_clock_steps == ()
+    assert solutions[-1].t_s == pytest.approx(39.99)
+
+
 def test_an_imu_spike_inside_the_magnitude_limits_is_rejected_and_leaves_no_trace(rocking_run):
     """Five gyro samples of 30 rad/s and one accelerometer sample of 100 m/s² (inside the
     magnitude limits) change no solution beyond what losing those samples does."""

@@ -41,13 +41,26 @@ def test_the_sequence_goes_on_through_a_lost_sample():
 
 
 def test_a_lost_sample_does_not_widen_what_follows():
-    """The interval is the shortest recent one: after a lost sample, a stamp ahead by more than
-    SEQUENCE_INTERVALS of the stream's own interval is still held."""
+    """The interval is the median of the recent ones: after a lost sample, a stamp ahead by more
+    than SEQUENCE_INTERVALS of the stream's own interval is still held."""
     sequence = StreamSequence()
     for t in (0.0, 0.1, 0.2, 0.4):
         sequence.screen(t, t)
     assert sequence.interval_s == pytest.approx(INTERVAL_S)
     assert sequence.screen(0.4 + (SEQUENCE_INTERVALS + 0.1) * INTERVAL_S, None).held
+
+
+@pytest.mark.parametrize("off_grid_share", [0.3, 0.4, 0.6])
+def test_a_stamp_off_the_grid_before_an_outage_costs_no_sample(off_grid_share):
+    """A stamp off the stream's grid (a driver's jitter) makes two short intervals: the stream's
+    interval stays its own, so after an outage that follows at once the held samples still
+    follow each other and become the sequence; none is lost."""
+    own = list(np.arange(0.0, 5.0, INTERVAL_S))
+    off_grid = own[-1] + off_grid_share * INTERVAL_S
+    after = list(5.0 + 1.0 + np.arange(0.0, 5.0, INTERVAL_S))
+    taken, given_up, _ = screen_all([*own, off_grid, *after])
+    assert given_up == []
+    assert taken == [*own, off_grid, *after]
 
 
 def test_after_an_outage_the_held_samples_become_the_sequence_once_they_span_the_confirming_span():

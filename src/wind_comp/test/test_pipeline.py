@@ -204,19 +204,33 @@ def feed_live_with_latency(messages):
     return np.array(status), np.array(waited_s), pipeline
 
 
+def jittered_copies(messages: list, late_s: float) -> list:
+    """The latest wind sample of ``messages`` and its temperature stamped ``late_s`` (s)
+    later."""
+    wind = next(values for kind, values in reversed(messages) if kind == "wind")
+    temperature = next(values for kind, values in reversed(messages) if kind == "temperature")
+    t_s = wind.t_s + late_s
+    return [("wind", wind._replace(t_s=t_s)), ("temperature", (t_s, *temperature[1:]))]
+
+
+@pytest.mark.parametrize("off_grid", [False, True], ids=["on grid", "off grid"])
 @pytest.mark.parametrize("missed_samples", [3, 10, 100])
-def test_wind_resumes_valid_after_an_anemometer_outage(missed_samples):
-    """The anemometer misses ``missed_samples`` samples from 30 s on: the samples after the
-    outage are held off its sequence (they could be a second stream's) until they span
-    CONFIRMING_SPAN_S with none of the old sequence in between, then corrected: every sample
-    gets its output, valid, the resumed ones at most a confirming span late, live and offline
-    alike."""
+def test_wind_resumes_valid_after_an_anemometer_outage(missed_samples, off_grid):
+    """The anemometer misses ``missed_samples`` samples from 30 s on (``off_grid``: the last
+    before them followed by one stamped 0.3 intervals later, a driver's jitter): the samples
+    after the outage are held off its sequence (they could be a second stream's) until they
+    span CONFIRMING_SPAN_S with none of the old sequence in between, then corrected: every
+    sample gets its output, valid, the resumed ones at most a confirming span late, live and
+    offline alike."""
     messages, wind_t, missed = [], [], 0
     for kind, values in arrivals(NAV_LATENCY_S):
         if kind in ("wind", "temperature"):
             t_s = values.t_s if kind == "wind" else values[0]
             if t_s > 30.0 and missed < 2 * missed_samples:
                 missed += 1  # the sample and its temperature
+                if off_grid and missed == 1:
+                    messages += jittered_copies(messages, 0.3 / WIND_RATE_HZ)
+                    wind_t.append(messages[-2][1].t_s)
                 continue
             if kind == "wind":
                 wind_t.append(t_s)
