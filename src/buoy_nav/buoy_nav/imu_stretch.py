@@ -33,25 +33,27 @@ import numpy as np
 from buoy_common.contract import Reason
 from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource
 from buoy_nav.error_state_filter import GateResult
-from buoy_nav.measurement_queue import MAX_MEASUREMENT_LEAD_S
 from buoy_nav.pack_epoch import (
     EPOCH_INNOVATION,
     EPOCH_NIS,
     EPOCH_S,
     EPOCH_SIZE,
     EPOCH_T,
-    INTERVAL_RING,
-    NEWEST_AIDING,
     PACK_ROW_SIZE,
-    PACK_SEQUENCE_SIZE,
     PACK_T,
     PACK_TERMS_SIZE,
-    SEQUENCE_LATEST,
     THRESHOLD,
     pack_epoch,
-    queued_attitude,
 )
-from buoy_nav.sequence_kernels import RING_SIZE, ring_add, ring_interval, ring_of
+from buoy_nav.sequence_kernels import (
+    RING_SIZE,
+    SEQUENCE_LATEST,
+    SEQUENCE_SIZE,
+    queued_in_sequence,
+    ring_add,
+    ring_interval,
+    sequence_of,
+)
 from buoy_nav.solution_rows import write_row
 from buoy_nav.strapdown_kernel import (
     DURATION,
@@ -208,7 +210,7 @@ class ImuStretches:
         self._jacobian = np.zeros((3, 1)) if parts.pack is None else parts.pack.jacobian.copy()
         self._no_pack = _PackArguments(
             np.zeros((0, PACK_ROW_SIZE)),
-            np.zeros(PACK_SEQUENCE_SIZE),
+            np.zeros(SEQUENCE_SIZE),
             np.zeros(PACK_TERMS_SIZE),
             np.zeros(7),
             self._jacobian,
@@ -480,17 +482,13 @@ class ImuStretches:
         return order, np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE), measurements
 
     def _pack_sequence(self) -> np.ndarray:
-        """:func:`imu_stretch`'s ``pack_sequence`` from the pack's sequence and the IMU's clock."""
+        """:func:`imu_stretch`'s ``pack_sequence`` from the pack's sequence."""
         parts = self._parts
-        sequence = np.zeros(PACK_SEQUENCE_SIZE)
-        sequence[NEWEST_AIDING] = parts.imu_input.clock.newest_aiding_s
         if parts.pack is None:
+            sequence = np.zeros(SEQUENCE_SIZE)
             sequence[SEQUENCE_LATEST] = math.inf
             return sequence
-        stream = parts.sequences[parts.pack.kind]
-        sequence[SEQUENCE_LATEST] = stream.latest_s
-        sequence[INTERVAL_RING:] = ring_of(stream.intervals_s)
-        return sequence
+        return sequence_of(parts.sequences[parts.pack.kind])
 
     def _pack_terms(self, run: _Run) -> np.ndarray:
         """:func:`imu_stretch`'s ``pack_terms``."""
@@ -511,7 +509,6 @@ class ImuStretches:
                 floor,
                 threshold,
                 float(self._parts.pack.states.attitude.start) if self._parts.pack else 0.0,
-                MAX_MEASUREMENT_LEAD_S,
                 self._parts.prediction.resync_at_s,
                 *bounds,
             )
@@ -585,8 +582,9 @@ def imu_stretch(
     Each IMU sample (n × 7: header stamp s, ω_ib body rad/s, specific force body m/s²) is
     screened (``screening``, ``screened_state``; into ``samples``, re-stamped and calibrated),
     predicted ahead with its row (:func:`_predicted`) and the filter stepped to its horizon
-    (:func:`_filtered`); each attitude is queued (:func:`~buoy_nav.pack_epoch.queued_attitude`)
-    and its epoch made when the filter reaches it. The arrays' layouts are this module's
+    (:func:`_filtered`); each attitude is queued
+    (:func:`~buoy_nav.sequence_kernels.queued_in_sequence`) and its epoch made when the filter
+    reaches it. The arrays' layouts are this module's
     constants and :mod:`buoy_nav.pack_epoch`'s; ``state``, the strapdown states, ``covariance``
     and ``counts`` are updated in place, ``row_written`` set for each sample whose row was
     written.
@@ -602,7 +600,7 @@ def imu_stretch(
         position = order[item]
         if position < 0:
             t = pack_rows[-1 - position, PACK_T]
-            if not queued_attitude(t, pack_sequence, pack_terms, point[0], screened_state[LATEST]):
+            if not queued_in_sequence(t, pack_sequence, point[0], screened_state[LATEST]):
                 return item, stepped, BEFORE_SAMPLE
             counts[QUEUE_TAIL] += 1
             continue
@@ -939,7 +937,7 @@ def load_compiled_imu_stretch() -> None:
         np.arange(36, dtype=np.int64).reshape(4, 3, 3),
         np.zeros(1, dtype=np.bool_),
         np.zeros((0, PACK_ROW_SIZE)),
-        np.zeros(PACK_SEQUENCE_SIZE),
+        np.zeros(SEQUENCE_SIZE),
         np.zeros(PACK_TERMS_SIZE),
         np.zeros(7),
         np.zeros((3, 15)),

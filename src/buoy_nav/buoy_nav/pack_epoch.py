@@ -2,11 +2,11 @@
 
 A motion pack's attitude (:mod:`buoy_nav.aiding.ahrs_attitude`) comes with every IMU sample. In
 a stretch it is queued as the engine queues a measurement in its sequence
-(:func:`queued_attitude`), and when the filter reaches its stamp its epoch is made with the
-engine's own kernels in the engine's order (:func:`pack_epoch`): the step there with the
-covariance's propagation, the pack's compiled update, the injection of the correction and its
-carry-over to the prediction. Each returns False, with nothing changed, where the engine must
-take over. The arrays they read and write are laid out below.
+(:func:`~buoy_nav.sequence_kernels.queued_in_sequence`), and when the filter reaches its stamp
+its epoch is made with the engine's own kernels in the engine's order (:func:`pack_epoch`): the
+step there with the covariance's propagation, the pack's compiled update, the injection of the
+correction and its carry-over to the prediction. It returns False, with nothing changed, where
+the engine must take over. The arrays it reads and writes are laid out below.
 """
 
 import math
@@ -16,7 +16,6 @@ import numba
 from buoy_nav.aiding.ahrs_attitude import attitude_update
 from buoy_nav.error_dynamics import stepped_covariance_kernel
 from buoy_nav.prediction import carry_over_kernel
-from buoy_nav.sequence_kernels import RING_SIZE, ring_add, ring_interval
 from buoy_nav.strapdown_kernel import (
     ALTITUDE,
     GYRO_BIAS,
@@ -25,54 +24,23 @@ from buoy_nav.strapdown_kernel import (
     VELOCITY,
     inject_error_state,
 )
-from buoy_nav.stream_sequence import SEQUENCE_INTERVALS
 
 # The motion pack's attitudes a stretch takes (the stretch's ``pack_rows``, one row each, those
 # already queued first): stamp (s), the pack's attitude on true north (R_nb, 3×3 row-major), its
 # covariance (3×3 ENU rad², row-major) and the sample's weight.
 PACK_T, PACK_ROTATION, PACK_COVARIANCE, PACK_WEIGHT = 0, 1, 10, 19
 PACK_ROW_SIZE = 20
-# The pack's sequence (``pack_sequence``): its latest stamp (s), the newest aiding stamp the
-# IMU's clock knows (s), then the ring of its recent in-sequence intervals
-# (:mod:`buoy_nav.sequence_kernels`, :class:`~buoy_nav.stream_sequence.StreamSequence`).
-SEQUENCE_LATEST, NEWEST_AIDING, INTERVAL_RING = range(3)
-PACK_SEQUENCE_SIZE = INTERVAL_RING + RING_SIZE
 # The pack's update and what it stops at (``pack_terms``): the lag (s) and its uncertainty
 # squared (s²), the variance floor (rad²), the gate's threshold, the error states' attitude
-# start; how far a measurement may lead the IMU (s), the filter stamp at which the prediction
-# forks afresh (s), and the latitude and longitude (rad) between which the pack's true north is
-# the one its rows were turned to.
-(LAG, LAG_UNCERTAINTY_SQ, FLOOR, THRESHOLD, ATTITUDE_START, MAX_LEAD, RESYNC_AT) = range(7)
-LATITUDE_LOW, LATITUDE_HIGH, LONGITUDE_LOW, LONGITUDE_HIGH = range(7, 11)
-PACK_TERMS_SIZE = 11
+# start; the filter stamp at which the prediction forks afresh (s), and the latitude and
+# longitude (rad) between which the pack's true north is the one its rows were turned to.
+(LAG, LAG_UNCERTAINTY_SQ, FLOOR, THRESHOLD, ATTITUDE_START, RESYNC_AT) = range(6)
+LATITUDE_LOW, LATITUDE_HIGH, LONGITUDE_LOW, LONGITUDE_HIGH = range(6, 10)
+PACK_TERMS_SIZE = 10
 # The epochs of the pack's attitude a stretch applied (``epochs``, a row each): stamp (s), the
 # innovation (rad, 3), its NIS and S (3×3 rad², row-major), for the books.
 EPOCH_T, EPOCH_INNOVATION, EPOCH_NIS, EPOCH_S = 0, 1, 4, 5
 EPOCH_SIZE = 14
-
-
-@numba.njit(cache=True)
-def queued_attitude(t, pack_sequence, pack_terms, last_imu_stamp_s, newest_imu_stamp_s) -> bool:
-    """Whether the engine would queue the pack's attitude stamped ``t`` (s) with nothing else
-    to do: in its sequence (``pack_sequence``), after the latest IMU stamp the filter processed
-    and not beyond the newest IMU stamp by ``pack_terms``' :data:`MAX_LEAD` (s); the sequence
-    then follows it and knows the newest aiding stamp. Nothing is changed otherwise."""
-    latest = pack_sequence[SEQUENCE_LATEST]
-    ring = pack_sequence[INTERVAL_RING:]
-    if not (
-        math.isfinite(t)
-        and t > latest
-        and not t - latest > SEQUENCE_INTERVALS * ring_interval(ring)
-        and t > last_imu_stamp_s
-        and not t - newest_imu_stamp_s > pack_terms[MAX_LEAD]
-    ):
-        return False
-    if math.isfinite(latest):
-        ring_add(ring, t - latest)
-    pack_sequence[SEQUENCE_LATEST] = t
-    if t > pack_sequence[NEWEST_AIDING]:
-        pack_sequence[NEWEST_AIDING] = t
-    return True
 
 
 @numba.njit(cache=True)

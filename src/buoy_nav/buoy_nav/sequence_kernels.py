@@ -1,19 +1,33 @@
-"""A stream's recent intervals in an array, for the compiled stretches (numba, cached on disk).
+"""A stream's sequence in an array, for the compiled stretches (numba, cached on disk).
 
-:mod:`buoy_nav.imu_stretch` and :mod:`buoy_nav.pack_epoch` follow a stream's sequence as
-:class:`~buoy_nav.stream_sequence.RecentIntervals` does: its recent in-sequence intervals in a
-ring laid out below, the sample interval from them by the one rule the interpreter uses too
-(:func:`~buoy_nav.stream_sequence.stream_interval_s`, compiled from its source).
+:mod:`buoy_nav.imu_stretch` follows the IMU's sequence and those of the aiding sources whose
+measurements it takes as :class:`~buoy_nav.stream_sequence.StreamSequence` and
+:class:`~buoy_nav.stream_sequence.RecentIntervals` do: the recent in-sequence intervals in a
+ring, the sample interval from them by the one rule the interpreter uses too
+(:func:`~buoy_nav.stream_sequence.stream_interval_s`, compiled from its source), and a
+measurement queued as :meth:`~buoy_nav.engine.FusionEngine.add_measurement` queues one with
+nothing else to do (:func:`queued_in_sequence`). The arrays are laid out below.
 """
+
+import math
 
 import numba
 import numpy as np
 
-from buoy_nav.stream_sequence import RATE_MEMORY, stream_interval_s
+from buoy_nav.measurement_queue import MAX_MEASUREMENT_LEAD_S
+from buoy_nav.stream_sequence import (
+    RATE_MEMORY,
+    SEQUENCE_INTERVALS,
+    StreamSequence,
+    stream_interval_s,
+)
 
 # The ring: how many intervals it holds, where the next one goes, then the intervals (s).
 RING_COUNT, RING_NEXT, RING_INTERVALS = range(3)
 RING_SIZE = RING_INTERVALS + RATE_MEMORY
+# An aiding source's sequence: its latest stamp (s), then the ring of its intervals.
+SEQUENCE_LATEST, SEQUENCE_RING = 0, 1
+SEQUENCE_SIZE = SEQUENCE_RING + RING_SIZE
 
 stream_interval = numba.njit(cache=True)(stream_interval_s)
 
@@ -49,3 +63,34 @@ def intervals_of(ring: np.ndarray) -> list[float]:
     count, following = int(ring[RING_COUNT]), int(ring[RING_NEXT])
     values = ring[RING_INTERVALS : RING_INTERVALS + count].tolist()
     return values[following:] + values[:following] if count == RATE_MEMORY else values
+
+
+def sequence_of(stream: StreamSequence) -> np.ndarray:
+    """The array of a source's sequence ``stream`` (its latest stamp, its intervals' ring)."""
+    sequence = np.empty(SEQUENCE_SIZE)
+    sequence[SEQUENCE_LATEST] = stream.latest_s
+    sequence[SEQUENCE_RING:] = ring_of(stream.intervals_s)
+    return sequence
+
+
+@numba.njit(cache=True)
+def queued_in_sequence(t, sequence, last_imu_stamp_s, newest_imu_stamp_s) -> bool:
+    """Whether the engine would queue an aiding measurement stamped ``t`` (s) with nothing else
+    to do: following its source's ``sequence``, after the latest IMU stamp the filter processed
+    (``last_imu_stamp_s``) and not beyond the newest IMU stamp (``newest_imu_stamp_s``) by
+    more than :data:`~buoy_nav.measurement_queue.MAX_MEASUREMENT_LEAD_S`; the sequence then
+    follows it. Nothing is changed otherwise."""
+    latest = sequence[SEQUENCE_LATEST]
+    ring = sequence[SEQUENCE_RING:]
+    if not (
+        math.isfinite(t)
+        and t > latest
+        and not t - latest > SEQUENCE_INTERVALS * ring_interval(ring)
+        and t > last_imu_stamp_s
+        and not t - newest_imu_stamp_s > MAX_MEASUREMENT_LEAD_S
+    ):
+        return False
+    if math.isfinite(latest):
+        ring_add(ring, t - latest)
+    sequence[SEQUENCE_LATEST] = t
+    return True
