@@ -11,6 +11,7 @@ the ``*_ecef`` / tangent-plane conversions accept numpy arrays (broadcasting) as
 import math
 
 import numpy as np
+from numba.extending import register_jitable
 
 SEMI_MAJOR_AXIS_M = 6378137.0
 FLATTENING = 1.0 / 298.257223563
@@ -118,10 +119,12 @@ def ecef_from_geodetic(latitude_rad, longitude_rad, altitude_m) -> np.ndarray:
     )
 
 
+@register_jitable
 def ecef_from_geodetic_scalar(
     latitude_rad: float, longitude_rad: float, altitude_m: float
 ) -> tuple[float, float, float]:
-    """Same as :func:`ecef_from_geodetic` for one point, with plain floats (fast path)."""
+    """Same as :func:`ecef_from_geodetic` for one point, with plain floats (fast path); compiled
+    code calls the same source (:func:`enu_offset_scalar` compiled)."""
     sin_lat, cos_lat = math.sin(latitude_rad), math.cos(latitude_rad)
     prime_vertical = SEMI_MAJOR_AXIS_M / math.sqrt(1.0 - ECCENTRICITY_SQ * sin_lat * sin_lat)
     horizontal = (prime_vertical + altitude_m) * cos_lat

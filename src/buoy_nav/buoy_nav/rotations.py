@@ -213,8 +213,9 @@ def euler_from_rotation_matrix(rotation) -> tuple[float, float, float]:
 
 
 def wrap_angle(angle_rad: float) -> float:
-    """Wrap an angle (rad) into (−π, π]."""
-    wrapped = math.fmod(angle_rad + math.pi, 2.0 * math.pi)
+    """Wrap an angle (rad) into (−π, π]. Written for the interpreter and numba alike: ``%`` is
+    the C library's fmod with the divisor's sign, in both."""
+    wrapped = (angle_rad + math.pi) % (2.0 * math.pi)
     if wrapped <= 0.0:
         wrapped += 2.0 * math.pi
     return wrapped - math.pi

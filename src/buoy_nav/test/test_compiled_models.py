@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from buoy_nav import earth
+from buoy_nav import earth, strapdown_kernel
 from buoy_nav.aiding import (
     GnssBaseline,
     GnssBaselineSource,
@@ -348,3 +348,74 @@ def _block_diagonal(blocks):
         matrix[offset : offset + block.shape[0], offset : offset + block.shape[0]] = block
         offset += block.shape[0]
     return matrix
+
+
+def strapdown_vector(point: LinearisationPoint) -> np.ndarray:
+    """The strapdown state vector of ``point`` (:mod:`buoy_nav.strapdown_kernel`'s layout), the
+    navigation frame's rate its last step's."""
+    state = point.state
+    vector = np.zeros(strapdown_kernel.STATE_SIZE)
+    vector[strapdown_kernel.ATTITUDE : strapdown_kernel.ATTITUDE + 4] = state.attitude_xyzw
+    vector[strapdown_kernel.VELOCITY : strapdown_kernel.VELOCITY + 3] = state.velocity_enu_mps
+    vector[strapdown_kernel.LATITUDE] = state.latitude_rad
+    vector[strapdown_kernel.LONGITUDE] = state.longitude_rad
+    vector[strapdown_kernel.ALTITUDE] = state.altitude_m
+    vector[strapdown_kernel.GYRO_BIAS : strapdown_kernel.GYRO_BIAS + 3] = state.gyro_bias_rad_s
+    frame_rate = strapdown_kernel.NAV_FRAME_RATE
+    vector[frame_rate : frame_rate + 3] = point.nav_frame_rate_enu_rad_s
+    return vector
+
+
+def random_measurement(source, point: LinearisationPoint, rng):
+    """A validated measurement of ``source`` near what ``point`` predicts."""
+    state = point.state
+    if isinstance(source, GnssFixSource):
+        return GnssFix(
+            math.degrees(state.latitude_rad) + rng.normal(0.0, 1e-5),
+            math.degrees(state.longitude_rad) + rng.normal(0.0, 1e-5),
+            state.altitude_m + rng.normal(0.0, 2.0),
+            random_covariance(rng, 1e-2),
+        )
+    if isinstance(source, GnssVelocitySource):
+        return GnssVelocity(rng.normal(0.0, 2.0, 3), random_covariance(rng, 1e-3))
+    if isinstance(source, GnssHeadingSource):
+        return GnssHeading(rng.uniform(-4.0, 4.0), rng.choice([1e-8, 1e-3]))
+    vector = point.rotation_nb @ source._baseline_body_m + rng.normal(0.0, 0.01, 3)
+    return source.measurement_type(vector)
+
+
+@pytest.mark.parametrize(
+    "source_class",
+    [
+        GnssFixSource,
+        GnssVelocitySource,
+        GnssHeadingSource,
+        GnssBaselineSource,
+        GnssBaselineTertiarySource,
+    ],
+)
+def test_a_sources_stretch_model_over_arrays_is_its_model_to_the_bit(source_class, rng):
+    """What a compiled stretch models of a measurement from its numbers and the strapdown state
+    vector is what the source's model gives at the same point (a heading whose baseline is too
+    steep: no model, both ways)."""
+    source = source_class(CONFIG, STATES)
+    terms = source.stretch_terms()
+    for _ in range(CASES):
+        point = random_point(rng)
+        measurement = source.validated(random_measurement(source, point, rng))
+        model = source.model(measurement, point)
+        innovation, jacobian, covariance, holds = source.stretch_model(
+            np.array(source.stretch_values(measurement)),
+            strapdown_vector(point),
+            point.rotation_nb,
+            np.array(point.raw_gyro_rad_s),
+            terms,
+        )
+        assert holds == (model is not None)
+        if model is not None:
+            for name, value, expected in (
+                ("innovation", innovation, model.innovation),
+                ("jacobian", jacobian, model.jacobian),
+                ("covariance", covariance, model.covariance),
+            ):
+                assert value.tobytes() == np.asarray(expected).tobytes(), name

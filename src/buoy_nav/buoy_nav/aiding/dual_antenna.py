@@ -26,6 +26,19 @@ from buoy_nav.aiding.base import (
 from buoy_nav.aiding.model_kernels import place_block, skew
 
 
+@numba.njit(cache=True)
+def baseline_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
+    """:meth:`DualAntennaSource.baseline_vector_model` over arrays, for a compiled stretch
+    (:mod:`buoy_nav.aiding_epoch`): the antenna vector ``values`` (ENU m) at the nominal
+    ``rotation_nb`` (the state and the raw gyro unused), with the source's ``terms``
+    (:meth:`DualAntennaSource.stretch_terms`): the innovation (m), the Jacobian, R (m²) and
+    whether the model holds (always)."""
+    _, innovation, jacobian = baseline_vector_model(
+        values[0:3].copy(), rotation_nb, terms[0:3].copy(), int(terms[12]), int(terms[13])
+    )
+    return innovation, jacobian, terms[3:12].reshape(3, 3).copy(), True
+
+
 class DualAntennaSource(AidingSource):
     """A source that measures the antenna baseline's azimuth, alone or with its tilt.
 
@@ -52,6 +65,28 @@ class DualAntennaSource(AidingSource):
             states.dim,
         )
         return MeasurementModel(predicted, innovation, jacobian, covariance_m2)
+
+    stretch_model = staticmethod(baseline_stretch_model)
+
+    def stretch_values(self, measurement) -> tuple[float, ...]:
+        """The numbers :func:`baseline_stretch_model` reads of a validated antenna vector: the
+        vector (ENU m)."""
+        return tuple(measurement.baseline_enu_m.tolist())
+
+    def stretch_terms(self) -> np.ndarray:
+        """The terms :func:`baseline_stretch_model` reads: the baseline (body m), the noise
+        (m², row-major), the error states' attitude start and their count (a source whose
+        model is :meth:`baseline_vector_model` of its ``_covariance_m2``)."""
+        states = self.states
+        return np.array(
+            (
+                *self._baseline_body_m,
+                *self._covariance_m2.reshape(9),
+                states.attitude.start,
+                states.dim,
+            ),
+            dtype=float,
+        )
 
     def load_compiled_code(self) -> None:
         states = self.states

@@ -40,6 +40,7 @@ from buoy_nav.aiding.model_kernels import (
     skew,
 )
 from buoy_nav.error_state_filter import NavState
+from buoy_nav.strapdown_kernel import ALTITUDE, LATITUDE, LONGITUDE
 
 # sensor_msgs/NavSatStatus: a status below this is no fix.
 STATUS_FIX = 0
@@ -86,6 +87,34 @@ def antenna_position_model(
     place_identity(jacobian, position_start)
     covariance = floored_covariance(measured_covariance_enu_m2, variance_floor_m2)
     return lever_enu, measured_enu_m - lever_enu, jacobian, covariance
+
+
+_enu_offset = numba.njit(cache=True)(earth.enu_offset_scalar)
+
+
+@numba.njit(cache=True)
+def fix_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
+    """:meth:`GnssFixSource.model` over arrays, for a compiled stretch
+    (:mod:`buoy_nav.aiding_epoch`): the fix ``values`` (:meth:`GnssFixSource.stretch_values`)
+    at the strapdown ``state`` vector and its R_nb ``rotation_nb`` (the raw gyro unused), with
+    the source's ``terms`` (:meth:`GnssFixSource.stretch_terms`): the innovation (ENU m), the
+    Jacobian, R (m²) and whether the model holds (always)."""
+    measured = np.array(
+        _enu_offset(
+            state[LATITUDE], state[LONGITUDE], state[ALTITUDE], values[0], values[1], values[2]
+        )
+    )
+    _, innovation, jacobian, covariance = antenna_position_model(
+        measured,
+        values[3:12].reshape(3, 3).copy(),
+        terms[0],
+        rotation_nb,
+        terms[1:4].copy(),
+        int(terms[4]),
+        int(terms[5]),
+        int(terms[6]),
+    )
+    return innovation, jacobian, covariance, True
 
 
 class GnssFixSource(AidingSource):
@@ -175,6 +204,33 @@ class GnssFixSource(AidingSource):
             states.dim,
         )
         return MeasurementModel(predicted, innovation, jacobian, covariance)
+
+    stretch_model = staticmethod(fix_stretch_model)
+
+    def stretch_values(self, measurement: GnssFix) -> tuple[float, ...]:
+        """The numbers :func:`fix_stretch_model` reads of a validated fix: latitude and
+        longitude (rad), altitude (m), the covariance (m², row-major)."""
+        return (
+            measurement.latitude_rad,
+            measurement.longitude_rad,
+            measurement.altitude_m,
+            *measurement.covariance_enu_m2.reshape(9).tolist(),
+        )
+
+    def stretch_terms(self) -> np.ndarray:
+        """The terms :func:`fix_stretch_model` reads: the variance floor (m²), the lever arm
+        (body m), the error states' attitude and position starts and their count."""
+        states = self.states
+        return np.array(
+            (
+                self._variance_floor_m2,
+                *self._lever_arm_body_m,
+                states.attitude.start,
+                states.position.start,
+                states.dim,
+            ),
+            dtype=float,
+        )
 
     def load_compiled_code(self) -> None:
         states = self.states

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from buoy_common.contract import GNSS_HEADING_TOPIC, Reason
@@ -41,6 +42,7 @@ from buoy_nav.aiding.base import (
 from buoy_nav.aiding.dual_antenna import DualAntennaSource
 from buoy_nav.aiding.gnss_baseline import GnssBaselineSource
 from buoy_nav.aiding.model_kernels import azimuth_model
+from buoy_nav.aiding.model_kernels import floored_covariance as floored_covariance_kernel
 from buoy_nav.antenna_geometry import MIN_HORIZONTAL_BASELINE_FRACTION, horizontal_fraction_enu
 from buoy_nav.rotations import wrap_angle
 
@@ -60,6 +62,28 @@ def yaw_from_quaternion_rad(x: float, y: float, z: float, w: float) -> float:
     """Yaw (rad, about ENU up, 0 = East, counter-clockwise) of the rotation of a quaternion
     (any norm): the azimuth of the rotated body x axis projected on the horizontal."""
     return math.atan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
+
+
+_wrap_angle = numba.njit(cache=True)(wrap_angle)
+
+
+@numba.njit(cache=True)
+def heading_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
+    """:meth:`GnssHeadingSource.model` over arrays, for a compiled stretch
+    (:mod:`buoy_nav.aiding_epoch`): the heading ``values`` (yaw rad, variance rad²) at the
+    nominal ``rotation_nb`` (the state and the raw gyro unused), with the source's ``terms``
+    (:meth:`GnssHeadingSource.stretch_terms`): the innovation (rad), the Jacobian, R (rad²) and
+    whether the model holds (not for a baseline too steep to have an azimuth)."""
+    baseline_enu, _, predicted, jacobian = azimuth_model(
+        rotation_nb, terms[1:4].copy(), int(terms[5]), int(terms[6])
+    )
+    # As horizontal_fraction_enu, with numpy's norm of a vector, √(b·b).
+    fraction = math.hypot(baseline_enu[0], baseline_enu[1]) / math.sqrt(
+        np.dot(baseline_enu, baseline_enu)
+    )
+    innovation = np.array((_wrap_angle(values[0] - predicted),))
+    covariance = floored_covariance_kernel(np.full((1, 1), values[1]), terms[0])
+    return innovation, jacobian, covariance, not fraction < terms[4]
 
 
 class GnssHeadingSource(DualAntennaSource):
@@ -115,6 +139,29 @@ class GnssHeadingSource(DualAntennaSource):
             covariance=floored_covariance(
                 measurement.variance_rad2, self._heading_variance_floor_rad2
             ),
+        )
+
+    stretch_model = staticmethod(heading_stretch_model)
+
+    def stretch_values(self, measurement: GnssHeading) -> tuple[float, ...]:
+        """The numbers :func:`heading_stretch_model` reads of a validated heading: the yaw
+        (rad) and its variance (rad²)."""
+        return (measurement.yaw_rad, measurement.variance_rad2)
+
+    def stretch_terms(self) -> np.ndarray:
+        """The terms :func:`heading_stretch_model` reads: the variance floor (rad²), the
+        baseline (body m), the least horizontal share of it, the error states' attitude start
+        and their count."""
+        states = self.states
+        return np.array(
+            (
+                self._heading_variance_floor_rad2,
+                *self._baseline_body_m,
+                MIN_HORIZONTAL_BASELINE_FRACTION,
+                states.attitude.start,
+                states.dim,
+            ),
+            dtype=float,
         )
 
     def load_compiled_code(self) -> None:

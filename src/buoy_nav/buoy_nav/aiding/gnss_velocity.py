@@ -29,6 +29,7 @@ import numba
 import numpy as np
 
 from buoy_common.contract import GNSS_VELOCITY_TOPIC, Reason, header_seconds
+from buoy_nav import strapdown_kernel
 from buoy_nav.aiding.base import (
     GNSS_RECEIVER,
     VELOCITY,
@@ -50,6 +51,10 @@ from buoy_nav.aiding.model_kernels import (
 )
 from buoy_nav.error_state_filter import NavState
 
+# Where the strapdown state vector holds what the stretch's model reads.
+_STATE_VELOCITY = strapdown_kernel.VELOCITY
+_GYRO_BIAS = strapdown_kernel.GYRO_BIAS
+_NAV_FRAME_RATE = strapdown_kernel.NAV_FRAME_RATE
 # Beyond this speed over ground (m/s) a value is a malformed message, not a buoy's velocity.
 MAX_SPEED_MPS = 100.0
 
@@ -126,6 +131,31 @@ def antenna_velocity_model(
     return predicted, measured_enu_mps - predicted, jacobian, covariance
 
 
+@numba.njit(cache=True)
+def velocity_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
+    """:meth:`GnssVelocitySource.model` over arrays, for a compiled stretch
+    (:mod:`buoy_nav.aiding_epoch`): the velocity ``values``
+    (:meth:`GnssVelocitySource.stretch_values`) at the strapdown ``state`` vector, its R_nb
+    ``rotation_nb`` and the raw gyro sample there (body rad/s), with the source's ``terms``
+    (:meth:`GnssVelocitySource.stretch_terms`): the innovation (ENU m/s), the Jacobian, R
+    (m²/s²) and whether the model holds (always)."""
+    _, innovation, jacobian, covariance = antenna_velocity_model(
+        values[0:3].copy(),
+        values[3:12].reshape(3, 3).copy(),
+        terms[0],
+        state[_STATE_VELOCITY : _STATE_VELOCITY + 3].copy(),
+        rotation_nb,
+        raw_gyro_rad_s - state[_GYRO_BIAS : _GYRO_BIAS + 3],
+        state[_NAV_FRAME_RATE : _NAV_FRAME_RATE + 3].copy(),
+        terms[1:4].copy(),
+        int(terms[4]),
+        int(terms[5]),
+        int(terms[6]),
+        int(terms[7]),
+    )
+    return innovation, jacobian, covariance, True
+
+
 class GnssVelocitySource(AidingSource):
     """Velocity of the primary antenna (see the module docstring)."""
 
@@ -190,6 +220,32 @@ class GnssVelocitySource(AidingSource):
             states.dim,
         )
         return MeasurementModel(predicted, innovation, jacobian, covariance)
+
+    stretch_model = staticmethod(velocity_stretch_model)
+
+    def stretch_values(self, measurement: GnssVelocity) -> tuple[float, ...]:
+        """The numbers :func:`velocity_stretch_model` reads of a validated velocity: the
+        velocity (ENU m/s), its covariance (m²/s², row-major)."""
+        return (
+            *measurement.velocity_enu_mps.tolist(),
+            *measurement.covariance_m2s2.reshape(9).tolist(),
+        )
+
+    def stretch_terms(self) -> np.ndarray:
+        """The terms :func:`velocity_stretch_model` reads: the variance floor (m²/s²), the lever
+        arm (body m), the error states' attitude, velocity and gyro bias starts, their count."""
+        states = self.states
+        return np.array(
+            (
+                self._variance_floor_m2s2,
+                *self._lever_arm_body_m,
+                states.attitude.start,
+                states.velocity.start,
+                states.gyro_bias.start,
+                states.dim,
+            ),
+            dtype=float,
+        )
 
     def load_compiled_code(self) -> None:
         states = self.states
