@@ -30,6 +30,7 @@ from test_nav_sensor_sets import moored_config, scenario_messages
 
 from buoy_common.contract import AHRS_TOPIC, IMU_RAW_TOPIC, Reason, header_seconds
 from buoy_nav import imu_stretch as stretch_module
+from buoy_nav.aiding_epoch import APPLIED, BOOK_STATUS
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
@@ -38,6 +39,7 @@ from buoy_nav.imu_stretch import MeasurementInput
 from buoy_nav.solution_rows import SolutionRows
 
 IMU = "imu"
+GNSS_TOPICS = ("gnss/fix", "gnss/vel", "gnss/heading", "gnss/baseline")
 
 
 def fusion_inputs(messages) -> list[tuple]:
@@ -172,6 +174,8 @@ def stretch_counts(monkeypatch) -> Counter:
         counts["offered"] += order.shape[0]
         counts["taken"] += taken
         counts["epochs"] += int(arguments[-1][stretch_module.EPOCHS])
+        books = arguments[-2][stretch_module.AIDING_BOOKS_ROWS][: arguments[-1][stretch_module.AIDING_BOOKS]]
+        counts["aiding applied"] += int(np.sum(books[:, BOOK_STATUS] == APPLIED))
         return taken, stepped, stop
 
     monkeypatch.setattr(stretch_module, "imu_stretch", counted)
@@ -263,6 +267,8 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
     imu_samples = sum(kind == IMU for kind, _ in inputs)
     # The first sample of each run (one in ten between the GNSS epochs) is fed alone.
     assert stretch_counts["taken"] >= 0.7 * imu_samples, "the stretch took too few samples"
+    gnss = sum(kind in GNSS_TOPICS for kind, _ in inputs)
+    print("aiding applied", stretch_counts["aiding applied"], "of", gnss, "taken", stretch_counts["taken"], "of", imu_samples)
     health = stretched.health()
     if imu_faults:
         rejected = health.counters[IMU].rejected

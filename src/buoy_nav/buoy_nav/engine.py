@@ -229,6 +229,8 @@ class FusionEngine:
                     (s for s in self.sources if isinstance(s, AhrsAttitudeSource) and s.enabled),
                     None,
                 ),
+                self._counters,
+                tuple(self.sources),
             )
         )
 
@@ -269,14 +271,13 @@ class FusionEngine:
         outcomes: list = [None] * len(inputs)
         position = 0
         while position < len(inputs):
-            screening = None if run is False else self._stretch_screening()
+            screening = self._stretch_screening()
             if screening is not None:
                 if run is None:
-                    run = self._stretches.run_of(inputs, self._nav) or False
-                if run is not False:
-                    position += self._take_stretch(run, position, screening, outcomes)
-                    if position == len(inputs):
-                        break
+                    run = self._stretches.run_of(inputs, self._nav)
+                position += self._take_stretch(run, position, screening, outcomes)
+                if position == len(inputs):
+                    break
             outcomes[position] = self._take_input(inputs[position])
             position += 1
         return outcomes
@@ -444,9 +445,10 @@ class FusionEngine:
     @property
     def stretched_sources(self) -> tuple[AidingSource, ...]:
         """The aiding sources whose measurements :meth:`add_inputs` may take in its compiled
-        stretches besides the IMU's samples (the motion pack's attitude, when enabled)."""
+        stretches besides the IMU's samples (the motion pack's attitude, when enabled, and the
+        GNSS sources' measurements, :mod:`buoy_nav.stretched_aiding`)."""
         pack = self._stretches.pack
-        return () if pack is None else (pack,)
+        return (*(() if pack is None else (pack,)), *self._stretches.aiding_sources)
 
     def source_of_topic(self, topic: str) -> AidingSource:
         """The aiding source that reads ``topic`` (ValueError naming it when none does)."""

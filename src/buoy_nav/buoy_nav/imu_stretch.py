@@ -32,8 +32,21 @@ import numpy as np
 
 from buoy_common.contract import Reason
 from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource
+from buoy_nav.aiding_epoch import (
+    BOOK_SIZE,
+    QUEUED,
+    ROW_SIZE,
+    ROW_SLOT,
+    ROW_STATUS,
+    ROW_T,
+    TERMS_SIZE,
+    aiding_epoch,
+    due_status,
+    first_queued,
+)
 from buoy_nav.error_state_filter import GateResult
 from buoy_nav.pack_epoch import (
+    ATTITUDE_START,
     EPOCH_INNOVATION,
     EPOCH_NIS,
     EPOCH_S,
@@ -42,6 +55,7 @@ from buoy_nav.pack_epoch import (
     PACK_ROW_SIZE,
     PACK_T,
     PACK_TERMS_SIZE,
+    RESYNC_AT,
     THRESHOLD,
     pack_epoch,
 )
@@ -63,6 +77,7 @@ from buoy_nav.strapdown_kernel import (
 )
 from buoy_nav.strapdown_kernel import STATE_SIZE as STRAPDOWN_STATE_SIZE
 from buoy_nav.stream_sequence import SEQUENCE_INTERVALS
+from buoy_nav.stretched_aiding import AidingRows, StretchedAiding
 
 DONE = 0
 """Every sample of the stretch taken, the filter caught up to the last one's horizon."""
@@ -103,8 +118,14 @@ SCREENING_SIZE = 20
 LATEST, SEQUENCE_LAST, CLOCK_INTERVAL, LAST_SAMPLE, CLOCK_RING = 0, 1, 2, 3, 10
 SCREENED_STATE_SIZE = CLOCK_RING + RING_SIZE
 # How far a stretch went (``counts``): the IMU samples it took, where the queued attitudes begin
-# and end in ``pack_rows`` (those before the first were applied), the epochs applied.
-IMU_TAKEN, QUEUE_HEAD, QUEUE_TAIL, EPOCHS = range(4)
+# and end in ``pack_rows`` (those before the first were applied), the epochs applied; where the
+# queued aiding measurements begin and end in the aiding rows, and the books of their epochs.
+IMU_TAKEN, QUEUE_HEAD, QUEUE_TAIL, EPOCHS, AIDING_HEAD, AIDING_TAIL, AIDING_BOOKS = range(7)
+COUNTS_SIZE = 7
+# The aiding measurements' arguments (:func:`imu_stretch`'s ``aiding``, laid out in
+# :mod:`buoy_nav.aiding_epoch`): their rows, each source's sequence
+# (:mod:`buoy_nav.sequence_kernels`), each source's terms, the epochs' books.
+AIDING_ROWS, AIDING_SEQUENCES, AIDING_TERMS, AIDING_BOOKS_ROWS = range(4)
 
 
 WINDOW = 512
@@ -150,6 +171,9 @@ class _Run(NamedTuple):
     pack_terms: tuple | None
     position_rad: tuple[float, float]
     imu_only: bool
+    aiding_index: list[int]
+    """Each input's index among the stretched aiding measurements of ``aiding`` (−1: none)."""
+    aiding: AidingRows
 
 
 class _PackArguments(NamedTuple):
@@ -173,6 +197,11 @@ class _Offer(NamedTuple):
     pack: _PackArguments
     measurements: list
     queued: int
+    aiding: tuple
+    """:func:`imu_stretch`'s ``aiding`` (:mod:`buoy_nav.stretched_aiding`)."""
+    aiding_rows: AidingRows
+    """The aiding measurements offered, those queued before first, ``aiding_queued`` of them."""
+    aiding_queued: int
 
 
 _POSITIONS = np.arange(WINDOW, dtype=np.int64)
@@ -198,6 +227,9 @@ class EngineParts(NamedTuple):
     pseudo: tuple
     pack: AhrsAttitudeSource | None
     """The motion pack's attitude source when enabled: its attitudes are taken in stretches."""
+    counters: dict
+    sources: tuple
+    """Every aiding source, in registry order (:mod:`buoy_nav.stretched_aiding` takes some)."""
 
 
 class ImuStretches:
@@ -206,6 +238,8 @@ class ImuStretches:
 
     def __init__(self, parts: EngineParts):
         self._parts = parts
+        self._aiding = StretchedAiding(parts, parts.sources)
+        self._no_aiding = AidingRows([], np.zeros((0, ROW_SIZE)))
         # Writable, as the compiled stretch is loaded for.
         self._jacobian = np.zeros((3, 1)) if parts.pack is None else parts.pack.jacobian.copy()
         self._no_pack = _PackArguments(
@@ -222,19 +256,33 @@ class ImuStretches:
         """The motion pack's attitude source whose attitudes the stretches take (None: none)."""
         return self._parts.pack
 
-    def run_of(self, inputs: list, nav) -> _Run | None:
+    @property
+    def aiding_sources(self) -> tuple:
+        """The aiding sources whose measurements the stretches take
+        (:mod:`buoy_nav.stretched_aiding`)."""
+        return self._aiding.sources
+
+    def run_of(self, inputs: list, nav) -> _Run:
         """``inputs`` (IMU samples and :class:`MeasurementInput`) made ready, the pack's true
-        north turned at the filter's position of ``nav`` now; None when an IMU sample is not
-        three numbers each (:meth:`~buoy_nav.engine.FusionEngine.add_imu` then says why)."""
+        north turned at the filter's position of ``nav`` now. An IMU sample that is not three
+        numbers each is the engine's to take (:meth:`~buoy_nav.engine.FusionEngine.add_imu`
+        says why)."""
         pack = self._parts.pack
         imu_index, pack_index, samples, measurements = [], [], [], []
+        aiding_index, aiding_items, aiding_rows = [], [], []
         for item in inputs:
             if type(item) is not MeasurementInput:
                 imu_index.append(len(samples))
                 pack_index.append(-1)
+                aiding_index.append(-1)
                 samples.append(item)
                 continue
             imu_index.append(-1)
+            made = self._aiding.row(*item) if self._aiding.takes(item.source) else None
+            aiding_index.append(-1 if made is None else len(aiding_items))
+            if made is not None:
+                aiding_items.append((item.source, made[0], item.t_s))
+                aiding_rows.append(made[1])
             validated = (
                 item.source.validated(item.measurement)
                 if item.source is pack
@@ -247,12 +295,9 @@ class ImuStretches:
             else:
                 pack_index.append(len(measurements))
                 measurements.append(validated)
-        try:
-            raw = np.array([(t_s, *gyro, *force) for t_s, gyro, force in samples], dtype=float)
-        except (TypeError, ValueError):
-            return None
-        if raw.shape != (len(samples), SAMPLE_SIZE):
-            return None
+        raw, sample_rows = _imu_rows(samples)
+        if len(raw) < len(samples):
+            imu_index = [-1 if index < 0 else sample_rows[index] for index in imu_index]
         state = nav.integrator.state_vector
         position = (float(state[LATITUDE]), float(state[LONGITUDE]))
         rows = [pack.stretch_row(m, *position) for m in measurements] if measurements else []
@@ -264,7 +309,9 @@ class ImuStretches:
             np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE),
             None if pack is None else pack.stretch_terms(*position, nav.kalman),
             position,
-            len(samples) == len(inputs),
+            len(raw) == len(inputs),
+            aiding_index,
+            AidingRows(aiding_items, np.array(aiding_rows).reshape(-1, ROW_SIZE)),
         )
 
     def take(self, run: _Run, start: int, screening: tuple, nav) -> Taken | None:
@@ -272,7 +319,10 @@ class ImuStretches:
         ``screening``'s limits and state and the aided navigation ``nav``; None when it took
         none (the engine takes the first itself)."""
         parts = self._parts
-        offer = self._imu_offer(run, start) if run.imu_only else self._pack_offer(run, start, nav)
+        if run.imu_only:
+            offer = self._imu_offer(run, start)
+        else:
+            offer = self._measurement_offer(run, start, nav)
         if offer is None:
             return None
         raw = offer.raw
@@ -285,9 +335,9 @@ class ImuStretches:
         plane_terms, covariance, block_indices, distrusted, distrust = (
             parts.solutions.row_arguments(nav.kalman)
         )
-        if offer.measurements:
+        if offer.measurements or offer.aiding_rows.items:
             covariance = covariance.copy()  # the epochs' covariance, the filter's if they end
-        counts = np.array((0, 0, offer.queued, 0), dtype=np.int64)
+        counts = np.array((0, 0, offer.queued, 0, 0, offer.aiding_queued, 0), dtype=np.int64)
         count, stepped, stop = imu_stretch(
             raw,
             offer.order,
@@ -309,14 +359,13 @@ class ImuStretches:
             block_indices,
             rows_written,
             *offer.pack,
+            offer.aiding,
             counts,
         )
-        if offer.measurements:
-            self._book_pack(run, offer.measurements, offer.queued, counts, offer.pack.epochs, nav)
-            if counts[EPOCHS]:
-                nav.kalman.covariance = covariance
-                parts.solutions.covariance_changed()
-                parts.solutions.biases_changed()
+        if self._booked(run, offer, counts, nav):
+            nav.kalman.covariance = covariance
+            parts.solutions.covariance_changed()
+            parts.solutions.biases_changed()
         if count == 0:
             return None
         imu_taken = int(counts[IMU_TAKEN])
@@ -333,24 +382,36 @@ class ImuStretches:
     def _imu_offer(self, run: _Run, start: int) -> _Offer:
         """What a stretch of IMU samples alone is offered from ``start``."""
         end = min(start + WINDOW, len(run.imu_index))
-        return _Offer(run.raw[start:end], _POSITIONS[: end - start], self._no_pack, [], 0)
+        return _Offer(
+            run.raw[start:end],
+            _POSITIONS[: end - start],
+            self._no_pack,
+            [],
+            0,
+            self._aiding.arguments(self._no_aiding.rows),
+            self._no_aiding,
+            0,
+        )
 
-    def _pack_offer(self, run: _Run, start: int, nav) -> _Offer | None:
-        """What a stretch is offered from ``start`` with the pack's attitudes among the IMU
-        samples (the pack's queued ones taken out of the queue, when they can be applied in it);
-        None: nothing."""
+    def _measurement_offer(self, run: _Run, start: int, nav) -> _Offer | None:
+        """What a stretch is offered from ``start`` with the measurements of the pack or of the
+        stretched aiding sources among the IMU samples, when they can be applied in it (their
+        queued ones taken out of the queue); None: nothing. A stretch takes the pack's or the
+        aiding sources', not both: their books are kept source by source."""
         parts = self._parts
-        with_pack = self._pack_ready(nav)
-        window = self._window(run, start, with_pack)
+        with_pack = self._pack_ready(nav) and self._pack_present(run, start)
+        ready = frozenset() if with_pack else self._aiding.ready(nav)
+        if not parts.queue.settled:  # the queue judges some of its measurements at their turn
+            with_pack, ready = False, frozenset()
+        window = self._window(run, start, with_pack, ready)
+        if not window:
+            return None
         queued = None
         if with_pack and any(run.pack_index[place] >= 0 for place in window):
             queued = parts.queue.take_source(parts.pack)
-            if queued is None:
-                window = self._window(run, start, False)
-        if not window:
-            return None
+        aiding_queued = self._aiding.queued(ready) if ready else self._no_aiding
         raw = run.raw[[run.imu_index[place] for place in window if run.imu_index[place] >= 0]]
-        order, pack_rows, measurements = self._order(run, window, queued)
+        order, pack_rows, measurements, aiding = self._order(run, window, queued, aiding_queued)
         pack = _PackArguments(
             pack_rows,
             self._pack_sequence(),
@@ -359,7 +420,37 @@ class ImuStretches:
             self._jacobian,
             np.empty((len(pack_rows), EPOCH_SIZE)),
         )
-        return _Offer(raw, np.array(order, dtype=np.int64), pack, measurements, len(queued or ()))
+        return _Offer(
+            raw,
+            np.array(order, dtype=np.int64),
+            pack,
+            measurements,
+            len(queued or ()),
+            self._aiding.arguments(aiding.rows),
+            aiding,
+            len(aiding_queued.items),
+        )
+
+    def _pack_present(self, run: _Run, start: int) -> bool:
+        """Whether the pack has attitudes queued or among the inputs a stretch from ``start``
+        could be offered."""
+        pack = self._parts.pack
+        return any(entry[3] is pack for entry in self._parts.queue.heap) or any(
+            index >= 0 for index in run.pack_index[start : start + WINDOW]
+        )
+
+    def _booked(self, run: _Run, offer: _Offer, counts, nav) -> bool:
+        """Keep the books of the measurements ``offer`` had (``counts``: what the stretch did);
+        whether it applied any."""
+        applied = False
+        if offer.measurements:
+            self._book_pack(run, offer.measurements, offer.queued, counts, offer.pack.epochs, nav)
+            applied = bool(counts[EPOCHS])
+        if offer.aiding_rows.items:
+            books = offer.aiding[AIDING_BOOKS_ROWS][: counts[AIDING_BOOKS]]
+            tail = int(counts[AIDING_TAIL])
+            applied = self._aiding.book(offer.aiding_rows, offer.aiding_queued, tail, books)
+        return applied
 
     def _buffered_within_reach(self, raw: np.ndarray, clock_offset_s: float) -> list[tuple]:
         """The buffered samples the filter may step to while taking ``raw``: none beyond the
@@ -441,45 +532,68 @@ class ImuStretches:
             and not nav.records_epochs
         )
 
-    def _window(self, run: _Run, start: int, with_pack: bool) -> list[int]:
+    def _window(self, run: _Run, start: int, with_pack: bool, ready: frozenset) -> list[int]:
         """The places of the inputs from ``start`` a stretch is offered: up to the first the
-        engine must take (the pack's too, unless ``with_pack``), and not beyond the first IMU
-        sample whose filtering reaches the next measurement or constraint due (the stretch
-        stops there), :data:`WINDOW` at most."""
+        engine must take (the pack's too, unless ``with_pack``; the aiding sources' unless
+        ``ready``), and not beyond the first IMU sample whose filtering reaches the next
+        measurement or constraint due (the stretch stops there), :data:`WINDOW` at most."""
         parts = self._parts
-        pack = parts.pack if with_pack else None
+        taken = ready | {parts.pack} if with_pack else ready
+        heap = parts.queue.heap
         stop_s = min(
-            min((entry[0] for entry in parts.queue.heap if entry[3] is not pack), default=math.inf),
+            min((entry[0] for entry in heap if entry[3] not in taken), default=math.inf),
             min((source.next_due_s for source in parts.pseudo), default=math.inf),
         )
         stop_s += parts.config.max_measurement_delay_s
         window = []
+        aiding_items = run.aiding.items
         for place in range(start, min(start + WINDOW, len(run.imu_index))):
             imu = run.imu_index[place]
-            if imu < 0 and not (with_pack and run.pack_index[place] >= 0):
+            if imu < 0 and not (
+                (with_pack and run.pack_index[place] >= 0)
+                or (
+                    run.aiding_index[place] >= 0
+                    and aiding_items[run.aiding_index[place]][0] in ready
+                )
+            ):
                 break
             window.append(place)
             if imu >= 0 and run.raw[imu, 0] > stop_s:
                 break
         return window
 
-    def _order(self, run: _Run, window: list[int], queued: list | None) -> tuple:
-        """:func:`imu_stretch`'s ``order`` for the inputs at the ``window``'s places, and the
-        pack's rows and attitudes: the ``queued`` ones first, then those of the window."""
+    def _order(self, run: _Run, window: list[int], queued: list | None, aiding_queued):
+        """:func:`imu_stretch`'s ``order`` for the inputs at the ``window``'s places, the pack's
+        rows and attitudes (the ``queued`` ones first, then those of the window) and the aiding
+        rows (``aiding_queued`` first, then those of the window)."""
         pack = self._parts.pack
         measurements = [measurement for _, measurement in queued or ()]
         rows = [pack.stretch_row(m, *run.position_rad) for m in measurements]
+        n_pack = len(measurements) + sum(
+            run.imu_index[place] < 0 and run.pack_index[place] >= 0 for place in window
+        )
+        aiding_items, aiding_rows = list(aiding_queued.items), [aiding_queued.rows]
         order, imu_count = [], 0
         for place in window:
             if run.imu_index[place] >= 0:
                 order.append(imu_count)
                 imu_count += 1
-            else:
+            elif run.pack_index[place] >= 0:
                 index = run.pack_index[place]
                 order.append(-1 - len(measurements))
                 measurements.append(run.measurements[index])
                 rows.append(run.pack_rows[index])
-        return order, np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE), measurements
+            else:
+                index = run.aiding_index[place]
+                order.append(-1 - n_pack - len(aiding_items))
+                aiding_items.append(run.aiding.items[index])
+                aiding_rows.append(run.aiding.rows[index : index + 1])
+        return (
+            order,
+            np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE),
+            measurements,
+            AidingRows(aiding_items, np.concatenate(aiding_rows)),
+        )
 
     def _pack_sequence(self) -> np.ndarray:
         """:func:`imu_stretch`'s ``pack_sequence`` from the pack's sequence."""
@@ -545,6 +659,28 @@ class ImuStretches:
             parts.queue.push(pack, measurement.t_s, measurement)
 
 
+def _imu_rows(samples: list) -> tuple[np.ndarray, list[int]]:
+    """The rows (n × 7: stamp s, gyro, force) of the IMU ``samples`` that are three numbers
+    each, and each sample's row (−1: not such a sample)."""
+    try:
+        raw = np.array([(t_s, *gyro, *force) for t_s, gyro, force in samples], dtype=float)
+        if raw.shape == (len(samples), SAMPLE_SIZE):
+            return raw, list(range(len(samples)))
+    except (TypeError, ValueError):
+        pass
+    rows, sample_rows = [], []
+    for t_s, gyro, force in samples:
+        try:
+            row = np.array((t_s, *gyro, *force), dtype=float)
+        except (TypeError, ValueError):
+            row = None
+        well_formed = row is not None and row.shape == (SAMPLE_SIZE,)
+        sample_rows.append(len(rows) if well_formed else -1)
+        if well_formed:
+            rows.append(row)
+    return np.array(rows).reshape(-1, SAMPLE_SIZE), sample_rows
+
+
 @numba.njit(cache=True)
 def imu_stretch(
     raw,
@@ -572,6 +708,7 @@ def imu_stretch(
     noise_terms,
     pack_jacobian,
     epochs,
+    aiding,
     counts,
 ):
     """Take the inputs in ``order`` (an IMU sample's index in ``raw``, or −1 − the index of a
@@ -599,10 +736,12 @@ def imu_stretch(
     for item in range(order.shape[0]):
         position = order[item]
         if position < 0:
-            t = pack_rows[-1 - position, PACK_T]
-            if not queued_in_sequence(t, pack_sequence, point[0], screened_state[LATEST]):
+            if not _queued(-1 - position, pack_rows, pack_sequence, aiding, point, screened_state):
                 return item, stepped, BEFORE_SAMPLE
-            counts[QUEUE_TAIL] += 1
+            if -1 - position < pack_rows.shape[0]:
+                counts[QUEUE_TAIL] += 1
+            else:
+                counts[AIDING_TAIL] = -1 - position - pack_rows.shape[0] + 1
             continue
         index = counts[IMU_TAKEN]
         sample = samples[index]
@@ -640,6 +779,7 @@ def imu_stretch(
             ahead_state,
             ahead[0],
             epochs,
+            aiding,
             counts,
         )
         if stepped < 0:
@@ -727,11 +867,13 @@ def _filtered(
     ahead_state,
     ahead_t,
     epochs,
+    aiding,
     counts,
 ) -> int:
     """The filter (``filter_state`` at ``point``) stepped through the samples it has not
     reached of the first ``reachable`` (the ``buffered`` ones, then the taken ``samples``) up to
-    ``horizon_s`` (s), each queued pack attitude's epoch made at its stamp: how many samples
+    ``horizon_s`` (s), the epoch of each stamp with queued pack attitudes or aiding measurements
+    made there (:func:`_epoch_made`): how many samples
     it has reached in all, or −1 − that when it stopped where the engine must go on (a gap, a
     measurement or constraint due, the covariance's batch full, an epoch it cannot make)."""
     n_buffered = buffered.shape[0]
@@ -750,29 +892,33 @@ def _filtered(
         ):
             return -1 - stepped
         head = counts[QUEUE_HEAD]
-        if head < counts[QUEUE_TAIL] and pack_rows[head, PACK_T] <= t_due:
+        pack_due = head < counts[QUEUE_TAIL] and pack_rows[head, PACK_T] <= t_due
+        rows = aiding[AIDING_ROWS]
+        aiding_due = due_status(rows, counts[AIDING_HEAD], counts[AIDING_TAIL], t_due)
+        if pack_due or aiding_due:
             if not (
-                pack_rows[head, PACK_T] == t_due
-                and dt > 0.0
-                and pack_epoch(
-                    pack_rows[head],
+                dt > 0.0
+                and _epoch_made(
+                    pack_due,
+                    aiding_due,
                     point,
                     due,
                     filter_state,
                     coning,
                     sculling,
                     covariance,
-                    noise_terms,
+                    pack_rows,
                     pack_terms,
+                    noise_terms,
                     pack_jacobian,
                     ahead_state,
                     ahead_t,
-                    epochs[counts[EPOCHS]],
+                    epochs,
+                    aiding,
+                    counts,
                 )
             ):
                 return -1 - stepped
-            counts[QUEUE_HEAD] += 1
-            counts[EPOCHS] += 1
         elif dt > 0.0:
             if filter_state[DURATION] + dt >= limits[PROPAGATION_INTERVAL]:
                 return -1 - stepped
@@ -780,6 +926,105 @@ def _filtered(
         point[:] = due
         stepped += 1
     return stepped
+
+
+@numba.njit(cache=True)
+def _queued(measurement, pack_rows, pack_sequence, aiding, point, screened_state) -> bool:
+    """Whether the engine would queue the ``measurement`` th of the stretch's measurements (the
+    pack's rows, then the aiding rows) with nothing else to do; its source's sequence then
+    follows it and an aiding row is marked queued."""
+    n_pack = pack_rows.shape[0]
+    if measurement < n_pack:
+        t = pack_rows[measurement, PACK_T]
+        return queued_in_sequence(t, pack_sequence, point[0], screened_state[LATEST])
+    rows = aiding[AIDING_ROWS]
+    k = measurement - n_pack
+    sequence = aiding[AIDING_SEQUENCES][int(rows[k, ROW_SLOT])]
+    if not queued_in_sequence(rows[k, ROW_T], sequence, point[0], screened_state[LATEST]):
+        return False
+    rows[k, ROW_STATUS] = QUEUED
+    return True
+
+
+@numba.njit(cache=True)
+def _epoch_made(
+    pack_due,
+    aiding_due,
+    point,
+    due,
+    filter_state,
+    coning,
+    sculling,
+    covariance,
+    pack_rows,
+    pack_terms,
+    noise_terms,
+    pack_jacobian,
+    ahead_state,
+    ahead_t,
+    epochs,
+    aiding,
+    counts,
+) -> bool:
+    """The epoch at the IMU sample ``due`` of the queued pack attitude (``pack_due``) or aiding
+    measurements (``aiding_due``, :func:`~buoy_nav.aiding_epoch.due_status`) made with the
+    engine's kernels, ``counts`` following it; False, with nothing changed, when the engine is
+    to make it (a stamp of both, a stamp between two IMU samples, an epoch the kernels leave
+    to it)."""
+    t_due = due[0]
+    if pack_due and aiding_due:
+        return False
+    if pack_due:
+        head = counts[QUEUE_HEAD]
+        if not (
+            pack_rows[head, PACK_T] == t_due
+            and pack_epoch(
+                pack_rows[head],
+                point,
+                due,
+                filter_state,
+                coning,
+                sculling,
+                covariance,
+                noise_terms,
+                pack_terms,
+                pack_jacobian,
+                ahead_state,
+                ahead_t,
+                epochs[counts[EPOCHS]],
+            )
+        ):
+            return False
+        counts[QUEUE_HEAD] += 1
+        counts[EPOCHS] += 1
+        return True
+    rows = aiding[AIDING_ROWS]
+    if aiding_due != 1:
+        return False
+    written = aiding_epoch(
+        rows,
+        counts[AIDING_HEAD],
+        counts[AIDING_TAIL],
+        point,
+        due,
+        filter_state,
+        coning,
+        sculling,
+        covariance,
+        noise_terms,
+        aiding[AIDING_TERMS],
+        int(pack_terms[ATTITUDE_START]),
+        pack_terms[RESYNC_AT],
+        ahead_state,
+        ahead_t,
+        aiding[AIDING_BOOKS_ROWS],
+        counts[AIDING_BOOKS],
+    )
+    if written < 0:
+        return False
+    counts[AIDING_BOOKS] += written
+    counts[AIDING_HEAD] = first_queued(rows, counts[AIDING_HEAD], counts[AIDING_TAIL])
+    return True
 
 
 @numba.njit(cache=True)
@@ -942,5 +1187,11 @@ def load_compiled_imu_stretch() -> None:
         np.zeros(7),
         np.zeros((3, 15)),
         np.zeros((0, EPOCH_SIZE)),
-        np.zeros(4, dtype=np.int64),
+        (
+            np.zeros((0, ROW_SIZE)),
+            np.zeros((0, SEQUENCE_SIZE)),
+            np.zeros((0, TERMS_SIZE)),
+            np.zeros((0, BOOK_SIZE)),
+        ),
+        np.zeros(COUNTS_SIZE, dtype=np.int64),
     )

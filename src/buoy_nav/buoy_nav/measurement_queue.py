@@ -127,12 +127,18 @@ class MeasurementQueue:
                 kept.append((source, measurement))
         return t, kept
 
+    @property
+    def settled(self) -> bool:
+        """Whether no queued measurement arrived ahead of its sequence or was replaced: none is
+        left for the queue to judge at its turn, and :meth:`take_source` takes."""
+        return not (self._replaced or any(self._ahead.values()))
+
     def take_source(self, source: AidingSource) -> list[tuple[float, object]] | None:
         """Take out the queued measurements of ``source`` as (stamp s, measurement), oldest
         first, to be applied elsewhere (:mod:`buoy_nav.imu_stretch`) or queued again with
-        :meth:`push`; None, with nothing taken, when one of the queue's arrived ahead of its
-        sequence or was replaced (the queue judges those at their turn)."""
-        if self._replaced or any(self._ahead.values()):
+        :meth:`push`; None, with nothing taken, when the queue is not :attr:`settled` (it
+        judges some at their turn)."""
+        if not self.settled:
             return None
         kind = source.kind
         taken = sorted(

@@ -1,0 +1,213 @@
+"""The aiding sources whose measurements the compiled stretches take (:mod:`buoy_nav.imu_stretch`,
+:mod:`buoy_nav.aiding_epoch`): which they are, their measurements made into rows, when the
+stretches may take them, and the books of what a stretch did with them, kept as the engine keeps
+them.
+
+A source is taken when its measurement function over arrays is one of
+:data:`~buoy_nav.aiding_epoch.MODELS` and the source that supersedes it, if registered, is taken
+too (the stretch sets a superseded measurement aside as the queue would). Its measurements are
+taken while a pass of its gate cannot move its health, nothing of it is held off its sequence,
+no contradiction suspends it, the filter is trusted and no smoother records the epochs: the
+epochs a stretch makes then move nothing else the engine keeps.
+"""
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from buoy_common.contract import Reason
+from buoy_nav.aiding_epoch import (
+    APPLIED,
+    BOOK_DIMENSION,
+    BOOK_INNOVATION,
+    BOOK_NIS,
+    BOOK_ROW,
+    BOOK_S,
+    BOOK_SIZE,
+    BOOK_STATUS,
+    MODELS,
+    PENDING,
+    QUEUED,
+    ROW_SIZE,
+    ROW_STATUS,
+    TERM_MODEL,
+    TERM_ORDER,
+    TERM_SUPERSEDED_BY,
+    TERM_THRESHOLDS,
+    TERM_VALUES,
+    TERMS_SIZE,
+)
+from buoy_nav.chi_square import chi_square_quantile
+from buoy_nav.error_state_filter import GateResult
+from buoy_nav.sequence_kernels import SEQUENCE_SIZE, sequence_of
+
+
+class AidingRows(NamedTuple):
+    """The stretched aiding measurements of some inputs: each one's (source, validated
+    measurement, stamp s), and their rows (:mod:`buoy_nav.aiding_epoch`'s layout)."""
+
+    items: list[tuple]
+    rows: np.ndarray
+
+
+class StretchedAiding:
+    """The stretched aiding sources among the engine's ``sources`` (in registry order), with the
+    engine's ``parts`` (:class:`~buoy_nav.imu_stretch.EngineParts`) they are booked in."""
+
+    def __init__(self, parts, sources):
+        self._parts = parts
+        registered = {source.kind for source in sources}
+        stretchable = [
+            source
+            for source in sources
+            if source.enabled and getattr(source, "stretch_model", None) in MODELS
+        ]
+        stretched_kinds = {source.kind for source in stretchable}
+        self.sources = tuple(
+            source
+            for source in stretchable
+            if source.superseded_by not in registered or source.superseded_by in stretched_kinds
+        )
+        self._slot = {source: slot for slot, source in enumerate(self.sources)}
+        order = {source: place for place, source in enumerate(sources)}
+        self._terms = np.zeros((len(self.sources), TERMS_SIZE))
+        for slot, source in enumerate(self.sources):
+            self._terms[slot] = self._terms_of(source, order[source])
+
+    def _terms_of(self, source, registry_order: int) -> np.ndarray:
+        """The row of ``aiding_terms`` of ``source``."""
+        terms = np.zeros(TERMS_SIZE)
+        terms[TERM_MODEL] = MODELS.index(source.stretch_model)
+        terms[TERM_ORDER] = registry_order
+        by = [slot for slot, other in enumerate(self.sources) if other.kind == source.superseded_by]
+        terms[TERM_SUPERSEDED_BY] = by[0] if by else -1.0
+        for dimension in (1, 2, 3):
+            threshold = chi_square_quantile(dimension, source.gate_probability)
+            terms[TERM_THRESHOLDS + dimension - 1] = threshold
+        own = source.stretch_terms()
+        terms[TERM_VALUES : TERM_VALUES + own.size] = own
+        return terms
+
+    def takes(self, source) -> bool:
+        """Whether the stretches may take measurements of ``source``."""
+        return source in self._slot
+
+    def row(self, source, t_s: float, measurement) -> tuple | None:
+        """The (validated measurement, row) of ``measurement`` of ``source`` stamped ``t_s``
+        (s), or None when the engine is to take it (not valid, not a finite stamp)."""
+        if isinstance(measurement, Reason) or not math.isfinite(t_s):
+            return None
+        validated = source.validated(measurement)
+        if isinstance(validated, Reason):
+            return None
+        row = np.zeros(ROW_SIZE)
+        values = source.stretch_values(validated)
+        row[:3] = (t_s, self._slot[source], PENDING)
+        row[3 : 3 + len(values)] = values
+        return validated, row
+
+    def ready(self, nav) -> frozenset:
+        """The sources whose measurements a stretch may take now (see the module docstring)."""
+        parts = self._parts
+        if not self.sources or not parts.integrity.trusted or nav.records_epochs:
+            return frozenset()
+        gates = parts.gates
+        return frozenset(
+            source
+            for source in self.sources
+            if gates.unmoved_by_passes(source.kind)
+            and not gates.suspended(source.kind)
+            and not gates.contradicted(source.kind)
+            and parts.sequences[source.kind].steady
+        )
+
+    def queued(self, ready: frozenset) -> AidingRows | None:
+        """The queued measurements of the ``ready`` sources taken out of the engine's queue as
+        rows, stamp by stamp; None, with nothing taken, when the queue judges some at their
+        turn (:meth:`~buoy_nav.measurement_queue.MeasurementQueue.take_source`)."""
+        queue = self._parts.queue
+        items = []
+        for source in self.sources:
+            if source not in ready:
+                continue
+            taken = queue.take_source(source)
+            if taken is None:
+                self._push_back(items)
+                return None
+            items.extend((source, measurement, t) for t, measurement in taken)
+        items.sort(key=lambda item: (item[2], self._slot[item[0]]))
+        rows = np.zeros((len(items), ROW_SIZE))
+        for index, (source, measurement, t) in enumerate(items):
+            row = self.row(source, t, measurement)[1]
+            row[ROW_STATUS] = QUEUED
+            rows[index] = row
+        return AidingRows(items, rows)
+
+    def arguments(self, rows: np.ndarray) -> tuple:
+        """:func:`~buoy_nav.imu_stretch.imu_stretch`'s ``aiding`` for ``rows``: the rows, each
+        source's sequence, the terms and room for the books."""
+        sequences = np.zeros((len(self.sources), SEQUENCE_SIZE))
+        for slot, source in enumerate(self.sources):
+            sequences[slot] = sequence_of(self._parts.sequences[source.kind])
+        return (rows, sequences, self._terms, np.zeros((len(rows), BOOK_SIZE)))
+
+    def book(self, aiding: AidingRows, first_new: int, tail: int, books: np.ndarray) -> bool:
+        """Keep the books of what a stretch did with ``aiding`` (those before ``first_new``
+        queued before it) as the engine keeps them: the sequences and the IMU's clock follow
+        the new ones it queued (up to ``tail``), each epoch's measurements set aside are counted
+        superseded and those applied observed and booked as passed by their gates, in the
+        engine's order, and those still queued go back to the queue. Whether an epoch was
+        applied."""
+        parts = self._parts
+        for source, _, t in aiding.items[first_new:tail]:
+            parts.sequences[source.kind].followed(t)
+            parts.imu_input.clock.aiding_stamp(t)
+        epoch: list = []
+        for book in books.tolist():
+            item = aiding.items[int(book[BOOK_ROW])]
+            if epoch and item[2] != epoch[0][1][2]:
+                self._book_epoch(epoch)
+                epoch = []
+            epoch.append((book, item))
+        if epoch:
+            self._book_epoch(epoch)
+        statuses = aiding.rows[:, ROW_STATUS].tolist()
+        self._push_back(
+            [item for item, status in zip(aiding.items, statuses, strict=True) if status == QUEUED]
+        )
+        return bool(epoch)
+
+    def _book_epoch(self, epoch: list) -> None:
+        """The books of one epoch's (book row, item) pairs, as the queue and the engine keep
+        them: the superseded counted, then each applied one observed, then each booked as
+        passed by its gate."""
+        parts = self._parts
+        applied = []
+        for book, (source, measurement, t) in epoch:
+            if book[BOOK_STATUS] != APPLIED:
+                parts.counters[source.kind].superseded += 1
+                continue
+            parts.contradictions.observe(t, measurement)
+            applied.append((book, source, t))
+        for book, source, t in applied:
+            dimension = int(book[BOOK_DIMENSION])
+            threshold = self._terms[self._slot[source], TERM_THRESHOLDS + dimension - 1]
+            gate = GateResult(
+                True,
+                book[BOOK_NIS],
+                threshold,
+                np.array(book[BOOK_S : BOOK_S + dimension * dimension]).reshape(
+                    dimension, dimension
+                ),
+            )
+            innovation = np.array(book[BOOK_INNOVATION : BOOK_INNOVATION + dimension])
+            fused, outcome = parts.gates.passed(source, t, innovation, gate)
+            if not fused:
+                raise RuntimeError(f"{source.kind}: a stretch's measurement was not fused")
+            parts.transitions.extend(outcome.transitions)
+
+    def _push_back(self, items: list) -> None:
+        """Queue ``items`` (source, measurement, stamp) again, in their order."""
+        for source, measurement, t in items:
+            self._parts.queue.push(source, t, measurement)
