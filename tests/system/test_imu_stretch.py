@@ -1,9 +1,10 @@
 """Stretches of IMU samples in one compiled call against one input at a time, on the simulator.
 
 An offline run hands the engine the IMU messages between two other sensor messages together,
-with the motion pack's attitudes among them (:meth:`FusionEngine.add_inputs`): they are
-screened one by one, then each stretch with nothing else to do goes through
-:mod:`buoy_nav.imu_stretch` and the engine takes the inputs that need it. Fed the same messages
+with the motion pack's attitudes and the GNSS measurements among them
+(:meth:`FusionEngine.add_inputs`): they are screened one by one, then each stretch with nothing
+else to do goes through :mod:`buoy_nav.imu_stretch`, its epochs made there, and the engine
+takes the inputs that need it. Fed the same messages
 one at a time (:meth:`FusionEngine.add_imu`, :func:`feed_message`, as a live node feeds them),
 the engine must give the same rows, stamps, counters, source health, state and covariance to
 the bit: on a clean sea state and through a GNSS outage (the covariance then propagated in
@@ -28,10 +29,18 @@ from gnss_faults import biased_velocity
 from scipy.spatial.transform import Rotation
 from test_nav_sensor_sets import moored_config, scenario_messages
 
-from buoy_common.contract import AHRS_TOPIC, IMU_RAW_TOPIC, Reason, header_seconds
+from buoy_common.contract import (
+    AHRS_TOPIC,
+    GNSS_BASELINE_TOPIC,
+    GNSS_FIX_TOPIC,
+    GNSS_VELOCITY_TOPIC,
+    IMU_RAW_TOPIC,
+    Reason,
+    header_seconds,
+)
 from buoy_nav import imu_stretch as stretch_module
-from buoy_nav.aiding_epoch import APPLIED, BOOK_STATUS
 from buoy_nav.aiding.base import vector_of
+from buoy_nav.aiding_epoch import APPLIED, BOOK_STATUS
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import FUSION_INPUT_MSGTYPES, feed_message
@@ -39,7 +48,7 @@ from buoy_nav.imu_stretch import MeasurementInput
 from buoy_nav.solution_rows import SolutionRows
 
 IMU = "imu"
-GNSS_TOPICS = ("gnss/fix", "gnss/vel", "gnss/heading", "gnss/baseline")
+APPLIED_GNSS_TOPICS = (GNSS_FIX_TOPIC, GNSS_VELOCITY_TOPIC, GNSS_BASELINE_TOPIC)
 
 
 def fusion_inputs(messages) -> list[tuple]:
@@ -164,8 +173,8 @@ def in_stretches(config: FusionConfig, inputs: list[tuple]):
 
 @pytest.fixture
 def stretch_counts(monkeypatch) -> Counter:
-    """Inputs offered to the compiled stretch and taken by it, and the pack's epochs it
-    applied, counted."""
+    """Inputs offered to the compiled stretch and taken by it, the pack's epochs it applied and
+    the aiding measurements, counted."""
     counts = Counter()
     compiled = stretch_module.imu_stretch
 
@@ -173,13 +182,41 @@ def stretch_counts(monkeypatch) -> Counter:
         taken, stepped, stop = compiled(raw, order, *arguments)
         counts["offered"] += order.shape[0]
         counts["taken"] += taken
-        counts["epochs"] += int(arguments[-1][stretch_module.EPOCHS])
-        books = arguments[-2][stretch_module.AIDING_BOOKS_ROWS][: arguments[-1][stretch_module.AIDING_BOOKS]]
+        aiding, went = arguments[-2], arguments[-1]
+        counts["epochs"] += int(went[stretch_module.EPOCHS])
+        books = aiding[stretch_module.AIDING_BOOKS_ROWS][: went[stretch_module.AIDING_BOOKS]]
         counts["aiding applied"] += int(np.sum(books[:, BOOK_STATUS] == APPLIED))
         return taken, stepped, stop
 
     monkeypatch.setattr(stretch_module, "imu_stretch", counted)
     return counts
+
+
+def innovations(engine: FusionEngine) -> list | None:
+    """The engine's innovation log (recorded when ``record_innovations``), in bytes."""
+    if engine.innovation_log is None:
+        return None
+    return [
+        (
+            record.t_s,
+            record.kind,
+            np.asarray(record.innovation).tobytes(),
+            np.asarray(record.innovation_covariance).tobytes(),
+            record.nis,
+            record.accepted,
+        )
+        for record in engine.innovation_log
+    ]
+
+
+def kept_motion(engine: FusionEngine) -> list:
+    """What the engine's contradictions keep of the receiver's motion (every fix and velocity of
+    their window, each as stamp and bytes)."""
+    motion = engine._contradictions.motion
+    return [
+        (sample[0], *(np.asarray(part).tobytes() for part in sample[1:]))
+        for sample in (*motion._fixes, *motion._velocities)
+    ]
 
 
 def assert_same_engines(first: FusionEngine, second: FusionEngine) -> None:
@@ -200,6 +237,8 @@ def assert_same_engines(first: FusionEngine, second: FusionEngine) -> None:
     if screening is not None:
         for array, other_array in zip(screening, other_screening, strict=True):
             assert np.array_equal(array, other_array)
+    assert innovations(first) == innovations(second)
+    assert kept_motion(first) == kept_motion(second)
     assert np.array_equal(first.covariance, second.covariance)
     state, other_state = first.nav_state, second.nav_state
     for field in dataclasses.fields(state):
@@ -220,7 +259,13 @@ def stretched_as_alone(config: FusionConfig, inputs: list[tuple], min_rows: int)
 
 
 CASES = {
-    "clean, then a GNSS outage": ("sea_state", 120.0, FusionConfig(), False, False),
+    "clean, then a GNSS outage": (
+        "sea_state",
+        120.0,
+        FusionConfig(record_innovations=True),
+        False,
+        False,
+    ),
     "imu faults": ("sea_state", 160.0, FusionConfig(), True, False),
     "biased velocity": (
         "sea_state",
@@ -267,8 +312,11 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
     imu_samples = sum(kind == IMU for kind, _ in inputs)
     # The first sample of each run (one in ten between the GNSS epochs) is fed alone.
     assert stretch_counts["taken"] >= 0.7 * imu_samples, "the stretch took too few samples"
-    gnss = sum(kind in GNSS_TOPICS for kind, _ in inputs)
-    print("aiding applied", stretch_counts["aiding applied"], "of", gnss, "taken", stretch_counts["taken"], "of", imu_samples)
+    # The GNSS epochs too (the heading is superseded by the baseline): all but those of the
+    # outage's end, the faults' and the distrust's.
+    applicable = sum(kind in APPLIED_GNSS_TOPICS for kind, _ in inputs)
+    share = 0.15 if velocity_bias else 0.5
+    assert stretch_counts["aiding applied"] >= share * applicable, "too few GNSS epochs"
     health = stretched.health()
     if imu_faults:
         rejected = health.counters[IMU].rejected

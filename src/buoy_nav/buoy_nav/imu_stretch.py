@@ -11,15 +11,18 @@ fork afresh, the rows' block full. The engine then takes over at that sample
 (:meth:`~buoy_nav.engine.FusionEngine.add_inputs`), so the result is the engine's to the bit;
 a test holds the two equal.
 
-A motion pack's attitude comes with every IMU sample (:mod:`buoy_nav.aiding.ahrs_attitude`).
-The stretch queues it as the engine does and, when the filter reaches its stamp, makes its
-epoch with the engine's kernels (:mod:`buoy_nav.pack_epoch`): the step there with the
-covariance's propagation, the pack's compiled update, the injection of the correction and its
-carry-over to the prediction. It
-stops before an epoch the engine must make itself (a gate that fails, a covariance to repair,
-a constraint due, the prediction forked afresh) and where the pack's books could change what
-follows (its health moved by a pass, the filter distrusted, a smoother recording the epochs);
-the engine then keeps the books of the epochs it made, in their order.
+The aiding measurements in between are taken too: a motion pack's attitude, which comes with
+every IMU sample (:mod:`buoy_nav.aiding.ahrs_attitude`, :mod:`buoy_nav.pack_epoch`), or the GNSS
+sources' (:mod:`buoy_nav.stretched_aiding`, :mod:`buoy_nav.aiding_epoch`), one or the other in
+a stretch. The stretch queues each as the engine does and, when the filter reaches its stamp,
+makes its epoch with the engine's kernels: the step there with the covariance's propagation,
+the compiled update (the pack's, or the GNSS sources' models stacked, gated and applied in one
+update), the injection of the correction and its carry-over to the prediction. It stops before
+an epoch the engine must make itself (a gate that fails, a covariance to repair, a model that
+does not hold, another measurement or a constraint due, the prediction forked afresh) and where
+the sources' books could change what follows (a source's health moved by a pass, the filter
+distrusted, a smoother recording the epochs); the engine then keeps the books of the epochs it
+made, in their order.
 """
 
 import itertools
