@@ -167,16 +167,20 @@ class _Run(NamedTuple):
     filter's position then (rad), and whether the inputs are IMU samples alone."""
 
     raw: np.ndarray
-    imu_index: list[int]
-    pack_index: list[int]
+    imu_index: np.ndarray
+    pack_index: np.ndarray
     measurements: list
     pack_rows: np.ndarray
     pack_terms: tuple | None
     position_rad: tuple[float, float]
     imu_only: bool
-    aiding_index: list[int]
+    aiding_index: np.ndarray
     """Each input's index among the stretched aiding measurements of ``aiding`` (−1: none)."""
     aiding: AidingRows
+    aiding_slots: np.ndarray
+    """Each input's aiding source's slot (:mod:`buoy_nav.stretched_aiding`; −1: none)."""
+    imu_stamps: np.ndarray
+    """Each input's IMU stamp (s; −inf: not an IMU sample's)."""
 
 
 class _PackArguments(NamedTuple):
@@ -269,38 +273,32 @@ class ImuStretches:
         """``inputs`` (IMU samples and :class:`MeasurementInput`) made ready, the pack's true
         north turned at the filter's position of ``nav`` now. An IMU sample that is not three
         numbers each is the engine's to take (:meth:`~buoy_nav.engine.FusionEngine.add_imu`
-        says why)."""
+        says why), as is a measurement that is not valid."""
         pack = self._parts.pack
-        imu_index, pack_index, samples, measurements = [], [], [], []
-        aiding_index, aiding_items, aiding_rows = [], [], []
-        for item in inputs:
+        n = len(inputs)
+        imu_index, pack_index = np.full(n, -1), np.full(n, -1)
+        aiding_index, aiding_slots = np.full(n, -1), np.full(n, -1)
+        samples, measurements, aiding_items, aiding_rows = [], [], [], []
+        for place, item in enumerate(inputs):
             if type(item) is not MeasurementInput:
-                imu_index.append(len(samples))
-                pack_index.append(-1)
-                aiding_index.append(-1)
+                imu_index[place] = len(samples)
                 samples.append(item)
-                continue
-            imu_index.append(-1)
-            made = self._aiding.row(*item) if self._aiding.takes(item.source) else None
-            aiding_index.append(-1 if made is None else len(aiding_items))
-            if made is not None:
-                aiding_items.append((item.source, made[0], item.t_s))
-                aiding_rows.append(made[1])
-            validated = (
-                item.source.validated(item.measurement)
-                if item.source is pack
-                and not isinstance(item.measurement, Reason)
-                and math.isfinite(item.t_s)
-                else None
-            )
-            if validated is None or isinstance(validated, Reason):
-                pack_index.append(-1)
-            else:
-                pack_index.append(len(measurements))
-                measurements.append(validated)
+            elif item.source is pack:
+                validated = _valid(item)
+                if validated is not None:
+                    pack_index[place] = len(measurements)
+                    measurements.append(validated)
+            elif self._aiding.takes(item.source):
+                made = self._aiding.row(*item)
+                if made is not None:
+                    aiding_index[place], aiding_slots[place] = len(aiding_items), made[1][1]
+                    aiding_items.append((item.source, made[0], item.t_s))
+                    aiding_rows.append(made[1])
         raw, sample_rows = _imu_rows(samples)
         if len(raw) < len(samples):
-            imu_index = [-1 if index < 0 else sample_rows[index] for index in imu_index]
+            imu_index = np.where(imu_index < 0, -1, np.array([*sample_rows, -1])[imu_index])
+        imu_stamps = np.full(n, -math.inf)
+        imu_stamps[imu_index >= 0] = raw[imu_index[imu_index >= 0], 0]
         state = nav.integrator.state_vector
         position = (float(state[LATITUDE]), float(state[LONGITUDE]))
         rows = [pack.stretch_row(m, *position) for m in measurements] if measurements else []
@@ -312,9 +310,11 @@ class ImuStretches:
             np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE),
             None if pack is None else pack.stretch_terms(*position, nav.kalman),
             position,
-            len(raw) == len(inputs),
+            len(raw) == n,
             aiding_index,
             AidingRows(aiding_items, np.array(aiding_rows).reshape(-1, ROW_SIZE)),
+            aiding_slots,
+            imu_stamps,
         )
 
     def take(self, run: _Run, start: int, screening: tuple, nav) -> Taken | None:
@@ -406,14 +406,16 @@ class ImuStretches:
         ready = frozenset() if with_pack else self._aiding.ready(nav)
         if not parts.queue.settled:  # the queue judges some of its measurements at their turn
             with_pack, ready = False, frozenset()
-        window = self._window(run, start, with_pack, ready)
-        if not window:
+        end = self._window_end(run, start, with_pack, ready)
+        if end == start:
             return None
+        window = slice(start, end)
         queued = None
-        if with_pack and any(run.pack_index[place] >= 0 for place in window):
+        if with_pack and (run.pack_index[window] >= 0).any():
             queued = parts.queue.take_source(parts.pack)
         aiding_queued = self._aiding.queued(ready) if ready else self._no_aiding
-        raw = run.raw[[run.imu_index[place] for place in window if run.imu_index[place] >= 0]]
+        imu = run.imu_index[window]
+        raw = run.raw[imu[imu >= 0]]
         order, pack_rows, measurements, aiding = self._order(run, window, queued, aiding_queued)
         pack = _PackArguments(
             pack_rows,
@@ -425,7 +427,7 @@ class ImuStretches:
         )
         return _Offer(
             raw,
-            np.array(order, dtype=np.int64),
+            order,
             pack,
             measurements,
             len(queued or ()),
@@ -438,8 +440,8 @@ class ImuStretches:
         """Whether the pack has attitudes queued or among the inputs a stretch from ``start``
         could be offered."""
         pack = self._parts.pack
-        return any(entry[3] is pack for entry in self._parts.queue.heap) or any(
-            index >= 0 for index in run.pack_index[start : start + WINDOW]
+        return any(entry[3] is pack for entry in self._parts.queue.heap) or bool(
+            (run.pack_index[start : start + WINDOW] >= 0).any()
         )
 
     def _booked(self, run: _Run, offer: _Offer, counts, nav) -> bool:
@@ -535,11 +537,11 @@ class ImuStretches:
             and not nav.records_epochs
         )
 
-    def _window(self, run: _Run, start: int, with_pack: bool, ready: frozenset) -> list[int]:
-        """The places of the inputs from ``start`` a stretch is offered: up to the first the
-        engine must take (the pack's too, unless ``with_pack``; the aiding sources' unless
-        ``ready``), and not beyond the first IMU sample whose filtering reaches the next
-        measurement or constraint due (the stretch stops there), :data:`WINDOW` at most."""
+    def _window_end(self, run: _Run, start: int, with_pack: bool, ready: frozenset) -> int:
+        """Where the inputs from ``start`` a stretch is offered end: at the first the engine
+        must take (the pack's too, unless ``with_pack``; the aiding sources' unless ``ready``),
+        after the first IMU sample whose filtering reaches the next measurement or constraint
+        due (the stretch stops there), :data:`WINDOW` at most."""
         parts = self._parts
         taken = ready | {parts.pack} if with_pack else ready
         heap = parts.queue.heap
@@ -548,55 +550,47 @@ class ImuStretches:
             min((source.next_due_s for source in parts.pseudo), default=math.inf),
         )
         stop_s += parts.config.max_measurement_delay_s
-        window = []
-        aiding_items = run.aiding.items
-        for place in range(start, min(start + WINDOW, len(run.imu_index))):
-            imu = run.imu_index[place]
-            if imu < 0 and not (
-                (with_pack and run.pack_index[place] >= 0)
-                or (
-                    run.aiding_index[place] >= 0
-                    and aiding_items[run.aiding_index[place]][0] in ready
-                )
-            ):
-                break
-            window.append(place)
-            if imu >= 0 and run.raw[imu, 0] > stop_s:
-                break
-        return window
+        end = min(start + WINDOW, len(run.imu_index))
+        allowed = run.imu_index[start:end] >= 0
+        if with_pack:
+            allowed |= run.pack_index[start:end] >= 0
+        if ready:
+            allowed |= self._aiding.ready_mask(ready)[run.aiding_slots[start:end]]
+        blocked = np.flatnonzero(~allowed)
+        if blocked.size:
+            end = start + int(blocked[0])
+        beyond = np.flatnonzero(run.imu_stamps[start:end] > stop_s)
+        return start + int(beyond[0]) + 1 if beyond.size else end
 
-    def _order(self, run: _Run, window: list[int], queued: list | None, aiding_queued):
-        """:func:`imu_stretch`'s ``order`` for the inputs at the ``window``'s places, the pack's
-        rows and attitudes (the ``queued`` ones first, then those of the window) and the aiding
-        rows (``aiding_queued`` first, then those of the window)."""
+    def _order(self, run: _Run, window: slice, queued: list | None, aiding_queued: AidingRows):
+        """:func:`imu_stretch`'s ``order`` for the inputs of the ``window``, the pack's rows and
+        attitudes (the ``queued`` ones first, then those of the window) and the aiding rows
+        (``aiding_queued`` first, then those of the window)."""
         pack = self._parts.pack
+        imu, packs, aids = run.imu_index[window], run.pack_index[window], run.aiding_index[window]
+        is_imu = imu >= 0
+        is_pack = ~is_imu & (packs >= 0)
+        is_aiding = ~is_imu & ~is_pack
         measurements = [measurement for _, measurement in queued or ()]
         rows = [pack.stretch_row(m, *run.position_rad) for m in measurements]
-        n_pack = len(measurements) + sum(
-            run.imu_index[place] < 0 and run.pack_index[place] >= 0 for place in window
+        n_queued = len(measurements)
+        pack_places = packs[is_pack]
+        measurements += [run.measurements[index] for index in pack_places.tolist()]
+        pack_rows = np.concatenate(
+            (np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE), run.pack_rows[pack_places])
         )
-        aiding_items, aiding_rows = list(aiding_queued.items), [aiding_queued.rows]
-        order, imu_count = [], 0
-        for place in window:
-            if run.imu_index[place] >= 0:
-                order.append(imu_count)
-                imu_count += 1
-            elif run.pack_index[place] >= 0:
-                index = run.pack_index[place]
-                order.append(-1 - len(measurements))
-                measurements.append(run.measurements[index])
-                rows.append(run.pack_rows[index])
-            else:
-                index = run.aiding_index[place]
-                order.append(-1 - n_pack - len(aiding_items))
-                aiding_items.append(run.aiding.items[index])
-                aiding_rows.append(run.aiding.rows[index : index + 1])
-        return (
-            order,
-            np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE),
-            measurements,
-            AidingRows(aiding_items, np.concatenate(aiding_rows)),
+        aiding_places = aids[is_aiding]
+        order = np.empty(len(imu), dtype=np.int64)
+        order[is_imu] = np.arange(np.count_nonzero(is_imu))
+        order[is_pack] = -1 - n_queued - np.arange(len(pack_places))
+        order[is_aiding] = (
+            -1 - len(measurements) - len(aiding_queued.items) - np.arange(len(aiding_places))
         )
+        aiding = AidingRows(
+            [*aiding_queued.items, *(run.aiding.items[index] for index in aiding_places.tolist())],
+            np.concatenate((aiding_queued.rows, run.aiding.rows[aiding_places])),
+        )
+        return order, pack_rows, measurements, aiding
 
     def _pack_sequence(self) -> np.ndarray:
         """:func:`imu_stretch`'s ``pack_sequence`` from the pack's sequence."""
@@ -660,6 +654,14 @@ class ImuStretches:
             parts.transitions.extend(outcome.transitions)
         for measurement in measurements[head:tail]:
             parts.queue.push(pack, measurement.t_s, measurement)
+
+
+def _valid(item: MeasurementInput):
+    """The validated measurement of ``item``, or None when it is none (the engine says why)."""
+    if isinstance(item.measurement, Reason) or not math.isfinite(item.t_s):
+        return None
+    validated = item.source.validated(item.measurement)
+    return None if isinstance(validated, Reason) else validated
 
 
 def _imu_rows(samples: list) -> tuple[np.ndarray, list[int]]:

@@ -70,6 +70,8 @@ class StretchedAiding:
             if source.superseded_by not in registered or source.superseded_by in stretched_kinds
         )
         self._slot = {source: slot for slot, source in enumerate(self.sources)}
+        # (kind, stamp s) → row, of the measurements a stretch queued again.
+        self._rows_of_queued: dict[tuple[str, float], np.ndarray] = {}
         order = {source: place for place, source in enumerate(sources)}
         self._terms = np.zeros((len(self.sources), TERMS_SIZE))
         for slot, source in enumerate(self.sources):
@@ -107,6 +109,11 @@ class StretchedAiding:
         row[3 : 3 + len(values)] = values
         return validated, row
 
+    def ready_mask(self, ready: frozenset) -> np.ndarray:
+        """Whether each slot's source is among ``ready``, and last False (for the slot −1 of an
+        input that is no stretched source's)."""
+        return np.array([*(source in ready for source in self.sources), False])
+
     def ready(self, nav) -> frozenset:
         """The sources whose measurements a stretch may take now (see the module docstring)."""
         parts = self._parts
@@ -122,26 +129,22 @@ class StretchedAiding:
             and parts.sequences[source.kind].steady
         )
 
-    def queued(self, ready: frozenset) -> AidingRows | None:
+    def queued(self, ready: frozenset) -> AidingRows:
         """The queued measurements of the ``ready`` sources taken out of the engine's queue as
-        rows, stamp by stamp; None, with nothing taken, when the queue judges some at their
-        turn (:meth:`~buoy_nav.measurement_queue.MeasurementQueue.take_source`)."""
+        rows, stamp by stamp (the queue :attr:`settled`: it takes them)."""
         queue = self._parts.queue
+        rows_of_queued, self._rows_of_queued = self._rows_of_queued, {}
         items = []
         for source in self.sources:
-            if source not in ready:
-                continue
-            taken = queue.take_source(source)
-            if taken is None:
-                self._push_back(items)
-                return None
-            items.extend((source, measurement, t) for t, measurement in taken)
+            if source in ready:
+                taken = queue.take_source(source) or ()
+                items.extend((source, measurement, t) for t, measurement in taken)
         items.sort(key=lambda item: (item[2], self._slot[item[0]]))
         rows = np.zeros((len(items), ROW_SIZE))
         for index, (source, measurement, t) in enumerate(items):
-            row = self.row(source, t, measurement)[1]
-            row[ROW_STATUS] = QUEUED
-            rows[index] = row
+            row = rows_of_queued.get((source.kind, t))
+            rows[index] = self.row(source, t, measurement)[1] if row is None else row
+        rows[:, ROW_STATUS] = QUEUED
         return AidingRows(items, rows)
 
     def arguments(self, rows: np.ndarray) -> tuple:
@@ -172,10 +175,11 @@ class StretchedAiding:
             epoch.append((book, item))
         if epoch:
             self._book_epoch(epoch)
-        statuses = aiding.rows[:, ROW_STATUS].tolist()
-        self._push_back(
-            [item for item, status in zip(aiding.items, statuses, strict=True) if status == QUEUED]
-        )
+        for index in np.flatnonzero(aiding.rows[:, ROW_STATUS] == QUEUED).tolist():
+            source, measurement, t = aiding.items[index]
+            self._parts.queue.push(source, t, measurement)
+            # Taken out again by the next stretch, most likely: its row need not be made again.
+            self._rows_of_queued[(source.kind, t)] = aiding.rows[index]
         return bool(epoch)
 
     def _book_epoch(self, epoch: list) -> None:
@@ -206,8 +210,3 @@ class StretchedAiding:
             if not fused:
                 raise RuntimeError(f"{source.kind}: a stretch's measurement was not fused")
             parts.transitions.extend(outcome.transitions)
-
-    def _push_back(self, items: list) -> None:
-        """Queue ``items`` (source, measurement, stamp) again, in their order."""
-        for source, measurement, t in items:
-            self._parts.queue.push(source, t, measurement)
