@@ -6,14 +6,16 @@ with the motion pack's attitudes and the GNSS measurements among them
 else to do goes through :mod:`buoy_nav.imu_stretch`, its epochs made there, and the engine
 takes the inputs that need it. Fed the same messages
 one at a time (:meth:`FusionEngine.add_imu`, :func:`feed_message`, as a live node feeds them),
-the engine must give the same rows, stamps, counters, source health, state and covariance to
-the bit: on a clean sea state and through a GNSS outage (the covariance then propagated in
-batches between the IMU samples); on IMU samples with a spike, non-finite values, a repeated
-stamp, a second stream, a gap that restarts the alignment and a step of the IMU's clock; on a
-GNSS velocity biased enough that the filter is distrusted, realigned and the velocity
-suspended; with the solutions decimated to 10 Hz and the IMU's calibration applied; and on a
-moored motion pack whose attitudes come with faults (refused quaternions, a stamp out of order,
-a non-finite covariance, attitudes the gate rejects, an outage), alone and with a magnetometer.
+the engine must give the same rows, stamps, counters, source health, innovations, state and
+covariance to the bit: on a clean sea state, its GNSS messages in another order than the
+engine stacks them in and for a while stamped between two IMU samples, and through a GNSS
+outage (the covariance then propagated in batches between the IMU samples); on IMU samples
+with a spike, non-finite values, a repeated stamp, a second stream, a gap that restarts the
+alignment and a step of the IMU's clock; on a GNSS velocity biased enough that the filter is
+distrusted, realigned and the velocity suspended; with the solutions decimated to 10 Hz and the
+IMU's calibration applied; and on a moored motion pack whose attitudes come with faults (refused
+quaternions, a stamp out of order, a non-finite covariance, attitudes the gate rejects, an
+outage), alone and with a magnetometer.
 """
 
 from __future__ import annotations
@@ -122,6 +124,30 @@ def without_gnss_between(inputs: list[tuple], from_s: float, to_s: float) -> lis
             continue
         kept.append((kind, item))
     return kept
+
+
+def with_gnss_reordered(inputs: list[tuple], from_s: float, to_s: float) -> list[tuple]:
+    """``inputs`` with the measurements between two IMU samples in the reverse order (the
+    baseline first, the fix last: not the order the engine stacks them in), and those of
+    [``from_s``, ``to_s``) after the first IMU sample stamped 3 ms later (between two IMU
+    samples: the engine applies them there)."""
+    first_s = next(item[0] for kind, item in inputs if kind == IMU)
+    reordered, between = [], []
+    for kind, item in [*inputs, (IMU, None)]:
+        if kind != IMU:
+            message = item
+            if from_s <= header_seconds(item.header) - first_s < to_s:
+                message = copy.deepcopy(item)
+                stamp = message.header.stamp
+                stamp_ns = stamp.sec * 10**9 + stamp.nanosec + 3 * 10**6
+                stamp.sec, stamp.nanosec = divmod(stamp_ns, 10**9)
+            between.append((kind, message))
+            continue
+        reordered += between[::-1]
+        between = []
+        if item is not None:
+            reordered.append((kind, item))
+    return reordered
 
 
 def one_at_a_time(config: FusionConfig, inputs: list[tuple]):
@@ -259,7 +285,7 @@ def stretched_as_alone(config: FusionConfig, inputs: list[tuple], min_rows: int)
 
 
 CASES = {
-    "clean, then a GNSS outage": (
+    "clean, GNSS out of order and off the IMU's grid, then an outage": (
         "sea_state",
         120.0,
         FusionConfig(record_innovations=True),
@@ -307,7 +333,7 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
     if imu_faults:
         inputs = with_imu_faults(inputs)
     if case.startswith("clean"):
-        inputs = without_gnss_between(inputs, 80.0, 100.0)
+        inputs = without_gnss_between(with_gnss_reordered(inputs, 40.0, 60.0), 80.0, 100.0)
     stretched = stretched_as_alone(config, inputs, 500)
     imu_samples = sum(kind == IMU for kind, _ in inputs)
     # The first sample of each run (one in ten between the GNSS epochs) is fed alone.

@@ -128,10 +128,9 @@ class NavState:
         return rotation_matrix_from_quaternion(self.attitude_xyzw)
 
 
-def inject_error_state(state: NavState, error) -> NavState:
-    """Apply an error state of :data:`ERROR_STATES` to a nominal state (THE error-injection
-    convention, :func:`buoy_nav.strapdown_kernel.inject_error_state`, which the integrator
-    applies to its own state in place)."""
+def strapdown_vector(state: NavState) -> np.ndarray:
+    """The strapdown state vector of ``state`` (:mod:`buoy_nav.strapdown_kernel`'s layout; what a
+    :class:`NavState` does not hold is zero)."""
     nominal = np.zeros(kernel.STATE_SIZE)
     nominal[kernel.ATTITUDE : kernel.ATTITUDE + 4] = state.attitude_xyzw
     nominal[kernel.VELOCITY : kernel.VELOCITY + 3] = state.velocity_enu_mps
@@ -140,6 +139,14 @@ def inject_error_state(state: NavState, error) -> NavState:
     nominal[kernel.ALTITUDE] = state.altitude_m
     nominal[kernel.GYRO_BIAS : kernel.GYRO_BIAS + 3] = state.gyro_bias_rad_s
     nominal[kernel.ACCEL_BIAS : kernel.ACCEL_BIAS + 3] = state.accel_bias_mps2
+    return nominal
+
+
+def inject_error_state(state: NavState, error) -> NavState:
+    """Apply an error state of :data:`ERROR_STATES` to a nominal state (THE error-injection
+    convention, :func:`buoy_nav.strapdown_kernel.inject_error_state`, which the integrator
+    applies to its own state in place)."""
+    nominal = strapdown_vector(state)
     kernel.inject_error_state(nominal, np.asarray(error, dtype=float))
     return NavState(
         attitude_xyzw=tuple(nominal[kernel.ATTITUDE : kernel.ATTITUDE + 4].tolist()),

@@ -29,7 +29,12 @@ from buoy_nav.aiding.base import LinearisationPoint
 from buoy_nav.aiding.model_kernels import azimuth_model
 from buoy_nav.antenna_geometry import horizontal_fraction
 from buoy_nav.config import FusionConfig
-from buoy_nav.error_state_filter import ERROR_STATES, ErrorStateFilter, NavState
+from buoy_nav.error_state_filter import (
+    ERROR_STATES,
+    ErrorStateFilter,
+    NavState,
+    strapdown_vector,
+)
 from buoy_nav.rotations import cross, skew, wrap_angle
 
 STATES = ERROR_STATES
@@ -350,17 +355,9 @@ def _block_diagonal(blocks):
     return matrix
 
 
-def strapdown_vector(point: LinearisationPoint) -> np.ndarray:
-    """The strapdown state vector of ``point`` (:mod:`buoy_nav.strapdown_kernel`'s layout), the
-    navigation frame's rate its last step's."""
-    state = point.state
-    vector = np.zeros(strapdown_kernel.STATE_SIZE)
-    vector[strapdown_kernel.ATTITUDE : strapdown_kernel.ATTITUDE + 4] = state.attitude_xyzw
-    vector[strapdown_kernel.VELOCITY : strapdown_kernel.VELOCITY + 3] = state.velocity_enu_mps
-    vector[strapdown_kernel.LATITUDE] = state.latitude_rad
-    vector[strapdown_kernel.LONGITUDE] = state.longitude_rad
-    vector[strapdown_kernel.ALTITUDE] = state.altitude_m
-    vector[strapdown_kernel.GYRO_BIAS : strapdown_kernel.GYRO_BIAS + 3] = state.gyro_bias_rad_s
+def strapdown_vector_of(point: LinearisationPoint) -> np.ndarray:
+    """The strapdown state vector of ``point``, the navigation frame's rate its last step's."""
+    vector = strapdown_vector(point.state)
     frame_rate = strapdown_kernel.NAV_FRAME_RATE
     vector[frame_rate : frame_rate + 3] = point.nav_frame_rate_enu_rad_s
     return vector
@@ -406,7 +403,7 @@ def test_a_sources_stretch_model_over_arrays_is_its_model_to_the_bit(source_clas
         model = source.model(measurement, point)
         innovation, jacobian, covariance, holds = source.stretch_model(
             np.array(source.stretch_values(measurement)),
-            strapdown_vector(point),
+            strapdown_vector_of(point),
             point.rotation_nb,
             np.array(point.raw_gyro_rad_s),
             terms,
