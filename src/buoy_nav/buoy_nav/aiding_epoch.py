@@ -23,16 +23,11 @@ from buoy_nav.aiding.dual_antenna import baseline_stretch_model
 from buoy_nav.aiding.gnss_fix import fix_stretch_model
 from buoy_nav.aiding.gnss_heading import heading_stretch_model
 from buoy_nav.aiding.gnss_velocity import velocity_stretch_model
-from buoy_nav.error_dynamics import stepped_covariance_kernel
+from buoy_nav.epoch_kernels import corrected, stepped_to
 from buoy_nav.kalman_kernel import gated_stacked_update
-from buoy_nav.prediction import carry_over_kernel
 from buoy_nav.rotations import rotation_matrix_elements
 from buoy_nav.strapdown_kernel import (
-    ALTITUDE,
     ATTITUDE,
-    LATITUDE,
-    VELOCITY,
-    inject_error_state,
 )
 
 MODELS = (fix_stretch_model, velocity_stretch_model, heading_stretch_model, baseline_stretch_model)
@@ -209,24 +204,7 @@ def aiding_epoch(
     if t >= resync_at_s:
         return -1
     superseded, kept = _stamp_rows(rows, head, tail, t, terms)
-    stepped = filter_state.copy()
-    _, prior = stepped_covariance_kernel(
-        stepped,
-        covariance,
-        t - point[0],
-        (point[1], point[2], point[3], due[1], due[2], due[3]),
-        (point[4], point[5], point[6], due[4], due[5], due[6]),
-        (coning, sculling),
-        (
-            noise_terms[0],
-            noise_terms[1],
-            noise_terms[2],
-            noise_terms[3],
-            noise_terms[4],
-            noise_terms[5],
-            noise_terms[6],
-        ),
-    )
+    stepped, prior = stepped_to(point, due, filter_state, coning, sculling, covariance, noise_terms)
     holds, innovation, jacobian, measurement_covariance, ends, thresholds = _stacked_models(
         rows, kept, terms, stepped, due[1:4].copy(), covariance.shape[0]
     )
@@ -237,16 +215,7 @@ def aiding_epoch(
     )
     if not (accepted and positive):
         return -1
-    velocity = stepped[VELOCITY : VELOCITY + 3].copy()
-    latitude, filter_altitude = stepped[LATITUDE], stepped[ALTITUDE]
-    filter_state[:] = stepped
-    inject_error_state(filter_state, correction)
-    covariance[:, :] = updated
-    carried = correction.copy()
-    span = ahead_t - t
-    if span > 0.0:
-        carry_over_kernel(ahead_state, velocity, latitude, filter_altitude, span, carried)
-    inject_error_state(ahead_state, carried)
+    corrected(filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t)
     return _booked(
         rows, superseded, kept, ends, nis, innovation, innovation_covariance, books, book_count
     )

@@ -14,15 +14,11 @@ import math
 import numba
 
 from buoy_nav.aiding.ahrs_attitude import attitude_update
-from buoy_nav.error_dynamics import stepped_covariance_kernel
-from buoy_nav.prediction import carry_over_kernel
+from buoy_nav.epoch_kernels import corrected, stepped_to
 from buoy_nav.strapdown_kernel import (
-    ALTITUDE,
     GYRO_BIAS,
     LATITUDE,
     LONGITUDE,
-    VELOCITY,
-    inject_error_state,
 )
 
 # The motion pack's attitudes a stretch takes (the stretch's ``pack_rows``, one row each, those
@@ -70,24 +66,7 @@ def pack_epoch(
     t = due[0]
     if t >= pack_terms[RESYNC_AT]:
         return False
-    stepped = filter_state.copy()
-    _, prior = stepped_covariance_kernel(
-        stepped,
-        covariance,
-        t - point[0],
-        (point[1], point[2], point[3], due[1], due[2], due[3]),
-        (point[4], point[5], point[6], due[4], due[5], due[6]),
-        (coning, sculling),
-        (
-            noise_terms[0],
-            noise_terms[1],
-            noise_terms[2],
-            noise_terms[3],
-            noise_terms[4],
-            noise_terms[5],
-            noise_terms[6],
-        ),
-    )
+    stepped, prior = stepped_to(point, due, filter_state, coning, sculling, covariance, noise_terms)
     latitude, longitude = stepped[LATITUDE], stepped[LONGITUDE]
     if not (
         pack_terms[LATITUDE_LOW] < latitude < pack_terms[LATITUDE_HIGH]
@@ -121,16 +100,7 @@ def pack_epoch(
     )
     if not (accepted and positive):
         return False
-    velocity = stepped[VELOCITY : VELOCITY + 3].copy()
-    filter_altitude = stepped[ALTITUDE]
-    filter_state[:] = stepped
-    inject_error_state(filter_state, correction)
-    covariance[:, :] = updated
-    carried = correction.copy()
-    span = ahead_t - t
-    if span > 0.0:
-        carry_over_kernel(ahead_state, velocity, latitude, filter_altitude, span, carried)
-    inject_error_state(ahead_state, carried)
+    corrected(filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t)
     epoch[EPOCH_T] = t
     epoch[EPOCH_INNOVATION : EPOCH_INNOVATION + 3] = innovation
     epoch[EPOCH_NIS] = nis
