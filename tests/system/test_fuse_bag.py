@@ -369,17 +369,21 @@ def test_the_pass_keeps_the_set_up_out_of_the_collector_and_hands_it_back(
     collector's walks); after it nothing stays frozen, so a long-lived process (an archive's
     worker) still collects the garbage among it."""
     frozen_while_fusing = []
-    messages = 0
-    add_message = OfflineFusion.add_message
+    calls = 0
 
-    def watched(fusion, *arguments):
-        nonlocal messages
-        if messages % 500 == 0:  # counting the frozen objects walks them all
-            frozen_while_fusing.append(gc.get_freeze_count())
-        messages += 1
-        return add_message(fusion, *arguments)
+    def watched(method):
+        def counting(fusion, *arguments):
+            nonlocal calls
+            if calls % 50 == 0:  # counting the frozen objects walks them all
+                frozen_while_fusing.append(gc.get_freeze_count())
+            calls += 1
+            return method(fusion, *arguments)
 
-    monkeypatch.setattr(OfflineFusion, "add_message", watched)
+        return counting
+
+    # The sensor messages reach the fusion one at a time or, read with their chunk, in runs.
+    for name in ("add_message", "add_records"):
+        monkeypatch.setattr(OfflineFusion, name, watched(getattr(OfflineFusion, name)))
     config = fusion_config_from_files([str(BUOY_PARAMETERS)])
     fuse_bag(short_bags["complete"], tmp_path / "out", config, smooth=smooth)
     engine_objects = 10_000  # an engine and its compiled kernels are far more

@@ -41,12 +41,13 @@ from buoy_common.contract import (
     header_seconds,
 )
 from buoy_nav import imu_stretch as stretch_module
+from buoy_nav import imu_stretches
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.aiding_epoch import APPLIED, BOOK_STATUS
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import FUSION_INPUT_MSGTYPES, feed_message
-from buoy_nav.imu_stretch import MeasurementInput
+from buoy_nav.imu_stretches import MeasurementInput
 from buoy_nav.solution_rows import SolutionRows
 
 IMU = "imu"
@@ -214,7 +215,7 @@ def stretch_counts(monkeypatch) -> Counter:
         counts["aiding applied"] += int(np.sum(books[:, BOOK_STATUS] == APPLIED))
         return taken, stepped, stop
 
-    monkeypatch.setattr(stretch_module, "imu_stretch", counted)
+    monkeypatch.setattr(imu_stretches, "imu_stretch", counted)
     return counts
 
 

@@ -98,12 +98,8 @@ from buoy_nav.epoch_recorder import EpochRecorder
 from buoy_nav.error_state_filter import ERROR_STATES, ImuErrorModel, NavState
 from buoy_nav.health import IMU, EngineHealth, InnovationRecord, MeasurementCounters
 from buoy_nav.imu_input import ImuInput
-from buoy_nav.imu_stretch import (
-    EngineParts,
-    ImuStretches,
-    MeasurementInput,
-    load_compiled_imu_stretch,
-)
+from buoy_nav.imu_stretch import load_compiled_imu_stretch
+from buoy_nav.imu_stretches import EngineParts, ImuStretches, MeasurementInput
 from buoy_nav.integrity import IntegrityMonitor, distrust_variances
 from buoy_nav.measurement_queue import MAX_MEASUREMENT_LEAD_S, MeasurementQueue
 from buoy_nav.mechanization import StrapdownIntegrator, load_compiled_kernels

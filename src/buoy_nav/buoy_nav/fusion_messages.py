@@ -70,7 +70,7 @@ from buoy_nav.aiding import TOPIC_SOURCES
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.aiding.gnss_fix import STATUS_FIX
 from buoy_nav.engine import IMU, FusionEngine, NavSolution
-from buoy_nav.imu_stretch import MeasurementInput
+from buoy_nav.imu_stretches import MeasurementInput
 from buoy_nav.nav_numbers import (
     ATTITUDE_COVARIANCE,
     BODY_TWIST_COVARIANCE,

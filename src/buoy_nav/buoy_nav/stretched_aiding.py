@@ -53,7 +53,7 @@ class AidingRows(NamedTuple):
 
 class StretchedAiding:
     """The stretched aiding sources among the engine's ``sources`` (in registry order), with the
-    engine's ``parts`` (:class:`~buoy_nav.imu_stretch.EngineParts`) they are booked in."""
+    engine's ``parts`` (:class:`~buoy_nav.imu_stretches.EngineParts`) they are booked in."""
 
     def __init__(self, parts, sources):
         self._parts = parts

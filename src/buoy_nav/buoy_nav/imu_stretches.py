@@ -1,0 +1,490 @@
+"""The engine's parts handed to the compiled stretch (:func:`buoy_nav.imu_stretch.imu_stretch`)
+and set from what it did.
+
+:meth:`~buoy_nav.engine.FusionEngine.add_inputs` is given an offline run's IMU samples and the
+measurements among them (:class:`MeasurementInput`). :class:`ImuStretches` makes them ready
+once (:meth:`ImuStretches.run_of`: the IMU samples' rows, the measurements validated and made
+into rows), offers each stretch the inputs it may take from where the engine stands (up to the
+first the engine must take; the pack's or the stretched aiding sources' measurements with those
+already queued taken out of the queue, when their books allow), calls the kernel, and then sets
+the engine's parts from what it did and keeps the books of the epochs it made, as the engine
+keeps them (:mod:`buoy_nav.stretched_aiding` for the GNSS sources').
+"""
+
+import itertools
+import math
+from collections import deque
+from typing import NamedTuple
+
+import numpy as np
+
+from buoy_common.contract import Reason
+from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource
+from buoy_nav.aiding_epoch import ROW_SIZE
+from buoy_nav.imu_stretch import (
+    AIDING_BOOKS,
+    AIDING_BOOKS_ROWS,
+    AIDING_TAIL,
+    CATCH_UP,
+    CLOCK_OFFSET,
+    EPOCHS,
+    IMU_TAKEN,
+    NEXT_OUTPUT_T,
+    ROWS,
+    SAMPLE_SIZE,
+    imu_stretch,
+)
+from buoy_nav.pack_epoch import (
+    PACK_ROW_SIZE,
+)
+from buoy_nav.strapdown_kernel import LATITUDE, LONGITUDE
+from buoy_nav.stretched_aiding import AidingRows, StretchedAiding
+from buoy_nav.stretched_pack import PackArguments, StretchedPack
+
+WINDOW = 512
+"""Inputs offered to one call at most: a stretch rarely runs longer (a constraint, a fix, the
+covariance's batch stop it), and its arrays are made for what it is offered."""
+
+
+class MeasurementInput(NamedTuple):
+    """An aiding source's measurement among the inputs of
+    :meth:`~buoy_nav.engine.FusionEngine.add_inputs`: its ``source``, its stamp ``t_s`` (s) and
+    the ``measurement`` (or the :class:`~buoy_common.contract.Reason` its message is none)."""
+
+    source: object
+    t_s: float
+    measurement: object
+
+
+class Taken(NamedTuple):
+    """What a stretch took: how many inputs, the IMU samples among them (stamp s, gyro,
+    force; re-stamped and calibrated) with their places among the inputs and whether each
+    one's solution was written, and whether the engine's filtering up to the last sample's
+    horizon is left to do (:data:`CATCH_UP`)."""
+
+    inputs: int
+    samples: list[tuple]
+    places: list[int]
+    rows_written: list[bool]
+    catch_up: bool
+
+
+class _Run(NamedTuple):
+    """The inputs of one call made ready for the stretches: the IMU samples' rows (n × 7), and
+    for each input its IMU sample's index there or its pack attitude's in ``pack_rows`` (−1:
+    neither, the engine takes it), the pack's validated attitudes and their rows, the terms
+    those rows hold with (:meth:`AhrsAttitudeSource.stretch_terms`; None: no pack) at the
+    filter's position then (rad), and whether the inputs are IMU samples alone."""
+
+    raw: np.ndarray
+    imu_index: np.ndarray
+    pack_index: np.ndarray
+    measurements: list
+    pack_rows: np.ndarray
+    pack_terms: tuple | None
+    position_rad: tuple[float, float]
+    imu_only: bool
+    aiding_index: np.ndarray
+    """Each input's index among the stretched aiding measurements of ``aiding`` (−1: none)."""
+    aiding: AidingRows
+    aiding_slots: np.ndarray
+    """Each input's aiding source's slot (:mod:`buoy_nav.stretched_aiding`; −1: none)."""
+    imu_stamps: np.ndarray
+    """Each input's IMU stamp (s; −inf: not an IMU sample's)."""
+
+
+class _Offer(NamedTuple):
+    """What one call of :func:`imu_stretch` is offered: the IMU samples' rows, the inputs'
+    ``order``, the pack's arguments, its attitudes (those queued before first, ``queued`` of
+    them; none when the stretch takes IMU samples alone)."""
+
+    raw: np.ndarray
+    order: np.ndarray
+    pack: PackArguments
+    measurements: list
+    queued: int
+    aiding: tuple
+    """:func:`imu_stretch`'s ``aiding`` (:mod:`buoy_nav.stretched_aiding`)."""
+    aiding_rows: AidingRows
+    """The aiding measurements offered, those queued before first, ``aiding_queued`` of them."""
+    aiding_queued: int
+
+
+_POSITIONS = np.arange(WINDOW, dtype=np.int64)
+"""The ``order`` of a stretch of IMU samples alone."""
+
+
+class EngineParts(NamedTuple):
+    """The parts of a :class:`~buoy_nav.engine.FusionEngine` a stretch reads and moves."""
+
+    config: object
+    buffer: deque
+    point: object
+    prediction: object
+    output: object
+    solutions: object
+    queue: object
+    imu_input: object
+    gates: object
+    sequences: dict
+    contradictions: object
+    integrity: object
+    transitions: list
+    pseudo: tuple
+    pack: AhrsAttitudeSource | None
+    """The motion pack's attitude source when enabled: its attitudes are taken in stretches."""
+    counters: dict
+    sources: tuple
+    """Every aiding source, in registry order (:mod:`buoy_nav.stretched_aiding` takes some)."""
+
+
+class ImuStretches:
+    """The engine's ``parts`` handed to :func:`imu_stretch` and set from what it did, and the
+    books of the pack's attitudes it applied kept as the engine keeps them."""
+
+    def __init__(self, parts: EngineParts):
+        self._parts = parts
+        self._aiding = StretchedAiding(parts, parts.sources)
+        self._no_aiding = AidingRows([], np.zeros((0, ROW_SIZE)))
+        self._pack = StretchedPack(parts, parts.sources[0].states.attitude.start)
+
+    @property
+    def pack(self) -> AhrsAttitudeSource | None:
+        """The motion pack's attitude source whose attitudes the stretches take (None: none)."""
+        return self._pack.source
+
+    @property
+    def aiding_sources(self) -> tuple:
+        """The aiding sources whose measurements the stretches take
+        (:mod:`buoy_nav.stretched_aiding`)."""
+        return self._aiding.sources
+
+    def run_of(self, inputs: list, nav) -> _Run:
+        """``inputs`` (IMU samples and :class:`MeasurementInput`) made ready, the pack's true
+        north turned at the filter's position of ``nav`` now. An IMU sample that is not three
+        numbers each is the engine's to take (:meth:`~buoy_nav.engine.FusionEngine.add_imu`
+        says why), as is a measurement that is not valid."""
+        pack = self._parts.pack
+        n = len(inputs)
+        imu_index, pack_index = np.full(n, -1), np.full(n, -1)
+        aiding_index, aiding_slots = np.full(n, -1), np.full(n, -1)
+        samples, measurements, aiding_items, aiding_rows = [], [], [], []
+        for place, item in enumerate(inputs):
+            if type(item) is not MeasurementInput:
+                imu_index[place] = len(samples)
+                samples.append(item)
+            elif item.source is pack:
+                validated = _valid(item)
+                if validated is not None:
+                    pack_index[place] = len(measurements)
+                    measurements.append(validated)
+            elif self._aiding.takes(item.source):
+                made = self._aiding.row(*item)
+                if made is not None:
+                    aiding_index[place], aiding_slots[place] = len(aiding_items), made[1][1]
+                    aiding_items.append((item.source, made[0], item.t_s))
+                    aiding_rows.append(made[1])
+        raw, sample_rows = _imu_rows(samples)
+        if len(raw) < len(samples):
+            imu_index = np.where(imu_index < 0, -1, np.array([*sample_rows, -1])[imu_index])
+        imu_stamps = np.full(n, -math.inf)
+        imu_stamps[imu_index >= 0] = raw[imu_index[imu_index >= 0], 0]
+        state = nav.integrator.state_vector
+        position = (float(state[LATITUDE]), float(state[LONGITUDE]))
+        rows = [pack.stretch_row(m, *position) for m in measurements] if measurements else []
+        return _Run(
+            raw,
+            imu_index,
+            pack_index,
+            measurements,
+            np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE),
+            None if pack is None else pack.stretch_terms(*position, nav.kalman),
+            position,
+            len(raw) == n,
+            aiding_index,
+            AidingRows(aiding_items, np.array(aiding_rows).reshape(-1, ROW_SIZE)),
+            aiding_slots,
+            imu_stamps,
+        )
+
+    def take(self, run: _Run, start: int, screening: tuple, nav) -> Taken | None:
+        """The inputs of ``run`` from ``start`` through :func:`imu_stretch`, with the IMU
+        ``screening``'s limits and state and the aided navigation ``nav``; None when it took
+        none (the engine takes the first itself)."""
+        parts = self._parts
+        if run.imu_only:
+            offer = self._imu_offer(run, start)
+        else:
+            offer = self._measurement_offer(run, start, nav)
+        if offer is None:
+            return None
+        raw = offer.raw
+        limits_of_screening, screened_state = screening
+        due = self._buffered_within_reach(raw, limits_of_screening[CLOCK_OFFSET])
+        ahead = parts.prediction.ahead[0]
+        state = self._state()
+        screened = np.empty_like(raw)
+        rows_written = np.zeros(len(raw), dtype=bool)
+        plane_terms, covariance, block_indices, distrusted, distrust = (
+            parts.solutions.row_arguments(nav.kalman)
+        )
+        if offer.measurements or offer.aiding_rows.items:
+            covariance = covariance.copy()  # the epochs' covariance, the filter's if they end
+        counts = np.array((0, 0, offer.queued, 0, 0, offer.aiding_queued, 0), dtype=np.int64)
+        count, stepped, stop = imu_stretch(
+            raw,
+            offer.order,
+            limits_of_screening,
+            screened_state,
+            screened,
+            np.array([(t, *gyro, *force) for t, gyro, force in due]).reshape(-1, SAMPLE_SIZE),
+            state,
+            self._limits(distrusted, distrust),
+            nav.integrator.state_vector,
+            nav.integrator.coning_correction,
+            nav.integrator.sculling_correction,
+            ahead.state_vector,
+            ahead.coning_correction,
+            ahead.sculling_correction,
+            parts.solutions.rows.block,
+            plane_terms,
+            covariance,
+            block_indices,
+            rows_written,
+            *offer.pack,
+            offer.aiding,
+            counts,
+        )
+        if self._booked(run, offer, counts, nav):
+            nav.kalman.covariance = covariance
+            parts.solutions.covariance_changed()
+            parts.solutions.biases_changed()
+        if count == 0:
+            return None
+        imu_taken = int(counts[IMU_TAKEN])
+        took = [
+            (t, (gx, gy, gz), (fx, fy, fz))
+            for t, gx, gy, gz, fx, fy, fz in screened[:imu_taken].tolist()
+        ]
+        if took:
+            parts.imu_input.screened_through(screened_state, took[-1])
+            self._moved(state, due, took, stepped)
+        places = [start + k for k, place in enumerate(offer.order[:count].tolist()) if place >= 0]
+        return Taken(count, took, places, rows_written[:imu_taken].tolist(), stop == CATCH_UP)
+
+    def _imu_offer(self, run: _Run, start: int) -> _Offer:
+        """What a stretch of IMU samples alone is offered from ``start``."""
+        end = min(start + WINDOW, len(run.imu_index))
+        return _Offer(
+            run.raw[start:end],
+            _POSITIONS[: end - start],
+            self._pack.none,
+            [],
+            0,
+            self._aiding.arguments(self._no_aiding.rows),
+            self._no_aiding,
+            0,
+        )
+
+    def _measurement_offer(self, run: _Run, start: int, nav) -> _Offer | None:
+        """What a stretch is offered from ``start`` with the measurements of the pack or of the
+        stretched aiding sources among the IMU samples, when they can be applied in it (their
+        queued ones taken out of the queue); None: nothing. A stretch takes the pack's or the
+        aiding sources', not both: their books are kept source by source."""
+        parts = self._parts
+        with_pack = self._pack.ready(nav) and self._pack_present(run, start)
+        ready = frozenset() if with_pack else self._aiding.ready(nav)
+        if not parts.queue.settled:  # the queue judges some of its measurements at their turn
+            with_pack, ready = False, frozenset()
+        end = self._window_end(run, start, with_pack, ready)
+        if end == start:
+            return None
+        window = slice(start, end)
+        queued = None
+        if with_pack and (run.pack_index[window] >= 0).any():
+            queued = parts.queue.take_source(parts.pack)
+        aiding_queued = self._aiding.queued(ready) if ready else self._no_aiding
+        imu = run.imu_index[window]
+        raw = run.raw[imu[imu >= 0]]
+        order, pack_rows, measurements, aiding = self._order(run, window, queued, aiding_queued)
+        return _Offer(
+            raw,
+            order,
+            self._pack.arguments(pack_rows, run.pack_terms, nav),
+            measurements,
+            len(queued or ()),
+            self._aiding.arguments(aiding.rows),
+            aiding,
+            len(aiding_queued.items),
+        )
+
+    def _pack_present(self, run: _Run, start: int) -> bool:
+        """Whether the pack has attitudes queued or among the inputs a stretch from ``start``
+        could be offered."""
+        return self._pack.queued() or bool((run.pack_index[start : start + WINDOW] >= 0).any())
+
+    def _booked(self, run: _Run, offer: _Offer, counts, nav) -> bool:
+        """Keep the books of the measurements ``offer`` had (``counts``: what the stretch did);
+        whether it applied any."""
+        applied = False
+        if offer.measurements:
+            self._pack.book(
+                run.pack_terms, offer.measurements, offer.queued, counts, offer.pack.epochs
+            )
+            applied = bool(counts[EPOCHS])
+        if offer.aiding_rows.items:
+            books = offer.aiding[AIDING_BOOKS_ROWS][: counts[AIDING_BOOKS]]
+            tail = int(counts[AIDING_TAIL])
+            applied = self._aiding.book(offer.aiding_rows, offer.aiding_queued, tail, books)
+        return applied
+
+    def _buffered_within_reach(self, raw: np.ndarray, clock_offset_s: float) -> list[tuple]:
+        """The buffered samples the filter may step to while taking ``raw``: none beyond the
+        horizon of its latest stamp (the clock's offset ``clock_offset_s`` stays while a
+        stretch runs: a step of the clock has samples held, which stops it)."""
+        stamps = raw[:, 0]
+        finite = stamps[np.isfinite(stamps)]
+        latest_s = finite.max() + clock_offset_s if finite.size else -math.inf
+        reach_s = latest_s - self._parts.config.max_measurement_delay_s
+        return list(itertools.takewhile(lambda sample: sample[0] <= reach_s, self._parts.buffer))
+
+    def _state(self) -> np.ndarray:
+        """:func:`imu_stretch`'s ``state`` from the parts."""
+        parts = self._parts
+        point, prediction = parts.point, parts.prediction
+        _, ahead_t, ahead_gyro, ahead_force = prediction.ahead
+        return np.array(
+            (
+                point.t_s,
+                *point.gyro,
+                *point.force,
+                ahead_t,
+                *ahead_gyro,
+                *ahead_force,
+                prediction.last_predicted_stamp_s,
+                parts.output.next_output_s,
+                parts.solutions.rows.count,
+            ),
+            dtype=float,
+        )
+
+    def _limits(self, distrusted: bool, distrust: tuple[float, float]) -> np.ndarray:
+        """:func:`imu_stretch`'s ``limits``, the filter ``distrusted`` or not (``distrust``: the
+        attitude and velocity variances then added)."""
+        parts = self._parts
+        config = parts.config
+        heap = parts.queue.heap
+        return np.array(
+            (
+                config.max_measurement_delay_s,
+                config.max_imu_gap_s,
+                config.covariance_propagation_interval_s,
+                heap[0][0] if heap else math.inf,
+                parts.output.period_s,
+                1.0 if distrusted else 0.0,
+                *distrust,
+                min((source.next_due_s for source in parts.pseudo), default=math.inf),
+            )
+        )
+
+    def _moved(self, state: np.ndarray, due: list, took: list, stepped: int) -> None:
+        """The parts set from what the stretch did: it ``took`` these samples (into the
+        buffer) and stepped the filter to ``stepped`` of the ``due`` buffered samples and
+        then of those; ``state`` as it left it."""
+        parts = self._parts
+        point = parts.point
+        buffer = parts.buffer
+        buffer.extend(took)
+        if stepped:
+            walked = [(point.t_s, point.gyro, point.force), *due, *took]
+            for _ in range(stepped):
+                buffer.popleft()
+            point.stepped_through(walked[stepped - 1], walked[stepped])
+        parts.prediction.predicted_through(took[-1])
+        parts.output.next_output_s = float(state[NEXT_OUTPUT_T])
+        parts.solutions.rows.count = int(state[ROWS])
+
+    def _window_end(self, run: _Run, start: int, with_pack: bool, ready: frozenset) -> int:
+        """Where the inputs from ``start`` a stretch is offered end: at the first the engine
+        must take (the pack's too, unless ``with_pack``; the aiding sources' unless ``ready``),
+        after the first IMU sample whose filtering reaches the next measurement or constraint
+        due (the stretch stops there), :data:`WINDOW` at most."""
+        parts = self._parts
+        taken = ready | {parts.pack} if with_pack else ready
+        heap = parts.queue.heap
+        stop_s = min(
+            min((entry[0] for entry in heap if entry[3] not in taken), default=math.inf),
+            min((source.next_due_s for source in parts.pseudo), default=math.inf),
+        )
+        stop_s += parts.config.max_measurement_delay_s
+        end = min(start + WINDOW, len(run.imu_index))
+        allowed = run.imu_index[start:end] >= 0
+        if with_pack:
+            allowed |= run.pack_index[start:end] >= 0
+        if ready:
+            allowed |= self._aiding.ready_mask(ready)[run.aiding_slots[start:end]]
+        blocked = np.flatnonzero(~allowed)
+        if blocked.size:
+            end = start + int(blocked[0])
+        beyond = np.flatnonzero(run.imu_stamps[start:end] > stop_s)
+        return start + int(beyond[0]) + 1 if beyond.size else end
+
+    def _order(self, run: _Run, window: slice, queued: list | None, aiding_queued: AidingRows):
+        """:func:`imu_stretch`'s ``order`` for the inputs of the ``window``, the pack's rows and
+        attitudes (the ``queued`` ones first, then those of the window) and the aiding rows
+        (``aiding_queued`` first, then those of the window)."""
+        pack = self._parts.pack
+        imu, packs, aids = run.imu_index[window], run.pack_index[window], run.aiding_index[window]
+        is_imu = imu >= 0
+        is_pack = ~is_imu & (packs >= 0)
+        is_aiding = ~is_imu & ~is_pack
+        measurements = [measurement for _, measurement in queued or ()]
+        rows = [pack.stretch_row(m, *run.position_rad) for m in measurements]
+        n_queued = len(measurements)
+        pack_places = packs[is_pack]
+        measurements += [run.measurements[index] for index in pack_places.tolist()]
+        pack_rows = np.concatenate(
+            (np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE), run.pack_rows[pack_places])
+        )
+        aiding_places = aids[is_aiding]
+        order = np.empty(len(imu), dtype=np.int64)
+        order[is_imu] = np.arange(np.count_nonzero(is_imu))
+        order[is_pack] = -1 - n_queued - np.arange(len(pack_places))
+        order[is_aiding] = (
+            -1 - len(measurements) - len(aiding_queued.items) - np.arange(len(aiding_places))
+        )
+        aiding = AidingRows(
+            [*aiding_queued.items, *(run.aiding.items[index] for index in aiding_places.tolist())],
+            np.concatenate((aiding_queued.rows, run.aiding.rows[aiding_places])),
+        )
+        return order, pack_rows, measurements, aiding
+
+
+def _valid(item: MeasurementInput):
+    """The validated measurement of ``item``, or None when it is none (the engine says why)."""
+    if isinstance(item.measurement, Reason) or not math.isfinite(item.t_s):
+        return None
+    validated = item.source.validated(item.measurement)
+    return None if isinstance(validated, Reason) else validated
+
+
+def _imu_rows(samples: list) -> tuple[np.ndarray, list[int]]:
+    """The rows (n × 7: stamp s, gyro, force) of the IMU ``samples`` that are three numbers
+    each, and each sample's row (−1: not such a sample)."""
+    try:
+        raw = np.array([(t_s, *gyro, *force) for t_s, gyro, force in samples], dtype=float)
+        if raw.shape == (len(samples), SAMPLE_SIZE):
+            return raw, list(range(len(samples)))
+    except (TypeError, ValueError):
+        pass
+    rows, sample_rows = [], []
+    for t_s, gyro, force in samples:
+        try:
+            row = np.array((t_s, *gyro, *force), dtype=float)
+        except (TypeError, ValueError):
+            row = None
+        well_formed = row is not None and row.shape == (SAMPLE_SIZE,)
+        sample_rows.append(len(rows) if well_formed else -1)
+        if well_formed:
+            rows.append(row)
+    return np.array(rows).reshape(-1, SAMPLE_SIZE), sample_rows
