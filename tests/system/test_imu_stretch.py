@@ -211,7 +211,7 @@ def stretch_counts(monkeypatch) -> Counter:
         counts["taken"] += taken
         aiding, went = arguments[-2], arguments[-1]
         counts["epochs"] += int(went[stretch_module.EPOCHS])
-        books = aiding[stretch_module.AIDING_BOOKS_ROWS][: went[stretch_module.AIDING_BOOKS]]
+        books = aiding.books[: went[stretch_module.AIDING_BOOKS]]
         counts["aiding applied"] += int(np.sum(books[:, BOOK_STATUS] == APPLIED))
         return taken, stepped, stop
 

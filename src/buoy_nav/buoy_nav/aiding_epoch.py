@@ -16,6 +16,8 @@ A source whose measurement function is not in :data:`MODELS` is not taken in str
 measurements stop them and the engine applies them. The arrays are laid out below.
 """
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -52,6 +54,18 @@ TERMS_SIZE = TERM_VALUES + 16
 BOOK_ROW, BOOK_STATUS, BOOK_DIMENSION, BOOK_NIS, BOOK_INNOVATION = range(5)
 BOOK_S = BOOK_INNOVATION + 3
 BOOK_SIZE = BOOK_S + 9
+
+
+class AidingArguments(NamedTuple):
+    """The arrays a stretch hands the aiding epochs (laid out above): the measurements' rows,
+    each source's sequence (:mod:`buoy_nav.sequence_kernels`), each source's terms and room for
+    the epochs' books."""
+
+    rows: np.ndarray
+    sequences: np.ndarray
+    terms: np.ndarray
+    books: np.ndarray
+
 
 _rotation_matrix_elements = numba.njit(cache=True)(rotation_matrix_elements)
 

@@ -39,6 +39,7 @@ from buoy_nav.aiding_epoch import (
     ROW_STATUS,
     ROW_T,
     TERMS_SIZE,
+    AidingArguments,
     aiding_epoch,
     due_status,
     first_queued,
@@ -50,6 +51,7 @@ from buoy_nav.pack_epoch import (
     PACK_T,
     PACK_TERMS_SIZE,
     RESYNC_AT,
+    PackArguments,
     pack_epoch,
 )
 from buoy_nav.sequence_kernels import (
@@ -107,10 +109,6 @@ SCREENED_STATE_SIZE = CLOCK_RING + RING_SIZE
 # queued aiding measurements begin and end in the aiding rows, and the books of their epochs.
 IMU_TAKEN, QUEUE_HEAD, QUEUE_TAIL, EPOCHS, AIDING_HEAD, AIDING_TAIL, AIDING_BOOKS = range(7)
 COUNTS_SIZE = 7
-# The aiding measurements' arguments (:func:`imu_stretch`'s ``aiding``, laid out in
-# :mod:`buoy_nav.aiding_epoch`): their rows, each source's sequence
-# (:mod:`buoy_nav.sequence_kernels`), each source's terms, the epochs' books.
-AIDING_ROWS, AIDING_SEQUENCES, AIDING_TERMS, AIDING_BOOKS_ROWS = range(4)
 
 
 @numba.njit(cache=True)
@@ -134,29 +132,25 @@ def imu_stretch(
     covariance,
     block_indices,
     row_written,
-    pack_rows,
-    pack_sequence,
-    pack_terms,
     noise_terms,
-    pack_jacobian,
-    epochs,
+    pack,
     aiding,
     counts,
 ):
     """Take the inputs in ``order`` (an IMU sample's index in ``raw``, or −1 − the index of a
-    motion-pack attitude in ``pack_rows``) as the engine's ``add_imu``, ``add_measurement`` and
-    ``catch_up`` would, until one needs the engine; the filter may also reach the ``buffered``
-    IMU samples ahead of it (k × 7, oldest first).
+    measurement: the pack's rows, then the aiding rows) as the engine's ``add_imu``,
+    ``add_measurement`` and ``catch_up`` would, until one needs the engine; the filter may also
+    reach the ``buffered`` IMU samples ahead of it (k × 7, oldest first).
 
     Each IMU sample (n × 7: header stamp s, ω_ib body rad/s, specific force body m/s²) is
     screened (``screening``, ``screened_state``; into ``samples``, re-stamped and calibrated),
     predicted ahead with its row (:func:`_predicted`) and the filter stepped to its horizon
-    (:func:`_filtered`); each attitude is queued
-    (:func:`~buoy_nav.sequence_kernels.queued_in_sequence`) and its epoch made when the filter
-    reaches it. The arrays' layouts are this module's
-    constants and :mod:`buoy_nav.pack_epoch`'s; ``state``, the strapdown states, ``covariance``
-    and ``counts`` are updated in place, ``row_written`` set for each sample whose row was
-    written.
+    (:func:`_filtered`); each measurement is queued (:func:`_queued`) and its epoch made when
+    the filter reaches it, the process noise's ``noise_terms`` and the ``pack``'s or the
+    ``aiding``'s arrays (:class:`~buoy_nav.pack_epoch.PackArguments`,
+    :class:`~buoy_nav.aiding_epoch.AidingArguments`). The layouts are this module's constants and
+    those modules'; ``state``, the strapdown states, ``covariance`` and ``counts`` are updated in
+    place, ``row_written`` set for each sample whose row was written.
 
     Returns (inputs taken, buffered samples the filter stepped to, :data:`DONE`,
     :data:`BEFORE_SAMPLE` or :data:`CATCH_UP`).
@@ -168,12 +162,12 @@ def imu_stretch(
     for item in range(order.shape[0]):
         position = order[item]
         if position < 0:
-            if not _queued(-1 - position, pack_rows, pack_sequence, aiding, point, screened_state):
+            if not _queued(-1 - position, pack, aiding, point, screened_state):
                 return item, stepped, BEFORE_SAMPLE
-            if -1 - position < pack_rows.shape[0]:
+            if -1 - position < pack.rows.shape[0]:
                 counts[QUEUE_TAIL] += 1
             else:
-                counts[AIDING_TAIL] = -1 - position - pack_rows.shape[0] + 1
+                counts[AIDING_TAIL] = -1 - position - pack.rows.shape[0] + 1
             continue
         index = counts[IMU_TAKEN]
         sample = samples[index]
@@ -204,13 +198,10 @@ def imu_stretch(
             filter_coning,
             filter_sculling,
             covariance,
-            pack_rows,
-            pack_terms,
             noise_terms,
-            pack_jacobian,
             ahead_state,
             ahead[0],
-            epochs,
+            pack,
             aiding,
             counts,
         )
@@ -292,13 +283,10 @@ def _filtered(
     coning,
     sculling,
     covariance,
-    pack_rows,
-    pack_terms,
     noise_terms,
-    pack_jacobian,
     ahead_state,
     ahead_t,
-    epochs,
+    pack,
     aiding,
     counts,
 ) -> int:
@@ -324,9 +312,8 @@ def _filtered(
         ):
             return -1 - stepped
         head = counts[QUEUE_HEAD]
-        pack_due = head < counts[QUEUE_TAIL] and pack_rows[head, PACK_T] <= t_due
-        rows = aiding[AIDING_ROWS]
-        aiding_due = due_status(rows, counts[AIDING_HEAD], counts[AIDING_TAIL], t_due)
+        pack_due = head < counts[QUEUE_TAIL] and pack.rows[head, PACK_T] <= t_due
+        aiding_due = due_status(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL], t_due)
         if pack_due or aiding_due:
             if not (
                 dt > 0.0
@@ -339,13 +326,10 @@ def _filtered(
                     coning,
                     sculling,
                     covariance,
-                    pack_rows,
-                    pack_terms,
                     noise_terms,
-                    pack_jacobian,
                     ahead_state,
                     ahead_t,
-                    epochs,
+                    pack,
                     aiding,
                     counts,
                 )
@@ -361,17 +345,17 @@ def _filtered(
 
 
 @numba.njit(cache=True)
-def _queued(measurement, pack_rows, pack_sequence, aiding, point, screened_state) -> bool:
+def _queued(measurement, pack, aiding, point, screened_state) -> bool:
     """Whether the engine would queue the ``measurement`` th of the stretch's measurements (the
-    pack's rows, then the aiding rows) with nothing else to do; its source's sequence then
-    follows it and an aiding row is marked queued."""
-    n_pack = pack_rows.shape[0]
+    ``pack``'s rows, then the ``aiding`` rows) with nothing else to do; its source's sequence
+    then follows it and an aiding row is marked queued."""
+    n_pack = pack.rows.shape[0]
     if measurement < n_pack:
-        t = pack_rows[measurement, PACK_T]
-        return queued_in_sequence(t, pack_sequence, point[0], screened_state[LATEST])
-    rows = aiding[AIDING_ROWS]
+        t = pack.rows[measurement, PACK_T]
+        return queued_in_sequence(t, pack.sequence, point[0], screened_state[LATEST])
+    rows = aiding.rows
     k = measurement - n_pack
-    sequence = aiding[AIDING_SEQUENCES][int(rows[k, ROW_SLOT])]
+    sequence = aiding.sequences[int(rows[k, ROW_SLOT])]
     if not queued_in_sequence(rows[k, ROW_T], sequence, point[0], screened_state[LATEST]):
         return False
     rows[k, ROW_STATUS] = QUEUED
@@ -388,13 +372,10 @@ def _epoch_made(
     coning,
     sculling,
     covariance,
-    pack_rows,
-    pack_terms,
     noise_terms,
-    pack_jacobian,
     ahead_state,
     ahead_t,
-    epochs,
+    pack,
     aiding,
     counts,
 ) -> bool:
@@ -403,15 +384,14 @@ def _epoch_made(
     engine's kernels, ``counts`` following it; False, with nothing changed, when the engine is
     to make it (a stamp of both, a stamp between two IMU samples, an epoch the kernels leave
     to it)."""
-    t_due = due[0]
     if pack_due and aiding_due:
         return False
     if pack_due:
         head = counts[QUEUE_HEAD]
         if not (
-            pack_rows[head, PACK_T] == t_due
+            pack.rows[head, PACK_T] == due[0]
             and pack_epoch(
-                pack_rows[head],
+                pack.rows[head],
                 point,
                 due,
                 filter_state,
@@ -419,22 +399,21 @@ def _epoch_made(
                 sculling,
                 covariance,
                 noise_terms,
-                pack_terms,
-                pack_jacobian,
+                pack.terms,
+                pack.jacobian,
                 ahead_state,
                 ahead_t,
-                epochs[counts[EPOCHS]],
+                pack.epochs[counts[EPOCHS]],
             )
         ):
             return False
         counts[QUEUE_HEAD] += 1
         counts[EPOCHS] += 1
         return True
-    rows = aiding[AIDING_ROWS]
     if aiding_due != 1:
         return False
     written = aiding_epoch(
-        rows,
+        aiding.rows,
         counts[AIDING_HEAD],
         counts[AIDING_TAIL],
         point,
@@ -444,18 +423,18 @@ def _epoch_made(
         sculling,
         covariance,
         noise_terms,
-        aiding[AIDING_TERMS],
-        int(pack_terms[ATTITUDE_START]),
-        pack_terms[RESYNC_AT],
+        aiding.terms,
+        int(pack.terms[ATTITUDE_START]),
+        pack.terms[RESYNC_AT],
         ahead_state,
         ahead_t,
-        aiding[AIDING_BOOKS_ROWS],
+        aiding.books,
         counts[AIDING_BOOKS],
     )
     if written < 0:
         return False
     counts[AIDING_BOOKS] += written
-    counts[AIDING_HEAD] = first_queued(rows, counts[AIDING_HEAD], counts[AIDING_TAIL])
+    counts[AIDING_HEAD] = first_queued(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL])
     return True
 
 
@@ -613,13 +592,15 @@ def load_compiled_imu_stretch() -> None:
         np.eye(15),
         np.arange(36, dtype=np.int64).reshape(4, 3, 3),
         np.zeros(1, dtype=np.bool_),
-        np.zeros((0, PACK_ROW_SIZE)),
-        np.zeros(SEQUENCE_SIZE),
-        np.zeros(PACK_TERMS_SIZE),
         np.zeros(7),
-        np.zeros((3, 15)),
-        np.zeros((0, EPOCH_SIZE)),
-        (
+        PackArguments(
+            np.zeros((0, PACK_ROW_SIZE)),
+            np.zeros(SEQUENCE_SIZE),
+            np.zeros(PACK_TERMS_SIZE),
+            np.zeros((3, 15)),
+            np.zeros((0, EPOCH_SIZE)),
+        ),
+        AidingArguments(
             np.zeros((0, ROW_SIZE)),
             np.zeros((0, SEQUENCE_SIZE)),
             np.zeros((0, TERMS_SIZE)),

@@ -20,10 +20,9 @@ import numpy as np
 
 from buoy_common.contract import Reason
 from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource
-from buoy_nav.aiding_epoch import ROW_SIZE
+from buoy_nav.aiding_epoch import ROW_SIZE, AidingArguments
 from buoy_nav.imu_stretch import (
     AIDING_BOOKS,
-    AIDING_BOOKS_ROWS,
     AIDING_TAIL,
     CATCH_UP,
     CLOCK_OFFSET,
@@ -36,10 +35,11 @@ from buoy_nav.imu_stretch import (
 )
 from buoy_nav.pack_epoch import (
     PACK_ROW_SIZE,
+    PackArguments,
 )
 from buoy_nav.strapdown_kernel import LATITUDE, LONGITUDE
 from buoy_nav.stretched_aiding import AidingRows, StretchedAiding
-from buoy_nav.stretched_pack import PackArguments, StretchedPack
+from buoy_nav.stretched_pack import StretchedPack
 
 WINDOW = 512
 """Inputs offered to one call at most: a stretch rarely runs longer (a constraint, a fix, the
@@ -95,23 +95,26 @@ class _Run(NamedTuple):
 
 class _Offer(NamedTuple):
     """What one call of :func:`imu_stretch` is offered: the IMU samples' rows, the inputs'
-    ``order``, the pack's arguments, its attitudes (those queued before first, ``queued`` of
-    them; none when the stretch takes IMU samples alone)."""
+    ``order``, the process noise's terms (:meth:`AidedNavigation.noise_terms`), the pack's
+    arguments and its attitudes (those queued before first, ``queued`` of them), the aiding
+    measurements' arguments and rows (those queued before first, ``aiding_queued`` of them);
+    no measurement when the stretch takes IMU samples alone."""
 
     raw: np.ndarray
     order: np.ndarray
+    noise_terms: np.ndarray
     pack: PackArguments
     measurements: list
     queued: int
-    aiding: tuple
-    """:func:`imu_stretch`'s ``aiding`` (:mod:`buoy_nav.stretched_aiding`)."""
+    aiding: AidingArguments
     aiding_rows: AidingRows
-    """The aiding measurements offered, those queued before first, ``aiding_queued`` of them."""
     aiding_queued: int
 
 
 _POSITIONS = np.arange(WINDOW, dtype=np.int64)
 """The ``order`` of a stretch of IMU samples alone."""
+_NO_NOISE_TERMS = np.zeros(7)
+"""The ``noise_terms`` of a stretch of IMU samples alone (no epoch: none read)."""
 
 
 class EngineParts(NamedTuple):
@@ -251,7 +254,8 @@ class ImuStretches:
             covariance,
             block_indices,
             rows_written,
-            *offer.pack,
+            offer.noise_terms,
+            offer.pack,
             offer.aiding,
             counts,
         )
@@ -278,6 +282,7 @@ class ImuStretches:
         return _Offer(
             run.raw[start:end],
             _POSITIONS[: end - start],
+            _NO_NOISE_TERMS,
             self._pack.none,
             [],
             0,
@@ -310,7 +315,8 @@ class ImuStretches:
         return _Offer(
             raw,
             order,
-            self._pack.arguments(pack_rows, run.pack_terms, nav),
+            np.array(nav.noise_terms(), dtype=float),
+            self._pack.arguments(pack_rows, run.pack_terms),
             measurements,
             len(queued or ()),
             self._aiding.arguments(aiding.rows),
@@ -333,7 +339,7 @@ class ImuStretches:
             )
             applied = bool(counts[EPOCHS])
         if offer.aiding_rows.items:
-            books = offer.aiding[AIDING_BOOKS_ROWS][: counts[AIDING_BOOKS]]
+            books = offer.aiding.books[: counts[AIDING_BOOKS]]
             tail = int(counts[AIDING_TAIL])
             applied = self._aiding.book(offer.aiding_rows, offer.aiding_queued, tail, books)
         return applied

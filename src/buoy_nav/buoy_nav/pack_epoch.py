@@ -10,8 +10,10 @@ the engine must take over. The arrays it reads and writes are laid out below.
 """
 
 import math
+from typing import NamedTuple
 
 import numba
+import numpy as np
 
 from buoy_nav.aiding.ahrs_attitude import attitude_update
 from buoy_nav.epoch_kernels import corrected, stepped_to
@@ -33,6 +35,20 @@ PACK_ROW_SIZE = 20
 (LAG, LAG_UNCERTAINTY_SQ, FLOOR, THRESHOLD, ATTITUDE_START, RESYNC_AT) = range(6)
 LATITUDE_LOW, LATITUDE_HIGH, LONGITUDE_LOW, LONGITUDE_HIGH = range(6, 10)
 PACK_TERMS_SIZE = 10
+
+
+class PackArguments(NamedTuple):
+    """The arrays a stretch hands the pack's epochs (laid out above and below): its attitudes'
+    rows, its sequence (:mod:`buoy_nav.sequence_kernels`), its terms, the update's Jacobian (3 ×
+    error states, written in place) and room for the epochs' books."""
+
+    rows: np.ndarray
+    sequence: np.ndarray
+    terms: np.ndarray
+    jacobian: np.ndarray
+    epochs: np.ndarray
+
+
 # The epochs of the pack's attitude a stretch applied (``epochs``, a row each): stamp (s), the
 # innovation (rad, 3), its NIS and S (3×3 rad², row-major), for the books.
 EPOCH_T, EPOCH_INNOVATION, EPOCH_NIS, EPOCH_S = 0, 1, 4, 5

@@ -37,6 +37,7 @@ from buoy_nav.aiding_epoch import (
     TERM_THRESHOLDS,
     TERM_VALUES,
     TERMS_SIZE,
+    AidingArguments,
 )
 from buoy_nav.chi_square import chi_square_quantile
 from buoy_nav.error_state_filter import GateResult
@@ -147,13 +148,13 @@ class StretchedAiding:
         rows[:, ROW_STATUS] = QUEUED
         return AidingRows(items, rows)
 
-    def arguments(self, rows: np.ndarray) -> tuple:
+    def arguments(self, rows: np.ndarray) -> AidingArguments:
         """:func:`~buoy_nav.imu_stretch.imu_stretch`'s ``aiding`` for ``rows``: the rows, each
         source's sequence, the terms and room for the books."""
         sequences = np.zeros((len(self.sources), SEQUENCE_SIZE))
         for slot, source in enumerate(self.sources):
             sequences[slot] = sequence_of(self._parts.sequences[source.kind])
-        return (rows, sequences, self._terms, np.zeros((len(rows), BOOK_SIZE)))
+        return AidingArguments(rows, sequences, self._terms, np.zeros((len(rows), BOOK_SIZE)))
 
     def book(self, aiding: AidingRows, first_new: int, tail: int, books: np.ndarray) -> bool:
         """Keep the books of what a stretch did with ``aiding`` (those before ``first_new``

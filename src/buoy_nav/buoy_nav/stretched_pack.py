@@ -8,7 +8,6 @@ stretch makes then move nothing else the engine keeps.
 """
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 
@@ -24,23 +23,12 @@ from buoy_nav.pack_epoch import (
     PACK_ROW_SIZE,
     PACK_TERMS_SIZE,
     THRESHOLD,
+    PackArguments,
 )
 from buoy_nav.sequence_kernels import SEQUENCE_LATEST, SEQUENCE_SIZE, sequence_of
 
 NO_TERMS = (0.0, 0.0, 0.0, 0.0, -math.inf, math.inf, -math.inf, math.inf)
 """The pack's terms when there is no pack (:meth:`AhrsAttitudeSource.stretch_terms`)."""
-
-
-class PackArguments(NamedTuple):
-    """:func:`~buoy_nav.imu_stretch.imu_stretch`'s arguments for the pack's attitudes, in its
-    order."""
-
-    rows: np.ndarray
-    sequence: np.ndarray
-    terms: np.ndarray
-    noise_terms: np.ndarray
-    jacobian: np.ndarray
-    epochs: np.ndarray
 
 
 class StretchedPack:
@@ -58,7 +46,6 @@ class StretchedPack:
             np.zeros((0, PACK_ROW_SIZE)),
             np.zeros(SEQUENCE_SIZE),
             np.zeros(PACK_TERMS_SIZE),
-            np.zeros(7),
             self._jacobian,
             np.zeros((0, EPOCH_SIZE)),
         )
@@ -87,14 +74,13 @@ class StretchedPack:
         pack = self._parts.pack
         return any(entry[3] is pack for entry in self._parts.queue.heap)
 
-    def arguments(self, rows: np.ndarray, pack_terms: tuple | None, nav) -> PackArguments:
-        """The kernel's arguments for the pack's ``rows``, its terms ``pack_terms`` (None: no
-        pack) and the process noise of ``nav``."""
+    def arguments(self, rows: np.ndarray, pack_terms: tuple | None) -> PackArguments:
+        """The kernel's arguments for the pack's ``rows`` and its terms ``pack_terms`` (None: no
+        pack)."""
         return PackArguments(
             rows,
             self._sequence(),
             self._terms(pack_terms),
-            np.array(nav.noise_terms(), dtype=float),
             self._jacobian,
             np.empty((len(rows), EPOCH_SIZE)),
         )
