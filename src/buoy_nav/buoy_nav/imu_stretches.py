@@ -286,7 +286,7 @@ class ImuStretches:
             self._pack.none,
             [],
             0,
-            self._aiding.arguments(self._no_aiding.rows),
+            self._aiding.none,
             self._no_aiding,
             0,
         )
@@ -319,7 +319,7 @@ class ImuStretches:
             self._pack.arguments(pack_rows, run.pack_terms),
             measurements,
             len(queued or ()),
-            self._aiding.arguments(aiding.rows),
+            self._aiding.arguments(aiding.rows) if aiding.items else self._aiding.none,
             aiding,
             len(aiding_queued.items),
         )

@@ -22,30 +22,50 @@ from buoy_nav.stream_sequence import (
     stream_interval_s,
 )
 
-# The ring: how many intervals it holds, where the next one goes, then the intervals (s).
-RING_COUNT, RING_NEXT, RING_INTERVALS = range(3)
+# The ring: how many intervals it holds, where the next one goes, the sample interval from them
+# (:func:`~buoy_nav.stream_sequence.stream_interval_s`, NaN while there is none), then the
+# intervals (s).
+RING_COUNT, RING_NEXT, RING_INTERVAL, RING_INTERVALS = range(4)
 RING_SIZE = RING_INTERVALS + RATE_MEMORY
 # An aiding source's sequence: its latest stamp (s), then the ring of its intervals.
 SEQUENCE_LATEST, SEQUENCE_RING = 0, 1
 SEQUENCE_SIZE = SEQUENCE_RING + RING_SIZE
 
-stream_interval = numba.njit(cache=True)(stream_interval_s)
-
 
 @numba.njit(cache=True)
 def ring_interval(ring) -> float:
     """The stream's sample interval (s) from the intervals of ``ring`` (NaN: none)."""
-    return stream_interval(ring[RING_INTERVALS : RING_INTERVALS + int(ring[RING_COUNT])])
+    return ring[RING_INTERVAL]
 
 
 @numba.njit(cache=True)
 def ring_add(ring, interval_s) -> None:
-    """An in-sequence interval of ``interval_s`` (s) into ``ring``, the oldest one out when it
-    is full."""
+    """An in-sequence interval of ``interval_s`` (s, finite) into ``ring``, the oldest one out
+    when it is full, and the sample interval from them."""
     following = int(ring[RING_NEXT])
     ring[RING_INTERVALS + following] = interval_s
     ring[RING_NEXT] = (following + 1) % RATE_MEMORY
-    ring[RING_COUNT] = min(ring[RING_COUNT] + 1.0, float(RATE_MEMORY))
+    count = min(int(ring[RING_COUNT]) + 1, RATE_MEMORY)
+    ring[RING_COUNT] = count
+    ring[RING_INTERVAL] = _lower_median(ring[RING_INTERVALS : RING_INTERVALS + count])
+
+
+@numba.njit(cache=True)
+def _lower_median(values) -> float:
+    """The lower median of the finite ``values`` (at least one): the value
+    :func:`~buoy_nav.stream_sequence.stream_interval_s` reads off them in order, found without
+    sorting them (at each IMU sample, sorting allocated more than this compares)."""
+    rank = (values.shape[0] - 1) // 2
+    for candidate in values:
+        below = equal = 0
+        for other in values:
+            if other < candidate:
+                below += 1
+            elif other == candidate:
+                equal += 1
+        if below <= rank < below + equal:
+            return candidate
+    return math.nan
 
 
 def ring_of(intervals_s: list[float]) -> np.ndarray:
@@ -54,6 +74,7 @@ def ring_of(intervals_s: list[float]) -> np.ndarray:
     count = len(intervals_s)
     ring[RING_COUNT] = count
     ring[RING_NEXT] = count % RATE_MEMORY
+    ring[RING_INTERVAL] = stream_interval_s(intervals_s)
     ring[RING_INTERVALS : RING_INTERVALS + count] = intervals_s
     return ring
 

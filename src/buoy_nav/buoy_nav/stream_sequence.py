@@ -36,6 +36,7 @@ What becomes of a held sample depends on who waits for it:
   (``out_of_sequence``); confirmed, it is corrected like any other.
 """
 
+import bisect
 import itertools
 import math
 from collections import deque
@@ -69,7 +70,8 @@ def stream_interval_s(intervals) -> float:
     new sequence would ever be confirmed: the stream would be lost for good. The lower median
     of two keeps the shorter, so that a sample lost early does not widen what follows.
 
-    Written for the interpreter and numba alike (:mod:`buoy_nav.sequence_kernels`)."""
+    The compiled stretches keep the same interval in their rings
+    (:func:`buoy_nav.sequence_kernels.ring_add`); a test holds the two equal."""
     count = len(intervals)
     if count == 0:
         return math.nan
@@ -82,6 +84,9 @@ class RecentIntervals:
 
     def __init__(self):
         self._intervals: deque[float] = deque(maxlen=RATE_MEMORY)
+        # The same intervals in ascending order: a new one goes in place at each sample, which
+        # costs less than sorting them all again.
+        self._ascending: list[float] = []
         self.interval_s = math.nan
         """The stream's sample interval (s; NaN until an interval came)."""
 
@@ -91,14 +96,28 @@ class RecentIntervals:
         return list(self._intervals)
 
     def add(self, interval_s: float) -> None:
-        """An in-sequence interval of ``interval_s`` (s) came."""
-        self._intervals.append(interval_s)
-        self.interval_s = stream_interval_s(self._intervals)
+        """An in-sequence interval of ``interval_s`` (s, finite) came."""
+        intervals, ascending = self._intervals, self._ascending
+        if len(intervals) == RATE_MEMORY:
+            del ascending[bisect.bisect_left(ascending, intervals[0])]
+        intervals.append(interval_s)
+        bisect.insort(ascending, interval_s)
+        # stream_interval_s of the intervals, read off those already in order.
+        self.interval_s = ascending[(len(ascending) - 1) // 2]
+
+    def extend(self, intervals_s: list[float]) -> None:
+        """In-sequence intervals ``intervals_s`` (s, finite, in order) came: as :meth:`add` of
+        each."""
+        if intervals_s:
+            self._intervals.extend(intervals_s)
+            self._ascending = sorted(self._intervals)
+            self.interval_s = stream_interval_s(self._intervals)
 
     def restart(self, intervals_s) -> None:
-        """The recent intervals are ``intervals_s`` (s, oldest first) alone."""
+        """The recent intervals are ``intervals_s`` (s, oldest first, finite) alone."""
         self._intervals.clear()
         self._intervals.extend(intervals_s)
+        self._ascending = sorted(self._intervals)
         self.interval_s = stream_interval_s(self._intervals)
 
 
@@ -183,12 +202,20 @@ class StreamSequence:
         """The recent in-sequence intervals (s), oldest first."""
         return self._intervals.values_s
 
-    def followed(self, t_s: float) -> None:
-        """A sample stamped ``t_s`` (s) followed the sequence, none held: as :meth:`screen`
-        takes it (:mod:`buoy_nav.imu_stretch` screened it)."""
-        if math.isfinite(self.latest_s):
-            self._intervals.add(t_s - self.latest_s)
-        self.latest_s = t_s
+    def followed(self, stamps_s: list[float]) -> None:
+        """Samples stamped ``stamps_s`` (s, in order) followed the sequence, none held: as
+        :meth:`screen` takes them one by one (:mod:`buoy_nav.imu_stretch` screened them)."""
+        if not stamps_s:
+            return
+        previous = [self.latest_s, *stamps_s[:-1]]
+        self._intervals.extend(
+            [
+                t - latest
+                for t, latest in zip(stamps_s, previous, strict=True)
+                if math.isfinite(latest)
+            ]
+        )
+        self.latest_s = stamps_s[-1]
 
     def on_grid(self, t_s: float) -> bool:
         """Whether the stamp ``t_s`` (s) lies on the sequence's grid: a whole number of sample

@@ -71,6 +71,12 @@ class StretchedAiding:
             if source.superseded_by not in registered or source.superseded_by in stretched_kinds
         )
         self._slot = {source: slot for slot, source in enumerate(self.sources)}
+        self._none = AidingArguments(
+            np.zeros((0, ROW_SIZE)),
+            np.zeros((0, SEQUENCE_SIZE)),
+            np.zeros((0, TERMS_SIZE)),
+            np.zeros((0, BOOK_SIZE)),
+        )
         # (kind, stamp s) → row, of the measurements a stretch queued again.
         self._rows_of_queued: dict[tuple[str, float], np.ndarray] = {}
         order = {source: place for place, source in enumerate(sources)}
@@ -148,6 +154,11 @@ class StretchedAiding:
         rows[:, ROW_STATUS] = QUEUED
         return AidingRows(items, rows)
 
+    @property
+    def none(self) -> AidingArguments:
+        """The arguments of a stretch that takes no aiding measurement."""
+        return self._none
+
     def arguments(self, rows: np.ndarray) -> AidingArguments:
         """:func:`~buoy_nav.imu_stretch.imu_stretch`'s ``aiding`` for ``rows``: the rows, each
         source's sequence, the terms and room for the books."""
@@ -164,8 +175,10 @@ class StretchedAiding:
         engine's order, and those still queued go back to the queue. Whether an epoch was
         applied."""
         parts = self._parts
-        for source, _, t in aiding.items[first_new:tail]:
-            parts.sequences[source.kind].followed(t)
+        queued = aiding.items[first_new:tail]
+        for source in self.sources:
+            parts.sequences[source.kind].followed([t for s, _, t in queued if s is source])
+        for _, _, t in queued:
             parts.imu_input.clock.aiding_stamp(t)
         epoch: list = []
         for book in books.tolist():

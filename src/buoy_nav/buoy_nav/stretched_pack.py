@@ -118,9 +118,10 @@ class StretchedPack:
         parts = self._parts
         pack = parts.pack
         head, tail, applied = int(counts[QUEUE_HEAD]), int(counts[QUEUE_TAIL]), int(counts[EPOCHS])
-        for measurement in measurements[first_new:tail]:
-            parts.sequences[pack.kind].followed(measurement.t_s)
-            parts.imu_input.clock.aiding_stamp(measurement.t_s)
+        queued = [measurement.t_s for measurement in measurements[first_new:tail]]
+        parts.sequences[pack.kind].followed(queued)
+        if queued:
+            parts.imu_input.clock.aiding_stamp(queued[-1])
         threshold = pack_terms[THRESHOLD]
         for epoch, measurement in zip(epochs[:applied].tolist(), measurements, strict=False):
             t = epoch[EPOCH_T]
