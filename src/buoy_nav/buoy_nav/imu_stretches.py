@@ -20,7 +20,7 @@ import numpy as np
 
 from buoy_common.contract import Reason
 from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource
-from buoy_nav.aiding_epoch import ROW_SIZE, AidingArguments
+from buoy_nav.aiding_epoch import ROW_SIZE, ROW_SLOT, AidingArguments
 from buoy_nav.imu_stretch import (
     AIDING_BOOKS,
     AIDING_TAIL,
@@ -184,7 +184,7 @@ class ImuStretches:
             elif self._aiding.takes(item.source):
                 made = self._aiding.row(*item)
                 if made is not None:
-                    aiding_index[place], aiding_slots[place] = len(aiding_items), made[1][1]
+                    aiding_index[place], aiding_slots[place] = len(aiding_items), made[1][ROW_SLOT]
                     aiding_items.append((item.source, made[0], item.t_s))
                     aiding_rows.append(made[1])
         raw, sample_rows = _imu_rows(samples)

@@ -30,7 +30,10 @@ from buoy_nav.aiding_epoch import (
     PENDING,
     QUEUED,
     ROW_SIZE,
+    ROW_SLOT,
     ROW_STATUS,
+    ROW_T,
+    ROW_VALUES,
     TERM_MODEL,
     TERM_ORDER,
     TERM_SUPERSEDED_BY,
@@ -112,8 +115,8 @@ class StretchedAiding:
             return None
         row = np.zeros(ROW_SIZE)
         values = source.stretch_values(validated)
-        row[:3] = (t_s, self._slot[source], PENDING)
-        row[3 : 3 + len(values)] = values
+        row[ROW_T], row[ROW_SLOT], row[ROW_STATUS] = t_s, self._slot[source], PENDING
+        row[ROW_VALUES : ROW_VALUES + len(values)] = values
         return validated, row
 
     def ready_mask(self, ready: frozenset) -> np.ndarray:
