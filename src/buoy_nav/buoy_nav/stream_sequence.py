@@ -72,10 +72,12 @@ def stream_interval_s(intervals) -> float:
 
     The compiled stretches keep the same interval in their rings
     (:func:`buoy_nav.sequence_kernels.ring_add`); a test holds the two equal."""
-    count = len(intervals)
-    if count == 0:
-        return math.nan
-    return sorted(intervals)[(count - 1) // 2]
+    return _lower_median(sorted(intervals))
+
+
+def _lower_median(ascending: list[float]) -> float:
+    """The lower median of values in ascending order (NaN: none)."""
+    return ascending[(len(ascending) - 1) // 2] if ascending else math.nan
 
 
 class RecentIntervals:
@@ -102,23 +104,26 @@ class RecentIntervals:
             del ascending[bisect.bisect_left(ascending, intervals[0])]
         intervals.append(interval_s)
         bisect.insort(ascending, interval_s)
-        # stream_interval_s of the intervals, read off those already in order.
-        self.interval_s = ascending[(len(ascending) - 1) // 2]
+        self.interval_s = _lower_median(ascending)
 
     def extend(self, intervals_s: list[float]) -> None:
         """In-sequence intervals ``intervals_s`` (s, finite, in order) came: as :meth:`add` of
         each."""
         if intervals_s:
             self._intervals.extend(intervals_s)
-            self._ascending = sorted(self._intervals)
-            self.interval_s = stream_interval_s(self._intervals)
+            self._reorder()
 
     def restart(self, intervals_s) -> None:
         """The recent intervals are ``intervals_s`` (s, oldest first, finite) alone."""
         self._intervals.clear()
         self._intervals.extend(intervals_s)
+        self._reorder()
+
+    def _reorder(self) -> None:
+        """The intervals in order again, and the sample interval from them
+        (:func:`stream_interval_s`, sorting them once)."""
         self._ascending = sorted(self._intervals)
-        self.interval_s = stream_interval_s(self._intervals)
+        self.interval_s = _lower_median(self._ascending)
 
 
 def follows(t_s: float, previous_s: float, interval_s: float) -> bool:
