@@ -201,12 +201,15 @@ def in_stretches(config: FusionConfig, inputs: list[tuple]):
 @pytest.fixture
 def stretch_counts(monkeypatch) -> Counter:
     """Inputs offered to the compiled stretch and taken by it, the pack's epochs it applied and
-    the aiding measurements, counted."""
+    the aiding measurements, and the stretches that forked the prediction afresh, counted."""
     counts = Counter()
     compiled = stretch_module.imu_stretch
 
     def counted(raw, order, *arguments):
+        state = arguments[4]
+        forked_at = state[stretch_module.FORKED_AT]
         taken, stepped, stop = compiled(raw, order, *arguments)
+        counts["forked"] += state[stretch_module.FORKED_AT] != forked_at
         counts["offered"] += order.shape[0]
         counts["taken"] += taken
         aiding, went = arguments[-2], arguments[-1]
@@ -344,6 +347,9 @@ def test_stretches_give_the_engine_one_sample_at_a_time_gives(case, stretch_coun
     applicable = sum(kind in APPLIED_GNSS_TOPICS for kind, _ in inputs)
     share = 0.15 if velocity_bias else 0.5
     assert stretch_counts["aiding applied"] >= share * applicable, "too few GNSS epochs"
+    # The prediction is forked afresh once a second of stamps: within a stretch for some (the
+    # distrust of the biased velocity leaves most to the engine).
+    assert stretch_counts["forked"] >= 0.05 * duration_s, "the stretches never forked"
     health = stretched.health()
     if imu_faults:
         rejected = health.counters[IMU].rejected
@@ -426,7 +432,8 @@ def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretc
     second) with faulty attitudes: the same to the bit, most IMU samples in the stretch and,
     without the magnetometer, most of the pack's epochs too (with it, each attitude shares its
     stamp with a field, a stamp of two measurements the engine applies itself)."""
-    _, _, messages = scenario_messages("moored_motion_pack", 150.0)
+    duration_s = 150.0
+    _, _, messages = scenario_messages("moored_motion_pack", duration_s)
     config = PACK_CASES[case]
     magnetometer = config.use_magnetometer
     inputs = with_pack_faults(fusion_inputs(messages))
@@ -444,3 +451,6 @@ def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretc
     assert stretch_counts["taken"] >= 0.7 * imu_samples, "the stretch took too few inputs"
     if not magnetometer:
         assert stretch_counts["epochs"] >= 0.5 * counters.accepted, "too few epochs taken"
+    if not config.moored:
+        # Moored, the constraint once a second stops the stretch before the prediction forks.
+        assert stretch_counts["forked"] >= 0.1 * duration_s, "the stretches never forked"

@@ -201,9 +201,9 @@ def aiding_epoch(
     noise_terms,
     terms,
     attitude_start,
-    resync_at_s,
     ahead_state,
     ahead_t,
+    carried,
     books,
     book_count,
 ) -> int:
@@ -211,12 +211,11 @@ def aiding_epoch(
     to ``tail``) as the engine makes it: the filter's step there from ``point`` with the
     covariance's propagation, the stacked models, gates and update and, when every gate passes
     and the covariance after it is positive definite, the injection into ``filter_state``, the
-    new ``covariance``, the correction carried over to the prediction (``ahead_state``, at
-    ``ahead_t`` s), the rows' status and their books from ``book_count`` in ``books``. The books
-    written, or −1 with nothing changed when the engine is to make it."""
+    new ``covariance``, (when ``carried``) the correction carried over to the prediction
+    (``ahead_state``, at ``ahead_t`` s), the rows' status and their books from ``book_count``
+    in ``books``. The books written, or −1 with nothing changed when the engine is to make
+    it."""
     t = due[0]
-    if t >= resync_at_s:
-        return -1
     superseded, kept = _stamp_rows(rows, head, tail, t, terms)
     stepped, prior = stepped_to(point, due, filter_state, coning, sculling, covariance, noise_terms)
     holds, innovation, jacobian, measurement_covariance, ends, thresholds = _stacked_models(
@@ -229,7 +228,9 @@ def aiding_epoch(
     )
     if not (accepted and positive):
         return -1
-    corrected(filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t)
+    corrected(
+        filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t, carried
+    )
     return _booked(
         rows, superseded, kept, ends, nis, innovation, innovation_covariance, books, book_count
     )

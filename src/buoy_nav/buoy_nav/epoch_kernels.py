@@ -44,18 +44,22 @@ def stepped_to(point, due, filter_state, coning, sculling, covariance, noise_ter
 
 
 @numba.njit(cache=True)
-def corrected(filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t):
+def corrected(
+    filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t, carried
+):
     """The epoch at stamp ``t`` (s) taken: ``filter_state`` the ``stepped`` state with the
-    ``correction`` injected, ``covariance`` the ``updated`` one, and the correction carried over
-    to the prediction ahead (``ahead_state``, at ``ahead_t`` s) from the state it was
-    linearised at."""
-    velocity = stepped[VELOCITY : VELOCITY + 3].copy()
-    latitude, altitude = stepped[LATITUDE], stepped[ALTITUDE]
+    ``correction`` injected, ``covariance`` the ``updated`` one, and, when ``carried``, the
+    correction carried over to the prediction ahead (``ahead_state``, at ``ahead_t`` s) from
+    the state it was linearised at (not when the prediction is forked afresh instead)."""
     filter_state[:] = stepped
     inject_error_state(filter_state, correction)
     covariance[:, :] = updated
-    carried = correction.copy()
+    if not carried:
+        return
+    velocity = stepped[VELOCITY : VELOCITY + 3].copy()
+    latitude, altitude = stepped[LATITUDE], stepped[ALTITUDE]
+    carried_correction = correction.copy()
     span = ahead_t - t
     if span > 0.0:
-        carry_over_kernel(ahead_state, velocity, latitude, altitude, span, carried)
-    inject_error_state(ahead_state, carried)
+        carry_over_kernel(ahead_state, velocity, latitude, altitude, span, carried_correction)
+    inject_error_state(ahead_state, carried_correction)

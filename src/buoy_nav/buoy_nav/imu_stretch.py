@@ -6,11 +6,14 @@ buffer, the prediction ahead steps to it and writes its solution's row
 buffered samples its horizon passed (:meth:`~buoy_nav.engine.FusionEngine._process`).
 :func:`imu_stretch` does exactly that for consecutive accepted samples, with the engine's own
 kernels (the strapdown step, the row writer) and in the engine's order, and stops where the
-engine has more to do: a measurement due, the covariance's batch full, a gap, the prediction to
-fork afresh, the rows' block full. The engine then takes over at that sample
+engine has more to do: a measurement due, the covariance's batch full, a gap, the rows' block
+full. The engine then takes over at that sample
 (:meth:`~buoy_nav.engine.FusionEngine.add_inputs`, :mod:`buoy_nav.imu_stretches`, which hands
 the kernel the engine's parts and sets them from what it did), so the result is the engine's to
-the bit; a test holds the two equal.
+the bit; a test holds the two equal. Where the engine forks the prediction afresh from the filter
+(once a second of stamps, :mod:`buoy_nav.prediction`) the stretch does too: the correction from
+then on is not carried over, and the next sample forks the copy from the filter and steps it
+through the samples buffered ahead of the filter.
 
 The aiding measurements in between are taken too: a motion pack's attitude, which comes with
 every IMU sample (:mod:`buoy_nav.aiding.ahrs_attitude`, :mod:`buoy_nav.pack_epoch`), or the GNSS
@@ -20,7 +23,7 @@ makes its epoch with the engine's kernels: the step there with the covariance's 
 the compiled update (the pack's, or the GNSS sources' models stacked, gated and applied in one
 update), the injection of the correction and its carry-over to the prediction. It stops before
 an epoch the engine must make itself (a gate that fails, a covariance to repair, a model that
-does not hold, another measurement or a constraint due, the prediction forked afresh) and where
+does not hold, another measurement or a constraint due) and where
 the sources' books could change what follows (a source's health moved by a pass, the filter
 distrusted, a smoother recording the epochs); the engine then keeps the books of the epochs it
 made, in their order.
@@ -50,10 +53,10 @@ from buoy_nav.pack_epoch import (
     PACK_ROW_SIZE,
     PACK_T,
     PACK_TERMS_SIZE,
-    RESYNC_AT,
     PackArguments,
     pack_epoch,
 )
+from buoy_nav.prediction import PREDICTION_RESYNC_INTERVAL_S
 from buoy_nav.sequence_kernels import (
     RING_SIZE,
     SEQUENCE_SIZE,
@@ -76,14 +79,18 @@ sample's horizon (:meth:`~buoy_nav.engine.FusionEngine.catch_up`) is left to do.
 
 # The state handed in and out (:func:`imu_stretch`'s ``state``): where the (stamp s, gyro,
 # force) samples the filter's and the prediction's states are at begin, then the stamp of the
-# latest sample predicted (s), the output decimation's next output stamp (s), the rows written.
+# latest sample predicted (s), the output decimation's next output stamp (s), the rows written,
+# the filter stamp the prediction was last forked from (s) and whether it is to be forked afresh
+# at the next sample (1.0) or not (0.0).
 POINT = 0
 AHEAD = 7
 SAMPLE_SIZE = 7
 LAST_PREDICTED_T = 14
 NEXT_OUTPUT_T = 15
 ROWS = 16
-STATE_SIZE = 17
+FORKED_AT = 17
+FORK_DUE = 18
+STATE_SIZE = 19
 # The limits handed in (:func:`imu_stretch`'s ``limits``).
 DELAY, MAX_GAP, PROPAGATION_INTERVAL, NEXT_MEASUREMENT, OUTPUT_PERIOD = range(5)
 DISTRUSTED, ATTITUDE_VARIANCE, VELOCITY_VARIANCE, CONSTRAINT_DUE = range(5, 9)
@@ -157,7 +164,6 @@ def imu_stretch(
     """
     # Integer bounds: a slice object held globally would be unpickled at each call.
     point = state[POINT : POINT + SAMPLE_SIZE]
-    ahead = state[AHEAD : AHEAD + SAMPLE_SIZE]
     stepped = 0
     for item in range(order.shape[0]):
         position = order[item]
@@ -174,6 +180,18 @@ def imu_stretch(
         if not _taken(raw[position], screening, screened_state, sample, state, limits, rows_block):
             return item, stepped, BEFORE_SAMPLE
         counts[IMU_TAKEN] += 1
+        if state[FORK_DUE] != 0.0:
+            _forked(
+                state,
+                buffered,
+                samples,
+                stepped,
+                index,
+                filter_state,
+                ahead_state,
+                ahead_coning,
+                ahead_sculling,
+            )
         row_written[index] = _predicted(
             sample,
             state,
@@ -200,7 +218,7 @@ def imu_stretch(
             covariance,
             noise_terms,
             ahead_state,
-            ahead[0],
+            state,
             pack,
             aiding,
             counts,
@@ -221,6 +239,28 @@ def _taken(raw_sample, screening, screened_state, sample, state, limits, rows_bl
         return False
     _accepted(screening, screened_state, sample)
     return True
+
+
+@numba.njit(cache=True)
+def _forked(
+    state, buffered, samples, stepped, index, filter_state, ahead_state, coning, sculling
+) -> None:
+    """The prediction ahead forked afresh from the filter (``filter_state``, at ``state``'s
+    :data:`POINT`) and stepped through the samples buffered ahead of it (of the ``buffered``
+    ones, then the taken ``samples``, the first ``stepped`` reached by the filter) up to the
+    taken sample ``index``, which it is then predicted to. Each of them was predicted before:
+    none writes a row again."""
+    ahead = state[AHEAD : AHEAD + SAMPLE_SIZE]
+    ahead_state[:] = filter_state
+    ahead_state[DURATION:] = 0.0
+    ahead[:] = state[POINT : POINT + SAMPLE_SIZE]
+    state[FORKED_AT] = ahead[0]
+    state[FORK_DUE] = 0.0
+    n_buffered = buffered.shape[0]
+    for k in range(stepped, n_buffered + index):
+        due = buffered[k] if k < n_buffered else samples[k - n_buffered]
+        _step(ahead_state, due[0] - ahead[0], ahead, due, coning, sculling)
+        ahead[:] = due
 
 
 @numba.njit(cache=True)
@@ -285,7 +325,7 @@ def _filtered(
     covariance,
     noise_terms,
     ahead_state,
-    ahead_t,
+    state,
     pack,
     aiding,
     counts,
@@ -328,7 +368,7 @@ def _filtered(
                     covariance,
                     noise_terms,
                     ahead_state,
-                    ahead_t,
+                    state,
                     pack,
                     aiding,
                     counts,
@@ -374,18 +414,65 @@ def _epoch_made(
     covariance,
     noise_terms,
     ahead_state,
-    ahead_t,
+    state,
     pack,
     aiding,
     counts,
 ) -> bool:
     """The epoch at the IMU sample ``due`` of the queued pack attitude (``pack_due``) or aiding
     measurements (``aiding_due``, :func:`~buoy_nav.aiding_epoch.due_status`) made with the
-    engine's kernels, ``counts`` following it; False, with nothing changed, when the engine is
-    to make it (a stamp of both, a stamp between two IMU samples, an epoch the kernels leave
-    to it)."""
+    engine's kernels, ``counts`` following it, and its correction carried over to the prediction
+    ahead (``ahead_state`` at ``state``'s :data:`AHEAD`) or, from a second of stamps after its
+    fork on, the prediction marked to be forked afresh; False, with nothing changed, when the
+    engine is to make it (a stamp of both, a stamp between two IMU samples, an epoch the kernels
+    leave to it)."""
     if pack_due and aiding_due:
         return False
+    ahead_t = state[AHEAD]
+    carried = state[FORK_DUE] == 0.0 and due[0] < state[FORKED_AT] + PREDICTION_RESYNC_INTERVAL_S
+    made = _made(
+        pack_due,
+        aiding_due,
+        point,
+        due,
+        filter_state,
+        coning,
+        sculling,
+        covariance,
+        noise_terms,
+        ahead_state,
+        ahead_t,
+        carried,
+        pack,
+        aiding,
+        counts,
+    )
+    if made and not carried:
+        state[FORK_DUE] = 1.0
+    return made
+
+
+@numba.njit(cache=True)
+def _made(
+    pack_due,
+    aiding_due,
+    point,
+    due,
+    filter_state,
+    coning,
+    sculling,
+    covariance,
+    noise_terms,
+    ahead_state,
+    ahead_t,
+    carried,
+    pack,
+    aiding,
+    counts,
+) -> bool:
+    """The pack's epoch (``pack_due``) or the aiding sources' (``aiding_due``) at the IMU
+    sample ``due`` made, its correction ``carried`` over to the prediction or not, as
+    :func:`_epoch_made` says."""
     if pack_due:
         head = counts[QUEUE_HEAD]
         if not (
@@ -403,6 +490,7 @@ def _epoch_made(
                 pack.jacobian,
                 ahead_state,
                 ahead_t,
+                carried,
                 pack.epochs[counts[EPOCHS]],
             )
         ):
@@ -425,9 +513,9 @@ def _epoch_made(
         noise_terms,
         aiding.terms,
         int(pack.terms[ATTITUDE_START]),
-        pack.terms[RESYNC_AT],
         ahead_state,
         ahead_t,
+        carried,
         aiding.books,
         counts[AIDING_BOOKS],
     )

@@ -11,7 +11,6 @@ the engine's parts from what it did and keeps the books of the epochs it made, a
 keeps them (:mod:`buoy_nav.stretched_aiding` for the GNSS sources').
 """
 
-import itertools
 import math
 from collections import deque
 from typing import NamedTuple
@@ -25,8 +24,9 @@ from buoy_nav.imu_stretch import (
     AIDING_BOOKS,
     AIDING_TAIL,
     CATCH_UP,
-    CLOCK_OFFSET,
     EPOCHS,
+    FORK_DUE,
+    FORKED_AT,
     IMU_TAKEN,
     NEXT_OUTPUT_T,
     ROWS,
@@ -223,7 +223,7 @@ class ImuStretches:
             return None
         raw = offer.raw
         limits_of_screening, screened_state = screening
-        due = self._buffered_within_reach(raw, limits_of_screening[CLOCK_OFFSET])
+        due = list(parts.buffer)
         ahead = parts.prediction.ahead[0]
         state = self._state()
         screened = np.empty_like(raw)
@@ -344,16 +344,6 @@ class ImuStretches:
             applied = self._aiding.book(offer.aiding_rows, offer.aiding_queued, tail, books)
         return applied
 
-    def _buffered_within_reach(self, raw: np.ndarray, clock_offset_s: float) -> list[tuple]:
-        """The buffered samples the filter may step to while taking ``raw``: none beyond the
-        horizon of its latest stamp (the clock's offset ``clock_offset_s`` stays while a
-        stretch runs: a step of the clock has samples held, which stops it)."""
-        stamps = raw[:, 0]
-        finite = stamps[np.isfinite(stamps)]
-        latest_s = finite.max() + clock_offset_s if finite.size else -math.inf
-        reach_s = latest_s - self._parts.config.max_measurement_delay_s
-        return list(itertools.takewhile(lambda sample: sample[0] <= reach_s, self._parts.buffer))
-
     def _state(self) -> np.ndarray:
         """:func:`imu_stretch`'s ``state`` from the parts."""
         parts = self._parts
@@ -370,6 +360,8 @@ class ImuStretches:
                 prediction.last_predicted_stamp_s,
                 parts.output.next_output_s,
                 parts.solutions.rows.count,
+                prediction.forked_at_s,
+                0.0,
             ),
             dtype=float,
         )
@@ -406,7 +398,9 @@ class ImuStretches:
             for _ in range(stepped):
                 buffer.popleft()
             point.stepped_through(walked[stepped - 1], walked[stepped])
-        parts.prediction.predicted_through(took[-1])
+        parts.prediction.predicted_through(
+            took[-1], float(state[FORKED_AT]), state[FORK_DUE] != 0.0
+        )
         parts.output.next_output_s = float(state[NEXT_OUTPUT_T])
         parts.solutions.rows.count = int(state[ROWS])
 

@@ -30,11 +30,11 @@ PACK_T, PACK_ROTATION, PACK_COVARIANCE, PACK_WEIGHT = 0, 1, 10, 19
 PACK_ROW_SIZE = 20
 # The pack's update and what it stops at (``pack_terms``): the lag (s) and its uncertainty
 # squared (s²), the variance floor (rad²), the gate's threshold, the error states' attitude
-# start; the filter stamp at which the prediction forks afresh (s), and the latitude and
-# longitude (rad) between which the pack's true north is the one its rows were turned to.
-(LAG, LAG_UNCERTAINTY_SQ, FLOOR, THRESHOLD, ATTITUDE_START, RESYNC_AT) = range(6)
-LATITUDE_LOW, LATITUDE_HIGH, LONGITUDE_LOW, LONGITUDE_HIGH = range(6, 10)
-PACK_TERMS_SIZE = 10
+# start, and the latitude and longitude (rad) between which the pack's true north is the one its
+# rows were turned to.
+(LAG, LAG_UNCERTAINTY_SQ, FLOOR, THRESHOLD, ATTITUDE_START) = range(5)
+LATITUDE_LOW, LATITUDE_HIGH, LONGITUDE_LOW, LONGITUDE_HIGH = range(5, 9)
+PACK_TERMS_SIZE = 9
 
 
 class PackArguments(NamedTuple):
@@ -69,19 +69,17 @@ def pack_epoch(
     jacobian,
     ahead_state,
     ahead_t,
+    carried,
     epoch,
 ) -> bool:
     """The epoch of the pack's attitude ``row`` at the IMU sample ``due``, as the engine makes
     it: the filter's step there from ``point`` with the covariance's propagation, the pack's
     compiled update and, when its gate passes and the covariance after it is positive
-    definite, the injection into ``filter_state``, the new ``covariance`` and the correction
-    carried over to the prediction (``ahead_state``, at ``ahead_t`` s), the gate into
-    ``epoch``. False, with nothing changed, when the engine is to make it (the gate fails, the
-    covariance needs a repair, the filter left the true north's cell, the prediction forks
-    afresh there)."""
+    definite, the injection into ``filter_state``, the new ``covariance`` and (when
+    ``carried``) the correction carried over to the prediction (``ahead_state``, at ``ahead_t``
+    s), the gate into ``epoch``. False, with nothing changed, when the engine is to make it (the
+    gate fails, the covariance needs a repair, the filter left the true north's cell)."""
     t = due[0]
-    if t >= pack_terms[RESYNC_AT]:
-        return False
     stepped, prior = stepped_to(point, due, filter_state, coning, sculling, covariance, noise_terms)
     latitude, longitude = stepped[LATITUDE], stepped[LONGITUDE]
     if not (
@@ -116,7 +114,9 @@ def pack_epoch(
     )
     if not (accepted and positive):
         return False
-    corrected(filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t)
+    corrected(
+        filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t, carried
+    )
     epoch[EPOCH_T] = t
     epoch[EPOCH_INNOVATION : EPOCH_INNOVATION + 3] = innovation
     epoch[EPOCH_NIS] = nis

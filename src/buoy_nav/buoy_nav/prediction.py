@@ -125,15 +125,22 @@ class RealtimePrediction:
         return self._last_predicted_stamp
 
     @property
+    def forked_at_s(self) -> float:
+        """The filter stamp (s) the copy ahead was last forked at."""
+        return self._forked_at
+
+    @property
     def resync_at_s(self) -> float:
         """The filter stamp (s) from which a correction drops the copy ahead, to be forked
         afresh."""
         return self._forked_at + PREDICTION_RESYNC_INTERVAL_S
 
-    def predicted_through(self, sample: tuple) -> None:
+    def predicted_through(self, sample: tuple, forked_at_s: float, fork_due: bool) -> None:
         """The copy ahead was stepped through a stretch of samples to ``sample`` (stamp s, raw
-        gyro, raw force), in place (:mod:`buoy_nav.imu_stretch`)."""
-        self._ahead = (self._ahead[0], *sample)
+        gyro, raw force), in place (:mod:`buoy_nav.imu_stretch`), last forked at the filter
+        stamp ``forked_at_s`` (s) and dropped since (``fork_due``) or not."""
+        self._ahead = None if fork_due else (self._ahead[0], *sample)
+        self._forked_at = forked_at_s
         self._last_predicted_stamp = sample[0]
 
     def carry_over(self, filter_time: float, state: NavState, correction) -> None:

@@ -104,7 +104,6 @@ class StretchedPack:
                 floor,
                 threshold,
                 float(self._attitude_start),
-                self._parts.prediction.resync_at_s,
                 *bounds,
             )
         )
