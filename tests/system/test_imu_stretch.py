@@ -451,6 +451,6 @@ def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretc
     assert stretch_counts["taken"] >= 0.7 * imu_samples, "the stretch took too few inputs"
     if not magnetometer:
         assert stretch_counts["epochs"] >= 0.5 * counters.accepted, "too few epochs taken"
-    if not config.moored:
-        # Moored, the constraint once a second stops the stretch before the prediction forks.
-        assert stretch_counts["forked"] >= 0.1 * duration_s, "the stretches never forked"
+    # The prediction is forked afresh once a second of stamps: in a stretch for most (moored,
+    # at the first sample after the constraint's epoch).
+    assert stretch_counts["forked"] >= 0.5 * duration_s, "the stretches seldom forked"

@@ -298,12 +298,13 @@ class FusionEngine:
         """The IMU screening's limits and state for :mod:`buoy_nav.imu_stretch`
         (:meth:`~buoy_nav.imu_input.ImuInput.steady_screening`) when the next samples may go
         through it: aligned, with solutions written as rows and predicted ahead from a copy
-        already forked, and the screening in its steady course; else None."""
+        the stretch may step (:meth:`~buoy_nav.imu_stretches.ImuStretches.ready`), and the
+        screening in its steady course; else None."""
         if (
             self._nav is None
             or not self.config.realtime_output
             or self._solutions.rows is None
-            or self._prediction.ahead is None
+            or not self._stretches.ready()
         ):
             return None
         return self._imu_input.steady_screening()

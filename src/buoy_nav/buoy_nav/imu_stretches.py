@@ -224,8 +224,8 @@ class ImuStretches:
         raw = offer.raw
         limits_of_screening, screened_state = screening
         due = list(parts.buffer)
-        ahead = parts.prediction.ahead[0]
-        state = self._state()
+        ahead, ahead_sample = self._ahead(nav)
+        state = self._state(ahead_sample)
         screened = np.empty_like(raw)
         rows_written = np.zeros(len(raw), dtype=bool)
         plane_terms, covariance, block_indices, distrusted, distrust = (
@@ -272,7 +272,7 @@ class ImuStretches:
         ]
         if took:
             parts.imu_input.screened_through(screened_state, took[-1])
-            self._moved(state, due, took, stepped)
+            self._moved(state, due, took, stepped, ahead)
         places = [start + k for k, place in enumerate(offer.order[:count].tolist()) if place >= 0]
         return Taken(count, took, places, rows_written[:imu_taken].tolist(), stop == CATCH_UP)
 
@@ -344,11 +344,35 @@ class ImuStretches:
             applied = self._aiding.book(offer.aiding_rows, offer.aiding_queued, tail, books)
         return applied
 
-    def _state(self) -> np.ndarray:
-        """:func:`imu_stretch`'s ``state`` from the parts."""
+    def ready(self) -> bool:
+        """Whether the prediction ahead lets a stretch go on: forked, or to be forked afresh
+        at the next sample as the stretch forks it (:meth:`RealtimePrediction.quiet_fork`)."""
+        parts = self._parts
+        prediction = parts.prediction
+        if prediction.ahead is not None:
+            return True
+        point = parts.point
+        return prediction.quiet_fork((point.t_s, point.gyro, point.force), parts.buffer) is not None
+
+    def _ahead(self, nav) -> tuple:
+        """The copy ahead the stretch steps (an integrator; a new fork of the filter's ``nav``
+        when it is to be forked afresh) and the (stamp s, gyro, force) sample it is at (the
+        newest it would be forked through, then)."""
+        parts = self._parts
+        prediction = parts.prediction
+        if prediction.ahead is not None:
+            integrator, *sample = prediction.ahead
+            return integrator, sample
+        point = parts.point
+        newest = prediction.quiet_fork((point.t_s, point.gyro, point.force), parts.buffer)
+        return nav.integrator.fork(), newest
+
+    def _state(self, ahead_sample: tuple) -> np.ndarray:
+        """:func:`imu_stretch`'s ``state`` from the parts, the prediction at ``ahead_sample``
+        (stamp s, gyro, force)."""
         parts = self._parts
         point, prediction = parts.point, parts.prediction
-        _, ahead_t, ahead_gyro, ahead_force = prediction.ahead
+        ahead_t, ahead_gyro, ahead_force = ahead_sample
         return np.array(
             (
                 point.t_s,
@@ -361,7 +385,7 @@ class ImuStretches:
                 parts.output.next_output_s,
                 parts.solutions.rows.count,
                 prediction.forked_at_s,
-                0.0,
+                0.0 if prediction.ahead is not None else 1.0,
             ),
             dtype=float,
         )
@@ -385,10 +409,11 @@ class ImuStretches:
             )
         )
 
-    def _moved(self, state: np.ndarray, due: list, took: list, stepped: int) -> None:
+    def _moved(self, state: np.ndarray, due: list, took: list, stepped: int, ahead) -> None:
         """The parts set from what the stretch did: it ``took`` these samples (into the
-        buffer) and stepped the filter to ``stepped`` of the ``due`` buffered samples and
-        then of those; ``state`` as it left it."""
+        buffer), stepped the filter to ``stepped`` of the ``due`` buffered samples and then of
+        those and the prediction ``ahead`` (an integrator) to the last; ``state`` as it left
+        it."""
         parts = self._parts
         point = parts.point
         buffer = parts.buffer
@@ -399,7 +424,7 @@ class ImuStretches:
                 buffer.popleft()
             point.stepped_through(walked[stepped - 1], walked[stepped])
         parts.prediction.predicted_through(
-            took[-1], float(state[FORKED_AT]), state[FORK_DUE] != 0.0
+            ahead, took[-1], float(state[FORKED_AT]), state[FORK_DUE] != 0.0
         )
         parts.output.next_output_s = float(state[NEXT_OUTPUT_T])
         parts.solutions.rows.count = int(state[ROWS])

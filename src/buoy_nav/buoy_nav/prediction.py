@@ -135,11 +135,35 @@ class RealtimePrediction:
         afresh."""
         return self._forked_at + PREDICTION_RESYNC_INTERVAL_S
 
-    def predicted_through(self, sample: tuple, forked_at_s: float, fork_due: bool) -> None:
-        """The copy ahead was stepped through a stretch of samples to ``sample`` (stamp s, raw
-        gyro, raw force), in place (:mod:`buoy_nav.imu_stretch`), last forked at the filter
-        stamp ``forked_at_s`` (s) and dropped since (``fork_due``) or not."""
-        self._ahead = None if fork_due else (self._ahead[0], *sample)
+    def quiet_fork(self, filter_sample: tuple, buffered_samples: Iterable[tuple]) -> tuple | None:
+        """When the copy is to be forked afresh at the next sample: the newest of the filter's
+        sample and the ``buffered_samples`` ahead of it (each (t, raw gyro, raw force)), which
+        the fork would be stepped through without a solution (each was predicted before) nor a
+        gap; None when it is not to be forked or would not be so."""
+        if self._ahead is not None:
+            return None
+        newest = filter_sample
+        if newest[0] > self._last_predicted_stamp:
+            return None
+        for sample in buffered_samples:
+            t = sample[0]
+            if t - newest[0] > self._max_imu_gap_s or t > self._last_predicted_stamp:
+                return None
+            newest = sample
+        return newest
+
+    def predicted_through(
+        self,
+        integrator: StrapdownIntegrator,
+        sample: tuple,
+        forked_at_s: float,
+        fork_due: bool,
+    ) -> None:
+        """The copy ahead (``integrator``) was stepped through a stretch of samples to
+        ``sample`` (stamp s, raw gyro, raw force), in place (:mod:`buoy_nav.imu_stretch`), last
+        forked at the filter stamp ``forked_at_s`` (s) and to be forked afresh (``fork_due``)
+        or not."""
+        self._ahead = None if fork_due else (integrator, *sample)
         self._forked_at = forked_at_s
         self._last_predicted_stamp = sample[0]
 
