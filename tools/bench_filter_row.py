@@ -28,7 +28,7 @@ import numpy as np
 from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource, attitude_update
 from buoy_nav.config import fusion_config_from_files
 from buoy_nav.engine import FusionEngine
-from buoy_nav.error_dynamics import _propagated_covariance, noise_coefficients
+from buoy_nav.error_dynamics import noise_coefficients, propagated_covariance_kernel
 from buoy_nav.error_state_filter import ImuErrorModel
 from buoy_nav.strapdown_kernel import (
     DURATION,
@@ -86,7 +86,7 @@ def compiled_row(
     Returns the covariance after the row, the NIS and whether the gate accepted it."""
     _integrate(state, step_s, gyro_start, gyro_end, force_start, force_end)
     if state[DURATION] > 0.0:
-        _, covariance = _propagated_covariance(state, covariance, noise_terms)
+        _, covariance = propagated_covariance_kernel(state, covariance, noise_terms)
     _, nis, _, accepted, updated, correction, _ = attitude_update(
         covariance, state, *update_arguments
     )

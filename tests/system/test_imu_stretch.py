@@ -37,6 +37,7 @@ from buoy_common.contract import (
     GNSS_FIX_TOPIC,
     GNSS_VELOCITY_TOPIC,
     IMU_RAW_TOPIC,
+    MAGNETOMETER_TOPIC,
     Reason,
     header_seconds,
 )
@@ -48,6 +49,7 @@ from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import FUSION_INPUT_MSGTYPES, feed_message
 from buoy_nav.imu_stretches import MeasurementInput
+from buoy_nav.prediction import RealtimePrediction
 from buoy_nav.solution_rows import SolutionRows
 
 IMU = "imu"
@@ -201,7 +203,8 @@ def in_stretches(config: FusionConfig, inputs: list[tuple]):
 @pytest.fixture
 def stretch_counts(monkeypatch) -> Counter:
     """Inputs offered to the compiled stretch and taken by it, the pack's epochs it applied and
-    the aiding measurements, and the stretches that forked the prediction afresh, counted."""
+    the aiding measurements, the stretches that forked the prediction afresh, and the forks the
+    engine made itself among the inputs it was given together, counted."""
     counts = Counter()
     compiled = stretch_module.imu_stretch
 
@@ -212,13 +215,30 @@ def stretch_counts(monkeypatch) -> Counter:
         counts["forked"] += state[stretch_module.FORKED_AT] != forked_at
         counts["offered"] += order.shape[0]
         counts["taken"] += taken
-        aiding, went = arguments[-2], arguments[-1]
+        aiding, went = arguments[-3], arguments[-1]
         counts["epochs"] += int(went[stretch_module.EPOCHS])
+        counts["mooring epochs"] += int(went[stretch_module.MOORING_EPOCHS])
         books = aiding.books[: went[stretch_module.AIDING_BOOKS]]
         counts["aiding applied"] += int(np.sum(books[:, BOOK_STATUS] == APPLIED))
         return taken, stepped, stop
 
     monkeypatch.setattr(imu_stretches, "imu_stretch", counted)
+    add_inputs, predict = FusionEngine.add_inputs, RealtimePrediction.predict
+    adding = []
+
+    def counted_add_inputs(engine, inputs):
+        adding.append(engine)
+        try:
+            return add_inputs(engine, inputs)
+        finally:
+            adding.pop()
+
+    def counted_predict(prediction, *arguments):
+        counts["forked by the engine"] += bool(adding) and prediction.ahead is None
+        return predict(prediction, *arguments)
+
+    monkeypatch.setattr(FusionEngine, "add_inputs", counted_add_inputs)
+    monkeypatch.setattr(RealtimePrediction, "predict", counted_predict)
     return counts
 
 
@@ -412,16 +432,37 @@ def with_pack_faults(inputs: list[tuple]) -> list[tuple]:
 
 
 PACK_CASES = {
-    "moored pack": moored_config(use_magnetometer=False, ahrs_lag_s=0.2),
-    "moored pack, magnetometer": moored_config(ahrs_lag_s=0.2),
+    # (the configuration, the least and the most share of the seconds whose mooring constraint
+    # the stretches apply)
+    "moored pack": (moored_config(use_magnetometer=False, ahrs_lag_s=0.2), 0.5, 1.0),
+    # Each attitude shares its stamp with a field, a stamp the engine takes: few constraints in
+    # a stretch.
+    "moored pack, magnetometer": (moored_config(ahrs_lag_s=0.2), 0.0, 1.0),
+    # The mooring's innovations widen its σ once first judged, between two closes of the
+    # mean velocity's blocks (its window's fifth, 61 s, no multiple of 10 s): the engine's to
+    # apply from the next on.
+    "moored pack, mooring's sigma claimed too small": (
+        moored_config(
+            use_magnetometer=False,
+            ahrs_lag_s=0.2,
+            moored_position_sigma_horizontal_m=0.15,
+            moored_check_window_s=305.0,
+        ),
+        0.2,
+        0.6,
+    ),
     # On the corner of the cells the geomagnetic model is evaluated for: the filter's position
     # wanders across their edges, and the pack's true north with it.
-    "free pack": FusionConfig(
-        site_latitude_deg=35.025,
-        site_longitude_deg=120.025,
-        ahrs_yaw_reference="magnetic_north",
-        use_magnetometer=False,
-        ahrs_lag_s=0.2,
+    "free pack": (
+        FusionConfig(
+            site_latitude_deg=35.025,
+            site_longitude_deg=120.025,
+            ahrs_yaw_reference="magnetic_north",
+            use_magnetometer=False,
+            ahrs_lag_s=0.2,
+        ),
+        0.0,
+        0.0,
     ),
 }
 
@@ -431,12 +472,17 @@ def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretc
     """A motion pack (its attitude with every tenth IMU sample; moored, the constraint once a
     second) with faulty attitudes: the same to the bit, most IMU samples in the stretch and,
     without the magnetometer, most of the pack's epochs too (with it, each attitude shares its
-    stamp with a field, a stamp of two measurements the engine applies itself)."""
+    stamp with a field, a stamp of two measurements the engine applies itself), and of the
+    mooring's constraints as many as its case expects."""
     duration_s = 150.0
     _, _, messages = scenario_messages("moored_motion_pack", duration_s)
-    config = PACK_CASES[case]
+    config, least_mooring_share, most_mooring_share = PACK_CASES[case]
     magnetometer = config.use_magnetometer
     inputs = with_pack_faults(fusion_inputs(messages))
+    if config.moored and not magnetometer:
+        # The fields of a magnetometer not used end each run all the same: without them the
+        # stretches span many constraints.
+        inputs = [(kind, item) for kind, item in inputs if kind != MAGNETOMETER_TOPIC]
     stretched = stretched_as_alone(config, inputs, 10_000)
     counters = stretched.health().counters["ahrs"]
     for reason in (
@@ -451,6 +497,8 @@ def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretc
     assert stretch_counts["taken"] >= 0.7 * imu_samples, "the stretch took too few inputs"
     if not magnetometer:
         assert stretch_counts["epochs"] >= 0.5 * counters.accepted, "too few epochs taken"
-    # The prediction is forked afresh once a second of stamps: in a stretch for most (moored,
-    # at the first sample after the constraint's epoch).
-    assert stretch_counts["forked"] >= 0.5 * duration_s, "the stretches seldom forked"
+    # The prediction is forked afresh once a second of stamps: in a stretch for most.
+    assert stretch_counts["forked by the engine"] <= 0.5 * duration_s, "the stretches seldom forked"
+    constraints = stretch_counts["mooring epochs"]
+    assert constraints >= least_mooring_share * duration_s, "too few constraints taken"
+    assert constraints <= most_mooring_share * duration_s, "a constraint the engine's taken"

@@ -227,6 +227,7 @@ class FusionEngine:
                 ),
                 self._counters,
                 tuple(self.sources),
+                self._recency,
             )
         )
 

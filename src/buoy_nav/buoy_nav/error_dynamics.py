@@ -100,7 +100,7 @@ def propagated_covariance(
     vector ``integrator_state`` (:mod:`buoy_nav.strapdown_kernel`'s layout) holds, and
     ``covariance`` carried over it, Φ P Φᵀ + Q_d (:meth:`ErrorStateFilter.propagate`); the
     sums are restarted (:meth:`StrapdownIntegrator.take_propagation_sums`). One compiled call."""
-    return _propagated_covariance(
+    return propagated_covariance_kernel(
         integrator_state,
         covariance,
         noise_coefficients(imu, gyro_drift_scale, accel_noise_scale),
@@ -162,7 +162,7 @@ _normal_gravity_mps2 = numba.njit(cache=True)(earth.normal_gravity_mps2)
 
 
 @numba.njit(cache=True)
-def _propagated_covariance(state, covariance, noise_terms):
+def propagated_covariance_kernel(state, covariance, noise_terms):
     """:func:`propagated_covariance` (``noise_terms``: those of :func:`noise_coefficients`)."""
     transition, noise = _error_model(
         state[kernel.DURATION],
@@ -201,7 +201,7 @@ def stepped_covariance_kernel(state, covariance, step_s, gyro, force, correction
         corrections[0],
         corrections[1],
     )
-    return _propagated_covariance(state, covariance, noise_terms)
+    return propagated_covariance_kernel(state, covariance, noise_terms)
 
 
 @numba.njit(cache=True)

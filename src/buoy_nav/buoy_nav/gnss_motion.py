@@ -69,6 +69,11 @@ class GnssMotion:
         self._velocity_sum = np.zeros(3)
         self._velocity_covariance_sum = np.zeros((3, 3))
 
+    @property
+    def empty(self) -> bool:
+        """Whether it keeps no fix and no velocity: nothing to judge by."""
+        return not self._fixes and not self._velocities
+
     def add(self, t_s: float, measurement) -> None:
         """Keep a validated fix or velocity stamped ``t_s`` (s); other measurements are not
         the receiver's motion and are ignored."""

@@ -47,6 +47,10 @@ from buoy_nav.aiding_epoch import (
     due_status,
     first_queued,
 )
+from buoy_nav.mooring_epoch import BOOK_SIZE as MOORING_BOOK_SIZE
+from buoy_nav.mooring_epoch import PERIOD, MooringArguments, mooring_epoch
+from buoy_nav.mooring_epoch import STATE_SIZE as MOORING_STATE_SIZE
+from buoy_nav.mooring_epoch import TERMS_SIZE as MOORING_TERMS_SIZE
 from buoy_nav.pack_epoch import (
     ATTITUDE_START,
     EPOCH_SIZE,
@@ -113,9 +117,11 @@ LATEST, SEQUENCE_LAST, CLOCK_INTERVAL, LAST_SAMPLE, CLOCK_RING = 0, 1, 2, 3, 10
 SCREENED_STATE_SIZE = CLOCK_RING + RING_SIZE
 # How far a stretch went (``counts``): the IMU samples it took, where the queued attitudes begin
 # and end in ``pack_rows`` (those before the first were applied), the epochs applied; where the
-# queued aiding measurements begin and end in the aiding rows, and the books of their epochs.
+# queued aiding measurements begin and end in the aiding rows, and the books of their epochs;
+# the mooring's epochs, and where its innovations' window begins and ends.
 IMU_TAKEN, QUEUE_HEAD, QUEUE_TAIL, EPOCHS, AIDING_HEAD, AIDING_TAIL, AIDING_BOOKS = range(7)
-COUNTS_SIZE = 7
+MOORING_EPOCHS, WINDOW_FIRST, WINDOW_END = range(7, 10)
+COUNTS_SIZE = 10
 
 
 @numba.njit(cache=True)
@@ -142,6 +148,7 @@ def imu_stretch(
     noise_terms,
     pack,
     aiding,
+    mooring,
     counts,
 ):
     """Take the inputs in ``order`` (an IMU sample's index in ``raw``, or −1 − the index of a
@@ -155,7 +162,9 @@ def imu_stretch(
     (:func:`_filtered`); each measurement is queued (:func:`_queued`) and its epoch made when
     the filter reaches it, the process noise's ``noise_terms`` and the ``pack``'s or the
     ``aiding``'s arrays (:class:`~buoy_nav.pack_epoch.PackArguments`,
-    :class:`~buoy_nav.aiding_epoch.AidingArguments`). The layouts are this module's constants and
+    :class:`~buoy_nav.aiding_epoch.AidingArguments`); the ``mooring``'s constraint is applied
+    where it is due (:class:`~buoy_nav.mooring_epoch.MooringArguments`; no room for its books:
+    the stretch stops there). The layouts are this module's constants and
     those modules'; ``state``, the strapdown states, ``covariance`` and ``counts`` are updated in
     place, ``row_written`` set for each sample whose row was written.
 
@@ -221,6 +230,7 @@ def imu_stretch(
             state,
             pack,
             aiding,
+            mooring,
             counts,
         )
         if stepped < 0:
@@ -328,60 +338,194 @@ def _filtered(
     state,
     pack,
     aiding,
+    mooring,
     counts,
 ) -> int:
     """The filter (``filter_state`` at ``point``) stepped through the samples it has not
     reached of the first ``reachable`` (the ``buffered`` ones, then the taken ``samples``) up to
     ``horizon_s`` (s), the epoch of each stamp with queued pack attitudes or aiding measurements
-    made there (:func:`_epoch_made`): how many samples
-    it has reached in all, or −1 − that when it stopped where the engine must go on (a gap, a
-    measurement or constraint due, the covariance's batch full, an epoch it cannot make)."""
+    made there (:func:`_epoch_made`) and then the mooring's where it is due
+    (:func:`_sample_reached`): how many samples it has reached in all, or −1 − that when it
+    stopped where the engine must go on (a gap, a measurement due, the covariance's batch full,
+    an epoch it cannot make)."""
     n_buffered = buffered.shape[0]
     while stepped < reachable:
         due = buffered[stepped] if stepped < n_buffered else samples[stepped - n_buffered]
         t_due = due[0]
         if t_due > horizon_s:
             break
-        dt = t_due - point[0]
         # A gap, or a sample predicted before (above), the prediction meets first and the
         # engine takes; the stretch still never steps across one.
-        if (
-            dt > limits[MAX_GAP]
-            or limits[NEXT_MEASUREMENT] <= t_due
-            or limits[CONSTRAINT_DUE] <= t_due
+        if due[0] - point[0] > limits[MAX_GAP] or limits[NEXT_MEASUREMENT] <= t_due:
+            return -1 - stepped
+        if not _sample_reached(
+            due,
+            point,
+            limits,
+            filter_state,
+            coning,
+            sculling,
+            covariance,
+            noise_terms,
+            ahead_state,
+            state,
+            pack,
+            aiding,
+            mooring,
+            counts,
         ):
             return -1 - stepped
-        head = counts[QUEUE_HEAD]
-        pack_due = head < counts[QUEUE_TAIL] and pack.rows[head, PACK_T] <= t_due
-        aiding_due = due_status(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL], t_due)
-        if pack_due or aiding_due:
-            if not (
-                dt > 0.0
-                and _epoch_made(
-                    pack_due,
-                    aiding_due,
-                    point,
-                    due,
-                    filter_state,
-                    coning,
-                    sculling,
-                    covariance,
-                    noise_terms,
-                    ahead_state,
-                    state,
-                    pack,
-                    aiding,
-                    counts,
-                )
-            ):
-                return -1 - stepped
-        elif dt > 0.0:
-            if filter_state[DURATION] + dt >= limits[PROPAGATION_INTERVAL]:
-                return -1 - stepped
-            _step(filter_state, dt, point, due, coning, sculling)
         point[:] = due
         stepped += 1
     return stepped
+
+
+@numba.njit(cache=True)
+def _sample_reached(
+    due,
+    point,
+    limits,
+    filter_state,
+    coning,
+    sculling,
+    covariance,
+    noise_terms,
+    ahead_state,
+    state,
+    pack,
+    aiding,
+    mooring,
+    counts,
+) -> bool:
+    """The filter (``filter_state`` at ``point``) stepped to the IMU sample ``due`` with the
+    epochs there (:func:`_stepped`), and then, when due, the mooring's
+    (:func:`~buoy_nav.mooring_epoch.mooring_epoch`); False, with nothing changed, where the
+    engine must take the sample."""
+    if limits[CONSTRAINT_DUE] > due[0]:
+        return _stepped(
+            due,
+            point,
+            limits,
+            filter_state,
+            coning,
+            sculling,
+            covariance,
+            noise_terms,
+            ahead_state,
+            state,
+            pack,
+            aiding,
+            counts,
+        )
+    if mooring.books.shape[0] <= counts[MOORING_EPOCHS] or aiding.rows.shape[0]:
+        return False
+    # Both epochs of the sample or neither: what the first moved comes back when the second
+    # is the engine's.
+    saved_filter, saved_covariance = filter_state.copy(), covariance.copy()
+    saved_ahead, saved_counts, saved_fork = ahead_state.copy(), counts.copy(), state[FORK_DUE]
+    if _stepped(
+        due,
+        point,
+        limits,
+        filter_state,
+        coning,
+        sculling,
+        covariance,
+        noise_terms,
+        ahead_state,
+        state,
+        pack,
+        aiding,
+        counts,
+    ) and _mooring_made(
+        due[0], filter_state, covariance, noise_terms, ahead_state, state, mooring, counts
+    ):
+        limits[CONSTRAINT_DUE] = due[0] + mooring.terms[PERIOD]
+        return True
+    filter_state[:], covariance[:, :], ahead_state[:] = saved_filter, saved_covariance, saved_ahead
+    counts[:], state[FORK_DUE] = saved_counts, saved_fork
+    return False
+
+
+@numba.njit(cache=True)
+def _mooring_made(t, filter_state, covariance, noise_terms, ahead_state, state, mooring, counts):
+    """The mooring's epoch at the IMU sample stamped ``t`` (s) made, its books counted and its
+    correction carried over as :func:`_carried` says; False, with nothing changed, when the
+    engine is to make it."""
+    carried = _carried(state, t)
+    made = mooring_epoch(
+        t,
+        filter_state,
+        covariance,
+        noise_terms,
+        ahead_state,
+        state[AHEAD],
+        carried,
+        mooring,
+        counts[WINDOW_FIRST : WINDOW_END + 1],
+        mooring.books[counts[MOORING_EPOCHS]],
+    )
+    if made:
+        counts[MOORING_EPOCHS] += 1
+        if not carried:
+            state[FORK_DUE] = 1.0
+    return made
+
+
+@numba.njit(cache=True)
+def _carried(state, t) -> bool:
+    """Whether the correction of an epoch at ``t`` (s) is carried over to the prediction ahead
+    (``state``'s :data:`AHEAD`), or the prediction forked afresh at the next sample instead
+    (a second of stamps after its fork, as the engine does)."""
+    return state[FORK_DUE] == 0.0 and t < state[FORKED_AT] + PREDICTION_RESYNC_INTERVAL_S
+
+
+@numba.njit(cache=True)
+def _stepped(
+    due,
+    point,
+    limits,
+    filter_state,
+    coning,
+    sculling,
+    covariance,
+    noise_terms,
+    ahead_state,
+    state,
+    pack,
+    aiding,
+    counts,
+) -> bool:
+    """The filter (``filter_state`` at ``point``) stepped to the IMU sample ``due``, with the
+    epoch there of the queued pack attitude or aiding measurements (:func:`_epoch_made`);
+    False, with nothing changed, where the engine must take the sample."""
+    t_due = due[0]
+    dt = t_due - point[0]
+    head = counts[QUEUE_HEAD]
+    pack_due = head < counts[QUEUE_TAIL] and pack.rows[head, PACK_T] <= t_due
+    aiding_due = due_status(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL], t_due)
+    if pack_due or aiding_due:
+        return dt > 0.0 and _epoch_made(
+            pack_due,
+            aiding_due,
+            point,
+            due,
+            filter_state,
+            coning,
+            sculling,
+            covariance,
+            noise_terms,
+            ahead_state,
+            state,
+            pack,
+            aiding,
+            counts,
+        )
+    if dt > 0.0:
+        if filter_state[DURATION] + dt >= limits[PROPAGATION_INTERVAL]:
+            return False
+        _step(filter_state, dt, point, due, coning, sculling)
+    return True
 
 
 @numba.njit(cache=True)
@@ -422,14 +566,13 @@ def _epoch_made(
     """The epoch at the IMU sample ``due`` of the queued pack attitude (``pack_due``) or aiding
     measurements (``aiding_due``, :func:`~buoy_nav.aiding_epoch.due_status`) made with the
     engine's kernels, ``counts`` following it, and its correction carried over to the prediction
-    ahead (``ahead_state`` at ``state``'s :data:`AHEAD`) or, from a second of stamps after its
-    fork on, the prediction marked to be forked afresh; False, with nothing changed, when the
+    ahead (``ahead_state``) as :func:`_carried` says; False, with nothing changed, when the
     engine is to make it (a stamp of both, a stamp between two IMU samples, an epoch the kernels
     leave to it)."""
     if pack_due and aiding_due:
         return False
     ahead_t = state[AHEAD]
-    carried = state[FORK_DUE] == 0.0 and due[0] < state[FORKED_AT] + PREDICTION_RESYNC_INTERVAL_S
+    carried = _carried(state, due[0])
     made = _made(
         pack_due,
         aiding_due,
@@ -693,6 +836,14 @@ def load_compiled_imu_stretch() -> None:
             np.zeros((0, SEQUENCE_SIZE)),
             np.zeros((0, TERMS_SIZE)),
             np.zeros((0, BOOK_SIZE)),
+        ),
+        MooringArguments(
+            np.zeros(MOORING_TERMS_SIZE),
+            np.eye(3),
+            np.zeros(MOORING_STATE_SIZE),
+            np.zeros(0),
+            np.zeros(0),
+            np.zeros((0, MOORING_BOOK_SIZE)),
         ),
         np.zeros(COUNTS_SIZE, dtype=np.int64),
     )

@@ -24,21 +24,27 @@ from buoy_nav.imu_stretch import (
     AIDING_BOOKS,
     AIDING_TAIL,
     CATCH_UP,
+    COUNTS_SIZE,
     EPOCHS,
     FORK_DUE,
     FORKED_AT,
     IMU_TAKEN,
+    MOORING_EPOCHS,
     NEXT_OUTPUT_T,
+    QUEUE_TAIL,
     ROWS,
     SAMPLE_SIZE,
+    WINDOW_END,
     imu_stretch,
 )
+from buoy_nav.mooring_epoch import MooringArguments
 from buoy_nav.pack_epoch import (
     PACK_ROW_SIZE,
     PackArguments,
 )
 from buoy_nav.strapdown_kernel import LATITUDE, LONGITUDE
 from buoy_nav.stretched_aiding import AidingRows, StretchedAiding
+from buoy_nav.stretched_mooring import StretchedMooring
 from buoy_nav.stretched_pack import StretchedPack
 
 WINDOW = 512
@@ -97,8 +103,9 @@ class _Offer(NamedTuple):
     """What one call of :func:`imu_stretch` is offered: the IMU samples' rows, the inputs'
     ``order``, the process noise's terms (:meth:`AidedNavigation.noise_terms`), the pack's
     arguments and its attitudes (those queued before first, ``queued`` of them), the aiding
-    measurements' arguments and rows (those queued before first, ``aiding_queued`` of them);
-    no measurement when the stretch takes IMU samples alone."""
+    measurements' arguments and rows (those queued before first, ``aiding_queued`` of them), the
+    mooring's arguments (:mod:`buoy_nav.stretched_mooring`; no room for epochs: the stretch stops
+    at the constraint); no measurement when the stretch takes IMU samples alone."""
 
     raw: np.ndarray
     order: np.ndarray
@@ -109,6 +116,7 @@ class _Offer(NamedTuple):
     aiding: AidingArguments
     aiding_rows: AidingRows
     aiding_queued: int
+    mooring: MooringArguments
 
 
 _POSITIONS = np.arange(WINDOW, dtype=np.int64)
@@ -139,6 +147,8 @@ class EngineParts(NamedTuple):
     counters: dict
     sources: tuple
     """Every aiding source, in registry order (:mod:`buoy_nav.stretched_aiding` takes some)."""
+    recency: object
+    """When each quantity was last aided (:class:`~buoy_nav.sensor_sets.AidingRecency`)."""
 
 
 class ImuStretches:
@@ -150,6 +160,7 @@ class ImuStretches:
         self._aiding = StretchedAiding(parts, parts.sources)
         self._no_aiding = AidingRows([], np.zeros((0, ROW_SIZE)))
         self._pack = StretchedPack(parts, parts.sources[0].states.attitude.start)
+        self._mooring = StretchedMooring(parts)
 
     @property
     def pack(self) -> AhrsAttitudeSource | None:
@@ -216,7 +227,7 @@ class ImuStretches:
         none (the engine takes the first itself)."""
         parts = self._parts
         if run.imu_only:
-            offer = self._imu_offer(run, start)
+            offer = self._imu_offer(run, start, nav)
         else:
             offer = self._measurement_offer(run, start, nav)
         if offer is None:
@@ -231,9 +242,11 @@ class ImuStretches:
         plane_terms, covariance, block_indices, distrusted, distrust = (
             parts.solutions.row_arguments(nav.kalman)
         )
-        if offer.measurements or offer.aiding_rows.items:
+        if offer.measurements or offer.aiding_rows.items or offer.mooring.books.size:
             covariance = covariance.copy()  # the epochs' covariance, the filter's if they end
-        counts = np.array((0, 0, offer.queued, 0, 0, offer.aiding_queued, 0), dtype=np.int64)
+        counts = np.zeros(COUNTS_SIZE, dtype=np.int64)
+        counts[QUEUE_TAIL], counts[AIDING_TAIL] = offer.queued, offer.aiding_queued
+        counts[WINDOW_END] = offer.mooring.window_stamps.size - offer.mooring.books.shape[0]
         count, stepped, stop = imu_stretch(
             raw,
             offer.order,
@@ -257,6 +270,7 @@ class ImuStretches:
             offer.noise_terms,
             offer.pack,
             offer.aiding,
+            offer.mooring,
             counts,
         )
         if self._booked(run, offer, counts, nav):
@@ -276,19 +290,22 @@ class ImuStretches:
         places = [start + k for k, place in enumerate(offer.order[:count].tolist()) if place >= 0]
         return Taken(count, took, places, rows_written[:imu_taken].tolist(), stop == CATCH_UP)
 
-    def _imu_offer(self, run: _Run, start: int) -> _Offer:
-        """What a stretch of IMU samples alone is offered from ``start``."""
+    def _imu_offer(self, run: _Run, start: int, nav) -> _Offer:
+        """What a stretch of IMU samples alone is offered from ``start`` (with the mooring's
+        epochs when they may be made, :meth:`StretchedMooring.ready`)."""
         end = min(start + WINDOW, len(run.imu_index))
+        with_mooring = self._mooring.ready(nav)
         return _Offer(
             run.raw[start:end],
             _POSITIONS[: end - start],
-            _NO_NOISE_TERMS,
+            np.array(nav.noise_terms(), dtype=float) if with_mooring else _NO_NOISE_TERMS,
             self._pack.none,
             [],
             0,
             self._aiding.none,
             self._no_aiding,
             0,
+            self._mooring_arguments(with_mooring, end - start),
         )
 
     def _measurement_offer(self, run: _Run, start: int, nav) -> _Offer | None:
@@ -301,7 +318,8 @@ class ImuStretches:
         ready = frozenset() if with_pack else self._aiding.ready(nav)
         if not parts.queue.settled:  # the queue judges some of its measurements at their turn
             with_pack, ready = False, frozenset()
-        end = self._window_end(run, start, with_pack, ready)
+        with_mooring = not ready and self._mooring.ready(nav)
+        end = self._window_end(run, start, with_pack, ready, with_mooring)
         if end == start:
             return None
         window = slice(start, end)
@@ -322,7 +340,15 @@ class ImuStretches:
             self._aiding.arguments(aiding.rows) if aiding.items else self._aiding.none,
             aiding,
             len(aiding_queued.items),
+            self._mooring_arguments(with_mooring, len(raw)),
         )
+
+    def _mooring_arguments(self, with_mooring: bool, samples: int) -> MooringArguments:
+        """The mooring's arguments of a stretch offered ``samples`` IMU samples: room for an
+        epoch at each sample the filter may reach (the buffered ones too), ``with_mooring``."""
+        if not with_mooring:
+            return self._mooring.none
+        return self._mooring.arguments(samples + len(self._parts.buffer))
 
     def _pack_present(self, run: _Run, start: int) -> bool:
         """Whether the pack has attitudes queued or among the inputs a stretch from ``start``
@@ -333,16 +359,22 @@ class ImuStretches:
         """Keep the books of the measurements ``offer`` had (``counts``: what the stretch did);
         whether it applied any."""
         applied = False
+        book_mooring = self._mooring.booker(offer.mooring, int(counts[MOORING_EPOCHS]))
         if offer.measurements:
             self._pack.book(
-                run.pack_terms, offer.measurements, offer.queued, counts, offer.pack.epochs
+                run.pack_terms,
+                offer.measurements,
+                offer.queued,
+                counts,
+                offer.pack.epochs,
+                book_mooring,
             )
             applied = bool(counts[EPOCHS])
         if offer.aiding_rows.items:
             books = offer.aiding.books[: counts[AIDING_BOOKS]]
             tail = int(counts[AIDING_TAIL])
             applied = self._aiding.book(offer.aiding_rows, offer.aiding_queued, tail, books)
-        return applied
+        return book_mooring(math.inf) or applied
 
     def ready(self) -> bool:
         """Whether the prediction ahead lets a stretch go on: forked, or to be forked afresh
@@ -429,18 +461,19 @@ class ImuStretches:
         parts.output.next_output_s = float(state[NEXT_OUTPUT_T])
         parts.solutions.rows.count = int(state[ROWS])
 
-    def _window_end(self, run: _Run, start: int, with_pack: bool, ready: frozenset) -> int:
+    def _window_end(
+        self, run: _Run, start: int, with_pack: bool, ready: frozenset, with_mooring: bool
+    ) -> int:
         """Where the inputs from ``start`` a stretch is offered end: at the first the engine
         must take (the pack's too, unless ``with_pack``; the aiding sources' unless ``ready``),
         after the first IMU sample whose filtering reaches the next measurement or constraint
-        due (the stretch stops there), :data:`WINDOW` at most."""
+        due (unless ``with_mooring``; the stretch stops there), :data:`WINDOW` at most."""
         parts = self._parts
         taken = ready | {parts.pack} if with_pack else ready
         heap = parts.queue.heap
-        stop_s = min(
-            min((entry[0] for entry in heap if entry[3] not in taken), default=math.inf),
-            min((source.next_due_s for source in parts.pseudo), default=math.inf),
-        )
+        stop_s = min((entry[0] for entry in heap if entry[3] not in taken), default=math.inf)
+        if not with_mooring:
+            stop_s = min(stop_s, min((s.next_due_s for s in parts.pseudo), default=math.inf))
         stop_s += parts.config.max_measurement_delay_s
         end = min(start + WINDOW, len(run.imu_index))
         allowed = run.imu_index[start:end] >= 0

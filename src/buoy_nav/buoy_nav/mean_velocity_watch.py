@@ -133,6 +133,11 @@ class MeanVelocityWatch:
         """What the watch says while the drift is widened, else ``""``."""
         self._covariance_factor = 1.0
 
+    @property
+    def block(self) -> tuple[float, float]:
+        """The block in progress: its start (s; NaN before its first sample) and length (s)."""
+        return self._block_start_s, self._block_s
+
     def restart(self) -> None:
         """Forget the block in progress (the velocity was not held by the mooring between)."""
         self._block_start_s = math.nan

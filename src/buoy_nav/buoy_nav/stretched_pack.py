@@ -8,6 +8,7 @@ stretch makes then move nothing else the engine keeps.
 """
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -108,12 +109,21 @@ class StretchedPack:
             )
         )
 
-    def book(self, pack_terms: tuple, measurements: list, first_new: int, counts, epochs):
+    def book(
+        self,
+        pack_terms: tuple,
+        measurements: list,
+        first_new: int,
+        counts,
+        epochs,
+        book_before: Callable[[float], object],
+    ):
         """Keep the books of what the stretch did with the pack's ``measurements`` (those
         queued before it first, the new ones from ``first_new``; ``pack_terms`` they held with)
         as the engine keeps them: its sequence and the IMU's clock follow the new ones it
-        queued, each epoch it applied (``epochs``) is observed and booked as passed by its gate,
-        and the attitudes still queued go back to the queue."""
+        queued, each epoch it applied (``epochs``) is observed and booked as passed by its gate
+        (after ``book_before`` its stamp, which books the other epochs stamped before it), and
+        the attitudes still queued go back to the queue."""
         parts = self._parts
         pack = parts.pack
         head, tail, applied = int(counts[QUEUE_HEAD]), int(counts[QUEUE_TAIL]), int(counts[EPOCHS])
@@ -124,6 +134,7 @@ class StretchedPack:
         threshold = pack_terms[THRESHOLD]
         for epoch, measurement in zip(epochs[:applied].tolist(), measurements, strict=False):
             t = epoch[EPOCH_T]
+            book_before(t)
             parts.contradictions.observe(t, measurement)
             gate = GateResult(
                 True,

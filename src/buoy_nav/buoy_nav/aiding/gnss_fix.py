@@ -34,6 +34,7 @@ from buoy_nav.aiding.base import (
     has_non_positive_variance,
 )
 from buoy_nav.aiding.model_kernels import (
+    enu_offset,
     floored_covariance,
     place_block,
     place_identity,
@@ -89,9 +90,6 @@ def antenna_position_model(
     return lever_enu, measured_enu_m - lever_enu, jacobian, covariance
 
 
-_enu_offset = numba.njit(cache=True)(earth.enu_offset_scalar)
-
-
 @numba.njit(cache=True)
 def fix_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
     """:meth:`GnssFixSource.model` over arrays, for a compiled stretch
@@ -100,7 +98,7 @@ def fix_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
     the source's ``terms`` (:meth:`GnssFixSource.stretch_terms`): the innovation (ENU m), the
     Jacobian, R (m²) and whether the model holds (always)."""
     measured = np.array(
-        _enu_offset(
+        enu_offset(
             state[LATITUDE], state[LONGITUDE], state[ALTITUDE], values[0], values[1], values[2]
         )
     )

@@ -1,5 +1,6 @@
 """What the aiding sources' compiled measurement functions share (numba, cached on disk): the
-vector algebra, compiled from its one source in :mod:`buoy_nav.rotations`, the floored
+vector algebra, compiled from its one source in :mod:`buoy_nav.rotations`, the tangent plane's
+offsets from :mod:`buoy_nav.earth`'s, the floored
 measurement covariance and the placing of a Jacobian's blocks; and the checks of a measurement's
 arrays that every source's validation makes (:mod:`buoy_nav.aiding.base`), a few tenths of a
 microsecond compiled against two for numpy's calls on arrays this small.
@@ -16,10 +17,11 @@ import math
 import numba
 import numpy as np
 
-from buoy_nav import rotations
+from buoy_nav import earth, rotations
 
 cross = numba.njit(cache=True)(rotations.cross)
 skew = numba.njit(cache=True)(rotations.skew)
+enu_offset = numba.njit(cache=True)(earth.enu_offset_scalar)
 
 
 @numba.njit(cache=True)

@@ -130,7 +130,8 @@ class InnovationWatch:
     a consistent filter's scatter from widening it."""
 
     def __init__(self, window_s: float, stated_sigma_m: float, scale_limit: float):
-        self._window_s = window_s
+        self.window_s = window_s
+        """The window's length (s)."""
         self._stated_variance_m2 = stated_sigma_m**2
         self._scale_limit = scale_limit
         self._stamps: deque[float] = deque()
@@ -144,6 +145,18 @@ class InnovationWatch:
         self._scaled_at_s = -math.inf
         self._warned_at_s = -math.inf
         self._warning = False
+
+    @property
+    def quiet(self) -> bool:
+        """Whether the σ is as stated and not being widened: an innovation whose window's
+        ratio stays within :data:`WARNING_RATIO` leaves it so."""
+        return self.scale == 1.0 and not self._widening
+
+    def window_squares(self) -> tuple[np.ndarray, np.ndarray]:
+        """The window's stamps (s) and each innovation's normalised square at the stated σ,
+        whose sum over twice their count is ``ratio()²``."""
+        variance = self._eigenvalues.rows + self._stated_variance_m2
+        return np.array(self._stamps), np.sum(self._projected.rows / variance, axis=1)
 
     def ratio(self, scale: float = 1.0) -> float:
         """Normalised RMS of the window's innovations with the σ widened by ``scale``."""
@@ -161,12 +174,12 @@ class InnovationWatch:
         self._stamps.append(t_s)
         self._projected.append((eigenvectors.T @ innovation_m) ** 2)
         self._eigenvalues.append(np.maximum(eigenvalues, 0.0))
-        while self._stamps[0] < t_s - self._window_s:
+        while self._stamps[0] < t_s - self.window_s:
             self._stamps.popleft()
             self._projected.drop_first()
             self._eigenvalues.drop_first()
         span_s = t_s - self._stamps[0]
-        if span_s < MIN_SPAN_OF_WINDOW * self._window_s:
+        if span_s < MIN_SPAN_OF_WINDOW * self.window_s:
             return None
         ratio = self.ratio()
         # Started beyond the warning, kept until the innovations are no larger than stated.
@@ -175,18 +188,18 @@ class InnovationWatch:
         elif ratio <= 1.0:
             self._widening = False
         self._follow(t_s, self._consistent_scale() if self._widening else 1.0)
-        if span_s < (1.0 - MIN_SPAN_OF_WINDOW) * self._window_s:
+        if span_s < (1.0 - MIN_SPAN_OF_WINDOW) * self.window_s:
             return None
         if ratio <= WARNING_RATIO:
             was_warning, self._warning = self._warning, False
             return "" if was_warning else None
         self._warning = True
-        if t_s - self._warned_at_s < self._window_s:
+        if t_s - self._warned_at_s < self.window_s:
             return None
         self._warned_at_s = t_s
         return (
             f"mooring innovations {ratio:.1f}× their stated σ over the last "
-            f"{self._window_s:.0f} s: the gyro's wander (fusion.gyro_bias_instability_deg_h) or "
+            f"{self.window_s:.0f} s: the gyro's wander (fusion.gyro_bias_instability_deg_h) or "
             f"the mooring's σ (fusion.moored_position_sigma_horizontal_m) is stated too small; "
             f"its σ widened {self.scale:.1f}× (at most fusion.moored_sigma_scale_limit, "
             f"{self._scale_limit:g}); run assess_motion_pack"
@@ -199,7 +212,7 @@ class InnovationWatch:
         if consistent_scale >= self.scale:
             self.scale = consistent_scale
         else:
-            share = -math.expm1(-(t_s - self._scaled_at_s) / self._window_s)
+            share = -math.expm1(-(t_s - self._scaled_at_s) / self.window_s)
             self.scale += share * (consistent_scale - self.scale)
         self._scaled_at_s = t_s
 
@@ -211,6 +224,29 @@ class InnovationWatch:
         from scipy.optimize import brentq
 
         return brentq(lambda scale: self.ratio(scale) - 1.0, 1.0, self._scale_limit)
+
+
+class MooringStretch(NamedTuple):
+    """What the compiled stretches take of the mooring (:mod:`buoy_nav.stretched_mooring`): its
+    anchor (rad, rad, m; None before one is set) and the anchor's stamp (s), time constant (s)
+    and period (s); its stated covariance (3×3 m², ENU) and the factor on its horizontal
+    variance; whether its innovations leave that σ as stated
+    (:attr:`InnovationWatch.quiet`), their window (s), the span of it they must cover to be
+    judged (s), its stamps (s) and normalised squares; and the mean velocity's watches' blocks
+    in progress, (start s, length s) each."""
+
+    anchor: np.ndarray | None
+    anchor_t_s: float
+    time_constant_s: float
+    period_s: float
+    covariance_m2: np.ndarray
+    variance_scale: float
+    quiet: bool
+    window_s: float
+    min_span_s: float
+    window_stamps_s: np.ndarray
+    window_squares: np.ndarray
+    blocks: tuple[tuple[float, float], tuple[float, float]]
 
 
 class MooringAnchor(NamedTuple):
@@ -389,14 +425,68 @@ class MooredSource(AidingSource):
             self._drift_watch.restart()
             self._noise_watch.restart()
             return None
-        if self._drift_watch.add(t_s, state.velocity_enu_mps, velocity_covariance_m2s2):
-            self._watches_changed = True
-        if self._noise_watch.add(t_s, state.velocity_enu_mps, velocity_covariance_m2s2):
-            self._watches_changed = True
+        self._watch_velocity(t_s, state.velocity_enu_mps, velocity_covariance_m2s2)
         weight = -math.expm1(-(t_s - self._anchor_t_s) / self._time_constant_s)
-        self._anchor = self._anchor + weight * (position - self._anchor)
+        return self._anchored(t_s, self._anchor + weight * (position - self._anchor))
+
+    def replayed(
+        self, t_s: float, velocity_enu_mps, velocity_covariance_m2s2, anchor
+    ) -> MooringAnchor:
+        """The books of the epoch a compiled stretch made at ``t_s`` (s), as
+        :meth:`pseudo_measurement` keeps them: the filter's velocity (m/s ENU) and its
+        covariance (3×3 m²/s²) then to the mean velocity's watches, whose blocks the stretch
+        never closes, and the ``anchor`` (rad, rad, m) it moved to."""
+        self.next_due_s = t_s + self._period_s
+        if self._watch_velocity(t_s, velocity_enu_mps, velocity_covariance_m2s2):
+            raise RuntimeError("a block of the mooring's mean velocity closed in a stretch")
+        return self._anchored(t_s, np.array(anchor))
+
+    def stretch(self) -> MooringStretch:
+        """What the compiled stretches take of the mooring now."""
+        watch = self._watch
+        stamps, squares = watch.window_squares()
+        return MooringStretch(
+            self._anchor,
+            self._anchor_t_s,
+            self._time_constant_s,
+            self._period_s,
+            self._covariance,
+            watch.scale**2,
+            watch.quiet,
+            watch.window_s,
+            MIN_SPAN_OF_WINDOW * watch.window_s,
+            stamps,
+            squares,
+            (self._drift_watch.block, self._noise_watch.block),
+        )
+
+    @property
+    def held_as_stated(self) -> bool:
+        """Whether the anchor is set and the innovations leave the σ as stated."""
+        return self._anchor is not None and self._watch.quiet
+
+    def fixes_reset(self, fix_age_s: float) -> bool:
+        """Whether a fix of age ``fix_age_s`` (s) resets the anchor instead of the constraint
+        holding to it."""
+        return fix_age_s <= self._gnss_timeout_s
+
+    def _watch_velocity(self, t_s: float, velocity_enu_mps, velocity_covariance_m2s2) -> bool:
+        """The velocity (m/s ENU) and its covariance (3×3 m²/s²) at ``t_s`` (s) to the mean
+        velocity's watches; whether either changed what it widens."""
+        changed = False
+        if self._drift_watch.add(t_s, velocity_enu_mps, velocity_covariance_m2s2):
+            changed = True
+        if self._noise_watch.add(t_s, velocity_enu_mps, velocity_covariance_m2s2):
+            changed = True
+        if changed:
+            self._watches_changed = True
+        return changed
+
+    def _anchored(self, t_s: float, anchor: np.ndarray) -> MooringAnchor:
+        """The anchor (rad, rad, m) moved at ``t_s`` (s)."""
+        self._anchor = anchor
         self._anchor_t_s = t_s
-        return MooringAnchor(*self._anchor)
+        return MooringAnchor(*anchor)
 
     def measurement_from_message(self, message) -> Reason:
         return Reason.MALFORMED
