@@ -502,3 +502,21 @@ def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretc
     constraints = stretch_counts["mooring epochs"]
     assert constraints >= least_mooring_share * duration_s, "too few constraints taken"
     assert constraints <= most_mooring_share * duration_s, "a constraint the engine's taken"
+
+
+def test_stretches_take_the_mooring_among_imu_samples_alone(stretch_counts):
+    """A moored buoy's IMU samples alone once its magnetometer has given the alignment its
+    heading and stopped: the same to the bit, the mooring's constraints applied in the
+    stretches for most of the seconds after."""
+    duration_s, heading_s = 75.0, 40.0
+    _, _, messages = scenario_messages("moored_motion_pack", duration_s)
+    inputs = fusion_inputs(messages)
+    start_s = inputs[0][1][0]
+    inputs = [
+        (kind, item)
+        for kind, item in inputs
+        if kind == IMU
+        or (kind == MAGNETOMETER_TOPIC and header_seconds(item.header) < start_s + heading_s)
+    ]
+    stretched_as_alone(moored_config(use_ahrs=False), inputs, 5_000)
+    assert stretch_counts["mooring epochs"] >= 0.5 * (duration_s - heading_s)
