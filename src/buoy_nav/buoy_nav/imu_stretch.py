@@ -401,29 +401,13 @@ def _sample_reached(
     epochs there (:func:`_stepped`), and then, when due, the mooring's
     (:func:`~buoy_nav.mooring_epoch.mooring_epoch`); False, with nothing changed, where the
     engine must take the sample."""
-    if limits[CONSTRAINT_DUE] > due[0]:
-        return _stepped(
-            due,
-            point,
-            limits,
-            filter_state,
-            coning,
-            sculling,
-            covariance,
-            noise_terms,
-            ahead_state,
-            state,
-            pack,
-            aiding,
-            counts,
-        )
-    if mooring.books.shape[0] <= counts[MOORING_EPOCHS] or aiding.rows.shape[0]:
+    mooring_due = limits[CONSTRAINT_DUE] <= due[0]
+    if mooring_due and (mooring.books.shape[0] <= counts[MOORING_EPOCHS] or aiding.rows.shape[0]):
         return False
     # Both epochs of the sample or neither: what the first moved comes back when the second
     # is the engine's.
-    saved_filter, saved_covariance = filter_state.copy(), covariance.copy()
-    saved_ahead, saved_counts, saved_fork = ahead_state.copy(), counts.copy(), state[FORK_DUE]
-    if _stepped(
+    saved = _saved(mooring_due, filter_state, covariance, ahead_state, counts, state)
+    stepped = _stepped(
         due,
         point,
         limits,
@@ -437,14 +421,34 @@ def _sample_reached(
         pack,
         aiding,
         counts,
-    ) and _mooring_made(
+    )
+    if not mooring_due:
+        return stepped
+    if stepped and _mooring_made(
         due[0], filter_state, covariance, noise_terms, ahead_state, state, mooring, counts
     ):
         limits[CONSTRAINT_DUE] = due[0] + mooring.terms[PERIOD]
         return True
+    saved_filter, saved_covariance, saved_ahead, saved_counts, saved_fork = saved
     filter_state[:], covariance[:, :], ahead_state[:] = saved_filter, saved_covariance, saved_ahead
     counts[:], state[FORK_DUE] = saved_counts, saved_fork
     return False
+
+
+@numba.njit(cache=True)
+def _saved(wanted, filter_state, covariance, ahead_state, counts, state):
+    """Copies of what an epoch moves, when ``wanted`` (else empty arrays): the filter's
+    state, the covariance, the prediction's state, the ``counts`` and whether the prediction
+    is to be forked afresh."""
+    if wanted:
+        return (
+            filter_state.copy(),
+            covariance.copy(),
+            ahead_state.copy(),
+            counts.copy(),
+            state[FORK_DUE],
+        )
+    return np.empty(0), np.empty((0, 0)), np.empty(0), np.empty(0, np.int64), state[FORK_DUE]
 
 
 @numba.njit(cache=True)
@@ -573,49 +577,6 @@ def _epoch_made(
         return False
     ahead_t = state[AHEAD]
     carried = _carried(state, due[0])
-    made = _made(
-        pack_due,
-        aiding_due,
-        point,
-        due,
-        filter_state,
-        coning,
-        sculling,
-        covariance,
-        noise_terms,
-        ahead_state,
-        ahead_t,
-        carried,
-        pack,
-        aiding,
-        counts,
-    )
-    if made and not carried:
-        state[FORK_DUE] = 1.0
-    return made
-
-
-@numba.njit(cache=True)
-def _made(
-    pack_due,
-    aiding_due,
-    point,
-    due,
-    filter_state,
-    coning,
-    sculling,
-    covariance,
-    noise_terms,
-    ahead_state,
-    ahead_t,
-    carried,
-    pack,
-    aiding,
-    counts,
-) -> bool:
-    """The pack's epoch (``pack_due``) or the aiding sources' (``aiding_due``) at the IMU
-    sample ``due`` made, its correction ``carried`` over to the prediction or not, as
-    :func:`_epoch_made` says."""
     if pack_due:
         head = counts[QUEUE_HEAD]
         if not (
@@ -640,32 +601,34 @@ def _made(
             return False
         counts[QUEUE_HEAD] += 1
         counts[EPOCHS] += 1
-        return True
-    if aiding_due != 1:
-        return False
-    written = aiding_epoch(
-        aiding.rows,
-        counts[AIDING_HEAD],
-        counts[AIDING_TAIL],
-        point,
-        due,
-        filter_state,
-        coning,
-        sculling,
-        covariance,
-        noise_terms,
-        aiding.terms,
-        int(pack.terms[ATTITUDE_START]),
-        ahead_state,
-        ahead_t,
-        carried,
-        aiding.books,
-        counts[AIDING_BOOKS],
-    )
-    if written < 0:
-        return False
-    counts[AIDING_BOOKS] += written
-    counts[AIDING_HEAD] = first_queued(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL])
+    else:
+        if aiding_due != 1:
+            return False
+        written = aiding_epoch(
+            aiding.rows,
+            counts[AIDING_HEAD],
+            counts[AIDING_TAIL],
+            point,
+            due,
+            filter_state,
+            coning,
+            sculling,
+            covariance,
+            noise_terms,
+            aiding.terms,
+            int(pack.terms[ATTITUDE_START]),
+            ahead_state,
+            ahead_t,
+            carried,
+            aiding.books,
+            counts[AIDING_BOOKS],
+        )
+        if written < 0:
+            return False
+        counts[AIDING_BOOKS] += written
+        counts[AIDING_HEAD] = first_queued(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL])
+    if not carried:
+        state[FORK_DUE] = 1.0
     return True
 
 
