@@ -6,9 +6,11 @@ measurements among them (:class:`MeasurementInput`). :class:`ImuStretches` makes
 once (:meth:`ImuStretches.run_of`: the IMU samples' rows, the measurements validated and made
 into rows), offers each stretch the inputs it may take from where the engine stands (up to the
 first the engine must take; the pack's or the stretched aiding sources' measurements with those
-already queued taken out of the queue, when their books allow), calls the kernel, and then sets
-the engine's parts from what it did and keeps the books of the epochs it made, as the engine
-keeps them (:mod:`buoy_nav.stretched_aiding` for the GNSS sources').
+already queued taken out of the queue, when their books allow; the mooring's constraint when it
+may be made there), calls the kernel, and then sets the engine's parts from what it did (the
+prediction ahead too, forked afresh by the stretch or to be) and keeps the books of the epochs
+it made, as the engine keeps them, in their order (:mod:`buoy_nav.stretched_pack`,
+:mod:`buoy_nav.stretched_aiding`, :mod:`buoy_nav.stretched_mooring`).
 """
 
 import math
@@ -103,9 +105,10 @@ class _Offer(NamedTuple):
     """What one call of :func:`imu_stretch` is offered: the IMU samples' rows, the inputs'
     ``order``, the process noise's terms (:meth:`AidedNavigation.noise_terms`), the pack's
     arguments and its attitudes (those queued before first, ``queued`` of them), the aiding
-    measurements' arguments and rows (those queued before first, ``aiding_queued`` of them), the
-    mooring's arguments (:mod:`buoy_nav.stretched_mooring`; no room for epochs: the stretch stops
-    at the constraint); no measurement when the stretch takes IMU samples alone."""
+    measurements' arguments and rows (those queued before first, ``aiding_queued`` of them), and
+    the mooring's arguments (:mod:`buoy_nav.stretched_mooring`; without room for its epochs when
+    the stretch is to stop at the constraint); no measurement when the stretch takes IMU samples
+    alone."""
 
     raw: np.ndarray
     order: np.ndarray

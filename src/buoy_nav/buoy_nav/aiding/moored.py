@@ -48,6 +48,10 @@ innovations consistent (bounded by ``moored_sigma_scale_limit``; 1 never widens)
 the window moves, back to the stated σ once the innovations are no larger than stated; the
 wider σ lets the velocity's and position's covariance grow with what the mooring cannot hold.
 The vertical σ, which no watch judges, stays as stated.
+
+Offline, the compiled stretches make most of its epochs (:mod:`buoy_nav.mooring_epoch`) while
+its innovations leave the σ as stated and its watches' blocks do not close; its books are then
+kept as :meth:`MooredSource.replayed` says, the same as the engine's to the bit.
 """
 
 from __future__ import annotations
