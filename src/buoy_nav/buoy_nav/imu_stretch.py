@@ -21,9 +21,11 @@ sources' (:mod:`buoy_nav.stretched_aiding`, :mod:`buoy_nav.aiding_epoch`), one o
 a stretch. The stretch queues each as the engine does and, when the filter reaches its stamp,
 makes its epoch with the engine's kernels: the step there with the covariance's propagation,
 the compiled update (the pack's, or the GNSS sources' models stacked, gated and applied in one
-update), the injection of the correction and its carry-over to the prediction. It stops before
-an epoch the engine must make itself (a gate that fails, a covariance to repair, a model that
-does not hold, another measurement or a constraint due) and where
+update), the injection of the correction and its carry-over to the prediction. A moored
+buoy's constraint is made where it is due (:mod:`buoy_nav.mooring_epoch`), after the epoch of
+the sample it shares a stamp with, the two undone together when the engine must make it. The
+stretch stops before an epoch the engine must make itself (a gate that fails, a covariance to
+repair, a model that does not hold, another measurement due, a constraint not taken) and where
 the sources' books could change what follows (a source's health moved by a pass, the filter
 distrusted, a smoother recording the epochs); the engine then keeps the books of the epochs it
 made, in their order.
