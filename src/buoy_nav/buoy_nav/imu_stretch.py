@@ -63,17 +63,20 @@ from buoy_nav.pack_epoch import (
     pack_epoch,
 )
 from buoy_nav.prediction import PREDICTION_RESYNC_INTERVAL_S
-from buoy_nav.sequence_kernels import (
-    RING_SIZE,
-    SEQUENCE_SIZE,
-    queued_in_sequence,
-    ring_add,
-    ring_interval,
-)
+from buoy_nav.sequence_kernels import SEQUENCE_SIZE, queued_in_sequence
 from buoy_nav.solution_rows import write_row
 from buoy_nav.strapdown_kernel import DURATION, strapdown_step
 from buoy_nav.strapdown_kernel import STATE_SIZE as STRAPDOWN_STATE_SIZE
-from buoy_nav.stream_sequence import SEQUENCE_INTERVALS
+from buoy_nav.stretch_screening import (
+    LATEST,
+    SAMPLE_INTERVAL,
+    SAMPLE_SIZE,
+    SCREENED_STATE_SIZE,
+    SCREENING_SIZE,
+    SQUARE,
+    accepted,
+    screened,
+)
 
 DONE = 0
 """Every sample of the stretch taken, the filter caught up to the last one's horizon."""
@@ -83,14 +86,13 @@ CATCH_UP = 2
 """Stopped after the prediction of the last sample counted: the engine's filtering up to that
 sample's horizon (:meth:`~buoy_nav.engine.FusionEngine.catch_up`) is left to do."""
 
-# The state handed in and out (:func:`imu_stretch`'s ``state``): where the (stamp s, gyro,
-# force) samples the filter's and the prediction's states are at begin, then the stamp of the
-# latest sample predicted (s), the output decimation's next output stamp (s), the rows written,
-# the filter stamp the prediction was last forked from (s) and whether it is to be forked afresh
-# at the next sample (1.0) or not (0.0).
+# The state handed in and out (:func:`imu_stretch`'s ``state``): where the samples (SAMPLE_SIZE
+# each, :mod:`buoy_nav.stretch_screening`) the filter's and the prediction's states are at
+# begin, then the stamp of the latest sample predicted (s), the output decimation's next output
+# stamp (s), the rows written, the filter stamp the prediction was last forked from (s) and
+# whether it is to be forked afresh at the next sample (1.0) or not (0.0).
 POINT = 0
 AHEAD = 7
-SAMPLE_SIZE = 7
 LAST_PREDICTED_T = 14
 NEXT_OUTPUT_T = 15
 ROWS = 16
@@ -101,22 +103,6 @@ STATE_SIZE = 19
 DELAY, MAX_GAP, PROPAGATION_INTERVAL, NEXT_MEASUREMENT, OUTPUT_PERIOD = range(5)
 DISTRUSTED, ATTITUDE_VARIANCE, VELOCITY_VARIANCE, CONSTRAINT_DUE = range(5, 9)
 LIMITS_SIZE = 9
-# The screening's limits and state (:func:`imu_stretch`'s ``screening`` and ``screened_state``,
-# :meth:`~buoy_nav.imu_input.ImuInput.steady_screening`): the clock's offset (s), the largest
-# squared rate and force, the largest gap (s), the calibration's gyro biases, accelerometer
-# biases and scales (none when CALIBRATED is 0.0), the largest angular acceleration and jerk,
-# the rate's and force's noise allowances, the learnt sample interval (s) and the exponent of
-# the squares (2.0, handed in so that they are the C library's, as the interpreter's ``** 2``);
-# the latest accepted stamp, the sequence's latest stamp, the clock's sample interval (s), the
-# last accepted sample (stamp s, gyro, force) and, last, the ring of the clock's recent
-# intervals the sample interval is taken from (:mod:`buoy_nav.sequence_kernels`).
-(CLOCK_OFFSET, MAX_RATE_SQ, MAX_FORCE_SQ, SCREENING_MAX_GAP, CALIBRATED) = range(5)
-GYRO_BIAS, ACCEL_BIAS, ACCEL_SCALE = 5, 8, 11
-(MAX_ANGULAR_ACCELERATION, MAX_JERK, RATE_NOISE, FORCE_NOISE, SAMPLE_INTERVAL) = range(14, 19)
-SQUARE = 19
-SCREENING_SIZE = 20
-LATEST, SEQUENCE_LAST, CLOCK_INTERVAL, LAST_SAMPLE, CLOCK_RING = 0, 1, 2, 3, 10
-SCREENED_STATE_SIZE = CLOCK_RING + RING_SIZE
 # How far a stretch went (``counts``): the IMU samples it took, where the queued attitudes begin
 # and end in ``pack_rows`` (those before the first were applied), the epochs applied; where the
 # queued aiding measurements begin and end in the aiding rows, and the books of their epochs;
@@ -245,11 +231,11 @@ def _taken(raw_sample, screening, screened_state, sample, state, limits, rows_bl
     """Whether the stretch takes ``raw_sample``: screened as :func:`_screened` screens it, not
     beyond a gap from the prediction ahead (``state``'s :data:`AHEAD`), with room in the rows'
     block; the screening then accepts it into ``sample``."""
-    if not _screened(raw_sample, screening, screened_state, sample):
+    if not screened(raw_sample, screening, screened_state, sample):
         return False
     if sample[0] - state[AHEAD] > limits[MAX_GAP] or state[ROWS] >= rows_block.shape[0]:
         return False
-    _accepted(screening, screened_state, sample)
+    accepted(screening, screened_state, sample)
     return True
 
 
@@ -632,88 +618,6 @@ def _epoch_made(
     if not carried:
         state[FORK_DUE] = 1.0
     return True
-
-
-@numba.njit(cache=True)
-def _screened(raw_sample, screening, screened_state, sample) -> bool:
-    """Whether :meth:`~buoy_nav.imu_input.ImuInput.accept` would accept ``raw_sample`` as the
-    next sample of the sequence with nothing else to do (nothing held, refused, restarted or
-    learnt); ``sample`` then holds it re-stamped and calibrated. Nothing else is changed."""
-    t = raw_sample[0]
-    stamp = t + screening[CLOCK_OFFSET]
-    latest = screened_state[LATEST]
-    sequence_last = screened_state[SEQUENCE_LAST]
-    if not (
-        stamp > latest
-        and (
-            stamp == sequence_last
-            or (
-                stamp > sequence_last
-                and not stamp - sequence_last > SEQUENCE_INTERVALS * screened_state[CLOCK_INTERVAL]
-            )
-        )
-    ):
-        return False
-    gx, gy, gz, fx, fy, fz = raw_sample[1:7]
-    if not (math.isfinite(t) and math.isfinite(gx + gy + gz) and math.isfinite(fx + fy + fz)):
-        return False
-    if screening[CALIBRATED] != 0.0:
-        gx = gx - screening[GYRO_BIAS]
-        gy = gy - screening[GYRO_BIAS + 1]
-        gz = gz - screening[GYRO_BIAS + 2]
-        fx = (fx - screening[ACCEL_BIAS]) / screening[ACCEL_SCALE]
-        fy = (fy - screening[ACCEL_BIAS + 1]) / screening[ACCEL_SCALE + 1]
-        fz = (fz - screening[ACCEL_BIAS + 2]) / screening[ACCEL_SCALE + 2]
-    if (
-        gx * gx + gy * gy + gz * gz > screening[MAX_RATE_SQ]
-        or fx * fx + fy * fy + fz * fz > screening[MAX_FORCE_SQ]
-    ):
-        return False
-    if stamp - latest > screening[SCREENING_MAX_GAP]:
-        return False
-    last = screened_state[LAST_SAMPLE : LAST_SAMPLE + SAMPLE_SIZE]
-    dt = stamp - last[0]
-    if dt > 0.0 and dt < screening[SAMPLE_INTERVAL]:
-        return False
-    square = screening[SQUARE]
-    rate_bound = screening[MAX_ANGULAR_ACCELERATION] * dt + screening[RATE_NOISE]
-    force_bound = screening[MAX_JERK] * dt + screening[FORCE_NOISE]
-    if (
-        math.pow(gx - last[1], square)
-        + math.pow(gy - last[2], square)
-        + math.pow(gz - last[3], square)
-        > rate_bound * rate_bound
-        or math.pow(fx - last[4], square)
-        + math.pow(fy - last[5], square)
-        + math.pow(fz - last[6], square)
-        > force_bound * force_bound
-    ):
-        return False
-    sample[0] = stamp
-    sample[1] = gx
-    sample[2] = gy
-    sample[3] = gz
-    sample[4] = fx
-    sample[5] = fy
-    sample[6] = fz
-    return True
-
-
-@numba.njit(cache=True)
-def _accepted(screening, screened_state, sample) -> None:
-    """The screened ``sample`` accepted: the screening's state follows it (the sequence, the
-    clock's sample interval, the last accepted sample)."""
-    stamp = sample[0]
-    dt = stamp - screened_state[LATEST]
-    if dt <= screening[SCREENING_MAX_GAP] and not dt > (
-        SEQUENCE_INTERVALS * screened_state[CLOCK_INTERVAL]
-    ):
-        ring = screened_state[CLOCK_RING:]
-        ring_add(ring, dt)
-        screened_state[CLOCK_INTERVAL] = ring_interval(ring)
-    screened_state[LATEST] = stamp
-    screened_state[SEQUENCE_LAST] = stamp
-    screened_state[LAST_SAMPLE : LAST_SAMPLE + SAMPLE_SIZE] = sample
 
 
 @numba.njit(cache=True)

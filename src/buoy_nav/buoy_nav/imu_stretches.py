@@ -35,7 +35,6 @@ from buoy_nav.imu_stretch import (
     NEXT_OUTPUT_T,
     QUEUE_TAIL,
     ROWS,
-    SAMPLE_SIZE,
     WINDOW_END,
     imu_stretch,
 )
@@ -45,6 +44,7 @@ from buoy_nav.pack_epoch import (
     PackArguments,
 )
 from buoy_nav.strapdown_kernel import LATITUDE, LONGITUDE
+from buoy_nav.stretch_screening import SAMPLE_SIZE
 from buoy_nav.stretched_aiding import AidingRows, StretchedAiding
 from buoy_nav.stretched_mooring import StretchedMooring
 from buoy_nav.stretched_pack import StretchedPack
