@@ -165,34 +165,22 @@ def imu_stretch(
     for item in range(order.shape[0]):
         position = order[item]
         if position < 0:
-            if not _queued(-1 - position, pack, aiding, point, screened_state):
+            if not _queued(-1 - position, pack, aiding, point, screened_state, counts):
                 return item, stepped, BEFORE_SAMPLE
-            if -1 - position < pack.rows.shape[0]:
-                counts[QUEUE_TAIL] += 1
-            else:
-                counts[AIDING_TAIL] = -1 - position - pack.rows.shape[0] + 1
             continue
         index = counts[IMU_TAKEN]
         sample = samples[index]
         if not _taken(raw[position], screening, screened_state, sample, state, limits, rows_block):
             return item, stepped, BEFORE_SAMPLE
         counts[IMU_TAKEN] += 1
-        if state[FORK_DUE] != 0.0:
-            _forked(
-                state,
-                buffered,
-                samples,
-                stepped,
-                index,
-                filter_state,
-                ahead_state,
-                ahead_coning,
-                ahead_sculling,
-            )
         row_written[index] = _predicted(
-            sample,
+            index,
+            stepped,
+            buffered,
+            samples,
             state,
             limits,
+            filter_state,
             ahead_state,
             ahead_coning,
             ahead_sculling,
@@ -263,9 +251,13 @@ def _forked(
 
 @numba.njit(cache=True)
 def _predicted(
-    sample,
+    index,
+    stepped,
+    buffered,
+    samples,
     state,
     limits,
+    filter_state,
     ahead_state,
     coning,
     sculling,
@@ -274,10 +266,16 @@ def _predicted(
     covariance,
     block_indices,
 ) -> bool:
-    """The prediction ahead (``ahead_state``, at ``state``'s :data:`AHEAD` sample) stepped to
-    the accepted IMU ``sample`` and, when the output is due there, its solution's row written;
-    whether it was (``state``'s :data:`ROWS`, :data:`LAST_PREDICTED_T` and the decimation's
-    next stamp follow)."""
+    """The prediction ahead (``ahead_state``, at ``state``'s :data:`AHEAD` sample; forked
+    afresh first when due, :func:`_forked`) stepped to the accepted IMU sample ``index`` of
+    ``samples`` and, when the output is due there, its solution's row written; whether it was
+    (``state``'s :data:`ROWS`, :data:`LAST_PREDICTED_T` and the decimation's next stamp
+    follow)."""
+    if state[FORK_DUE] != 0.0:
+        _forked(
+            state, buffered, samples, stepped, index, filter_state, ahead_state, coning, sculling
+        )
+    sample = samples[index]
     ahead = state[AHEAD : AHEAD + SAMPLE_SIZE]
     t = sample[0]
     span = t - ahead[0]
@@ -521,20 +519,24 @@ def _stepped(
 
 
 @numba.njit(cache=True)
-def _queued(measurement, pack, aiding, point, screened_state) -> bool:
+def _queued(measurement, pack, aiding, point, screened_state, counts) -> bool:
     """Whether the engine would queue the ``measurement`` th of the stretch's measurements (the
     ``pack``'s rows, then the ``aiding`` rows) with nothing else to do; its source's sequence
-    then follows it and an aiding row is marked queued."""
+    then follows it, an aiding row is marked queued and ``counts`` take it."""
     n_pack = pack.rows.shape[0]
     if measurement < n_pack:
         t = pack.rows[measurement, PACK_T]
-        return queued_in_sequence(t, pack.sequence, point[0], screened_state[LATEST])
+        if not queued_in_sequence(t, pack.sequence, point[0], screened_state[LATEST]):
+            return False
+        counts[QUEUE_TAIL] += 1
+        return True
     rows = aiding.rows
     k = measurement - n_pack
     sequence = aiding.sequences[int(rows[k, ROW_SLOT])]
     if not queued_in_sequence(rows[k, ROW_T], sequence, point[0], screened_state[LATEST]):
         return False
     rows[k, ROW_STATUS] = QUEUED
+    counts[AIDING_TAIL] = k + 1
     return True
 
 
