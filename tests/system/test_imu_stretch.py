@@ -29,7 +29,12 @@ import numpy as np
 import pytest
 from gnss_faults import biased_velocity
 from scipy.spatial.transform import Rotation
-from test_nav_sensor_sets import moored_config, scenario_messages
+from test_nav_sensor_sets import (
+    MAGNETOMETER,
+    calibrated_magnetometer,
+    moored_config,
+    scenario_messages,
+)
 
 from buoy_common.contract import (
     AHRS_TOPIC,
@@ -44,7 +49,8 @@ from buoy_common.contract import (
 from buoy_nav import imu_stretch as stretch_module
 from buoy_nav import imu_stretches
 from buoy_nav.aiding.base import vector_of
-from buoy_nav.aiding_epoch import APPLIED, BOOK_STATUS
+from buoy_nav.aiding.magnetometer import magnetometer_stretch_model
+from buoy_nav.aiding_epoch import APPLIED, BOOK_ROW, BOOK_STATUS, MODELS, ROW_SLOT, TERM_MODEL
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import FUSION_INPUT_MSGTYPES, feed_message
@@ -203,7 +209,7 @@ def in_stretches(config: FusionConfig, inputs: list[tuple]):
 @pytest.fixture
 def stretch_counts(monkeypatch) -> Counter:
     """Inputs offered to the compiled stretch and taken by it, the pack's epochs it applied and
-    the aiding measurements, the stretches that forked the prediction afresh, and the forks the
+    the aiding measurements (the magnetometer's fields among them), the stretches that forked the prediction afresh, and the forks the
     engine made itself among the inputs it was given together, counted."""
     counts = Counter()
     compiled = stretch_module.imu_stretch
@@ -219,7 +225,10 @@ def stretch_counts(monkeypatch) -> Counter:
         counts["epochs"] += int(went[stretch_module.EPOCHS])
         counts["mooring epochs"] += int(went[stretch_module.MOORING_EPOCHS])
         books = aiding.books[: went[stretch_module.AIDING_BOOKS]]
-        counts["aiding applied"] += int(np.sum(books[:, BOOK_STATUS] == APPLIED))
+        applied = books[books[:, BOOK_STATUS] == APPLIED, BOOK_ROW].astype(int)
+        counts["aiding applied"] += applied.size
+        models = aiding.terms[aiding.rows[applied, ROW_SLOT].astype(int), TERM_MODEL]
+        counts["fields applied"] += int(np.sum(models == MODELS.index(magnetometer_stretch_model)))
         return taken, stepped, stop
 
     monkeypatch.setattr(imu_stretches, "imu_stretch", counted)
@@ -520,3 +529,37 @@ def test_stretches_take_the_mooring_among_imu_samples_alone(stretch_counts):
     ]
     stretched_as_alone(moored_config(use_ahrs=False), inputs, 5_000)
     assert stretch_counts["mooring epochs"] >= 0.5 * (duration_s - heading_s)
+
+
+def test_stretches_take_the_magnetometer_as_one_input_at_a_time_does(stretch_counts):
+    """A single GNSS antenna and a magnetometer at 10 Hz, a steel hull passing for ten seconds
+    (the gate rejects its fields, and a run of rejections suspends the magnetometer until it
+    agrees again), and a field not finite: the same to the bit, most of the fields' epochs in
+    the stretches, none of the disturbed ones."""
+    duration_s = 120.0
+    _, _, messages = scenario_messages(
+        "sea_state",
+        duration_s,
+        (
+            "sensors.gnss.receiver=single_antenna",
+            *MAGNETOMETER,
+            "sensors.magnetometer.disturbances_s=[[60, 70]]",
+        ),
+    )
+    inputs = fusion_inputs(messages)
+    fields = [index for index, (kind, _) in enumerate(inputs) if kind == MAGNETOMETER_TOPIC]
+    broken = copy.deepcopy(inputs[fields[500]][1])
+    broken.magnetic_field.y = math.nan
+    inputs[fields[500]] = (MAGNETOMETER_TOPIC, broken)
+    config = FusionConfig(
+        site_latitude_deg=35.0,
+        site_longitude_deg=120.0,
+        record_innovations=True,
+        **calibrated_magnetometer(),
+    )
+    stretched = stretched_as_alone(config, inputs, 5_000)
+    counters = stretched.health().counters["magnetometer"]
+    assert counters.rejected.get(Reason.NON_FINITE, 0) == 1
+    assert counters.rejected.get(Reason.GATE, 0) + counters.rejected.get(Reason.SUSPENDED, 0) > 50
+    assert stretch_counts["fields applied"] >= 0.5 * counters.accepted, "too few fields taken"
+    assert stretch_counts["fields applied"] <= counters.accepted

@@ -1,16 +1,18 @@
-"""The epoch of one stamp's GNSS measurements in a compiled stretch of IMU samples
-(:mod:`buoy_nav.imu_stretch`).
+"""The epoch of one stamp's GNSS measurements and magnetometer fields in a compiled stretch of IMU
+samples (:mod:`buoy_nav.imu_stretch`).
 
-The GNSS sources (fix, velocity, heading, antenna baselines) each give their measurement function
-over arrays (``stretch_model``, in :data:`MODELS`). In a stretch their measurements are queued as
-the engine queues them (:func:`~buoy_nav.sequence_kernels.queued_in_sequence`), and when the
-filter reaches a stamp that has some, :func:`aiding_epoch` makes its epoch as the engine makes
-it through the sources' compiled models (``FusionEngine._handle_measurements``): a measurement
-another of the stamp supersedes set aside, the others in the sources' registry order, the step
-there with the covariance's propagation, each one modelled and gated and all of them applied in
-one stacked update, the correction injected and carried over to the prediction. It returns −1,
-with nothing changed, where the engine must make the epoch itself: a model that does not hold, a
-gate that fails, a covariance to repair, the prediction forking afresh there.
+The GNSS sources (fix, velocity, heading, antenna baselines) and the magnetometer each give their
+measurement function over arrays (``stretch_model``, in :data:`MODELS`). In a stretch their
+measurements are queued as the engine queues them
+(:func:`~buoy_nav.sequence_kernels.queued_in_sequence`), and when the filter reaches a stamp that
+has some, :func:`aiding_epoch` makes its epoch as the engine makes it through the sources' compiled
+models (``FusionEngine._handle_measurements``): a measurement another of the stamp supersedes set
+aside, the others in the sources' registry order, the step there with the covariance's propagation,
+each one modelled and gated (with its own noise, as the magnetometer's field whose calibration error
+its neighbours share) and all of them applied in one stacked update, the correction injected and
+carried over to the prediction. It returns −1, with nothing changed, where the engine must make the
+epoch itself: a model that does not hold, a gate that fails, a covariance to repair, the prediction
+forking afresh there.
 
 A source whose measurement function is not in :data:`MODELS` is not taken in stretches: its
 measurements stop them and the engine applies them. The arrays are laid out below.
@@ -25,6 +27,7 @@ from buoy_nav.aiding.dual_antenna import baseline_stretch_model
 from buoy_nav.aiding.gnss_fix import fix_stretch_model
 from buoy_nav.aiding.gnss_heading import heading_stretch_model
 from buoy_nav.aiding.gnss_velocity import velocity_stretch_model
+from buoy_nav.aiding.magnetometer import magnetometer_stretch_model
 from buoy_nav.epoch_kernels import corrected, stepped_to
 from buoy_nav.kalman_kernel import gated_stacked_update
 from buoy_nav.rotations import rotation_matrix_elements
@@ -32,14 +35,20 @@ from buoy_nav.strapdown_kernel import (
     ATTITUDE,
 )
 
-MODELS = (fix_stretch_model, velocity_stretch_model, heading_stretch_model, baseline_stretch_model)
+MODELS = (
+    fix_stretch_model,
+    velocity_stretch_model,
+    heading_stretch_model,
+    baseline_stretch_model,
+    magnetometer_stretch_model,
+)
 """The measurement functions a stretch applies, in the order :func:`_modelled` calls them by."""
 
 # The aiding measurements a stretch takes (``aiding_rows``, one row each, those already queued
 # first): stamp (s), the source's slot (its row of ``aiding_terms``), what became of it, then
 # the numbers its model reads (the source's ``stretch_values``).
 ROW_T, ROW_SLOT, ROW_STATUS, ROW_VALUES = range(4)
-ROW_SIZE = ROW_VALUES + 12
+ROW_SIZE = ROW_VALUES + 14
 PENDING, QUEUED, APPLIED, SUPERSEDED = 0.0, 1.0, 2.0, 3.0
 # Each source's terms (``aiding_terms``, a row a slot): the index of its model in MODELS, its
 # order in the registry (the order the engine stacks a stamp's measurements in), the slot of the
@@ -74,14 +83,18 @@ _rotation_matrix_elements = numba.njit(cache=True)(rotation_matrix_elements)
 def _modelled(model, values, state, rotation_nb, raw_gyro_rad_s, terms):
     """The measurement function :data:`MODELS` [``model``] of ``values`` at the strapdown
     ``state`` vector, its R_nb and the raw gyro sample there (body rad/s), with the source's
-    ``terms``: (innovation, Jacobian, R, whether the model holds)."""
+    ``terms``: (innovation, Jacobian, R, the gate's noise, whether the model holds)."""
+    if model == 4:
+        return magnetometer_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
     if model == 0:
-        return fix_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
-    if model == 1:
-        return velocity_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
-    if model == 2:
-        return heading_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
-    return baseline_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
+        nu, h, r, holds = fix_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
+    elif model == 1:
+        nu, h, r, holds = velocity_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
+    elif model == 2:
+        nu, h, r, holds = heading_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
+    else:
+        nu, h, r, holds = baseline_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
+    return nu, h, r, r, holds
 
 
 @numba.njit(cache=True)
@@ -141,8 +154,9 @@ def _stamp_rows(rows, head, tail, t, terms):
 @numba.njit(cache=True)
 def _stacked_models(rows, kept, terms, state, raw_gyro_rad_s, state_count):
     """The models of the ``kept`` rows at the strapdown ``state`` (``state_count`` error
-    states) stacked as the engine stacks them: whether each holds, then ν, H, R
-    (block-diagonal), each one's end in the stack and its gate's threshold."""
+    states) stacked as the engine stacks them: whether each holds, then ν, H, R and the
+    gates' noise (block-diagonal; 0 × 0 when it is R), each one's end in the stack and its
+    gate's threshold."""
     elements = _rotation_matrix_elements(
         state[ATTITUDE], state[ATTITUDE + 1], state[ATTITUDE + 2], state[ATTITUDE + 3]
     )
@@ -154,6 +168,7 @@ def _stacked_models(rows, kept, terms, state, raw_gyro_rad_s, state_count):
     innovation = np.empty(size)
     jacobian = np.empty((size, state_count))
     covariance = np.zeros((size, size))
+    gate_covariance = np.zeros((size, size))
     ends = np.empty(count, np.int64)
     thresholds = np.empty(count)
     end = 0
@@ -161,7 +176,7 @@ def _stacked_models(rows, kept, terms, state, raw_gyro_rad_s, state_count):
     for i in range(count):
         row = rows[kept[i]]
         slot = int(row[ROW_SLOT])
-        nu, h, r, model_holds = _modelled(
+        nu, h, r, gate_r, model_holds = _modelled(
             int(terms[slot, TERM_MODEL]),
             row[ROW_VALUES:].copy(),
             state,
@@ -174,14 +189,20 @@ def _stacked_models(rows, kept, terms, state, raw_gyro_rad_s, state_count):
         innovation[end : end + dimension] = nu
         jacobian[end : end + dimension, :] = h
         covariance[end : end + dimension, end : end + dimension] = r
+        gate_covariance[end : end + dimension, end : end + dimension] = gate_r
         thresholds[i] = terms[slot, TERM_THRESHOLDS + dimension - 1]
         end += dimension
         ends[i] = end
+    covariance = covariance[:end, :end].copy()
+    gate_covariance = gate_covariance[:end, :end].copy()
+    if np.array_equal(gate_covariance, covariance):  # S is then formed once
+        gate_covariance = np.zeros((0, 0))
     return (
         holds,
         innovation[:end].copy(),
         jacobian[:end].copy(),
-        covariance[:end, :end].copy(),
+        covariance,
+        gate_covariance,
         ends,
         thresholds,
     )
@@ -218,13 +239,20 @@ def aiding_epoch(
     t = due[0]
     superseded, kept = _stamp_rows(rows, head, tail, t, terms)
     stepped, prior = stepped_to(point, due, filter_state, coning, sculling, covariance, noise_terms)
-    holds, innovation, jacobian, measurement_covariance, ends, thresholds = _stacked_models(
-        rows, kept, terms, stepped, due[1:4].copy(), covariance.shape[0]
+    holds, innovation, jacobian, measurement_covariance, gate_covariance, ends, thresholds = (
+        _stacked_models(rows, kept, terms, stepped, due[1:4].copy(), covariance.shape[0])
     )
     if not holds:
         return -1
     nis, innovation_covariance, accepted, updated, correction, positive = gated_stacked_update(
-        prior, innovation, jacobian, measurement_covariance, ends, thresholds, attitude_start
+        prior,
+        innovation,
+        jacobian,
+        measurement_covariance,
+        ends,
+        thresholds,
+        attitude_start,
+        gate_covariance,
     )
     if not (accepted and positive):
         return -1

@@ -64,6 +64,8 @@ STANDARD_GRAVITY_MPS2 = 9.80665
 DEG = math.pi / 180.0
 # Smallest eigenvalue kept when a covariance has to be repaired, relative to the largest one.
 _EIGENVALUE_FLOOR_RELATIVE = 1e-15
+_NO_GATE_COVARIANCE = np.zeros((0, 0))
+"""The compiled gated update's gate covariance when the gates take R."""
 
 
 def _measurement_arrays(innovation, jacobian, measurement_covariance):
@@ -305,7 +307,13 @@ class ErrorStateFilter:
         return correction
 
     def gated_update(
-        self, innovation, jacobian, measurement_covariance, dimensions, probabilities
+        self,
+        innovation,
+        jacobian,
+        measurement_covariance,
+        dimensions,
+        probabilities,
+        gate_covariance=None,
     ) -> "StackedUpdate":
         """Gate each measurement of a stack (``dimensions``: the rows of each, in order) at its
         chi-square ``probabilities`` and, when each passes, apply the stack in Joseph form and
@@ -313,8 +321,12 @@ class ErrorStateFilter:
         arithmetic as :meth:`gate` of each, :meth:`update` and :meth:`reset_after_injection`.
 
         innovation ν (m,), jacobian H (m × states), measurement covariance R (m × m, block
-        diagonal), stacked."""
+        diagonal), stacked; ``gate_covariance`` the noise the gates take, stacked as R (None:
+        R)."""
         nu, h, r = _measurement_arrays(innovation, jacobian, measurement_covariance)
+        gate_r = _NO_GATE_COVARIANCE
+        if gate_covariance is not None:
+            gate_r = np.ascontiguousarray(gate_covariance, dtype=float)
         thresholds = [
             self.gate_threshold(dimension, probability)
             for dimension, probability in zip(dimensions, probabilities, strict=True)
@@ -329,6 +341,7 @@ class ErrorStateFilter:
                 np.array(ends),
                 np.array(thresholds),
                 self.states.attitude.start,
+                gate_r,
             )
         )
         gates = []

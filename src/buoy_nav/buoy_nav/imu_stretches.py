@@ -182,6 +182,8 @@ class ImuStretches:
         numbers each is the engine's to take (:meth:`~buoy_nav.engine.FusionEngine.add_imu`
         says why), as is a measurement that is not valid."""
         pack = self._parts.pack
+        state = nav.integrator.state_vector
+        position = (float(state[LATITUDE]), float(state[LONGITUDE]))
         n = len(inputs)
         imu_index, pack_index = np.full(n, -1), np.full(n, -1)
         aiding_index, aiding_slots = np.full(n, -1), np.full(n, -1)
@@ -196,7 +198,7 @@ class ImuStretches:
                     pack_index[place] = len(measurements)
                     measurements.append(validated)
             elif self._aiding.takes(item.source):
-                made = self._aiding.row(*item)
+                made = self._aiding.row(*item, position)
                 if made is not None:
                     aiding_index[place], aiding_slots[place] = len(aiding_items), made[1][ROW_SLOT]
                     aiding_items.append((item.source, made[0], item.t_s))
@@ -206,8 +208,6 @@ class ImuStretches:
             imu_index = np.where(imu_index < 0, -1, np.array([*sample_rows, -1])[imu_index])
         imu_stamps = np.full(n, -math.inf)
         imu_stamps[imu_index >= 0] = raw[imu_index[imu_index >= 0], 0]
-        state = nav.integrator.state_vector
-        position = (float(state[LATITUDE]), float(state[LONGITUDE]))
         rows = [pack.stretch_row(m, *position) for m in measurements] if measurements else []
         return _Run(
             raw,
@@ -319,6 +319,8 @@ class ImuStretches:
         parts = self._parts
         with_pack = self._pack.ready(nav) and self._pack_present(run, start)
         ready = frozenset() if with_pack else self._aiding.ready(nav)
+        if ready and not self._aiding_present(run, start, ready):
+            ready = frozenset()  # the mooring's epochs may then be made
         if not parts.queue.settled:  # the queue judges some of its measurements at their turn
             with_pack, ready = False, frozenset()
         with_mooring = not ready and self._mooring.ready(nav)
@@ -329,7 +331,7 @@ class ImuStretches:
         queued = None
         if with_pack and (run.pack_index[window] >= 0).any():
             queued = parts.queue.take_source(parts.pack)
-        aiding_queued = self._aiding.queued(ready) if ready else self._no_aiding
+        aiding_queued = self._aiding.queued(ready, run.position_rad) if ready else self._no_aiding
         imu = run.imu_index[window]
         raw = run.raw[imu[imu >= 0]]
         order, pack_rows, measurements, aiding = self._order(run, window, queued, aiding_queued)
@@ -352,6 +354,14 @@ class ImuStretches:
         if not with_mooring:
             return self._mooring.none
         return self._mooring.arguments(samples + len(self._parts.buffer))
+
+    def _aiding_present(self, run: _Run, start: int, ready: frozenset) -> bool:
+        """Whether the ``ready`` aiding sources have measurements queued or among the inputs a
+        stretch from ``start`` could be offered."""
+        if any(entry[3] in ready for entry in self._parts.queue.heap):
+            return True
+        slots = run.aiding_slots[start : start + WINDOW]
+        return bool(self._aiding.ready_mask(ready)[slots].any())
 
     def _pack_present(self, run: _Run, start: int) -> bool:
         """Whether the pack has attitudes queued or among the inputs a stretch from ``start``

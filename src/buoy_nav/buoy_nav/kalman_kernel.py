@@ -209,35 +209,41 @@ def gated_stacked_update(
     block_ends,
     gate_thresholds,
     attitude_start,
+    gate_covariance,
 ):
-    """The innovation test of each measurement of a stack (:func:`innovation_test` of its rows,
-    up to ``block_ends[k]``, with its diagonal block of R) and, when each passes its
-    ``gate_thresholds[k]``, the stacked :func:`joseph_update` and the :func:`attitude_reset`
-    after the injection: the NIS of each, the stack's S (each one's S on its diagonal),
-    whether every one passed and S of the stack was positive definite, and then the covariance
-    after the update and the reset, the error estimate and whether that covariance is positive
-    definite (else ``covariance``, zeros and True). The same arithmetic as gating each
-    measurement alone and updating with the stack."""
+    """The innovation test of each measurement of a stack (:func:`innovation_test` of its rows, up
+    to ``block_ends[k]``, with its diagonal block of the ``gate_covariance``, or of R when that is
+    empty, 0 × 0) and, when each passes its ``gate_thresholds[k]``, the stacked
+    :func:`joseph_update` with R and the :func:`attitude_reset` after the injection: the NIS of
+    each, the gates' S (each one's S on its diagonal), whether every one passed and S of the stack
+    was positive definite, and then the covariance after the update and the reset, the error
+    estimate and whether that covariance is positive definite (else ``covariance``, zeros and True).
+    The same arithmetic as gating each measurement alone and updating with the stack."""
     count = block_ends.shape[0]
     # Each block's rows of H P and its diagonal block of the stack's S are, element by element,
     # those of the block alone: the stack forms them once.
     hp = _product(jacobian, covariance)
     s = _innovation_covariance(hp, jacobian, measurement_covariance)
+    gate_s = s
+    if gate_covariance.shape[0] > 0:
+        gate_s = _innovation_covariance(hp, jacobian, gate_covariance)
     nis = np.empty(count)
     passed = True
     start = 0
     for k in range(count):
         end = block_ends[k]
-        nis[k] = _normalised_squared(innovation[start:end].copy(), s[start:end, start:end].copy())
+        nis[k] = _normalised_squared(
+            innovation[start:end].copy(), gate_s[start:end, start:end].copy()
+        )
         passed = passed and nis[k] <= gate_thresholds[k]
         start = end
     unchanged = np.zeros(covariance.shape[0])
     if not passed:
-        return nis, s, False, covariance, unchanged, True
+        return nis, gate_s, False, covariance, unchanged, True
     posterior, correction, positive = _joseph_posterior(
         covariance, innovation, jacobian, measurement_covariance, hp, s
     )
     if not positive:
-        return nis, s, False, covariance, unchanged, True
+        return nis, gate_s, False, covariance, unchanged, True
     reset, positive_definite = attitude_reset(posterior, correction, attitude_start)
-    return nis, s, True, reset, correction, positive_definite
+    return nis, gate_s, True, reset, correction, positive_definite

@@ -117,6 +117,7 @@ def mooring_epoch(
         np.array((3,)),
         np.array((terms[THRESHOLD],)),
         int(terms[ATTITUDE_START]),
+        np.zeros((0, 0)),
     )
     if not (accepted and positive):
         return False

@@ -105,19 +105,26 @@ class StretchedAiding:
         """Whether the stretches may take measurements of ``source``."""
         return source in self._slot
 
-    def row(self, source, t_s: float, measurement) -> tuple | None:
+    def row(self, source, t_s: float, measurement, position_rad: tuple) -> tuple | None:
         """The (validated measurement, row) of ``measurement`` of ``source`` stamped ``t_s``
-        (s), or None when the engine is to take it (not valid, not a finite stamp)."""
+        (s), made with the filter at ``position_rad`` (latitude, longitude), or None when the
+        engine is to take it (not valid, not a finite stamp)."""
         if isinstance(measurement, Reason) or not math.isfinite(t_s):
             return None
         validated = source.validated(measurement)
         if isinstance(validated, Reason):
             return None
+        return validated, self._row_of_validated(source, t_s, validated, position_rad)
+
+    def _row_of_validated(self, source, t_s: float, validated, position_rad: tuple) -> np.ndarray:
+        """The row of the ``validated`` measurement of ``source`` stamped ``t_s`` (s), made with
+        the filter at ``position_rad`` (latitude, longitude). A measurement is validated once:
+        a magnetometer's validation calibrates its field."""
         row = np.zeros(ROW_SIZE)
-        values = source.stretch_values(validated)
+        values = source.stretch_values(validated, position_rad)
         row[ROW_T], row[ROW_SLOT], row[ROW_STATUS] = t_s, self._slot[source], PENDING
         row[ROW_VALUES : ROW_VALUES + len(values)] = values
-        return validated, row
+        return row
 
     def ready_mask(self, ready: frozenset) -> np.ndarray:
         """Whether each slot's source is among ``ready``, and last False (for the slot −1 of an
@@ -139,9 +146,10 @@ class StretchedAiding:
             and parts.sequences[source.kind].steady
         )
 
-    def queued(self, ready: frozenset) -> AidingRows:
+    def queued(self, ready: frozenset, position_rad: tuple) -> AidingRows:
         """The queued measurements of the ``ready`` sources taken out of the engine's queue as
-        rows, stamp by stamp (the queue :attr:`settled`: it takes them)."""
+        rows (those not made before made with the filter at ``position_rad``), stamp by stamp
+        (the queue :attr:`settled`: it takes them)."""
         queue = self._parts.queue
         rows_of_queued, self._rows_of_queued = self._rows_of_queued, {}
         items = []
@@ -153,7 +161,9 @@ class StretchedAiding:
         rows = np.zeros((len(items), ROW_SIZE))
         for index, (source, measurement, t) in enumerate(items):
             row = rows_of_queued.get((source.kind, t))
-            rows[index] = self.row(source, t, measurement)[1] if row is None else row
+            if row is None:
+                row = self._row_of_validated(source, t, measurement, position_rad)
+            rows[index] = row
         rows[:, ROW_STATUS] = QUEUED
         return AidingRows(items, rows)
 

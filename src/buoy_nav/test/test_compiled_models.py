@@ -4,7 +4,9 @@ the filter's stacked gate and update in one compiled call is, to the bit, each m
 gate followed by the stacked update and the reset. (Their physics, the Jacobians against
 finite differences and the rigid-body velocity, is held by ``test_aiding.py``.)"""
 
+import dataclasses
 import math
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -22,6 +24,8 @@ from buoy_nav.aiding import (
     GnssHeadingSource,
     GnssVelocity,
     GnssVelocitySource,
+    MagneticField,
+    MagnetometerSource,
     MooredSource,
     MooringAnchor,
 )
@@ -35,6 +39,7 @@ from buoy_nav.error_state_filter import (
     NavState,
     strapdown_vector,
 )
+from buoy_nav.geomagnetism import SECONDS_PER_JULIAN_YEAR, wmm_field_enu_t
 from buoy_nav.rotations import cross, skew, wrap_angle
 
 STATES = ERROR_STATES
@@ -302,12 +307,16 @@ def random_stack(rng, point):
 
 def test_the_stacked_gate_and_update_is_each_gate_then_the_update_to_the_bit(rng):
     """Every gate's NIS and S, the covariance after the update and the reset, and the correction
-    equal those of the filter's own calls, for stacks of one to three measurements; a stack
-    with a measurement its gate rejects changes nothing."""
+    equal those of the filter's own calls, for stacks of one to three measurements, gated with R
+    or with a noise of their own; a stack with a measurement its gate rejects changes
+    nothing."""
     outcomes = {True: 0, False: 0}
     for _ in range(CASES):
         point = random_point(rng)
         models = random_stack(rng, point)
+        weighted = rng.uniform() < 0.5
+        if weighted:
+            models = weighted_in_the_update(rng, models)
         probability = float(rng.choice([0.9, 0.999]))
         kalman = random_filter(rng)
         before = kalman.covariance.copy()
@@ -317,9 +326,12 @@ def test_the_stacked_gate_and_update_is_each_gate_then_the_update_to_the_bit(rng
             _block_diagonal([m.covariance for m in models]),
             [m.innovation.shape[0] for m in models],
             [probability] * len(models),
+            _block_diagonal([m.gated_covariance for m in models]) if weighted else None,
         )
         assert np.array_equal(kalman.covariance, before)
-        gates = [kalman.gate(m.innovation, m.jacobian, m.covariance, probability) for m in models]
+        gates = [
+            kalman.gate(m.innovation, m.jacobian, m.gated_covariance, probability) for m in models
+        ]
         for gate, expected in zip(stacked.gates, gates, strict=True):
             assert (gate.accepted, gate.nis, gate.threshold) == (
                 expected.accepted,
@@ -343,6 +355,19 @@ def test_the_stacked_gate_and_update_is_each_gate_then_the_update_to_the_bit(rng
         assert stacked.covariance.tobytes() == kalman.covariance.tobytes()
         assert stacked.positive_definite
     assert min(outcomes.values()) > CASES // 20, outcomes
+
+
+def weighted_in_the_update(rng, models):
+    """``models`` gated with their noise and updated with a multiple of it, as a sample whose
+    error its neighbours share is weighted in the update."""
+    return [
+        dataclasses.replace(
+            model,
+            covariance=model.covariance * rng.uniform(2.0, 30.0),
+            gate_covariance=model.covariance,
+        )
+        for model in models
+    ]
 
 
 def _block_diagonal(blocks):
@@ -381,6 +406,70 @@ def random_measurement(source, point: LinearisationPoint, rng):
     return source.measurement_type(vector)
 
 
+def random_field(rng, point: LinearisationPoint) -> tuple[MagneticField, str]:
+    """A calibrated field at ``point`` and what it is meant to be: the Earth's there seen with
+    the nominal attitude and the sensor's noise (``agrees``; near the north magnetic pole so
+    steep that it has no heading), or one much stronger or turned off it (``disagrees``)."""
+    state = point.state
+    t_s = (2026.0 - 1970.0) * SECONDS_PER_JULIAN_YEAR + rng.uniform(0.0, 2e7)
+    field_enu = np.array(wmm_field_enu_t(state.latitude_rad, state.longitude_rad, t_s))
+    kind = rng.choice(["agrees", "disagrees"], p=[0.7, 0.3])
+    if kind == "disagrees":
+        turn = Rotation.from_rotvec(rng.normal(0.0, 0.6, 3)).as_matrix()
+        field_enu = turn @ field_enu * rng.choice([1.0, 1.6])
+    field_body = point.rotation_nb.T @ field_enu + rng.normal(0.0, 5e-8, 3)
+    interval = rng.choice([math.nan, 1.0, 0.1])
+    return MagneticField(field_body, float(rng.choice([0.0, 1e-15])), t_s, interval), kind
+
+
+def test_the_magnetometers_stretch_model_is_its_model_to_the_bit(rng):
+    """What a compiled stretch models of a magnetometer's field, the Earth's field taken where
+    the filter is, is what the source's model gives at the same point: the heading, its
+    Jacobian, R and the gate's noise to the bit, and no model both ways for a field the Earth's
+    does not explain or too steep to head by; none either where the filter has left the cell
+    the Earth's field was taken in."""
+    source = MagnetometerSource(CONFIG, STATES)
+    terms = source.stretch_terms()
+    outcomes = Counter()
+    for case in range(CASES):
+        point = random_point(rng)
+        if case % 10 == 0:  # beside the north magnetic pole: a field too steep to head by
+            point = point._replace(
+                state=dataclasses.replace(
+                    point.state,
+                    latitude_rad=math.radians(rng.uniform(85.0, 87.0)),
+                    longitude_rad=math.radians(rng.uniform(130.0, 150.0)),
+                )
+            )
+        field, kind = random_field(rng, point)
+        measurement = source.validated(field)
+        model = source.model(measurement, point)
+        position = (point.state.latitude_rad, point.state.longitude_rad)
+        values = np.array(source.stretch_values(measurement, position))
+        vector = strapdown_vector_of(point)
+        innovation, jacobian, covariance, gate_covariance, holds = source.stretch_model(
+            values, vector, point.rotation_nb, np.array(point.raw_gyro_rad_s), terms
+        )
+        outcome = type(model).__name__
+        outcomes[kind, outcome] += 1
+        assert holds == (outcome == "MeasurementModel")
+        if holds:
+            for name, value, expected in (
+                ("innovation", innovation, model.innovation),
+                ("jacobian", jacobian, model.jacobian),
+                ("covariance", covariance, model.covariance),
+                ("gate covariance", gate_covariance, model.gate_covariance),
+            ):
+                assert value.tobytes() == np.asarray(expected).tobytes(), name
+        vector[strapdown_kernel.LATITUDE] += math.radians(0.06)  # the next cell
+        assert not source.stretch_model(
+            values, vector, point.rotation_nb, np.array(point.raw_gyro_rad_s), terms
+        )[-1]
+    assert outcomes["agrees", "MeasurementModel"] > CASES // 2, outcomes
+    assert outcomes["agrees", "NoneType"] > 0, outcomes
+    assert outcomes["disagrees", "Reason"] > CASES // 10, outcomes
+
+
 @pytest.mark.parametrize(
     "source_class",
     [
@@ -402,7 +491,7 @@ def test_a_sources_stretch_model_over_arrays_is_its_model_to_the_bit(source_clas
         measurement = source.validated(random_measurement(source, point, rng))
         model = source.model(measurement, point)
         innovation, jacobian, covariance, holds = source.stretch_model(
-            np.array(source.stretch_values(measurement)),
+            np.array(source.stretch_values(measurement, (0.0, 0.0))),
             strapdown_vector_of(point),
             point.rotation_nb,
             np.array(point.raw_gyro_rad_s),

@@ -68,9 +68,9 @@ class DualAntennaSource(AidingSource):
 
     stretch_model = staticmethod(baseline_stretch_model)
 
-    def stretch_values(self, measurement) -> tuple[float, ...]:
+    def stretch_values(self, measurement, position_rad: tuple) -> tuple[float, ...]:
         """The numbers :func:`baseline_stretch_model` reads of a validated antenna vector: the
-        vector (ENU m)."""
+        vector (ENU m), whatever the filter's ``position_rad``."""
         return tuple(measurement.baseline_enu_m.tolist())
 
     def stretch_terms(self) -> np.ndarray:

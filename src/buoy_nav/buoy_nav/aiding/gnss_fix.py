@@ -205,9 +205,10 @@ class GnssFixSource(AidingSource):
 
     stretch_model = staticmethod(fix_stretch_model)
 
-    def stretch_values(self, measurement: GnssFix) -> tuple[float, ...]:
+    def stretch_values(self, measurement: GnssFix, position_rad: tuple) -> tuple[float, ...]:
         """The numbers :func:`fix_stretch_model` reads of a validated fix: latitude and
-        longitude (rad), altitude (m), the covariance (m², row-major)."""
+        longitude (rad), altitude (m), the covariance (m², row-major); none depends on the filter's
+        ``position_rad``."""
         return (
             measurement.latitude_rad,
             measurement.longitude_rad,

@@ -43,6 +43,7 @@ from buoy_nav.aiding.dual_antenna import DualAntennaSource
 from buoy_nav.aiding.gnss_baseline import GnssBaselineSource
 from buoy_nav.aiding.model_kernels import azimuth_model
 from buoy_nav.aiding.model_kernels import floored_covariance as floored_covariance_kernel
+from buoy_nav.aiding.model_kernels import wrap_angle as wrap_angle_kernel
 from buoy_nav.antenna_geometry import MIN_HORIZONTAL_BASELINE_FRACTION, horizontal_fraction_enu
 from buoy_nav.rotations import wrap_angle
 
@@ -64,9 +65,6 @@ def yaw_from_quaternion_rad(x: float, y: float, z: float, w: float) -> float:
     return math.atan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z)
 
 
-_wrap_angle = numba.njit(cache=True)(wrap_angle)
-
-
 @numba.njit(cache=True)
 def heading_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
     """:meth:`GnssHeadingSource.model` over arrays, for a compiled stretch
@@ -81,7 +79,7 @@ def heading_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
     fraction = math.hypot(baseline_enu[0], baseline_enu[1]) / math.sqrt(
         np.dot(baseline_enu, baseline_enu)
     )
-    innovation = np.array((_wrap_angle(values[0] - predicted),))
+    innovation = np.array((wrap_angle_kernel(values[0] - predicted),))
     covariance = floored_covariance_kernel(np.full((1, 1), values[1]), terms[0])
     return innovation, jacobian, covariance, not fraction < terms[4]
 
@@ -143,9 +141,9 @@ class GnssHeadingSource(DualAntennaSource):
 
     stretch_model = staticmethod(heading_stretch_model)
 
-    def stretch_values(self, measurement: GnssHeading) -> tuple[float, ...]:
+    def stretch_values(self, measurement: GnssHeading, position_rad: tuple) -> tuple[float, ...]:
         """The numbers :func:`heading_stretch_model` reads of a validated heading: the yaw
-        (rad) and its variance (rad²)."""
+        (rad) and its variance (rad²); neither depends on the filter's ``position_rad``."""
         return (measurement.yaw_rad, measurement.variance_rad2)
 
     def stretch_terms(self) -> np.ndarray:

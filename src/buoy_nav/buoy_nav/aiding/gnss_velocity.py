@@ -223,9 +223,10 @@ class GnssVelocitySource(AidingSource):
 
     stretch_model = staticmethod(velocity_stretch_model)
 
-    def stretch_values(self, measurement: GnssVelocity) -> tuple[float, ...]:
+    def stretch_values(self, measurement: GnssVelocity, position_rad: tuple) -> tuple[float, ...]:
         """The numbers :func:`velocity_stretch_model` reads of a validated velocity: the
-        velocity (ENU m/s), its covariance (m²/s², row-major)."""
+        velocity (ENU m/s), its covariance (m²/s², row-major); none depends on the filter's
+        ``position_rad``."""
         return (
             *measurement.velocity_enu_mps.tolist(),
             *measurement.covariance_m2s2.reshape(9).tolist(),

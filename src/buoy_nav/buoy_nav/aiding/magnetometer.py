@@ -60,6 +60,7 @@ import math
 from collections import deque
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from buoy_common.contract import MAGNETOMETER_TOPIC, Reason, header_seconds
@@ -75,20 +76,113 @@ from buoy_nav.aiding.base import (
     vector_of,
     yaw_reset,
 )
-from buoy_nav.aiding.model_kernels import azimuth_model
+from buoy_nav.aiding.model_kernels import azimuth_model, wrap_angle
 from buoy_nav.geomagnetism import (
     declination_rad,
+    wmm_cell_bounds_rad,
     wmm_field_range_along_parallel,
     wmm_field_range_at,
 )
-from buoy_nav.rotations import (
-    wrap_angle,
-)
+from buoy_nav.rotations import wrap_angle as wrap_angle_rad
+from buoy_nav.strapdown_kernel import LATITUDE, LONGITUDE
 
 MIN_HORIZONTAL_FIELD_FRACTION = 0.15
+_MIN_HORIZONTAL_FIELD_FRACTION_SQ = MIN_HORIZONTAL_FIELD_FRACTION**2
 MIN_FIELD_T = 1e-6
 """The Earth's field is 22–67 µT; under 1 µT the sensor reads no field at all."""
 RESET_AFTER_GATE_RESETS = 100
+
+
+# What :func:`magnetic_heading_model` makes of a field.
+MEASURED, REFUSED, TOO_STEEP = 0, 1, 2
+# The Earth's field a field is judged against and headed to (``geomagnetic``): magnetic north's
+# ENU azimuth (rad), the least and greatest strength (T) and dip (rad, positive down) allowed.
+(NORTH_AZIMUTH, STRENGTH_LOW, STRENGTH_HIGH, DIP_LOW, DIP_HIGH) = range(5)
+GEOMAGNETIC_SIZE = 5
+# What :func:`magnetometer_stretch_model` reads of a field (``values``): the calibrated field
+# (body T), its noise variance (T²), the sample's weight, the Earth's field (``geomagnetic``)
+# and the bounds (rad) of latitude and longitude within which that is the Earth's field.
+FIELD, NOISE, WEIGHT, GEOMAGNETIC = 0, 3, 4, 5
+CELL = GEOMAGNETIC + GEOMAGNETIC_SIZE
+# What it reads of the source (``terms``): the calibration's heading variance (rad²), the error
+# states' attitude start and their count.
+CALIBRATION, ATTITUDE_START, STATE_COUNT = range(3)
+
+
+@numba.njit(cache=True)
+def field_agrees(field_enu_t, strength_low_t, strength_high_t, dip_low_rad, dip_high_rad):
+    """Whether a field (ENU, T) has a strength (T) and a dip, its angle under the horizontal
+    (rad, positive pointing down), within the bounds given."""
+    strength = math.sqrt(np.dot(field_enu_t, field_enu_t))
+    if not strength_low_t <= strength <= strength_high_t:
+        return False
+    dip = math.atan2(-field_enu_t[2], math.hypot(field_enu_t[0], field_enu_t[1]))
+    return dip_low_rad <= dip <= dip_high_rad
+
+
+@numba.njit(cache=True, error_model="numpy")
+def magnetic_heading_model(
+    rotation_nb,
+    field_body_t,
+    noise_variance_t2,
+    weight,
+    geomagnetic,
+    calibration_variance_rad2,
+    attitude_start,
+    state_count,
+):
+    """The heading of a calibrated field (body T, its noise variance T²) at the nominal R_nb
+    against the Earth's field (``geomagnetic``, laid out above), the calibration's heading
+    variance (rad²) shared by ``weight`` samples (see the module docstring): what became of it
+    (MEASURED, REFUSED: its strength or dip is not the Earth's, TOO_STEEP: its horizontal part
+    is too short to head by), the predicted azimuth (rad, ENU), the innovation (rad), the
+    Jacobian (1 × ``state_count``, on the attitude from ``attitude_start``), R and the gate's
+    noise (rad²)."""
+    field, horizontal_sq, predicted, jacobian = azimuth_model(
+        rotation_nb, field_body_t, attitude_start, state_count
+    )
+    status = MEASURED
+    if not field_agrees(
+        field,
+        geomagnetic[STRENGTH_LOW],
+        geomagnetic[STRENGTH_HIGH],
+        geomagnetic[DIP_LOW],
+        geomagnetic[DIP_HIGH],
+    ):
+        status = REFUSED
+    elif horizontal_sq < _MIN_HORIZONTAL_FIELD_FRACTION_SQ * np.dot(field, field):
+        status = TOO_STEEP
+    innovation = np.array((wrap_angle(geomagnetic[NORTH_AZIMUTH] - predicted),))
+    noise = noise_variance_t2 / horizontal_sq
+    covariance = np.full((1, 1), calibration_variance_rad2 * weight + noise)
+    gate_covariance = np.full((1, 1), calibration_variance_rad2 + noise)
+    return status, predicted, innovation, jacobian, covariance, gate_covariance
+
+
+@numba.njit(cache=True)
+def magnetometer_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
+    """:meth:`MagnetometerSource.model` over arrays, for a compiled stretch
+    (:mod:`buoy_nav.aiding_epoch`): the field ``values`` (laid out above) at the nominal
+    ``state`` vector and its ``rotation_nb`` (the raw gyro unused), with the source's ``terms``:
+    the innovation (rad), the Jacobian, R and the gate's noise (rad²), and whether the model
+    holds (not for a field the Earth's does not explain or too steep to head by, nor where the
+    filter has left the cell the Earth's field was taken in)."""
+    status, _, innovation, jacobian, covariance, gate_covariance = magnetic_heading_model(
+        rotation_nb,
+        values[FIELD : FIELD + 3].copy(),
+        values[NOISE],
+        values[WEIGHT],
+        values[GEOMAGNETIC:CELL].copy(),
+        terms[CALIBRATION],
+        int(terms[ATTITUDE_START]),
+        int(terms[STATE_COUNT]),
+    )
+    latitude, longitude = state[LATITUDE], state[LONGITUDE]
+    in_cell = (
+        values[CELL] < latitude < values[CELL + 1]
+        and values[CELL + 2] < longitude < values[CELL + 3]
+    )
+    return innovation, jacobian, covariance, gate_covariance, status == MEASURED and in_cell
 
 
 class MagneticField(NamedTuple):
@@ -187,7 +281,7 @@ class MagnetometerSource(AidingSource):
 
     def magnetic_north_azimuth_rad(self, latitude_rad: float, longitude_rad: float, t_s: float):
         """ENU azimuth (rad, 0 = East, counter-clockwise) of magnetic north at a place."""
-        return wrap_angle(
+        return wrap_angle_rad(
             0.5 * math.pi - declination_rad(self._declination_deg, latitude_rad, longitude_rad, t_s)
         )
 
@@ -201,37 +295,50 @@ class MagnetometerSource(AidingSource):
     ) -> Reason | None:
         """``magnetic_field_inconsistent`` when a calibrated field (ENU, T) differs from the
         Earth's at a place (rad) and time (s since the Unix epoch) in strength or (with
-        ``judge_dip``) dip beyond the tolerances; None when it agrees. With a site's latitude
-        given alone (the navigation's longitude 0 then), the Earth's field is any the model
-        gives along that parallel."""
+        ``judge_dip``) dip beyond the tolerances; None when it agrees."""
+        strength_low, strength_high, dip_low, dip_high = self._field_bounds(
+            latitude_rad, longitude_rad, t_s
+        )
+        if not judge_dip:
+            dip_low, dip_high = -math.inf, math.inf
+        field = np.ascontiguousarray(field_enu_t, dtype=float)
+        if field_agrees(field, strength_low, strength_high, dip_low, dip_high):
+            return None
+        return Reason.MAGNETIC_FIELD_INCONSISTENT
+
+    def _field_bounds(self, latitude_rad: float, longitude_rad: float, t_s: float) -> tuple:
+        """The least and greatest strength (T) and dip (rad) a calibrated field may have at a
+        place (rad) and time (s since the Unix epoch): the Earth's there within the tolerances.
+        With a site's latitude given alone (the navigation's longitude 0 then), the Earth's
+        field is any the model gives along that parallel."""
         expected = (
             wmm_field_range_along_parallel(latitude_rad, t_s)
             if self._longitude_unknown
             else wmm_field_range_at(latitude_rad, longitude_rad, t_s)
         )
-        field = np.asarray(field_enu_t, dtype=float)
-        strength = float(np.linalg.norm(field))
         weakest, strongest = expected.strength_t
         tolerance = self._strength_tolerance
-        if not weakest * (1.0 - tolerance) <= strength <= strongest * (1.0 + tolerance):
-            return Reason.MAGNETIC_FIELD_INCONSISTENT
         shallowest, steepest = expected.dip_rad
-        dip = _dip_rad(field)
-        if judge_dip and not (
-            shallowest - self._dip_tolerance_rad <= dip <= steepest + self._dip_tolerance_rad
-        ):
-            return Reason.MAGNETIC_FIELD_INCONSISTENT
-        return None
+        return (
+            weakest * (1.0 - tolerance),
+            strongest * (1.0 + tolerance),
+            shallowest - self._dip_tolerance_rad,
+            steepest + self._dip_tolerance_rad,
+        )
 
-    def _variance(
-        self, measurement: MagneticField, horizontal_sq: float, weighted: bool = False
-    ) -> float:
-        """The heading's variance (rad²) of one sample (``weighted``: with the calibration's
-        part shared over its correlation time, as the filter's update takes it)."""
-        calibration = self._heading_variance_rad2
-        if weighted:
-            calibration *= self._weight(measurement)
-        return calibration + measurement.noise_variance_t2 / horizontal_sq
+    def _geomagnetic(self, latitude_rad: float, longitude_rad: float, t_s: float) -> np.ndarray:
+        """The Earth's field a field is judged against and headed to at a place (rad) and time
+        (s since the Unix epoch): :func:`magnetic_heading_model`'s ``geomagnetic``."""
+        return np.array(
+            (
+                self.magnetic_north_azimuth_rad(latitude_rad, longitude_rad, t_s),
+                *self._field_bounds(latitude_rad, longitude_rad, t_s),
+            )
+        )
+
+    def _one_sample_variance(self, measurement: MagneticField, horizontal_sq: float) -> float:
+        """The heading's variance (rad²) of one sample, the calibration's whole."""
+        return self._heading_variance_rad2 + measurement.noise_variance_t2 / horizontal_sq
 
     def _weight(self, measurement: MagneticField) -> float:
         """Samples per correlation time: they share one error of the calibration."""
@@ -240,30 +347,59 @@ class MagnetometerSource(AidingSource):
     def model(self, measurement: MagneticField, point: LinearisationPoint):
         state = point.state
         states = self.states
-        field, horizontal_sq, predicted, jacobian = azimuth_model(
-            point.rotation_nb, measurement.field_body_t, states.attitude.start, states.dim
+        status, predicted, innovation, jacobian, covariance, gate_covariance = (
+            magnetic_heading_model(
+                point.rotation_nb,
+                measurement.field_body_t,
+                measurement.noise_variance_t2,
+                self._weight(measurement),
+                self._geomagnetic(state.latitude_rad, state.longitude_rad, measurement.t_s),
+                self._heading_variance_rad2,
+                states.attitude.start,
+                states.dim,
+            )
         )
-        refusal = self.field_refusal(
-            field, state.latitude_rad, state.longitude_rad, measurement.t_s
-        )
-        if refusal is not None:
-            return refusal
-        if horizontal_sq < (MIN_HORIZONTAL_FIELD_FRACTION**2) * float(field @ field):
+        if status == REFUSED:
+            return Reason.MAGNETIC_FIELD_INCONSISTENT
+        if status == TOO_STEEP:
             return None
-        target = self.magnetic_north_azimuth_rad(
-            state.latitude_rad, state.longitude_rad, measurement.t_s
-        )
         return MeasurementModel(
             predicted=np.array((predicted,)),
-            innovation=np.array((wrap_angle(target - predicted),)),
+            innovation=innovation,
             jacobian=jacobian,
-            covariance=np.array([[self._variance(measurement, horizontal_sq, weighted=True)]]),
-            gate_covariance=np.array([[self._variance(measurement, horizontal_sq)]]),
+            covariance=covariance,
+            gate_covariance=gate_covariance,
+        )
+
+    stretch_model = staticmethod(magnetometer_stretch_model)
+
+    def stretch_values(self, measurement: MagneticField, position_rad: tuple) -> tuple:
+        """The numbers :func:`magnetometer_stretch_model` reads of a validated field, the
+        Earth's field taken at the filter's ``position_rad`` (latitude, longitude) and the
+        field's stamp (laid out with the model)."""
+        latitude_rad, longitude_rad = position_rad
+        return (
+            *measurement.field_body_t.tolist(),
+            measurement.noise_variance_t2,
+            self._weight(measurement),
+            *self._geomagnetic(latitude_rad, longitude_rad, measurement.t_s).tolist(),
+            *wmm_cell_bounds_rad(latitude_rad, longitude_rad),
+        )
+
+    def stretch_terms(self) -> np.ndarray:
+        """The terms :func:`magnetometer_stretch_model` reads: the calibration's heading
+        variance (rad²), the error states' attitude start and their count."""
+        states = self.states
+        return np.array(
+            (self._heading_variance_rad2, states.attitude.start, states.dim), dtype=float
         )
 
     def load_compiled_code(self) -> None:
         states = self.states
-        azimuth_model(np.eye(3), np.ones(3), states.attitude.start, states.dim)
+        magnetic_heading_model(
+            np.eye(3), np.ones(3), 0.0, 1.0, np.zeros(GEOMAGNETIC_SIZE), 0.0, 0, states.dim
+        )
+        field_agrees(np.ones(3), 0.0, 1.0, 0.0, 1.0)
 
     def reset(self, measurement: MagneticField, point: LinearisationPoint, model):
         """The yaw that puts the field's horizontal part on magnetic north, tilt kept."""
@@ -276,7 +412,7 @@ class MagnetometerSource(AidingSource):
         target = self.magnetic_north_azimuth_rad(
             state.latitude_rad, state.longitude_rad, measurement.t_s
         )
-        variance = self._variance(measurement, max(horizontal_sq, MIN_FIELD_T**2))
+        variance = self._one_sample_variance(measurement, max(horizontal_sq, MIN_FIELD_T**2))
         return yaw_reset(self.states, point, field, target, variance)
 
     def align(self, aligner, t_s: float, measurement: MagneticField, raw_gyro_rad_s):
@@ -318,9 +454,3 @@ class MagnetometerSource(AidingSource):
         if len(checks) < checks.maxlen:
             return False
         return sum(checks) <= self._alignment_resume_share * len(checks)
-
-
-def _dip_rad(field_enu) -> float:
-    """Angle (rad) of a field (ENU) under the horizontal: positive pointing down."""
-    east, north, up = field_enu
-    return math.atan2(-up, math.hypot(east, north))

@@ -22,6 +22,7 @@ from buoy_nav import earth, rotations
 cross = numba.njit(cache=True)(rotations.cross)
 skew = numba.njit(cache=True)(rotations.skew)
 enu_offset = numba.njit(cache=True)(earth.enu_offset_scalar)
+wrap_angle = numba.njit(cache=True)(rotations.wrap_angle)
 
 
 @numba.njit(cache=True)
