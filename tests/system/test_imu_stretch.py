@@ -48,6 +48,7 @@ from buoy_common.contract import (
 )
 from buoy_nav import imu_stretch as stretch_module
 from buoy_nav import imu_stretches
+from buoy_nav.aiding.ahrs_attitude import attitude_stretch_model
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.aiding.magnetometer import magnetometer_stretch_model
 from buoy_nav.aiding_epoch import APPLIED, BOOK_ROW, BOOK_STATUS, MODELS, ROW_SLOT, TERM_MODEL
@@ -208,9 +209,10 @@ def in_stretches(config: FusionConfig, inputs: list[tuple]):
 
 @pytest.fixture
 def stretch_counts(monkeypatch) -> Counter:
-    """Inputs offered to the compiled stretch and taken by it, the pack's epochs it applied and
-    the aiding measurements (the magnetometer's fields among them), the stretches that forked the prediction afresh, and the forks the
-    engine made itself among the inputs it was given together, counted."""
+    """Inputs offered to the compiled stretch and taken by it, the aiding measurements it
+    applied (the pack's attitudes and the magnetometer's fields among them) and the mooring's
+    epochs, the stretches that forked the prediction afresh, and the forks the engine made
+    itself among the inputs it was given together, counted."""
     counts = Counter()
     compiled = stretch_module.imu_stretch
 
@@ -222,13 +224,13 @@ def stretch_counts(monkeypatch) -> Counter:
         counts["offered"] += order.shape[0]
         counts["taken"] += taken
         aiding, went = arguments[-3], arguments[-1]
-        counts["epochs"] += int(went[stretch_module.EPOCHS])
         counts["mooring epochs"] += int(went[stretch_module.MOORING_EPOCHS])
         books = aiding.books[: went[stretch_module.AIDING_BOOKS]]
         applied = books[books[:, BOOK_STATUS] == APPLIED, BOOK_ROW].astype(int)
         counts["aiding applied"] += applied.size
         models = aiding.terms[aiding.rows[applied, ROW_SLOT].astype(int), TERM_MODEL]
         counts["fields applied"] += int(np.sum(models == MODELS.index(magnetometer_stretch_model)))
+        counts["attitudes applied"] += int(np.sum(models == MODELS.index(attitude_stretch_model)))
         return taken, stepped, stop
 
     monkeypatch.setattr(imu_stretches, "imu_stretch", counted)
@@ -444,9 +446,8 @@ PACK_CASES = {
     # (the configuration, the least and the most share of the seconds whose mooring constraint
     # the stretches apply)
     "moored pack": (moored_config(use_magnetometer=False, ahrs_lag_s=0.2), 0.5, 1.0),
-    # Each attitude shares its stamp with a field, a stamp the engine takes: few constraints in
-    # a stretch.
-    "moored pack, magnetometer": (moored_config(ahrs_lag_s=0.2), 0.0, 1.0),
+    # Each attitude shares its stamp with a field: the two stacked in one epoch.
+    "moored pack, magnetometer": (moored_config(ahrs_lag_s=0.2), 0.5, 1.0),
     # The mooring's innovations widen its σ once first judged, between two closes of the
     # mean velocity's blocks (its window's fifth, 61 s, no multiple of 10 s): the engine's to
     # apply from the next on.
@@ -479,10 +480,10 @@ PACK_CASES = {
 @pytest.mark.parametrize("case", PACK_CASES)
 def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretch_counts):
     """A motion pack (its attitude with every tenth IMU sample; moored, the constraint once a
-    second) with faulty attitudes: the same to the bit, most IMU samples in the stretch and,
-    without the magnetometer, most of the pack's epochs too (with it, each attitude shares its
-    stamp with a field, a stamp of two measurements the engine applies itself), and of the
-    mooring's constraints as many as its case expects."""
+    second) with faulty attitudes: the same to the bit, most IMU samples in the stretch, most
+    of the pack's epochs too (with a magnetometer, each attitude stacked with the field of its
+    stamp, most of the fields), and of the mooring's constraints as many as its case
+    expects."""
     duration_s = 150.0
     _, _, messages = scenario_messages("moored_motion_pack", duration_s)
     config, least_mooring_share, most_mooring_share = PACK_CASES[case]
@@ -504,8 +505,10 @@ def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretc
         assert counters.rejected.get(reason, 0) >= 1, reason
     imu_samples = sum(kind == IMU for kind, _ in inputs)
     assert stretch_counts["taken"] >= 0.7 * imu_samples, "the stretch took too few inputs"
-    if not magnetometer:
-        assert stretch_counts["epochs"] >= 0.5 * counters.accepted, "too few epochs taken"
+    assert stretch_counts["attitudes applied"] >= 0.5 * counters.accepted, "too few taken"
+    if magnetometer:
+        fields = stretched.health().counters["magnetometer"].accepted
+        assert stretch_counts["fields applied"] >= 0.5 * fields, "too few fields taken"
     # The prediction is forked afresh once a second of stamps: in a stretch for most.
     assert stretch_counts["forked by the engine"] <= 0.5 * duration_s, "the stretches seldom forked"
     constraints = stretch_counts["mooring epochs"]

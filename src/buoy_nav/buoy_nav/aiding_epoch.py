@@ -1,18 +1,19 @@
-"""The epoch of one stamp's GNSS measurements and magnetometer fields in a compiled stretch of IMU
-samples (:mod:`buoy_nav.imu_stretch`).
+"""The epoch of one stamp's aiding measurements in a compiled stretch of IMU samples
+(:mod:`buoy_nav.imu_stretch`).
 
-The GNSS sources (fix, velocity, heading, antenna baselines) and the magnetometer each give their
-measurement function over arrays (``stretch_model``, in :data:`MODELS`). In a stretch their
-measurements are queued as the engine queues them
-(:func:`~buoy_nav.sequence_kernels.queued_in_sequence`), and when the filter reaches a stamp that
-has some, :func:`aiding_epoch` makes its epoch as the engine makes it through the sources' compiled
-models (``FusionEngine._handle_measurements``): a measurement another of the stamp supersedes set
-aside, the others in the sources' registry order, the step there with the covariance's propagation,
-each one modelled and gated (with its own noise, as the magnetometer's field whose calibration error
-its neighbours share) and all of them applied in one stacked update, the correction injected and
-carried over to the prediction. It returns −1, with nothing changed, where the engine must make the
-epoch itself: a model that does not hold, a gate that fails, a covariance to repair, the prediction
-forking afresh there.
+The motion pack, the magnetometer and the GNSS sources (fix, velocity, heading, antenna
+baselines) each give their measurement function over arrays (``stretch_model``, in
+:data:`MODELS`). In a stretch their measurements are queued as the engine queues them
+(:func:`~buoy_nav.sequence_kernels.queued_in_sequence`), and when the filter reaches a stamp
+that has some, :func:`aiding_epoch` makes its epoch as the engine makes it
+(``FusionEngine._handle_measurements``): a measurement another of the stamp supersedes set
+aside, the others in the sources' registry order, the step there with the covariance's
+propagation, each one modelled and gated (with its own noise, as the magnetometer's field whose
+calibration error its neighbours share) and all of them applied in one stacked update, the
+correction injected and carried over to the prediction. That is the arithmetic of the engine's
+compiled stacked update, of its interpreted gates and update, and of the pack's compiled update
+for an attitude alone. It returns −1, with nothing changed, where the engine must make the
+epoch itself: a model that does not hold, a gate that fails, a covariance to repair.
 
 A source whose measurement function is not in :data:`MODELS` is not taken in stretches: its
 measurements stop them and the engine applies them. The arrays are laid out below.
@@ -23,6 +24,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from buoy_nav.aiding.ahrs_attitude import attitude_stretch_model
 from buoy_nav.aiding.dual_antenna import baseline_stretch_model
 from buoy_nav.aiding.gnss_fix import fix_stretch_model
 from buoy_nav.aiding.gnss_heading import heading_stretch_model
@@ -41,6 +43,7 @@ MODELS = (
     heading_stretch_model,
     baseline_stretch_model,
     magnetometer_stretch_model,
+    attitude_stretch_model,
 )
 """The measurement functions a stretch applies, in the order :func:`_modelled` calls them by."""
 
@@ -48,7 +51,7 @@ MODELS = (
 # first): stamp (s), the source's slot (its row of ``aiding_terms``), what became of it, then
 # the numbers its model reads (the source's ``stretch_values``).
 ROW_T, ROW_SLOT, ROW_STATUS, ROW_VALUES = range(4)
-ROW_SIZE = ROW_VALUES + 14
+ROW_SIZE = ROW_VALUES + 23
 PENDING, QUEUED, APPLIED, SUPERSEDED = 0.0, 1.0, 2.0, 3.0
 # Each source's terms (``aiding_terms``, a row a slot): the index of its model in MODELS, its
 # order in the registry (the order the engine stacks a stamp's measurements in), the slot of the
@@ -66,14 +69,15 @@ BOOK_SIZE = BOOK_S + 9
 
 
 class AidingArguments(NamedTuple):
-    """The arrays a stretch hands the aiding epochs (laid out above): the measurements' rows,
-    each source's sequence (:mod:`buoy_nav.sequence_kernels`), each source's terms and room for
-    the epochs' books."""
+    """What a stretch hands the aiding epochs (laid out above): the measurements' rows, each
+    source's sequence (:mod:`buoy_nav.sequence_kernels`), each source's terms, room for the
+    epochs' books and the error states' attitude start."""
 
     rows: np.ndarray
     sequences: np.ndarray
     terms: np.ndarray
     books: np.ndarray
+    attitude_start: int
 
 
 _rotation_matrix_elements = numba.njit(cache=True)(rotation_matrix_elements)
@@ -92,6 +96,8 @@ def _modelled(model, values, state, rotation_nb, raw_gyro_rad_s, terms):
         nu, h, r, holds = velocity_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
     elif model == 2:
         nu, h, r, holds = heading_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
+    elif model == 5:
+        nu, h, r, holds = attitude_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
     else:
         nu, h, r, holds = baseline_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
     return nu, h, r, r, holds

@@ -79,7 +79,6 @@ from buoy_common.contract import Reason
 from buoy_nav import earth
 from buoy_nav.aided_navigation import AidedNavigation
 from buoy_nav.aiding import AIDING_SOURCES
-from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource
 from buoy_nav.aiding.base import (
     AIDED_QUANTITIES,
     FIX,
@@ -221,10 +220,6 @@ class FusionEngine:
                 self._integrity,
                 self._source_transitions,
                 self._registry.pseudo,
-                next(
-                    (s for s in self.sources if isinstance(s, AhrsAttitudeSource) and s.enabled),
-                    None,
-                ),
                 self._counters,
                 tuple(self.sources),
                 self._recency,
@@ -443,10 +438,9 @@ class FusionEngine:
     @property
     def stretched_sources(self) -> tuple[AidingSource, ...]:
         """The aiding sources whose measurements :meth:`add_inputs` may take in its compiled
-        stretches besides the IMU's samples (the motion pack's attitude, when enabled, and the
-        GNSS sources' measurements, :mod:`buoy_nav.stretched_aiding`)."""
-        pack = self._stretches.pack
-        return (*(() if pack is None else (pack,)), *self._stretches.aiding_sources)
+        stretches besides the IMU's samples (the motion pack's attitude, the magnetometer's
+        fields and the GNSS sources' measurements, :mod:`buoy_nav.stretched_aiding`)."""
+        return self._stretches.aiding_sources
 
     def source_of_topic(self, topic: str) -> AidingSource:
         """The aiding source that reads ``topic`` (ValueError naming it when none does)."""

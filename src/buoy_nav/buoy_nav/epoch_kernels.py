@@ -1,5 +1,5 @@
-"""What the epochs a compiled stretch makes share (:mod:`buoy_nav.pack_epoch`,
-:mod:`buoy_nav.aiding_epoch`), as the engine makes them: the filter's step to the epoch's IMU
+"""What the epochs a compiled stretch makes share (:mod:`buoy_nav.aiding_epoch`,
+:mod:`buoy_nav.mooring_epoch`), as the engine makes them: the filter's step to the epoch's IMU
 sample with the covariance's propagation, and then the correction injected and carried over to
 the prediction ahead (numba, cached on disk).
 """

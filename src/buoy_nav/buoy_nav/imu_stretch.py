@@ -15,13 +15,12 @@ the bit; a test holds the two equal. Where the engine forks the prediction afres
 then on is not carried over, and the next sample forks the copy from the filter and steps it
 through the samples buffered ahead of the filter.
 
-The aiding measurements in between are taken too: a motion pack's attitude, which comes with
-every IMU sample (:mod:`buoy_nav.aiding.ahrs_attitude`, :mod:`buoy_nav.pack_epoch`), or the GNSS
-sources' (:mod:`buoy_nav.stretched_aiding`, :mod:`buoy_nav.aiding_epoch`), one or the other in
-a stretch. The stretch queues each as the engine does and, when the filter reaches its stamp,
-makes its epoch with the engine's kernels: the step there with the covariance's propagation,
-the compiled update (the pack's, or the GNSS sources' models stacked, gated and applied in one
-update), the injection of the correction and its carry-over to the prediction. A moored
+The aiding measurements in between are taken too (:mod:`buoy_nav.stretched_aiding`,
+:mod:`buoy_nav.aiding_epoch`): a motion pack's attitude, which comes with every IMU sample, the
+magnetometer's fields and the GNSS sources' measurements. The stretch queues each as the engine
+does and, when the filter reaches its stamp, makes its epoch with the engine's kernels: the step
+there with the covariance's propagation, the sources' compiled models stacked, gated and applied
+in one update, the injection of the correction and its carry-over to the prediction. A moored
 buoy's constraint is made where it is due (:mod:`buoy_nav.mooring_epoch`), after the epoch of
 the sample it shares a stamp with, the two undone together when the engine must make it. The
 stretch stops before an epoch the engine must make itself (a gate that fails, a covariance to
@@ -53,15 +52,6 @@ from buoy_nav.mooring_epoch import BOOK_SIZE as MOORING_BOOK_SIZE
 from buoy_nav.mooring_epoch import PERIOD, MooringArguments, mooring_epoch
 from buoy_nav.mooring_epoch import STATE_SIZE as MOORING_STATE_SIZE
 from buoy_nav.mooring_epoch import TERMS_SIZE as MOORING_TERMS_SIZE
-from buoy_nav.pack_epoch import (
-    ATTITUDE_START,
-    EPOCH_SIZE,
-    PACK_ROW_SIZE,
-    PACK_T,
-    PACK_TERMS_SIZE,
-    PackArguments,
-    pack_epoch,
-)
 from buoy_nav.prediction import PREDICTION_RESYNC_INTERVAL_S
 from buoy_nav.sequence_kernels import SEQUENCE_SIZE, queued_in_sequence
 from buoy_nav.solution_rows import write_row
@@ -103,13 +93,12 @@ STATE_SIZE = 19
 DELAY, MAX_GAP, PROPAGATION_INTERVAL, NEXT_MEASUREMENT, OUTPUT_PERIOD = range(5)
 DISTRUSTED, ATTITUDE_VARIANCE, VELOCITY_VARIANCE, CONSTRAINT_DUE = range(5, 9)
 LIMITS_SIZE = 9
-# How far a stretch went (``counts``): the IMU samples it took, where the queued attitudes begin
-# and end in ``pack_rows`` (those before the first were applied), the epochs applied; where the
-# queued aiding measurements begin and end in the aiding rows, and the books of their epochs;
-# the mooring's epochs, and where its innovations' window begins and ends.
-IMU_TAKEN, QUEUE_HEAD, QUEUE_TAIL, EPOCHS, AIDING_HEAD, AIDING_TAIL, AIDING_BOOKS = range(7)
-MOORING_EPOCHS, WINDOW_FIRST, WINDOW_END = range(7, 10)
-COUNTS_SIZE = 10
+# How far a stretch went (``counts``): the IMU samples it took; where the queued aiding
+# measurements begin and end in the aiding rows, and the books of their epochs; the mooring's
+# epochs, and where its innovations' window begins and ends.
+IMU_TAKEN, AIDING_HEAD, AIDING_TAIL, AIDING_BOOKS = range(4)
+MOORING_EPOCHS, WINDOW_FIRST, WINDOW_END = range(4, 7)
+COUNTS_SIZE = 7
 
 
 @numba.njit(cache=True)
@@ -134,13 +123,12 @@ def imu_stretch(
     block_indices,
     row_written,
     noise_terms,
-    pack,
     aiding,
     mooring,
     counts,
 ):
-    """Take the inputs in ``order`` (an IMU sample's index in ``raw``, or −1 − the index of a
-    measurement: the pack's rows, then the aiding rows) as the engine's ``add_imu``,
+    """Take the inputs in ``order`` (an IMU sample's index in ``raw``, or −1 − the index of an
+    aiding measurement's row) as the engine's ``add_imu``,
     ``add_measurement`` and ``catch_up`` would, until one needs the engine; the filter may also
     reach the ``buffered`` IMU samples ahead of it (k × 7, oldest first).
 
@@ -148,9 +136,8 @@ def imu_stretch(
     screened (``screening``, ``screened_state``; into ``samples``, re-stamped and calibrated),
     predicted ahead with its row (:func:`_predicted`) and the filter stepped to its horizon
     (:func:`_filtered`); each measurement is queued (:func:`_queued`) and its epoch made when
-    the filter reaches it, the process noise's ``noise_terms`` and the ``pack``'s or the
-    ``aiding``'s arrays (:class:`~buoy_nav.pack_epoch.PackArguments`,
-    :class:`~buoy_nav.aiding_epoch.AidingArguments`); the ``mooring``'s constraint is applied
+    the filter reaches it, the process noise's ``noise_terms`` and the ``aiding`` arrays
+    (:class:`~buoy_nav.aiding_epoch.AidingArguments`); the ``mooring``'s constraint is applied
     where it is due (:class:`~buoy_nav.mooring_epoch.MooringArguments`; no room for its books:
     the stretch stops there). The layouts are this module's constants and
     those modules'; ``state``, the strapdown states, ``covariance`` and ``counts`` are updated in
@@ -165,7 +152,7 @@ def imu_stretch(
     for item in range(order.shape[0]):
         position = order[item]
         if position < 0:
-            if not _queued(-1 - position, pack, aiding, point, screened_state, counts):
+            if not _queued(-1 - position, aiding, point, screened_state, counts):
                 return item, stepped, BEFORE_SAMPLE
             continue
         index = counts[IMU_TAKEN]
@@ -204,7 +191,6 @@ def imu_stretch(
             noise_terms,
             ahead_state,
             state,
-            pack,
             aiding,
             mooring,
             counts,
@@ -322,18 +308,16 @@ def _filtered(
     noise_terms,
     ahead_state,
     state,
-    pack,
     aiding,
     mooring,
     counts,
 ) -> int:
-    """The filter (``filter_state`` at ``point``) stepped through the samples it has not
-    reached of the first ``reachable`` (the ``buffered`` ones, then the taken ``samples``) up to
-    ``horizon_s`` (s), the epoch of each stamp with queued pack attitudes or aiding measurements
-    made there (:func:`_epoch_made`) and then the mooring's where it is due
-    (:func:`_sample_reached`): how many samples it has reached in all, or −1 − that when it
-    stopped where the engine must go on (a gap, a measurement due, the covariance's batch full,
-    an epoch it cannot make)."""
+    """The filter (``filter_state`` at ``point``) stepped through the samples it has not reached of
+    the first ``reachable`` (the ``buffered`` ones, then the taken ``samples``) up to ``horizon_s``
+    (s), the epoch of each stamp with queued aiding measurements made there (:func:`_epoch_made`)
+    and then the mooring's where it is due (:func:`_sample_reached`): how many samples it has
+    reached in all, or −1 − that when it stopped where the engine must go on (a gap, a measurement
+    due, the covariance's batch full, an epoch it cannot make)."""
     n_buffered = buffered.shape[0]
     while stepped < reachable:
         due = buffered[stepped] if stepped < n_buffered else samples[stepped - n_buffered]
@@ -355,7 +339,6 @@ def _filtered(
             noise_terms,
             ahead_state,
             state,
-            pack,
             aiding,
             mooring,
             counts,
@@ -378,7 +361,6 @@ def _sample_reached(
     noise_terms,
     ahead_state,
     state,
-    pack,
     aiding,
     mooring,
     counts,
@@ -388,11 +370,11 @@ def _sample_reached(
     (:func:`~buoy_nav.mooring_epoch.mooring_epoch`); False, with nothing changed, where the
     engine must take the sample."""
     mooring_due = limits[CONSTRAINT_DUE] <= due[0]
-    if mooring_due and (mooring.books.shape[0] <= counts[MOORING_EPOCHS] or aiding.rows.shape[0]):
+    if mooring_due and mooring.books.shape[0] <= counts[MOORING_EPOCHS]:
         return False
     # Both epochs of the sample or neither: what the first moved comes back when the second
     # is the engine's.
-    saved = _saved(mooring_due, filter_state, covariance, ahead_state, counts, state)
+    saved = _saved(mooring_due, filter_state, covariance, ahead_state, counts, state, aiding)
     stepped = _stepped(
         due,
         point,
@@ -404,7 +386,6 @@ def _sample_reached(
         noise_terms,
         ahead_state,
         state,
-        pack,
         aiding,
         counts,
     )
@@ -415,17 +396,18 @@ def _sample_reached(
     ):
         limits[CONSTRAINT_DUE] = due[0] + mooring.terms[PERIOD]
         return True
-    saved_filter, saved_covariance, saved_ahead, saved_counts, saved_fork = saved
+    saved_filter, saved_covariance, saved_ahead, saved_counts, saved_fork, saved_status = saved
     filter_state[:], covariance[:, :], ahead_state[:] = saved_filter, saved_covariance, saved_ahead
     counts[:], state[FORK_DUE] = saved_counts, saved_fork
+    aiding.rows[:, ROW_STATUS] = saved_status
     return False
 
 
 @numba.njit(cache=True)
-def _saved(wanted, filter_state, covariance, ahead_state, counts, state):
+def _saved(wanted, filter_state, covariance, ahead_state, counts, state, aiding):
     """Copies of what an epoch moves, when ``wanted`` (else empty arrays): the filter's
-    state, the covariance, the prediction's state, the ``counts`` and whether the prediction
-    is to be forked afresh."""
+    state, the covariance, the prediction's state, the ``counts``, whether the prediction is
+    to be forked afresh and what became of each of the ``aiding`` rows."""
     if wanted:
         return (
             filter_state.copy(),
@@ -433,8 +415,16 @@ def _saved(wanted, filter_state, covariance, ahead_state, counts, state):
             ahead_state.copy(),
             counts.copy(),
             state[FORK_DUE],
+            aiding.rows[:, ROW_STATUS].copy(),
         )
-    return np.empty(0), np.empty((0, 0)), np.empty(0), np.empty(0, np.int64), state[FORK_DUE]
+    return (
+        np.empty(0),
+        np.empty((0, 0)),
+        np.empty(0),
+        np.empty(0, np.int64),
+        state[FORK_DUE],
+        np.empty(0),
+    )
 
 
 @numba.njit(cache=True)
@@ -482,21 +472,17 @@ def _stepped(
     noise_terms,
     ahead_state,
     state,
-    pack,
     aiding,
     counts,
 ) -> bool:
     """The filter (``filter_state`` at ``point``) stepped to the IMU sample ``due``, with the
-    epoch there of the queued pack attitude or aiding measurements (:func:`_epoch_made`);
+    epoch there of the queued aiding measurements (:func:`_epoch_made`);
     False, with nothing changed, where the engine must take the sample."""
     t_due = due[0]
     dt = t_due - point[0]
-    head = counts[QUEUE_HEAD]
-    pack_due = head < counts[QUEUE_TAIL] and pack.rows[head, PACK_T] <= t_due
     aiding_due = due_status(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL], t_due)
-    if pack_due or aiding_due:
+    if aiding_due:
         return dt > 0.0 and _epoch_made(
-            pack_due,
             aiding_due,
             point,
             due,
@@ -507,7 +493,6 @@ def _stepped(
             noise_terms,
             ahead_state,
             state,
-            pack,
             aiding,
             counts,
         )
@@ -519,30 +504,21 @@ def _stepped(
 
 
 @numba.njit(cache=True)
-def _queued(measurement, pack, aiding, point, screened_state, counts) -> bool:
-    """Whether the engine would queue the ``measurement`` th of the stretch's measurements (the
-    ``pack``'s rows, then the ``aiding`` rows) with nothing else to do; its source's sequence
-    then follows it, an aiding row is marked queued and ``counts`` take it."""
-    n_pack = pack.rows.shape[0]
-    if measurement < n_pack:
-        t = pack.rows[measurement, PACK_T]
-        if not queued_in_sequence(t, pack.sequence, point[0], screened_state[LATEST]):
-            return False
-        counts[QUEUE_TAIL] += 1
-        return True
+def _queued(measurement, aiding, point, screened_state, counts) -> bool:
+    """Whether the engine would queue the ``measurement`` th of the ``aiding`` rows with
+    nothing else to do; its source's sequence then follows it, the row is marked queued and
+    ``counts`` take it."""
     rows = aiding.rows
-    k = measurement - n_pack
-    sequence = aiding.sequences[int(rows[k, ROW_SLOT])]
-    if not queued_in_sequence(rows[k, ROW_T], sequence, point[0], screened_state[LATEST]):
+    sequence = aiding.sequences[int(rows[measurement, ROW_SLOT])]
+    if not queued_in_sequence(rows[measurement, ROW_T], sequence, point[0], screened_state[LATEST]):
         return False
-    rows[k, ROW_STATUS] = QUEUED
-    counts[AIDING_TAIL] = k + 1
+    rows[measurement, ROW_STATUS] = QUEUED
+    counts[AIDING_TAIL] = measurement + 1
     return True
 
 
 @numba.njit(cache=True)
 def _epoch_made(
-    pack_due,
     aiding_due,
     point,
     due,
@@ -553,70 +529,40 @@ def _epoch_made(
     noise_terms,
     ahead_state,
     state,
-    pack,
     aiding,
     counts,
 ) -> bool:
-    """The epoch at the IMU sample ``due`` of the queued pack attitude (``pack_due``) or aiding
-    measurements (``aiding_due``, :func:`~buoy_nav.aiding_epoch.due_status`) made with the
-    engine's kernels, ``counts`` following it, and its correction carried over to the prediction
-    ahead (``ahead_state``) as :func:`_carried` says; False, with nothing changed, when the
-    engine is to make it (a stamp of both, a stamp between two IMU samples, an epoch the kernels
-    leave to it)."""
-    if pack_due and aiding_due:
+    """The epoch at the IMU sample ``due`` of the queued aiding measurements (``aiding_due``,
+    :func:`~buoy_nav.aiding_epoch.due_status`) made with the engine's kernels, ``counts``
+    following it, and its correction carried over to the prediction ahead (``ahead_state``) as
+    :func:`_carried` says; False, with nothing changed, when the engine is to make it (a
+    stamp between two IMU samples, an epoch the kernels leave to it)."""
+    if aiding_due != 1:
         return False
-    ahead_t = state[AHEAD]
     carried = _carried(state, due[0])
-    if pack_due:
-        head = counts[QUEUE_HEAD]
-        if not (
-            pack.rows[head, PACK_T] == due[0]
-            and pack_epoch(
-                pack.rows[head],
-                point,
-                due,
-                filter_state,
-                coning,
-                sculling,
-                covariance,
-                noise_terms,
-                pack.terms,
-                pack.jacobian,
-                ahead_state,
-                ahead_t,
-                carried,
-                pack.epochs[counts[EPOCHS]],
-            )
-        ):
-            return False
-        counts[QUEUE_HEAD] += 1
-        counts[EPOCHS] += 1
-    else:
-        if aiding_due != 1:
-            return False
-        written = aiding_epoch(
-            aiding.rows,
-            counts[AIDING_HEAD],
-            counts[AIDING_TAIL],
-            point,
-            due,
-            filter_state,
-            coning,
-            sculling,
-            covariance,
-            noise_terms,
-            aiding.terms,
-            int(pack.terms[ATTITUDE_START]),
-            ahead_state,
-            ahead_t,
-            carried,
-            aiding.books,
-            counts[AIDING_BOOKS],
-        )
-        if written < 0:
-            return False
-        counts[AIDING_BOOKS] += written
-        counts[AIDING_HEAD] = first_queued(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL])
+    written = aiding_epoch(
+        aiding.rows,
+        counts[AIDING_HEAD],
+        counts[AIDING_TAIL],
+        point,
+        due,
+        filter_state,
+        coning,
+        sculling,
+        covariance,
+        noise_terms,
+        aiding.terms,
+        aiding.attitude_start,
+        ahead_state,
+        state[AHEAD],
+        carried,
+        aiding.books,
+        counts[AIDING_BOOKS],
+    )
+    if written < 0:
+        return False
+    counts[AIDING_BOOKS] += written
+    counts[AIDING_HEAD] = first_queued(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL])
     if not carried:
         state[FORK_DUE] = 1.0
     return True
@@ -695,18 +641,12 @@ def load_compiled_imu_stretch() -> None:
         np.arange(36, dtype=np.int64).reshape(4, 3, 3),
         np.zeros(1, dtype=np.bool_),
         np.zeros(7),
-        PackArguments(
-            np.zeros((0, PACK_ROW_SIZE)),
-            np.zeros(SEQUENCE_SIZE),
-            np.zeros(PACK_TERMS_SIZE),
-            np.zeros((3, 15)),
-            np.zeros((0, EPOCH_SIZE)),
-        ),
         AidingArguments(
             np.zeros((0, ROW_SIZE)),
             np.zeros((0, SEQUENCE_SIZE)),
             np.zeros((0, TERMS_SIZE)),
             np.zeros((0, BOOK_SIZE)),
+            0,
         ),
         MooringArguments(
             np.zeros(MOORING_TERMS_SIZE),

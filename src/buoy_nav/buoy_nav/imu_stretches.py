@@ -5,12 +5,12 @@ and set from what it did.
 measurements among them (:class:`MeasurementInput`). :class:`ImuStretches` makes them ready
 once (:meth:`ImuStretches.run_of`: the IMU samples' rows, the measurements validated and made
 into rows), offers each stretch the inputs it may take from where the engine stands (up to the
-first the engine must take; the pack's or the stretched aiding sources' measurements with those
-already queued taken out of the queue, when their books allow; the mooring's constraint when it
-may be made there), calls the kernel, and then sets the engine's parts from what it did (the
-prediction ahead too, forked afresh by the stretch or to be) and keeps the books of the epochs
-it made, as the engine keeps them, in their order (:mod:`buoy_nav.stretched_pack`,
-:mod:`buoy_nav.stretched_aiding`, :mod:`buoy_nav.stretched_mooring`).
+first the engine must take; the stretched aiding sources' measurements with those already queued
+taken out of the queue, when their books allow; the mooring's constraint when it may be made
+there), calls the kernel, and then sets the engine's parts from what it did (the prediction ahead
+too, forked afresh by the stretch or to be) and keeps the books of the epochs it made, as the
+engine keeps them, in their order (:mod:`buoy_nav.stretched_aiding`,
+:mod:`buoy_nav.stretched_mooring`).
 """
 
 import math
@@ -19,35 +19,26 @@ from typing import NamedTuple
 
 import numpy as np
 
-from buoy_common.contract import Reason
-from buoy_nav.aiding.ahrs_attitude import AhrsAttitudeSource
 from buoy_nav.aiding_epoch import ROW_SIZE, ROW_SLOT, AidingArguments
 from buoy_nav.imu_stretch import (
     AIDING_BOOKS,
     AIDING_TAIL,
     CATCH_UP,
     COUNTS_SIZE,
-    EPOCHS,
     FORK_DUE,
     FORKED_AT,
     IMU_TAKEN,
     MOORING_EPOCHS,
     NEXT_OUTPUT_T,
-    QUEUE_TAIL,
     ROWS,
     WINDOW_END,
     imu_stretch,
 )
 from buoy_nav.mooring_epoch import MooringArguments
-from buoy_nav.pack_epoch import (
-    PACK_ROW_SIZE,
-    PackArguments,
-)
 from buoy_nav.strapdown_kernel import LATITUDE, LONGITUDE
 from buoy_nav.stretch_screening import SAMPLE_SIZE
 from buoy_nav.stretched_aiding import AidingRows, StretchedAiding
 from buoy_nav.stretched_mooring import StretchedMooring
-from buoy_nav.stretched_pack import StretchedPack
 
 WINDOW = 512
 """Inputs offered to one call at most: a stretch rarely runs longer (a constraint, a fix, the
@@ -78,18 +69,12 @@ class Taken(NamedTuple):
 
 
 class _Run(NamedTuple):
-    """The inputs of one call made ready for the stretches: the IMU samples' rows (n × 7), and
-    for each input its IMU sample's index there or its pack attitude's in ``pack_rows`` (−1:
-    neither, the engine takes it), the pack's validated attitudes and their rows, the terms
-    those rows hold with (:meth:`AhrsAttitudeSource.stretch_terms`; None: no pack) at the
-    filter's position then (rad), and whether the inputs are IMU samples alone."""
+    """The inputs of one call made ready for the stretches: the IMU samples' rows (n × 7), for
+    each input its IMU sample's index there (−1: none), the filter's position (rad) the
+    measurements' rows were made at, and whether the inputs are IMU samples alone."""
 
     raw: np.ndarray
     imu_index: np.ndarray
-    pack_index: np.ndarray
-    measurements: list
-    pack_rows: np.ndarray
-    pack_terms: tuple | None
     position_rad: tuple[float, float]
     imu_only: bool
     aiding_index: np.ndarray
@@ -103,8 +88,7 @@ class _Run(NamedTuple):
 
 class _Offer(NamedTuple):
     """What one call of :func:`imu_stretch` is offered: the IMU samples' rows, the inputs'
-    ``order``, the process noise's terms (:meth:`AidedNavigation.noise_terms`), the pack's
-    arguments and its attitudes (those queued before first, ``queued`` of them), the aiding
+    ``order``, the process noise's terms (:meth:`AidedNavigation.noise_terms`), the aiding
     measurements' arguments and rows (those queued before first, ``aiding_queued`` of them), and
     the mooring's arguments (:mod:`buoy_nav.stretched_mooring`; without room for its epochs when
     the stretch is to stop at the constraint); no measurement when the stretch takes IMU samples
@@ -113,9 +97,6 @@ class _Offer(NamedTuple):
     raw: np.ndarray
     order: np.ndarray
     noise_terms: np.ndarray
-    pack: PackArguments
-    measurements: list
-    queued: int
     aiding: AidingArguments
     aiding_rows: AidingRows
     aiding_queued: int
@@ -145,8 +126,6 @@ class EngineParts(NamedTuple):
     integrity: object
     transitions: list
     pseudo: tuple
-    pack: AhrsAttitudeSource | None
-    """The motion pack's attitude source when enabled: its attitudes are taken in stretches."""
     counters: dict
     sources: tuple
     """Every aiding source, in registry order (:mod:`buoy_nav.stretched_aiding` takes some)."""
@@ -156,19 +135,13 @@ class EngineParts(NamedTuple):
 
 class ImuStretches:
     """The engine's ``parts`` handed to :func:`imu_stretch` and set from what it did, and the
-    books of the pack's attitudes it applied kept as the engine keeps them."""
+    books of the epochs it made kept as the engine keeps them."""
 
     def __init__(self, parts: EngineParts):
         self._parts = parts
         self._aiding = StretchedAiding(parts, parts.sources)
         self._no_aiding = AidingRows([], np.zeros((0, ROW_SIZE)))
-        self._pack = StretchedPack(parts, parts.sources[0].states.attitude.start)
         self._mooring = StretchedMooring(parts)
-
-    @property
-    def pack(self) -> AhrsAttitudeSource | None:
-        """The motion pack's attitude source whose attitudes the stretches take (None: none)."""
-        return self._pack.source
 
     @property
     def aiding_sources(self) -> tuple:
@@ -177,26 +150,20 @@ class ImuStretches:
         return self._aiding.sources
 
     def run_of(self, inputs: list, nav) -> _Run:
-        """``inputs`` (IMU samples and :class:`MeasurementInput`) made ready, the pack's true
-        north turned at the filter's position of ``nav`` now. An IMU sample that is not three
+        """``inputs`` (IMU samples and :class:`MeasurementInput`) made ready, the measurements'
+        rows made at the filter's position of ``nav`` now. An IMU sample that is not three
         numbers each is the engine's to take (:meth:`~buoy_nav.engine.FusionEngine.add_imu`
         says why), as is a measurement that is not valid."""
-        pack = self._parts.pack
         state = nav.integrator.state_vector
         position = (float(state[LATITUDE]), float(state[LONGITUDE]))
         n = len(inputs)
-        imu_index, pack_index = np.full(n, -1), np.full(n, -1)
+        imu_index = np.full(n, -1)
         aiding_index, aiding_slots = np.full(n, -1), np.full(n, -1)
-        samples, measurements, aiding_items, aiding_rows = [], [], [], []
+        samples, aiding_items, aiding_rows = [], [], []
         for place, item in enumerate(inputs):
             if type(item) is not MeasurementInput:
                 imu_index[place] = len(samples)
                 samples.append(item)
-            elif item.source is pack:
-                validated = _valid(item)
-                if validated is not None:
-                    pack_index[place] = len(measurements)
-                    measurements.append(validated)
             elif self._aiding.takes(item.source):
                 made = self._aiding.row(*item, position)
                 if made is not None:
@@ -208,14 +175,9 @@ class ImuStretches:
             imu_index = np.where(imu_index < 0, -1, np.array([*sample_rows, -1])[imu_index])
         imu_stamps = np.full(n, -math.inf)
         imu_stamps[imu_index >= 0] = raw[imu_index[imu_index >= 0], 0]
-        rows = [pack.stretch_row(m, *position) for m in measurements] if measurements else []
         return _Run(
             raw,
             imu_index,
-            pack_index,
-            measurements,
-            np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE),
-            None if pack is None else pack.stretch_terms(*position, nav.kalman),
             position,
             len(raw) == n,
             aiding_index,
@@ -245,10 +207,10 @@ class ImuStretches:
         plane_terms, covariance, block_indices, distrusted, distrust = (
             parts.solutions.row_arguments(nav.kalman)
         )
-        if offer.measurements or offer.aiding_rows.items or offer.mooring.books.size:
+        if offer.aiding_rows.items or offer.mooring.books.size:
             covariance = covariance.copy()  # the epochs' covariance, the filter's if they end
         counts = np.zeros(COUNTS_SIZE, dtype=np.int64)
-        counts[QUEUE_TAIL], counts[AIDING_TAIL] = offer.queued, offer.aiding_queued
+        counts[AIDING_TAIL] = offer.aiding_queued
         counts[WINDOW_END] = offer.mooring.window_stamps.size - offer.mooring.books.shape[0]
         count, stepped, stop = imu_stretch(
             raw,
@@ -271,12 +233,11 @@ class ImuStretches:
             block_indices,
             rows_written,
             offer.noise_terms,
-            offer.pack,
             offer.aiding,
             offer.mooring,
             counts,
         )
-        if self._booked(run, offer, counts, nav):
+        if self._booked(offer, counts):
             nav.kalman.covariance = covariance
             parts.solutions.covariance_changed()
             parts.solutions.biases_changed()
@@ -302,9 +263,6 @@ class ImuStretches:
             run.raw[start:end],
             _POSITIONS[: end - start],
             np.array(nav.noise_terms(), dtype=float) if with_mooring else _NO_NOISE_TERMS,
-            self._pack.none,
-            [],
-            0,
             self._aiding.none,
             self._no_aiding,
             0,
@@ -312,36 +270,29 @@ class ImuStretches:
         )
 
     def _measurement_offer(self, run: _Run, start: int, nav) -> _Offer | None:
-        """What a stretch is offered from ``start`` with the measurements of the pack or of the
-        stretched aiding sources among the IMU samples, when they can be applied in it (their
-        queued ones taken out of the queue); None: nothing. A stretch takes the pack's or the
-        aiding sources', not both: their books are kept source by source."""
+        """What a stretch is offered from ``start`` with the measurements of the stretched
+        aiding sources among the IMU samples, when they can be applied in it (their queued ones
+        taken out of the queue), and the mooring's epochs when they may be made; None:
+        nothing."""
         parts = self._parts
-        with_pack = self._pack.ready(nav) and self._pack_present(run, start)
-        ready = frozenset() if with_pack else self._aiding.ready(nav)
-        if ready and not self._aiding_present(run, start, ready):
-            ready = frozenset()  # the mooring's epochs may then be made
+        ready = self._aiding.ready(nav)
         if not parts.queue.settled:  # the queue judges some of its measurements at their turn
-            with_pack, ready = False, frozenset()
-        with_mooring = not ready and self._mooring.ready(nav)
-        end = self._window_end(run, start, with_pack, ready, with_mooring)
+            ready = frozenset()
+        if ready and not self._aiding_present(run, start, ready):
+            ready = frozenset()
+        with_mooring = self._mooring.ready(nav)
+        end = self._window_end(run, start, ready, with_mooring)
         if end == start:
             return None
         window = slice(start, end)
-        queued = None
-        if with_pack and (run.pack_index[window] >= 0).any():
-            queued = parts.queue.take_source(parts.pack)
         aiding_queued = self._aiding.queued(ready, run.position_rad) if ready else self._no_aiding
         imu = run.imu_index[window]
         raw = run.raw[imu[imu >= 0]]
-        order, pack_rows, measurements, aiding = self._order(run, window, queued, aiding_queued)
+        order, aiding = self._order(run, window, aiding_queued)
         return _Offer(
             raw,
             order,
             np.array(nav.noise_terms(), dtype=float),
-            self._pack.arguments(pack_rows, run.pack_terms),
-            measurements,
-            len(queued or ()),
             self._aiding.arguments(aiding.rows) if aiding.items else self._aiding.none,
             aiding,
             len(aiding_queued.items),
@@ -363,30 +314,17 @@ class ImuStretches:
         slots = run.aiding_slots[start : start + WINDOW]
         return bool(self._aiding.ready_mask(ready)[slots].any())
 
-    def _pack_present(self, run: _Run, start: int) -> bool:
-        """Whether the pack has attitudes queued or among the inputs a stretch from ``start``
-        could be offered."""
-        return self._pack.queued() or bool((run.pack_index[start : start + WINDOW] >= 0).any())
-
-    def _booked(self, run: _Run, offer: _Offer, counts, nav) -> bool:
-        """Keep the books of the measurements ``offer`` had (``counts``: what the stretch did);
-        whether it applied any."""
-        applied = False
+    def _booked(self, offer: _Offer, counts) -> bool:
+        """Keep the books of the epochs ``offer`` had (``counts``: what the stretch did), in
+        their order; whether it made any."""
         book_mooring = self._mooring.booker(offer.mooring, int(counts[MOORING_EPOCHS]))
-        if offer.measurements:
-            self._pack.book(
-                run.pack_terms,
-                offer.measurements,
-                offer.queued,
-                counts,
-                offer.pack.epochs,
-                book_mooring,
-            )
-            applied = bool(counts[EPOCHS])
+        applied = False
         if offer.aiding_rows.items:
             books = offer.aiding.books[: counts[AIDING_BOOKS]]
             tail = int(counts[AIDING_TAIL])
-            applied = self._aiding.book(offer.aiding_rows, offer.aiding_queued, tail, books)
+            applied = self._aiding.book(
+                offer.aiding_rows, offer.aiding_queued, tail, books, book_mooring
+            )
         return book_mooring(math.inf) or applied
 
     def ready(self) -> bool:
@@ -474,24 +412,19 @@ class ImuStretches:
         parts.output.next_output_s = float(state[NEXT_OUTPUT_T])
         parts.solutions.rows.count = int(state[ROWS])
 
-    def _window_end(
-        self, run: _Run, start: int, with_pack: bool, ready: frozenset, with_mooring: bool
-    ) -> int:
+    def _window_end(self, run: _Run, start: int, ready: frozenset, with_mooring: bool) -> int:
         """Where the inputs from ``start`` a stretch is offered end: at the first the engine
-        must take (the pack's too, unless ``with_pack``; the aiding sources' unless ``ready``),
-        after the first IMU sample whose filtering reaches the next measurement or constraint
-        due (unless ``with_mooring``; the stretch stops there), :data:`WINDOW` at most."""
+        must take (the aiding sources' unless ``ready``), after the first IMU sample whose
+        filtering reaches the next measurement or constraint due (unless ``with_mooring``; the
+        stretch stops there), :data:`WINDOW` at most."""
         parts = self._parts
-        taken = ready | {parts.pack} if with_pack else ready
         heap = parts.queue.heap
-        stop_s = min((entry[0] for entry in heap if entry[3] not in taken), default=math.inf)
+        stop_s = min((entry[0] for entry in heap if entry[3] not in ready), default=math.inf)
         if not with_mooring:
             stop_s = min(stop_s, min((s.next_due_s for s in parts.pseudo), default=math.inf))
         stop_s += parts.config.max_measurement_delay_s
         end = min(start + WINDOW, len(run.imu_index))
         allowed = run.imu_index[start:end] >= 0
-        if with_pack:
-            allowed |= run.pack_index[start:end] >= 0
         if ready:
             allowed |= self._aiding.ready_mask(ready)[run.aiding_slots[start:end]]
         blocked = np.flatnonzero(~allowed)
@@ -500,43 +433,20 @@ class ImuStretches:
         beyond = np.flatnonzero(run.imu_stamps[start:end] > stop_s)
         return start + int(beyond[0]) + 1 if beyond.size else end
 
-    def _order(self, run: _Run, window: slice, queued: list | None, aiding_queued: AidingRows):
-        """:func:`imu_stretch`'s ``order`` for the inputs of the ``window``, the pack's rows and
-        attitudes (the ``queued`` ones first, then those of the window) and the aiding rows
+    def _order(self, run: _Run, window: slice, aiding_queued: AidingRows):
+        """:func:`imu_stretch`'s ``order`` for the inputs of the ``window`` and the aiding rows
         (``aiding_queued`` first, then those of the window)."""
-        pack = self._parts.pack
-        imu, packs, aids = run.imu_index[window], run.pack_index[window], run.aiding_index[window]
+        imu, aids = run.imu_index[window], run.aiding_index[window]
         is_imu = imu >= 0
-        is_pack = ~is_imu & (packs >= 0)
-        is_aiding = ~is_imu & ~is_pack
-        measurements = [measurement for _, measurement in queued or ()]
-        rows = [pack.stretch_row(m, *run.position_rad) for m in measurements]
-        n_queued = len(measurements)
-        pack_places = packs[is_pack]
-        measurements += [run.measurements[index] for index in pack_places.tolist()]
-        pack_rows = np.concatenate(
-            (np.array(rows, dtype=float).reshape(-1, PACK_ROW_SIZE), run.pack_rows[pack_places])
-        )
-        aiding_places = aids[is_aiding]
+        aiding_places = aids[~is_imu]
         order = np.empty(len(imu), dtype=np.int64)
         order[is_imu] = np.arange(np.count_nonzero(is_imu))
-        order[is_pack] = -1 - n_queued - np.arange(len(pack_places))
-        order[is_aiding] = (
-            -1 - len(measurements) - len(aiding_queued.items) - np.arange(len(aiding_places))
-        )
+        order[~is_imu] = -1 - len(aiding_queued.items) - np.arange(len(aiding_places))
         aiding = AidingRows(
             [*aiding_queued.items, *(run.aiding.items[index] for index in aiding_places.tolist())],
             np.concatenate((aiding_queued.rows, run.aiding.rows[aiding_places])),
         )
-        return order, pack_rows, measurements, aiding
-
-
-def _valid(item: MeasurementInput):
-    """The validated measurement of ``item``, or None when it is none (the engine says why)."""
-    if isinstance(item.measurement, Reason) or not math.isfinite(item.t_s):
-        return None
-    validated = item.source.validated(item.measurement)
-    return None if isinstance(validated, Reason) else validated
+        return order, aiding
 
 
 def _imu_rows(samples: list) -> tuple[np.ndarray, list[int]]:

@@ -12,6 +12,7 @@ epochs a stretch makes then move nothing else the engine keeps.
 """
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -74,11 +75,13 @@ class StretchedAiding:
             if source.superseded_by not in registered or source.superseded_by in stretched_kinds
         )
         self._slot = {source: slot for slot, source in enumerate(self.sources)}
+        self._attitude_start = sources[0].states.attitude.start
         self._none = AidingArguments(
             np.zeros((0, ROW_SIZE)),
             np.zeros((0, SEQUENCE_SIZE)),
             np.zeros((0, TERMS_SIZE)),
             np.zeros((0, BOOK_SIZE)),
+            self._attitude_start,
         )
         # (kind, stamp s) → row, of the measurements a stretch queued again.
         self._rows_of_queued: dict[tuple[str, float], np.ndarray] = {}
@@ -178,14 +181,28 @@ class StretchedAiding:
         sequences = np.zeros((len(self.sources), SEQUENCE_SIZE))
         for slot, source in enumerate(self.sources):
             sequences[slot] = sequence_of(self._parts.sequences[source.kind])
-        return AidingArguments(rows, sequences, self._terms, np.zeros((len(rows), BOOK_SIZE)))
+        return AidingArguments(
+            rows,
+            sequences,
+            self._terms,
+            np.zeros((len(rows), BOOK_SIZE)),
+            self._attitude_start,
+        )
 
-    def book(self, aiding: AidingRows, first_new: int, tail: int, books: np.ndarray) -> bool:
+    def book(
+        self,
+        aiding: AidingRows,
+        first_new: int,
+        tail: int,
+        books: np.ndarray,
+        book_before: Callable[[float], object],
+    ) -> bool:
         """Keep the books of what a stretch did with ``aiding`` (those before ``first_new``
         queued before it) as the engine keeps them: the sequences and the IMU's clock follow
         the new ones it queued (up to ``tail``), each epoch's measurements set aside are counted
         superseded and those applied observed and booked as passed by their gates, in the
-        engine's order, and those still queued go back to the queue. Whether an epoch was
+        engine's order (after ``book_before`` the epoch's stamp, which books the other epochs
+        stamped before it), and those still queued go back to the queue. Whether an epoch was
         applied."""
         parts = self._parts
         queued = aiding.items[first_new:tail]
@@ -197,11 +214,11 @@ class StretchedAiding:
         for book in books.tolist():
             item = aiding.items[int(book[BOOK_ROW])]
             if epoch and item[2] != epoch[0][1][2]:
-                self._book_epoch(epoch)
+                self._book_epoch(epoch, book_before)
                 epoch = []
             epoch.append((book, item))
         if epoch:
-            self._book_epoch(epoch)
+            self._book_epoch(epoch, book_before)
         for index in np.flatnonzero(aiding.rows[:, ROW_STATUS] == QUEUED).tolist():
             source, measurement, t = aiding.items[index]
             self._parts.queue.push(source, t, measurement)
@@ -209,11 +226,12 @@ class StretchedAiding:
             self._rows_of_queued[(source.kind, t)] = aiding.rows[index]
         return bool(epoch)
 
-    def _book_epoch(self, epoch: list) -> None:
+    def _book_epoch(self, epoch: list, book_before: Callable[[float], object]) -> None:
         """The books of one epoch's (book row, item) pairs, as the queue and the engine keep
-        them: the superseded counted, then each applied one observed, then each booked as
-        passed by its gate."""
+        them, after ``book_before`` its stamp: the superseded counted, then each applied one
+        observed, then each booked as passed by its gate."""
         parts = self._parts
+        book_before(epoch[0][1][2])
         applied = []
         for book, (source, measurement, t) in epoch:
             if book[BOOK_STATUS] != APPLIED:

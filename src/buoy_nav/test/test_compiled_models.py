@@ -14,6 +14,8 @@ from scipy.spatial.transform import Rotation
 
 from buoy_nav import earth, strapdown_kernel
 from buoy_nav.aiding import (
+    AhrsAttitude,
+    AhrsAttitudeSource,
     GnssBaseline,
     GnssBaselineSource,
     GnssBaselineTertiary,
@@ -49,6 +51,7 @@ CONFIG = FusionConfig(
     secondary_antenna_body_m=(-0.93, 0.57, 1.46),
     tertiary_antenna_body_m=(0.8, 1.1, 1.3),
 )
+PACK_CONFIG = dataclasses.replace(CONFIG, ahrs_yaw_reference="magnetic_north", ahrs_lag_s=0.2)
 
 
 @pytest.fixture
@@ -402,6 +405,14 @@ def random_measurement(source, point: LinearisationPoint, rng):
         return GnssVelocity(rng.normal(0.0, 2.0, 3), random_covariance(rng, 1e-3))
     if isinstance(source, GnssHeadingSource):
         return GnssHeading(rng.uniform(-4.0, 4.0), rng.choice([1e-8, 1e-3]))
+    if isinstance(source, AhrsAttitudeSource):
+        turn = Rotation.from_rotvec(rng.normal(0.0, 0.05, 3)).as_matrix()
+        return AhrsAttitude(
+            turn @ point.rotation_nb,
+            random_covariance(rng, 1e-4),
+            float(rng.choice([math.nan, 0.1])),
+            (2026.0 - 1970.0) * SECONDS_PER_JULIAN_YEAR,
+        )
     vector = point.rotation_nb @ source._baseline_body_m + rng.normal(0.0, 0.01, 3)
     return source.measurement_type(vector)
 
@@ -478,20 +489,22 @@ def test_the_magnetometers_stretch_model_is_its_model_to_the_bit(rng):
         GnssHeadingSource,
         GnssBaselineSource,
         GnssBaselineTertiarySource,
+        AhrsAttitudeSource,
     ],
 )
 def test_a_sources_stretch_model_over_arrays_is_its_model_to_the_bit(source_class, rng):
     """What a compiled stretch models of a measurement from its numbers and the strapdown state
     vector is what the source's model gives at the same point (a heading whose baseline is too
-    steep: no model, both ways)."""
-    source = source_class(CONFIG, STATES)
+    steep: no model, both ways; a motion pack lagging, on magnetic north)."""
+    source = source_class(PACK_CONFIG if source_class is AhrsAttitudeSource else CONFIG, STATES)
     terms = source.stretch_terms()
     for _ in range(CASES):
         point = random_point(rng)
         measurement = source.validated(random_measurement(source, point, rng))
         model = source.model(measurement, point)
+        position = (point.state.latitude_rad, point.state.longitude_rad)
         innovation, jacobian, covariance, holds = source.stretch_model(
-            np.array(source.stretch_values(measurement, (0.0, 0.0))),
+            np.array(source.stretch_values(measurement, position)),
             strapdown_vector_of(point),
             point.rotation_nb,
             np.array(point.raw_gyro_rad_s),

@@ -47,6 +47,7 @@ from buoy_nav.aiding.base import (
     orientation_record,
     samples_per_correlation_time,
 )
+from buoy_nav.aiding.model_kernels import place_identity
 from buoy_nav.error_state_filter import GateResult
 from buoy_nav.geomagnetism import declination_rad, wmm_cell_bounds_rad
 from buoy_nav.rotations import (
@@ -69,6 +70,164 @@ _quaternion_from_rotation_vector = numba.njit(cache=True)(quaternion_from_rotati
 _rotation_matrix_elements = numba.njit(cache=True)(rotation_matrix_elements)
 _quaternion_from_rotation_elements = numba.njit(cache=True)(quaternion_from_rotation_elements)
 _rotation_vector_from_quaternion = numba.njit(cache=True)(rotation_vector_from_quaternion)
+
+
+@numba.njit(cache=True)
+def _model_covariance(covariance_rad2, floor_rad2, lag_variance_rad2, weight):
+    """The update's R (3×3, ENU rad²): the pack's ``covariance_rad2`` symmetrised, its
+    variances raised to ``floor_rad2``, the lag's variance added to each axis and the whole
+    multiplied by the sample's ``weight``, element by element as
+    ``(floored_covariance(C, floor) + I·lag) · weight`` computes it in numpy, to the bit."""
+    result = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            value = 0.5 * (covariance_rad2[i, j] + covariance_rad2[j, i])
+            if i == j and value < floor_rad2:
+                value = floor_rad2
+            identity = 1.0 if i == j else 0.0
+            result[i, j] = (value + identity * lag_variance_rad2) * weight
+    return result
+
+
+@numba.njit(cache=True)
+def _attitude_innovation(measured_nb, rotation_nb, rate_x, rate_y, rate_z, lag_s):
+    """Log(R_m' R_nbᵀ) (rad, ENU): the pack's true-north attitude ``measured_nb`` (3×3,
+    body→ENU) carried forward by ``lag_s`` (s) with the bias-corrected body rate (rad/s),
+    R_m' = R_m Exp([ω τ]×), against the nominal ``rotation_nb``. Compiled: at the pack's rate
+    the interpreter's cost of the small products outweighed their arithmetic."""
+    carried = measured_nb
+    if lag_s > 0.0:
+        lag = _rotation_matrix_elements(
+            *_quaternion_from_rotation_vector(rate_x * lag_s, rate_y * lag_s, rate_z * lag_s)
+        )
+        carried = np.zeros((3, 3))
+        for i in range(3):
+            for j in range(3):
+                carried[i, j] = (
+                    measured_nb[i, 0] * lag[j] + measured_nb[i, 1] * lag[3 + j]
+                ) + measured_nb[i, 2] * lag[6 + j]
+    product = np.zeros(9)
+    for i in range(3):
+        for j in range(3):
+            product[3 * i + j] = (
+                carried[i, 0] * rotation_nb[j, 0] + carried[i, 1] * rotation_nb[j, 1]
+            ) + carried[i, 2] * rotation_nb[j, 2]
+    return _rotation_vector_from_quaternion(
+        *_quaternion_from_rotation_elements(
+            product[0],
+            product[1],
+            product[2],
+            product[3],
+            product[4],
+            product[5],
+            product[6],
+            product[7],
+            product[8],
+        )
+    )
+
+
+@numba.njit(cache=True)
+def attitude_update(
+    covariance,
+    integrator_state,
+    measured_nb,
+    rate_x,
+    rate_y,
+    rate_z,
+    lag_s,
+    measurement_covariance_rad2,
+    floor_rad2,
+    lag_variance_rad2,
+    weight,
+    jacobian,
+    gate_threshold,
+    attitude_start,
+):
+    """:class:`CompiledUpdate`'s fields of the pack's true-north attitude ``measured_nb``
+    against the nominal state vector ``integrator_state`` and ``covariance``: the innovation of
+    :func:`_attitude_innovation` (bias-corrected body rate in rad/s, ``lag_s`` s), R of
+    :func:`_model_covariance`, the gate at ``gate_threshold`` and, when it passes, the Joseph
+    update and the attitude reset (the error states' attitude from ``attitude_start``)."""
+    elements = _rotation_matrix_elements(
+        integrator_state[ATTITUDE],
+        integrator_state[ATTITUDE + 1],
+        integrator_state[ATTITUDE + 2],
+        integrator_state[ATTITUDE + 3],
+    )
+    rotation_nb = np.empty((3, 3))
+    for index in range(9):
+        rotation_nb[index // 3, index % 3] = elements[index]
+    innovation = np.array(
+        _attitude_innovation(measured_nb, rotation_nb, rate_x, rate_y, rate_z, lag_s)
+    )
+    model_covariance = _model_covariance(
+        measurement_covariance_rad2, floor_rad2, lag_variance_rad2, weight
+    )
+    nis, innovation_covariance = kalman_kernel.innovation_test(
+        covariance, innovation, jacobian, model_covariance
+    )
+    if not nis <= gate_threshold:
+        return (
+            innovation,
+            nis,
+            innovation_covariance,
+            False,
+            covariance,
+            np.zeros(covariance.shape[0]),
+            True,
+        )
+    posterior, correction, _ = kalman_kernel.joseph_update(
+        covariance, innovation, jacobian, model_covariance
+    )
+    reset, positive = kalman_kernel.attitude_reset(posterior, correction, attitude_start)
+    return innovation, nis, innovation_covariance, True, reset, correction, positive
+
+
+# What :func:`attitude_stretch_model` reads of an attitude (``values``): its true-north R_nb
+# (row-major), its covariance (ENU rad², row-major), the sample's weight and the bounds (rad)
+# of latitude and longitude within which that true north holds.
+TRUE_NORTH, COVARIANCE, WEIGHT, CELL = 0, 9, 18, 19
+# What it reads of the source (``terms``): the lag (s) and its uncertainty squared (s²), the
+# variance floor (rad²), the error states' attitude start and their count.
+LAG, LAG_UNCERTAINTY_SQ, FLOOR, ATTITUDE_START, STATE_COUNT = range(5)
+
+
+@numba.njit(cache=True)
+def attitude_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms):
+    """:meth:`AhrsAttitudeSource.model` over arrays, for a compiled stretch
+    (:mod:`buoy_nav.aiding_epoch`): the attitude ``values`` (laid out above) at the nominal
+    ``state`` vector, its ``rotation_nb`` and the raw gyro sample there (body rad/s), with the
+    source's ``terms``: the innovation (rad, ENU), the Jacobian, R (rad²) and whether the model
+    holds (not where the filter has left the cell the true north was taken in)."""
+    rate_x = raw_gyro_rad_s[0] - state[GYRO_BIAS]
+    rate_y = raw_gyro_rad_s[1] - state[GYRO_BIAS + 1]
+    rate_z = raw_gyro_rad_s[2] - state[GYRO_BIAS + 2]
+    square = 2.0 + 0.0 * rate_x  # a run-time exponent: the C library's pow, as the interpreter's
+    lag_variance = (
+        math.pow(rate_x, square) + math.pow(rate_y, square) + math.pow(rate_z, square)
+    ) * terms[LAG_UNCERTAINTY_SQ]
+    innovation = np.array(
+        _attitude_innovation(
+            values[TRUE_NORTH:COVARIANCE].reshape(3, 3).copy(),
+            rotation_nb,
+            rate_x,
+            rate_y,
+            rate_z,
+            terms[LAG],
+        )
+    )
+    covariance = _model_covariance(
+        values[COVARIANCE:WEIGHT].reshape(3, 3).copy(), terms[FLOOR], lag_variance, values[WEIGHT]
+    )
+    jacobian = np.zeros((3, int(terms[STATE_COUNT])))
+    place_identity(jacobian, int(terms[ATTITUDE_START]))
+    latitude, longitude = state[LATITUDE], state[LONGITUDE]
+    in_cell = (
+        values[CELL] < latitude < values[CELL + 1]
+        and values[CELL + 2] < longitude < values[CELL + 3]
+    )
+    return innovation, jacobian, covariance, in_cell
 
 
 class AhrsAttitude(NamedTuple):
@@ -264,33 +423,38 @@ class AhrsAttitudeSource(AidingSource):
             self.states.attitude.start,
         )
 
-    def stretch_terms(self, latitude_rad: float, longitude_rad: float, kalman) -> tuple:
-        """What :mod:`buoy_nav.imu_stretch` applies this source's attitudes with, the filter at
-        a position (rad) with the gate of ``kalman``: (lag s, its uncertainty squared s², the
-        variance floor rad², the gate's threshold, and the bounds (rad) of latitude and longitude
-        within which :meth:`stretch_row`'s true north holds: (lowest, highest latitude, lowest,
-        highest longitude))."""
+    stretch_model = staticmethod(attitude_stretch_model)
+
+    def stretch_values(self, measurement: AhrsAttitude, position_rad: tuple) -> tuple:
+        """The numbers :func:`attitude_stretch_model` reads of a validated attitude, its true
+        north taken at the filter's ``position_rad`` (latitude, longitude; laid out with the
+        model)."""
+        latitude_rad, longitude_rad = position_rad
         if self._magnetic and math.isnan(self._declination_deg):
             bounds = wmm_cell_bounds_rad(latitude_rad, longitude_rad)
         else:
             bounds = (-math.inf, math.inf, -math.inf, math.inf)
         return (
-            self._lag_s,
-            self._lag_uncertainty_s**2,
-            self._floor_rad2,
-            kalman.gate_threshold(3, self.gate_probability),
-            *bounds,
-        )
-
-    def stretch_row(self, measurement: AhrsAttitude, latitude_rad: float, longitude_rad: float):
-        """A validated ``measurement`` as :mod:`buoy_nav.imu_stretch` takes it, its true north
-        that at a position (rad) within :meth:`stretch_terms`' bounds: (stamp s, the attitude
-        on true north, R_nb row-major, its covariance rad² row-major, the sample's weight)."""
-        return (
-            measurement.t_s,
             *self._true_north(measurement, latitude_rad, longitude_rad).reshape(9).tolist(),
             *measurement.covariance_rad2.reshape(9).tolist(),
             self._weight(measurement),
+            *bounds,
+        )
+
+    def stretch_terms(self) -> np.ndarray:
+        """The terms :func:`attitude_stretch_model` reads: the lag (s) and its uncertainty
+        squared (s²), the variance floor (rad²), the error states' attitude start and their
+        count."""
+        states = self.states
+        return np.array(
+            (
+                self._lag_s,
+                self._lag_uncertainty_s**2,
+                self._floor_rad2,
+                states.attitude.start,
+                states.dim,
+            ),
+            dtype=float,
         )
 
     @property
@@ -341,115 +505,3 @@ class AhrsAttitudeSource(AidingSource):
         return aligner.add_heading(
             t_s, math.atan2(forward[1], forward[0]), variance, raw_gyro_rad_s, body_vector=BODY_X
         )
-
-
-@numba.njit(cache=True)
-def _model_covariance(covariance_rad2, floor_rad2, lag_variance_rad2, weight):
-    """The update's R (3×3, ENU rad²): the pack's ``covariance_rad2`` symmetrised, its
-    variances raised to ``floor_rad2``, the lag's variance added to each axis and the whole
-    multiplied by the sample's ``weight``, element by element as
-    ``(floored_covariance(C, floor) + I·lag) · weight`` computes it in numpy, to the bit."""
-    result = np.empty((3, 3))
-    for i in range(3):
-        for j in range(3):
-            value = 0.5 * (covariance_rad2[i, j] + covariance_rad2[j, i])
-            if i == j and value < floor_rad2:
-                value = floor_rad2
-            identity = 1.0 if i == j else 0.0
-            result[i, j] = (value + identity * lag_variance_rad2) * weight
-    return result
-
-
-@numba.njit(cache=True)
-def _attitude_innovation(measured_nb, rotation_nb, rate_x, rate_y, rate_z, lag_s):
-    """Log(R_m' R_nbᵀ) (rad, ENU): the pack's true-north attitude ``measured_nb`` (3×3,
-    body→ENU) carried forward by ``lag_s`` (s) with the bias-corrected body rate (rad/s),
-    R_m' = R_m Exp([ω τ]×), against the nominal ``rotation_nb``. Compiled: at the pack's rate
-    the interpreter's cost of the small products outweighed their arithmetic."""
-    carried = measured_nb
-    if lag_s > 0.0:
-        lag = _rotation_matrix_elements(
-            *_quaternion_from_rotation_vector(rate_x * lag_s, rate_y * lag_s, rate_z * lag_s)
-        )
-        carried = np.zeros((3, 3))
-        for i in range(3):
-            for j in range(3):
-                carried[i, j] = (
-                    measured_nb[i, 0] * lag[j] + measured_nb[i, 1] * lag[3 + j]
-                ) + measured_nb[i, 2] * lag[6 + j]
-    product = np.zeros(9)
-    for i in range(3):
-        for j in range(3):
-            product[3 * i + j] = (
-                carried[i, 0] * rotation_nb[j, 0] + carried[i, 1] * rotation_nb[j, 1]
-            ) + carried[i, 2] * rotation_nb[j, 2]
-    return _rotation_vector_from_quaternion(
-        *_quaternion_from_rotation_elements(
-            product[0],
-            product[1],
-            product[2],
-            product[3],
-            product[4],
-            product[5],
-            product[6],
-            product[7],
-            product[8],
-        )
-    )
-
-
-@numba.njit(cache=True)
-def attitude_update(
-    covariance,
-    integrator_state,
-    measured_nb,
-    rate_x,
-    rate_y,
-    rate_z,
-    lag_s,
-    measurement_covariance_rad2,
-    floor_rad2,
-    lag_variance_rad2,
-    weight,
-    jacobian,
-    gate_threshold,
-    attitude_start,
-):
-    """:class:`CompiledUpdate`'s fields of the pack's true-north attitude ``measured_nb``
-    against the nominal state vector ``integrator_state`` and ``covariance``: the innovation of
-    :func:`_attitude_innovation` (bias-corrected body rate in rad/s, ``lag_s`` s), R of
-    :func:`_model_covariance`, the gate at ``gate_threshold`` and, when it passes, the Joseph
-    update and the attitude reset (the error states' attitude from ``attitude_start``)."""
-    elements = _rotation_matrix_elements(
-        integrator_state[ATTITUDE],
-        integrator_state[ATTITUDE + 1],
-        integrator_state[ATTITUDE + 2],
-        integrator_state[ATTITUDE + 3],
-    )
-    rotation_nb = np.empty((3, 3))
-    for index in range(9):
-        rotation_nb[index // 3, index % 3] = elements[index]
-    innovation = np.array(
-        _attitude_innovation(measured_nb, rotation_nb, rate_x, rate_y, rate_z, lag_s)
-    )
-    model_covariance = _model_covariance(
-        measurement_covariance_rad2, floor_rad2, lag_variance_rad2, weight
-    )
-    nis, innovation_covariance = kalman_kernel.innovation_test(
-        covariance, innovation, jacobian, model_covariance
-    )
-    if not nis <= gate_threshold:
-        return (
-            innovation,
-            nis,
-            innovation_covariance,
-            False,
-            covariance,
-            np.zeros(covariance.shape[0]),
-            True,
-        )
-    posterior, correction, _ = kalman_kernel.joseph_update(
-        covariance, innovation, jacobian, model_covariance
-    )
-    reset, positive = kalman_kernel.attitude_reset(posterior, correction, attitude_start)
-    return innovation, nis, innovation_covariance, True, reset, correction, positive
