@@ -51,7 +51,15 @@ from buoy_nav import imu_stretches
 from buoy_nav.aiding.ahrs_attitude import attitude_stretch_model
 from buoy_nav.aiding.base import vector_of
 from buoy_nav.aiding.magnetometer import magnetometer_stretch_model
-from buoy_nav.aiding_epoch import APPLIED, BOOK_ROW, BOOK_STATUS, MODELS, ROW_SLOT, TERM_MODEL
+from buoy_nav.aiding_epoch import (
+    APPLIED,
+    BOOK_ROW,
+    BOOK_STATUS,
+    MODELS,
+    ROW_SLOT,
+    TERM_MODEL,
+    WATCHED,
+)
 from buoy_nav.config import FusionConfig
 from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import FUSION_INPUT_MSGTYPES, feed_message
@@ -226,6 +234,8 @@ def stretch_counts(monkeypatch) -> Counter:
         aiding, went = arguments[-3], arguments[-1]
         counts["mooring epochs"] += int(went[stretch_module.MOORING_EPOCHS])
         books = aiding.books[: went[stretch_module.AIDING_BOOKS]]
+        watched = books[books[:, BOOK_STATUS] >= WATCHED, BOOK_ROW].astype(int)
+        counts["watched"] += watched.size
         applied = books[books[:, BOOK_STATUS] == APPLIED, BOOK_ROW].astype(int)
         counts["aiding applied"] += applied.size
         models = aiding.terms[aiding.rows[applied, ROW_SLOT].astype(int), TERM_MODEL]
@@ -538,7 +548,7 @@ def test_stretches_take_the_magnetometer_as_one_input_at_a_time_does(stretch_cou
     """A single GNSS antenna and a magnetometer at 10 Hz, a steel hull passing for ten seconds
     (the gate rejects its fields, and a run of rejections suspends the magnetometer until it
     agrees again), and a field not finite: the same to the bit, most of the fields' epochs in
-    the stretches, none of the disturbed ones."""
+    the stretches, and most of those of the suspended magnetometer, watched there."""
     duration_s = 120.0
     _, _, messages = scenario_messages(
         "sea_state",
@@ -566,3 +576,6 @@ def test_stretches_take_the_magnetometer_as_one_input_at_a_time_does(stretch_cou
     assert counters.rejected.get(Reason.GATE, 0) + counters.rejected.get(Reason.SUSPENDED, 0) > 50
     assert stretch_counts["fields applied"] >= 0.5 * counters.accepted, "too few fields taken"
     assert stretch_counts["fields applied"] <= counters.accepted
+    # Suspended, the magnetometer is watched in the stretches until it may resume.
+    suspended = counters.rejected.get(Reason.SUSPENDED, 0)
+    assert 0.5 * suspended <= stretch_counts["watched"] <= suspended

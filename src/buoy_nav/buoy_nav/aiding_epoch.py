@@ -30,8 +30,9 @@ from buoy_nav.aiding.gnss_fix import fix_stretch_model
 from buoy_nav.aiding.gnss_heading import heading_stretch_model
 from buoy_nav.aiding.gnss_velocity import velocity_stretch_model
 from buoy_nav.aiding.magnetometer import magnetometer_stretch_model
+from buoy_nav.aiding.model_kernels import HOLDS, LEFT_TO_THE_ENGINE, NO_GEOMETRY, REFUSED
 from buoy_nav.epoch_kernels import corrected, stepped_to
-from buoy_nav.kalman_kernel import gated_stacked_update
+from buoy_nav.kalman_kernel import gated_stacked_update, innovation_test
 from buoy_nav.rotations import rotation_matrix_elements
 from buoy_nav.strapdown_kernel import (
     ATTITUDE,
@@ -53,6 +54,9 @@ MODELS = (
 ROW_T, ROW_SLOT, ROW_STATUS, ROW_VALUES = range(4)
 ROW_SIZE = ROW_VALUES + 23
 PENDING, QUEUED, APPLIED, SUPERSEDED = 0.0, 1.0, 2.0, 3.0
+# A suspended source's measurement, watched and not fused: gated, without the geometry to be
+# modelled, or refused by its model.
+WATCHED, WATCHED_NO_GEOMETRY, WATCHED_REFUSED = 4.0, 5.0, 6.0
 # Each source's terms (``aiding_terms``, a row a slot): the index of its model in MODELS, its
 # order in the registry (the order the engine stacks a stamp's measurements in), the slot of the
 # source that supersedes it (−1: none), its gate's thresholds for 1, 2 and 3 dimensions, then
@@ -60,9 +64,9 @@ PENDING, QUEUED, APPLIED, SUPERSEDED = 0.0, 1.0, 2.0, 3.0
 TERM_MODEL, TERM_ORDER, TERM_SUPERSEDED_BY, TERM_THRESHOLDS = range(4)
 TERM_VALUES = TERM_THRESHOLDS + 3
 TERMS_SIZE = TERM_VALUES + 16
-# The books of an epoch (``aiding_books``, a row a measurement applied or set aside, an
-# epoch's in its order): its row in ``aiding_rows``, APPLIED or SUPERSEDED, its dimension, its
-# NIS, its innovation and its S (row-major), the dimension's share of each.
+# The books of an epoch (``aiding_books``, a row a measurement applied, set aside or watched, an
+# epoch's in its order): its row in ``aiding_rows``, what became of it (its row's status), its
+# dimension, its NIS, its innovation and its S (row-major), the dimension's share of each.
 BOOK_ROW, BOOK_STATUS, BOOK_DIMENSION, BOOK_NIS, BOOK_INNOVATION = range(5)
 BOOK_S = BOOK_INNOVATION + 3
 BOOK_SIZE = BOOK_S + 9
@@ -71,13 +75,18 @@ BOOK_SIZE = BOOK_S + 9
 class AidingArguments(NamedTuple):
     """What a stretch hands the aiding epochs (laid out above): the measurements' rows, each
     source's sequence (:mod:`buoy_nav.sequence_kernels`), each source's terms, room for the
-    epochs' books and the error states' attitude start."""
+    epochs' books, the error states' attitude start and, for each source, how many of its
+    measurements may be watched (``watch``; 0: a source not suspended, whose measurements are
+    fused)."""
 
     rows: np.ndarray
     sequences: np.ndarray
     terms: np.ndarray
     books: np.ndarray
     attitude_start: int
+    watch: np.ndarray
+    """The outcomes of each suspended source that cannot resume it, whatever they are: the
+    stretch books no more (it counts them down)."""
 
 
 _rotation_matrix_elements = numba.njit(cache=True)(rotation_matrix_elements)
@@ -87,7 +96,8 @@ _rotation_matrix_elements = numba.njit(cache=True)(rotation_matrix_elements)
 def _modelled(model, values, state, rotation_nb, raw_gyro_rad_s, terms):
     """The measurement function :data:`MODELS` [``model``] of ``values`` at the strapdown
     ``state`` vector, its R_nb and the raw gyro sample there (body rad/s), with the source's
-    ``terms``: (innovation, Jacobian, R, the gate's noise, whether the model holds)."""
+    ``terms``: (innovation, Jacobian, R, the gate's noise, its fate,
+    :mod:`buoy_nav.aiding.model_kernels`)."""
     if model == 4:
         return magnetometer_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
     if model == 0:
@@ -100,7 +110,7 @@ def _modelled(model, values, state, rotation_nb, raw_gyro_rad_s, terms):
         nu, h, r, holds = attitude_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
     else:
         nu, h, r, holds = baseline_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms)
-    return nu, h, r, r, holds
+    return nu, h, r, r, HOLDS if holds else LEFT_TO_THE_ENGINE
 
 
 @numba.njit(cache=True)
@@ -158,17 +168,38 @@ def _stamp_rows(rows, head, tail, t, terms):
 
 
 @numba.njit(cache=True)
-def _stacked_models(rows, kept, terms, state, raw_gyro_rad_s, state_count):
-    """The models of the ``kept`` rows at the strapdown ``state`` (``state_count`` error
-    states) stacked as the engine stacks them: whether each holds, then ν, H, R and the
-    gates' noise (block-diagonal; 0 × 0 when it is R), each one's end in the stack and its
-    gate's threshold."""
+def _rotation_nb(state):
+    """R_nb of the strapdown ``state`` vector's attitude."""
     elements = _rotation_matrix_elements(
         state[ATTITUDE], state[ATTITUDE + 1], state[ATTITUDE + 2], state[ATTITUDE + 3]
     )
     rotation_nb = np.empty((3, 3))
     for index in range(9):
         rotation_nb[index // 3, index % 3] = elements[index]
+    return rotation_nb
+
+
+@numba.njit(cache=True)
+def _row_model(rows, k, terms, state, rotation_nb, raw_gyro_rad_s):
+    """:func:`_modelled` of the row ``k``."""
+    row = rows[k]
+    slot = int(row[ROW_SLOT])
+    return _modelled(
+        int(terms[slot, TERM_MODEL]),
+        row[ROW_VALUES:].copy(),
+        state,
+        rotation_nb,
+        raw_gyro_rad_s,
+        terms[slot, TERM_VALUES:].copy(),
+    )
+
+
+@numba.njit(cache=True)
+def _stacked_models(rows, kept, terms, state, rotation_nb, raw_gyro_rad_s, state_count):
+    """The models of the ``kept`` rows at the strapdown ``state`` (its ``rotation_nb``;
+    ``state_count`` error states) stacked as the engine stacks them: whether each holds, then
+    ν, H, R and the gates' noise (block-diagonal; 0 × 0 when it is R), each one's end in the
+    stack and its gate's threshold."""
     count = kept.shape[0]
     size = 3 * count
     innovation = np.empty(size)
@@ -180,17 +211,11 @@ def _stacked_models(rows, kept, terms, state, raw_gyro_rad_s, state_count):
     end = 0
     holds = True
     for i in range(count):
-        row = rows[kept[i]]
-        slot = int(row[ROW_SLOT])
-        nu, h, r, gate_r, model_holds = _modelled(
-            int(terms[slot, TERM_MODEL]),
-            row[ROW_VALUES:].copy(),
-            state,
-            rotation_nb,
-            raw_gyro_rad_s,
-            terms[slot, TERM_VALUES:].copy(),
+        slot = int(rows[kept[i], ROW_SLOT])
+        nu, h, r, gate_r, fate = _row_model(
+            rows, kept[i], terms, state, rotation_nb, raw_gyro_rad_s
         )
-        holds = holds and model_holds
+        holds = holds and fate == HOLDS
         dimension = nu.shape[0]
         innovation[end : end + dimension] = nu
         jacobian[end : end + dimension, :] = h
@@ -215,6 +240,36 @@ def _stacked_models(rows, kept, terms, state, raw_gyro_rad_s, state_count):
 
 
 @numba.njit(cache=True)
+def _watched_models(rows, watched, terms, watch, state, rotation_nb, raw_gyro_rad_s, prior):
+    """The ``watched`` rows (of suspended sources) modelled at the strapdown ``state`` (its
+    ``rotation_nb``) and each one gated alone against the ``prior`` covariance, as the engine
+    gates them: whether the stretch may book them all (each model's fate leaves it to the
+    stretch, and each source's ``watch`` lets it book one more outcome), each one's fate, NIS,
+    innovation and S."""
+    count = watched.shape[0]
+    fates = np.empty(count, np.int64)
+    nis = np.full(count, np.nan)
+    innovations = np.zeros((count, 3))
+    gate_s = np.zeros((count, 3, 3))
+    dimensions = np.zeros(count, np.int64)
+    for i in range(count):
+        nu, h, _, gate_r, fate = _row_model(
+            rows, watched[i], terms, state, rotation_nb, raw_gyro_rad_s
+        )
+        judged = fate != NO_GEOMETRY  # a health outcome
+        if fate == LEFT_TO_THE_ENGINE or (judged and watch[int(rows[watched[i], ROW_SLOT])] < 1):
+            return False, fates, nis, innovations, gate_s, dimensions
+        fates[i] = fate
+        if fate == HOLDS:
+            dimension = nu.shape[0]
+            nis[i], s = innovation_test(prior, nu, h, gate_r)
+            innovations[i, :dimension] = nu
+            gate_s[i, :dimension, :dimension] = s
+            dimensions[i] = dimension
+    return True, fates, nis, innovations, gate_s, dimensions
+
+
+@numba.njit(cache=True)
 def aiding_epoch(
     rows,
     head,
@@ -227,47 +282,125 @@ def aiding_epoch(
     covariance,
     noise_terms,
     terms,
+    watch,
     attitude_start,
     ahead_state,
     ahead_t,
     carried,
     books,
     book_count,
-) -> int:
+):
     """The epoch of the measurements queued at the IMU sample ``due`` (``rows`` from ``head``
     to ``tail``) as the engine makes it: the filter's step there from ``point`` with the
-    covariance's propagation, the stacked models, gates and update and, when every gate passes
-    and the covariance after it is positive definite, the injection into ``filter_state``, the
-    new ``covariance``, (when ``carried``) the correction carried over to the prediction
-    (``ahead_state``, at ``ahead_t`` s), the rows' status and their books from ``book_count``
-    in ``books``. The books written, or −1 with nothing changed when the engine is to make
-    it."""
+    covariance's propagation; the suspended sources' measurements (``watch``) modelled and
+    gated alone, counted down in ``watch``; the others' stacked models, gates and update and,
+    when every gate passes and the covariance after it is positive definite, the injection
+    into ``filter_state``, the new ``covariance``, (when ``carried``) the correction carried
+    over to the prediction (``ahead_state``, at ``ahead_t`` s); the rows' status and their
+    books from ``book_count`` in ``books``. The books written (−1, with nothing changed, when
+    the engine is to make it) and whether a correction was made."""
     t = due[0]
-    superseded, kept = _stamp_rows(rows, head, tail, t, terms)
+    superseded, ordered = _stamp_rows(rows, head, tail, t, terms)
+    is_watched = np.zeros(ordered.shape[0], np.bool_)
+    for i in range(ordered.shape[0]):
+        is_watched[i] = watch[int(rows[ordered[i], ROW_SLOT])] > 0
+    kept, watched = ordered[~is_watched], ordered[is_watched]
     stepped, prior = stepped_to(point, due, filter_state, coning, sculling, covariance, noise_terms)
+    rotation_nb = _rotation_nb(stepped)
+    raw_gyro = due[1:4].copy()
+    bookable, fates, watched_nis, watched_innovations, watched_s, watched_dimensions = (
+        _watched_models(rows, watched, terms, watch, stepped, rotation_nb, raw_gyro, prior)
+    )
+    if not bookable:
+        return -1, False
     holds, innovation, jacobian, measurement_covariance, gate_covariance, ends, thresholds = (
-        _stacked_models(rows, kept, terms, stepped, due[1:4].copy(), covariance.shape[0])
+        _stacked_models(rows, kept, terms, stepped, rotation_nb, raw_gyro, covariance.shape[0])
     )
     if not holds:
-        return -1
-    nis, innovation_covariance, accepted, updated, correction, positive = gated_stacked_update(
-        prior,
-        innovation,
-        jacobian,
-        measurement_covariance,
-        ends,
-        thresholds,
-        attitude_start,
-        gate_covariance,
-    )
-    if not (accepted and positive):
-        return -1
-    corrected(
-        filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t, carried
-    )
-    return _booked(
+        return -1, False
+    if kept.shape[0]:
+        nis, innovation_covariance, accepted, updated, correction, positive = gated_stacked_update(
+            prior,
+            innovation,
+            jacobian,
+            measurement_covariance,
+            ends,
+            thresholds,
+            attitude_start,
+            gate_covariance,
+        )
+        if not (accepted and positive):
+            return -1, False
+        corrected(
+            filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t, carried
+        )
+    else:  # the step to the stamp alone, as the engine's when it fuses none of them
+        nis, innovation_covariance = np.empty(0), np.empty((0, 0))
+        filter_state[:] = stepped
+        covariance[:, :] = prior
+    count = _booked(
         rows, superseded, kept, ends, nis, innovation, innovation_covariance, books, book_count
     )
+    _watch_booked(
+        rows,
+        watched,
+        watch,
+        fates,
+        watched_nis,
+        watched_innovations,
+        watched_s,
+        watched_dimensions,
+        books,
+        book_count + count,
+    )
+    count += watched.shape[0]
+    _in_registry_order(books[book_count + superseded.shape[0] : book_count + count], rows, terms)
+    return count, kept.shape[0] > 0
+
+
+@numba.njit(cache=True)
+def _watch_booked(rows, watched, watch, fates, nis, innovations, gate_s, dimensions, books, first):
+    """The ``watched`` rows marked with their fates, their sources' ``watch`` counted down for
+    each one judged (a health outcome), and their books written from ``first``."""
+    for i in range(watched.shape[0]):
+        k = watched[i]
+        fate = fates[i]
+        if fate == HOLDS:
+            status = WATCHED
+        elif fate == REFUSED:
+            status = WATCHED_REFUSED
+        else:
+            status = WATCHED_NO_GEOMETRY
+        if fate != NO_GEOMETRY:
+            watch[int(rows[k, ROW_SLOT])] -= 1
+        rows[k, ROW_STATUS] = status
+        book = books[first + i]
+        book[BOOK_ROW] = k
+        book[BOOK_STATUS] = status
+        dimension = dimensions[i]
+        book[BOOK_DIMENSION] = dimension
+        book[BOOK_NIS] = nis[i]
+        for a in range(dimension):
+            book[BOOK_INNOVATION + a] = innovations[i, a]
+            for b in range(dimension):
+                book[BOOK_S + dimension * a + b] = gate_s[i, a, b]
+
+
+@numba.njit(cache=True)
+def _in_registry_order(books, rows, terms):
+    """The ``books`` of an epoch's measurements applied and watched put in the sources'
+    registry order, the order the engine books them in (an insertion sort: a few rows)."""
+    for i in range(1, books.shape[0]):
+        book = books[i].copy()
+        order = terms[int(rows[int(book[BOOK_ROW]), ROW_SLOT]), TERM_ORDER]
+        place = i
+        while (
+            place > 0
+            and terms[int(rows[int(books[place - 1, BOOK_ROW]), ROW_SLOT]), TERM_ORDER] > order
+        ):
+            books[place] = books[place - 1]
+            place -= 1
+        books[place] = book
 
 
 @numba.njit(cache=True)

@@ -125,27 +125,78 @@ class AidingGates:
         outcome = GateOutcome([], [], {}, [])
         for source, measurement in group:
             model = source.model(measurement, point)
-            if model is None:
-                self._counters[source.kind].reject(Reason.GEOMETRY)
-                continue
-            if isinstance(model, Reason):
-                self._counters[source.kind].reject(model)
-                self._judge(source, t_s, True, outcome)
+            if model is None or isinstance(model, Reason):
+                self._book_unmodelled(source, t_s, model, outcome)
                 continue
             gate = kalman.gate(
                 model.innovation, model.jacobian, model.gated_covariance, source.gate_probability
             )
-            if gate.accepted:
-                if self._book_passed(source, t_s, model.innovation, gate, outcome):
-                    outcome.accepted.append(model)
-                continue
-            self._log_innovation(source, t_s, model.innovation, gate)
-            self._watch_innovations(source, t_s, model.innovation, gate, outcome)
-            if self._judge(source, t_s, True, outcome):
-                self._counters[source.kind].reject(Reason.SUSPENDED)
-            else:
-                self._book_rejection(source, t_s, measurement, model, gate.nis, outcome)
+            if self._book_gated(source, t_s, measurement, model, model.innovation, gate, outcome):
+                outcome.accepted.append(model)
         return outcome
+
+    def watched(
+        self,
+        source: AidingSource,
+        t_s: float,
+        refusal: Reason | None,
+        innovation=None,
+        gate: GateResult | None = None,
+    ) -> GateOutcome:
+        """Book a measurement of the suspended ``source`` at stamp ``t_s`` (s) modelled and
+        gated elsewhere (a compiled stretch) as :meth:`gate` books it: its ``innovation`` and
+        ``gate``, or, without a model, the ``refusal`` (None: for want of geometry). Nothing of
+        it is fused: its outcome must leave the source suspended."""
+        if not self.suspended(source.kind):
+            raise RuntimeError(f"{source.kind}: a measurement watched of a source not suspended")
+        outcome = GateOutcome([], [], {}, [])
+        if gate is None:
+            self._book_unmodelled(source, t_s, refusal, outcome)
+        elif self._book_gated(source, t_s, None, None, innovation, gate, outcome):
+            raise RuntimeError(f"{source.kind}: a watched measurement resumed its source")
+        return outcome
+
+    def outcomes_while_suspended(self, kind: str) -> int:
+        """How many more gate outcomes of the source of ``kind``, suspended by its gate
+        outcomes and not by a contradiction, cannot resume it whatever they are (0: not such a
+        source)."""
+        if self.contradicted(kind) or not self.suspended(kind):
+            return 0
+        return self._health[kind].outcomes_that_cannot_resume()
+
+    def _book_unmodelled(
+        self, source: AidingSource, t_s: float, refusal: Reason | None, outcome: GateOutcome
+    ) -> None:
+        """Book a measurement of ``source`` at ``t_s`` (s) that has no model: for want of
+        geometry (``refusal`` None), or refused for ``refusal``, a failed outcome."""
+        if refusal is None:
+            self._counters[source.kind].reject(Reason.GEOMETRY)
+            return
+        self._counters[source.kind].reject(refusal)
+        self._judge(source, t_s, True, outcome)
+
+    def _book_gated(
+        self,
+        source: AidingSource,
+        t_s: float,
+        measurement,
+        model: MeasurementModel | None,
+        innovation,
+        gate: GateResult,
+        outcome: GateOutcome,
+    ) -> bool:
+        """Book the ``gate`` of the ``measurement`` of ``source`` at ``t_s`` (s), its
+        ``model`` and ``innovation``: whether it is to be fused (a source whose failure leaves
+        it suspended needs neither the measurement nor the model)."""
+        if gate.accepted:
+            return self._book_passed(source, t_s, innovation, gate, outcome)
+        self._log_innovation(source, t_s, innovation, gate)
+        self._watch_innovations(source, t_s, innovation, gate, outcome)
+        if self._judge(source, t_s, True, outcome):
+            self._counters[source.kind].reject(Reason.SUSPENDED)
+        else:
+            self._book_rejection(source, t_s, measurement, model, gate.nis, outcome)
+        return False
 
     def passed(
         self, source: AidingSource, t_s: float, innovation, gate: GateResult

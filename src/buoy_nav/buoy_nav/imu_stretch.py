@@ -396,10 +396,13 @@ def _sample_reached(
     ):
         limits[CONSTRAINT_DUE] = due[0] + mooring.terms[PERIOD]
         return True
-    saved_filter, saved_covariance, saved_ahead, saved_counts, saved_fork, saved_status = saved
+    saved_filter, saved_covariance, saved_ahead, saved_counts, saved_fork, saved_status, watch = (
+        saved
+    )
     filter_state[:], covariance[:, :], ahead_state[:] = saved_filter, saved_covariance, saved_ahead
     counts[:], state[FORK_DUE] = saved_counts, saved_fork
     aiding.rows[:, ROW_STATUS] = saved_status
+    aiding.watch[:] = watch
     return False
 
 
@@ -407,7 +410,7 @@ def _sample_reached(
 def _saved(wanted, filter_state, covariance, ahead_state, counts, state, aiding):
     """Copies of what an epoch moves, when ``wanted`` (else empty arrays): the filter's
     state, the covariance, the prediction's state, the ``counts``, whether the prediction is
-    to be forked afresh and what became of each of the ``aiding`` rows."""
+    to be forked afresh, what became of each of the ``aiding`` rows and the watches left."""
     if wanted:
         return (
             filter_state.copy(),
@@ -416,6 +419,7 @@ def _saved(wanted, filter_state, covariance, ahead_state, counts, state, aiding)
             counts.copy(),
             state[FORK_DUE],
             aiding.rows[:, ROW_STATUS].copy(),
+            aiding.watch.copy(),
         )
     return (
         np.empty(0),
@@ -423,6 +427,7 @@ def _saved(wanted, filter_state, covariance, ahead_state, counts, state, aiding)
         np.empty(0),
         np.empty(0, np.int64),
         state[FORK_DUE],
+        np.empty(0),
         np.empty(0),
     )
 
@@ -540,7 +545,7 @@ def _epoch_made(
     if aiding_due != 1:
         return False
     carried = _carried(state, due[0])
-    written = aiding_epoch(
+    written, made_correction = aiding_epoch(
         aiding.rows,
         counts[AIDING_HEAD],
         counts[AIDING_TAIL],
@@ -552,6 +557,7 @@ def _epoch_made(
         covariance,
         noise_terms,
         aiding.terms,
+        aiding.watch,
         aiding.attitude_start,
         ahead_state,
         state[AHEAD],
@@ -563,7 +569,7 @@ def _epoch_made(
         return False
     counts[AIDING_BOOKS] += written
     counts[AIDING_HEAD] = first_queued(aiding.rows, counts[AIDING_HEAD], counts[AIDING_TAIL])
-    if not carried:
+    if made_correction and not carried:
         state[FORK_DUE] = 1.0
     return True
 
@@ -647,6 +653,7 @@ def load_compiled_imu_stretch() -> None:
             np.zeros((0, TERMS_SIZE)),
             np.zeros((0, BOOK_SIZE)),
             0,
+            np.zeros(0),
         ),
         MooringArguments(
             np.zeros(MOORING_TERMS_SIZE),

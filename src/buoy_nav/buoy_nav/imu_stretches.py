@@ -293,7 +293,7 @@ class ImuStretches:
             raw,
             order,
             np.array(nav.noise_terms(), dtype=float),
-            self._aiding.arguments(aiding.rows) if aiding.items else self._aiding.none,
+            self._aiding.arguments(aiding.rows, ready) if aiding.items else self._aiding.none,
             aiding,
             len(aiding_queued.items),
             self._mooring_arguments(with_mooring, len(raw)),

@@ -146,6 +146,23 @@ class SourceHealth:
             self._failed_count == 0 or len(self._failed) >= self.rule.min_samples
         )
 
+    def outcomes_that_cannot_resume(self) -> int:
+        """How many more outcomes of a source suspended by its outcomes cannot resume it,
+        whatever they are: those before the first after which, had they all passed, no more
+        than ``resume_share`` of the last ``min_samples`` would have failed."""
+        rule = self.rule
+        older = list(self._failed)
+        failures_since = [0]  # failures among the last k kept outcomes, k = 0, 1, ...
+        for failed in reversed(older):
+            failures_since.append(failures_since[-1] + failed)
+        for outcomes in range(1, rule.min_samples):
+            if len(older) + outcomes < rule.min_samples:
+                continue
+            kept = min(rule.min_samples - outcomes, len(older))
+            if failures_since[kept] / rule.min_samples <= rule.resume_share:
+                return outcomes - 1
+        return rule.min_samples - 1
+
     def record(self, failed_gate: bool, t_s: float = math.nan) -> HealthChange:
         """Add one gate outcome (True: the measurement failed the gate) of the measurement of
         stamp ``t_s`` (s; NaN: judged by the count of outcomes alone) and return what it

@@ -8,7 +8,10 @@ A source is taken when its measurement function over arrays is one of
 too (the stretch sets a superseded measurement aside as the queue would). Its measurements are
 taken while a pass of its gate cannot move its health, nothing of it is held off its sequence,
 no contradiction suspends it, the filter is trusted and no smoother records the epochs: the
-epochs a stretch makes then move nothing else the engine keeps.
+epochs a stretch makes then move nothing else the engine keeps. A source its gate outcomes
+suspended is watched as the engine watches it (its measurements modelled and gated, none
+fused) for as many outcomes as cannot resume it
+(:meth:`~buoy_nav.source_health.SourceHealth.outcomes_that_cannot_resume`).
 """
 
 import math
@@ -19,7 +22,6 @@ import numpy as np
 
 from buoy_common.contract import Reason
 from buoy_nav.aiding_epoch import (
-    APPLIED,
     BOOK_DIMENSION,
     BOOK_INNOVATION,
     BOOK_NIS,
@@ -35,12 +37,16 @@ from buoy_nav.aiding_epoch import (
     ROW_STATUS,
     ROW_T,
     ROW_VALUES,
+    SUPERSEDED,
     TERM_MODEL,
     TERM_ORDER,
     TERM_SUPERSEDED_BY,
     TERM_THRESHOLDS,
     TERM_VALUES,
     TERMS_SIZE,
+    WATCHED,
+    WATCHED_NO_GEOMETRY,
+    WATCHED_REFUSED,
     AidingArguments,
 )
 from buoy_nav.chi_square import chi_square_quantile
@@ -82,6 +88,7 @@ class StretchedAiding:
             np.zeros((0, TERMS_SIZE)),
             np.zeros((0, BOOK_SIZE)),
             self._attitude_start,
+            np.zeros(0),
         )
         # (kind, stamp s) → row, of the measurements a stretch queued again.
         self._rows_of_queued: dict[tuple[str, float], np.ndarray] = {}
@@ -143,10 +150,12 @@ class StretchedAiding:
         return frozenset(
             source
             for source in self.sources
-            if gates.unmoved_by_passes(source.kind)
-            and not gates.suspended(source.kind)
+            if parts.sequences[source.kind].steady
             and not gates.contradicted(source.kind)
-            and parts.sequences[source.kind].steady
+            and (
+                gates.unmoved_by_passes(source.kind)
+                or gates.outcomes_while_suspended(source.kind) > 0
+            )
         )
 
     def queued(self, ready: frozenset, position_rad: tuple) -> AidingRows:
@@ -175,18 +184,24 @@ class StretchedAiding:
         """The arguments of a stretch that takes no aiding measurement."""
         return self._none
 
-    def arguments(self, rows: np.ndarray) -> AidingArguments:
-        """:func:`~buoy_nav.imu_stretch.imu_stretch`'s ``aiding`` for ``rows``: the rows, each
-        source's sequence, the terms and room for the books."""
+    def arguments(self, rows: np.ndarray, ready: frozenset) -> AidingArguments:
+        """:func:`~buoy_nav.imu_stretch.imu_stretch`'s ``aiding`` for ``rows`` of the
+        ``ready`` sources: the rows, each source's sequence, the terms, room for the books and
+        the outcomes of each suspended source the stretch may watch."""
+        gates = self._parts.gates
         sequences = np.zeros((len(self.sources), SEQUENCE_SIZE))
+        watch = np.zeros(len(self.sources))
         for slot, source in enumerate(self.sources):
             sequences[slot] = sequence_of(self._parts.sequences[source.kind])
+            if source in ready:
+                watch[slot] = gates.outcomes_while_suspended(source.kind)
         return AidingArguments(
             rows,
             sequences,
             self._terms,
             np.zeros((len(rows), BOOK_SIZE)),
             self._attitude_start,
+            watch,
         )
 
     def book(
@@ -228,30 +243,44 @@ class StretchedAiding:
 
     def _book_epoch(self, epoch: list, book_before: Callable[[float], object]) -> None:
         """The books of one epoch's (book row, item) pairs, as the queue and the engine keep
-        them, after ``book_before`` its stamp: the superseded counted, then each applied one
-        observed, then each booked as passed by its gate."""
+        them, after ``book_before`` its stamp: the superseded counted, then each other one
+        observed, then each booked as passed by its gate (applied) or as a suspended source's
+        outcome (watched)."""
         parts = self._parts
         book_before(epoch[0][1][2])
-        applied = []
+        taken = []
         for book, (source, measurement, t) in epoch:
-            if book[BOOK_STATUS] != APPLIED:
+            if book[BOOK_STATUS] == SUPERSEDED:
                 parts.counters[source.kind].superseded += 1
                 continue
             parts.contradictions.observe(t, measurement)
-            applied.append((book, source, t))
-        for book, source, t in applied:
-            dimension = int(book[BOOK_DIMENSION])
-            threshold = self._terms[self._slot[source], TERM_THRESHOLDS + dimension - 1]
-            gate = GateResult(
-                True,
-                book[BOOK_NIS],
-                threshold,
-                np.array(book[BOOK_S : BOOK_S + dimension * dimension]).reshape(
-                    dimension, dimension
-                ),
-            )
-            innovation = np.array(book[BOOK_INNOVATION : BOOK_INNOVATION + dimension])
-            fused, outcome = parts.gates.passed(source, t, innovation, gate)
-            if not fused:
-                raise RuntimeError(f"{source.kind}: a stretch's measurement was not fused")
+            taken.append((book, source, t))
+        for book, source, t in taken:
+            status = book[BOOK_STATUS]
+            if status == WATCHED_NO_GEOMETRY:
+                outcome = parts.gates.watched(source, t, None)
+            elif status == WATCHED_REFUSED:
+                outcome = parts.gates.watched(source, t, source.stretch_refusal)
+            else:
+                outcome = self._gated(book, source, t, watched=status == WATCHED)
             parts.transitions.extend(outcome.transitions)
+
+    def _gated(self, book, source, t: float, watched: bool):
+        """The gate's books of a measurement of ``source`` at ``t`` (s) the stretch applied or
+        (``watched``) gated alone, as its ``book`` says: the gates' outcome."""
+        dimension = int(book[BOOK_DIMENSION])
+        threshold = self._terms[self._slot[source], TERM_THRESHOLDS + dimension - 1]
+        nis = book[BOOK_NIS]
+        gate = GateResult(
+            nis <= threshold,
+            nis,
+            threshold,
+            np.array(book[BOOK_S : BOOK_S + dimension * dimension]).reshape(dimension, dimension),
+        )
+        innovation = np.array(book[BOOK_INNOVATION : BOOK_INNOVATION + dimension])
+        if watched:
+            return self._parts.gates.watched(source, t, None, innovation, gate)
+        fused, outcome = self._parts.gates.passed(source, t, innovation, gate)
+        if not fused:
+            raise RuntimeError(f"{source.kind}: a stretch's measurement was not fused")
+        return outcome

@@ -32,7 +32,13 @@ from buoy_nav.aiding import (
     MooringAnchor,
 )
 from buoy_nav.aiding.base import LinearisationPoint
-from buoy_nav.aiding.model_kernels import azimuth_model
+from buoy_nav.aiding.model_kernels import (
+    HOLDS,
+    LEFT_TO_THE_ENGINE,
+    NO_GEOMETRY,
+    REFUSED,
+    azimuth_model,
+)
 from buoy_nav.antenna_geometry import horizontal_fraction
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import (
@@ -436,9 +442,10 @@ def random_field(rng, point: LinearisationPoint) -> tuple[MagneticField, str]:
 def test_the_magnetometers_stretch_model_is_its_model_to_the_bit(rng):
     """What a compiled stretch models of a magnetometer's field, the Earth's field taken where
     the filter is, is what the source's model gives at the same point: the heading, its
-    Jacobian, R and the gate's noise to the bit, and no model both ways for a field the Earth's
-    does not explain or too steep to head by; none either where the filter has left the cell
-    the Earth's field was taken in."""
+    Jacobian, R and the gate's noise to the bit, a refusal both ways for a field the Earth's
+    does not explain (for the source's reason), no model both ways for one too steep to head
+    by, and the field left to the engine where the filter has left the cell the Earth's field
+    was taken in."""
     source = MagnetometerSource(CONFIG, STATES)
     terms = source.stretch_terms()
     outcomes = Counter()
@@ -458,13 +465,17 @@ def test_the_magnetometers_stretch_model_is_its_model_to_the_bit(rng):
         position = (point.state.latitude_rad, point.state.longitude_rad)
         values = np.array(source.stretch_values(measurement, position))
         vector = strapdown_vector_of(point)
-        innovation, jacobian, covariance, gate_covariance, holds = source.stretch_model(
+        innovation, jacobian, covariance, gate_covariance, fate = source.stretch_model(
             values, vector, point.rotation_nb, np.array(point.raw_gyro_rad_s), terms
         )
         outcome = type(model).__name__
         outcomes[kind, outcome] += 1
-        assert holds == (outcome == "MeasurementModel")
-        if holds:
+        assert (
+            fate == {"MeasurementModel": HOLDS, "NoneType": NO_GEOMETRY, "Reason": REFUSED}[outcome]
+        )
+        if fate == REFUSED:
+            assert model == source.stretch_refusal
+        if fate == HOLDS:
             for name, value, expected in (
                 ("innovation", innovation, model.innovation),
                 ("jacobian", jacobian, model.jacobian),
@@ -473,9 +484,10 @@ def test_the_magnetometers_stretch_model_is_its_model_to_the_bit(rng):
             ):
                 assert value.tobytes() == np.asarray(expected).tobytes(), name
         vector[strapdown_kernel.LATITUDE] += math.radians(0.06)  # the next cell
-        assert not source.stretch_model(
+        elsewhere = source.stretch_model(
             values, vector, point.rotation_nb, np.array(point.raw_gyro_rad_s), terms
-        )[-1]
+        )
+        assert elsewhere[-1] == LEFT_TO_THE_ENGINE
     assert outcomes["agrees", "MeasurementModel"] > CASES // 2, outcomes
     assert outcomes["agrees", "NoneType"] > 0, outcomes
     assert outcomes["disagrees", "Reason"] > CASES // 10, outcomes

@@ -1,5 +1,6 @@
 """Suspension and resumption of an aiding source from its gate outcomes."""
 
+import copy
 import dataclasses
 
 import numpy as np
@@ -57,6 +58,29 @@ def test_a_suspended_source_resumes_once_it_agrees_again():
     assert changes.index(HealthChange.RESUMED) == 40
     assert changes.count(HealthChange.RESUMED) == 1
     assert not health.suspended and health.reason == ""
+
+
+def test_the_outcomes_that_cannot_resume_a_source_are_as_many_as_fail_to_resume_it():
+    """From suspensions of every kind (fresh, after a few outcomes, after many with failures
+    among them): that many outcomes, passing or failing, leave the source suspended, and one
+    more passing outcome than that resumes it."""
+    rng = np.random.default_rng(3)
+    counts = []
+    for _ in range(300):
+        health = SourceHealth(RULE)
+        _feed(health, [True] * RULE.min_samples)
+        _feed(health, rng.random(int(rng.integers(0, 2 * RULE.window))) < rng.uniform(0.0, 0.2))
+        if not health.suspended:
+            continue
+        count = health.outcomes_that_cannot_resume()
+        counts.append(count)
+        for failing in (False, True):
+            trial = copy.deepcopy(health)
+            outcomes = [failing or bool(rng.random() < 0.5) for _ in range(count)]
+            assert HealthChange.RESUMED not in _feed(trial, outcomes)
+        trial = copy.deepcopy(health)
+        assert _feed(trial, [False] * (count + 1))[-1] is HealthChange.RESUMED
+    assert len(counts) > 100 and min(counts) <= 5 and max(counts) >= 90
 
 
 def test_forget_starts_the_judgement_again():

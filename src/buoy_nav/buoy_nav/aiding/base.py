@@ -244,6 +244,10 @@ class AidingSource(abc.ABC):
     same arithmetic as :meth:`model` and the filter's gate and update (the engine then uses it
     for a stamp of that one measurement, and books a measurement it rejects the interpreted
     way)."""
+    stretch_refusal: ClassVar[Reason | None] = None
+    """The reason :meth:`model` refuses a measurement for, when its measurement function over
+    arrays (``stretch_model``, :mod:`buoy_nav.aiding_epoch`) may say ``REFUSED``
+    (:mod:`buoy_nav.aiding.model_kernels`)."""
     has_compiled_model: ClassVar[bool] = False
     """Whether :meth:`model` is one compiled call (:mod:`buoy_nav.aiding.model_kernels`) that
     keeps nothing between measurements and whose gate takes R: the engine then gates a stamp's

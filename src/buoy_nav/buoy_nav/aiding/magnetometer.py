@@ -76,7 +76,14 @@ from buoy_nav.aiding.base import (
     vector_of,
     yaw_reset,
 )
-from buoy_nav.aiding.model_kernels import azimuth_model, wrap_angle
+from buoy_nav.aiding.model_kernels import (
+    HOLDS,
+    LEFT_TO_THE_ENGINE,
+    NO_GEOMETRY,
+    REFUSED,
+    azimuth_model,
+    wrap_angle,
+)
 from buoy_nav.geomagnetism import (
     declination_rad,
     wmm_cell_bounds_rad,
@@ -93,8 +100,6 @@ MIN_FIELD_T = 1e-6
 RESET_AFTER_GATE_RESETS = 100
 
 
-# What :func:`magnetic_heading_model` makes of a field.
-MEASURED, REFUSED, TOO_STEEP = 0, 1, 2
 # The Earth's field a field is judged against and headed to (``geomagnetic``): magnetic north's
 # ENU azimuth (rad), the least and greatest strength (T) and dip (rad, positive down) allowed.
 (NORTH_AZIMUTH, STRENGTH_LOW, STRENGTH_HIGH, DIP_LOW, DIP_HIGH) = range(5)
@@ -131,17 +136,17 @@ def magnetic_heading_model(
     attitude_start,
     state_count,
 ):
-    """The heading of a calibrated field (body T, its noise variance T²) at the nominal R_nb
-    against the Earth's field (``geomagnetic``, laid out above), the calibration's heading
-    variance (rad²) shared by ``weight`` samples (see the module docstring): what became of it
-    (MEASURED, REFUSED: its strength or dip is not the Earth's, TOO_STEEP: its horizontal part
-    is too short to head by), the predicted azimuth (rad, ENU), the innovation (rad), the
-    Jacobian (1 × ``state_count``, on the attitude from ``attitude_start``), R and the gate's
-    noise (rad²)."""
+    """The heading of a calibrated field (body T, its noise variance T²) at the nominal R_nb against
+    the Earth's field (``geomagnetic``, laid out above), the calibration's heading variance (rad²)
+    shared by ``weight`` samples (see the module docstring): what became of it
+    (:data:`~buoy_nav.aiding.model_kernels.HOLDS`; ``REFUSED``: its strength or dip is not the
+    Earth's; ``NO_GEOMETRY``: its horizontal part is too short to head by), the predicted azimuth
+    (rad, ENU), the innovation (rad), the Jacobian (1 × ``state_count``, on the attitude from
+    ``attitude_start``), R and the gate's noise (rad²)."""
     field, horizontal_sq, predicted, jacobian = azimuth_model(
         rotation_nb, field_body_t, attitude_start, state_count
     )
-    status = MEASURED
+    status = HOLDS
     if not field_agrees(
         field,
         geomagnetic[STRENGTH_LOW],
@@ -151,7 +156,7 @@ def magnetic_heading_model(
     ):
         status = REFUSED
     elif horizontal_sq < _MIN_HORIZONTAL_FIELD_FRACTION_SQ * np.dot(field, field):
-        status = TOO_STEEP
+        status = NO_GEOMETRY
     innovation = np.array((wrap_angle(geomagnetic[NORTH_AZIMUTH] - predicted),))
     noise = noise_variance_t2 / horizontal_sq
     covariance = np.full((1, 1), calibration_variance_rad2 * weight + noise)
@@ -164,8 +169,9 @@ def magnetometer_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms
     """:meth:`MagnetometerSource.model` over arrays, for a compiled stretch
     (:mod:`buoy_nav.aiding_epoch`): the field ``values`` (laid out above) at the nominal
     ``state`` vector and its ``rotation_nb`` (the raw gyro unused), with the source's ``terms``:
-    the innovation (rad), the Jacobian, R and the gate's noise (rad²), and whether the model
-    holds (not for a field the Earth's does not explain or too steep to head by, nor where the
+    the innovation (rad), the Jacobian, R and the gate's noise (rad²), and its fate
+    (:mod:`buoy_nav.aiding.model_kernels`: ``REFUSED`` for a field the Earth's does not
+    explain, ``NO_GEOMETRY`` for one too steep to head by, ``LEFT_TO_THE_ENGINE`` where the
     filter has left the cell the Earth's field was taken in)."""
     status, _, innovation, jacobian, covariance, gate_covariance = magnetic_heading_model(
         rotation_nb,
@@ -182,7 +188,13 @@ def magnetometer_stretch_model(values, state, rotation_nb, raw_gyro_rad_s, terms
         values[CELL] < latitude < values[CELL + 1]
         and values[CELL + 2] < longitude < values[CELL + 3]
     )
-    return innovation, jacobian, covariance, gate_covariance, status == MEASURED and in_cell
+    return (
+        innovation,
+        jacobian,
+        covariance,
+        gate_covariance,
+        status if in_cell else LEFT_TO_THE_ENGINE,
+    )
 
 
 class MagneticField(NamedTuple):
@@ -361,7 +373,7 @@ class MagnetometerSource(AidingSource):
         )
         if status == REFUSED:
             return Reason.MAGNETIC_FIELD_INCONSISTENT
-        if status == TOO_STEEP:
+        if status == NO_GEOMETRY:
             return None
         return MeasurementModel(
             predicted=np.array((predicted,)),
@@ -372,6 +384,7 @@ class MagnetometerSource(AidingSource):
         )
 
     stretch_model = staticmethod(magnetometer_stretch_model)
+    stretch_refusal = Reason.MAGNETIC_FIELD_INCONSISTENT
 
     def stretch_values(self, measurement: MagneticField, position_rad: tuple) -> tuple:
         """The numbers :func:`magnetometer_stretch_model` reads of a validated field, the

@@ -19,6 +19,12 @@ import numpy as np
 
 from buoy_nav import earth, rotations
 
+# What a compiled stretch's measurement function makes of a measurement (its ``fate``): a
+# model, none for want of geometry (the engine's ``None``), a refusal (the source's
+# ``stretch_refusal`` reason), or a case the engine is to take (the measurement's values taken
+# for a place the filter has left).
+HOLDS, NO_GEOMETRY, REFUSED, LEFT_TO_THE_ENGINE = range(4)
+
 cross = numba.njit(cache=True)(rotations.cross)
 skew = numba.njit(cache=True)(rotations.skew)
 enu_offset = numba.njit(cache=True)(earth.enu_offset_scalar)
