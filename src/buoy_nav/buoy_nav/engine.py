@@ -436,6 +436,13 @@ class FusionEngine:
         return transitions
 
     @property
+    def imu_clock_steps(self) -> list[tuple[float, float]]:
+        """The steps of the IMU's clock undone so far, as (stamp of the first sample after the
+        step on the aiding sources' clock, s; step, s), the engine's own list: it grows as
+        steps are found (read it, do not change it)."""
+        return self._imu_input.clock.steps
+
+    @property
     def stretched_sources(self) -> tuple[AidingSource, ...]:
         """The aiding sources whose measurements :meth:`add_inputs` may take in its compiled
         stretches besides the IMU's samples (the motion pack's attitude, the magnetometer's

@@ -104,22 +104,41 @@ class StampBook:
     message's own (sec, nanosec). Solutions come out in stamp order, so the book is a queue;
     it keeps the newest ``capacity`` samples (delayed output needs
     ``max_measurement_delay_s`` × IMU rate of them).
+
+    A sample the engine re-stamped after a step of the IMU's clock (``clock_steps``, the
+    engine's :attr:`~buoy_nav.engine.FusionEngine.imu_clock_steps`) has no header stamp of its
+    own: its stamp is rounded to the nanosecond. Looked up, it could meet another sample's
+    header of the same float stamp (after a step back, the stamps of the seconds that follow
+    run over again), found or not depending on how far the input had been read: live and
+    offline would stamp it differently.
     """
 
-    def __init__(self, capacity: int = 8192):
+    def __init__(self, clock_steps=(), capacity: int = 8192):
         self._stamps: deque[tuple[float, int, int]] = deque(maxlen=capacity)
+        self._clock_steps = clock_steps
 
     def remember(self, t_s: float, sec: int, nanosec: int) -> None:
         self._stamps.append((t_s, sec, nanosec))
 
     def exact(self, t_s: float) -> tuple[int, int]:
-        """(sec, nanosec) of the sample stamped ``t_s`` (s); rounded from ``t_s`` if unknown."""
+        """(sec, nanosec) of the sample stamped ``t_s`` (s); rounded from ``t_s`` if unknown
+        or re-stamped."""
         stamps = self._stamps
         while stamps and stamps[0][0] < t_s:
             stamps.popleft()
-        if stamps and stamps[0][0] == t_s:
+        if stamps and stamps[0][0] == t_s and not self._restamped(t_s):
             return stamps[0][1], stamps[0][2]
         return seconds_to_stamp(t_s)
+
+    def _restamped(self, t_s: float) -> bool:
+        """Whether the sample the engine stamped ``t_s`` (s) was moved off its header stamp by
+        the steps of the IMU's clock undone before it (their offsets summed as the engine's
+        clock sums them)."""
+        offset_s = 0.0
+        for first_s, step_s in self._clock_steps:
+            if t_s >= first_s:
+                offset_s -= step_s
+        return offset_s != 0.0
 
 
 def feed_message(

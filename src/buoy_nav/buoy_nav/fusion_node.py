@@ -153,7 +153,7 @@ class FusionNode(FlushingNode):
         super().__init__(FUSION_NODE_NAME)
         self.config = self._declare_fusion_config()
         self.engine = FusionEngine(self.config)
-        self.stamps = StampBook()
+        self.stamps = StampBook(self.engine.imu_clock_steps)
         self._messages_in = collections.Counter()
         self._messages_in_at_last_report = collections.Counter()
         self._last_report_s = time.monotonic()

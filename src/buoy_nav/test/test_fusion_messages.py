@@ -38,6 +38,7 @@ from buoy_common.contract import (
     NAV_VELOCITY_TOPIC,
     TF_MSGTYPE,
     Reason,
+    seconds_to_stamp,
 )
 from buoy_nav.config import fusion_config_from_files
 from buoy_nav.engine import FusionEngine, NavSolution
@@ -206,6 +207,33 @@ def test_nav_stamps_are_the_imu_stamps_to_the_nanosecond(sensor_inputs, produced
             messages[NAV_FIX_TOPIC].header.stamp.nanosec,
         )
         assert values.sec + values.nanosec * 1e-9 == solution.t_s
+
+
+def test_a_restamped_sample_is_stamped_alike_however_far_the_input_was_read():
+    """After a step back of the IMU's clock the engine re-stamps the samples onto the aiding
+    clock, and the headers of the seconds after the step run over the same stamps again. A
+    re-stamped solution is stamped by rounding, whether the book already holds a later sample
+    whose header has its float stamp (offline, the input read ahead) or not yet (live)."""
+    step_s = -5.000000123
+    restamped_s = 1_767_225_634.99
+    steps = [(restamped_s - 0.5, step_s)]
+    header = (1_767_225_634, 990_000_000)  # a later sample's, read ahead
+    float_stamp = header[0] + header[1] * 1e-9
+    assert float_stamp == restamped_s
+    before = (1_767_225_620, 990_000_000)  # a sample's before the step
+    before_s = before[0] + before[1] * 1e-9
+    read_ahead, live = StampBook(steps), StampBook(steps)
+    for book in (read_ahead, live):
+        book.remember(before_s, *before)
+    read_ahead.remember(float_stamp, *header)
+    rounded = seconds_to_stamp(restamped_s)
+    assert rounded != header
+    # Before the step, and with no step at all, the header's own stamp.
+    assert read_ahead.exact(before_s) == live.exact(before_s) == before
+    assert read_ahead.exact(restamped_s) == live.exact(restamped_s) == rounded
+    plain = StampBook()
+    plain.remember(float_stamp, *header)
+    assert plain.exact(restamped_s) == header
 
 
 def test_imu_samples_from_cdr_bytes_give_the_same_solutions(sensor_inputs, produced):

@@ -161,7 +161,7 @@ class OfflineFusion:
             from buoy_nav.smoothed_solutions import FixedIntervalSmoother
 
             self.smoother = FixedIntervalSmoother(self.engine, smoother_spill_parent)
-        self.stamps = StampBook()
+        self.stamps = StampBook(self.engine.imu_clock_steps)
         self.writer = writer
         self.nav_output = NavOutputRate(nav_rate_hz)
         self.rejections: Counter[str] = Counter()
