@@ -545,10 +545,11 @@ def test_stretches_take_the_mooring_among_imu_samples_alone(stretch_counts):
 
 
 def test_stretches_take_the_magnetometer_as_one_input_at_a_time_does(stretch_counts):
-    """A single GNSS antenna and a magnetometer at 10 Hz, a steel hull passing for ten seconds
-    (the gate rejects its fields, and a run of rejections suspends the magnetometer until it
-    agrees again), and a field not finite: the same to the bit, most of the fields' epochs in
-    the stretches, and most of those of the suspended magnetometer, watched there."""
+    """A single GNSS antenna at 1 Hz and a magnetometer at 10 Hz, a steel hull passing for ten
+    seconds (the gate rejects its fields, and a run of rejections suspends the magnetometer
+    until it agrees again), and a field not finite: the same to the bit, most of the fields'
+    epochs in the stretches, and most of those of the suspended magnetometer, watched there
+    (nine in ten alone at their stamp: an epoch that fuses nothing)."""
     duration_s = 120.0
     _, _, messages = scenario_messages(
         "sea_state",
@@ -559,7 +560,12 @@ def test_stretches_take_the_magnetometer_as_one_input_at_a_time_does(stretch_cou
             "sensors.magnetometer.disturbances_s=[[60, 70]]",
         ),
     )
-    inputs = fusion_inputs(messages)
+    inputs = [
+        (kind, item)
+        for kind, item in fusion_inputs(messages)
+        if kind not in (GNSS_FIX_TOPIC, GNSS_VELOCITY_TOPIC)
+        or round(header_seconds(item.header) * 10.0) % 10 == 0
+    ]
     fields = [index for index, (kind, _) in enumerate(inputs) if kind == MAGNETOMETER_TOPIC]
     broken = copy.deepcopy(inputs[fields[500]][1])
     broken.magnetic_field.y = math.nan
