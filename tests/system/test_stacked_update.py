@@ -2,12 +2,13 @@
 simulator.
 
 When every measurement of a stamp comes from a source whose model is one compiled call (the
-position, velocity and antenna vectors), the engine gates them and applies them in one compiled
+position, velocity and antenna vectors, the magnetometer's field), the engine gates them and applies them in one compiled
 call and books them as the gates book them; a stamp with a measurement its gate rejects, or of
 a suspended source, goes the interpreted way. Run with the compiled models' path and without
 it, the same messages must give the same solutions, counters and source health to the bit: for
 a three-antenna buoy in a sea whose every epoch passes, for a receiver's heading, for a
-moored buoy without GNSS, and for a filter told that its
+moored buoy without GNSS, for a single antenna with a magnetometer that a passing hull gets
+suspended, and for a filter told that its
 antennas are 1.5 m from where they are, whose positions are rejected, whose velocity is
 suspended and which realigns.
 """
@@ -16,7 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 from test_compiled_update import assert_same_solutions
-from test_nav_sensor_sets import fuse, moored_config, scenario_messages
+from test_nav_sensor_sets import (
+    MAGNETOMETER,
+    calibrated_magnetometer,
+    fuse,
+    moored_config,
+    scenario_messages,
+)
 from test_nav_simulated import simulate
 
 from buoy_common.contract import Reason
@@ -26,6 +33,7 @@ from buoy_nav.aiding import (
     GnssFixSource,
     GnssHeadingSource,
     GnssVelocitySource,
+    MagnetometerSource,
     MooredSource,
 )
 from buoy_nav.config import FusionConfig
@@ -37,6 +45,7 @@ COMPILED_MODEL_SOURCES = (
     GnssBaselineTertiarySource,
     GnssHeadingSource,
     MooredSource,
+    MagnetometerSource,
 )
 
 
@@ -98,6 +107,31 @@ def test_a_mooring_without_gnss_gives_the_same_filter(monkeypatch):
     assert_same_solutions(solutions, expected)
     assert_same_engine(engine, reference)
     assert engine.health().counters[MooredSource.kind].accepted > 100
+
+
+def test_a_single_antenna_and_a_magnetometer_give_the_same_filter(monkeypatch):
+    """The magnetometer's field (gated with one sample's noise, updated with its share of the
+    calibration's) stacked with the position and velocity, and a steel hull passing that gets
+    the magnetometer suspended for a while."""
+    scenario, _, messages = scenario_messages(
+        "sea_state",
+        120.0,
+        (
+            "sensors.gnss.receiver=single_antenna",
+            *MAGNETOMETER,
+            "sensors.magnetometer.disturbances_s=[[60, 70]]",
+        ),
+    )
+    config = FusionConfig(
+        site_latitude_deg=35.0, site_longitude_deg=120.0, **calibrated_magnetometer()
+    )
+    (engine, solutions, _, _), (reference, expected, _, _) = with_and_without_the_compiled_path(
+        lambda: fuse(config, messages, scenario), monkeypatch
+    )
+    assert_same_solutions(solutions, expected)
+    assert_same_engine(engine, reference)
+    counters = engine.health().counters[MagnetometerSource.kind]
+    assert counters.accepted > 500 and counters.rejected.get(Reason.SUSPENDED, 0) > 0
 
 
 def test_a_wrong_lever_arm_gives_the_same_rejections_and_filter(monkeypatch):

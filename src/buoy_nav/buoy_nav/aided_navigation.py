@@ -149,10 +149,16 @@ class AidedNavigation:
     def gated_update(self, models: list[MeasurementModel], probabilities) -> StackedUpdate:
         """Gate each of the ``models`` of one stamp (linearised at the nominal state now) at its
         chi-square probability (``probabilities``, in order) and, when each passes, the stacked
-        update of :meth:`correct`, in one compiled call; nothing is changed (take the update
-        with :meth:`apply_correction`)."""
+        update of :meth:`correct`, in one compiled call, each gated with its gate's noise;
+        nothing is changed (take the update with :meth:`apply_correction`)."""
+        gate_covariance = None
+        if any(model.gate_covariance is not None for model in models):
+            gate_covariance = block_diagonal([model.gated_covariance for model in models])
         return self.kalman.gated_update(
-            *_stacked(models), [model.innovation.shape[0] for model in models], probabilities
+            *_stacked(models),
+            [model.innovation.shape[0] for model in models],
+            probabilities,
+            gate_covariance,
         )
 
     def apply_correction(self, correction, covariance, positive_definite: bool) -> None:

@@ -667,7 +667,7 @@ class FusionEngine:
         models = []
         for source, measurement in group:
             model = source.model(measurement, point)
-            if not isinstance(model, MeasurementModel) or model.gate_covariance is not None:
+            if not isinstance(model, MeasurementModel):
                 return False
             models.append(model)
         nav = self._nav

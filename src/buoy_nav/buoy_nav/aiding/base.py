@@ -249,10 +249,10 @@ class AidingSource(abc.ABC):
     arrays (``stretch_model``, :mod:`buoy_nav.aiding_epoch`) may say ``REFUSED``
     (:mod:`buoy_nav.aiding.model_kernels`)."""
     has_compiled_model: ClassVar[bool] = False
-    """Whether :meth:`model` is one compiled call (:mod:`buoy_nav.aiding.model_kernels`) that
-    keeps nothing between measurements and whose gate takes R: the engine then gates a stamp's
-    measurements of such sources and applies them in one compiled call, and gates and books
-    them the interpreted way when one of them fails its gate."""
+    """Whether :meth:`model` is one compiled call (:mod:`buoy_nav.aiding.model_kernels`) that keeps
+    nothing between measurements (its gate may take a noise of its own, ``gate_covariance``): the
+    engine then gates a stamp's measurements of such sources and applies them in one compiled call,
+    and gates and books them the interpreted way when one of them fails its gate."""
 
     def __init__(self, config: FusionConfig, states: StateLayout):
         self.config = config

@@ -383,6 +383,7 @@ class MagnetometerSource(AidingSource):
             gate_covariance=gate_covariance,
         )
 
+    has_compiled_model = True
     stretch_model = staticmethod(magnetometer_stretch_model)
     stretch_refusal = Reason.MAGNETIC_FIELD_INCONSISTENT
 
