@@ -1,16 +1,14 @@
-"""A GNSS epoch's compiled gates and stacked update against the interpreted ones, on the
-simulator.
+"""A GNSS epoch's compiled gates and stacked update against the interpreted ones, on the simulator.
 
 When every measurement of a stamp comes from a source whose model is one compiled call (the
-position, velocity and antenna vectors, the magnetometer's field), the engine gates them and applies them in one compiled
-call and books them as the gates book them; a stamp with a measurement its gate rejects, or of
-a suspended source, goes the interpreted way. Run with the compiled models' path and without
-it, the same messages must give the same solutions, counters and source health to the bit: for
-a three-antenna buoy in a sea whose every epoch passes, for a receiver's heading, for a
-moored buoy without GNSS, for a single antenna with a magnetometer that a passing hull gets
-suspended, and for a filter told that its
-antennas are 1.5 m from where they are, whose positions are rejected, whose velocity is
-suspended and which realigns.
+position, velocity and antenna vectors, the magnetometer's field), the engine gates them and applies
+them in one compiled call and books them as the gates book them; a stamp with a measurement its gate
+rejects, or of a suspended source, goes the interpreted way. Run with the compiled models' path and
+without it, the same messages must give the same solutions, counters and source health to the bit:
+for a three-antenna buoy in a sea whose every epoch passes, for a receiver's heading, for a moored
+buoy without GNSS, for a single antenna with a magnetometer that a passing hull gets suspended, and
+for a filter told that its antennas are 1.5 m from where they are, whose positions are rejected,
+whose velocity is suspended and which realigns.
 """
 
 from __future__ import annotations
