@@ -81,6 +81,8 @@ class StretchedAiding:
             if source.superseded_by not in registered or source.superseded_by in stretched_kinds
         )
         self._slot = {source: slot for slot, source in enumerate(self.sources)}
+        self._watch: dict = {}
+        """The outcomes each suspended source may have watched, as :meth:`ready` found them."""
         self._attitude_start = sources[0].states.attitude.start
         self._none = AidingArguments(
             np.zeros((0, ROW_SIZE)),
@@ -142,21 +144,26 @@ class StretchedAiding:
         return np.array([*(source in ready for source in self.sources), False])
 
     def ready(self, nav) -> frozenset:
-        """The sources whose measurements a stretch may take now (see the module docstring)."""
+        """The sources whose measurements a stretch may take now (see the module docstring);
+        the outcomes each suspended one may have watched are kept for :meth:`arguments`."""
         parts = self._parts
+        self._watch = {}
         if not self.sources or not parts.integrity.trusted or nav.records_epochs:
             return frozenset()
         gates = parts.gates
-        return frozenset(
-            source
-            for source in self.sources
-            if parts.sequences[source.kind].steady
-            and not gates.contradicted(source.kind)
-            and (
-                gates.unmoved_by_passes(source.kind)
-                or gates.outcomes_while_suspended(source.kind) > 0
-            )
-        )
+        ready = []
+        for source in self.sources:
+            kind = source.kind
+            if not parts.sequences[kind].steady or gates.contradicted(kind):
+                continue
+            if gates.unmoved_by_passes(kind):
+                ready.append(source)
+                continue
+            watched = gates.outcomes_while_suspended(kind)
+            if watched > 0:
+                self._watch[source] = watched
+                ready.append(source)
+        return frozenset(ready)
 
     def queued(self, ready: frozenset, position_rad: tuple) -> AidingRows:
         """The queued measurements of the ``ready`` sources taken out of the engine's queue as
@@ -188,13 +195,12 @@ class StretchedAiding:
         """:func:`~buoy_nav.imu_stretch.imu_stretch`'s ``aiding`` for ``rows`` of the
         ``ready`` sources: the rows, each source's sequence, the terms, room for the books and
         the outcomes of each suspended source the stretch may watch."""
-        gates = self._parts.gates
         sequences = np.zeros((len(self.sources), SEQUENCE_SIZE))
         watch = np.zeros(len(self.sources))
         for slot, source in enumerate(self.sources):
             sequences[slot] = sequence_of(self._parts.sequences[source.kind])
             if source in ready:
-                watch[slot] = gates.outcomes_while_suspended(source.kind)
+                watch[slot] = self._watch.get(source, 0)
         return AidingArguments(
             rows,
             sequences,
