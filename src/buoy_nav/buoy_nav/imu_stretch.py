@@ -48,10 +48,7 @@ from buoy_nav.aiding_epoch import (
     due_status,
     first_queued,
 )
-from buoy_nav.mooring_epoch import BOOK_SIZE as MOORING_BOOK_SIZE
-from buoy_nav.mooring_epoch import PERIOD, MooringArguments, mooring_epoch
-from buoy_nav.mooring_epoch import STATE_SIZE as MOORING_STATE_SIZE
-from buoy_nav.mooring_epoch import TERMS_SIZE as MOORING_TERMS_SIZE
+from buoy_nav.mooring_epoch import PERIOD, mooring_epoch, no_mooring
 from buoy_nav.prediction import PREDICTION_RESYNC_INTERVAL_S
 from buoy_nav.sequence_kernels import SEQUENCE_SIZE, queued_in_sequence
 from buoy_nav.solution_rows import write_row
@@ -655,13 +652,6 @@ def load_compiled_imu_stretch() -> None:
             0,
             np.zeros(0),
         ),
-        MooringArguments(
-            np.zeros(MOORING_TERMS_SIZE),
-            np.eye(3),
-            np.zeros(MOORING_STATE_SIZE),
-            np.zeros(0),
-            np.zeros(0),
-            np.zeros((0, MOORING_BOOK_SIZE)),
-        ),
+        no_mooring(),
         np.zeros(COUNTS_SIZE, dtype=np.int64),
     )

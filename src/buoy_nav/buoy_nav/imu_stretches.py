@@ -211,7 +211,7 @@ class ImuStretches:
             covariance = covariance.copy()  # the epochs' covariance, the filter's if they end
         counts = np.zeros(COUNTS_SIZE, dtype=np.int64)
         counts[AIDING_TAIL] = offer.aiding_queued
-        counts[WINDOW_END] = offer.mooring.window_stamps.size - offer.mooring.books.shape[0]
+        counts[WINDOW_END] = offer.mooring.watch.stamps.size - offer.mooring.books.shape[0]
         count, stepped, stop = imu_stretch(
             raw,
             offer.order,

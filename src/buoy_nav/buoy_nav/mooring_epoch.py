@@ -9,13 +9,14 @@ compiled model, its gate and update, the injection of the correction and its car
 prediction. It keeps the books the engine then keeps from what it used (the velocity and its
 covariance for the mean velocity's watches, the anchor, the gate).
 
+Its innovation watch is the engine's own compiled one (:func:`~buoy_nav.innovation_watch.watched`)
+on the same window: the σ it widens or narrows moves the next epochs' noise in the stretch as
+it does in the engine.
+
 It returns False, with nothing changed, where the engine must make the epoch: the gate fails,
 the covariance needs a repair, a block of the mean velocity's watches closes (their verdict may
-change the process noise), or the mooring's innovations may have begun to widen its σ. The last
-is judged as :class:`~buoy_nav.aiding.moored.InnovationWatch` judges it, on the normalised
-squares of the window's horizontal innovations at the stated σ, with a margin far above the
-rounding of the two formulations: an epoch the kernel makes never meets a σ the watch would
-have widened.
+change the process noise), or the innovation watch has something to say (a warning, or that one
+no longer holds: the engine logs it).
 """
 
 import math
@@ -28,47 +29,50 @@ from buoy_nav.aiding.model_kernels import enu_offset
 from buoy_nav.aiding.moored import anchor_model
 from buoy_nav.epoch_kernels import corrected
 from buoy_nav.error_dynamics import propagated_covariance_kernel
+from buoy_nav.innovation_watch import SAYS_NOTHING, SCALE, WatchArrays, unwatched, watched
 from buoy_nav.kalman_kernel import gated_stacked_update
 from buoy_nav.strapdown_kernel import ALTITUDE, DURATION, LATITUDE, LONGITUDE, VELOCITY
 
 # The mooring's terms (``terms``): the anchor's time constant (s), the constraint's period (s),
-# its gate's threshold (three dimensions), the factor on its horizontal variance, its stated
-# horizontal variance (m²), the innovations' window (s) and the span of it they must cover to be
-# judged (s), the largest square of their normalised RMS that surely leaves the σ unwidened, the
-# blocks of the two mean-velocity watches (s), and where the error states' position, velocity
-# and attitude begin.
-(TIME_CONSTANT, PERIOD, THRESHOLD, VARIANCE_SCALE, HORIZONTAL_VARIANCE) = range(5)
-(WINDOW, MIN_SPAN, RATIO_SQ_LIMIT, DRIFT_BLOCK, NOISE_BLOCK) = range(5, 10)
-(POSITION_START, VELOCITY_START, ATTITUDE_START) = range(10, 13)
-TERMS_SIZE = 13
-# What the epochs move (``state``): the anchor (rad, rad, m) and its stamp (s), whether the
-# innovations leave the σ as stated (1.0) or may widen it (0.0), and the start of each watch's
-# block in progress (s, NaN: none).
-ANCHOR, ANCHOR_T, QUIET, DRIFT_BLOCK_START, NOISE_BLOCK_START = 0, 3, 4, 5, 6
-STATE_SIZE = 7
+# its gate's threshold (three dimensions), the blocks of the two mean-velocity watches (s), and
+# where the error states' position, velocity and attitude begin.
+TIME_CONSTANT, PERIOD, THRESHOLD, DRIFT_BLOCK, NOISE_BLOCK = range(5)
+POSITION_START, VELOCITY_START, ATTITUDE_START = range(5, 8)
+TERMS_SIZE = 8
+# What the epochs move (``state``) besides the innovation watch: the anchor (rad, rad, m) and
+# its stamp (s), and the start of each mean-velocity watch's block in progress (s, NaN: none).
+ANCHOR, ANCHOR_T, DRIFT_BLOCK_START, NOISE_BLOCK_START = 0, 3, 4, 5
+STATE_SIZE = 6
 # The books of an epoch (``books``, a row each): its stamp (s), the filter's velocity (ENU m/s)
 # and that velocity's covariance (3×3 m²/s², row-major) before the epoch, the anchor (rad, rad,
 # m), the innovation (m, ENU), its S (3×3 m², row-major) and NIS.
 BOOK_T, BOOK_VELOCITY, BOOK_VELOCITY_COVARIANCE, BOOK_ANCHOR = 0, 1, 4, 13
 BOOK_INNOVATION, BOOK_S, BOOK_NIS = 16, 19, 28
 BOOK_SIZE = 29
-MARGIN = 1e-9
-"""Share by which the kernel's judgement of the innovations' RMS errs on the side of the
-engine: their rounding differs by some 1e-15."""
 
 
 class MooringArguments(NamedTuple):
     """The arrays a stretch hands the mooring's epochs (laid out above): its terms, its stated
-    covariance (3×3 m², ENU), its state, the stamps (s) of the innovations' window and their
-    normalised squares (room for the new ones after), and room for the epochs' books (none:
-    the stretch stops at the constraint)."""
+    covariance (3×3 m², ENU), its state, its innovation watch (its window from index 0, room
+    for the new innovations after) and room for the epochs' books (none: the stretch stops at
+    the constraint)."""
 
     terms: np.ndarray
     covariance: np.ndarray
     state: np.ndarray
-    window_stamps: np.ndarray
-    window_squares: np.ndarray
+    watch: WatchArrays
     books: np.ndarray
+
+
+def no_mooring() -> MooringArguments:
+    """The arguments of a stretch that stops at the constraint: no room for its epochs."""
+    return MooringArguments(
+        np.zeros(TERMS_SIZE),
+        np.zeros((3, 3)),
+        np.zeros(STATE_SIZE),
+        unwatched(),
+        np.zeros((0, BOOK_SIZE)),
+    )
 
 
 @numba.njit(cache=True)
@@ -78,18 +82,16 @@ def mooring_epoch(
     """The mooring's epoch at the IMU sample stamped ``t`` (s), the filter (``filter_state``)
     already there, as the engine makes it: the anchor moved, the ``covariance`` propagated with
     the process noise's ``noise_terms`` when samples were integrated since, the model, gate and
-    update and, when the gate passes and the covariance after it is positive definite, the
-    injection, the new covariance, (when ``carried``) the correction carried over to the
-    prediction (``ahead_state``, at ``ahead_t`` s), the ``mooring``'s state moved, the window's
-    bounds (``window``: its first and past-last index) and the ``book`` written. False, with
-    nothing changed, when the engine is to make it (see the module docstring)."""
+    update and, when the gate passes, the covariance after it is positive definite and the
+    innovation watch has nothing to say, the injection, the new covariance, (when ``carried``)
+    the correction carried over to the prediction (``ahead_state``, at ``ahead_t`` s), the
+    ``mooring``'s state and watch moved (``window``: the watch's first and past-last index) and
+    the ``book`` written. False, with nothing changed, when the engine is to make it (see the
+    module docstring)."""
     terms, state = mooring.terms, mooring.state
-    if state[QUIET] == 0.0 or _block_closes(state, terms, t):
+    if _block_closes(state, terms, t):
         return False
-    weight = -math.expm1(-(t - state[ANCHOR_T]) / terms[TIME_CONSTANT])
-    anchor = np.empty(3)
-    for i in range(3):
-        anchor[i] = state[ANCHOR + i] + weight * (filter_state[LATITUDE + i] - state[ANCHOR + i])
+    anchor = _anchor_moved(state, terms, filter_state, t)
     offset = enu_offset(
         filter_state[LATITUDE],
         filter_state[LONGITUDE],
@@ -98,10 +100,12 @@ def mooring_epoch(
         anchor[1],
         anchor[2],
     )
+    scale = mooring.watch.status[SCALE]
+    variance_scale = scale * scale
     _, innovation, jacobian, measurement_covariance = anchor_model(
         np.array(offset),
         mooring.covariance,
-        terms[VARIANCE_SCALE],
+        variance_scale,
         int(terms[POSITION_START]),
         covariance.shape[0],
     )
@@ -121,14 +125,56 @@ def mooring_epoch(
     )
     if not (accepted and positive):
         return False
+    says, watch_status, watch_window = _watch_tried(
+        mooring.watch,
+        window,
+        t,
+        innovation,
+        innovation_covariance,
+        variance_scale * mooring.covariance[0, 0],
+    )
+    if says != SAYS_NOTHING:
+        return False
     _write_book(book, t, filter_state, covariance, terms, anchor, innovation, innovation_covariance)
     book[BOOK_NIS] = nis[0]
     corrected(
         filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t, carried
     )
-    _moved(state, terms, t, anchor)
-    judged(mooring, window, t, innovation, innovation_covariance)
+    _moved(state, t, anchor)
+    mooring.watch.status[:] = watch_status
+    window[:] = watch_window
     return True
+
+
+@numba.njit(cache=True)
+def _anchor_moved(state, terms, filter_state, t):
+    """The anchor (rad, rad, m) moved toward the filter's position at ``t`` (s), with the
+    anchor's time constant."""
+    weight = -math.expm1(-(t - state[ANCHOR_T]) / terms[TIME_CONSTANT])
+    anchor = np.empty(3)
+    for i in range(3):
+        anchor[i] = state[ANCHOR + i] + weight * (filter_state[LATITUDE + i] - state[ANCHOR + i])
+    return anchor
+
+
+@numba.njit(cache=True)
+def _watch_tried(watch, window, t, innovation, innovation_covariance, fused_variance):
+    """The innovation watch's verdict on the epoch's horizontal innovation (m, ENU), with the
+    filter's part of its covariance (S less the ``fused_variance`` m² of the mooring's σ), tried
+    on copies of its status and of the window's bounds (``window``): what it says, the status
+    and the bounds. Its row is written past the window's end, where nothing reads it before the
+    bounds move there."""
+    filter_covariance = np.empty((2, 2))
+    for i in range(2):
+        for j in range(2):
+            identity = 1.0 if i == j else 0.0
+            filter_covariance[i, j] = innovation_covariance[i, j] - fused_variance * identity
+    tried = WatchArrays(
+        watch.terms, watch.status.copy(), watch.stamps, watch.projected, watch.eigenvalues
+    )
+    bounds = window.copy()
+    says = watched(tried, bounds, t, innovation[:2].copy(), filter_covariance)
+    return says, tried.status, bounds
 
 
 @numba.njit(cache=True)
@@ -160,7 +206,7 @@ def _write_book(
 
 
 @numba.njit(cache=True)
-def _moved(state, terms, t, anchor) -> None:
+def _moved(state, t, anchor) -> None:
     """The mooring's state after its epoch at ``t`` (s): the new ``anchor``, the watches'
     blocks begun."""
     state[ANCHOR : ANCHOR + 3] = anchor
@@ -168,30 +214,3 @@ def _moved(state, terms, t, anchor) -> None:
     for block_start in (DRIFT_BLOCK_START, NOISE_BLOCK_START):
         if math.isnan(state[block_start]):
             state[block_start] = t
-
-
-@numba.njit(cache=True)
-def judged(mooring, window, t, innovation, innovation_covariance) -> None:
-    """The horizontal innovation's normalised square at the stated σ added to the window (the
-    ``mooring``'s, ``window`` its bounds) and the window judged: no longer quiet once the
-    squares' mean could reach :data:`RATIO_SQ_LIMIT`."""
-    terms = mooring.terms
-    stated = terms[HORIZONTAL_VARIANCE]
-    # The filter's part of S, with the σ the watch judges at instead of the one fused.
-    shift = stated - terms[VARIANCE_SCALE] * stated
-    a = innovation_covariance[0, 0] + shift
-    b = innovation_covariance[0, 1]
-    d = innovation_covariance[1, 1] + shift
-    east, north = innovation[0], innovation[1]
-    square = (d * east * east - 2.0 * b * east * north + a * north * north) / (a * d - b * b)
-    stamps, squares = mooring.window_stamps, mooring.window_squares
-    end = window[1]
-    stamps[end], squares[end] = t, square
-    window[1] = end + 1
-    while stamps[window[0]] < t - terms[WINDOW]:
-        window[0] += 1
-    if t - stamps[window[0]] < terms[MIN_SPAN]:
-        return
-    count = window[1] - window[0]
-    if np.sum(squares[window[0] : window[1]]) > terms[RATIO_SQ_LIMIT] * 2.0 * count:
-        mooring.state[QUIET] = 0.0

@@ -6,9 +6,10 @@ A stretch makes the mooring's epochs when the mooring (:mod:`buoy_nav.aiding.moo
 engine's one constraint and its anchor is set; when no fix can reset the anchor (none accepted
 for ``coasting_timeout_s``, and none in the stretch: it takes no GNSS measurement) and the
 receiver's motion holds nothing to judge the mooring by; when a pass of its gate cannot move its
-health and it is neither suspended nor contradicted; when the filter is trusted, no smoother
-records the epochs and the mooring's innovations leave its σ as stated. Its epochs then move
-nothing else the engine keeps but what :meth:`StretchedMooring.booker` books.
+health and it is neither suspended nor contradicted; when the filter is trusted and no smoother
+records the epochs. Its epochs then move nothing else the engine keeps but what
+:meth:`StretchedMooring.booker` books (its innovation watch among them: the books give it the
+same innovations, and it widens or narrows the σ as it did in the stretch).
 """
 
 import math
@@ -17,7 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from buoy_nav.aiding.base import AIDED_QUANTITIES, FIX
-from buoy_nav.aiding.moored import WARNING_RATIO, MooredSource
+from buoy_nav.aiding.moored import MooredSource
 from buoy_nav.chi_square import chi_square_quantile
 from buoy_nav.error_state_filter import GateResult
 from buoy_nav.mooring_epoch import (
@@ -34,23 +35,17 @@ from buoy_nav.mooring_epoch import (
     BOOK_VELOCITY_COVARIANCE,
     DRIFT_BLOCK,
     DRIFT_BLOCK_START,
-    HORIZONTAL_VARIANCE,
-    MARGIN,
-    MIN_SPAN,
     NOISE_BLOCK,
     NOISE_BLOCK_START,
     PERIOD,
     POSITION_START,
-    QUIET,
-    RATIO_SQ_LIMIT,
     STATE_SIZE,
     TERMS_SIZE,
     THRESHOLD,
     TIME_CONSTANT,
-    VARIANCE_SCALE,
     VELOCITY_START,
-    WINDOW,
     MooringArguments,
+    no_mooring,
 )
 
 
@@ -63,14 +58,7 @@ class StretchedMooring:
         pseudo = parts.pseudo
         only = pseudo[0] if len(pseudo) == 1 else None
         self.source: MooredSource | None = only if isinstance(only, MooredSource) else None
-        self._none = MooringArguments(
-            np.zeros(TERMS_SIZE),
-            np.zeros((3, 3)),
-            np.zeros(STATE_SIZE),
-            np.zeros(0),
-            np.zeros(0),
-            np.zeros((0, BOOK_SIZE)),
-        )
+        self._none = no_mooring()
         self._threshold = (
             chi_square_quantile(3, self.source.gate_probability) if self.source else math.nan
         )
@@ -84,7 +72,7 @@ class StretchedMooring:
         """Whether a stretch that takes no GNSS measurement may make the mooring's epochs now
         (see the module docstring)."""
         source, parts = self.source, self._parts
-        if source is None or not source.held_as_stated:
+        if source is None or not source.anchored:
             return False
         kind, gates = source.kind, parts.gates
         fix_age_s = parts.recency.age_s(AIDED_QUANTITIES.index(FIX), parts.point.t_s)
@@ -102,14 +90,11 @@ class StretchedMooring:
         """:func:`~buoy_nav.imu_stretch.imu_stretch`'s ``mooring`` with room for ``room``
         epochs."""
         source = self.source
-        stretch = source.stretch()
+        stretch = source.stretch(room)
         states = source.states
         terms = np.zeros(TERMS_SIZE)
         terms[TIME_CONSTANT], terms[PERIOD] = stretch.time_constant_s, stretch.period_s
-        terms[THRESHOLD], terms[VARIANCE_SCALE] = self._threshold, stretch.variance_scale
-        terms[HORIZONTAL_VARIANCE] = stretch.covariance_m2[0, 0]
-        terms[WINDOW], terms[MIN_SPAN] = stretch.window_s, stretch.min_span_s
-        terms[RATIO_SQ_LIMIT] = WARNING_RATIO**2 * (1.0 - MARGIN)
+        terms[THRESHOLD] = self._threshold
         (_, terms[DRIFT_BLOCK]), (_, terms[NOISE_BLOCK]) = stretch.blocks
         terms[POSITION_START] = states.position.start
         terms[VELOCITY_START] = states.velocity.start
@@ -117,12 +102,11 @@ class StretchedMooring:
         state = np.zeros(STATE_SIZE)
         state[ANCHOR : ANCHOR + 3] = stretch.anchor
         state[ANCHOR_T] = stretch.anchor_t_s
-        state[QUIET] = 1.0 if stretch.quiet else 0.0
         (state[DRIFT_BLOCK_START], _), (state[NOISE_BLOCK_START], _) = stretch.blocks
-        stamps = np.concatenate((stretch.window_stamps_s, np.zeros(room)))
-        squares = np.concatenate((stretch.window_squares, np.zeros(room)))
         books = np.zeros((room, BOOK_SIZE))
-        return MooringArguments(terms, stretch.covariance_m2, state, stamps, squares, books)
+        return MooringArguments(
+            terms, stretch.covariance_m2, state, stretch.innovation_watch, books
+        )
 
     def booker(self, arguments: MooringArguments, epochs: int) -> Callable[[float], bool]:
         """What books the first ``epochs`` of the stretch's mooring epochs (``arguments``) as

@@ -48,6 +48,7 @@ from buoy_nav.error_state_filter import (
     strapdown_vector,
 )
 from buoy_nav.geomagnetism import SECONDS_PER_JULIAN_YEAR, wmm_field_enu_t
+from buoy_nav.innovation_watch import SCALE
 from buoy_nav.rotations import cross, skew, wrap_angle
 
 STATES = ERROR_STATES
@@ -267,7 +268,8 @@ def test_anchor_model_is_the_numpy_algebra_to_the_bit(rng):
             state.longitude_rad + rng.normal(0.0, 1e-6),
             state.altitude_m + rng.normal(0.0, 1.0),
         )
-        source._watch.scale = float(rng.choice([1.0, rng.uniform(1.0, 5.0)]))
+        scale = float(rng.choice([1.0, rng.uniform(1.0, 5.0)]))
+        source._watch._watch.status[SCALE] = scale
         offset = np.array(
             earth.enu_offset_scalar(
                 state.latitude_rad, state.longitude_rad, state.altitude_m, *anchor
@@ -276,7 +278,7 @@ def test_anchor_model_is_the_numpy_algebra_to_the_bit(rng):
         jacobian = np.zeros((3, STATES.dim))
         jacobian[:, STATES.position] = np.eye(3)
         widened = stated.copy()
-        widened[:2, :2] *= source._watch.scale**2
+        widened[:2, :2] *= scale * scale
         assert_same_bits(source.model(anchor, point), np.zeros(3), offset, jacobian, widened)
 
 

@@ -1,13 +1,20 @@
 """The mooring's innovation watch: silent and unwidened on innovations as large as stated, a
 warning once a window and a σ widened by what the innovations show on innovations larger,
-both undone when they shrink again."""
+both undone when they shrink again; its compiled sums and roots those of NumPy and SciPy."""
 
 import math
 
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
-from buoy_nav.aiding.moored import WARNING_RATIO, InnovationWatch
+from buoy_nav.innovation_watch import (
+    WARNING_RATIO,
+    InnovationWatch,
+    consistent_scale,
+    pairwise_sum,
+    window_ratio,
+)
 
 WINDOW_S = 300.0
 STATED_SIGMA_M = 0.2
@@ -84,3 +91,37 @@ def test_a_limit_of_one_never_widens():
     watch = InnovationWatch(WINDOW_S, STATED_SIGMA_M, 1.0)
     answers = feed(watch, 0.0, 600.0, 3.0 * STATED_SIGMA_M, 7)
     assert watch.scale == 1.0 and any(answers)
+
+
+@pytest.mark.parametrize("first", [0, 3])
+def test_the_window_is_summed_as_numpy_sums(first):
+    """The compiled pairwise sum against NumPy's on every length up to several blocks and
+    on long windows: the ratio is the vectorised formulation's to the bit."""
+    rng = np.random.default_rng(8)
+    lengths = [*range(600), *rng.integers(600, 20_000, 20)]
+    for length in lengths:
+        values = rng.exponential(size=first + length) * 10.0 ** rng.uniform(-5, 5, first + length)
+        assert pairwise_sum(values, first, length) == np.sum(values[first:]), length
+
+
+def test_the_widened_sigma_is_the_root_scipy_finds():
+    """While the window's innovations are larger than stated, the factor found by the compiled
+    Brent's method is the one SciPy's brentq finds on the same ratio, to the bit."""
+    watch = InnovationWatch(WINDOW_S, STATED_SIGMA_M, SCALE_LIMIT)
+    rng = np.random.default_rng(9)
+    checked = 0
+    for t_s in np.arange(0.0, 900.0):
+        spread = STATED_SIGMA_M * (1.0 + 2.0 * t_s / 900.0)
+        root = rng.normal(0.0, STATED_SIGMA_M, (2, 2))
+        watch.add(float(t_s), spread * rng.standard_normal(2), root @ root.T)
+        if watch.ratio(1.0) <= 1.0 or watch.ratio(SCALE_LIMIT) >= 1.0:
+            continue
+        arrays = watch.arrays(0)
+        bounds = np.array((0, arrays.stamps.size))
+
+        def excess(scale, arrays=arrays, bounds=bounds):
+            return window_ratio(arrays, bounds, scale) - 1.0
+
+        assert consistent_scale(arrays, bounds) == brentq(excess, 1.0, SCALE_LIMIT)
+        checked += 1
+    assert checked > 300

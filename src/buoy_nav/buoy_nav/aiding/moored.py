@@ -35,29 +35,29 @@ stands). Without a receiver it cannot be judged; the start-up statement
 (:mod:`buoy_nav.observability`) says so.
 
 Without GNSS the mooring's own innovations still say when it is held too tight
-(:class:`InnovationWatch`): over ``moored_check_window_s`` the normalised RMS of their
-horizontal part, ``sqrt(Σ NIS / Σ dim)``, is 1 for a consistent filter; beyond
-:data:`WARNING_RATIO` the filter's position wanders from its anchor more than the stated σ
-and the filter's covariance together allow, because a slow tilt error (the gyro's bias wander
-stated too small) drives the velocity, or because the sea moves the buoy further than
-``moored_position_sigma_horizontal_m``.
+(:class:`~buoy_nav.innovation_watch.InnovationWatch`): over ``moored_check_window_s`` the
+normalised RMS of their horizontal part, ``sqrt(Σ NIS / Σ dim)``, is 1 for a consistent filter;
+beyond :data:`~buoy_nav.innovation_watch.WARNING_RATIO` the filter's position wanders from its
+anchor more than the stated σ and the filter's covariance together allow, because a slow tilt
+error (the gyro's bias wander stated too small) drives the velocity, or because the sea moves
+the buoy further than ``moored_position_sigma_horizontal_m``.
 It is said (logged once a window while it holds, and in the diagnostics) and acted on: a source
 that claims more than it delivers is fused with the noise its own innovations show. Beyond
-:data:`WARNING_RATIO` the horizontal σ is widened by the factor that makes the window's
+that ratio the horizontal σ is widened by the factor that makes the window's
 innovations consistent (bounded by ``moored_sigma_scale_limit``; 1 never widens), followed as
 the window moves, back to the stated σ once the innovations are no larger than stated; the
 wider σ lets the velocity's and position's covariance grow with what the mooring cannot hold.
 The vertical σ, which no watch judges, stays as stated.
 
-Offline, the compiled stretches make most of its epochs (:mod:`buoy_nav.mooring_epoch`) while
-its innovations leave the σ as stated and its watches' blocks do not close; its books are then
-kept as :meth:`MooredSource.replayed` says, the same as the engine's to the bit.
+Offline, the compiled stretches make most of its epochs (:mod:`buoy_nav.mooring_epoch`), the
+innovation watch's among them, while it says nothing new and the mean velocity's watches'
+blocks do not close; its books are then kept as :meth:`MooredSource.replayed` says, the same as
+the engine's to the bit.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
 from typing import NamedTuple
 
 import numba
@@ -75,181 +75,23 @@ from buoy_nav.aiding.base import (
 )
 from buoy_nav.aiding.model_kernels import place_identity
 from buoy_nav.chi_square import AGREEMENT_PROBABILITY, chi_square_quantile
+from buoy_nav.innovation_watch import MIN_SPAN_OF_WINDOW, InnovationWatch, WatchArrays
 from buoy_nav.mean_velocity_watch import GYRO_DRIFT, VELOCITY_NOISE, MeanVelocityWatch
-
-MIN_SPAN_OF_WINDOW = 0.2
-"""Share of ``moored_check_window_s`` the measurements must span before the mooring is judged
-(against GNSS, or its σ widened by its own innovations)."""
-WARNING_RATIO = 1.3
-"""Normalised RMS of the mooring's innovations over a window beyond which it warns and starts
-widening its σ: a variance 1.7 times the stated one. Consecutive innovations are correlated
-over the anchor's minutes, so a window holds only a few independent samples and a consistent
-filter's ratio scatters by a tenth or two about 1."""
-
-
-class _WindowRows:
-    """The rows of a sliding window, kept in one C-ordered array so that the window is a view,
-    not a copy: appended at the end, dropped from the start, moved back to the front when the
-    end reaches the capacity (doubled when the window fills more than half of it)."""
-
-    def __init__(self, width: int):
-        self._data = np.empty((64, width))
-        self._start = 0
-        self._end = 0
-
-    @property
-    def rows(self) -> np.ndarray:
-        """The window's rows, oldest first (a view: valid until the next append)."""
-        return self._data[self._start : self._end]
-
-    def append(self, row) -> None:
-        if self._end == len(self._data):
-            live = self._end - self._start
-            target = self._data
-            if 2 * live > len(self._data):
-                target = np.empty((2 * len(self._data), self._data.shape[1]))
-            target[:live] = self._data[self._start : self._end]
-            self._data, self._start, self._end = target, 0, live
-        self._data[self._end] = row
-        self._end += 1
-
-    def drop_first(self) -> None:
-        self._start += 1
-
-
-class InnovationWatch:
-    """The mooring's horizontal innovations over the last ``window_s`` (s): their normalised
-    RMS at the stated σ, the factor its σ is widened by, and the warning beyond
-    :data:`WARNING_RATIO` (once a window while it holds).
-
-    Each innovation ν (m, ENU east and north) is kept with the part of its covariance that is
-    the filter's, C = H P Hᵀ (m²), so the normalised RMS is known for any σ of the mooring::
-
-        ratio(k)² = Σ νᵀ (C + k² σ² I)⁻¹ ν / Σ 2.
-
-    Beyond :data:`WARNING_RATIO` at the stated σ (k = 1) the σ is widened by the k that makes
-    the window consistent, ratio(k) = 1, at most ``scale_limit``: at once when k grows, with the
-    window as time constant when it shrinks, and back toward 1 the same way once the
-    innovations are no larger than stated, ratio(1) ≤ 1. Starting only beyond the warning keeps
-    a consistent filter's scatter from widening it."""
-
-    def __init__(self, window_s: float, stated_sigma_m: float, scale_limit: float):
-        self.window_s = window_s
-        """The window's length (s)."""
-        self._stated_variance_m2 = stated_sigma_m**2
-        self._scale_limit = scale_limit
-        self._stamps: deque[float] = deque()
-        self._projected = _WindowRows(2)
-        """Per innovation, its squared components along the eigenvectors of C (m²)."""
-        self._eigenvalues = _WindowRows(2)
-        """Per innovation, the eigenvalues of C (m²)."""
-        self.scale = 1.0
-        """Factor (≥ 1) on the stated horizontal σ the mooring is fused with."""
-        self._widening = False
-        self._scaled_at_s = -math.inf
-        self._warned_at_s = -math.inf
-        self._warning = False
-
-    @property
-    def quiet(self) -> bool:
-        """Whether the σ is as stated and not being widened: an innovation whose window's
-        ratio stays within :data:`WARNING_RATIO` leaves it so."""
-        return self.scale == 1.0 and not self._widening
-
-    def window_squares(self) -> tuple[np.ndarray, np.ndarray]:
-        """The window's stamps (s) and each innovation's normalised square at the stated σ,
-        whose sum over twice their count is ``ratio()²``."""
-        variance = self._eigenvalues.rows + self._stated_variance_m2
-        return np.array(self._stamps), np.sum(self._projected.rows / variance, axis=1)
-
-    def ratio(self, scale: float = 1.0) -> float:
-        """Normalised RMS of the window's innovations with the σ widened by ``scale``."""
-        projected, eigenvalues = self._projected.rows, self._eigenvalues.rows
-        variance = eigenvalues + scale**2 * self._stated_variance_m2
-        return math.sqrt(float(np.sum(projected / variance)) / projected.size)
-
-    def add(
-        self, t_s: float, innovation_m: np.ndarray, filter_covariance_m2: np.ndarray
-    ) -> str | None:
-        """Take one horizontal innovation (stamp s, ν m, C = H P Hᵀ m²) and update
-        :attr:`scale`: a new warning, ``""`` when one no longer holds, None when nothing
-        changed."""
-        eigenvalues, eigenvectors = np.linalg.eigh(filter_covariance_m2)
-        self._stamps.append(t_s)
-        self._projected.append((eigenvectors.T @ innovation_m) ** 2)
-        self._eigenvalues.append(np.maximum(eigenvalues, 0.0))
-        while self._stamps[0] < t_s - self.window_s:
-            self._stamps.popleft()
-            self._projected.drop_first()
-            self._eigenvalues.drop_first()
-        span_s = t_s - self._stamps[0]
-        if span_s < MIN_SPAN_OF_WINDOW * self.window_s:
-            return None
-        ratio = self.ratio()
-        # Started beyond the warning, kept until the innovations are no larger than stated.
-        if ratio > WARNING_RATIO:
-            self._widening = True
-        elif ratio <= 1.0:
-            self._widening = False
-        self._follow(t_s, self._consistent_scale() if self._widening else 1.0)
-        if span_s < (1.0 - MIN_SPAN_OF_WINDOW) * self.window_s:
-            return None
-        if ratio <= WARNING_RATIO:
-            was_warning, self._warning = self._warning, False
-            return "" if was_warning else None
-        self._warning = True
-        if t_s - self._warned_at_s < self.window_s:
-            return None
-        self._warned_at_s = t_s
-        return (
-            f"mooring innovations {ratio:.1f}× their stated σ over the last "
-            f"{self.window_s:.0f} s: the gyro's wander (fusion.gyro_bias_instability_deg_h) or "
-            f"the mooring's σ (fusion.moored_position_sigma_horizontal_m) is stated too small; "
-            f"its σ widened {self.scale:.1f}× (at most fusion.moored_sigma_scale_limit, "
-            f"{self._scale_limit:g}); run assess_motion_pack"
-        )
-
-    def _follow(self, t_s: float, consistent_scale: float) -> None:
-        """Widen at once, narrow over the window: the filter's covariance grows with the
-        widening, so the innovations judged at a narrower σ look consistent before the
-        mooring is."""
-        if consistent_scale >= self.scale:
-            self.scale = consistent_scale
-        else:
-            share = -math.expm1(-(t_s - self._scaled_at_s) / self.window_s)
-            self.scale += share * (consistent_scale - self.scale)
-        self._scaled_at_s = t_s
-
-    def _consistent_scale(self) -> float:
-        """The k of ratio(k) = 1, within [1, scale limit]."""
-        if self.ratio(self._scale_limit) >= 1.0:
-            return self._scale_limit
-        # Imported here: scipy.optimize adds a quarter second to every start-up otherwise.
-        from scipy.optimize import brentq
-
-        return brentq(lambda scale: self.ratio(scale) - 1.0, 1.0, self._scale_limit)
 
 
 class MooringStretch(NamedTuple):
     """What the compiled stretches take of the mooring (:mod:`buoy_nav.stretched_mooring`): its
     anchor (rad, rad, m; None before one is set) and the anchor's stamp (s), time constant (s)
-    and period (s); its stated covariance (3×3 m², ENU) and the factor on its horizontal
-    variance; whether its innovations leave that σ as stated
-    (:attr:`InnovationWatch.quiet`), their window (s), the span of it they must cover to be
-    judged (s), its stamps (s) and normalised squares; and the mean velocity's watches' blocks
-    in progress, (start s, length s) each."""
+    and period (s); its stated covariance (3×3 m², ENU); its innovation watch, its window from
+    index 0 with room after it (:meth:`~buoy_nav.innovation_watch.InnovationWatch.arrays`);
+    and the mean velocity's watches' blocks in progress, (start s, length s) each."""
 
     anchor: np.ndarray | None
     anchor_t_s: float
     time_constant_s: float
     period_s: float
     covariance_m2: np.ndarray
-    variance_scale: float
-    quiet: bool
-    window_s: float
-    min_span_s: float
-    window_stamps_s: np.ndarray
-    window_squares: np.ndarray
+    innovation_watch: WatchArrays
     blocks: tuple[tuple[float, float], tuple[float, float]]
 
 
@@ -269,7 +111,7 @@ def anchor_model(
     position: predicted offset 0, the innovation, the Jacobian over ``state_count`` error states
     (I on the position from ``position_start``) and R, the stated ``covariance_m2`` (m²) with
     its horizontal block multiplied by ``horizontal_variance_scale`` (the square of the factor
-    the innovations widen the σ by, formed by the caller as the interpreter forms it)."""
+    the innovations widen the σ by)."""
     jacobian = np.zeros((3, state_count))
     place_identity(jacobian, position_start)
     covariance = covariance_m2.copy()
@@ -370,7 +212,8 @@ class MooredSource(AidingSource):
         covariance (S less the mooring's σ it was fused with): the vertical one, of a σ the
         heave rarely fills, would dilute what the tilt error does to the horizontal. Said with
         what the mean velocity's watches say, joined, whenever one of them changed."""
-        fused_variance = self._watch.scale**2 * self._covariance[0, 0]
+        scale = self._watch.scale
+        fused_variance = scale * scale * self._covariance[0, 0]
         filter_covariance = innovation_covariance[:2, :2] - fused_variance * np.eye(2)
         position_warning = self._watch.add(t_s, innovation[:2], filter_covariance)
         if position_warning is not None:
@@ -445,29 +288,23 @@ class MooredSource(AidingSource):
             raise RuntimeError("a block of the mooring's mean velocity closed in a stretch")
         return self._anchored(t_s, np.array(anchor))
 
-    def stretch(self) -> MooringStretch:
-        """What the compiled stretches take of the mooring now."""
-        watch = self._watch
-        stamps, squares = watch.window_squares()
+    def stretch(self, room: int) -> MooringStretch:
+        """What the compiled stretches take of the mooring now, with room for ``room`` of its
+        epochs."""
         return MooringStretch(
             self._anchor,
             self._anchor_t_s,
             self._time_constant_s,
             self._period_s,
             self._covariance,
-            watch.scale**2,
-            watch.quiet,
-            watch.window_s,
-            MIN_SPAN_OF_WINDOW * watch.window_s,
-            stamps,
-            squares,
+            self._watch.arrays(room),
             (self._drift_watch.block, self._noise_watch.block),
         )
 
     @property
-    def held_as_stated(self) -> bool:
-        """Whether the anchor is set and the innovations leave the σ as stated."""
-        return self._anchor is not None and self._watch.quiet
+    def anchored(self) -> bool:
+        """Whether the anchor is set."""
+        return self._anchor is not None
 
     def fixes_reset(self, fix_age_s: float) -> bool:
         """Whether a fix of age ``fix_age_s`` (s) resets the anchor instead of the constraint
@@ -510,16 +347,17 @@ class MooredSource(AidingSource):
                 measurement.altitude_m,
             )
         )
-        states = self.states
+        states, scale = self.states, self._watch.scale
         return MeasurementModel(
             *anchor_model(
-                offset, self._covariance, self._watch.scale**2, states.position.start, states.dim
+                offset, self._covariance, scale * scale, states.position.start, states.dim
             )
         )
 
     def load_compiled_code(self) -> None:
         states = self.states
         anchor_model(np.zeros(3), self._covariance, 1.0, states.position.start, states.dim)
+        self._watch.load_compiled_code()
 
     def align(self, aligner, t_s: float, measurement, raw_gyro_rad_s) -> None:
         return None
