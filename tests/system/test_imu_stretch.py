@@ -65,6 +65,7 @@ from buoy_nav.engine import FusionEngine
 from buoy_nav.fusion_messages import FUSION_INPUT_MSGTYPES, feed_message
 from buoy_nav.imu_stretches import MeasurementInput
 from buoy_nav.innovation_watch import SCALE
+from buoy_nav.mean_velocity_watch import BLOCK_START
 from buoy_nav.prediction import RealtimePrediction
 from buoy_nav.solution_rows import SolutionRows
 
@@ -230,7 +231,10 @@ def stretch_counts(monkeypatch) -> Counter:
         forked_at = state[stretch_module.FORKED_AT]
         aiding, mooring, went = arguments[-3:]
         widened = mooring.watch.status[SCALE] > 1.0
+        block_starts = mooring.velocity_watches.block[:, BLOCK_START].copy()
         taken, stepped, stop = compiled(raw, order, *arguments)
+        moved = mooring.velocity_watches.block[:, BLOCK_START] != block_starts
+        counts["velocity blocks closed"] += int(np.sum(moved & ~np.isnan(block_starts)))
         counts["forked"] += state[stretch_module.FORKED_AT] != forked_at
         counts["offered"] += order.shape[0]
         counts["taken"] += taken
@@ -529,6 +533,9 @@ def test_stretches_take_the_motion_pack_as_one_input_at_a_time_does(case, stretc
     assert constraints >= least_mooring_share * duration_s, "too few constraints taken"
     widened = stretch_counts["mooring epochs at a widened σ"]
     assert widened >= least_widened_share * constraints, "too few taken at a widened σ"
+    if config.moored:
+        # Of the mean velocity's blocks, 10 s and 30 s long, most closed in the stretches.
+        assert stretch_counts["velocity blocks closed"] >= 0.5 * (duration_s / 10.0)
 
 
 def test_stretches_take_the_mooring_among_imu_samples_alone(stretch_counts):

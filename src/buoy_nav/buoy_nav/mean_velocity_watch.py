@@ -45,9 +45,9 @@ would only let the filter follow the pack's tilt more closely.
 from __future__ import annotations
 
 import math
-from collections import deque
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from buoy_nav.chi_square import chi_square_quantile
@@ -71,6 +71,107 @@ third about 1 (ten degrees of freedom)."""
 NARROW_RATIO = 0.5
 """Normalised RMS below which a widened drift is narrowed."""
 NARROWING_PER_WINDOW = math.sqrt(2.0)
+
+# A watch's terms (``terms``): its block's length (s), the variance the wave excursion leaves
+# in a block's mean (m²/s² an axis), the blocks its window holds, the factor it has widened its
+# σ by and the largest it may.
+BLOCK_LENGTH, EXCURSION_VARIANCE, BLOCKS_IN_WINDOW, SCALE, SCALE_LIMIT = range(5)
+TERMS_SIZE = 5
+# Its block in progress and window (``block``): the block's start (s, NaN: none), its samples,
+# their velocities' sum (m/s, east and north) and their covariances' (m²/s², 2×2 row-major), and
+# how many blocks' normalised squares the window holds (``squares``, oldest first).
+BLOCK_START, SAMPLES, VELOCITY_SUM, COVARIANCE_SUM, SQUARES = 0, 1, 2, 4, 8
+BLOCK_SIZE = 9
+# A closed block's verdict: nothing changes, the σ is to be widened, or narrowed.
+KEEPS, WIDENS, NARROWS = range(3)
+
+
+class BlockArrays(NamedTuple):
+    """A watch as arrays (laid out above), one row a watch when the stretches take several
+    (``squares`` then as wide as the widest window)."""
+
+    terms: np.ndarray
+    block: np.ndarray
+    squares: np.ndarray
+
+
+def unwatched_blocks() -> BlockArrays:
+    """No watch's arrays, for a stretch that takes no velocity."""
+    return BlockArrays(np.zeros((0, TERMS_SIZE)), np.zeros((0, BLOCK_SIZE)), np.zeros((0, 1)))
+
+
+def stacked(watches: list[BlockArrays]) -> BlockArrays:
+    """Several watches' arrays, a row each."""
+    squares = np.zeros((len(watches), max(watch.squares.size for watch in watches)))
+    for row, watch in zip(squares, watches, strict=True):
+        row[: watch.squares.size] = watch.squares
+    return BlockArrays(
+        np.stack([watch.terms for watch in watches]),
+        np.stack([watch.block for watch in watches]),
+        squares,
+    )
+
+
+@numba.njit(cache=True)
+def velocity_added(terms, block, squares, t_s, velocity_enu_mps, velocity_covariance_m2s2):
+    """Take the filter's horizontal velocity (m/s ENU, east and north) and its covariance
+    (m²/s², 2×2) at stamp ``t_s`` (s) into the block in progress, closing it first when it
+    is over (its normalised square added to the window, :func:`_closed`): the verdict
+    (:data:`KEEPS`, ...) and the window's ratio it is on (NaN when no block closed). The
+    caller widens or narrows the σ (:attr:`terms`' :data:`SCALE`) as the verdict says."""
+    verdict, ratio = KEEPS, math.nan
+    if math.isnan(block[BLOCK_START]):
+        block[BLOCK_START] = t_s
+    if t_s - block[BLOCK_START] >= terms[BLOCK_LENGTH] and block[SAMPLES] > 0.0:
+        verdict, ratio = _closed(terms, block, squares)
+        block[BLOCK_START:SQUARES] = 0.0
+        block[BLOCK_START] = t_s
+    for i in range(2):
+        block[VELOCITY_SUM + i] += velocity_enu_mps[i]
+        for j in range(2):
+            block[COVARIANCE_SUM + 2 * i + j] += velocity_covariance_m2s2[i, j]
+    block[SAMPLES] += 1.0
+    return verdict, ratio
+
+
+@numba.njit(cache=True)
+def _closed(terms, block, squares):
+    """The block in progress closed: its mean's normalised square added to the window (the
+    oldest dropped when it is full), and the verdict on the window (see the module
+    docstring) with the ratio it is on."""
+    samples = block[SAMPLES]
+    mean = np.empty(2)
+    covariance = np.empty((2, 2))
+    for i in range(2):
+        mean[i] = block[VELOCITY_SUM + i] / samples
+        for j in range(2):
+            identity = 1.0 if i == j else 0.0
+            covariance[i, j] = (
+                block[COVARIANCE_SUM + 2 * i + j] / samples + terms[EXCURSION_VARIANCE] * identity
+            )
+    square = mean @ np.linalg.solve(covariance, mean)
+    count = int(block[SQUARES])
+    if count == int(terms[BLOCKS_IN_WINDOW]):
+        squares[: count - 1] = squares[1:count]
+        count -= 1
+    squares[count] = square
+    count += 1
+    block[SQUARES] = count
+    total = 0.0
+    for i in range(count):
+        total += squares[i]
+    ratio = math.sqrt(total / (2.0 * count))
+    if square > BLOCK_QUANTILE:
+        root = math.sqrt(square / 2.0)
+        ratio = root if root > ratio else ratio
+    elif count < MIN_BLOCKS:
+        return KEEPS, ratio
+    if ratio > WANDER_RATIO and terms[SCALE] < terms[SCALE_LIMIT]:
+        return WIDENS, ratio
+    full = count == terms[BLOCKS_IN_WINDOW]
+    if full and ratio < NARROW_RATIO and terms[SCALE] > 1.0:
+        return NARROWS, ratio
+    return KEEPS, ratio
 
 
 class WidenedNoise(NamedTuple):
@@ -118,49 +219,53 @@ class MeanVelocityWatch:
         scale_limit: float,
     ):
         self._widened = widened
-        self._block_s = widened.block_s
-        self._blocks_in_window = max(MIN_BLOCKS, round(window_s / self._block_s))
-        self._excursion_variance_m2s2 = 2.0 * excursion_sigma_m**2 / self._block_s**2
-        self._scale_limit = scale_limit
-        self._block_start_s = math.nan
-        self._velocity_sum_mps = np.zeros(2)
-        self._covariance_sum_m2s2 = np.zeros((2, 2))
-        self._samples = 0
-        self._normalised_squared: deque[float] = deque(maxlen=self._blocks_in_window)
-        self.scale = 1.0
-        """Factor (≥ 1) on the σ of the noise it widens (``widened.parameter``)."""
+        blocks_in_window = max(MIN_BLOCKS, round(window_s / widened.block_s))
+        terms = np.zeros(TERMS_SIZE)
+        terms[BLOCK_LENGTH] = widened.block_s
+        terms[EXCURSION_VARIANCE] = 2.0 * excursion_sigma_m**2 / widened.block_s**2
+        terms[BLOCKS_IN_WINDOW] = blocks_in_window
+        terms[SCALE], terms[SCALE_LIMIT] = 1.0, scale_limit
+        self._arrays = BlockArrays(terms, np.zeros(BLOCK_SIZE), np.zeros(blocks_in_window))
+        self.restart()
         self.warning = ""
         """What the watch says while the drift is widened, else ``""``."""
         self._covariance_factor = 1.0
 
     @property
-    def block(self) -> tuple[float, float]:
-        """The block in progress: its start (s; NaN before its first sample) and length (s)."""
-        return self._block_start_s, self._block_s
+    def scale(self) -> float:
+        """Factor (≥ 1) on the σ of the noise it widens (``widened.parameter``)."""
+        return float(self._arrays.terms[SCALE])
+
+    @property
+    def arrays(self) -> BlockArrays:
+        """A copy of the watch as arrays."""
+        return BlockArrays(*(array.copy() for array in self._arrays))
 
     def restart(self) -> None:
         """Forget the block in progress (the velocity was not held by the mooring between)."""
-        self._block_start_s = math.nan
-        self._velocity_sum_mps[:] = 0.0
-        self._covariance_sum_m2s2[:] = 0.0
-        self._samples = 0
+        block = self._arrays.block
+        block[BLOCK_START:SQUARES] = 0.0
+        block[BLOCK_START] = math.nan
 
     def add(self, t_s: float, velocity_enu_mps, velocity_covariance_m2s2) -> bool:
         """Take the filter's horizontal velocity (m/s ENU, its first two components) and its
         covariance (m²/s², the upper-left 2×2) at stamp ``t_s`` (s); returns whether
         :attr:`scale` changed."""
-        if math.isnan(self._block_start_s):
-            self._block_start_s = t_s
-        if t_s - self._block_start_s >= self._block_s and self._samples:
-            changed = self._close_block()
-            self.restart()
-            self._block_start_s = t_s
-        else:
-            changed = False
-        self._velocity_sum_mps += np.asarray(velocity_enu_mps, dtype=float)[:2]
-        self._covariance_sum_m2s2 += np.asarray(velocity_covariance_m2s2, dtype=float)[:2, :2]
-        self._samples += 1
-        return changed
+        verdict, ratio = velocity_added(
+            *self._arrays,
+            t_s,
+            np.asarray(velocity_enu_mps, dtype=float),
+            np.ascontiguousarray(np.asarray(velocity_covariance_m2s2, dtype=float)[:2, :2]),
+        )
+        if verdict == WIDENS:
+            self._widen(ratio)
+        elif verdict == NARROWS:
+            self._narrow(ratio)
+        return verdict != KEEPS
+
+    def load_compiled_code(self) -> None:
+        """Compile the watch, or load it from the cache, now, on a copy of it."""
+        velocity_added(*self.arrays, 0.0, np.zeros(3), np.eye(2))
 
     def take_covariance_factor(self) -> float:
         """The variance factor the blocks showed when the drift was last widened, once: the
@@ -171,45 +276,38 @@ class MeanVelocityWatch:
 
     def ratio(self) -> float:
         """Normalised RMS of the window's blocks (NaN before any)."""
-        if not self._normalised_squared:
+        count = int(self._arrays.block[SQUARES])
+        if not count:
             return math.nan
-        return math.sqrt(sum(self._normalised_squared) / (2.0 * len(self._normalised_squared)))
+        return math.sqrt(sum(self._arrays.squares[:count].tolist()) / (2.0 * count))
 
-    def _close_block(self) -> bool:
-        mean = self._velocity_sum_mps / self._samples
-        covariance = self._covariance_sum_m2s2 / self._samples
-        covariance = covariance + self._excursion_variance_m2s2 * np.eye(2)
-        block = float(mean @ np.linalg.solve(covariance, mean))
-        self._normalised_squared.append(block)
-        ratio = self.ratio()
-        if block > BLOCK_QUANTILE:
-            ratio = max(ratio, math.sqrt(block / 2.0))
-        elif len(self._normalised_squared) < MIN_BLOCKS:
-            return False
-        if ratio > WANDER_RATIO and self.scale < self._scale_limit:
-            self.scale = min(self._scale_limit, self.scale * ratio**2)
-            self._covariance_factor = ratio**2
-            self._normalised_squared.clear()
-            widened = self._widened
-            self.warning = (
-                f"the moored buoy's mean velocity over {self._block_s:.0f}-s blocks is "
-                f"{ratio:.1f}× its stated σ: {widened.cause} (fusion.{widened.parameter}); "
-                f"{widened.name} widened {self.scale:.1f}× (at most "
-                f"fusion.{widened.limit_parameter}, {self._scale_limit:g}); run "
-                f"assess_motion_pack"
-            )
-            return True
-        full = len(self._normalised_squared) == self._blocks_in_window
-        if full and ratio < NARROW_RATIO and self.scale > 1.0:
-            self.scale = max(1.0, self.scale / NARROWING_PER_WINDOW)
-            self._normalised_squared.clear()
-            self.warning = (
-                f"{self._widened.name} (fusion.{self._widened.parameter}) held widened "
-                f"{self.scale:.1f}×, narrowing as the moored buoy's mean velocity over "
-                f"{self._block_s:.0f}-s blocks stays within its σ ({ratio:.1f}×); run "
-                f"assess_motion_pack"
-                if self.scale > 1.0
-                else ""
-            )
-            return True
-        return False
+    def _widen(self, ratio: float) -> None:
+        """Widen the σ by the variance ``ratio``² the blocks show, at most to the limit; judge
+        the widened filter's own blocks from now on."""
+        terms, widened = self._arrays.terms, self._widened
+        limit = terms[SCALE_LIMIT]
+        terms[SCALE] = min(limit, terms[SCALE] * ratio**2)
+        self._covariance_factor = ratio**2
+        self._arrays.block[SQUARES] = 0.0
+        self.warning = (
+            f"the moored buoy's mean velocity over {widened.block_s:.0f}-s blocks is "
+            f"{ratio:.1f}× its stated σ: {widened.cause} (fusion.{widened.parameter}); "
+            f"{widened.name} widened {self.scale:.1f}× (at most "
+            f"fusion.{widened.limit_parameter}, {limit:g}); run "
+            f"assess_motion_pack"
+        )
+
+    def _narrow(self, ratio: float) -> None:
+        """Narrow a widened σ by :data:`NARROWING_PER_WINDOW`, the window's ``ratio`` well
+        within it."""
+        terms, widened = self._arrays.terms, self._widened
+        terms[SCALE] = max(1.0, terms[SCALE] / NARROWING_PER_WINDOW)
+        self._arrays.block[SQUARES] = 0.0
+        self.warning = (
+            f"{widened.name} (fusion.{widened.parameter}) held widened "
+            f"{self.scale:.1f}×, narrowing as the moored buoy's mean velocity over "
+            f"{widened.block_s:.0f}-s blocks stays within its σ ({ratio:.1f}×); run "
+            f"assess_motion_pack"
+            if self.scale > 1.0
+            else ""
+        )

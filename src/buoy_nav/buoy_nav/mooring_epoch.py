@@ -9,13 +9,15 @@ compiled model, its gate and update, the injection of the correction and its car
 prediction. It keeps the books the engine then keeps from what it used (the velocity and its
 covariance for the mean velocity's watches, the anchor, the gate).
 
-Its innovation watch is the engine's own compiled one (:func:`~buoy_nav.innovation_watch.watched`)
-on the same window: the σ it widens or narrows moves the next epochs' noise in the stretch as
-it does in the engine.
+Its watches are the engine's own compiled ones on the same windows: the innovation watch
+(:func:`~buoy_nav.innovation_watch.watched`), whose σ widened or narrowed moves the next
+epochs' noise in the stretch as it does in the engine, and the mean velocity's
+(:func:`~buoy_nav.mean_velocity_watch.velocity_added`), whose blocks the stretch adds to and
+closes.
 
 It returns False, with nothing changed, where the engine must make the epoch: the gate fails,
-the covariance needs a repair, a block of the mean velocity's watches closes (their verdict may
-change the process noise), or the innovation watch has something to say (a warning, or that one
+the covariance needs a repair, a mean velocity's block closes with a verdict that widens or
+narrows a process noise, or the innovation watch has something to say (a warning, or that one
 no longer holds: the engine logs it).
 """
 
@@ -31,18 +33,18 @@ from buoy_nav.epoch_kernels import corrected
 from buoy_nav.error_dynamics import propagated_covariance_kernel
 from buoy_nav.innovation_watch import SAYS_NOTHING, SCALE, WatchArrays, unwatched, watched
 from buoy_nav.kalman_kernel import gated_stacked_update
+from buoy_nav.mean_velocity_watch import KEEPS, BlockArrays, unwatched_blocks, velocity_added
 from buoy_nav.strapdown_kernel import ALTITUDE, DURATION, LATITUDE, LONGITUDE, VELOCITY
 
 # The mooring's terms (``terms``): the anchor's time constant (s), the constraint's period (s),
-# its gate's threshold (three dimensions), the blocks of the two mean-velocity watches (s), and
-# where the error states' position, velocity and attitude begin.
-TIME_CONSTANT, PERIOD, THRESHOLD, DRIFT_BLOCK, NOISE_BLOCK = range(5)
-POSITION_START, VELOCITY_START, ATTITUDE_START = range(5, 8)
-TERMS_SIZE = 8
-# What the epochs move (``state``) besides the innovation watch: the anchor (rad, rad, m) and
-# its stamp (s), and the start of each mean-velocity watch's block in progress (s, NaN: none).
-ANCHOR, ANCHOR_T, DRIFT_BLOCK_START, NOISE_BLOCK_START = 0, 3, 4, 5
-STATE_SIZE = 6
+# its gate's threshold (three dimensions), and where the error states' position, velocity and
+# attitude begin.
+TIME_CONSTANT, PERIOD, THRESHOLD, POSITION_START, VELOCITY_START, ATTITUDE_START = range(6)
+TERMS_SIZE = 6
+# What the epochs move (``state``) besides the watches: the anchor (rad, rad, m) and its stamp
+# (s).
+ANCHOR, ANCHOR_T = 0, 3
+STATE_SIZE = 4
 # The books of an epoch (``books``, a row each): its stamp (s), the filter's velocity (ENU m/s)
 # and that velocity's covariance (3×3 m²/s², row-major) before the epoch, the anchor (rad, rad,
 # m), the innovation (m, ENU), its S (3×3 m², row-major) and NIS.
@@ -54,13 +56,14 @@ BOOK_SIZE = 29
 class MooringArguments(NamedTuple):
     """The arrays a stretch hands the mooring's epochs (laid out above): its terms, its stated
     covariance (3×3 m², ENU), its state, its innovation watch (its window from index 0, room
-    for the new innovations after) and room for the epochs' books (none: the stretch stops at
-    the constraint)."""
+    for the new innovations after), the mean velocity's watches (a row each) and room for the
+    epochs' books (none: the stretch stops at the constraint)."""
 
     terms: np.ndarray
     covariance: np.ndarray
     state: np.ndarray
     watch: WatchArrays
+    velocity_watches: BlockArrays
     books: np.ndarray
 
 
@@ -71,6 +74,7 @@ def no_mooring() -> MooringArguments:
         np.zeros((3, 3)),
         np.zeros(STATE_SIZE),
         unwatched(),
+        unwatched_blocks(),
         np.zeros((0, BOOK_SIZE)),
     )
 
@@ -89,7 +93,10 @@ def mooring_epoch(
     the ``book`` written. False, with nothing changed, when the engine is to make it (see the
     module docstring)."""
     terms, state = mooring.terms, mooring.state
-    if _block_closes(state, terms, t):
+    kept, blocks, squares = _velocity_watched(
+        mooring.velocity_watches, terms, t, filter_state, covariance
+    )
+    if not kept:
         return False
     anchor = _anchor_moved(state, terms, filter_state, t)
     offset = enu_offset(
@@ -140,9 +147,12 @@ def mooring_epoch(
     corrected(
         filter_state, stepped, correction, covariance, updated, ahead_state, ahead_t, t, carried
     )
-    _moved(state, t, anchor)
+    state[ANCHOR : ANCHOR + 3] = anchor
+    state[ANCHOR_T] = t
     mooring.watch.status[:] = watch_status
     window[:] = watch_window
+    mooring.velocity_watches.block[:] = blocks
+    mooring.velocity_watches.squares[:] = squares
     return True
 
 
@@ -178,15 +188,25 @@ def _watch_tried(watch, window, t, innovation, innovation_covariance, fused_vari
 
 
 @numba.njit(cache=True)
-def _block_closes(state, terms, t) -> bool:
-    """Whether a mean-velocity watch's block in progress closes at ``t`` (s)."""
-    for start, length in (
-        (state[DRIFT_BLOCK_START], terms[DRIFT_BLOCK]),
-        (state[NOISE_BLOCK_START], terms[NOISE_BLOCK]),
-    ):
-        if not math.isnan(start) and t - start >= length:
-            return True
-    return False
+def _velocity_watched(watches, terms, t, filter_state, covariance):
+    """The mean velocity's watches (``watches``, a row each) after the filter's velocity and
+    its covariance at ``t`` (s), tried on copies of their blocks and windows: whether every
+    closed block's verdict keeps the process noise as it is, and the blocks and windows."""
+    blocks, squares = watches.block.copy(), watches.squares.copy()
+    velocity = int(terms[VELOCITY_START])
+    velocity_covariance = covariance[velocity : velocity + 2, velocity : velocity + 2].copy()
+    for row in range(blocks.shape[0]):
+        verdict, _ = velocity_added(
+            watches.terms[row],
+            blocks[row],
+            squares[row],
+            t,
+            filter_state[VELOCITY : VELOCITY + 2],
+            velocity_covariance,
+        )
+        if verdict != KEEPS:
+            return False, blocks, squares
+    return True, blocks, squares
 
 
 @numba.njit(cache=True)
@@ -203,14 +223,3 @@ def _write_book(
         for j in range(3):
             book[BOOK_VELOCITY_COVARIANCE + 3 * i + j] = covariance[velocity + i, velocity + j]
             book[BOOK_S + 3 * i + j] = innovation_covariance[i, j]
-
-
-@numba.njit(cache=True)
-def _moved(state, t, anchor) -> None:
-    """The mooring's state after its epoch at ``t`` (s): the new ``anchor``, the watches'
-    blocks begun."""
-    state[ANCHOR : ANCHOR + 3] = anchor
-    state[ANCHOR_T] = t
-    for block_start in (DRIFT_BLOCK_START, NOISE_BLOCK_START):
-        if math.isnan(state[block_start]):
-            state[block_start] = t

@@ -33,10 +33,6 @@ from buoy_nav.mooring_epoch import (
     BOOK_T,
     BOOK_VELOCITY,
     BOOK_VELOCITY_COVARIANCE,
-    DRIFT_BLOCK,
-    DRIFT_BLOCK_START,
-    NOISE_BLOCK,
-    NOISE_BLOCK_START,
     PERIOD,
     POSITION_START,
     STATE_SIZE,
@@ -95,17 +91,20 @@ class StretchedMooring:
         terms = np.zeros(TERMS_SIZE)
         terms[TIME_CONSTANT], terms[PERIOD] = stretch.time_constant_s, stretch.period_s
         terms[THRESHOLD] = self._threshold
-        (_, terms[DRIFT_BLOCK]), (_, terms[NOISE_BLOCK]) = stretch.blocks
         terms[POSITION_START] = states.position.start
         terms[VELOCITY_START] = states.velocity.start
         terms[ATTITUDE_START] = states.attitude.start
         state = np.zeros(STATE_SIZE)
         state[ANCHOR : ANCHOR + 3] = stretch.anchor
         state[ANCHOR_T] = stretch.anchor_t_s
-        (state[DRIFT_BLOCK_START], _), (state[NOISE_BLOCK_START], _) = stretch.blocks
         books = np.zeros((room, BOOK_SIZE))
         return MooringArguments(
-            terms, stretch.covariance_m2, state, stretch.innovation_watch, books
+            terms,
+            stretch.covariance_m2,
+            state,
+            stretch.innovation_watch,
+            stretch.velocity_watches,
+            books,
         )
 
     def booker(self, arguments: MooringArguments, epochs: int) -> Callable[[float], bool]:

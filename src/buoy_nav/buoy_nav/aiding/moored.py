@@ -50,9 +50,9 @@ wider σ lets the velocity's and position's covariance grow with what the moorin
 The vertical σ, which no watch judges, stays as stated.
 
 Offline, the compiled stretches make most of its epochs (:mod:`buoy_nav.mooring_epoch`), the
-innovation watch's among them, while it says nothing new and the mean velocity's watches'
-blocks do not close; its books are then kept as :meth:`MooredSource.replayed` says, the same as
-the engine's to the bit.
+watches' among them, while the innovation watch says nothing new and the mean velocity's
+watches widen or narrow no noise; its books are then kept as :meth:`MooredSource.replayed`
+says, the same as the engine's to the bit.
 """
 
 from __future__ import annotations
@@ -76,7 +76,13 @@ from buoy_nav.aiding.base import (
 from buoy_nav.aiding.model_kernels import place_identity
 from buoy_nav.chi_square import AGREEMENT_PROBABILITY, chi_square_quantile
 from buoy_nav.innovation_watch import MIN_SPAN_OF_WINDOW, InnovationWatch, WatchArrays
-from buoy_nav.mean_velocity_watch import GYRO_DRIFT, VELOCITY_NOISE, MeanVelocityWatch
+from buoy_nav.mean_velocity_watch import (
+    GYRO_DRIFT,
+    VELOCITY_NOISE,
+    BlockArrays,
+    MeanVelocityWatch,
+    stacked,
+)
 
 
 class MooringStretch(NamedTuple):
@@ -84,7 +90,8 @@ class MooringStretch(NamedTuple):
     anchor (rad, rad, m; None before one is set) and the anchor's stamp (s), time constant (s)
     and period (s); its stated covariance (3×3 m², ENU); its innovation watch, its window from
     index 0 with room after it (:meth:`~buoy_nav.innovation_watch.InnovationWatch.arrays`);
-    and the mean velocity's watches' blocks in progress, (start s, length s) each."""
+    and the mean velocity's watches, the gyro drift's and the velocity noise's, a row each
+    (:attr:`~buoy_nav.mean_velocity_watch.MeanVelocityWatch.arrays`)."""
 
     anchor: np.ndarray | None
     anchor_t_s: float
@@ -92,7 +99,7 @@ class MooringStretch(NamedTuple):
     period_s: float
     covariance_m2: np.ndarray
     innovation_watch: WatchArrays
-    blocks: tuple[tuple[float, float], tuple[float, float]]
+    velocity_watches: BlockArrays
 
 
 class MooringAnchor(NamedTuple):
@@ -282,10 +289,11 @@ class MooredSource(AidingSource):
         """The books of the epoch a compiled stretch made at ``t_s`` (s), as
         :meth:`pseudo_measurement` keeps them: the filter's velocity (m/s ENU) and its
         covariance (3×3 m²/s²) then to the mean velocity's watches, whose blocks the stretch
-        never closes, and the ``anchor`` (rad, rad, m) it moved to."""
+        closes only with a verdict that changes nothing, and the ``anchor`` (rad, rad, m) it
+        moved to."""
         self.next_due_s = t_s + self._period_s
         if self._watch_velocity(t_s, velocity_enu_mps, velocity_covariance_m2s2):
-            raise RuntimeError("a block of the mooring's mean velocity closed in a stretch")
+            raise RuntimeError("a mooring's mean velocity block changed a noise in a stretch")
         return self._anchored(t_s, np.array(anchor))
 
     def stretch(self, room: int) -> MooringStretch:
@@ -298,7 +306,7 @@ class MooredSource(AidingSource):
             self._period_s,
             self._covariance,
             self._watch.arrays(room),
-            (self._drift_watch.block, self._noise_watch.block),
+            stacked([self._drift_watch.arrays, self._noise_watch.arrays]),
         )
 
     @property
@@ -358,6 +366,7 @@ class MooredSource(AidingSource):
         states = self.states
         anchor_model(np.zeros(3), self._covariance, 1.0, states.position.start, states.dim)
         self._watch.load_compiled_code()
+        self._drift_watch.load_compiled_code()
 
     def align(self, aligner, t_s: float, measurement, raw_gyro_rad_s) -> None:
         return None
