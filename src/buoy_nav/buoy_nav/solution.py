@@ -93,13 +93,18 @@ class SolutionBuilder:
         self.map_plane = map_plane
         self.rows = rows
         """Where the solutions are written as rows instead (None: made as :class:`NavSolution`)."""
-        self.emit = self.solution if rows is None else self.row
-        """:meth:`solution`, or :meth:`row` when the solutions are written as rows."""
         self._distrust_variances: tuple[float, float] | None = None
         self._covariance_blocks: tuple[np.ndarray, ...] | None = None
         self._block_layout: StateLayout | None = None
         self._block_indices: np.ndarray | None = None
         self._bias_arrays: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def emit(self):
+        """:meth:`solution`, or :meth:`row` when the solutions are written as rows. Looked up
+        each time: a bound method kept on the builder would hold it in a reference cycle, and
+        with it the rows, until the collector's next full pass."""
+        return self.solution if self.rows is None else self.row
 
     def covariance_changed(self) -> None:
         self._covariance_blocks = None

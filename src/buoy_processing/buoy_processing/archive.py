@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import gc
 import hashlib
 import io
 import json
@@ -206,12 +205,6 @@ def state_path(out: Path, relative: str, suffix: str) -> Path:
 _in_local_pool = False
 
 
-BAGS_BETWEEN_COLLECTIONS = 8
-"""Bags a worker processes between two collections of their reference cycles: what they leave
-stays under a hundred megabytes, the collections under 1 % of the work on hour-long files."""
-_bags_since_collection = 0
-
-
 def prepare_pool_worker() -> None:
     """Start of a local pool's worker. Ctrl-C, which reaches the whole process group, is ignored
     between bags (an idle worker would die with a traceback) and taken by a bag in progress."""
@@ -244,19 +237,6 @@ def process_archived_bag(job: BagJob) -> BagOutcome:
     finally:
         if _in_local_pool:
             signal.signal(signal.SIGINT, signal.SIG_IGN)
-        _collect_now_and_then()
-
-
-def _collect_now_and_then() -> None:
-    """Every :data:`BAGS_BETWEEN_COLLECTIONS` bags, collect the reference cycles they left. The
-    collector runs on counts of objects, not bytes: cycles holding a bag's large arrays
-    outlived it, and a Dask worker, running bag after bag in its thread, grew by some 10 MB a
-    bag, gigabytes over a year of hourly files. A full collection takes about 0.1 s."""
-    global _bags_since_collection
-    _bags_since_collection += 1
-    if _bags_since_collection >= BAGS_BETWEEN_COLLECTIONS:
-        _bags_since_collection = 0
-        gc.collect()
 
 
 def _process(job: BagJob, started: float) -> BagOutcome:

@@ -130,6 +130,9 @@ class OutputSide:
         written."""
         self._held_back.hand_over()
         self.consumer.finish(log_time_ns)
+        # The consumer and the hand-over hold each other: a cycle that would keep the run's
+        # arrays until the collector's next full pass (a worker running bag after bag grew).
+        self.consumer.detach()
         if self._output is not None:
             self._output.finish()
         if self._opened_reader:
@@ -137,8 +140,7 @@ class OutputSide:
 
     def finish(self):
         """In the writing process, after the end of the data: the consumer, without its ties
-        to the output, to go back to the tool."""
-        self.consumer.detach()
+        to the output (:meth:`_end` cut them), to go back to the tool."""
         return self.consumer
 
     def _decoding_reader(self) -> BagReader:
