@@ -23,7 +23,7 @@ from against_truth import assert_wind_within_budget
 from buoy_common.bag_io import BagReader, BagWriter
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_processing import process_bag
-from buoy_processing.report import figures, write_report
+from buoy_processing.report import figures
 from buoy_processing.report.attitude import (
     attitude_errors_deg,
     rpy_rad_from_quaternions,
@@ -36,6 +36,7 @@ from buoy_processing.report.data import (
     report_data_from_bag,
     save_report_data,
 )
+from buoy_processing.report.folder import write_report
 from buoy_processing.wind_report import main
 from sensor_sim.simulate_bag import parse_arguments, simulate
 from wind_comp.config import compensator_config_from_files

@@ -23,7 +23,6 @@ from buoy_common.namespaces import (
     output_for,
     views_of_bag,
 )
-from buoy_processing.report import write_report
 from buoy_processing.report.current import CurrentData, current_report_data
 from buoy_processing.report.data import (
     ReportData,
@@ -32,6 +31,7 @@ from buoy_processing.report.data import (
     load_report_data,
     report_data_from_bag,
 )
+from buoy_processing.report.folder import write_report
 
 EXIT_CODES = INTERRUPTIBLE_EXIT_CODES
 
