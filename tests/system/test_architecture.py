@@ -122,6 +122,28 @@ def test_the_wind_correction_runs_live_without_the_applications_dependencies():
     assert "wind_comp.compensation_node" in live_modules
 
 
+def test_processing_records_does_not_load_the_reports_plotting():
+    # matplotlib takes some 0.6 s to import: a run that writes bags, tables and NetCDF files
+    # must not pay for the figures only wind_report draws.
+    modules = [
+        "buoy_processing.process_bag",
+        "buoy_processing.process_archive",
+        "buoy_processing.fuse_bag",
+        "buoy_processing.netcdf_output",
+    ]
+    probe = (
+        "import importlib, sys\n"
+        f"for name in {modules!r}:\n"
+        "    importlib.import_module(name)\n"
+        "print('matplotlib' in sys.modules)\n"
+    )
+    completed = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
+    )
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    assert completed.stdout.strip() == "False"
+
+
 def test_the_wind_correction_declares_none_of_the_applications_dependencies():
     manifest = ET.parse(REPO / "src" / "wind_comp" / "package.xml").getroot()
     declared = {element.text for element in manifest if element.tag.endswith("depend")}
