@@ -59,10 +59,13 @@ CELL_MARGIN_RAD = 1e-9
 rounding of the cell's index."""
 
 
+@lru_cache(maxsize=16)
 def wmm_cell_bounds_rad(latitude_rad: float, longitude_rad: float) -> tuple[float, ...]:
     """(lowest, highest latitude, lowest, highest longitude), rad: the open bounds, less
     :data:`CELL_MARGIN_RAD`, of the cell the model is evaluated for at a position (rad); the
-    field is the same anywhere within them at one time."""
+    field is the same anywhere within them at one time. Kept for the last positions asked: an
+    offline run asks it for every attitude and field at the one position the filter had when
+    their rows were made."""
     bounds = []
     for angle_rad in (latitude_rad, longitude_rad):
         cell = _cell(angle_rad)
