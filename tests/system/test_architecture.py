@@ -8,6 +8,7 @@ refused or accepted alike everywhere.
 """
 
 import ast
+import json
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -101,25 +102,30 @@ def test_the_layers_are_the_packages():
     assert sorted(path.parent.name for path in manifests) == sorted(PACKAGES)
 
 
+def loaded_by_importing(modules: list[str], watched: list[str]) -> list[str]:
+    """Which of the ``watched`` modules a fresh interpreter has loaded once it imported
+    ``modules``."""
+    probe = (
+        "import importlib, json, sys\n"
+        f"for name in {modules!r}:\n"
+        "    importlib.import_module(name)\n"
+        f"print(json.dumps(sorted(m for m in {watched!r} if m in sys.modules)))\n"
+    )
+    completed = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
+    )
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    return json.loads(completed.stdout)
+
+
 def test_the_wind_correction_runs_live_without_the_applications_dependencies():
     # compensation_node on a buoy's computer needs numpy and scipy, not the NetCDF, Parquet,
     # Dask and plotting stack of the offline application.
     live_modules = sorted(
         f"wind_comp.{path.stem}" for path in _modules("wind_comp") if path.stem != "__init__"
     )
-    probe = (
-        "import importlib, json, sys\n"
-        f"for name in {live_modules!r}:\n"
-        "    importlib.import_module(name)\n"
-        f"print(json.dumps(sorted(m for m in {list(APPLICATION_ONLY_MODULES)!r} "
-        "if m in sys.modules)))\n"
-    )
-    completed = subprocess.run(
-        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
-    )
-    assert completed.returncode == 0, completed.stderr[-3000:]
-    assert completed.stdout.strip() == "[]"
     assert "wind_comp.compensation_node" in live_modules
+    assert loaded_by_importing(live_modules, list(APPLICATION_ONLY_MODULES)) == []
 
 
 def test_processing_records_does_not_load_the_reports_plotting():
@@ -131,17 +137,7 @@ def test_processing_records_does_not_load_the_reports_plotting():
         "buoy_processing.fuse_bag",
         "buoy_processing.netcdf_output",
     ]
-    probe = (
-        "import importlib, sys\n"
-        f"for name in {modules!r}:\n"
-        "    importlib.import_module(name)\n"
-        "print('matplotlib' in sys.modules)\n"
-    )
-    completed = subprocess.run(
-        [sys.executable, "-c", probe], capture_output=True, text=True, timeout=120
-    )
-    assert completed.returncode == 0, completed.stderr[-3000:]
-    assert completed.stdout.strip() == "False"
+    assert loaded_by_importing(modules, ["matplotlib"]) == []
 
 
 def test_the_wind_correction_declares_none_of_the_applications_dependencies():
