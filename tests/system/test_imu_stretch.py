@@ -298,6 +298,21 @@ def kept_motion(engine: FusionEngine) -> list:
     ]
 
 
+def judged_outcomes(engine: FusionEngine) -> dict:
+    """What the engine's books judge the sources by: each source's recent gate outcomes with
+    their stamps (in bytes), and the stamps each source and aided quantity was last accepted."""
+    windows = {
+        kind: (list(health._failed), np.asarray(health._stamps_s, dtype=float).tobytes())
+        for kind, health in engine._gates._health.items()
+    }
+    recency = engine._recency
+    return {
+        "windows": windows,
+        "accepted": dict(recency._last_accepted),
+        "aided": list(recency._last_aided),
+    }
+
+
 def assert_same_engines(first: FusionEngine, second: FusionEngine) -> None:
     health, other = first.health(), second.health()
     assert health.counters == other.counters
@@ -317,6 +332,7 @@ def assert_same_engines(first: FusionEngine, second: FusionEngine) -> None:
         for array, other_array in zip(screening, other_screening, strict=True):
             assert np.array_equal(array, other_array)
     assert innovations(first) == innovations(second)
+    assert judged_outcomes(first) == judged_outcomes(second)
     assert kept_motion(first) == kept_motion(second)
     assert np.array_equal(first.covariance, second.covariance)
     state, other_state = first.nav_state, second.nav_state

@@ -207,6 +207,33 @@ class AidingGates:
         outcome = GateOutcome([], [], {}, [])
         return self._book_passed(source, t_s, innovation, gate, outcome), outcome
 
+    def books_passes_at_once(self, source: AidingSource) -> bool:
+        """Whether the passes of ``source`` may be booked at once (:meth:`passed_at_once`):
+        they move nothing of it but its books, whatever comes between (its health cannot move,
+        no innovation is logged and the source watches none)."""
+        return (
+            self._innovation_log is None
+            and not source.watches_innovations
+            and self._health[source.kind].unmoved_by_passes
+        )
+
+    def passed_at_once(self, source: AidingSource, stamps_s: list[float], nis: list[float]) -> None:
+        """Book measurements of ``source`` stamped ``stamps_s`` (s, in order) that passed their
+        gates elsewhere (a compiled stretch) with normalised innovation squares ``nis``, as
+        :meth:`passed` books each, for a source that :meth:`books_passes_at_once`."""
+        if not self.books_passes_at_once(source):
+            raise RuntimeError(f"{source.kind}: passes booked at once that could move it")
+        kind = source.kind
+        self._health[kind].record_passes(stamps_s)
+        counters = self._counters[kind]
+        counters.accepted += len(nis)
+        # Summed in the order and the precision of one at a time: the same mean NIS to the bit.
+        for value in nis:
+            counters.nis_sum += value
+        counters.nis_count += len(nis)
+        self._recency.accepted(kind, self._aided_index[source], stamps_s[-1])
+        self._consecutive_rejections[kind] = 0
+
     def _book_passed(
         self, source: AidingSource, t_s: float, innovation, gate: GateResult, outcome: GateOutcome
     ) -> bool:

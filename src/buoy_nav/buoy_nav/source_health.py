@@ -35,8 +35,10 @@ only the evidence that suspended it lifts the suspension
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 from typing import NamedTuple
@@ -179,6 +181,18 @@ class SourceHealth:
         else:
             self._maybe_suspend()
         return self._change_since(was_suspended)
+
+    def record_passes(self, stamps_s: Sequence[float]) -> None:
+        """Add outcomes that passed the gate, of the measurements stamped ``stamps_s`` (s, in
+        order), as :meth:`record` adds each, to a source they cannot move
+        (:attr:`unmoved_by_passes`: each would return :attr:`HealthChange.NONE`)."""
+        if not self.unmoved_by_passes:
+            raise ValueError("source health: passes recorded at once where one could move it")
+        kept = len(self._failed)
+        dropped = min(kept, max(0, kept + len(stamps_s) - self.rule.window))
+        self._failed_count -= sum(itertools.islice(self._failed, dropped))
+        self._failed.extend(itertools.repeat(False, len(stamps_s)))
+        self._stamps_s.extend(stamps_s)
 
     def contradict(self, reason: str) -> HealthChange:
         """Suspend the source for ``reason``, whatever its gate outcomes, until

@@ -15,7 +15,7 @@ fused) for as many outcomes as cannot resume it
 """
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import NamedTuple
 
 import numpy as np
@@ -231,15 +231,19 @@ class StretchedAiding:
             parts.sequences[source.kind].followed([t for s, _, t in queued if s is source])
         for _, _, t in queued:
             parts.imu_input.clock.aiding_stamp(t)
+        passes = _Passes(
+            source for source in self.sources if parts.gates.books_passes_at_once(source)
+        )
         epoch: list = []
         for book in books.tolist():
             item = aiding.items[int(book[BOOK_ROW])]
             if epoch and item[2] != epoch[0][1][2]:
-                self._book_epoch(epoch, book_before)
+                self._book_epoch(epoch, book_before, passes)
                 epoch = []
             epoch.append((book, item))
         if epoch:
-            self._book_epoch(epoch, book_before)
+            self._book_epoch(epoch, book_before, passes)
+        passes.book(parts.gates)
         for index in np.flatnonzero(aiding.rows[:, ROW_STATUS] == QUEUED).tolist():
             source, measurement, t = aiding.items[index]
             self._parts.queue.push(source, t, measurement)
@@ -247,11 +251,14 @@ class StretchedAiding:
             self._rows_of_queued[(source.kind, t)] = aiding.rows[index]
         return bool(epoch)
 
-    def _book_epoch(self, epoch: list, book_before: Callable[[float], object]) -> None:
+    def _book_epoch(
+        self, epoch: list, book_before: Callable[[float], object], passes: "_Passes"
+    ) -> None:
         """The books of one epoch's (book row, item) pairs, as the queue and the engine keep
         them, after ``book_before`` its stamp: the superseded counted, then each other one
-        observed, then each booked as passed by its gate (applied) or as a suspended source's
-        outcome (watched)."""
+        observed, then each booked as passed by its gate (applied; kept in ``passes`` for its
+        source's books at once, where they may be) or as a suspended source's outcome
+        (watched)."""
         parts = self._parts
         book_before(epoch[0][1][2])
         taken = []
@@ -267,6 +274,8 @@ class StretchedAiding:
                 outcome = parts.gates.watched(source, t, None)
             elif status == WATCHED_REFUSED:
                 outcome = parts.gates.watched(source, t, source.stretch_refusal)
+            elif status != WATCHED and passes.keep(source, t, book[BOOK_NIS]):
+                continue
             else:
                 outcome = self._gated(book, source, t, watched=status == WATCHED)
             parts.transitions.extend(outcome.transitions)
@@ -290,3 +299,28 @@ class StretchedAiding:
         if not fused:
             raise RuntimeError(f"{source.kind}: a stretch's measurement was not fused")
         return outcome
+
+
+class _Passes:
+    """The applied measurements of a stretch whose sources book their passes at once
+    (:meth:`~buoy_nav.aiding_gates.AidingGates.books_passes_at_once`): each one's stamps and
+    normalised innovation squares, in their order, booked after the stretch's other books."""
+
+    def __init__(self, sources: Iterable):
+        self._kept = {source: ([], []) for source in sources}
+
+    def keep(self, source, t_s: float, nis: float) -> bool:
+        """Keep the pass of ``source`` at ``t_s`` (s) with ``nis``; whether it was kept (False:
+        its source books each pass where it comes)."""
+        kept = self._kept.get(source)
+        if kept is None:
+            return False
+        kept[0].append(t_s)
+        kept[1].append(nis)
+        return True
+
+    def book(self, gates) -> None:
+        """Book the kept passes of each source at once in ``gates``."""
+        for source, (stamps_s, nis) in self._kept.items():
+            if stamps_s:
+                gates.passed_at_once(source, stamps_s, nis)

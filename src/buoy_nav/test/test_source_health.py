@@ -83,6 +83,42 @@ def test_the_outcomes_that_cannot_resume_a_source_are_as_many_as_fail_to_resume_
     assert len(counts) > 100 and min(counts) <= 5 and max(counts) >= 90
 
 
+def test_passes_recorded_at_once_leave_the_health_one_at_a_time_leaves():
+    """From histories of every length and share failed that passes cannot move (none failed,
+    or the judged count reached), a run of passes of any length recorded at once: the same
+    outcomes, stamps and count as recorded one by one, and the same changes after them."""
+    rng = np.random.default_rng(4)
+    compared = 0
+    for _ in range(400):
+        health = SourceHealth(RULE)
+        history = int(rng.integers(0, 2 * RULE.window))
+        share = rng.choice([0.0, rng.uniform(0.0, 0.4)])
+        stamps = np.cumsum(rng.uniform(0.01, 2.0, history + 3 * RULE.window)).tolist()
+        for t_s in stamps[:history]:
+            health.record(bool(rng.random() < share), t_s)
+        if not health.unmoved_by_passes:
+            continue
+        passes = stamps[history : history + int(rng.integers(1, 2 * RULE.window))]
+        at_once, one_by_one = copy.deepcopy(health), copy.deepcopy(health)
+        at_once.record_passes(passes)
+        changes = [one_by_one.record(False, t_s) for t_s in passes]
+        assert set(changes) == {HealthChange.NONE}
+        assert vars(at_once) == vars(one_by_one)
+        after = rng.random(RULE.window) < 0.7
+        assert _feed(at_once, after) == _feed(one_by_one, after)
+        compared += 1
+    assert compared > 200
+
+
+def test_passes_are_not_recorded_at_once_where_one_could_move_the_source():
+    suspended, judging = SourceHealth(RULE), SourceHealth(RULE)
+    _feed(suspended, [True] * RULE.min_samples)
+    _feed(judging, [True, False])
+    for health in (suspended, judging):
+        with pytest.raises(ValueError, match="could move it"):
+            health.record_passes([1.0, 2.0])
+
+
 def test_forget_starts_the_judgement_again():
     health = SourceHealth(RULE)
     _feed(health, [True] * RULE.min_samples)

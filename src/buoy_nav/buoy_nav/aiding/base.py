@@ -284,6 +284,11 @@ class AidingSource(abc.ABC):
         return None
 
     @property
+    def watches_innovations(self) -> bool:
+        """Whether :meth:`innovation_warning` can say anything: the source overrides it."""
+        return type(self).innovation_warning is not AidingSource.innovation_warning
+
+    @property
     def gyro_drift_scale(self) -> float:
         """Factor (≥ 1) on the σ of the gyro's drift that this source's innovations ask for,
         which the engine applies to the filter's process noise; 1 for a source that cannot
