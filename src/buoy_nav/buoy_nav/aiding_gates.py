@@ -228,8 +228,10 @@ class AidingGates:
         counters = self._counters[kind]
         counters.accepted += len(nis)
         # Summed in the order and the precision of one at a time: the same mean NIS to the bit.
+        nis_sum = counters.nis_sum
         for value in nis:
-            counters.nis_sum += value
+            nis_sum += value
+        counters.nis_sum = nis_sum
         counters.nis_count += len(nis)
         self._recency.accepted(kind, self._aided_index[source], stamps_s[-1])
         self._consecutive_rejections[kind] = 0
