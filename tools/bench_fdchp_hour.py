@@ -203,18 +203,13 @@ def whole_command(bag: Path, params: list[Path], out: Path, runs: int, warm_s: f
     (the compiled caches warm), the fastest of ``runs``; and its fixed cost: that less
     ``warm_s``, the same processing in a process that has run it before (the start-up, the
     compiled code loaded at its first call, the modules imported where first needed)."""
-    params = [argument for path in params for argument in ("--params-file", str(path))]
     command = [
         sys.executable,
         "-c",
         "import sys; from buoy_processing.process_bag import main; sys.exit(main())",
-        str(bag),
-        str(out / "command"),
-        "--overwrite",
-        "--no-bag",
-        "--netcdf",
-        str(out / "command.nc"),
-        *params,
+        *bench_speed.tool_arguments(
+            bag, out / "command", params, ["--no-bag", "--netcdf", str(out / "command.nc")]
+        ),
     ]
     walls = []
     for _ in range(runs):

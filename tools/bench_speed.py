@@ -149,6 +149,18 @@ def run_speed(in_bag: Path, work_dir: Path, log=lambda text: None) -> dict:
     }
 
 
+def tool_arguments(in_bag: Path, out_bag: Path, params, arguments=()) -> list[str]:
+    """A tool's command-line arguments for a run on ``in_bag`` into ``out_bag`` (replaced when
+    it exists) with the parameter files ``params`` and the further ``arguments``."""
+    return [
+        str(in_bag),
+        str(out_bag),
+        "--overwrite",
+        *(argument for path in params for argument in ("--params-file", str(path))),
+        *arguments,
+    ]
+
+
 def first_output_s(
     tool: str,
     in_bag: Path,
@@ -164,20 +176,10 @@ def first_output_s(
     environment.pop("PYTHONDONTWRITEBYTECODE", None)
     if not write_bytecode:
         environment["PYTHONDONTWRITEBYTECODE"] = "1"
-    params = [argument for path in params for argument in ("--params-file", str(path))]
     command = _FIRST_OUTPUT_COMMAND.replace("{module}", TOOL_MODULES[tool])
     started_s = time.monotonic()
     with subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            command,
-            str(in_bag),
-            str(out_bag),
-            "--overwrite",
-            *params,
-            *arguments,
-        ],
+        [sys.executable, "-c", command, *tool_arguments(in_bag, out_bag, params, arguments)],
         env=environment,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
