@@ -237,7 +237,8 @@ def feed_records(
     ``topics`` (``imu/data_raw`` and those of :attr:`FusionEngine.stretched_sources`), nothing
     else between them, in one call (:meth:`FusionEngine.add_inputs`): each one's record
     ``(sec, nanosec, *fields)``; each one's solutions and rejection."""
-    inputs = []
+    inputs: list = []
+    records_of: dict = {}  # source → its records' (place among the inputs, stamp s, fields)
     for topic, record in zip(topics, records, strict=True):
         sec, nanosec, *fields = record
         t_s = sec + nanosec * 1e-9
@@ -246,10 +247,29 @@ def feed_records(
                 stamps.remember(t_s, sec, nanosec)
             inputs.append((t_s, *fields))
         else:
-            source = engine.source_of_topic(topic)
-            measurement = source.measurement_from_record(t_s, *fields)
-            inputs.append(MeasurementInput(source, t_s, measurement))
+            records_of.setdefault(engine.source_of_topic(topic), []).append(
+                (len(inputs), t_s, fields)
+            )
+            inputs.append(None)
+    for source, source_records in records_of.items():
+        places, stamps_s, fields = zip(*source_records, strict=True)
+        for place, t_s, measurement in zip(
+            places, stamps_s, _measurements_from_records(source, stamps_s, fields), strict=True
+        ):
+            inputs[place] = MeasurementInput(source, t_s, measurement)
     return engine.add_inputs(inputs)
+
+
+def _measurements_from_records(source, stamps_s: tuple, fields: tuple) -> list:
+    """Each record's measurement of ``source`` (or the :class:`Reason` it is none), in order:
+    at once where the source can (``measurements_from_records``), else one by one. A source's
+    records are made only after each other: what it keeps between them is its own."""
+    if hasattr(source, "measurements_from_records"):
+        return source.measurements_from_records(list(stamps_s), *zip(*fields, strict=True))
+    return [
+        source.measurement_from_record(t_s, *record_fields)
+        for t_s, record_fields in zip(stamps_s, fields, strict=True)
+    ]
 
 
 class NavValues(NamedTuple):

@@ -13,6 +13,7 @@ import math
 from functools import lru_cache
 from typing import NamedTuple
 
+import numpy as np
 from pygeomag import GeoMag
 
 SECONDS_PER_JULIAN_YEAR = 365.25 * 86400.0
@@ -52,6 +53,12 @@ def _cell(angle_rad: float) -> int:
 def _wmm_at(latitude_rad: float, longitude_rad: float, t_s: float):
     year = UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
     return _wmm_cell(_cell(latitude_rad), _cell(longitude_rad), round(year / _YEAR_STEP))
+
+
+def _year_steps(stamps_s: np.ndarray) -> np.ndarray:
+    """The tenth of a year each of ``stamps_s`` (s since the Unix epoch) falls in, as
+    :func:`_wmm_at` rounds it (half to even, as ``round``)."""
+    return np.rint((UNIX_EPOCH_DECIMAL_YEAR + stamps_s / SECONDS_PER_JULIAN_YEAR) / _YEAR_STEP)
 
 
 CELL_MARGIN_RAD = 1e-9
@@ -101,6 +108,23 @@ def declination_rad(
     if not math.isnan(configured_deg):
         return math.radians(configured_deg)
     return math.radians(wmm_declination_deg(latitude_rad, longitude_rad, t_s))
+
+
+def declinations_rad(
+    configured_deg: float, latitude_rad: float, longitude_rad: float, stamps_s
+) -> np.ndarray:
+    """:func:`declination_rad` at each of ``stamps_s`` (s since the Unix epoch) at one position
+    (rad), the model evaluated once per tenth of a year they span: the same numbers."""
+    stamps = np.asarray(stamps_s, dtype=float)
+    if not math.isnan(configured_deg):
+        return np.full(stamps.shape, math.radians(configured_deg))
+    steps = _year_steps(stamps)
+    latitude_cell, longitude_cell = _cell(latitude_rad), _cell(longitude_rad)
+    declinations = np.empty(stamps.shape)
+    for step in np.unique(steps).tolist():
+        result = _wmm_cell(latitude_cell, longitude_cell, int(step))
+        declinations[steps == step] = math.radians(float(result.d))
+    return declinations
 
 
 class FieldRange(NamedTuple):

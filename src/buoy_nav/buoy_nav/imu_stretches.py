@@ -160,12 +160,17 @@ class ImuStretches:
         imu_index = np.full(n, -1)
         aiding_index, aiding_slots = np.full(n, -1), np.full(n, -1)
         samples, aiding_items, aiding_rows = [], [], []
+        takes = self._aiding.takes
+        stretched = [
+            item for item in inputs if type(item) is MeasurementInput and takes(item.source)
+        ]
+        made_of_stretched = iter(self._aiding.rows(stretched, position))
         for place, item in enumerate(inputs):
             if type(item) is not MeasurementInput:
                 imu_index[place] = len(samples)
                 samples.append(item)
-            elif self._aiding.takes(item.source):
-                made = self._aiding.row(*item, position)
+            elif takes(item.source):
+                made = next(made_of_stretched)
                 if made is not None:
                     aiding_index[place], aiding_slots[place] = len(aiding_items), made[1][ROW_SLOT]
                     aiding_items.append((item.source, made[0], item.t_s))

@@ -117,16 +117,28 @@ class StretchedAiding:
         """Whether the stretches may take measurements of ``source``."""
         return source in self._slot
 
-    def row(self, source, t_s: float, measurement, position_rad: tuple) -> tuple | None:
-        """The (validated measurement, row) of ``measurement`` of ``source`` stamped ``t_s``
-        (s), made with the filter at ``position_rad`` (latitude, longitude), or None when the
-        engine is to take it (not valid, not a finite stamp)."""
-        if isinstance(measurement, Reason) or not math.isfinite(t_s):
-            return None
-        validated = source.validated(measurement)
-        if isinstance(validated, Reason):
-            return None
-        return validated, self._row_of_validated(source, t_s, validated, position_rad)
+    def rows(self, inputs: list, position_rad: tuple) -> list[tuple | None]:
+        """The (validated measurement, row) of each of ``inputs`` (a stretched source's
+        :class:`~buoy_nav.imu_stretches.MeasurementInput`), made with the filter at
+        ``position_rad`` (latitude, longitude), or None when the engine is to take it (not
+        valid, not a finite stamp). A source's measurements are made into rows together."""
+        made: list[tuple | None] = [None] * len(inputs)
+        places_of: dict = {}
+        for place, (source, t_s, measurement) in enumerate(inputs):
+            if not isinstance(measurement, Reason) and math.isfinite(t_s):
+                places_of.setdefault(source, []).append(place)
+        for source, places in places_of.items():
+            validated, values = _stretch_values_of(
+                source, [inputs[place].measurement for place in places], position_rad
+            )
+            rows = np.zeros((len(places), ROW_SIZE))
+            rows[:, ROW_T] = [inputs[place].t_s for place in places]
+            rows[:, ROW_SLOT], rows[:, ROW_STATUS] = self._slot[source], PENDING
+            rows[:, ROW_VALUES : ROW_VALUES + values.shape[1]] = values
+            for index, place in enumerate(places):
+                if not isinstance(validated[index], Reason):
+                    made[place] = validated[index], rows[index]
+        return made
 
     def _row_of_validated(self, source, t_s: float, validated, position_rad: tuple) -> np.ndarray:
         """The row of the ``validated`` measurement of ``source`` stamped ``t_s`` (s), made with
@@ -299,6 +311,28 @@ class StretchedAiding:
         if not fused:
             raise RuntimeError(f"{source.kind}: a stretch's measurement was not fused")
         return outcome
+
+
+def _stretch_values_of(source, measurements: list, position_rad: tuple) -> tuple[list, np.ndarray]:
+    """Each of ``measurements`` of ``source`` validated (or the :class:`Reason` it is not
+    valid) and the rows of the numbers its model over arrays reads, made with the filter at
+    ``position_rad``: at once where the source can (``stretch_values_of``), else one by one. A
+    measurement is validated once: a magnetometer's validation calibrates its field."""
+    if hasattr(source, "stretch_values_of"):
+        return source.stretch_values_of(measurements, position_rad)
+    validated = [source.validated(measurement) for measurement in measurements]
+    values = [
+        None
+        if isinstance(measurement, Reason)
+        else source.stretch_values(measurement, position_rad)
+        for measurement in validated
+    ]
+    width = max((len(row) for row in values if row is not None), default=0)
+    array = np.zeros((len(values), width))
+    for index, row in enumerate(values):
+        if row is not None:
+            array[index] = row
+    return validated, array
 
 
 class _Passes:

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from buoy_common.contract import Reason
 from buoy_nav import earth, strapdown_kernel
 from buoy_nav.aiding import (
     AhrsAttitude,
@@ -532,3 +533,51 @@ def test_a_sources_stretch_model_over_arrays_is_its_model_to_the_bit(source_clas
                 ("covariance", covariance, model.covariance),
             ):
                 assert value.tobytes() == np.asarray(expected).tobytes(), name
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        PACK_CONFIG,
+        dataclasses.replace(PACK_CONFIG, magnetic_declination_deg=-7.5),
+        dataclasses.replace(PACK_CONFIG, ahrs_yaw_reference="true_north"),
+    ],
+    ids=["model's declination", "configured declination", "true north"],
+)
+def test_a_packs_attitudes_made_into_rows_at_once_are_each_ones(config, rng):
+    """What a stretch reads of many attitudes made at once (``stretch_values_of``) is what it
+    reads of each alone, validated then made into numbers, to the bit: on magnetic north with
+    the model's declination over stamps across its steps or a configured one, on true north;
+    one not finite or with a variance not positive refused for the same reason; attitudes
+    given as flat numbers, which do not stack, made one by one."""
+    source = AhrsAttitudeSource(config, STATES)
+    point = random_point(rng)
+    position = (point.state.latitude_rad, point.state.longitude_rad)
+    measurements = []
+    for index in range(CASES):
+        attitude = random_measurement(source, point, rng)._replace(
+            t_s=(2026.0 - 1970.0 + rng.uniform(-1.0, 1.0)) * SECONDS_PER_JULIAN_YEAR,
+            interval_s=float(rng.choice([math.nan, 0.1, 2.0, 0.0, -1.0, math.inf])),
+        )
+        if index % 17 == 0:
+            attitude.rotation_nb[1, 2] = math.nan
+        if index % 13 == 0:
+            attitude.covariance_rad2[2, 2] = -1e-6
+        measurements.append(attitude)
+    flat = [m._replace(rotation_nb=m.rotation_nb.reshape(9).tolist()) for m in measurements[:9]]
+    for given in (measurements, flat + measurements[9:]):
+        validated, values = source.stretch_values_of(given, position)
+        for index, measurement in enumerate(given):
+            alone = source.validated(measurement)
+            if isinstance(alone, str):
+                assert validated[index] == alone
+                continue
+            assert validated[index].rotation_nb.tobytes() == alone.rotation_nb.tobytes()
+            assert validated[index].covariance_rad2.tobytes() == alone.covariance_rad2.tobytes()
+            assert validated[index][2:] == alone[2:]
+            expected = np.array(source.stretch_values(alone, position))
+            assert values[index].tobytes() == expected.tobytes(), index
+    assert {reason for reason in validated if isinstance(reason, str)} == {
+        Reason.NON_FINITE,
+        Reason.NON_POSITIVE_VARIANCE,
+    }

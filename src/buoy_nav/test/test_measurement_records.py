@@ -82,3 +82,47 @@ def test_a_record_makes_what_its_message_makes(source_class):
         outcomes.add(outcome if isinstance(outcome, str) else "usable")
     # The values reached the sources' checks: they take some and refuse others.
     assert len(outcomes) > 1, outcomes
+
+
+AT_ONCE_SOURCES = [
+    source for source in RECORD_SOURCES if hasattr(source, "measurements_from_records")
+]
+
+
+@pytest.mark.parametrize("source_class", AT_ONCE_SOURCES, ids=lambda s: s.kind)
+def test_records_made_at_once_are_what_each_makes_alone(source_class):
+    """A run of records made at once (``measurements_from_records``) gives each one the
+    measurement or the rejection it gets alone, to the bit, over runs of any length with what
+    the source keeps carried between them: a stamp that repeats or goes back is refused after
+    one that was refused for its values too, and a stamp that is not a number is refused."""
+    columns = columns_of(source_class)
+    raws = cdr_bulk.encode(source_class.msgtype(), columns)
+    decoded = cdr_bulk.decode(source_class.msgtype(), raws)
+    stamps_s = (decoded["sec"] + decoded["nanosec"] * 1e-9).tolist()
+    for place in RNG.choice(MESSAGES, 6, replace=False).tolist():
+        stamps_s[place] = float(RNG.choice([math.nan, math.inf, -math.inf]))
+    fields = [decoded[name].tolist() for name in source_class.record_fields]
+    alone = source_class(FusionConfig(), ERROR_STATES)
+    expected = [
+        alone.measurement_from_record(t_s, *(field[index] for field in fields))
+        for index, t_s in enumerate(stamps_s)
+    ]
+    at_once = source_class(FusionConfig(), ERROR_STATES)
+    made, start = [], 0
+    while start < MESSAGES:
+        end = start + int(RNG.integers(1, 80))
+        made += at_once.measurements_from_records(
+            stamps_s[start:end], *(field[start:end] for field in fields)
+        )
+        start = end
+    assert len(made) == MESSAGES
+    for index, (one, other) in enumerate(zip(made, expected, strict=True)):
+        assert same(one, other), (index, one, other)
+    # The stamp each kept last: a later usable record makes the same interval after both.
+    usable = next(i for i, outcome in enumerate(expected) if not isinstance(outcome, str))
+    later = [field[usable] for field in fields]
+    assert same(
+        at_once.measurement_from_record(2e9, *later), alone.measurement_from_record(2e9, *later)
+    )
+    refused = {outcome for outcome in expected if isinstance(outcome, str)}
+    assert len(refused) >= 4, refused

@@ -46,10 +46,11 @@ from buoy_nav.aiding.base import (
     has_non_positive_variance,
     orientation_record,
     samples_per_correlation_time,
+    samples_per_correlation_times,
 )
 from buoy_nav.aiding.model_kernels import place_identity
 from buoy_nav.error_state_filter import GateResult
-from buoy_nav.geomagnetism import declination_rad, wmm_cell_bounds_rad
+from buoy_nav.geomagnetism import declination_rad, declinations_rad, wmm_cell_bounds_rad
 from buoy_nav.rotations import (
     quaternion_from_rotation_elements,
     quaternion_from_rotation_vector,
@@ -64,6 +65,24 @@ from buoy_nav.strapdown_kernel import ATTITUDE, GYRO_BIAS, LATITUDE, LONGITUDE, 
 UNIT_NORM_TOLERANCE = 1e-3
 MIN_QUATERNION_NORM = 1e-9
 BODY_X = np.array((1.0, 0.0, 0.0))
+
+# What :meth:`AhrsAttitudeSource.measurements_from_records` finds of each record, as a code.
+_REASONS = (
+    None,
+    Reason.NON_FINITE,
+    Reason.ZERO_QUATERNION,
+    Reason.NON_UNIT_QUATERNION,
+    Reason.DUPLICATE_STAMP,
+    Reason.STAMP_NOT_INCREASING,
+)
+(
+    _VALID,
+    _NON_FINITE,
+    _ZERO_QUATERNION,
+    _NON_UNIT_QUATERNION,
+    _DUPLICATE_STAMP,
+    _STAMP_NOT_INCREASING,
+) = range(len(_REASONS))
 
 # The rotation functions the innovation calls, compiled from their one source.
 _quaternion_from_rotation_vector = numba.njit(cache=True)(quaternion_from_rotation_vector)
@@ -318,6 +337,74 @@ class AhrsAttitudeSource(AidingSource):
             t_s,
         )
 
+    def measurements_from_records(
+        self, stamps_s: list, orientations_xyzw: list, orientation_covariances: list
+    ) -> list[AhrsAttitude | Reason]:
+        """:meth:`measurement_from_record` of consecutive records at once, to the bit: their
+        stamps (s), quaternions and covariances, each one's attitude or the reason it is none.
+        Records that are not all four and nine numbers are made one by one."""
+        count = len(stamps_s)
+        try:
+            quaternions = np.array(orientations_xyzw, dtype=float)
+            covariances = np.array(orientation_covariances, dtype=float)
+        except (TypeError, ValueError):
+            quaternions = covariances = None
+        if (
+            quaternions is None
+            or quaternions.shape != (count, 4)
+            or covariances.shape != (count, 9)
+        ):
+            return [
+                self.measurement_from_record(*record)
+                for record in zip(stamps_s, orientations_xyzw, orientation_covariances, strict=True)
+            ]
+        stamps = np.array(stamps_s, dtype=float)
+        x, y, z, w = quaternions.T
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            norm = np.sqrt(x * x + y * y + z * z + w * w)
+            reasons, previous = self._record_reasons(norm, stamps)
+            intervals = stamps - previous
+            elements = rotation_matrix_elements(x / norm, y / norm, z / norm, w / norm)
+        rotations = np.stack(elements, axis=1).reshape(count, 3, 3)
+        covariances = covariances.reshape(count, 3, 3)
+        intervals = np.where(np.isfinite(intervals), intervals, math.nan).tolist()
+        return [
+            AhrsAttitude(rotations[index], covariances[index], intervals[index], stamps_s[index])
+            if reason == _VALID
+            else _REASONS[reason]
+            for index, reason in enumerate(reasons.tolist())
+        ]
+
+    def _record_reasons(
+        self, norms: np.ndarray, stamps_s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """What :meth:`measurement_from_record` finds of consecutive records of quaternion
+        ``norms`` and stamps ``stamps_s`` (s), as codes, and the stamp (s) kept before each
+        one; the stamp kept after them all is kept."""
+        reasons = np.select(
+            (
+                ~np.isfinite(norms),
+                norms < MIN_QUATERNION_NORM,
+                np.abs(norms - 1.0) > UNIT_NORM_TOLERANCE,
+                ~np.isfinite(stamps_s),
+            ),
+            (_NON_FINITE, _ZERO_QUATERNION, _NON_UNIT_QUATERNION, _NON_FINITE),
+            _VALID,
+        )
+        # A record that passes the checks before the stamp's is kept if it is later than every
+        # such record before it: one not later moved nothing.
+        latest = np.maximum.accumulate(
+            np.concatenate(([self._last_stamp_s], np.where(reasons == _VALID, stamps_s, -np.inf)))
+        )
+        previous = latest[:-1]
+        reasons = np.where(
+            (reasons == _VALID) & (stamps_s <= previous),
+            np.where(stamps_s == previous, _DUPLICATE_STAMP, _STAMP_NOT_INCREASING),
+            reasons,
+        )
+        self._last_stamp_s = float(latest[-1])
+        return reasons, previous
+
     def validated(self, measurement: AhrsAttitude) -> AhrsAttitude | Reason:
         rotation = as_float_array(measurement.rotation_nb, (3, 3))
         covariance = as_float_array(measurement.covariance_rad2, (3, 3))
@@ -430,16 +517,91 @@ class AhrsAttitudeSource(AidingSource):
         north taken at the filter's ``position_rad`` (latitude, longitude; laid out with the
         model)."""
         latitude_rad, longitude_rad = position_rad
-        if self._magnetic and math.isnan(self._declination_deg):
-            bounds = wmm_cell_bounds_rad(latitude_rad, longitude_rad)
-        else:
-            bounds = (-math.inf, math.inf, -math.inf, math.inf)
         return (
             *self._true_north(measurement, latitude_rad, longitude_rad).reshape(9).tolist(),
             *measurement.covariance_rad2.reshape(9).tolist(),
             self._weight(measurement),
-            *bounds,
+            *self._cell_bounds_rad(latitude_rad, longitude_rad),
         )
+
+    def stretch_values_of(self, measurements: list, position_rad: tuple) -> tuple[list, np.ndarray]:
+        """:meth:`validated` and :meth:`stretch_values` of many attitudes at once, to the bit:
+        each one validated (or the :class:`Reason` it is not valid) and the rows of their numbers
+        (n × those of :meth:`stretch_values`; a row of an invalid one is left unread). The true
+        north of all of one declination is one stacked product, which numpy computes as it
+        computes each alone."""
+        try:
+            rotations = np.array([m.rotation_nb for m in measurements], dtype=float)
+            covariances = np.array([m.covariance_rad2 for m in measurements], dtype=float)
+        except (TypeError, ValueError):
+            rotations = covariances = None
+        count = len(measurements)
+        if (
+            rotations is None
+            or rotations.shape != (count, 3, 3)
+            or covariances.shape != (count, 3, 3)
+        ):
+            return self._stretch_values_one_by_one(measurements, position_rad)
+        validated = self._validated_stack(measurements, rotations, covariances)
+        latitude_rad, longitude_rad = position_rad
+        true_north = rotations
+        if self._magnetic:
+            stamps = np.array([m.t_s for m in measurements], dtype=float)
+            declinations = declinations_rad(
+                self._declination_deg, latitude_rad, longitude_rad, stamps
+            )
+            true_north = np.empty_like(rotations)
+            for declination in np.unique(declinations).tolist():
+                alike = declinations == declination
+                turn = rotation_matrix_from_euler(0.0, 0.0, -declination)
+                true_north[alike] = turn @ rotations[alike]
+        intervals = np.array([m.interval_s for m in measurements], dtype=float)
+        values = np.empty((count, CELL + 4))
+        values[:, TRUE_NORTH:COVARIANCE] = true_north.reshape(count, 9)
+        values[:, COVARIANCE:WEIGHT] = covariances.reshape(count, 9)
+        values[:, WEIGHT] = samples_per_correlation_times(intervals, self._correlation_s)
+        values[:, CELL:] = self._cell_bounds_rad(latitude_rad, longitude_rad)
+        return validated, values
+
+    def _validated_stack(self, measurements: list, rotations, covariances) -> list:
+        """:meth:`validated` of each of ``measurements``, whose rotations and covariances are
+        stacked (n × 3 × 3) in ``rotations`` and ``covariances``: each valid one holds its own
+        of them."""
+        rotation_finite = np.isfinite(rotations).all(axis=(1, 2))
+        covariance_finite = np.isfinite(covariances).all(axis=(1, 2))
+        positive = (np.diagonal(covariances, axis1=1, axis2=2) > 0.0).all(axis=1)
+        validated = []
+        for index, measurement in enumerate(measurements):
+            if not (rotation_finite[index] and covariance_finite[index]):
+                validated.append(Reason.NON_FINITE)
+            elif not positive[index]:
+                validated.append(Reason.NON_POSITIVE_VARIANCE)
+            else:
+                validated.append(
+                    AhrsAttitude(
+                        rotations[index],
+                        covariances[index],
+                        measurement.interval_s,
+                        measurement.t_s,
+                    )
+                )
+        return validated
+
+    def _stretch_values_one_by_one(self, measurements: list, position_rad: tuple):
+        """:meth:`stretch_values_of` for attitudes that do not stack (not all 3 × 3 numbers)."""
+        validated = [self.validated(measurement) for measurement in measurements]
+        values = np.zeros((len(measurements), CELL + 4))
+        for index, measurement in enumerate(validated):
+            if not isinstance(measurement, Reason):
+                values[index] = self.stretch_values(measurement, position_rad)
+        return validated, values
+
+    def _cell_bounds_rad(self, latitude_rad: float, longitude_rad: float) -> tuple:
+        """The bounds (rad) of latitude and longitude within which the true north taken at the
+        position holds: the model's cell with the model's declination, anywhere otherwise."""
+        if self._magnetic and math.isnan(self._declination_deg):
+            return wmm_cell_bounds_rad(latitude_rad, longitude_rad)
+        return (-math.inf, math.inf, -math.inf, math.inf)
 
     def stretch_terms(self) -> np.ndarray:
         """The terms :func:`attitude_stretch_model` reads: the lag (s) and its uncertainty

@@ -440,6 +440,15 @@ def samples_per_correlation_time(interval_s: float, correlation_time_s: float) -
     return max(1.0, correlation_time_s / interval_s)
 
 
+def samples_per_correlation_times(intervals_s: np.ndarray, correlation_time_s: float) -> np.ndarray:
+    """:func:`samples_per_correlation_time` of each of ``intervals_s`` (s): the same numbers."""
+    known = np.isfinite(intervals_s) & (intervals_s > 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratios = correlation_time_s / intervals_s
+    # ``max(1.0, ratio)`` keeps 1.0 unless the ratio is larger.
+    return np.where(known & (ratios > 1.0), ratios, 1.0)
+
+
 def floored_covariance(covariance, variance_floor: float) -> np.ndarray:
     """Symmetrised covariance (a square matrix, or a variance) whose diagonal is raised to at
     least ``variance_floor``: :func:`buoy_nav.aiding.model_kernels.floored_covariance`, which the
