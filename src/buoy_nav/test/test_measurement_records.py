@@ -10,6 +10,7 @@ import pytest
 
 from buoy_common import cdr_bulk
 from buoy_common.bag_io import jazzy_typestore
+from buoy_common.contract import Reason
 from buoy_nav.aiding import AIDING_SOURCES
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ERROR_STATES
@@ -126,3 +127,23 @@ def test_records_made_at_once_are_what_each_makes_alone(source_class):
     )
     refused = {outcome for outcome in expected if isinstance(outcome, str)}
     assert len(refused) >= 4, refused
+
+
+def test_a_pack_run_with_a_malformed_covariance_is_made_one_by_one():
+    """A run of the pack's records whose covariances are not all nine numbers is made record by
+    record: the short one refused as malformed, the others as each alone."""
+    source_class = next(source for source in AT_ONCE_SOURCES if source.kind == "ahrs")
+    quaternions = [[0.0, 0.0, math.sin(0.1 * k), math.cos(0.1 * k)] for k in range(5)]
+    covariances = [[1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4] for _ in range(5)]
+    covariances[2] = covariances[2][:8]
+    stamps_s = [100.0 + 0.1 * k for k in range(5)]
+    alone = source_class(FusionConfig(), ERROR_STATES)
+    expected = [
+        alone.measurement_from_record(*record)
+        for record in zip(stamps_s, quaternions, covariances, strict=True)
+    ]
+    made = source_class(FusionConfig(), ERROR_STATES).measurements_from_records(
+        stamps_s, quaternions, covariances
+    )
+    assert expected[2] == Reason.MALFORMED
+    assert all(same(one, other) for one, other in zip(made, expected, strict=True))
