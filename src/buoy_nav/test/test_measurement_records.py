@@ -12,6 +12,7 @@ from buoy_common import cdr_bulk
 from buoy_common.bag_io import jazzy_typestore
 from buoy_common.contract import Reason
 from buoy_nav.aiding import AIDING_SOURCES
+from buoy_nav.aiding.ahrs_attitude import AT_ONCE_FROM
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ERROR_STATES
 
@@ -133,10 +134,11 @@ def test_a_pack_run_with_a_malformed_covariance_is_made_one_by_one():
     """A run of the pack's records whose covariances are not all nine numbers is made record by
     record: the short one refused as malformed, the others as each alone."""
     source_class = next(source for source in AT_ONCE_SOURCES if source.kind == "ahrs")
-    quaternions = [[0.0, 0.0, math.sin(0.1 * k), math.cos(0.1 * k)] for k in range(5)]
-    covariances = [[1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4] for _ in range(5)]
+    count = 2 * AT_ONCE_FROM
+    quaternions = [[0.0, 0.0, math.sin(0.1 * k), math.cos(0.1 * k)] for k in range(count)]
+    covariances = [[1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4] for _ in range(count)]
     covariances[2] = covariances[2][:8]
-    stamps_s = [100.0 + 0.1 * k for k in range(5)]
+    stamps_s = [100.0 + 0.1 * k for k in range(count)]
     alone = source_class(FusionConfig(), ERROR_STATES)
     expected = [
         alone.measurement_from_record(*record)

@@ -66,6 +66,11 @@ UNIT_NORM_TOLERANCE = 1e-3
 MIN_QUATERNION_NORM = 1e-9
 BODY_X = np.array((1.0, 0.0, 0.0))
 
+AT_ONCE_FROM = 16
+"""Records (or attitudes) from which :meth:`AhrsAttitudeSource.measurements_from_records` and
+:meth:`AhrsAttitudeSource.stretch_values_of` make them at once: their arrays cost some 100 µs a
+call, one by one some 8 µs each (with the model's declination), so fewer are made one by one."""
+
 # What :meth:`AhrsAttitudeSource.measurements_from_records` finds of each record, as a code.
 _REASONS = (
     None,
@@ -342,8 +347,13 @@ class AhrsAttitudeSource(AidingSource):
     ) -> list[AhrsAttitude | Reason]:
         """:meth:`measurement_from_record` of consecutive records at once, to the bit: their
         stamps (s), quaternions and covariances, each one's attitude or the reason it is none.
-        Records that are not all four and nine numbers are made one by one."""
+        Fewer than :data:`AT_ONCE_FROM` records, or records that are not all four and nine
+        numbers, are made one by one."""
         count = len(stamps_s)
+        if count < AT_ONCE_FROM:
+            return self._measurements_one_by_one(
+                stamps_s, orientations_xyzw, orientation_covariances
+            )
         try:
             quaternions = np.array(orientations_xyzw, dtype=float)
             covariances = np.array(orientation_covariances, dtype=float)
@@ -354,10 +364,9 @@ class AhrsAttitudeSource(AidingSource):
             or quaternions.shape != (count, 4)
             or covariances.shape != (count, 9)
         ):
-            return [
-                self.measurement_from_record(*record)
-                for record in zip(stamps_s, orientations_xyzw, orientation_covariances, strict=True)
-            ]
+            return self._measurements_one_by_one(
+                stamps_s, orientations_xyzw, orientation_covariances
+            )
         stamps = np.array(stamps_s, dtype=float)
         x, y, z, w = quaternions.T
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -373,6 +382,15 @@ class AhrsAttitudeSource(AidingSource):
             if reason == _VALID
             else _REASONS[reason]
             for index, reason in enumerate(reasons.tolist())
+        ]
+
+    def _measurements_one_by_one(
+        self, stamps_s: list, orientations_xyzw: list, orientation_covariances: list
+    ) -> list[AhrsAttitude | Reason]:
+        """:meth:`measurements_from_records`, a record at a time."""
+        return [
+            self.measurement_from_record(*record)
+            for record in zip(stamps_s, orientations_xyzw, orientation_covariances, strict=True)
         ]
 
     def _record_reasons(
@@ -529,13 +547,15 @@ class AhrsAttitudeSource(AidingSource):
         each one validated (or the :class:`Reason` it is not valid) and the rows of their numbers
         (n × those of :meth:`stretch_values`; a row of an invalid one is left unread). The true
         north of all of one declination is one stacked product, which numpy computes as it
-        computes each alone."""
+        computes each alone. Fewer than :data:`AT_ONCE_FROM` are made one by one."""
+        count = len(measurements)
+        if count < AT_ONCE_FROM:
+            return self._stretch_values_one_by_one(measurements, position_rad)
         try:
             rotations = np.array([m.rotation_nb for m in measurements], dtype=float)
             covariances = np.array([m.covariance_rad2 for m in measurements], dtype=float)
         except (TypeError, ValueError):
             rotations = covariances = None
-        count = len(measurements)
         if (
             rotations is None
             or rotations.shape != (count, 3, 3)
