@@ -254,18 +254,22 @@ def feed_records(
     for source, source_records in records_of.items():
         places, stamps_s, fields = zip(*source_records, strict=True)
         for place, t_s, measurement in zip(
-            places, stamps_s, _measurements_from_records(source, stamps_s, fields), strict=True
+            places, stamps_s, measurements_from_records(source, stamps_s, fields), strict=True
         ):
             inputs[place] = MeasurementInput(source, t_s, measurement)
     return engine.add_inputs(inputs)
 
 
-def _measurements_from_records(source, stamps_s: tuple, fields: tuple) -> list:
-    """Each record's measurement of ``source`` (or the :class:`Reason` it is none), in order:
-    at once where the source can (``measurements_from_records``), else one by one. A source's
-    records are made only after each other: what it keeps between them is its own."""
-    if hasattr(source, "measurements_from_records"):
-        return source.measurements_from_records(list(stamps_s), *zip(*fields, strict=True))
+def measurements_from_records(source, stamps_s, fields) -> list:
+    """Each record's measurement of ``source`` (or the :class:`Reason` it is none), in order,
+    of records stamped ``stamps_s`` (s) with the values of its ``record_fields`` in ``fields``
+    (a tuple a record): at once where the source can (its ``measurements_from_records``), else
+    one by one. A source's records are made only after each other: what it keeps between them
+    is its own."""
+    at_once = getattr(source, "measurements_from_records", None)
+    made = None if at_once is None else at_once(list(stamps_s), *zip(*fields, strict=True))
+    if made is not None:
+        return made
     return [
         source.measurement_from_record(t_s, *record_fields)
         for t_s, record_fields in zip(stamps_s, fields, strict=True)

@@ -128,7 +128,7 @@ class StretchedAiding:
             if not isinstance(measurement, Reason) and math.isfinite(t_s):
                 places_of.setdefault(source, []).append(place)
         for source, places in places_of.items():
-            validated, values = _stretch_values_of(
+            validated, values = stretch_values_of(
                 source, [inputs[place].measurement for place in places], position_rad
             )
             rows = np.zeros((len(places), ROW_SIZE))
@@ -313,13 +313,15 @@ class StretchedAiding:
         return outcome
 
 
-def _stretch_values_of(source, measurements: list, position_rad: tuple) -> tuple[list, np.ndarray]:
+def stretch_values_of(source, measurements: list, position_rad: tuple) -> tuple[list, np.ndarray]:
     """Each of ``measurements`` of ``source`` validated (or the :class:`Reason` it is not
     valid) and the rows of the numbers its model over arrays reads, made with the filter at
-    ``position_rad``: at once where the source can (``stretch_values_of``), else one by one. A
-    measurement is validated once: a magnetometer's validation calibrates its field."""
-    if hasattr(source, "stretch_values_of"):
-        return source.stretch_values_of(measurements, position_rad)
+    ``position_rad``: at once where the source can (its ``stretch_values_of``), else one by one.
+    A measurement is validated once: a magnetometer's validation calibrates its field."""
+    at_once = getattr(source, "stretch_values_of", None)
+    made = None if at_once is None else at_once(measurements, position_rad)
+    if made is not None:
+        return made
     validated = [source.validated(measurement) for measurement in measurements]
     values = [
         None

@@ -51,6 +51,7 @@ from buoy_nav.error_state_filter import (
 from buoy_nav.geomagnetism import SECONDS_PER_JULIAN_YEAR, wmm_field_enu_t
 from buoy_nav.innovation_watch import SCALE
 from buoy_nav.rotations import cross, skew, wrap_angle
+from buoy_nav.stretched_aiding import stretch_values_of
 
 STATES = ERROR_STATES
 CASES = 500
@@ -566,7 +567,7 @@ def test_a_packs_attitudes_made_into_rows_at_once_are_each_ones(config, rng):
         measurements.append(attitude)
     flat = [m._replace(rotation_nb=m.rotation_nb.reshape(9).tolist()) for m in measurements[:9]]
     for given in (measurements, flat + measurements[9:]):
-        validated, values = source.stretch_values_of(given, position)
+        validated, values = stretch_values_of(source, given, position)
         for index, measurement in enumerate(given):
             alone = source.validated(measurement)
             if isinstance(alone, str):

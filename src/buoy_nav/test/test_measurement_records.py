@@ -15,6 +15,7 @@ from buoy_nav.aiding import AIDING_SOURCES
 from buoy_nav.aiding.ahrs_attitude import AT_ONCE_FROM
 from buoy_nav.config import FusionConfig
 from buoy_nav.error_state_filter import ERROR_STATES
+from buoy_nav.fusion_messages import measurements_from_records
 
 RECORD_SOURCES = [source for source in AIDING_SOURCES if source.record_fields]
 MESSAGES = 400
@@ -113,8 +114,10 @@ def test_records_made_at_once_are_what_each_makes_alone(source_class):
     made, start = [], 0
     while start < MESSAGES:
         end = start + int(RNG.integers(1, 80))
-        made += at_once.measurements_from_records(
-            stamps_s[start:end], *(field[start:end] for field in fields)
+        made += measurements_from_records(
+            at_once,
+            stamps_s[start:end],
+            list(zip(*(field[start:end] for field in fields), strict=True)),
         )
         start = end
     assert len(made) == MESSAGES
@@ -144,8 +147,10 @@ def test_a_pack_run_with_a_malformed_covariance_is_made_one_by_one():
         alone.measurement_from_record(*record)
         for record in zip(stamps_s, quaternions, covariances, strict=True)
     ]
-    made = source_class(FusionConfig(), ERROR_STATES).measurements_from_records(
-        stamps_s, quaternions, covariances
+    at_once = source_class(FusionConfig(), ERROR_STATES)
+    assert at_once.measurements_from_records(stamps_s, quaternions, covariances) is None
+    made = measurements_from_records(
+        at_once, stamps_s, list(zip(quaternions, covariances, strict=True))
     )
     assert expected[2] == Reason.MALFORMED
     assert all(same(one, other) for one, other in zip(made, expected, strict=True))

@@ -344,16 +344,14 @@ class AhrsAttitudeSource(AidingSource):
 
     def measurements_from_records(
         self, stamps_s: list, orientations_xyzw: list, orientation_covariances: list
-    ) -> list[AhrsAttitude | Reason]:
+    ) -> list[AhrsAttitude | Reason] | None:
         """:meth:`measurement_from_record` of consecutive records at once, to the bit: their
-        stamps (s), quaternions and covariances, each one's attitude or the reason it is none.
-        Fewer than :data:`AT_ONCE_FROM` records, or records that are not all four and nine
-        numbers, are made one by one."""
+        stamps (s), quaternions and covariances, each one's attitude or the reason it is none;
+        None, nothing changed, for fewer than :data:`AT_ONCE_FROM` records or records that are
+        not all four and nine numbers (the caller makes them one by one)."""
         count = len(stamps_s)
         if count < AT_ONCE_FROM:
-            return self._measurements_one_by_one(
-                stamps_s, orientations_xyzw, orientation_covariances
-            )
+            return None
         try:
             quaternions = np.array(orientations_xyzw, dtype=float)
             covariances = np.array(orientation_covariances, dtype=float)
@@ -364,9 +362,7 @@ class AhrsAttitudeSource(AidingSource):
             or quaternions.shape != (count, 4)
             or covariances.shape != (count, 9)
         ):
-            return self._measurements_one_by_one(
-                stamps_s, orientations_xyzw, orientation_covariances
-            )
+            return None
         stamps = np.array(stamps_s, dtype=float)
         x, y, z, w = quaternions.T
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -382,15 +378,6 @@ class AhrsAttitudeSource(AidingSource):
             if reason == _VALID
             else _REASONS[reason]
             for index, reason in enumerate(reasons.tolist())
-        ]
-
-    def _measurements_one_by_one(
-        self, stamps_s: list, orientations_xyzw: list, orientation_covariances: list
-    ) -> list[AhrsAttitude | Reason]:
-        """:meth:`measurements_from_records`, a record at a time."""
-        return [
-            self.measurement_from_record(*record)
-            for record in zip(stamps_s, orientations_xyzw, orientation_covariances, strict=True)
         ]
 
     def _record_reasons(
@@ -542,15 +529,18 @@ class AhrsAttitudeSource(AidingSource):
             *self._cell_bounds_rad(latitude_rad, longitude_rad),
         )
 
-    def stretch_values_of(self, measurements: list, position_rad: tuple) -> tuple[list, np.ndarray]:
+    def stretch_values_of(
+        self, measurements: list, position_rad: tuple
+    ) -> tuple[list, np.ndarray] | None:
         """:meth:`validated` and :meth:`stretch_values` of many attitudes at once, to the bit:
         each one validated (or the :class:`Reason` it is not valid) and the rows of their numbers
-        (n × those of :meth:`stretch_values`; a row of an invalid one is left unread). The true
-        north of all of one declination is one stacked product, which numpy computes as it
-        computes each alone. Fewer than :data:`AT_ONCE_FROM` are made one by one."""
+        (n × those of :meth:`stretch_values`; a row of an invalid one is left unread); None for
+        fewer than :data:`AT_ONCE_FROM` or attitudes that do not stack (not all 3 × 3 numbers:
+        the caller makes them one by one). The true north of all of one declination is one
+        stacked product, which numpy computes as it computes each alone."""
         count = len(measurements)
         if count < AT_ONCE_FROM:
-            return self._stretch_values_one_by_one(measurements, position_rad)
+            return None
         try:
             rotations = np.array([m.rotation_nb for m in measurements], dtype=float)
             covariances = np.array([m.covariance_rad2 for m in measurements], dtype=float)
@@ -561,7 +551,7 @@ class AhrsAttitudeSource(AidingSource):
             or rotations.shape != (count, 3, 3)
             or covariances.shape != (count, 3, 3)
         ):
-            return self._stretch_values_one_by_one(measurements, position_rad)
+            return None
         validated = self._validated_stack(measurements, rotations, covariances)
         latitude_rad, longitude_rad = position_rad
         true_north = rotations
@@ -606,15 +596,6 @@ class AhrsAttitudeSource(AidingSource):
                     )
                 )
         return validated
-
-    def _stretch_values_one_by_one(self, measurements: list, position_rad: tuple):
-        """:meth:`stretch_values_of` for attitudes that do not stack (not all 3 × 3 numbers)."""
-        validated = [self.validated(measurement) for measurement in measurements]
-        values = np.zeros((len(measurements), CELL + 4))
-        for index, measurement in enumerate(validated):
-            if not isinstance(measurement, Reason):
-                values[index] = self.stretch_values(measurement, position_rad)
-        return validated, values
 
     def _cell_bounds_rad(self, latitude_rad: float, longitude_rad: float) -> tuple:
         """The bounds (rad) of latitude and longitude within which the true north taken at the
