@@ -61,6 +61,10 @@ as constants and printed beside our figures:
     then the filter's step of its rows, the engine's against the same kernels composed into one
     compiled call (tools/bench_filter_row.py), and a row's time by stage, without a profiler
     (tools/bench_row_stages.py).
+20. event_entry: what one input costs the fusion engine handed the inputs one at a time, as
+    the live node hands them, against the compiled stretch driven one input at a time and by
+    chunks, on the simulated FDCHP hour's inputs (tools/bench_event_entry.py; about two
+    minutes).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -71,7 +75,7 @@ go to stdout and out/bench/results.json, progress to stderr.
                                             smoother_day|soak|real_record|archive|archive_year|
                                             current|current_long|fluxes|
                                             magnetometer_calibration|io_floor|
-                                            fdchp_hour ...]
+                                            fdchp_hour|event_entry ...]
 
 Without --only every section runs but the long ones (LONG_SECTIONS: smoother_table1, 4000 s
 runs as in paper 002; smoother_speed, one hour; smoother_day, 24 hours; soak, 2
@@ -179,6 +183,7 @@ SECTIONS = (
     "magnetometer_calibration",
     "io_floor",
     "fdchp_hour",
+    "event_entry",
 )
 LONG_SECTIONS = (
     "smoother_table1",
@@ -880,6 +885,19 @@ def fdchp_hour_section(run: BenchRun) -> dict:
     return {"fdchp_hour": result, "filter_row": filter_row, "row_stages": row_stages}
 
 
+def event_entry_section(run: BenchRun) -> dict:
+    """What one input costs the engine handed the inputs one at a time, the live node's way
+    and through the stretch (its own tool, which writes out/bench/event_entry.json)."""
+    if "event_entry" not in run.sections:
+        return {}
+    from tools import bench_event_entry
+
+    result = bench_event_entry.run_event_entry(log=log)
+    bench_event_entry.print_event_entry(result)
+    (OUT_DIR / "event_entry.json").write_text(json.dumps(result, indent=2))
+    return {"event_entry": result}
+
+
 SECTION_STEPS = (
     sensor_sets_section,
     real_record_section,
@@ -900,6 +918,7 @@ SECTION_STEPS = (
     archive_year_section,
     io_floor_section,
     fdchp_hour_section,
+    event_entry_section,
 )
 """The sections after the cases, in the order they run and print; each returns its results."""
 
