@@ -1,4 +1,6 @@
-"""What one input costs the fusion engine when it is handed the inputs one at a time, as the live
+"""One input at a time: what the engine's calls cost the live node's way and through the stretch.
+
+What one input costs the fusion engine when it is handed the inputs one at a time, as the live
 node hands them, against the compiled stretch driven one input at a time and by chunks
 (tools/bench.py, section ``event_entry``).
 
@@ -33,11 +35,8 @@ Results go to out/bench/event_entry.json.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
-import json
 import os
-import sys
 import time
 
 import numpy as np
@@ -47,6 +46,7 @@ from buoy_nav.engine import FusionEngine
 from buoy_nav.imu_stretches import MeasurementInput
 from buoy_nav.solution_rows import SolutionRows
 from tools import bench_fdchp_hour
+from tools.bench_command import run_timed_tool
 from tools.interpreter import describe, interpreter
 
 OUT_DIR = bench_fdchp_hour.OUT_DIR
@@ -231,13 +231,7 @@ def print_event_entry(result: dict) -> None:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(prog="bench_event_entry", description=__doc__.split("\n")[0])
-    parser.add_argument("--runs", type=int, default=RUNS, help="timed runs of each way")
-    arguments = parser.parse_args(argv)
-    result = run_event_entry(arguments.runs, lambda text: print(text, file=sys.stderr, flush=True))
-    print_event_entry(result)
-    OUT_DIR.mkdir(parents=True, exist_ok=True)
-    (OUT_DIR / "event_entry.json").write_text(json.dumps(result, indent=2))
+    run_timed_tool(argv, "event_entry", __doc__, RUNS, run_event_entry, print_event_entry)
 
 
 if __name__ == "__main__":

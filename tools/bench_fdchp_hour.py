@@ -35,12 +35,10 @@ Results go to out/bench/fdchp_hour.json, the profiles' top functions with them.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import cProfile
 import hashlib
 import io
-import json
 import os
 import pstats
 import resource
@@ -56,6 +54,7 @@ from buoy_common.import_records import import_records
 from buoy_nav.config import fusion_config_from_files
 from buoy_processing.bag_processing import process_bag
 from tools import bench_speed, compiled_caches, fdchp_simulated
+from tools.bench_command import run_timed_tool
 from tools.bench_fdchp import COLUMN_MAP
 from tools.bench_fdchp import PARAMS as OOI_PARAMS
 from tools.interpreter import describe, interpreter
@@ -348,13 +347,7 @@ def print_fdchp_hour(result: dict) -> None:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(prog="bench_fdchp_hour", description=__doc__.split("\n")[0])
-    parser.add_argument("--runs", type=int, default=RUNS, help="timed runs of each hour")
-    arguments = parser.parse_args(argv)
-    result = run_fdchp_hour(arguments.runs, lambda text: print(text, file=sys.stderr, flush=True))
-    print_fdchp_hour(result)
-    OUT_DIR.mkdir(parents=True, exist_ok=True)
-    (OUT_DIR / "fdchp_hour.json").write_text(json.dumps(result, indent=2))
+    run_timed_tool(argv, "fdchp_hour", __doc__, RUNS, run_fdchp_hour, print_fdchp_hour)
 
 
 if __name__ == "__main__":
