@@ -193,11 +193,12 @@ NAMED_SCRIPTS = {
 
 
 def uses_argparse(source: Path) -> bool:
-    """Whether the script parses a command line (argparse, or buoy_common.cli's parser)."""
+    """Whether the script parses a command line (argparse, buoy_common.cli's parser, or the
+    timed bench tools' in tools/bench_command.py)."""
     if not source.is_file():
         return False
     text = source.read_text()
-    return "argparse" in text or "command_parser(" in text
+    return any(parser in text for parser in ("argparse", "command_parser(", "run_timed_tool("))
 
 
 def help_target(command: Command) -> str | None:
