@@ -63,8 +63,8 @@ as constants and printed beside our figures:
     (tools/bench_row_stages.py).
 20. event_entry: what one input costs the fusion engine handed the inputs one at a time, as
     the live node hands them, against the compiled stretch driven one input at a time and by
-    chunks, on the simulated FDCHP hour's inputs (tools/bench_event_entry.py; about two
-    minutes).
+    chunks, on the simulated FDCHP hour's inputs and the first of the speed section's hour
+    (tools/bench_event_entry.py; about four minutes).
 
 Simulated bags are cached in out/bench/cache/ under a key of scenario, overrides, seed and a
 hash of the simulator's sources and parameter files, so a second run only processes. Figures
@@ -546,7 +546,7 @@ def plan_bags(sections: set[str], quick: bool, cases: list[Case], smoothing_case
         path = cached_bag_path(case.scenario, case.overrides, fingerprint)
         bags.wanted[path] = (case.scenario, case.overrides)
         bags.bag_of[case.key] = path
-    if sections & {"speed", "smoother_speed", "io_floor"}:
+    if sections & {"speed", "smoother_speed", "io_floor", "event_entry"}:
         bags.speed_bag = cached_bag_path("open_ocean", speed_overrides(quick), fingerprint)
         bags.wanted[bags.speed_bag] = ("open_ocean", speed_overrides(quick))
     for case in smoothing_cases:
@@ -887,12 +887,13 @@ def fdchp_hour_section(run: BenchRun) -> dict:
 
 def event_entry_section(run: BenchRun) -> dict:
     """What one input costs the engine handed the inputs one at a time, the live node's way
-    and through the stretch (its own tool, which writes out/bench/event_entry.json)."""
+    and through the stretch, on the FDCHP hour and the speed section's (its own tool, which
+    writes out/bench/event_entry.json)."""
     if "event_entry" not in run.sections:
         return {}
     from tools import bench_event_entry
 
-    result = bench_event_entry.run_event_entry(log=log)
+    result = bench_event_entry.run_event_entry(log=log, gnss_bag=run.bags.speed_bag)
     bench_event_entry.print_event_entry(result)
     (OUT_DIR / "event_entry.json").write_text(json.dumps(result, indent=2))
     return {"event_entry": result}
