@@ -51,14 +51,22 @@ def _cell(angle_rad: float) -> int:
 
 
 def _wmm_at(latitude_rad: float, longitude_rad: float, t_s: float):
-    year = UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
-    return _wmm_cell(_cell(latitude_rad), _cell(longitude_rad), round(year / _YEAR_STEP))
+    return _wmm_cell(_cell(latitude_rad), _cell(longitude_rad), _year_step(t_s))
+
+
+def _decimal_year(t_s):
+    """The decimal year of a stamp, or of each of an array of them (s since the Unix epoch)."""
+    return UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
+
+
+def _year_step(t_s: float) -> int:
+    """The tenth of a year (the model's step) a stamp (s since the Unix epoch) falls in."""
+    return round(_decimal_year(t_s) / _YEAR_STEP)
 
 
 def _year_steps(stamps_s: np.ndarray) -> np.ndarray:
-    """The tenth of a year each of ``stamps_s`` (s since the Unix epoch) falls in, as
-    :func:`_wmm_at` rounds it (half to even, as ``round``)."""
-    return np.rint((UNIX_EPOCH_DECIMAL_YEAR + stamps_s / SECONDS_PER_JULIAN_YEAR) / _YEAR_STEP)
+    """:func:`_year_step` of each of ``stamps_s`` (rounded half to even, as ``round``)."""
+    return np.rint(_decimal_year(stamps_s) / _YEAR_STEP)
 
 
 CELL_MARGIN_RAD = 1e-9
@@ -153,8 +161,7 @@ def wmm_field_range_along_parallel(latitude_rad: float, t_s: float) -> FieldRang
     (rad), over every longitude (every :data:`PARALLEL_STEP_DEG`), at a time (s since the Unix
     epoch), at sea level: what a buoy at that latitude may see when its longitude is not
     known."""
-    year = UNIX_EPOCH_DECIMAL_YEAR + t_s / SECONDS_PER_JULIAN_YEAR
-    return _parallel_range(_cell(latitude_rad), round(year / _YEAR_STEP))
+    return _parallel_range(_cell(latitude_rad), _year_step(t_s))
 
 
 @lru_cache(maxsize=16)
