@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import os
 import time
 from pathlib import Path
@@ -85,17 +86,15 @@ class Recorded:
     """The inputs an engine was given, a list per call of ``add_inputs``, and its sources (the
     measurements' sources, which another engine's replace)."""
 
-    def __init__(self, limit: int | None = None):
+    def __init__(self, limit: float = math.inf):
         self.chunks: list[list] = []
         self.sources: tuple = ()
         self._left = limit
 
     def add(self, engine: FusionEngine, inputs) -> None:
-        if self._left is not None and self._left <= 0:
-            return
-        self.sources = engine.sources
-        self.chunks.append(list(inputs))
-        if self._left is not None:
+        if self._left > 0:
+            self.sources = engine.sources
+            self.chunks.append(list(inputs))
             self._left -= len(inputs)
 
     def for_engine(self, engine: FusionEngine) -> list[list]:
